@@ -1,0 +1,40 @@
+"""Errors that reach the user as one clear line (file and cause), never a traceback."""
+from __future__ import annotations
+
+
+class FoldstatError(Exception):
+    """Base class of every expected failure of the toolkit.
+
+    Parameters
+    ----------
+    cause : str
+        What went wrong, in one short sentence.
+    path : str or os.PathLike, optional
+        The file the failure concerns; it is named first in the message.
+    """
+
+    def __init__(self, cause: str, path=None):
+        self.cause = str(cause)
+        self.path = None if path is None else str(path)
+        super().__init__(self.one_line())
+
+    def one_line(self) -> str:
+        """The message shown to the user: ``"<file>: <cause>"``."""
+        msg = " ".join(self.cause.split())
+        return f"{self.path}: {msg}" if self.path else msg
+
+
+class ImageError(FoldstatError):
+    """The image cannot be read or is not an RGB scan."""
+
+
+class ParameterError(FoldstatError):
+    """A parameter is absurd (negative scale, s_min larger than the image, ...)."""
+
+
+class AnalysisError(FoldstatError):
+    """The scan was read but cannot be analysed (empty mask, nothing left after cleaning, ...)."""
+
+
+class ConfigError(FoldstatError):
+    """A set.toml, calibration file or other configuration is missing or malformed."""

@@ -1,0 +1,78 @@
+"""One code path for parallelism: a ``concurrent.futures`` executor.
+
+Local processes by default; a Dask distributed cluster when a scheduler address is given
+(``Client.get_executor()``). Batches and simulation ensembles both use :func:`get_executor`.
+"""
+from __future__ import annotations
+
+import os
+from concurrent.futures import Executor, ProcessPoolExecutor, ThreadPoolExecutor
+from contextlib import contextmanager
+
+import numpy as np
+
+
+class _InlineExecutor(Executor):
+    """Runs tasks in the calling process (``workers=1``): simplest to debug, no pickling."""
+
+    def submit(self, fn, /, *args, **kwargs):
+        from concurrent.futures import Future
+
+        fut = Future()
+        try:
+            fut.set_result(fn(*args, **kwargs))
+        except BaseException as exc:  # noqa: BLE001 - forwarded to the caller through the future
+            fut.set_exception(exc)
+        return fut
+
+
+@contextmanager
+def get_executor(workers: int | None = 1, scheduler: str | None = None):
+    """Yield a ``concurrent.futures.Executor``.
+
+    Parameters
+    ----------
+    workers : int, optional
+        Number of local worker processes; 1 runs inline, ``None`` uses ``os.cpu_count()``.
+    scheduler : str, optional
+        Address of a Dask distributed scheduler (``tcp://host:port``); when given, tasks go to
+        that cluster through ``Client.get_executor()`` and ``workers`` is ignored.
+
+    Yields
+    ------
+    concurrent.futures.Executor
+    """
+    if scheduler:
+        from distributed import Client
+
+        client = Client(scheduler)
+        try:
+            yield client.get_executor(pure=False)
+        finally:
+            client.close()
+        return
+    if workers is None:
+        workers = os.cpu_count() or 1
+    if workers < 1:
+        raise ValueError(f"workers must be >= 1, got {workers}")
+    if workers == 1:
+        yield _InlineExecutor()
+        return
+    import multiprocessing as mp
+
+    # 'spawn' keeps workers free of the parent's threads (numba, BLAS) and matches Dask.
+    with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn")) as ex:
+        yield ex
+
+
+def spawn_seeds(seed: int | None, n: int) -> list[int]:
+    """``n`` independent integer seeds derived from ``seed`` by ``SeedSequence.spawn``.
+
+    Task ``i`` always gets the same seed, whatever the number of workers or the order of
+    completion, so results do not depend on the executor.
+    """
+    children = np.random.SeedSequence(seed).spawn(n)
+    return [int(c.generate_state(1, dtype=np.uint32)[0]) for c in children]
+
+
+__all__ = ["get_executor", "spawn_seeds", "ThreadPoolExecutor"]
