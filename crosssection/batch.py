@@ -1,0 +1,599 @@
+"""Batch processing: every scan under a folder analysed in parallel, resumable.
+
+``python -m crosssection batch INPUT_DIR --out OUT_DIR [--workers W] [--scheduler ADDRESS]``
+
+Layout of ``OUT_DIR``::
+
+    index.csv          one row per image: set, status (ok / failed / skipped), output folder,
+                       summary numbers (n_junctions ... total_energy, wall_s), reason
+    failures.csv       image, set, reason   (one line per failed image)
+    batch.json         parameters, sets, package version, counts
+    <set>/<stem>/      the ``analyze`` layout: summary.json, junctions.csv, stacks.csv,
+                       branches.csv, voids.csv, overlay.png
+
+Design choices
+--------------
+- One code path for parallelism: :func:`crosssection.parallel.get_executor` (local processes,
+  or a Dask cluster with ``--scheduler``). Tasks receive paths and parameters, write their own
+  outputs and return a small dict (never arrays), so memory stays at about one image per worker.
+- Task ``i`` of the sorted image list gets seed ``spawn_seeds(seed, n)[i]``
+  (``SeedSequence.spawn``); results do not depend on the number of workers or on the order of
+  completion.
+- Atomic outputs: a task writes into a hidden staging folder ``.<stem>.partial-XXXX`` next to
+  its output folder and renames it into place when complete. A killed worker leaves at most a
+  staging folder, which the next run removes; an output folder is therefore always complete.
+  ``summary.json`` carries ``batch.params_hash``; an image whose folder holds a summary with
+  the same hash (and ``overlay.png`` when figures are wanted) is skipped on a re-run.
+- The parameters hash covers the resolved analysis parameters, the SHA-256 of the image and
+  of the calibration file, and the package version: changing any of them redoes the image.
+- Failures never stop the batch: a corrupt or non-RGB image, an analysis error, a bad
+  ``set.toml`` or a missing calibration fail only the images concerned, each with a one-line
+  reason in ``failures.csv``. A worker process that dies is replaced; the images it may have
+  been running are retried once, then recorded as failed.
+"""
+from __future__ import annotations
+
+import argparse
+import hashlib
+import inspect
+import json
+import math
+import os
+import shutil
+import sys
+import tempfile
+import time
+import traceback
+from concurrent.futures import FIRST_COMPLETED, wait
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import pandas as pd
+
+from ._version import __version__
+from .errors import ConfigError, FoldstatError
+from .fileio import write_csv, write_json
+from .parallel import get_executor, spawn_seeds
+from .setconfig import (DEFAULT_PARAMS, DEFAULT_SET_NAME, SET_FILE, SetConfig, check_params,
+                        failed_set, load_set_config)
+
+IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg")
+SUMMARY_NUMBERS = ["n_junctions", "n_stacks", "n_branches", "n_voids", "mean_branches_per_stack",
+                   "rod_length_mm", "epsilon", "total_energy"]
+INDEX_COLUMNS = (["image", "set", "status", "output"] + SUMMARY_NUMBERS
+                 + ["wall_s", "seed", "params_hash", "peak_rss_mb", "reason"])
+FAILURE_COLUMNS = ["image", "set", "reason"]
+#: parameters recorded with the results but consumed by no analysis stage (unless it takes them)
+METADATA_PARAMS = ("bending_rigidity_J",)
+PARTIAL_TAG = ".partial-"
+#: how often (s) the index is rewritten while the batch runs, so a killed batch leaves one
+INDEX_EVERY_S = 5.0
+#: a task in flight when its worker process died this many times is recorded as failed
+MAX_ATTEMPTS = 2
+
+
+@dataclass
+class ImageTask:
+    """One image to analyse (everything a worker needs; small and picklable)."""
+
+    image: str            # absolute path
+    rel: str              # path relative to INPUT_DIR (posix), the index key
+    set_name: str
+    out_dir: str          # absolute output folder OUT_DIR/<set>/<stem>
+    out_rel: str          # relative to OUT_DIR
+    params: dict = field(default_factory=dict)
+    seed: int = 0
+    params_hash: str = ""
+    figure: bool = True
+    error: str | None = None
+
+
+# --------------------------------------------------------------------------- discovery
+
+
+def _is_hidden(rel_parts) -> bool:
+    return any(p.startswith(".") for p in rel_parts)
+
+
+def find_images(input_dir, *, exclude=()) -> list[Path]:
+    """Image files under ``input_dir`` (recursive, sorted; hidden files and folders skipped).
+
+    Parameters
+    ----------
+    input_dir : str or Path
+    exclude : iterable of Path
+        Folders not to descend into (the output folder when it lies inside the input).
+
+    Returns
+    -------
+    list of Path
+    """
+    root = Path(input_dir).resolve()
+    excluded = [Path(e).resolve() for e in exclude]
+    found = []
+    for dirpath, dirnames, filenames in os.walk(root):
+        here = Path(dirpath)
+        dirnames[:] = sorted(d for d in dirnames if not d.startswith(".")
+                             and (here / d).resolve() not in excluded)
+        for fn in filenames:
+            if not fn.startswith(".") and fn.lower().endswith(IMAGE_SUFFIXES):
+                found.append(here / fn)
+    return sorted(found, key=lambda p: p.relative_to(root).as_posix())
+
+
+def _sha256(path, chunk=1 << 20) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        while block := fh.read(chunk):
+            h.update(block)
+    return h.hexdigest()
+
+
+def params_hash(params: dict, image_sha: str, *, seed=None) -> str:
+    """Hash of everything that determines an image's results.
+
+    Parameters
+    ----------
+    params : dict
+        Resolved analysis parameters (a calibration path is replaced by its content hash, so
+        moving a set folder does not redo it).
+    image_sha : str
+        SHA-256 of the image file.
+    seed : int, optional
+        Included only when the analysis consumes a seed.
+
+    Returns
+    -------
+    str
+        16 hex digits.
+    """
+    p = dict(params)
+    if p.get("calibration"):
+        cal = Path(p["calibration"])
+        p["calibration"] = _sha256(cal) if cal.is_file() else str(cal)
+    payload = {"params": p, "image": image_sha, "version": __version__, "seed": seed}
+    blob = json.dumps(payload, sort_keys=True, default=str).encode()
+    return hashlib.sha256(blob).hexdigest()[:16]
+
+
+def _analyze_accepts() -> tuple[set[str], bool]:
+    """Keyword names ``crosssection.analyze`` accepts, and whether it takes ``**kwargs``."""
+    from . import pipeline
+
+    sig = inspect.signature(pipeline.analyze)
+    names = {n for n, p in sig.parameters.items()
+             if p.kind in (p.KEYWORD_ONLY, p.POSITIONAL_OR_KEYWORD)}
+    var_kw = any(p.kind == p.VAR_KEYWORD for p in sig.parameters.values())
+    return names, var_kw
+
+
+def _safe_component(text: str) -> str:
+    return "".join(c if (c.isalnum() or c in "-_+") else "_" for c in text)
+
+
+def plan_batch(input_dir, out_dir, *, cli_params: dict | None = None, seed: int | None = 0,
+               figure: bool = True) -> tuple[list[ImageTask], dict[str, SetConfig]]:
+    """Find the images and sets under ``input_dir`` and build one task per image.
+
+    Parameters
+    ----------
+    input_dir, out_dir : str or Path
+    cli_params : dict, optional
+        Parameters from the command line: used for images outside any set and where a
+        ``set.toml`` is silent.
+    seed : int, optional
+        Base seed; task ``i`` gets ``spawn_seeds(seed, n)[i]``.
+    figure : bool
+        Whether tasks draw ``overlay.png``.
+
+    Returns
+    -------
+    tasks : list of ImageTask
+        Sorted by relative image path.
+    sets : dict
+        Set folder (posix, relative to ``input_dir``) -> SetConfig.
+
+    Raises
+    ------
+    ConfigError
+        ``input_dir`` is not a folder, or holds no image.
+    """
+    root = Path(input_dir)
+    if not root.is_dir():
+        raise ConfigError("input folder does not exist", root)
+    root = root.resolve()
+    out = Path(out_dir).resolve()
+    defaults = dict(DEFAULT_PARAMS)
+    defaults.update(check_params(cli_params or {}, Path.cwd() / "command line"))
+    images = find_images(root, exclude=[out])
+    if not images:
+        raise ConfigError(f"no image ({', '.join(IMAGE_SUFFIXES)}) found", root)
+
+    # sets: the nearest folder (at or above the image, within root) holding set.toml
+    sets: dict[str, SetConfig] = {}
+    default_set = SetConfig(name=DEFAULT_SET_NAME, folder=root, params=defaults)
+
+    def set_of(folder: Path) -> SetConfig:
+        for cand in [folder, *folder.parents]:
+            key = cand.relative_to(root).as_posix() if cand != root else "."
+            if key in sets:
+                return sets[key]
+            toml = cand / SET_FILE
+            if toml.is_file():
+                try:
+                    sets[key] = load_set_config(toml, defaults=defaults)
+                except FoldstatError as exc:
+                    sets[key] = failed_set(toml, exc.one_line())
+                return sets[key]
+            if cand == root:
+                break
+        return default_set
+
+    try:
+        accepted, var_kw = _analyze_accepts()
+    except Exception:  # noqa: BLE001 - pipeline missing: every task will report it
+        accepted, var_kw = set(), True
+    uses_seed = var_kw or "seed" in accepted
+    seeds = spawn_seeds(seed, len(images))
+
+    tasks, used = [], {}
+    for img, task_seed in zip(images, seeds):
+        cfg = set_of(img.parent)
+        rel = img.relative_to(root).as_posix()
+        out_rel = f"{cfg.name}/{_safe_component(img.stem)}"
+        used.setdefault(out_rel, []).append(len(tasks))
+        params = {} if cfg.error else cfg.params_for(img)
+        tasks.append(ImageTask(image=str(img), rel=rel, set_name=cfg.name, out_dir="",
+                               out_rel=out_rel, params=params, seed=task_seed,
+                               figure=figure, error=cfg.error))
+    # two images with one stem in one set (a.png and a.tif, or sub/a.png): name them by path
+    for out_rel, idx in used.items():
+        if len(idx) > 1:
+            for i in idx:
+                t = tasks[i]
+                t.out_rel = f"{t.set_name}/{_safe_component(t.rel.replace('/', '__'))}"
+    for t in tasks:
+        t.out_dir = str(out / t.out_rel)
+        if t.error is None:
+            t.params_hash = params_hash(t.params, _sha256(t.image),
+                                        seed=t.seed if uses_seed else None)
+    if any(t.set_name == DEFAULT_SET_NAME and t.error is None for t in tasks):
+        sets.setdefault("<no set.toml>", default_set)
+    return tasks, sets
+
+
+# --------------------------------------------------------------------------- worker side
+
+
+def _row(task: ImageTask, status: str, summary: dict | None = None, reason: str = "",
+         wall_s: float = math.nan) -> dict:
+    summary = summary or {}
+    row = {"image": task.rel, "set": task.set_name, "status": status, "output": task.out_rel}
+    for k in SUMMARY_NUMBERS:
+        v = summary.get(k)
+        row[k] = math.nan if v is None else v
+    row.update(wall_s=wall_s, seed=task.seed, params_hash=task.params_hash,
+               peak_rss_mb=math.nan, reason=reason)
+    return row
+
+
+def _peak_rss_mb() -> float:
+    """Peak resident memory of this process so far (MB; Linux reports ru_maxrss in kB)."""
+    try:
+        import resource
+
+        kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+        return round(kb / (1024 * 1024 if sys.platform == "darwin" else 1024), 1)
+    except Exception:  # noqa: BLE001 - not on every platform
+        return math.nan
+
+
+def _one_line(exc: BaseException) -> str:
+    if isinstance(exc, FoldstatError):
+        return exc.one_line()
+    tb = traceback.extract_tb(exc.__traceback__)
+    where = f" (at {Path(tb[-1].filename).name}:{tb[-1].lineno})" if tb else ""
+    return " ".join(f"unexpected {type(exc).__name__}: {exc}{where}".split())
+
+
+def _clear_partials(final: Path):
+    """Remove staging folders a killed task left next to ``final``."""
+    parent = final.parent
+    if parent.is_dir():
+        for p in parent.glob(f".{final.name}{PARTIAL_TAG}*"):
+            shutil.rmtree(p, ignore_errors=True) if p.is_dir() else p.unlink(missing_ok=True)
+
+
+def _analysis_kwargs(params: dict, seed: int) -> tuple[dict, dict]:
+    """Split parameters into those ``analyze`` takes and metadata; unknown ones are errors."""
+    accepted, var_kw = _analyze_accepts()
+    kwargs, meta = {}, {}
+    for k, v in params.items():
+        if var_kw or k in accepted:
+            kwargs[k] = v
+        elif k in METADATA_PARAMS:
+            meta[k] = v
+        else:
+            raise ConfigError(f"parameter {k!r} is not accepted by the analysis")
+    if var_kw or "seed" in accepted:
+        kwargs["seed"] = seed
+    return kwargs, meta
+
+
+def process_image(task: ImageTask) -> dict:
+    """Analyse one image and write its output folder atomically (runs in a worker).
+
+    Parameters
+    ----------
+    task : ImageTask
+
+    Returns
+    -------
+    dict
+        The image's index row (status ``ok`` or ``failed`` with a one-line reason). Never
+        raises for a bad image.
+    """
+    t0 = time.perf_counter()
+    final = Path(task.out_dir)
+    if task.error:
+        return _row(task, "failed", reason=task.error)
+    staging = None
+    try:
+        from .pipeline import analyze
+
+        _clear_partials(final)
+        kwargs, meta = _analysis_kwargs(task.params, task.seed)
+        result = analyze(task.image, **kwargs)
+        info = {"params_hash": task.params_hash, "image": task.rel, "set": task.set_name,
+                "seed": task.seed, "params": task.params, "version": __version__, **meta}
+        if isinstance(getattr(result, "summary", None), dict):
+            result.summary["batch"] = dict(info)
+        final.parent.mkdir(parents=True, exist_ok=True)
+        staging = Path(tempfile.mkdtemp(prefix=f".{final.name}{PARTIAL_TAG}", dir=final.parent))
+        result.write(staging, figure=task.figure)
+        summary_path = staging / "summary.json"
+        summary = json.loads(summary_path.read_text())
+        info["wall_s"] = time.perf_counter() - t0
+        summary["batch"] = info
+        write_json(summary_path, summary)
+        # swap the complete folder into place; an old one (other parameters) goes first
+        if final.exists():
+            old = Path(tempfile.mkdtemp(prefix=f".{final.name}{PARTIAL_TAG}", dir=final.parent))
+            os.replace(final, old / "old")
+            os.replace(staging, final)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(staging, final)
+        staging = None
+        row = _row(task, "ok", summary, wall_s=info["wall_s"])
+        row["peak_rss_mb"] = _peak_rss_mb()
+        return row
+    except Exception as exc:  # noqa: BLE001 - a bad image is recorded, the batch goes on
+        return _row(task, "failed", reason=_one_line(exc), wall_s=time.perf_counter() - t0)
+    finally:
+        if staging is not None:
+            shutil.rmtree(staging, ignore_errors=True)
+
+
+def completed_row(task: ImageTask) -> dict | None:
+    """The index row of an image already done with the same parameters hash, else None."""
+    final = Path(task.out_dir)
+    try:
+        summary = json.loads((final / "summary.json").read_text())
+    except (OSError, ValueError):
+        return None
+    info = summary.get("batch") or {}
+    if info.get("params_hash") != task.params_hash:
+        return None
+    if task.figure and not (final / "overlay.png").is_file():
+        return None
+    return _row(task, "skipped", summary, wall_s=info.get("wall_s", math.nan))
+
+
+# --------------------------------------------------------------------------- driver
+
+
+def _write_tables(out: Path, rows: dict, tasks: list[ImageTask]):
+    ordered = [rows[t.rel] for t in tasks if t.rel in rows]
+    index = pd.DataFrame(ordered, columns=INDEX_COLUMNS)
+    write_csv(out / "index.csv", index)
+    failed = index[index["status"] == "failed"][FAILURE_COLUMNS]
+    write_csv(out / "failures.csv", failed)
+    return index
+
+
+def _executor_slots(ex, workers: int) -> int:
+    client = getattr(ex, "_client", None)  # Dask ClientExecutor
+    if client is not None:
+        try:
+            return max(2, 2 * sum(client.nthreads().values()))
+        except Exception:  # noqa: BLE001
+            return 64
+    return max(1, 2 * workers)
+
+
+def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | None = None,
+              seed: int | None = 0, figure: bool = True, cli_params: dict | None = None,
+              force: bool = False, progress: bool = True) -> pd.DataFrame:
+    """Analyse every image under ``input_dir`` into ``out_dir`` (see module docstring).
+
+    Parameters
+    ----------
+    input_dir, out_dir : str or Path
+    workers : int or None
+        Local worker processes (1 runs inline, None = all cores). Ignored with ``scheduler``.
+    scheduler : str, optional
+        Dask scheduler address; tasks run on that cluster.
+    seed : int, optional
+        Base seed of the per-image seeds.
+    figure : bool
+        Draw ``overlay.png`` for each image.
+    cli_params : dict, optional
+        Analysis parameters for images outside any set (and defaults under a ``set.toml``).
+    force : bool
+        Redo images even when their output is complete.
+    progress : bool
+        Show a tqdm progress bar (with ETA) on stderr.
+
+    Returns
+    -------
+    pandas.DataFrame
+        The index (also written to ``out_dir/index.csv``).
+
+    Raises
+    ------
+    ConfigError
+        The input folder does not exist or holds no image.
+    """
+    from tqdm.auto import tqdm
+
+    t_start = time.time()
+    out = Path(out_dir)
+    tasks, sets = plan_batch(input_dir, out, cli_params=cli_params, seed=seed, figure=figure)
+    out.mkdir(parents=True, exist_ok=True)
+    meta = {
+        "package": "foldstat", "version": __version__, "python": sys.version.split()[0],
+        "input_dir": str(Path(input_dir).resolve()), "out_dir": str(out.resolve()),
+        "workers": workers, "scheduler": scheduler, "seed": seed, "figure": figure,
+        "force": force, "cli_params": cli_params or {},
+        "sets": {k: {"name": s.name, "folder": str(s.folder),
+                     "source": None if s.source is None else str(s.source),
+                     "params": s.params, "overrides": s.overrides, "error": s.error,
+                     "warnings": s.warnings} for k, s in sets.items()},
+        "n_images": len(tasks), "started": time.strftime("%Y-%m-%dT%H:%M:%S"),
+    }
+    for s in sets.values():
+        for w in s.warnings:
+            print(f"warning: {w}", file=sys.stderr)
+    write_json(out / "batch.json", meta)
+
+    rows: dict[str, dict] = {}
+    todo = []
+    for t in tasks:
+        if t.error:
+            rows[t.rel] = _row(t, "failed", reason=t.error)
+            continue
+        done = None if force else completed_row(t)
+        if done is not None:
+            rows[t.rel] = done
+        else:
+            todo.append(t)
+
+    bar = tqdm(total=len(tasks), initial=len(rows), unit="img", desc="batch",
+               disable=not progress, dynamic_ncols=True)
+    attempts = {t.rel: 0 for t in todo}
+    last_write = time.monotonic()
+    try:
+        queue = list(reversed(todo))
+        while queue:
+            broken = False
+            with get_executor(workers, scheduler) as ex:
+                slots = _executor_slots(ex, workers or os.cpu_count() or 1)
+                inflight = {}
+                while queue or inflight:
+                    while queue and len(inflight) < slots and not broken:
+                        t = queue.pop()
+                        attempts[t.rel] += 1
+                        try:
+                            inflight[ex.submit(process_image, t)] = t
+                        except BrokenProcessPool:
+                            queue.append(t)
+                            attempts[t.rel] -= 1
+                            broken = True
+                    if not inflight:
+                        break
+                    done, _ = wait(list(inflight), return_when=FIRST_COMPLETED)
+                    for fut in done:
+                        t = inflight.pop(fut)
+                        try:
+                            row = fut.result()
+                        except BrokenProcessPool:
+                            # a worker died (killed, out of memory): retry, then give up
+                            broken = True
+                            if attempts[t.rel] < MAX_ATTEMPTS:
+                                queue.append(t)
+                                continue
+                            row = _row(t, "failed", reason="worker process died while "
+                                                           "analysing this image")
+                        except Exception as exc:  # noqa: BLE001 - lost task (cluster error)
+                            row = _row(t, "failed", reason=_one_line(exc))
+                        rows[t.rel] = row
+                        bar.update(1)
+                    if time.monotonic() - last_write > INDEX_EVERY_S:
+                        _write_tables(out, rows, tasks)
+                        last_write = time.monotonic()
+    finally:
+        bar.close()
+        index = _write_tables(out, rows, tasks)
+        counts = index["status"].value_counts().to_dict()
+        meta.update(finished=time.strftime("%Y-%m-%dT%H:%M:%S"),
+                    elapsed_s=time.time() - t_start,
+                    counts={k: int(counts.get(k, 0)) for k in ("ok", "skipped", "failed")},
+                    complete=len(index) == len(tasks))
+        write_json(out / "batch.json", meta)
+    return index
+
+
+# --------------------------------------------------------------------------- CLI
+
+
+def _add_analysis_options(p: argparse.ArgumentParser):
+    g = p.add_argument_group("analysis parameters (images outside any set.toml, and defaults "
+                             "where a set.toml is silent)")
+    g.add_argument("--px-per-mm", type=float, default=None, help="scan resolution (default 50)")
+    g.add_argument("--thickness-mm", type=float, default=None,
+                   help="sheet thickness h (default 0.1)")
+    g.add_argument("--hole-radius-mm", type=float, default=None,
+                   help="radius of the confining hole (fitted when absent)")
+    g.add_argument("--hole-center-px", type=float, nargs=2, metavar=("X", "Y"), default=None)
+    g.add_argument("--calibration", default=None, help="CSV n_layers,width_mm")
+    g.add_argument("--rod-length-mm", type=float, default=None)
+    g.add_argument("--kappa-c-per-mm", type=float, default=None, help="plastic threshold")
+    g.add_argument("--bending-rigidity-J", dest="bending_rigidity_J", type=float, default=None)
+
+
+def add_subparser(sub):
+    """Register the ``batch`` subcommand on an ``argparse`` subparsers object."""
+    p = sub.add_parser(
+        "batch", help="analyse every image under a folder, in parallel, resumable",
+        description="Analyse every image (png, tif, tiff, jpg, jpeg; recursive) under "
+                    "INPUT_DIR into OUT_DIR/<set>/<image stem>/. A folder with a set.toml is "
+                    "a set; finished images are skipped on a re-run; bad images are listed in "
+                    "OUT_DIR/failures.csv and the batch goes on.")
+    p.add_argument("input_dir", metavar="INPUT_DIR")
+    p.add_argument("--out", required=True, metavar="OUT_DIR")
+    p.add_argument("--workers", type=int, default=None,
+                   help="local worker processes (default: all cores; 1 runs inline)")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="Dask scheduler address, e.g. tcp://127.0.0.1:8786")
+    p.add_argument("--seed", type=int, default=0, help="base seed of the per-image seeds")
+    p.add_argument("--no-figure", action="store_true", help="skip overlay.png")
+    p.add_argument("--force", action="store_true", help="redo images already complete")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    _add_analysis_options(p)
+    p.set_defaults(func=run)
+    return p
+
+
+def run(args) -> int:
+    """Entry point of ``python -m crosssection batch``; returns the exit status."""
+    cli_params = {k: getattr(args, k) for k in
+                  ("px_per_mm", "thickness_mm", "hole_radius_mm", "hole_center_px",
+                   "calibration", "rod_length_mm", "kappa_c_per_mm", "bending_rigidity_J")
+                  if getattr(args, k, None) is not None}
+    if cli_params.get("calibration"):
+        cli_params["calibration"] = str(Path(cli_params["calibration"]).resolve())
+    index = run_batch(args.input_dir, args.out, workers=args.workers, scheduler=args.scheduler,
+                      seed=args.seed, figure=not args.no_figure, cli_params=cli_params,
+                      force=args.force, progress=not args.quiet)
+    n = index["status"].value_counts()
+    n_failed = int(n.get("failed", 0))
+    print(f"batch: {len(index)} images: {int(n.get('ok', 0))} done, "
+          f"{int(n.get('skipped', 0))} skipped, {n_failed} failed"
+          + (f" (see {Path(args.out) / 'failures.csv'})" if n_failed else ""))
+    return 0
+
+
+__all__ = ["run_batch", "plan_batch", "process_image", "completed_row", "find_images",
+           "params_hash", "ImageTask", "add_subparser", "run"]

@@ -1,0 +1,244 @@
+"""``set.toml``: the parameters shared by the scans of one experimental set.
+
+A *set* is a folder holding a ``set.toml``; every image below it (recursively, down to the next
+folder with its own ``set.toml``) belongs to it. Example::
+
+    name = "confined_r20"
+    px_per_mm = 50
+    thickness_mm = 0.1
+    hole_radius_mm = 20.0
+    rod_length_mm = 1500.0
+    calibration = "calibration.csv"     # relative to the set folder
+    bending_rigidity_J = 1.2e-4          # B, J*m: turns e into physical energy (paper, "Energetical properties")
+    kappa_c_per_mm = 5.0                 # plastic threshold kappa_c
+
+    [images."scan_03.png"]               # per-image overrides (path relative to the set folder)
+    hole_radius_mm = 19.5
+
+Unknown keys are errors (a typo such as ``px_per_m`` would otherwise silently fall back to a
+default and bias every length of the set). Values are checked for type and sign; the calibration
+file must exist and hold the columns ``n_layers,width_mm``.
+"""
+from __future__ import annotations
+
+import math
+import re
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .errors import ConfigError
+
+SET_FILE = "set.toml"
+
+#: analysis parameters a set (or the command line) may give, with their checkers
+POSITIVE_FLOAT_KEYS = ("px_per_mm", "thickness_mm", "hole_radius_mm", "rod_length_mm",
+                       "bending_rigidity_J", "kappa_c_per_mm", "s_min_mm2", "l_min_mm")
+#: keys describing the set rather than one analysis; never passed to the analysis as-is
+META_KEYS = ("name",)
+OTHER_PARAM_KEYS = ("calibration", "hole_center_px", "blue_min", "rg_max", "threshold_method")
+PARAM_KEYS = POSITIVE_FLOAT_KEYS + OTHER_PARAM_KEYS
+ALLOWED_KEYS = META_KEYS + PARAM_KEYS + ("images",)
+
+#: defaults used for images outside any set (the paper's scans: 50 px/mm, h = 0.1 mm)
+DEFAULT_PARAMS = {"px_per_mm": 50.0, "thickness_mm": 0.1}
+DEFAULT_SET_NAME = "default"
+
+_SAFE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._+-]*$")
+
+
+@dataclass
+class SetConfig:
+    """One set of scans.
+
+    Attributes
+    ----------
+    name : str
+        Output sub-folder name (``OUT_DIR/<name>/``).
+    folder : Path
+        The folder holding ``set.toml`` (or the input root for images outside any set).
+    params : dict
+        Analysis parameters of the set (calibration resolved to an absolute path).
+    overrides : dict
+        Image path relative to ``folder`` (posix) -> dict of parameters overriding ``params``.
+    source : Path or None
+        The ``set.toml`` read, None for the default set.
+    error : str or None
+        Why the set cannot be used (bad ``set.toml``, missing calibration); its images fail
+        with this reason.
+    warnings : list of str
+        Non-fatal remarks (an override naming no image, ...).
+    """
+
+    name: str
+    folder: Path
+    params: dict = field(default_factory=dict)
+    overrides: dict = field(default_factory=dict)
+    source: Path | None = None
+    error: str | None = None
+    warnings: list = field(default_factory=list)
+
+    def params_for(self, image_path) -> dict:
+        """Parameters of one image of the set: the set's, updated by its override table."""
+        rel = Path(image_path).resolve().relative_to(self.folder.resolve()).as_posix()
+        out = dict(self.params)
+        out.update(self.overrides.get(rel, {}))
+        return out
+
+
+def _check_value(key, value, path, where):
+    """Validate one parameter value; return it normalised (floats, absolute calibration path)."""
+    ctx = f"{where}{key}"
+    if key in POSITIVE_FLOAT_KEYS:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(f"{ctx} must be a number, got {value!r}", path)
+        value = float(value)
+        if not math.isfinite(value) or value <= 0:
+            raise ConfigError(f"{ctx} must be > 0, got {value!r}", path)
+        return value
+    if key == "calibration":
+        if not isinstance(value, str) or not value:
+            raise ConfigError(f"{ctx} must be a file path (string), got {value!r}", path)
+        cal = Path(value)
+        if not cal.is_absolute():
+            cal = Path(path).parent / cal
+        check_calibration(cal, origin=path)
+        return str(cal.resolve())
+    if key == "hole_center_px":
+        if (not isinstance(value, (list, tuple)) or len(value) != 2
+                or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in value)):
+            raise ConfigError(f"{ctx} must be [x, y] in pixels, got {value!r}", path)
+        return [float(v) for v in value]
+    if key in ("blue_min", "rg_max"):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or value < 0:
+            raise ConfigError(f"{ctx} must be a number >= 0, got {value!r}", path)
+        return value
+    if key == "threshold_method":
+        if value not in ("fixed", "otsu"):
+            raise ConfigError(f"{ctx} must be 'fixed' or 'otsu', got {value!r}", path)
+        return value
+    raise ConfigError(f"unknown key {ctx!r}; allowed: {', '.join(ALLOWED_KEYS)}", path)
+
+
+def check_calibration(cal_path, origin=None) -> Path:
+    """Check that a calibration CSV exists and has numeric ``n_layers,width_mm`` columns.
+
+    Parameters
+    ----------
+    cal_path : str or Path
+        The calibration file.
+    origin : str or Path, optional
+        The file that named it (named in the error).
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    ConfigError
+        Missing, unreadable or malformed file.
+    """
+    import pandas as pd
+
+    cal_path = Path(cal_path)
+    named = f" (named in {origin})" if origin else ""
+    if not cal_path.is_file():
+        raise ConfigError(f"calibration file not found{named}", cal_path)
+    try:
+        df = pd.read_csv(cal_path)
+    except Exception as exc:  # noqa: BLE001 - any parse failure is a config error
+        raise ConfigError(f"calibration file unreadable{named}: {exc}", cal_path) from exc
+    missing = [c for c in ("n_layers", "width_mm") if c not in df.columns]
+    if missing:
+        raise ConfigError(f"calibration lacks columns {missing}{named}", cal_path)
+    if len(df) == 0 or not all(pd.api.types.is_numeric_dtype(df[c]) for c in ("n_layers", "width_mm")):
+        raise ConfigError(f"calibration needs numeric rows n_layers,width_mm{named}", cal_path)
+    return cal_path
+
+
+def check_params(params: dict, path=None, where: str = "") -> dict:
+    """Validate a dict of analysis parameters (the keys of :data:`PARAM_KEYS`).
+
+    Parameters
+    ----------
+    params : dict
+        Raw values (from TOML or the command line). ``None`` values are dropped.
+    path : str or Path, optional
+        File the values come from; relative calibration paths are resolved against its folder.
+    where : str
+        Prefix naming the table in messages (``'images."a.png".'``).
+
+    Returns
+    -------
+    dict
+        Normalised parameters.
+    """
+    return {k: _check_value(k, v, path if path is not None else Path.cwd() / "cli", where)
+            for k, v in params.items() if v is not None}
+
+
+def load_set_config(toml_path, *, defaults: dict | None = None) -> SetConfig:
+    """Read and validate a ``set.toml``.
+
+    Parameters
+    ----------
+    toml_path : str or Path
+        The file.
+    defaults : dict, optional
+        Parameters used where the set is silent (the command-line values).
+
+    Returns
+    -------
+    SetConfig
+
+    Raises
+    ------
+    ConfigError
+        Unreadable TOML, unknown key, wrong type or sign, missing or malformed calibration,
+        unsafe set name.
+    """
+    toml_path = Path(toml_path)
+    try:
+        data = tomllib.loads(toml_path.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"invalid TOML: {exc}", toml_path) from exc
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"cannot read: {exc}", toml_path) from exc
+    folder = toml_path.parent
+    name = data.get("name", folder.name)
+    if not isinstance(name, str) or not _SAFE_NAME.match(name) or name in (".", ".."):
+        raise ConfigError(f"name must be a plain folder name (letters, digits, . _ + -), "
+                          f"got {name!r}", toml_path)
+    images = data.get("images", {})
+    if not isinstance(images, dict) or any(not isinstance(v, dict) for v in images.values()):
+        raise ConfigError("[images] must hold one table per image, e.g. "
+                          "[images.\"scan_03.png\"]", toml_path)
+    top = {k: v for k, v in data.items() if k not in ("name", "images")}
+    params = dict(defaults or {})
+    params.update(check_params(top, toml_path))
+    overrides, warnings = {}, []
+    for rel, table in images.items():
+        bad = [k for k in table if k not in PARAM_KEYS]
+        if bad:
+            raise ConfigError(f"unknown key {bad[0]!r} in [images.{rel!r}]; allowed: "
+                              f"{', '.join(PARAM_KEYS)}", toml_path)
+        key = Path(rel).as_posix()
+        overrides[key] = check_params(table, toml_path, where=f"images.{rel!r}.")
+        if not (folder / key).is_file():
+            warnings.append(f"{toml_path}: [images.{rel!r}] names no image of the set")
+    return SetConfig(name=name, folder=folder, params=params, overrides=overrides,
+                     source=toml_path, warnings=warnings)
+
+
+def failed_set(toml_path, error: str) -> SetConfig:
+    """A placeholder set whose images all fail with ``error`` (named after its folder)."""
+    toml_path = Path(toml_path)
+    name = toml_path.parent.name
+    if not _SAFE_NAME.match(name or ""):
+        name = "invalid_set"
+    return SetConfig(name=name, folder=toml_path.parent, source=toml_path, error=error)
+
+
+__all__ = ["SetConfig", "load_set_config", "check_params", "check_calibration", "failed_set",
+           "SET_FILE", "DEFAULT_PARAMS", "DEFAULT_SET_NAME", "PARAM_KEYS", "ALLOWED_KEYS"]

@@ -1,0 +1,358 @@
+"""The paper's per-set tables, relations (Eqs. 1-5), correlations and distribution fits.
+
+Everything is computed from an :class:`~crosssection.stats.data.Ensemble` (units of L):
+
+- macro (paper table tab_macro): <N_l>, <N_br>, <n_br>, <s>/L^2, <sqrt(s)/p>, <l>/L;
+- micro (table tab_micro): <kappa_m>L, <l>/L, <E~>, <e>, alpha_e, chi_e, alpha_E, chi_E
+  (Gamma fits, eq_gam, chi = scale);
+- degrees of freedom (table tab_res): alpha_E/alpha_e against <N_l>;
+- relations (section "Stacking"): Eq. 1 constant, slope of sqrt(s_bar) vs l_bar, Eq. 3 slope,
+  Eq. 5 ratio, n_br exponential;
+- correlations (Pearson r): l with 1/kappa_m (paper 0.45), e with l kappa_m^2 (0.6),
+  E with N_br (0.75);
+- fits of every distribution with model selection, truncation-aware where a detection limit
+  applies (l >= l_min, s >= s_min), with the naive fit alongside.
+
+Bulk and periphery are tabulated apart and together when the data carry regions (images);
+simulations have region ``"none"`` and only the ``"all"`` rows.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from . import fits as F
+from .data import SIM_REGION, Ensemble
+
+EQ1_CONST = 2 * np.sqrt(np.pi) / np.sqrt(3)  # Eq. 1: N_br = (2 sqrt(pi)/sqrt(3)) eps (sqrt(s)/l) sqrt(N_l)
+EQ5_PAPER = 2.2 * np.sqrt(np.pi / 3)  # Eq. 5
+PAPER_SLOPE_S_L = 1.1  # Fig. topolo_macro b
+PAPER_CORR = {"l_vs_inv_kappa_m": 0.45, "e_vs_l_kappa_m2": 0.6, "E_vs_N_br": 0.75}
+
+# quantity -> (table, column, families, truncation column or None, label)
+QUANTITIES = {
+    "length_L": ("branches", "length_L", F.FAMILIES, "l_min_L", r"$\ell/L$"),
+    "kappa_m_L": ("branches", "kappa_m_L", F.FAMILIES, None, r"$\kappa_m L$"),
+    "kappa_plus_L": ("branches", "kappa_plus_L", F.FAMILIES, None, r"$\kappa_+ L$"),
+    "e": ("branches", "e", F.FAMILIES, None, r"$e$"),
+    "E": ("configs", "E", ("exponential", "gamma", "lognormal", "gaussian"), None, r"$E$"),
+    "n_br": ("stacks", "n_br", ("exponential", "gamma", "lognormal", "gaussian"), None,
+             r"$n_{br}$"),
+    "area_L2": ("voids", "area_L2", ("exponential", "gamma", "lognormal", "gaussian"),
+                "s_min_L2", r"$s/L^2$"),
+    "shape_ratio": ("voids", "shape_ratio", ("gamma", "lognormal", "gaussian"), None,
+                    r"$\sqrt{s}/p$"),
+}
+POSITIVE_QUANTITIES = {"length_L", "kappa_m_L", "kappa_plus_L", "e", "E", "n_br", "area_L2",
+                       "shape_ratio"}
+
+
+@dataclass
+class StatsOptions:
+    """Knobs of the statistics (all random choices derive from ``seed``)."""
+
+    seed: int = 0
+    n_boot: int = 200
+    gof: bool = True
+    n_mc: int = 199
+    quantities: tuple = tuple(QUANTITIES)
+    min_n: int = 5
+
+
+@dataclass
+class StatsResult:
+    """All tables of a run, plus the fit objects (for figures)."""
+
+    macro: pd.DataFrame
+    micro: pd.DataFrame
+    dof: pd.DataFrame
+    fits: pd.DataFrame
+    truncation: pd.DataFrame
+    relations: pd.DataFrame
+    correlations: pd.DataFrame
+    per_config: pd.DataFrame
+    summaries: dict = field(default_factory=dict)  # (set, region, quantity) -> FitSummary
+
+
+def regions_of(ens: Ensemble) -> list[str]:
+    """``["all"]`` plus ``bulk``/``periphery`` when the branches carry them."""
+    present = set(ens.branches["region"].dropna().astype(str)) - {SIM_REGION, "nan", ""}
+    return ["all"] + [r for r in ("bulk", "periphery") if r in present]
+
+
+def _in_region(df, region):
+    if region == "all" or "region" not in df.columns:
+        return df
+    return df[df["region"].astype(str) == region]
+
+
+def _mean(v):
+    v = np.asarray(v, float)
+    v = v[np.isfinite(v)]
+    return float(np.mean(v)) if v.size else np.nan
+
+
+def per_config_table(ens: Ensemble) -> pd.DataFrame:
+    """Per configuration: N_l, N_br, n_br_bar = N_br/N_l, epsilon, E, s_bar, l_bar, e_bar.
+
+    s_bar and l_bar are the configuration means of void area and branch length (units of L),
+    the quantities of Eq. 1.
+    """
+    c = ens.configs.copy()
+    key = ["set", "config_id"]
+    lb = ens.branches.groupby(key)["length_L"].mean().rename("l_bar")
+    eb = ens.branches.groupby(key)["e"].mean().rename("e_bar")
+    sb = ens.voids.groupby(key)["area_L2"].mean().rename("s_bar")
+    c = c.join(lb, on=key).join(eb, on=key).join(sb, on=key)
+    c["n_br_bar"] = c["N_br"] / c["N_l"].where(c["N_l"] > 0)
+    c["sqrt_s_bar"] = np.sqrt(c["s_bar"])
+    c["eq1_x"] = c["epsilon"] * c["sqrt_s_bar"] / c["l_bar"] * np.sqrt(c["N_l"])
+    return c
+
+
+def macro_table(ens: Ensemble) -> pd.DataFrame:
+    """Paper table tab_macro per set and region."""
+    rows = []
+    for s in ens.sets:
+        e = ens.subset(s)
+        for reg in regions_of(e):
+            br, st = _in_region(e.branches, reg), _in_region(e.stacks, reg)
+            if reg == "all":
+                N_l, N_br = _mean(e.configs["N_l"]), _mean(e.configs["N_br"])
+                s_mean = _mean(e.voids["area_L2"])
+                sp = _mean(e.voids["shape_ratio"])
+            else:  # counts of this sub-system per configuration; voids have no region
+                cids = e.configs["config_id"]
+                N_l = _mean(st.groupby("config_id").size().reindex(cids, fill_value=0))
+                N_br = _mean(br.groupby("config_id").size().reindex(cids, fill_value=0))
+                s_mean = sp = np.nan
+            rows.append({"set": s, "region": reg, "n_configs": len(e.configs),
+                         "N_l": N_l, "N_br": N_br, "n_br": _mean(st["n_br"]),
+                         "s_L2": s_mean, "sqrt_s_over_p": sp, "l_L": _mean(br["length_L"]),
+                         "n_branches": len(br), "n_voids": len(e.voids) if reg == "all" else 0})
+    return pd.DataFrame(rows)
+
+
+def _clean(x, positive=True):
+    x = np.asarray(x, float)
+    keep = np.isfinite(x)
+    if positive:
+        keep &= x > 0
+    return x[keep], keep
+
+
+def fit_quantity(ens: Ensemble, quantity: str, region: str, opts: StatsOptions, seed):
+    """Fit every family of ``quantity`` in one set and region.
+
+    Returns
+    -------
+    (FitSummary or None, truncation-bias DataFrame or None, n_nonpositive_dropped)
+    """
+    table, col, fams, tcol, _ = QUANTITIES[quantity]
+    df = _in_region(getattr(ens, table), region)
+    x, keep = _clean(df[col], quantity in POSITIVE_QUANTITIES)
+    if x.size < opts.min_n or np.ptp(x) <= 0:
+        return None, None, int((~keep).sum())
+    cuts = None
+    if tcol is not None:
+        c = np.asarray(df[tcol], float)[keep]
+        if np.all(np.isfinite(c)):
+            cuts = c
+    summ = F.fit_all(x, fams, truncation=cuts, seed=seed, n_boot=opts.n_boot, gof=opts.gof,
+                     n_mc=opts.n_mc)
+    bias = None
+    if cuts is not None:
+        bias = F.truncation_bias(x, cuts, families=tuple(f for f in fams
+                                                          if f in ("exponential", "gamma",
+                                                                   "lognormal")))
+    return summ, bias, int((~keep).sum())
+
+
+def _gamma_params(summ):
+    if summ is None or "gamma" not in summ.results or not summ.results["gamma"].ok:
+        return np.nan, np.nan
+    p = summ.results["gamma"].params
+    return p["alpha"], p["chi"]
+
+
+def compute_stats(ens: Ensemble, opts: StatsOptions | None = None) -> StatsResult:
+    """Every table of the report.
+
+    Parameters
+    ----------
+    ens : Ensemble
+    opts : StatsOptions, optional
+
+    Returns
+    -------
+    StatsResult
+    """
+    opts = opts or StatsOptions()
+    per_cfg = per_config_table(ens)
+    macro = macro_table(ens)
+    fit_rows, trunc_rows, summaries = [], [], {}
+    jobs = [(s, reg, q) for s in ens.sets for reg in regions_of(ens.subset(s))
+            for q in opts.quantities
+            if not (reg != "all" and QUANTITIES[q][0] in ("configs", "voids"))]
+    seeds = np.random.SeedSequence(opts.seed).spawn(len(jobs))
+    subsets = {s: ens.subset(s) for s in ens.sets}
+    for (s, reg, q), sd in zip(jobs, seeds):
+        summ, bias, ndrop = fit_quantity(subsets[s], q, reg, opts, sd)
+        if summ is None:
+            continue
+        summaries[(s, reg, q)] = summ
+        t = summ.table.copy()
+        t.insert(0, "quantity", q)
+        t.insert(0, "region", reg)
+        t.insert(0, "set", s)
+        t["n_dropped"] = summ.n_dropped + ndrop
+        fit_rows.append(t)
+        if bias is not None:
+            bias.insert(0, "quantity", q)
+            bias.insert(0, "region", reg)
+            bias.insert(0, "set", s)
+            trunc_rows.append(bias)
+    fits_df = pd.concat(fit_rows, ignore_index=True) if fit_rows else pd.DataFrame()
+    trunc_df = pd.concat(trunc_rows, ignore_index=True) if trunc_rows else pd.DataFrame()
+
+    micro_rows, dof_rows = [], []
+    for s in ens.sets:
+        e = subsets[s]
+        aE, cE = _gamma_params(summaries.get((s, "all", "E")))
+        for reg in regions_of(e):
+            br = _in_region(e.branches, reg)
+            ae, ce = _gamma_params(summaries.get((s, reg, "e")))
+            micro_rows.append({
+                "set": s, "region": reg, "kappa_m_L": _mean(br["kappa_m_L"]),
+                "l_L": _mean(br["length_L"]),
+                "E_tilde": _mean(e.configs["E"]) if reg == "all" else np.nan,
+                "e": _mean(br["e"]), "alpha_e": ae, "chi_e": ce,
+                "alpha_E": aE if reg == "all" else np.nan,
+                "chi_E": cE if reg == "all" else np.nan})
+        ae, _ = _gamma_params(summaries.get((s, "all", "e")))
+        dof_rows.append({"set": s, "N_l": _mean(e.configs["N_l"]),
+                         "N_br": _mean(e.configs["N_br"]), "alpha_E": aE, "alpha_e": ae,
+                         "alpha_E_over_alpha_e": aE / ae if ae else np.nan})
+    micro = pd.DataFrame(micro_rows)
+    dof = pd.DataFrame(dof_rows)
+    relations = relations_table(ens, per_cfg, summaries)
+    correlations = correlations_table(ens)
+    return StatsResult(macro, micro, dof, fits_df, trunc_df, relations, correlations, per_cfg,
+                       summaries)
+
+
+def slope_through_origin(x, y):
+    """Least-squares slope of y = a x and its R^2 (uncentred), ignoring non-finite pairs.
+
+    Returns
+    -------
+    (a, r2, n)
+    """
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    k = np.isfinite(x) & np.isfinite(y)
+    x, y = x[k], y[k]
+    if x.size == 0 or not np.any(x):
+        return np.nan, np.nan, int(x.size)
+    a = float(np.sum(x * y) / np.sum(x * x))
+    ss_res = float(np.sum((y - a * x) ** 2))
+    ss_tot = float(np.sum((y - y.mean()) ** 2))
+    return a, (1 - ss_res / ss_tot) if ss_tot > 0 else np.nan, int(x.size)
+
+
+def relations_table(ens: Ensemble, per_cfg: pd.DataFrame, summaries: dict) -> pd.DataFrame:
+    """Fitted constants of the paper's Eqs. 1-5 per set.
+
+    Rows (relation, fitted, expected):
+
+    - ``eq1_const``: C in N_br = C eps (sqrt(s_bar)/l_bar) sqrt(N_l), expected 2 sqrt(pi/3);
+    - ``slope_sqrt_s_vs_l``: sqrt(s_bar) = a l_bar through the origin, paper 1.1;
+    - ``eq1_eps_sqrtNl``: K in N_br = K eps sqrt(N_l), expected 2 sqrt(pi/3) x slope;
+    - ``eq3_slope``: N_br = a N_l through the origin, expected <n_br>;
+    - ``eq4_fluct``: <n_br_bar/<n_br> - 1> (paper: a few percent);
+    - ``eq5``: <n_br> sqrt(<N_l>)/<eps>, paper 2.2 sqrt(pi/3);
+    - ``n_br_exp_mu``: exponential mean of n_br (= <n_br>), with the selected family;
+    - ``E_vs_Nbr_e``: <E> against <N_br><e> (paper, simulations).
+    """
+    rows = []
+    for s in ens.sets:
+        pc = per_cfg[per_cfg["set"] == s]
+        e = ens.subset(s)
+        nbr_mean = _mean(e.stacks["n_br"])
+        c1, r1, n1 = slope_through_origin(pc["eq1_x"], pc["N_br"])
+        a, ra, na = slope_through_origin(pc["l_bar"], pc["sqrt_s_bar"])
+        k, rk, nk = slope_through_origin(pc["epsilon"] * np.sqrt(pc["N_l"]), pc["N_br"])
+        a3, r3, n3 = slope_through_origin(pc["N_l"], pc["N_br"])
+        fl = _mean(pc["n_br_bar"] / nbr_mean - 1) if np.isfinite(nbr_mean) else np.nan
+        eq5 = nbr_mean * np.sqrt(_mean(pc["N_l"])) / _mean(pc["epsilon"])
+        nsum = summaries.get((s, "all", "n_br"))
+        mu = nsum.results["exponential"].params["mu"] if nsum else np.nan
+        ci = nsum.results["exponential"].ci.get("mu", (np.nan, np.nan)) if nsum else (np.nan,) * 2
+        rows += [
+            {"set": s, "relation": "eq1_const", "fitted": c1, "expected": EQ1_CONST,
+             "r2": r1, "n": n1, "note": "N_br = C eps sqrt(s_bar)/l_bar sqrt(N_l)"},
+            {"set": s, "relation": "slope_sqrt_s_vs_l", "fitted": a, "expected": PAPER_SLOPE_S_L,
+             "r2": ra, "n": na, "note": "sqrt(s_bar) = a l_bar (paper 1.1)"},
+            {"set": s, "relation": "eq1_eps_sqrtNl", "fitted": k,
+             "expected": EQ1_CONST * a if np.isfinite(a) else np.nan, "r2": rk, "n": nk,
+             "note": "N_br = K eps sqrt(N_l); expected C*a"},
+            {"set": s, "relation": "eq3_slope", "fitted": a3, "expected": nbr_mean, "r2": r3,
+             "n": n3, "note": "N_br = <n_br> N_l"},
+            {"set": s, "relation": "eq4_fluct", "fitted": fl, "expected": 0.0, "r2": np.nan,
+             "n": int(pc["n_br_bar"].notna().sum()), "note": "<n_br_bar/<n_br> - 1>"},
+            {"set": s, "relation": "eq5", "fitted": eq5, "expected": EQ5_PAPER, "r2": np.nan,
+             "n": len(pc), "note": "<n_br> sqrt(<N_l>)/<eps> (paper 2.2 sqrt(pi/3))"},
+            {"set": s, "relation": "n_br_exp_mu", "fitted": mu, "expected": nbr_mean,
+             "r2": np.nan, "n": len(e.stacks),
+             "note": (f"CI [{ci[0]:.3g}, {ci[1]:.3g}]; selected: "
+                      f"{nsum.best if nsum else 'n/a'}")},
+            {"set": s, "relation": "E_vs_Nbr_e", "fitted": _mean(pc["E"]),
+             "expected": _mean(pc["N_br"]) * _mean(e.branches["e"]), "r2": np.nan,
+             "n": len(pc), "note": "<E> = <N_br><e>"},
+        ]
+    return pd.DataFrame(rows)
+
+
+def _corr(x, y):
+    from scipy import stats
+
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    k = np.isfinite(x) & np.isfinite(y)
+    if k.sum() < 3 or np.ptp(x[k]) == 0 or np.ptp(y[k]) == 0:
+        return np.nan, np.nan, int(k.sum())
+    return (float(stats.pearsonr(x[k], y[k])[0]), float(stats.spearmanr(x[k], y[k])[0]),
+            int(k.sum()))
+
+
+def correlations_table(ens: Ensemble) -> pd.DataFrame:
+    """Pearson (and Spearman) coefficients the paper quotes, per set and region."""
+    rows = []
+    for s in ens.sets:
+        e = ens.subset(s)
+        for reg in regions_of(e):
+            br = _in_region(e.branches, reg)
+            km = np.asarray(br["kappa_m_L"], float)
+            inv = np.where(km > 0, 1 / np.where(km > 0, km, 1), np.nan)
+            for pair, (x, y) in {
+                    "l_vs_inv_kappa_m": (br["length_L"], inv),
+                    "e_vs_l_kappa_m2": (br["e"], br["length_L"] * km ** 2)}.items():
+                r, rs, n = _corr(x, y)
+                rows.append({"set": s, "region": reg, "pair": pair, "pearson_r": r,
+                             "spearman_r": rs, "n": n, "paper": PAPER_CORR[pair]})
+        r, rs, n = _corr(e.configs["E"], e.configs["N_br"])
+        rows.append({"set": s, "region": "all", "pair": "E_vs_N_br", "pearson_r": r,
+                     "spearman_r": rs, "n": n, "paper": PAPER_CORR["E_vs_N_br"]})
+    return pd.DataFrame(rows)
+
+
+def to_markdown(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
+    """A GitHub-flavoured Markdown table (no extra dependency)."""
+    def fmt(v):
+        if isinstance(v, (float, np floating)) if False else isinstance(v, (float, np.floating)):
+            return "" if not np.isfinite(v) else format(float(v), floatfmt)
+        return str(v).replace("|", "\\|")
+    head = "| " + " | ".join(map(str, df.columns)) + " |"
+    sep = "|" + "|".join("---" for _ in df.columns) + "|"
+    body = ["| " + " | ".join(fmt(v) for v in row) + " |" for row in df.itertuples(index=False)]
+    return "\n".join([head, sep, *body]) + "\n"

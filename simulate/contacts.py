@@ -1,0 +1,591 @@
+"""Ground truth from geometry: stacks, junctions, branches and voids of a simulated rod.
+
+Never from images: everything here follows from the node positions of the rod (units of L).
+
+Definitions (issue 3, "Analysis of a configuration"; paper sections "Simulations vs
+experiments", "Tiling", "Curvature of branches", "Energetical properties"):
+
+- The rod is resampled at arclength spacing ``h <= min(ds, delta) / 3`` (nodes included).
+- Two samples ``k`` and ``j`` are *in contact* when ``|R_k - R_j| < delta`` and they lie on
+  different *passes*: the rod between them leaves the disk of radius ``delta`` around ``R_k``.
+  (A tight fold of radius < delta/2 is therefore one pass at its apex, as it is one band in a
+  scan.)
+- Contacts chain: a pass touching a pass that touches a third forms one band of three (as in
+  a scan, where bands closer than the resolution merge). The *multiplicity* of a sample is the
+  number of distinct passes in its chained cluster, itself included.
+- Runs of constant multiplicity (runs shorter than ``min_run`` = 3 delta are merged into a
+  neighbour; a run also ends where a partner pass jumps) are unioned through their contacts
+  into *stacks*; a short single run between two runs of the same stack is a fold cap and is
+  split between them (the stack ends there, like a free end: junction -1).
+- A stack whose runs wrap around (a spiral) is cut where its passes cross the normal at its
+  first sample, so that every stack has ``n_br`` runs = branches, and
+  ``N_br = sum(n_br) = number of branches``.
+- *Junctions* are where the runs of two or more different stacks meet (they change the set of
+  passes in contact); free rod ends, fold caps and loop cuts are not junctions.
+- *Branches* are the rod pieces between consecutive stack boundaries along the rod (junctions,
+  free ends, fold apices): each belongs to exactly one stack.
+- *Voids* are the bounded components of the plane minus the rod thickened to width delta
+  (contacts merged), rasterised at ``delta/6`` per pixel; their area and perimeter are measured
+  on sub-pixel contours and corrected by the Steiner formula back to the rod centre line.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+from numba import njit
+from scipy.spatial import cKDTree
+
+from .energy import bending_energy, confinement_energy, node_curvature
+
+__all__ = ["RodAnalysis", "analyze_rod", "default_contact_distance", "resample_rod"]
+
+
+def default_contact_distance(n_segments: int) -> float:
+    """Default contact cut-off ``delta`` = half a segment length, ``0.5 / N`` (units of L).
+
+    Half a segment is below the resolution of the rod itself (two passes closer than that are
+    in contact for every practical purpose) and, rendered at the default scale of
+    :mod:`simulate.render`, maps to the band width of a thin stack plus a visible gap.
+    """
+    return 0.5 / max(int(n_segments), 1)
+
+
+@dataclass
+class RodAnalysis:
+    """Ground-truth analysis of one rod configuration (units of L).
+
+    Attributes
+    ----------
+    rg : float
+        Radius of gyration ``sqrt(int R^2 ds)`` (paper Eq. "raygir", trapezoid rule).
+    epsilon, epsilon_sqrt2 : float
+        ``1/(2 pi Rg)`` (paper's definition) and ``1/(2 pi sqrt(2) Rg)`` (disk of radius
+        sqrt(2) Rg; the reading under which the paper's <eps> = 2.3 matches Rg = 0.05-0.07).
+    energy_total, energy_bending, energy_confinement : float
+        Whole-rod energies (paper Eq. "modreduced", hard core 0).
+    n_stacks, n_branches, n_junctions, n_voids : int
+        ``n_branches = sum(stacks.n_br)``.
+    multiplicity : (N+1,) int array
+        Number of passes in the chained contact cluster of each node, itself included.
+    junctions, stacks, branches, voids : DataFrame
+        See the module docstring; columns ``junction_id, x, y, n_stacks``;
+        ``stack_id, junction_a, junction_b, length, n_br, passes``;
+        ``branch_id, stack_id, length, kappa_plus, kappa_pm, energy_bending,
+        energy_confinement, energy, s_start, s_end``; ``area, perimeter, shape_ratio, n_edges``.
+    contact_distance : float
+        The cut-off delta used.
+    stack_lines : list of (P, 2) arrays
+        Mean line of every stack (centroid of its passes), extended to its junctions; used by
+        the renderer.
+    samples_s, samples_xy, samples_multiplicity : arrays
+        The resampled rod and the multiplicity of every sample.
+    """
+
+    rg: float
+    epsilon: float
+    epsilon_sqrt2: float
+    energy_total: float
+    energy_bending: float
+    energy_confinement: float
+    n_stacks: int
+    n_branches: int
+    n_junctions: int
+    n_voids: int
+    multiplicity: np.ndarray
+    junctions: pd.DataFrame
+    stacks: pd.DataFrame
+    branches: pd.DataFrame
+    voids: pd.DataFrame
+    contact_distance: float
+    stack_lines: list = field(default_factory=list, repr=False)
+    samples_s: np.ndarray = field(default=None, repr=False)
+    samples_xy: np.ndarray = field(default=None, repr=False)
+    samples_multiplicity: np.ndarray = field(default=None, repr=False)
+
+
+# ----------------------------------------------------------------------------------------
+# resampling and contacts
+
+
+def resample_rod(xy, spacing: float) -> tuple[np.ndarray, np.ndarray, int]:
+    """Resample the rod at equal arclength steps, nodes included.
+
+    Parameters
+    ----------
+    xy : (N+1, 2) array
+        Node positions; segments of equal length 1/N.
+    spacing : float
+        Largest allowed sample spacing (units of L).
+
+    Returns
+    -------
+    s : (K,) arclengths, pts : (K, 2) positions, sub : int samples per segment.
+    """
+    xy = np.asarray(xy, dtype=np.float64)
+    n = xy.shape[0] - 1
+    sub = max(1, int(np.ceil((1.0 / n) / spacing)))
+    t = np.arange(sub) / sub
+    a = xy[:-1, None, :] * (1 - t)[None, :, None] + xy[1:, None, :] * t[None, :, None]
+    pts = np.concatenate([a.reshape(-1, 2), xy[-1:]], axis=0)
+    s = np.arange(pts.shape[0]) / (n * sub)
+    return s, pts, sub
+
+
+@njit(cache=True)
+def _other_pass(pts, pairs, delta):
+    """For each pair (k, j), k < j: is j on another pass than k seen from k (col 0) and k
+    seen from j (col 1)? Another pass = the rod between them leaves the disk of radius delta."""
+    m = pairs.shape[0]
+    out = np.zeros((m, 2), dtype=np.bool_)
+    d2 = delta * delta
+    for p in range(m):
+        k = pairs[p, 0]
+        j = pairs[p, 1]
+        for side in range(2):
+            c = k if side == 0 else j
+            cx = pts[c, 0]
+            cy = pts[c, 1]
+            for i in range(k + 1, j):
+                dx = pts[i, 0] - cx
+                dy = pts[i, 1] - cy
+                if dx * dx + dy * dy >= d2:
+                    out[p, side] = True
+                    break
+    return out
+
+
+def _partner_lists(pts, delta, local_window):
+    """For every sample, the representative (closest) sample of every other pass within delta."""
+    k_total = pts.shape[0]
+    tree = cKDTree(pts)
+    pairs = tree.query_pairs(delta, output_type="ndarray")
+    partners = [[] for _ in range(k_total)]
+    if len(pairs) == 0:
+        return partners
+    pairs = np.sort(pairs, axis=1)
+    # chord <= arc: samples closer than delta in arclength are always on the same pass
+    pairs = pairs[(pairs[:, 1] - pairs[:, 0]) > local_window]
+    if len(pairs) == 0:
+        return partners
+    other = _other_pass(pts, pairs.astype(np.int64), float(delta))
+    nb = [[] for _ in range(k_total)]
+    for (k, j), (ok_k, ok_j) in zip(pairs.tolist(), other.tolist()):
+        if ok_k:
+            nb[k].append(j)
+        if ok_j:
+            nb[j].append(k)
+    for k in range(k_total):
+        if not nb[k]:
+            continue
+        js = np.sort(np.asarray(nb[k]))
+        d = np.hypot(*(pts[js] - pts[k]).T)
+        breaks = np.flatnonzero(np.diff(js) > 1) + 1
+        for seg_js, seg_d in zip(np.split(js, breaks), np.split(d, breaks)):
+            partners[k].append(int(seg_js[np.argmin(seg_d)]))
+    return partners
+
+
+def _clusters(partners, same_pass_window, max_size=64):
+    """Chained contact cluster of every sample: sorted member samples, one per pass."""
+    out = []
+    for k in range(len(partners)):
+        members = [k]
+        frontier = [k]
+        while frontier and len(members) < max_size:
+            nxt = []
+            for r in frontier:
+                for q in partners[r]:
+                    if all(abs(q - m) > same_pass_window for m in members):
+                        members.append(q)
+                        nxt.append(q)
+            frontier = nxt
+        out.append(sorted(members))
+    return out
+
+
+def _runs(labels):
+    """(start, stop) index pairs (stop exclusive) of runs of equal labels."""
+    labels = np.asarray(labels)
+    if labels.size == 0:
+        return []
+    cut = np.flatnonzero(labels[1:] != labels[:-1]) + 1
+    starts = np.r_[0, cut]
+    stops = np.r_[cut, labels.size]
+    return list(zip(starts.tolist(), stops.tolist()))
+
+
+def _smooth_short_runs(mult, min_len):
+    """Give runs shorter than ``min_len`` samples the multiplicity of their longer neighbour."""
+    mult = mult.copy()
+    for _ in range(20):
+        runs = _runs(mult)
+        if len(runs) < 2:
+            break
+        lengths = [b - a for a, b in runs]
+        order = np.argsort(lengths)
+        changed = False
+        for i in order:
+            a, b = runs[i]
+            if b - a >= min_len:
+                break
+            left = runs[i - 1] if i > 0 else None
+            right = runs[i + 1] if i + 1 < len(runs) else None
+            cand = [r for r in (left, right) if r is not None]
+            best = max(cand, key=lambda r: r[1] - r[0])
+            mult[a:b] = mult[best[0]]
+            changed = True
+            break  # recompute runs after each merge (keeps it simple and order independent)
+        if not changed:
+            break
+    return mult
+
+
+class _DSU:
+    def __init__(self, n):
+        self.p = list(range(n))
+
+    def find(self, a):
+        while self.p[a] != a:
+            self.p[a] = self.p[self.p[a]]
+            a = self.p[a]
+        return a
+
+    def union(self, a, b):
+        ra, rb = self.find(a), self.find(b)
+        if ra != rb:
+            self.p[max(ra, rb)] = min(ra, rb)
+
+
+# ----------------------------------------------------------------------------------------
+# main entry
+
+
+def analyze_rod(xy, *, lam: float, contact_distance: float | None = None,
+                min_run: float | None = None, void_px: float | None = None) -> RodAnalysis:
+    """Stacks, junctions, branches, voids, Rg and energies of one rod configuration.
+
+    Parameters
+    ----------
+    xy : (N+1, 2) float array
+        Node positions of the rod (units of L, N equal segments of length 1/N).
+    lam : float
+        Dimensionless confinement Lambda (for the confinement energies).
+    contact_distance : float, optional
+        Contact cut-off delta (units of L); default :func:`default_contact_distance` = 0.5/N.
+    min_run : float, optional
+        Contact runs shorter than this arclength are merged into their neighbour
+        (default 3 delta: the disk of radius delta blurs multiplicity changes over ~2 delta).
+    void_px : float, optional
+        Pixel size (units of L) of the void rasterisation (default delta/6).
+
+    Returns
+    -------
+    RodAnalysis
+    """
+    xy = np.asarray(xy, dtype=np.float64)
+    if xy.ndim != 2 or xy.shape[1] != 2 or xy.shape[0] < 3:
+        raise ValueError(f"xy must be (N+1, 2) with N >= 2, got {xy.shape}")
+    n = xy.shape[0] - 1
+    ds = 1.0 / n
+    delta = float(contact_distance) if contact_distance is not None else default_contact_distance(n)
+    min_run = 3.0 * delta if min_run is None else float(min_run)
+
+    # --- energies, Rg (paper Eq. "modreduced", "raygir")
+    e_bend = float(bending_energy(xy))
+    e_conf = float(confinement_energy(xy, lam))
+    r2 = np.einsum("ij,ij->i", xy, xy)
+    rg = float(np.sqrt(np.sum((r2[1:] + r2[:-1]) * 0.5) * ds))
+    eps = 1.0 / (2 * np.pi * rg) if rg > 0 else np.inf
+    eps2 = eps / np.sqrt(2.0)
+
+    # --- contacts on the resampled rod
+    s, pts, sub = resample_rod(xy, min(ds, delta) / 3.0)
+    h = s[1] - s[0]
+    k_total = len(s)
+    local_window = int(np.floor(delta / h))
+    partners = _partner_lists(pts, delta, local_window)
+    same_pass = int(np.ceil(2.0 * delta / h)) + 1
+    clusters = _clusters(partners, same_pass)
+    mult_raw = np.array([len(c) for c in clusters], dtype=np.int64)
+    mult = _smooth_short_runs(mult_raw, max(1, int(round(min_run / h))))
+
+    # --- runs: constant multiplicity and continuous partners
+    jump = max(3 * same_pass, int(np.ceil(4 * delta / h)))
+    run_id = np.empty(k_total, dtype=np.int64)
+    runs = []
+    start = 0
+    for k in range(1, k_total + 1):
+        cut = k == k_total
+        if not cut:
+            if mult[k] != mult[k - 1]:
+                cut = True
+            elif mult[k] > 1 and mult_raw[k] == mult[k] and mult_raw[k - 1] == mult[k - 1]:
+                a = [q for q in clusters[k - 1] if abs(q - (k - 1)) > same_pass]
+                b = [q for q in clusters[k] if abs(q - k) > same_pass]
+                if any(min(abs(q - r) for r in b) > jump for q in a) or \
+                        any(min(abs(q - r) for r in a) > jump for q in b):
+                    cut = True
+        if cut:
+            runs.append([start, k])
+            run_id[start:k] = len(runs) - 1
+            start = k
+
+    def union_runs(runs, run_id):
+        dsu = _DSU(len(runs))
+        for k in range(k_total):
+            if mult[k] < 2 or mult_raw[k] != mult[k]:
+                continue
+            for q in clusters[k]:
+                if q != k and mult[q] == mult[k]:
+                    dsu.union(run_id[k], run_id[q])
+        return [dsu.find(i) for i in range(len(runs))]
+
+    cls = union_runs(runs, run_id)
+
+    # --- fold caps: a short run between two runs of one stack is split between them
+    cap_max = 4.0 * delta + np.pi * delta
+    changed = True
+    while changed:
+        changed = False
+        for i in range(1, len(runs) - 1):
+            a, b = runs[i]
+            if (b - a) * h < cap_max and cls[i - 1] == cls[i + 1] and cls[i] != cls[i - 1] \
+                    and mult[runs[i - 1][0]] > mult[a]:
+                mid = (a + b) // 2
+                runs[i - 1][1] = mid
+                runs[i + 1][0] = mid
+                del runs[i]
+                del cls[i]
+                changed = True
+                break
+    for i, (a, b) in enumerate(runs):
+        run_id[a:b] = i
+
+    # --- loops: a stack with fewer runs than passes wraps around; cut it at one normal
+    for _ in range(4):
+        groups = {}
+        for i, c in enumerate(cls):
+            groups.setdefault(c, []).append(i)
+        cut_points = []
+        for c, members in groups.items():
+            a0 = runs[members[0]][0]
+            m_mode = int(np.bincount(mult[np.r_[tuple(slice(*runs[i]) for i in members)]]).argmax())
+            if len(members) >= m_mode:
+                continue
+            k0 = a0 + min(same_pass, (runs[members[0]][1] - a0) // 2)
+            cut_points.extend(q for q in clusters[k0] if run_id[q] in members)
+        cut_points = sorted(set(cut_points))
+        if not cut_points:
+            break
+        new_runs, new_cls = [], []
+        for i, (a, b) in enumerate(runs):
+            cuts = [q for q in cut_points if a + same_pass < q < b - same_pass]
+            edges = [a] + cuts + [b]
+            for u, v in zip(edges[:-1], edges[1:]):
+                new_runs.append([u, v])
+                new_cls.append(cls[i])
+        if len(new_runs) == len(runs):
+            break
+        runs, cls = new_runs, new_cls
+        for i, (a, b) in enumerate(runs):
+            run_id[a:b] = i
+
+    # renumber stacks in order of first appearance along the rod
+    stack_of_cls = {}
+    for c in cls:
+        stack_of_cls.setdefault(c, len(stack_of_cls))
+    run_stack = np.array([stack_of_cls[c] for c in cls], dtype=np.int64)
+    n_stacks = len(stack_of_cls)
+    stack_runs = [[] for _ in range(n_stacks)]
+    for i, st in enumerate(run_stack):
+        stack_runs[st].append(i)
+
+    # --- stack ends (sides) and junctions
+    def end_point(i, e):
+        a, b = runs[i]
+        return pts[a] if e == 0 else pts[b - 1 if b == k_total else b]
+
+    side = {}  # (run, end) -> side 0/1 of its stack
+    for st, members in enumerate(stack_runs):
+        r0 = members[0]
+        p0, p1 = end_point(r0, 0), end_point(r0, 1)
+        side[(r0, 0)], side[(r0, 1)] = 0, 1
+        for r in members[1:]:
+            q0, q1 = end_point(r, 0), end_point(r, 1)
+            direct = np.hypot(*(q0 - p0)) + np.hypot(*(q1 - p1))
+            flipped = np.hypot(*(q0 - p1)) + np.hypot(*(q1 - p0))
+            side[(r, 0)], side[(r, 1)] = (0, 1) if direct <= flipped else (1, 0)
+    # nodes: stack ends (stack, side); union across boundaries between consecutive runs
+    nodes = {(st, sd): idx for idx, (st, sd) in enumerate(
+        (st, sd) for st in range(n_stacks) for sd in (0, 1))}
+    dsu = _DSU(len(nodes))
+    node_pts = {v: [] for v in nodes.values()}
+    for i in range(len(runs)):
+        for e in (0, 1):
+            node_pts[nodes[(run_stack[i], side[(i, e)])]].append(end_point(i, e))
+    for i in range(len(runs) - 1):
+        dsu.union(nodes[(run_stack[i], side[(i, 1)])], nodes[(run_stack[i + 1], side[(i + 1, 0)])])
+    groups = {}
+    for (st, sd), idx in nodes.items():
+        groups.setdefault(dsu.find(idx), []).append((st, sd))
+    junction_of_end = {}
+    jrows = []
+    for root, ends in sorted(groups.items(), key=lambda g: min(g[1])):
+        if len({st for st, _ in ends}) < 2:
+            continue  # free end, fold apex or loop cut: not a junction
+        jid = len(jrows)
+        pp = np.concatenate([np.asarray(node_pts[nodes[e]]) for e in ends])
+        c = pp.mean(axis=0)
+        jrows.append({"junction_id": jid, "x": float(c[0]), "y": float(c[1]),
+                      "n_stacks": len(ends)})
+        for e in ends:
+            junction_of_end[e] = jid
+    junctions = pd.DataFrame(jrows, columns=["junction_id", "x", "y", "n_stacks"])
+    j_xy = junctions[["x", "y"]].to_numpy(float) if len(junctions) else np.zeros((0, 2))
+
+    # --- branches: per-run energies (nodal bending weights, exact trapezoid confinement)
+    kappa = node_curvature(xy)
+    node_s = np.arange(n + 1) * ds
+    brows = []
+    for i, (a, b) in enumerate(runs):
+        s0, s1 = s[a], (s[b] if b < k_total else 1.0)
+        if i == len(runs) - 1:
+            s1 = 1.0
+        in_br = (node_s >= s0 - 1e-12) & ((node_s < s1 - 1e-12) | (i == len(runs) - 1))
+        eb = float(np.sum(kappa[in_br] ** 2) * ds)
+        ec = float(lam * _trapezoid_piece(r2, n, s0, s1))
+        length = s1 - s0
+        kap = kappa[in_br]
+        kp = float(np.sum(np.abs(kap)) * ds / length) if length > 0 else 0.0
+        kpm = float(np.sum(kap) * ds / length) if length > 0 else 0.0
+        brows.append({"branch_id": i, "stack_id": int(run_stack[i]), "length": length,
+                      "kappa_plus": kp, "kappa_pm": kpm, "energy_bending": eb,
+                      "energy_confinement": ec, "energy": eb + ec, "s_start": s0, "s_end": s1})
+    branches = pd.DataFrame(brows)
+
+    # --- stacks and their mean lines
+    srows, lines = [], []
+    for st, members in enumerate(stack_runs):
+        ja = junction_of_end.get((st, 0), -1)
+        jb = junction_of_end.get((st, 1), -1)
+        lengths = [branches.loc[r, "length"] for r in members]
+        srows.append({"stack_id": st, "junction_a": ja, "junction_b": jb,
+                      "length": float(np.mean(lengths)), "n_br": len(members),
+                      "passes": ";".join(str(r) for r in members)})
+        lines.append(_mean_line(st, members, runs, side, clusters, run_stack, run_id, pts,
+                                k_total, j_xy, ja, jb))
+    stacks = pd.DataFrame(srows, columns=["stack_id", "junction_a", "junction_b", "length",
+                                          "n_br", "passes"])
+
+    voids = _voids(xy, delta, j_xy, void_px)
+
+    node_mult = mult[np.arange(n + 1) * sub]
+    return RodAnalysis(
+        rg=rg, epsilon=float(eps), epsilon_sqrt2=float(eps2),
+        energy_total=e_bend + e_conf, energy_bending=e_bend, energy_confinement=e_conf,
+        n_stacks=n_stacks, n_branches=len(runs), n_junctions=len(junctions),
+        n_voids=len(voids), multiplicity=node_mult, junctions=junctions, stacks=stacks,
+        branches=branches, voids=voids, contact_distance=delta, stack_lines=lines,
+        samples_s=s, samples_xy=pts, samples_multiplicity=mult)
+
+
+def _trapezoid_piece(r2, n, s0, s1):
+    """Integral over [s0, s1] of the piecewise-linear interpolant of the nodal values r2.
+
+    Summed over a partition of [0, 1] it equals the trapezoid rule exactly."""
+    ds = 1.0 / n
+    x = np.arange(n + 1) * ds
+
+    def cumulative(t):
+        i = min(int(np.floor(t / ds)), n - 1)
+        tau = t - x[i]
+        f0, f1 = r2[i], r2[i + 1]
+        full = np.sum((r2[1:i + 1] + r2[:i]) * 0.5) * ds
+        return full + f0 * tau + (f1 - f0) * tau * tau / (2 * ds)
+
+    return cumulative(min(s1, 1.0)) - cumulative(max(s0, 0.0))
+
+
+def _mean_line(st, members, runs, side, clusters, run_stack, run_id, pts, k_total, j_xy, ja, jb):
+    """Centroid line of a stack's passes along its first run, extended to its junctions."""
+    r0 = members[0]
+    a, b = runs[r0]
+    b_incl = min(b, k_total - 1)
+    idx = np.arange(a, b_incl + 1)
+    line = np.empty((len(idx), 2))
+    for t, k in enumerate(idx):
+        mem = [q for q in clusters[k] if run_stack[run_id[q]] == st]
+        line[t] = pts[mem].mean(axis=0) if mem else pts[k]
+    ends = []
+    # the first run's start is side 0 by construction
+    head = [j_xy[ja]] if ja >= 0 else []
+    tail = [j_xy[jb]] if jb >= 0 else []
+    del ends
+    out = np.concatenate([np.asarray(head).reshape(-1, 2), line, np.asarray(tail).reshape(-1, 2)])
+    if ja < 0 and jb < 0 and len(members) > 1 and len(line) > 2:
+        # a loop stack (cut at one normal): close it
+        if np.hypot(*(line[0] - line[-1])) < 0.25 * np.hypot(*np.ptp(line, axis=0)):
+            out = np.concatenate([out, out[:1]])
+    return out
+
+
+# ----------------------------------------------------------------------------------------
+# voids
+
+
+def _voids(xy, delta, j_xy, void_px=None, max_px=4000):
+    """Bounded faces of the rod thickened to width delta, measured back to the centre line."""
+    import cv2
+    from scipy import ndimage
+    from skimage import measure
+
+    cols = ["area", "perimeter", "shape_ratio", "n_edges", "centroid_x", "centroid_y"]
+    lo = xy.min(axis=0) - 2 * delta
+    hi = xy.max(axis=0) + 2 * delta
+    px = delta / 6.0 if void_px is None else float(void_px)
+    px = max(px, float(np.max(hi - lo)) / max_px)
+    shape = (int(np.ceil((hi[1] - lo[1]) / px)) + 3, int(np.ceil((hi[0] - lo[0]) / px)) + 3)
+    canvas = np.full(shape, 255, np.uint8)
+    shift = 4
+    poly = np.round((xy - lo) / px * (1 << shift)).astype(np.int32)  # (x, y) = (col, row)
+    cv2.polylines(canvas, [poly.reshape(-1, 1, 2)], False, 0, 1, cv2.LINE_8, shift)
+    dist = cv2.distanceTransform(canvas, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    half = 0.5 * delta / px
+    free = dist > half
+    lab, nlab = ndimage.label(free)
+    border = np.unique(np.r_[lab[0], lab[-1], lab[:, 0], lab[:, -1]])
+    rows = []
+    jp = (j_xy - lo) / px if len(j_xy) else np.zeros((0, 2))
+    for lab_id, sl in enumerate(ndimage.find_objects(lab), start=1):
+        if sl is None or lab_id in border:
+            continue
+        sub = np.pad(lab[sl] == lab_id, 1)
+        if sub.sum() < 4:
+            continue
+        contours = measure.find_contours(sub.astype(float), 0.5)
+        if not contours:
+            continue
+        c = max(contours, key=len)
+        area_px = 0.5 * abs(np.dot(c[:-1, 0], c[1:, 1]) - np.dot(c[1:, 0], c[:-1, 1]))
+        per_px = float(np.sum(np.hypot(*np.diff(c, axis=0).T)))
+        # Steiner: the face of the centre line is the void grown by delta/2
+        r = half
+        area = (area_px + per_px * r + np.pi * r * r) * px * px
+        per = (per_px + 2 * np.pi * r) * px
+        cy, cx = np.argwhere(sub).mean(axis=0) - 1 + [sl[0].start, sl[1].start]
+        # junctions on the contour: within delta (plus the half band) of the void
+        n_edges = 0
+        if len(jp):
+            dd = ndimage.distance_transform_edt(~sub)
+            for (jx, jy) in jp:
+                rr = int(round(jy)) - sl[0].start + 1
+                cc = int(round(jx)) - sl[1].start + 1
+                if 0 <= rr < dd.shape[0] and 0 <= cc < dd.shape[1]:
+                    if dd[rr, cc] <= half + 1.5 * delta / px + 1:
+                        n_edges += 1
+        rows.append({"area": area, "perimeter": per, "shape_ratio": np.sqrt(area) / per,
+                     "n_edges": n_edges, "centroid_x": lo[0] + (cx + 0.5) * px,
+                     "centroid_y": lo[1] + (cy + 0.5) * px})
+    return pd.DataFrame(rows, columns=cols)

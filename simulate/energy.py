@@ -1,0 +1,212 @@
+"""Energy of the confined rod, paper Eq. "modreduced" (section "Energy functional").
+
+``E = int (R'')^2 ds + Lambda int R^2 ds + hard core``, with ``R`` and ``s`` in units of L.
+Discretisation (N segments, ``ds = 1/N``, nodes ``xy`` (N+1, 2)):
+
+* bending: finite differences at the N-1 interior nodes,
+  ``|R''_i|^2 = |R_{i+1} - 2 R_i + R_{i-1}|^2 / ds^4``, summed times ``ds``. For the
+  inextensible rod this is ``(2 - 2 cos(theta_i - theta_{i-1})) / ds^2`` per node; the free ends
+  carry no curvature.
+* confinement: trapezoidal rule over the nodes, ``Lambda * sum_i w_i |R_i|^2`` with
+  ``w = ds`` inside and ``ds/2`` at the ends.
+* hard core: a self-intersecting configuration (or one leaving the optional hard-wall disk)
+  has infinite energy.
+
+The functions on ``xy`` are pure numpy (also used by ``simulate.contacts``); the incremental
+kernels used by the minimiser live in :mod:`simulate.optimize`.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .geometry import positions, trapezoid_weights
+
+
+def _second_differences(xy):
+    xy = np.asarray(xy, dtype=np.float64)
+    return xy[2:] - 2.0 * xy[1:-1] + xy[:-2]
+
+
+def bending_energy(xy) -> float:
+    """Bending energy ``int (R'')^2 ds`` by finite differences (paper Eq. "modreduced").
+
+    Parameters
+    ----------
+    xy : (N+1, 2) array
+        Node positions, segment length ``1/N``.
+
+    Returns
+    -------
+    float
+        ``sum_i |R_{i+1} - 2R_i + R_{i-1}|^2 / ds^3`` over interior nodes. An arc of radius
+        ``r`` gives ``(1 - 1/N) / r^2`` (N-1 interior nodes), i.e. ``1/r^2`` up to O(1/N).
+    """
+    xy = np.asarray(xy, dtype=np.float64)
+    n = xy.shape[0] - 1
+    if n < 2:
+        return 0.0
+    d2 = _second_differences(xy)
+    return float(np.sum(d2 * d2) * n ** 3)
+
+
+def node_curvature(xy) -> np.ndarray:
+    """Signed curvature at every node, shape (N+1,), 0 at both free ends.
+
+    ``kappa_i = sign(t_{i-1} x t_i) |R_{i+1} - 2R_i + R_{i-1}| / ds^2``; for the inextensible
+    rod ``|kappa_i| = 2 sin(|dtheta_i|/2) / ds``, so ``sum_i kappa_i^2 ds`` equals
+    :func:`bending_energy` exactly. Positive = turning left (counter-clockwise).
+
+    Parameters
+    ----------
+    xy : (N+1, 2) array
+
+    Returns
+    -------
+    (N+1,) float64 array
+    """
+    xy = np.asarray(xy, dtype=np.float64)
+    n = xy.shape[0] - 1
+    kappa = np.zeros(n + 1)
+    if n < 2:
+        return kappa
+    d = np.diff(xy, axis=0)
+    d2 = d[1:] - d[:-1]
+    cross = d[:-1, 0] * d[1:, 1] - d[:-1, 1] * d[1:, 0]
+    sign = np.where(cross < 0, -1.0, 1.0)
+    kappa[1:-1] = sign * np.hypot(d2[:, 0], d2[:, 1]) * n * n
+    return kappa
+
+
+def confinement_energy(xy, lam: float) -> float:
+    """Confinement energy ``Lambda int R^2 ds`` by the trapezoidal rule.
+
+    Parameters
+    ----------
+    xy : (N+1, 2) array
+    lam : float
+        Dimensionless confinement Lambda (paper: 7e5).
+
+    Returns
+    -------
+    float
+        A straight rod centred at the origin gives ``Lambda/12`` (+ O(1/N^2)).
+    """
+    xy = np.asarray(xy, dtype=np.float64)
+    w = trapezoid_weights(xy.shape[0] - 1)
+    return float(lam * (w @ np.einsum("ij,ij->i", xy, xy)))
+
+
+def total_energy(xy, lam: float, *, wall_radius: float | None = None,
+                 hard_core: bool = True) -> float:
+    """Total energy Ẽ of Eq. "modreduced": bending + confinement + hard core.
+
+    Parameters
+    ----------
+    xy : (N+1, 2) array
+    lam : float
+        Confinement Lambda.
+    wall_radius : float, optional
+        Radius of a hard-wall disk centred at the origin (V = inf outside), as in the
+        experiment; ``None`` for no wall.
+    hard_core : bool
+        If true (default), a self-intersecting polyline has energy ``inf``.
+
+    Returns
+    -------
+    float
+    """
+    xy = np.asarray(xy, dtype=np.float64)
+    if wall_radius is not None:
+        if np.max(np.einsum("ij,ij->i", xy, xy)) > wall_radius * wall_radius:
+            return float("inf")
+    if hard_core:
+        from .intersect import has_intersection
+
+        if has_intersection(xy):
+            return float("inf")
+    return bending_energy(xy) + confinement_energy(xy, lam)
+
+
+def energy_theta(theta, start, lam: float) -> float:
+    """Bending + confinement energy of the rod given by tangent angles (no hard core)."""
+    xy = positions(theta, start)
+    return bending_energy(xy) + confinement_energy(xy, lam)
+
+
+def energy_and_gradient(theta, start, lam: float) -> tuple[float, np.ndarray]:
+    """Smooth energy (bending + confinement) and its exact gradient.
+
+    Parameters
+    ----------
+    theta : (N,) array
+        Tangent angles.
+    start : (2,) array
+        Position of node 0.
+    lam : float
+        Confinement Lambda.
+
+    Returns
+    -------
+    energy : float
+    grad : (N+2,) array
+        ``dE/dtheta_k`` for k < N, then ``dE/dx0``, ``dE/dy0``.
+
+    Notes
+    -----
+    Bending ``N sum_i (2 - 2cos(theta_i - theta_{i-1}))``; changing ``theta_k`` moves the nodes
+    ``j > k`` by ``ds t_k^perp`` so ``dE_conf/dtheta_k = 2 Lambda ds t_k^perp . sum_{j>k} w_j R_j``.
+    """
+    theta = np.asarray(theta, dtype=np.float64)
+    n = theta.size
+    ds = 1.0 / n
+    xy = positions(theta, start)
+    w = trapezoid_weights(n)
+    dth = np.diff(theta)
+    e_b = n * np.sum(2.0 - 2.0 * np.cos(dth))
+    e_c = lam * (w @ np.einsum("ij,ij->i", xy, xy))
+    grad = np.zeros(n + 2)
+    s = 2.0 * n * np.sin(dth)
+    grad[1:n] += s
+    grad[0:n - 1] -= s
+    wr = w[:, None] * xy
+    suffix = np.cumsum(wr[::-1], axis=0)[::-1]  # suffix[j] = sum_{i>=j} w_i R_i
+    tail = suffix[1:]                            # tail[k] = sum_{j>k} w_j R_j
+    tperp = np.stack([-np.sin(theta), np.cos(theta)], axis=1)
+    grad[:n] += 2.0 * lam * ds * np.einsum("ij,ij->i", tperp, tail)
+    grad[n:] = 2.0 * lam * suffix[0]
+    return float(e_b + e_c), grad
+
+
+def nematic_energy(xy, *, u: float, cutoff: float, min_separation: int = 6) -> float:
+    """Nematic self-contact energy ``u sum sin^2(alpha)`` (paper, "Search for local minima").
+
+    Sum over pairs of segments ``(i, j)``, ``j - i >= min_separation``, whose distance is below
+    ``cutoff``; ``alpha`` is the angle between them (antiparallel and parallel cost nothing).
+
+    Parameters
+    ----------
+    xy : (N+1, 2) array
+    u : float
+        Strength (paper: 50-150).
+    cutoff : float
+        Contact distance in units of L.
+    min_separation : int
+        Pairs closer than this along the rod are neighbours, not contacts.
+
+    Returns
+    -------
+    float
+    """
+    from .intersect import close_pairs
+
+    xy = np.asarray(xy, dtype=np.float64)
+    pairs = close_pairs(xy, cutoff, min_separation)
+    if pairs.shape[0] == 0:
+        return 0.0
+    d = np.diff(xy, axis=0)
+    th = np.arctan2(d[:, 1], d[:, 0])
+    return float(u * np.sum(np.sin(th[pairs[:, 0]] - th[pairs[:, 1]]) ** 2))
+
+
+__all__ = ["bending_energy", "confinement_energy", "node_curvature", "total_energy",
+           "energy_theta", "energy_and_gradient", "nematic_energy"]

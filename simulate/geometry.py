@@ -1,0 +1,104 @@
+"""Geometry of the discretised inextensible rod (paper section "Energy functional").
+
+The rod of length 1 (lengths in units of L) is cut into ``N`` segments of length ``ds = 1/N``.
+It is parametrised by the tangent angles ``theta`` (N,) and the start point ``start`` (2,), so
+that every segment has exactly the length ``ds`` whatever the parameters (inextensibility).
+Positions are the ``N + 1`` nodes ``xy`` (N+1, 2).
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def _positions(theta, x0, y0):
+    n = theta.shape[0]
+    ds = 1.0 / n
+    xy = np.empty((n + 1, 2))
+    xy[0, 0] = x0
+    xy[0, 1] = y0
+    for i in range(n):
+        xy[i + 1, 0] = xy[i, 0] + ds * np.cos(theta[i])
+        xy[i + 1, 1] = xy[i, 1] + ds * np.sin(theta[i])
+    return xy
+
+
+def positions(theta, start=(0.0, 0.0)) -> np.ndarray:
+    """Node positions of the rod from its tangent angles.
+
+    Parameters
+    ----------
+    theta : (N,) array
+        Tangent angle of every segment (radians).
+    start : (2,) array-like
+        Position of node 0.
+
+    Returns
+    -------
+    (N+1, 2) float64 array
+        ``xy[i+1] = xy[i] + (cos theta_i, sin theta_i) / N``.
+    """
+    theta = np.ascontiguousarray(theta, dtype=np.float64)
+    return _positions(theta, float(start[0]), float(start[1]))
+
+
+def angles(xy) -> tuple[np.ndarray, np.ndarray]:
+    """Tangent angles and start point of a polyline (inverse of :func:`positions`).
+
+    Parameters
+    ----------
+    xy : (N+1, 2) array
+
+    Returns
+    -------
+    theta : (N,) array
+        Unwrapped tangent angles (consecutive differences in (-pi, pi]).
+    start : (2,) array
+        ``xy[0]``.
+    """
+    xy = np.asarray(xy, dtype=np.float64)
+    d = np.diff(xy, axis=0)
+    theta = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
+    return theta, xy[0].copy()
+
+
+def trapezoid_weights(n_segments: int) -> np.ndarray:
+    """Trapezoid weights of the N+1 nodes for integrals ``int f ds`` over the rod.
+
+    Returns
+    -------
+    (N+1,) array
+        ``ds`` at interior nodes, ``ds/2`` at both ends; sums to 1.
+    """
+    w = np.full(n_segments + 1, 1.0 / n_segments)
+    w[0] *= 0.5
+    w[-1] *= 0.5
+    return w
+
+
+def center_of_mass(xy) -> np.ndarray:
+    """Centre of mass of the rod (trapezoid rule along the arclength), shape (2,).
+
+    This is the translation that minimises the confinement energy ``Lambda int R^2 ds``.
+    """
+    xy = np.asarray(xy, dtype=np.float64)
+    w = trapezoid_weights(xy.shape[0] - 1)
+    return w @ xy
+
+
+def centered(xy) -> np.ndarray:
+    """The polyline translated so that its centre of mass is at the origin."""
+    xy = np.asarray(xy, dtype=np.float64)
+    return xy - center_of_mass(xy)
+
+
+def radius_of_gyration(xy) -> float:
+    """``Rg = sqrt(int R^2 ds)`` about the origin (paper Eq. "raygir", L = 1)."""
+    xy = np.asarray(xy, dtype=np.float64)
+    w = trapezoid_weights(xy.shape[0] - 1)
+    return float(np.sqrt(w @ np.einsum("ij,ij->i", xy, xy)))
+
+
+__all__ = ["positions", "angles", "trapezoid_weights", "center_of_mass", "centered",
+           "radius_of_gyration"]
