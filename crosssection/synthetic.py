@@ -149,6 +149,9 @@ class Scene:
         The width law used to draw the bands.
     paths_rc : list of np.ndarray
         Truth centreline of every stack, (P, 2) float (row, col) in pixels, junction a -> b.
+    packs : list of (list of int, list of int)
+        Per junction, the stack ids of its two packs A | B (a stack id appears twice if both
+        its ends are at that junction); ``sum n_br(A) == sum n_br(B)`` exactly.
     """
 
     rgb: np.ndarray
@@ -157,6 +160,7 @@ class Scene:
     params: dict
     calibration: SyntheticCalibration
     paths_rc: list = field(default_factory=list)
+    packs: list = field(default_factory=list)
 
     # aliases matching docs/design.md
     @property
@@ -282,15 +286,18 @@ def _contract_short(net: _Network, radius: float, min_edge: float) -> _Network:
         deg[u] += 1
         deg[v] += 1
     order = sorted(range(len(net.edges)), key=lambda k: edge_len(k, *net.edges[k]))
+    # at most ~4 % crossings (paper: 1 %); other short stacks stay, thin (see the caps)
+    merges, max_merges = 0, max(1, int(0.04 * len(net.pos)))
     for k in order:
         u, v, kind = net.edges[k]
         if edge_len(k, u, v, kind) >= min_edge:
             break
         ru, rv = find(u), find(v)
         # merge only two Y junctions into one crossing (never degree > 4)
-        if ru != rv and deg[ru] == 3 and deg[rv] == 3:
+        if ru != rv and deg[ru] == 3 and deg[rv] == 3 and merges < max_merges:
             parent[rv] = ru
             deg[ru] = 4
+            merges += 1
     roots = sorted({find(i) for i in range(len(net.pos))})
     new_id = {r: k for k, r in enumerate(roots)}
     members = {r: [] for r in roots}
@@ -684,8 +691,9 @@ def _compose(rng, cov, stacks, labels_small, shape, centre, radius_px, union4_sm
         cv2.ellipse(img, c, ax, float(rng.uniform(0, 180)), 0, 360, tuple(float(x) for x in col), -1, cv2.LINE_AA)
     # ink, one shade per stack, anti-aliased coverage
     ink = np.zeros((H, W, 3), np.float32)
-    shades = np.array(INK_RGB) + rng.uniform(-1, 1, (len(stacks) + 1, 3)) * np.array(INK_JITTER)
-    shades[0] = INK_RGB
+    # one ink per scan within the design range, each stack within +-4 of it
+    base = np.array(INK_RGB) + rng.uniform(-1, 1, 3) * np.array(INK_JITTER)
+    shades = base + rng.uniform(-4, 4, (len(stacks) + 1, 3))
     ink[:] = shades[labels_small][..., :]
     a = cov[..., None]
     img = img * (1 - a) + ink * a
@@ -696,7 +704,7 @@ def _compose(rng, cov, stacks, labels_small, shape, centre, radius_px, union4_sm
         if not len(cand):
             break
         r, c = cand[rng.integers(len(cand))]
-        col = tuple(float(x) for x in np.array(INK_RGB) + rng.uniform(-10, 10, 3))
+        col = tuple(float(x) for x in base + rng.uniform(-10, 10, 3))
         cv2.circle(img, (int(c), int(r)), int(rng.integers(1, 4)), col, -1, cv2.LINE_AA)
     # pinholes: small paper-coloured holes inside bands at least 9 px wide
     wide = [k for k, st in enumerate(stacks) if st.width_px >= 9]
@@ -780,7 +788,7 @@ def make_scene(*, seed: int, n_stacks: int = 40, max_layers: int = 6, px_per_mm:
         radius_px = hole_radius_mm * px_per_mm
     else:
         # cell spacing: room for the widest bands plus a void >= a few s_min
-        spacing = max(2.6 * px_per_mm, 3.2 * w_max_px + 2.0 * px_per_mm)
+        spacing = max(2.4 * px_per_mm, 2.5 * w_max_px + 1.4 * px_per_mm)
         radius_px = spacing * math.sqrt(n_cells / math.pi)
     if hole_radius_mm is not None:
         radius_px = hole_radius_mm * px_per_mm
@@ -816,7 +824,7 @@ def make_scene(*, seed: int, n_stacks: int = 40, max_layers: int = 6, px_per_mm:
         widths_table = cal.width(np.arange(1, max_layers + 1)) * px_per_mm
         caps = np.empty(len(net.edges), int)
         for k, (u, v, _) in enumerate(net.edges):
-            room = min(lengths[k] - 1.0 * px_per_mm, min_adj[u], min_adj[v]) / 2.6
+            room = min(lengths[k], min_adj[u], min_adj[v]) / 2.2
             room = min(room, 0.22 * spacing)
             caps[k] = max(1, int(np.searchsorted(widths_table, room, side="right")))
         caps = np.minimum(caps, max_layers)
@@ -900,8 +908,10 @@ def make_scene(*, seed: int, n_stacks: int = 40, max_layers: int = 6, px_per_mm:
                     "mean_layers": mean_layers, "kappa_c_per_mm": kappa_c_per_mm,
                     "layout_attempts": len(failures) + 1},
     }
+    packs = [([int(ends[v][i][0]) for i in A], [int(ends[v][i][0]) for i in B])
+             for v, (A, B) in enumerate(chosen)]
     paths_rc = [np.column_stack([st.xy[:, 1] + centre[1], st.xy[:, 0] + centre[0]]) for st in stacks]
-    return Scene(rgb, summary, tables, params, cal, paths_rc)
+    return Scene(rgb, summary, tables, params, cal, paths_rc, packs)
 
 
 def write_scene(scene: Scene, folder, *, image_name: str = "image.png") -> Path:

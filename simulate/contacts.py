@@ -558,10 +558,12 @@ def _voids(xy, delta, j_xy, void_px=None, max_px=4000):
     border = np.unique(np.r_[lab[0], lab[-1], lab[:, 0], lab[:, -1]])
     rows = []
     jp = (j_xy - lo) / px if len(j_xy) else np.zeros((0, 2))
+    reach = half + 1.5 * delta / px + 1.0  # junctions on the contour: within ~delta of the void
+    pad = int(np.ceil(reach)) + 2
     for lab_id, sl in enumerate(ndimage.find_objects(lab), start=1):
         if sl is None or lab_id in border:
             continue
-        sub = np.pad(lab[sl] == lab_id, 1)
+        sub = np.pad(lab[sl] == lab_id, pad)
         if sub.sum() < 4:
             continue
         contours = measure.find_contours(sub.astype(float), 0.5)
@@ -574,18 +576,16 @@ def _voids(xy, delta, j_xy, void_px=None, max_px=4000):
         r = half
         area = (area_px + per_px * r + np.pi * r * r) * px * px
         per = (per_px + 2 * np.pi * r) * px
-        cy, cx = np.argwhere(sub).mean(axis=0) - 1 + [sl[0].start, sl[1].start]
-        # junctions on the contour: within delta (plus the half band) of the void
+        r0, c0 = sl[0].start - pad, sl[1].start - pad
+        cy, cx = np.argwhere(sub).mean(axis=0) + [r0, c0]
         n_edges = 0
         if len(jp):
             dd = ndimage.distance_transform_edt(~sub)
             for (jx, jy) in jp:
-                rr = int(round(jy)) - sl[0].start + 1
-                cc = int(round(jx)) - sl[1].start + 1
-                if 0 <= rr < dd.shape[0] and 0 <= cc < dd.shape[1]:
-                    if dd[rr, cc] <= half + 1.5 * delta / px + 1:
-                        n_edges += 1
+                rr, cc = int(round(jy)) - r0, int(round(jx)) - c0
+                if 0 <= rr < dd.shape[0] and 0 <= cc < dd.shape[1] and dd[rr, cc] <= reach:
+                    n_edges += 1
         rows.append({"area": area, "perimeter": per, "shape_ratio": np.sqrt(area) / per,
-                     "n_edges": n_edges, "centroid_x": lo[0] + (cx + 0.5) * px,
-                     "centroid_y": lo[1] + (cy + 0.5) * px})
+                     "n_edges": n_edges, "centroid_x": lo[0] + cx * px,
+                     "centroid_y": lo[1] + cy * px})
     return pd.DataFrame(rows, columns=cols)

@@ -41,12 +41,23 @@ _MINTOL = 1.0e-11
 # ----------------------------------------------------------------------------- state
 @njit(cache=True)
 def _build_xy(p, n, xy):
+    # p holds bend angles: theta_i = p_0 + ... + p_i
     ds = 1.0 / n
     xy[0, 0] = p[n]
     xy[0, 1] = p[n + 1]
+    th = 0.0
     for i in range(n):
-        xy[i + 1, 0] = xy[i, 0] + ds * math.cos(p[i])
-        xy[i + 1, 1] = xy[i, 1] + ds * math.sin(p[i])
+        th += p[i]
+        xy[i + 1, 0] = xy[i, 0] + ds * math.cos(th)
+        xy[i + 1, 1] = xy[i, 1] + ds * math.sin(th)
+
+
+@njit(cache=True)
+def _theta(p, n, th):
+    t = 0.0
+    for i in range(n):
+        t += p[i]
+        th[i] = t
 
 
 @njit(cache=True)
@@ -70,17 +81,18 @@ def _suffix(xy, w, sw, spx, spy, sq):
 def _bending_p(p, n):
     e = 0.0
     for i in range(1, n):
-        e += 2.0 - 2.0 * math.cos(p[i] - p[i - 1])
+        e += 2.0 - 2.0 * math.cos(p[i])
     return e * n
 
 
 @njit(cache=True)
-def _nematic_p(p, pairs, u):
+def _nematic_p(th, pairs, u):
+    # th: tangent angles
     if u == 0.0:
         return 0.0
     e = 0.0
     for q in range(pairs.shape[0]):
-        s = math.sin(p[pairs[q, 0]] - p[pairs[q, 1]])
+        s = math.sin(th[pairs[q, 0]] - th[pairs[q, 1]])
         e += s * s
     return u * e
 
@@ -191,7 +203,7 @@ _CTX = 16
 
 
 @njit(cache=True)
-def _energy_trial(a, ctx, p, d, pt, xyt, lam, w, u, pairs):
+def _energy_trial(a, ctx, p, d, pt, xyt, tht, lam, w, u, pairs):
     mode = int(ctx[0])
     n = p.shape[0] - 2
     if mode == 0:
@@ -200,8 +212,6 @@ def _energy_trial(a, ctx, p, d, pt, xyt, lam, w, u, pairs):
         e = ctx[11]
         if k >= 1:
             e += n * (2.0 - 2.0 * math.cos(ctx[5] + x) - ctx[7])
-        if k <= n - 2:
-            e += n * (2.0 - 2.0 * math.cos(ctx[6] - x) - ctx[8])
         e += 2.0 * lam * ((math.cos(x) - 1.0) * ctx[3] + math.sin(x) * ctx[4])
         if u > 0.0:
             e += 0.5 * u * ((1.0 - math.cos(2.0 * x)) * ctx[9] - math.sin(2.0 * x) * ctx[10])
@@ -218,7 +228,9 @@ def _energy_trial(a, ctx, p, d, pt, xyt, lam, w, u, pairs):
     ec = 0.0
     for j in range(n + 1):
         ec += w[j] * (xyt[j, 0] * xyt[j, 0] + xyt[j, 1] * xyt[j, 1])
-    return eb + lam * ec + _nematic_p(pt, pairs, u)
+    if u > 0.0:
+        _theta(pt, n, tht)
+    return eb + lam * ec + _nematic_p(tht, pairs, u)
 
 
 @njit(cache=True)
@@ -323,8 +335,8 @@ def _admissible(a, ctx, p, d, xy, xyt, wall2, rj, clear2, gpar, gstart, gitems, 
 def _ev(a, thresh, ctx, p, d, pt, xy, xyt, lam, w, u, pairs, wall2, rj, clear2, gpar, gstart,
         gitems, stats):
     stats[0] += 1
-    f = _energy_trial(a, ctx, p, d, pt, xyt, lam, w, u, pairs)
-    if f <= thresh:
+    f = _energy_trial(a, ctx, p, d, pt, xyt, gpar[5:], lam, w, u, pairs)
+    if f <= thresh and ctx[14] != 0.0:
         if not _admissible(a, ctx, p, d, xy, xyt, wall2, rj, clear2, gpar, gstart, gitems,
                            stats):
             return BIG
@@ -517,7 +529,7 @@ def _refresh(p, n, xy, w, sw, spx, spy, sq):
 
 @njit(cache=True)
 def powell_run(p, lam, kind, sgn, dirs, maxiter, xtol, ftol, u, cutoff, min_separation, wall,
-               stats):
+               stats, hard_core=True):
     """One run of Powell's method from ``p`` (modified in place), as scipy's ``Powell``.
 
     Parameters
@@ -549,6 +561,8 @@ def powell_run(p, lam, kind, sgn, dirs, maxiter, xtol, ftol, u, cutoff, min_sepa
     stats : (6,) int64
         Accumulates [evaluations, line searches, admissibility checks, iterations,
         explicit collision tests, checks settled by the clearance bound].
+    hard_core : bool
+        False disables the self-intersection test (for comparisons with scipy only).
 
     Returns
     -------
@@ -570,10 +584,12 @@ def powell_run(p, lam, kind, sgn, dirs, maxiter, xtol, ftol, u, cutoff, min_sepa
     sq = np.empty(n + 2)
     clear2 = np.empty(n)
     rj = np.empty(n)
-    gpar = np.empty(5)
+    gpar = np.empty(5 + n)
+    th = np.empty(n)
     gstart = np.empty(41 * 41 + 2, np.int64)
     gitems = np.empty(4 * n + 4, np.int64)
     ctx = np.zeros(_CTX)
+    ctx[14] = 1.0 if hard_core else 0.0
     zero_d = np.zeros(m)
     wall2 = wall * wall
     x1 = p.copy()
@@ -581,9 +597,10 @@ def powell_run(p, lam, kind, sgn, dirs, maxiter, xtol, ftol, u, cutoff, min_sepa
     pairs = np.empty((0, 2), np.int64)
 
     _refresh(p, n, xy, w, sw, spx, spy, sq)
+    _theta(p, n, th)
     if u > 0.0:
         pairs = close_pairs(xy, cutoff, min_separation)
-    fval = _bending_p(p, n) + lam * sq[0] + _nematic_p(p, pairs, u)
+    fval = _bending_p(p, n) + lam * sq[0] + _nematic_p(th, pairs, u)
     it = 0
     while True:
         fx = fval
@@ -605,10 +622,8 @@ def powell_run(p, lam, kind, sgn, dirs, maxiter, xtol, ftol, u, cutoff, min_sepa
                 ctx[2] = sgn[slot]
                 ctx[3] = rkx * vx + rky * vy
                 ctx[4] = rky * vx - rkx * vy
-                ctx[5] = p[k] - p[k - 1] if k >= 1 else 0.0
-                ctx[6] = p[k + 1] - p[k] if k <= n - 2 else 0.0
+                ctx[5] = p[k]
                 ctx[7] = 2.0 - 2.0 * math.cos(ctx[5])
-                ctx[8] = 2.0 - 2.0 * math.cos(ctx[6])
                 nc = 0.0
                 ns = 0.0
                 if u > 0.0:
@@ -616,7 +631,7 @@ def powell_run(p, lam, kind, sgn, dirs, maxiter, xtol, ftol, u, cutoff, min_sepa
                         ia = pairs[q, 0]
                         ib = pairs[q, 1]
                         if ia < k <= ib:
-                            ph = 2.0 * (p[ia] - p[ib])
+                            ph = 2.0 * (th[ia] - th[ib])
                             nc += math.cos(ph)
                             ns += math.sin(ph)
                 ctx[9] = nc
@@ -629,6 +644,8 @@ def powell_run(p, lam, kind, sgn, dirs, maxiter, xtol, ftol, u, cutoff, min_sepa
                 if amin != 0.0:
                     x = sgn[slot] * amin
                     p[k] += x
+                    for j in range(k, n):
+                        th[j] += x
                     c = math.cos(x)
                     s = math.sin(x)
                     for j in range(k + 1, n + 1):
@@ -664,6 +681,7 @@ def powell_run(p, lam, kind, sgn, dirs, maxiter, xtol, ftol, u, cutoff, min_sepa
                     for i in range(m):
                         p[i] += amin * dirs[slot, i]
                     _refresh(p, n, xy, w, sw, spx, spy, sq)
+                    _theta(p, n, th)
                 fval = fnew
             if (fx2 - fval) > delta:
                 delta = fx2 - fval
@@ -672,7 +690,8 @@ def powell_run(p, lam, kind, sgn, dirs, maxiter, xtol, ftol, u, cutoff, min_sepa
         stats[3] += 1
         # re-derive positions and energy from the parameters (no drift from rotations)
         _refresh(p, n, xy, w, sw, spx, spy, sq)
-        fval = _bending_p(p, n) + lam * sq[0] + _nematic_p(p, pairs, u)
+        _theta(p, n, th)
+        fval = _bending_p(p, n) + lam * sq[0] + _nematic_p(th, pairs, u)
         bnd = ftol * (abs(fx) + abs(fval)) + 1e-20
         if 2.0 * (fx - fval) <= bnd or it >= maxiter:
             break
@@ -698,6 +717,7 @@ def powell_run(p, lam, kind, sgn, dirs, maxiter, xtol, ftol, u, cutoff, min_sepa
                     for i in range(m):
                         p[i] += amin * d1[i]
                     _refresh(p, n, xy, w, sw, spx, spy, sq)
+                    _theta(p, n, th)
                     fval = fnew
                     kind[bigind] = kind[m - 1]
                     sgn[bigind] = sgn[m - 1]
@@ -710,5 +730,5 @@ def powell_run(p, lam, kind, sgn, dirs, maxiter, xtol, ftol, u, cutoff, min_sepa
                     fval = fnew
         if u > 0.0:
             pairs = close_pairs(xy, cutoff, min_separation)
-            fval = _bending_p(p, n) + lam * sq[0] + _nematic_p(p, pairs, u)
+            fval = _bending_p(p, n) + lam * sq[0] + _nematic_p(th, pairs, u)
     return fval

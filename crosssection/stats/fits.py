@@ -64,6 +64,11 @@ def _log1mexp(t):
                     np.log1p(-np.exp(-np.maximum(t, np.log(2.0)))))
 
 
+def _seedseq(seed) -> np.random.SeedSequence:
+    """A SeedSequence from an int, None or an existing SeedSequence."""
+    return seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+
+
 def _as_cuts(truncation, n):
     if truncation is None:
         return None
@@ -392,9 +397,7 @@ def fit_family(x, family: str, *, truncation=None, n_boot: int = 200, seed=0,
         params = _report_params(family, theta, x, c)
         aic = 2 * k - 2 * ll
         bic = k * np.log(n) - 2 * ll
-        ss = np.random.SeedSequence(seed) if not isinstance(seed, np.random.SeedSequence) \
-            else seed
-        s_boot, s_gof = ss.spawn(2)
+        s_boot, s_gof = _seedseq(seed).spawn(2)
         ci = bootstrap_ci(x, family, truncation=c, n_boot=n_boot, seed=s_boot,
                           level=ci_level) if n_boot else {}
         stat, pval = (goodness_of_fit(x, family, params, truncation=c, n_mc=n_mc, seed=s_gof)
@@ -553,7 +556,7 @@ def fit_all(x, families=FAMILIES, *, truncation=None, seed=0, n_boot: int = 200,
     n_dropped = int(x.size - keep.sum())
     x = x[keep]
     c = None if c is None else c[keep]
-    seeds = np.random.SeedSequence(seed).spawn(len(families))
+    seeds = _seedseq(seed).spawn(len(families))
     results = {f: fit_family(x, f, truncation=c, n_boot=n_boot, seed=s, gof=gof, n_mc=n_mc,
                              ci_level=ci_level)
                for f, s in zip(families, seeds)}
@@ -610,7 +613,7 @@ def truncation_bias(x, truncation, families=("exponential", "gamma", "lognormal"
     keep = np.isfinite(x) & (x >= c)
     x, c = x[keep], c[keep]
     rows = []
-    seeds = np.random.SeedSequence(seed).spawn(len(families))
+    seeds = _seedseq(seed).spawn(len(families))
     for f, s in zip(families, seeds):
         rn = fit_family(x, f, n_boot=0, gof=False)
         rt = fit_family(x, f, truncation=c, n_boot=n_boot, gof=False, seed=s)

@@ -349,7 +349,7 @@ def correlations_table(ens: Ensemble) -> pd.DataFrame:
 def to_markdown(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
     """A GitHub-flavoured Markdown table (no extra dependency)."""
     def fmt(v):
-        if isinstance(v, (float, np floating)) if False else isinstance(v, (float, np.floating)):
+        if isinstance(v, (float, np.floating)):
             return "" if not np.isfinite(v) else format(float(v), floatfmt)
         return str(v).replace("|", "\\|")
     head = "| " + " | ".join(map(str, df.columns)) + " |"

@@ -1,0 +1,192 @@
+"""Figures of one analysed scan: the overlay (paper Figs. 1c and 9a) and the processing steps
+(paper Fig. 2). matplotlib with the Agg backend; save with ``crosssection.fileio.save_figure``.
+
+Stacks are drawn as one ``LineCollection`` (thousands of stacks render in about a second),
+with a line width proportional to ``n_br`` (one sheet thickness per branch on the image's
+scale, at least 0.6 pt per branch), bulk green and periphery red, labelled with ``n_br`` at their
+mid point when they are long enough to carry a label.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["overlay_figure", "steps_figure", "dim_image"]
+
+BULK_COLOR = "#1a9641"
+PERIPHERY_COLOR = "#d7191c"
+OTHER_COLOR = "#2b83ba"
+
+
+def _figure(shape, ncols=1, nrows=1, inches=10.0):
+    from matplotlib.figure import Figure  # no pyplot: no GUI backend, thread-safe
+
+    h, w = shape[:2]
+    scale = inches / max(h * nrows, w * ncols)
+    fig = Figure(figsize=(max(3.0, w * ncols * scale), max(3.0, h * nrows * scale + 0.6)))
+    return fig
+
+
+def dim_image(rgb, amount=0.55) -> np.ndarray:
+    """The scan as float RGB in [0, 1], blended towards white by ``amount``."""
+    a = np.asarray(rgb)
+    if a.ndim == 2:
+        a = np.repeat(a[..., None], 3, axis=2)
+    a = a[..., :3]
+    vmax = 65535.0 if a.dtype == np.uint16 else (255.0 if a.dtype.kind in "ui" else 1.0)
+    f = np.clip(a.astype(np.float32) / vmax, 0, 1)
+    return f * (1 - amount) + amount
+
+
+def _get(result, name, default=None):
+    return getattr(result, name, default) if result is not None else default
+
+
+def overlay_figure(rgb, result=None, *, junctions_df=None, stacks_df=None, paths=None,
+                   hole=None, thickness_px=5.0, title=None, label_min_px=None,
+                   max_labels=600):
+    """The scan dimmed, with the network drawn on it (paper Figs. 1c and 9a).
+
+    Parameters
+    ----------
+    rgb : array (H, W, 3)
+        The scan (any dtype).
+    result : AnalysisResult, optional
+        Takes ``junctions``, ``stacks``, ``graph.paths`` and ``hole`` from it when the keyword
+        arguments are not given.
+    junctions_df : DataFrame
+        ``x_px``, ``y_px`` (junction centres; column, row).
+    stacks_df : DataFrame
+        ``n_br``, ``region``; optional ``mid_x_px``, ``mid_y_px``.
+    paths : list of (P, 2) arrays
+        Pixel paths (row, col) in the order of ``stacks_df`` rows.
+    hole : Hole, optional
+        Drawn as a dashed circle.
+    thickness_px : float
+        Sheet thickness in px: a stack of n_br branches is drawn ``n_br * thickness_px`` wide.
+    title : str, optional
+    label_min_px : float, optional
+        Only stacks at least this long (px) get an n_br label (default: 4 label heights).
+    max_labels : int
+        At most this many labels, on the longest stacks.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    from matplotlib.collections import LineCollection
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Circle
+
+    junctions_df = junctions_df if junctions_df is not None else _get(result, "junctions")
+    stacks_df = stacks_df if stacks_df is not None else _get(result, "stacks")
+    if paths is None:
+        paths = _get(_get(result, "graph"), "paths", [])
+    hole = hole if hole is not None else _get(result, "hole")
+    paths = list(paths or [])
+    img = np.asarray(rgb)
+    H, W = img.shape[:2]
+    fig = _figure(img.shape)
+    ax = fig.add_axes([0, 0, 1, 1 - 0.6 / fig.get_figheight()])
+    ax.imshow(dim_image(img), interpolation="antialiased")
+    ax.set_xlim(-0.5, W - 0.5)
+    ax.set_ylim(H - 0.5, -0.5)
+    ax.set_axis_off()
+    pt_per_px = fig.get_figwidth() * 72.0 / W
+
+    m = len(paths)
+    n_br = np.ones(m, dtype=float)
+    regions = np.array(["bulk"] * m, dtype=object)
+    if stacks_df is not None and len(stacks_df) == m:
+        if "n_br" in stacks_df:
+            n_br = np.nan_to_num(stacks_df["n_br"].to_numpy(dtype=float), nan=1.0)
+        if "region" in stacks_df:
+            regions = stacks_df["region"].astype(str).to_numpy()
+    colors = np.where(regions == "periphery", PERIPHERY_COLOR,
+                      np.where(regions == "bulk", BULK_COLOR, OTHER_COLOR))
+    lw_layer = max(0.6, thickness_px * pt_per_px)
+    segs = [np.asarray(p, float)[:, ::-1] for p in paths if len(p) >= 2]
+    keep = [i for i, p in enumerate(paths) if len(p) >= 2]
+    if segs:
+        lc = LineCollection(segs, colors=colors[keep], linewidths=lw_layer * n_br[keep],
+                            alpha=0.8, capstyle="round", joinstyle="round")
+        ax.add_collection(lc)
+
+    # n_br labels at the mid points of long enough stacks (the longest max_labels: text is
+    # the slow part of a matplotlib figure, ~2.5 ms per label)
+    fontsize = 7.0
+    if label_min_px is None:
+        label_min_px = 4 * fontsize / pt_per_px
+    lengths = np.array([len(p) for p in paths])
+    order = np.argsort(-lengths, kind="stable")[:max_labels]
+    for i in order:
+        p = paths[i]
+        if len(p) == 0 or len(p) < label_min_px:
+            continue
+        if stacks_df is not None and len(stacks_df) == m and "mid_x_px" in stacks_df:
+            x, y = float(stacks_df["mid_x_px"].iloc[i]), float(stacks_df["mid_y_px"].iloc[i])
+        else:
+            y, x = np.asarray(p[len(p) // 2], float)
+        if not (np.isfinite(x) and np.isfinite(y)):
+            continue
+        ax.text(x, y, str(int(n_br[i])), fontsize=fontsize, ha="center", va="center",
+                color="black", fontweight="bold")
+
+    if junctions_df is not None and len(junctions_df):
+        ax.scatter(junctions_df["x_px"], junctions_df["y_px"],
+                   s=max(12.0, (2.5 * thickness_px * pt_per_px) ** 2), facecolors="none",
+                   edgecolors="black", linewidths=1.0, zorder=3)
+    if hole is not None:
+        ax.add_patch(Circle((hole.center_rc[1], hole.center_rc[0]), hole.radius_px, fill=False,
+                            ls="--", lw=1.2, ec="0.25", zorder=2))
+    handles = [Line2D([], [], color=BULK_COLOR, lw=3, label="bulk"),
+               Line2D([], [], color=PERIPHERY_COLOR, lw=3, label="periphery"),
+               Line2D([], [], marker="o", mfc="none", mec="black", ls="none", label="junction")]
+    n_j = 0 if junctions_df is None else len(junctions_df)
+    head = title or "stacks: width and label = n_br"
+    fig.suptitle(f"{head}   ({n_j} junctions, {m} stacks, {int(n_br.sum())} branches)",
+                 fontsize=10, y=0.995, x=0.01, ha="left")
+    fig.legend(handles=handles, loc="upper right", ncol=3, fontsize=8, frameon=False)
+    return fig
+
+
+def steps_figure(rgb, mask_threshold, mask_clean, skeleton, junction_centers_rc, *,
+                 titles=None):
+    """The four steps of paper Fig. 2: raw scan, thresholded, cleaned, skeleton + junctions.
+
+    Parameters
+    ----------
+    rgb : array (H, W, 3)
+    mask_threshold, mask_clean, skeleton : bool arrays (H, W)
+    junction_centers_rc : array (K, 2)
+    titles : list of 4 str, optional
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    from scipy import ndimage as ndi
+
+    img = np.asarray(rgb)
+    H, W = img.shape[:2]
+    fig = _figure(img.shape, ncols=4, inches=16.0)
+    axes = fig.subplots(1, 4)
+    titles = titles or ["raw scan", "threshold (blue high, red/green low)",
+                        "cleaned (voids >= s_min kept)", "skeleton and junctions"]
+    axes[0].imshow(dim_image(img, 0.0))
+    axes[1].imshow(np.asarray(mask_threshold, bool), cmap="gray_r", interpolation="nearest")
+    axes[2].imshow(np.asarray(mask_clean, bool), cmap="gray_r", interpolation="nearest")
+    sk = np.asarray(skeleton, bool)
+    # a one-pixel skeleton vanishes when a large scan is shown small: thicken for display
+    grow = int(max(0, round(max(H, W) / 1000.0)))
+    if grow:
+        sk = ndi.binary_dilation(sk, iterations=grow)
+    axes[3].imshow(sk, cmap="gray_r", interpolation="nearest")
+    jc = np.asarray(junction_centers_rc, float).reshape(-1, 2)
+    if len(jc):
+        axes[3].scatter(jc[:, 1], jc[:, 0], s=14, facecolors="none", edgecolors="red",
+                        linewidths=0.8)
+    for ax, t in zip(axes, titles):
+        ax.set_title(t, fontsize=10)
+        ax.set_axis_off()
+    fig.subplots_adjust(left=0.01, right=0.99, bottom=0.01, top=0.92, wspace=0.03)
+    return fig

@@ -1,0 +1,338 @@
+"""Write the statistics report: tables (CSV + Markdown), figures (PNG), stats.json, report.html.
+
+Figures follow the paper's style: probability densities in linear and logarithmic scales with
+the selected fit drawn over the histogram; bulk (green) and periphery (red) superposed as in
+the paper's figure of the two sub-systems; every curve labelled directly in the panel with its
+parameters, so that no legend has to be looked up.
+"""
+from __future__ import annotations
+
+import html
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+
+from .._version import __version__  # noqa: E402
+from ..fileio import save_figure, write_csv, write_json, write_text  # noqa: E402
+from . import fits as F  # noqa: E402
+from .data import Ensemble  # noqa: E402
+from .tables import (EQ1_CONST, QUANTITIES, StatsOptions, StatsResult,  # noqa: E402
+                     compute_stats, regions_of, to_markdown)
+
+REGION_COLOR = {"all": "black", "bulk": "tab:green", "periphery": "tab:red"}
+SET_COLORS = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+
+
+def _fit_text(summ: F.FitSummary) -> str:
+    if summ is None or summ.best is None:
+        return "no fit"
+    r = summ.results[summ.best]
+    p = "" if not np.isfinite(r.pvalue) else f", p={r.pvalue:.2f}"
+    return r.label() + p
+
+
+def _density_curve(r: F.FitResult, xs, cut):
+    y = r.pdf(xs)
+    if r.truncated and cut is not None and r.family != "bose_einstein":
+        y = np.where(xs >= cut, y / F.scipy_dist(r.family, r.params).sf(cut), np.nan)
+    return y
+
+
+def pdf_figure(res: StatsResult, ens: Ensemble, set_name: str, quantity: str):
+    """Histogram densities of one quantity in linear and log scales with the selected fits.
+
+    Returns
+    -------
+    matplotlib.figure.Figure or None
+        None when nothing was fitted.
+    """
+    table, col, _, tcol, label = QUANTITIES[quantity]
+    sub = ens.subset(set_name)
+    regs = [r for r in regions_of(sub) if (set_name, r, quantity) in res.summaries]
+    if not regs:
+        return None
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+    lines = []
+    for reg in regs:
+        summ = res.summaries[(set_name, reg, quantity)]
+        df = getattr(sub, table)
+        if reg != "all" and "region" in df.columns:
+            df = df[df["region"].astype(str) == reg]
+        x = np.asarray(df[col], float)
+        x = x[np.isfinite(x) & (x > 0)]
+        cut = None
+        if tcol is not None and summ.results and next(iter(summ.results.values())).truncated:
+            cut = float(np.nanmean(df[tcol]))
+            x = x[x >= np.nanmin(df[tcol])]
+        color = REGION_COLOR.get(reg, "black")
+        best = summ.results.get(summ.best) if summ.best else None
+        for ax, logscale in zip(axes, (False, True)):
+            positive = x.min() > 0
+            if logscale and positive and x.max() / x.min() > 10:
+                bins = np.geomspace(x.min(), x.max(), 30)
+                ax.set_xscale("log")
+            else:
+                bins = np.linspace(x.min(), x.max(), 30)
+            h, edges = np.histogram(x, bins=bins, density=True)
+            mids = np.sqrt(edges[1:] * edges[:-1]) if ax.get_xscale() == "log" \
+                else (edges[1:] + edges[:-1]) / 2
+            ax.plot(mids[h > 0], h[h > 0], "o", ms=4, color=color, alpha=0.8)
+            if best is not None:
+                xs = (np.geomspace(bins[0], bins[-1], 300) if ax.get_xscale() == "log"
+                      else np.linspace(bins[0], bins[-1], 300))
+                ax.plot(xs, _density_curve(best, xs, cut), "-", color=color, lw=1.6)
+                gam = summ.results.get("gamma")
+                if summ.best != "gamma" and gam is not None and gam.ok and reg == "all":
+                    ax.plot(xs, _density_curve(gam, xs, cut), "--", color="grey", lw=1)
+            if cut is not None:
+                ax.axvline(cut, color="grey", ls=":", lw=1)
+            if logscale:
+                ax.set_yscale("log")
+        lines.append((reg, color, f"{reg} (n={summ.results[next(iter(summ.results))].n}): "
+                                  f"{_fit_text(summ)}"))
+    for i, (reg, color, text) in enumerate(lines):
+        axes[0].text(0.98, 0.95 - 0.08 * i, text, transform=axes[0].transAxes, ha="right",
+                     va="top", color=color, fontsize=8)
+    extra = []
+    if any("gamma" in res.summaries[(set_name, r, quantity)].results for r in regs):
+        extra.append("dashed grey: Gamma")
+    if tcol is not None:
+        extra.append("dotted: detection limit (truncation-aware fit)")
+    if extra:
+        axes[1].text(0.02, 0.03, "; ".join(extra), transform=axes[1].transAxes, fontsize=7,
+                     color="grey")
+    for ax in axes:
+        ax.set_xlabel(label)
+        ax.set_ylabel(rf"$\rho$({label})")
+    axes[0].set_title(f"{set_name}: pdf of {label} (linear)")
+    axes[1].set_title(f"{set_name}: pdf of {label} (log)")
+    fig.tight_layout()
+    return fig
+
+
+def network_figure(res: StatsResult):
+    """N_br vs N_l with Eqs. 1 and 3, and n_br_bar vs N_l with Eqs. 2 and 4, per set."""
+    pc = res.per_config
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+    for i, (s, g) in enumerate(pc.groupby("set", sort=False)):
+        c = SET_COLORS[i % len(SET_COLORS)]
+        rel = res.relations[res.relations["set"] == s].set_index("relation")["fitted"]
+        nbr = res.macro.query("set == @s and region == 'all'")["n_br"].iloc[0]
+        axes[0].plot(g["N_l"], g["N_br"], "o", color=c, ms=4, alpha=0.7)
+        axes[1].plot(g["N_l"], g["n_br_bar"], "o", color=c, ms=4, alpha=0.7)
+        nl = np.linspace(max(1, g["N_l"].min() * 0.8), g["N_l"].max() * 1.2, 100)
+        ratio = np.nanmean(g["sqrt_s_bar"] / g["l_bar"])
+        eps = np.nanmean(g["epsilon"])
+        if np.isfinite(ratio) and np.isfinite(eps):
+            eq1 = EQ1_CONST * eps * ratio * np.sqrt(nl)  # Eq. 1 with set means
+            axes[0].plot(nl, eq1, "-", color=c)
+            axes[1].plot(nl, eq1 / nl, "-", color=c)  # Eq. 2
+        if np.isfinite(nbr):
+            axes[0].plot(nl, nbr * nl, "--", color=c)  # Eq. 3
+            axes[1].axhline(nbr, ls="--", color=c)  # Eq. 4
+        axes[0].text(nl[-1], nbr * nl[-1] if np.isfinite(nbr) else g["N_br"].max(),
+                     f" {s}: <n_br>={nbr:.2g}, C={rel.get('eq1_const', np.nan):.2g}",
+                     color=c, fontsize=8, va="center")
+    axes[0].set(xlabel=r"$N_l$", ylabel=r"$N_{br}$",
+                title=r"$N_{br}$ vs $N_l$: solid Eq.1 ($C=2\sqrt{\pi/3}$), dashed Eq.3")
+    axes[1].set(xlabel=r"$N_l$", ylabel=r"$\bar n_{br}=N_{br}/N_l$",
+                title=r"$\bar n_{br}$ vs $N_l$: solid Eq.2, dashed Eq.4")
+    fig.tight_layout()
+    return fig
+
+
+def _scatter_fig(res, x, y, xlabel, ylabel, title, *, through_origin=False, paper_slope=None):
+    pc = res.per_config
+    fig, ax = plt.subplots(figsize=(6, 4.5))
+    for i, (s, g) in enumerate(pc.groupby("set", sort=False)):
+        c = SET_COLORS[i % len(SET_COLORS)]
+        xv, yv = np.asarray(g[x], float), np.asarray(g[y], float)
+        k = np.isfinite(xv) & np.isfinite(yv)
+        ax.plot(xv[k], yv[k], "o", color=c, ms=4, alpha=0.7)
+        if k.sum() >= 2:
+            txt = f"{s}"
+            if through_origin:
+                a = np.sum(xv[k] * yv[k]) / np.sum(xv[k] ** 2)
+                xs = np.linspace(0, xv[k].max() * 1.1, 10)
+                ax.plot(xs, a * xs, "-", color=c)
+                txt += f": slope {a:.3g}"
+            elif np.ptp(xv[k]) > 0 and np.ptp(yv[k]) > 0:
+                txt += f": r={np.corrcoef(xv[k], yv[k])[0, 1]:.2f}"
+            ax.annotate(txt, (xv[k].max(), yv[k][np.argmax(xv[k])]), color=c, fontsize=8,
+                        xytext=(4, 0), textcoords="offset points")
+    if paper_slope is not None:
+        xs = np.array([0, np.nanmax(pc[x]) * 1.1])
+        ax.plot(xs, paper_slope * xs, ":", color="grey")
+        ax.text(xs[1], paper_slope * xs[1], f"paper {paper_slope}", color="grey", fontsize=8)
+    ax.set(xlabel=xlabel, ylabel=ylabel, title=title)
+    fig.tight_layout()
+    return fig
+
+
+def e_vs_nbr_figure(ens: Ensemble):
+    """Mean branch energy against the number of branches of its stack (paper fig energo_micro3)."""
+    br = ens.branches.dropna(subset=["n_br", "e"])
+    if br.empty:
+        return None
+    fig, ax = plt.subplots(figsize=(6, 4.5))
+    for i, s in enumerate(ens.sets):
+        g = br[br["set"] == s]
+        if g.empty:
+            continue
+        c = SET_COLORS[i % len(SET_COLORS)]
+        for reg, ls in (("bulk", ":"), ("periphery", "--"), (None, "-")):
+            gg = g if reg is None else g[g["region"] == reg]
+            if gg.empty:
+                continue
+            st = gg.groupby("n_br")["e"].agg(["mean", "sem", "size"])
+            ax.errorbar(st.index, st["mean"], yerr=st["sem"].fillna(0), fmt="o" + ls, color=c,
+                        ms=4 if reg is None else 2, lw=1, capsize=2,
+                        alpha=1 if reg is None else 0.6)
+            if reg is None:
+                ax.annotate(s, (st.index[-1], st["mean"].iloc[-1]), color=c, fontsize=8,
+                            xytext=(4, 0), textcoords="offset points")
+    ax.set(xlabel=r"$n_{br}$ (branches in the stack)", ylabel=r"$\langle e\rangle$",
+           title="branch energy vs stack size (solid all, dotted bulk, dashed periphery)")
+    fig.tight_layout()
+    return fig
+
+
+def _html_table(df: pd.DataFrame) -> str:
+    return df.to_html(index=False, float_format=lambda v: f"{v:.4g}", na_rep="",
+                      border=0, classes="t")
+
+
+def write_report(ens: Ensemble, out_dir, *, opts: StatsOptions | None = None,
+                 inputs=(), figures: bool = True) -> dict:
+    """Compute every statistic of ``ens`` and write the report folder.
+
+    Parameters
+    ----------
+    ens : Ensemble
+    out_dir : path
+        Receives macro/micro/fits/relations/dof/truncation (.csv, .md), correlations.csv,
+        per_config.csv, stats.json, figures/*.png and report.html. All writes are atomic.
+    opts : StatsOptions, optional
+    inputs : sequence of str
+        Input folders, recorded in stats.json.
+    figures : bool
+        Draw the PNG figures.
+
+    Returns
+    -------
+    dict
+        Name -> written path.
+    """
+    opts = opts or StatsOptions()
+    out = Path(out_dir)
+    res = compute_stats(ens, opts)
+    paths = {}
+    tables = {"macro": res.macro, "micro": res.micro, "fits": res.fits,
+              "relations": res.relations, "dof": res.dof, "truncation": res.truncation}
+    for name, df in tables.items():
+        paths[f"{name}.csv"] = write_csv(out / f"{name}.csv", df)
+        paths[f"{name}.md"] = write_text(out / f"{name}.md", to_markdown(df))
+    paths["correlations.csv"] = write_csv(out / "correlations.csv", res.correlations)
+    paths["per_config.csv"] = write_csv(out / "per_config.csv", res.per_config)
+
+    figs = []
+    if figures:
+        fdir = out / "figures"
+        for s in ens.sets:
+            for q in opts.quantities:
+                fig = pdf_figure(res, ens, s, q)
+                if fig is not None:
+                    name = f"pdf_{q}_{_safe(s)}.png"
+                    paths[name] = save_figure(fig, fdir / name)
+                    figs.append((f"{s}: pdf of {q}", f"figures/{name}"))
+        scatter = [
+            ("network_Nbr_vs_Nl.png", "N_br vs N_l (Eqs. 1-4)", lambda: network_figure(res)),
+            ("sqrt_s_vs_l.png", "sqrt(s_bar) vs l_bar", lambda: _scatter_fig(
+                res, "l_bar", "sqrt_s_bar", r"$\bar\ell/L$", r"$\sqrt{\bar s}/L$",
+                r"$\sqrt{\bar s}$ vs $\bar\ell$ per configuration (fit through 0)",
+                through_origin=True, paper_slope=1.1)),
+            ("E_vs_Nbr.png", "E vs N_br", lambda: _scatter_fig(
+                res, "N_br", "E", r"$N_{br}$", r"$E$", r"total energy vs number of branches")),
+            ("e_vs_nbr.png", "e vs n_br", lambda: e_vs_nbr_figure(ens)),
+        ]
+        for name, title, make in scatter:
+            fig = make()
+            if fig is not None:
+                paths[name] = save_figure(fig, fdir / name)
+                figs.append((title, f"figures/{name}"))
+
+    stats_json = {
+        "package": "foldstat", "version": __version__, "inputs": [str(i) for i in inputs],
+        "options": {k: (list(v) if isinstance(v, tuple) else v)
+                    for k, v in vars(opts).items()},
+        "model_selection": f"min BIC; a family with fewer parameters within "
+                           f"dBIC < {F.DELTA_BIC_SIMPLER} is preferred",
+        "sets": {},
+    }
+    for s in ens.sets:
+        sel = {}
+        for (ss, reg, q), summ in res.summaries.items():
+            if ss != s:
+                continue
+            sel.setdefault(reg, {})[q] = {
+                "selected": summ.best,
+                "fits": {f: {"params": r.params, "ci": r.ci, "bic": r.bic, "aic": r.aic,
+                             "pvalue": r.pvalue, "n": r.n, "truncated": r.truncated}
+                         for f, r in summ.results.items() if r.ok}}
+        stats_json["sets"][s] = {
+            "macro": res.macro[res.macro["set"] == s].to_dict("records"),
+            "micro": res.micro[res.micro["set"] == s].to_dict("records"),
+            "relations": res.relations[res.relations["set"] == s].to_dict("records"),
+            "correlations": res.correlations[res.correlations["set"] == s].to_dict("records"),
+            "dof": res.dof[res.dof["set"] == s].to_dict("records"),
+            "fits": sel}
+    paths["stats.json"] = write_json(out / "stats.json", stats_json)
+    paths["report.html"] = write_text(out / "report.html", _html(res, figs, stats_json))
+    return paths
+
+
+def _safe(name: str) -> str:
+    return "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in str(name))
+
+
+def _html(res: StatsResult, figs, meta) -> str:
+    sel = res.fits[res.fits["selected"]] if not res.fits.empty else res.fits
+    sel_cols = [c for c in ("set", "region", "quantity", "family", "n", "p1_name", "p1", "p1_lo",
+                            "p1_hi", "p2_name", "p2", "p2_lo", "p2_hi", "delta_bic", "pvalue")
+                if c in sel.columns]
+    parts = [
+        "<!doctype html><html><head><meta charset='utf-8'><title>foldstat statistics</title>",
+        "<style>body{font-family:sans-serif;max-width:1200px;margin:auto}"
+        "table.t{border-collapse:collapse;font-size:12px}table.t td,table.t th"
+        "{border:1px solid #ccc;padding:2px 6px}img{max-width:100%}</style></head><body>",
+        f"<h1>Folding statistics</h1><p>foldstat {html.escape(meta['version'])}; inputs: "
+        f"{html.escape(', '.join(meta['inputs']))}; seed {meta['options']['seed']}, "
+        f"{meta['options']['n_boot']} bootstrap resamples. Model selection: "
+        f"{html.escape(meta['model_selection'])}. Lengths in units of L.</p>",
+        "<p>Tables: " + " ".join(f"<a href='{n}.csv'>{n}.csv</a> <a href='{n}.md'>(md)</a>"
+                                 for n in ("macro", "micro", "fits", "relations", "dof",
+                                           "truncation"))
+        + " <a href='correlations.csv'>correlations.csv</a> <a href='stats.json'>stats.json</a>"
+          "</p>",
+        "<h2>Macro (paper table tab_macro)</h2>", _html_table(res.macro),
+        "<h2>Micro (paper table tab_micro)</h2>", _html_table(res.micro),
+        "<h2>Degrees of freedom: alpha_E/alpha_e vs N_l (paper table tab_res)</h2>",
+        _html_table(res.dof),
+        "<h2>Relations (paper Eqs. 1-5)</h2>", _html_table(res.relations),
+        "<h2>Correlations</h2>", _html_table(res.correlations),
+        "<h2>Selected laws</h2>", _html_table(sel[sel_cols]) if len(sel) else "<p>none</p>",
+    ]
+    if not res.truncation.empty:
+        parts += ["<h2>Detection limits: naive vs truncation-aware fits</h2>",
+                  _html_table(res.truncation)]
+    parts.append("<h2>Figures</h2>")
+    for title, rel in figs:
+        parts.append(f"<h3>{html.escape(title)}</h3><a href='{rel}'><img src='{rel}' "
+                     f"alt='{html.escape(title)}'></a>")
+    parts.append("</body></html>\n")
+    return "\n".join(parts)
