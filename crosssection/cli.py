@@ -34,7 +34,13 @@ def build_parser() -> argparse.ArgumentParser:
         if modname in seen:
             continue
         seen.add(modname)
-        importlib.import_module(modname).add_subparser(sub)
+        try:
+            module = importlib.import_module(modname)
+        except ModuleNotFoundError as exc:  # a subcommand module not installed in this build
+            if exc.name != modname:
+                raise
+            continue
+        module.add_subparser(sub)
     return parser
 
 

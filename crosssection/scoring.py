@@ -238,4 +238,49 @@ def meets_targets(s: dict) -> dict:
     }
 
 
-__all__ = ["score", "score_folder", "match_points", "meets_targets"]
+def analyze_scene_folder(scene_dir, *, image_name: str | None = None, use_hole: bool = True,
+                         use_calibration: bool = True, **kwargs):
+    """Run ``crosssection.analyze`` on a scene folder with the parameters of its ``params.json``.
+
+    Parameters
+    ----------
+    scene_dir : str or Path
+        Holds the image (``image.png`` unless ``image_name``), ``params.json`` and
+        ``calibration.csv``.
+    use_hole : bool
+        Pass the known hole (radius, centre); otherwise the pipeline fits it.
+    use_calibration : bool
+        Pass ``calibration.csv``; otherwise the pipeline's default (linear) law is used.
+    **kwargs
+        Extra keyword arguments for ``analyze`` (only those its signature accepts are passed).
+
+    Returns
+    -------
+    (result, (summary, tables))
+        The ``AnalysisResult`` and the pair :func:`score` takes.
+    """
+    import inspect
+
+    from . import analyze
+
+    scene_dir = Path(scene_dir)
+    params = json.loads((scene_dir / "params.json").read_text())
+    image = scene_dir / (image_name or params.get("image") or "image.png")
+    want = {"px_per_mm": params.get("px_per_mm", 50.0),
+            "thickness_mm": params.get("thickness_mm", 0.1)}
+    if use_hole and params.get("hole_radius_mm"):
+        want["hole_radius_mm"] = params["hole_radius_mm"]
+        if params.get("hole_center_px"):
+            want["hole_center_px"] = tuple(params["hole_center_px"])
+    cal = scene_dir / "calibration.csv"
+    if use_calibration and cal.exists():
+        want["calibration"] = str(cal)
+    want.update(kwargs)
+    sig = inspect.signature(analyze).parameters
+    accepts_any = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in sig.values())
+    call = {k: v for k, v in want.items() if accepts_any or k in sig}
+    result = analyze(str(image), **call)
+    return result, _as_pair(result)
+
+
+__all__ = ["score", "score_folder", "match_points", "meets_targets", "analyze_scene_folder"]

@@ -57,6 +57,7 @@ import numpy as np
 import pandas as pd
 
 from . import schema
+from .errors import ParameterError
 from .fileio import atomic_path, write_csv, write_json
 
 SUPERSAMPLE = 4  # rendering resolution factor (anti-aliasing and void truth)
@@ -172,7 +173,7 @@ class Scene:
         return self.tables
 
 
-class SceneGenerationError(RuntimeError):
+class SceneGenerationError(ParameterError):
     """No valid layout found (too many stacks or layers for the requested image size)."""
 
 
@@ -948,7 +949,7 @@ def write_image(rgb: np.ndarray, path) -> Path:
         if suffix in (".tif", ".tiff"):
             import tifffile
 
-            tifffile.imwrite(tmp, rgb, photometric="rgb")
+            tifffile.imwrite(tmp, rgb, photometric="rgb", compression="zlib")
         elif suffix in (".jpg", ".jpeg"):
             cv2.imwrite(str(tmp), rgb[..., ::-1], [cv2.IMWRITE_JPEG_QUALITY, 90])
         else:

@@ -24,7 +24,13 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"foldstat {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     for modname in dict.fromkeys(SUBCOMMANDS.values()):
-        importlib.import_module(modname).add_subparser(sub)
+        try:
+            module = importlib.import_module(modname)
+        except ModuleNotFoundError as exc:  # a subcommand module not installed in this build
+            if exc.name != modname:
+                raise
+            continue
+        module.add_subparser(sub)
     return parser
 
 

@@ -2,10 +2,11 @@
 
 A faithful port of ``scipy.optimize.minimize(method="Powell")`` (same bracketing, same Brent
 line search with ``tol = 100 xtol``, same direction-set update) on the parameters
-``p = (theta_0 .. theta_{N-1}, x0, y0)``, made fast by the structure of the rod:
+``p = (phi_0 .. phi_{N-1}, x0, y0)``, bend angles ``phi_k = theta_k - theta_{k-1}`` (``phi_0 =
+theta_0``) and the start point, made fast by the structure of the rod:
 
-* along a coordinate direction ``theta_k`` the tail (nodes ``j > k``) rotates rigidly about
-  ``R_k``: the bending energy changes at two nodes and the confinement energy follows from
+* along a coordinate direction ``phi_k`` the tail (nodes ``j > k``) rotates rigidly about
+  ``R_k``: the bending energy changes at one node and the confinement energy follows from
   suffix sums of ``w_j``, ``w_j R_j``, ``w_j |R_j|^2``, so one trial costs O(1); along ``x0``,
   ``y0`` the rod translates (O(1), no new contact possible);
 * hard core: a trial is tested for self-intersection only when it would be accepted (its energy
@@ -535,7 +536,7 @@ def powell_run(p, lam, kind, sgn, dirs, maxiter, xtol, ftol, u, cutoff, min_sepa
     Parameters
     ----------
     p : (N+2,) float64
-        ``theta_0 .. theta_{N-1}, x0, y0``; must be admissible (no self-intersection).
+        Bend angles ``phi_0 .. phi_{N-1}`` then ``x0, y0``; must be admissible.
     lam : float
         Confinement Lambda.
     kind : (N+2,) int64

@@ -177,3 +177,35 @@ def test_density_range():
     dense = make_scene(seed=4, n_stacks=240, max_layers=3)
     assert 14 <= sparse.summary["n_stacks"] <= 30
     assert 190 <= dense.summary["n_stacks"] <= 290
+
+
+def test_truth_junctions_sit_at_skeleton_branch_points(scene):
+    """Convention check: the truth junction is the medial-axis branch point of the fork (the
+    paper defines junctions on the skeleton), so a plain skimage skeleton of the clean mask
+    branches within a few pixels of every truth junction."""
+    from scipy import ndimage as ndi
+    from scipy.spatial import cKDTree
+    from skimage.morphology import skeletonize
+
+    m = _mask(scene.rgb)
+    m = m | ~_big_bg(m)  # fill background specks and pinholes smaller than s_min
+    sk = skeletonize(m)
+    nb = ndi.convolve(sk.astype(int), np.ones((3, 3), int), mode="constant") - 1
+    jp = sk & (nb >= 3)
+    lab, k = ndi.label(jp, np.ones((3, 3)))
+    c = np.array(ndi.center_of_mass(jp, lab, range(1, k + 1)))[:, ::-1]
+    t = scene.tables["junctions"][["x_px", "y_px"]].to_numpy()
+    d, _ = cKDTree(c).query(t)
+    assert np.mean(d <= 15) >= 0.97  # 3h
+    assert np.median(d) < 4.0
+
+
+def _big_bg(m, s_min_px=2500):
+    """Background components of at least s_min_px (the voids kept by the paper's cleaning)."""
+    from scipy import ndimage as ndi
+
+    lab, n = ndi.label(~m)
+    sizes = np.bincount(lab.ravel())
+    keep = sizes >= s_min_px
+    keep[0] = False
+    return keep[lab]

@@ -1,0 +1,79 @@
+#!/usr/bin/env python
+"""Speed: a 2000x2000 generated scan analysed end to end vs scikit-image's skeletonize alone.
+
+Issue 2 target: ``crosssection.analyze`` (no figure) within 2x the time of
+``skimage.morphology.skeletonize`` on the same binary mask, both measured here in the same run
+(best of ``--repeat``; the pipeline is warmed up on a small scan first so numba compilation is
+not counted). Prints the ratio and the per-stage breakdown from ``summary['timings_s']``.
+
+Usage: python benchmarks/bench_pipeline.py [--size 2000] [--repeat 3] [--seed 7]
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+import numpy as np
+
+
+def default_mask(rgb: np.ndarray) -> np.ndarray:
+    """The paper's RGB threshold with the design defaults (blue >= 100, red and green <= 130)."""
+    r, g, b = (rgb[..., i].astype(np.int16) for i in range(3))
+    return (b >= 100) & (r <= 130) & (g <= 130)
+
+
+def best_of(fn, repeat: int) -> tuple[float, object]:
+    best, out = np.inf, None
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        out = fn()
+        best = min(best, time.perf_counter() - t0)
+    return best, out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--size", type=int, default=2000)
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--seed", type=int, default=7)
+    ap.add_argument("--n-stacks", type=int, default=250)
+    args = ap.parse_args(argv)
+    from skimage.morphology import skeletonize
+
+    from crosssection.synthetic import make_scene
+
+    t0 = time.perf_counter()
+    scene = make_scene(seed=args.seed, n_stacks=args.n_stacks, max_layers=4, noise_sigma=4.0,
+                       image_size=args.size, specks=30, pinholes=20, smears=5)
+    print(f"scene: {scene.rgb.shape[1]}x{scene.rgb.shape[0]} px, {scene.summary['n_stacks']} stacks, "
+          f"{scene.summary['n_junctions']} junctions, {scene.summary['n_voids']} voids "
+          f"(generated in {time.perf_counter() - t0:.1f} s)")
+    mask = default_mask(scene.rgb)
+    t_skel, _ = best_of(lambda: skeletonize(mask), args.repeat)
+    print(f"skimage.morphology.skeletonize alone: {t_skel:.3f} s (best of {args.repeat})")
+    try:
+        from crosssection import analyze
+    except ImportError as exc:
+        print(f"pipeline not available ({exc}); only the reference was timed")
+        return 0
+    p = scene.params
+    kw = dict(px_per_mm=p["px_per_mm"], thickness_mm=p["thickness_mm"])
+    small = make_scene(seed=1, n_stacks=20, max_layers=3)
+    analyze(small.rgb, **kw)  # warm-up: numba compilation and imports not timed
+    t_an, result = best_of(lambda: analyze(scene.rgb, **kw), args.repeat)
+    print(f"crosssection.analyze end to end (no figure): {t_an:.3f} s (best of {args.repeat})")
+    print(f"ratio analyze / skeletonize = {t_an / t_skel:.2f}  (target <= 2)")
+    timings = dict(result.summary.get("timings_s", {}))
+    if timings:
+        total = sum(timings.values())
+        print("per-stage breakdown (last run):")
+        for k, v in sorted(timings.items(), key=lambda kv: -kv[1]):
+            print(f"  {k:14s} {v:8.3f} s  {100 * v / max(total, 1e-12):5.1f} %  "
+                  f"({v / t_skel:.2f} x skeletonize)")
+        print(f"  {'sum':14s} {total:8.3f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,311 @@
+"""Ensembles of quenched (or annealed) rods: the ``quench`` and ``anneal`` subcommands.
+
+``python -m simulate quench --n-configs K --lambda 7e5 --noise 750 --segments 300 --seed S
+[--method powell|lbfgs] [--workers W] [--scheduler ADDR] --out DIR`` writes
+
+* ``DIR/configs.csv`` -- one row per configuration: config_id, seed, rg, epsilon (= 1/(2 pi Rg),
+  paper section "Simulations vs experiments"), epsilon_sqrt2 (= 1/(2 pi sqrt(2) Rg), the disk
+  radius read as sqrt(2) Rg), energy_total, energy_bending, energy_confinement, n_stacks,
+  n_branches, n_junctions, n_voids, method, wall_s, plus minimiser counters;
+* ``DIR/branches.csv`` -- config_id, branch_id, length, kappa_plus, kappa_pm, energy_bending,
+  energy_confinement, energy (from :func:`simulate.contacts.analyze_rod`);
+* ``DIR/voids.csv`` -- config_id, area, perimeter, shape_ratio, n_edges;
+* ``DIR/rods.npz`` -- node positions of every configuration, key ``config_XXXXX``;
+* ``DIR/params.json`` -- all parameters and the package version.
+
+Configuration ``i`` always uses the seed ``spawn_seeds(seed, K)[i]``, so results do not depend
+on the number of workers. Every finished configuration is written atomically to
+``DIR/parts/config_XXXXX.npz`` and skipped when the command is run again (resume); the tables
+are assembled from the parts at the end.
+"""
+from __future__ import annotations
+
+import json
+import time
+from concurrent.futures import as_completed
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from crosssection._version import __version__
+from crosssection.errors import ConfigError, ParameterError
+from crosssection.fileio import write_csv, write_json, write_npz
+from crosssection.parallel import get_executor, spawn_seeds
+
+CONFIG_COLUMNS = ["config_id", "seed", "rg", "epsilon", "epsilon_sqrt2", "energy_total",
+                  "energy_bending", "energy_confinement", "n_stacks", "n_branches",
+                  "n_junctions", "n_voids", "method", "wall_s"]
+BRANCH_COLUMNS = ["config_id", "branch_id", "length", "kappa_plus", "kappa_pm",
+                  "energy_bending", "energy_confinement", "energy"]
+VOID_COLUMNS = ["config_id", "area", "perimeter", "shape_ratio", "n_edges"]
+
+# parameters that define the physics: a re-run into the same folder must agree on them
+_PHYSICS_KEYS = ("command", "n_segments", "lam", "noise", "seed", "method", "n_runs",
+                 "maxiter", "nematic_runs", "u", "ftol", "xtol", "wall_radius",
+                 "contact_distance", "lam_start", "stages", "ramp")
+
+
+def part_path(out, config_id: int) -> Path:
+    """Path of the part file of one configuration."""
+    return Path(out) / "parts" / f"config_{config_id:05d}.npz"
+
+
+def minimize_config(xy0, params: dict, seed: int):
+    """Run the minimisation named by ``params`` on one start shape.
+
+    Parameters
+    ----------
+    xy0 : (N+1, 2) array
+    params : dict
+        Run parameters (see :func:`run_ensemble`).
+    seed : int
+        Seed of the minimiser's random choices (direction resets).
+
+    Returns
+    -------
+    simulate.optimize.QuenchResult
+    """
+    from . import optimize
+
+    common = dict(seed=seed, n_runs=params["n_runs"], maxiter=params["maxiter"],
+                  nematic_runs=tuple(params["nematic_runs"]), u=params["u"],
+                  ftol=params["ftol"], xtol=params["xtol"], wall_radius=params["wall_radius"])
+    if params["command"] == "anneal":
+        return optimize.anneal(xy0, params["lam"], lam_start=params["lam_start"],
+                               stages=params["stages"], ramp=params["ramp"],
+                               method=params["method"], **common)
+    if params["method"] == "powell":
+        return optimize.powell_protocol(xy0, params["lam"], **common)
+    if params["method"] == "lbfgs":
+        return optimize.lbfgs_quench(xy0, params["lam"], seed=seed,
+                                     wall_radius=params["wall_radius"])
+    raise ParameterError(f"unknown method {params['method']!r}")
+
+
+def run_config(config_id: int, seed: int, params: dict, out: str) -> int:
+    """Generate, minimise and analyse configuration ``config_id``; write its part file.
+
+    Returns
+    -------
+    int
+        ``config_id`` (the part file holds the results).
+    """
+    from .contacts import analyze_rod
+    from .noise import initial_shape
+
+    shape_ss, opt_ss = np.random.SeedSequence(seed).spawn(2)
+    xy0 = initial_shape(params["n_segments"], params["noise"], seed=np.random.default_rng(shape_ss))
+    opt_seed = int(opt_ss.generate_state(1, dtype=np.uint32)[0])
+    t0 = time.perf_counter()
+    res = minimize_config(xy0, params, opt_seed)
+    wall_s = time.perf_counter() - t0
+    row = {"config_id": config_id, "seed": seed, "method": params["method"], "wall_s": wall_s,
+           "energy_total": res.energy_total, "energy_bending": res.energy_bending,
+           "energy_confinement": res.energy_confinement}
+    branches = []
+    voids = []
+    try:
+        an = analyze_rod(res.xy, lam=params["lam"], contact_distance=params["contact_distance"])
+        rg = float(an.rg)
+        row.update(rg=rg, epsilon=float(an.epsilon),
+                   epsilon_sqrt2=1.0 / (2.0 * np.pi * np.sqrt(2.0) * rg) if rg > 0 else np.inf,
+                   n_stacks=int(an.n_stacks), n_branches=int(an.n_branches),
+                   n_junctions=int(an.n_junctions), n_voids=int(an.n_voids))
+        bcols = [c for c in BRANCH_COLUMNS if c != "config_id"]
+        branches = an.branches.reindex(columns=bcols).to_dict("records")
+        vcols = [c for c in VOID_COLUMNS if c != "config_id"]
+        voids = an.voids.reindex(columns=vcols).to_dict("records")
+    except Exception as exc:  # noqa: BLE001 - recorded per configuration, the ensemble goes on
+        from .geometry import radius_of_gyration
+
+        rg = radius_of_gyration(res.xy)
+        row.update(rg=rg, epsilon=1.0 / (2.0 * np.pi * rg),
+                   epsilon_sqrt2=1.0 / (2.0 * np.pi * np.sqrt(2.0) * rg),
+                   analysis_error=f"{type(exc).__name__}: {exc}")
+    row.update({f"n_{k}": v for k, v in res.stats.items()})
+    meta = json.dumps({"row": row, "branches": branches, "voids": voids},
+                      default=lambda o: o.item() if hasattr(o, "item") else str(o))
+    write_npz(part_path(out, config_id), xy=res.xy, xy0=xy0, meta=np.array(meta))
+    return config_id
+
+
+def _read_part(path):
+    with np.load(path, allow_pickle=False) as z:
+        return json.loads(str(z["meta"])), z["xy"].copy()
+
+
+def assemble(out, n_configs: int) -> dict:
+    """Assemble configs.csv, branches.csv, voids.csv and rods.npz from the part files.
+
+    Returns
+    -------
+    dict
+        ``{"configs": DataFrame, "branches": DataFrame, "voids": DataFrame}``.
+    """
+    out = Path(out)
+    rows, brows, vrows, rods = [], [], [], {}
+    for i in range(n_configs):
+        meta, xy = _read_part(part_path(out, i))
+        rows.append(meta["row"])
+        brows += [{"config_id": i, **b} for b in meta["branches"]]
+        vrows += [{"config_id": i, **v} for v in meta["voids"]]
+        rods[f"config_{i:05d}"] = xy
+    configs = pd.DataFrame(rows)
+    extra = [c for c in configs.columns if c not in CONFIG_COLUMNS]
+    configs = configs.reindex(columns=CONFIG_COLUMNS + extra)
+    branches = pd.DataFrame(brows).reindex(columns=BRANCH_COLUMNS)
+    voids = pd.DataFrame(vrows).reindex(columns=VOID_COLUMNS)
+    write_csv(out / "configs.csv", configs)
+    write_csv(out / "branches.csv", branches)
+    write_csv(out / "voids.csv", voids)
+    write_npz(out / "rods.npz", **rods)
+    return {"configs": configs, "branches": branches, "voids": voids}
+
+
+def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None = None,
+                 progress: bool = True) -> dict:
+    """Run (or resume) an ensemble and write its tables.
+
+    Parameters
+    ----------
+    params : dict
+        ``command`` ("quench" or "anneal"), ``n_configs``, ``n_segments``, ``lam``, ``noise``,
+        ``seed``, ``method``, ``n_runs``, ``maxiter``, ``nematic_runs``, ``u``, ``ftol``,
+        ``xtol``, ``wall_radius``, ``contact_distance``, and for anneal ``lam_start``,
+        ``stages``, ``ramp``.
+    out : path
+        Output folder.
+    workers : int
+        Local worker processes (1 = inline).
+    scheduler : str, optional
+        Dask scheduler address.
+    progress : bool
+        Show a tqdm progress bar (configurations done, ETA).
+
+    Returns
+    -------
+    dict of DataFrames (see :func:`assemble`).
+    """
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    params = {k: params.get(k) for k in sorted(params)}
+    pfile = out / "params.json"
+    if pfile.exists():
+        try:
+            old = json.loads(pfile.read_text())
+        except (OSError, json.JSONDecodeError) as exc:
+            raise ConfigError(f"unreadable params.json ({exc})", path=pfile) from None
+        diff = [k for k in _PHYSICS_KEYS
+                if json.dumps(old.get(k)) != json.dumps(params.get(k))]
+        if diff:
+            raise ConfigError("output folder holds a different ensemble (parameters differ: "
+                              + ", ".join(diff) + "); use another --out", path=out)
+    n = int(params["n_configs"])
+    write_json(pfile, {**params, "n_configs": max(n, int(json.loads(pfile.read_text())
+                                                          .get("n_configs", 0))
+                                                      if pfile.exists() else n),
+                       "version": __version__})
+    seeds = spawn_seeds(params["seed"], n)
+    todo = [i for i in range(n) if not part_path(out, i).exists()]
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=n, initial=n - len(todo), unit="config", desc=params["command"])
+    try:
+        if todo:
+            with get_executor(workers, scheduler) as ex:
+                if workers == 1 and not scheduler:
+                    # inline executor runs at submit: submit one by one so the bar moves
+                    futs = (ex.submit(run_config, i, seeds[i], params, str(out)) for i in todo)
+                else:
+                    futs = as_completed([ex.submit(run_config, i, seeds[i], params, str(out))
+                                         for i in todo])
+                for fut in futs:
+                    fut.result()
+                    if bar is not None:
+                        bar.update(1)
+    finally:
+        if bar is not None:
+            bar.close()
+    return assemble(out, n)
+
+
+def _add_common(p, command):
+    p.add_argument("--n-configs", type=int, default=250, help="number of configurations K")
+    p.add_argument("--lambda", dest="lam", type=float, default=7e5,
+                   help="confinement Lambda (target Lambda for anneal; paper: 7e5)")
+    p.add_argument("--noise", type=float, default=750.0, help="initial noise D (paper: 750)")
+    p.add_argument("--segments", type=int, default=300, help="number of segments N")
+    p.add_argument("--seed", type=int, default=0, help="ensemble seed")
+    p.add_argument("--method", choices=["powell", "lbfgs"], default="powell",
+                   help="minimiser (powell = the paper's protocol)")
+    p.add_argument("--runs", type=int, default=10, help="Powell runs per configuration")
+    p.add_argument("--maxiter", type=int, default=30, help="iterations per Powell run")
+    p.add_argument("--nematic-runs", type=str, default="1,2",
+                   help="comma-separated Powell runs (0-based) with the nematic term")
+    p.add_argument("--u", type=float, default=100.0, help="nematic strength u (50-150)")
+    p.add_argument("--ftol", type=float, default=1e-4, help="Powell ftol (scipy's default)")
+    p.add_argument("--xtol", type=float, default=1e-4, help="Powell xtol (scipy's default)")
+    p.add_argument("--wall-radius", type=float, default=None,
+                   help="hard-wall disk radius in units of L (default: none)")
+    p.add_argument("--contact-distance", type=float, default=None,
+                   help="contact cut-off of the analysis (units of L; default contacts')")
+    p.add_argument("--workers", type=int, default=1, help="local worker processes")
+    p.add_argument("--scheduler", default=None, help="Dask scheduler address")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--out", required=True, help="output folder")
+    if command == "anneal":
+        p.add_argument("--lambda-start", dest="lam_start", type=float, default=1e3,
+                       help="initial Lambda of the ramp")
+        p.add_argument("--stages", type=int, default=12, help="number of Lambda stages")
+        p.add_argument("--ramp", choices=["geometric", "linear"], default="geometric",
+                       help="Lambda schedule")
+    p.set_defaults(func=run, command=command)
+
+
+def params_from_args(args) -> dict:
+    """The parameter dict of :func:`run_ensemble` from parsed CLI arguments."""
+    try:
+        nem = [int(x) for x in str(args.nematic_runs).split(",") if x.strip()]
+    except ValueError:
+        raise ParameterError(f"--nematic-runs must be integers, got {args.nematic_runs!r}")
+    if args.n_configs < 1 or args.segments < 3 or args.lam < 0 or args.noise < 0:
+        raise ParameterError("need --n-configs >= 1, --segments >= 3, --lambda >= 0, "
+                             "--noise >= 0")
+    params = dict(command=args.command, n_configs=args.n_configs, n_segments=args.segments,
+                  lam=args.lam, noise=args.noise, seed=args.seed, method=args.method,
+                  n_runs=args.runs, maxiter=args.maxiter, nematic_runs=nem, u=args.u,
+                  ftol=args.ftol, xtol=args.xtol, wall_radius=args.wall_radius,
+                  contact_distance=args.contact_distance)
+    if args.command == "anneal":
+        params.update(lam_start=args.lam_start, stages=args.stages, ramp=args.ramp)
+    return params
+
+
+def run(args) -> int:
+    """Entry point of ``quench`` / ``anneal``."""
+    params = params_from_args(args)
+    tables = run_ensemble(params, args.out, workers=args.workers, scheduler=args.scheduler,
+                          progress=not args.no_progress)
+    c = tables["configs"]
+    print(f"{len(c)} configurations -> {args.out}: <E> = {c.energy_total.mean():.1f} "
+          f"(bending {c.energy_bending.mean():.1f}, confinement "
+          f"{c.energy_confinement.mean():.1f}), <Rg> = {c.rg.mean():.4f}")
+    return 0
+
+
+def add_subparser(sub):
+    """Register the ``quench`` and ``anneal`` subcommands."""
+    q = sub.add_parser("quench", help="quench an ensemble of random rods (paper protocol)",
+                       description=__doc__.split("\n\n")[0])
+    _add_common(q, "quench")
+    a = sub.add_parser("anneal", help="anneal rods: Lambda ramped slowly to the target",
+                       description="Like quench, but Lambda is ramped from --lambda-start to "
+                                   "--lambda over --stages stages.")
+    _add_common(a, "anneal")
+
+
+__all__ = ["run_ensemble", "run_config", "assemble", "minimize_config", "add_subparser",
+           "CONFIG_COLUMNS", "BRANCH_COLUMNS", "VOID_COLUMNS"]

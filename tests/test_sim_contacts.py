@@ -1,0 +1,174 @@
+"""Contact analysis (simulate.contacts) on hand-built polylines with known structure."""
+import numpy as np
+import pytest
+
+from simulate.contacts import analyze_rod
+
+LAM = 7e5
+DELTA = 0.5 / 300
+
+
+def resample(curve, n=300):
+    """Dense curve -> rod of length 1 in n (nearly) equal segments, centred at the origin."""
+    curve = np.asarray(curve, float)
+    s = np.r_[0, np.cumsum(np.hypot(*np.diff(curve, axis=0).T))]
+    t = np.linspace(0, s[-1], n + 1)
+    xy = np.c_[np.interp(t, s, curve[:, 0]), np.interp(t, s, curve[:, 1])]
+    xy /= np.hypot(*np.diff(xy, axis=0).T).sum()
+    return xy - xy.mean(axis=0)
+
+
+def lines(*pts, m=2000):
+    t = np.linspace(0, 1, m)[:, None]
+    return np.concatenate([np.asarray(a) * (1 - t) + np.asarray(b) * t
+                           for a, b in zip(pts[:-1], pts[1:])])
+
+
+def hairpin(g, arm=0.3):
+    """Folded rod: arms in contact (gap g) over ``arm``, fold cap at one end, arms diverging
+    into free ends at the other (one Y junction)."""
+    th = np.linspace(np.pi / 2, -np.pi / 2, 400)
+    cap = np.c_[arm + g / 2 * np.cos(th), g / 2 * np.sin(th)]
+    return np.concatenate([lines((-0.1, 0.06), (0, g / 2), (arm, g / 2)), cap,
+                           lines((arm, -g / 2), (0, -g / 2), (-0.1, -0.06))])
+
+
+def spiral(turns, g):
+    th = np.linspace(0, 2 * np.pi * turns, 20000)
+    r = 1 / (2 * np.pi * turns) - g * turns / 2 + g * th / (2 * np.pi)
+    return np.c_[r * np.cos(th), r * np.sin(th)]
+
+
+def double_loop(g, r0=0.06):
+    """1.5 turns wound with gap g: the second half-turn lies on the first (stack n=2), a tail
+    enters from the inside and one leaves outwards (2 junctions, 1 void)."""
+    th = np.linspace(0, 3 * np.pi, 20000)
+    r = r0 + g * th / (2 * np.pi)
+    c = np.c_[r * np.cos(th), r * np.sin(th)]
+    return np.concatenate([lines((0.6 * r0, 0), (r0, 0)), c, lines(c[-1], c[-1] - (0.1, 0))])
+
+
+def transform(xy, rng):
+    a = rng.uniform(0, 2 * np.pi)
+    rot = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+    xy = xy @ rot.T
+    return xy[::-1].copy() if rng.random() < 0.5 else xy
+
+
+def bending(xy):
+    """sum |R''|^2 ds by second differences; = (2 - 2 cos dtheta)/ds^2 per node for equal
+    segments (our resampled test rods are equal only to ~1e-3)."""
+    n = len(xy) - 1
+    d2 = xy[2:] - 2 * xy[1:-1] + xy[:-2]
+    return np.sum(d2 ** 2) * n ** 3
+
+
+def confinement(xy, lam):
+    r2 = (xy ** 2).sum(1)
+    return lam * np.sum(r2[1:] + r2[:-1]) / 2 / (len(xy) - 1)
+
+
+def check_totals(a, xy):
+    assert a.branches["energy_bending"].sum() == pytest.approx(a.energy_bending, rel=1e-9)
+    assert a.branches["energy_confinement"].sum() == pytest.approx(a.energy_confinement, rel=1e-9)
+    assert a.energy_bending == pytest.approx(bending(xy), rel=1e-6)
+    assert a.energy_confinement == pytest.approx(confinement(xy, LAM), rel=1e-9)
+    assert a.branches["length"].sum() == pytest.approx(1.0, abs=1e-9)
+    assert a.n_branches == a.stacks["n_br"].sum() == len(a.branches)
+    # branches tile the rod in order
+    assert np.allclose(a.branches["s_start"].to_numpy()[1:], a.branches["s_end"].to_numpy()[:-1])
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_straight_rod(seed):
+    rng = np.random.default_rng(seed)
+    xy = transform(resample(lines((-0.5, 0), (0.5, 0)), n=int(rng.integers(100, 400))), rng)
+    a = analyze_rod(xy, lam=LAM)
+    assert (a.n_stacks, a.n_branches, a.n_junctions, a.n_voids) == (1, 1, 0, 0)
+    assert (a.multiplicity == 1).all()
+    assert a.energy_confinement == pytest.approx(LAM / 12, rel=1e-3)  # issue 3 reference
+    assert a.rg == pytest.approx(np.sqrt(1 / 12), rel=1e-3)
+    assert a.epsilon / a.epsilon_sqrt2 == pytest.approx(np.sqrt(2))
+    check_totals(a, xy)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_hairpin(seed):
+    rng = np.random.default_rng(seed)
+    g = rng.uniform(0.2, 0.8) * DELTA
+    xy = transform(resample(hairpin(g)), rng)
+    a = analyze_rod(xy, lam=LAM)
+    # stack n=2 from the Y junction to the fold (end, -1); two single tails to free ends
+    assert a.n_junctions == 1 and a.junctions["n_stacks"].tolist() == [3]
+    assert sorted(a.stacks["n_br"]) == [1, 1, 2]
+    assert a.n_branches == 4 and a.n_voids == 0
+    s2 = a.stacks[a.stacks.n_br == 2].iloc[0]
+    assert sorted([s2.junction_a, s2.junction_b]) == [-1, 0]
+    assert a.multiplicity.max() == 2
+    check_totals(a, xy)
+
+
+def test_hairpin_apart_has_no_contact():
+    xy = resample(hairpin(3 * DELTA))
+    a = analyze_rod(xy, lam=LAM)
+    assert (a.n_stacks, a.n_junctions) == (1, 0)
+    # but a larger cut-off puts the arms in contact
+    b = analyze_rod(xy, lam=LAM, contact_distance=4 * DELTA)
+    assert sorted(b.stacks["n_br"]) == [1, 1, 2]
+
+
+@pytest.mark.parametrize("turns,seed", [(2, 0), (3, 1), (3, 2), (4, 3)])
+def test_spiral_is_one_stack(turns, seed):
+    rng = np.random.default_rng(seed)
+    # adjacent turns within delta, but two turns apart beyond it: contacts must chain
+    g = rng.uniform(0.55, 0.9) * DELTA
+    xy = transform(resample(spiral(turns, g)), rng)
+    a = analyze_rod(xy, lam=LAM)
+    assert a.n_stacks == 1 and a.n_junctions == 0
+    assert a.stacks["n_br"].tolist() == [turns]
+    assert a.n_branches == turns
+    assert a.stacks[["junction_a", "junction_b"]].to_numpy().tolist() == [[-1, -1]]
+    assert a.n_voids == 1
+    check_totals(a, xy)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_double_loop(seed):
+    rng = np.random.default_rng(seed)
+    xy = transform(resample(double_loop(rng.uniform(0.3, 0.8) * DELTA)), rng)
+    a = analyze_rod(xy, lam=LAM)
+    assert a.n_junctions == 2 and a.junctions["n_stacks"].tolist() == [3, 3]
+    assert sorted(a.stacks["n_br"]) == [1, 1, 1, 2]
+    assert a.n_branches == 5 and a.n_voids == 1
+    assert a.voids["n_edges"].tolist() == [2]
+    check_totals(a, xy)
+
+
+@pytest.mark.parametrize("n", [200, 300, 500])
+def test_circle_void_shape_ratio(n):
+    th = np.linspace(0, 2 * np.pi, 20000)
+    xy = resample(np.c_[np.cos(th), np.sin(th)], n=n)
+    a = analyze_rod(xy, lam=LAM)
+    assert a.n_voids == 1
+    v = a.voids.iloc[0]
+    assert v.shape_ratio == pytest.approx(1 / (2 * np.sqrt(np.pi)), rel=5e-3)  # 0.2821
+    assert v.area == pytest.approx(1 / (4 * np.pi), rel=5e-3)
+    assert v.perimeter == pytest.approx(1.0, rel=5e-3)
+
+
+def test_square_void():
+    xy = resample(lines((0, 0), (1, 0), (1, 1), (0, 1), (0, 0)))
+    a = analyze_rod(xy, lam=LAM)
+    assert a.n_voids == 1
+    assert a.voids.iloc[0].shape_ratio == pytest.approx(0.25, rel=1e-2)
+
+
+def test_branch_curvatures_on_arc():
+    r = 0.3
+    th = np.linspace(0, 1 / r, 5000)
+    xy = resample(np.c_[r * np.cos(th), r * np.sin(th)])
+    a = analyze_rod(xy, lam=LAM)
+    b = a.branches.iloc[0]
+    assert a.energy_bending == pytest.approx(1 / r ** 2, rel=1e-2)  # issue 3 reference
+    assert b.kappa_plus == pytest.approx(1 / r, rel=1e-2)
+    assert abs(b.kappa_pm) == pytest.approx(1 / r, rel=1e-2)

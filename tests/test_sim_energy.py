@@ -1,0 +1,78 @@
+import numpy as np
+import pytest
+
+from simulate.energy import (bending_energy, confinement_energy, energy_and_gradient,
+                             node_curvature, total_energy)
+from simulate.geometry import angles, center_of_mass, positions, radius_of_gyration
+
+
+@pytest.mark.parametrize("n,r", [(100, 0.3), (300, 0.2), (300, 1.0), (500, 0.05)])
+def test_arc_bending_is_inverse_radius_squared(n, r):
+    theta = np.arange(n) / n / r + 0.7
+    xy = positions(theta, (0.1, -0.2))
+    # N-1 interior nodes carry the curvature: exact value (1 - 1/N) / r^2 up to O(ds^2)
+    assert bending_energy(xy) == pytest.approx(1.0 / r**2, rel=1.5 / n)
+    assert bending_energy(xy) == pytest.approx((1 - 1.0 / n) / r**2, rel=1e-3)
+
+
+@pytest.mark.parametrize("n,lam,angle", [(300, 7e5, 0.0), (60, 12.0, 1.1), (301, 3.0, -2.0)])
+def test_straight_centred_rod_confinement(n, lam, angle):
+    xy = positions(np.full(n, angle))
+    xy -= center_of_mass(xy)
+    assert confinement_energy(xy, lam) == pytest.approx(lam / 12.0, rel=3.0 / n**2)  # trapezoid error 2 ds^2
+    assert bending_energy(xy) == pytest.approx(0.0, abs=1e-9)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_gradient_matches_finite_differences(seed):
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(10, 40))
+    theta = np.cumsum(rng.normal(0, 0.3, n))
+    start = rng.normal(0, 0.2, 2)
+    lam = float(10 ** rng.uniform(1, 4))
+    e, g = energy_and_gradient(theta, start, lam)
+    x = np.concatenate([theta, start])
+    h = 1e-6
+    fd = np.empty_like(x)
+    for i in range(x.size):
+        xp = x.copy(); xp[i] += h
+        xm = x.copy(); xm[i] -= h
+        fd[i] = (energy_and_gradient(xp[:n], xp[n:], lam)[0]
+                 - energy_and_gradient(xm[:n], xm[n:], lam)[0]) / (2 * h)
+    assert np.allclose(g, fd, rtol=1e-5, atol=1e-5 * np.abs(g).max())
+    xy = positions(theta, start)
+    assert e == pytest.approx(bending_energy(xy) + confinement_energy(xy, lam), rel=1e-12)
+
+
+@pytest.mark.parametrize("seed", [4, 5, 6])
+def test_node_curvature_consistent_with_bending(seed):
+    rng = np.random.default_rng(seed)
+    n = 200
+    theta = np.cumsum(rng.normal(0, 0.05, n))
+    xy = positions(theta)
+    k = node_curvature(xy)
+    assert k.shape == (n + 1,) and k[0] == 0 and k[-1] == 0
+    assert np.sum(k**2) / n == pytest.approx(bending_energy(xy), rel=1e-10)
+    # sign: counter-clockwise turn is positive, magnitude ~ dtheta / ds
+    dth = np.diff(theta)
+    assert np.all(np.sign(k[1:-1]) == np.sign(dth))
+    assert np.allclose(k[1:-1], 2 * np.sin(dth / 2) * n, rtol=1e-8)
+
+
+def test_total_energy_hard_core_and_wall():
+    # a figure-eight-like crossing polyline
+    xy = np.array([[0, 0], [1, 1], [1, 0], [0, 1]], float) / 3.0
+    assert total_energy(xy, 10.0) == np.inf
+    assert np.isfinite(total_energy(xy, 10.0, hard_core=False))
+    xy = positions(np.zeros(50), (-0.5, 0.0))
+    assert total_energy(xy, 1.0, wall_radius=0.4) == np.inf
+    assert np.isfinite(total_energy(xy, 1.0, wall_radius=0.6))
+
+
+def test_angles_roundtrip_and_rg():
+    rng = np.random.default_rng(9)
+    theta = np.cumsum(rng.normal(0, 0.2, 80))
+    xy = positions(theta, (0.3, 0.1))
+    th2, st = angles(xy)
+    assert np.allclose(positions(th2, st), xy, atol=1e-12)
+    assert radius_of_gyration(xy) ** 2 * 5.0 == pytest.approx(confinement_energy(xy, 5.0))

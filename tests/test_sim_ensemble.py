@@ -1,0 +1,86 @@
+import argparse
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from crosssection.errors import ConfigError
+from simulate import ensemble
+
+ARGS = ["--n-configs", "3", "--segments", "60", "--lambda", "2e4", "--noise", "300",
+        "--runs", "2", "--maxiter", "3", "--nematic-runs", "0", "--no-progress"]
+
+
+def _run(argv):
+    p = argparse.ArgumentParser()
+    sub = p.add_subparsers(dest="command", required=True)
+    ensemble.add_subparser(sub)
+    a = p.parse_args(argv)
+    return a.func(a)
+
+
+def _configs(path):
+    return pd.read_csv(path / "configs.csv").drop(columns=["wall_s"])
+
+
+@pytest.fixture(scope="module")
+def first(tmp_path_factory):
+    out = tmp_path_factory.mktemp("ens") / "a"
+    assert _run(["quench", *ARGS, "--seed", "11", "--out", str(out)]) == 0
+    return out
+
+
+def test_outputs_and_schema(first):
+    c = pd.read_csv(first / "configs.csv")
+    for col in ensemble.CONFIG_COLUMNS:
+        assert col in c.columns
+    assert list(c.config_id) == [0, 1, 2]
+    assert (c.method == "powell").all()
+    assert np.allclose(c.energy_total, c.energy_bending + c.energy_confinement)
+    assert np.allclose(c.epsilon, 1 / (2 * np.pi * c.rg))
+    b = pd.read_csv(first / "branches.csv")
+    v = pd.read_csv(first / "voids.csv")
+    assert list(b.columns) == ensemble.BRANCH_COLUMNS
+    assert list(v.columns) == ensemble.VOID_COLUMNS
+    rods = np.load(first / "rods.npz")
+    assert sorted(rods.files) == ["config_00000", "config_00001", "config_00002"]
+    assert rods["config_00001"].shape == (61, 2)
+    params = json.loads((first / "params.json").read_text())
+    assert params["lam"] == 2e4 and params["seed"] == 11 and "version" in params
+
+
+def test_determinism_and_workers(first, tmp_path):
+    again = tmp_path / "b"
+    assert _run(["quench", *ARGS, "--seed", "11", "--out", str(again)]) == 0
+    pd.testing.assert_frame_equal(_configs(first), _configs(again))
+    two = tmp_path / "c"
+    assert _run(["quench", *ARGS, "--seed", "11", "--workers", "2", "--out", str(two)]) == 0
+    pd.testing.assert_frame_equal(_configs(first), _configs(two))
+    a, b = np.load(first / "rods.npz"), np.load(two / "rods.npz")
+    assert all(np.array_equal(a[k], b[k]) for k in a.files)
+    other = tmp_path / "d"
+    assert _run(["quench", *ARGS, "--seed", "12", "--out", str(other)]) == 0
+    assert not np.allclose(_configs(first).energy_total, _configs(other).energy_total)
+
+
+def test_resume_after_deleting_parts(first, tmp_path):
+    import shutil
+
+    out = tmp_path / "r"
+    shutil.copytree(first, out)
+    (out / "configs.csv").unlink()
+    (out / "parts" / "config_00001.npz").unlink()
+    stamp = (out / "parts" / "config_00000.npz").stat().st_mtime_ns
+    assert _run(["quench", *ARGS, "--seed", "11", "--out", str(out)]) == 0
+    assert (out / "parts" / "config_00000.npz").stat().st_mtime_ns == stamp  # skipped
+    pd.testing.assert_frame_equal(_configs(first), _configs(out))
+
+
+def test_refuses_different_parameters(first, tmp_path):
+    import shutil
+
+    out = tmp_path / "x"
+    shutil.copytree(first, out)
+    with pytest.raises(ConfigError):
+        _run(["quench", *ARGS, "--seed", "99", "--out", str(out)])
