@@ -369,7 +369,7 @@ def _candidate_splits(node_ends, wall: bool):
     return sorted(out)
 
 
-def _solve_counts(rng, net, ends, caps, mean_layers, time_limit=4.0):
+def _solve_counts(rng, net, ends, caps, mean_layers, time_limit=60.0):
     """Integer layer counts with exact pack conservation (mixed-integer program).
 
     Returns (n per edge, chosen split per node) or (None, None) when infeasible."""
@@ -415,7 +415,8 @@ def _solve_counts(rng, net, ends, caps, mean_layers, time_limit=4.0):
     ub = np.concatenate([caps.astype(float), np.full(E, np.inf), np.ones(nz)])
     integrality = np.concatenate([np.ones(E), np.zeros(E), np.ones(nz)])
     res = milp(c, constraints=LinearConstraint(A, lo, hi), bounds=Bounds(lb, ub),
-               integrality=integrality, options={"time_limit": time_limit, "disp": False, "mip_rel_gap": 0.25})
+               integrality=integrality, options={"time_limit": time_limit, "disp": False, "mip_rel_gap": 0.25,
+                        "node_limit": 500})  # node limit, not time, decides: deterministic
     if res.x is None:
         return None, None
     x = res.x

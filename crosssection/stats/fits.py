@@ -278,8 +278,9 @@ def _pit(family, params, x, c):
     return 1.0 - d.sf(x) / sc
 
 
-def _sample(family, params, n, c, rng, x_lo=None):
-    """Draw n values from the (truncated) fitted law."""
+def _sample(family, params, n, c, rng):
+    """Draw n values from the (truncated) fitted law (inverse survival, in log space for the
+    normal laws so that cuts deep in the tail stay finite)."""
     u = rng.uniform(size=n)
     if family == "bose_einstein":
         lo = params["x_lo"] if c is None else c
@@ -287,6 +288,12 @@ def _sample(family, params, n, c, rng, x_lo=None):
     d = scipy_dist(family, params)
     if c is None:
         return d.ppf(u)
+    if family in ("gaussian", "lognormal"):
+        mu, sg = params["mu"], params["sigma"]
+        cc = c if family == "gaussian" else np.log(c)
+        z = special.ndtri_exp(np.log1p(-u) + special.log_ndtr(-(cc - mu) / sg))
+        y = mu - sg * z
+        return y if family == "gaussian" else np.exp(y)
     return d.isf((1.0 - u) * d.sf(c))
 
 
@@ -530,13 +537,21 @@ def goodness_of_fit(x, family: str, params: dict, *, truncation=None, n_mc: int 
                                     n_mc_samples=n_mc, random_state=rng)
         return float(res.statistic), float(res.pvalue)
     stat0 = anderson_darling(_pit(family, params, x, c))
-    null = np.empty(n_mc)
+    null = np.full(n_mc, np.nan)
     for i in range(n_mc):
         xs = _sample(family, params, x.size, c, rng)
-        th, _ = _fit_theta(family, xs, c)
+        if not np.all(np.isfinite(xs)):
+            continue
+        try:
+            th, _ = _fit_theta(family, xs, c)
+        except (ValueError, FloatingPointError, RuntimeError):
+            continue
         ps = _report_params(family, th, xs, c)
         null[i] = anderson_darling(_pit(family, ps, xs, c))
-    return stat0, float((np.sum(null >= stat0) + 1) / (n_mc + 1))
+    null = null[np.isfinite(null)]
+    if null.size == 0:
+        return stat0, float("nan")
+    return stat0, float((np.sum(null >= stat0) + 1) / (null.size + 1))
 
 
 def select_model(results: dict, *, delta: float = DELTA_BIC_SIMPLER) -> str | None:
