@@ -28,8 +28,9 @@ Design choices
   of the calibration file, and the package version: changing any of them redoes the image.
 - Failures never stop the batch: a corrupt or non-RGB image, an analysis error, a bad
   ``set.toml`` or a missing calibration fail only the images concerned, each with a one-line
-  reason in ``failures.csv``. A worker process that dies is replaced; the images it may have
-  been running are retried once, then recorded as failed.
+  reason in ``failures.csv``. A worker process that dies (crash, out-of-memory kill) is
+  replaced; the images that were in flight are re-run one at a time, and the one whose worker
+  dies alone is recorded as failed.
 """
 from __future__ import annotations
 
@@ -44,6 +45,7 @@ import sys
 import tempfile
 import time
 import traceback
+from collections import deque
 from concurrent.futures import FIRST_COMPLETED, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import asdict, dataclass, field
@@ -69,8 +71,6 @@ METADATA_PARAMS = ("bending_rigidity_J",)
 PARTIAL_TAG = ".partial-"
 #: how often (s) the index is rewritten while the batch runs, so a killed batch leaves one
 INDEX_EVERY_S = 5.0
-#: a task in flight when its worker process died this many times is recorded as failed
-MAX_ATTEMPTS = 2
 
 
 @dataclass
@@ -278,6 +278,15 @@ def _row(task: ImageTask, status: str, summary: dict | None = None, reason: str 
     return row
 
 
+def _read_umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+_UMASK = _read_umask()  # read once at import: os.umask is process-wide, not thread-safe
+
+
 def _peak_rss_mb() -> float:
     """Peak resident memory of this process so far (MB; Linux reports ru_maxrss in kB)."""
     try:
@@ -351,6 +360,7 @@ def process_image(task: ImageTask) -> dict:
             result.summary["batch"] = dict(info)
         final.parent.mkdir(parents=True, exist_ok=True)
         staging = Path(tempfile.mkdtemp(prefix=f".{final.name}{PARTIAL_TAG}", dir=final.parent))
+        os.chmod(staging, 0o777 & ~_UMASK)  # mkdtemp makes 0700; outputs get the usual mode
         result.write(staging, figure=task.figure)
         summary_path = staging / "summary.json"
         summary = json.loads(summary_path.read_text())
@@ -415,7 +425,7 @@ def _executor_slots(ex, workers: int) -> int:
 
 def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | None = None,
               seed: int | None = 0, figure: bool = True, cli_params: dict | None = None,
-              force: bool = False, progress: bool = True) -> pd.DataFrame:
+              force: bool = False, progress: bool = True, task_fn=None) -> pd.DataFrame:
     """Analyse every image under ``input_dir`` into ``out_dir`` (see module docstring).
 
     Parameters
@@ -435,6 +445,8 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
         Redo images even when their output is complete.
     progress : bool
         Show a tqdm progress bar (with ETA) on stderr.
+    task_fn : callable, optional
+        Replaces :func:`process_image` (a module-level function, for tests).
 
     Returns
     -------
@@ -482,40 +494,46 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
 
     bar = tqdm(total=len(tasks), initial=len(rows), unit="img", desc="batch",
                disable=not progress, dynamic_ncols=True)
-    attempts = {t.rel: 0 for t in todo}
     last_write = time.monotonic()
+    fn = task_fn or process_image
+    queue, suspects = deque(todo), deque()
     try:
-        queue = list(reversed(todo))
-        while queue:
-            broken = False
+        while queue or suspects:
             with get_executor(workers, scheduler) as ex:
                 slots = _executor_slots(ex, workers or os.cpu_count() or 1)
-                inflight = {}
-                while queue or inflight:
-                    while queue and len(inflight) < slots and not broken:
-                        t = queue.pop()
-                        attempts[t.rel] += 1
+                inflight, broken = {}, False
+                while True:
+                    # suspects (in flight when a worker died) run alone, so that a death
+                    # names its image for sure; the others fill the free slots
+                    while not broken:
+                        if suspects:
+                            if inflight:
+                                break
+                            t, alone = suspects.popleft(), True
+                        elif queue and len(inflight) < slots:
+                            t, alone = queue.popleft(), False
+                        else:
+                            break
                         try:
-                            inflight[ex.submit(process_image, t)] = t
-                        except BrokenProcessPool:
-                            queue.append(t)
-                            attempts[t.rel] -= 1
+                            inflight[ex.submit(fn, t)] = (t, alone)
+                        except (BrokenProcessPool, RuntimeError):
+                            (suspects if alone else queue).appendleft(t)
                             broken = True
                     if not inflight:
                         break
                     done, _ = wait(list(inflight), return_when=FIRST_COMPLETED)
                     for fut in done:
-                        t = inflight.pop(fut)
+                        t, alone = inflight.pop(fut)
                         try:
                             row = fut.result()
                         except BrokenProcessPool:
-                            # a worker died (killed, out of memory): retry, then give up
+                            # a worker process died (killed, out of memory, crash)
                             broken = True
-                            if attempts[t.rel] < MAX_ATTEMPTS:
-                                queue.append(t)
+                            if not alone:
+                                suspects.append(t)
                                 continue
-                            row = _row(t, "failed", reason="worker process died while "
-                                                           "analysing this image")
+                            row = _row(t, "failed",
+                                       reason="worker process died while analysing this image")
                         except Exception as exc:  # noqa: BLE001 - lost task (cluster error)
                             row = _row(t, "failed", reason=_one_line(exc))
                         rows[t.rel] = row

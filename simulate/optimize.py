@@ -93,7 +93,7 @@ def powell_protocol(xy0, lam: float, *, seed=None, n_runs: int = 10, maxiter: in
                     nematic_runs=(1, 2), u: float = 100.0, contact_cutoff: float | None = None,
                     min_separation: int = 10, xtol: float = 1e-4, ftol: float = 1e-4,
                     wall_radius: float | None = None, first_identity: bool = False,
-                    ) -> QuenchResult:
+                    parametrization: str = "bend") -> QuenchResult:
     """The paper's minimisation: ``n_runs`` Powell runs with direction resets.
 
     Parameters
@@ -123,11 +123,18 @@ def powell_protocol(xy0, lam: float, *, seed=None, n_runs: int = 10, maxiter: in
         Hard-wall disk radius (centred at the origin).
     first_identity : bool
         Start run 0 with scipy's default direction set (identity) instead of a random one.
+    parametrization : {"bend", "tangent"}
+        Coordinates of Powell's search: ``"bend"`` -- bend angles ``phi_k`` (a coordinate
+        move turns the whole tail about node k); ``"tangent"`` -- tangent angles ``theta_k``
+        (segment k turns, the tail translates by at most 2/N). Both are exact Powell (checked
+        against scipy in the respective coordinates). PARAMETRIZATION_NOTE gives the measurement.
 
     Returns
     -------
     QuenchResult
     """
+    if parametrization not in ("bend", "tangent"):
+        raise ParameterError(f"unknown parametrization {parametrization!r}")
     t0 = time.perf_counter()
     xy0 = np.asarray(xy0, dtype=np.float64)
     n = xy0.shape[0] - 1
@@ -155,7 +162,7 @@ def powell_protocol(xy0, lam: float, *, seed=None, n_runs: int = 10, maxiter: in
             sgn = rng.choice([-1.0, 1.0], size=m)
         powell_run(p, float(lam), kind, sgn, dirs, int(maxiter), float(xtol), float(ftol),
                    float(u) if run in nem else 0.0, cutoff, int(min_separation), wall, stats,
-                   True)
+                   True, parametrization == "tangent")
         xy = from_params(p)
         history.append((time.perf_counter() - t0,
                         bending_energy(xy) + confinement_energy(xy, lam)))

@@ -200,7 +200,10 @@ def _seg_hits_head(ax, ay, bx, by, j, xy, xmin, ymin, h, nx, ny, start, items):
 #   mode 0 (theta_k): [0, k, s, cdot, ccrs, dkm, dkp, bkm, bkp, nc, nsn, f0, built, chord_safe]
 #   mode 1 (x0 / y0): [1, axis, s, pw, W0, f0]
 #   mode 2 (general): [2]
-_CTX = 16
+#   mode 3 (tangent theta_k, p holds bend angles: phi_k += x, phi_{k+1} -= x):
+#          [3, k, s, Sx, Sy, phi_k, phi_k+1, b_k, b_k+1, nc, nsn, f0, built, safe, hc, -,
+#           W, cos theta_k, sin theta_k]
+_CTX = 24
 
 
 @njit(cache=True)
@@ -220,6 +223,24 @@ def _energy_trial(a, ctx, p, d, pt, xyt, tht, lam, w, u, pairs):
     if mode == 1:
         x = ctx[2] * a
         return ctx[5] + lam * (2.0 * x * ctx[3] + x * x * ctx[4])
+    if mode == 3:
+        k = int(ctx[1])
+        x = ctx[2] * a
+        c = math.cos(x)
+        sn = math.sin(x)
+        e = ctx[11]
+        if k >= 1:
+            e += n * (2.0 - 2.0 * math.cos(ctx[5] + x) - ctx[7])
+        if k < n - 1:
+            e += n * (2.0 - 2.0 * math.cos(ctx[6] - x) - ctx[8])
+        ds = 1.0 / n
+        # the tail (nodes j > k) translates by v = ds (t_k(theta + x) - t_k(theta))
+        vx = ds * (ctx[17] * c - ctx[18] * sn - ctx[17])
+        vy = ds * (ctx[18] * c + ctx[17] * sn - ctx[18])
+        e += lam * (2.0 * (vx * ctx[3] + vy * ctx[4]) + (vx * vx + vy * vy) * ctx[16])
+        if u > 0.0:
+            e += 0.5 * u * ((1.0 - math.cos(2.0 * x)) * ctx[9] - math.sin(2.0 * x) * ctx[10])
+        return e
     # general direction: O(N)
     m = p.shape[0]
     for i in range(m):
@@ -268,11 +289,99 @@ def _prepare_head(ctx, xy, rj, clear2, gpar, gstart, gitems, n):
 
 
 @njit(cache=True)
+def _prepare_tangent(ctx, xy, clear2, gpar, gstart, gitems, n):
+    """Tangent move of segment k: head 0..k-1 fixed, segment k turns about R_k, the tail
+    translates; every moving point moves by at most |v| relative to the head and to segment
+    k. Clearance c_j of segment j >= k to the head (and, j >= k+2, to segment k), capped."""
+    k = int(ctx[1])
+    h = 1.0 / n
+    if k >= 1:
+        xmin, ymin, h, nx, ny, start, items = _head_grid(xy, k, 1.0 / n)
+        gpar[0] = xmin
+        gpar[1] = ymin
+        gpar[2] = h
+        gpar[3] = nx
+        gpar[4] = ny
+        gstart[:nx * ny + 1] = start
+        gitems[:items.shape[0]] = items
+    pad = h
+    safe = math.inf
+    kx0 = xy[k, 0]
+    ky0 = xy[k, 1]
+    kx1 = xy[k + 1, 0]
+    ky1 = xy[k + 1, 1]
+    for j in range(k, n):
+        ax = xy[j, 0]
+        ay = xy[j, 1]
+        bx = xy[j + 1, 0]
+        by = xy[j + 1, 1]
+        c2 = pad * pad
+        if k >= 1:
+            c2 = min(c2, _seg_vs_head(ax, ay, bx, by, j, k, xy, gpar[0], gpar[1], h,
+                                      int(gpar[3]), int(gpar[4]), gstart, gitems, pad))
+        if j >= k + 2:
+            c2 = min(c2, seg_dist2(kx0, ky0, kx1, ky1, ax, ay, bx, by))
+        clear2[j] = c2
+        safe = min(safe, math.sqrt(c2))
+    ctx[12] = 1.0
+    ctx[13] = safe
+
+
+@njit(cache=True)
+def _admissible_tangent(a, ctx, xy, wall2, clear2, gpar, gstart, gitems, stats, n):
+    k = int(ctx[1])
+    x = ctx[2] * a
+    c = math.cos(x)
+    sn = math.sin(x)
+    ds = 1.0 / n
+    tx = ctx[17] * c - ctx[18] * sn
+    ty = ctx[18] * c + ctx[17] * sn
+    vx = ds * tx - ds * ctx[17]
+    vy = ds * ty - ds * ctx[18]
+    if wall2 < math.inf:
+        for j in range(k + 1, n + 1):
+            qx = xy[j, 0] + vx
+            qy = xy[j, 1] + vy
+            if qx * qx + qy * qy > wall2:
+                return False
+    if ctx[12] == 0.0:
+        _prepare_tangent(ctx, xy, clear2, gpar, gstart, gitems, n)
+    v2 = vx * vx + vy * vy
+    if v2 < ctx[13] * ctx[13]:
+        stats[5] += 1
+        return True
+    stats[4] += 1
+    kx0 = xy[k, 0]
+    ky0 = xy[k, 1]
+    kx1 = kx0 + ds * tx
+    ky1 = ky0 + ds * ty
+    for j in range(k, n):
+        if v2 < clear2[j]:
+            continue
+        if j == k:
+            ax, ay, bx, by = kx0, ky0, kx1, ky1
+        else:
+            ax = xy[j, 0] + vx
+            ay = xy[j, 1] + vy
+            bx = xy[j + 1, 0] + vx
+            by = xy[j + 1, 1] + vy
+        if k >= 1:
+            if _seg_hits_head(ax, ay, bx, by, j, xy, gpar[0], gpar[1], gpar[2], int(gpar[3]),
+                              int(gpar[4]), gstart, gitems):
+                return False
+        if j >= k + 2 and seg_intersect(kx0, ky0, kx1, ky1, ax, ay, bx, by):
+            return False
+    return True
+
+
+@njit(cache=True)
 def _admissible(a, ctx, p, d, xy, xyt, wall2, rj, clear2, gpar, gstart, gitems, stats):
     """Hard core (and wall) for the trial at step ``a``; ``xyt`` holds a general trial."""
     mode = int(ctx[0])
     n = p.shape[0] - 2
     stats[2] += 1
+    if mode == 3:
+        return _admissible_tangent(a, ctx, xy, wall2, clear2, gpar, gstart, gitems, stats, n)
     if mode == 0:
         k = int(ctx[1])
         x = ctx[2] * a
@@ -352,7 +461,8 @@ def _line_search(tol, ctx, p, d, pt, xy, xyt, lam, w, u, pairs, wall2, rj, clear
     Returns (alpha_min, f_min). Trials are checked for admissibility only when they could
     become the best point (see module docstring).
     """
-    f0 = ctx[11] if int(ctx[0]) == 0 else (ctx[5] if int(ctx[0]) == 1 else ctx[15])
+    md = int(ctx[0])
+    f0 = ctx[11] if (md == 0 or md == 3) else (ctx[5] if md == 1 else ctx[15])
     xa = 0.0
     xb = 1.0
     fa = f0
@@ -530,7 +640,7 @@ def _refresh(p, n, xy, w, sw, spx, spy, sq):
 
 @njit(cache=True)
 def powell_run(p, lam, kind, sgn, dirs, maxiter, xtol, ftol, u, cutoff, min_separation, wall,
-               stats, hard_core=True):
+               stats, hard_core=True, tangent=False):
     """One run of Powell's method from ``p`` (modified in place), as scipy's ``Powell``.
 
     Parameters
@@ -564,6 +674,12 @@ def powell_run(p, lam, kind, sgn, dirs, maxiter, xtol, ftol, u, cutoff, min_sepa
         explicit collision tests, checks settled by the clearance bound].
     hard_core : bool
         False disables the self-intersection test (for comparisons with scipy only).
+    tangent : bool
+        If true, coordinate slot ``k < N`` is the TANGENT angle ``theta_k`` (direction
+        ``e_k - e_{k+1}`` in bend-angle space: segment k turns, the tail translates by at most
+        ``2/N``); this is Powell's method in the parameters ``(theta, x0, y0)`` exactly (Powell
+        is equivariant under the linear map theta <-> phi when the direction set is mapped).
+        If false, slot ``k`` is the bend angle ``phi_k`` (the tail rotates about ``R_k``).
 
     Returns
     -------
@@ -611,7 +727,54 @@ def powell_run(p, lam, kind, sgn, dirs, maxiter, xtol, ftol, u, cutoff, min_sepa
             fx2 = fval
             kk = kind[slot]
             stats[1] += 1
-            if kk >= 0 and kk < n:
+            if kk >= 0 and kk < n and tangent:
+                k = kk
+                ctx[0] = 3.0
+                ctx[1] = k
+                ctx[2] = sgn[slot]
+                ctx[3] = spx[k + 1]
+                ctx[4] = spy[k + 1]
+                ctx[5] = p[k]
+                ctx[6] = p[k + 1] if k < n - 1 else 0.0
+                ctx[7] = 2.0 - 2.0 * math.cos(ctx[5])
+                ctx[8] = 2.0 - 2.0 * math.cos(ctx[6])
+                ctx[16] = sw[k + 1]
+                ctx[17] = math.cos(th[k])
+                ctx[18] = math.sin(th[k])
+                nc = 0.0
+                ns = 0.0
+                if u > 0.0:
+                    for q in range(pairs.shape[0]):
+                        ia = pairs[q, 0]
+                        ib = pairs[q, 1]
+                        if ia == k or ib == k:
+                            ph = 2.0 * (th[ia] - th[ib])
+                            nc += math.cos(ph)
+                            ns += math.sin(ph) if ib == k else -math.sin(ph)
+                ctx[9] = nc
+                ctx[10] = ns
+                ctx[11] = fval
+                ctx[12] = 0.0
+                ctx[13] = 0.0
+                amin, fnew = _line_search(xtol * 100.0, ctx, p, zero_d, pt, xy, xyt, lam, w, u,
+                                          pairs, wall2, rj, clear2, gpar, gstart, gitems, stats)
+                if amin != 0.0:
+                    x = sgn[slot] * amin
+                    p[k] += x
+                    if k < n - 1:
+                        p[k + 1] -= x
+                    th[k] += x
+                    ds = 1.0 / n
+                    c = math.cos(x)
+                    s = math.sin(x)
+                    vx = ds * (ctx[17] * c - ctx[18] * s - ctx[17])
+                    vy = ds * (ctx[18] * c + ctx[17] * s - ctx[18])
+                    for j in range(k + 1, n + 1):
+                        xy[j, 0] += vx
+                        xy[j, 1] += vy
+                    _suffix(xy, w, sw, spx, spy, sq)
+                fval = fnew
+            elif kk >= 0 and kk < n:
                 k = kk
                 rkx = xy[k, 0]
                 rky = xy[k, 1]

@@ -208,6 +208,44 @@ def load_image_output(folder, *, set_name: str, config_id: str | None = None,
                     stacks.reindex(columns=STACK_COLS), voids.reindex(columns=VOID_COLS))
 
 
+def _batch_image_folders(folder: Path):
+    """(set, config_id, folder) of every finished image of a batch output.
+
+    ``index.csv`` (columns set, status, output) is used when present: rows with status ``ok``
+    or ``skipped`` (done in an earlier run) whose folder holds a summary. Otherwise every
+    ``summary.json`` below ``folder`` counts, except in hidden folders (the batch's
+    ``.<stem>.partial-*`` staging folders of interrupted runs).
+    """
+    index = folder / "index.csv"
+    if index.is_file():
+        try:
+            idx = pd.read_csv(index)
+        except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError):
+            idx = None
+        if idx is not None and {"set", "status", "output"} <= set(idx.columns):
+            out = []
+            for row in idx.itertuples(index=False):
+                if str(row.status) not in ("ok", "skipped") or not isinstance(row.output, str):
+                    continue
+                img = folder / row.output
+                if (img / "summary.json").is_file():
+                    cid = "/".join(Path(row.output).parts[1:]) or Path(row.output).name
+                    out.append((str(row.set), cid, img))
+            if out:
+                return out
+    out = []
+    for summ in sorted(folder.glob("**/summary.json")):
+        img = summ.parent
+        rel = img.relative_to(folder)
+        if any(part.startswith(".") for part in rel.parts):
+            continue
+        if len(rel.parts) >= 2:
+            out.append((rel.parts[0], "/".join(rel.parts[1:]), img))
+        else:
+            out.append((folder.resolve().name, rel.parts[0], img))
+    return out
+
+
 def load_batch(folder, *, l_min_mm=1.0, s_min_mm2=1.0) -> Ensemble:
     """Read every per-image folder of a batch output.
 
@@ -227,13 +265,7 @@ def load_batch(folder, *, l_min_mm=1.0, s_min_mm2=1.0) -> Ensemble:
     """
     folder = Path(folder)
     parts = []
-    for summ in sorted(folder.glob("**/summary.json")):
-        img = summ.parent
-        rel = img.relative_to(folder)
-        if len(rel.parts) >= 2:
-            set_name, cid = rel.parts[0], "/".join(rel.parts[1:])
-        else:
-            set_name, cid = folder.resolve().name, rel.parts[0]
+    for set_name, cid, img in _batch_image_folders(folder):
         parts.append(load_image_output(img, set_name=set_name, config_id=cid,
                                        l_min_mm=l_min_mm, s_min_mm2=s_min_mm2))
     if not parts:

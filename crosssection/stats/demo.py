@@ -103,7 +103,8 @@ def write_demo_batch(out_dir, *, sets=None, n_images=8, seed=0) -> Path:
             summary, tables = demo_image_tables(rng, **kw_i)
             folder = out / name / f"img{i:03d}"
             write_tables(folder, summary, tables)
-            rows.append({"set": name, "image": f"img{i:03d}", "status": "ok",
+            rows.append({"image": f"img{i:03d}.png", "set": name, "status": "ok",
+                         "output": f"{name}/img{i:03d}",
                          **{k: summary[k] for k in ("n_stacks", "n_branches", "n_voids",
                                                     "rod_length_mm", "epsilon")}})
     write_csv(out / "index.csv", pd.DataFrame(rows))

@@ -244,7 +244,8 @@ def compute_stats(ens: Ensemble, opts: StatsOptions | None = None) -> StatsResul
 
 
 def slope_through_origin(x, y):
-    """Least-squares slope of y = a x and its R^2 (uncentred), ignoring non-finite pairs.
+    """Least-squares slope of y = a x and R^2 = 1 - SS_res/SS_tot about the mean of y (negative
+    when the line through the origin does worse than the mean), ignoring non-finite pairs.
 
     Returns
     -------
