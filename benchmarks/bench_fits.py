@@ -139,7 +139,7 @@ def figures(res, out):
     ax.set_yticks(range(len(vals)), labels, fontsize=6)
     ax.set(xlim=(0.7, 1.0), xlabel="fraction of 95% bootstrap intervals covering the truth",
            title="bootstrap coverage (dashed: nominal 0.95)")
-    fig.subplots_adjust(left=0.35)
+    fig.subplots_adjust(left=0.35, bottom=0.13)
     save_figure(fig, out / "coverage.png")
     fig, ax = plt.subplots(figsize=(7, 3.5))
     rows = [(f"{f} {k}", d["naive_bias"], d["truncated_bias"])
@@ -148,14 +148,15 @@ def figures(res, out):
     ax.barh(y - 0.2, [r[1] for r in rows], 0.4, color="tab:red")
     ax.barh(y + 0.2, [r[2] for r in rows], 0.4, color="tab:green")
     for yi, r in zip(y, rows):
-        ax.text(r[1], yi - 0.2, f" naive {r[1]:+.2f}", va="center", fontsize=7, color="tab:red")
-        ax.text(r[2], yi + 0.2, f" truncated {r[2]:+.3f}", va="center", fontsize=7,
+        ax.text(max(r[1], 0), yi - 0.2, f" naive {r[1]:+.2f}", va="center", fontsize=7,
+                color="tab:red")
+        ax.text(max(r[2], 0), yi + 0.2, f" truncated {r[2]:+.3f}", va="center", fontsize=7,
                 color="tab:green")
     ax.set_yticks(y, [r[0] for r in rows])
     ax.axvline(0, color="k", lw=0.8)
     ax.set(xlabel="mean relative bias of the fitted parameter",
            title="detection limit: naive vs truncation-aware MLE")
-    fig.subplots_adjust(left=0.22, right=0.85)
+    fig.subplots_adjust(left=0.22, right=0.85, bottom=0.15)
     save_figure(fig, out / "truncation.png")
 
 
@@ -166,8 +167,13 @@ def main(argv=None):
     ap.add_argument("--n-boot", type=int, default=200)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--quick", action="store_true", help="small sweep (about a minute)")
+    ap.add_argument("--figures-only", action="store_true",
+                    help="redraw the figures from an existing OUT/bench_fits.json")
     a = ap.parse_args(argv)
     out = Path(a.out)
+    if a.figures_only:
+        figures(json.loads((out / "bench_fits.json").read_text()), out)
+        return
     reps = 20 if a.quick else a.reps
     t0 = time.perf_counter()
     res = {"coverage": coverage(reps, 100 if a.quick else a.n_boot,

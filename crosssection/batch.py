@@ -18,7 +18,7 @@ Design choices
   outputs and return a small dict (never arrays), so memory stays at about one image per worker.
 - Task ``i`` of the sorted image list gets seed ``spawn_seeds(seed, n)[i]``
   (``SeedSequence.spawn``); results do not depend on the number of workers or on the order of
-  completion.
+  completion. The seed used is recorded in ``summary.json`` (``batch.seed``) and index.csv.
 - Atomic outputs: a task writes into a hidden staging folder ``.<stem>.partial-XXXX`` next to
   its output folder and renames it into place when complete. A killed worker leaves at most a
   staging folder, which the next run removes; an output folder is therefore always complete.
@@ -256,8 +256,10 @@ def plan_batch(input_dir, out_dir, *, cli_params: dict | None = None, seed: int 
     for t in tasks:
         t.out_dir = str(out / t.out_rel)
         if t.error is None:
+            # the base seed, not the per-image one: adding images to the folder shifts the
+            # spawned seeds, and must not redo the images already complete
             t.params_hash = params_hash(t.params, _sha256(t.image),
-                                        seed=t.seed if uses_seed else None)
+                                        seed=seed if uses_seed else None)
     if any(t.set_name == DEFAULT_SET_NAME and t.error is None for t in tasks):
         sets.setdefault("<no set.toml>", default_set)
     return tasks, sets
@@ -398,7 +400,9 @@ def completed_row(task: ImageTask) -> dict | None:
         return None
     if task.figure and not (final / "overlay.png").is_file():
         return None
-    return _row(task, "skipped", summary, wall_s=info.get("wall_s", math.nan))
+    row = _row(task, "skipped", summary, wall_s=info.get("wall_s", math.nan))
+    row["seed"] = info.get("seed", task.seed)  # the seed the image was analysed with
+    return row
 
 
 # --------------------------------------------------------------------------- driver

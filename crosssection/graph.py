@@ -76,6 +76,17 @@ class StackGraph:
 
 
 @njit(cache=True)
+def _step(img, r, c, prev_r, prev_c):
+    """The neighbour of (r, c) other than prev (non-junction pixels have <= 2 neighbours)."""
+    for k in range(8):
+        rr = r + _DR[k]
+        cc = c + _DC[k]
+        if img[rr, cc] and not (rr == prev_r and cc == prev_c):
+            return rr, cc
+    return -1, -1
+
+
+@njit(cache=True)
 def _trace(img, lab, jr, jc):
     """Trace all stacks of the padded skeleton ``img`` with junction labels ``lab``.
 
@@ -90,15 +101,6 @@ def _trace(img, lab, jr, jc):
     offs = [0]
     meta = []  # kind_u, id_u, kind_v, id_v
 
-    def step(r, c, prev_r, prev_c):
-        # the neighbour of (r, c) other than prev (non-junction pixels have <= 2 neighbours)
-        for k in range(8):
-            rr = r + _DR[k]
-            cc = c + _DC[k]
-            if img[rr, cc] and not (rr == prev_r and cc == prev_c):
-                return rr, cc
-        return -1, -1
-
     # 1. from every junction pixel, every unvisited non-junction neighbour starts a stack
     for i in range(jr.shape[0]):
         r0 = jr[i]
@@ -111,17 +113,17 @@ def _trace(img, lab, jr, jc):
             pr.append(r0)
             pc.append(c0)
             prev_r, prev_c = r0, c0
-            kind_v = _END
-            id_v = 0
+            kind_v = np.int64(_END)
+            id_v = np.int64(0)
             while True:
                 pr.append(r)
                 pc.append(c)
                 if lab[r, c] != 0:
                     kind_v = _JUNCTION
-                    id_v = lab[r, c] - 1
+                    id_v = np.int64(lab[r, c] - 1)
                     break
                 visited[r, c] = 1
-                nr, nc = step(r, c, prev_r, prev_c)
+                nr, nc = _step(img, r, c, prev_r, prev_c)
                 if nr < 0:
                     kind_v = _END
                     id_v = r * w + c
@@ -133,7 +135,7 @@ def _trace(img, lab, jr, jc):
                 prev_r, prev_c = r, c
                 r, c = nr, nc
             offs.append(len(pr))
-            meta.append((_JUNCTION, lab[r0, c0] - 1, kind_v, id_v))
+            meta.append((np.int64(_JUNCTION), np.int64(lab[r0, c0] - 1), np.int64(kind_v), np.int64(id_v)))
     # 2. junction-free segments, from a free end to the other
     for r0 in range(1, h - 1):
         for c0 in range(1, w - 1):
@@ -146,17 +148,17 @@ def _trace(img, lab, jr, jc):
                 continue
             r, c = r0, c0
             prev_r, prev_c = -1, -1
-            kind_v = _END
-            id_v = 0
+            kind_v = np.int64(_END)
+            id_v = np.int64(0)
             while True:
                 pr.append(r)
                 pc.append(c)
                 if lab[r, c] != 0:
                     kind_v = _JUNCTION
-                    id_v = lab[r, c] - 1
+                    id_v = np.int64(lab[r, c] - 1)
                     break
                 visited[r, c] = 1
-                nr, nc = step(r, c, prev_r, prev_c)
+                nr, nc = _step(img, r, c, prev_r, prev_c)
                 if nr < 0 or (lab[nr, nc] == 0 and visited[nr, nc]):
                     kind_v = _END
                     id_v = r * w + c
@@ -164,7 +166,7 @@ def _trace(img, lab, jr, jc):
                 prev_r, prev_c = r, c
                 r, c = nr, nc
             offs.append(len(pr))
-            meta.append((_END, r0 * w + c0, kind_v, id_v))
+            meta.append((np.int64(_END), np.int64(r0 * w + c0), np.int64(kind_v), np.int64(id_v)))
     # 3. closed loops without junction: every remaining pixel has two neighbours
     for r0 in range(1, h - 1):
         for c0 in range(1, w - 1):
@@ -182,7 +184,7 @@ def _trace(img, lab, jr, jc):
                 pr.append(r)
                 pc.append(c)
                 visited[r, c] = 1
-                nr, nc = step(r, c, prev_r, prev_c)
+                nr, nc = _step(img, r, c, prev_r, prev_c)
                 if nr < 0:
                     break
                 if nr == r0 and nc == c0:
@@ -194,7 +196,8 @@ def _trace(img, lab, jr, jc):
                 prev_r, prev_c = r, c
                 r, c = nr, nc
             offs.append(len(pr))
-            meta.append((_LOOP, r0 * w + c0, _LOOP, r0 * w + c0))
+            meta.append((np.int64(_LOOP), np.int64(r0 * w + c0), np.int64(_LOOP),
+                         np.int64(r0 * w + c0)))
     return (np.array(pr, np.int64), np.array(pc, np.int64), np.array(offs, np.int64),
             meta)
 

@@ -32,22 +32,32 @@ junctions the MILP stays small (about 10 variables per stack) and solves in mill
 a fraction of a second (benchmarks/bench_linsys.py).
 
 Diagnostics follow the paper's M x M system ``A = [C; I_S]`` (rows scaled to unit norm),
-``S`` = the ~M/3 most reliable stacks (``fixed_by_width``), right-hand side
-``[0; round(e_S)]``: its rank (exact, combinatorially from the graph, see :func:`incidence_rank`),
-its 2-norm condition number (dense ``np.linalg.cond`` for small components, a sparse
-eigenvalue estimate beyond ``dense_max``) and the least-squares residual
+``S`` = the stacks fixed by width (``fixed_by_width``), right-hand side ``[0; round(e_S)]``:
+its rank, its 2-norm condition number (dense ``np.linalg.cond``-equivalent SVD for small
+components, a sparse eigenvalue estimate beyond ``dense_max``) and the least-squares residual
 ``min_x ||A x - b||`` (sparse LSQR).
 
-Reliability rule for ``fixed_by_width``: ``score_i = w_i * (1 - 2 |e_i - round(e_i)|)`` (close
-to an integer, thin); the top ``ceil(M/3)`` stacks of each component are chosen, more when
-conservation leaves more unknowns free, until the M x M system has full rank.
+Which stacks are fixed by width (the paper keeps "the M/3 stacks with the best estimation of
+the thickness, in general thin stacks"): reliability ``score_i = w_i (1 - 2 |e_i - round(e_i)|)``
+(thin, so large ``w_i``, and close to an integer).  First the stacks that conservation cannot
+determine are found by a matroid greedy on the columns of ``C`` taken from the *least*
+reliable (:func:`width_fixed_stacks`: the least reliable stacks are determined by
+conservation, what is left is the minimal, most reliable set that makes ``[C; I_S]``
+non-singular); then the most reliable remaining stacks are added up to ``ceil(M/3)``.  When
+conservation leaves more than M/3 unknowns free the component is flagged
+``underdetermined`` (the integer solution still uses every width with its weight).
+``rank_conservation`` (the rank of ``C`` alone) is reported per component.
 
 Junctions flagged ``reference_dependent`` or ``ambiguous`` by stage 7 are not trusted as
 given: among the pack partitions listed in ``Pack.candidates`` the one whose conservation
 residual with the width estimates is smallest (z-score ``|c.e| / sqrt(sum c^2 sigma^2)``)
 is kept as a *soft* equation (penalty ``soft_penalty``), provided that z-score is below
 ``z_max`` and clearly better than the runner-up; otherwise the equation is dropped.  Both cases
-are flagged.
+are flagged.  A *clear* junction whose geometric partition the widths contradict by more than
+``z_max`` sigma, while another candidate fits clearly, is switched to that candidate (soft,
+flag ``repartitioned-junctions``); without such a candidate the geometry is kept (hard).
+On generated scenes this guards against the few junctions where the skeleton's tangents
+mislead (one wrong hard equation otherwise shifts n_br along a whole chain of stacks).
 """
 from __future__ import annotations
 
@@ -58,7 +68,8 @@ import numpy as np
 import scipy.sparse as sp
 
 __all__ = ["LinearSystemResult", "ComponentInfo", "solve_branch_counts",
-           "conservation_equations", "incidence_rank", "reliability_score"]
+           "conservation_equations", "incidence_rank", "width_fixed_stacks",
+           "reliability_score"]
 
 
 @dataclass
@@ -72,10 +83,12 @@ class ComponentInfo:
     condition_number: float
     residual: float
     method: str                      # "milp" | "width"
+    rank_conservation: int = 0       # rank of the junction equations alone
     flags: list = field(default_factory=list)
     soft_junctions: list = field(default_factory=list)
     dropped_junctions: list = field(default_factory=list)
     violated_junctions: list = field(default_factory=list)
+    repartitioned_junctions: list = field(default_factory=list)
 
 
 @dataclass
@@ -167,8 +180,12 @@ def conservation_equations(graph, packs: dict, layers_est=None, sigma=None, *,
     -------
     hard, soft : list of (node, dict stack_id -> coefficient)
     dropped : list of node
+        Uncertain junctions without a clear partition (no equation).
+    repartitioned : list of node
+        Clear junctions whose geometric partition the widths contradict (z > ``z_max``)
+        while another candidate fits clearly: that candidate is used as a soft equation.
     """
-    hard, soft, dropped = [], [], []
+    hard, soft, dropped, repartitioned = [], [], [], []
     for node, pack in packs.items():
         ends = set(_ends_at(graph, node)) if graph is not None else None
         side_a, side_b = list(pack.side_a), list(pack.side_b)
@@ -177,40 +194,58 @@ def conservation_equations(graph, packs: dict, layers_est=None, sigma=None, *,
             return bool(a) and bool(b) and (ends is None or set(a) | set(b) == ends) \
                 and len(a) + len(b) == len(set(a) | set(b))
 
-        uncertain = bool(getattr(pack, "ambiguous", False)) or \
-            bool(getattr(pack, "reference_dependent", False)) or not covers(side_a, side_b)
-        if not uncertain:
-            row = _row(side_a, side_b)
-            if row:
-                hard.append((node, row))
-            continue
-        cands = [(side_a, side_b)] + [tuple(c) for c in getattr(pack, "candidates", [])]
-        rows = []
-        for a, b in cands:
-            if covers(list(a), list(b)):
-                r = _row(a, b)
-                if r and r not in rows:
-                    rows.append(r)
-        if not rows or layers_est is None:
-            dropped.append(node)
-            continue
-        z = []
-        for r in rows:
+        def zscore(r):
             ids = np.fromiter(r.keys(), int)
             c = np.fromiter(r.values(), float)
             est, sig = layers_est[ids], sigma[ids]
             if not np.all(np.isfinite(est)):
-                z.append(np.inf)
+                return np.inf
+            return abs(c @ est) / math.sqrt(float(np.sum(c ** 2 * sig ** 2)) + 1e-12)
+
+        def candidate_rows():
+            cands = [(side_a, side_b)] + [tuple(c) for c in getattr(pack, "candidates", [])]
+            rows = []
+            for a, b in cands:
+                if covers(list(a), list(b)):
+                    r = _row(a, b)
+                    if r and r not in rows:
+                        rows.append(r)
+            return rows
+
+        def width_choice(rows):
+            """Best row by z-score if clearly best and acceptable, else None."""
+            if not rows or layers_est is None:
+                return None
+            z = [zscore(r) for r in rows]
+            order = np.argsort(z)
+            best = z[order[0]]
+            runner = z[order[1]] if len(order) > 1 else np.inf
+            if best <= z_max and runner - best >= z_gap:
+                return rows[order[0]]
+            return None
+
+        uncertain = bool(getattr(pack, "ambiguous", False)) or \
+            bool(getattr(pack, "reference_dependent", False)) or not covers(side_a, side_b)
+        if not uncertain:
+            row = _row(side_a, side_b)
+            if not row:
                 continue
-            z.append(abs(c @ est) / math.sqrt(float(np.sum(c ** 2 * sig ** 2)) + 1e-12))
-        order = np.argsort(z)
-        best = z[order[0]]
-        runner = z[order[1]] if len(order) > 1 else np.inf
-        if best <= z_max and runner - best >= z_gap:
-            soft.append((node, rows[order[0]]))
-        else:
+            if layers_est is not None and zscore(row) > z_max:
+                # the widths flatly contradict the geometric packs: take the partition they
+                # clearly support, if any (soft); otherwise trust the geometry
+                alt = width_choice(candidate_rows())
+                if alt is not None and alt != row:
+                    soft.append((node, alt))
+                    repartitioned.append(node)
+                    continue
+            hard.append((node, row))
+            continue
+        choice = width_choice(candidate_rows())
+        if choice is None:
             dropped.append(node)
-    return hard, soft, dropped
+        else:
+            soft.append((node, choice))
+    return hard, soft, dropped, repartitioned
 
 
 def incidence_rank(rows: list, columns) -> int:
@@ -273,6 +308,89 @@ def incidence_rank(rows: list, columns) -> int:
                     ok = False
         null_dim += ok
     return len(rows) - null_dim
+
+
+def width_fixed_stacks(rows: list, stacks, score) -> tuple[list, int]:
+    """Stacks that conservation cannot determine, choosing the least reliable to determine.
+
+    Matroid greedy on the columns of the conservation matrix (a signed-graph incidence
+    matrix): stacks are taken in order of *increasing* reliability and kept as "determined by
+    conservation" while the kept columns stay linearly independent (each connected part of
+    the kept stacks is a tree, or a tree plus one unbalanced cycle or one one-junction
+    column; union-find with parity).  The rest must come from widths: it is the set of most
+    reliable stacks of minimal size that makes ``[C; I_S]`` non-singular.
+
+    Parameters
+    ----------
+    rows : list of dict stack_id -> coefficient
+    stacks : list of int
+    score : (M,) array
+        Reliability (higher = better).
+
+    Returns
+    -------
+    fixed : list of int
+        Stacks to fix by width.
+    rank_c : int
+        Rank of the conservation matrix restricted to ``stacks``.
+    """
+    stacks = list(stacks)
+    col_rows: dict[int, list] = {s: [] for s in stacks}
+    for j, r in enumerate(rows):
+        for s, c in r.items():
+            if s in col_rows and c != 0:
+                col_rows[s].append((j, c))
+    if any(len(v) > 2 or (len(v) == 2 and abs(v[0][1]) != abs(v[1][1]))
+           for v in col_rows.values()):
+        # not a plain signed graph: slow but exact incremental rank
+        fixed, kept = [], []
+        for s in sorted(stacks, key=lambda s: score[s]):
+            if incidence_rank(rows, kept + [s]) == len(kept) + 1:
+                kept.append(s)
+            else:
+                fixed.append(s)
+        return fixed, len(kept)
+    parent = list(range(len(rows)))
+    parity = [0] * len(rows)     # sign of y_j relative to its root (0: +, 1: -)
+    full = [False] * len(rows)   # component already has an unbalanced cycle / half-edge
+
+    def find(j):
+        path = []
+        while parent[j] != j:
+            path.append(j)
+            j = parent[j]
+        root, acc = j, 0
+        for k in reversed(path):  # path compression with parities
+            acc ^= parity[k]
+            parity[k] = acc
+            parent[k] = root
+        return root
+
+    fixed, rank_c = [], 0
+    for s in sorted(stacks, key=lambda s: score[s]):
+        lst = col_rows[s]
+        ok = False
+        if len(lst) == 1:
+            r = find(lst[0][0])
+            if not full[r]:
+                full[r] = ok = True
+        elif len(lst) == 2:
+            (j1, c1), (j2, c2) = lst
+            rel = 0 if c1 * c2 < 0 else 1  # y_j2 = -(c1/c2) y_j1: same sign iff c1 c2 < 0
+            r1, r2 = find(j1), find(j2)
+            if r1 != r2:
+                if not (full[r1] and full[r2]):
+                    parent[r2] = r1
+                    parity[r2] = parity[j1] ^ parity[j2] ^ rel
+                    full[r1] = full[r1] or full[r2]
+                    ok = True
+            elif not full[r1] and (parity[j1] ^ parity[j2]) != rel:
+                full[r1] = ok = True  # unbalanced cycle closes: still independent
+        if ok:
+            rank_c += 1
+        else:
+            fixed.append(s)
+    return fixed, rank_c
 
 
 def reliability_score(layers_est: np.ndarray, weights: np.ndarray) -> np.ndarray:
@@ -362,7 +480,7 @@ def solve_branch_counts(graph, packs: dict, layers_est, *, reliability=None,
                         noise_layers: float = 0.3, noise_growth: float = 0.05,
                         width_fraction: float = 1.0 / 3.0, window: int = 3,
                         z_max: float = 4.0, soft_penalty: float = 4.0,
-                        time_limit_s: float = 20.0, dense_max: int = 500,
+                        time_limit_s: float = 20.0, dense_max: int = 50,
                         compute_residual: bool = True) -> LinearSystemResult:
     """Integer number of branches per stack (paper, "Image analysis procedure").
 
@@ -425,7 +543,8 @@ def solve_branch_counts(graph, packs: dict, layers_est, *, reliability=None,
     w_eff = np.maximum(w, w_floor)  # keeps every problem bounded and the LS system PD
     score = reliability_score(e_raw, w)
 
-    hard, soft, dropped = conservation_equations(graph, packs, e_raw, sigma, z_max=z_max)
+    hard, soft, dropped, repart = conservation_equations(graph, packs, e_raw, sigma,
+                                                         z_max=z_max)
     hard_nodes = {nd for nd, _ in hard}
 
     # components of the stack graph (edges carry stack ids)
@@ -468,17 +587,16 @@ def solve_branch_counts(graph, packs: dict, layers_est, *, reliability=None,
         ee, ww, sg = e[idx], w_eff[idx], sigma[idx]
         # ---- the paper's M x M system and its diagnostics
         r_dicts = [r for _, r in rows]
-        rank_c = incidence_rank(r_dicts, stacks)
-        n_sel = min(m, max(int(math.ceil(width_fraction * m)), m - rank_c))
-        order = idx[np.argsort(-score[idx], kind="stable")]
-        sel = list(order[:n_sel])
-        rest = list(order[n_sel:])
-        rank = n_sel + incidence_rank(r_dicts, set(stacks) - set(sel))
-        while rank < m and rest:  # more widths until the system is determined
-            add, rest = rest[: m - rank], rest[m - rank:]
-            sel += add
-            rank = len(sel) + incidence_rank(r_dicts, set(stacks) - set(sel))
-        if len(sel) > int(math.ceil(width_fraction * m)) and rows:
+        needed, rank_c = width_fixed_stacks(r_dicts, stacks, score)
+        n_paper = int(math.ceil(width_fraction * m))
+        sel = list(needed)
+        if len(sel) < n_paper:  # the paper's M/3 most reliable, on top of the needed ones
+            chosen = set(sel)
+            extra = [s for s in idx[np.argsort(-score[idx], kind="stable")] if s not in chosen]
+            sel += extra[: n_paper - len(sel)]
+        rank = m  # [C; I_S] is non-singular by construction
+        info.rank_conservation = int(rank_c)
+        if len(needed) > n_paper and rows:
             info.flags.append("underdetermined")
         fixed[sel] = True
         C = _sparse_rows(rows, col, m)
@@ -505,6 +623,9 @@ def solve_branch_counts(graph, packs: dict, layers_est, *, reliability=None,
             info.flags.append("dropped-junctions")
         if s_rows:
             info.flags.append("soft-junctions")
+        info.repartitioned_junctions = [nd for nd in repart if nd in nodeset]
+        if info.repartitioned_junctions:
+            info.flags.append("repartitioned-junctions")
         if not rows:
             info.method = "width"
             info.flags.append("fallback-to-width")

@@ -116,8 +116,8 @@ def end_tangent(path_rc: np.ndarray, node_rc, end: int, *, tangent_px: float,
     end : {0, 1}
         0: the junction is at the path start, 1: at the path end.
     tangent_px : float
-        The path is followed from the junction until it first gets farther than this
-        distance; those pixels are used.
+        Length of the fitting window: the path is followed from the junction until it first
+        gets farther than ``skip_px + tangent_px`` from the junction centre.
     skip_px : float
         Pixels closer than this to the junction centre (inside the junction blob, where the
         skeleton of merging stacks bends) are ignored.
@@ -135,7 +135,7 @@ def end_tangent(path_rc: np.ndarray, node_rc, end: int, *, tangent_px: float,
     if len(pts) == 0:
         return np.full(2, np.nan)
     dist = np.hypot(*(pts - p0).T)
-    beyond = np.flatnonzero(dist > tangent_px)
+    beyond = np.flatnonzero(dist > skip_px + tangent_px)
     stop = beyond[0] + 1 if beyond.size else len(pts)
     sel = pts[:stop][dist[:stop] >= skip_px]
     if len(sel) < 2:  # short stack: take what there is
@@ -209,6 +209,7 @@ def partition_by_gap(keys: list[EdgeEnd], tangents: np.ndarray):
 
 
 def compute_packs(graph: StackGraphLike, *, tangent_px: float, skip_px: float = 2.0,
+                  distance_px: np.ndarray | None = None, blob_factor: float = 1.0,
                   nodes=None) -> dict:
     """Split the stacks meeting at every junction into two packs.
 
@@ -218,10 +219,20 @@ def compute_packs(graph: StackGraphLike, *, tangent_px: float, skip_px: float = 
         Stage-6 graph (see docs/design.md); only junction nodes (``node_kind == "junction"``)
         are processed.
     tangent_px : float
-        Distance from the junction centre over which each stack's tangent is fitted; choose it
-        larger than the junction blob (a few stack widths).
+        Length of path, beyond the skipped blob, over which each stack's tangent is fitted.
+        Short is better on curved stacks: on 4 generated scenes (crosssection.synthetic,
+        h = 5 px, up to 8 layers, 151 junctions) the partitions matched the truth packs for
+        148 junctions with ``tangent_px=10, skip_px=4``, 147 with 15/4, 136 with 30/4,
+        71 with 60/8; skipping the inscribed-disk radius (``distance_px``) did not help
+        (139 with 15 px).  Recommended: about 2 h (10 px at 50 px/mm), ``skip_px`` about h.
     skip_px : float
         Pixels closer than this to the junction centre are ignored in the fit.
+    distance_px : 2-D array, optional
+        Euclidean distance transform of the mask.  When given, the skipped radius at each
+        junction is ``max(skip_px, blob_factor * EDT at the junction centre)``: the inscribed
+        disk of the junction blob, where the skeleton of thick merging stacks bends.
+    blob_factor : float
+        See ``distance_px``.
     nodes : iterable, optional
         Restrict to these nodes.
 
@@ -235,10 +246,15 @@ def compute_packs(graph: StackGraphLike, *, tangent_px: float, skip_px: float = 
         nodes = [n for n in graph.graph.nodes if graph.node_kind.get(n, "junction") == "junction"]
     for node in nodes:
         keys = junction_edge_ends(graph, node)
+        skip = float(skip_px)
+        if distance_px is not None:
+            r, c = np.round(np.asarray(graph.node_rc[node], float)).astype(int)
+            if 0 <= r < distance_px.shape[0] and 0 <= c < distance_px.shape[1]:
+                skip = max(skip, blob_factor * float(distance_px[r, c]))
         tans = {}
         for sid, end in keys:
             tans[(sid, end)] = end_tangent(graph.paths[sid], graph.node_rc[node], end,
-                                           tangent_px=tangent_px, skip_px=skip_px)
+                                           tangent_px=tangent_px, skip_px=skip)
         out[node] = _pack_from_tangents(node, keys, tans)
     return out
 

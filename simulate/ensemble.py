@@ -43,7 +43,7 @@ VOID_COLUMNS = ["config_id", "area", "perimeter", "shape_ratio", "n_edges"]
 # parameters that define the physics: a re-run into the same folder must agree on them
 _PHYSICS_KEYS = ("command", "n_segments", "lam", "noise", "seed", "method", "n_runs",
                  "maxiter", "nematic_runs", "u", "ftol", "xtol", "wall_radius",
-                 "contact_distance", "lam_start", "stages", "ramp")
+                 "contact_distance", "lam_start", "stages", "ramp", "parametrization")
 
 
 def part_path(out, config_id: int) -> Path:
@@ -70,7 +70,9 @@ def minimize_config(xy0, params: dict, seed: int):
 
     common = dict(seed=seed, n_runs=params["n_runs"], maxiter=params["maxiter"],
                   nematic_runs=tuple(params["nematic_runs"]), u=params["u"],
-                  ftol=params["ftol"], xtol=params["xtol"], wall_radius=params["wall_radius"])
+                  ftol=params["ftol"], xtol=params["xtol"], wall_radius=params["wall_radius"],
+                  parametrization=params.get("parametrization") or
+                  ("bend" if params["command"] == "anneal" else "tangent"))
     if params["command"] == "anneal":
         return optimize.anneal(xy0, params["lam"], lam_start=params["lam_start"],
                                stages=params["stages"], ramp=params["ramp"],
@@ -80,6 +82,10 @@ def minimize_config(xy0, params: dict, seed: int):
     if params["method"] == "lbfgs":
         return optimize.lbfgs_quench(xy0, params["lam"], seed=seed,
                                      wall_radius=params["wall_radius"])
+    if params["method"] == "scipy-powell":
+        return optimize.scipy_protocol(xy0, params["lam"], seed=seed, n_runs=params["n_runs"],
+                                       maxiter=params["maxiter"], ftol=params["ftol"],
+                                       xtol=params["xtol"])
     raise ParameterError(f"unknown method {params['method']!r}")
 
 
@@ -239,10 +245,13 @@ def _add_common(p, command):
     p.add_argument("--noise", type=float, default=750.0, help="initial noise D (paper: 750)")
     p.add_argument("--segments", type=int, default=300, help="number of segments N")
     p.add_argument("--seed", type=int, default=0, help="ensemble seed")
-    p.add_argument("--method", choices=["powell", "lbfgs"], default="powell",
+    p.add_argument("--method", choices=["powell", "lbfgs", "scipy-powell"], default="powell",
                    help="minimiser (powell = the paper's protocol)")
     p.add_argument("--runs", type=int, default=10, help="Powell runs per configuration")
     p.add_argument("--maxiter", type=int, default=30, help="iterations per Powell run")
+    p.add_argument("--parametrization", choices=["tangent", "bend"], default=None,
+                   help="Powell search coordinates (default: tangent for quench = the "
+                        "prototype's statistics; bend for anneal = winds into the spiral)")
     p.add_argument("--nematic-runs", type=str, default="1,2",
                    help="comma-separated Powell runs (0-based) with the nematic term")
     p.add_argument("--u", type=float, default=100.0, help="nematic strength u (50-150)")
@@ -259,7 +268,7 @@ def _add_common(p, command):
     if command == "anneal":
         p.add_argument("--lambda-start", dest="lam_start", type=float, default=1e3,
                        help="initial Lambda of the ramp")
-        p.add_argument("--stages", type=int, default=12, help="number of Lambda stages")
+        p.add_argument("--stages", type=int, default=24, help="number of Lambda stages")
         p.add_argument("--ramp", choices=["geometric", "linear"], default="geometric",
                        help="Lambda schedule")
     p.set_defaults(func=run, command=command)
@@ -278,7 +287,7 @@ def params_from_args(args) -> dict:
                   lam=args.lam, noise=args.noise, seed=args.seed, method=args.method,
                   n_runs=args.runs, maxiter=args.maxiter, nematic_runs=nem, u=args.u,
                   ftol=args.ftol, xtol=args.xtol, wall_radius=args.wall_radius,
-                  contact_distance=args.contact_distance)
+                  contact_distance=args.contact_distance, parametrization=args.parametrization)
     if args.command == "anneal":
         params.update(lam_start=args.lam_start, stages=args.stages, ramp=args.ramp)
     return params

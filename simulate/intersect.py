@@ -275,6 +275,42 @@ def close_pairs(xy, cutoff, min_separation):
     return out
 
 
+@njit(cache=True)
+def has_contact_grid(xy, margin):
+    """Is any pair of non-adjacent segments closer than ``margin`` (0 = touching)?
+
+    ``has_contact_grid(xy, 0.0)`` is :func:`has_intersection_grid`; a positive margin is the
+    minimiser's clearance, which keeps its configurations robust to rounding (see
+    :mod:`simulate.powell`).
+    """
+    n = xy.shape[0] - 1
+    if n < 3:
+        return False
+    if margin <= 0.0:
+        return has_intersection_grid(xy)
+    xmin, ymin, h, nx, ny = _grid_setup(xy, margin)
+    start, items = _grid_fill(xy, xmin, ymin, h, nx, ny, 0.0)
+    seen = np.full(n, -1, np.int64)
+    m2 = margin * margin
+    for i in range(n):
+        x0 = int((min(xy[i, 0], xy[i + 1, 0]) - margin - xmin) / h)
+        x1 = int((max(xy[i, 0], xy[i + 1, 0]) + margin - xmin) / h)
+        y0 = int((min(xy[i, 1], xy[i + 1, 1]) - margin - ymin) / h)
+        y1 = int((max(xy[i, 1], xy[i + 1, 1]) + margin - ymin) / h)
+        for cx in range(max(x0, 0), min(x1, nx - 1) + 1):
+            for cy in range(max(y0, 0), min(y1, ny - 1) + 1):
+                c = cx * ny + cy
+                for p in range(start[c], start[c + 1]):
+                    j = items[p]
+                    if j < i + 2 or seen[j] == i:
+                        continue
+                    seen[j] = i
+                    if seg_dist2(xy[i, 0], xy[i, 1], xy[i + 1, 0], xy[i + 1, 1],
+                                 xy[j, 0], xy[j, 1], xy[j + 1, 0], xy[j + 1, 1]) < m2:
+                        return True
+    return False
+
+
 def has_intersection(xy, method: str = "grid") -> bool:
     """Does the polyline ``xy`` (N+1, 2) intersect itself?
 
@@ -299,4 +335,4 @@ def has_intersection(xy, method: str = "grid") -> bool:
 
 
 __all__ = ["has_intersection", "has_intersection_brute", "has_intersection_skip",
-           "has_intersection_grid", "close_pairs", "seg_intersect", "seg_dist2"]
+           "has_intersection_grid", "has_contact_grid", "close_pairs", "seg_intersect", "seg_dist2"]

@@ -5,16 +5,33 @@
   nematic self-contact term ``u sin^2 alpha`` in ``nematic_runs`` (2 early runs) only, hard core
   throughout. The numba engine is :mod:`simulate.powell` (a port of scipy's Powell).
 
-  Parameters are the bend angles ``phi = (theta_0, theta_1 - theta_0, ..., theta_{N-1} -
-  theta_{N-2})`` and the start point: a coordinate direction ``phi_k`` turns the tail of the rod
-  rigidly about node ``k`` (the elementary move of the prototype), so one trial costs O(1).
+  Search coordinates (``parametrization``): ``"tangent"`` (default) -- the tangent angles
+  ``theta_k`` and the start point: a coordinate move turns segment ``k`` and translates the tail
+  by at most 2/N; ``"bend"`` -- the bend angles ``phi_k = theta_k - theta_{k-1}``: a coordinate
+  move turns the whole tail rigidly about node ``k``. Both cost O(1) per trial. Measured on the
+  same 15 starts (N = 300, Lambda = 7e5, D = 750, seeds 0-14, 10 runs x 30 iterations):
+
+  ==============  ======  =======  ===========  ======  ==========
+  coordinates       <E>   bending  confinement   <Rg>   s / config
+  ==============  ======  =======  ===========  ======  ==========
+  tangent          4273     2018       2255      0.0563     2.4
+  bend             4364     2476       1888      0.0509     1.8
+  prototype        4240     1970       2270      0.057     ~60
+  ==============  ======  =======  ===========  ======  ==========
+
+  The tangent coordinates reproduce the prototype (bending < confinement, Rg 0.057); the bend
+  coordinates' long-range moves let the rod contract further (smaller Rg, lower confinement)
+  at the price of more bending. Other knobs (5 starts, tangent): ftol 1e-6 changes nothing
+  (4713 vs 4769), maxiter 60 lowers Ẽ by ~10 % (4211), u = 50 / 100 / 150 gives 4296 / 4273 /
+  4366 over 15 starts ("its precise value did not affect the resulting configurations"), no
+  nematic term raises confinement (2675 vs 2277, Rg 0.061), a nematic cut-off of 2/N instead
+  of 1/N raises bending (3226).
   Direction reset: each run starts from a random permutation of the coordinate directions with
   random signs (a "set of random directions" in the paper's words, chosen among coordinate
   directions so that most line searches stay O(1)); Powell's own update then mixes in
   extrapolated directions.
-* ``lbfgs`` -- scipy L-BFGS-B on bending + confinement + a smooth short-range repulsion between
-  nodes far apart along the rod, with the hard core as a barrier (an inadmissible trial returns
-  a huge energy, so the line search backtracks).
+* ``lbfgs`` -- scipy L-BFGS-B on bending + confinement + a smooth contact barrier (see
+  :func:`lbfgs_quench`).
 * ``anneal`` -- Lambda ramped geometrically from ``lam_start`` to the target, a short Powell
   protocol at every stage; approaches the spiral ground state (Ẽ -> 2 sqrt(Lambda)).
 
@@ -93,7 +110,7 @@ def powell_protocol(xy0, lam: float, *, seed=None, n_runs: int = 10, maxiter: in
                     nematic_runs=(1, 2), u: float = 100.0, contact_cutoff: float | None = None,
                     min_separation: int = 10, xtol: float = 1e-4, ftol: float = 1e-4,
                     wall_radius: float | None = None, first_identity: bool = False,
-                    parametrization: str = "bend") -> QuenchResult:
+                    parametrization: str = "tangent") -> QuenchResult:
     """The paper's minimisation: ``n_runs`` Powell runs with direction resets.
 
     Parameters
@@ -127,7 +144,8 @@ def powell_protocol(xy0, lam: float, *, seed=None, n_runs: int = 10, maxiter: in
         Coordinates of Powell's search: ``"bend"`` -- bend angles ``phi_k`` (a coordinate
         move turns the whole tail about node k); ``"tangent"`` -- tangent angles ``theta_k``
         (segment k turns, the tail translates by at most 2/N). Both are exact Powell (checked
-        against scipy in the respective coordinates). PARAMETRIZATION_NOTE gives the measurement.
+        against scipy in the respective coordinates). The module docstring gives the
+        measurement: ``"tangent"`` reproduces the prototype's statistics.
 
     Returns
     -------
@@ -171,33 +189,19 @@ def powell_protocol(xy0, lam: float, *, seed=None, n_runs: int = 10, maxiter: in
 
 
 
-def _repulsion(xy, sigma, eps, min_separation):
-    """Smooth short-range repulsion ``eps sum (1 - d/sigma)^2`` between nodes far apart along
-    the rod, and its gradient with respect to node positions."""
-    from scipy.spatial import cKDTree
-
-    pairs = cKDTree(xy).query_pairs(sigma, output_type="ndarray")
-    grad = np.zeros_like(xy)
-    if pairs.size == 0:
-        return 0.0, grad
-    pairs = pairs[np.abs(pairs[:, 0] - pairs[:, 1]) >= min_separation]
-    if pairs.size == 0:
-        return 0.0, grad
-    dv = xy[pairs[:, 0]] - xy[pairs[:, 1]]
-    d = np.maximum(np.hypot(dv[:, 0], dv[:, 1]), 1e-12)
-    g = 1.0 - d / sigma
-    e = eps * np.sum(g * g)
-    coef = (-2.0 * eps * g / sigma / d)[:, None] * dv
-    np.add.at(grad, pairs[:, 0], coef)
-    np.add.at(grad, pairs[:, 1], -coef)
-    return float(e), grad
-
-
-def lbfgs_quench(xy0, lam: float, *, seed=None, barrier: float = 100.0,
-                 barrier_range: float | None = None, min_separation: int = 10,
+def lbfgs_quench(xy0, lam: float, *, seed=None, barrier: float = 0.1,
+                 barrier_range: float | None = None, min_separation: int = 3,
                  maxiter: int = 20000, wall_radius: float | None = None,
-                 restarts: int = 500) -> QuenchResult:
+                 restarts: int = 50, gtol: float = 1e-6) -> QuenchResult:
     """Gradient quench: L-BFGS-B on bending + confinement + a smooth contact barrier.
+
+    The hard core is replaced, for the gradient, by :func:`simulate.energy.contact_barrier`
+    (``eps (sigma/d - 1)^2`` between a node and the segments far from it along the rod,
+    diverging at contact), so contacts can slide instead of jamming. Every evaluation also runs
+    the exact hard-core test: a trial that crosses the rod (a line-search step may jump over
+    the barrier) gets the energy 1e30 and the line search backtracks; L-BFGS-B is restarted
+    from the last admissible point when its line search gives up. The returned configuration is
+    self-avoiding (checked), and its energies exclude the barrier.
 
     Parameters
     ----------
@@ -208,89 +212,111 @@ def lbfgs_quench(xy0, lam: float, *, seed=None, barrier: float = 100.0,
     seed : int, optional
         Unused (deterministic); accepted for a uniform interface.
     barrier : float
-        Strength ``eps`` of the repulsion ``eps (1 - d/sigma)^2`` between nodes.
+        Strength ``eps`` of the barrier (per node/segment pair).
     barrier_range : float, optional
-        Range ``sigma`` (default 2/N).
+        Range ``sigma`` (default 0.4/N, inside the contact cut-off 0.5/N of
+        :mod:`simulate.contacts`, so strands held apart by the barrier count as in contact).
     min_separation : int
-        Nodes closer than this along the rod do not repel.
+        A node does not feel the segments within this many indices along the rod.
     maxiter : int
-        L-BFGS-B iterations.
+        L-BFGS-B iterations per start.
     wall_radius : float, optional
-        Hard-wall disk; trials outside get a huge energy.
+        Hard-wall disk; trials outside get the energy 1e30.
     restarts : int
-        Maximum L-BFGS-B restarts after a line search stopped at the hard core.
+        Maximum L-BFGS-B restarts after an abnormal line-search stop.
+    gtol : float
+        Projected-gradient tolerance of L-BFGS-B.
 
     Returns
     -------
     QuenchResult
-        The hard core is kept as a barrier: a self-intersecting trial returns a huge energy so
-        the line search backtracks; the result is self-avoiding.
+        ``stats`` holds evaluations, iterations, restarts, rejected (crossing) trials and the
+        final barrier energy.
     """
     from scipy.optimize import minimize
 
-    from .energy import energy_and_gradient
+    from .energy import contact_barrier, energy_and_gradient
 
     t0 = time.perf_counter()
     xy0 = np.asarray(xy0, dtype=np.float64)
+    if has_intersection_grid(np.ascontiguousarray(xy0)):
+        raise ParameterError("the initial configuration intersects itself")
     n = xy0.shape[0] - 1
     ds = 1.0 / n
-    sigma = 2.0 * ds if barrier_range is None else float(barrier_range)
+    sigma = 0.4 * ds if barrier_range is None else float(barrier_range)
     theta0, start0 = angles(xy0)
     x0 = np.concatenate([theta0, start0])
-    count = [0]
+    count = {"evaluations": 0, "rejected": 0}
+    best = {"f": np.inf, "x": x0.copy()}
 
     def fun(x):
-        count[0] += 1
+        count["evaluations"] += 1
         th = x[:n]
         xy = positions(th, x[n:])
-        if has_intersection_grid(xy) or (wall_radius is not None and
-                                         np.max(np.einsum("ij,ij->i", xy, xy)) > wall_radius ** 2):
-            return 1e30, np.zeros_like(x)
+        bad = has_intersection_grid(xy) or (wall_radius is not None and np.max(
+            np.einsum("ij,ij->i", xy, xy)) > wall_radius ** 2)
+        er, gr, _ = contact_barrier(xy, sigma=sigma, eps=barrier, min_separation=min_separation)
         e, g = energy_and_gradient(th, x[n:], lam)
-        er, gr = _repulsion(xy, sigma, barrier, min_separation)
+        if bad or not np.isfinite(er):
+            # inadmissible trial: a value well above the best admissible one with the smooth
+            # gradient, so that L-BFGS-B's line search backtracks (1e30 would end the search)
+            count["rejected"] += 1
+            gr = np.where(np.isfinite(gr), gr, 0.0)
+            er = 0.0
+            e = 2.0 * abs(best["f"]) + 1e3 if np.isfinite(best["f"]) else 1e30
+            bad = True
         # chain rule: node j > k moves by ds t_k^perp when theta_k changes
         suffix = np.cumsum(gr[::-1], axis=0)[::-1]
-        tperp = np.stack([-np.sin(th), np.cos(th)], axis=1)
         g = g.copy()
-        g[:n] += ds * np.einsum("ij,ij->i", tperp, suffix[1:])
+        g[:n] += ds * (np.cos(th) * suffix[1:, 1] - np.sin(th) * suffix[1:, 0])
         g[n:] += suffix[0]
-        return e + er, g
+        f = e + er
+        if f < best["f"] and not bad:
+            best["f"] = f
+            best["x"] = x.copy()
+        return f, g
 
-    # L-BFGS-B stops when its line search meets the hard core; restart from there (fresh
-    # curvature memory, short first step) until a restart gains nothing.
     x = x0
-    f_old = np.inf
     nit = 0
-    for _ in range(restarts):
+    n_restarts = 0
+    f_old = np.inf
+    for n_restarts in range(restarts):
         res = minimize(fun, x, jac=True, method="L-BFGS-B",
-                       options=dict(maxiter=maxiter, maxfun=4 * maxiter, ftol=1e-12,
-                                    gtol=1e-8))
+                       options=dict(maxiter=maxiter, maxfun=4 * maxiter, ftol=1e-13,
+                                    gtol=gtol))
         nit += int(res.nit)
-        if res.fun < 1e29:
-            x = res.x
-        if not res.fun < f_old - 1e-9 * abs(f_old) or res.success:
+        x = best["x"]
+        if res.success or (np.isfinite(f_old) and not best["f"] < f_old - 1e-10 * abs(f_old)):
             break
-        f_old = res.fun
+        f_old = best["f"]
     xy = positions(x[:n], x[n:])
-    if has_intersection_grid(xy):  # cannot happen: such trials are never accepted
-        xy = xy0
-    out = _result(xy, lam, "lbfgs", t0, {"evaluations": count[0], "iterations": int(res.nit)},
-                  [])
+    if has_intersection_grid(xy):  # cannot happen: crossing trials are never the best point
+        raise RuntimeError("lbfgs_quench produced a self-intersecting rod")
+    er = contact_barrier(xy, sigma=sigma, eps=barrier, min_separation=min_separation)[0]
+    out = _result(xy, lam, "lbfgs", t0, {**count, "iterations": nit,
+                                          "restarts": n_restarts, "barrier_energy": er}, [])
     out.history.append((out.wall_s, out.energy_total))
     return out
 
 
-def anneal(xy0, lam: float, *, lam_start: float = 1e3, stages: int = 12,
+def anneal(xy0, lam: float, *, lam_start: float = 1e3, stages: int = 24,
            ramp: str = "geometric", method: str = "powell", seed=None, n_runs: int = 10,
            maxiter: int = 30, nematic_runs=(1, 2), u: float = 100.0, ftol: float = 1e-4,
            xtol: float = 1e-4, wall_radius: float | None = None,
-           runs_per_stage: int = 2) -> QuenchResult:
+           runs_per_stage: int = 2, parametrization: str = "bend") -> QuenchResult:
     """Annealing: Lambda ramped from ``lam_start`` to ``lam`` in ``stages`` stages.
 
     Every intermediate stage runs ``runs_per_stage`` Powell runs (or one L-BFGS quench) at its
     Lambda; the last stage runs the full protocol (``n_runs`` runs, nematic runs included) at
     the target. Slow compaction lets the rod wind up: the energy approaches the spiral ground
     state ``2 sqrt(Lambda)`` (paper, conclusion) instead of the quench's ~2.5 times more.
+
+    Measured (N = 300, Lambda = 7e5, D = 750, starts 0 and 1; 2 sqrt(Lambda) = 1673):
+    bend coordinates, 12 / 24 / 48 stages -> Ẽ = 1909 / 1847 / 1827 (Rg 0.040 / 0.040 /
+    0.039), about 5 / 5 / 14 s per configuration; 24 stages with 4 runs per stage: 2041 (no
+    better); tangent coordinates, 12 stages: 6694 (local moves cannot wind the rod up). More
+    stages approach the spiral slowly (+9 % above 2 sqrt(Lambda) at 48 stages); the remaining
+    gap is the open spiral's ends and imperfect winding, not the ramp.
 
     Parameters
     ----------
@@ -305,6 +331,8 @@ def anneal(xy0, lam: float, *, lam_start: float = 1e3, stages: int = 12,
     method : {"powell", "lbfgs"}
     seed, n_runs, maxiter, nematic_runs, u, ftol, xtol, wall_radius
         As in :func:`powell_protocol`.
+    parametrization : {"bend", "tangent"}
+        Powell coordinates; ``"bend"`` (default) rotates whole tails and winds the spiral.
     runs_per_stage : int
         Powell runs at each intermediate stage.
 
@@ -332,7 +360,8 @@ def anneal(xy0, lam: float, *, lam_start: float = 1e3, stages: int = 12,
             r = powell_protocol(xy, float(lam_s), seed=child, n_runs=n_runs if last else
                                 runs_per_stage, maxiter=maxiter,
                                 nematic_runs=nematic_runs if last else (), u=u, ftol=ftol,
-                                xtol=xtol, wall_radius=wall_radius)
+                                xtol=xtol, wall_radius=wall_radius,
+                                parametrization=parametrization)
         elif method == "lbfgs":
             r = lbfgs_quench(xy, float(lam_s), wall_radius=wall_radius)
         else:
@@ -345,10 +374,10 @@ def anneal(xy0, lam: float, *, lam_start: float = 1e3, stages: int = 12,
 
 
 def scipy_powell(xy0, lam: float, *, maxiter: int = 30, direc=None, xtol: float = 1e-4,
-                 ftol: float = 1e-4, hard_core: bool = True):
-    """Reference: ``scipy.optimize.minimize(method="Powell")`` on the same energy.
-
-    Same parameters (bend angles, start point), same energy, hard core as the value 1e30.
+                 ftol: float = 1e-4, hard_core: bool = True, parametrization: str = "tangent",
+                 u: float = 0.0, contact_cutoff: float | None = None,
+                 min_separation: int = 10):
+    """Reference: one ``scipy.optimize.minimize(method="Powell")`` run on the same energy.
 
     Parameters
     ----------
@@ -356,9 +385,15 @@ def scipy_powell(xy0, lam: float, *, maxiter: int = 30, direc=None, xtol: float 
     lam : float
     maxiter : int
     direc : (N+2, N+2) array, optional
-        Initial direction set (scipy's default: identity).
+        Initial direction set in the chosen coordinates (scipy's default: identity).
     xtol, ftol : float
     hard_core : bool
+        Self-intersecting trials get the energy 1e30 (as in the paper).
+    parametrization : {"tangent", "bend"}
+        Coordinates ``(theta, x0, y0)`` or ``(phi, x0, y0)``, as :func:`powell_protocol`.
+    u, contact_cutoff, min_separation
+        Nematic term (``u = 0``: none); its contact list is recomputed at every evaluation
+        (the numba engine keeps it fixed during an iteration).
 
     Returns
     -------
@@ -366,27 +401,72 @@ def scipy_powell(xy0, lam: float, *, maxiter: int = 30, direc=None, xtol: float 
     """
     from scipy.optimize import minimize
 
+    from .energy import nematic_energy
+
     t0 = time.perf_counter()
     n = np.asarray(xy0).shape[0] - 1
+    cutoff = 1.0 / n if contact_cutoff is None else float(contact_cutoff)
     count = [0]
+    tangent = parametrization == "tangent"
 
     def f(p):
         count[0] += 1
-        xy = positions(np.cumsum(p[:n]), p[n:])
+        xy = positions(p[:n] if tangent else np.cumsum(p[:n]), p[n:])
         if hard_core and has_intersection_grid(xy):
             return 1e30
-        return bending_energy(xy) + confinement_energy(xy, lam)
+        e = bending_energy(xy) + confinement_energy(xy, lam)
+        if u > 0:
+            e += nematic_energy(xy, u=u, cutoff=cutoff, min_separation=min_separation)
+        return e
 
+    if tangent:
+        theta, start = angles(xy0)
+        p0 = np.concatenate([theta, start])
+    else:
+        p0 = to_params(xy0)
     opts = dict(maxiter=maxiter, xtol=xtol, ftol=ftol)
     if direc is not None:
         opts["direc"] = np.array(direc, dtype=float)
-    res = minimize(f, to_params(xy0), method="Powell", options=opts)
-    xy = from_params(res.x)
+    res = minimize(f, p0, method="Powell", options=opts)
+    xy = positions(res.x[:n] if tangent else np.cumsum(res.x[:n]), res.x[n:])
     out = _result(xy, lam, "scipy-powell", t0, {"evaluations": count[0],
                                                  "iterations": int(res.nit)}, [])
     out.history.append((out.wall_s, out.energy_total))
     return out
 
 
+def scipy_protocol(xy0, lam: float, *, seed=None, n_runs: int = 10, maxiter: int = 30,
+                   nematic_runs=(1, 2), u: float = 100.0, ftol: float = 1e-4,
+                   xtol: float = 1e-4, parametrization: str = "tangent") -> QuenchResult:
+    """The paper's protocol with scipy's Powell (the prototype's way; slow reference).
+
+    Same runs, direction resets (random signed permutations of the coordinate directions) and
+    nematic runs as :func:`powell_protocol`, each run a :func:`scipy_powell` call.
+
+    Returns
+    -------
+    QuenchResult
+        ``history`` holds (wall seconds, energy) after every run.
+    """
+    t0 = time.perf_counter()
+    rng = np.random.default_rng(seed)
+    xy = np.asarray(xy0, dtype=np.float64)
+    m = xy.shape[0] + 1
+    history = []
+    evals = 0
+    nem = set(int(r) for r in nematic_runs)
+    for run in range(n_runs):
+        direc = np.zeros((m, m))
+        perm = rng.permutation(m)  # same draws, same order as powell_protocol
+        direc[np.arange(m), perm] = rng.choice([-1.0, 1.0], size=m)
+        r = scipy_powell(xy, lam, maxiter=maxiter, direc=direc, xtol=xtol, ftol=ftol,
+                         parametrization=parametrization, u=u if run in nem else 0.0)
+        xy = r.xy
+        evals += r.stats["evaluations"]
+        history.append((time.perf_counter() - t0, r.energy_total))
+    return _result(xy, lam, "scipy-powell", t0, {"evaluations": evals}, history)
+
+
 __all__ = ["QuenchResult", "powell_protocol", "lbfgs_quench", "anneal", "scipy_powell",
+           "scipy_protocol",
            "to_params", "from_params"]

@@ -5,6 +5,14 @@ line search with ``tol = 100 xtol``, same direction-set update) on the parameter
 ``p = (phi_0 .. phi_{N-1}, x0, y0)``, bend angles ``phi_k = theta_k - theta_{k-1}`` (``phi_0 =
 theta_0``) and the start point, made fast by the structure of the rod:
 
+* coordinates: the engine stores bend angles; a coordinate slot is either the bend angle
+  ``phi_k`` (``tangent=False``) or the tangent angle ``theta_k`` (``tangent=True``, direction
+  ``e_k - e_{k+1}`` in bend space; Powell's method is equivariant under this linear map, so this
+  IS Powell on ``(theta, x0, y0)``, checked against scipy);
+* along a tangent direction ``theta_k`` segment ``k`` turns about ``R_k`` and the tail
+  translates by ``v`` (``|v| <= 2/N``): bending changes at two nodes, confinement by
+  ``Lambda (2 v . sum_{j>k} w_j R_j + |v|^2 sum_{j>k} w_j)``, O(1); the hard-core test uses
+  per-segment clearances to the head and to segment k (no test while ``|v|`` is below all);
 * along a coordinate direction ``phi_k`` the tail (nodes ``j > k``) rotates rigidly about
   ``R_k``: the bending energy changes at one node and the confinement energy follows from
   suffix sums of ``w_j``, ``w_j R_j``, ``w_j |R_j|^2``, so one trial costs O(1); along ``x0``,
@@ -22,7 +30,8 @@ theta_0``) and the start point, made fast by the structure of the rod:
   the iteration; along ``theta_k`` it is O(1) from ``sum cos 2phi``, ``sum sin 2phi`` of the
   head-tail pairs.
 
-Inadmissible trials get the energy ``BIG`` (1e30), "a very large number" as in the paper.
+Inadmissible trials get the energy ``BIG`` (1e30), "a very large number" as in the paper; a
+trial is inadmissible when two non-adjacent segments come closer than ``MARGIN`` (1e-9 L).
 """
 from __future__ import annotations
 
@@ -31,9 +40,15 @@ import math
 import numpy as np
 from numba import njit
 
-from .intersect import close_pairs, has_intersection_grid, seg_dist2, seg_intersect
+from .intersect import close_pairs, has_contact_grid, seg_dist2
 
 BIG = 1e30
+# Clearance kept between non-adjacent segments (units of L). The hard core pushes contacts to
+# the boundary of the admissible set: without a margin, contacts end ~1e-15 apart and the
+# rounding of rebuilding positions from angles (or of the next stage's start) can turn them
+# into crossings (measured: 2e-15 minimum gaps, and a crossing after an anneal stage).
+MARGIN = 1e-9
+_M2 = MARGIN * MARGIN
 _GOLD = 1.618034
 _CG = 0.3819660
 _MINTOL = 1.0e-11
@@ -177,10 +192,10 @@ def _seg_vs_head(ax, ay, bx, by, j, k, xy, xmin, ymin, h, nx, ny, start, items, 
 
 @njit(cache=True)
 def _seg_hits_head(ax, ay, bx, by, j, xy, xmin, ymin, h, nx, ny, start, items):
-    x0 = int(math.floor((min(ax, bx) - xmin) / h))
-    x1 = int(math.floor((max(ax, bx) - xmin) / h))
-    y0 = int(math.floor((min(ay, by) - ymin) / h))
-    y1 = int(math.floor((max(ay, by) - ymin) / h))
+    x0 = int(math.floor((min(ax, bx) - MARGIN - xmin) / h))
+    x1 = int(math.floor((max(ax, bx) + MARGIN - xmin) / h))
+    y0 = int(math.floor((min(ay, by) - MARGIN - ymin) / h))
+    y1 = int(math.floor((max(ay, by) + MARGIN - ymin) / h))
     if x1 < 0 or y1 < 0 or x0 > nx - 1 or y0 > ny - 1:
         return False
     for cx in range(max(x0, 0), min(x1, nx - 1) + 1):
@@ -190,7 +205,8 @@ def _seg_hits_head(ax, ay, bx, by, j, xy, xmin, ymin, h, nx, ny, start, items):
                 i = items[q]
                 if i == j - 1:
                     continue
-                if seg_intersect(xy[i, 0], xy[i, 1], xy[i + 1, 0], xy[i + 1, 1], ax, ay, bx, by):
+                if seg_dist2(xy[i, 0], xy[i, 1], xy[i + 1, 0], xy[i + 1, 1], ax, ay, bx,
+                             by) < _M2:
                     return True
     return False
 
@@ -280,10 +296,10 @@ def _prepare_head(ctx, xy, rj, clear2, gpar, gstart, gitems, n):
         r = max(math.hypot(ax - rkx, ay - rky), math.hypot(bx - rkx, by - rky))
         rj[j] = r
         c2 = _seg_vs_head(ax, ay, bx, by, j, k, xy, xmin, ymin, h, nx, ny, gstart, gitems, pad)
-        c2 = min(c2, pad * pad)
-        clear2[j] = c2
+        c = max(math.sqrt(min(c2, pad * pad)) - MARGIN, 0.0)
+        clear2[j] = c * c
         if r > 0.0:
-            safe = min(safe, math.sqrt(c2) / r)
+            safe = min(safe, c / r)
     ctx[12] = 1.0
     ctx[13] = safe
 
@@ -321,8 +337,9 @@ def _prepare_tangent(ctx, xy, clear2, gpar, gstart, gitems, n):
                                       int(gpar[3]), int(gpar[4]), gstart, gitems, pad))
         if j >= k + 2:
             c2 = min(c2, seg_dist2(kx0, ky0, kx1, ky1, ax, ay, bx, by))
-        clear2[j] = c2
-        safe = min(safe, math.sqrt(c2))
+        c = max(math.sqrt(c2) - MARGIN, 0.0)
+        clear2[j] = c * c
+        safe = min(safe, c)
     ctx[12] = 1.0
     ctx[13] = safe
 
@@ -369,7 +386,7 @@ def _admissible_tangent(a, ctx, xy, wall2, clear2, gpar, gstart, gitems, stats, 
             if _seg_hits_head(ax, ay, bx, by, j, xy, gpar[0], gpar[1], gpar[2], int(gpar[3]),
                               int(gpar[4]), gstart, gitems):
                 return False
-        if j >= k + 2 and seg_intersect(kx0, ky0, kx1, ky1, ax, ay, bx, by):
+        if j >= k + 2 and seg_dist2(kx0, ky0, kx1, ky1, ax, ay, bx, by) < _M2:
             return False
     return True
 
@@ -438,7 +455,7 @@ def _admissible(a, ctx, p, d, xy, xyt, wall2, rj, clear2, gpar, gstart, gitems, 
     stats[4] += 1
     if wall2 < math.inf and _outside_wall(xyt, wall2):
         return False
-    return not has_intersection_grid(xyt)
+    return not has_contact_grid(xyt, MARGIN)
 
 
 @njit(cache=True)

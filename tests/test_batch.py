@@ -30,7 +30,8 @@ def draw_scan(seed: int, size: int = 420) -> np.ndarray:
     try:
         from crosssection.synthetic import make_scene
 
-        scene = make_scene(seed=seed, n_stacks=12, max_layers=4, image_size=size)
+        scene = make_scene(seed=seed, n_stacks=12, max_layers=4, image_size=size,
+                           max_tries=5)
         return scene.rgb
     except Exception:  # noqa: BLE001 - generator not there (yet) or other signature
         pass
@@ -302,9 +303,11 @@ def test_batch_records_failures_and_finishes_good_images(tmp_path, pipeline):
         assert s["batch"]["params_hash"] == row["params_hash"]
         assert s["n_junctions"] == row["n_junctions"]
     assert (out / "alpha" / "s1").is_dir() and (out / "default" / "loose").is_dir()
+    # output folders get the usual permissions (not the 0700 of a temporary folder)
+    assert (out / "alpha" / "s1").stat().st_mode & 0o777 == 0o777 & ~B._UMASK
     s1 = json.loads((out / "alpha" / "s1" / "summary.json").read_text())
     assert s1["batch"]["params"]["rod_length_mm"] == 200.0
-    assert s1["batch"]["bending_rigidity_J"] == 1e-4
+    assert s1["batch"]["params"]["bending_rigidity_J"] == 1e-4
     meta = json.loads((out / "batch.json").read_text())
     assert meta["version"] and meta["seed"] == 5 and meta["counts"]["failed"] == len(expect["failed"])
     assert leftovers(out) == []

@@ -16,7 +16,8 @@ import networkx as nx
 import numpy as np
 import pytest
 
-from crosssection.linsys import (conservation_equations, incidence_rank, solve_branch_counts)
+from crosssection.linsys import (conservation_equations, incidence_rank, solve_branch_counts,
+                                 width_fixed_stacks)
 from crosssection.packs import Pack
 
 
@@ -210,7 +211,7 @@ def test_y_junction_splits():
 def test_incidence_rank_matches_numpy():
     for seed in range(8):
         fg = random_network(200 + seed, n_junctions=15, n_free=2 * (seed % 3))
-        hard, soft, dropped = conservation_equations(fg, fg.packs)
+        hard, soft, dropped, _ = conservation_equations(fg, fg.packs)
         rows = [r for _, r in hard + soft]
         M = len(fg.paths)
         rng = np.random.default_rng(seed)
@@ -221,6 +222,31 @@ def test_incidence_rank_matches_numpy():
                 for s, v in r.items():
                     A[j, s] = v
             assert incidence_rank(rows, c) == np.linalg.matrix_rank(A[:, list(c)])
+
+
+def test_width_fixed_stacks_minimal_and_nonsingular():
+    for seed in range(8):
+        fg = random_network(300 + seed, n_junctions=20, n_free=2 * (seed % 3), tree=seed == 7)
+        hard, soft, _, _ = conservation_equations(fg, fg.packs)
+        rows = [r for _, r in hard + soft]
+        M = len(fg.paths)
+        score = np.random.default_rng(seed).random(M)
+        fixed, rank_c = width_fixed_stacks(rows, range(M), score)
+        A = np.zeros((len(rows), M))
+        for j, r in enumerate(rows):
+            for s, v in r.items():
+                A[j, s] = v
+        assert rank_c == np.linalg.matrix_rank(A)
+        assert len(fixed) == M - rank_c
+        E = np.zeros((len(fixed), M))
+        E[np.arange(len(fixed)), fixed] = 1
+        assert np.linalg.matrix_rank(np.vstack([A, E])) == M
+        # matroid greedy: every fixed stack is spanned by the determined (kept) stacks that
+        # are less reliable than it, so no more reliable choice of S exists
+        kept = sorted(set(range(M)) - set(fixed))
+        for f in fixed:
+            low = [k for k in kept if score[k] < score[f]]
+            assert np.linalg.matrix_rank(A[:, low + [f]]) == np.linalg.matrix_rank(A[:, low])
 
 
 def _tiny_graph(edges, kinds):
@@ -305,3 +331,45 @@ def test_ill_conditioned_large_weights_never_crash():
     assert res.conservation_residual == 0
     s = res.summary()
     assert set(s) >= {"rank", "residual", "condition_number", "flags"}
+
+
+def test_condition_number_sparse_estimate_matches_numpy():
+    fg = random_network(11, n_junctions=60)
+    M = len(fg.paths)
+    est = fg.n_true + np.random.default_rng(0).normal(0, 0.3, M)
+    sparse = solve_branch_counts(fg, fg.packs, est, dense_max=0)
+    dense = solve_branch_counts(fg, fg.packs, est, dense_max=10**6)
+    hard, soft, _, _ = conservation_equations(fg, fg.packs, est, np.full(M, 0.3))
+    rows = [r for _, r in hard + soft]
+    A = np.zeros((len(rows), M))
+    for j, r in enumerate(rows):
+        for s, v in r.items():
+            A[j, s] = v
+    A /= np.linalg.norm(A, axis=1, keepdims=True)
+    sel = np.flatnonzero(dense.fixed_by_width)
+    E = np.zeros((len(sel), M))
+    E[np.arange(len(sel)), sel] = 1
+    ref = np.linalg.cond(np.vstack([A, E]))
+    assert sparse.n_components == 1
+    assert dense.condition_number == pytest.approx(ref, rel=1e-6)
+    assert sparse.condition_number == pytest.approx(ref, rel=1e-4)
+    np.testing.assert_array_equal(sparse.n_br, dense.n_br)
+
+
+def test_wrong_geometric_pack_is_repartitioned_by_widths():
+    """A clear (not flagged) junction with the wrong partition, contradicted by thin exact
+    widths, is switched to the candidate the widths support."""
+    fg = random_network(21, n_junctions=30)
+    rng = np.random.default_rng(5)
+    est = fg.n_true + rng.normal(0, 0.1, len(fg.paths))
+    # corrupt one degree-3 junction: move a member of the larger pack to the other pack
+    node = next(nd for nd, p in fg.packs.items() if len(p.side_a) == 1 and len(p.side_b) == 2
+                and len({s for s, _ in p.side_a + p.side_b}) == 3
+                and abs(sum(fg.n_true[s] for s, _ in p.side_b[1:]) * 2) >= 4)
+    p = fg.packs[node]
+    right = (list(p.side_a), list(p.side_b))
+    fg.packs[node] = Pack(node, p.side_a + p.side_b[1:], p.side_b[:1],
+                          candidates=[right, (p.side_a + p.side_b[1:], p.side_b[:1])])
+    res = solve_branch_counts(fg, fg.packs, est)
+    np.testing.assert_array_equal(res.n_br, fg.n_true)
+    assert any("repartitioned" in f for f in res.flags)

@@ -76,3 +76,47 @@ def test_angles_roundtrip_and_rg():
     th2, st = angles(xy)
     assert np.allclose(positions(th2, st), xy, atol=1e-12)
     assert radius_of_gyration(xy) ** 2 * 5.0 == pytest.approx(confinement_energy(xy, 5.0))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_contact_barrier_gradient_and_range(seed):
+    from simulate.energy import contact_barrier
+
+    rng = np.random.default_rng(seed)
+    n = 40
+    ds = 1.0 / n
+    # a hairpin: two antiparallel strands at a random gap inside the range, with noise
+    gap = rng.uniform(0.2, 0.35) * ds
+    top = np.stack([np.arange(21) * ds, np.zeros(21)], axis=1)
+    bot = np.stack([np.arange(19, -1, -1) * ds, np.full(20, gap)], axis=1)
+    xy = np.concatenate([top, bot]) + rng.normal(0, 0.02 * gap, (41, 2))
+    sigma = 0.4 * ds
+    e, g, npairs = contact_barrier(xy, sigma=sigma, eps=0.3, min_separation=3)
+    assert e > 0 and npairs > 10
+    h = 1e-7 * ds
+    for i in rng.choice(41, 8, replace=False):
+        for c in range(2):
+            xp = xy.copy()
+            xp[i, c] += h
+            xm = xy.copy()
+            xm[i, c] -= h
+            fd = (contact_barrier(xp, sigma=sigma, eps=0.3)[0]
+                  - contact_barrier(xm, sigma=sigma, eps=0.3)[0]) / (2 * h)
+            assert g[i, c] == pytest.approx(fd, rel=1e-4, abs=1e-6 * np.abs(g).max())
+    # out of range: nothing; brute-force energy agrees
+    far = contact_barrier(xy, sigma=0.5 * gap * 0.5, eps=0.3)
+    assert far[0] == 0.0 and far[2] == 0
+    brute = 0.0
+    for i in range(41):
+        for j in range(40):
+            if i - 3 <= j <= i + 2:
+                continue
+            a, b = xy[j], xy[j + 1]
+            t = np.clip(np.dot(xy[i] - a, b - a) / np.dot(b - a, b - a), 0, 1)
+            d = np.linalg.norm(xy[i] - a - t * (b - a))
+            if d < sigma:
+                brute += 0.3 * (sigma / d - 1) ** 2
+    assert e == pytest.approx(brute, rel=1e-12)
+    # a node (almost) on another segment: the barrier diverges
+    xy[30] = 0.5 * (xy[5] + xy[6]) + [0.0, 1e-12]
+    assert contact_barrier(xy, sigma=sigma, eps=0.3)[0] > 1e15

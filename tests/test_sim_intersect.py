@@ -93,3 +93,19 @@ def test_close_pairs_match_brute_force(seed):
             if seg_dist2(*xy[i], *xy[i + 1], *xy[j], *xy[j + 1]) < cut * cut:
                 want.add((i, j))
     assert got == want
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_contact_grid_matches_brute_distance(seed):
+    from simulate.intersect import has_contact_grid, seg_dist2
+
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(20, 80))
+    theta = np.cumsum(rng.normal(0, 0.6, n))
+    xy = np.zeros((n + 1, 2))
+    xy[1:] = np.cumsum(np.stack([np.cos(theta), np.sin(theta)], 1) / n, axis=0)
+    dmin = min(np.sqrt(seg_dist2(*xy[i], *xy[i + 1], *xy[j], *xy[j + 1]))
+               for i in range(n) for j in range(i + 2, n))
+    for margin in (0.5 * dmin + 1e-15, 2.0 * dmin + 1e-12, 1.0 / n):
+        assert has_contact_grid(xy, margin) == (dmin < margin)
+    assert has_contact_grid(xy, 0.0) == (dmin == 0.0)

@@ -1,0 +1,110 @@
+"""Bad inputs to ``python -m crosssection analyze``: non-zero exit, one stderr line naming the
+file and the cause, no traceback (issue 2 contract)."""
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import cv2
+import numpy as np
+import pytest
+from PIL import Image
+
+from crosssection.cli import main
+
+
+def _good_rgb(seed, size=120):
+    rng = np.random.default_rng(seed)
+    img = np.full((size, size, 3), 245, np.uint8)
+    mask = np.zeros((size, size), np.uint8)
+    for _ in range(3):
+        p0, p1 = rng.integers(10, size - 10, (2, 2))
+        cv2.line(mask, tuple(map(int, p0)), tuple(map(int, p1)), 1, 6)
+    img[mask > 0] = (40, 70, 190)
+    return img
+
+
+def _make(kind, folder, seed):
+    p = folder / f"bad_{kind}.png"
+    img = _good_rgb(seed)
+    if kind == "truncated":
+        Image.fromarray(img).save(p)
+        data = p.read_bytes()
+        p.write_bytes(data[: len(data) * 2 // 3])
+    elif kind == "text":
+        p.write_text("hello, I am not a PNG\n" * 20)
+    elif kind == "empty_file":
+        p.write_bytes(b"")
+    elif kind == "grayscale":
+        Image.fromarray(img[..., 1]).save(p)
+    elif kind == "all_white":
+        Image.fromarray(np.full((100, 100, 3), 255, np.uint8)).save(p)
+    elif kind == "all_blue":
+        Image.fromarray(np.tile(np.array([40, 70, 190], np.uint8), (100, 100, 1))).save(p)
+    elif kind == "tiny":
+        Image.fromarray(img[:12, :12]).save(p)
+    elif kind == "missing":
+        pass
+    elif kind == "directory":
+        p.mkdir()
+    return p
+
+
+KINDS = ["truncated", "text", "empty_file", "grayscale", "all_white", "all_blue", "tiny",
+         "missing", "directory"]
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_bad_input_in_process(kind, tmp_path, capsys):
+    p = _make(kind, tmp_path, seed=KINDS.index(kind))
+    status = main(["analyze", str(p), "--px-per-mm", "50", "--thickness-mm", "0.1",
+                   "--no-figure", "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert status != 0
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert len(lines) == 1, err
+    assert p.name in lines[0]
+    assert "Traceback" not in err
+    assert not (tmp_path / "out" / "summary.json").exists()
+
+
+@pytest.mark.parametrize("kind", ["truncated", "all_white"])
+def test_bad_input_subprocess(kind, tmp_path):
+    p = _make(kind, tmp_path, seed=7)
+    run = subprocess.run([sys.executable, "-m", "crosssection", "analyze", str(p),
+                          "--px-per-mm", "50", "--thickness-mm", "0.1", "--out",
+                          str(tmp_path / "out")], capture_output=True, text=True, timeout=300)
+    assert run.returncode != 0
+    assert "Traceback" not in run.stderr
+    lines = [line for line in run.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and p.name in lines[0]
+
+
+@pytest.mark.parametrize("args", [["--px-per-mm", "-50"], ["--thickness-mm", "0"],
+                                  ["--s-min-mm2", "1e9"], ["--hole-radius-mm", "-2"]])
+def test_absurd_parameters_exit_nonzero(args, tmp_path, capsys):
+    p = tmp_path / "ok.png"
+    Image.fromarray(_good_rgb(3)).save(p)
+    status = main(["analyze", str(p), *args, "--no-figure", "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert status != 0
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+
+
+def test_bad_calibration_names_the_file(tmp_path, capsys):
+    p = tmp_path / "ok.png"
+    Image.fromarray(_good_rgb(5)).save(p)
+    cal = tmp_path / "cal.csv"
+    cal.write_text("layers,w\n1,0.1\n")
+    status = main(["analyze", str(p), "--calibration", str(cal), "--no-figure",
+                   "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert status != 0 and "cal.csv" in err and len(err.strip().splitlines()) == 1
+
+
+def test_good_input_exits_zero(tmp_path, capsys):
+    p = tmp_path / "ok.png"
+    Image.fromarray(_good_rgb(11, size=200)).save(p)
+    status = main(["analyze", str(p), "--no-figure", "--out", str(tmp_path / "o")])
+    assert status == 0, capsys.readouterr().err
+    assert (tmp_path / "o" / "summary.json").exists()
