@@ -95,7 +95,8 @@ def numbers(index: pd.DataFrame) -> pd.DataFrame:
 
 
 def complete_outputs(out: Path) -> set[str]:
-    return {p.parent.relative_to(out).as_posix() for p in out.glob("*/*/summary.json")}
+    return {p.parent.relative_to(out).as_posix() for p in out.glob("*/*/summary.json")
+            if not p.parent.name.startswith(".")}  # staging folders hold one too
 
 
 def kill_and_resume(inp, out, workers, figure, n, ref: pd.DataFrame) -> dict:
@@ -148,8 +149,10 @@ def main(argv=None):
     print(f"generated {a.n} scans of {a.size}x{a.size} px in {time.perf_counter() - t:.1f} s "
           f"-> {inp}")
 
+    load_before = os.getloadavg()[0]
     t1 = timed_batch(inp, work / "out1", 1, figure)
     tw = timed_batch(inp, work / f"out{a.workers}", a.workers, figure)
+    load_after = os.getloadavg()[0]
     i1 = pd.read_csv(work / "out1" / "index.csv")
     iw = pd.read_csv(work / f"out{a.workers}" / "index.csv")
     ok = int((i1["status"] == "ok").sum())
@@ -159,6 +162,8 @@ def main(argv=None):
         "n_ok": ok, "n_failed": int((i1["status"] == "failed").sum()),
         "t_1_worker_s": round(t1, 2), f"t_{a.workers}_workers_s": round(tw, 2),
         "speedup": round(t1 / tw, 2),
+        # the machine is shared: a load above ~0.5 before the run means fewer free cores
+        "loadavg_1min_before_after": [round(load_before, 2), round(load_after, 2)],
         "per_image_1_worker_s": round(t1 / a.n, 3),
         "identical_1_vs_w": bool(numbers(i1).equals(numbers(iw))),
         "one_image_mb": round(image_bytes / 2**20, 2),

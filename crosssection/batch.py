@@ -411,6 +411,8 @@ def completed_row(task: ImageTask) -> dict | None:
 def _write_tables(out: Path, rows: dict, tasks: list[ImageTask]):
     ordered = [rows[t.rel] for t in tasks if t.rel in rows]
     index = pd.DataFrame(ordered, columns=INDEX_COLUMNS)
+    for c in ("n_junctions", "n_stacks", "n_branches", "n_voids", "seed"):
+        index[c] = pd.to_numeric(index[c], errors="coerce").astype("Int64")  # ints, blank if none
     write_csv(out / "index.csv", index)
     failed = index[index["status"] == "failed"][FAILURE_COLUMNS]
     write_csv(out / "failures.csv", failed)

@@ -22,6 +22,7 @@ from numba import njit
 
 from .errors import ParameterError
 from .junctions import Junctions
+from .skeleton import nonzero_rc
 
 _DR = np.array([-1, -1, 0, 1, 1, 1, 0, -1], dtype=np.int64)
 _DC = np.array([0, 1, 1, 1, 0, -1, -1, -1], dtype=np.int64)
@@ -87,10 +88,12 @@ def _step(img, r, c, prev_r, prev_c):
 
 
 @njit(cache=True)
-def _trace(img, lab, jr, jc):
+def _trace(img, lab, jr, jc, sr, sc):
     """Trace all stacks of the padded skeleton ``img`` with junction labels ``lab``.
 
-    ``jr``, ``jc``: junction pixels (padded coords). Returns flat path pixels, path offsets,
+    ``lab`` is the unpadded label image (read at skeleton pixels only, ``lab[r - 1, c - 1]``);
+    ``jr``, ``jc``: junction pixels, ``sr``, ``sc``: all skeleton pixels in raster order
+    (padded coords). Returns flat path pixels, path offsets,
     and per path (kind_u, id_u, kind_v, id_v); for end/loop nodes the id is the flat index of
     the node pixel (the caller numbers them).
     """
@@ -108,7 +111,7 @@ def _trace(img, lab, jr, jc):
         for k in range(8):
             r = r0 + _DR[k]
             c = c0 + _DC[k]
-            if not img[r, c] or lab[r, c] != 0 or visited[r, c]:
+            if not img[r, c] or lab[r - 1, c - 1] != 0 or visited[r, c]:
                 continue
             pr.append(r0)
             pc.append(c0)
@@ -118,9 +121,9 @@ def _trace(img, lab, jr, jc):
             while True:
                 pr.append(r)
                 pc.append(c)
-                if lab[r, c] != 0:
+                if lab[r - 1, c - 1] != 0:
                     kind_v = _JUNCTION
-                    id_v = np.int64(lab[r, c] - 1)
+                    id_v = np.int64(lab[r - 1, c - 1] - 1)
                     break
                 visited[r, c] = 1
                 nr, nc = _step(img, r, c, prev_r, prev_c)
@@ -128,18 +131,21 @@ def _trace(img, lab, jr, jc):
                     kind_v = _END
                     id_v = r * w + c
                     break
-                if lab[nr, nc] == 0 and visited[nr, nc]:
+                if lab[nr - 1, nc - 1] == 0 and visited[nr, nc]:
                     kind_v = _END  # cannot happen on a clean skeleton; stop safely
                     id_v = r * w + c
                     break
                 prev_r, prev_c = r, c
                 r, c = nr, nc
             offs.append(len(pr))
-            meta.append((np.int64(_JUNCTION), np.int64(lab[r0, c0] - 1), np.int64(kind_v), np.int64(id_v)))
+            meta.append((np.int64(_JUNCTION), np.int64(lab[r0 - 1, c0 - 1] - 1),
+                         np.int64(kind_v), np.int64(id_v)))
     # 2. junction-free segments, from a free end to the other
-    for r0 in range(1, h - 1):
-        for c0 in range(1, w - 1):
-            if not img[r0, c0] or lab[r0, c0] != 0 or visited[r0, c0]:
+    for i0 in range(sr.shape[0]):
+        r0 = sr[i0]
+        c0 = sc[i0]
+        if True:
+            if lab[r0 - 1, c0 - 1] != 0 or visited[r0, c0]:
                 continue
             nb = 0
             for k in range(8):
@@ -153,13 +159,13 @@ def _trace(img, lab, jr, jc):
             while True:
                 pr.append(r)
                 pc.append(c)
-                if lab[r, c] != 0:
+                if lab[r - 1, c - 1] != 0:
                     kind_v = _JUNCTION
-                    id_v = np.int64(lab[r, c] - 1)
+                    id_v = np.int64(lab[r - 1, c - 1] - 1)
                     break
                 visited[r, c] = 1
                 nr, nc = _step(img, r, c, prev_r, prev_c)
-                if nr < 0 or (lab[nr, nc] == 0 and visited[nr, nc]):
+                if nr < 0 or (lab[nr - 1, nc - 1] == 0 and visited[nr, nc]):
                     kind_v = _END
                     id_v = r * w + c
                     break
@@ -168,9 +174,11 @@ def _trace(img, lab, jr, jc):
             offs.append(len(pr))
             meta.append((np.int64(_END), np.int64(r0 * w + c0), np.int64(kind_v), np.int64(id_v)))
     # 3. closed loops without junction: every remaining pixel has two neighbours
-    for r0 in range(1, h - 1):
-        for c0 in range(1, w - 1):
-            if not img[r0, c0] or lab[r0, c0] != 0 or visited[r0, c0]:
+    for i0 in range(sr.shape[0]):
+        r0 = sr[i0]
+        c0 = sc[i0]
+        if True:
+            if lab[r0 - 1, c0 - 1] != 0 or visited[r0, c0]:
                 continue
             nb = 0
             for k in range(8):
@@ -250,6 +258,75 @@ def path_length_px(points, *, window_px: int = 5, closed: bool = False) -> float
     return float(np.hypot(*np.diff(s, axis=0).T).sum())
 
 
+@njit(cache=True)
+def _smoothed_lengths(pr, pc, offs, u_rc, v_rc, is_loop, half):
+    """Sliding-average lengths of all paths (same as :func:`path_length_px`, vectorised).
+
+    Open paths get their node positions prepended/appended; loops are closed periodically.
+    """
+    m = offs.shape[0] - 1
+    out = np.zeros(m)
+    for i in range(m):
+        a = offs[i]
+        b = offs[i + 1]
+        if is_loop[i]:
+            n = b - a - 1 if (b - a > 3 and pr[a] == pr[b - 1] and pc[a] == pc[b - 1]) \
+                else b - a
+            if n < 3:
+                continue
+            x = np.empty(n)
+            y = np.empty(n)
+            for k in range(n):
+                x[k] = pr[a + k]
+                y[k] = pc[a + k]
+            hw = min(half, (n - 1) // 2)
+            sx = np.empty(n)
+            sy = np.empty(n)
+            for k in range(n):
+                tx = 0.0
+                ty = 0.0
+                for d in range(-hw, hw + 1):
+                    q = (k + d) % n
+                    tx += x[q]
+                    ty += y[q]
+                sx[k] = tx / (2 * hw + 1)
+                sy[k] = ty / (2 * hw + 1)
+            total = 0.0
+            for k in range(n):
+                q = (k + 1) % n
+                total += np.hypot(sx[q] - sx[k], sy[q] - sy[k])
+            out[i] = total
+        else:
+            n = b - a + 2
+            x = np.empty(n)
+            y = np.empty(n)
+            x[0] = u_rc[i, 0]
+            y[0] = u_rc[i, 1]
+            for k in range(b - a):
+                x[k + 1] = pr[a + k]
+                y[k + 1] = pc[a + k]
+            x[n - 1] = v_rc[i, 0]
+            y[n - 1] = v_rc[i, 1]
+            px = 0.0
+            py = 0.0
+            total = 0.0
+            for k in range(n):
+                hw = min(min(k, n - 1 - k), half)
+                tx = 0.0
+                ty = 0.0
+                for d in range(-hw, hw + 1):
+                    tx += x[k + d]
+                    ty += y[k + d]
+                tx /= 2 * hw + 1
+                ty /= 2 * hw + 1
+                if k > 0:
+                    total += np.hypot(tx - px, ty - py)
+                px = tx
+                py = ty
+            out[i] = total
+    return out
+
+
 def build_stack_graph(skel, junctions: Junctions, *, smooth_px: int = 5) -> StackGraph:
     """Trace the skeleton into a MultiGraph of junctions and stacks.
 
@@ -275,14 +352,14 @@ def build_stack_graph(skel, junctions: Junctions, *, smooth_px: int = 5) -> Stac
     h, w = skel.shape
     img = np.zeros((h + 2, w + 2), np.uint8)
     img[1:-1, 1:-1] = skel
-    lab = np.zeros((h + 2, w + 2), np.int32)
-    lab[1:-1, 1:-1] = junctions.label_image
+    lab = junctions.label_image
+    sr, sc = nonzero_rc(img)
     if junctions.pixels:
         jp = np.concatenate(junctions.pixels).astype(np.int64) + 1
     else:
         jp = np.zeros((0, 2), np.int64)
     pr, pc, offs, meta = _trace(img, lab, np.ascontiguousarray(jp[:, 0]),
-                                np.ascontiguousarray(jp[:, 1]))
+                                np.ascontiguousarray(jp[:, 1]), sr, sc)
     pr -= 1
     pc -= 1
     k = len(junctions)
@@ -308,7 +385,11 @@ def build_stack_graph(skel, junctions: Junctions, *, smooth_px: int = 5) -> Stac
             node_kind[nid] = "end" if kind == _END else "loop"
         return pixel_node[ident]
 
-    paths, ends, lengths = [], [], []
+    paths, ends = [], []
+    m = len(meta)
+    u_rc = np.zeros((m, 2))
+    v_rc = np.zeros((m, 2))
+    is_loop = np.zeros(m, np.bool_)
     for i, (ku, iu, kv, iv) in enumerate(meta):
         path = np.stack([pr[offs[i]:offs[i + 1]], pc[offs[i]:offs[i + 1]]], axis=1)
         u = node_of(ku, iu)
@@ -317,11 +398,11 @@ def build_stack_graph(skel, junctions: Junctions, *, smooth_px: int = 5) -> Stac
         paths.append(path)
         ends.append((u, v))
         g.add_edge(u, v, key=sid, stack_id=sid)
-        if ku == _LOOP:
-            lengths.append(path_length_px(path, window_px=smooth_px, closed=True))
-        else:
-            pts = np.vstack([node_rc[u], path, node_rc[v]])
-            lengths.append(path_length_px(pts, window_px=smooth_px))
+        u_rc[i] = node_rc[u]
+        v_rc[i] = node_rc[v]
+        is_loop[i] = ku == _LOOP
+    lengths = (_smoothed_lengths(pr, pc, np.asarray(offs, np.int64), u_rc, v_rc, is_loop,
+                                 max(0, int(smooth_px) // 2)) if m else np.zeros(0))
     return StackGraph(graph=g, node_rc=node_rc, node_kind=node_kind, paths=paths, ends=ends,
                       length_px=np.asarray(lengths, dtype=float))
 

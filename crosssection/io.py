@@ -128,9 +128,17 @@ def _read_pillow(path: Path, head: bytes) -> np.ndarray:
 
     depth = _png_bit_depth(head)
     if depth is not None and depth[0] == 16 and depth[1] in (2, 6):
-        # 16-bit RGB(A) PNG: Pillow reduces it to 8 bits, OpenCV keeps it
+        # 16-bit RGB(A) PNG: Pillow reduces it to 8 bits, OpenCV keeps it. Pillow checks
+        # the file first: libpng, under OpenCV, would print its own errors on stderr
         import cv2
 
+        try:
+            with Image.open(path) as im:
+                im.load()
+        except (OSError, SyntaxError, ValueError) as exc:
+            msg = " ".join(str(exc).split())[:120]
+            raise ImageError(f"cannot read image (corrupt or truncated file: {msg})",
+                             path) from None
         data = np.frombuffer(path.read_bytes(), np.uint8)
         arr = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
         if arr is None or arr.ndim != 3:
@@ -149,6 +157,9 @@ def _read_pillow(path: Path, head: bytes) -> np.ndarray:
             arr = np.asarray(im)
     except UnidentifiedImageError:
         raise ImageError("not an image file (unknown or corrupt format)", path) from None
+    except Image.DecompressionBombError as exc:
+        raise ImageError(f"image too large ({' '.join(str(exc).split())[:100]})",
+                         path) from None
     except (OSError, SyntaxError, ValueError) as exc:
         msg = " ".join(str(exc).split())[:120]
         raise ImageError(f"cannot read image (corrupt or truncated file: {msg})", path) from None

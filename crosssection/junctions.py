@@ -24,6 +24,7 @@ import numpy as np
 from numba import njit
 
 from .errors import ParameterError
+from .skeleton import nonzero_rc
 
 
 @dataclass
@@ -57,27 +58,30 @@ def _find(parent, i):
 
 
 @njit(cache=True)
-def _junction_labels(img, merge_px):
+def _junction_labels(img, rows, cols, merge_px):
     """Label junction clusters of the padded uint8 skeleton ``img``.
 
-    Returns the padded int32 label image (0 none, j+1 junction j) and the number of clusters.
+    ``rows``, ``cols``: the skeleton pixels (padded coordinates, raster order). Returns the
+    unpadded int32 label image (0 none, j+1 junction j), the number of clusters, and the
+    junction pixels (unpadded row, col) with their cluster ids.
     """
     h, w = img.shape
     # junction pixels: >= 3 neighbours
     jr = []
     jc = []
-    for r in range(1, h - 1):
-        for c in range(1, w - 1):
-            if img[r, c]:
-                nb = (img[r - 1, c - 1] + img[r - 1, c] + img[r - 1, c + 1] + img[r, c - 1]
-                      + img[r, c + 1] + img[r + 1, c - 1] + img[r + 1, c] + img[r + 1, c + 1])
-                if nb >= 3:
-                    jr.append(r)
-                    jc.append(c)
+    for i in range(rows.shape[0]):
+        r = rows[i]
+        c = cols[i]
+        nb = (img[r - 1, c - 1] + img[r - 1, c] + img[r - 1, c + 1] + img[r, c - 1]
+              + img[r, c + 1] + img[r + 1, c - 1] + img[r + 1, c] + img[r + 1, c + 1])
+        if nb >= 3:
+            jr.append(r)
+            jc.append(c)
     n = len(jr)
     lab = np.zeros((h, w), np.int32)
     if n == 0:
-        return lab, 0
+        e = np.zeros(0, np.int64)
+        return lab[1:-1, 1:-1], 0, e, e.copy(), e.copy()
     idx = np.zeros((h, w), np.int32)  # 1 + junction pixel index
     for i in range(n):
         idx[jr[i], jc[i]] = i + 1
@@ -141,12 +145,17 @@ def _junction_labels(img, merge_px):
                             jc.append(cc)
                             n += 1
                             changed = True
-    return lab, k
+    out_r = np.empty(n, np.int64)
+    out_c = np.empty(n, np.int64)
+    out_id = np.empty(n, np.int64)
+    for i in range(n):
+        out_r[i] = jr[i] - 1
+        out_c[i] = jc[i] - 1
+        out_id[i] = lab[jr[i], jc[i]] - 1
+    return lab[1:-1, 1:-1], k, out_r, out_c, out_id
 
 
-def _from_labels(lab, k) -> Junctions:
-    rr, cc = np.nonzero(lab)
-    ids = lab[rr, cc] - 1
+def _from_pixels(rr, cc, ids, k, lab) -> Junctions:
     order = np.argsort(ids, kind="stable")
     rr, cc, ids = rr[order], cc[order], ids[order]
     bounds = np.searchsorted(ids, np.arange(k + 1))
@@ -155,6 +164,11 @@ def _from_labels(lab, k) -> Junctions:
     centers = (np.array([p.mean(axis=0) for p in pixels], dtype=float) if k
                else np.zeros((0, 2), float))
     return Junctions(centers_rc=centers, pixels=pixels, label_image=lab)
+
+
+def _from_labels(lab, k) -> Junctions:
+    rr, cc = np.nonzero(lab)
+    return _from_pixels(rr, cc, lab[rr, cc].astype(np.int64) - 1, k, lab)
 
 
 def find_junctions(skel, *, merge_px: float = 2.0) -> Junctions:
@@ -181,8 +195,9 @@ def find_junctions(skel, *, merge_px: float = 2.0) -> Junctions:
     h, w = skel.shape
     img = np.zeros((h + 2, w + 2), np.uint8)
     img[1:-1, 1:-1] = skel
-    lab, k = _junction_labels(img, float(merge_px))
-    return _from_labels(np.ascontiguousarray(lab[1:-1, 1:-1]), k)
+    rows, cols = nonzero_rc(img)
+    lab, k, rr, cc, ids = _junction_labels(img, rows, cols, float(merge_px))
+    return _from_pixels(rr, cc, ids, k, lab)
 
 
 def merge_junctions(junctions: Junctions, groups, extra_pixels=()) -> Junctions:
@@ -215,21 +230,30 @@ def merge_junctions(junctions: Junctions, groups, extra_pixels=()) -> Junctions:
         ra, rb = find(int(a)), find(int(b))
         if ra != rb:
             parent[ra] = rb
-    lab = np.zeros_like(junctions.label_image)
+    lab = junctions.label_image
+    members: dict[int, list] = {}
     for j, pix in enumerate(junctions.pixels):
-        lab[pix[:, 0], pix[:, 1]] = find(j) + 1
+        members.setdefault(find(j), []).append(np.asarray(pix, np.int64).reshape(-1, 2))
     for (a, _b), pix in zip(groups, extra_pixels):
         pix = np.asarray(pix, dtype=np.int64).reshape(-1, 2)
         if len(pix):
-            sel = lab[pix[:, 0], pix[:, 1]] == 0
-            lab[pix[sel, 0], pix[sel, 1]] = find(int(a)) + 1
-    # renumber in raster order of first pixel
-    flat = lab.ravel()
-    nz = np.flatnonzero(flat)
-    old = flat[nz]
-    _, first = np.unique(old, return_index=True)
-    uniq_sorted_by_first = old[np.sort(first)]
-    remap = np.zeros(k + 2, np.int32)
-    remap[uniq_sorted_by_first] = np.arange(1, len(uniq_sorted_by_first) + 1, dtype=np.int32)
-    flat[nz] = remap[old]
-    return _from_labels(lab, len(uniq_sorted_by_first))
+            pix = pix[lab[pix[:, 0], pix[:, 1]] == 0]  # not yet a junction pixel
+            members[find(int(a))].append(pix)
+    w = lab.shape[1]
+    clusters = []
+    for root, parts in members.items():
+        pix = np.unique(np.concatenate(parts), axis=0)
+        clusters.append((int((pix[:, 0] * w + pix[:, 1]).min()), pix))
+    clusters.sort(key=lambda t: t[0])  # raster order of the first pixel
+    new_lab = lab.copy()
+    rr, cc, ids = [], [], []
+    for j, (_first, pix) in enumerate(clusters):
+        new_lab[pix[:, 0], pix[:, 1]] = j + 1
+        rr.append(pix[:, 0])
+        cc.append(pix[:, 1])
+        ids.append(np.full(len(pix), j, np.int64))
+    if not clusters:
+        return _from_pixels(np.zeros(0, np.int64), np.zeros(0, np.int64),
+                            np.zeros(0, np.int64), 0, new_lab)
+    return _from_pixels(np.concatenate(rr), np.concatenate(cc), np.concatenate(ids),
+                        len(clusters), new_lab)

@@ -226,6 +226,8 @@ def _load_calibration(calibration, thickness_mm):
         return Calibration.from_csv(calibration), str(calibration)
     if hasattr(calibration, "layers"):
         return calibration, type(calibration).__name__
+    if not isinstance(calibration, pd.DataFrame) and hasattr(calibration, "to_frame"):
+        calibration = calibration.to_frame()  # e.g. synthetic.SyntheticCalibration
     if isinstance(calibration, pd.DataFrame):
         cols = {str(c).strip().lower(): c for c in calibration.columns}
         if "n_layers" in cols and "width_mm" in cols:
@@ -311,7 +313,7 @@ def preprocess(image, *, px_per_mm: float = 50.0, thickness_mm: float = 0.1,
                         "will be unreliable")
     with timer("threshold"):
         thr = threshold_rgb(rgb, blue_min=blue_min, rg_max=rg_max, method=threshold_method)
-    frac = float(thr.mask.mean())
+    frac = np.count_nonzero(thr.mask) / thr.mask.size
     if frac == 0:
         raise AnalysisError(
             f"empty mask: no pixel has blue >= {thr.blue_min} and red, green <= {thr.rg_max} "
@@ -322,10 +324,11 @@ def preprocess(image, *, px_per_mm: float = 50.0, thickness_mm: float = 0.1,
     speck_px = min(s_min_px, l_min_px * thickness_px) if l_min_px > 0 else s_min_px
     with timer("clean"):
         mask = clean_mask(thr.mask, s_min_px=s_min_px, speck_px=speck_px)
-    if not mask.any():
+    n_ink = np.count_nonzero(mask)
+    if n_ink == 0:
         raise AnalysisError(f"nothing left after cleaning: every ink component is smaller than "
                             f"{speck_px:.0f} px", path)
-    if mask.mean() > 0.95:
+    if n_ink > 0.95 * mask.size:
         raise AnalysisError("the cleaned mask covers the whole image: no void or background "
                             "to delimit stacks", path)
     with timer("skeleton"):

@@ -108,3 +108,16 @@ def test_good_input_exits_zero(tmp_path, capsys):
     status = main(["analyze", str(p), "--no-figure", "--out", str(tmp_path / "o")])
     assert status == 0, capsys.readouterr().err
     assert (tmp_path / "o" / "summary.json").exists()
+
+
+def test_truncated_16bit_png_one_line_no_libpng_noise(tmp_path, capfd):
+    img = (_good_rgb(13).astype(np.uint16) * 257)
+    p = tmp_path / "trunc16.png"
+    cv2.imwrite(str(p), img[..., ::-1])
+    data = p.read_bytes()
+    p.write_bytes(data[: len(data) // 2])
+    status = main(["analyze", str(p), "--no-figure", "--out", str(tmp_path / "o")])
+    err = capfd.readouterr().err  # file-descriptor level: catches C libraries' messages too
+    assert status != 0
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert len(lines) == 1 and "trunc16.png" in lines[0], err

@@ -369,3 +369,20 @@ def test_path_length_of_oblique_lines(ang_deg):
     pts = pts[np.r_[True, np.any(np.diff(pts, axis=0) != 0, axis=1)]]
     true = np.hypot(*(pts[-1] - pts[0]))
     assert abs(path_length_px(pts) - true) / true < 0.01
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_graph_lengths_equal_reference_smoothing(seed):
+    rng = np.random.default_rng(100 + seed)
+    lines = [tuple(map(tuple, rng.integers(5, 195, (2, 2)))) for _ in range(6)]
+    img = _draw((200, 200), lines, 5).astype(np.uint8)
+    cv2.circle(img, tuple(map(int, rng.integers(50, 150, 2))), int(rng.integers(15, 40)), 1, 3)
+    sk = skeletonize_mask(img > 0, l_min_px=10)
+    g = build_stack_graph(sk, find_junctions(sk))
+    assert g.n_stacks > 3
+    for sid, ((u, v), p) in enumerate(zip(g.ends, g.paths)):
+        if g.node_kind[u] == "loop":
+            ref = path_length_px(p, closed=True)
+        else:
+            ref = path_length_px(np.vstack([g.node_rc[u], p, g.node_rc[v]]))
+        assert abs(g.length_px[sid] - ref) < 1e-9 * max(ref, 1.0)
