@@ -107,13 +107,17 @@ def main(argv=None):
     fig, ax = plt.subplots(figsize=(7, 4.5))
     colors = {"powell": "C0", "lbfgs": "C1", "anneal": "C2", "scipy-powell": "C3"}
     for name, c, t, e in curves:
+        if name == "anneal":  # intermediate stages are at lower Lambda: final point only
+            ax.plot(t[-1], e[-1], "s", ms=4, alpha=0.7, color=colors[name],
+                    label=name + " (final)" if c == 0 else None)
+            continue
         ax.plot(np.maximum(t, 1e-2), e, "-o", ms=2, lw=0.8, alpha=0.6, color=colors[name],
                 label=name if c == 0 else None)
     ax.axhline(2 * np.sqrt(a.lam), color="k", ls="--", lw=0.8, label="2√Λ (spiral)")
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("wall time per configuration (s)")
-    ax.set_ylabel("energy Ẽ (after each run / stage)")
+    ax.set_ylabel("energy Ẽ (after each Powell run)")
     ax.set_title(f"N={a.n}, Λ={a.lam:.0e}, D={a.noise:.0f}")
     ax.legend()
     print("chart:", save_figure(fig, out / "quench_methods.png"))

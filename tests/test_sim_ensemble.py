@@ -84,3 +84,21 @@ def test_refuses_different_parameters(first, tmp_path):
     shutil.copytree(first, out)
     with pytest.raises(ConfigError):
         _run(["quench", *ARGS, "--seed", "99", "--out", str(out)])
+
+
+@pytest.mark.parametrize("command,extra", [("quench", ["--method", "lbfgs"]),
+                                           ("quench", ["--parametrization", "bend"]),
+                                           ("anneal", ["--stages", "3", "--lambda-start", "500"])])
+def test_other_methods(command, extra, first, tmp_path):
+    out = tmp_path / "m"
+    assert _run([command, *ARGS, "--seed", "11", *extra, "--out", str(out)]) == 0
+    c = pd.read_csv(out / "configs.csv")
+    rods = np.load(out / "rods.npz")
+    from simulate.intersect import has_intersection
+
+    assert all(not has_intersection(rods[k], "brute") for k in rods.files)
+    assert np.allclose(c.energy_total, c.energy_bending + c.energy_confinement)
+    # same starts as the default powell ensemble, another minimiser: other energies
+    assert not np.allclose(c.energy_total, _configs(first).energy_total)
+    params = json.loads((out / "params.json").read_text())
+    assert params["command"] == command
