@@ -1,15 +1,13 @@
 """foldstat.crosssection: from a scan of a cut cross-section to the network of junctions,
 stacks, branches and voids, then ensemble statistics.
+
+>>> import crosssection
+>>> res = crosssection.analyze("scan.png", px_per_mm=50, thickness_mm=0.1)  # doctest: +SKIP
+>>> res.summary["n_branches"], res.branches.head()  # doctest: +SKIP
 """
 from ._version import __version__
 from .errors import AnalysisError, ConfigError, FoldstatError, ImageError, ParameterError
+from .pipeline import AnalysisResult, analyze
 
-__all__ = ["__version__", "FoldstatError", "ImageError", "ParameterError", "AnalysisError",
-           "ConfigError"]
-
-try:  # the pipeline entry point; kept importable while stages are developed
-    from .pipeline import AnalysisResult, analyze  # noqa: F401
-
-    __all__ += ["analyze", "AnalysisResult"]
-except ImportError:  # pragma: no cover
-    pass
+__all__ = ["__version__", "analyze", "AnalysisResult", "FoldstatError", "ImageError",
+           "ParameterError", "AnalysisError", "ConfigError"]
