@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
+from numba import njit
 
 EdgeEnd = tuple[int, int]  # (stack_id, end): end 0 = path start, 1 = path end
 
@@ -156,6 +157,98 @@ def end_tangent(path_rc: np.ndarray, node_rc, end: int, *, tangent_px: float,
     return d / n if n > 1e-9 else np.full(2, np.nan)
 
 
+@njit(cache=True)
+def _tangents_kernel(pr, pc, offs, sids, ends, p0r, p0c, skips, tangent_px):  # pragma: no cover
+    """:func:`end_tangent` for many ends at once (same rules; closed-form 2x2 PCA)."""
+    q = sids.shape[0]
+    out = np.full((q, 2), np.nan)
+    for k in range(q):
+        a = offs[sids[k]]
+        n = offs[sids[k] + 1] - a
+        if n == 0:
+            continue
+        rev = ends[k] == 1
+        r0, c0 = p0r[k], p0c[k]
+        lim = skips[k] + tangent_px
+        stop = n
+        for i in range(n):
+            ii = a + (n - 1 - i if rev else i)
+            if np.hypot(pr[ii] - r0, pc[ii] - c0) > lim:
+                stop = i + 1
+                break
+        # selected points: first `stop` points at distance >= skip
+        cnt = 0
+        sr = 0.0
+        sc = 0.0
+        first = -1
+        last = -1
+        for i in range(stop):
+            ii = a + (n - 1 - i if rev else i)
+            if np.hypot(pr[ii] - r0, pc[ii] - c0) >= skips[k]:
+                cnt += 1
+                sr += pr[ii]
+                sc += pc[ii]
+                if first < 0:
+                    first = i
+                last = i
+        use_all = cnt < 2
+        if use_all:  # short stack: take what there is
+            stop = max(2, min(n, int(np.ceil(tangent_px))))
+            stop = min(stop, n)
+            cnt = stop
+            sr = 0.0
+            sc = 0.0
+            for i in range(stop):
+                ii = a + (n - 1 - i if rev else i)
+                sr += pr[ii]
+                sc += pc[ii]
+            first = 0
+            last = stop - 1
+        if cnt >= 2:
+            mr = sr / cnt
+            mc = sc / cnt
+            vrr = 0.0
+            vcc = 0.0
+            vrc = 0.0
+            for i in range(stop):
+                ii = a + (n - 1 - i if rev else i)
+                if use_all or np.hypot(pr[ii] - r0, pc[ii] - c0) >= skips[k]:
+                    dr = pr[ii] - mr
+                    dc = pc[ii] - mc
+                    vrr += dr * dr
+                    vcc += dc * dc
+                    vrc += dr * dc
+            ang = 0.5 * np.arctan2(2.0 * vrc, vrr - vcc)
+            tr = np.cos(ang)
+            tc = np.sin(ang)
+            i0 = a + (n - 1 - first if rev else first)
+            i1 = a + (n - 1 - last if rev else last)
+            orr = float(pr[i1] - pr[i0])
+            orc = float(pc[i1] - pc[i0])
+            if orr * orr + orc * orc < 1e-12:
+                orr = mr - r0
+                orc = mc - c0
+            if tr * orr + tc * orc < 0:
+                tr = -tr
+                tc = -tc
+            if orr * orr + orc * orc >= 1e-12:
+                out[k, 0] = tr
+                out[k, 1] = tc
+                continue
+        mr = 0.0
+        mc = 0.0
+        for i in range(n):
+            mr += pr[a + i]
+            mc += pc[a + i]
+        dr = mr / n - r0
+        dc = mc / n - c0
+        nn = np.hypot(dr, dc)
+        if nn > 1e-9:
+            out[k, 0] = dr / nn
+            out[k, 1] = dc / nn
+    return out
+
+
 def _canonical(a: list[EdgeEnd], b: list[EdgeEnd]) -> tuple[tuple, tuple]:
     """Order a partition: smaller pack first, ties by smallest element; sorted packs."""
     a, b = tuple(sorted(a)), tuple(sorted(b))
@@ -241,20 +334,46 @@ def compute_packs(graph: StackGraphLike, *, tangent_px: float, skip_px: float = 
     dict
         node -> :class:`Pack`.
     """
-    out = {}
+    kind = graph.node_kind
     if nodes is None:
-        nodes = [n for n in graph.graph.nodes if graph.node_kind.get(n, "junction") == "junction"]
+        nodes = [n for n in graph.graph.nodes if kind.get(n, "junction") == "junction"]
+    nodes = list(nodes)
+    # stack ends per node in one pass over graph.ends (as junction_edge_ends, sorted)
+    by_node: dict = {}
+    for sid, (u, v) in enumerate(graph.ends):
+        by_node.setdefault(u, []).append((sid, 0))
+        by_node.setdefault(v, []).append((sid, 1))
+    keys_of = {nd: sorted(by_node.get(nd, [])) for nd in nodes}
+    q_sid, q_end, q_r, q_c, q_skip = [], [], [], [], []
     for node in nodes:
-        keys = junction_edge_ends(graph, node)
+        p0 = np.asarray(graph.node_rc[node], float)
         skip = float(skip_px)
         if distance_px is not None:
-            r, c = np.round(np.asarray(graph.node_rc[node], float)).astype(int)
+            r, c = np.round(p0).astype(int)
             if 0 <= r < distance_px.shape[0] and 0 <= c < distance_px.shape[1]:
                 skip = max(skip, blob_factor * float(distance_px[r, c]))
-        tans = {}
-        for sid, end in keys:
-            tans[(sid, end)] = end_tangent(graph.paths[sid], graph.node_rc[node], end,
-                                           tangent_px=tangent_px, skip_px=skip)
+        for sid, end in keys_of[node]:
+            q_sid.append(sid)
+            q_end.append(end)
+            q_r.append(p0[0])
+            q_c.append(p0[1])
+            q_skip.append(skip)
+    paths = [np.asarray(p).reshape(-1, 2) for p in graph.paths]
+    lens = np.fromiter((len(p) for p in paths), np.int64, count=len(paths))
+    offs = np.zeros(len(paths) + 1, np.int64)
+    np.cumsum(lens, out=offs[1:])
+    flat = np.concatenate(paths).astype(float) if offs[-1] else np.zeros((0, 2))
+    tan = _tangents_kernel(np.ascontiguousarray(flat[:, 0]), np.ascontiguousarray(flat[:, 1]),
+                           offs, np.asarray(q_sid, np.int64), np.asarray(q_end, np.int64),
+                           np.asarray(q_r, float), np.asarray(q_c, float),
+                           np.asarray(q_skip, float), float(tangent_px)) if q_sid else \
+        np.zeros((0, 2))
+    out = {}
+    k = 0
+    for node in nodes:
+        keys = keys_of[node]
+        tans = {key: tan[k + i] for i, key in enumerate(keys)}
+        k += len(keys)
         out[node] = _pack_from_tangents(node, keys, tans)
     return out
 

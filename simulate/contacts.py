@@ -392,52 +392,67 @@ def analyze_rod(xy, *, lam: float, contact_distance: float | None = None,
         for i, (a, b) in enumerate(runs):
             run_id[a:b] = i
 
-    # renumber stacks in order of first appearance along the rod
-    stack_of_cls = {}
-    for c in cls:
-        stack_of_cls.setdefault(c, len(stack_of_cls))
-    run_stack = np.array([stack_of_cls[c] for c in cls], dtype=np.int64)
-    n_stacks = len(stack_of_cls)
-    stack_runs = [[] for _ in range(n_stacks)]
-    for i, st in enumerate(run_stack):
-        stack_runs[st].append(i)
-
-    # --- stack ends (sides) and junctions
+    # --- stacks, their sides and junctions; degree-2 "junctions" are merged away
     def end_point(i, e):
         a, b = runs[i]
         return pts[a] if e == 0 else pts[b - 1 if b == k_total else b]
 
-    side = {}  # (run, end) -> side 0/1 of its stack
-    for st, members in enumerate(stack_runs):
-        r0 = members[0]
-        p0, p1 = end_point(r0, 0), end_point(r0, 1)
-        side[(r0, 0)], side[(r0, 1)] = 0, 1
-        for r in members[1:]:
-            q0, q1 = end_point(r, 0), end_point(r, 1)
-            direct = np.hypot(*(q0 - p0)) + np.hypot(*(q1 - p1))
-            flipped = np.hypot(*(q0 - p1)) + np.hypot(*(q1 - p0))
-            side[(r, 0)], side[(r, 1)] = (0, 1) if direct <= flipped else (1, 0)
-    # nodes: stack ends (stack, side); union across boundaries between consecutive runs
-    nodes = {(st, sd): idx for idx, (st, sd) in enumerate(
-        (st, sd) for st in range(n_stacks) for sd in (0, 1))}
-    dsu = _DSU(len(nodes))
-    node_pts = {v: [] for v in nodes.values()}
-    for i in range(len(runs)):
-        for e in (0, 1):
-            node_pts[nodes[(run_stack[i], side[(i, e)])]].append(end_point(i, e))
-    for i in range(len(runs) - 1):
-        dsu.union(nodes[(run_stack[i], side[(i, 1)])], nodes[(run_stack[i + 1], side[(i + 1, 0)])])
-    groups = {}
-    for (st, sd), idx in nodes.items():
-        groups.setdefault(dsu.find(idx), []).append((st, sd))
+    rside = None  # [side of start, side of end] per run; 2 = inside its stack (merged away)
+    for _ in range(len(runs) + 1):
+        run_stack, stack_runs, side, groups, node_pts = _topology(runs, cls, end_point, rside)
+        rside = [[side[(i, 0)], side[(i, 1)]] for i in range(len(runs))]
+        # A junction with exactly two stack ends (a free rod end or a fold inside a band, or a
+        # third pass brushing a band) changes the set of passes but not the band: a scan
+        # shows one band whose width changes, the skeleton no junction. Convention (truth and
+        # pipeline agree): the two stacks are one; the passes running through are one
+        # branch each, so n_br = number of distinct rod pieces in the band (the larger count).
+        deg2 = [ends for ends in groups.values()
+                if len(ends) == 2 and ends[0][0] != ends[1][0]]
+        if not deg2:
+            break
+        (st_a, sd_a), (st_b, sd_b) = deg2[0]  # one merge at a time: sides stay consistent
+        c_a, c_b = cls[stack_runs[st_a][0]], cls[stack_runs[st_b][0]]
+        for i in range(len(runs)):
+            for e in (0, 1):
+                if run_stack[i] == st_a and rside[i][e] == sd_a:
+                    rside[i][e] = 2
+                elif run_stack[i] == st_b:
+                    if rside[i][e] == sd_b:
+                        rside[i][e] = 2
+                    elif rside[i][e] == 1 - sd_b:
+                        rside[i][e] = sd_a  # B's far end takes the side freed in A
+        cls = [c_a if c == c_b else c for c in cls]
+        new_runs, new_cls, new_side = [list(runs[0])], [cls[0]], [list(rside[0])]
+        for i in range(1, len(runs)):
+            if new_side[-1][1] == 2 and rside[i][0] == 2 and new_cls[-1] == cls[i]:
+                new_runs[-1][1] = runs[i][1]  # one pass through the merged band: one branch
+                new_side[-1][1] = rside[i][1]
+            else:
+                new_runs.append(list(runs[i]))
+                new_cls.append(cls[i])
+                new_side.append(list(rside[i]))
+        runs, cls, rside = new_runs, new_cls, new_side
+    for i, (a, b) in enumerate(runs):
+        run_id[a:b] = i
+    n_stacks = len(stack_runs)
+
+    # rod ends and fold apices are not where stacks meet: keep them out of junction positions
+    def is_meeting(i, e):
+        if (e == 0 and i == 0) or (e == 1 and i == len(runs) - 1):
+            return False
+        j = i - 1 if e == 0 else i + 1
+        return run_stack[j] != run_stack[i]
+
     junction_of_end = {}
     jrows = []
     for root, ends in sorted(groups.items(), key=lambda g: min(g[1])):
         if len({st for st, _ in ends}) < 2:
             continue  # free end, fold apex or loop cut: not a junction
         jid = len(jrows)
-        pp = np.concatenate([np.asarray(node_pts[nodes[e]]) for e in ends])
-        c = pp.mean(axis=0)
+        pp = [p for e in ends for (p, i, ee) in node_pts[e] if is_meeting(i, ee)]
+        if not pp:
+            pp = [p for e in ends for (p, _, _) in node_pts[e]]
+        c = np.mean(pp, axis=0)
         jrows.append({"junction_id": jid, "x": float(c[0]), "y": float(c[1]),
                       "n_stacks": len(ends)})
         for e in ends:
@@ -491,6 +506,54 @@ def analyze_rod(xy, *, lam: float, contact_distance: float | None = None,
         samples_s=s, samples_xy=pts, samples_multiplicity=mult)
 
 
+
+def _topology(runs, cls, end_point, rside=None):
+    """Stack numbering, sides of every run end and the junction groups of stack ends.
+
+    Returns ``run_stack`` (stack of every run, numbered by first appearance along the rod),
+    ``stack_runs``, ``side[(run, end)]`` (0/1: which end of its stack the run end lies at,
+    matched to the stack's longest run, or taken from ``rside``; 2: inside the stack), ``groups`` (lists of (stack, side) ends joined by
+    consecutive runs: junctions when they hold two or more stacks) and ``node_pts``
+    ((stack, side) -> list of (point, run, end)).
+    """
+    stack_of_cls = {}
+    for c in cls:
+        stack_of_cls.setdefault(c, len(stack_of_cls))
+    run_stack = np.array([stack_of_cls[c] for c in cls], dtype=np.int64)
+    n_stacks = len(stack_of_cls)
+    stack_runs = [[] for _ in range(n_stacks)]
+    for i, st in enumerate(run_stack):
+        stack_runs[st].append(i)
+    side = {}
+    for st, members in enumerate(stack_runs):
+        if rside is not None:
+            for r in members:
+                side[(r, 0)], side[(r, 1)] = rside[r]
+            continue
+        ref = max(members, key=lambda r: runs[r][1] - runs[r][0])
+        p0, p1 = end_point(ref, 0), end_point(ref, 1)
+        for r in members:
+            q0, q1 = end_point(r, 0), end_point(r, 1)
+            direct = np.hypot(*(q0 - p0)) + np.hypot(*(q1 - p1))
+            flipped = np.hypot(*(q0 - p1)) + np.hypot(*(q1 - p0))
+            side[(r, 0)], side[(r, 1)] = (0, 1) if direct <= flipped else (1, 0)
+    nodes = {(st, sd): idx for idx, (st, sd) in enumerate(
+        (st, sd) for st in range(n_stacks) for sd in (0, 1))}
+    dsu = _DSU(len(nodes))
+    node_pts = {e: [] for e in nodes}
+    for i in range(len(runs)):
+        for e in (0, 1):
+            if side[(i, e)] < 2:  # 2: a free end or fold inside a merged band
+                node_pts[(int(run_stack[i]), side[(i, e)])].append((end_point(i, e), i, e))
+    for i in range(len(runs) - 1):
+        if side[(i, 1)] < 2 and side[(i + 1, 0)] < 2:
+            dsu.union(nodes[(run_stack[i], side[(i, 1)])],
+                      nodes[(run_stack[i + 1], side[(i + 1, 0)])])
+    groups = {}
+    for (st, sd), idx in nodes.items():
+        groups.setdefault(dsu.find(idx), []).append((st, sd))
+    return run_stack, stack_runs, side, groups, node_pts
+
 def _trapezoid_piece(r2, n, s0, s1):
     """Integral over [s0, s1] of the piecewise-linear interpolant of the nodal values r2.
 
@@ -509,8 +572,9 @@ def _trapezoid_piece(r2, n, s0, s1):
 
 
 def _mean_line(st, members, runs, side, clusters, run_stack, run_id, pts, k_total, j_xy, ja, jb):
-    """Centroid line of a stack's passes along its first run, extended to its junctions."""
-    r0 = members[0]
+    """Centroid line of a stack's passes along its longest run, extended to its junctions
+    (side 0 first)."""
+    r0 = max(members, key=lambda r: runs[r][1] - runs[r][0])
     a, b = runs[r0]
     b_incl = min(b, k_total - 1)
     idx = np.arange(a, b_incl + 1)
@@ -518,7 +582,8 @@ def _mean_line(st, members, runs, side, clusters, run_stack, run_id, pts, k_tota
     for t, k in enumerate(idx):
         mem = [q for q in clusters[k] if run_stack[run_id[q]] == st]
         line[t] = pts[mem].mean(axis=0) if mem else pts[k]
-    # the first run's start is side 0 by construction
+    if side[(r0, 0)] == 1 or side[(r0, 1)] == 0:
+        line = line[::-1]
     head = [j_xy[ja]] if ja >= 0 else []
     tail = [j_xy[jb]] if jb >= 0 else []
     out = np.concatenate([np.asarray(head).reshape(-1, 2), line, np.asarray(tail).reshape(-1, 2)])

@@ -108,6 +108,23 @@ def _point_at_half(p):
     return p[i] + f * (p[i + 1] - p[i])
 
 
+def _loop_mid(p):
+    """Mid point of a closed line started at its raster-first point (min row, then min col).
+
+    A junction-free closed loop has no natural start; the pipeline (``crosssection.graph``)
+    starts its path at the first skeleton pixel in raster order and takes the point at half
+    the length (``pipeline._mid_points``). The half-way point does not depend on the
+    direction, so starting the truth line at the same place makes the two mid points agree
+    (``crosssection.scoring`` matches stacks by mid point).
+    """
+    q = np.asarray(p, float)[:-1]
+    row = np.round(q[:, 1])
+    cand = np.flatnonzero(row == row.min())
+    i0 = int(cand[np.argmin(q[cand, 0])])
+    q = np.concatenate([q[i0:], q[:i0], q[i0:i0 + 1]])
+    return _point_at_half(q)
+
+
 def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float = 7e5,
                          px_per_mm: float = 50.0, thickness_mm: float = 0.1,
                          rod_length_mm: float | None = None, calibration=None,
@@ -148,9 +165,11 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
         Seed of every random choice (colour jitter, noise, defects).
     margin_mm : float
         Paper around the configuration.
-    hole_radius_mm : float, optional
+    hole_radius_mm : float, "auto" or None
         Draw a hard-wall disk of this radius centred on the rod's centre of mass
-        (stacks touching it are "periphery"); default none (all "bulk").
+        (stacks touching it are "periphery"); ``"auto"``: the smallest disk enclosing the
+        rod plus the half width of the thickest band and 2 h, centred on it (the CLI
+        default: a scan always has its container); None: no hole (all "bulk").
 
     Returns
     -------
@@ -186,9 +205,24 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
         gap_ok = delta * rod_length_mm >= need_mm
     scale = rod_length_mm * px_per_mm  # px per unit L
     margin_px = margin_mm * px_per_mm
+    hole_center_l = np.average(xy, axis=0)
+    if isinstance(hole_radius_mm, str):
+        if hole_radius_mm != "auto":
+            raise ParameterError(f"hole_radius_mm must be a number, None or 'auto', got "
+                                 f"{hole_radius_mm!r}")
+        # the experiment's container: the smallest disk holding the rod, plus the half width
+        # of the thickest band and 2 h of clearance (the pipeline then uses the known hole
+        # instead of fitting one to the ink envelope)
+        (cx, cy), r_l = cv2.minEnclosingCircle(xy.astype(np.float32))
+        hole_center_l = np.array([cx, cy], float)
+        hole_radius_mm = float(r_l * rod_length_mm + 0.5 * float(width(n_max))
+                               + 2 * thickness_mm)
     hole_px = None if hole_radius_mm is None else hole_radius_mm * px_per_mm
     if hole_px is not None:
-        margin_px = max(margin_px, hole_px - 0.5 * extent * scale + 2 * thickness_mm * px_per_mm)
+        c_off = (hole_center_l - lo) * scale
+        far = (xy.max(axis=0) - hole_center_l) * scale
+        need = hole_px + 2 * thickness_mm * px_per_mm - np.minimum(c_off, far)
+        margin_px = max(margin_px, float(need.max()))
 
     def to_px(p):  # (x, y) in L -> (col, row) float px
         return (np.asarray(p, float) - lo) * scale + margin_px
@@ -197,7 +231,7 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
     w_px, h_px = int(size[0]), int(size[1])
     hole_c = None
     if hole_px is not None:
-        hole_c = to_px(np.average(xy, axis=0))
+        hole_c = to_px(hole_center_l)
 
     # --- ink: one band of width w(n) per stack along its mean line (exact distance bands)
     coverage = np.zeros((h_px, w_px), np.float32)
@@ -276,7 +310,9 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
             if np.any(r >= hole_px - float(width(row.n_br)) * px_per_mm - 2 * thickness_mm * px_per_mm):
                 region = "periphery"
         regions.append(region)
-        mid = _point_at_half(line)
+        closed = (row.junction_a < 0 and row.junction_b < 0 and len(line) > 3
+                  and np.allclose(line[0], line[-1]))
+        mid = _loop_mid(line) if closed else _point_at_half(line)
         srows.append({"stack_id": int(sid), "junction_a": int(row.junction_a),
                       "junction_b": int(row.junction_b), "length_mm": _poly_len(line) / px_per_mm,
                       "width_mm": float(width(row.n_br)), "n_br": int(row.n_br),
@@ -424,9 +460,23 @@ def add_subparser(sub) -> None:
     p.add_argument("--smears", type=int, default=0)
     p.add_argument("--specks", type=int, default=0)
     p.add_argument("--pinholes", type=int, default=0)
+    p.add_argument("--hole", default="auto",
+                   help="hole radius in mm, 'auto' (smallest disk around the rod, default) "
+                        "or 'none' (the pipeline then fits one)")
     p.add_argument("--limit", type=int, default=None, help="render only the first K configs")
     p.add_argument("--seed", type=int, default=0)
     p.set_defaults(func=_run)
+
+
+def _hole_arg(text):
+    if text is None or str(text).lower() in ("none", "null", ""):
+        return None
+    if str(text).lower() == "auto":
+        return "auto"
+    try:
+        return float(text)
+    except ValueError:
+        raise ParameterError(f"--hole must be a number, 'auto' or 'none', got {text!r}") from None
 
 
 def _run(args) -> int:
@@ -438,6 +488,6 @@ def _run(args) -> int:
                            thickness_mm=args.thickness_mm, rod_length_mm=args.rod_length_mm,
                            noise_sigma=args.noise, blur_px=args.blur, jpeg_quality=args.jpeg,
                            smears=args.smears, specks=args.specks, pinholes=args.pinholes,
-                           seed=args.seed)
+                           seed=args.seed, hole_radius_mm=_hole_arg(args.hole))
     print(f"{len(out)} scenes in {args.out}")
     return 0

@@ -175,3 +175,22 @@ def test_degenerate_paths():
     assert np.all(two.kappa_per_mm == 0)
     empty = stack_curvature(np.zeros((0, 2), int), n_br=1, thickness_px=H, px_per_mm=50.0)
     assert empty.length_mm == 0 and len(empty.s_mm) == 0
+
+
+@pytest.mark.parametrize("seed", [5, 6])
+def test_window_capped_by_stack_length(seed):
+    """A short S-shaped stack of 4 layers (paper window 5 n h = 100 px, longer than half the
+    stack): the capped window still resolves the inflection; the uncapped one averages it
+    away (kappa_+ collapses onto kappa_m)."""
+    rng = np.random.default_rng(seed)
+    R = rng.uniform(45, 60)
+    t = np.linspace(0, 0.8, 3000)
+    arc = np.c_[R - R * np.cos(t), R * np.sin(t)]
+    xy = np.vstack([-arc[::-1], arc[1:]])
+    rc = np.round(np.c_[300 - xy[:, 1], 300 + xy[:, 0]]).astype(int)
+    rc = rc[np.r_[True, np.any(np.diff(rc, axis=0) != 0, axis=1)]]
+    capped = stack_curvature(rc, n_br=4, thickness_px=H, px_per_mm=50.0)
+    full = stack_curvature(rc, n_br=4, thickness_px=H, px_per_mm=50.0, max_window_frac=None)
+    assert capped.kappa_plus / 50 > 0.5 / R
+    assert capped.kappa_plus > 3 * capped.kappa_m
+    assert full.kappa_plus < 0.5 * capped.kappa_plus

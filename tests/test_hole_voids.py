@@ -11,7 +11,7 @@ from skimage.draw import polygon
 from crosssection.errors import AnalysisError
 from crosssection.hole import Hole, classify_regions, fit_hole, kasa_fit, wall_tolerance_px
 from crosssection.schema import VOID_COLUMNS
-from crosssection.voids import contour_perimeter_px, find_voids
+from crosssection.voids import contour_perimeter_px, find_voids, void_labels
 
 H = 5.0
 
@@ -209,3 +209,39 @@ def test_contour_perimeter_square_axis_aligned():
     sq = np.zeros((120, 120), bool)
     sq[10:110, 10:110] = True
     assert contour_perimeter_px(sq) == pytest.approx(400, rel=0.02)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_voids_match_labelling_reference(seed):
+    """The contour-based void extraction equals a plain 4-connected labelling of the
+    background (areas, centroids, order) on random ink textures with islands, spurs and
+    diagonal pinches; junction counts equal a brute-force distance check."""
+    from scipy import ndimage as ndi
+
+    rng = np.random.default_rng(seed)
+    size = 300
+    field = ndi.gaussian_filter(rng.normal(size=(size, size)), rng.uniform(2, 5))
+    mask = field > -rng.uniform(0.4, 0.6) * field.std()
+    mask |= rng.random((size, size)) < 0.01            # isolated ink pixels (islands, spurs)
+    hole = Hole(np.array([150.0, 150.0]) + rng.uniform(-5, 5, 2), rng.uniform(100, 140), False)
+    s_min = 30
+    lab, n = ndi.label(~mask)
+    rr, cc = np.mgrid[0:size, 0:size]
+    outside = (rr - hole.center_rc[0]) ** 2 + (cc - hole.center_rc[1]) ** 2 > hole.radius_px ** 2
+    bad = set(np.unique(lab[outside & ~mask])) | set(np.unique(lab[0])) | \
+        set(np.unique(lab[-1])) | set(np.unique(lab[:, 0])) | set(np.unique(lab[:, -1]))
+    ref = [i for i in range(1, n + 1) if i not in bad and (lab == i).sum() >= s_min]
+    jc = rng.uniform(20, 280, (30, 2))
+    df = find_voids(mask, hole=hole, s_min_px=s_min, px_per_mm=50.0, junction_centers_rc=jc,
+                    touch_px=6.0)
+    assert len(df) == len(ref) > 5
+    for row, i in zip(df.itertuples(), ref):
+        pr, pc = np.nonzero(lab == i)
+        assert row.area_mm2 * 2500 == pytest.approx(len(pr))
+        assert row.centroid_y_px == pytest.approx(pr.mean(), abs=1e-9)
+        assert row.centroid_x_px == pytest.approx(pc.mean(), abs=1e-9)
+        d2 = (pr[None, :] - jc[:, :1]) ** 2 + (pc[None, :] - jc[:, 1:]) ** 2
+        assert row.n_edges == int((d2.min(axis=1) <= 36.0).sum())
+    vl = void_labels(mask, hole=hole, s_min_px=s_min)
+    assert vl.max() == len(ref)
+    assert all(np.array_equal(vl == j + 1, lab == i) for j, i in enumerate(ref))
