@@ -10,6 +10,7 @@
 * ``DIR/branches.csv`` -- config_id, branch_id, length, kappa_plus, kappa_pm, energy_bending,
   energy_confinement, energy (from :func:`simulate.contacts.analyze_rod`);
 * ``DIR/voids.csv`` -- config_id, area, perimeter, shape_ratio, n_edges;
+* ``DIR/stacks.csv`` -- config_id, stack_id, n_br, length (for rho(n_br) and paper Eqs. 3-4);
 * ``DIR/rods.npz`` -- node positions of every configuration, key ``config_XXXXX``;
 * ``DIR/params.json`` -- all parameters and the package version.
 
@@ -44,7 +45,8 @@ CONFIG_COLUMNS = ["config_id", "seed", "rg", "epsilon", "epsilon_sqrt2", "energy
                   "energy_bending", "energy_confinement", "n_stacks", "n_branches",
                   "n_junctions", "n_voids", "method", "wall_s"]
 BRANCH_COLUMNS = ["config_id", "branch_id", "length", "kappa_plus", "kappa_pm",
-                  "energy_bending", "energy_confinement", "energy"]
+                  "energy_bending", "energy_confinement", "energy", "stack_id"]
+STACK_COLUMNS = ["config_id", "stack_id", "n_br", "length"]
 VOID_COLUMNS = ["config_id", "area", "perimeter", "shape_ratio", "n_edges"]
 
 # parameters that define the physics: a re-run into the same folder must agree on them
@@ -118,6 +120,7 @@ def run_config(config_id: int, seed: int, params: dict, out: str) -> int:
            "energy_confinement": res.energy_confinement}
     branches = []
     voids = []
+    stacks = []
     try:
         an = analyze_rod(res.xy, lam=params["lam"], contact_distance=params["contact_distance"])
         rg = float(an.rg)
@@ -129,6 +132,8 @@ def run_config(config_id: int, seed: int, params: dict, out: str) -> int:
         branches = an.branches.reindex(columns=bcols).to_dict("records")
         vcols = [c for c in VOID_COLUMNS if c != "config_id"]
         voids = an.voids.reindex(columns=vcols).to_dict("records")
+        scols = [c for c in STACK_COLUMNS if c != "config_id"]
+        stacks = an.stacks.reindex(columns=scols).to_dict("records")
     except Exception as exc:  # noqa: BLE001 - recorded per configuration, the ensemble goes on
         from .geometry import radius_of_gyration
 
@@ -137,7 +142,7 @@ def run_config(config_id: int, seed: int, params: dict, out: str) -> int:
                    epsilon_sqrt2=1.0 / (2.0 * np.pi * np.sqrt(2.0) * rg),
                    analysis_error=f"{type(exc).__name__}: {exc}")
     row.update({f"n_{k}": v for k, v in res.stats.items()})
-    meta = json.dumps({"row": row, "branches": branches, "voids": voids},
+    meta = json.dumps({"row": row, "branches": branches, "voids": voids, "stacks": stacks},
                       default=lambda o: o.item() if hasattr(o, "item") else str(o))
     write_npz(part_path(out, config_id), xy=res.xy, xy0=xy0, meta=np.array(meta))
     return config_id
@@ -157,23 +162,26 @@ def assemble(out, n_configs: int) -> dict:
         ``{"configs": DataFrame, "branches": DataFrame, "voids": DataFrame}``.
     """
     out = Path(out)
-    rows, brows, vrows, rods = [], [], [], {}
+    rows, brows, vrows, srows, rods = [], [], [], [], {}
     for i in range(n_configs):
         meta, xy = _read_part(part_path(out, i))
         rows.append(meta["row"])
         brows += [{"config_id": i, **b} for b in meta["branches"]]
         vrows += [{"config_id": i, **v} for v in meta["voids"]]
+        srows += [{"config_id": i, **v} for v in meta.get("stacks", [])]
         rods[f"config_{i:05d}"] = xy
     configs = pd.DataFrame(rows)
     extra = [c for c in configs.columns if c not in CONFIG_COLUMNS]
     configs = configs.reindex(columns=CONFIG_COLUMNS + extra)
     branches = pd.DataFrame(brows).reindex(columns=BRANCH_COLUMNS)
     voids = pd.DataFrame(vrows).reindex(columns=VOID_COLUMNS)
+    stacks = pd.DataFrame(srows).reindex(columns=STACK_COLUMNS)  # per-stack n_br for the stats
+    write_csv(out / "stacks.csv", stacks)
     write_csv(out / "configs.csv", configs)
     write_csv(out / "branches.csv", branches)
     write_csv(out / "voids.csv", voids)
     write_npz(out / "rods.npz", **rods)
-    return {"configs": configs, "branches": branches, "voids": voids}
+    return {"configs": configs, "branches": branches, "voids": voids, "stacks": stacks}
 
 
 def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None = None,
