@@ -22,31 +22,22 @@ SUBCOMMANDS = {
 }
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="python -m crosssection",
-        description="Analyse scans of folded-sheet cross-sections into junctions, stacks, "
-                    "branches and voids; batch them; compute ensemble statistics.")
+def make_parser(prog: str, description: str, subcommands: dict) -> argparse.ArgumentParser:
+    """A parser whose subcommands are registered by their modules' ``add_subparser``."""
+    parser = argparse.ArgumentParser(prog=prog, description=description)
     parser.add_argument("--version", action="version", version=f"foldstat {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
-    seen = set()
-    for modname in dict.fromkeys(SUBCOMMANDS.values()):
-        if modname in seen:
-            continue
-        seen.add(modname)
-        try:
-            module = importlib.import_module(modname)
-        except ModuleNotFoundError as exc:  # a subcommand module not installed in this build
-            if exc.name != modname:
-                raise
-            continue
-        module.add_subparser(sub)
+    for modname in dict.fromkeys(subcommands.values()):
+        importlib.import_module(modname).add_subparser(sub)
     return parser
 
 
-def main(argv=None) -> int:
-    """Run the CLI; return the exit status (0 success, 2 bad input, 1 unexpected error)."""
-    parser = build_parser()
+def run_parsed(parser: argparse.ArgumentParser, argv=None) -> int:
+    """Parse ``argv`` and run the chosen subcommand.
+
+    Returns the exit status: 0 success, 2 bad input (one line naming the file and the cause),
+    130 interrupted (re-running resumes), 1 unexpected error (one line, never a traceback).
+    """
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)
@@ -54,9 +45,21 @@ def main(argv=None) -> int:
         print(f"error: {exc.one_line()}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("error: interrupted", file=sys.stderr)
+        print("error: interrupted (re-run the same command to resume)", file=sys.stderr)
         return 130
     except Exception as exc:  # noqa: BLE001 - last resort: one line, never a traceback
         print(f"error: unexpected {type(exc).__name__}: {' '.join(str(exc).split())}",
               file=sys.stderr)
         return 1
+
+
+def build_parser() -> argparse.ArgumentParser:
+    return make_parser(
+        "python -m crosssection",
+        "Analyse scans of folded-sheet cross-sections into junctions, stacks, branches and "
+        "voids; batch them; compute ensemble statistics.", SUBCOMMANDS)
+
+
+def main(argv=None) -> int:
+    """Run the ``crosssection`` CLI; return the exit status."""
+    return run_parsed(build_parser(), argv)
