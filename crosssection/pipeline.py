@@ -574,6 +574,9 @@ def analyze(image, *, px_per_mm: float = 50.0, thickness_mm: float = 0.1,
             p = packs.get(j)
             return " ".join(f"{s}.{e}" for s, e in getattr(p, name, [])) if p else ""
 
+        # junctions whose conservation equation the robust solve rejected (linsys flag)
+        violated = {int(j) for c in (getattr(lin, "components", None) or [])
+                    for j in getattr(c, "violated_junctions", [])}
         junctions = pd.DataFrame({
             "junction_id": np.arange(K, dtype=np.int64),
             "x_px": junc.centers_rc[:, 1] if K else np.zeros(0),
@@ -583,6 +586,7 @@ def analyze(image, *, px_per_mm: float = 50.0, thickness_mm: float = 0.1,
             "pack_b": [side(j, "side_b") for j in range(K)],
             "ambiguous": pk_amb,
             "reference_dependent": pk_ref,
+            "conservation_ok": [j not in violated for j in range(K)],
             "n_pixels": [len(p) for p in junc.pixels],
         })
     n_branches = int(n_br.sum())
