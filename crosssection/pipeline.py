@@ -574,9 +574,17 @@ def analyze(image, *, px_per_mm: float = 50.0, thickness_mm: float = 0.1,
             p = packs.get(j)
             return " ".join(f"{s}.{e}" for s, e in getattr(p, name, [])) if p else ""
 
-        # junctions whose conservation equation the robust solve rejected (linsys flag)
-        violated = {int(j) for c in (getattr(lin, "components", None) or [])
-                    for j in getattr(c, "violated_junctions", [])}
+        # layer conservation under the geometric packs reported here (paper's junction
+        # equation); the solve may have repartitioned a junction the widths contradict
+        def residual(j):
+            p = packs.get(j)
+            if p is None:
+                return 0
+            return int(sum(n_br[s] for s, _ in p.side_a) - sum(n_br[s] for s, _ in p.side_b))
+
+        comps = getattr(lin, "components", None) or []
+        repart = {int(j) for c in comps for j in getattr(c, "repartitioned_junctions", [])}
+        cons_res = [residual(j) for j in range(K)]
         junctions = pd.DataFrame({
             "junction_id": np.arange(K, dtype=np.int64),
             "x_px": junc.centers_rc[:, 1] if K else np.zeros(0),
@@ -586,7 +594,9 @@ def analyze(image, *, px_per_mm: float = 50.0, thickness_mm: float = 0.1,
             "pack_b": [side(j, "side_b") for j in range(K)],
             "ambiguous": pk_amb,
             "reference_dependent": pk_ref,
-            "conservation_ok": [j not in violated for j in range(K)],
+            "conservation_residual": cons_res,
+            "conservation_ok": [r == 0 for r in cons_res],
+            "repartitioned": [j in repart for j in range(K)],
             "n_pixels": [len(p) for p in junc.pixels],
         })
     n_branches = int(n_br.sum())

@@ -130,6 +130,16 @@ def test_api_on_generated_scenes(seed, n_stacks, max_layers, extra):
                         scene.tables["stacks"][["mid_x_px", "mid_y_px"]].to_numpy(float), 20.0)
     rel = st.length_mm.to_numpy()[a] / scene.tables["stacks"]["length_mm"].to_numpy()[b] - 1
     assert np.median(np.abs(rel)) < 0.05
+    # conservation columns agree with an independent count over the reported packs, and
+    # layers are conserved at (nearly) every junction of these clean scenes
+    n = st.set_index("stack_id").n_br
+    jt = res.junctions
+    for _, row in jt.iterrows():
+        sums = [sum(int(n[int(float(e.split(".")[0]))]) for e in str(side).split())
+                for side in (row.pack_a, row.pack_b)]
+        assert row.conservation_residual == sums[0] - sums[1]
+        assert bool(row.conservation_ok) == (sums[0] == sums[1])
+    assert jt.conservation_ok.mean() >= 0.9
 
 
 def test_ring_only_image_is_not_an_error():

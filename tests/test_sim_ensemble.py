@@ -50,6 +50,21 @@ def test_outputs_and_schema(first):
     assert params["lam"] == 2e4 and params["seed"] == 11 and "version" in params
 
 
+def test_stacks_table_consistent_with_branches(first):
+    c = pd.read_csv(first / "configs.csv").set_index("config_id")
+    s = pd.read_csv(first / "stacks.csv")
+    b = pd.read_csv(first / "branches.csv")
+    assert list(s.columns) == ensemble.STACK_COLUMNS
+    assert (s.n_br >= 1).all()
+    per_config = s.groupby("config_id")
+    # N_l and N_br = sum of n_br per configuration, as in configs.csv
+    assert (per_config.size() == c.n_stacks.loc[per_config.size().index]).all()
+    assert (per_config.n_br.sum() == c.n_branches.loc[per_config.size().index]).all()
+    # every branch points at an existing stack of its configuration
+    keys = set(zip(s.config_id, s.stack_id))
+    assert all((ci, si) in keys for ci, si in zip(b.config_id, b.stack_id))
+
+
 def test_determinism_and_workers(first, tmp_path):
     again = tmp_path / "b"
     assert _run(["quench", *ARGS, "--seed", "11", "--out", str(again)]) == 0
