@@ -503,11 +503,25 @@ def analyze(image, *, px_per_mm: float = 50.0, thickness_mm: float = 0.1,
     # 10. curvature along the smoothed centerline, window 5 n_br h (paper)
     with timer("curvature"):
         profiles = []
+        dist = pre.distance_px
+        H, W = dist.shape
+
+        def fork_radius(node):
+            # inscribed ink radius at a junction: inside the fork the bands overlap and the
+            # skeleton hooks into the junction, so its curvature there is not the sheet's.
+            # Measured: total energy vs truth on simulator renders +225 % -> +34 % (mean of 3),
+            # on generated Bezier networks -24 % -> -29 % (6 scenes)
+            if sg.node_kind[node] != "junction":
+                return 0.0
+            r, c = np.round(sg.node_rc[node]).astype(int)
+            return float(dist[min(max(r, 0), H - 1), min(max(c, 0), W - 1)])
+
         for sid in range(m):
-            u, _v = sg.ends[sid]
+            u, v = sg.ends[sid]
+            trim = max(int(n_br[sid]) * h_px, fork_radius(u), fork_radius(v))
             profiles.append(cv.stack_curvature(
                 sg.paths[sid], n_br=int(n_br[sid]), thickness_px=h_px, px_per_mm=px_per_mm,
-                smooth_px=smooth_px, closed=(sg.node_kind[u] == "loop")))
+                smooth_px=smooth_px, closed=(sg.node_kind[u] == "loop"), trim_px=trim))
         length_mm = np.asarray(sg.length_px, dtype=float) / px_per_mm
     rod_measured = float(np.sum(n_br * length_mm))
     L = rod_length_given if rod_length_given is not None else rod_measured
