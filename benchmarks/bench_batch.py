@@ -5,7 +5,7 @@ Usage::
     python benchmarks/bench_batch.py [--n 200] [--size 480] [--workers 2] [--no-figure]
                                      [--skip-kill] [--json results.json] [--keep DIR]
 
-In one run, on N small generated scans (``crosssection.synthetic.make_scene`` when it succeeds,
+In one run, on N small generated scans (``crosssection.truth.network.make_scene`` when it succeeds,
 else blue bands drawn with OpenCV):
 
 1. the batch on 1 worker (inline) and on ``--workers`` worker processes, each as a
@@ -40,7 +40,7 @@ NUMBERS = ["n_junctions", "n_stacks", "n_branches", "n_voids", "mean_branches_pe
 def draw_scan(seed: int, size: int) -> np.ndarray:
     """One generated RGB scan (uint8)."""
     try:
-        from crosssection.synthetic import make_scene
+        from crosssection.truth.network import make_scene
 
         return make_scene(seed=seed, n_stacks=15, max_layers=4, image_size=size, max_tries=5).rgb
     except Exception:  # noqa: BLE001 - fall back to a simple drawing
@@ -64,7 +64,7 @@ def make_inputs(folder: Path, n: int, size: int, seed: int = 0) -> int:
     """Write ``n`` scans into two sets of ``folder``; return the bytes of one decoded image."""
     from PIL import Image
 
-    from crosssection.parallel import spawn_seeds
+    from crosssection.core.parallel import spawn_seeds
 
     for k, name in enumerate(("setA", "setB")):
         (folder / name).mkdir(parents=True, exist_ok=True)

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from crosssection.fileio import save_figure, write_json
+from crosssection.core.fileio import save_figure, write_json
 from crosssection.stats import fits as F
 
 TRUE = {"exponential": {"mu": 2.5e-3}, "gamma": {"alpha": 0.4, "chi": 0.12},

@@ -21,7 +21,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from crosssection.linsys import conservation_equations, solve_branch_counts  # noqa: E402
-from tests.test_linsys import random_network  # noqa: E402
+from crosssection.truth.graphs import random_network  # noqa: E402
 
 
 def paper_matrix(fg, res, est):

@@ -41,7 +41,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     from skimage.morphology import skeletonize
 
-    from crosssection.synthetic import make_scene
+    from crosssection.truth.network import make_scene
 
     t0 = time.perf_counter()
     scene = make_scene(seed=args.seed, n_stacks=args.n_stacks, max_layers=4, noise_sigma=4.0,

@@ -36,7 +36,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from crosssection.fileio import save_figure, write_csv
+from crosssection.core.fileio import save_figure, write_csv
 from simulate.contacts import analyze_rod
 from simulate.geometry import radius_of_gyration
 from simulate.noise import initial_shape

@@ -5,9 +5,9 @@ stacks, branches and voids, then ensemble statistics.
 >>> res = crosssection.analyze("scan.png", px_per_mm=50, thickness_mm=0.1)  # doctest: +SKIP
 >>> res.summary["n_branches"], res.branches.head()  # doctest: +SKIP
 """
-from ._version import __version__
-from .errors import AnalysisError, ConfigError, FoldstatError, ImageError, ParameterError
-from .pipeline import AnalysisResult, analyze
+from crosssection._version import __version__
+from crosssection.core.errors import AnalysisError, ConfigError, FoldstatError, ImageError, ParameterError
+from crosssection.pipeline import AnalysisResult, analyze
 
 __all__ = ["__version__", "analyze", "AnalysisResult", "FoldstatError", "ImageError",
            "ParameterError", "AnalysisError", "ConfigError"]

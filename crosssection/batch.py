@@ -13,7 +13,7 @@ Layout of ``OUT_DIR``::
 
 Design choices
 --------------
-- One code path for parallelism: :func:`crosssection.parallel.get_executor` (local processes,
+- One code path for parallelism: :func:`crosssection.core.parallel.get_executor` (local processes,
   or a Dask cluster with ``--scheduler``). Tasks receive paths and parameters, write their own
   outputs and return a small dict (never arrays), so memory stays at about one image per worker.
 - Task ``i`` of the sorted image list gets seed ``spawn_seeds(seed, n)[i]``
@@ -53,11 +53,11 @@ from pathlib import Path
 
 import pandas as pd
 
-from ._version import __version__
-from .errors import ConfigError, FoldstatError
-from .fileio import write_csv, write_json
-from .parallel import get_executor, spawn_seeds
-from .setconfig import (DEFAULT_PARAMS, DEFAULT_SET_NAME, SET_FILE, SetConfig, check_params,
+from crosssection._version import __version__
+from crosssection.core.errors import ConfigError, FoldstatError
+from crosssection.core.fileio import write_csv, write_json
+from crosssection.core.parallel import get_executor, spawn_seeds
+from crosssection.setconfig import (DEFAULT_PARAMS, DEFAULT_SET_NAME, SET_FILE, SetConfig, check_params,
                         failed_set, load_set_config)
 
 IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg")
@@ -159,7 +159,7 @@ def params_hash(params: dict, image_sha: str, *, seed=None) -> str:
 
 def _analyze_accepts() -> tuple[set[str], bool]:
     """Keyword names ``crosssection.analyze`` accepts, and whether it takes ``**kwargs``."""
-    from . import pipeline
+    from crosssection import pipeline
 
     sig = inspect.signature(pipeline.analyze)
     names = {n for n, p in sig.parameters.items()
@@ -351,7 +351,7 @@ def process_image(task: ImageTask) -> dict:
         return _row(task, "failed", reason=task.error)
     staging = None
     try:
-        from .pipeline import analyze
+        from crosssection.pipeline import analyze
 
         _clear_partials(final)
         kwargs, meta = _analysis_kwargs(task.params, task.seed)

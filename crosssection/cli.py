@@ -10,8 +10,8 @@ import argparse
 import importlib
 import sys
 
-from ._version import __version__
-from .errors import FoldstatError
+from crosssection._version import __version__
+from crosssection.core.errors import FoldstatError
 
 # subcommand -> module providing add_subparser(subparsers)
 SUBCOMMANDS = {

@@ -74,7 +74,7 @@ def add_subparser(subparsers) -> None:
 
 def run(args) -> int:
     """``analyze``: run the pipeline and write the output folder."""
-    from .pipeline import analyze
+    from crosssection.pipeline import analyze
 
     result = analyze(
         args.image, px_per_mm=args.px_per_mm, thickness_mm=args.thickness_mm,
@@ -94,7 +94,7 @@ def run(args) -> int:
 
 def run_steps(args) -> int:
     """``steps``: stages 1-6 only, then the step images."""
-    from .pipeline import preprocess, write_step_images
+    from crosssection.pipeline import preprocess, write_step_images
 
     pre = preprocess(args.image, px_per_mm=args.px_per_mm, thickness_mm=args.thickness_mm,
                      blue_min=args.blue_min, rg_max=args.rg_max,

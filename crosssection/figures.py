@@ -1,5 +1,5 @@
 """Figures of one analysed scan: the overlay (paper Figs. 1c and 9a) and the processing steps
-(paper Fig. 2). matplotlib with the Agg backend; save with ``crosssection.fileio.save_figure``.
+(paper Fig. 2). matplotlib with the Agg backend; save with ``crosssection.core.fileio.save_figure``.
 
 Stacks are drawn as one ``LineCollection`` (thousands of stacks render in about a second),
 with a line width proportional to ``n_br`` (one sheet thickness per branch on the image's

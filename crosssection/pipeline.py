@@ -31,9 +31,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from . import schema
-from ._version import __version__
-from .errors import AnalysisError, ConfigError, ImageError, ParameterError
+from crosssection.core import schema
+from crosssection._version import __version__
+from crosssection.core.errors import AnalysisError, ConfigError, ImageError, ParameterError
 
 __all__ = ["analyze", "AnalysisResult", "preprocess", "Preprocessed"]
 
@@ -119,8 +119,8 @@ class AnalysisResult:
         out.mkdir(parents=True, exist_ok=True)
         paths = {}
         if figure:
-            from .figures import overlay_figure
-            from .fileio import save_figure
+            from crosssection.figures import overlay_figure
+            from crosssection.core.fileio import save_figure
 
             t0 = time.perf_counter()
             fig = overlay_figure(self.rgb, self, thickness_px=self.thickness_px)
@@ -154,7 +154,7 @@ def write_step_images(out_dir, rgb, mask_threshold, mask_clean, skeleton, juncti
     """Write the four step images of paper Fig. 2 (see ``AnalysisResult.write_steps``)."""
     import cv2
 
-    from .fileio import atomic_path
+    from crosssection.core.fileio import atomic_path
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -178,8 +178,8 @@ def write_step_images(out_dir, rgb, mask_threshold, mask_clean, skeleton, juncti
         cv2.circle(sk, (int(round(c)), int(round(r))), rad, (0, 0, 255), 1, cv2.LINE_AA)
     save("step4_skeleton.png", sk)
     if figure:
-        from .figures import steps_figure
-        from .fileio import save_figure
+        from crosssection.figures import steps_figure
+        from crosssection.core.fileio import save_figure
 
         fig = steps_figure(raw, mask_threshold, mask_clean, skeleton, junction_centers_rc)
         paths["steps"] = save_figure(fig, out / "steps.png")
@@ -218,7 +218,7 @@ def _positive(name, value, *, allow_none=True, allow_zero=False, path=None):
 
 
 def _load_calibration(calibration, thickness_mm):
-    from .widths import Calibration
+    from crosssection.stages.widths import Calibration
 
     if calibration is None:
         return Calibration.linear(thickness_mm, n_max=50), "linear n*h"
@@ -257,7 +257,7 @@ class Preprocessed:
 
 
 def _image_and_path(image):
-    from .io import as_rgb, load_image
+    from crosssection.stages.load import as_rgb, load_image
 
     if isinstance(image, (str, Path)):
         return load_image(image), str(image)
@@ -277,11 +277,11 @@ def preprocess(image, *, px_per_mm: float = 50.0, thickness_mm: float = 0.1,
     """
     import cv2
 
-    from .clean import clean_mask
-    from .graph import build_stack_graph, short_junction_links
-    from .junctions import find_junctions, merge_junctions
-    from .skeleton import skeletonize_mask
-    from .threshold import threshold_rgb
+    from crosssection.stages.clean import clean_mask
+    from crosssection.stages.graph import build_stack_graph, short_junction_links
+    from crosssection.stages.junctions import find_junctions, merge_junctions
+    from crosssection.stages.skeleton import skeletonize_mask
+    from crosssection.stages.threshold import threshold_rgb
 
     timer = timer or _Timer()
     px_per_mm = _positive("px_per_mm", px_per_mm, allow_none=False)
@@ -434,13 +434,13 @@ def analyze(image, *, px_per_mm: float = 50.0, thickness_mm: float = 0.1,
     ImageError, ParameterError, ConfigError, AnalysisError
         One-line cause naming the file.
     """
-    from . import branches as br
-    from . import curvature as cv
-    from .hole import classify_regions, fit_hole, wall_tolerance_px
-    from .linsys import solve_branch_counts
-    from .packs import compute_packs
-    from .voids import find_voids
-    from .widths import stack_widths_px
+    from crosssection.stages import branches as br
+    from crosssection.stages import curvature as cv
+    from crosssection.stages.hole import classify_regions, fit_hole, wall_tolerance_px
+    from crosssection.linsys import solve_branch_counts
+    from crosssection.stages.packs import compute_packs
+    from crosssection.stages.voids import find_voids
+    from crosssection.stages.widths import stack_widths_px
 
     t_start = time.perf_counter()
     timer = _Timer()

@@ -27,7 +27,7 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .errors import ConfigError
+from crosssection.core.errors import ConfigError
 
 SET_FILE = "set.toml"
 

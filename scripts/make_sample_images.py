@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Write the sample scans of ``sample_images/`` with their exact truth.
 
-The scans are synthetic (``crosssection.synthetic.make_scene``): forked blue bands of known
+The scans are synthetic (``crosssection.truth.network.make_scene``): forked blue bands of known
 layer counts inside a disk, varied in density, layer counts and degradations, at the paper's
 resolution (50 px/mm, h = 0.1 mm). Layout written::
 
@@ -12,7 +12,7 @@ resolution (50 px/mm, h = 0.1 mm). Layout written::
         scenes/<scan stem>/      # params.json + truth/ (summary.json and the four tables)
 
 Score an analysis of one scan with
-``crosssection.scoring.score_folder(OUT_DIR, "sample_images/scenes/<stem>")``.
+``crosssection.truth.scoring.score_folder(OUT_DIR, "sample_images/scenes/<stem>")``.
 
 Usage::
 
@@ -29,10 +29,10 @@ from pathlib import Path
 
 import numpy as np
 
-from crosssection.fileio import write_csv, write_json, write_text
-from crosssection import schema
-from crosssection.parallel import spawn_seeds
-from crosssection.synthetic import make_scene, write_image
+from crosssection.core.fileio import write_csv, write_json, write_text
+from crosssection.core import schema
+from crosssection.core.parallel import spawn_seeds
+from crosssection.truth.network import make_scene, write_image
 
 #: (file name, generator options): sparse/thick, medium/noisy, dense/thin, JPEG, 16-bit TIFF
 SAMPLES = [
@@ -78,7 +78,7 @@ def main(argv=None) -> int:
               f"{path.stat().st_size / 1e6:.2f} MB")
     write_csv(out / "calibration.csv", cal.to_frame(20))
     toml = ("# Synthetic sample scans written by scripts/make_sample_images.py (do not edit).\n"
-            "# Truth: scenes/<stem>/truth/; score with crosssection.scoring.score_folder.\n"
+            "# Truth: scenes/<stem>/truth/; score with crosssection.truth.scoring.score_folder.\n"
             'name = "samples"\npx_per_mm = 50\nthickness_mm = 0.1\n'
             'calibration = "calibration.csv"\n\n'
             "# hole of each scan (known from the generator; remove to let the pipeline fit it)\n"

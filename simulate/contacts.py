@@ -37,7 +37,7 @@ import pandas as pd
 from numba import njit
 from scipy.spatial import cKDTree
 
-from .energy import bending_energy, confinement_energy, node_curvature
+from simulate.energy import bending_energy, confinement_energy, node_curvature
 
 __all__ = ["RodAnalysis", "analyze_rod", "default_contact_distance", "resample_rod"]
 

@@ -22,8 +22,8 @@ import math
 import numpy as np
 from numba import njit
 
-from .geometry import positions, trapezoid_weights
-from .intersect import _grid_fill, _grid_setup
+from simulate.geometry import positions, trapezoid_weights
+from simulate.intersect import _grid_fill, _grid_setup
 
 
 def _second_differences(xy):
@@ -124,7 +124,7 @@ def total_energy(xy, lam: float, *, wall_radius: float | None = None,
         if np.max(np.einsum("ij,ij->i", xy, xy)) > wall_radius * wall_radius:
             return float("inf")
     if hard_core:
-        from .intersect import has_intersection
+        from simulate.intersect import has_intersection
 
         if has_intersection(xy):
             return float("inf")
@@ -201,7 +201,7 @@ def nematic_energy(xy, *, u: float, cutoff: float, min_separation: int = 6) -> f
     -------
     float
     """
-    from .intersect import close_pairs
+    from simulate.intersect import close_pairs
 
     xy = np.asarray(xy, dtype=np.float64)
     pairs = close_pairs(xy, cutoff, min_separation)

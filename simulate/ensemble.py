@@ -37,9 +37,9 @@ import numpy as np
 import pandas as pd
 
 from crosssection._version import __version__
-from crosssection.errors import ConfigError, ParameterError
-from crosssection.fileio import write_csv, write_json, write_npz
-from crosssection.parallel import get_executor, spawn_seeds
+from crosssection.core.errors import ConfigError, ParameterError
+from crosssection.core.fileio import write_csv, write_json, write_npz
+from crosssection.core.parallel import get_executor, spawn_seeds
 
 CONFIG_COLUMNS = ["config_id", "seed", "rg", "epsilon", "epsilon_sqrt2", "energy_total",
                   "energy_bending", "energy_confinement", "n_stacks", "n_branches",
@@ -75,7 +75,7 @@ def minimize_config(xy0, params: dict, seed: int):
     -------
     simulate.optimize.QuenchResult
     """
-    from . import optimize
+    from simulate import optimize
 
     common = dict(seed=seed, n_runs=params["n_runs"], maxiter=params["maxiter"],
                   nematic_runs=tuple(params["nematic_runs"]), u=params["u"],
@@ -106,8 +106,8 @@ def run_config(config_id: int, seed: int, params: dict, out: str) -> int:
     int
         ``config_id`` (the part file holds the results).
     """
-    from .contacts import analyze_rod
-    from .noise import initial_shape
+    from simulate.contacts import analyze_rod
+    from simulate.noise import initial_shape
 
     shape_ss, opt_ss = np.random.SeedSequence(seed).spawn(2)
     xy0 = initial_shape(params["n_segments"], params["noise"], seed=np.random.default_rng(shape_ss))
@@ -135,7 +135,7 @@ def run_config(config_id: int, seed: int, params: dict, out: str) -> int:
         scols = [c for c in STACK_COLUMNS if c != "config_id"]
         stacks = an.stacks.reindex(columns=scols).to_dict("records")
     except Exception as exc:  # noqa: BLE001 - recorded per configuration, the ensemble goes on
-        from .geometry import radius_of_gyration
+        from simulate.geometry import radius_of_gyration
 
         rg = radius_of_gyration(res.xy)
         row.update(rg=rg, epsilon=1.0 / (2.0 * np.pi * rg),

@@ -23,10 +23,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from crosssection.errors import ParameterError
+from crosssection.core.errors import ParameterError
 
-from .geometry import center_of_mass, positions
-from .intersect import has_intersection_grid
+from simulate.geometry import center_of_mass, positions
+from simulate.intersect import has_intersection_grid
 
 
 def angle_increments(n_segments: int, noise: float, rng) -> np.ndarray:

@@ -52,12 +52,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from crosssection.errors import ParameterError
+from crosssection.core.errors import ParameterError
 
-from .energy import bending_energy, confinement_energy
-from .geometry import angles, positions
-from .intersect import has_intersection_grid
-from .powell import powell_run
+from simulate.energy import bending_energy, confinement_energy
+from simulate.geometry import angles, positions
+from simulate.intersect import has_intersection_grid
+from simulate.powell import powell_run
 
 
 @dataclass
@@ -243,7 +243,7 @@ def lbfgs_quench(xy0, lam: float, *, seed=None, barrier: float = 0.1,
     """
     from scipy.optimize import minimize
 
-    from .energy import contact_barrier, energy_and_gradient
+    from simulate.energy import contact_barrier, energy_and_gradient
 
     t0 = time.perf_counter()
     xy0 = np.asarray(xy0, dtype=np.float64)
@@ -409,7 +409,7 @@ def scipy_powell(xy0, lam: float, *, maxiter: int = 30, direc=None, xtol: float 
     """
     from scipy.optimize import minimize
 
-    from .energy import nematic_energy
+    from simulate.energy import nematic_energy
 
     t0 = time.perf_counter()
     n = np.asarray(xy0).shape[0] - 1

@@ -40,7 +40,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .intersect import close_pairs, has_contact_grid, seg_dist2
+from simulate.intersect import close_pairs, has_contact_grid, seg_dist2
 
 BIG = 1e30
 # Clearance kept between non-adjacent segments (units of L). The hard core pushes contacts to

@@ -30,11 +30,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from crosssection import schema
-from crosssection.errors import ConfigError, ParameterError
-from crosssection.fileio import write_csv, write_json
+from crosssection.core import schema
+from crosssection.core.errors import ConfigError, ParameterError
+from crosssection.core.fileio import write_csv, write_json
 
-from .contacts import RodAnalysis, analyze_rod
+from simulate.contacts import RodAnalysis, analyze_rod
 
 __all__ = ["RenderedScene", "default_calibration", "render_configuration", "write_scene",
            "render_directory", "add_subparser"]
@@ -74,7 +74,7 @@ def _width_fn(calibration, thickness_mm):
 
 @dataclass
 class RenderedScene:
-    """A rendered configuration: the scan and its truth in :mod:`crosssection.schema`."""
+    """A rendered configuration: the scan and its truth in :mod:`crosssection.core.schema`."""
 
     rgb: np.ndarray
     summary: dict
@@ -111,11 +111,11 @@ def _point_at_half(p):
 def _loop_mid(p):
     """Mid point of a closed line started at its raster-first point (min row, then min col).
 
-    A junction-free closed loop has no natural start; the pipeline (``crosssection.graph``)
+    A junction-free closed loop has no natural start; the pipeline (``crosssection.stages.graph``)
     starts its path at the first skeleton pixel in raster order and takes the point at half
     the length (``pipeline._mid_points``). The half-way point does not depend on the
     direction, so starting the truth line at the same place makes the two mid points agree
-    (``crosssection.scoring`` matches stacks by mid point).
+    (``crosssection.truth.scoring`` matches stacks by mid point).
     """
     q = np.asarray(p, float)[:-1]
     row = np.round(q[:, 1])
@@ -178,7 +178,7 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
     import cv2
     from scipy import ndimage
 
-    from crosssection.voids import contour_perimeter_px
+    from crosssection.stages.voids import contour_perimeter_px
 
     xy = np.asarray(xy, float)
     if analysis is None:
@@ -388,7 +388,7 @@ def write_scene(scene: RenderedScene, folder) -> Path:
     """Write the scene folder of docs/design.md: image.png, params.json, calibration.csv, truth/."""
     import cv2
 
-    from crosssection.fileio import atomic_path
+    from crosssection.core.fileio import atomic_path
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)

@@ -3,7 +3,7 @@
 ``python -m simulate validate SCENES --out REPORT`` runs ``crosssection.analyze`` on every scene
 folder of SCENES (``image.png``, ``params.json``, ``calibration.csv``, ``truth/``; written by
 ``python -m simulate render``), scores it against the truth with
-``crosssection.scoring.score`` and writes ``REPORT/scores.csv`` (one row per scene),
+``crosssection.truth.scoring.score`` and writes ``REPORT/scores.csv`` (one row per scene),
 ``REPORT/summary.json`` (means over the scored scenes) and ``REPORT/failures.csv`` (one line
 per scene that could not be analysed: the run goes on).
 """
@@ -15,12 +15,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from crosssection.errors import ConfigError, FoldstatError
-from crosssection.fileio import write_csv, write_json
+from crosssection.core.errors import ConfigError, FoldstatError
+from crosssection.core.fileio import write_csv, write_json
 
 __all__ = ["validate_scenes", "score_scene", "add_subparser"]
 
-# the columns the issue asks for, first in scores.csv (crosssection.scoring names)
+# the columns the issue asks for, first in scores.csv (crosssection.truth.scoring names)
 KEY_COLUMNS = ["scene", "rod_length_rel_error", "n_branches_rel_error", "junction_precision",
                "junction_recall", "n_br_exact_length_fraction", "n_voids_rel_error",
                "void_area_mean_rel_error", "total_energy_rel_error"]
@@ -38,10 +38,10 @@ def score_scene(scene_dir, *, match_px: float | None = None) -> dict:
     Returns
     -------
     dict
-        The scores of :func:`crosssection.scoring.score` plus ``scene`` and ``analyze_s``.
+        The scores of :func:`crosssection.truth.scoring.score` plus ``scene`` and ``analyze_s``.
     """
-    from crosssection import schema
-    from crosssection.scoring import analyze_scene_folder, score
+    from crosssection.core import schema
+    from crosssection.truth.scoring import analyze_scene_folder, score
 
     scene_dir = Path(scene_dir)
     truth_dir = scene_dir / "truth"

@@ -3,10 +3,10 @@
 properties"): maximum-likelihood fits with detection limits, the paper's tables and
 relations, and an HTML report (``python -m crosssection stats``).
 """
-from .data import Ensemble, detect_kind, load_any, load_batch, load_image_output, load_simulation
-from .fits import (FAMILIES, FitResult, FitSummary, bootstrap_ci, fit_all, fit_family,
+from crosssection.stats.data import Ensemble, detect_kind, load_any, load_batch, load_image_output, load_simulation
+from crosssection.stats.fits import (FAMILIES, FitResult, FitSummary, bootstrap_ci, fit_all, fit_family,
                    goodness_of_fit, select_model, truncation_bias)
-from .tables import StatsOptions, StatsResult, compute_stats
+from crosssection.stats.tables import StatsOptions, StatsResult, compute_stats
 
 __all__ = ["Ensemble", "detect_kind", "load_any", "load_batch", "load_image_output",
            "load_simulation", "FAMILIES", "FitResult", "FitSummary", "bootstrap_ci", "fit_all",

@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..errors import ParameterError
+from crosssection.core.errors import ParameterError
 
 
 def add_subparser(subparsers) -> argparse.ArgumentParser:
@@ -41,9 +41,9 @@ def add_subparser(subparsers) -> argparse.ArgumentParser:
 
 def run(args) -> int:
     """Load every DIR, compute the statistics and write the report."""
-    from .data import Ensemble, load_any
-    from .report import write_report
-    from .tables import StatsOptions
+    from crosssection.stats.data import Ensemble, load_any
+    from crosssection.stats.report import write_report
+    from crosssection.stats.tables import StatsOptions
 
     if args.name and len(args.name) != len(args.dirs):
         raise ParameterError(f"--name given {len(args.name)} times for {len(args.dirs)} DIRs")

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..errors import ConfigError
+from crosssection.core.errors import ConfigError
 
 CONFIG_COLS = ["set", "config_id", "N_l", "N_br", "n_voids", "epsilon", "E", "rod_length_mm",
                "source"]

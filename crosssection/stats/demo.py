@@ -1,7 +1,7 @@
 """Synthetic inputs of known statistics for the ``stats`` subcommand (tests, benchmarks, demos).
 
 ``write_demo_batch`` writes a batch output (``index.csv`` and ``<set>/<stem>/`` folders in the
-schema of :mod:`crosssection.schema`, lengths in mm); ``write_demo_simulation`` writes a
+schema of :mod:`crosssection.core.schema`, lengths in mm); ``write_demo_simulation`` writes a
 ``simulate quench`` ensemble (``configs.csv``, ``branches.csv``, ``voids.csv``, units of L).
 The laws are the paper's: exponential branch lengths (experiments) above l_min, Gamma branch
 energies, log-normal void areas above s_min, Gaussian shape ratios, n_br >= 1 with geometric
@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..fileio import write_csv
-from ..schema import write_tables
+from crosssection.core.fileio import write_csv
+from crosssection.core.schema import write_tables
 
 
 def _trunc_exp(rng, mu, cut, n):

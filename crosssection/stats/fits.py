@@ -42,7 +42,7 @@ import numpy as np
 import pandas as pd
 from scipy import optimize, special, stats
 
-from ..errors import ParameterError
+from crosssection.core.errors import ParameterError
 
 DELTA_BIC_SIMPLER = 2.0
 FAMILIES = ("exponential", "gamma", "lognormal", "gaussian", "bose_einstein")

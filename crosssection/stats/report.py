@@ -17,11 +17,11 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from .._version import __version__  # noqa: E402
-from ..fileio import save_figure, write_csv, write_json, write_text  # noqa: E402
-from . import fits as F  # noqa: E402
-from .data import Ensemble  # noqa: E402
-from .tables import (EQ1_CONST, QUANTITIES, StatsOptions, StatsResult,  # noqa: E402
+from crosssection._version import __version__  # noqa: E402
+from crosssection.core.fileio import save_figure, write_csv, write_json, write_text  # noqa: E402
+from crosssection.stats import fits as F  # noqa: E402
+from crosssection.stats.data import Ensemble  # noqa: E402
+from crosssection.stats.tables import (EQ1_CONST, QUANTITIES, StatsOptions, StatsResult,  # noqa: E402
                      compute_stats, regions_of, to_markdown)
 
 REGION_COLOR = {"all": "black", "bulk": "tab:green", "periphery": "tab:red"}

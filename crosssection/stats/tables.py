@@ -23,8 +23,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from . import fits as F
-from .data import SIM_REGION, Ensemble
+from crosssection.stats import fits as F
+from crosssection.stats.data import SIM_REGION, Ensemble
 
 EQ1_CONST = 2 * np.sqrt(np.pi) / np.sqrt(3)  # Eq. 1: N_br = (2 sqrt(pi)/sqrt(3)) eps (sqrt(s)/l) sqrt(N_l)
 EQ5_PAPER = 2.2 * np.sqrt(np.pi / 3)  # Eq. 5

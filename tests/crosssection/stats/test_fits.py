@@ -1,0 +1,187 @@
+"""Maximum-likelihood fits, bootstrap intervals, goodness of fit, model selection, truncation."""
+import numpy as np
+import pytest
+from scipy import integrate, stats
+
+from crosssection.core.errors import ParameterError
+from crosssection.stats import fits as F
+
+TRUE = {
+    "exponential": {"mu": 2.5e-3},
+    "gamma": {"alpha": 0.4, "chi": 0.12},
+    "lognormal": {"mu": -9.0, "sigma": 1.2},
+    "gaussian": {"mu": 0.19, "sigma": 0.037},
+}
+BE_TRUE = {"beta": 3.0, "x_lo": 0.01, "x_hi": 2.0}
+
+
+def draw(family, n, rng):
+    if family == "bose_einstein":
+        return F.be_ppf(rng.uniform(size=n), BE_TRUE["beta"], BE_TRUE["x_lo"], BE_TRUE["x_hi"])
+    return F.scipy_dist(family, TRUE[family]).rvs(size=n, random_state=rng)
+
+
+@pytest.mark.parametrize("beta,lo,hi", [(3.0, 0.01, 2.0), (0.002, 1.0, 5000.0), (50.0, 1e-4, 0.3)])
+def test_bose_einstein_normalisation_cdf_ppf(beta, lo, hi):
+    z = integrate.quad(lambda e: 1 / np.expm1(beta * e), lo, hi, limit=200, points=[lo * 10])[0]
+    assert np.exp(F.be_log_norm(beta, lo, hi)) == pytest.approx(z, rel=1e-6)
+    u = np.linspace(0.01, 0.99, 7)
+    x = F.be_ppf(u, beta, lo, hi)
+    assert np.all((x >= lo) & (x <= hi))
+    np.testing.assert_allclose(F.be_cdf(x, beta, lo, hi), u, rtol=1e-9, atol=1e-12)
+    # density integrates to one
+    tot = integrate.quad(lambda e: np.exp(F.be_logpdf(e, beta, lo, hi)), lo, hi, limit=200,
+                         points=[lo * 10])[0]
+    assert tot == pytest.approx(1.0, rel=1e-6)
+
+
+@pytest.mark.parametrize("family", ["exponential", "gamma", "lognormal", "gaussian",
+                                    "bose_einstein"])
+def test_bootstrap_interval_covers_truth_at_nominal_rate(family):
+    # 95% percentile intervals from n = 300 samples; 24 replicates (fail if < 19 cover:
+    # P(X <= 18 | p = 0.95) ~ 1e-3)
+    rng = np.random.default_rng(sum(map(ord, family)))
+    truth = BE_TRUE if family == "bose_einstein" else TRUE[family]
+    cover, reps = 0, 24
+    for i in range(reps):
+        x = draw(family, 300, rng)
+        r = F.fit_family(x, family, n_boot=80 if family == "bose_einstein" else 150,
+                         seed=i, gof=False)
+        key = "beta" if family == "bose_einstein" else F.PARAM_NAMES[family][-1]
+        lo, hi = r.ci[key]
+        cover += lo <= truth[key] <= hi
+        # point estimate sits inside its own interval
+        assert lo <= r.params[key] <= hi
+    assert cover >= 19, f"{family}: {cover}/{reps}"
+
+
+def test_gamma_parameters_in_paper_notation():
+    rng = np.random.default_rng(7)
+    x = rng.gamma(2.5, 14.8, 5000)
+    r = F.fit_family(x, "gamma", n_boot=0, gof=False)
+    assert r.params["alpha"] == pytest.approx(2.5, rel=0.06)
+    assert r.params["chi"] == pytest.approx(14.8, rel=0.06)  # chi is the scale, mean = alpha chi
+    assert r.params["alpha"] * r.params["chi"] == pytest.approx(x.mean(), rel=1e-3)
+
+
+@pytest.mark.parametrize("family", ["exponential", "gamma", "lognormal", "gaussian",
+                                    "bose_einstein"])
+def test_model_selection_picks_generating_family(family):
+    rng = np.random.default_rng(1000 + len(family))
+    hits = 0
+    for i in range(10):
+        x = draw(family, 1000, rng)
+        hits += F.fit_all(x, seed=i, n_boot=0, gof=False).best == family
+    assert hits >= 9, f"{family}: {hits}/10"
+
+
+def test_select_model_prefers_fewer_parameters_within_two_bic():
+    def res(f, bic, k):
+        return F.FitResult(f, {}, 0.0, 0.0, bic, 100, k)
+
+    assert F.select_model({"exponential": res("exponential", 101.5, 1),
+                           "gamma": res("gamma", 100.0, 2)}) == "exponential"
+    assert F.select_model({"exponential": res("exponential", 102.5, 1),
+                           "gamma": res("gamma", 100.0, 2)}) == "gamma"
+    bad = res("lognormal", -1e9, 2)
+    bad.ok = False
+    assert F.select_model({"gamma": res("gamma", 100.0, 2), "lognormal": bad}) == "gamma"
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_truncated_exponential_mean_minus_cut_is_mu(seed):
+    rng = np.random.default_rng(seed)
+    mu, cut = 2.0, rng.uniform(0.5, 3.0)
+    x = rng.exponential(mu, 4000)
+    x = x[x >= cut]
+    r = F.fit_family(x, "exponential", truncation=cut, n_boot=200, seed=seed, gof=False)
+    assert r.params["mu"] == pytest.approx(x.mean() - cut, rel=1e-12)  # paper's note
+    lo, hi = r.ci["mu"]
+    assert lo <= mu <= hi
+    naive = F.fit_family(x, "exponential", n_boot=0, gof=False)
+    assert naive.params["mu"] > hi  # the naive fit is biased by the cut
+
+
+@pytest.mark.parametrize("family,truth,cut", [
+    ("gamma", {"alpha": 0.8, "chi": 2.0}, 0.8),
+    ("lognormal", {"mu": 0.0, "sigma": 1.0}, 0.7),
+])
+def test_truncation_aware_fit_removes_naive_bias(family, truth, cut):
+    rng = np.random.default_rng(11)
+    x = F.scipy_dist(family, truth).rvs(size=6000, random_state=rng)
+    x = x[x >= cut]
+    tb = F.truncation_bias(x, cut, families=(family,), n_boot=60, seed=3)
+    for _, row in tb.iterrows():
+        t = truth[row["param"]]
+        assert row["truncated_lo"] <= t <= row["truncated_hi"], row.to_dict()
+        # naive estimate lies outside the truncation-aware interval and is farther from truth
+        assert not (row["truncated_lo"] <= row["naive"] <= row["truncated_hi"])
+        assert abs(row["naive"] - t) > 3 * abs(row["truncated"] - t)
+
+
+def test_per_observation_cuts():
+    # images of different rod lengths: l_min/L differs from image to image
+    rng = np.random.default_rng(5)
+    xs, cs = [], []
+    for L in rng.uniform(1000, 3000, 12):
+        c = 1.0 / L
+        x = rng.gamma(0.8, 4e-3, 800)
+        x = x[x >= c]
+        xs.append(x)
+        cs.append(np.full(x.size, c))
+    x, c = np.concatenate(xs), np.concatenate(cs)
+    r = F.fit_family(x, "gamma", truncation=c, n_boot=40, seed=1, gof=False)
+    assert r.ci["alpha"][0] <= 0.8 <= r.ci["alpha"][1]
+    e = F.fit_family(x, "exponential", truncation=c, n_boot=0, gof=False)
+    assert e.params["mu"] == pytest.approx(np.mean(x - c))
+    with pytest.raises(ParameterError):
+        F.fit_family(x, "gamma", truncation=c[:-1])
+    with pytest.raises(ParameterError):
+        F.fit_family(x - 1.0, "gaussian", truncation=c)
+
+
+def test_goodness_of_fit_rejects_wrong_law_and_matches_scipy_path():
+    rng = np.random.default_rng(3)
+    x = rng.lognormal(0.0, 1.0, 400)
+    wrong = F.fit_family(x, "exponential", n_boot=0, n_mc=49, seed=1)
+    right = F.fit_family(x, "lognormal", n_boot=0, n_mc=49, seed=1)
+    assert wrong.pvalue <= 0.02
+    assert right.pvalue > 0.02
+    # the hand-written parametric bootstrap (used for truncated fits) with a cut of 0 is the
+    # same test as scipy.stats.goodness_of_fit: same statistic, compatible p-value
+    cut0 = F.fit_family(x, "lognormal", truncation=0.0, n_boot=0, n_mc=49, seed=1)
+    assert cut0.statistic == pytest.approx(right.statistic, rel=1e-6)
+    assert abs(cut0.pvalue - right.pvalue) < 0.3
+
+
+def test_truncated_gof_detects_wrong_law():
+    rng = np.random.default_rng(9)
+    x = rng.lognormal(0.0, 0.6, 1500)
+    x = x[x >= 0.5]
+    r = F.fit_family(x, "exponential", truncation=0.5, n_boot=0, n_mc=39, seed=2)
+    assert r.pvalue <= 0.05
+    ok = F.fit_family(x, "lognormal", truncation=0.5, n_boot=0, n_mc=39, seed=2)
+    assert ok.pvalue > 0.05
+
+
+def test_fit_all_table_and_drops():
+    rng = np.random.default_rng(4)
+    x = np.concatenate([rng.exponential(1.0, 300), [np.nan]])
+    s = F.fit_all(x, truncation=0.1, seed=0, n_boot=20, n_mc=19)
+    assert s.n_dropped == 1 + int(np.sum(x[:-1] < 0.1))
+    t = s.table
+    assert set(t["family"]) == set(F.FAMILIES)
+    assert t["selected"].sum() == 1 and t.loc[t["selected"], "family"].item() == s.best
+    assert t["delta_bic"].min() == 0.0
+    assert (t.loc[t["family"] == "bose_einstein", "k"] == 2).all()  # beta + x_hi with a cut
+    # positive laws do not apply to non-positive data
+    y = rng.normal(0.0, 1.0, 200)
+    s2 = F.fit_all(y, seed=0, n_boot=0, gof=False)
+    assert s2.best == "gaussian" and not s2.results["gamma"].ok
+
+
+def test_seeded_results_are_reproducible():
+    x = np.random.default_rng(8).gamma(0.5, 1.0, 300)
+    a = F.fit_family(x, "gamma", n_boot=30, n_mc=19, seed=42)
+    b = F.fit_family(x, "gamma", n_boot=30, n_mc=19, seed=42)
+    assert a.ci == b.ci and a.pvalue == b.pvalue

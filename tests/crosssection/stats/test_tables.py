@@ -1,0 +1,213 @@
+"""Loading batch outputs and simulation ensembles; the paper's tables, relations, correlations."""
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from crosssection.core.errors import ConfigError
+from crosssection.core.schema import write_tables
+from crosssection.stats import data as D
+from crosssection.stats import demo
+from crosssection.stats import tables as T
+
+FAST = T.StatsOptions(seed=0, n_boot=0, gof=False)
+
+
+def _image(folder, *, L, lengths_mm, kappa_m, energy, regions, stack_of, n_br, areas_mm2,
+           ratios, epsilon=10.0):
+    nst = len(n_br)
+    stacks = pd.DataFrame({"stack_id": range(nst), "junction_a": -1, "junction_b": -1,
+                           "length_mm": 5.0, "width_mm": 0.1, "n_br": n_br,
+                           "region": [regions[list(stack_of).index(i)] for i in range(nst)],
+                           "mid_x_px": 0.0, "mid_y_px": 0.0})
+    nb = len(lengths_mm)
+    branches = pd.DataFrame({"branch_id": range(nb), "stack_id": stack_of,
+                             "length_mm": lengths_mm, "kappa_pm": -np.asarray(kappa_m),
+                             "kappa_plus": kappa_m, "kappa_m": kappa_m, "energy": energy,
+                             "region": regions})
+    voids = pd.DataFrame({"void_id": range(len(areas_mm2)), "area_mm2": areas_mm2,
+                          "perimeter_mm": np.sqrt(areas_mm2) / np.asarray(ratios),
+                          "shape_ratio": ratios, "n_edges": 4, "centroid_x_px": 0.0,
+                          "centroid_y_px": 0.0})
+    summary = {"n_junctions": 0, "n_stacks": nst, "n_branches": nb, "n_voids": len(areas_mm2),
+               "mean_branches_per_stack": nb / nst, "rod_length_mm": L, "epsilon": epsilon,
+               "total_energy": float(np.sum(energy)), "hole": None, "timings_s": {}}
+    write_tables(folder, summary, {"stacks": stacks, "branches": branches, "voids": voids})
+
+
+def test_image_units_are_normalised_by_rod_length(tmp_path):
+    _image(tmp_path / "b" / "setA" / "img0", L=1000.0, lengths_mm=[10.0, 20.0, 30.0],
+           kappa_m=[0.5, 0.25, 0.1], energy=[5.0, 6.0, 7.0],
+           regions=["bulk", "bulk", "periphery"], stack_of=[0, 0, 1], n_br=[2, 1],
+           areas_mm2=[4.0, 9.0], ratios=[0.2, 0.18])
+    assert D.detect_kind(tmp_path / "b") == "batch"
+    assert D.detect_kind(tmp_path / "b" / "setA" / "img0") == "image"
+    ens = D.load_any(tmp_path / "b", l_min_mm=1.0, s_min_mm2=1.0)
+    assert ens.sets == ["setA"]
+    br = ens.branches
+    np.testing.assert_allclose(br["length_L"], [0.01, 0.02, 0.03])
+    np.testing.assert_allclose(br["kappa_m_L"], [500.0, 250.0, 100.0])
+    np.testing.assert_allclose(br["l_min_L"], 1e-3)
+    assert list(br["n_br"]) == [2, 2, 1]
+    np.testing.assert_allclose(ens.voids["area_L2"], [4e-6, 9e-6])
+    np.testing.assert_allclose(ens.voids["s_min_L2"], 1e-6)
+    m = T.macro_table(ens).set_index("region")
+    assert m.loc["all", "N_l"] == 2 and m.loc["all", "N_br"] == 3
+    assert m.loc["all", "n_br"] == 1.5
+    assert m.loc["all", "s_L2"] == pytest.approx(6.5e-6)
+    assert m.loc["all", "sqrt_s_over_p"] == pytest.approx(0.19)
+    assert m.loc["all", "l_L"] == pytest.approx(0.02)
+    assert m.loc["bulk", "N_br"] == 2 and m.loc["periphery", "l_L"] == pytest.approx(0.03)
+
+
+def test_simulation_ensemble_is_read_in_units_of_L(tmp_path):
+    sim = tmp_path / "sim"
+    sim.mkdir()
+    pd.DataFrame({"config_id": [0, 1], "seed": 1, "rg": 0.06, "epsilon": [2.2, 2.4],
+                  "energy_total": [4000.0, 4600.0], "energy_bending": 0.0,
+                  "energy_confinement": 0.0, "n_stacks": [10, 12], "n_branches": [20, 25],
+                  "n_voids": [3, 4], "method": "powell", "wall_s": 1.0}).to_csv(
+        sim / "configs.csv", index=False)
+    pd.DataFrame({"config_id": [0, 0, 1], "branch_id": [0, 1, 0], "length": [0.1, 0.2, 0.05],
+                  "kappa_plus": [30.0, 40.0, 20.0], "kappa_pm": [-30.0, 10.0, 20.0],
+                  "energy_bending": 1.0, "energy_confinement": 1.0,
+                  "energy": [200.0, 300.0, 100.0]}).to_csv(sim / "branches.csv", index=False)
+    pd.DataFrame({"config_id": [0, 1], "area": [1e-3, 2e-3], "perimeter": [0.2, 0.3],
+                  "shape_ratio": [0.16, 0.15], "n_edges": [4, 5]}).to_csv(
+        sim / "voids.csv", index=False)
+    assert D.detect_kind(sim) == "simulation"
+    ens = D.load_any(sim)
+    assert ens.sets == ["sim"]
+    np.testing.assert_allclose(ens.branches["kappa_m_L"], [30.0, 10.0, 20.0])  # |kappa_pm|
+    np.testing.assert_allclose(ens.branches["length_L"], [0.1, 0.2, 0.05])
+    assert ens.branches["l_min_L"].isna().all()
+    assert T.regions_of(ens) == ["all"]
+    m = T.macro_table(ens)
+    assert list(m["region"]) == ["all"]
+    assert m["N_l"].item() == 11 and m["N_br"].item() == 22.5
+    # a missing column is reported with its file
+    pd.DataFrame({"config_id": [0]}).to_csv(sim / "voids.csv", index=False)
+    with pytest.raises(ConfigError) as ei:
+        D.load_any(sim)
+    assert "voids.csv" in ei.value.one_line() and "area" in ei.value.one_line()
+
+
+def test_batch_skips_staging_folders_and_failed_rows(tmp_path):
+    b = demo.write_demo_batch(tmp_path / "b", n_images=2, seed=4, sets={"s": {"n_stacks": 10}})
+    n_ok = len(D.load_any(b).configs)
+    # an interrupted batch leaves a hidden staging copy holding a summary.json
+    import shutil
+
+    shutil.copytree(b / "s" / "img000", b / "s" / ".img000.partial-abc")
+    idx = pd.read_csv(b / "index.csv")
+    idx.loc[1, "status"] = "failed"
+    idx.to_csv(b / "index.csv", index=False)
+    assert len(D.load_any(b).configs) == n_ok - 1  # the index decides
+    (b / "index.csv").unlink()
+    ens = D.load_any(b)  # without index: glob, hidden folders ignored
+    assert sorted(ens.configs["config_id"]) == ["img000", "img001"]
+
+
+def test_unrecognised_folder(tmp_path):
+    with pytest.raises(ConfigError):
+        D.detect_kind(tmp_path)
+    with pytest.raises(ConfigError):
+        D.detect_kind(tmp_path / "missing")
+    (tmp_path / "x").mkdir()
+    (tmp_path / "x" / "summary.json").write_text(json.dumps({"rod_length_mm": None}))
+    with pytest.raises(ConfigError, match="rod_length_mm"):
+        D.load_any(tmp_path / "x")
+
+
+def _relations_ensemble(rng, n=25, slope=1.1, nbr=3.0):
+    """Configurations built to satisfy sqrt(s_bar) = slope l_bar and N_br = nbr N_l exactly."""
+    cfg, br, vo, st = [], [], [], []
+    for k in range(n):
+        n_l = int(rng.integers(10, 60))
+        n_br = int(nbr * n_l)
+        l_bar = rng.uniform(2e-3, 1e-2)
+        s_bar = (slope * l_bar) ** 2
+        eps = rng.uniform(5, 20)
+        cfg.append({"set": "X", "config_id": str(k), "N_l": n_l, "N_br": n_br, "n_voids": 2,
+                    "epsilon": eps, "E": rng.gamma(10, 100), "rod_length_mm": np.nan,
+                    "source": ""})
+        ln = np.full(n_br, l_bar)
+        km = rng.uniform(10, 100, n_br)
+        br.append(pd.DataFrame({"set": "X", "config_id": str(k), "length_L": ln,
+                                "kappa_m_L": km, "kappa_plus_L": km, "e": ln * km ** 2,
+                                "region": "none", "n_br": nbr, "l_min_L": np.nan}))
+        vo.append(pd.DataFrame({"set": "X", "config_id": str(k),
+                                "area_L2": [0.5 * s_bar, 1.5 * s_bar], "perimeter_L": 1.0,
+                                "shape_ratio": 0.18, "n_edges": 4, "s_min_L2": np.nan}))
+        st.append(pd.DataFrame({"set": "X", "config_id": str(k), "n_br": np.full(n_l, nbr),
+                                "length_L": 0.01, "region": "none"}))
+    return D.Ensemble(pd.DataFrame(cfg), pd.concat(br, ignore_index=True),
+                      pd.concat(st, ignore_index=True), pd.concat(vo, ignore_index=True))
+
+
+@pytest.mark.parametrize("seed,slope,nbr", [(0, 1.1, 3.0), (1, 0.8, 2.0)])
+def test_relations_recover_constants(seed, slope, nbr):
+    ens = _relations_ensemble(np.random.default_rng(seed), slope=slope, nbr=nbr)
+    pc = T.per_config_table(ens)
+    rel = T.relations_table(ens, pc, {}).set_index("relation")
+    assert rel.loc["slope_sqrt_s_vs_l", "fitted"] == pytest.approx(slope, rel=1e-9)
+    assert rel.loc["eq3_slope", "fitted"] == pytest.approx(nbr, rel=1e-9)
+    assert rel.loc["eq3_slope", "expected"] == pytest.approx(nbr)
+    assert rel.loc["eq4_fluct", "fitted"] == pytest.approx(0.0, abs=1e-12)
+    want5 = nbr * np.sqrt(pc["N_l"].mean()) / pc["epsilon"].mean()
+    assert rel.loc["eq5", "fitted"] == pytest.approx(want5)
+    # Eq. 1 with data built from it: N_br = C eps sqrt(s)/l sqrt(N_l)
+    pc2 = pc.copy()
+    pc2["N_br"] = T.EQ1_CONST * pc2["eq1_x"]
+    c, r2, _ = T.slope_through_origin(pc2["eq1_x"], pc2["N_br"])
+    assert c == pytest.approx(T.EQ1_CONST) and r2 == pytest.approx(1.0)
+
+
+def test_correlations_and_micro_gamma_fits():
+    rng = np.random.default_rng(2)
+    ens = _relations_ensemble(rng, n=40)
+    cor = T.correlations_table(ens).set_index("pair")
+    # e = l kappa_m^2 exactly, so r = 1
+    assert cor.loc["e_vs_l_kappa_m2", "pearson_r"] == pytest.approx(1.0)
+    assert cor.loc["E_vs_N_br", "paper"] == 0.75
+    # branch energies from a known Gamma law: alpha_e recovered; dof ratio consistent
+    ens.branches["e"] = rng.gamma(0.31, 728.0, len(ens.branches))
+    res = T.compute_stats(ens, T.StatsOptions(n_boot=0, gof=False,
+                                              quantities=("e", "E", "length_L")))
+    mic = res.micro.set_index("region").loc["all"]
+    assert mic["alpha_e"] == pytest.approx(0.31, rel=0.08)
+    assert mic["chi_e"] == pytest.approx(728.0, rel=0.12)
+    dof = res.dof.iloc[0]
+    assert dof["alpha_E_over_alpha_e"] == pytest.approx(dof["alpha_E"] / dof["alpha_e"])
+    assert res.fits.groupby(["quantity"])["selected"].sum().eq(1).all()
+
+
+def test_demo_batch_tables_bulk_periphery_and_truncation(tmp_path):
+    demo.write_demo_batch(tmp_path / "b", n_images=4, seed=3,
+                          sets={"s1": {"n_stacks": 50, "nbr_mean": 3.0, "length_mu_L": 4e-3}})
+    ens = D.load_any(tmp_path / "b")
+    res = T.compute_stats(ens, T.StatsOptions(n_boot=20, gof=False,
+                                              quantities=("length_L", "n_br", "e")))
+    assert set(res.macro["region"]) == {"all", "bulk", "periphery"}
+    m = res.macro.set_index("region")
+    # bulk + periphery partition the branches
+    assert m.loc["bulk", "N_br"] + m.loc["periphery", "N_br"] == pytest.approx(m.loc["all", "N_br"])
+    f = res.fits[(res.fits["quantity"] == "length_L") & (res.fits["region"] == "all")]
+    assert f["truncated"].all()
+    exp = f[f["family"] == "exponential"].iloc[0]
+    assert exp["p1_lo"] <= 4e-3 <= exp["p1_hi"]  # generated mu (units of L) recovered
+    tr = res.truncation[(res.truncation["family"] == "exponential")
+                        & (res.truncation["region"] == "all")].iloc[0]
+    assert tr["naive"] > tr["truncated"]  # naive fit biased upward by l_min
+    assert tr["mean_minus_cut"] == pytest.approx(tr["truncated"])
+    # N_br = sum of n_br over stacks, so Eq. 3 holds exactly per configuration
+    rel = res.relations.set_index("relation")
+    assert rel.loc["eq3_slope", "r2"] == pytest.approx(1.0, abs=0.2)
+
+
+def test_to_markdown():
+    md = T.to_markdown(pd.DataFrame({"a": [1.23456789, np.nan], "b": ["x|y", "z"]}))
+    lines = md.strip().splitlines()
+    assert lines[0] == "| a | b |" and lines[1] == "|---|---|"
+    assert lines[2] == "| 1.235 | x\\|y |" and lines[3] == "|  | z |"

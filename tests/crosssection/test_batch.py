@@ -1,0 +1,253 @@
+"""Batch processing: set.toml, discovery, failures, resume, atomic outputs, CLI.
+
+The end-to-end tests run the real pipeline (``crosssection.analyze``) on small generated scans
+(``crosssection.testing``).
+"""
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from crosssection import batch as B
+from crosssection.core.errors import ConfigError
+from crosssection.setconfig import check_params, load_set_config
+from crosssection.testing import generated_scan as draw_scan
+from crosssection.testing import index_numbers as numbers
+from crosssection.testing import make_scan_tree as make_tree
+from crosssection.testing import partial_outputs as leftovers
+from crosssection.testing import write_calibration as write_cal
+from crosssection.testing import write_png as save_png
+
+
+
+# ----------------------------------------------------------------------------- helpers
+
+
+# ----------------------------------------------------------------------------- set.toml
+
+
+def test_set_toml_valid_with_override(tmp_path):
+    write_cal(tmp_path / "c" / "cal.csv")
+    (tmp_path / "x.png").write_bytes(b"")
+    (tmp_path / "set.toml").write_text(
+        'name = "run-1"\npx_per_mm = 40\nthickness_mm = 0.12\nhole_radius_mm = 20\n'
+        'calibration = "c/cal.csv"\nkappa_c_per_mm = 3.5\nbending_rigidity_J = 2e-4\n'
+        '[images."x.png"]\nhole_radius_mm = 19.5\npx_per_mm = 41\n')
+    cfg = load_set_config(tmp_path / "set.toml", defaults={"px_per_mm": 50.0, "rod_length_mm": 9})
+    assert cfg.name == "run-1" and cfg.error is None and cfg.warnings == []
+    assert cfg.params["px_per_mm"] == 40.0 and cfg.params["rod_length_mm"] == 9.0
+    assert Path(cfg.params["calibration"]) == (tmp_path / "c" / "cal.csv").resolve()
+    p = cfg.params_for(tmp_path / "x.png")
+    assert p["hole_radius_mm"] == 19.5 and p["px_per_mm"] == 41.0
+    assert p["thickness_mm"] == 0.12 and p["kappa_c_per_mm"] == 3.5
+
+
+@pytest.mark.parametrize("text, word", [
+    ('px_per_m = 50\n', "unknown key"),
+    ('px_per_mm = -3\n', "> 0"),
+    ('thickness_mm = "thin"\n', "must be a number"),
+    ('name = "../escape"\n', "name"),
+    ('px_per_mm = 50\n[images."a.png"]\nfoo = 1\n', "foo"),
+    ('calibration = "nowhere.csv"\n', "not found"),
+    ('hole_center_px = [1, 2, 3]\n', "[x, y]"),
+    ('this is = = not toml\n', "invalid TOML"),
+])
+def test_set_toml_errors_are_clear(tmp_path, text, word):
+    (tmp_path / "set.toml").write_text(text)
+    with pytest.raises(ConfigError) as err:
+        load_set_config(tmp_path / "set.toml")
+    msg = err.value.one_line()
+    assert word in msg and "set.toml" in msg and "\n" not in msg
+
+
+def test_calibration_columns_checked(tmp_path):
+    (tmp_path / "cal.csv").write_text("layers,w\n1,0.1\n")
+    (tmp_path / "set.toml").write_text('calibration = "cal.csv"\n')
+    with pytest.raises(ConfigError, match="n_layers"):
+        load_set_config(tmp_path / "set.toml")
+
+
+def test_override_naming_no_image_is_a_warning(tmp_path):
+    (tmp_path / "set.toml").write_text('[images."ghost.png"]\npx_per_mm = 30\n')
+    cfg = load_set_config(tmp_path / "set.toml")
+    assert cfg.error is None and any("ghost.png" in w for w in cfg.warnings)
+
+
+def test_cli_params_checked():
+    assert check_params({"px_per_mm": 20, "hole_radius_mm": None}) == {"px_per_mm": 20.0}
+    with pytest.raises(ConfigError):
+        check_params({"thickness_mm": 0})
+
+
+# ----------------------------------------------------------------------------- planning
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_plan_assigns_sets_seeds_and_outputs(tmp_path, seed):
+    inp, out = tmp_path / "in", tmp_path / "in" / "results"  # output inside the input
+    make_tree(inp, seed)
+    save_png(inp / "setA" / "s0.tif", draw_scan(seed))          # stem collision with s0.png
+    save_png(out / "alpha" / "s0" / "overlay.png", draw_scan(seed))  # must not be picked up
+    tasks, sets = B.plan_batch(inp, out, seed=seed)
+    by = {t.rel: t for t in tasks}
+    assert "results/alpha/s0/overlay.png" not in by
+    assert by["setA/sub/s2.png"].set_name == "alpha"
+    assert by["loose.png"].set_name == "default" and by["loose.png"].params["px_per_mm"] == 50
+    assert by["setA/s1.png"].params["rod_length_mm"] == 200.0
+    assert "rod_length_mm" not in by["setA/s0.png"].params
+    assert by["badset/b0.png"].error and "px_per_mm" in by["badset/b0.png"].error
+    assert by["nocal/c0.png"].error and "missing.csv" in by["nocal/c0.png"].error
+    outs = [t.out_rel for t in tasks]
+    assert len(set(outs)) == len(outs)                        # collisions disambiguated
+    assert by["setA/s0.png"].out_rel != by["setA/s0.tif"].out_rel
+    assert by["setA/s1.png"].out_rel == "alpha/s1"
+    # seeds: one per task from SeedSequence.spawn, distinct, and the same on a re-plan
+    seeds = [t.seed for t in tasks]
+    assert len(set(seeds)) == len(seeds)
+    assert seeds == [t.seed for t in B.plan_batch(inp, out, seed=seed)[0]]
+    assert seeds != [t.seed for t in B.plan_batch(inp, out, seed=seed + 100)[0]]
+    # the hash follows the image content and the parameters
+    h0 = by["setA/s0.png"].params_hash
+    save_png(inp / "setA" / "s0.png", draw_scan(seed + 7))
+    assert B.plan_batch(inp, out, seed=seed)[0][tasks.index(by["setA/s0.png"])].params_hash != h0
+    t2 = {t.rel: t for t in B.plan_batch(inp, out, seed=seed, cli_params={"px_per_mm": 51})[0]}
+    assert t2["loose.png"].params_hash != by["loose.png"].params_hash
+
+
+def test_missing_or_empty_input(tmp_path):
+    with pytest.raises(ConfigError, match="does not exist"):
+        B.plan_batch(tmp_path / "nope", tmp_path / "out")
+    (tmp_path / "empty").mkdir()
+    (tmp_path / "empty" / "notes.txt").write_text("x")
+    with pytest.raises(ConfigError, match="no image"):
+        B.plan_batch(tmp_path / "empty", tmp_path / "out")
+
+
+# ----------------------------------------------------------------------------- end to end
+
+
+def test_batch_records_failures_and_finishes_good_images(tmp_path):
+    inp, out = tmp_path / "in", tmp_path / "out"
+    expect = make_tree(inp, seed=11)
+    index = B.run_batch(inp, out, workers=1, seed=5, progress=False)
+    idx = pd.read_csv(out / "index.csv")
+    assert list(idx.columns[:4]) == ["image", "set", "status", "output"]
+    assert set(B.SUMMARY_NUMBERS + ["wall_s"]) <= set(idx.columns)
+    st = dict(zip(idx["image"], idx["status"]))
+    assert all(st[i] == "ok" for i in expect["ok"]), idx[["image", "status", "reason"]]
+    assert all(st[i] == "failed" for i in expect["failed"])
+    assert len(idx) == len(index) == len(expect["ok"]) + len(expect["failed"])
+    fails = pd.read_csv(out / "failures.csv")
+    assert list(fails.columns) == ["image", "set", "reason"]
+    reasons = dict(zip(fails["image"], fails["reason"]))
+    assert set(reasons) == set(expect["failed"])
+    for img, word in expect["failed"].items():
+        assert "\n" not in reasons[img]
+        # the reason names the file concerned: the image itself, or the set's set.toml
+        named = "set.toml" if word else img
+        assert named in reasons[img], reasons[img]
+        if word:
+            assert word in reasons[img]
+    assert "RGB" in reasons["gray.png"] or "gray" in reasons["gray.png"].lower()
+    # outputs in the analyze layout, under OUT/<set name>/<stem>
+    for img in expect["ok"]:
+        row = idx[idx["image"] == img].iloc[0]
+        folder = out / row["output"]
+        for f in ("summary.json", "junctions.csv", "stacks.csv", "branches.csv", "voids.csv",
+                  "overlay.png"):
+            assert (folder / f).is_file(), folder / f
+        s = json.loads((folder / "summary.json").read_text())
+        assert s["batch"]["params_hash"] == row["params_hash"]
+        assert s["n_junctions"] == row["n_junctions"]
+    assert (out / "alpha" / "s1").is_dir() and (out / "default" / "loose").is_dir()
+    # output folders get the usual permissions (not the 0700 of a temporary folder)
+    assert (out / "alpha" / "s1").stat().st_mode & 0o777 == 0o777 & ~B._UMASK
+    s1 = json.loads((out / "alpha" / "s1" / "summary.json").read_text())
+    assert s1["batch"]["params"]["rod_length_mm"] == 200.0
+    assert s1["batch"]["params"]["bending_rigidity_J"] == 1e-4
+    meta = json.loads((out / "batch.json").read_text())
+    assert meta["version"] and meta["seed"] == 5 and meta["counts"]["failed"] == len(expect["failed"])
+    assert leftovers(out) == []
+
+
+def test_resume_redoes_only_missing_images(tmp_path):
+    inp, out = tmp_path / "in", tmp_path / "out"
+    expect = make_tree(inp, seed=23, bad=False)
+    B.run_batch(inp, out, workers=1, progress=False)
+    first = pd.read_csv(out / "index.csv")
+    assert (first["status"] == "ok").all()
+    before = {p: p.stat().st_mtime_ns for p in out.rglob("summary.json")}
+    tables = {p: p.read_text() for p in out.rglob("*.csv") if p.parent != out}
+    # lose one output folder; a killed worker left a staging folder and a temp file
+    victim = out / first.set_index("image").loc["setA/s1.png", "output"]
+    shutil.rmtree(victim)
+    stale = victim.parent / f".{victim.name}{B.PARTIAL_TAG}dead"
+    stale.mkdir()
+    (stale / "junctions.csv").write_text("junction_id,x_px\n1,")
+    (victim.parent / ".index.csv.tmpjunk.tmp").write_text("half")
+    # the re-run uses 2 worker processes: same numbers as the inline first run
+    second = B.run_batch(inp, out, workers=2, progress=False)
+    st = dict(zip(second["image"], second["status"]))
+    assert st.pop("setA/s1.png") == "ok"
+    assert set(st.values()) == {"skipped"}
+    assert not stale.exists()
+    for p, t in before.items():
+        if p.parent != victim:
+            assert p.stat().st_mtime_ns == t      # untouched
+    pd.testing.assert_frame_equal(numbers(first), numbers(pd.read_csv(out / "index.csv")))
+    # the per-image tables are identical too, the redone image's included
+    assert len(tables) == 4 * len(expect["ok"])
+    for p, text in tables.items():
+        assert p.read_text() == text, p
+    # changed parameters redo the affected images only
+    third = B.run_batch(inp, out, workers=1, progress=False, cli_params={"px_per_mm": 40})
+    st3 = dict(zip(third["image"], third["status"]))
+    assert st3["loose.png"] == "ok" and st3["setA/s0.png"] == "skipped"
+
+
+def test_failed_write_leaves_no_partial_folder(tmp_path, monkeypatch):
+    inp, out = tmp_path / "in", tmp_path / "out"
+    make_tree(inp, seed=3, bad=False)
+    B.run_batch(inp, out, workers=1, progress=False)
+    good = (out / "alpha" / "s0" / "stacks.csv").read_text()
+    calls = {"n": 0}
+    real_write_json = B.write_json
+
+    def flaky_write_json(path, data):
+        if Path(path).name == "summary.json":
+            calls["n"] += 1
+            raise OSError("disk full")
+        return real_write_json(path, data)
+
+    monkeypatch.setattr(B, "write_json", flaky_write_json)
+    idx = B.run_batch(inp, out, workers=1, progress=False, force=True)
+    assert calls["n"] == 4 and (idx["status"] == "failed").all()
+    assert idx["reason"].str.contains("disk full").all()
+    # the previous complete outputs are intact, no staging folder is left
+    assert (out / "alpha" / "s0" / "stacks.csv").read_text() == good
+    assert leftovers(out) == []
+
+
+def test_cli_exit_status(tmp_path, capsys):
+    import argparse
+
+    parser = argparse.ArgumentParser()
+    B.add_subparser(parser.add_subparsers())
+    inp, out = tmp_path / "in", tmp_path / "out"
+    expect = make_tree(inp, seed=7)
+    args = parser.parse_args(["batch", str(inp), "--out", str(out), "--workers", "1",
+                              "--no-figure", "--quiet", "--px-per-mm", "48"])
+    assert args.func(args) == 0
+    line = capsys.readouterr().out.strip().splitlines()[-1]
+    assert f"{len(expect['failed'])} failed" in line
+    assert not list(out.rglob("overlay.png"))
+    s = json.loads((out / "default" / "loose" / "summary.json").read_text())
+    assert s["batch"]["params"]["px_per_mm"] == 48.0
+    with pytest.raises(ConfigError):
+        args = parser.parse_args(["batch", str(tmp_path / "nope"), "--out", str(out)])
+        args.func(args)

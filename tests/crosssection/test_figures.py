@@ -1,0 +1,90 @@
+"""Figures: overlay (paper Figs. 1c, 9a) and processing steps (Fig. 2)."""
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+from PIL import Image
+
+from crosssection.core.fileio import save_figure
+from crosssection.figures import BULK_COLOR, PERIPHERY_COLOR, overlay_figure, steps_figure
+from crosssection.stages.hole import Hole
+
+
+def _network(seed, m=40, size=400):
+    rng = np.random.default_rng(seed)
+    paths, rows = [], []
+    for i in range(m):
+        a = rng.uniform(40, size - 40, 2)
+        b = a + rng.uniform(-80, 80, 2)
+        b = np.clip(b, 5, size - 5)
+        t = np.linspace(0, 1, int(np.hypot(*(b - a))) + 2)[:, None]
+        p = np.round(a + t * (b - a)).astype(int)
+        paths.append(p)
+        mid = p[len(p) // 2]
+        rows.append(dict(stack_id=i, n_br=int(rng.integers(1, 6)),
+                         region=("periphery" if i % 2 else "bulk"),
+                         mid_x_px=mid[1], mid_y_px=mid[0]))
+    stacks = pd.DataFrame(rows)
+    jc = rng.uniform(20, size - 20, (15, 2))
+    junctions = pd.DataFrame(dict(junction_id=np.arange(15), x_px=jc[:, 1], y_px=jc[:, 0]))
+    rgb = np.full((size, size, 3), 245, np.uint8)
+    return rgb, stacks, junctions, paths
+
+
+def _hex(c):
+    return np.array([int(c[i:i + 2], 16) for i in (1, 3, 5)])
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_overlay_draws_regions_and_saves(tmp_path, seed):
+    rgb, stacks, junctions, paths = _network(seed)
+    hole = Hole(np.array([200.0, 200.0]), 190.0, False)
+    fig = overlay_figure(rgb, junctions_df=junctions, stacks_df=stacks, paths=paths, hole=hole)
+    ax = fig.axes[0]
+    lc = ax.collections[0]
+    assert len(lc.get_segments()) == len(paths)
+    lw = np.asarray(lc.get_linewidths())
+    ratio = lw / stacks.n_br.to_numpy()
+    assert np.allclose(ratio, ratio[0])                     # width proportional to n_br
+    labels = [t.get_text() for t in ax.texts]
+    assert len(labels) > 0 and set(labels) <= {str(n) for n in stacks.n_br}
+    out = save_figure(fig, tmp_path / "overlay.png")
+    img = np.asarray(Image.open(out).convert("RGB")).astype(int)
+    for col in (BULK_COLOR, PERIPHERY_COLOR):
+        close = np.abs(img - _hex(col)).sum(axis=2) < 60
+        assert close.sum() > 50, col                         # both regions visible
+
+
+def test_overlay_from_result_object_and_uint16():
+    rgb, stacks, junctions, paths = _network(3, m=5)
+
+    class G:
+        pass
+
+    class R:
+        pass
+
+    r = R()
+    r.junctions, r.stacks, r.graph, r.hole = junctions, stacks, G(), None
+    r.graph.paths = paths
+    fig = overlay_figure(rgb.astype(np.uint16) * 257, r)
+    assert len(fig.axes[0].collections[0].get_segments()) == 5
+
+
+def test_overlay_many_stacks(tmp_path):
+    rgb, stacks, junctions, paths = _network(4, m=3000, size=1500)
+    fig = overlay_figure(rgb, junctions_df=junctions, stacks_df=stacks, paths=paths)
+    save_figure(fig, tmp_path / "big.png", dpi=60)
+    assert (tmp_path / "big.png").stat().st_size > 1000
+
+
+def test_steps_figure(tmp_path):
+    rng = np.random.default_rng(5)
+    rgb = rng.integers(0, 255, (120, 160, 3), dtype=np.uint8)
+    m = rgb[..., 2] > 128
+    fig = steps_figure(rgb, m, m, m & (rng.random(m.shape) > 0.5), np.array([[10.0, 20.0]]))
+    assert len(fig.axes) == 4
+    assert all(ax.get_title() for ax in fig.axes)
+    out = save_figure(fig, tmp_path / "steps.png")
+    assert Image.open(out).size[0] > Image.open(out).size[1]

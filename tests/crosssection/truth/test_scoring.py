@@ -1,0 +1,101 @@
+"""The scorer: perfect on the truth itself, and each metric reacts to its own kind of error."""
+import copy
+
+import numpy as np
+import pytest
+
+from crosssection.truth.scoring import match_points, meets_targets, score, score_folder
+from crosssection.truth.network import make_scene, write_scene
+
+
+@pytest.fixture(scope="module", params=[3, 12])
+def truth(request):
+    sc = make_scene(seed=request.param, n_stacks=40, max_layers=5)
+    return sc.summary, sc.tables
+
+
+def _copy(pair):
+    return copy.deepcopy(pair[0]), {k: v.copy() for k, v in pair[1].items()}
+
+
+def test_truth_scores_perfect(truth):
+    s = score(truth, truth)
+    assert s["junction_f1"] == 1.0
+    assert s["rod_length_rel_error"] == 0.0
+    assert s["n_br_exact_length_fraction"] == 1.0
+    assert s["void_match_fraction"] == 1.0
+    assert s["void_area_median_rel_error"] == 0.0
+    assert s["total_energy_rel_error"] == 0.0
+    assert all(meets_targets(s).values())
+
+
+def test_junction_recall_and_precision(truth):
+    rng = np.random.default_rng(1)
+    summary, tables = _copy(truth)
+    j = tables["junctions"]
+    drop = rng.choice(len(j), 3, replace=False)
+    tables["junctions"] = j.drop(index=drop).reset_index(drop=True)
+    s = score((summary, tables), truth)
+    assert s["junction_recall"] == pytest.approx((len(j) - 3) / len(j))
+    assert s["junction_precision"] == 1.0
+    # shifting by more than 3h unmatches; by less keeps the match
+    summary, tables = _copy(truth)
+    tables["junctions"].loc[:4, "x_px"] += 16.0  # > 15 px = 3h
+    tables["junctions"].loc[5:9, "y_px"] += 10.0
+    s = score((summary, tables), truth)
+    assert s["junction_matched"] == len(j) - 5
+
+
+def test_n_br_fraction_weighted_by_length(truth):
+    summary, tables = _copy(truth)
+    st = tables["stacks"]
+    k = int(st["length_mm"].idxmax())
+    tables["stacks"].loc[k, "n_br"] += 1
+    s = score((summary, tables), truth)
+    expected = 1 - st["length_mm"][k] / st["length_mm"].sum()
+    assert s["n_br_exact_length_fraction"] == pytest.approx(expected)
+    assert s["n_br_mean_abs_error"] == pytest.approx(1 / len(st))
+
+
+def test_stacks_matched_by_mid_point_not_by_order(truth):
+    summary, tables = _copy(truth)
+    tables["stacks"] = tables["stacks"].sample(frac=1.0, random_state=4).reset_index(drop=True)
+    s = score((summary, tables), truth)
+    assert s["n_br_exact_length_fraction"] == 1.0
+    summary, tables = _copy(truth)
+    tables["stacks"]["mid_x_px"] += 2000.0  # far away: nothing matches
+    s = score((summary, tables), truth)
+    assert s["stack_match_fraction"] == 0.0
+    assert s["n_br_exact_length_fraction"] == 0.0
+
+
+def test_rod_length_voids_and_energy_errors(truth):
+    summary, tables = _copy(truth)
+    summary["rod_length_mm"] *= 1.05
+    summary["total_energy"] *= 0.8
+    v = tables["voids"]
+    tables["voids"] = v.iloc[1:].reset_index(drop=True)
+    tables["voids"]["area_mm2"] *= 1.1
+    s = score((summary, tables), truth)
+    assert s["rod_length_rel_error"] == pytest.approx(0.05)
+    assert s["total_energy_rel_error"] == pytest.approx(-0.2)
+    assert s["n_voids_rel_error"] == pytest.approx(-1 / len(v))
+    assert s["void_area_median_rel_error"] == pytest.approx(0.1)
+    assert not meets_targets(s)["rod_length"]
+
+
+def test_match_points_respects_radius():
+    rng = np.random.default_rng(0)
+    t = rng.uniform(0, 500, (30, 2))
+    o = t + rng.normal(0, 2, t.shape)
+    r, c = match_points(o, t, 15.0)
+    assert len(r) == 30 and np.array_equal(r, c)
+    r, c = match_points(o + 100, t, 15.0)
+    assert len(r) <= 2
+
+
+def test_score_folder(tmp_path):
+    sc = make_scene(seed=9, n_stacks=25, max_layers=4)
+    folder = write_scene(sc, tmp_path / "scene")
+    s = score_folder(folder / "truth", folder)
+    assert s["junction_f1"] == 1.0 and s["match_px"] == pytest.approx(15.0)

@@ -1,0 +1,119 @@
+import argparse
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from crosssection.core.errors import ConfigError
+from simulate import ensemble
+
+ARGS = ["--n-configs", "3", "--segments", "60", "--lambda", "2e4", "--noise", "300",
+        "--runs", "2", "--maxiter", "3", "--nematic-runs", "0", "--no-progress"]
+
+
+def _run(argv):
+    p = argparse.ArgumentParser()
+    sub = p.add_subparsers(dest="command", required=True)
+    ensemble.add_subparser(sub)
+    a = p.parse_args(argv)
+    return a.func(a)
+
+
+def _configs(path):
+    return pd.read_csv(path / "configs.csv").drop(columns=["wall_s"])
+
+
+@pytest.fixture(scope="module")
+def first(tmp_path_factory):
+    out = tmp_path_factory.mktemp("ens") / "a"
+    assert _run(["quench", *ARGS, "--seed", "11", "--out", str(out)]) == 0
+    return out
+
+
+def test_outputs_and_schema(first):
+    c = pd.read_csv(first / "configs.csv")
+    for col in ensemble.CONFIG_COLUMNS:
+        assert col in c.columns
+    assert list(c.config_id) == [0, 1, 2]
+    assert (c.method == "powell").all()
+    assert np.allclose(c.energy_total, c.energy_bending + c.energy_confinement)
+    assert np.allclose(c.epsilon, 1 / (2 * np.pi * c.rg))
+    b = pd.read_csv(first / "branches.csv")
+    v = pd.read_csv(first / "voids.csv")
+    assert list(b.columns) == ensemble.BRANCH_COLUMNS
+    assert list(v.columns) == ensemble.VOID_COLUMNS
+    rods = np.load(first / "rods.npz")
+    assert sorted(rods.files) == ["config_00000", "config_00001", "config_00002"]
+    assert rods["config_00001"].shape == (61, 2)
+    params = json.loads((first / "params.json").read_text())
+    assert params["lam"] == 2e4 and params["seed"] == 11 and "version" in params
+
+
+def test_stacks_table_consistent_with_branches(first):
+    c = pd.read_csv(first / "configs.csv").set_index("config_id")
+    s = pd.read_csv(first / "stacks.csv")
+    b = pd.read_csv(first / "branches.csv")
+    assert list(s.columns) == ensemble.STACK_COLUMNS
+    assert (s.n_br >= 1).all()
+    per_config = s.groupby("config_id")
+    # N_l and N_br = sum of n_br per configuration, as in configs.csv
+    assert (per_config.size() == c.n_stacks.loc[per_config.size().index]).all()
+    assert (per_config.n_br.sum() == c.n_branches.loc[per_config.size().index]).all()
+    # every branch points at an existing stack of its configuration
+    keys = set(zip(s.config_id, s.stack_id))
+    assert all((ci, si) in keys for ci, si in zip(b.config_id, b.stack_id))
+
+
+def test_determinism_and_workers(first, tmp_path):
+    again = tmp_path / "b"
+    assert _run(["quench", *ARGS, "--seed", "11", "--out", str(again)]) == 0
+    pd.testing.assert_frame_equal(_configs(first), _configs(again))
+    two = tmp_path / "c"
+    assert _run(["quench", *ARGS, "--seed", "11", "--workers", "2", "--out", str(two)]) == 0
+    pd.testing.assert_frame_equal(_configs(first), _configs(two))
+    a, b = np.load(first / "rods.npz"), np.load(two / "rods.npz")
+    assert all(np.array_equal(a[k], b[k]) for k in a.files)
+    other = tmp_path / "d"
+    assert _run(["quench", *ARGS, "--seed", "12", "--out", str(other)]) == 0
+    assert not np.allclose(_configs(first).energy_total, _configs(other).energy_total)
+
+
+def test_resume_after_deleting_parts(first, tmp_path):
+    import shutil
+
+    out = tmp_path / "r"
+    shutil.copytree(first, out)
+    (out / "configs.csv").unlink()
+    (out / "parts" / "config_00001.npz").unlink()
+    stamp = (out / "parts" / "config_00000.npz").stat().st_mtime_ns
+    assert _run(["quench", *ARGS, "--seed", "11", "--out", str(out)]) == 0
+    assert (out / "parts" / "config_00000.npz").stat().st_mtime_ns == stamp  # skipped
+    pd.testing.assert_frame_equal(_configs(first), _configs(out))
+
+
+def test_refuses_different_parameters(first, tmp_path):
+    import shutil
+
+    out = tmp_path / "x"
+    shutil.copytree(first, out)
+    with pytest.raises(ConfigError):
+        _run(["quench", *ARGS, "--seed", "99", "--out", str(out)])
+
+
+@pytest.mark.parametrize("command,extra", [("quench", ["--method", "lbfgs"]),
+                                           ("quench", ["--parametrization", "bend"]),
+                                           ("anneal", ["--stages", "3", "--lambda-start", "500"])])
+def test_other_methods(command, extra, first, tmp_path):
+    out = tmp_path / "m"
+    assert _run([command, *ARGS, "--seed", "11", *extra, "--out", str(out)]) == 0
+    c = pd.read_csv(out / "configs.csv")
+    rods = np.load(out / "rods.npz")
+    from simulate.intersect import has_intersection
+
+    assert all(not has_intersection(rods[k], "brute") for k in rods.files)
+    assert np.allclose(c.energy_total, c.energy_bending + c.energy_confinement)
+    # same starts as the default powell ensemble, another minimiser: other energies
+    assert not np.allclose(c.energy_total, _configs(first).energy_total)
+    params = json.loads((out / "params.json").read_text())
+    assert params["command"] == command
