@@ -1,7 +1,7 @@
 """Benchmark of stage 9 (crosssection.linsys.solve_branch_counts) against np.linalg.lstsq.
 
 Plain script: ``python benchmarks/bench_linsys.py [--sizes 20 100 ...] [--repeat 3]``.
-For every size a random stack network with known n_br (tests/test_linsys.py generator) gets
+For every size a random stack network with known n_br (``crosssection.truth.graphs``) gets
 width estimates with 0.3-layer noise; we time the full solver (equations, rank, condition
 number, residual, integer search) and, on the same run, np.linalg.lstsq on the paper's dense
 M x M system [C; I_S] (rows scaled to unit norm) that the solver reports on, and the exact

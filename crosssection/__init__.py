@@ -6,8 +6,12 @@ stacks, branches and voids, then ensemble statistics.
 >>> res.summary["n_branches"], res.branches.head()  # doctest: +SKIP
 """
 from crosssection._version import __version__
-from crosssection.core.errors import AnalysisError, ConfigError, FoldstatError, ImageError, ParameterError
+from crosssection.core.errors import (AnalysisError, ConfigError, FoldstatError, ImageError,
+                                      ParameterError)
+from crosssection.params import AnalysisParams, ScanScale
 from crosssection.pipeline import AnalysisResult, analyze
+from crosssection.quality import QualityWarning
 
-__all__ = ["__version__", "analyze", "AnalysisResult", "FoldstatError", "ImageError",
-           "ParameterError", "AnalysisError", "ConfigError"]
+__all__ = ["__version__", "analyze", "AnalysisParams", "ScanScale", "AnalysisResult",
+           "QualityWarning", "FoldstatError", "ImageError", "ParameterError", "AnalysisError",
+           "ConfigError"]

@@ -34,9 +34,8 @@ Design choices
 """
 from __future__ import annotations
 
-import argparse
+import warnings
 import hashlib
-import inspect
 import json
 import math
 import os
@@ -54,9 +53,11 @@ from pathlib import Path
 import pandas as pd
 
 from crosssection._version import __version__
-from crosssection.core.errors import ConfigError, FoldstatError
+from crosssection.core.errors import ConfigError, FoldstatError, ParameterError
 from crosssection.core.fileio import write_csv, write_json
 from crosssection.core.parallel import get_executor, spawn_seeds
+from crosssection.params import AnalysisParams, add_analysis_arguments
+from crosssection.quality import QualityWarning
 from crosssection.setconfig import (DEFAULT_PARAMS, DEFAULT_SET_NAME, SET_FILE, SetConfig, check_params,
                         failed_set, load_set_config)
 
@@ -64,11 +65,11 @@ IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg")
 SUMMARY_NUMBERS = ["n_junctions", "n_stacks", "n_branches", "n_voids", "mean_branches_per_stack",
                    "rod_length_mm", "epsilon", "total_energy"]
 INDEX_COLUMNS = (["image", "set", "status", "output"] + SUMMARY_NUMBERS
-                 + ["wall_s", "seed", "params_hash", "peak_rss_mb", "reason"])
+                 + ["quality", "wall_s", "seed", "params_hash", "peak_rss_mb", "reason"])
 FAILURE_COLUMNS = ["image", "set", "reason"]
-#: parameters recorded with the results but consumed by no analysis stage (unless it takes them)
-METADATA_PARAMS = ("bending_rigidity_J",)
 PARTIAL_TAG = ".partial-"
+#: exit status of a batch that finished but could not analyse every image
+EXIT_SOME_FAILED = 3
 #: how often (s) the index is rewritten while the batch runs, so a killed batch leaves one
 INDEX_EVERY_S = 5.0
 
@@ -157,15 +158,13 @@ def params_hash(params: dict, image_sha: str, *, seed=None) -> str:
     return hashlib.sha256(blob).hexdigest()[:16]
 
 
-def _analyze_accepts() -> tuple[set[str], bool]:
-    """Keyword names ``crosssection.analyze`` accepts, and whether it takes ``**kwargs``."""
-    from crosssection import pipeline
+#: the batch's own files at the top of OUT_DIR: no set folder may take these names
+RESERVED_NAMES = ("index.csv", "failures.csv", "batch.json")
 
-    sig = inspect.signature(pipeline.analyze)
-    names = {n for n, p in sig.parameters.items()
-             if p.kind in (p.KEYWORD_ONLY, p.POSITIONAL_OR_KEYWORD)}
-    var_kw = any(p.kind == p.VAR_KEYWORD for p in sig.parameters.values())
-    return names, var_kw
+
+def _set_folder(set_name: str) -> str:
+    """Output folder of a set: its name, unless that would collide with the batch's files."""
+    return f"set_{set_name}" if set_name.lower() in RESERVED_NAMES else set_name
 
 
 def _safe_component(text: str) -> str:
@@ -230,18 +229,13 @@ def plan_batch(input_dir, out_dir, *, cli_params: dict | None = None, seed: int 
                 break
         return default_set
 
-    try:
-        accepted, var_kw = _analyze_accepts()
-    except Exception:  # noqa: BLE001 - pipeline missing: every task will report it
-        accepted, var_kw = set(), True
-    uses_seed = var_kw or "seed" in accepted
     seeds = spawn_seeds(seed, len(images))
 
     tasks, used = [], {}
     for img, task_seed in zip(images, seeds):
         cfg = set_of(img.parent)
         rel = img.relative_to(root).as_posix()
-        out_rel = f"{cfg.name}/{_safe_component(img.stem)}"
+        out_rel = f"{_set_folder(cfg.name)}/{_safe_component(img.stem)}"
         used.setdefault(out_rel, []).append(len(tasks))
         params = {} if cfg.error else cfg.params_for(img)
         tasks.append(ImageTask(image=str(img), rel=rel, set_name=cfg.name, out_dir="",
@@ -252,14 +246,19 @@ def plan_batch(input_dir, out_dir, *, cli_params: dict | None = None, seed: int 
         if len(idx) > 1:
             for i in idx:
                 t = tasks[i]
-                t.out_rel = f"{t.set_name}/{_safe_component(t.rel.replace('/', '__'))}"
+                t.out_rel = (f"{_set_folder(t.set_name)}/"
+                             f"{_safe_component(t.rel.replace('/', '__'))}")
     for t in tasks:
         t.out_dir = str(out / t.out_rel)
         if t.error is None:
-            # the base seed, not the per-image one: adding images to the folder shifts the
-            # spawned seeds, and must not redo the images already complete
-            t.params_hash = params_hash(t.params, _sha256(t.image),
-                                        seed=seed if uses_seed else None)
+            try:
+                resolved = AnalysisParams.from_mapping(t.params, path=t.image).to_dict()
+            except FoldstatError as exc:
+                t.error = exc.one_line()
+                continue
+            # the analysis is deterministic: the seed is recorded, not hashed, so adding
+            # images (which shifts the spawned seeds) does not redo those already complete
+            t.params_hash = params_hash(resolved, _sha256(t.image))
     if any(t.set_name == DEFAULT_SET_NAME and t.error is None for t in tasks):
         sets.setdefault("<no set.toml>", default_set)
     return tasks, sets
@@ -275,8 +274,9 @@ def _row(task: ImageTask, status: str, summary: dict | None = None, reason: str 
     for k in SUMMARY_NUMBERS:
         v = summary.get(k)
         row[k] = math.nan if v is None else v
-    row.update(wall_s=wall_s, seed=task.seed, params_hash=task.params_hash,
-               peak_rss_mb=math.nan, reason=reason)
+    quality = summary.get("quality") or {}
+    row.update(quality=";".join(quality.get("codes", [])), wall_s=wall_s, seed=task.seed,
+               params_hash=task.params_hash, peak_rss_mb=math.nan, reason=reason)
     return row
 
 
@@ -316,22 +316,6 @@ def _clear_partials(final: Path):
             shutil.rmtree(p, ignore_errors=True) if p.is_dir() else p.unlink(missing_ok=True)
 
 
-def _analysis_kwargs(params: dict, seed: int) -> tuple[dict, dict]:
-    """Split parameters into those ``analyze`` takes and metadata; unknown ones are errors."""
-    accepted, var_kw = _analyze_accepts()
-    kwargs, meta = {}, {}
-    for k, v in params.items():
-        if var_kw or k in accepted:
-            kwargs[k] = v
-        elif k in METADATA_PARAMS:
-            meta[k] = v
-        else:
-            raise ConfigError(f"parameter {k!r} is not accepted by the analysis")
-    if var_kw or "seed" in accepted:
-        kwargs["seed"] = seed
-    return kwargs, meta
-
-
 def process_image(task: ImageTask) -> dict:
     """Analyse one image and write its output folder atomically (runs in a worker).
 
@@ -354,10 +338,13 @@ def process_image(task: ImageTask) -> dict:
         from crosssection.pipeline import analyze
 
         _clear_partials(final)
-        kwargs, meta = _analysis_kwargs(task.params, task.seed)
-        result = analyze(task.image, **kwargs)
+        params = AnalysisParams.from_mapping(task.params, path=task.image)
+        with warnings.catch_warnings():
+            # the flags are in the summary; the driver prints them once per image
+            warnings.simplefilter("ignore", QualityWarning)
+            result = analyze(task.image, params)
         info = {"params_hash": task.params_hash, "image": task.rel, "set": task.set_name,
-                "seed": task.seed, "params": task.params, "version": __version__, **meta}
+                "seed": task.seed, "params": task.params, "version": __version__}
         if isinstance(getattr(result, "summary", None), dict):
             result.summary["batch"] = dict(info)
         final.parent.mkdir(parents=True, exist_ok=True)
@@ -562,21 +549,6 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
 # --------------------------------------------------------------------------- CLI
 
 
-def _add_analysis_options(p: argparse.ArgumentParser):
-    g = p.add_argument_group("analysis parameters (images outside any set.toml, and defaults "
-                             "where a set.toml is silent)")
-    g.add_argument("--px-per-mm", type=float, default=None, help="scan resolution (default 50)")
-    g.add_argument("--thickness-mm", type=float, default=None,
-                   help="sheet thickness h (default 0.1)")
-    g.add_argument("--hole-radius-mm", type=float, default=None,
-                   help="radius of the confining hole (fitted when absent)")
-    g.add_argument("--hole-center-px", type=float, nargs=2, metavar=("X", "Y"), default=None)
-    g.add_argument("--calibration", default=None, help="CSV n_layers,width_mm")
-    g.add_argument("--rod-length-mm", type=float, default=None)
-    g.add_argument("--kappa-c-per-mm", type=float, default=None, help="plastic threshold")
-    g.add_argument("--bending-rigidity-J", dest="bending_rigidity_J", type=float, default=None)
-
-
 def add_subparser(sub):
     """Register the ``batch`` subcommand on an ``argparse`` subparsers object."""
     p = sub.add_parser(
@@ -595,28 +567,33 @@ def add_subparser(sub):
     p.add_argument("--no-figure", action="store_true", help="skip overlay.png")
     p.add_argument("--force", action="store_true", help="redo images already complete")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    _add_analysis_options(p)
+    add_analysis_arguments(p)
     p.set_defaults(func=run)
     return p
 
 
 def run(args) -> int:
-    """Entry point of ``python -m crosssection batch``; returns the exit status."""
-    cli_params = {k: getattr(args, k) for k in
-                  ("px_per_mm", "thickness_mm", "hole_radius_mm", "hole_center_px",
-                   "calibration", "rod_length_mm", "kappa_c_per_mm", "bending_rigidity_J")
+    """Entry point of ``python -m crosssection batch``; returns the exit status (0 all images
+    done, 3 finished with some images failed, 2 bad arguments)."""
+    if args.workers is not None and args.workers < 1:
+        raise ParameterError(f"--workers must be >= 1, got {args.workers}", args.input_dir)
+    cli_params = {k: v for k, v in AnalysisParams.from_cli_args(args).to_dict().items()
                   if getattr(args, k, None) is not None}
-    if cli_params.get("calibration"):
-        cli_params["calibration"] = str(Path(cli_params["calibration"]).resolve())
+    if getattr(args, "no_merge_thick_crossings", False):
+        cli_params["merge_thick_crossings"] = False
     index = run_batch(args.input_dir, args.out, workers=args.workers, scheduler=args.scheduler,
                       seed=args.seed, figure=not args.no_figure, cli_params=cli_params,
                       force=args.force, progress=not args.quiet)
     n = index["status"].value_counts()
     n_failed = int(n.get("failed", 0))
+    for _, row in index[index["quality"].fillna("") != ""].iterrows():
+        print(f"warning: {Path(args.input_dir) / row['image']}: doubtful results "
+              f"({row['quality'].replace(';', ', ')}; see "
+              f"{Path(args.out) / row['output'] / 'summary.json'})", file=sys.stderr)
     print(f"batch: {len(index)} images: {int(n.get('ok', 0))} done, "
           f"{int(n.get('skipped', 0))} skipped, {n_failed} failed"
           + (f" (see {Path(args.out) / 'failures.csv'})" if n_failed else ""))
-    return 0
+    return EXIT_SOME_FAILED if n_failed else 0
 
 
 __all__ = ["run_batch", "plan_batch", "process_image", "completed_row", "find_images",

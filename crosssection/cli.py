@@ -9,9 +9,11 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+import warnings
 
 from crosssection._version import __version__
 from crosssection.core.errors import FoldstatError
+from crosssection.quality import QualityWarning
 
 # subcommand -> module providing add_subparser(subparsers)
 SUBCOMMANDS = {
@@ -36,13 +38,24 @@ def run_parsed(parser: argparse.ArgumentParser, argv=None) -> int:
     """Parse ``argv`` and run the chosen subcommand.
 
     Returns the exit status: 0 success, 2 bad input (one line naming the file and the cause),
-    130 interrupted (re-running resumes), 1 unexpected error (one line, never a traceback).
+    3 a batch finished with some images failed, 130 interrupted (re-running resumes),
+    1 unexpected error (one line, never a traceback). Quality warnings are printed as
+    ``warning: FILE: ...`` lines on stderr.
     """
     args = parser.parse_args(argv)
     try:
-        return int(args.func(args) or 0)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            status = int(args.func(args) or 0)
+        _print_warnings(caught)
+        return status
     except FoldstatError as exc:
         print(f"error: {exc.one_line()}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        # the output (or an input) path cannot be used: the user's to fix, not a bug
+        where = exc.filename if exc.filename is not None else "output"
+        print(f"error: {where}: {exc.strerror or exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("error: interrupted (re-run the same command to resume)", file=sys.stderr)
@@ -51,6 +64,18 @@ def run_parsed(parser: argparse.ArgumentParser, argv=None) -> int:
         print(f"error: unexpected {type(exc).__name__}: {' '.join(str(exc).split())}",
               file=sys.stderr)
         return 1
+
+
+def _print_warnings(caught) -> None:
+    """Our quality warnings as ``warning: FILE: ...`` lines; library warnings are dropped
+    (what matters of them is already in our own checks)."""
+    seen = set()
+    for w in caught:
+        if issubclass(w.category, QualityWarning):
+            line = f"warning: {' '.join(str(w.message).split())}"
+            if line not in seen:
+                seen.add(line)
+                print(line, file=sys.stderr)
 
 
 def build_parser() -> argparse.ArgumentParser:

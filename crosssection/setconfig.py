@@ -21,27 +21,23 @@ file must exist and hold the columns ``n_layers,width_mm``.
 """
 from __future__ import annotations
 
-import math
 import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from crosssection.core.errors import ConfigError
+from crosssection.core.errors import ConfigError, ParameterError
+from crosssection.params import PARAM_NAMES, check_param
 
 SET_FILE = "set.toml"
 
-#: analysis parameters a set (or the command line) may give, with their checkers
-POSITIVE_FLOAT_KEYS = ("px_per_mm", "thickness_mm", "hole_radius_mm", "rod_length_mm",
-                       "bending_rigidity_J", "kappa_c_per_mm", "s_min_mm2", "l_min_mm")
 #: keys describing the set rather than one analysis; never passed to the analysis as-is
 META_KEYS = ("name",)
-OTHER_PARAM_KEYS = ("calibration", "hole_center_px", "blue_min", "rg_max", "threshold_method")
-PARAM_KEYS = POSITIVE_FLOAT_KEYS + OTHER_PARAM_KEYS
+PARAM_KEYS = PARAM_NAMES
 ALLOWED_KEYS = META_KEYS + PARAM_KEYS + ("images",)
 
-#: defaults used for images outside any set (the paper's scans: 50 px/mm, h = 0.1 mm)
-DEFAULT_PARAMS = {"px_per_mm": 50.0, "thickness_mm": 0.1}
+#: parameters of images outside any set beyond the AnalysisParams defaults
+DEFAULT_PARAMS: dict = {}
 DEFAULT_SET_NAME = "default"
 
 _SAFE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._+-]*$")
@@ -87,15 +83,11 @@ class SetConfig:
 
 
 def _check_value(key, value, path, where):
-    """Validate one parameter value; return it normalised (floats, absolute calibration path)."""
+    """Validate one parameter value (the checks of :class:`AnalysisParams`); return it
+    normalised (floats, absolute calibration path)."""
     ctx = f"{where}{key}"
-    if key in POSITIVE_FLOAT_KEYS:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(f"{ctx} must be a number, got {value!r}", path)
-        value = float(value)
-        if not math.isfinite(value) or value <= 0:
-            raise ConfigError(f"{ctx} must be > 0, got {value!r}", path)
-        return value
+    if key not in PARAM_KEYS:
+        raise ConfigError(f"unknown key {ctx!r}; allowed: {', '.join(ALLOWED_KEYS)}", path)
     if key == "calibration":
         if not isinstance(value, str) or not value:
             raise ConfigError(f"{ctx} must be a file path (string), got {value!r}", path)
@@ -104,20 +96,13 @@ def _check_value(key, value, path, where):
             cal = Path(path).parent / cal
         check_calibration(cal, origin=path)
         return str(cal.resolve())
-    if key == "hole_center_px":
-        if (not isinstance(value, (list, tuple)) or len(value) != 2
-                or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in value)):
-            raise ConfigError(f"{ctx} must be [x, y] in pixels, got {value!r}", path)
-        return [float(v) for v in value]
-    if key in ("blue_min", "rg_max"):
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or value < 0:
-            raise ConfigError(f"{ctx} must be a number >= 0, got {value!r}", path)
-        return value
-    if key == "threshold_method":
-        if value not in ("fixed", "otsu"):
-            raise ConfigError(f"{ctx} must be 'fixed' or 'otsu', got {value!r}", path)
-        return value
-    raise ConfigError(f"unknown key {ctx!r}; allowed: {', '.join(ALLOWED_KEYS)}", path)
+    if isinstance(value, str) and key not in ("threshold_method", "curvature_method"):
+        raise ConfigError(f"{ctx} must be a number, got {value!r}", path)
+    try:
+        value = check_param(key, value)
+    except ParameterError as exc:
+        raise ConfigError(f"{where}{exc.cause}", path) from None
+    return list(value) if isinstance(value, tuple) else value
 
 
 def check_calibration(cal_path, origin=None) -> Path:

@@ -32,7 +32,8 @@ import numpy as np
 from crosssection.core.fileio import write_csv, write_json, write_text
 from crosssection.core import schema
 from crosssection.core.parallel import spawn_seeds
-from crosssection.truth.network import make_scene, write_image
+from crosssection.truth.network import make_scene
+from crosssection.truth.scene import write_image
 
 #: (file name, generator options): sparse/thick, medium/noisy, dense/thin, JPEG, 16-bit TIFF
 SAMPLES = [

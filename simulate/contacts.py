@@ -2,8 +2,8 @@
 
 Never from images: everything here follows from the node positions of the rod (units of L).
 
-Definitions (issue 3, "Analysis of a configuration"; paper sections "Simulations vs
-experiments", "Tiling", "Curvature of branches", "Energetical properties"):
+Definitions (paper sections "Simulations vs experiments", "Tiling", "Curvature of branches",
+"Energetical properties"):
 
 - The rod is resampled at arclength spacing ``h <= min(ds, delta) / 3`` (nodes included).
 - Two samples ``k`` and ``j`` are *in contact* when ``|R_k - R_j| < delta`` and they lie on
@@ -31,12 +31,14 @@ experiments", "Tiling", "Curvature of branches", "Energetical properties"):
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 import pandas as pd
 from numba import njit
 from scipy.spatial import cKDTree
 
+from crosssection.core.unionfind import group_labels
 from simulate.energy import bending_energy, confinement_energy, node_curvature
 
 __all__ = ["RodAnalysis", "analyze_rod", "default_contact_distance", "resample_rod"]
@@ -242,22 +244,6 @@ def _smooth_short_runs(mult, min_len):
     return mult
 
 
-class _DSU:
-    def __init__(self, n):
-        self.p = list(range(n))
-
-    def find(self, a):
-        while self.p[a] != a:
-            self.p[a] = self.p[self.p[a]]
-            a = self.p[a]
-        return a
-
-    def union(self, a, b):
-        ra, rb = self.find(a), self.find(b)
-        if ra != rb:
-            self.p[max(ra, rb)] = min(ra, rb)
-
-
 # ----------------------------------------------------------------------------------------
 # main entry
 
@@ -265,6 +251,10 @@ class _DSU:
 def analyze_rod(xy, *, lam: float, contact_distance: float | None = None,
                 min_run: float | None = None, void_px: float | None = None) -> RodAnalysis:
     """Stacks, junctions, branches, voids, Rg and energies of one rod configuration.
+
+    The stages follow the module docstring: contacts on the resampled rod, runs of constant
+    multiplicity, stacks (runs unioned through their contacts, fold caps split, loops cut,
+    two-ended junctions merged away), junctions, branches, voids.
 
     Parameters
     ----------
@@ -288,32 +278,95 @@ def analyze_rod(xy, *, lam: float, contact_distance: float | None = None,
     if xy.ndim != 2 or xy.shape[1] != 2 or xy.shape[0] < 3:
         raise ValueError(f"xy must be (N+1, 2) with N >= 2, got {xy.shape}")
     n = xy.shape[0] - 1
-    ds = 1.0 / n
     delta = float(contact_distance) if contact_distance is not None else default_contact_distance(n)
     min_run = 3.0 * delta if min_run is None else float(min_run)
 
-    # --- energies, Rg (paper Eq. "modreduced", "raygir")
-    e_bend = float(bending_energy(xy))
-    e_conf = float(confinement_energy(xy, lam))
+    whole = _whole_rod(xy, lam)
+    smp = _sample_contacts(xy, delta, min_run)
+    runs = _contact_runs(smp, delta)
+    cls = _union_runs(runs, smp)
+    runs, cls = _split_fold_caps(runs, cls, smp, delta)
+    runs, cls = _cut_loops(runs, cls, smp)
+    topo = _merge_two_ended_junctions(runs, cls, smp)
+    junctions, junction_of_end = _junction_table(topo)
+    j_xy = junctions[["x", "y"]].to_numpy(float) if len(junctions) else np.zeros((0, 2))
+    branches = _branch_table(xy, lam, topo, smp, whole.r2)
+    stacks, lines = _stack_table(topo, smp, branches, junction_of_end, j_xy)
+    voids = _voids(xy, delta, j_xy, void_px)
+
+    return RodAnalysis(
+        rg=whole.rg, epsilon=whole.epsilon, epsilon_sqrt2=whole.epsilon_sqrt2,
+        energy_total=whole.e_bend + whole.e_conf, energy_bending=whole.e_bend,
+        energy_confinement=whole.e_conf, n_stacks=len(topo.stack_runs),
+        n_branches=len(topo.runs), n_junctions=len(junctions), n_voids=len(voids),
+        multiplicity=smp.mult[np.arange(n + 1) * smp.sub], junctions=junctions,
+        stacks=stacks, branches=branches, voids=voids, contact_distance=delta,
+        stack_lines=lines, samples_s=smp.s, samples_xy=smp.pts, samples_multiplicity=smp.mult)
+
+
+# ----------------------------------------------------------------------------------------
+# stages
+
+
+class _WholeRod(NamedTuple):
+    """Energies and size of the whole rod (paper Eqs. "modreduced", "raygir")."""
+
+    e_bend: float
+    e_conf: float
+    r2: np.ndarray  # |R|^2 at every node
+    rg: float
+    epsilon: float
+    epsilon_sqrt2: float
+
+
+def _whole_rod(xy, lam) -> _WholeRod:
+    ds = 1.0 / (xy.shape[0] - 1)
     r2 = np.einsum("ij,ij->i", xy, xy)
     rg = float(np.sqrt(np.sum((r2[1:] + r2[:-1]) * 0.5) * ds))
     eps = 1.0 / (2 * np.pi * rg) if rg > 0 else np.inf
-    eps2 = eps / np.sqrt(2.0)
+    return _WholeRod(e_bend=float(bending_energy(xy)), e_conf=float(confinement_energy(xy, lam)),
+                     r2=r2, rg=rg, epsilon=float(eps), epsilon_sqrt2=float(eps / np.sqrt(2.0)))
 
-    # --- contacts on the resampled rod
+
+class _Samples(NamedTuple):
+    """The resampled rod and its contacts."""
+
+    s: np.ndarray         # (K,) arclengths
+    pts: np.ndarray       # (K, 2) positions
+    sub: int              # samples per segment
+    h: float              # sample spacing
+    same_pass: int        # samples closer than this along the rod are on one pass
+    clusters: list        # chained contact cluster of every sample (one sample per pass)
+    mult_raw: np.ndarray  # (K,) passes in every cluster
+    mult: np.ndarray      # mult_raw with runs shorter than min_run merged into a neighbour
+
+
+def _sample_contacts(xy, delta, min_run) -> _Samples:
+    ds = 1.0 / (xy.shape[0] - 1)
     s, pts, sub = resample_rod(xy, min(ds, delta) / 3.0)
     h = s[1] - s[0]
-    k_total = len(s)
-    local_window = int(np.floor(delta / h))
-    partners = _partner_lists(pts, delta, local_window)
+    partners = _partner_lists(pts, delta, int(np.floor(delta / h)))
     same_pass = int(np.ceil(2.0 * delta / h)) + 1
     clusters = _clusters(partners, same_pass)
     mult_raw = np.array([len(c) for c in clusters], dtype=np.int64)
     mult = _smooth_short_runs(mult_raw, max(1, int(round(min_run / h))))
+    return _Samples(s=s, pts=pts, sub=sub, h=h, same_pass=same_pass, clusters=clusters,
+                    mult_raw=mult_raw, mult=mult)
 
-    # --- runs: constant multiplicity and continuous partners
-    jump = max(3 * same_pass, int(np.ceil(4 * delta / h)))
+
+def _run_ids(runs, k_total):
+    """Run index of every sample (runs tile the samples)."""
     run_id = np.empty(k_total, dtype=np.int64)
+    for i, (a, b) in enumerate(runs):
+        run_id[a:b] = i
+    return run_id
+
+
+def _contact_runs(smp, delta):
+    """Runs ``[start, stop)`` of constant multiplicity whose partner passes do not jump."""
+    mult, mult_raw, clusters, same_pass = smp.mult, smp.mult_raw, smp.clusters, smp.same_pass
+    k_total = len(smp.s)
+    jump = max(3 * same_pass, int(np.ceil(4 * delta / smp.h)))
     runs = []
     start = 0
     for k in range(1, k_total + 1):
@@ -329,29 +382,30 @@ def analyze_rod(xy, *, lam: float, contact_distance: float | None = None,
                     cut = True
         if cut:
             runs.append([start, k])
-            run_id[start:k] = len(runs) - 1
             start = k
+    return runs
 
-    def union_runs(runs, run_id):
-        dsu = _DSU(len(runs))
-        for k in range(k_total):
-            if mult[k] < 2 or mult_raw[k] != mult[k]:
-                continue
-            for q in clusters[k]:
-                if q != k and mult[q] == mult[k]:
-                    dsu.union(run_id[k], run_id[q])
-        return [dsu.find(i) for i in range(len(runs))]
 
-    cls = union_runs(runs, run_id)
+def _union_runs(runs, smp):
+    """Stack label of every run: runs joined by a contact of unsmoothed multiplicity."""
+    mult, mult_raw = smp.mult, smp.mult_raw
+    run_id = _run_ids(runs, len(smp.s))
+    pairs = [(run_id[k], run_id[q]) for k in range(len(smp.s))
+             if mult[k] >= 2 and mult_raw[k] == mult[k]
+             for q in smp.clusters[k] if q != k and mult[q] == mult[k]]
+    return group_labels(len(runs), pairs).tolist()
 
-    # --- fold caps: a short run between two runs of one stack is split between them
+
+def _split_fold_caps(runs, cls, smp, delta):
+    """A short run between two runs of one stack is a fold cap: split it between them."""
+    mult = smp.mult
     cap_max = 4.0 * delta + np.pi * delta
     changed = True
     while changed:
         changed = False
         for i in range(1, len(runs) - 1):
             a, b = runs[i]
-            if (b - a) * h < cap_max and cls[i - 1] == cls[i + 1] and cls[i] != cls[i - 1] \
+            if (b - a) * smp.h < cap_max and cls[i - 1] == cls[i + 1] and cls[i] != cls[i - 1] \
                     and mult[runs[i - 1][0]] > mult[a]:
                 mid = (a + b) // 2
                 runs[i - 1][1] = mid
@@ -360,10 +414,13 @@ def analyze_rod(xy, *, lam: float, contact_distance: float | None = None,
                 del cls[i]
                 changed = True
                 break
-    for i, (a, b) in enumerate(runs):
-        run_id[a:b] = i
+    return runs, cls
 
-    # --- loops: a stack with fewer runs than passes wraps around; cut it at one normal
+
+def _cut_loops(runs, cls, smp):
+    """A stack with fewer runs than passes wraps around (a spiral): cut it at one normal."""
+    same_pass = smp.same_pass
+    run_id = _run_ids(runs, len(smp.s))
     for _ in range(4):
         groups = {}
         for i, c in enumerate(cls):
@@ -371,11 +428,12 @@ def analyze_rod(xy, *, lam: float, contact_distance: float | None = None,
         cut_points = []
         for c, members in groups.items():
             a0 = runs[members[0]][0]
-            m_mode = int(np.bincount(mult[np.r_[tuple(slice(*runs[i]) for i in members)]]).argmax())
+            m_mode = int(np.bincount(
+                smp.mult[np.r_[tuple(slice(*runs[i]) for i in members)]]).argmax())
             if len(members) >= m_mode:
                 continue
             k0 = a0 + min(same_pass, (runs[members[0]][1] - a0) // 2)
-            cut_points.extend(q for q in clusters[k0] if run_id[q] in members)
+            cut_points.extend(q for q in smp.clusters[k0] if run_id[q] in members)
         cut_points = sorted(set(cut_points))
         if not cut_points:
             break
@@ -389,23 +447,34 @@ def analyze_rod(xy, *, lam: float, contact_distance: float | None = None,
         if len(new_runs) == len(runs):
             break
         runs, cls = new_runs, new_cls
-        for i, (a, b) in enumerate(runs):
-            run_id[a:b] = i
+        run_id = _run_ids(runs, len(smp.s))
+    return runs, cls
 
-    # --- stacks, their sides and junctions; degree-2 "junctions" are merged away
-    def end_point(i, e):
-        a, b = runs[i]
-        return pts[a] if e == 0 else pts[b - 1 if b == k_total else b]
 
+class _Topology(NamedTuple):
+    """Final runs (= branches) and how they form stacks and junctions (see :func:`_topology`)."""
+
+    runs: list
+    run_stack: np.ndarray
+    stack_runs: list
+    side: dict
+    groups: dict
+    node_pts: dict
+
+
+def _merge_two_ended_junctions(runs, cls, smp) -> _Topology:
+    """Number the stacks and merge every pair of stacks meeting alone at a junction.
+
+    A junction with exactly two stack ends (a free rod end or a fold inside a band, or a third
+    pass brushing a band) changes the set of passes but not the band: a scan shows one band
+    whose width changes, the skeleton no junction. Convention (truth and pipeline agree): the
+    two stacks are one; the passes running through are one branch each, so n_br = number of
+    distinct rod pieces in the band (the larger count).
+    """
     rside = None  # [side of start, side of end] per run; 2 = inside its stack (merged away)
     for _ in range(len(runs) + 1):
-        run_stack, stack_runs, side, groups, node_pts = _topology(runs, cls, end_point, rside)
+        run_stack, stack_runs, side, groups, node_pts = _topology(runs, cls, smp.pts, rside)
         rside = [[side[(i, 0)], side[(i, 1)]] for i in range(len(runs))]
-        # A junction with exactly two stack ends (a free rod end or a fold inside a band, or a
-        # third pass brushing a band) changes the set of passes but not the band: a scan
-        # shows one band whose width changes, the skeleton no junction. Convention (truth and
-        # pipeline agree): the two stacks are one; the passes running through are one
-        # branch each, so n_br = number of distinct rod pieces in the band (the larger count).
         deg2 = [ends for ends in groups.values()
                 if len(ends) == 2 and ends[0][0] != ends[1][0]]
         if not deg2:
@@ -432,9 +501,14 @@ def analyze_rod(xy, *, lam: float, contact_distance: float | None = None,
                 new_cls.append(cls[i])
                 new_side.append(list(rside[i]))
         runs, cls, rside = new_runs, new_cls, new_side
-    for i, (a, b) in enumerate(runs):
-        run_id[a:b] = i
-    n_stacks = len(stack_runs)
+    return _Topology(runs=runs, run_stack=run_stack, stack_runs=stack_runs, side=side,
+                     groups=groups, node_pts=node_pts)
+
+
+def _junction_table(topo):
+    """Junctions: stack-end groups holding two or more stacks. Returns the table and the
+    junction of every (stack, side) end."""
+    runs, run_stack = topo.runs, topo.run_stack
 
     # rod ends and fold apices are not where stacks meet: keep them out of junction positions
     def is_meeting(i, e):
@@ -445,22 +519,27 @@ def analyze_rod(xy, *, lam: float, contact_distance: float | None = None,
 
     junction_of_end = {}
     jrows = []
-    for root, ends in sorted(groups.items(), key=lambda g: min(g[1])):
+    for _, ends in sorted(topo.groups.items(), key=lambda g: min(g[1])):
         if len({st for st, _ in ends}) < 2:
             continue  # free end, fold apex or loop cut: not a junction
         jid = len(jrows)
-        pp = [p for e in ends for (p, i, ee) in node_pts[e] if is_meeting(i, ee)]
+        pp = [p for e in ends for (p, i, ee) in topo.node_pts[e] if is_meeting(i, ee)]
         if not pp:
-            pp = [p for e in ends for (p, _, _) in node_pts[e]]
+            pp = [p for e in ends for (p, _, _) in topo.node_pts[e]]
         c = np.mean(pp, axis=0)
         jrows.append({"junction_id": jid, "x": float(c[0]), "y": float(c[1]),
                       "n_stacks": len(ends)})
         for e in ends:
             junction_of_end[e] = jid
-    junctions = pd.DataFrame(jrows, columns=["junction_id", "x", "y", "n_stacks"])
-    j_xy = junctions[["x", "y"]].to_numpy(float) if len(junctions) else np.zeros((0, 2))
+    return pd.DataFrame(jrows, columns=["junction_id", "x", "y", "n_stacks"]), junction_of_end
 
-    # --- branches: per-run energies (nodal bending weights, exact trapezoid confinement)
+
+def _branch_table(xy, lam, topo, smp, r2):
+    """One row per run: length, curvatures and energies (nodal bending weights, exact
+    trapezoid confinement)."""
+    n = xy.shape[0] - 1
+    ds = 1.0 / n
+    s, k_total, runs = smp.s, len(smp.s), topo.runs
     kappa = node_curvature(xy)
     node_s = np.arange(n + 1) * ds
     brows = []
@@ -475,46 +554,43 @@ def analyze_rod(xy, *, lam: float, contact_distance: float | None = None,
         kap = kappa[in_br]
         kp = float(np.sum(np.abs(kap)) * ds / length) if length > 0 else 0.0
         kpm = float(np.sum(kap) * ds / length) if length > 0 else 0.0
-        brows.append({"branch_id": i, "stack_id": int(run_stack[i]), "length": length,
+        brows.append({"branch_id": i, "stack_id": int(topo.run_stack[i]), "length": length,
                       "kappa_plus": kp, "kappa_pm": kpm, "energy_bending": eb,
                       "energy_confinement": ec, "energy": eb + ec, "s_start": s0, "s_end": s1})
-    branches = pd.DataFrame(brows)
+    return pd.DataFrame(brows)
 
-    # --- stacks and their mean lines
+
+def _stack_table(topo, smp, branches, junction_of_end, j_xy):
+    """One row per stack (its junctions, mean branch length, n_br) and its mean line."""
+    run_id = _run_ids(topo.runs, len(smp.s))
     srows, lines = [], []
-    for st, members in enumerate(stack_runs):
+    for st, members in enumerate(topo.stack_runs):
         ja = junction_of_end.get((st, 0), -1)
         jb = junction_of_end.get((st, 1), -1)
         lengths = [branches.loc[r, "length"] for r in members]
         srows.append({"stack_id": st, "junction_a": ja, "junction_b": jb,
                       "length": float(np.mean(lengths)), "n_br": len(members),
                       "passes": ";".join(str(r) for r in members)})
-        lines.append(_mean_line(st, members, runs, side, clusters, run_stack, run_id, pts,
-                                k_total, j_xy, ja, jb))
+        lines.append(_mean_line(st, members, topo, smp, run_id, j_xy, ja, jb))
     stacks = pd.DataFrame(srows, columns=["stack_id", "junction_a", "junction_b", "length",
                                           "n_br", "passes"])
-
-    voids = _voids(xy, delta, j_xy, void_px)
-
-    node_mult = mult[np.arange(n + 1) * sub]
-    return RodAnalysis(
-        rg=rg, epsilon=float(eps), epsilon_sqrt2=float(eps2),
-        energy_total=e_bend + e_conf, energy_bending=e_bend, energy_confinement=e_conf,
-        n_stacks=n_stacks, n_branches=len(runs), n_junctions=len(junctions),
-        n_voids=len(voids), multiplicity=node_mult, junctions=junctions, stacks=stacks,
-        branches=branches, voids=voids, contact_distance=delta, stack_lines=lines,
-        samples_s=s, samples_xy=pts, samples_multiplicity=mult)
+    return stacks, lines
 
 
+def _end_point(runs, pts, i, e):
+    """Position of end ``e`` (0: start, 1: stop) of run ``i``."""
+    a, b = runs[i]
+    return pts[a] if e == 0 else pts[b - 1 if b == len(pts) else b]
 
-def _topology(runs, cls, end_point, rside=None):
+
+def _topology(runs, cls, pts, rside=None):
     """Stack numbering, sides of every run end and the junction groups of stack ends.
 
     Returns ``run_stack`` (stack of every run, numbered by first appearance along the rod),
     ``stack_runs``, ``side[(run, end)]`` (0/1: which end of its stack the run end lies at,
-    matched to the stack's longest run, or taken from ``rside``; 2: inside the stack), ``groups`` (lists of (stack, side) ends joined by
-    consecutive runs: junctions when they hold two or more stacks) and ``node_pts``
-    ((stack, side) -> list of (point, run, end)).
+    matched to the stack's longest run, or taken from ``rside``; 2: inside the stack),
+    ``groups`` (lists of (stack, side) ends joined by consecutive runs: junctions when they
+    hold two or more stacks) and ``node_pts`` ((stack, side) -> list of (point, run, end)).
     """
     stack_of_cls = {}
     for c in cls:
@@ -531,28 +607,30 @@ def _topology(runs, cls, end_point, rside=None):
                 side[(r, 0)], side[(r, 1)] = rside[r]
             continue
         ref = max(members, key=lambda r: runs[r][1] - runs[r][0])
-        p0, p1 = end_point(ref, 0), end_point(ref, 1)
+        p0, p1 = _end_point(runs, pts, ref, 0), _end_point(runs, pts, ref, 1)
         for r in members:
-            q0, q1 = end_point(r, 0), end_point(r, 1)
+            q0, q1 = _end_point(runs, pts, r, 0), _end_point(runs, pts, r, 1)
             direct = np.hypot(*(q0 - p0)) + np.hypot(*(q1 - p1))
             flipped = np.hypot(*(q0 - p1)) + np.hypot(*(q1 - p0))
             side[(r, 0)], side[(r, 1)] = (0, 1) if direct <= flipped else (1, 0)
-    nodes = {(st, sd): idx for idx, (st, sd) in enumerate(
-        (st, sd) for st in range(n_stacks) for sd in (0, 1))}
-    dsu = _DSU(len(nodes))
-    node_pts = {e: [] for e in nodes}
+    # stack end (st, sd) is node 2 st + sd of the graph whose edges join consecutive runs
+    node_pts = {(st, sd): [] for st in range(n_stacks) for sd in (0, 1)}
+    pairs = []
     for i in range(len(runs)):
         for e in (0, 1):
             if side[(i, e)] < 2:  # 2: a free end or fold inside a merged band
-                node_pts[(int(run_stack[i]), side[(i, e)])].append((end_point(i, e), i, e))
+                node_pts[(int(run_stack[i]), side[(i, e)])].append(
+                    (_end_point(runs, pts, i, e), i, e))
     for i in range(len(runs) - 1):
         if side[(i, 1)] < 2 and side[(i + 1, 0)] < 2:
-            dsu.union(nodes[(run_stack[i], side[(i, 1)])],
-                      nodes[(run_stack[i + 1], side[(i + 1, 0)])])
+            pairs.append((2 * run_stack[i] + side[(i, 1)],
+                          2 * run_stack[i + 1] + side[(i + 1, 0)]))
+    labels = group_labels(2 * n_stacks, pairs)
     groups = {}
-    for (st, sd), idx in nodes.items():
-        groups.setdefault(dsu.find(idx), []).append((st, sd))
+    for st, sd in node_pts:
+        groups.setdefault(int(labels[2 * st + sd]), []).append((st, sd))
     return run_stack, stack_runs, side, groups, node_pts
+
 
 def _trapezoid_piece(r2, n, s0, s1):
     """Integral over [s0, s1] of the piecewise-linear interpolant of the nodal values r2.
@@ -571,18 +649,19 @@ def _trapezoid_piece(r2, n, s0, s1):
     return cumulative(min(s1, 1.0)) - cumulative(max(s0, 0.0))
 
 
-def _mean_line(st, members, runs, side, clusters, run_stack, run_id, pts, k_total, j_xy, ja, jb):
+def _mean_line(st, members, topo, smp, run_id, j_xy, ja, jb):
     """Centroid line of a stack's passes along its longest run, extended to its junctions
     (side 0 first)."""
+    runs, pts = topo.runs, smp.pts
     r0 = max(members, key=lambda r: runs[r][1] - runs[r][0])
     a, b = runs[r0]
-    b_incl = min(b, k_total - 1)
+    b_incl = min(b, len(pts) - 1)
     idx = np.arange(a, b_incl + 1)
     line = np.empty((len(idx), 2))
     for t, k in enumerate(idx):
-        mem = [q for q in clusters[k] if run_stack[run_id[q]] == st]
+        mem = [q for q in smp.clusters[k] if topo.run_stack[run_id[q]] == st]
         line[t] = pts[mem].mean(axis=0) if mem else pts[k]
-    if side[(r0, 0)] == 1 or side[(r0, 1)] == 0:
+    if topo.side[(r0, 0)] == 1 or topo.side[(r0, 1)] == 0:
         line = line[::-1]
     head = [j_xy[ja]] if ja >= 0 else []
     tail = [j_xy[jb]] if jb >= 0 else []

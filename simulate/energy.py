@@ -13,7 +13,7 @@ Discretisation (N segments, ``ds = 1/N``, nodes ``xy`` (N+1, 2)):
   has infinite energy.
 
 The functions on ``xy`` are pure numpy (also used by ``simulate.contacts``); the incremental
-kernels used by the minimiser live in :mod:`simulate.optimize`.
+kernels used by the minimiser live in :mod:`simulate.powell`.
 """
 from __future__ import annotations
 
@@ -128,12 +128,6 @@ def total_energy(xy, lam: float, *, wall_radius: float | None = None,
 
         if has_intersection(xy):
             return float("inf")
-    return bending_energy(xy) + confinement_energy(xy, lam)
-
-
-def energy_theta(theta, start, lam: float) -> float:
-    """Bending + confinement energy of the rod given by tangent angles (no hard core)."""
-    xy = positions(theta, start)
     return bending_energy(xy) + confinement_energy(xy, lam)
 
 
@@ -299,5 +293,5 @@ def contact_barrier(xy, *, sigma: float, eps: float, min_separation: int = 3):
     return float(e), grad, int(npairs)
 
 
-__all__ = ["contact_barrier", "bending_energy", "confinement_energy", "node_curvature", "total_energy",
-           "energy_theta", "energy_and_gradient", "nematic_energy"]
+__all__ = ["contact_barrier", "bending_energy", "confinement_energy", "node_curvature",
+           "total_energy", "energy_and_gradient", "nematic_energy"]

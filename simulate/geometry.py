@@ -87,12 +87,6 @@ def center_of_mass(xy) -> np.ndarray:
     return w @ xy
 
 
-def centered(xy) -> np.ndarray:
-    """The polyline translated so that its centre of mass is at the origin."""
-    xy = np.asarray(xy, dtype=np.float64)
-    return xy - center_of_mass(xy)
-
-
 def radius_of_gyration(xy) -> float:
     """``Rg = sqrt(int R^2 ds)`` about the origin (paper Eq. "raygir", L = 1)."""
     xy = np.asarray(xy, dtype=np.float64)
@@ -100,5 +94,4 @@ def radius_of_gyration(xy) -> float:
     return float(np.sqrt(w @ np.einsum("ij,ij->i", xy, xy)))
 
 
-__all__ = ["positions", "angles", "trapezoid_weights", "center_of_mass", "centered",
-           "radius_of_gyration"]
+__all__ = ["positions", "angles", "trapezoid_weights", "center_of_mass", "radius_of_gyration"]

@@ -6,8 +6,8 @@ so the tangent angle turns by ``dtheta_i = kappa_i ds = sqrt(2 D) ds xi_i`` betw
 ``i-1`` and ``i`` (variance ``2 D ds^2``). This is the reading under which D = 750 is "the
 largest noise without self-intersection" for N = 300. Measured raw self-intersection rates,
 N = 300, 10^4 draws each (95 % binomial interval): D = 500: 0.30 % [0.20, 0.43]; 750: 1.76 %
-[1.51, 2.04]; 1000: 4.28 % [3.89, 4.70]; 2000: 22.5 % [21.7, 23.3]. The issue quotes the
-prototype's 0.5 / 0.7 / 4 / 25 %: three of four agree, and no other discretisation matches
+[1.51, 2.04]; 1000: 4.28 % [3.89, 4.70]; 2000: 22.5 % [21.7, 23.3]. A reference prototype
+reported 0.5 / 0.7 / 4 / 25 %: three of four agree, and no other discretisation matches
 all four (the "ds/2" reading, variance ``D ds^2``, is this law at D/2: 0.05 % at 750 but only
 ~4 % at 2000; centring and the number of curvature nodes, N-1 or N, do not change the shape
 up to a rigid motion), so the 0.7 % at D = 750 is most likely the sampling error of a small

@@ -32,7 +32,7 @@
   extrapolated directions.
 * ``lbfgs`` -- scipy L-BFGS-B on bending + confinement + a smooth contact barrier (see
   :func:`lbfgs_quench`): contacts slide, so it reaches lower, more ordered states than Powell
-  (16 starts: Ẽ 2506, Rg 0.041, vs powell 4151, 0.058; KS p ~ 1e-7 on Ẽ), as the issue's
+  (16 starts: Ẽ 2506, Rg 0.041, vs powell 4151, 0.058; KS p ~ 1e-7 on Ẽ), as a reference
   prototype found (2600, 0.04). Hard core alone (1e30 for crossings) jams L-BFGS-B at the
   first contact (Ẽ 1.8-2.3e4 after ~20 iterations).
 * ``scipy_protocol`` -- the powell protocol with ``scipy.optimize.minimize(method="Powell")``

@@ -32,10 +32,16 @@ theta_0``) and the start point, made fast by the structure of the rod:
 
 Inadmissible trials get the energy ``BIG`` (1e30), "a very large number" as in the paper; a
 trial is inadmissible when two non-adjacent segments come closer than ``MARGIN`` (1e-9 L).
+
+The state shared by the kernels travels in named tuples (typed structures that numba compiles
+to plain structs and caches): :class:`Rod` (the configuration of the run), :class:`Line` (the
+move of one line search and its step-0 constants), :class:`Scratch` (reused buffers, the lazily
+built hard-core test, the counters) and :class:`Model` (energy parameters and constraints).
 """
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -53,8 +59,174 @@ _GOLD = 1.618034
 _CG = 0.3819660
 _MINTOL = 1.0e-11
 
+# moves of a line search (``Line.mode``)
+BEND = 0      # bend angle phi_k: the tail rotates rigidly about node k
+SHIFT = 1     # x0 or y0: the whole rod translates
+GENERAL = 2   # any direction of parameter space (Powell's extrapolated ones): O(N) per trial
+TANGENT = 3   # tangent angle theta_k: segment k turns, the tail translates
 
-# ----------------------------------------------------------------------------- state
+# head-grid bounds: cells no smaller than a segment, at most 41 x 41 of them
+_GRID_CELLS = 41 * 41 + 2
+
+
+class Rod(NamedTuple):
+    """The configuration of a Powell run, kept consistent with ``p`` after every step.
+
+    Attributes
+    ----------
+    p : (N+2,) float64
+        Search parameters: bend angles ``phi_0 .. phi_{N-1}``, then ``x0, y0``.
+    xy : (N+1, 2) float64
+        Node positions.
+    theta : (N,) float64
+        Tangent angles ``theta_k = phi_0 + .. + phi_k``.
+    w : (N+1,) float64
+        Trapezoid weights of the confinement integral.
+    tail_w, tail_wx, tail_wy, tail_wr2 : (N+2,) float64
+        Suffix sums over nodes ``j >= k`` of ``w_j``, ``w_j x_j``, ``w_j y_j``,
+        ``w_j |R_j|^2`` (index N+1 holds zeros).
+    """
+
+    p: np.ndarray
+    xy: np.ndarray
+    theta: np.ndarray
+    w: np.ndarray
+    tail_w: np.ndarray
+    tail_wx: np.ndarray
+    tail_wy: np.ndarray
+    tail_wr2: np.ndarray
+
+
+class Line(NamedTuple):
+    """One line search: its move and the step-0 constants every trial along it shares.
+
+    A trial at step ``a`` moves the coordinate by ``x = sign * a``. Fields a move does not
+    use are 0.
+
+    Attributes
+    ----------
+    mode : int
+        ``BEND``, ``TANGENT``, ``SHIFT`` or ``GENERAL``.
+    k : int
+        The coordinate: node / segment ``k`` (``BEND``, ``TANGENT``) or the axis (0: ``x0``,
+        1: ``y0``) of a ``SHIFT``.
+    sign : float
+        Sign of the coordinate direction (+1 or -1).
+    f0 : float
+        Energy at step 0.
+    lin_x, lin_y : float
+        Confinement coefficients: ``BEND``: ``R_k . V`` and ``R_k x V`` with ``V = sum_{j>k}
+        w_j (R_j - R_k)``; ``TANGENT``: ``sum_{j>k} w_j R_j``; ``SHIFT``: ``sum_j w_j`` times
+        the coordinate along the axis (``lin_x`` only).
+    weight : float
+        Weight of the translated nodes: ``sum_{j>k} w_j`` (``TANGENT``), ``sum_j w_j``
+        (``SHIFT``).
+    phi_k, phi_k1 : float
+        Bend angles at nodes ``k`` and ``k+1`` (``phi_k1 = 0`` past the last node).
+    bend_k, bend_k1 : float
+        Their bending terms ``2 - 2 cos phi`` at step 0.
+    nem_cos, nem_sin : float
+        Nematic pairs cut by the move: sums of ``cos 2(theta_a - theta_b)`` and of the signed
+        ``sin 2(theta_a - theta_b)``.
+    cos_k, sin_k : float
+        ``cos theta_k``, ``sin theta_k`` (``TANGENT``).
+    direction : (N+2,) float64
+        The direction in parameter space (``GENERAL``; empty for coordinate moves).
+    """
+
+    mode: int
+    k: int
+    sign: float
+    f0: float
+    lin_x: float
+    lin_y: float
+    weight: float
+    phi_k: float
+    phi_k1: float
+    bend_k: float
+    bend_k1: float
+    nem_cos: float
+    nem_sin: float
+    cos_k: float
+    sin_k: float
+    direction: np.ndarray
+
+
+class Scratch(NamedTuple):
+    """Buffers reused by every line search of a run, and the run's counters.
+
+    The hard-core test of a coordinate move is built lazily, at the first trial of its line
+    search that needs it (most line searches end without one).
+
+    Attributes
+    ----------
+    p_trial : (N+2,) float64
+        Parameters of a ``GENERAL`` trial.
+    xy_trial : (N+1, 2) float64
+        Its node positions.
+    theta_trial : (N,) float64
+        Its tangent angles (nematic term).
+    reach : (N,) float64
+        ``BEND``: farthest distance ``r_j`` of tail segment ``j`` from the pivot node ``k``.
+    clear2 : (N,) float64
+        Squared clearance of moving segment ``j`` to the fixed part, capped at one grid cell.
+    ready : (1,) bool
+        ``reach``, ``clear2``, ``safe`` and the head grid hold the current line search's test.
+    safe : (1,) float64
+        Move below which every trial is admissible: the chord ``2 |sin(x/2)|`` (``BEND``) or
+        the translation ``|v|`` (``TANGENT``).
+    grid_origin : (2,) float64
+        Lower-left corner of the head grid (segments ``0 .. k-1``).
+    grid_cell : (1,) float64
+        Its cell side.
+    grid_shape : (2,) int64
+        Its cell counts ``nx, ny``.
+    grid_start, grid_items : int64 arrays
+        Its segments per cell (CSR).
+    no_direction : (0,) float64
+        The ``direction`` of coordinate lines.
+    stats : (6,) int64
+        Counters (see :func:`powell_run`).
+    """
+
+    p_trial: np.ndarray
+    xy_trial: np.ndarray
+    theta_trial: np.ndarray
+    reach: np.ndarray
+    clear2: np.ndarray
+    ready: np.ndarray
+    safe: np.ndarray
+    grid_origin: np.ndarray
+    grid_cell: np.ndarray
+    grid_shape: np.ndarray
+    grid_start: np.ndarray
+    grid_items: np.ndarray
+    no_direction: np.ndarray
+    stats: np.ndarray
+
+
+class Model(NamedTuple):
+    """Energy and constraints of a run.
+
+    Attributes
+    ----------
+    lam : float
+        Confinement Lambda.
+    u : float
+        Nematic strength (0: no nematic term).
+    wall2 : float
+        Squared hard-wall radius (``inf``: no wall).
+    hard_core : bool
+        Test trials for self-intersection.
+    """
+
+    lam: float
+    u: float
+    wall2: float
+    hard_core: bool
+
+
+# ----------------------------------------------------------------------------- rod state
 @njit(cache=True)
 def _build_xy(p, n, xy):
     # p holds bend angles: theta_i = p_0 + ... + p_i
@@ -77,20 +249,52 @@ def _theta(p, n, th):
 
 
 @njit(cache=True)
-def _suffix(xy, w, sw, spx, spy, sq):
-    """Suffix sums over nodes j >= k of w, w x, w y, w |R|^2 (index N+1 holds zeros)."""
+def _suffix(rod):
+    """Suffix sums of ``w``, ``w x``, ``w y``, ``w |R|^2`` over nodes ``j >= k``."""
+    xy = rod.xy
+    w = rod.w
     n1 = xy.shape[0]
-    sw[n1] = 0.0
-    spx[n1] = 0.0
-    spy[n1] = 0.0
-    sq[n1] = 0.0
+    rod.tail_w[n1] = 0.0
+    rod.tail_wx[n1] = 0.0
+    rod.tail_wy[n1] = 0.0
+    rod.tail_wr2[n1] = 0.0
     for j in range(n1 - 1, -1, -1):
         x = xy[j, 0]
         y = xy[j, 1]
-        sw[j] = sw[j + 1] + w[j]
-        spx[j] = spx[j + 1] + w[j] * x
-        spy[j] = spy[j + 1] + w[j] * y
-        sq[j] = sq[j + 1] + w[j] * (x * x + y * y)
+        rod.tail_w[j] = rod.tail_w[j + 1] + w[j]
+        rod.tail_wx[j] = rod.tail_wx[j + 1] + w[j] * x
+        rod.tail_wy[j] = rod.tail_wy[j + 1] + w[j] * y
+        rod.tail_wr2[j] = rod.tail_wr2[j + 1] + w[j] * (x * x + y * y)
+
+
+@njit(cache=True)
+def _sync(rod):
+    """Positions, tangent angles and suffix sums from the parameters (no drift from moves)."""
+    n = rod.theta.shape[0]
+    _build_xy(rod.p, n, rod.xy)
+    _suffix(rod)
+    _theta(rod.p, n, rod.theta)
+
+
+@njit(cache=True)
+def _new_rod(p):
+    n = p.shape[0] - 2
+    ds = 1.0 / n
+    w = np.full(n + 1, ds)
+    w[0] = 0.5 * ds
+    w[n] = 0.5 * ds
+    rod = Rod(p, np.empty((n + 1, 2)), np.empty(n), w, np.empty(n + 2), np.empty(n + 2),
+              np.empty(n + 2), np.empty(n + 2))
+    _sync(rod)
+    return rod
+
+
+@njit(cache=True)
+def _new_scratch(n, stats):
+    return Scratch(np.empty(n + 2), np.empty((n + 1, 2)), np.empty(n), np.empty(n),
+                   np.empty(n), np.zeros(1, np.bool_), np.zeros(1), np.empty(2), np.empty(1),
+                   np.empty(2, np.int64), np.empty(_GRID_CELLS, np.int64),
+                   np.empty(4 * n + 4, np.int64), np.empty(0), stats)
 
 
 @njit(cache=True)
@@ -111,6 +315,13 @@ def _nematic_p(th, pairs, u):
         s = math.sin(th[pairs[q, 0]] - th[pairs[q, 1]])
         e += s * s
     return u * e
+
+
+@njit(cache=True)
+def _rod_energy(rod, model, pairs):
+    n = rod.theta.shape[0]
+    return (_bending_p(rod.p, n) + model.lam * rod.tail_wr2[0]
+            + _nematic_p(rod.theta, pairs, model.u))
 
 
 @njit(cache=True)
@@ -165,18 +376,48 @@ def _head_grid(xy, k, hcell):
 
 
 @njit(cache=True)
-def _seg_vs_head(ax, ay, bx, by, j, k, xy, xmin, ymin, h, nx, ny, start, items, pad):
-    """Smallest squared distance (0 = touching) of segment a-b (index j) to head segments whose
-    cells meet its bbox grown by ``pad``; returns early with 0 on contact."""
+def _store_head_grid(xy, k, n, scratch):
+    """Build the grid of head segments 0..k-1 into ``scratch``; returns its cell side."""
+    xmin, ymin, h, nx, ny, start, items = _head_grid(xy, k, 1.0 / n)
+    scratch.grid_origin[0] = xmin
+    scratch.grid_origin[1] = ymin
+    scratch.grid_cell[0] = h
+    scratch.grid_shape[0] = nx
+    scratch.grid_shape[1] = ny
+    scratch.grid_start[:nx * ny + 1] = start
+    scratch.grid_items[:items.shape[0]] = items
+    return h
+
+
+@njit(cache=True)
+def _head_cells(ax, ay, bx, by, pad, scratch):
+    """Cell range ``(x0, x1, y0, y1)`` of the head grid met by the segment's bbox grown by
+    ``pad``, clipped to the grid; empty (``x0 > x1``) when the bbox misses the grid."""
+    xmin = scratch.grid_origin[0]
+    ymin = scratch.grid_origin[1]
+    h = scratch.grid_cell[0]
+    nx = scratch.grid_shape[0]
+    ny = scratch.grid_shape[1]
     x0 = int(math.floor((min(ax, bx) - pad - xmin) / h))
     x1 = int(math.floor((max(ax, bx) + pad - xmin) / h))
     y0 = int(math.floor((min(ay, by) - pad - ymin) / h))
     y1 = int(math.floor((max(ay, by) + pad - ymin) / h))
-    best = math.inf
     if x1 < 0 or y1 < 0 or x0 > nx - 1 or y0 > ny - 1:
-        return best
-    for cx in range(max(x0, 0), min(x1, nx - 1) + 1):
-        for cy in range(max(y0, 0), min(y1, ny - 1) + 1):
+        return 0, -1, 0, -1
+    return max(x0, 0), min(x1, nx - 1), max(y0, 0), min(y1, ny - 1)
+
+
+@njit(cache=True)
+def _seg_vs_head(ax, ay, bx, by, j, xy, scratch, pad):
+    """Smallest squared distance (0 = touching) of segment a-b (index j) to head segments whose
+    cells meet its bbox grown by ``pad``; returns early with 0 on contact."""
+    x0, x1, y0, y1 = _head_cells(ax, ay, bx, by, pad, scratch)
+    ny = scratch.grid_shape[1]
+    start = scratch.grid_start
+    items = scratch.grid_items
+    best = math.inf
+    for cx in range(x0, x1 + 1):
+        for cy in range(y0, y1 + 1):
             c = cx * ny + cy
             for q in range(start[c], start[c + 1]):
                 i = items[q]
@@ -191,15 +432,14 @@ def _seg_vs_head(ax, ay, bx, by, j, k, xy, xmin, ymin, h, nx, ny, start, items, 
 
 
 @njit(cache=True)
-def _seg_hits_head(ax, ay, bx, by, j, xy, xmin, ymin, h, nx, ny, start, items):
-    x0 = int(math.floor((min(ax, bx) - MARGIN - xmin) / h))
-    x1 = int(math.floor((max(ax, bx) + MARGIN - xmin) / h))
-    y0 = int(math.floor((min(ay, by) - MARGIN - ymin) / h))
-    y1 = int(math.floor((max(ay, by) + MARGIN - ymin) / h))
-    if x1 < 0 or y1 < 0 or x0 > nx - 1 or y0 > ny - 1:
-        return False
-    for cx in range(max(x0, 0), min(x1, nx - 1) + 1):
-        for cy in range(max(y0, 0), min(y1, ny - 1) + 1):
+def _seg_hits_head(ax, ay, bx, by, j, xy, scratch):
+    """Does segment a-b (index j) come closer than ``MARGIN`` to a head segment?"""
+    x0, x1, y0, y1 = _head_cells(ax, ay, bx, by, MARGIN, scratch)
+    ny = scratch.grid_shape[1]
+    start = scratch.grid_start
+    items = scratch.grid_items
+    for cx in range(x0, x1 + 1):
+        for cy in range(y0, y1 + 1):
             c = cx * ny + cy
             for q in range(start[c], start[c + 1]):
                 i = items[q]
@@ -211,79 +451,11 @@ def _seg_hits_head(ax, ay, bx, by, j, xy, xmin, ymin, h, nx, ny, start, items):
     return False
 
 
-# ----------------------------------------------------------------------------- evaluation
-# ctx (float64 array) for a line search:
-#   mode 0 (theta_k): [0, k, s, cdot, ccrs, dkm, dkp, bkm, bkp, nc, nsn, f0, built, chord_safe]
-#   mode 1 (x0 / y0): [1, axis, s, pw, W0, f0]
-#   mode 2 (general): [2]
-#   mode 3 (tangent theta_k, p holds bend angles: phi_k += x, phi_{k+1} -= x):
-#          [3, k, s, Sx, Sy, phi_k, phi_k+1, b_k, b_k+1, nc, nsn, f0, built, safe, hc, -,
-#           W, cos theta_k, sin theta_k]
-_CTX = 24
-
-
 @njit(cache=True)
-def _energy_trial(a, ctx, p, d, pt, xyt, tht, lam, w, u, pairs):
-    mode = int(ctx[0])
-    n = p.shape[0] - 2
-    if mode == 0:
-        k = int(ctx[1])
-        x = ctx[2] * a
-        e = ctx[11]
-        if k >= 1:
-            e += n * (2.0 - 2.0 * math.cos(ctx[5] + x) - ctx[7])
-        e += 2.0 * lam * ((math.cos(x) - 1.0) * ctx[3] + math.sin(x) * ctx[4])
-        if u > 0.0:
-            e += 0.5 * u * ((1.0 - math.cos(2.0 * x)) * ctx[9] - math.sin(2.0 * x) * ctx[10])
-        return e
-    if mode == 1:
-        x = ctx[2] * a
-        return ctx[5] + lam * (2.0 * x * ctx[3] + x * x * ctx[4])
-    if mode == 3:
-        k = int(ctx[1])
-        x = ctx[2] * a
-        c = math.cos(x)
-        sn = math.sin(x)
-        e = ctx[11]
-        if k >= 1:
-            e += n * (2.0 - 2.0 * math.cos(ctx[5] + x) - ctx[7])
-        if k < n - 1:
-            e += n * (2.0 - 2.0 * math.cos(ctx[6] - x) - ctx[8])
-        ds = 1.0 / n
-        # the tail (nodes j > k) translates by v = ds (t_k(theta + x) - t_k(theta))
-        vx = ds * (ctx[17] * c - ctx[18] * sn - ctx[17])
-        vy = ds * (ctx[18] * c + ctx[17] * sn - ctx[18])
-        e += lam * (2.0 * (vx * ctx[3] + vy * ctx[4]) + (vx * vx + vy * vy) * ctx[16])
-        if u > 0.0:
-            e += 0.5 * u * ((1.0 - math.cos(2.0 * x)) * ctx[9] - math.sin(2.0 * x) * ctx[10])
-        return e
-    # general direction: O(N)
-    m = p.shape[0]
-    for i in range(m):
-        pt[i] = p[i] + a * d[i]
-    _build_xy(pt, n, xyt)
-    eb = _bending_p(pt, n)
-    ec = 0.0
-    for j in range(n + 1):
-        ec += w[j] * (xyt[j, 0] * xyt[j, 0] + xyt[j, 1] * xyt[j, 1])
-    if u > 0.0:
-        _theta(pt, n, tht)
-    return eb + lam * ec + _nematic_p(tht, pairs, u)
-
-
-@njit(cache=True)
-def _prepare_head(ctx, xy, rj, clear2, gpar, gstart, gitems, n):
+def _prepare_bend(line, xy, scratch, n):
     """Head grid, per-tail-segment reach r_j and clearance c_j (capped), safe chord."""
-    k = int(ctx[1])
-    xmin, ymin, h, nx, ny, start, items = _head_grid(xy, k, 1.0 / n)
-    gpar[0] = xmin
-    gpar[1] = ymin
-    gpar[2] = h
-    gpar[3] = nx
-    gpar[4] = ny
-    nc = nx * ny + 1
-    gstart[:nc] = start
-    gitems[:items.shape[0]] = items
+    k = line.k
+    h = _store_head_grid(xy, k, n, scratch)
     rkx = xy[k, 0]
     rky = xy[k, 1]
     safe = math.inf
@@ -294,32 +466,25 @@ def _prepare_head(ctx, xy, rj, clear2, gpar, gstart, gitems, n):
         bx = xy[j + 1, 0]
         by = xy[j + 1, 1]
         r = max(math.hypot(ax - rkx, ay - rky), math.hypot(bx - rkx, by - rky))
-        rj[j] = r
-        c2 = _seg_vs_head(ax, ay, bx, by, j, k, xy, xmin, ymin, h, nx, ny, gstart, gitems, pad)
+        scratch.reach[j] = r
+        c2 = _seg_vs_head(ax, ay, bx, by, j, xy, scratch, pad)
         c = max(math.sqrt(min(c2, pad * pad)) - MARGIN, 0.0)
-        clear2[j] = c * c
+        scratch.clear2[j] = c * c
         if r > 0.0:
             safe = min(safe, c / r)
-    ctx[12] = 1.0
-    ctx[13] = safe
+    scratch.ready[0] = True
+    scratch.safe[0] = safe
 
 
 @njit(cache=True)
-def _prepare_tangent(ctx, xy, clear2, gpar, gstart, gitems, n):
+def _prepare_tangent(line, xy, scratch, n):
     """Tangent move of segment k: head 0..k-1 fixed, segment k turns about R_k, the tail
     translates; every moving point moves by at most |v| relative to the head and to segment
     k. Clearance c_j of segment j >= k to the head (and, j >= k+2, to segment k), capped."""
-    k = int(ctx[1])
+    k = line.k
     h = 1.0 / n
     if k >= 1:
-        xmin, ymin, h, nx, ny, start, items = _head_grid(xy, k, 1.0 / n)
-        gpar[0] = xmin
-        gpar[1] = ymin
-        gpar[2] = h
-        gpar[3] = nx
-        gpar[4] = ny
-        gstart[:nx * ny + 1] = start
-        gitems[:items.shape[0]] = items
+        h = _store_head_grid(xy, k, n, scratch)
     pad = h
     safe = math.inf
     kx0 = xy[k, 0]
@@ -333,47 +498,105 @@ def _prepare_tangent(ctx, xy, clear2, gpar, gstart, gitems, n):
         by = xy[j + 1, 1]
         c2 = pad * pad
         if k >= 1:
-            c2 = min(c2, _seg_vs_head(ax, ay, bx, by, j, k, xy, gpar[0], gpar[1], h,
-                                      int(gpar[3]), int(gpar[4]), gstart, gitems, pad))
+            c2 = min(c2, _seg_vs_head(ax, ay, bx, by, j, xy, scratch, pad))
         if j >= k + 2:
             c2 = min(c2, seg_dist2(kx0, ky0, kx1, ky1, ax, ay, bx, by))
         c = max(math.sqrt(c2) - MARGIN, 0.0)
-        clear2[j] = c * c
+        scratch.clear2[j] = c * c
         safe = min(safe, c)
-    ctx[12] = 1.0
-    ctx[13] = safe
+    scratch.ready[0] = True
+    scratch.safe[0] = safe
+
+
+# ----------------------------------------------------------------------------- evaluation
+@njit(cache=True)
+def _energy_trial(a, line, rod, scratch, model, pairs):
+    """Energy at step ``a`` along ``line``: O(1) for coordinate moves, O(N) for ``GENERAL``
+    (which leaves the trial in ``scratch.xy_trial``)."""
+    n = rod.theta.shape[0]
+    lam = model.lam
+    u = model.u
+    x = line.sign * a
+    if line.mode == BEND:
+        e = line.f0
+        if line.k >= 1:
+            e += n * (2.0 - 2.0 * math.cos(line.phi_k + x) - line.bend_k)
+        e += 2.0 * lam * ((math.cos(x) - 1.0) * line.lin_x + math.sin(x) * line.lin_y)
+        if u > 0.0:
+            e += 0.5 * u * ((1.0 - math.cos(2.0 * x)) * line.nem_cos
+                            - math.sin(2.0 * x) * line.nem_sin)
+        return e
+    if line.mode == SHIFT:
+        return line.f0 + lam * (2.0 * x * line.lin_x + x * x * line.weight)
+    if line.mode == TANGENT:
+        c = math.cos(x)
+        sn = math.sin(x)
+        e = line.f0
+        if line.k >= 1:
+            e += n * (2.0 - 2.0 * math.cos(line.phi_k + x) - line.bend_k)
+        if line.k < n - 1:
+            e += n * (2.0 - 2.0 * math.cos(line.phi_k1 - x) - line.bend_k1)
+        vx, vy = _tail_shift(line, c, sn, n)
+        e += lam * (2.0 * (vx * line.lin_x + vy * line.lin_y)
+                    + (vx * vx + vy * vy) * line.weight)
+        if u > 0.0:
+            e += 0.5 * u * ((1.0 - math.cos(2.0 * x)) * line.nem_cos
+                            - math.sin(2.0 * x) * line.nem_sin)
+        return e
+    pt = scratch.p_trial
+    xyt = scratch.xy_trial
+    for i in range(pt.shape[0]):
+        pt[i] = rod.p[i] + a * line.direction[i]
+    _build_xy(pt, n, xyt)
+    eb = _bending_p(pt, n)
+    ec = 0.0
+    for j in range(n + 1):
+        ec += rod.w[j] * (xyt[j, 0] * xyt[j, 0] + xyt[j, 1] * xyt[j, 1])
+    if u > 0.0:
+        _theta(pt, n, scratch.theta_trial)
+    return eb + lam * ec + _nematic_p(scratch.theta_trial, pairs, u)
 
 
 @njit(cache=True)
-def _admissible_tangent(a, ctx, xy, wall2, clear2, gpar, gstart, gitems, stats, n):
-    k = int(ctx[1])
-    x = ctx[2] * a
+def _tail_shift(line, c, sn, n):
+    """Translation ``v = ds (t_k(theta_k + x) - t_k(theta_k))`` of the tail (nodes j > k) by a
+    ``TANGENT`` move of ``x`` (``c = cos x``, ``sn = sin x``)."""
+    ds = 1.0 / n
+    vx = ds * (line.cos_k * c - line.sin_k * sn - line.cos_k)
+    vy = ds * (line.sin_k * c + line.cos_k * sn - line.sin_k)
+    return vx, vy
+
+
+@njit(cache=True)
+def _admissible_tangent(a, line, xy, wall2, scratch, n):
+    k = line.k
+    x = line.sign * a
     c = math.cos(x)
     sn = math.sin(x)
     ds = 1.0 / n
-    tx = ctx[17] * c - ctx[18] * sn
-    ty = ctx[18] * c + ctx[17] * sn
-    vx = ds * tx - ds * ctx[17]
-    vy = ds * ty - ds * ctx[18]
+    tx = line.cos_k * c - line.sin_k * sn
+    ty = line.sin_k * c + line.cos_k * sn
+    vx = ds * tx - ds * line.cos_k
+    vy = ds * ty - ds * line.sin_k
     if wall2 < math.inf:
         for j in range(k + 1, n + 1):
             qx = xy[j, 0] + vx
             qy = xy[j, 1] + vy
             if qx * qx + qy * qy > wall2:
                 return False
-    if ctx[12] == 0.0:
-        _prepare_tangent(ctx, xy, clear2, gpar, gstart, gitems, n)
+    if not scratch.ready[0]:
+        _prepare_tangent(line, xy, scratch, n)
     v2 = vx * vx + vy * vy
-    if v2 < ctx[13] * ctx[13]:
-        stats[5] += 1
+    if v2 < scratch.safe[0] * scratch.safe[0]:
+        scratch.stats[5] += 1
         return True
-    stats[4] += 1
+    scratch.stats[4] += 1
     kx0 = xy[k, 0]
     ky0 = xy[k, 1]
     kx1 = kx0 + ds * tx
     ky1 = ky0 + ds * ty
     for j in range(k, n):
-        if v2 < clear2[j]:
+        if v2 < scratch.clear2[j]:
             continue
         if j == k:
             ax, ay, bx, by = kx0, ky0, kx1, ky1
@@ -382,117 +605,109 @@ def _admissible_tangent(a, ctx, xy, wall2, clear2, gpar, gstart, gitems, stats, 
             ay = xy[j, 1] + vy
             bx = xy[j + 1, 0] + vx
             by = xy[j + 1, 1] + vy
-        if k >= 1:
-            if _seg_hits_head(ax, ay, bx, by, j, xy, gpar[0], gpar[1], gpar[2], int(gpar[3]),
-                              int(gpar[4]), gstart, gitems):
-                return False
+        if k >= 1 and _seg_hits_head(ax, ay, bx, by, j, xy, scratch):
+            return False
         if j >= k + 2 and seg_dist2(kx0, ky0, kx1, ky1, ax, ay, bx, by) < _M2:
             return False
     return True
 
 
 @njit(cache=True)
-def _admissible(a, ctx, p, d, xy, xyt, wall2, rj, clear2, gpar, gstart, gitems, stats):
-    """Hard core (and wall) for the trial at step ``a``; ``xyt`` holds a general trial."""
-    mode = int(ctx[0])
-    n = p.shape[0] - 2
-    stats[2] += 1
-    if mode == 3:
-        return _admissible_tangent(a, ctx, xy, wall2, clear2, gpar, gstart, gitems, stats, n)
-    if mode == 0:
-        k = int(ctx[1])
-        x = ctx[2] * a
-        c = math.cos(x)
-        s = math.sin(x)
-        rkx = xy[k, 0]
-        rky = xy[k, 1]
-        if wall2 < math.inf:
-            for j in range(k + 1, n + 1):
-                dx = xy[j, 0] - rkx
-                dy = xy[j, 1] - rky
-                qx = rkx + c * dx - s * dy
-                qy = rky + s * dx + c * dy
-                if qx * qx + qy * qy > wall2:
-                    return False
-        if k == 0:
-            return True
-        if ctx[12] == 0.0:
-            _prepare_head(ctx, xy, rj, clear2, gpar, gstart, gitems, n)
-        chord = 2.0 * abs(math.sin(0.5 * x))
-        if chord < ctx[13]:
-            stats[5] += 1
-            return True
-        stats[4] += 1
-        xmin = gpar[0]
-        ymin = gpar[1]
-        h = gpar[2]
-        nx = int(gpar[3])
-        ny = int(gpar[4])
-        for j in range(k, n):
-            if chord * chord * rj[j] * rj[j] < clear2[j]:
-                continue
+def _admissible_bend(a, line, xy, wall2, scratch, n):
+    k = line.k
+    x = line.sign * a
+    c = math.cos(x)
+    s = math.sin(x)
+    rkx = xy[k, 0]
+    rky = xy[k, 1]
+    if wall2 < math.inf:
+        for j in range(k + 1, n + 1):
             dx = xy[j, 0] - rkx
             dy = xy[j, 1] - rky
-            ax = rkx + c * dx - s * dy
-            ay = rky + s * dx + c * dy
-            dx = xy[j + 1, 0] - rkx
-            dy = xy[j + 1, 1] - rky
-            bx = rkx + c * dx - s * dy
-            by = rky + s * dx + c * dy
-            if _seg_hits_head(ax, ay, bx, by, j, xy, xmin, ymin, h, nx, ny, gstart, gitems):
+            qx = rkx + c * dx - s * dy
+            qy = rky + s * dx + c * dy
+            if qx * qx + qy * qy > wall2:
                 return False
+    if k == 0:
         return True
-    if mode == 1:
+    if not scratch.ready[0]:
+        _prepare_bend(line, xy, scratch, n)
+    chord = 2.0 * abs(math.sin(0.5 * x))
+    if chord < scratch.safe[0]:
+        scratch.stats[5] += 1
+        return True
+    scratch.stats[4] += 1
+    for j in range(k, n):
+        if chord * chord * scratch.reach[j] * scratch.reach[j] < scratch.clear2[j]:
+            continue
+        dx = xy[j, 0] - rkx
+        dy = xy[j, 1] - rky
+        ax = rkx + c * dx - s * dy
+        ay = rky + s * dx + c * dy
+        dx = xy[j + 1, 0] - rkx
+        dy = xy[j + 1, 1] - rky
+        bx = rkx + c * dx - s * dy
+        by = rky + s * dx + c * dy
+        if _seg_hits_head(ax, ay, bx, by, j, xy, scratch):
+            return False
+    return True
+
+
+@njit(cache=True)
+def _admissible(a, line, rod, scratch, wall2):
+    """Hard core (and wall) for the trial at step ``a``; a ``GENERAL`` trial is read from
+    ``scratch.xy_trial``."""
+    n = rod.theta.shape[0]
+    xy = rod.xy
+    scratch.stats[2] += 1
+    if line.mode == TANGENT:
+        return _admissible_tangent(a, line, xy, wall2, scratch, n)
+    if line.mode == BEND:
+        return _admissible_bend(a, line, xy, wall2, scratch, n)
+    if line.mode == SHIFT:
         if wall2 < math.inf:
-            axis = int(ctx[1])
-            x = ctx[2] * a
+            axis = line.k
+            x = line.sign * a
             for j in range(n + 1):
                 qx = xy[j, 0] + (x if axis == 0 else 0.0)
                 qy = xy[j, 1] + (x if axis == 1 else 0.0)
                 if qx * qx + qy * qy > wall2:
                     return False
         return True
-    stats[4] += 1
-    if wall2 < math.inf and _outside_wall(xyt, wall2):
+    scratch.stats[4] += 1
+    if wall2 < math.inf and _outside_wall(scratch.xy_trial, wall2):
         return False
-    return not has_contact_grid(xyt, MARGIN)
+    return not has_contact_grid(scratch.xy_trial, MARGIN)
 
 
 @njit(cache=True)
-def _ev(a, thresh, ctx, p, d, pt, xy, xyt, lam, w, u, pairs, wall2, rj, clear2, gpar, gstart,
-        gitems, stats):
-    stats[0] += 1
-    f = _energy_trial(a, ctx, p, d, pt, xyt, gpar[5:], lam, w, u, pairs)
-    if f <= thresh and ctx[14] != 0.0:
-        if not _admissible(a, ctx, p, d, xy, xyt, wall2, rj, clear2, gpar, gstart, gitems,
-                           stats):
+def _ev(a, thresh, line, rod, scratch, model, pairs):
+    """Energy of the trial at step ``a``, ``BIG`` if it is inadmissible; trials above
+    ``thresh`` (the line search's best so far) cannot be accepted and skip the hard-core test."""
+    scratch.stats[0] += 1
+    f = _energy_trial(a, line, rod, scratch, model, pairs)
+    if f <= thresh and model.hard_core:
+        if not _admissible(a, line, rod, scratch, model.wall2):
             return BIG
     return f
 
 
+# ----------------------------------------------------------------------------- line search
 @njit(cache=True)
-def _line_search(tol, ctx, p, d, pt, xy, xyt, lam, w, u, pairs, wall2, rj, clear2, gpar,
-                 gstart, gitems, stats):
-    """scipy's ``bracket`` (xa=0, xb=1, grow_limit=110) then ``Brent`` (tol, maxiter 500).
-
-    Returns (alpha_min, f_min). Trials are checked for admissibility only when they could
-    become the best point (see module docstring).
-    """
-    md = int(ctx[0])
-    f0 = ctx[11] if (md == 0 or md == 3) else (ctx[5] if md == 1 else ctx[15])
+def _bracket(line, rod, scratch, model, pairs):
+    """scipy's ``bracket`` from ``xa = 0``, ``xb = 1`` (``grow_limit = 110``, at most 1000
+    steps). Returns ``(xa, xb, xc, fa, fb, fc, ok)``; ``ok`` is false when it gave up."""
+    f0 = line.f0
     xa = 0.0
     xb = 1.0
     fa = f0
-    fb = _ev(xb, f0, ctx, p, d, pt, xy, xyt, lam, w, u, pairs, wall2, rj, clear2, gpar, gstart,
-             gitems, stats)
+    fb = _ev(xb, f0, line, rod, scratch, model, pairs)
     if fa < fb:
         xa, xb = xb, xa
         fa, fb = fb, fa
     xc = xb + _GOLD * (xb - xa)
-    fc = _ev(xc, f0, ctx, p, d, pt, xy, xyt, lam, w, u, pairs, wall2, rj, clear2, gpar, gstart,
-             gitems, stats)
+    fc = _ev(xc, f0, line, rod, scratch, model, pairs)
     it = 0
-    ok = True
     while fc < fb:
         tmp1 = (xb - xa) * (fb - fc)
         tmp2 = (xb - xc) * (fb - fa)
@@ -504,61 +719,44 @@ def _line_search(tol, ctx, p, d, pt, xy, xyt, lam, w, u, pairs, wall2, rj, clear
         wv = xb - ((xb - xc) * tmp2 - (xb - xa) * tmp1) / denom
         wlim = xb + 110.0 * (xc - xb)
         if it > 1000:
-            ok = False
-            break
+            return xa, xb, xc, fa, fb, fc, False
         it += 1
         if (wv - xc) * (xb - wv) > 0.0:
-            fw = _ev(wv, f0, ctx, p, d, pt, xy, xyt, lam, w, u, pairs, wall2, rj, clear2, gpar,
-                     gstart, gitems, stats)
+            fw = _ev(wv, f0, line, rod, scratch, model, pairs)
             if fw < fc:
-                xa = xb
-                xb = wv
-                fa = fb
-                fb = fw
-                break
+                return xb, wv, xc, fb, fw, fc, True
             elif fw > fb:
-                xc = wv
-                fc = fw
-                break
+                return xa, xb, wv, fa, fb, fw, True
             wv = xc + _GOLD * (xc - xb)
-            fw = _ev(wv, f0, ctx, p, d, pt, xy, xyt, lam, w, u, pairs, wall2, rj, clear2, gpar,
-                     gstart, gitems, stats)
+            fw = _ev(wv, f0, line, rod, scratch, model, pairs)
         elif (wv - wlim) * (wlim - xc) >= 0.0:
             wv = wlim
-            fw = _ev(wv, f0, ctx, p, d, pt, xy, xyt, lam, w, u, pairs, wall2, rj, clear2, gpar,
-                     gstart, gitems, stats)
+            fw = _ev(wv, f0, line, rod, scratch, model, pairs)
         elif (wv - wlim) * (xc - wv) > 0.0:
-            fw = _ev(wv, f0, ctx, p, d, pt, xy, xyt, lam, w, u, pairs, wall2, rj, clear2, gpar,
-                     gstart, gitems, stats)
+            fw = _ev(wv, f0, line, rod, scratch, model, pairs)
             if fw < fc:
                 xb = xc
                 xc = wv
                 wv = xc + _GOLD * (xc - xb)
                 fb = fc
                 fc = fw
-                fw = _ev(wv, f0, ctx, p, d, pt, xy, xyt, lam, w, u, pairs, wall2, rj, clear2,
-                         gpar, gstart, gitems, stats)
+                fw = _ev(wv, f0, line, rod, scratch, model, pairs)
         else:
             wv = xc + _GOLD * (xc - xb)
-            fw = _ev(wv, f0, ctx, p, d, pt, xy, xyt, lam, w, u, pairs, wall2, rj, clear2, gpar,
-                     gstart, gitems, stats)
+            fw = _ev(wv, f0, line, rod, scratch, model, pairs)
         xa = xb
         xb = xc
         xc = wv
         fa = fb
         fb = fc
         fc = fw
-    cond1 = (fb < fc and fb <= fa) or (fb < fa and fb <= fc)
-    cond2 = (xa < xb < xc) or (xc < xb < xa)
-    cond3 = math.isfinite(xa) and math.isfinite(xb) and math.isfinite(xc)
-    if not (ok and cond1 and cond2 and cond3):
-        # scipy's _recover_from_bracket_error: best of the three points
-        if fb < fa and fb <= fc:
-            return xb, fb
-        if fc < fa:
-            return xc, fc
-        return xa, fa
-    # Brent
+    return xa, xb, xc, fa, fb, fc, True
+
+
+@njit(cache=True)
+def _brent(xa, xb, xc, fb, tol, line, rod, scratch, model, pairs):
+    """scipy's ``Brent`` minimisation in the bracket ``xa, xb, xc`` (at most 500 steps).
+    Returns ``(x_min, f_min)``."""
     x = xb
     wb = xb
     v = xb
@@ -618,8 +816,7 @@ def _line_search(tol, ctx, p, d, pt, xy, xyt, lam, w, u, pairs, wall2, rj, clear
                 uu = x - tol1
         else:
             uu = x + rat
-        fu = _ev(uu, fx, ctx, p, d, pt, xy, xyt, lam, w, u, pairs, wall2, rj, clear2, gpar,
-                 gstart, gitems, stats)
+        fu = _ev(uu, fx, line, rod, scratch, model, pairs)
         if fu > fx:
             if uu < x:
                 a = uu
@@ -648,11 +845,209 @@ def _line_search(tol, ctx, p, d, pt, xy, xyt, lam, w, u, pairs, wall2, rj, clear
     return x, fx
 
 
+@njit(cache=True)
+def _line_search(tol, line, rod, scratch, model, pairs):
+    """scipy's ``bracket`` (xa=0, xb=1, grow_limit=110) then ``Brent`` (tol, maxiter 500).
+
+    Returns (alpha_min, f_min). Trials are checked for admissibility only when they could
+    become the best point (see module docstring).
+    """
+    scratch.ready[0] = False
+    scratch.safe[0] = 0.0
+    xa, xb, xc, fa, fb, fc, ok = _bracket(line, rod, scratch, model, pairs)
+    cond1 = (fb < fc and fb <= fa) or (fb < fa and fb <= fc)
+    cond2 = (xa < xb < xc) or (xc < xb < xa)
+    cond3 = math.isfinite(xa) and math.isfinite(xb) and math.isfinite(xc)
+    if not (ok and cond1 and cond2 and cond3):
+        # scipy's _recover_from_bracket_error: best of the three points
+        if fb < fa and fb <= fc:
+            return xb, fb
+        if fc < fa:
+            return xc, fc
+        return xa, fa
+    return _brent(xa, xb, xc, fb, tol, line, rod, scratch, model, pairs)
+
+
 # ----------------------------------------------------------------------------- Powell
 @njit(cache=True)
-def _refresh(p, n, xy, w, sw, spx, spy, sq):
-    _build_xy(p, n, xy)
-    _suffix(xy, w, sw, spx, spy, sq)
+def _nematic_sums(theta, pairs, k, tangent):
+    """Nematic pairs whose angle a move of coordinate ``k`` changes: sums of ``cos 2 dtheta``
+    and of ``sin 2 dtheta`` signed by which side turns. A ``TANGENT`` move turns segment ``k``
+    alone; a ``BEND`` move turns every segment from ``k`` on (head-tail pairs)."""
+    nc = 0.0
+    ns = 0.0
+    for q in range(pairs.shape[0]):
+        ia = pairs[q, 0]
+        ib = pairs[q, 1]
+        if tangent:
+            if ia == k or ib == k:
+                ph = 2.0 * (theta[ia] - theta[ib])
+                nc += math.cos(ph)
+                ns += math.sin(ph) if ib == k else -math.sin(ph)
+        elif ia < k <= ib:
+            ph = 2.0 * (theta[ia] - theta[ib])
+            nc += math.cos(ph)
+            ns += math.sin(ph)
+    return nc, ns
+
+
+@njit(cache=True)
+def _tangent_line(k, sign, fval, rod, scratch, model, pairs):
+    n = rod.theta.shape[0]
+    phi_k = rod.p[k]
+    phi_k1 = rod.p[k + 1] if k < n - 1 else 0.0
+    nc = 0.0
+    ns = 0.0
+    if model.u > 0.0:
+        nc, ns = _nematic_sums(rod.theta, pairs, k, True)
+    return Line(TANGENT, k, sign, fval, rod.tail_wx[k + 1], rod.tail_wy[k + 1],
+                rod.tail_w[k + 1], phi_k, phi_k1, 2.0 - 2.0 * math.cos(phi_k),
+                2.0 - 2.0 * math.cos(phi_k1), nc, ns, math.cos(rod.theta[k]),
+                math.sin(rod.theta[k]), scratch.no_direction)
+
+
+@njit(cache=True)
+def _bend_line(k, sign, fval, rod, scratch, model, pairs):
+    rkx = rod.xy[k, 0]
+    rky = rod.xy[k, 1]
+    w1 = rod.tail_w[k + 1]
+    vx = rod.tail_wx[k + 1] - w1 * rkx
+    vy = rod.tail_wy[k + 1] - w1 * rky
+    nc = 0.0
+    ns = 0.0
+    if model.u > 0.0:
+        nc, ns = _nematic_sums(rod.theta, pairs, k, False)
+    phi_k = rod.p[k]
+    return Line(BEND, k, sign, fval, rkx * vx + rky * vy, rky * vx - rkx * vy, 0.0, phi_k, 0.0,
+                2.0 - 2.0 * math.cos(phi_k), 0.0, nc, ns, 0.0, 0.0, scratch.no_direction)
+
+
+@njit(cache=True)
+def _shift_line(axis, sign, fval, rod, scratch):
+    moment = rod.tail_wx[0] if axis == 0 else rod.tail_wy[0]
+    return Line(SHIFT, axis, sign, fval, moment, 0.0, rod.tail_w[0], 0.0, 0.0, 0.0, 0.0, 0.0,
+                0.0, 0.0, 0.0, scratch.no_direction)
+
+
+@njit(cache=True)
+def _general_line(direction, fval):
+    return Line(GENERAL, -1, 1.0, fval, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+                direction)
+
+
+@njit(cache=True)
+def _move_tangent(line, x, rod):
+    """Turn segment ``k`` by ``x``: the tail translates."""
+    n = rod.theta.shape[0]
+    k = line.k
+    rod.p[k] += x
+    if k < n - 1:
+        rod.p[k + 1] -= x
+    rod.theta[k] += x
+    vx, vy = _tail_shift(line, math.cos(x), math.sin(x), n)
+    for j in range(k + 1, n + 1):
+        rod.xy[j, 0] += vx
+        rod.xy[j, 1] += vy
+    _suffix(rod)
+
+
+@njit(cache=True)
+def _move_bend(line, x, rod):
+    """Bend node ``k`` by ``x``: the tail rotates rigidly about it."""
+    n = rod.theta.shape[0]
+    k = line.k
+    rkx = rod.xy[k, 0]
+    rky = rod.xy[k, 1]
+    rod.p[k] += x
+    for j in range(k, n):
+        rod.theta[j] += x
+    c = math.cos(x)
+    s = math.sin(x)
+    for j in range(k + 1, n + 1):
+        dx = rod.xy[j, 0] - rkx
+        dy = rod.xy[j, 1] - rky
+        rod.xy[j, 0] = rkx + c * dx - s * dy
+        rod.xy[j, 1] = rky + s * dx + c * dy
+    _suffix(rod)
+
+
+@njit(cache=True)
+def _move_shift(line, x, rod):
+    """Translate the rod by ``x`` along axis ``k``."""
+    n = rod.theta.shape[0]
+    rod.p[n + line.k] += x
+    for j in range(n + 1):
+        rod.xy[j, line.k] += x
+    _suffix(rod)
+
+
+@njit(cache=True)
+def _search_slot(slot, kind, sgn, dirs, fval, tol, tangent, rod, scratch, model, pairs):
+    """Line search along direction slot ``slot`` from energy ``fval``; moves the rod to the
+    minimum. Returns the energy there."""
+    n = rod.theta.shape[0]
+    kk = kind[slot]
+    if 0 <= kk < n:
+        if tangent:
+            line = _tangent_line(kk, sgn[slot], fval, rod, scratch, model, pairs)
+        else:
+            line = _bend_line(kk, sgn[slot], fval, rod, scratch, model, pairs)
+    elif kk >= n:
+        line = _shift_line(kk - n, sgn[slot], fval, rod, scratch)
+    else:
+        line = _general_line(dirs[slot], fval)
+    amin, fnew = _line_search(tol, line, rod, scratch, model, pairs)
+    if amin != 0.0:
+        if line.mode == GENERAL:
+            for i in range(rod.p.shape[0]):
+                rod.p[i] += amin * line.direction[i]
+            _sync(rod)
+        else:
+            x = line.sign * amin
+            if line.mode == TANGENT:
+                _move_tangent(line, x, rod)
+            elif line.mode == BEND:
+                _move_bend(line, x, rod)
+            else:
+                _move_shift(line, x, rod)
+    return fnew
+
+
+@njit(cache=True)
+def _update_directions(fx, fval, delta, bigind, x1, d1, kind, sgn, dirs, tol, rod, scratch,
+                       model, pairs):
+    """Powell's extrapolation and direction-set update, as scipy: if the extrapolated point
+    ``2 p - x1`` is lower and the test on ``delta`` (largest single-slot decrease) passes,
+    search along ``p - x1`` and let it replace slot ``bigind``. Returns the energy."""
+    m = rod.p.shape[0]
+    for i in range(m):
+        d1[i] = rod.p[i] - x1[i]
+        x1[i] = rod.p[i]
+    line = _general_line(d1, fval)
+    fx2 = _ev(1.0, fx, line, rod, scratch, model, pairs)
+    if not fx > fx2:
+        return fval
+    t = 2.0 * (fx + fx2 - 2.0 * fval)
+    temp = fx - fval - delta
+    t *= temp * temp
+    temp = fx - fx2
+    t -= delta * temp * temp
+    if not t < 0.0:
+        return fval
+    scratch.stats[1] += 1
+    amin, fnew = _line_search(tol, line, rod, scratch, model, pairs)
+    if amin != 0.0:
+        for i in range(m):
+            rod.p[i] += amin * d1[i]
+        _sync(rod)
+        kind[bigind] = kind[m - 1]
+        sgn[bigind] = sgn[m - 1]
+        for i in range(m):
+            dirs[bigind, i] = dirs[m - 1, i]
+        kind[m - 1] = -1
+        for i in range(m):
+            dirs[m - 1, i] = amin * d1[i]
+    return fnew
 
 
 @njit(cache=True)
@@ -704,212 +1099,39 @@ def powell_run(p, lam, kind, sgn, dirs, maxiter, xtol, ftol, u, cutoff, min_sepa
         Energy at the end (nematic term included when ``u > 0``).
     """
     m = p.shape[0]
-    n = m - 2
-    ds = 1.0 / n
-    w = np.full(n + 1, ds)
-    w[0] = 0.5 * ds
-    w[n] = 0.5 * ds
-    xy = np.empty((n + 1, 2))
-    xyt = np.empty((n + 1, 2))
-    pt = np.empty(m)
-    sw = np.empty(n + 2)
-    spx = np.empty(n + 2)
-    spy = np.empty(n + 2)
-    sq = np.empty(n + 2)
-    clear2 = np.empty(n)
-    rj = np.empty(n)
-    gpar = np.empty(5 + n)
-    th = np.empty(n)
-    gstart = np.empty(41 * 41 + 2, np.int64)
-    gitems = np.empty(4 * n + 4, np.int64)
-    ctx = np.zeros(_CTX)
-    ctx[14] = 1.0 if hard_core else 0.0
-    zero_d = np.zeros(m)
-    wall2 = wall * wall
+    rod = _new_rod(p)
+    scratch = _new_scratch(m - 2, stats)
+    model = Model(lam, u, wall * wall, hard_core)
+    tol = xtol * 100.0
     x1 = p.copy()
     d1 = np.empty(m)
     pairs = np.empty((0, 2), np.int64)
-
-    _refresh(p, n, xy, w, sw, spx, spy, sq)
-    _theta(p, n, th)
     if u > 0.0:
-        pairs = close_pairs(xy, cutoff, min_separation)
-    fval = _bending_p(p, n) + lam * sq[0] + _nematic_p(th, pairs, u)
+        pairs = close_pairs(rod.xy, cutoff, min_separation)
+    fval = _rod_energy(rod, model, pairs)
     it = 0
     while True:
         fx = fval
         bigind = 0
         delta = 0.0
         for slot in range(m):
-            fx2 = fval
-            kk = kind[slot]
             stats[1] += 1
-            if kk >= 0 and kk < n and tangent:
-                k = kk
-                ctx[0] = 3.0
-                ctx[1] = k
-                ctx[2] = sgn[slot]
-                ctx[3] = spx[k + 1]
-                ctx[4] = spy[k + 1]
-                ctx[5] = p[k]
-                ctx[6] = p[k + 1] if k < n - 1 else 0.0
-                ctx[7] = 2.0 - 2.0 * math.cos(ctx[5])
-                ctx[8] = 2.0 - 2.0 * math.cos(ctx[6])
-                ctx[16] = sw[k + 1]
-                ctx[17] = math.cos(th[k])
-                ctx[18] = math.sin(th[k])
-                nc = 0.0
-                ns = 0.0
-                if u > 0.0:
-                    for q in range(pairs.shape[0]):
-                        ia = pairs[q, 0]
-                        ib = pairs[q, 1]
-                        if ia == k or ib == k:
-                            ph = 2.0 * (th[ia] - th[ib])
-                            nc += math.cos(ph)
-                            ns += math.sin(ph) if ib == k else -math.sin(ph)
-                ctx[9] = nc
-                ctx[10] = ns
-                ctx[11] = fval
-                ctx[12] = 0.0
-                ctx[13] = 0.0
-                amin, fnew = _line_search(xtol * 100.0, ctx, p, zero_d, pt, xy, xyt, lam, w, u,
-                                          pairs, wall2, rj, clear2, gpar, gstart, gitems, stats)
-                if amin != 0.0:
-                    x = sgn[slot] * amin
-                    p[k] += x
-                    if k < n - 1:
-                        p[k + 1] -= x
-                    th[k] += x
-                    ds = 1.0 / n
-                    c = math.cos(x)
-                    s = math.sin(x)
-                    vx = ds * (ctx[17] * c - ctx[18] * s - ctx[17])
-                    vy = ds * (ctx[18] * c + ctx[17] * s - ctx[18])
-                    for j in range(k + 1, n + 1):
-                        xy[j, 0] += vx
-                        xy[j, 1] += vy
-                    _suffix(xy, w, sw, spx, spy, sq)
-                fval = fnew
-            elif kk >= 0 and kk < n:
-                k = kk
-                rkx = xy[k, 0]
-                rky = xy[k, 1]
-                W1 = sw[k + 1]
-                vx = spx[k + 1] - W1 * rkx
-                vy = spy[k + 1] - W1 * rky
-                ctx[0] = 0.0
-                ctx[1] = k
-                ctx[2] = sgn[slot]
-                ctx[3] = rkx * vx + rky * vy
-                ctx[4] = rky * vx - rkx * vy
-                ctx[5] = p[k]
-                ctx[7] = 2.0 - 2.0 * math.cos(ctx[5])
-                nc = 0.0
-                ns = 0.0
-                if u > 0.0:
-                    for q in range(pairs.shape[0]):
-                        ia = pairs[q, 0]
-                        ib = pairs[q, 1]
-                        if ia < k <= ib:
-                            ph = 2.0 * (th[ia] - th[ib])
-                            nc += math.cos(ph)
-                            ns += math.sin(ph)
-                ctx[9] = nc
-                ctx[10] = ns
-                ctx[11] = fval
-                ctx[12] = 0.0
-                ctx[13] = 0.0
-                amin, fnew = _line_search(xtol * 100.0, ctx, p, zero_d, pt, xy, xyt, lam, w, u,
-                                          pairs, wall2, rj, clear2, gpar, gstart, gitems, stats)
-                if amin != 0.0:
-                    x = sgn[slot] * amin
-                    p[k] += x
-                    for j in range(k, n):
-                        th[j] += x
-                    c = math.cos(x)
-                    s = math.sin(x)
-                    for j in range(k + 1, n + 1):
-                        dx = xy[j, 0] - rkx
-                        dy = xy[j, 1] - rky
-                        xy[j, 0] = rkx + c * dx - s * dy
-                        xy[j, 1] = rky + s * dx + c * dy
-                    _suffix(xy, w, sw, spx, spy, sq)
-                fval = fnew
-            elif kk >= n:
-                ctx[0] = 1.0
-                ctx[1] = kk - n
-                ctx[2] = sgn[slot]
-                ctx[3] = spx[0] if kk == n else spy[0]
-                ctx[4] = sw[0]
-                ctx[5] = fval
-                amin, fnew = _line_search(xtol * 100.0, ctx, p, zero_d, pt, xy, xyt, lam, w, u,
-                                          pairs, wall2, rj, clear2, gpar, gstart, gitems, stats)
-                if amin != 0.0:
-                    x = sgn[slot] * amin
-                    p[kk] += x
-                    for j in range(n + 1):
-                        xy[j, kk - n] += x
-                    _suffix(xy, w, sw, spx, spy, sq)
-                fval = fnew
-            else:
-                ctx[0] = 2.0
-                ctx[15] = fval
-                amin, fnew = _line_search(xtol * 100.0, ctx, p, dirs[slot], pt, xy, xyt, lam, w,
-                                          u, pairs, wall2, rj, clear2, gpar, gstart, gitems,
-                                          stats)
-                if amin != 0.0:
-                    for i in range(m):
-                        p[i] += amin * dirs[slot, i]
-                    _refresh(p, n, xy, w, sw, spx, spy, sq)
-                    _theta(p, n, th)
-                fval = fnew
-            if (fx2 - fval) > delta:
-                delta = fx2 - fval
+            fnew = _search_slot(slot, kind, sgn, dirs, fval, tol, tangent, rod, scratch, model,
+                                pairs)
+            if (fval - fnew) > delta:
+                delta = fval - fnew
                 bigind = slot
+            fval = fnew
         it += 1
         stats[3] += 1
-        # re-derive positions and energy from the parameters (no drift from rotations)
-        _refresh(p, n, xy, w, sw, spx, spy, sq)
-        _theta(p, n, th)
-        fval = _bending_p(p, n) + lam * sq[0] + _nematic_p(th, pairs, u)
+        _sync(rod)
+        fval = _rod_energy(rod, model, pairs)
         bnd = ftol * (abs(fx) + abs(fval)) + 1e-20
         if 2.0 * (fx - fval) <= bnd or it >= maxiter:
             break
-        # extrapolated point and Powell's direction-set update (as scipy)
-        for i in range(m):
-            d1[i] = p[i] - x1[i]
-            x1[i] = p[i]
-        ctx[0] = 2.0
-        ctx[15] = fval
-        fx2 = _ev(1.0, fx, ctx, p, d1, pt, xy, xyt, lam, w, u, pairs, wall2, rj, clear2, gpar,
-                  gstart, gitems, stats)
-        if fx > fx2:
-            t = 2.0 * (fx + fx2 - 2.0 * fval)
-            temp = fx - fval - delta
-            t *= temp * temp
-            temp = fx - fx2
-            t -= delta * temp * temp
-            if t < 0.0:
-                stats[1] += 1
-                amin, fnew = _line_search(xtol * 100.0, ctx, p, d1, pt, xy, xyt, lam, w, u,
-                                          pairs, wall2, rj, clear2, gpar, gstart, gitems, stats)
-                if amin != 0.0:
-                    for i in range(m):
-                        p[i] += amin * d1[i]
-                    _refresh(p, n, xy, w, sw, spx, spy, sq)
-                    _theta(p, n, th)
-                    fval = fnew
-                    kind[bigind] = kind[m - 1]
-                    sgn[bigind] = sgn[m - 1]
-                    for i in range(m):
-                        dirs[bigind, i] = dirs[m - 1, i]
-                    kind[m - 1] = -1
-                    for i in range(m):
-                        dirs[m - 1, i] = amin * d1[i]
-                else:
-                    fval = fnew
+        fval = _update_directions(fx, fval, delta, bigind, x1, d1, kind, sgn, dirs, tol, rod,
+                                  scratch, model, pairs)
         if u > 0.0:
-            pairs = close_pairs(xy, cutoff, min_separation)
-            fval = _bending_p(p, n) + lam * sq[0] + _nematic_p(th, pairs, u)
+            pairs = close_pairs(rod.xy, cutoff, min_separation)
+            fval = _rod_energy(rod, model, pairs)
     return fval

@@ -3,137 +3,266 @@
 Each stack of :func:`simulate.contacts.analyze_rod` is drawn as one blue band of width
 ``w(n_br)`` along the mean line of its passes, extended to its junctions (paper, section
 "Image analysis procedure": branches in contact closer than the resolution form one band whose
-width counts them). Voids show light receding surfaces; the outside is white paper.
+width counts them). Voids show a light receding surface; the outside is paper. Colours, scan
+defects and the truth voids are those of every scene generator (:mod:`crosssection.truth.ink`,
+:mod:`crosssection.truth.degrade`, :func:`crosssection.truth.voids.truth_voids`), and the result
+is a :class:`crosssection.truth.scene.Scene`.
 
 Scale. The rod of length 1 maps to ``rod_length_mm``. Passes closer than the contact cut-off
 delta merge into one band; passes further apart must show a gap, which holds when
 ``delta * rod_length_mm >= (w(1) + w(n_max)) / 2 + gap_px / px_per_mm`` (worst case: a single
 pass at distance delta from a stack of n_max coincident passes). The default
-``rod_length_mm`` is the smallest that satisfies this (about 150-200 mm for N = 300 and the
+``rod_length_mm`` is the smallest that satisfies this (about 150-250 mm for N = 300 and the
 default delta = 0.5/N), which keeps quench configurations (extent ~0.25 L) under ~2500 px.
 
-Calibration. ``w(n) = h n + 0.5 h (1 - exp(-(n - 1)/3))``: linear in the number of layers plus a
-saturating excess (the heating of the hot-wire cut swells thick stacks), written to
-``calibration.csv`` so the pipeline can invert it.
+Calibration. By default the generators' nonlinear law ``w(n) = h (n + 0.4 sqrt(n))``
+(:meth:`crosssection.core.calibration.Calibration.nonlinear`), written to ``calibration.csv``
+so the pipeline can invert it.
 
 Coordinates: column = x, row = y (no flip), so the image is the mirror image of a plot with y
 up; signed curvatures therefore compare in absolute value.
 """
 from __future__ import annotations
 
-import argparse
 import json
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pandas as pd
 
-from crosssection.core import schema
+from crosssection.core import polyline, schema
+from crosssection.core.calibration import Calibration
 from crosssection.core.errors import ConfigError, ParameterError
-from crosssection.core.fileio import write_csv, write_json
+from crosssection.truth import degrade, ink
+from crosssection.truth.scene import Scene, write_scene
+from crosssection.truth.voids import truth_voids
 
 from simulate.contacts import RodAnalysis, analyze_rod
 
-__all__ = ["RenderedScene", "default_calibration", "render_configuration", "write_scene",
-           "render_directory", "add_subparser"]
-
-INK_RGB = np.array([40.0, 70.0, 190.0])
-VOID_RGB = np.array([212.0, 215.0, 226.0])
-PAPER_RGB = np.array([250.0, 250.0, 248.0])
-SMEAR_RGB = np.array([160.0, 185.0, 242.0])
+__all__ = ["render_configuration", "render_directory", "add_subparser"]
 
 
-def default_calibration(thickness_mm: float = 0.1, n_max: int = 30) -> pd.DataFrame:
-    """Nonlinear width law ``w(n) = h n + 0.5 h (1 - exp(-(n-1)/3))`` as (n_layers, width_mm)."""
-    n = np.arange(1, n_max + 1)
-    w = thickness_mm * n + 0.5 * thickness_mm * (1 - np.exp(-(n - 1) / 3.0))
-    return pd.DataFrame({"n_layers": n, "width_mm": w})
+@dataclass(frozen=True)
+class _Frame:
+    """Where the configuration lands in the image: scale, margins, hole."""
+
+    origin_xy: np.ndarray         # lower corner of the configuration (units of L)
+    scale: float                  # px per unit L
+    margin_px: float
+    shape: tuple                  # (H, W)
+    rod_length_mm: float
+    gap_ok: bool                  # passes beyond delta are guaranteed a visible gap
+    hole_radius_mm: float | None
+    hole_xy: np.ndarray | None    # hole centre (x, y) px
+    hole_px: float | None
+
+    def to_px(self, p) -> np.ndarray:
+        """(x, y) in units of L -> (x = column, y = row) float pixels."""
+        return (np.asarray(p, float) - self.origin_xy) * self.scale + self.margin_px
 
 
-def _width_fn(calibration, thickness_mm):
-    if calibration is None:
-        calibration = default_calibration(thickness_mm)
-    if isinstance(calibration, (str, Path)):
-        calibration = pd.read_csv(calibration)
-    if isinstance(calibration, pd.DataFrame):
-        df = calibration.sort_values("n_layers")
-        n, w = df["n_layers"].to_numpy(float), df["width_mm"].to_numpy(float)
-        step = w[-1] - w[-2] if len(w) > 1 else w[-1]
-
-        def width(k):
-            k = np.asarray(k, float)
-            return np.where(k <= n[-1], np.interp(k, n, w), w[-1] + step * (k - n[-1]))
-        return width, df
-    if callable(calibration):
-        nn = np.arange(1, 31)
-        return calibration, pd.DataFrame({"n_layers": nn, "width_mm": calibration(nn)})
-    raise ParameterError(f"unsupported calibration {type(calibration).__name__}")
+def _rod_length_mm(xy, delta, cal, n_max, *, rod_length_mm, px_per_mm, gap_px, margin_mm,
+                   max_size_px):
+    """Rod length (mm) and whether passes beyond delta keep a visible gap (module docstring)."""
+    extent = float(np.max(xy.max(axis=0) - xy.min(axis=0)))
+    need_mm = 0.5 * (float(cal.width(1)) + float(cal.width(n_max))) + gap_px / px_per_mm
+    if rod_length_mm is not None:
+        return rod_length_mm, delta * rod_length_mm >= need_mm
+    rod_length_mm = need_mm / delta
+    cap = ((max_size_px - 2) / px_per_mm - 2 * margin_mm) / max(extent, 1e-9)
+    if rod_length_mm > cap:
+        warnings.warn(f"rod length capped at {cap:.1f} mm to keep the image under "
+                      f"{max_size_px} px: passes just beyond delta may touch", stacklevel=4)
+        return cap, False
+    return rod_length_mm, True
 
 
-@dataclass
-class RenderedScene:
-    """A rendered configuration: the scan and its truth in :mod:`crosssection.core.schema`."""
+def _frame(xy, analysis, cal, *, px_per_mm, thickness_mm, rod_length_mm, hole_radius_mm,
+           margin_mm, gap_px, max_size_px) -> _Frame:
+    """Scale, margins and hole of the rendering."""
+    st = analysis.stacks
+    n_max = int(st["n_br"].max()) if len(st) else 1
+    rod_length_mm, gap_ok = _rod_length_mm(
+        xy, analysis.contact_distance, cal, n_max, rod_length_mm=rod_length_mm,
+        px_per_mm=px_per_mm, gap_px=gap_px, margin_mm=margin_mm, max_size_px=max_size_px)
+    scale = rod_length_mm * px_per_mm
+    lo = xy.min(axis=0)
+    margin_px = margin_mm * px_per_mm
+    hole_center_l = np.average(xy, axis=0)
+    if isinstance(hole_radius_mm, str):
+        if hole_radius_mm != "auto":
+            raise ParameterError(f"hole_radius_mm must be a number, None or 'auto', got "
+                                 f"{hole_radius_mm!r}")
+        # the experiment's container: the smallest disk holding the rod, plus the half width
+        # of the thickest band and 2 h of clearance (the pipeline then uses the known hole
+        # instead of fitting one to the ink envelope)
+        (cx, cy), r_l = cv2.minEnclosingCircle(xy.astype(np.float32))
+        hole_center_l = np.array([cx, cy], float)
+        hole_radius_mm = float(r_l * rod_length_mm + 0.5 * float(cal.width(n_max))
+                               + 2 * thickness_mm)
+    hole_px = None if hole_radius_mm is None else hole_radius_mm * px_per_mm
+    if hole_px is not None:
+        c_off = (hole_center_l - lo) * scale
+        far = (xy.max(axis=0) - hole_center_l) * scale
+        need = hole_px + 2 * thickness_mm * px_per_mm - np.minimum(c_off, far)
+        margin_px = max(margin_px, float(need.max()))
+    size = np.ceil((xy.max(axis=0) - lo) * scale + 2 * margin_px).astype(int) + 1
+    hole_xy = None if hole_px is None else (hole_center_l - lo) * scale + margin_px
+    return _Frame(lo, scale, margin_px, (int(size[1]), int(size[0])), rod_length_mm, gap_ok,
+                  hole_radius_mm, hole_xy, hole_px)
 
-    rgb: np.ndarray
-    summary: dict
-    tables: dict
-    params: dict
-    calibration: pd.DataFrame
-    ink_mask: np.ndarray = field(repr=False, default=None)
 
-    @property
-    def truth_summary(self) -> dict:
-        return self.summary
+def _draw_bands(lines_px, n_br, widths_px, shape):
+    """Anti-aliased ink coverage (exact distance bands) and the stack label image.
 
-    @property
-    def truth_tables(self) -> dict:
-        return self.tables
-
-
-def _poly_len(p):
-    return float(np.sum(np.hypot(*np.diff(p, axis=0).T))) if len(p) > 1 else 0.0
-
-
-def _point_at_half(p):
-    seg = np.hypot(*np.diff(p, axis=0).T)
-    if len(seg) == 0 or seg.sum() == 0:
-        return p[0]
-    c = np.r_[0, np.cumsum(seg)]
-    t = 0.5 * c[-1]
-    i = min(int(np.searchsorted(c, t)) - 1, len(seg) - 1)
-    i = max(i, 0)
-    f = (t - c[i]) / seg[i] if seg[i] > 0 else 0.0
-    return p[i] + f * (p[i + 1] - p[i])
-
-
-def _loop_mid(p):
-    """Mid point of a closed line started at its raster-first point (min row, then min col).
-
-    A junction-free closed loop has no natural start; the pipeline (``crosssection.stages.graph``)
-    starts its path at the first skeleton pixel in raster order and takes the point at half
-    the length (``pipeline._mid_points``). The half-way point does not depend on the
-    direction, so starting the truth line at the same place makes the two mid points agree
-    (``crosssection.truth.scoring`` matches stacks by mid point).
+    Returns
+    -------
+    coverage : (H, W) float32 in [0, 1]
+    labels : (H, W) int32, ``k + 1`` on the ink of stack ``k`` (band drawn at its width)
     """
-    q = np.asarray(p, float)[:-1]
-    row = np.round(q[:, 1])
+    h_px, w_px = shape
+    coverage = np.zeros(shape, np.float32)
+    labels = np.zeros(shape, np.int32)
+    shift = 4
+    pts = [np.round(line * (1 << shift)).astype(np.int32).reshape(-1, 1, 2) for line in lines_px]
+    for n in sorted(set(n_br.tolist())):
+        canvas = np.full((h_px, w_px), 255, np.uint8)
+        members = np.flatnonzero(n_br == n)
+        for sid in members:
+            cv2.polylines(canvas, [pts[sid]], False, 0, 1, cv2.LINE_8, shift)
+        d = cv2.distanceTransform(canvas, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+        coverage = np.maximum(coverage, np.clip(0.5 * widths_px[members[0]] - d + 0.5, 0, 1))
+    for sid, p in enumerate(pts):
+        cv2.polylines(labels, [p], False, sid + 1, max(1, int(round(widths_px[sid]))),
+                      cv2.LINE_8, shift)
+    labels[coverage < 0.5] = 0
+    return coverage, labels
+
+
+def _draw_scan(rng, coverage, enclosed, frame, lines_px, widths_px, *, smears, specks, pinholes):
+    """The noise-free float32 scan: paper, receding surfaces, smears, ink, specks, pinholes."""
+    h_px, w_px = frame.shape
+    ink_mask = coverage >= 0.5
+    img = np.empty((h_px, w_px, 3), np.float32)
+    img[:] = ink.paper_rgb(rng)
+    img[enclosed] = ink.receding_rgb(rng)
+    if frame.hole_px is not None:
+        rr, cc = np.mgrid[0:h_px, 0:w_px]
+        outside = (rr - frame.hole_xy[1]) ** 2 + (cc - frame.hole_xy[0]) ** 2 > frame.hole_px ** 2
+        img[outside & ~ink_mask] = ink.PAPER_RGB * 0.97
+        centre_xy, radius_px = frame.hole_xy, frame.hole_px
+    else:
+        centre_xy, radius_px = (0.5 * w_px, 0.5 * h_px), 0.5 * min(h_px, w_px)
+    degrade.add_smears(img, rng, count=smears, centre_xy=centre_xy, radius_px=radius_px)
+    ink_rgb = ink.ink_rgb(rng)
+    # a per-pixel shade: the ink of a real scan is not flat
+    ink_jit = rng.normal(0, 6, size=(h_px, w_px, 1)).astype(np.float32)
+    a = coverage[..., None]
+    img = img * (1 - a) + (ink_rgb + ink_jit) * a
+    degrade.add_specks(img, rng, count=specks, background=coverage == 0, ink_rgb=ink_rgb)
+    degrade.add_pinholes(img, rng, count=pinholes, paths_xy=lines_px, widths_px=widths_px)
+    return img
+
+
+def _loop_mid_rc(line_rc):
+    """Mid point of a closed line (first point repeated last) started at its raster-first
+    point (min row, then min column): the start the pipeline gives a junction-free loop
+    (``crosssection.stages.graph``), so the two mid points agree and scoring matches them."""
+    q = line_rc[:-1]
+    row = np.round(q[:, 0])
     cand = np.flatnonzero(row == row.min())
-    i0 = int(cand[np.argmin(q[cand, 0])])
-    q = np.concatenate([q[i0:], q[:i0], q[i0:i0 + 1]])
-    return _point_at_half(q)
+    i0 = int(cand[np.argmin(q[cand, 1])])
+    return polyline.mid_point(np.concatenate([q[i0:], q[:i0]]), closed=True)
+
+
+def _stack_table(st, lines_px, frame, cal, *, px_per_mm, thickness_mm):
+    """stacks.csv of the truth (schema order) and the region of every stack."""
+    rows = []
+    for sid, row in st.iterrows():
+        line_rc = lines_px[sid][:, ::-1]
+        width_mm = float(cal.width(row.n_br))
+        region = "bulk"
+        if frame.hole_px is not None:
+            r = np.hypot(line_rc[:, 1] - frame.hole_xy[0], line_rc[:, 0] - frame.hole_xy[1])
+            if np.any(r >= frame.hole_px - width_mm * px_per_mm - 2 * thickness_mm * px_per_mm):
+                region = "periphery"
+        closed = (row.junction_a < 0 and row.junction_b < 0 and len(line_rc) > 3
+                  and np.allclose(line_rc[0], line_rc[-1]))
+        mid_rc = _loop_mid_rc(line_rc) if closed else polyline.mid_point(line_rc)
+        rows.append({"stack_id": int(sid), "junction_a": int(row.junction_a),
+                     "junction_b": int(row.junction_b),
+                     "length_mm": polyline.length(line_rc) / px_per_mm, "width_mm": width_mm,
+                     "n_br": int(row.n_br), "region": region, "mid_x_px": float(mid_rc[1]),
+                     "mid_y_px": float(mid_rc[0])})
+    return pd.DataFrame(rows, columns=schema.STACK_COLUMNS)
+
+
+def _truth_tables(analysis, frame, lines_px, cal, voids, *, px_per_mm, thickness_mm):
+    """The four truth tables (crosssection.core.schema), lengths in mm, curvatures in 1/mm."""
+    mm_per_l = frame.rod_length_mm
+    jt = analysis.junctions
+    jpx = frame.to_px(jt[["x", "y"]].to_numpy(float)) if len(jt) else np.zeros((0, 2))
+    junctions = pd.DataFrame({"junction_id": jt["junction_id"].astype(int) if len(jt) else [],
+                              "x_px": jpx[:, 0], "y_px": jpx[:, 1],
+                              "n_stacks": jt["n_stacks"].astype(int) if len(jt) else []})
+    stacks = _stack_table(analysis.stacks, lines_px, frame, cal, px_per_mm=px_per_mm,
+                          thickness_mm=thickness_mm)
+    br = analysis.branches
+    branches = pd.DataFrame({
+        "branch_id": br["branch_id"].astype(int), "stack_id": br["stack_id"].astype(int),
+        "length_mm": br["length"] * mm_per_l, "kappa_pm": br["kappa_pm"] / mm_per_l,
+        "kappa_plus": br["kappa_plus"] / mm_per_l, "kappa_m": br["kappa_pm"].abs() / mm_per_l,
+        # e = L int kappa^2 ds is scale free: the simulation's bending energy of the branch
+        "energy": br["energy_bending"],
+        "region": stacks["region"].to_numpy()[br["stack_id"].to_numpy(int)],
+        "energy_confinement": br["energy_confinement"], "s_start": br["s_start"],
+        "s_end": br["s_end"]})
+    return {"junctions": junctions, "stacks": stacks, "branches": branches, "voids": voids}
+
+
+def _summary(analysis, frame, tables, ink_mask, *, px_per_mm):
+    """summary.json of the truth: counts, rod length, compaction, energy, hole."""
+    stacks = tables["stacks"]
+    if frame.hole_px is not None:
+        hole = {"center_x_px": float(frame.hole_xy[0]), "center_y_px": float(frame.hole_xy[1]),
+                "radius_px": float(frame.hole_px)}
+    else:
+        ys, xs = np.nonzero(ink_mask)
+        (ccx, ccy), rad = (cv2.minEnclosingCircle(np.c_[xs, ys].astype(np.float32)) if len(xs)
+                           else ((0.0, 0.0), 0.0))
+        hole = {"center_x_px": float(ccx), "center_y_px": float(ccy), "radius_px": float(rad)}
+    n_branches = int(stacks["n_br"].sum()) if len(stacks) else 0
+    rod_length_mm = frame.rod_length_mm
+    return {
+        "n_junctions": int(len(tables["junctions"])), "n_stacks": int(len(stacks)),
+        "n_branches": n_branches, "n_voids": int(len(tables["voids"])),
+        "mean_branches_per_stack": n_branches / len(stacks) if len(stacks) else 0.0,
+        "rod_length_mm": float(rod_length_mm),
+        # the scan's compaction rate L / (2 pi R), R the hole (or the enclosing disk of the ink)
+        "epsilon": float(rod_length_mm / (2 * np.pi * hole["radius_px"] / px_per_mm))
+        if hole["radius_px"] > 0 else None,
+        # bending only: the confinement term has no counterpart in a scan
+        "total_energy": float(analysis.energy_bending),
+        "hole": hole, "timings_s": {},
+        "epsilon_rg": analysis.epsilon, "epsilon_rg_sqrt2": analysis.epsilon_sqrt2,
+        "rg": analysis.rg, "energy_confinement": analysis.energy_confinement,
+        "contact_distance": analysis.contact_distance,
+    }
 
 
 def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float = 7e5,
                          px_per_mm: float = 50.0, thickness_mm: float = 0.1,
-                         rod_length_mm: float | None = None, calibration=None,
+                         rod_length_mm: float | None = None,
+                         calibration: Calibration | None = None,
                          contact_distance: float | None = None,
                          noise_sigma: float = 0.0, blur_px: float = 0.0,
                          jpeg_quality: int | None = None, smears: int = 0, specks: int = 0,
                          pinholes: int = 0, seed: int = 0, margin_mm: float = 2.0,
                          gap_px: float = 2.0, max_size_px: int = 2500,
-                         hole_radius_mm: float | None = None) -> RenderedScene:
+                         hole_radius_mm: float | None = None) -> Scene:
     """Render one rod configuration into an RGB scan with exact truth tables.
 
     Parameters
@@ -150,8 +279,8 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
         Length of the rod in mm; default: the smallest that keeps a visible gap of
         ``gap_px`` between passes farther apart than delta (module docstring), capped so the
         image stays under ``max_size_px``.
-    calibration : DataFrame (n_layers, width_mm), path or callable, optional
-        Width law; default :func:`default_calibration`.
+    calibration : Calibration, optional
+        Width law; default :meth:`Calibration.nonlinear`.
     contact_distance : float, optional
         delta for the analysis when computed here.
     noise_sigma, blur_px : float
@@ -159,12 +288,17 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
     jpeg_quality : int, optional
         JPEG round trip at this quality.
     smears, specks, pinholes : int
-        Numbers of light-blue smears (kept by the threshold), small dark specks in the paper
-        and small white pinholes in the ink (both smaller than s_min, removed by cleaning).
+        Numbers of light-blue smears (rejected by the threshold), small ink specks in the
+        paper and paper-coloured pinholes in wide bands (both removed by cleaning); see
+        :mod:`crosssection.truth.degrade`.
     seed : int
-        Seed of every random choice (colour jitter, noise, defects).
+        Seed of every random choice (colours, noise, defects).
     margin_mm : float
         Paper around the configuration.
+    gap_px : float
+        Smallest visible gap between passes farther apart than delta.
+    max_size_px : int
+        Largest image side when ``rod_length_mm`` is chosen here.
     hole_radius_mm : float, "auto" or None
         Draw a hard-wall disk of this radius centred on the rod's centre of mass
         (stacks touching it are "periphery"); ``"auto"``: the smallest disk enclosing the
@@ -173,232 +307,50 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
 
     Returns
     -------
-    RenderedScene
+    Scene
+        With ``paths_rc`` (the drawn centrelines) and ``ink_mask``; no ``packs``.
     """
-    import cv2
-    from scipy import ndimage
-
-    from crosssection.stages.voids import contour_perimeter_px
-
     xy = np.asarray(xy, float)
-    if analysis is None:
-        analysis = analyze_rod(xy, lam=lam, contact_distance=contact_distance)
     if px_per_mm <= 0 or thickness_mm <= 0:
         raise ParameterError("px_per_mm and thickness_mm must be positive")
-    width, cal_df = _width_fn(calibration, thickness_mm)
+    if calibration is not None and not isinstance(calibration, Calibration):
+        raise ParameterError(f"calibration must be a Calibration, got {type(calibration).__name__}")
+    if analysis is None:
+        analysis = analyze_rod(xy, lam=lam, contact_distance=contact_distance)
+    cal = calibration or Calibration.nonlinear(thickness_mm)
     rng = np.random.default_rng(seed)
+    frame = _frame(xy, analysis, cal, px_per_mm=px_per_mm, thickness_mm=thickness_mm,
+                   rod_length_mm=rod_length_mm, hole_radius_mm=hole_radius_mm,
+                   margin_mm=margin_mm, gap_px=gap_px, max_size_px=max_size_px)
     st = analysis.stacks
-    n_max = int(st["n_br"].max()) if len(st) else 1
-    lo = xy.min(axis=0)
-    extent = float(np.max(xy.max(axis=0) - lo))
-    delta = analysis.contact_distance
-    need_mm = 0.5 * (float(width(1)) + float(width(n_max))) + gap_px / px_per_mm
-    gap_ok = True
-    if rod_length_mm is None:
-        rod_length_mm = need_mm / delta
-        cap = ((max_size_px - 2) / px_per_mm - 2 * margin_mm) / max(extent, 1e-9)
-        if rod_length_mm > cap:
-            warnings.warn(f"rod length capped at {cap:.1f} mm to keep the image under "
-                          f"{max_size_px} px: passes just beyond delta may touch", stacklevel=2)
-            rod_length_mm, gap_ok = cap, False
-    else:
-        gap_ok = delta * rod_length_mm >= need_mm
-    scale = rod_length_mm * px_per_mm  # px per unit L
-    margin_px = margin_mm * px_per_mm
-    hole_center_l = np.average(xy, axis=0)
-    if isinstance(hole_radius_mm, str):
-        if hole_radius_mm != "auto":
-            raise ParameterError(f"hole_radius_mm must be a number, None or 'auto', got "
-                                 f"{hole_radius_mm!r}")
-        # the experiment's container: the smallest disk holding the rod, plus the half width
-        # of the thickest band and 2 h of clearance (the pipeline then uses the known hole
-        # instead of fitting one to the ink envelope)
-        (cx, cy), r_l = cv2.minEnclosingCircle(xy.astype(np.float32))
-        hole_center_l = np.array([cx, cy], float)
-        hole_radius_mm = float(r_l * rod_length_mm + 0.5 * float(width(n_max))
-                               + 2 * thickness_mm)
-    hole_px = None if hole_radius_mm is None else hole_radius_mm * px_per_mm
-    if hole_px is not None:
-        c_off = (hole_center_l - lo) * scale
-        far = (xy.max(axis=0) - hole_center_l) * scale
-        need = hole_px + 2 * thickness_mm * px_per_mm - np.minimum(c_off, far)
-        margin_px = max(margin_px, float(need.max()))
-
-    def to_px(p):  # (x, y) in L -> (col, row) float px
-        return (np.asarray(p, float) - lo) * scale + margin_px
-
-    size = np.ceil((xy.max(axis=0) - lo) * scale + 2 * margin_px).astype(int) + 1
-    w_px, h_px = int(size[0]), int(size[1])
-    hole_c = None
-    if hole_px is not None:
-        hole_c = to_px(hole_center_l)
-
-    # --- ink: one band of width w(n) per stack along its mean line (exact distance bands)
-    coverage = np.zeros((h_px, w_px), np.float32)
-    shift = 4
-    lines_px = [to_px(line) for line in analysis.stack_lines]
-    for n in sorted(set(st["n_br"].tolist())):
-        canvas = np.full((h_px, w_px), 255, np.uint8)
-        for sid in st.index[st["n_br"] == n]:
-            p = np.round(lines_px[sid] * (1 << shift)).astype(np.int32).reshape(-1, 1, 2)
-            cv2.polylines(canvas, [p], False, 0, 1, cv2.LINE_8, shift)
-        d = cv2.distanceTransform(canvas, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
-        half = 0.5 * float(width(n)) * px_per_mm
-        coverage = np.maximum(coverage, np.clip(half - d + 0.5, 0, 1))
-    ink = coverage >= 0.5
-
-    # --- voids: enclosed paper (4-connected), receding surfaces
-    lab, nlab = ndimage.label(~ink)
-    border = set(np.unique(np.r_[lab[0], lab[-1], lab[:, 0], lab[:, -1]]).tolist()) - {0}
-    enclosed = (lab > 0) & ~np.isin(lab, list(border))
-
-    # --- colours
-    img = np.empty((h_px, w_px, 3), np.float32)
-    img[:] = PAPER_RGB
-    img[enclosed] = VOID_RGB + rng.uniform(-6, 6, size=3)
-    if hole_c is not None:
-        rr, cc = np.mgrid[0:h_px, 0:w_px]
-        outside = (rr - hole_c[1]) ** 2 + (cc - hole_c[0]) ** 2 > hole_px ** 2
-        img[outside & ~ink] = PAPER_RGB * 0.97
-    ink_col = INK_RGB + rng.uniform(-10, 10, size=3)
-    ink_jit = rng.normal(0, 6, size=(h_px, w_px, 1)).astype(np.float32)
-    a = coverage[..., None]
-    img = img * (1 - a) + (ink_col + ink_jit) * a
-    s_min_px = (10 * thickness_mm * px_per_mm) ** 2
-    for _ in range(int(smears)):
-        cy, cx = rng.uniform(0, h_px), rng.uniform(0, w_px)
-        ax = rng.uniform(10, 60), rng.uniform(4, 20)
-        m = np.zeros((h_px, w_px), np.uint8)
-        cv2.ellipse(m, (int(cx), int(cy)), (int(ax[0]), int(ax[1])), rng.uniform(0, 180), 0, 360,
-                    1, -1)
-        sm = (m > 0) & ~ink
-        img[sm] = img[sm] * 0.4 + SMEAR_RGB * 0.6
-    bg = np.argwhere(~ink)
-    for _ in range(int(specks)):
-        r, c = bg[rng.integers(len(bg))]
-        rad = int(rng.integers(1, max(2, int(np.sqrt(s_min_px) / 8))))
-        cv2.circle(img, (int(c), int(r)), rad, tuple(float(v) for v in INK_RGB), -1)
-    ink_core = np.argwhere(ndimage.binary_erosion(ink, iterations=2))
-    for _ in range(int(pinholes)):
-        if len(ink_core) == 0:
-            break
-        r, c = ink_core[rng.integers(len(ink_core))]
-        cv2.circle(img, (int(c), int(r)), 1, tuple(float(v) for v in PAPER_RGB), -1)
-    if blur_px > 0:
-        img = cv2.GaussianBlur(img, (0, 0), float(blur_px))
-    if noise_sigma > 0:
-        img = img + rng.normal(0, noise_sigma, img.shape).astype(np.float32)
-    rgb = np.clip(np.round(img), 0, 255).astype(np.uint8)
-    if jpeg_quality is not None:
-        ok, buf = cv2.imencode(".jpg", rgb[..., ::-1], [cv2.IMWRITE_JPEG_QUALITY, int(jpeg_quality)])
-        rgb = cv2.imdecode(buf, cv2.IMREAD_COLOR)[..., ::-1].copy()
-
-    # --- truth tables (schema.py)
-    mm_per_l = rod_length_mm
-    jt = analysis.junctions
-    jpx = to_px(jt[["x", "y"]].to_numpy(float)) if len(jt) else np.zeros((0, 2))
-    junctions = pd.DataFrame({"junction_id": jt["junction_id"].astype(int) if len(jt) else [],
-                              "x_px": jpx[:, 0], "y_px": jpx[:, 1],
-                              "n_stacks": jt["n_stacks"].astype(int) if len(jt) else []})
-    regions = []
-    srows = []
-    for sid, row in st.iterrows():
-        line = lines_px[sid]
-        region = "bulk"
-        if hole_c is not None:
-            r = np.hypot(line[:, 0] - hole_c[0], line[:, 1] - hole_c[1])
-            if np.any(r >= hole_px - float(width(row.n_br)) * px_per_mm - 2 * thickness_mm * px_per_mm):
-                region = "periphery"
-        regions.append(region)
-        closed = (row.junction_a < 0 and row.junction_b < 0 and len(line) > 3
-                  and np.allclose(line[0], line[-1]))
-        mid = _loop_mid(line) if closed else _point_at_half(line)
-        srows.append({"stack_id": int(sid), "junction_a": int(row.junction_a),
-                      "junction_b": int(row.junction_b), "length_mm": _poly_len(line) / px_per_mm,
-                      "width_mm": float(width(row.n_br)), "n_br": int(row.n_br),
-                      "region": region, "mid_x_px": float(mid[0]), "mid_y_px": float(mid[1])})
-    stacks = pd.DataFrame(srows, columns=schema.STACK_COLUMNS)
-    br = analysis.branches
-    branches = pd.DataFrame({
-        "branch_id": br["branch_id"].astype(int), "stack_id": br["stack_id"].astype(int),
-        "length_mm": br["length"] * mm_per_l, "kappa_pm": br["kappa_pm"] / mm_per_l,
-        "kappa_plus": br["kappa_plus"] / mm_per_l, "kappa_m": br["kappa_pm"].abs() / mm_per_l,
-        # e = L int kappa^2 ds is scale free: the simulation's bending energy of the branch
-        "energy": br["energy_bending"],
-        "region": [regions[s] for s in br["stack_id"]],
-        "energy_confinement": br["energy_confinement"], "s_start": br["s_start"],
-        "s_end": br["s_end"]})
-    vrows = []
-    lab_e, ne = ndimage.label(enclosed)
-    touch_px = 0.5 * float(width(n_max)) * px_per_mm + 2 * thickness_mm * px_per_mm
-    for i, sl in enumerate(ndimage.find_objects(lab_e), start=1):
-        region = lab_e[sl] == i
-        area = int(region.sum())
-        if area < s_min_px:
-            continue
-        per = contour_perimeter_px(region)
-        cy, cx = np.argwhere(region).mean(axis=0) + [sl[0].start, sl[1].start]
-        dd = ndimage.distance_transform_edt(lab_e != i) if len(jpx) else None
-        n_edges = int(sum(1 for (x, y) in jpx if 0 <= int(round(y)) < h_px and
-                          0 <= int(round(x)) < w_px and dd[int(round(y)), int(round(x))] <= touch_px))
-        vrows.append({"void_id": len(vrows), "area_mm2": area / px_per_mm ** 2,
-                      "perimeter_mm": per / px_per_mm,
-                      "shape_ratio": np.sqrt(area) / per if per > 0 else np.nan,
-                      "n_edges": n_edges, "centroid_x_px": float(cx), "centroid_y_px": float(cy)})
-    voids = pd.DataFrame(vrows, columns=schema.VOID_COLUMNS)
-
-    ys, xs = np.nonzero(ink)
-    if len(xs):
-        (ccx, ccy), rad = cv2.minEnclosingCircle(np.c_[xs, ys].astype(np.float32))
-    else:
-        ccx = ccy = rad = 0.0
-    hole = ({"center_x_px": float(hole_c[0]), "center_y_px": float(hole_c[1]),
-             "radius_px": float(hole_px)} if hole_c is not None else
-            {"center_x_px": float(ccx), "center_y_px": float(ccy), "radius_px": float(rad)})
-    n_branches = int(stacks["n_br"].sum()) if len(stacks) else 0
-    summary = {
-        "n_junctions": int(len(junctions)), "n_stacks": int(len(stacks)),
-        "n_branches": n_branches, "n_voids": int(len(voids)),
-        "mean_branches_per_stack": n_branches / len(stacks) if len(stacks) else 0.0,
-        "rod_length_mm": float(rod_length_mm),
-        # the scan's compaction rate L / (2 pi R), R the hole (or the enclosing disk of the ink)
-        "epsilon": float(rod_length_mm / (2 * np.pi * hole["radius_px"] / px_per_mm))
-        if hole["radius_px"] > 0 else None,
-        # bending only: the confinement term has no counterpart in a scan
-        "total_energy": float(analysis.energy_bending),
-        "hole": hole, "timings_s": {},
-        "epsilon_rg": analysis.epsilon, "epsilon_rg_sqrt2": analysis.epsilon_sqrt2,
-        "rg": analysis.rg, "energy_confinement": analysis.energy_confinement,
-        "contact_distance": delta,
-    }
+    lines_px = [frame.to_px(line) for line in analysis.stack_lines]
+    n_br = st["n_br"].to_numpy(int)
+    widths_px = cal.width(n_br) * px_per_mm
+    coverage, labels = _draw_bands(lines_px, n_br, widths_px, frame.shape)
+    ink_mask = coverage >= 0.5
+    voids = truth_voids(ink_mask, hole_center_xy=frame.hole_xy, hole_radius_px=frame.hole_px,
+                        s_min_px=(10 * thickness_mm * px_per_mm) ** 2, px_per_mm=px_per_mm,
+                        stack_labels=labels,
+                        stack_ends=st[["junction_a", "junction_b"]].to_numpy(int),
+                        stack_widths_px=widths_px, min_contact_px=2 * thickness_mm * px_per_mm)
+    img = _draw_scan(rng, coverage, voids.enclosed, frame, lines_px, widths_px, smears=smears,
+                     specks=specks, pinholes=pinholes)
+    rgb = degrade.finish_scan(img, rng, blur_px=blur_px, noise_sigma=noise_sigma,
+                              jpeg_quality=jpeg_quality)
+    tables = _truth_tables(analysis, frame, lines_px, cal, voids.table, px_per_mm=px_per_mm,
+                           thickness_mm=thickness_mm)
+    summary = _summary(analysis, frame, tables, ink_mask, px_per_mm=px_per_mm)
     params = {"px_per_mm": float(px_per_mm), "thickness_mm": float(thickness_mm),
-              "hole_radius_mm": hole_radius_mm,
-              "hole_center_px": None if hole_c is None else [float(hole_c[0]), float(hole_c[1])],
-              "seed": int(seed), "rod_length_mm": float(rod_length_mm),
-              "contact_distance": delta, "gap_guaranteed": bool(gap_ok),
+              "hole_radius_mm": frame.hole_radius_mm,
+              "hole_center_px": None if frame.hole_xy is None else
+              [float(frame.hole_xy[0]), float(frame.hole_xy[1])],
+              "seed": int(seed), "rod_length_mm": float(frame.rod_length_mm),
+              "contact_distance": analysis.contact_distance, "gap_guaranteed": bool(frame.gap_ok),
               "noise_sigma": noise_sigma, "blur_px": blur_px, "jpeg_quality": jpeg_quality,
               "smears": smears, "specks": specks, "pinholes": pinholes,
-              "origin_xy": lo.tolist(), "margin_px": float(margin_px)}
-    tables = {"junctions": junctions, "stacks": stacks, "branches": branches, "voids": voids}
-    return RenderedScene(rgb=rgb, summary=summary, tables=tables, params=params,
-                         calibration=cal_df, ink_mask=ink)
-
-
-def write_scene(scene: RenderedScene, folder) -> Path:
-    """Write the scene folder of docs/design.md: image.png, params.json, calibration.csv, truth/."""
-    import cv2
-
-    from crosssection.core.fileio import atomic_path
-
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    with atomic_path(folder / "image.png") as tmp:
-        if not cv2.imwrite(str(tmp), np.ascontiguousarray(scene.rgb[..., ::-1])):
-            raise ConfigError("cannot write image", folder / "image.png")
-    write_csv(folder / "calibration.csv", scene.calibration)
-    write_json(folder / "params.json", scene.params)
-    schema.write_tables(folder / "truth", scene.summary, scene.tables)
-    return folder
+              "origin_xy": frame.origin_xy.tolist(), "margin_px": float(frame.margin_px)}
+    return Scene(rgb, summary, tables, params, cal,
+                 paths_rc=[line[:, ::-1] for line in lines_px], ink_mask=ink_mask)
 
 
 def render_directory(sim_dir, out_dir, *, configs=None, **kwargs) -> list[Path]:

@@ -17,6 +17,8 @@ import pandas as pd
 
 from crosssection.core.errors import ConfigError, FoldstatError
 from crosssection.core.fileio import write_csv, write_json
+from crosssection.truth.scene import read_scene
+from crosssection.truth.scoring import analyze_scene_folder, score
 
 __all__ = ["validate_scenes", "score_scene", "add_subparser"]
 
@@ -39,25 +41,22 @@ def score_scene(scene_dir, *, match_px: float | None = None) -> dict:
     -------
     dict
         The scores of :func:`crosssection.truth.scoring.score` plus ``scene`` and ``analyze_s``.
-    """
-    from crosssection.core import schema
-    from crosssection.truth.scoring import analyze_scene_folder, score
 
+    Raises
+    ------
+    FoldstatError
+        Not a scene folder (:func:`crosssection.truth.scene.read_scene`), or the analysis
+        failed.
+    """
     scene_dir = Path(scene_dir)
-    truth_dir = scene_dir / "truth"
-    if not (truth_dir / "summary.json").exists():
-        raise ConfigError("no truth/summary.json (not a scene folder)", scene_dir)
+    truth = read_scene(scene_dir, image=False)
     t0 = time.perf_counter()
     _, pair = analyze_scene_folder(scene_dir)
     dt = time.perf_counter() - t0
-    truth = schema.read_tables(truth_dir)
-    import json
-
-    params = json.loads((scene_dir / "params.json").read_text())
-    kw = {"px_per_mm": params.get("px_per_mm", 50.0),
-          "thickness_mm": params.get("thickness_mm", 0.1)}
     out = {"scene": scene_dir.name}
-    out.update(score(pair, truth, match_px=match_px, **kw))
+    out.update(score(pair, (truth.summary, truth.tables), match_px=match_px,
+                     px_per_mm=truth.params["px_per_mm"],
+                     thickness_mm=truth.params["thickness_mm"]))
     out["analyze_s"] = dt
     return out
 

@@ -26,13 +26,43 @@ class _InlineExecutor(Executor):
         return fut
 
 
-def _init_worker():
-    """Worker-process initializer: one compute thread per worker process.
+def _die_with_parent(parent_pid: int) -> None:
+    """Stop this worker when the process that started it dies (kill -9 included).
+
+    Linux delivers SIGTERM to the worker at its parent's death (``prctl(PR_SET_PDEATHSIG)``);
+    a daemon thread also polls the parent's pid every second for platforms without it. Either
+    way no worker goes on with queued work after a killed batch or quench: the re-run resumes
+    from what was written.
+    """
+    import signal
+    import threading
+    import time
+
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL("libc.so.6", use_errno=True)
+        libc.prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+
+    def watch():
+        while True:
+            time.sleep(1.0)
+            if os.getppid() != parent_pid:
+                os._exit(1)
+
+    threading.Thread(target=watch, name="parent-watch", daemon=True).start()
+
+
+def _init_worker(parent_pid: int):
+    """Worker-process initializer: one compute thread per worker, and die with the parent.
 
     Each worker is one core's worth of work; letting OpenCV or numba start their own thread
     pools in every worker would oversubscribe the cores (2 workers x 2 threads on 2 cores)
     and make the speedup depend on the libraries' defaults.
     """
+    _die_with_parent(parent_pid)
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
                 "NUMBA_NUM_THREADS"):
         os.environ.setdefault(var, "1")
@@ -71,8 +101,10 @@ def get_executor(workers: int | None = 1, scheduler: str | None = None):
         return
     if workers is None:
         workers = os.cpu_count() or 1
-    if workers < 1:
-        raise ValueError(f"workers must be >= 1, got {workers}")
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        from crosssection.core.errors import ParameterError
+
+        raise ParameterError(f"workers must be a whole number >= 1, got {workers!r}")
     if workers == 1:
         yield _InlineExecutor()
         return
@@ -80,7 +112,7 @@ def get_executor(workers: int | None = 1, scheduler: str | None = None):
 
     # 'spawn' keeps workers free of the parent's threads (numba, BLAS) and matches Dask.
     with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"),
-                             initializer=_init_worker) as ex:
+                             initializer=_init_worker, initargs=(os.getpid(),)) as ex:
         yield ex
 
 

@@ -36,7 +36,25 @@ def _small_components(binary_u8: np.ndarray, connectivity: int, max_area: float)
     return small[lab]
 
 
-def clean_mask(mask, *, s_min_px: float, speck_px: float | None = None) -> np.ndarray:
+def _short_components(binary_u8: np.ndarray, min_extent_px: float) -> np.ndarray:
+    """Bool mask of the 8-connected components whose bounding-box diagonal is shorter than
+    ``min_extent_px``."""
+    import cv2
+
+    n, lab, stats, _ = cv2.connectedComponentsWithStats(binary_u8, connectivity=8,
+                                                        ltype=cv2.CV_32S)
+    if n <= 1:
+        return np.zeros(binary_u8.shape, bool)
+    extent = np.hypot(stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT])
+    short = extent < min_extent_px
+    short[0] = False
+    if not short.any():
+        return np.zeros(binary_u8.shape, bool)
+    return short[lab]
+
+
+def clean_mask(mask, *, s_min_px: float, speck_px: float | None = None,
+               min_extent_px: float = 0.0) -> np.ndarray:
     """Fill background holes smaller than ``s_min_px``, remove specks smaller than ``speck_px``.
 
     Parameters
@@ -47,6 +65,14 @@ def clean_mask(mask, *, s_min_px: float, speck_px: float | None = None) -> np.nd
         Smallest void kept, in px^2 (paper: s_min = (10 h)^2).
     speck_px : float, optional
         Smallest ink component kept, in px^2 (default ``s_min_px``).
+    min_extent_px : float, optional
+        Ink components whose bounding box has a diagonal shorter than this are removed
+        whatever their area (default 0: off). Pass the detection limit ``l_min`` in px: a
+        component that short holds no branch of length >= l_min, and no ring around a void
+        of area >= s_min = (10 h)^2 (paper, "Image analysis procedure"). Unlike an area,
+        this limit does not depend on how thick a dust speck is, which matters at low
+        resolution where the area of a real single-sheet stack, l_min h, is only a few
+        times a speck's.
 
     Returns
     -------
@@ -69,4 +95,8 @@ def clean_mask(mask, *, s_min_px: float, speck_px: float | None = None) -> np.nd
         out |= _small_components(bg, 4, s_min_px)
     if speck_px > 0:
         out &= ~_small_components(out.view(np.uint8), 8, speck_px)
+    if not np.isfinite(min_extent_px) or min_extent_px < 0:
+        raise ParameterError(f"min_extent_px must be a finite number >= 0, got {min_extent_px}")
+    if min_extent_px > 0:
+        out &= ~_short_components(out.view(np.uint8), min_extent_px)
     return out

@@ -21,6 +21,27 @@ wall, so the outer envelope of the ink is a circle with gaps where the rod leave
 
 When only the centre is given the radius is the median distance of the outermost points; when
 only the radius is given the centre is fitted with the radius fixed.
+
+Finding the hole in the scan (:func:`find_hole`). A scan often shows the plate around the hole;
+the plate/paper boundary is the wall, a full circle even where the rod leaves the wall:
+
+1. First guess: the ink envelope (:func:`fit_hole`).
+2. Rays from its centre, 0.7 R to 1.2 R + 10 px, sampled every half pixel on the image
+   smoothed over 3x3 px (plate texture). Per sector of 1/16 of the circle a local paper colour
+   (median of the brightest fifth of the non-ink samples inside 0.95 R: receding surfaces
+   are darker) and a local plate colour (median of the samples beyond 1.06 R + 4 px): local
+   references absorb illumination gradients.
+3. Each sample is projected on the paper -> plate colour axis (0 paper, 1 plate; linear in the
+   pixel's plate coverage); ink samples count as inside. On each ray the wall is the outermost
+   crossing of 0.5 before an unbroken plate run to the ray's end (a dark rim just outside
+   the edge projects beyond 1 and counts as plate).
+4. A robust circle fit (soft-L1) on these points; points more than 2 px off are dropped and
+   the circle refitted.
+
+The confidence is the fraction of rays that give a wall point within 2 px of the circle;
+without a plate distinct from the paper the ink envelope is returned with the fraction of its
+angular bins where ink reaches the circle as confidence (a rod pressed all around the wall
+gives 1).
 """
 from __future__ import annotations
 
@@ -28,9 +49,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from crosssection.core.errors import AnalysisError
+from crosssection.core.errors import AnalysisError, ParameterError
 
-__all__ = ["Hole", "fit_hole", "classify_regions", "wall_tolerance_px", "kasa_fit"]
+__all__ = ["Hole", "fit_hole", "find_hole", "frame_mask", "check_hole", "classify_regions",
+           "wall_tolerance_px", "kasa_fit"]
 
 
 @dataclass
@@ -45,11 +67,17 @@ class Hole:
         Radius of the wall (outer edge of the ink pressed against it), px.
     fitted : bool
         True when any of the two was fitted to the mask.
+    confidence : float
+        In [0, 1]; 1 for a given hole (see :func:`find_hole`).
+    reason : str
+        Why the confidence is low, or how the hole was found.
     """
 
     center_rc: np.ndarray
     radius_px: float
     fitted: bool
+    confidence: float = 1.0
+    reason: str = ""
 
     def as_summary(self) -> dict:
         """``{center_x_px, center_y_px, radius_px}`` for ``summary.json``."""
@@ -174,6 +202,196 @@ def fit_hole(mask, *, center_rc=None, radius_px=None, gap_px=None, path=None) ->
     if radius_px is not None:
         r = float(radius_px)
     return Hole(np.asarray(c, dtype=np.float64), float(r), True)
+
+
+def check_hole(shape, center_rc, radius_px, *, path=None) -> None:
+    """Reject a hole that cannot frame a scan of ``shape``.
+
+    Raises
+    ------
+    ParameterError
+        A radius not positive and finite, a hole diameter more than twice the scan's largest
+        side, or a hole that does not overlap the image.
+    """
+    H, W = shape[:2]
+    r = float(radius_px)
+    if not np.isfinite(r) or r <= 0:
+        raise ParameterError(f"hole radius must be positive, got {radius_px!r} px", path)
+    if 2 * r > 2 * max(H, W):
+        raise ParameterError(f"hole diameter {2 * r:.0f} px is more than twice the scan "
+                             f"({W}x{H} px): check hole_radius_mm and px_per_mm", path)
+    if center_rc is not None:
+        c = np.asarray(center_rc, dtype=np.float64)
+        if c.shape != (2,) or not np.isfinite(c).all():
+            raise ParameterError(f"hole centre must be 2 finite numbers, got {center_rc!r}", path)
+        dr = max(0.0, -c[0], c[0] - (H - 1))
+        dc = max(0.0, -c[1], c[1] - (W - 1))
+        if np.hypot(dr, dc) >= r:
+            raise ParameterError(f"the hole (centre x={c[1]:.0f}, y={c[0]:.0f} px, radius "
+                                 f"{r:.0f} px) does not overlap the {W}x{H} px scan", path)
+
+
+def frame_mask(shape, hole, *, margin_px: float = 2.0) -> np.ndarray:
+    """The scan's frame: pixels whose centre lies within ``radius + margin_px`` of the centre.
+
+    Parameters
+    ----------
+    shape : tuple
+        Image shape (H, W[, 3]).
+    hole : Hole
+    margin_px : float
+        Extra radius: ink pressed against the wall reaches the wall itself, and a hole given by
+        the user carries a pixel or two of error; the plate beyond is excluded by the colour
+        threshold anyway.
+
+    Returns
+    -------
+    (H, W) bool array
+
+    Raises
+    ------
+    ParameterError
+        See :func:`check_hole`.
+    """
+    check_hole(shape, hole.center_rc, hole.radius_px)
+    rr, cc = np.ogrid[:shape[0], :shape[1]]
+    r0, c0 = (float(v) for v in hole.center_rc)
+    return (rr - r0) ** 2 + (cc - c0) ** 2 <= (float(hole.radius_px) + margin_px) ** 2
+
+
+def _circle_fit(points, c0, r0):
+    """Soft-L1 geometric circle fit, then again without points more than 2 px off."""
+    from scipy.optimize import least_squares
+
+    x = np.r_[c0, r0]
+    keep = np.ones(len(points), bool)
+    for _ in range(2):
+        q = points[keep]
+        if len(q) < 5:
+            break
+        fun = lambda x, q=q: np.hypot(*(q - x[:2]).T) - x[2]  # noqa: E731
+        x = least_squares(fun, x, loss="soft_l1", f_scale=1.0).x
+        keep = np.abs(np.hypot(*(points - x[:2]).T) - x[2]) <= 2.0
+    return x[:2], float(x[2]), keep
+
+
+def _envelope_confidence(mask, hole) -> float:
+    """Fraction of 2-px angular bins whose outermost ink reaches the circle within 3 px."""
+    pts = _boundary_points(mask)
+    n_bins = int(np.clip(np.pi * hole.radius_px, 36, 4096))
+    outer, rad = _outermost(pts, hole.center_rc, n_bins)
+    return float(np.count_nonzero(rad >= hole.radius_px - 3.5)) / n_bins
+
+
+def _wall_points(rgb, ink_mask, c0, r0, n_rays):
+    """Wall points on rays from ``c0`` where a plate distinct from the paper surrounds it."""
+    import cv2
+    H, W = ink_mask.shape
+    img = cv2.blur(rgb.astype(np.float32), (3, 3))
+    ang = np.linspace(-np.pi, np.pi, n_rays, endpoint=False)
+    rad = np.arange(0.7 * r0, 1.2 * r0 + 10.0, 0.5)
+    rr = c0[0] + np.sin(ang)[:, None] * rad[None, :]
+    cc = c0[1] + np.cos(ang)[:, None] * rad[None, :]
+    valid = (rr >= 0) & (rr <= H - 1) & (cc >= 0) & (cc <= W - 1)
+    mc, mr = cc.astype(np.float32), rr.astype(np.float32)
+    col = cv2.remap(img, mc, mr, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    ink = cv2.remap(ink_mask.view(np.uint8), mc, mr, cv2.INTER_NEAREST,
+                    borderMode=cv2.BORDER_REPLICATE) > 0
+    inner = (rad <= 0.95 * r0)[None, :] & valid & ~ink
+    outer = (rad >= 1.06 * r0 + 4.0)[None, :] & valid
+    sector = ((ang + np.pi) / (2 * np.pi) * 16).astype(int) % 16
+    pts = []
+    for s in range(16):
+        rays = np.flatnonzero(sector == s)
+        if inner[rays].sum() < 20 or outer[rays].sum() < 20:
+            continue
+        # paper is the brightest large surface inside: receding surfaces are darker
+        cin = col[rays][inner[rays]]
+        lum = cin.sum(axis=1)
+        paper = np.median(cin[lum >= np.percentile(lum, 80)], axis=0)
+        plate = np.median(col[rays][outer[rays]], axis=0)
+        axis = plate - paper
+        spread = np.median(np.abs(col[rays][outer[rays]] - plate), axis=0)
+        # a plate only when it differs from the paper well beyond its own texture
+        if np.linalg.norm(axis) < max(25.0, 6.0 * np.linalg.norm(spread)):
+            continue
+        proj = (col[rays] - paper) @ axis / (axis @ axis)
+        proj[ink[rays]] = 0.0
+        plate_like = (proj >= 0.5) | ~valid[rays]
+        n = plate_like.shape[1]
+        # last inside sample of each ray, followed by plate up to the ray's end
+        j = n - 1 - np.argmax(~plate_like[:, ::-1], axis=1)
+        ok = (~plate_like).any(axis=1) & (j < n - 1)
+        ok &= valid[rays, np.minimum(j + 1, n - 1)] & (valid[rays].sum(axis=1) > n // 2)
+        i = np.flatnonzero(ok)
+        j = j[ok]
+        p0, p1 = proj[i, j], proj[i, j + 1]
+        f = np.clip((0.5 - p0) / np.maximum(p1 - p0, 1e-6), 0.0, 1.0)
+        f[ink[rays[i], j]] = 0.5
+        rw = rad[j] + 0.5 * f
+        a = ang[rays[i]]
+        pts.append(np.column_stack([c0[0] + np.sin(a) * rw, c0[1] + np.cos(a) * rw]))
+    if not pts:
+        return np.zeros((0, 2))
+    return np.concatenate(pts)
+
+
+def find_hole(rgb, ink_mask, *, min_confidence: float = 0.5, path=None) -> Hole:
+    """The hole found in the scan: the plate's circular edge, else the ink envelope.
+
+    Parameters
+    ----------
+    rgb : (H, W, 3) uint8 or uint16 array
+    ink_mask : (H, W) bool array
+        The ink (threshold output; specks are harmless).
+    min_confidence : float
+        Below this the plate's circle is not trusted and the ink envelope is returned (with
+        the lower of the two confidences).
+    path : str, optional
+        Image path, for error messages.
+
+    Returns
+    -------
+    Hole
+        ``fitted`` True; ``confidence`` in [0, 1] and ``reason`` as in the module docstring.
+
+    Raises
+    ------
+    AnalysisError
+        No ink to start from.
+    """
+    import cv2
+
+    ink = np.asarray(ink_mask, dtype=bool)
+    # the rod is one network (wall stacks link it): its largest component gives the first
+    # guess, free of specks and of any plate pixels that passed the threshold
+    n, lab, stats, _ = cv2.connectedComponentsWithStats(ink.view(np.uint8), connectivity=8)
+    if n > 2:
+        ink = lab == 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+    env = fit_hole(ink, path=path)
+    env_conf = _envelope_confidence(ink, env)
+    n_rays = int(np.clip(np.pi * env.radius_px, 90, 1440))
+    pts = _wall_points(np.asarray(rgb), ink, env.center_rc, env.radius_px, n_rays)
+    plate_conf = 0.0
+    if len(pts) >= 0.2 * n_rays:
+        c, r, keep = _circle_fit(pts, env.center_rc, env.radius_px)
+        plate_conf = float(np.count_nonzero(keep)) / n_rays
+        if plate_conf >= min_confidence:
+            return Hole(np.asarray(c, dtype=np.float64), r, True, plate_conf,
+                        f"plate edge on {100 * plate_conf:.0f} % of directions")
+    why = ("no plate distinct from the paper" if plate_conf == 0 else
+           f"plate edge found on only {100 * plate_conf:.0f} % of directions")
+    try:
+        check_hole(ink.shape, env.center_rc, env.radius_px)
+    except ParameterError:
+        # the ink's envelope is no circle (a few strokes): frame nothing out, flag it
+        (x, y), r = cv2.minEnclosingCircle(np.argwhere(np.asarray(ink_mask, bool))[:, ::-1]
+                                           .astype(np.float32))
+        return Hole(np.array([y, x], np.float64), float(r) + 1.0, True, 0.0,
+                    f"{why}, and the ink's envelope is not a circle: smallest circle around "
+                    "the ink")
+    return Hole(env.center_rc, env.radius_px, True, env_conf,
+                f"{why}: ink envelope, ink reaches it on {100 * env_conf:.0f} % of the circle")
 
 
 def wall_tolerance_px(graph, width_px, thickness_px) -> np.ndarray:

@@ -1,20 +1,39 @@
-"""Stage 2: threshold on RGB values (paper Fig. 2).
+"""Stage 2: the ink mask from RGB values (paper Fig. 2).
 
 Paper, section "Image analysis procedure": "only pixels of blue values larger than a given
 threshold but of red and green values smaller than another given threshold are kept, allowing
 to distinguish the cut edge from back receding surfaces and to remove noise".
 
-Two methods:
+The cut edges are inked in blue; ink absorbs red and green and passes blue. Every other
+surface of a scan is close to neutral (white paper, the light grey-blue receding surfaces, a
+grey, dark or beige plate) or of another hue (a brown or coloured plate), or is pale
+(light-blue smears of wiped ink). Two features separate them:
 
-- ``"fixed"`` (default): ``blue >= blue_min`` and ``red <= rg_max`` and ``green <= rg_max``;
-  defaults for uint8 ``blue_min = 100``, ``rg_max = 130`` (scaled by 257 for uint16). They
-  separate the ink (~ (40, 70, 190)) from grey-blue receding surfaces (red, green >= 190),
-  light-blue smears (green >= 170) and white paper.
-- ``"otsu"``: Otsu's threshold on the blue-dominance channel ``blue - max(red, green)``
-  (ink ~ +120, paper and grey surfaces ~ 0-10, light-blue smears ~ +50), combined with the
-  ``rg_max`` condition (default as above) which rejects the light smears that dominance alone
-  may keep. Useful when the scanner's exposure differs from the defaults' scans. The Otsu
-  threshold is reported as ``dominance_min``.
+- the blue dominance ``d = blue - max(red, green)``: about +120 on ink, 0 on any neutral
+  surface whatever its brightness (an illumination gradient multiplies it, a neutral stays
+  neutral), +10 to +20 on receding surfaces, below +40 on brown, beige or bluish plates;
+- the red-green darkness ``m = max(red, green)``: about 70 on ink, 245 on paper and 170 or more
+  on light-blue smears, which share their hue with ink but not its depth.
+
+Methods
+-------
+- ``"auto"`` (default): both cuts chosen from the scan. A provisional split of ``d`` by Otsu's
+  method gives the ink class; the ink level is its median, the paper level the median over a
+  ring 2-6 px around it (the paper that borders the ink, not the plate or the rest of the
+  frame). Each cut is the midpoint of the two levels, i.e. the value of a pixel half covered
+  by ink, so the band widths that give the layer counts are not biased by the threshold.
+  A pixel is ink when ``d >= d_cut`` and ``m <= m_cut``. Only pixels of ``region`` (the
+  scan's frame, inside the hole) enter the statistics and can be ink. Illumination and colour
+  casts move both levels together with the cuts; a plate is outside ``region``, and without a
+  region any plate that is not blue fails ``d``. When the scan has no blue-dominant class
+  (ink and paper levels closer than :data:`MIN_CONTRAST_U8`) the mask is empty.
+- ``"fixed"``: the paper's rule ``blue >= blue_min`` and ``red, green <= rg_max``, defaults
+  100 and 130 (uint8). It assumes the scanner exposure of the scans they were set on: a neutral
+  grey plate (~ (128, 125, 120)) passes it.
+- ``"otsu"``: Otsu's threshold on ``d`` and ``red, green <= rg_max`` (default 130).
+
+With ``"auto"``, a given ``blue_min`` or ``rg_max`` is an extra bound (it can only remove
+pixels). All values are in the native units of the image (uint16: uint8 values times 257).
 """
 from __future__ import annotations
 
@@ -26,10 +45,14 @@ from crosssection.core.errors import ParameterError
 
 BLUE_MIN_U8 = 100
 RG_MAX_U8 = 130
-METHODS = ("fixed", "otsu")
+#: Least difference (uint8 units) between the ink and paper levels of both features for
+#: ``"auto"`` to accept a blue-dominant class; ink on paper differs by 100 or more.
+MIN_CONTRAST_U8 = 30.0
+METHODS = ("auto", "fixed", "otsu")
+DOMINANCE = "blue - max(red, green)"
 
 
-@dataclass
+@dataclass(frozen=True)
 class ThresholdResult:
     """Binary mask and the thresholds used (native units of the image dtype).
 
@@ -37,29 +60,58 @@ class ThresholdResult:
     ----------
     mask : (H, W) bool array
     blue_min : float or None
-        Blue lower bound (``None`` for ``"otsu"``, which thresholds dominance instead).
-    rg_max : float
-        Red and green upper bound.
+        Blue lower bound (``"fixed"``, or given to ``"auto"``).
+    rg_max : float or None
+        Red and green upper bound (``"auto"``: the data-chosen ``m_cut``).
     method : str
-        ``"fixed"`` or ``"otsu"``.
+        ``"auto"``, ``"fixed"`` or ``"otsu"``.
     dominance_min : float or None
-        ``"otsu"``: threshold on ``blue - max(red, green)``.
+        Threshold on ``blue - max(red, green)`` (``"auto"``, ``"otsu"``).
     scale : float
-        1 for uint8 images, 257 for uint16 (the factor applied to the uint8 defaults).
+        1 for uint8 images, 257 for uint16.
+    ink_level, paper_level : (2,) tuple or None
+        ``"auto"``: the (dominance, max(red, green)) levels of ink and of the paper around it.
+    region_fraction : float
+        Fraction of the image inside ``region`` (1 without region).
+    note : str
+        Why the mask is empty, when it is.
     """
 
     mask: np.ndarray
     blue_min: float | None
-    rg_max: float
+    rg_max: float | None
     method: str
     dominance_min: float | None = None
     scale: float = 1.0
+    ink_level: tuple | None = None
+    paper_level: tuple | None = None
+    region_fraction: float = 1.0
+    note: str = ""
+
+    @property
+    def feature(self) -> str:
+        """The feature the method cuts."""
+        return "blue, red, green" if self.method == "fixed" else DOMINANCE
+
+    @property
+    def cut(self) -> float | None:
+        """The cut on :attr:`feature` (``blue_min`` for ``"fixed"``)."""
+        return self.blue_min if self.method == "fixed" else self.dominance_min
 
     def as_summary(self) -> dict:
         """JSON-friendly thresholds for ``summary.json``."""
-        return {"method": self.method, "blue_min": self.blue_min, "rg_max": self.rg_max,
-                "dominance_min": self.dominance_min, "dtype_scale": self.scale,
-                "foreground_fraction": float(self.mask.mean()) if self.mask.size else 0.0}
+        def _f(x):
+            return None if x is None else float(x)
+
+        def _t(x):
+            return None if x is None else [float(v) for v in x]
+        return {"method": self.method, "feature": self.feature, "cut": _f(self.cut),
+                "blue_min": _f(self.blue_min), "rg_max": _f(self.rg_max),
+                "dominance_min": _f(self.dominance_min), "ink_level": _t(self.ink_level),
+                "paper_level": _t(self.paper_level), "dtype_scale": float(self.scale),
+                "region_fraction": float(self.region_fraction),
+                "foreground_fraction": float(self.mask.mean()) if self.mask.size else 0.0,
+                "note": self.note}
 
 
 def _scale(rgb) -> float:
@@ -80,23 +132,126 @@ def _check_value(name, value, vmax):
     return v
 
 
-def threshold_rgb(rgb, *, blue_min=None, rg_max=None, method: str = "fixed") -> ThresholdResult:
+def _region(region, shape):
+    if region is None:
+        return None
+    reg = np.asarray(region)
+    if reg.shape != shape:
+        raise ParameterError(f"region shape {reg.shape} differs from the image's {shape}")
+    reg = reg.astype(bool, copy=False)
+    if not reg.any():
+        raise ParameterError("the region (scan's frame) is empty: the hole lies outside the "
+                             "image")
+    return reg
+
+
+def _otsu_u8(values) -> float:
+    """Otsu's threshold of values in uint8 units (histogram of 1-unit bins)."""
+    from skimage.filters import threshold_otsu
+
+    idx = np.clip(np.rint(np.ravel(values)).astype(np.int64) + 256, 0, 512)
+    counts = np.bincount(idx, minlength=513)
+    nz = np.flatnonzero(counts)
+    if len(nz) < 2:
+        return float(nz[0] - 256) + 1.0 if len(nz) else 1.0
+    counts = counts[nz[0]:nz[-1] + 1]
+    centers = np.arange(nz[0], nz[-1] + 1) - 256.0
+    return float(threshold_otsu(hist=(counts, centers)))
+
+
+def _median_u8(values) -> float:
+    """Median of values in uint8 units, to the nearest unit (a histogram, no sort)."""
+    idx = np.clip(np.rint(values).astype(np.int64) + 256, 0, 512)
+    cum = np.cumsum(np.bincount(idx, minlength=513))
+    return float(np.searchsorted(cum, 0.5 * cum[-1])) - 256.0
+
+
+def _levels_of(prov, ds, ms, reg, ring_px):
+    """Ink levels (median over ``prov``) and paper levels (median over the ring around it)."""
+    import cv2
+
+    if np.count_nonzero(prov) < 10:
+        return None
+    u8 = prov.view(np.uint8)
+    near = cv2.dilate(u8, np.ones((3, 3), np.uint8)).view(bool)
+    far = cv2.dilate(u8, np.ones((2 * ring_px + 1,) * 2, np.uint8)).view(bool)
+    ring = far & ~near
+    if reg is not None:
+        ring &= reg
+    if np.count_nonzero(ring) < 10:
+        return None
+    ink = (_median_u8(ds[prov]), _median_u8(ms[prov]))
+    paper = (_median_u8(ds[ring]), _median_u8(ms[ring]))
+    return ink, paper
+
+
+def _auto_levels(d, m, region, scale):
+    """Ink and paper levels (uint8 units) of dominance ``d`` and darkness ``m``.
+
+    Candidate ink classes are the upper class of Otsu's split of ``d`` and the upper class of
+    a second Otsu split within it: with a plate in the statistics (no region) the first split
+    may separate the plate from paper and ink, or the paper from a bluish plate and ink. The
+    candidate kept is the one that contrasts most with the ring of surface that borders it,
+    ``min(d_ink - d_ring, m_ring - m_ink)``: ink is bluer and darker in red and green than
+    the paper around it, a plate is not. Returns ``((d_ink, m_ink), (d_paper, m_paper))`` or
+    None when no candidate contrasts by :data:`MIN_CONTRAST_U8`. Large scans are sampled on a
+    2 px lattice (every band, at least a sheet thickness wide, is still sampled).
+    """
+    step = 2 if d.size > 1_000_000 else 1
+    ds = d[::step, ::step].astype(np.float32) / scale
+    ms = m[::step, ::step].astype(np.float32) / scale
+    reg = None if region is None else region[::step, ::step]
+    vals = ds if reg is None else ds[reg]
+    ring_px = 6 // step  # the paper 2-6 px out from the ink
+    best, best_score = None, MIN_CONTRAST_U8
+    t = -np.inf
+    for _ in range(2):
+        sub = vals[vals > t]
+        if sub.size < 20 or sub.min() == sub.max():
+            break
+        # Otsu's class above the cut is strictly greater (skimage's convention): with a
+        # two-level image ">=" would put the whole image in the ink class
+        t = _otsu_u8(sub)
+        prov = ds > t
+        if reg is not None:
+            prov &= reg
+        lev = _levels_of(prov, ds, ms, reg, ring_px)
+        if lev is None:
+            continue
+        (d_i, m_i), (d_p, m_p) = lev
+        score = min(d_i - d_p, m_p - m_i)
+        if score >= best_score:
+            best, best_score = lev, score
+    return best
+
+
+def threshold_rgb(rgb, *, method: str = "auto", region=None, blue_min=None,
+                  rg_max=None) -> ThresholdResult:
     """Binary mask of the blue-inked cut edge.
 
     Parameters
     ----------
     rgb : (H, W, 3) uint8 or uint16 array
-    blue_min : float, optional
-        Minimum blue (native units); default 100 for uint8, 100 * 257 for uint16. Ignored by
-        ``"otsu"``.
-    rg_max : float, optional
-        Maximum red and green (native units); default 130 (uint8), 130 * 257 (uint16).
-    method : {"fixed", "otsu"}
+    method : {"auto", "fixed", "otsu"}
         See the module docstring.
+    region : (H, W) bool array, optional
+        The scan's frame (inside the hole): only its pixels choose the cuts and can be ink.
+    blue_min : float, optional
+        Minimum blue (native units); ``"fixed"`` default 100 (uint8), 100 * 257 (uint16).
+        An extra bound for ``"auto"``; ignored by ``"otsu"``.
+    rg_max : float, optional
+        Maximum red and green (native units); ``"fixed"`` and ``"otsu"`` default 130 (uint8),
+        130 * 257 (uint16). An extra bound for ``"auto"``.
 
     Returns
     -------
     ThresholdResult
+
+    Raises
+    ------
+    ParameterError
+        Not an (H, W, 3) uint8/uint16 array, unknown method, a bound outside the image range,
+        a region of another shape or empty.
     """
     rgb = np.asarray(rgb)
     if rgb.ndim != 3 or rgb.shape[2] != 3:
@@ -105,26 +260,49 @@ def threshold_rgb(rgb, *, blue_min=None, rg_max=None, method: str = "fixed") -> 
         raise ParameterError(f"threshold method must be one of {METHODS}, got {method!r}")
     scale = _scale(rgb)
     vmax = 255.0 * scale
-    rg = RG_MAX_U8 * scale if rg_max is None else _check_value("rg_max", rg_max, vmax)
+    reg = _region(region, rgb.shape[:2])
+    reg_frac = 1.0 if reg is None else float(np.count_nonzero(reg)) / reg.size
+    rg = None if rg_max is None else _check_value("rg_max", rg_max, vmax)
+    bm = None if blue_min is None else _check_value("blue_min", blue_min, vmax)
     r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
-    rg_t = rgb.dtype.type(min(int(np.floor(rg)), int(vmax)))
-    if method == "fixed":
-        bm = BLUE_MIN_U8 * scale if blue_min is None else _check_value("blue_min", blue_min,
-                                                                         vmax)
-        b_t = int(np.ceil(bm))
-        if b_t > vmax:
-            mask = np.zeros(rgb.shape[:2], bool)
-        else:
-            mask = (b >= rgb.dtype.type(b_t)) & (r <= rg_t) & (g <= rg_t)
-        return ThresholdResult(mask, float(bm), float(rg), "fixed", None, scale)
-    from skimage.filters import threshold_otsu
+    m = np.maximum(r, g)
 
-    dom = b.astype(np.int32) - np.maximum(r, g).astype(np.int32)
-    if dom.min() == dom.max():
-        t = float(dom.max()) + 1.0  # uniform image: nothing dominates
-    else:
-        # Otsu on the positive part: the image is mostly neutral paper (dominance ~ 0)
-        t = float(threshold_otsu(dom))
-        t = max(t, 1.0)
-    mask = (dom >= t) & (r <= rg_t) & (g <= rg_t)
-    return ThresholdResult(mask, None, float(rg), "otsu", t, scale)
+    def _bounds(mask, blue, rgmax):
+        if blue is not None:
+            mask &= b >= int(np.ceil(blue))
+        if rgmax is not None:
+            mask &= m <= int(np.floor(rgmax))
+        if reg is not None:
+            mask &= reg
+        return mask
+
+    if method == "fixed":
+        bm = BLUE_MIN_U8 * scale if bm is None else bm
+        rg = RG_MAX_U8 * scale if rg is None else rg
+        mask = _bounds(np.ones(rgb.shape[:2], bool), bm, rg)
+        return ThresholdResult(mask, float(bm), float(rg), "fixed", None, scale,
+                               region_fraction=reg_frac)
+    d = b.astype(np.int32) - m.astype(np.int32)
+    if method == "otsu":
+        rg = RG_MAX_U8 * scale if rg is None else rg
+        dd = d if reg is None else d[reg]
+        if dd.min() == dd.max():
+            t = float(dd.max()) + 1.0  # uniform image: nothing dominates
+        else:
+            t = max(_otsu_u8(dd / scale) * scale, 1.0)
+        mask = _bounds(d >= t, None, rg)
+        return ThresholdResult(mask, None, float(rg), "otsu", t, scale, region_fraction=reg_frac)
+    levels = _auto_levels(d, m, reg, scale)
+    if levels is None:
+        return ThresholdResult(np.zeros(rgb.shape[:2], bool), bm, rg, "auto", None, scale,
+                               region_fraction=reg_frac,
+                               note="no blue-dominant class: no ink darker in red and green "
+                                    f"than the paper by {MIN_CONTRAST_U8:g} (uint8 units)")
+    ink, paper = levels
+    d_cut = 0.5 * (ink[0] + paper[0]) * scale
+    m_cut = 0.5 * (ink[1] + paper[1]) * scale
+    rg_used = m_cut if rg is None else min(m_cut, rg)
+    mask = _bounds(d >= d_cut, bm, rg_used)
+    return ThresholdResult(mask, bm, float(rg_used), "auto", float(d_cut), scale,
+                           tuple(v * scale for v in ink), tuple(v * scale for v in paper),
+                           reg_frac)

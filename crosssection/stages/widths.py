@@ -20,13 +20,10 @@ narrows); short stacks fall back to their central half.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from pathlib import Path
-
 import numpy as np
 from numba import njit
 
-from crosssection.core.errors import ConfigError
+from crosssection.core.calibration import Calibration
 
 __all__ = ["stack_widths", "stack_widths_px", "path_width_profile_px", "Calibration"]
 
@@ -277,130 +274,3 @@ def stack_widths(graph, distance_px: np.ndarray, *, px_per_mm: float,
         raise ValueError("px_per_mm must be positive")
     return stack_widths_px(graph, distance_px, junction_margin_px=junction_margin_px,
                            margin_width_factor=margin_width_factor) / float(px_per_mm)
-
-
-@dataclass(frozen=True)
-class Calibration:
-    """Width of a stack as a function of its number of layers, and its inverse.
-
-    The table is the user's measurement of cut stacks of ``n`` sheets (paper: the hot-wire cut
-    thickens stacks nonlinearly).  Between table rows the width is interpolated by a monotone
-    cubic (PCHIP, no overshoot); beyond the table it is extended linearly with the slope of
-    the end segment (below the first row, through the first segment).  ``layers`` is the exact
-    numerical inverse of ``width`` (bisection on the monotone interpolant), so
-    ``layers(width(n)) == n`` for every ``n``, tabulated or not.
-
-    Attributes
-    ----------
-    n_layers, width_mm : tuple of float
-        The table, strictly increasing in both columns.
-    source : str or None
-        File the table was read from.
-    """
-
-    n_layers: tuple
-    width_mm: tuple
-    source: str | None = None
-    _interp: object = field(default=None, repr=False, compare=False)
-
-    def __post_init__(self):
-        n = np.asarray(self.n_layers, dtype=float)
-        w = np.asarray(self.width_mm, dtype=float)
-        where = self.source
-        if n.ndim != 1 or n.shape != w.shape or len(n) == 0:
-            raise ConfigError("calibration needs at least one row of n_layers,width_mm", where)
-        if not (np.all(np.isfinite(n)) and np.all(np.isfinite(w))):
-            raise ConfigError("calibration contains non-numeric or missing values", where)
-        if np.any(n <= 0) or np.any(w <= 0):
-            raise ConfigError("calibration n_layers and width_mm must be positive", where)
-        if np.any(np.diff(n) <= 0) or np.any(np.diff(w) <= 0):
-            raise ConfigError("calibration must be strictly increasing in n_layers and width_mm",
-                              where)
-        if len(n) == 1:  # a single row: proportional through the origin
-            n = np.array([0.0, n[0]])
-            w = np.array([0.0, w[0]])
-        interp = None
-        if len(n) >= 3:
-            from scipy.interpolate import PchipInterpolator
-            interp = PchipInterpolator(n, w, extrapolate=False)
-        object.__setattr__(self, "_interp", (n, w, interp))
-
-    # ------------------------------------------------------------------ constructors
-    @classmethod
-    def from_csv(cls, path) -> "Calibration":
-        """Read a ``n_layers,width_mm`` CSV (header required, extra columns ignored).
-
-        Raises
-        ------
-        ConfigError
-            Missing file, missing columns, non-numeric, non-positive or non-increasing values;
-            the message names the file.
-        """
-        import pandas as pd
-
-        path = Path(path)
-        try:
-            df = pd.read_csv(path, comment="#", skipinitialspace=True)
-        except FileNotFoundError:
-            raise ConfigError("calibration file not found", path) from None
-        except Exception as exc:  # parser errors, empty file, binary junk
-            raise ConfigError(f"cannot read calibration CSV ({type(exc).__name__})", path) from None
-        df.columns = [str(c).strip().lower() for c in df.columns]
-        missing = [c for c in ("n_layers", "width_mm") if c not in df.columns]
-        if missing:
-            raise ConfigError(f"calibration lacks column(s) {', '.join(missing)} "
-                              "(expected n_layers,width_mm)", path)
-        n = pd.to_numeric(df["n_layers"], errors="coerce").to_numpy(float)
-        w = pd.to_numeric(df["width_mm"], errors="coerce").to_numpy(float)
-        return cls(tuple(n), tuple(w), source=str(path))
-
-    @classmethod
-    def linear(cls, thickness_mm: float, n_max: int = 50) -> "Calibration":
-        """The default calibration ``width = n h`` for ``n = 1..n_max``."""
-        if not thickness_mm > 0:
-            raise ConfigError(f"thickness_mm must be positive, got {thickness_mm}")
-        n = np.arange(1, int(n_max) + 1, dtype=float)
-        return cls(tuple(n), tuple(n * float(thickness_mm)))
-
-    # ------------------------------------------------------------------ evaluation
-    def width(self, n) -> np.ndarray:
-        """Width (mm) of a stack of ``n`` layers (float or array; continuous ``n`` allowed)."""
-        tn, tw, interp = self._interp
-        x = np.asarray(n, dtype=float)
-        lo_slope = (tw[1] - tw[0]) / (tn[1] - tn[0])
-        hi_slope = (tw[-1] - tw[-2]) / (tn[-1] - tn[-2])
-        if interp is not None:
-            inside = np.asarray(interp(np.clip(x, tn[0], tn[-1])), dtype=float)
-        else:
-            inside = np.interp(x, tn, tw)
-        out = np.where(x < tn[0], tw[0] + (x - tn[0]) * lo_slope,
-                       np.where(x > tn[-1], tw[-1] + (x - tn[-1]) * hi_slope, inside))
-        return out if out.ndim else float(out)
-
-    def layers(self, width_mm) -> np.ndarray:
-        """Continuous number of layers of a stack of width ``width_mm`` (inverse of width).
-
-        NaN widths give NaN.
-        """
-        tn, tw, interp = self._interp
-        y = np.asarray(width_mm, dtype=float)
-        lo_slope = (tw[1] - tw[0]) / (tn[1] - tn[0])
-        hi_slope = (tw[-1] - tw[-2]) / (tn[-1] - tn[-2])
-        if interp is None:
-            inside = np.interp(y, tw, tn)
-        else:
-            # bisection on the monotone interpolant, bracketed by the table rows
-            yc = np.clip(y, tw[0], tw[-1])
-            k = np.clip(np.searchsorted(tw, yc, side="right") - 1, 0, len(tw) - 2)
-            a, b = tn[k].copy(), tn[k + 1].copy()
-            a = np.where(np.isfinite(a), a, tn[0])
-            for _ in range(60):
-                m = 0.5 * (a + b)
-                below = interp(m) < yc
-                a = np.where(below, m, a)
-                b = np.where(below, b, m)
-            inside = 0.5 * (a + b)
-        out = np.where(y < tw[0], tn[0] + (y - tw[0]) / lo_slope,
-                       np.where(y > tw[-1], tn[-1] + (y - tw[-1]) / hi_slope, inside))
-        out = np.where(np.isfinite(y), out, np.nan)
-        return out if out.ndim else float(out)

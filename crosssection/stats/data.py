@@ -39,6 +39,20 @@ BRANCH_COLS = ["set", "config_id", "length_L", "kappa_m_L", "kappa_plus_L", "e",
 STACK_COLS = ["set", "config_id", "n_br", "length_L", "region"]
 VOID_COLS = ["set", "config_id", "area_L2", "perimeter_L", "shape_ratio", "n_edges", "s_min_L2"]
 SIM_REGION = "none"  # simulations have no wall: no bulk/periphery split (paper, "Two sub-systems")
+TEXT_COLS = {"set", "config_id", "region", "source"}
+
+
+def _numeric(df: pd.DataFrame, cols) -> pd.DataFrame:
+    """``df`` whose numeric columns among ``cols`` hold numbers: an empty table (a scan
+    without voids gives a header-only ``voids.csv``) reads as object columns, on which
+    numpy functions such as ``sqrt`` fail."""
+    bad = [c for c in cols if c in df.columns and c not in TEXT_COLS and df[c].dtype == object]
+    if not bad:
+        return df
+    df = df.copy()
+    for c in bad:
+        df[c] = pd.to_numeric(df[c], errors="coerce").astype(float)
+    return df
 
 
 @dataclass
@@ -70,8 +84,14 @@ class Ensemble:
         return Ensemble(cat("configs", CONFIG_COLS), cat("branches", BRANCH_COLS),
                         cat("stacks", STACK_COLS), cat("voids", VOID_COLS))
 
+    def __post_init__(self):
+        self.configs = _numeric(self.configs, CONFIG_COLS)
+        self.branches = _numeric(self.branches, BRANCH_COLS)
+        self.stacks = _numeric(self.stacks, STACK_COLS)
+        self.voids = _numeric(self.voids, VOID_COLS)
 
-def _read_csv(path: Path, required) -> pd.DataFrame:
+
+def _read_csv(path: Path, required, *, nonempty: bool = False) -> pd.DataFrame:
     try:
         df = pd.read_csv(path)
     except FileNotFoundError:
@@ -81,6 +101,8 @@ def _read_csv(path: Path, required) -> pd.DataFrame:
     missing = [c for c in required if c not in df.columns]
     if missing:
         raise ConfigError(f"lacks columns {missing}", path)
+    if nonempty and df.empty:
+        raise ConfigError("holds no rows (header only)", path)
     return df
 
 
@@ -121,7 +143,7 @@ def load_simulation(folder, *, set_name=None) -> Ensemble:
     folder = Path(folder)
     name = set_name or folder.resolve().name
     cfg = _read_csv(folder / "configs.csv", ["config_id", "epsilon", "energy_total", "n_stacks",
-                                             "n_branches", "n_voids"])
+                                             "n_branches", "n_voids"], nonempty=True)
     br = _read_csv(folder / "branches.csv", ["config_id", "length", "kappa_plus", "kappa_pm",
                                              "energy"])
     vo = _read_csv(folder / "voids.csv", ["config_id", "area", "shape_ratio", "n_edges"])

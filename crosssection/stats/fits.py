@@ -1,67 +1,45 @@
 """Maximum-likelihood fits of the paper's laws, with detection-limit truncation.
 
-Families (paper, section "Statistical distributions"; location fixed at 0 where the paper
-writes none):
+The families (exponential, Gamma, log-normal, Gaussian, Bose-Einstein, power law with
+exponential cutoff) are the classes of :mod:`crosssection.stats.families`, registered in
+:data:`FAMILIES` by name. This module fits any of them the same way: MLE, percentile
+bootstrap intervals, an Anderson-Darling goodness of fit with a parametric-bootstrap p-value,
+and model selection.
 
-=================  ==========================  =============================================
-name               parameters (paper notation)  density
-=================  ==========================  =============================================
-``exponential``    mu                           exp(-x/mu)/mu                        (eq_exp)
-``gamma``          alpha, chi                   x^(alpha-1) exp(-x/chi)/(Gamma(alpha) chi^alpha)
-                                                (eq_gam; chi is the *scale*, the mean is alpha*chi)
-``lognormal``      mu, sigma                    mean and std of ln x                 (eq_logn)
-``gaussian``       mu, sigma                                                         (eq_gaus)
-``bose_einstein``  alpha, beta                  alpha/(exp(beta x) - 1) on [x_lo, x_hi]
-=================  ==========================  =============================================
+Detection limits (paper "Statistical distributions in the folding of elastic structures",
+Adda-Bedia, Boudaoud, Boué, Deboeuf; note on <l> against mu): an observation below the cut c
+is never seen, so the likelihood of an observed x >= c is f(x)/S(c), S the survival function.
+``c`` may be a scalar or one cut per observation (images of different rod lengths L have
+different l_min/L).
 
-The Bose-Einstein form (paper, "Bose-Einstein condensation and annealing") diverges like
-1/(beta x) at 0 and is not normalisable on (0, inf); it is normalised on the observed range
-[x_lo, x_hi] (x_lo = the truncation cut if one is given, else the sample minimum; x_hi = the
-sample maximum). The normalisation integral has the closed form
-Z = [ln(1 - exp(-beta x))]_{x_lo}^{x_hi} / beta (checked against ``scipy.integrate.quad``
-in the tests) and alpha = 1/Z. Because its support is estimated from the data, its
-data-determined endpoints count as parameters in AIC/BIC (k = 3 without a cut, 2 with one).
+Degenerate fits: a fit whose parameters sit at a bound of their domain or far outside the data
+(a Gaussian whose mean lies hundreds of standard deviations below the cut, a Bose-Einstein law
+with beta x << 1 everywhere) describes no law of the data; it keeps its row, with the reason in
+``rejected``, but is never selected and carries no interval nor p-value.
 
-Detection limits (paper, note on <l> against mu): an observation below the cut c is never
-seen, so the likelihood of an observed x >= c is f(x)/S(c), S the survival function. ``c``
-may be a scalar or one cut per observation (images of different rod lengths L have different
-l_min/L). For the exponential the truncated MLE is closed form: mu = mean(x - c) (for a single
-cut: <l> - l_min = mu exactly).
+Model selection: the min-BIC family among the non-degenerate fits, except that a family with
+fewer parameters whose BIC is within ``DELTA_BIC_SIMPLER`` = 2 of the minimum is preferred
+("the simplest law the data support": a BIC difference below 2 is "not worth more than a bare
+mention", Kass & Raftery 1995). Ties in parameter count go to the lower BIC.
 
-Model selection: the min-BIC family, except that a family with fewer parameters whose BIC is
-within ``DELTA_BIC_SIMPLER`` = 2 of the minimum is preferred ("the simplest law the data
-support": a BIC difference below 2 is "not worth more than a bare mention", Kass & Raftery
-1995). Ties in parameter count go to the lower BIC.
+P-values come from n Monte-Carlo resamples, so the smallest one is 1/(n + 1); a p-value at that
+floor only says p < 1/(n + 1) and is printed so (:meth:`FitResult.p_text`).
 """
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pandas as pd
-from scipy import optimize, special, stats
+from scipy import stats
 
 from crosssection.core.errors import ParameterError
+from crosssection.stats.families import FAMILIES
 
 DELTA_BIC_SIMPLER = 2.0
-FAMILIES = ("exponential", "gamma", "lognormal", "gaussian", "bose_einstein")
-POSITIVE_FAMILIES = ("exponential", "gamma", "lognormal", "bose_einstein")
-PARAM_NAMES = {
-    "exponential": ("mu",),
-    "gamma": ("alpha", "chi"),
-    "lognormal": ("mu", "sigma"),
-    "gaussian": ("mu", "sigma"),
-    "bose_einstein": ("alpha", "beta"),
-}
-
-
-# ----------------------------------------------------------------------------- helpers
-def _log1mexp(t):
-    """log(1 - exp(-t)) for t > 0, accurate at both ends (Maechler 2012)."""
-    t = np.asarray(t, dtype=float)
-    return np.where(t <= np.log(2.0), np.log(-np.expm1(-np.minimum(t, np.log(2.0)))),
-                    np.log1p(-np.exp(-np.maximum(t, np.log(2.0)))))
+PAPER_FAMILIES = ("exponential", "gamma", "lognormal", "gaussian", "bose_einstein")
+MAX_PARAMS = max(len(f.param_names) for f in FAMILIES.values())
 
 
 def _seedseq(seed) -> np.random.SeedSequence:
@@ -80,257 +58,11 @@ def _as_cuts(truncation, n):
     return c
 
 
-# ------------------------------------------------------------------ Bose-Einstein law
-def be_log_norm(beta, lo, hi):
-    """ln Z(beta) with Z = integral_lo^hi dx / (exp(beta x) - 1) (closed form)."""
-    beta = float(beta)
-    d = _log1mexp(beta * np.asarray(hi, float)) - _log1mexp(beta * np.asarray(lo, float))
-    return np.log(d) - np.log(beta)
-
-
-def be_logpdf(x, beta, lo, hi):
-    """Log density of the Bose-Einstein form normalised on [lo, hi] (lo may be per point)."""
-    x = np.asarray(x, float)
-    # ln(exp(bx) - 1) = bx + ln(1 - exp(-bx))
-    out = -(beta * x + _log1mexp(beta * x)) - be_log_norm(beta, lo, hi)
-    return np.where((x >= lo) & (x <= hi), out, -np.inf)
-
-
-def be_cdf(x, beta, lo, hi):
-    """Cumulative distribution of the Bose-Einstein form on [lo, hi]."""
-    x = np.clip(np.asarray(x, float), lo, hi)
-    g = lambda v: _log1mexp(beta * v)  # noqa: E731
-    return (g(x) - g(lo)) / (g(hi) - g(lo))
-
-
-def be_ppf(u, beta, lo, hi):
-    """Inverse of :func:`be_cdf` (closed form)."""
-    u = np.asarray(u, float)
-    glo, ghi = _log1mexp(beta * np.asarray(lo, float)), _log1mexp(beta * hi)
-    g = glo + u * (ghi - glo)  # = ln(1 - exp(-beta x)) < 0
-    return -np.log(-np.expm1(g)) / beta
-
-
-def _fit_be(x, lo, hi):
-    """MLE of beta for the Bose-Einstein form on [lo, hi] (bounded Brent on ln beta)."""
-    xm = float(np.mean(x))
-
-    def nll(lb):
-        b = np.exp(lb)
-        return -float(np.sum(be_logpdf(x, b, lo, hi)))
-
-    span = np.log(xm)
-    res = optimize.minimize_scalar(nll, bounds=(-12.0 - span, 6.0 - span), method="bounded",
-                                   options={"xatol": 1e-7})
-    return float(np.exp(res.x)), -float(res.fun)
-
-
-# ------------------------------------------------------------------ scipy frozen laws
-def scipy_dist(family: str, params: dict):
-    """The ``scipy.stats`` frozen distribution of a fitted family (not Bose-Einstein)."""
-    if family == "exponential":
-        return stats.expon(scale=params["mu"])
-    if family == "gamma":
-        return stats.gamma(params["alpha"], scale=params["chi"])
-    if family == "lognormal":
-        return stats.lognorm(params["sigma"], scale=np.exp(params["mu"]))
-    if family == "gaussian":
-        return stats.norm(params["mu"], params["sigma"])
-    raise ParameterError(f"no scipy distribution for family {family!r}")
-
-
-def _theta_to_params(family, theta):
-    if family == "exponential":
-        return {"mu": float(theta[0])}
-    return dict(zip(PARAM_NAMES[family], map(float, theta)))
-
-
-def _naive_theta(family, x):
-    """Untruncated MLE (scipy.stats.fit with loc fixed at 0 for the positive laws)."""
-    if family == "exponential":
-        return (float(np.mean(x)),)
-    if family == "gamma":
-        a, _, scale = stats.gamma.fit(x, floc=0)
-        return (a, scale)
-    if family == "lognormal":
-        s, _, scale = stats.lognorm.fit(x, floc=0)
-        return (np.log(scale), s)
-    if family == "gaussian":
-        m, s = stats.norm.fit(x)
-        return (m, s)
-    raise ParameterError(f"unknown family {family!r}")
-
-
-def _logpdf(family, theta, x):
-    """Log density with scipy.special (no frozen-distribution overhead in the optimiser)."""
-    if family == "gamma":
-        a, chi = theta
-        return special.xlogy(a - 1, x) - x / chi - special.gammaln(a) - a * np.log(chi)
-    if family == "lognormal":
-        mu, sg = theta
-        lx = np.log(x)
-        return -0.5 * ((lx - mu) / sg) ** 2 - lx - np.log(sg) - 0.5 * np.log(2 * np.pi)
-    if family == "gaussian":
-        mu, sg = theta
-        return -0.5 * ((x - mu) / sg) ** 2 - np.log(sg) - 0.5 * np.log(2 * np.pi)
-    mu = theta[0]
-    return -x / mu - np.log(mu)
-
-
-def _logsf(family, theta, c):
-    """Log survival function at the cuts ``c``."""
-    if family == "gamma":
-        a, chi = theta
-        sf = special.gammaincc(a, c / chi)
-        with np.errstate(divide="ignore"):
-            out = np.log(sf)
-        bad = ~np.isfinite(out)
-        if np.any(bad):  # deep tail: scipy's asymptotics
-            out[bad] = stats.gamma.logsf(c[bad], a, scale=chi)
-        return out
-    if family == "lognormal":
-        mu, sg = theta
-        return special.log_ndtr(-(np.log(c) - mu) / sg)
-    if family == "gaussian":
-        mu, sg = theta
-        return special.log_ndtr(-(c - mu) / sg)
-    return -c / theta[0]
-
-
-def _trunc_nll(family, theta, x, cu, cn):
-    """Negative truncated log-likelihood; cuts given as unique values ``cu`` with counts ``cn``
-    (images share one cut each, so this evaluates the survival a few times only)."""
-    with np.errstate(all="ignore"):
-        ll = np.sum(_logpdf(family, theta, x)) - np.sum(cn * _logsf(family, theta, cu))
-    return -ll if np.isfinite(ll) else 1e300
-
-
-def _fit_theta(family, x, c, theta0=None):
-    """MLE parameters (tuple) and log-likelihood, truncated at cuts ``c`` (None: untruncated);
-    ``theta0`` warm-starts the numerical truncated fits."""
-    if family == "bose_einstein":
-        lo = float(np.min(x)) if c is None else c
-        hi = float(np.max(x))
-        beta, ll = _fit_be(x, lo, hi)
-        return (beta,), ll
-    if c is None:
-        theta = _naive_theta(family, x)
-        ll = float(np.sum(scipy_dist(family, _theta_to_params(family, theta)).logpdf(x)))
-        return theta, ll
-    if family == "exponential":
-        # memoryless: x - c is exponential with the same mu (paper's note on <l> vs mu)
-        mu = float(np.mean(x - c))
-        return (mu,), float(np.sum(-np.log(mu) - (x - c) / mu))
-    return _fit_truncated_numeric(family, x, c, theta0)
-
-
-def _fit_truncated_numeric(family, x, c, theta0=None):
-    """Truncated MLE by Nelder-Mead on unconstrained parameters (log of the positive ones)
-    of the data rescaled by their median (conditioning). Cold: two starts (the naive fit and
-    a broader one, since truncation hides mass below the cut), tight tolerances. Warm
-    (``theta0`` given, used by the bootstrap and the GOF refits): one start from ``theta0``,
-    relative tolerance 1e-4, far below the bootstrap spread; ~4x fewer evaluations."""
-    sc = float(np.median(x))
-    xs, cs = x / sc, c / sc
-    cu, cn = np.unique(cs, return_counts=True)
-    pos = np.array([n in ("alpha", "chi", "sigma") for n in PARAM_NAMES[family]])
-
-    def to_scaled(th):  # parameters of x -> parameters of x/sc
-        th = np.array(th, float)
-        if family == "gamma":
-            th[1] /= sc
-        elif family == "lognormal":
-            th[0] -= np.log(sc)
-        else:  # gaussian
-            th /= sc
-        return th
-
-    def from_scaled(th):
-        th = np.array(th, float)
-        if family == "gamma":
-            th[1] *= sc
-        elif family == "lognormal":
-            th[0] += np.log(sc)
-        else:
-            th *= sc
-        return th
-
-    def f(z):
-        th = np.where(pos, np.exp(np.clip(z, -700, 700)), z)
-        return _trunc_nll(family, th, xs, cu, cn)
-
-    if theta0 is not None:
-        z = np.where(pos, np.log(to_scaled(theta0)), to_scaled(theta0))
-        simplex = np.vstack([z, z + np.diag(np.full(z.size, 0.05))])
-        best = optimize.minimize(f, z, method="Nelder-Mead",
-                                 options={"xatol": 1e-4, "fatol": 1e-6, "maxiter": 300,
-                                          "initial_simplex": simplex})
-    else:
-        t0 = np.array(_naive_theta(family, xs), float)
-        z0 = np.where(pos, np.log(t0), t0)
-        starts = [z0]
-        if family == "gamma":
-            starts.append(np.array([np.log(0.5), np.log(np.mean(xs) * 2)]))
-        else:
-            starts.append(z0 - np.where(pos, -np.log(1.5), np.std(xs)))
-        best = None
-        for st in starts:
-            r = optimize.minimize(f, st, method="Nelder-Mead",
-                                  options={"xatol": 1e-7, "fatol": 1e-9, "maxiter": 4000})
-            if best is None or r.fun < best.fun:
-                best = r
-    th = from_scaled(np.where(pos, np.exp(best.x), best.x))
-    # log-likelihood of the unscaled data: Jacobian of x -> x/sc
-    return tuple(map(float, th)), -float(best.fun) - x.size * np.log(sc)
-
-
-def _k_params(family, truncated):
-    if family == "bose_einstein":  # beta + data-determined endpoints (see module doc)
-        return 2 if truncated else 3
-    return len(PARAM_NAMES[family])
-
-
-def _report_params(family, theta, x, c):
-    if family == "bose_einstein":
-        lo = float(np.min(x)) if c is None else c
-        hi = float(np.max(x))
-        beta = theta[0]
-        lo_s = float(np.min(lo)) if np.ndim(lo) else lo
-        return {"alpha": float(np.exp(-be_log_norm(beta, lo_s, hi))), "beta": beta,
-                "x_lo": lo_s, "x_hi": hi}
-    return _theta_to_params(family, theta)
-
-
-# ------------------------------------------------------------------ PIT and sampling
-def _pit(family, params, x, c):
-    """Probability integral transform of x under the (truncated) fitted law."""
-    if family == "bose_einstein":
-        lo = params["x_lo"] if c is None else c
-        return be_cdf(x, params["beta"], lo, params["x_hi"])
-    d = scipy_dist(family, params)
-    if c is None:
-        return d.cdf(x)
-    sc = d.sf(c)
-    return 1.0 - d.sf(x) / sc
-
-
-def _sample(family, params, n, c, rng):
-    """Draw n values from the (truncated) fitted law (inverse survival, in log space for the
-    normal laws so that cuts deep in the tail stay finite)."""
-    u = rng.uniform(size=n)
-    if family == "bose_einstein":
-        lo = params["x_lo"] if c is None else c
-        return be_ppf(u, params["beta"], lo, params["x_hi"])
-    d = scipy_dist(family, params)
-    if c is None:
-        return d.ppf(u)
-    if family in ("gaussian", "lognormal"):
-        mu, sg = params["mu"], params["sigma"]
-        cc = c if family == "gaussian" else np.log(c)
-        z = special.ndtri_exp(np.log1p(-u) + special.log_ndtr(-(cc - mu) / sg))
-        y = mu - sg * z
-        return y if family == "gaussian" else np.exp(y)
-    return d.isf((1.0 - u) * d.sf(c))
+def _family(name: str):
+    try:
+        return FAMILIES[name]
+    except KeyError:
+        raise ParameterError(f"unknown family {name!r}; choose from {tuple(FAMILIES)}") from None
 
 
 def anderson_darling(u) -> float:
@@ -342,7 +74,7 @@ def anderson_darling(u) -> float:
 
 
 # ------------------------------------------------------------------ results
-@dataclass
+@dataclass(frozen=True)
 class FitResult:
     """One fitted family.
 
@@ -350,7 +82,8 @@ class FitResult:
     ----------
     family : str
     params : dict
-        Parameters in the paper's notation (see module docstring).
+        Every parameter of the family in the paper's notation (``param_names`` of the
+        family, e.g. alpha, beta, x_lo, x_hi for Bose-Einstein).
     loglik, aic, bic : float
     n : int
         Number of observations used.
@@ -368,6 +101,12 @@ class FitResult:
     ok : bool
         False when the family does not apply (e.g. non-positive data for a positive law).
     note : str
+        Why the family does not apply.
+    n_mc : int
+        Monte-Carlo resamples behind ``pvalue`` (0: none); the smallest p-value is
+        1/(n_mc + 1).
+    rejected : str
+        Why the fit is degenerate ("" when it is not); a rejected fit is never selected.
     """
 
     family: str
@@ -383,23 +122,37 @@ class FitResult:
     truncated: bool = False
     ok: bool = True
     note: str = ""
+    n_mc: int = 0
+    rejected: str = ""
+
+    @property
+    def selectable(self) -> bool:
+        """Whether the fit may be named as the law of the data."""
+        return self.ok and not self.rejected and bool(np.isfinite(self.bic))
 
     def label(self, digits: int = 3) -> str:
-        """Short text such as ``gamma alpha=0.31 chi=728`` for figure titles."""
-        ps = " ".join(f"{k}={v:.{digits}g}" for k, v in self.params.items()
-                      if k in PARAM_NAMES[self.family])
+        """Short text with every parameter, such as ``gamma alpha=0.31 chi=728``."""
+        ps = " ".join(f"{k}={self.params[k]:.{digits}g}"
+                      for k in FAMILIES[self.family].param_names if k in self.params)
         return f"{self.family} {ps}"
 
+    def p_text(self) -> str:
+        """The p-value as printed: ``p < 1/200`` at the Monte-Carlo floor, else
+        ``p = 0.035``; "" when there is none."""
+        if not np.isfinite(self.pvalue) or self.n_mc <= 0:
+            return ""
+        floor = 1.0 / (self.n_mc + 1)
+        if self.pvalue <= floor * (1 + 1e-9):
+            return f"p < 1/{self.n_mc + 1}"
+        return f"p = {self.pvalue:.2g}"
+
     def pdf(self, x):
-        """Density of the fitted law (untruncated shape; BE zero outside its range)."""
-        x = np.asarray(x, float)
-        if self.family == "bose_einstein":
-            return np.exp(be_logpdf(x, self.params["beta"], self.params["x_lo"],
-                                    self.params["x_hi"]))
-        return scipy_dist(self.family, self.params).pdf(x)
+        """Density of the fitted law (untruncated shape; Bose-Einstein and the power law are
+        zero outside their range)."""
+        return FAMILIES[self.family].pdf(self.params, np.asarray(x, float))
 
 
-@dataclass
+@dataclass(frozen=True)
 class FitSummary:
     """All families fitted to one sample.
 
@@ -410,9 +163,9 @@ class FitSummary:
     best : str or None
         Selected family (see module docstring for the rule).
     table : pandas.DataFrame
-        One row per family: params, CIs, loglik, aic, bic, delta_bic, pvalue, selected.
+        One row per family (see :func:`summary_table`).
     n_dropped : int
-        Observations below the cut (or non-positive for positive laws) that were discarded.
+        Observations below the cut (or non-finite) that were discarded.
     """
 
     results: dict
@@ -421,7 +174,29 @@ class FitSummary:
     n_dropped: int = 0
 
 
-# ------------------------------------------------------------------ public API
+@dataclass(frozen=True)
+class GoodnessOfFit:
+    """Anderson-Darling statistic, its p-value and the resamples behind it."""
+
+    statistic: float
+    pvalue: float
+    n_mc: int
+
+
+def _applicability(fam, x, c, k) -> str:
+    """Why ``fam`` cannot be fitted to ``x`` ("" when it can)."""
+    n = x.size
+    if n < max(3, k + 1):
+        return f"too few observations ({n})"
+    if fam.positive and np.any(x <= 0):
+        return "needs x > 0"
+    if c is not None and np.any(x < c):
+        raise ParameterError("observations below the truncation cut; drop them first")
+    if fam.name != "exponential" and np.ptp(x) <= 0:
+        return "zero range" if fam.name == "bose_einstein" else "zero spread"
+    return ""
+
+
 def fit_family(x, family: str, *, truncation=None, n_boot: int = 200, seed=0,
                gof: bool = True, n_mc: int = 199, ci_level: float = 0.95) -> FitResult:
     """Maximum-likelihood fit of one family, with bootstrap intervals and a GOF p-value.
@@ -431,7 +206,7 @@ def fit_family(x, family: str, *, truncation=None, n_boot: int = 200, seed=0,
     x : array_like
         Observations (finite). For a truncated fit, all must be >= their cut.
     family : str
-        One of :data:`FAMILIES`.
+        A key of :data:`FAMILIES`.
     truncation : float or array_like, optional
         Detection limit: observations below it are never seen. Scalar or one per observation.
     n_boot : int
@@ -448,48 +223,42 @@ def fit_family(x, family: str, *, truncation=None, n_boot: int = 200, seed=0,
     Returns
     -------
     FitResult
+        Degenerate fits (see the module docstring) carry the reason in ``rejected`` and
+        neither intervals nor p-value.
     """
-    if family not in FAMILIES:
-        raise ParameterError(f"unknown family {family!r}; choose from {FAMILIES}")
+    fam = _family(family)
     x = np.asarray(x, float)
     n = x.size
     c = _as_cuts(truncation, n)
     truncated = c is not None
-    k = _k_params(family, truncated)
-    nan_res = FitResult(family, {p: float("nan") for p in PARAM_NAMES[family]}, float("nan"),
-                        float("nan"), float("nan"), n, k, truncated=truncated, ok=False)
-    if n < max(3, k + 1):
-        nan_res.note = f"too few observations ({n})"
-        return nan_res
-    if family in POSITIVE_FAMILIES and np.any(x <= 0):
-        nan_res.note = "needs x > 0"
-        return nan_res
-    if truncated and np.any(x < c):
-        raise ParameterError("observations below the truncation cut; drop them first")
-    if family == "bose_einstein" and np.ptp(x) <= 0:
-        nan_res.note = "zero range"
-        return nan_res
-    if family != "exponential" and np.ptp(x) <= 0:
-        nan_res.note = "zero spread"
-        return nan_res
+    k = fam.k(truncated)
+    why = _applicability(fam, x, c, k)
+    if why:
+        return FitResult(family, {p: float("nan") for p in fam.param_names}, float("nan"),
+                         float("nan"), float("nan"), n, k, truncated=truncated, ok=False,
+                         note=why)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        theta, ll = _fit_theta(family, x, c)
-        params = _report_params(family, theta, x, c)
-        aic = 2 * k - 2 * ll
-        bic = k * np.log(n) - 2 * ll
+        theta, ll = fam.fit(x, c)
+        params = fam.params(theta, x, c)
+        res = FitResult(family, params, float(ll), float(2 * k - 2 * ll),
+                        float(k * np.log(n) - 2 * ll), n, k, truncated=truncated)
+        if not all(np.isfinite(v) for v in params.values()):
+            return replace(res, rejected="the fit did not converge (non-finite parameter)")
+        rejected = fam.degeneracy(params, x, c)
+        if rejected:
+            return replace(res, rejected=rejected)
         s_boot, s_gof = _seedseq(seed).spawn(2)
         ci = bootstrap_ci(x, family, truncation=c, n_boot=n_boot, seed=s_boot,
                           level=ci_level) if n_boot else {}
-        stat, pval = (goodness_of_fit(x, family, params, truncation=c, n_mc=n_mc, seed=s_gof)
-                      if gof else (float("nan"), float("nan")))
-    return FitResult(family, params, float(ll), float(aic), float(bic), n, k, ci, pval, stat,
-                     truncated)
+        g = (goodness_of_fit(x, family, params, truncation=c, n_mc=n_mc, seed=s_gof)
+             if gof else GoodnessOfFit(float("nan"), float("nan"), 0))
+    return replace(res, ci=ci, pvalue=g.pvalue, statistic=g.statistic, n_mc=g.n_mc)
 
 
 def bootstrap_ci(x, family: str, *, truncation=None, n_boot: int = 200, seed=0,
                  level: float = 0.95) -> dict:
-    """Percentile bootstrap intervals of the fitted parameters.
+    """Percentile bootstrap intervals of every parameter of a family.
 
     Parameters
     ----------
@@ -506,12 +275,13 @@ def bootstrap_ci(x, family: str, *, truncation=None, n_boot: int = 200, seed=0,
     dict
         Parameter name -> (low, high).
     """
+    fam = _family(family)
     x = np.asarray(x, float)
     c = _as_cuts(truncation, x.size)
     rng = np.random.default_rng(seed)
-    names = PARAM_NAMES[family]
+    names = fam.param_names
     draws = np.full((n_boot, len(names)), np.nan)
-    theta_hat = _fit_theta(family, x, c)[0] if c is not None else None
+    theta_hat = fam.fit(x, c)[0] if c is not None else None
     for b in range(n_boot):
         idx = rng.integers(0, x.size, x.size)
         xb = x[idx]
@@ -519,10 +289,10 @@ def bootstrap_ci(x, family: str, *, truncation=None, n_boot: int = 200, seed=0,
         if np.ptp(xb) <= 0:
             continue
         try:
-            th, _ = _fit_theta(family, xb, cb, theta_hat)
+            th, _ = fam.fit(xb, cb, theta_hat)
         except (ValueError, FloatingPointError, RuntimeError):
             continue
-        p = _report_params(family, th, xb, cb)
+        p = fam.params(th, xb, cb)
         draws[b] = [p[nm] for nm in names]
     q = (1 - level) / 2
     out = {}
@@ -533,22 +303,16 @@ def bootstrap_ci(x, family: str, *, truncation=None, n_boot: int = 200, seed=0,
     return out
 
 
-_SCIPY_GOF = {"exponential": (stats.expon, {"loc": 0.0}),
-              "gamma": (stats.gamma, {"loc": 0.0}),
-              "lognormal": (stats.lognorm, {"loc": 0.0}),
-              "gaussian": (stats.norm, {})}
-
-
 def goodness_of_fit(x, family: str, params: dict, *, truncation=None, n_mc: int = 199,
-                    seed=0) -> tuple[float, float]:
+                    seed=0) -> GoodnessOfFit:
     """Anderson-Darling goodness of fit with a p-value that accounts for fitted parameters.
 
-    Untruncated exponential/Gamma/log-normal/Gaussian fits use
-    ``scipy.stats.goodness_of_fit`` (parametric bootstrap, parameters refitted on every
-    sample, loc fixed at 0 for the positive laws). Truncated fits and the Bose-Einstein
-    form use the same procedure written here: samples drawn from the fitted (truncated) law
-    with the same cuts, refitted, and the statistic computed on the probability integral
-    transform.
+    Untruncated fits of the families backed by ``scipy.stats`` (exponential, Gamma,
+    log-normal, Gaussian) use ``scipy.stats.goodness_of_fit`` (parametric bootstrap,
+    parameters refitted on every sample, loc fixed at 0 for the positive laws). Truncated fits
+    and the other families use the same procedure written here: samples drawn from the fitted
+    (truncated) law with the same cuts, refitted, and the statistic computed on the
+    probability integral transform.
 
     Parameters
     ----------
@@ -563,40 +327,42 @@ def goodness_of_fit(x, family: str, params: dict, *, truncation=None, n_mc: int 
 
     Returns
     -------
-    (statistic, pvalue)
+    GoodnessOfFit
+        ``n_mc`` there counts the resamples that could be refitted.
     """
+    fam = _family(family)
     x = np.asarray(x, float)
     c = _as_cuts(truncation, x.size)
     rng = np.random.default_rng(seed)
-    if c is None and family in _SCIPY_GOF:
-        dist, known = _SCIPY_GOF[family]
-        res = stats.goodness_of_fit(dist, x, known_params=known, statistic="ad",
+    if c is None and getattr(fam, "rv", None) is not None:
+        res = stats.goodness_of_fit(fam.rv, x, known_params=fam.known, statistic="ad",
                                     n_mc_samples=n_mc, random_state=rng)
-        return float(res.statistic), float(res.pvalue)
-    stat0 = anderson_darling(_pit(family, params, x, c))
-    theta_hat = None if family == "bose_einstein" else tuple(params[k] for k in PARAM_NAMES[family])
+        return GoodnessOfFit(float(res.statistic), float(res.pvalue), n_mc)
+    stat0 = anderson_darling(fam.pit(params, x, c))
+    theta_hat = fam.theta(params)
     null = np.full(n_mc, np.nan)
     for i in range(n_mc):
-        xs = _sample(family, params, x.size, c, rng)
+        xs = fam.sample(params, x.size, c, rng)
         if not np.all(np.isfinite(xs)):
             continue
         try:
-            th, _ = _fit_theta(family, xs, c, theta_hat)
+            th, _ = fam.fit(xs, c, theta_hat)
         except (ValueError, FloatingPointError, RuntimeError):
             continue
-        ps = _report_params(family, th, xs, c)
-        null[i] = anderson_darling(_pit(family, ps, xs, c))
+        null[i] = anderson_darling(fam.pit(fam.params(th, xs, c), xs, c))
     null = null[np.isfinite(null)]
     if null.size == 0:
-        return stat0, float("nan")
-    return stat0, float((np.sum(null >= stat0) + 1) / (null.size + 1))
+        return GoodnessOfFit(stat0, float("nan"), 0)
+    return GoodnessOfFit(stat0, float((np.sum(null >= stat0) + 1) / (null.size + 1)),
+                         int(null.size))
 
 
 def select_model(results: dict, *, delta: float = DELTA_BIC_SIMPLER) -> str | None:
     """The simplest family the data support.
 
-    The family of minimum BIC, unless a family with fewer parameters has
-    BIC - BIC_min < ``delta``; among those the fewest parameters win, then the lower BIC.
+    The family of minimum BIC among the selectable (applicable, non-degenerate) fits, unless
+    a family with fewer parameters has BIC - BIC_min < ``delta``; among those the fewest
+    parameters win, then the lower BIC.
 
     Parameters
     ----------
@@ -608,7 +374,7 @@ def select_model(results: dict, *, delta: float = DELTA_BIC_SIMPLER) -> str | No
     -------
     str or None
     """
-    ok = {f: r for f, r in results.items() if r.ok and np.isfinite(r.bic)}
+    ok = {f: r for f, r in results.items() if r.selectable}
     if not ok:
         return None
     bmin = min(r.bic for r in ok.values())
@@ -616,7 +382,7 @@ def select_model(results: dict, *, delta: float = DELTA_BIC_SIMPLER) -> str | No
     return min(cands, key=lambda r: (r.k, r.bic)).family
 
 
-def fit_all(x, families=FAMILIES, *, truncation=None, seed=0, n_boot: int = 200,
+def fit_all(x, families=PAPER_FAMILIES, *, truncation=None, seed=0, n_boot: int = 200,
             gof: bool = True, n_mc: int = 199, select_from=None,
             ci_level: float = 0.95) -> FitSummary:
     """Fit several families to one sample and select the simplest supported law.
@@ -627,6 +393,7 @@ def fit_all(x, families=FAMILIES, *, truncation=None, seed=0, n_boot: int = 200,
         Observations; non-finite values are dropped, and with a truncation the observations
         below their cut are dropped (counted in ``n_dropped``).
     families : sequence of str
+        Keys of :data:`FAMILIES` (default: the paper's five laws).
     truncation : float or array_like, optional
         Detection limit (scalar or one per observation).
     seed : int
@@ -639,6 +406,9 @@ def fit_all(x, families=FAMILIES, *, truncation=None, seed=0, n_boot: int = 200,
     -------
     FitSummary
     """
+    families = tuple(families)
+    for f in families:
+        _family(f)
     x = np.asarray(x, float)
     c = _as_cuts(truncation, x.size)
     keep = np.isfinite(x)
@@ -657,23 +427,29 @@ def fit_all(x, families=FAMILIES, *, truncation=None, seed=0, n_boot: int = 200,
 
 
 def summary_table(results: dict, best: str | None) -> pd.DataFrame:
-    """One row per family: p1, p1_lo, p1_hi, p2, ..., loglik, aic, bic, delta_bic, pvalue."""
+    """One row per family.
+
+    Columns: family, n, k, truncated; p1_name, p1, p1_lo, p1_hi, ... for every parameter
+    (up to :data:`MAX_PARAMS`); loglik, aic, bic, delta_bic (to the best selectable fit),
+    ad_statistic, pvalue, n_mc, p_text, selected, rejected, note.
+    """
     rows = []
-    finite = [r.bic for r in results.values() if r.ok and np.isfinite(r.bic)]
+    finite = [r.bic for r in results.values() if r.selectable]
     bmin = min(finite) if finite else np.nan
     for f, r in results.items():
         row = {"family": f, "n": r.n, "k": r.k, "truncated": r.truncated}
-        for i, nm in enumerate(PARAM_NAMES[f], 1):
+        for i, nm in enumerate(FAMILIES[f].param_names, 1):
             lo, hi = r.ci.get(nm, (np.nan, np.nan))
             row.update({f"p{i}_name": nm, f"p{i}": r.params.get(nm, np.nan),
                         f"p{i}_lo": lo, f"p{i}_hi": hi})
         row.update({"loglik": r.loglik, "aic": r.aic, "bic": r.bic,
                     "delta_bic": r.bic - bmin, "ad_statistic": r.statistic,
-                    "pvalue": r.pvalue, "selected": f == best, "note": r.note})
+                    "pvalue": r.pvalue, "n_mc": r.n_mc, "p_text": r.p_text(),
+                    "selected": f == best, "rejected": r.rejected, "note": r.note})
         rows.append(row)
-    cols = ["family", "n", "k", "truncated", "p1_name", "p1", "p1_lo", "p1_hi", "p2_name",
-            "p2", "p2_lo", "p2_hi", "loglik", "aic", "bic", "delta_bic", "ad_statistic",
-            "pvalue", "selected", "note"]
+    pcols = [f"p{i}{s}" for i in range(1, MAX_PARAMS + 1) for s in ("_name", "", "_lo", "_hi")]
+    cols = ["family", "n", "k", "truncated", *pcols, "loglik", "aic", "bic", "delta_bic",
+            "ad_statistic", "pvalue", "n_mc", "p_text", "selected", "rejected", "note"]
     return pd.DataFrame(rows).reindex(columns=cols)
 
 
@@ -708,7 +484,7 @@ def truncation_bias(x, truncation, families=("exponential", "gamma", "lognormal"
     for f, s in zip(families, seeds):
         rn = fit_family(x, f, n_boot=0, gof=False)
         rt = fit_family(x, f, truncation=c, n_boot=n_boot, gof=False, seed=s)
-        for nm in PARAM_NAMES[f]:
+        for nm in FAMILIES[f].param_names:
             a, b = rn.params[nm], rt.params[nm]
             lo, hi = rt.ci.get(nm, (np.nan, np.nan))
             rows.append({"family": f, "param": nm, "naive": a, "truncated": b,

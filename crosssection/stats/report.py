@@ -20,6 +20,7 @@ import pandas as pd  # noqa: E402
 from crosssection._version import __version__  # noqa: E402
 from crosssection.core.fileio import save_figure, write_csv, write_json, write_text  # noqa: E402
 from crosssection.stats import fits as F  # noqa: E402
+from crosssection.stats.families import FAMILIES  # noqa: E402
 from crosssection.stats.data import Ensemble  # noqa: E402
 from crosssection.stats.tables import (EQ1_CONST, QUANTITIES, StatsOptions, StatsResult,  # noqa: E402
                      compute_stats, regions_of, to_markdown)
@@ -36,18 +37,24 @@ def _margins(fig, two=False):
         fig.subplots_adjust(left=0.14, right=0.96, bottom=0.12, top=0.91)
 
 
+def _nanmean(v) -> float:
+    v = np.asarray(v, float)
+    v = v[np.isfinite(v)]
+    return float(np.mean(v)) if v.size else float("nan")
+
+
 def _fit_text(summ: F.FitSummary) -> str:
     if summ is None or summ.best is None:
         return "no fit"
     r = summ.results[summ.best]
-    p = "" if not np.isfinite(r.pvalue) else f", p={r.pvalue:.2f}"
-    return r.label() + p
+    p = r.p_text()
+    return r.label() + (f", {p}" if p else "")
 
 
 def _density_curve(r: F.FitResult, xs, cut):
     y = r.pdf(xs)
-    if r.truncated and cut is not None and r.family != "bose_einstein":
-        y = np.where(xs >= cut, y / F.scipy_dist(r.family, r.params).sf(cut), np.nan)
+    if r.truncated and cut is not None:
+        y = np.where(xs >= cut, y / FAMILIES[r.family].sf(r.params, cut), np.nan)
     return y
 
 
@@ -98,7 +105,7 @@ def pdf_figure(res: StatsResult, ens: Ensemble, set_name: str, quantity: str):
                       else np.linspace(bins[0], bins[-1], 300))
                 ax.plot(xs, _density_curve(best, xs, cut), "-", color=color, lw=1.6)
                 gam = summ.results.get("gamma")
-                if summ.best != "gamma" and gam is not None and gam.ok and reg == "all":
+                if summ.best != "gamma" and gam is not None and gam.selectable and reg == "all":
                     ax.plot(xs, _density_curve(gam, xs, cut), "--", color="grey", lw=1)
             if cut is not None:
                 ax.axvline(cut, color="grey", ls=":", lw=1)
@@ -141,8 +148,8 @@ def network_figure(res: StatsResult):
         axes[0].plot(g["N_l"], g["N_br"], "o", color=c, ms=4, alpha=0.7)
         axes[1].plot(g["N_l"], g["n_br_bar"], "o", color=c, ms=4, alpha=0.7)
         nl = np.linspace(max(1, g["N_l"].min() * 0.8), g["N_l"].max() * 1.2, 100)
-        ratio = np.nanmean(g["sqrt_s_bar"] / g["l_bar"])
-        eps = np.nanmean(g["epsilon"])
+        ratio = _nanmean(g["sqrt_s_bar"] / g["l_bar"])  # NaN for scans without voids
+        eps = _nanmean(g["epsilon"])
         if np.isfinite(ratio) and np.isfinite(eps):
             eq1 = EQ1_CONST * eps * ratio * np.sqrt(nl)  # Eq. 1 with set means
             axes[0].plot(nl, eq1, "-", color=c)
@@ -299,7 +306,8 @@ def write_report(ens: Ensemble, out_dir, *, opts: StatsOptions | None = None,
             sel.setdefault(reg, {})[q] = {
                 "selected": summ.best,
                 "fits": {f: {"params": r.params, "ci": r.ci, "bic": r.bic, "aic": r.aic,
-                             "pvalue": r.pvalue, "n": r.n, "truncated": r.truncated}
+                             "pvalue": r.pvalue, "n_mc": r.n_mc, "p_text": r.p_text(),
+                             "n": r.n, "truncated": r.truncated, "rejected": r.rejected}
                          for f, r in summ.results.items() if r.ok}}
         stats_json["sets"][s] = {
             "macro": res.macro[res.macro["set"] == s].to_dict("records"),
@@ -319,9 +327,13 @@ def _safe(name: str) -> str:
 
 def _html(res: StatsResult, figs, meta) -> str:
     sel = res.fits[res.fits["selected"]] if not res.fits.empty else res.fits
-    sel_cols = [c for c in ("set", "region", "quantity", "family", "n", "p1_name", "p1", "p1_lo",
-                            "p1_hi", "p2_name", "p2", "p2_lo", "p2_hi", "delta_bic", "pvalue")
-                if c in sel.columns]
+    pcols = tuple(f"p{i}{s}" for i in range(1, F.MAX_PARAMS + 1)
+                  for s in ("_name", "", "_lo", "_hi"))
+    sel_cols = [c for c in ("set", "region", "quantity", "family", "n", *pcols, "delta_bic",
+                            "p_text") if c in sel.columns]
+    rej = (res.fits[res.fits["rejected"].fillna("").astype(str) != ""]
+           if "rejected" in res.fits.columns else res.fits.iloc[:0])
+    rej_cols = ["set", "region", "quantity", "family", "rejected"]
     parts = [
         "<!doctype html><html><head><meta charset='utf-8'><title>foldstat statistics</title>",
         "<style>body{font-family:sans-serif;max-width:1200px;margin:auto}"
@@ -342,8 +354,11 @@ def _html(res: StatsResult, figs, meta) -> str:
         _html_table(res.dof),
         "<h2>Relations (paper Eqs. 1-5)</h2>", _html_table(res.relations),
         "<h2>Correlations</h2>", _html_table(res.correlations),
-        "<h2>Selected laws</h2>", _html_table(sel[sel_cols]) if len(sel) else "<p>none</p>",
+        "<h2>Selected laws</h2>",
+        _html_table(sel[sel_cols].dropna(axis=1, how="all")) if len(sel) else "<p>none</p>",
     ]
+    if len(rej):
+        parts += ["<h2>Degenerate fits (never selected)</h2>", _html_table(rej[rej_cols])]
     if not res.truncation.empty:
         parts += ["<h2>Detection limits: naive vs truncation-aware fits</h2>",
                   _html_table(res.truncation)]

@@ -34,143 +34,36 @@ Construction (paper, sections "Image analysis procedure", "Stacking" and "Tiling
 
 Calibration
 -----------
-The default width of a stack of n layers is ``w(n) = h (n + 0.4 sqrt(n))``: the hot-wire cut
-thickens each stack by a melted rim that grows sub-linearly with the stack thickness (paper:
-"the heating by the cutting tool thickens a stack nonlinearly"). The term is large enough that a
-pipeline assuming w = n h miscounts thick stacks (12 layers read as 13.4).
+The default width of a stack of n layers is ``w(n) = h (n + 0.4 sqrt(n))``
+(:meth:`crosssection.core.calibration.Calibration.nonlinear`): the hot-wire cut thickens each
+stack by a melted rim that grows sub-linearly with the stack thickness.
 
 Truth tables follow :mod:`crosssection.core.schema`. Curvatures come from the analytic curves; the
 energy of a branch is e = L * integral(kappa^2 ds) with L = sum(n_br * length) the rod length
-(paper, section "Energetical properties"). Voids are the background components inside the hole
-of the noise-free 4x rendering with area >= s_min = (10 h)^2; ``n_edges`` is the number of
-stacks bounding the void.
+(paper, section "Energetical properties"). Voids are those of the noise-free 4x rendering
+(:func:`crosssection.truth.voids.truth_voids`, s_min = (10 h)^2). Colours and scan defects come
+from :mod:`crosssection.truth.ink` and :mod:`crosssection.truth.degrade`, as for every generator.
 """
 from __future__ import annotations
 
-import json
 import math
-from dataclasses import dataclass, field
-from pathlib import Path
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
 import pandas as pd
 
-from crosssection.core import schema
+from crosssection.core import polyline
+from crosssection.core.calibration import Calibration
 from crosssection.core.errors import ParameterError
-from crosssection.core.fileio import atomic_path, write_csv, write_json
+from crosssection.truth import degrade, ink
+from crosssection.truth.scene import Scene, write_scene
+from crosssection.truth.voids import truth_voids
+
+# write_scene is the scene contract's writer, exported here beside the generator it writes
+__all__ = ["SceneGenerationError", "make_scene", "write_scene"]
 
 SUPERSAMPLE = 4  # rendering resolution factor (anti-aliasing and void truth)
-
-INK_RGB = (40.0, 70.0, 190.0)
-INK_JITTER = (20.0, 20.0, 25.0)
-PAPER_RGB = (246.0, 245.0, 240.0)
-
-
-# ----------------------------------------------------------------------------- calibration
-@dataclass
-class SyntheticCalibration:
-    """Width of a stack of n layers, ``w(n)`` in mm (default: ``h (n + 0.4 sqrt(n))``).
-
-    Parameters
-    ----------
-    widths_mm : np.ndarray
-        ``widths_mm[n - 1]`` is the width of n layers, n = 1..len(widths_mm); beyond the table
-        the width grows by the last increment per layer.
-    """
-
-    widths_mm: np.ndarray
-
-    @classmethod
-    def default(cls, thickness_mm: float = 0.1, n_max: int = 40) -> "SyntheticCalibration":
-        n = np.arange(1, n_max + 1, dtype=float)
-        return cls(thickness_mm * (n + 0.4 * np.sqrt(n)))
-
-    @classmethod
-    def coerce(cls, calibration, thickness_mm: float, n_max: int = 40) -> "SyntheticCalibration":
-        """Accept None, a SyntheticCalibration, a DataFrame (n_layers, width_mm), an array of
-        widths for n = 1.., or any object with a ``width(n)`` method."""
-        if calibration is None:
-            return cls.default(thickness_mm, n_max)
-        if isinstance(calibration, SyntheticCalibration):
-            return calibration
-        if isinstance(calibration, pd.DataFrame):
-            df = calibration.sort_values("n_layers")
-            n = df["n_layers"].to_numpy(float)
-            w = df["width_mm"].to_numpy(float)
-            grid = np.arange(1, n_max + 1, dtype=float)
-            return cls(np.interp(grid, n, w, right=np.nan)).__fill()
-        if hasattr(calibration, "width"):
-            grid = np.arange(1, n_max + 1)
-            return cls(np.asarray(calibration.width(grid), dtype=float).reshape(-1))
-        return cls(np.asarray(calibration, dtype=float).reshape(-1)).__fill(n_max)
-
-    def __fill(self, n_max: int | None = None) -> "SyntheticCalibration":
-        w = np.asarray(self.widths_mm, float)
-        good = np.isfinite(w)
-        k = int(np.flatnonzero(good)[-1]) + 1
-        w = w[:k]
-        n_max = max(n_max or len(self.widths_mm), k)
-        step = w[-1] - w[-2] if k >= 2 else w[-1]
-        extra = w[-1] + step * np.arange(1, n_max - k + 1)
-        return SyntheticCalibration(np.concatenate([w, extra]))
-
-    def width(self, n) -> np.ndarray:
-        """Width in mm of stacks of ``n`` layers (array-like of ints >= 1)."""
-        n = np.asarray(n, dtype=int)
-        w = self.widths_mm
-        k = len(w)
-        step = w[-1] - w[-2] if k >= 2 else w[-1]
-        inside = np.clip(n, 1, k) - 1
-        return np.where(n <= k, w[inside], w[-1] + step * (n - k))
-
-    def to_frame(self, n_max: int | None = None) -> pd.DataFrame:
-        """The calibration table ``n_layers, width_mm`` (what ``calibration.csv`` holds)."""
-        n = np.arange(1, (n_max or len(self.widths_mm)) + 1)
-        return pd.DataFrame({"n_layers": n, "width_mm": np.round(self.width(n), 6)})
-
-
-# ----------------------------------------------------------------------------- data classes
-@dataclass
-class Scene:
-    """A synthetic scan and its exact truth.
-
-    Attributes
-    ----------
-    rgb : np.ndarray
-        (H, W, 3) uint8 image (after noise, blur and JPEG round trip when requested).
-    summary : dict
-        Truth summary with :data:`crosssection.core.schema.SUMMARY_KEYS`.
-    tables : dict of DataFrame
-        ``junctions``, ``stacks``, ``branches``, ``voids`` in the schema's columns.
-    params : dict
-        Everything needed to analyse and to regenerate the scene (px_per_mm, thickness_mm,
-        hole_radius_mm, hole_center_px [x, y], seed, rod_length_mm, generator options).
-    calibration : SyntheticCalibration
-        The width law used to draw the bands.
-    paths_rc : list of np.ndarray
-        Truth centreline of every stack, (P, 2) float (row, col) in pixels, junction a -> b.
-    packs : list of (list of int, list of int)
-        Per junction, the stack ids of its two packs A | B (a stack id appears twice if both
-        its ends are at that junction); ``sum n_br(A) == sum n_br(B)`` exactly.
-    """
-
-    rgb: np.ndarray
-    summary: dict
-    tables: dict
-    params: dict
-    calibration: SyntheticCalibration
-    paths_rc: list = field(default_factory=list)
-    packs: list = field(default_factory=list)
-
-    # aliases matching docs/design.md
-    @property
-    def truth_summary(self) -> dict:
-        return self.summary
-
-    @property
-    def truth_tables(self) -> dict:
-        return self.tables
 
 
 class SceneGenerationError(ParameterError):
@@ -568,162 +461,236 @@ def _check_gaps(stacks, net, shape, centre, gap_px, node_xy):
     return int(bad.sum())
 
 
+# ----------------------------------------------------------------------------- layout
+@dataclass(frozen=True)
+class _Layout:
+    """A valid drawing: network, packs, stack geometry, hole."""
+
+    net: _Network
+    ends: list               # per node, its edge ends (see _edge_ends)
+    chosen: list             # per node, the chosen pack split (A, B) of its edge ends
+    stacks: list             # _Stack per edge
+    node_xy: np.ndarray      # (V, 2) junction positions (x, y) px, hole centre at the origin
+    centre: np.ndarray       # hole centre (x, y) in image px
+    shape: tuple             # (H, W) of the image
+    radius_px: float
+
+
+def _initial_radius_px(*, n_cells, image_size, hole_radius_mm, px_per_mm, w_max_px):
+    """Hole radius: given, from the image size, or room for the widest bands plus voids."""
+    if hole_radius_mm is not None:
+        return hole_radius_mm * px_per_mm
+    if image_size is not None:
+        return 0.45 * image_size
+    # cell spacing: room for the widest bands plus a void >= a few s_min
+    spacing = max(2.4 * px_per_mm, 2.5 * w_max_px + 1.4 * px_per_mm)
+    return spacing * math.sqrt(n_cells / math.pi)
+
+
+def _stack_caps(net, radius_px, spacing, widths_table_px, max_layers):
+    """Largest layer count per edge: a band must fit its own length, its neighbours' lengths
+    and its faces."""
+    lengths = np.array([(radius_px * (net.wall_angles[k][1] - net.wall_angles[k][0]))
+                        if kind == "wall" else float(np.hypot(*(net.pos[u] - net.pos[v])))
+                        for k, (u, v, kind) in enumerate(net.edges)])
+    min_adj = np.full(len(net.pos), np.inf)
+    for k, (u, v, _) in enumerate(net.edges):
+        min_adj[u] = min(min_adj[u], lengths[k])
+        min_adj[v] = min(min_adj[v], lengths[k])
+    caps = np.empty(len(net.edges), int)
+    for k, (u, v, _) in enumerate(net.edges):
+        room = min(lengths[k], min_adj[u], min_adj[v]) / 2.2
+        room = min(room, 0.22 * spacing)
+        caps[k] = max(1, int(np.searchsorted(widths_table_px, room, side="right")))
+    return np.minimum(caps, max_layers)
+
+
+def _place_stacks(net, ends, chosen, n, widths_px, radius_px):
+    """Centrelines of all stacks and the junction positions they end at."""
+    dep = _departures(net, ends, chosen)
+    # wall junctions sit half the widest wall band inside the wall
+    node_xy = net.pos.copy()
+    for v in np.flatnonzero(net.is_wall):
+        ww = max(widths_px[e[0]] for e in ends[v] if e[3] == "wall")
+        node_xy[v] = net.pos[v] * (radius_px - ww / 2) / radius_px
+    geo_net = _Network(node_xy, net.is_wall, net.edges, net.wall_angles)
+    stacks = []
+    for k in range(len(net.edges)):
+        st = _stack_geometry(geo_net if net.edges[k][2] == "ridge" else net, k, dep,
+                             float(widths_px[k]), int(n[k]))
+        if net.edges[k][2] == "wall":
+            # join the arc to the junction nodes (radial offsets of at most (w_T - w)/2)
+            u, v, _ = net.edges[k]
+            xy = np.vstack([node_xy[u], st.xy, node_xy[v]])
+            seg = np.hypot(*np.diff(xy, axis=0).T)
+            s = np.concatenate([[0.0], np.cumsum(seg)])
+            kap = np.concatenate([[st.kappa_px[0]], st.kappa_px, [st.kappa_px[-1]]])
+            st = _Stack(xy, s, kap, st.width_px, st.n)
+        stacks.append(st)
+    return stacks, node_xy
+
+
+def _attempt_layout(rng, *, n_cells, radius_px, image_size, max_layers, mean_layers, cal,
+                    px_per_mm, gap_px):
+    """One layout try: a :class:`_Layout`, or the reason (str) it was rejected."""
+    size = image_size or int(math.ceil(2 * radius_px / 0.9))
+    shape = (size, size)
+    centre = np.array([size / 2.0, size / 2.0]) + rng.uniform(-0.02, 0.02, 2) * size * (image_size is None)
+    centre = np.minimum(np.maximum(centre, radius_px + 2), size - radius_px - 2)
+    spacing = radius_px * math.sqrt(math.pi / n_cells)
+    min_edge = max(0.6 * px_per_mm, 0.18 * spacing)
+    net = _voronoi_network(rng, n_cells, radius_px, min_edge)
+    net = _contract_short(net, radius_px, min_edge)
+    ends = _edge_ends(net)
+    deg = np.array([len(e) for e in ends])
+    if deg.max() > 4 or deg.min() < 3:
+        return "degree"
+    if (deg == 4).mean() > 0.06:
+        return "too many degree-4"
+    widths_table_px = cal.width(np.arange(1, max_layers + 1)) * px_per_mm
+    caps = _stack_caps(net, radius_px, spacing, widths_table_px, max_layers)
+    n, chosen = _solve_counts(rng, net, ends, caps, mean_layers)
+    if n is None:
+        return "counts infeasible"
+    stacks, node_xy = _place_stacks(net, ends, chosen, n, cal.width(n) * px_per_mm, radius_px)
+    out = max(float(np.max(np.hypot(st.xy[:, 0], st.xy[:, 1]) + st.width_px / 2 - radius_px))
+              for st in stacks)
+    if out > 1.0:
+        return "band outside hole"
+    nbad = _check_gaps(stacks, net, shape, centre, gap_px, node_xy)
+    if nbad > 0:
+        return f"contacts ({nbad} px)"
+    return _Layout(net, ends, chosen, stacks, node_xy, centre, shape, float(radius_px))
+
+
 # ----------------------------------------------------------------------------- truth
-def _truth_tables(net, stacks, node_xy, centre, radius_px, px_per_mm, thickness_mm,
-                  cal, union4, labels4, ss, s_min_mm2, kappa_c_per_mm=None):
-    mm = 1.0 / px_per_mm
-    # junctions: every node (wall nodes included: they are junctions of the network)
+def _branch_rows(st, k, region, length_mm, rod_length_mm, px_per_mm, kappa_c_per_mm):
+    """The ``st.n`` identical branch rows of stack ``k`` (curvature of the analytic curve)."""
+    # curvature 1/mm of the curve as drawn in image coordinates (x right, y down): the sign is
+    # flipped for (row, col) users, whence the comparisons in absolute value
+    kap = st.kappa_px * px_per_mm
+    s = st.s_px / px_per_mm
+    ell = s[-1]
+    kpm = float(np.trapezoid(kap, s) / ell)
+    kplus = float(np.trapezoid(np.abs(kap), s) / ell)
+    if kappa_c_per_mm is None:
+        integrand = kap ** 2
+    else:
+        a = np.abs(kap)
+        integrand = np.where(a > kappa_c_per_mm, kappa_c_per_mm * (2 * a - kappa_c_per_mm), a ** 2)
+    e = rod_length_mm * float(np.trapezoid(integrand, s))
+    return [{"stack_id": k, "length_mm": length_mm, "kappa_pm": kpm, "kappa_plus": kplus,
+             "kappa_m": abs(kpm), "energy": e, "region": region}] * st.n
+
+
+def _truth_tables(layout, paths_rc, union4, labels4, *, px_per_mm, thickness_mm, s_min_mm2,
+                  kappa_c_per_mm):
+    """Truth summary and tables of a layout; also the count of enclosed background regions
+    smaller than s_min (a valid layout has none)."""
+    net, stacks = layout.net, layout.stacks
     deg = np.zeros(len(net.pos), int)
     for u, v, _ in net.edges:
         deg[u] += 1
         deg[v] += 1
-    jx = node_xy[:, 0] + centre[0]
-    jy = node_xy[:, 1] + centre[1]
-    junctions = pd.DataFrame({"junction_id": np.arange(len(net.pos)), "x_px": jx, "y_px": jy,
+    # junctions: every node (wall nodes included: they are junctions of the network)
+    junctions = pd.DataFrame({"junction_id": np.arange(len(net.pos)),
+                              "x_px": layout.node_xy[:, 0] + layout.centre[0],
+                              "y_px": layout.node_xy[:, 1] + layout.centre[1],
                               "n_stacks": deg, "wall": net.is_wall})
-    rows, brows = [], []
-    lengths = np.array([st.s_px[-1] * mm for st in stacks])
+    lengths = np.array([polyline.length(p) for p in paths_rc]) / px_per_mm
     ns = np.array([st.n for st in stacks])
     rod_length_mm = float((lengths * ns).sum())
+    rows, brows = [], []
     for k, ((u, v, kind), st) in enumerate(zip(net.edges, stacks)):
-        half = np.searchsorted(st.s_px, st.s_px[-1] / 2)
-        mid = st.xy[min(half, len(st.xy) - 1)] + centre
+        mid_rc = polyline.mid_point(paths_rc[k])
         region = "periphery" if (net.is_wall[u] or net.is_wall[v]) else "bulk"
         rows.append({"stack_id": k, "junction_a": u, "junction_b": v, "length_mm": lengths[k],
-                     "width_mm": st.width_px * mm, "n_br": st.n, "region": region,
-                     "mid_x_px": mid[0], "mid_y_px": mid[1], "wall": kind == "wall"})
-        # curvature 1/mm: the image y axis points down, so the sign flips for (row, col) users;
-        # we report the curvature of the curve as drawn in image coordinates (x right, y down).
-        kap = st.kappa_px * px_per_mm
-        s = st.s_px * mm
-        ell = s[-1]
-        kpm = float(np.trapezoid(kap, s) / ell)
-        kplus = float(np.trapezoid(np.abs(kap), s) / ell)
-        if kappa_c_per_mm is None:
-            integrand = kap ** 2
-        else:
-            a = np.abs(kap)
-            integrand = np.where(a > kappa_c_per_mm, kappa_c_per_mm * (2 * a - kappa_c_per_mm), a ** 2)
-        e = rod_length_mm * float(np.trapezoid(integrand, s))
-        for _ in range(st.n):
-            brows.append({"branch_id": len(brows), "stack_id": k, "length_mm": ell,
-                          "kappa_pm": kpm, "kappa_plus": kplus, "kappa_m": abs(kpm),
-                          "energy": e, "region": region})
-    stacks_df = pd.DataFrame(rows)
-    branches_df = pd.DataFrame(brows)
-    # voids from the noise-free 4x rendering: background components inside the hole
-    H4, W4 = union4.shape
-    yy, xx = np.ogrid[:H4, :W4]
-    # (the annulus within 0.75 px of the wall is excluded: raster slivers between wall bands and wall)
-    inside = ((xx + 0.5) / ss - centre[0]) ** 2 + ((yy + 0.5) / ss - centre[1]) ** 2 < (radius_px - 0.75) ** 2
-    bg = ((union4 == 0) & inside).astype(np.uint8)
-    nlab, lab, stats, cents = cv2.connectedComponentsWithStats(bg, connectivity=4)
-    s_min_px4 = s_min_mm2 * (px_per_mm * ss) ** 2
-    vrows = []
-    small = 0
-    ker = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * ss + 1, 2 * ss + 1))
-    for i in range(1, nlab):
-        area4 = stats[i, cv2.CC_STAT_AREA]
-        if area4 < s_min_px4:
-            small += int(area4 >= ss * ss)  # enclosed background >= 1 px but < s_min
-            continue
-        x0, y0, w0, h0 = stats[i, :4]
-        pad = 3 * ss
-        xs, ys = max(0, x0 - pad), max(0, y0 - pad)
-        crop = (lab[ys:y0 + h0 + pad, xs:x0 + w0 + pad] == i).astype(np.uint8)
-        cnts, _ = cv2.findContours(crop, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
-        cnt = max(cnts, key=cv2.contourArea)
-        perim4 = cv2.arcLength(cv2.approxPolyDP(cnt, 0.5 * ss, True), True)
-        ring = cv2.dilate(crop, ker) & (crop == 0)
-        adj = np.unique(labels4[ys:y0 + h0 + pad, xs:x0 + w0 + pad][ring.astype(bool)])
-        adj = adj[adj > 0]
-        area_mm2 = area4 / (px_per_mm * ss) ** 2
-        perim_mm = perim4 / (px_per_mm * ss)
-        cx, cy = cents[i] / ss
-        vrows.append({"void_id": len(vrows), "area_mm2": area_mm2, "perimeter_mm": perim_mm,
-                      "shape_ratio": math.sqrt(area_mm2) / perim_mm, "n_edges": len(adj),
-                      "centroid_x_px": cx, "centroid_y_px": cy})
-    voids_df = pd.DataFrame(vrows) if vrows else schema.empty_table("voids")
-    total_energy = float(branches_df["energy"].sum()) if len(branches_df) else 0.0
-    radius_mm = radius_px / px_per_mm
+                     "width_mm": st.width_px / px_per_mm, "n_br": st.n, "region": region,
+                     "mid_x_px": mid_rc[1], "mid_y_px": mid_rc[0], "wall": kind == "wall"})
+        brows += _branch_rows(st, k, region, lengths[k], rod_length_mm, px_per_mm, kappa_c_per_mm)
+    branches = pd.DataFrame(brows)
+    branches.insert(0, "branch_id", np.arange(len(branches)))
+    voids = truth_voids(union4, supersample=SUPERSAMPLE, hole_center_xy=layout.centre,
+                        hole_radius_px=layout.radius_px, s_min_px=s_min_mm2 * px_per_mm ** 2,
+                        px_per_mm=px_per_mm, stack_labels=labels4,
+                        stack_ends=[(u, v) for u, v, _ in net.edges],
+                        stack_widths_px=[st.width_px for st in stacks],
+                        min_contact_px=2 * thickness_mm * px_per_mm)
     summary = {
         "n_junctions": int(len(junctions)),
-        "n_stacks": int(len(stacks_df)),
-        "n_branches": int(len(branches_df)),
-        "n_voids": int(len(voids_df)),
+        "n_stacks": int(len(rows)),
+        "n_branches": int(len(branches)),
+        "n_voids": int(len(voids.table)),
         "mean_branches_per_stack": float(ns.mean()) if len(ns) else 0.0,
         "rod_length_mm": rod_length_mm,
-        "epsilon": rod_length_mm / (2 * math.pi * radius_mm),
-        "total_energy": total_energy,
-        "hole": {"center_x_px": float(centre[0]), "center_y_px": float(centre[1]),
-                 "radius_px": float(radius_px)},
+        "epsilon": rod_length_mm / (2 * math.pi * layout.radius_px / px_per_mm),
+        "total_energy": float(branches["energy"].sum()) if len(branches) else 0.0,
+        "hole": {"center_x_px": float(layout.centre[0]), "center_y_px": float(layout.centre[1]),
+                 "radius_px": float(layout.radius_px)},
         "timings_s": {},
         "n_degree4": int((deg == 4).sum()),
         "n_wall_junctions": int(net.is_wall.sum()),
-        "n_small_background": int(small),
+        "n_small_background": int(voids.n_small),
     }
-    tables = {"junctions": junctions, "stacks": stacks_df, "branches": branches_df,
-              "voids": voids_df}
+    tables = {"junctions": junctions, "stacks": pd.DataFrame(rows), "branches": branches,
+              "voids": voids.table}
     return summary, tables
 
 
+def _void_problem(layout, summary, tables, s_min_mm2):
+    """Why the voids disagree with the network's faces (None when they agree)."""
+    net = layout.net
+    n_faces = len(net.edges) - len(net.pos) + 1  # Euler, connected planar graph, no outer face
+    voids = tables["voids"]
+    small_voids = int((voids["area_mm2"] < 1.5 * s_min_mm2).sum()) if len(voids) else 0
+    if summary["n_voids"] != n_faces or small_voids or summary["n_small_background"]:
+        return (f"voids {summary['n_voids']} vs faces {n_faces}, small {small_voids}"
+                f"+{summary['n_small_background']}")
+    return None
+
+
 # ----------------------------------------------------------------------------- colour
-def _compose(rng, cov, stacks, labels_small, shape, centre, radius_px, union4_small_bg,
-             smears, specks, pinholes, receding_fraction, voids_df):
-    H, W = shape
-    img = np.empty((H, W, 3), np.float32)
-    img[:] = np.array(PAPER_RGB, np.float32) + rng.normal(0, 1.5, 3).astype(np.float32)
-    # receding surfaces: light grey-blue patches seen through some voids
-    for _, v in voids_df.iterrows():
+def _receding_surfaces(img, rng, voids, receding_fraction, px_per_mm):
+    """Light grey-blue patches seen through a fraction of the voids."""
+    for _, v in voids.iterrows():
         if rng.uniform() > receding_fraction:
             continue
-        g = rng.uniform(190, 228)
-        col = (g, g + rng.uniform(0, 6), g + rng.uniform(8, 16))
-        r = math.sqrt(v["area_mm2"]) * 0.5 * 50 * rng.uniform(0.4, 0.9)
+        col = ink.receding_rgb(rng)
+        r = math.sqrt(v["area_mm2"]) * 0.5 * px_per_mm * rng.uniform(0.4, 0.9)
         ax = (int(r * rng.uniform(0.6, 1.2)), int(r * rng.uniform(0.6, 1.2)))
         cv2.ellipse(img, (int(v["centroid_x_px"]), int(v["centroid_y_px"])), ax,
                     float(rng.uniform(0, 180)), 0, 360, tuple(float(c) for c in col), -1, cv2.LINE_AA)
-    # light-blue smears (ink wiped across the paper); excluded by the threshold (r, g > 130)
-    for _ in range(smears):
-        col = rng.uniform([140, 170, 230], [180, 200, 255])
-        ang = rng.uniform(0, 2 * np.pi)
-        rr = radius_px * math.sqrt(rng.uniform(0, 0.8))
-        c = (int(centre[0] + rr * math.cos(ang)), int(centre[1] + rr * math.sin(ang)))
-        ax = (int(rng.uniform(15, 60)), int(rng.uniform(3, 10)))
-        cv2.ellipse(img, c, ax, float(rng.uniform(0, 180)), 0, 360, tuple(float(x) for x in col), -1, cv2.LINE_AA)
-    # ink, one shade per stack, anti-aliased coverage
-    ink = np.zeros((H, W, 3), np.float32)
+
+
+def _draw_scan(rng, layout, union4, labels4, voids, *, px_per_mm, smears, specks, pinholes,
+               receding_fraction):
+    """The noise-free float32 scan: paper, receding surfaces, smears, ink, specks, pinholes."""
+    ss = SUPERSAMPLE
+    H, W = layout.shape
+    coverage = cv2.resize(union4.astype(np.float32) / 255.0, (W, H), interpolation=cv2.INTER_AREA)
+    # every pixel takes the shade of the stack under its centre sample
+    labels = labels4[ss // 2::ss, ss // 2::ss]
+    background = cv2.resize(union4, (W, H), interpolation=cv2.INTER_AREA) == 0
+    img = np.empty((H, W, 3), np.float32)
+    img[:] = ink.paper_rgb(rng)
+    _receding_surfaces(img, rng, voids, receding_fraction, px_per_mm)
+    degrade.add_smears(img, rng, count=smears, centre_xy=layout.centre, radius_px=layout.radius_px)
     # one ink per scan within the design range, each stack within +-4 of it
-    base = np.array(INK_RGB) + rng.uniform(-1, 1, 3) * np.array(INK_JITTER)
-    shades = base + rng.uniform(-4, 4, (len(stacks) + 1, 3))
-    ink[:] = shades[labels_small][..., :]
-    a = cov[..., None]
-    img = img * (1 - a) + ink * a
-    # dark-blue specks in voids (dust), kept away from the bands
-    bgfar = cv2.erode(union4_small_bg, np.ones((9, 9), np.uint8))
-    cand = np.argwhere(bgfar > 0)
-    for _ in range(specks):
-        if not len(cand):
-            break
-        r, c = cand[rng.integers(len(cand))]
-        col = tuple(float(x) for x in base + rng.uniform(-10, 10, 3))
-        cv2.circle(img, (int(c), int(r)), int(rng.integers(1, 4)), col, -1, cv2.LINE_AA)
-    # pinholes: small paper-coloured holes inside bands at least 9 px wide
-    wide = [k for k, st in enumerate(stacks) if st.width_px >= 9]
-    for _ in range(pinholes):
-        if not wide:
-            break
-        st = stacks[wide[rng.integers(len(wide))]]
-        p = st.xy[rng.integers(len(st.xy))] + centre
-        rad = min(2.0, st.width_px / 5)
-        cv2.circle(img, (int(round(p[0] * 4)), int(round(p[1] * 4))), max(1, int(round(rad * 4))),
-                   PAPER_RGB, -1, cv2.LINE_AA, shift=2)
+    base = ink.ink_rgb(rng)
+    shades = base + rng.uniform(-4, 4, (len(layout.stacks) + 1, 3))
+    a = coverage[..., None]
+    img = img * (1 - a) + shades[labels].astype(np.float32) * a
+    degrade.add_specks(img, rng, count=specks, background=background, ink_rgb=base)
+    degrade.add_pinholes(img, rng, count=pinholes,
+                         paths_xy=[st.xy + layout.centre for st in layout.stacks],
+                         widths_px=[st.width_px for st in layout.stacks])
     return img
 
 
 # ----------------------------------------------------------------------------- public API
 def make_scene(*, seed: int, n_stacks: int = 40, max_layers: int = 6, px_per_mm: float = 50.0,
-               thickness_mm: float = 0.1, calibration=None, hole_radius_mm: float | None = None,
+               thickness_mm: float = 0.1, calibration: Calibration | None = None,
+               hole_radius_mm: float | None = None,
                noise_sigma: float = 0.0, blur_px: float = 0.0, jpeg_quality: int | None = None,
                smears: int = 0, specks: int = 0, pinholes: int = 0,
                image_size: int | None = None, mean_layers: float | None = None,
@@ -742,8 +709,8 @@ def make_scene(*, seed: int, n_stacks: int = 40, max_layers: int = 6, px_per_mm:
         Largest number of layers (branches) in a stack, 1-12 tested.
     px_per_mm, thickness_mm : float
         Scan resolution and sheet thickness h.
-    calibration : optional
-        Width law (see :class:`SyntheticCalibration.coerce`); default ``h (n + 0.4 sqrt(n))``.
+    calibration : Calibration, optional
+        Width law of the bands; default :meth:`Calibration.nonlinear` ``h (n + 0.4 sqrt(n))``.
     hole_radius_mm : float, optional
         Hole radius; by default chosen from ``n_stacks`` and ``max_layers`` so that bands fit
         (or from ``image_size``).
@@ -754,7 +721,8 @@ def make_scene(*, seed: int, n_stacks: int = 40, max_layers: int = 6, px_per_mm:
     jpeg_quality : int, optional
         Round trip through JPEG at this quality.
     smears, specks, pinholes : int
-        Numbers of light-blue smears, dark-blue specks (< s_min) and pinholes in the ink.
+        Numbers of light-blue smears, dark-blue specks (< s_min) and pinholes in the ink
+        (:mod:`crosssection.truth.degrade`).
     image_size : int, optional
         Side of the square image; the hole fills 90 % of it.
     mean_layers : float, optional
@@ -769,205 +737,66 @@ def make_scene(*, seed: int, n_stacks: int = 40, max_layers: int = 6, px_per_mm:
     Returns
     -------
     Scene
+        With ``paths_rc`` and ``packs``; ``params["options"]`` holds the generator options.
 
     Raises
     ------
     SceneGenerationError
         When no valid layout is found.
     """
+    if calibration is not None and not isinstance(calibration, Calibration):
+        raise ParameterError(f"calibration must be a Calibration, got {type(calibration).__name__}")
     rng = np.random.default_rng(seed)
-    h_px = thickness_mm * px_per_mm
-    cal = SyntheticCalibration.coerce(calibration, thickness_mm, n_max=max(40, max_layers + 5))
-    w_max_px = float(cal.width(max_layers)) * px_per_mm
-    gap_px = 2 * h_px
+    cal = calibration or Calibration.nonlinear(thickness_mm, n_max=max(40, max_layers + 5))
     s_min_mm2 = (10 * thickness_mm) ** 2
     n_cells = max(3, int(round(n_stacks / 3.0)))
     if mean_layers is None:
         mean_layers = max(1.5, max_layers / 3.0)
-    if image_size is not None:
-        radius_px = 0.45 * image_size
-    elif hole_radius_mm is not None:
-        radius_px = hole_radius_mm * px_per_mm
-    else:
-        # cell spacing: room for the widest bands plus a void >= a few s_min
-        spacing = max(2.4 * px_per_mm, 2.5 * w_max_px + 1.4 * px_per_mm)
-        radius_px = spacing * math.sqrt(n_cells / math.pi)
-    if hole_radius_mm is not None:
-        radius_px = hole_radius_mm * px_per_mm
+    radius_px = _initial_radius_px(n_cells=n_cells, image_size=image_size,
+                                   hole_radius_mm=hole_radius_mm, px_per_mm=px_per_mm,
+                                   w_max_px=float(cal.width(max_layers)) * px_per_mm)
     fixed_radius = image_size is not None or hole_radius_mm is not None
     failures = []
     for attempt in range(max_tries):
         if attempt and attempt % 4 == 0 and not fixed_radius:
             radius_px *= 1.05
-        size = image_size or int(math.ceil(2 * radius_px / 0.9))
-        shape = (size, size)
-        centre = np.array([size / 2.0, size / 2.0]) + rng.uniform(-0.02, 0.02, 2) * size * (image_size is None)
-        centre = np.minimum(np.maximum(centre, radius_px + 2), size - radius_px - 2)
-        spacing = radius_px * math.sqrt(math.pi / n_cells)
-        min_edge = max(0.6 * px_per_mm, 0.18 * spacing)
-        net = _voronoi_network(rng, n_cells, radius_px, min_edge)
-        net = _contract_short(net, radius_px, min_edge)
-        ends = _edge_ends(net)
-        deg = np.array([len(e) for e in ends])
-        if deg.max() > 4 or deg.min() < 3:
-            failures.append("degree")
+        layout = _attempt_layout(rng, n_cells=n_cells, radius_px=radius_px,
+                                 image_size=image_size, max_layers=max_layers,
+                                 mean_layers=mean_layers, cal=cal, px_per_mm=px_per_mm,
+                                 gap_px=2 * thickness_mm * px_per_mm)
+        if isinstance(layout, str):
+            failures.append(layout)
             continue
-        if (deg == 4).mean() > 0.06:
-            failures.append("too many degree-4")
-            continue
-        # caps: a band must fit its own length, its neighbours' lengths and its faces
-        lengths = np.array([(radius_px * (net.wall_angles[k][1] - net.wall_angles[k][0]))
-                            if kind == "wall" else float(np.hypot(*(net.pos[u] - net.pos[v])))
-                            for k, (u, v, kind) in enumerate(net.edges)])
-        min_adj = np.full(len(net.pos), np.inf)
-        for k, (u, v, _) in enumerate(net.edges):
-            min_adj[u] = min(min_adj[u], lengths[k])
-            min_adj[v] = min(min_adj[v], lengths[k])
-        widths_table = cal.width(np.arange(1, max_layers + 1)) * px_per_mm
-        caps = np.empty(len(net.edges), int)
-        for k, (u, v, _) in enumerate(net.edges):
-            room = min(lengths[k], min_adj[u], min_adj[v]) / 2.2
-            room = min(room, 0.22 * spacing)
-            caps[k] = max(1, int(np.searchsorted(widths_table, room, side="right")))
-        caps = np.minimum(caps, max_layers)
-        n, chosen = _solve_counts(rng, net, ends, caps, mean_layers)
-        if n is None:
-            failures.append("counts infeasible")
-            continue
-        dep = _departures(net, ends, chosen)
-        widths_px = cal.width(n) * px_per_mm
-        # wall junctions sit half the widest wall band inside the wall
-        node_xy = net.pos.copy()
-        for v in np.flatnonzero(net.is_wall):
-            ww = max(widths_px[e[0]] for e in ends[v] if e[3] == "wall")
-            node_xy[v] = net.pos[v] * (radius_px - ww / 2) / radius_px
-        geo_net = _Network(node_xy, net.is_wall, net.edges, net.wall_angles)
-        stacks = []
-        for k in range(len(net.edges)):
-            st = _stack_geometry(geo_net if net.edges[k][2] == "ridge" else net, k, dep,
-                                 float(widths_px[k]), int(n[k]))
-            if net.edges[k][2] == "wall":
-                # join the arc to the junction nodes (radial offsets of at most (w_T - w)/2)
-                u, v, _ = net.edges[k]
-                xy = np.vstack([node_xy[u], st.xy, node_xy[v]])
-                seg = np.hypot(*np.diff(xy, axis=0).T)
-                s = np.concatenate([[0.0], np.cumsum(seg)])
-                kap = np.concatenate([[st.kappa_px[0]], st.kappa_px, [st.kappa_px[-1]]])
-                st = _Stack(xy, s, kap, st.width_px, st.n)
-            stacks.append(st)
-        # inside the hole?
-        out = max(float(np.max(np.hypot(st.xy[:, 0], st.xy[:, 1]) + st.width_px / 2 - radius_px))
-                  for st in stacks)
-        if out > 1.0:
-            failures.append("band outside hole")
-            continue
-        nbad = _check_gaps(stacks, net, shape, centre, gap_px, node_xy)
-        if nbad > 0:
-            failures.append(f"contacts ({nbad} px)")
-            continue
-        ss = SUPERSAMPLE
-        union4, labels4 = _render_masks(stacks, shape, centre, ss)
-        summary, tables = _truth_tables(net, stacks, node_xy, centre, radius_px, px_per_mm,
-                                        thickness_mm, cal, union4, labels4, ss, s_min_mm2,
-                                        kappa_c_per_mm)
-        n_faces = len(net.edges) - len(net.pos) + 1  # Euler, connected planar graph, no outer face
-        small_voids = (tables["voids"]["area_mm2"] < 1.5 * s_min_mm2).sum() if len(tables["voids"]) else 0
-        if summary["n_voids"] != n_faces or small_voids or summary["n_small_background"]:
-            failures.append(f"voids {summary['n_voids']} vs faces {n_faces}, small {small_voids}"
-                            f"+{summary['n_small_background']}")
-            continue
-        break
+        union4, labels4 = _render_masks(layout.stacks, layout.shape, layout.centre, SUPERSAMPLE)
+        paths_rc = [st.xy[:, ::-1] + layout.centre[::-1] for st in layout.stacks]
+        summary, tables = _truth_tables(layout, paths_rc, union4, labels4, px_per_mm=px_per_mm,
+                                        thickness_mm=thickness_mm, s_min_mm2=s_min_mm2,
+                                        kappa_c_per_mm=kappa_c_per_mm)
+        problem = _void_problem(layout, summary, tables, s_min_mm2)
+        if problem is None:
+            break
+        failures.append(problem)
     else:
         raise SceneGenerationError(f"no valid layout after {max_tries} tries: {failures[-5:]}")
 
-    # ---- image
-    cov = cv2.resize(union4.astype(np.float32) / 255.0, (shape[1], shape[0]),
-                     interpolation=cv2.INTER_AREA)
-    labels_small = labels4[ss // 2::ss, ss // 2::ss]
-    # pixels at band edges without a centre sample take the nearest stack's shade
-    labels_small = np.where(labels_small > 0, labels_small, 0)
-    bg_small = (cv2.resize(union4, (shape[1], shape[0]), interpolation=cv2.INTER_AREA) == 0)
-    img = _compose(rng, cov, stacks, labels_small, shape, centre, radius_px,
-                   bg_small.astype(np.uint8), smears, specks, pinholes, receding_fraction,
-                   tables["voids"])
-    if blur_px > 0:
-        img = cv2.GaussianBlur(img, (0, 0), blur_px)
-    if noise_sigma > 0:
-        img = img + rng.normal(0, noise_sigma, img.shape).astype(np.float32)
-    rgb = np.clip(np.rint(img), 0, 255).astype(np.uint8)
-    if jpeg_quality is not None:
-        ok, buf = cv2.imencode(".jpg", rgb[..., ::-1], [cv2.IMWRITE_JPEG_QUALITY, int(jpeg_quality)])
-        rgb = cv2.imdecode(buf, cv2.IMREAD_COLOR)[..., ::-1].copy()
+    img = _draw_scan(rng, layout, union4, labels4, tables["voids"], px_per_mm=px_per_mm,
+                     smears=smears, specks=specks, pinholes=pinholes,
+                     receding_fraction=receding_fraction)
+    rgb = degrade.finish_scan(img, rng, blur_px=blur_px, noise_sigma=noise_sigma,
+                              jpeg_quality=jpeg_quality)
     params = {
         "px_per_mm": float(px_per_mm), "thickness_mm": float(thickness_mm),
-        "hole_radius_mm": radius_px / px_per_mm,
-        "hole_center_px": [float(centre[0]), float(centre[1])],
+        "hole_radius_mm": layout.radius_px / px_per_mm,
+        "hole_center_px": [float(layout.centre[0]), float(layout.centre[1])],
         "seed": int(seed), "rod_length_mm": summary["rod_length_mm"],
         "generator": "crosssection.truth.network",
         "options": {"n_stacks": n_stacks, "max_layers": max_layers, "noise_sigma": noise_sigma,
                     "blur_px": blur_px, "jpeg_quality": jpeg_quality, "smears": smears,
-                    "specks": specks, "pinholes": pinholes, "image_size": shape[0],
+                    "specks": specks, "pinholes": pinholes, "image_size": layout.shape[0],
                     "mean_layers": mean_layers, "kappa_c_per_mm": kappa_c_per_mm,
                     "layout_attempts": len(failures) + 1},
     }
+    ends = layout.ends
     packs = [([int(ends[v][i][0]) for i in A], [int(ends[v][i][0]) for i in B])
-             for v, (A, B) in enumerate(chosen)]
-    paths_rc = [np.column_stack([st.xy[:, 1] + centre[1], st.xy[:, 0] + centre[0]]) for st in stacks]
+             for v, (A, B) in enumerate(layout.chosen)]
     return Scene(rgb, summary, tables, params, cal, paths_rc, packs)
-
-
-def write_scene(scene: Scene, folder, *, image_name: str = "image.png") -> Path:
-    """Write a scene folder: ``image.png``, ``params.json``, ``calibration.csv``, ``truth/``.
-
-    Parameters
-    ----------
-    scene : Scene
-    folder : str or Path
-        Created if needed.
-    image_name : str
-        File name of the image (``.png``, ``.jpg`` or ``.tif``; PNG by default).
-
-    Returns
-    -------
-    Path
-        The folder.
-    """
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    write_image(scene.rgb, folder / image_name)
-    n_max = max(12, int(scene.tables["stacks"]["n_br"].max()) + 3) if len(scene.tables["stacks"]) else 12
-    write_csv(folder / "calibration.csv", scene.calibration.to_frame(n_max))
-    write_json(folder / "params.json", scene.params)
-    schema.write_tables(folder / "truth", scene.summary, scene.tables)
-    return folder
-
-
-def write_image(rgb: np.ndarray, path) -> Path:
-    """Write an RGB array atomically (PNG/JPEG via OpenCV, TIFF via tifffile, 8 or 16 bit)."""
-    path = Path(path)
-    suffix = path.suffix.lower()
-    with atomic_path(path) as tmp:
-        if suffix in (".tif", ".tiff"):
-            import tifffile
-
-            tifffile.imwrite(tmp, rgb, photometric="rgb", compression="zlib")
-        elif suffix in (".jpg", ".jpeg"):
-            cv2.imwrite(str(tmp), rgb[..., ::-1], [cv2.IMWRITE_JPEG_QUALITY, 90])
-        else:
-            cv2.imwrite(str(tmp), rgb[..., ::-1], [cv2.IMWRITE_PNG_COMPRESSION, 9])
-    return path
-
-
-def load_truth(folder) -> tuple[dict, dict]:
-    """Read ``folder/truth`` (summary, tables) and return them with ``params.json`` merged
-    into the summary under ``'params'``."""
-    folder = Path(folder)
-    summary, tables = schema.read_tables(folder / "truth")
-    pfile = folder / "params.json"
-    if pfile.exists():
-        summary = dict(summary, params=json.loads(pfile.read_text()))
-    return summary, tables
-
-
-__all__ = ["Scene", "SyntheticCalibration", "SceneGenerationError", "make_scene", "write_scene",
-           "write_image", "load_truth"]

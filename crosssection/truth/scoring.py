@@ -23,8 +23,6 @@ Matching rules (documented choices)
 """
 from __future__ import annotations
 
-import json
-import math
 from pathlib import Path
 
 import numpy as np
@@ -33,6 +31,7 @@ from scipy.optimize import linear_sum_assignment
 from scipy.spatial.distance import cdist
 
 from crosssection.core import schema
+from crosssection.truth.scene import read_scene, read_scene_params
 
 TABLE_NAMES = ("junctions", "stacks", "branches", "voids")
 
@@ -205,8 +204,8 @@ def score_folder(out_dir, scene_dir, *, match_px: float | None = None) -> dict:
     out_dir : str or Path
         Holds ``summary.json`` and the four CSV tables.
     scene_dir : str or Path
-        Holds ``truth/`` and optionally ``params.json`` (px_per_mm, thickness_mm for the
-        default matching radius).
+        A scene folder (:func:`crosssection.truth.scene.read_scene`; its ``px_per_mm`` and
+        ``thickness_mm`` give the default matching radius).
     match_px : float, optional
         See :func:`score`.
 
@@ -215,16 +214,11 @@ def score_folder(out_dir, scene_dir, *, match_px: float | None = None) -> dict:
     dict
         As :func:`score`.
     """
-    scene_dir = Path(scene_dir)
-    params = {}
-    pfile = scene_dir / "params.json"
-    if pfile.exists():
-        params = json.loads(pfile.read_text())
-    truth = schema.read_tables(scene_dir / "truth")
+    scene = read_scene(scene_dir, image=False)
     result = schema.read_tables(out_dir)
-    return score(result, truth, match_px=match_px,
-                 px_per_mm=float(params.get("px_per_mm") or 50.0),
-                 thickness_mm=float(params.get("thickness_mm") or 0.1))
+    return score(result, (scene.summary, scene.tables), match_px=match_px,
+                 px_per_mm=float(scene.params["px_per_mm"]),
+                 thickness_mm=float(scene.params["thickness_mm"]))
 
 
 def meets_targets(s: dict) -> dict:
@@ -252,19 +246,17 @@ def analyze_scene_folder(scene_dir, *, image_name: str | None = None, use_hole: 
     use_calibration : bool
         Pass ``calibration.csv``; otherwise the pipeline's default (linear) law is used.
     **kwargs
-        Extra keyword arguments for ``analyze`` (only those its signature accepts are passed).
+        Fields of :class:`crosssection.params.AnalysisParams` overriding the scene's.
 
     Returns
     -------
     (result, (summary, tables))
         The ``AnalysisResult`` and the pair :func:`score` takes.
     """
-    import inspect
-
-    from crosssection import analyze
+    from crosssection import AnalysisParams, analyze
 
     scene_dir = Path(scene_dir)
-    params = json.loads((scene_dir / "params.json").read_text())
+    params = read_scene_params(scene_dir)
     image = scene_dir / (image_name or params.get("image") or "image.png")
     want = {"px_per_mm": params.get("px_per_mm", 50.0),
             "thickness_mm": params.get("thickness_mm", 0.1)}
@@ -276,10 +268,7 @@ def analyze_scene_folder(scene_dir, *, image_name: str | None = None, use_hole: 
     if use_calibration and cal.exists():
         want["calibration"] = str(cal)
     want.update(kwargs)
-    sig = inspect.signature(analyze).parameters
-    accepts_any = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in sig.values())
-    call = {k: v for k, v in want.items() if accepts_any or k in sig}
-    result = analyze(str(image), **call)
+    result = analyze(str(image), AnalysisParams.from_mapping(want, path=image))
     return result, _as_pair(result)
 
 

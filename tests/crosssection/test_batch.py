@@ -14,6 +14,7 @@ import pandas as pd
 import pytest
 
 from crosssection import batch as B
+from crosssection.params import AnalysisParams
 from crosssection.core.errors import ConfigError
 from crosssection.setconfig import check_params, load_set_config
 from crosssection.testing import generated_scan as draw_scan
@@ -97,7 +98,8 @@ def test_plan_assigns_sets_seeds_and_outputs(tmp_path, seed):
     by = {t.rel: t for t in tasks}
     assert "results/alpha/s0/overlay.png" not in by
     assert by["setA/sub/s2.png"].set_name == "alpha"
-    assert by["loose.png"].set_name == "default" and by["loose.png"].params["px_per_mm"] == 50
+    assert by["loose.png"].set_name == "default"
+    assert AnalysisParams.from_mapping(by["loose.png"].params).px_per_mm == 50
     assert by["setA/s1.png"].params["rod_length_mm"] == 200.0
     assert "rod_length_mm" not in by["setA/s0.png"].params
     assert by["badset/b0.png"].error and "px_per_mm" in by["badset/b0.png"].error
@@ -242,7 +244,7 @@ def test_cli_exit_status(tmp_path, capsys):
     expect = make_tree(inp, seed=7)
     args = parser.parse_args(["batch", str(inp), "--out", str(out), "--workers", "1",
                               "--no-figure", "--quiet", "--px-per-mm", "48"])
-    assert args.func(args) == 0
+    assert args.func(args) == B.EXIT_SOME_FAILED  # finished, some images failed
     line = capsys.readouterr().out.strip().splitlines()[-1]
     assert f"{len(expect['failed'])} failed" in line
     assert not list(out.rglob("overlay.png"))

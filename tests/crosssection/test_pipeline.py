@@ -49,8 +49,8 @@ def test_cli_analyze_contract(scene_dir, tmp_path):
         assert key in summary
     for key in schema.HOLE_KEYS:
         assert key in summary["hole"]
-    assert set(summary["timings_s"]) >= {"load", "threshold", "clean", "skeleton",
-                                         "junctions", "graph"}
+    assert set(summary["timings_s"]) >= {"load", "threshold", "hole", "clean", "skeleton",
+                                         "graph", "widths", "linear_system", "curvature"}
     for name, cols in schema.TABLES.items():
         df = pd.read_csv(out / f"{name}.csv")
         assert list(df.columns[:len(cols)]) == cols, name

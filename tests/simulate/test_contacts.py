@@ -40,7 +40,8 @@ def test_straight_rod(seed):
     a = analyze_rod(xy, lam=LAM)
     assert (a.n_stacks, a.n_branches, a.n_junctions, a.n_voids) == (1, 1, 0, 0)
     assert (a.multiplicity == 1).all()
-    assert a.energy_confinement == pytest.approx(LAM / 12, rel=1e-3)  # issue 3 reference
+    # a centred straight rod: Lambda int R^2 ds = Lambda / 12
+    assert a.energy_confinement == pytest.approx(LAM / 12, rel=1e-3)
     assert a.rg == pytest.approx(np.sqrt(1 / 12), rel=1e-3)
     assert a.epsilon / a.epsilon_sqrt2 == pytest.approx(np.sqrt(2))
     check_totals(a, xy)
@@ -123,7 +124,8 @@ def test_branch_curvatures_on_arc():
     xy = resample(np.c_[r * np.cos(th), r * np.sin(th)])
     a = analyze_rod(xy, lam=LAM)
     b = a.branches.iloc[0]
-    assert a.energy_bending == pytest.approx(1 / r ** 2, rel=1e-2)  # issue 3 reference
+    # a unit-length arc of radius r: int kappa^2 ds = 1 / r^2
+    assert a.energy_bending == pytest.approx(1 / r ** 2, rel=1e-2)
     assert b.kappa_plus == pytest.approx(1 / r, rel=1e-2)
     assert abs(b.kappa_pm) == pytest.approx(1 / r, rel=1e-2)
 
@@ -132,7 +134,7 @@ def teardrop(m=4000):
     """Clamped elastica loop (teardrop) of length 1: theta'' = -F sin(theta), started upward at
     the contact point with an unknown curvature; shooting for mirror symmetry (theta = pi and
     x = 0 at s = 1/2). The one solution without self-intersection has kappa(0) = -6.055,
-    F = -39.65 and sqrt(area)/perimeter = 0.2246 (issue 3 reference)."""
+    F = -39.65 and sqrt(area)/perimeter = 0.2246."""
     from scipy.integrate import solve_ivp
     from scipy.optimize import fsolve
 

@@ -169,6 +169,22 @@ def test_protocol_wall_and_errors():
         powell_protocol(bad, 1e3)
 
 
+@pytest.mark.parametrize("param", ["tangent", "bend"])
+def test_wall_binds_and_holds(param):
+    """A weak confinement lets the rod unfold against a wall that barely holds the start: the
+    wall changes the outcome, and no node ever leaves it."""
+    n = 100
+    xy0 = initial_shape(n, 750.0, seed=2)
+    wall = 1.001 * np.max(np.hypot(*xy0.T))
+    kw = dict(seed=2, n_runs=3, maxiter=6, nematic_runs=(1,), parametrization=param)
+    free = powell_protocol(xy0, 20.0, **kw)
+    held = powell_protocol(xy0, 20.0, wall_radius=wall, **kw)
+    assert np.max(np.hypot(*free.xy.T)) > wall
+    assert np.max(np.hypot(*held.xy.T)) <= wall
+    assert not has_intersection(held.xy, "brute")
+    assert held.energy_total < bending_energy(xy0) + confinement_energy(xy0, 20.0)
+
+
 def test_lbfgs_and_anneal_admissible():
     n = 60
     lam = 2e4

@@ -7,8 +7,10 @@ import pytest
 from scipy import ndimage
 
 from crosssection.core import schema
+from crosssection.core.calibration import Calibration
+from crosssection.truth.scene import read_scene, write_scene
 from simulate.contacts import analyze_rod
-from simulate.render import default_calibration, render_configuration, write_scene
+from simulate.render import render_configuration
 from simulate.shapes import double_loop, hairpin, resample, spiral, transform
 
 LAM = 7e5
@@ -43,8 +45,7 @@ def test_scene_truth_and_layout(tmp_path, seed):
         assert sc.summary["total_energy"] == pytest.approx(a.energy_bending)
         assert sc.tables["branches"]["length_mm"].sum() == pytest.approx(
             sc.params["rod_length_mm"])
-        w = default_calibration(0.1).set_index("n_layers")["width_mm"]
-        assert np.allclose(st["width_mm"], w.loc[st["n_br"]].to_numpy())
+        assert np.allclose(st["width_mm"], Calibration.nonlinear(0.1).width(st["n_br"]))
         # every pass beyond delta shows a gap: the ink has as many connected components
         # as the configuration has connected stack graphs (here one)
         assert ndimage.label(sc.ink_mask)[1] == 1
@@ -59,6 +60,21 @@ def test_scene_truth_and_layout(tmp_path, seed):
         assert all(k in summary for k in schema.SUMMARY_KEYS)
         cal = pd.read_csv(folder / "calibration.csv")
         assert list(cal.columns) == ["n_layers", "width_mm"]
+        back = read_scene(folder)
+        assert np.array_equal(back.rgb, sc.rgb)
+        assert back.params["rod_length_mm"] == pytest.approx(sc.params["rod_length_mm"])
+        # truth voids: enclosed paper >= s_min, each bounded by stacks of the configuration
+        enclosed = ndimage.label(~sc.ink_mask)[0]
+        border = np.unique(np.r_[enclosed[0], enclosed[-1], enclosed[:, 0], enclosed[:, -1]])
+        sizes = np.bincount(enclosed.ravel())
+        big = [i for i in range(1, len(sizes)) if i not in border and sizes[i] >= 50 ** 2]
+        assert len(sc.tables["voids"]) == len(big)
+        assert np.allclose(np.sort(sc.tables["voids"]["area_mm2"]), np.sort(sizes[big]) / 50 ** 2)
+        # stack mid points sit half-way along the drawn centrelines
+        for k, path in enumerate(sc.paths_rc):
+            seg = np.hypot(*np.diff(path, axis=0).T)
+            mid = st.loc[k, ["mid_y_px", "mid_x_px"]].to_numpy(float)
+            assert np.min(np.hypot(*(path - mid).T)) <= seg.max() + 1e-9
 
 
 def test_band_widths_follow_calibration():

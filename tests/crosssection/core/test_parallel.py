@@ -11,6 +11,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from crosssection.core.errors import ParameterError
+
 from crosssection import batch as B
 from crosssection.core.parallel import get_executor, spawn_seeds
 
@@ -45,7 +47,7 @@ def test_process_pool_matches_inline_and_uses_other_processes():
         pids = set(ex.map(_pid, range(6)))
     assert pooled == inline
     assert os.getpid() not in pids
-    with pytest.raises(ValueError):
+    with pytest.raises(ParameterError):
         with get_executor(0):
             pass
 

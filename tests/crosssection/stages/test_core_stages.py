@@ -113,7 +113,7 @@ def test_load_bad_inputs_raise_image_error(tmp_path, kind):
 
 # ----------------------------------------------------------------------------- stage 2
 @pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
-@pytest.mark.parametrize("method", ["fixed", "otsu"])
+@pytest.mark.parametrize("method", ["auto", "fixed", "otsu"])
 def test_threshold_keeps_ink_only(dtype, method):
     rng = np.random.default_rng(7 + (dtype == np.uint16))
     img = _scene_rgb(rng, dtype=dtype)
@@ -121,7 +121,11 @@ def test_threshold_keeps_ink_only(dtype, method):
     np.testing.assert_array_equal(res.mask, _truth_mask())
     assert res.method == method
     scale = 257 if dtype == np.uint16 else 1
-    assert res.rg_max == 130 * scale
+    if method == "auto":
+        # data-chosen: half way between the ink's red-green level (~70) and the paper's (~250)
+        assert 140 * scale < res.rg_max < 180 * scale
+    else:
+        assert res.rg_max == 130 * scale
     if method == "fixed":
         assert res.blue_min == 100 * scale
     else:
@@ -132,7 +136,11 @@ def test_threshold_user_values_and_validation():
     img = _scene_rgb(np.random.default_rng(8))
     # rg_max below the ink's red/green keeps nothing
     assert not threshold_rgb(img, rg_max=20).mask.any()
-    assert threshold_rgb(img, blue_min=50, rg_max=250).mask.sum() > _truth_mask().sum()
+    assert not threshold_rgb(img, method="fixed", rg_max=20).mask.any()
+    # the paper's rule with loose bounds takes the smear; "auto" treats bounds as extra limits
+    loose = threshold_rgb(img, method="fixed", blue_min=50, rg_max=250).mask.sum()
+    assert loose > _truth_mask().sum()
+    assert threshold_rgb(img, blue_min=50, rg_max=250).mask.sum() < loose
     with pytest.raises(ParameterError):
         threshold_rgb(img, blue_min=300)
     with pytest.raises(ParameterError):

@@ -9,7 +9,8 @@ pipeline) and is compared by ``crosssection.truth.scoring``.
 import pytest
 
 from crosssection.truth.scoring import analyze_scene_folder, score
-from crosssection.truth.network import make_scene, write_scene
+from crosssection.truth.network import make_scene
+from crosssection.truth.scene import write_scene
 
 pytest.importorskip("crosssection.pipeline")
 

@@ -7,7 +7,9 @@ import pandas as pd
 import pytest
 
 from crosssection.core import schema
-from crosssection.truth.network import SyntheticCalibration, make_scene, write_scene
+from crosssection.core.calibration import Calibration
+from crosssection.truth.network import make_scene
+from crosssection.truth.scene import write_scene
 
 SEEDS = [0, 7, 23]
 
@@ -42,6 +44,28 @@ def test_junction_degrees_match_stacks(scene):
     assert (deg == j["n_stacks"].to_numpy()).all()
     assert set(np.unique(deg)) <= {3, 4}
     assert (deg == 4).mean() <= 0.06  # paper: ~1 % crossings
+
+
+def test_void_sides_are_the_faces_of_the_network(scene):
+    """Every void is a face of the planar network: its junctions are those of the stacks
+    around it, so each interior stack is counted by its two faces and each wall stack by one."""
+    st = scene.tables["stacks"]
+    expected = 2 * int((~st["wall"]).sum()) + int(st["wall"].sum())
+    assert int(scene.tables["voids"]["n_edges"].sum()) == expected
+    assert (scene.tables["voids"]["n_edges"] >= 2).all()
+
+
+def test_stack_mid_points_halve_the_centrelines(scene):
+    """The mid point of stacks.csv is half-way along the truth centreline (scoring matches
+    stacks by it): the two halves of the centreline have equal lengths."""
+    st = scene.tables["stacks"]
+    for k, path in enumerate(scene.paths_rc):
+        mid = np.array([st["mid_y_px"][k], st["mid_x_px"][k]])
+        seg = np.hypot(*np.diff(path, axis=0).T)
+        s = np.concatenate([[0], np.cumsum(seg)])
+        i = int(np.argmin(np.hypot(*(path - mid).T)))
+        assert abs(s[i] - s[-1] / 2) <= 1.0 + 1e-9  # samples are at most 1 px apart
+        assert st["length_mm"][k] == pytest.approx(s[-1] / 50.0)
 
 
 def test_summary_consistent_with_tables(scene):
@@ -143,11 +167,13 @@ def test_degradations_change_image_not_truth():
 
 
 def test_custom_calibration_is_used():
-    cal = pd.DataFrame({"n_layers": np.arange(1, 9), "width_mm": 0.1 * np.arange(1, 9) + 0.05})
+    cal = Calibration.from_frame(pd.DataFrame({"n_layers": np.arange(1, 9),
+                                               "width_mm": 0.1 * np.arange(1, 9) + 0.05}))
     sc = make_scene(seed=11, n_stacks=25, max_layers=5, calibration=cal)
     st = sc.tables["stacks"]
     assert np.allclose(st["width_mm"], 0.1 * st["n_br"] + 0.05, atol=0.021)
-    default = SyntheticCalibration.default(0.1)
+    assert sc.calibration is cal
+    default = Calibration.nonlinear(0.1)
     n = np.arange(1, 13)
     w = default.width(n)
     assert np.all(np.diff(w) > 0.1 * 0.999)  # each layer adds at least h

@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from crosssection.truth.scoring import match_points, meets_targets, score, score_folder
-from crosssection.truth.network import make_scene, write_scene
+from crosssection.truth.network import make_scene
+from crosssection.truth.scene import write_scene
 
 
 @pytest.fixture(scope="module", params=[3, 12])

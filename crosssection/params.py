@@ -1,0 +1,408 @@
+"""The parameters of one analysis, in one place: :class:`AnalysisParams` and :class:`ScanScale`.
+
+Every default of the scan analysis is a field default of :class:`AnalysisParams`; every entry
+point (``analyze``, the ``analyze``/``steps``/``batch`` commands, ``set.toml``, scoring and
+validation) builds one through :meth:`AnalysisParams.from_mapping`,
+:meth:`AnalysisParams.from_toml` or :meth:`AnalysisParams.from_cli_args`, so values are
+validated once, with errors naming the parameter and the file they came from. The command-line
+options are generated from the fields (:func:`add_analysis_arguments`), so ``analyze`` and
+``batch`` accept the same options with the same help, unit and default.
+
+:class:`ScanScale` owns every conversion between millimetres and pixels.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+
+from crosssection.core.errors import ConfigError, FoldstatError, ParameterError
+
+__all__ = ["ScanScale", "AnalysisParams", "add_analysis_arguments", "check_param", "PARAM_NAMES",
+           "THRESHOLD_METHODS", "CURVATURE_METHODS"]
+
+THRESHOLD_METHODS = ("auto", "fixed", "otsu")
+CURVATURE_METHODS = ("spline", "paper")
+
+# Sanity limits that turn absurd values into one clear error rather than a hang or a
+# MemoryError: a sheet thinner than a pixel cannot be resolved, and a scan of more than
+# 2 000 px per mm (a 12.7 um pixel) is beyond any flatbed scanner.
+_MAX_PX_PER_MM = 2000.0
+_MIN_THICKNESS_PX = 1.0
+
+
+@dataclass(frozen=True)
+class ScanScale:
+    """Resolution and sheet thickness of a scan; every mm <-> px conversion.
+
+    Parameters
+    ----------
+    px_per_mm : float
+        Scan resolution (the paper's scans: 50 px/mm).
+    thickness_mm : float
+        Sheet thickness h (the paper's polyester: 0.1 mm).
+    """
+
+    px_per_mm: float = 50.0
+    thickness_mm: float = 0.1
+
+    @property
+    def thickness_px(self) -> float:
+        """Sheet thickness h in pixels."""
+        return self.thickness_mm * self.px_per_mm
+
+    def to_px(self, length_mm):
+        """Length in mm -> px."""
+        return length_mm * self.px_per_mm
+
+    def to_mm(self, length_px):
+        """Length in px -> mm."""
+        return length_px / self.px_per_mm
+
+    def area_to_px2(self, area_mm2):
+        """Area in mm^2 -> px^2."""
+        return area_mm2 * self.px_per_mm ** 2
+
+    def area_to_mm2(self, area_px2):
+        """Area in px^2 -> mm^2."""
+        return area_px2 / self.px_per_mm ** 2
+
+
+def _opt(help_text: str, unit: str = "", *, cli: bool = True, choices=None, nargs=None,
+         metavar=None):
+    return {"help": help_text, "unit": unit, "cli": cli, "choices": choices, "nargs": nargs,
+            "metavar": metavar}
+
+
+@dataclass(frozen=True)
+class AnalysisParams:
+    """Every parameter of the analysis of one scan, validated on construction.
+
+    Lengths are in mm, areas in mm^2, pixel positions as (x, y) = (column, row). ``None``
+    means "derived" (from the scan, the sheet thickness, or measured); the value used is
+    recorded in ``summary.json``.
+    """
+
+    px_per_mm: float = field(default=50.0, metadata=_opt("scan resolution", "px/mm"))
+    thickness_mm: float = field(default=0.1, metadata=_opt("sheet thickness h", "mm"))
+    hole_radius_mm: float | None = field(default=None, metadata=_opt(
+        "hole radius R; nothing outside the hole is analysed (default: found in the scan)",
+        "mm"))
+    hole_center_px: tuple | None = field(default=None, metadata=_opt(
+        "hole centre, x = column, y = row (default: found in the scan)", "px", nargs=2,
+        metavar=("X", "Y")))
+    calibration: object = field(default=None, metadata=_opt(
+        "CSV n_layers,width_mm: width of a cut stack of n layers (default: width = n h, "
+        "with a warning)"))
+    rod_length_mm: float | None = field(default=None, metadata=_opt(
+        "known rod length L for the dimensionless energies and epsilon (default: measured "
+        "sum n_br l)", "mm"))
+    threshold_method: str = field(default="auto", metadata=_opt(
+        "ink threshold: auto (blue dominance, cut chosen from the scan), fixed (the paper's "
+        "blue >= blue_min, red and green <= rg_max) or otsu", choices=THRESHOLD_METHODS))
+    blue_min: float | None = field(default=None, metadata=_opt(
+        "fixed threshold: minimum blue, native units (default 100 for 8-bit)"))
+    rg_max: float | None = field(default=None, metadata=_opt(
+        "fixed threshold: maximum red and green, native units (default 130 for 8-bit)"))
+    s_min_mm2: float | None = field(default=None, metadata=_opt(
+        "smallest void (default (10 h)^2, the paper's)", "mm^2"))
+    l_min_mm: float = field(default=1.0, metadata=_opt(
+        "shortest branch detected; shorter skeleton spurs are pruned (paper: 1 mm)", "mm"))
+    kappa_c_per_mm: float | None = field(default=None, metadata=_opt(
+        "plastic curvature threshold of the bending energy (default: none)", "1/mm"))
+    tangent_mm: float | None = field(default=None, metadata=_opt(
+        "length of the stack-tangent fit at junctions (default 3 h)", "mm"))
+    bending_rigidity_J: float | None = field(default=None, metadata=_opt(
+        "bending rigidity B; adds total_energy_J = e B / (2 L) to the summary", "J m"))
+    smooth_px: int | None = field(default=None, metadata=_opt(
+        "sliding-average window of the centrelines (default from h)", "px"))
+    merge_px: float = field(default=2.0, metadata=_opt(
+        "junction pixels closer than this are one junction", "px"))
+    merge_thick_crossings: bool = field(default=True, metadata=_opt(
+        "merge junctions joined by a stack inside one ink blob", cli=False))
+    curvature_method: str = field(default="paper", metadata=_opt(
+        "curvature estimator: spline (smoothing chosen by the data) or paper (parabolic fits "
+        "over 5 n_br h)", choices=CURVATURE_METHODS))
+
+    # ------------------------------------------------------------------ validation
+    def __post_init__(self):
+        for f in fields(self):
+            object.__setattr__(self, f.name, check_param(f.name, getattr(self, f.name)))
+        if self.px_per_mm > _MAX_PX_PER_MM:
+            raise ParameterError(f"px_per_mm = {self.px_per_mm:g} is beyond any scanner "
+                                 f"(at most {_MAX_PX_PER_MM:g})")
+        if self.thickness_px < _MIN_THICKNESS_PX:
+            raise ParameterError(
+                f"sheet thickness h = {self.thickness_mm:g} mm is {self.thickness_px:.3g} px at "
+                f"{self.px_per_mm:g} px/mm: below one pixel it cannot be resolved (check "
+                "px_per_mm and thickness_mm)")
+        if (self.hole_center_px is None) != (self.hole_radius_mm is None) \
+                and self.hole_center_px is not None:
+            raise ParameterError("hole_center_px needs hole_radius_mm")
+
+    # ------------------------------------------------------------------ derived values
+    @property
+    def scale(self) -> ScanScale:
+        """Resolution and thickness as a :class:`ScanScale`."""
+        return ScanScale(self.px_per_mm, self.thickness_mm)
+
+    @property
+    def thickness_px(self) -> float:
+        return self.thickness_mm * self.px_per_mm
+
+    @property
+    def s_min_used_mm2(self) -> float:
+        """Smallest void: the given value or the paper's (10 h)^2."""
+        return self.s_min_mm2 if self.s_min_mm2 is not None else (10.0 * self.thickness_mm) ** 2
+
+    @property
+    def tangent_used_mm(self) -> float:
+        # 3 h: measured best of 1.5-12 h on 6 generated scenes (1-12 layers, noise, blur,
+        # JPEG): exact n_br on 100 % of the stack length, against 82-93 % at 2 h and 60-84 %
+        # with twice the median width
+        return self.tangent_mm if self.tangent_mm is not None else 3.0 * self.thickness_mm
+
+    @property
+    def hole_given(self) -> bool:
+        return self.hole_radius_mm is not None
+
+    def calibration_source(self) -> str:
+        """How the calibration was given (path, object type, or the default law)."""
+        c = self.calibration
+        if c is None:
+            return "linear n*h"
+        if isinstance(c, (str, Path)):
+            return str(c)
+        return type(c).__name__
+
+    # ------------------------------------------------------------------ constructors
+    def replace(self, **changes) -> "AnalysisParams":
+        """A copy with some fields changed (validated)."""
+        _reject_unknown(changes)
+        return dataclasses.replace(self, **changes)
+
+    @classmethod
+    def from_mapping(cls, values: dict | None = None, *, path=None, base=None,
+                     relative_to=None, **overrides) -> "AnalysisParams":
+        """Parameters from a dict (``None`` values mean the default).
+
+        Parameters
+        ----------
+        values : dict, optional
+            Field name -> value; unknown names are errors.
+        path : str or Path, optional
+            The file the values concern (an image or a parameter file): named in errors.
+        relative_to : str or Path, optional
+            A file whose folder a relative ``calibration`` path is resolved against (a
+            ``set.toml``); by default it is relative to the working directory.
+        base : AnalysisParams, optional
+            Values used where ``values`` is silent (default: the field defaults).
+        **overrides
+            More values, applied after ``values``.
+        """
+        merged = {k: v for k, v in {**(values or {}), **overrides}.items() if v is not None}
+        try:
+            _reject_unknown(merged)
+            cal = merged.get("calibration")
+            if isinstance(cal, (str, Path)) and relative_to is not None \
+                    and not Path(cal).is_absolute():
+                merged["calibration"] = str(Path(relative_to).parent / cal)
+            return dataclasses.replace(base, **merged) if base is not None else cls(**merged)
+        except FoldstatError as exc:
+            raise type(exc)(exc.cause, path if path is not None else exc.path) from None
+
+    @classmethod
+    def from_toml(cls, path, *, table: str | None = None) -> "AnalysisParams":
+        """Parameters from a TOML file (top level, or one of its tables)."""
+        path = Path(path)
+        try:
+            data = tomllib.loads(path.read_text(encoding="utf-8"))
+        except tomllib.TOMLDecodeError as exc:
+            raise ConfigError(f"invalid TOML: {exc}", path) from None
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ConfigError(f"cannot read: {exc}", path) from None
+        if table is not None:
+            data = data.get(table, {})
+        return cls.from_mapping({k: v for k, v in data.items() if k in PARAM_NAMES}, path=path,
+                                relative_to=path)
+
+    @classmethod
+    def from_cli_args(cls, args, *, path=None) -> "AnalysisParams":
+        """Parameters from ``argparse`` options added by :func:`add_analysis_arguments`."""
+        values = {name: getattr(args, name, None) for name in PARAM_NAMES}
+        if values.get("calibration"):
+            values["calibration"] = str(Path(values["calibration"]).resolve())
+        if getattr(args, "no_merge_thick_crossings", False):
+            values["merge_thick_crossings"] = False
+        return cls.from_mapping(values, path=path)
+
+    def to_dict(self) -> dict:
+        """JSON-ready parameters (for ``summary.json`` and the batch's resume hash)."""
+        out = {}
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if f.name == "calibration":
+                v = None if v is None else self.calibration_source()
+            elif isinstance(v, tuple):
+                v = list(v)
+            out[f.name] = v
+        return out
+
+    # ------------------------------------------------------------------ per image
+    def check_image(self, shape, path=None) -> None:
+        """Errors for parameters absurd against the scan's size (``shape`` = (H, W, ...)).
+
+        Raises
+        ------
+        ParameterError
+            s_min larger than the image, h not small against it, l_min beyond it, a hole
+            more than twice the scan's size.
+        """
+        h, w = int(shape[0]), int(shape[1])
+        s_min_px = self.scale.area_to_px2(self.s_min_used_mm2)
+        l_min_px = self.scale.to_px(self.l_min_mm)
+        if s_min_px >= h * w:
+            raise ParameterError(f"s_min = {self.s_min_used_mm2:g} mm^2 = {s_min_px:.0f} px is "
+                                 f"not smaller than the image ({w}x{h} px)", path)
+        if self.thickness_px >= min(h, w) / 2:
+            raise ParameterError(f"sheet thickness {self.thickness_mm:g} mm = "
+                                 f"{self.thickness_px:.1f} px is not small against the image "
+                                 f"({w}x{h} px); check px_per_mm and thickness_mm", path)
+        if l_min_px >= max(h, w):
+            raise ParameterError(f"l_min = {self.l_min_mm:g} mm = {l_min_px:.0f} px exceeds the "
+                                 f"image size ({w}x{h} px)", path)
+        if self.hole_radius_mm is not None:
+            r_px = self.scale.to_px(self.hole_radius_mm)
+            if 2 * r_px > 2 * max(h, w):
+                raise ParameterError(f"hole radius {self.hole_radius_mm:g} mm = {r_px:.0f} px: "
+                                     f"the hole is more than twice the scan ({w}x{h} px); "
+                                     "check hole_radius_mm and px_per_mm", path)
+            if self.hole_center_px is not None:
+                x, y = self.hole_center_px
+                if not (-r_px < x < w + r_px and -r_px < y < h + r_px):
+                    raise ParameterError(f"hole centre ({x:g}, {y:g}) px with radius "
+                                         f"{r_px:.0f} px does not meet the scan ({w}x{h} px)",
+                                         path)
+
+
+PARAM_NAMES = tuple(f.name for f in fields(AnalysisParams))
+
+
+def _reject_unknown(values: dict) -> None:
+    bad = [k for k in values if k not in PARAM_NAMES]
+    if bad:
+        raise ParameterError(f"unknown parameter {bad[0]!r}; known: {', '.join(PARAM_NAMES)}")
+
+
+def _number(name, value, *, minimum=0.0, allow_equal=False, integer=False):
+    if isinstance(value, bool) or not isinstance(value, (int, float)) and \
+            not hasattr(value, "__float__"):
+        raise ParameterError(f"{name} must be a number, got {value!r}")
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ParameterError(f"{name} must be a number, got {value!r}") from None
+    if not math.isfinite(v) or v < minimum or (v == minimum and not allow_equal):
+        op = ">=" if allow_equal else ">"
+        raise ParameterError(f"{name} must be a finite number {op} {minimum:g}, got {value!r}")
+    if integer:
+        if v != int(v):
+            raise ParameterError(f"{name} must be a whole number, got {value!r}")
+        return int(v)
+    return v
+
+
+# field -> checker; None values (derived) are accepted for the optional fields
+_POSITIVE = ("px_per_mm", "thickness_mm", "hole_radius_mm", "rod_length_mm", "kappa_c_per_mm",
+             "tangent_mm", "bending_rigidity_J")
+_NON_NEGATIVE = ("s_min_mm2", "l_min_mm", "merge_px", "blue_min", "rg_max")
+
+
+def check_param(name: str, value):
+    """Validate and normalise one parameter value (``ParameterError`` naming it)."""
+    if value is None:
+        if name in ("px_per_mm", "thickness_mm", "l_min_mm", "merge_px", "threshold_method",
+                    "curvature_method", "merge_thick_crossings"):
+            raise ParameterError(f"{name} is required")
+        return None
+    if name in _POSITIVE:
+        return _number(name, value)
+    if name in _NON_NEGATIVE:
+        v = _number(name, value, allow_equal=True)
+        if name == "merge_px" and v > 50:
+            raise ParameterError(f"merge_px = {v:g} px would merge distant junctions "
+                                 "(at most 50 px)")
+        return v
+    if name == "smooth_px":
+        v = _number(name, value, integer=True)
+        if v > 1000:
+            raise ParameterError(f"smooth_px = {v} is longer than any stack (at most 1000)")
+        return v
+    if name == "hole_center_px":
+        try:
+            x, y = value
+        except (TypeError, ValueError):
+            raise ParameterError(f"hole_center_px must be two numbers [x, y] in pixels, got "
+                                 f"{value!r}") from None
+        return (_number("hole_center_px x", x, minimum=-math.inf),
+                _number("hole_center_px y", y, minimum=-math.inf))
+    if name == "threshold_method":
+        return _choice(name, value, THRESHOLD_METHODS)
+    if name == "curvature_method":
+        return _choice(name, value, CURVATURE_METHODS)
+    if name == "merge_thick_crossings":
+        if not isinstance(value, bool):
+            raise ParameterError(f"{name} must be true or false, got {value!r}")
+        return value
+    if name == "calibration":
+        return _check_calibration(value)
+    raise ParameterError(f"unknown parameter {name!r}")
+
+
+def _choice(name, value, allowed):
+    if value not in allowed:
+        raise ParameterError(f"{name} must be one of {', '.join(allowed)}, got {value!r}")
+    return value
+
+
+def _check_calibration(value):
+    if isinstance(value, (str, Path)):
+        if not str(value):
+            raise ParameterError("calibration must be a file path")
+        return str(value)
+    if hasattr(value, "layers") or hasattr(value, "to_frame") or hasattr(value, "columns"):
+        return value
+    raise ParameterError(f"calibration must be a CSV path or a Calibration, got "
+                         f"{type(value).__name__}")
+
+
+def add_analysis_arguments(parser, *, exclude=()) -> None:
+    """Add one command-line option per analysis parameter (help, unit and default from the
+    fields of :class:`AnalysisParams`); every default is None so that a ``set.toml`` can
+    fill what the command line leaves out."""
+    group = parser.add_argument_group("analysis parameters")
+    for f in fields(AnalysisParams):
+        meta = f.metadata
+        if not meta.get("cli", True) or f.name in exclude:
+            continue
+        default = f.default
+        unit = f" [{meta['unit']}]" if meta.get("unit") else ""
+        shown = "" if default is None else f" (default {default})"
+        kwargs = dict(default=None, help=f"{meta['help']}{unit}{shown}".replace("%", "%%"))
+        if meta.get("choices"):
+            kwargs["choices"] = meta["choices"]
+        elif f.name == "calibration":
+            kwargs["metavar"] = "CSV"
+        elif f.name in ("smooth_px",):
+            kwargs["type"] = int
+        else:
+            kwargs["type"] = float
+        if meta.get("nargs"):
+            kwargs["nargs"] = meta["nargs"]
+            kwargs["metavar"] = meta["metavar"]
+        group.add_argument("--" + f.name.replace("_", "-"), dest=f.name, **kwargs)
+    if "merge_thick_crossings" not in exclude:
+        group.add_argument("--no-merge-thick-crossings", action="store_true",
+                           help="keep the two junctions of a crossing of thick stacks apart")

@@ -1,0 +1,205 @@
+"""Self-diagnosis: when the numbers of an analysis are doubtful, say so.
+
+Each check compares a measured quantity with a documented limit. A failed check is a
+:class:`QualityFlag` in ``summary.json`` (``quality`` block), a ``warnings.warn`` with its own
+category (a subclass of :class:`QualityWarning`) from the API, a ``warning: FILE: ...`` line on
+stderr from the command line, and the ``quality`` column of a batch's ``index.csv``.
+
+=======================  ===================================================  ====================
+code                     what is measured                                     limit
+=======================  ===================================================  ====================
+no_calibration           no width calibration given: layers from width = n h  always flagged
+low_resolution           sheet thickness h in pixels                          h < 3 px
+hole_fitted              hole found in the scan, with its confidence          confidence < 0.5
+ink_outside_hole         ink pixels outside the hole / all ink pixels         > 2 %
+junction_degree          largest junction degree (paper: degree 4 ~ 1 %)      > 6
+packing                  L h / (pi R^2): area of the rod over the hole's      > 1 (impossible)
+epsilon_ink              L h over the ink area inside the hole                outside [0.4, 2.5]
+specks                   free stacks (both ends free) shorter than 2 l_min    > 5 % of stacks
+widths_out_of_range      stacks wider than the calibration's widest entry     > 5 % of stacks
+linear_system            conservation residuals / repartitioned junctions     > 10 % of junctions
+=======================  ===================================================  ====================
+
+The ``epsilon_ink`` check uses that a rod of length L and thickness h covers about L h of ink:
+a rod length far from the ink area means the layer counts or the threshold are wrong.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+__all__ = ["QualityFlag", "QualityWarning", "CATEGORIES", "assess", "quality_block"]
+
+
+class QualityWarning(UserWarning):
+    """Base class of the warnings that say an analysis' numbers are doubtful."""
+
+
+class CalibrationWarning(QualityWarning):
+    """No width calibration, or widths beyond its range."""
+
+
+class ResolutionWarning(QualityWarning):
+    """The scan resolves the sheet thickness with too few pixels."""
+
+
+class FrameWarning(QualityWarning):
+    """The hole was found with low confidence, or ink lies outside it."""
+
+
+class NetworkWarning(QualityWarning):
+    """Implausible network: junction degrees, specks, rod length against the hole or the ink."""
+
+
+class LinearSystemWarning(QualityWarning):
+    """The layer conservation at junctions does not hold or was overridden often."""
+
+
+CATEGORIES = {
+    "no_calibration": CalibrationWarning,
+    "widths_out_of_range": CalibrationWarning,
+    "low_resolution": ResolutionWarning,
+    "hole_fitted": FrameWarning,
+    "ink_outside_hole": FrameWarning,
+    "junction_degree": NetworkWarning,
+    "packing": NetworkWarning,
+    "epsilon_ink": NetworkWarning,
+    "specks": NetworkWarning,
+    "linear_system": LinearSystemWarning,
+}
+for _name, _cls in {c.__name__: c for c in CATEGORIES.values()}.items():
+    globals()[_name] = _cls
+    __all__.append(_name)
+
+
+@dataclass(frozen=True)
+class QualityFlag:
+    """One failed check: what was measured against which limit."""
+
+    code: str
+    message: str
+    value: float | None = None
+    limit: float | None = None
+
+    @property
+    def category(self) -> type:
+        return CATEGORIES.get(self.code, QualityWarning)
+
+
+def _frac(num, den) -> float:
+    return float(num) / float(den) if den else 0.0
+
+
+def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stacks,
+           rod_length_mm, rod_measured_mm, ink_area_in_hole_mm2, calibration_max_width_mm,
+           junctions) -> list[QualityFlag]:
+    """Run every check of the module table on one analysis.
+
+    Parameters
+    ----------
+    params : AnalysisParams
+    hole : Hole
+    hole_confidence : float or None
+        Confidence of a found hole (None when given).
+    ink_outside_fraction : float
+        Ink pixels outside the hole over all ink pixels (before the frame is applied).
+    degrees : (K,) int array
+        Junction degrees.
+    stacks : DataFrame
+        The stack table (``kind``, ``length_mm``, ``width_mm``, ``junction_a/b``).
+    rod_length_mm : float
+        L used (given or measured): the packing check.
+    rod_measured_mm : float
+        ``sum n_br l`` measured on the scan: the ink-area check.
+    ink_area_in_hole_mm2 : float
+        Cleaned ink area inside the hole.
+    calibration_max_width_mm : float or None
+        Widest calibrated stack.
+    junctions : DataFrame
+        The junction table (``conservation_ok``, ``repartitioned``).
+
+    Returns
+    -------
+    list of QualityFlag
+    """
+    flags = []
+    h_px = params.thickness_px
+    if params.calibration is None:
+        flags.append(QualityFlag("no_calibration", "no width calibration: layer counts assume "
+                                 "a stack of n layers is n h wide (pass a calibration CSV)"))
+    if h_px < 3.0:
+        flags.append(QualityFlag("low_resolution", f"sheet thickness is {h_px:.2f} px (< 3 px): "
+                                 "layer counts from widths are unreliable", h_px, 3.0))
+    if hole_confidence is not None and hole_confidence < 0.5:
+        flags.append(QualityFlag("hole_fitted", f"hole found with low confidence "
+                                 f"{hole_confidence:.2f}: pass hole_radius_mm and "
+                                 "hole_center_px", hole_confidence, 0.5))
+    if ink_outside_fraction > 0.02:
+        flags.append(QualityFlag("ink_outside_hole", f"{100 * ink_outside_fraction:.1f} % of the "
+                                 "ink lies outside the hole (ignored): check the hole and the "
+                                 "threshold", ink_outside_fraction, 0.02))
+    if len(degrees) and int(np.max(degrees)) > 6:
+        flags.append(QualityFlag("junction_degree", f"a junction of degree {int(np.max(degrees))} "
+                                 "(> 6): bands merged by the threshold or the cleaning",
+                                 int(np.max(degrees)), 6))
+    flags += _rod_checks(params, hole, rod_length_mm, rod_measured_mm, ink_area_in_hole_mm2)
+    flags += _stack_checks(params, stacks, calibration_max_width_mm)
+    n_j = len(junctions)
+    if n_j:
+        bad = int((~junctions["conservation_ok"].astype(bool)).sum()
+                  + junctions["repartitioned"].astype(bool).sum())
+        if _frac(bad, n_j) > 0.10:
+            flags.append(QualityFlag("linear_system", f"{bad} of {n_j} junctions violate layer "
+                                     "conservation or were repartitioned by the widths",
+                                     _frac(bad, n_j), 0.10))
+    return flags
+
+
+def _rod_checks(params, hole, rod_length_mm, rod_measured_mm,
+                ink_area_in_hole_mm2) -> list[QualityFlag]:
+    flags = []
+    r_mm = params.scale.to_mm(hole.radius_px)
+    h = params.thickness_mm
+    if r_mm > 0 and rod_length_mm > 0:
+        packing = rod_length_mm * h / (math.pi * r_mm ** 2)
+        if packing > 1.0:
+            eps = rod_length_mm / (2 * math.pi * r_mm)
+            flags.append(QualityFlag("packing", f"epsilon = {eps:.1f} is impossible for this "
+                                     f"hole: the rod would cover {100 * packing:.0f} % of it",
+                                     packing, 1.0))
+    if ink_area_in_hole_mm2 > 0 and rod_measured_mm > 0:
+        ratio = rod_measured_mm * h / ink_area_in_hole_mm2
+        if not 0.4 <= ratio <= 2.5:
+            flags.append(QualityFlag("epsilon_ink", f"rod length L = {rod_measured_mm:.0f} mm "
+                                     f"covers {ratio:.2f}x the ink area (L h / ink area outside "
+                                     "[0.4, 2.5]): layer counts or threshold are off",
+                                     ratio, 2.5 if ratio > 1 else 0.4))
+    return flags
+
+
+def _stack_checks(params, stacks, calibration_max_width_mm) -> list[QualityFlag]:
+    flags = []
+    m = len(stacks)
+    if not m:
+        return flags
+    free = (stacks["junction_a"] < 0) & (stacks["junction_b"] < 0) & (stacks["kind"] != "loop")
+    specks = int((free & (stacks["length_mm"] < 2 * params.l_min_mm)).sum())
+    if _frac(specks, m) > 0.05:
+        flags.append(QualityFlag("specks", f"{specks} of {m} stacks are short isolated pieces "
+                                 "(specks surviving the cleaning?)", _frac(specks, m), 0.05))
+    if calibration_max_width_mm:
+        wide = int((stacks["width_mm"] > 1.05 * calibration_max_width_mm).sum())
+        if _frac(wide, m) > 0.05:
+            flags.append(QualityFlag("widths_out_of_range", f"{wide} of {m} stacks are wider "
+                                     f"than the calibration's widest entry "
+                                     f"({calibration_max_width_mm:g} mm)", _frac(wide, m),
+                                     0.05))
+    return flags
+
+
+def quality_block(flags) -> dict:
+    """The ``quality`` block of ``summary.json``."""
+    return {"ok": not flags, "codes": [f.code for f in flags],
+            "flags": [asdict(f) for f in flags]}

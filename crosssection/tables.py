@@ -1,0 +1,234 @@
+"""The per-image tables: junctions, stacks and branches in the schema of
+:mod:`crosssection.core.schema`, assembled from the stages' results.
+
+Conventions (tested in tests/crosssection/test_pipeline.py):
+
+- Stack length is the node-to-node length of the smoothed skeleton path (junction centre to
+  junction centre, so the junction blob is not lost). Branch lengths in ``branches.csv`` are
+  the same values, so that ``rod_length_mm = sum n_br * length_mm`` holds in both tables.
+- ``mid_x_px``/``mid_y_px`` is the point at half the arc length of the stack's path
+  (:func:`crosssection.core.polyline.mid_point`): scoring matches stacks by it.
+- ``junctions.csv`` reports the layer conservation residual under the geometric packs it
+  lists; the linear solve may have repartitioned a junction the widths contradict.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from crosssection.core import schema
+from crosssection.stages import branches as br
+
+__all__ = ["stack_table", "junction_table", "branch_table"]
+
+
+def _mid_points(paths) -> np.ndarray:
+    from crosssection.core.polyline import mid_point
+
+    out = np.full((len(paths), 2), np.nan)
+    for i, p in enumerate(paths):
+        if len(p):
+            out[i] = mid_point(np.asarray(p, float))
+    return out
+
+
+def _end_junctions(graph):
+    ja = np.array([u if graph.node_kind[u] == "junction" else schema.NO_JUNCTION
+                   for u, _ in graph.ends], dtype=np.int64)
+    jb = np.array([v if graph.node_kind[v] == "junction" else schema.NO_JUNCTION
+                   for _, v in graph.ends], dtype=np.int64)
+    return ja, jb
+
+
+def stack_kinds(graph) -> list[str]:
+    """``"junction"`` (both ends at junctions), ``"free_end"`` or ``"loop"`` per stack."""
+    ja, jb = _end_junctions(graph)
+    return ["loop" if graph.node_kind[u] == "loop" else
+            ("junction" if (ja[i] >= 0 and jb[i] >= 0) else "free_end")
+            for i, (u, _v) in enumerate(graph.ends)]
+
+
+def stack_table(graph, *, length_mm, width_mm, layers_est, n_br, fixed_by_width, regions,
+                profiles, stack_energy) -> pd.DataFrame:
+    """One row per stack (schema columns first, then diagnostics).
+
+    Parameters
+    ----------
+    graph : StackGraph
+    length_mm, width_mm, layers_est : (M,) float arrays
+    n_br : (M,) int array
+    fixed_by_width : (M,) bool array
+        Stacks whose count the widths fixed (linear system).
+    regions : list of str
+        ``"bulk"`` / ``"periphery"``.
+    profiles : list of CurvatureProfile
+    stack_energy : (M,) float array
+        Dimensionless bending energy of one branch of the stack.
+
+    Returns
+    -------
+    DataFrame
+    """
+    m = graph.n_stacks
+    mids = _mid_points(graph.paths)
+    ja, jb = _end_junctions(graph)
+    cols = {
+        "stack_id": np.arange(m, dtype=np.int64),
+        "junction_a": ja, "junction_b": jb,
+        "length_mm": length_mm,
+        "width_mm": width_mm,
+        "n_br": n_br,
+        "region": list(regions),
+        "mid_x_px": mids[:, 1], "mid_y_px": mids[:, 0],
+        "layers_est": layers_est,
+        "fixed_by_width": np.asarray(fixed_by_width, bool),
+        "kappa_pm": [p.kappa_pm for p in profiles],
+        "kappa_plus": [p.kappa_plus for p in profiles],
+        "kappa_m": [p.kappa_m for p in profiles],
+        "energy_per_branch": stack_energy,
+    }
+    if profiles and hasattr(profiles[0], "energy_rel_uncertainty"):
+        cols["energy_rel_uncertainty"] = [p.energy_rel_uncertainty for p in profiles]
+    cols["kind"] = stack_kinds(graph)
+    cols["n_pixels"] = [len(p) for p in graph.paths]
+    return pd.DataFrame(cols)
+
+
+def junction_table(junctions, graph, packs, n_br, linear_system) -> pd.DataFrame:
+    """One row per junction: position, degree, packs and the conservation residual.
+
+    Parameters
+    ----------
+    junctions : Junctions
+    graph : StackGraph
+    packs : dict
+        Junction node -> Pack.
+    n_br : (M,) int array
+    linear_system : LinearSystemResult
+
+    Returns
+    -------
+    DataFrame
+    """
+    k = len(junctions)
+    deg = np.array([graph.degree(j) for j in range(k)], dtype=np.int64)
+
+    def side(j, name):
+        p = packs.get(j)
+        return " ".join(f"{s}.{e}" for s, e in getattr(p, name, [])) if p else ""
+
+    def residual(j):
+        p = packs.get(j)
+        if p is None:
+            return 0
+        return int(sum(n_br[s] for s, _ in p.side_a) - sum(n_br[s] for s, _ in p.side_b))
+
+    comps = getattr(linear_system, "components", None) or []
+    repart = {int(j) for c in comps for j in getattr(c, "repartitioned_junctions", [])}
+    cons = [residual(j) for j in range(k)]
+    return pd.DataFrame({
+        "junction_id": np.arange(k, dtype=np.int64),
+        "x_px": junctions.centers_rc[:, 1] if k else np.zeros(0),
+        "y_px": junctions.centers_rc[:, 0] if k else np.zeros(0),
+        "n_stacks": deg,
+        "pack_a": [side(j, "side_a") for j in range(k)],
+        "pack_b": [side(j, "side_b") for j in range(k)],
+        "ambiguous": [bool(getattr(packs.get(j), "ambiguous", False)) for j in range(k)],
+        "reference_dependent": [bool(getattr(packs.get(j), "reference_dependent", False))
+                                for j in range(k)],
+        "conservation_residual": cons,
+        "conservation_ok": [r == 0 for r in cons],
+        "repartitioned": [j in repart for j in range(k)],
+        "n_pixels": [len(p) for p in junctions.pixels],
+    })
+
+
+def branch_table(profiles, n_br, regions, length_mm, *, rod_length_mm,
+                 kappa_c_per_mm=None) -> tuple[pd.DataFrame, np.ndarray]:
+    """Branches (``n_br`` per stack) and the energy of one branch of every stack.
+
+    Returns
+    -------
+    branches : DataFrame
+        Schema columns; ``length_mm`` is the stack's node-to-node length.
+    stack_energy : (M,) float array
+    """
+    m = len(profiles)
+    branches = br.branch_table(np.arange(m), profiles, n_br, regions,
+                               rod_length_mm=rod_length_mm, kappa_c_per_mm=kappa_c_per_mm)
+    if len(branches):
+        branches["length_mm"] = length_mm[branches["stack_id"].to_numpy()]
+    stack_energy = np.array([br.bending_energy(p.kappa_per_mm, p.s_mm,
+                                               rod_length_mm=rod_length_mm,
+                                               kappa_c_per_mm=kappa_c_per_mm)
+                             for p in profiles]) if m else np.zeros(0)
+    return schema.check_table("branches", branches), stack_energy
+
+
+def summary(*, pre, params, linear_system, junctions, stacks, branches, voids, rod_measured_mm,
+            rod_used_mm, calibration_source, timings, total_time_s, version) -> dict:
+    """The ``summary.json`` of one analysis (``schema.SUMMARY_KEYS`` first, then the
+    thresholds, cleaning, skeleton and linear-system diagnostics, parameters and image).
+
+    Parameters
+    ----------
+    pre : Preprocessed
+        Stages 1-6 (threshold, hole, masks, skeleton, graph).
+    params : AnalysisParams
+    linear_system : LinearSystemResult
+    junctions, stacks, branches, voids : DataFrame
+    rod_measured_mm, rod_used_mm : float
+        ``sum n_br l`` and the L used (given or measured).
+    calibration_source : str
+    timings : dict
+        Stage name -> seconds.
+    total_time_s : float
+    version : str
+
+    Returns
+    -------
+    dict
+    """
+    n_br = stacks["n_br"].to_numpy()
+    deg = junctions["n_stacks"].to_numpy()
+    kinds = stacks["kind"].tolist()
+    radius_mm = params.scale.to_mm(pre.hole.radius_px)
+    total_energy = float(branches["energy"].sum()) if len(branches) else 0.0
+    h, w = pre.rgb.shape[:2]
+    out = {
+        "n_junctions": int(len(junctions)),
+        "n_stacks": int(len(stacks)),
+        "n_branches": int(n_br.sum()),
+        "n_voids": int(len(voids)),
+        "mean_branches_per_stack": float(n_br.mean()) if len(n_br) else 0.0,
+        "rod_length_mm": float(rod_measured_mm),
+        "rod_length_used_mm": float(rod_used_mm),
+        "rod_length_given": params.rod_length_mm is not None,
+        "epsilon": rod_used_mm / (2.0 * np.pi * radius_mm) if radius_mm > 0 else None,
+        "total_energy": total_energy,
+        "hole": {**pre.hole.as_summary(), "fitted": bool(pre.hole.fitted),
+                 "radius_mm": float(radius_mm), "confidence": pre.hole_confidence},
+        "timings_s": {k: round(v, 6) for k, v in timings.items()},
+        "total_time_s": round(total_time_s, 6),
+        "n_junctions_by_degree": {str(int(d)): int(c) for d, c in
+                                  zip(*np.unique(deg, return_counts=True))} if len(deg) else {},
+        "n_loops": int(sum(1 for k in kinds if k == "loop")),
+        "n_free_end_stacks": int(sum(1 for k in kinds if k == "free_end")),
+        "thresholds": pre.threshold.as_summary(),
+        "cleaning": {"s_min_px": pre.s_min_px, "speck_px": pre.speck_px,
+                     "foreground_fraction": float(pre.mask_clean.mean()),
+                     "ink_outside_hole_fraction": pre.ink_outside_fraction},
+        "skeleton": {"l_min_px": pre.l_min_px, "n_pixels": int(pre.skeleton.sum()),
+                     "merged_crossing_links": int(pre.merged_links)},
+        "linear_system": linear_system.summary() if hasattr(linear_system, "summary") else {},
+        "calibration": calibration_source,
+        "parameters": {**params.to_dict(), "s_min_mm2": params.s_min_used_mm2,
+                       "tangent_mm": params.tangent_used_mm},
+        "version": version,
+        "image": {"path": pre.path, "height_px": int(h), "width_px": int(w),
+                  "dtype": str(pre.rgb.dtype)},
+    }
+    if params.bending_rigidity_J is not None and rod_used_mm > 0:
+        out["total_energy_J"] = total_energy * params.bending_rigidity_J / (2.0 * rod_used_mm
+                                                                            * 1e-3)
+    return out

@@ -1,0 +1,241 @@
+"""The scene contract: a synthetic scan with its exact truth, and its folder on disk.
+
+Both generators (``crosssection.truth.network.make_scene``, ``simulate.render``) return a
+:class:`Scene`; the scorers read scene folders back through :func:`read_scene` and
+:func:`read_scene_params`. Scene folder layout::
+
+    image.png          the scan (RGB, 8 bit)
+    params.json        px_per_mm, thickness_mm, hole_radius_mm or null, hole_center_px [x, y]
+                       or null, seed, rod_length_mm, and the generator's options
+    calibration.csv    n_layers,width_mm: the width law the bands were drawn with
+    truth/             summary.json, junctions.csv, stacks.csv, branches.csv, voids.csv
+                       (crosssection.core.schema)
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from crosssection.core import schema
+from crosssection.core.calibration import Calibration
+from crosssection.core.errors import ConfigError, ImageError
+from crosssection.core.fileio import atomic_path, write_json
+
+__all__ = ["Scene", "write_scene", "read_scene", "read_scene_params", "write_image"]
+
+#: Fewest rows of a written ``calibration.csv`` (more when the scene has thicker stacks).
+MIN_CALIBRATION_ROWS = 12
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A synthetic scan and its exact truth.
+
+    Attributes
+    ----------
+    rgb : np.ndarray or None
+        (H, W, 3) uint8 image (after the degradations); None when read without the image.
+    summary : dict
+        Truth summary with :data:`crosssection.core.schema.SUMMARY_KEYS`.
+    tables : dict of DataFrame
+        ``junctions``, ``stacks``, ``branches``, ``voids`` in the schema's columns.
+    params : dict
+        What ``params.json`` holds: everything needed to analyse and to regenerate the scene.
+    calibration : Calibration or None
+        The width law the bands were drawn with (None for a folder without
+        ``calibration.csv``).
+    paths_rc : list of np.ndarray
+        Truth centreline of every stack, (P, 2) float (row, col) in pixels, junction a -> b
+        (empty when read from a folder).
+    packs : list of (list of int, list of int)
+        Per junction, the stack ids of its two packs A | B, when the generator knows them
+        (empty otherwise).
+    ink_mask : np.ndarray, optional
+        (H, W) bool, the noise-free ink as drawn, when the generator provides it.
+    """
+
+    rgb: np.ndarray | None
+    summary: dict
+    tables: dict
+    params: dict
+    calibration: Calibration | None
+    paths_rc: list = field(default_factory=list)
+    packs: list = field(default_factory=list)
+    ink_mask: np.ndarray | None = field(default=None, repr=False)
+
+
+def write_image(rgb: np.ndarray, path) -> Path:
+    """Write an RGB array atomically (PNG/JPEG via OpenCV, TIFF via tifffile, 8 or 16 bit).
+
+    Parameters
+    ----------
+    rgb : (H, W, 3) uint8 or uint16 array
+    path : str or Path
+        ``.png`` (default for unknown suffixes), ``.jpg``/``.jpeg`` (quality 90) or
+        ``.tif``/``.tiff`` (zlib).
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    ImageError
+        Not a non-empty (H, W, 3) uint8 or uint16 array, or the file could not be written.
+    """
+    path = Path(path)
+    rgb = np.asarray(rgb)
+    if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.size == 0 \
+            or rgb.dtype not in (np.uint8, np.uint16):
+        raise ImageError(f"cannot write image: need a non-empty (H, W, 3) uint8 or uint16 "
+                         f"array, got {rgb.shape} {rgb.dtype}", path)
+    suffix = path.suffix.lower()
+    with atomic_path(path) as tmp:
+        try:
+            if suffix in (".tif", ".tiff"):
+                import tifffile
+
+                tifffile.imwrite(tmp, rgb, photometric="rgb", compression="zlib")
+                ok = True
+            else:
+                flags = ([cv2.IMWRITE_JPEG_QUALITY, 90] if suffix in (".jpg", ".jpeg")
+                         else [cv2.IMWRITE_PNG_COMPRESSION, 9])
+                ok = cv2.imwrite(str(tmp), np.ascontiguousarray(rgb[..., ::-1]), flags)
+        except (OSError, ValueError, cv2.error) as exc:
+            raise ImageError(f"cannot write image ({type(exc).__name__})", path) from None
+        if not ok:
+            raise ImageError("cannot write image", path)
+    return path
+
+
+def write_scene(scene: Scene, folder, *, image_name: str = "image.png") -> Path:
+    """Write a scene folder: the image, ``params.json``, ``calibration.csv``, ``truth/``.
+
+    Parameters
+    ----------
+    scene : Scene
+    folder : str or Path
+        Created if needed.
+    image_name : str
+        File name of the image (``.png``, ``.jpg`` or ``.tif``; PNG by default).
+
+    Returns
+    -------
+    Path
+        The folder.
+
+    Raises
+    ------
+    ImageError
+        The image could not be written.
+    """
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    write_image(scene.rgb, folder / image_name)
+    stacks = scene.tables["stacks"]
+    n_rows = max(MIN_CALIBRATION_ROWS, int(stacks["n_br"].max()) + 3 if len(stacks) else 0)
+    scene.calibration.to_csv(folder / "calibration.csv", n_rows)
+    write_json(folder / "params.json", scene.params)
+    schema.write_tables(folder / "truth", scene.summary, scene.tables)
+    return folder
+
+
+def _check_number(params: dict, key: str, path, *, required: bool) -> None:
+    value = params.get(key)
+    if value is None:
+        if required:
+            raise ConfigError(f"lacks {key}", path)
+        return
+    if isinstance(value, bool) or not isinstance(value, (int, float)) \
+            or not math.isfinite(value) or value <= 0:
+        raise ConfigError(f"{key} must be a positive number, got {value!r}", path)
+
+
+def read_scene_params(folder) -> dict:
+    """Read and check a scene folder's ``params.json``.
+
+    Parameters
+    ----------
+    folder : str or Path
+        The scene folder.
+
+    Returns
+    -------
+    dict
+        The parameters as written: ``px_per_mm`` and ``thickness_mm`` (positive),
+        ``hole_radius_mm`` (positive or None), ``hole_center_px`` ([x, y] or None), and the
+        generator's other entries.
+
+    Raises
+    ------
+    ConfigError
+        Missing or malformed file, or a missing or invalid entry; the message names the file.
+    """
+    path = Path(folder) / "params.json"
+    try:
+        params = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise ConfigError("file not found", path) from None
+    except OSError as exc:
+        raise ConfigError(f"cannot read ({exc.strerror or type(exc).__name__})", path) from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"malformed JSON ({getattr(exc, 'msg', exc)})", path) from None
+    if not isinstance(params, dict):
+        raise ConfigError("must hold a JSON object", path)
+    _check_number(params, "px_per_mm", path, required=True)
+    _check_number(params, "thickness_mm", path, required=True)
+    _check_number(params, "hole_radius_mm", path, required=False)
+    centre = params.get("hole_center_px")
+    if centre is not None and not (
+            isinstance(centre, list) and len(centre) == 2
+            and all(isinstance(c, (int, float)) and math.isfinite(c) for c in centre)):
+        raise ConfigError(f"hole_center_px must be [x, y] or null, got {centre!r}", path)
+    return params
+
+
+def read_scene(folder, *, image_name: str | None = None, image: bool = True) -> Scene:
+    """Read a scene folder written by :func:`write_scene`.
+
+    Parameters
+    ----------
+    folder : str or Path
+    image_name : str, optional
+        File name of the image; default ``params["image"]`` if present, else ``image.png``.
+    image : bool
+        Read the image (``Scene.rgb`` is None otherwise).
+
+    Returns
+    -------
+    Scene
+        Without ``paths_rc``, ``packs`` and ``ink_mask`` (not stored in the folder);
+        ``calibration`` is None when the folder has no ``calibration.csv``.
+
+    Raises
+    ------
+    ConfigError
+        Missing or malformed ``params.json`` or ``truth/``, malformed ``calibration.csv``.
+    ImageError
+        Missing or unreadable image.
+    """
+    from crosssection.stages.load import load_image
+
+    folder = Path(folder)
+    params = read_scene_params(folder)
+    truth = folder / "truth"
+    if not (truth / "summary.json").exists():
+        raise ConfigError("no truth/summary.json (not a scene folder)", folder)
+    try:
+        summary, tables = schema.read_tables(truth)
+    except (OSError, ValueError) as exc:
+        raise ConfigError(f"unreadable truth tables ({type(exc).__name__})", truth) from None
+    cal_path = folder / "calibration.csv"
+    calibration = Calibration.from_csv(cal_path) if cal_path.exists() else None
+    rgb = None
+    if image:
+        rgb = load_image(folder / (image_name or params.get("image") or "image.png"))
+    return Scene(rgb, summary, tables, params, calibration)

@@ -1,0 +1,40 @@
+"""Width error model and its scale measured on the data."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from crosssection.linsys import estimate_noise_scale
+from crosssection.linsys.noise import width_weights
+
+
+@pytest.mark.parametrize("sigma", [0.03, 0.1, 0.6])
+def test_noise_scale_follows_the_data(sigma):
+    rng = np.random.default_rng(int(sigma * 100))
+    n = rng.integers(1, 5, 400)
+    e = n + rng.normal(0, sigma, 400)
+    s_model = np.full(400, 0.3)
+    k = estimate_noise_scale(e, s_model)
+    if sigma < 0.2:
+        assert k == pytest.approx(max(sigma / 0.3, 0.25), rel=0.25)
+    else:
+        assert k > 0.8  # half-layer errors never make the model more confident
+    assert estimate_noise_scale(e[:3], s_model[:3]) == 1.0
+
+
+def test_width_weights_model():
+    e = np.array([1.0, 3.0, np.nan, 5.0])
+    wts = width_weights(e, reliability=np.array([1.0, 2.0, 1.0, np.nan]), noise_scale=0.5)
+    np.testing.assert_allclose(wts.sigma, 0.5 * np.array([0.3, 0.4, 0.3, 0.5]))
+    np.testing.assert_allclose(wts.weights, [1 / 0.15 ** 2, 2 / 0.2 ** 2, 0, 0])
+    np.testing.assert_array_equal(wts.layers, [1, 3, 1, 5])
+    assert np.all(wts.weights_eff > 0)
+    assert wts.weights_eff[2] == pytest.approx(1e-6 * wts.weights.max())
+    assert wts.noise_scale == 0.5
+
+
+def test_width_weights_rejects_bad_arguments():
+    with pytest.raises(ValueError, match="noise_scale"):
+        width_weights(np.ones(3), noise_scale="fast")
+    with pytest.raises(ValueError, match="reliability"):
+        width_weights(np.ones(3), reliability=np.ones(2))

@@ -1,0 +1,83 @@
+"""The scan's frame (crosssection.stages.hole: find_hole, frame_mask, check_hole) on generated
+scans with a plate, a shadow rim, ink touching the wall, and without plate."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from crosssection.core.errors import ParameterError
+from crosssection.stages.hole import Hole, check_hole, find_hole, frame_mask
+from crosssection.stages.threshold import threshold_rgb
+from crosssection.truth.backdrop import apply_backdrop
+from crosssection.truth.network import make_scene
+
+PAPER_RGB = (246, 245, 240)
+
+
+@pytest.fixture(scope="module")
+def scene():
+    sc = make_scene(seed=21, n_stacks=25, max_layers=5, receding_fraction=0.6, noise_sigma=4)
+    c = np.array(sc.params["hole_center_px"][::-1])
+    R = sc.params["hole_radius_mm"] * sc.params["px_per_mm"]
+    return sc, c, R
+
+
+def _leave_wall(rgb, c, R):
+    """The rod leaves the wall on a quarter of the circle: paper instead of the wall ink."""
+    out = rgb.copy()
+    rr, cc = np.mgrid[:rgb.shape[0], :rgb.shape[1]]
+    a = np.arctan2(rr - c[0], cc - c[1])
+    out[(a > 0.3) & (a < 1.9) & (np.hypot(rr - c[0], cc - c[1]) > R - 25)] = PAPER_RGB
+    return out
+
+
+@pytest.mark.parametrize("plate,rim,gap", [("grey", 0, False), ("dark", 2, False),
+                                           ("coloured", 0, True), ("bluish", 3, True),
+                                           ("beige", 1, True)])
+def test_find_hole_with_plate(scene, plate, rim, gap):
+    sc, c, R = scene
+    base = _leave_wall(sc.rgb, c, R) if gap else sc.rgb
+    ink = threshold_rgb(base, method="fixed").mask
+    img = apply_backdrop(base, ink_mask=ink, hole_center_rc=c, hole_radius_px=R,
+                         rng=np.random.default_rng(len(plate)), plate=plate, rim_px=rim,
+                         illumination=0.15, cast=0.06)
+    hole = find_hole(img, threshold_rgb(img).mask)
+    # measured: centre within 0.8 px, radius within 0.2 px (the generator's pixel grid is
+    # offset by 3/8 px from pixel centres)
+    assert np.hypot(*(hole.center_rc - c)) < 1.5
+    assert abs(hole.radius_px - R) < 1.5
+    assert hole.fitted and hole.confidence > 0.9 and "plate" in hole.reason
+
+
+def test_without_plate_the_ink_envelope(scene):
+    sc, c, R = scene
+    full = find_hole(sc.rgb, threshold_rgb(sc.rgb).mask)
+    assert np.hypot(*(full.center_rc - c)) < 1.5 and abs(full.radius_px - R) < 1.5
+    assert full.confidence > 0.95 and "envelope" in full.reason
+    gap = _leave_wall(sc.rgb, c, R)
+    part = find_hole(gap, threshold_rgb(gap).mask)
+    assert np.hypot(*(part.center_rc - c)) < 1.5 and abs(part.radius_px - R) < 1.5
+    # ink reaches the circle on about 3/4 of it: a lower confidence
+    assert 0.6 < part.confidence < 0.85
+
+
+def test_frame_mask_area_and_margin():
+    hole = Hole(np.array([40.0, 55.0]), 30.0, False)
+    m0 = frame_mask((100, 120), hole, margin_px=0.0)
+    m2 = frame_mask((100, 120, 3), hole)
+    assert m0.shape == (100, 120) and m0.dtype == bool
+    assert abs(m0.sum() - np.pi * 30 ** 2) < 0.01 * np.pi * 30 ** 2
+    assert abs(m2.sum() - np.pi * 32 ** 2) < 0.01 * np.pi * 32 ** 2
+    assert m0[40, 55] and not m0[40, 86] and m2[40, 86]
+
+
+def test_absurd_holes_raise():
+    check_hole((850, 850), (425, 425), 800)                      # large but possible
+    with pytest.raises(ParameterError, match="twice"):
+        check_hole((850, 850), (425, 425), 50_000)                # 1000 mm at 50 px/mm
+    with pytest.raises(ParameterError, match="overlap"):
+        frame_mask((100, 100), Hole(np.array([500.0, 500.0]), 50.0, False))
+    with pytest.raises(ParameterError):
+        check_hole((100, 100), None, -3)
+    with pytest.raises(ParameterError):
+        check_hole((100, 100), (np.nan, 3), 10)

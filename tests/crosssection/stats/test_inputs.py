@@ -1,0 +1,70 @@
+"""Edge inputs of the ``stats`` subcommand: scans without voids, empty ensembles."""
+import argparse
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from crosssection.core.errors import ConfigError
+from crosssection.core.schema import write_tables
+from crosssection.stats import cli, demo
+
+
+def _run(argv):
+    p = argparse.ArgumentParser()
+    sub = p.add_subparsers(dest="command", required=True)
+    cli.add_subparser(sub)
+    args = p.parse_args(["stats", *argv])
+    return args.func(args)
+
+
+def _voidless_batch(root, rng, n_images=3):
+    """A batch output whose scans have branches and stacks but no void at all."""
+    for i in range(n_images):
+        summary, tables = demo.demo_image_tables(rng, n_stacks=20)
+        tables["voids"] = tables["voids"].iloc[:0]
+        summary["n_voids"] = 0
+        write_tables(root / "setA" / f"img{i}", summary, tables)
+    return root
+
+
+def test_stats_on_scans_without_voids(tmp_path):
+    b = _voidless_batch(tmp_path / "b", np.random.default_rng(4))
+    out = tmp_path / "rep"
+    assert _run([str(b), "--out", str(out), "--n-boot", "5", "--no-gof"]) == 0
+    macro = pd.read_csv(out / "macro.csv").set_index("region")
+    assert macro.loc["all", "n_voids"] == 0
+    assert np.isnan(macro.loc["all", "s_L2"])
+    pc = pd.read_csv(out / "per_config.csv")
+    assert len(pc) == 3 and pc["sqrt_s_bar"].isna().all()
+    fits = pd.read_csv(out / "fits.csv")
+    assert "length_L" in set(fits["quantity"]) and "area_L2" not in set(fits["quantity"])
+    assert (out / "report.html").is_file()
+
+
+def test_stats_on_a_single_scan_without_voids(tmp_path):
+    rng = np.random.default_rng(5)
+    summary, tables = demo.demo_image_tables(rng, n_stacks=15)
+    tables["voids"] = None  # written as a header-only table
+    summary["n_voids"] = 0
+    write_tables(tmp_path / "scan", summary, tables)
+    assert _run([str(tmp_path / "scan"), "--out", str(tmp_path / "rep"), "--n-boot", "0",
+                 "--no-gof", "--no-figures"]) == 0
+    assert pd.read_csv(tmp_path / "rep" / "macro.csv")["n_voids"].eq(0).all()
+
+
+def test_header_only_configs_is_a_one_line_error(tmp_path):
+    s = demo.write_demo_simulation(tmp_path / "sim", n_configs=3, seed=0)
+    (s / "configs.csv").write_text((s / "configs.csv").read_text().splitlines()[0] + "\n")
+    with pytest.raises(ConfigError) as err:
+        _run([str(s), "--out", str(tmp_path / "rep")])
+    msg = err.value.one_line()
+    assert "configs.csv" in msg and "\n" not in msg
+    assert not (tmp_path / "rep").exists()
+
+
+def test_empty_configs_file_is_a_one_line_error(tmp_path):
+    s = demo.write_demo_simulation(tmp_path / "sim", n_configs=3, seed=0)
+    (s / "configs.csv").write_text("")
+    with pytest.raises(ConfigError, match="configs.csv"):
+        _run([str(s), "--out", str(tmp_path / "rep")])
