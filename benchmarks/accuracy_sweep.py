@@ -21,7 +21,8 @@ import pandas as pd
 
 from crosssection.core.parallel import spawn_seeds
 from crosssection.truth.scoring import analyze_scene_folder, meets_targets, score
-from crosssection.truth.network import make_scene, write_scene
+from crosssection.truth.network import make_scene
+from crosssection.truth.scene import write_scene
 
 CONDITIONS = [
     ("n20-L12-clean", dict(n_stacks=20, max_layers=12, mean_layers=5.0)),

@@ -22,7 +22,7 @@ from crosssection.truth.scoring import analyze_scene_folder, score
 
 __all__ = ["validate_scenes", "score_scene", "add_subparser"]
 
-# the columns the issue asks for, first in scores.csv (crosssection.truth.scoring names)
+# the headline scores, first in scores.csv (crosssection.truth.scoring names)
 KEY_COLUMNS = ["scene", "rod_length_rel_error", "n_branches_rel_error", "junction_precision",
                "junction_recall", "n_br_exact_length_fraction", "n_voids_rel_error",
                "void_area_mean_rel_error", "total_energy_rel_error"]

@@ -25,7 +25,8 @@ def scene_folder(tmp_path_factory):
 
     30 stacks of 1-4 layers, clean (seed 31).
     """
-    from crosssection.truth.network import make_scene, write_scene
+    from crosssection.truth.network import make_scene
+    from crosssection.truth.scene import write_scene
 
     scene = make_scene(seed=31, n_stacks=30, max_layers=4)
     folder = tmp_path_factory.mktemp("scene")

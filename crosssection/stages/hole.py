@@ -289,7 +289,7 @@ def _wall_points(rgb, ink_mask, c0, r0, n_rays):
     H, W = ink_mask.shape
     img = cv2.blur(rgb.astype(np.float32), (3, 3))
     ang = np.linspace(-np.pi, np.pi, n_rays, endpoint=False)
-    rad = np.arange(0.7 * r0, 1.2 * r0 + 10.0, 0.5)
+    rad = np.arange(0.7 * r0, 1.2 * r0 + 10.0, 1.0)
     rr = c0[0] + np.sin(ang)[:, None] * rad[None, :]
     cc = c0[1] + np.cos(ang)[:, None] * rad[None, :]
     valid = (rr >= 0) & (rr <= H - 1) & (cc >= 0) & (cc <= W - 1)
@@ -312,8 +312,11 @@ def _wall_points(rgb, ink_mask, c0, r0, n_rays):
         plate = np.median(col[rays][outer[rays]], axis=0)
         axis = plate - paper
         spread = np.median(np.abs(col[rays][outer[rays]] - plate), axis=0)
-        # a plate only when it differs from the paper well beyond its own texture
-        if np.linalg.norm(axis) < max(25.0, 6.0 * np.linalg.norm(spread)):
+        # a plate only when it differs from the paper well beyond its own texture, and is
+        # darker: a brighter "outside" is the paper itself around a rod whose inside is
+        # receding surface (a scan without plate, the hole larger than the rod)
+        if np.linalg.norm(axis) < max(25.0, 6.0 * np.linalg.norm(spread)) \
+                or plate.sum() >= paper.sum():
             continue
         proj = (col[rays] - paper) @ axis / (axis @ axis)
         proj[ink[rays]] = 0.0
@@ -370,7 +373,9 @@ def find_hole(rgb, ink_mask, *, min_confidence: float = 0.5, path=None) -> Hole:
         ink = lab == 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
     env = fit_hole(ink, path=path)
     env_conf = _envelope_confidence(ink, env)
-    n_rays = int(np.clip(np.pi * env.radius_px, 90, 1440))
+    # one ray per ~2.5 degrees at most: 720 wall points fit a circle to a tenth of a pixel,
+    # and the cost of the ray sampling grows with their number
+    n_rays = int(np.clip(np.pi * env.radius_px, 90, 720))
     pts = _wall_points(np.asarray(rgb), ink, env.center_rc, env.radius_px, n_rays)
     plate_conf = 0.0
     if len(pts) >= 0.2 * n_rays:
@@ -390,7 +395,12 @@ def find_hole(rgb, ink_mask, *, min_confidence: float = 0.5, path=None) -> Hole:
         return Hole(np.array([y, x], np.float64), float(r) + 1.0, True, 0.0,
                     f"{why}, and the ink's envelope is not a circle: smallest circle around "
                     "the ink")
-    return Hole(env.center_rc, env.radius_px, True, env_conf,
+    # without a plate nothing marks the wall: the frame must not cut the rod, so the circle
+    # grows to hold all of its largest ink component (a rod pressed on the wall is unchanged)
+    pts = np.argwhere(ink)
+    reach = float(np.sqrt(((pts - env.center_rc) ** 2).sum(axis=1).max())) + 1.0 if len(pts) \
+        else env.radius_px
+    return Hole(env.center_rc, max(env.radius_px, reach), True, env_conf,
                 f"{why}: ink envelope, ink reaches it on {100 * env_conf:.0f} % of the circle")
 
 

@@ -116,6 +116,17 @@ def _upper_gamma_small_z(s, z, n_terms=40):
     return np.log(math.exp(_upper_gamma_cf_scalar(s, _SPLIT)) + total)
 
 
+def _small_z_scalar(s: float, z: float, n_terms=40) -> float:
+    """Scalar :func:`_upper_gamma_small_z` in plain floats."""
+    lr = math.log(z / _SPLIT)
+    total, term = 0.0, _SPLIT ** s
+    for k in range(n_terms):
+        t = (s + k) * lr
+        total += term * (-lr) * (math.expm1(t) / t if t else 1.0)
+        term *= -_SPLIT / (k + 1)
+    return math.log(math.exp(_upper_gamma_cf_scalar(s, _SPLIT)) + total)
+
+
 def log_upper_gamma(s: float, z):
     """ln Gamma(s, z), the (non-regularised) upper incomplete Gamma, for real s and z > 0.
 
@@ -131,11 +142,12 @@ def log_upper_gamma(s: float, z):
         if np.any(bad):  # deep tail
             out[bad] = stats.gamma.logsf(z[bad], s) + special.gammaln(s)
         return out
+    if z.size <= 16:  # a few cuts: plain floats beat numpy's per-call overhead
+        return np.array([_upper_gamma_cf_scalar(s, v) if v >= _SPLIT
+                         else _small_z_scalar(s, v) for v in z.tolist()])
     out = np.empty_like(z)
     big = z >= _SPLIT
-    if np.count_nonzero(big) <= 16:  # a few cuts: plain floats beat numpy's call overhead
-        out[big] = [_upper_gamma_cf_scalar(s, v) for v in z[big]]
-    else:
+    if np.any(big):
         out[big] = _upper_gamma_cf(s, z[big])
     if np.any(~big):
         out[~big] = _upper_gamma_small_z(s, z[~big])

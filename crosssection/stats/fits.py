@@ -281,7 +281,7 @@ def bootstrap_ci(x, family: str, *, truncation=None, n_boot: int = 200, seed=0,
     rng = np.random.default_rng(seed)
     names = fam.param_names
     draws = np.full((n_boot, len(names)), np.nan)
-    theta_hat = fam.fit(x, c)[0] if c is not None else None
+    theta_hat = fam.fit(x, c)[0]  # warm start of the numerical refits
     for b in range(n_boot):
         idx = rng.integers(0, x.size, x.size)
         xb = x[idx]

@@ -57,11 +57,10 @@ from crosssection.core import polyline
 from crosssection.core.calibration import Calibration
 from crosssection.core.errors import ParameterError
 from crosssection.truth import degrade, ink
-from crosssection.truth.scene import Scene, write_scene
+from crosssection.truth.scene import Scene
 from crosssection.truth.voids import truth_voids
 
-# write_scene is the scene contract's writer, exported here beside the generator it writes
-__all__ = ["SceneGenerationError", "make_scene", "write_scene"]
+__all__ = ["SceneGenerationError", "make_scene"]
 
 SUPERSAMPLE = 4  # rendering resolution factor (anti-aliasing and void truth)
 

@@ -16,7 +16,7 @@ from crosssection import analyze
 from crosssection.core import schema
 from crosssection.cli import main
 from crosssection.core.errors import AnalysisError, ParameterError
-from crosssection.truth.network import make_scene, write_scene
+from crosssection.truth.network import make_scene
 
 
 @pytest.fixture

@@ -175,7 +175,8 @@ def test_stages_7_8_9_on_rendered_y(ns, seed):
     from crosssection.stages.junctions import find_junctions
     from crosssection.linsys import solve_branch_counts
     from crosssection.stages.skeleton import skeletonize_mask
-    from crosssection.stages.widths import Calibration, stack_widths
+    from crosssection.core.calibration import Calibration
+    from crosssection.stages.widths import stack_widths
 
     trunk, left, right = ns
     mask, rot = _render_y(trunk, left, right, seed=seed)

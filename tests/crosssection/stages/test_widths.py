@@ -9,7 +9,8 @@ from skimage.draw import circle_perimeter, line
 from skimage.morphology import skeletonize
 
 from crosssection.core.errors import ConfigError
-from crosssection.stages.widths import Calibration, path_width_profile_px, stack_widths, stack_widths_px
+from crosssection.core.calibration import Calibration
+from crosssection.stages.widths import path_width_profile_px, stack_widths, stack_widths_px
 from crosssection.truth.graphs import NetworkGraph
 
 

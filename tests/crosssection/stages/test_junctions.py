@@ -1,0 +1,121 @@
+"""Junction placement at thick forks and crossings (stages 5-6 with the fork refinement)."""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from crosssection.stages.clean import clean_mask
+from crosssection.stages.graph import stack_graph
+from crosssection.stages.junctions import fork_points
+from crosssection.stages.skeleton import skeletonize_mask
+from crosssection.stages.threshold import threshold_rgb
+
+
+def _bands(shape, bands):
+    """Binary mask of straight bands ((r0, c0), (r1, c1), width_px) drawn at 1/16 px."""
+    m = np.zeros(shape, np.uint8)
+    for p0, p1, w in bands:
+        pts = (np.array([p0, p1], float)[:, ::-1] * 16).round().astype(np.int32)
+        cv2.polylines(m, [pts.reshape(-1, 1, 2)], False, 1, thickness=int(round(w)),
+                      lineType=cv2.LINE_8, shift=4)
+    return m.astype(bool)
+
+
+def _graph(mask, h_px, refine=True):
+    skel = skeletonize_mask(mask, l_min_px=10 * h_px)
+    dist = cv2.distanceTransform(mask.view(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    return stack_graph(skel, dist, thickness_px=h_px if refine else None)
+
+
+@pytest.mark.parametrize("n_trunk", [8, 16, 25])
+def test_thick_t_junction_placed_at_centreline_meeting(n_trunk):
+    # a thick trunk continuing as n_trunk - 1 layers while one sheet leaves at a right angle:
+    # the skeleton forks off the centreline meeting point, the refined junction does not
+    h = 5.0
+    w_trunk = h * (n_trunk + 0.4 * np.sqrt(n_trunk))
+    w_cont = h * (n_trunk - 1 + 0.4 * np.sqrt(n_trunk - 1))
+    w_one = 1.4 * h
+    size = 600
+    node = np.array([300.0, 300.0])
+    mask = _bands((size, size), [((300, 20), (300, 300), w_trunk),
+                                 ((300, 300), (300, 580), w_cont),
+                                 ((300, 300), (20, 300), w_one)])
+    junc, sg, _ = _graph(mask, h)
+    assert len(junc) == 1
+    d = np.hypot(*(junc.centers_rc - node).T).min()
+    assert d <= 3 * h
+    assert sg.degree(0) == 3
+
+
+def test_degree4_crossing_kept_and_centred():
+    h = 5.0
+    w = h * 12
+    mask = _bands((500, 500), [((250, 10), (250, 490), w), ((10, 200), (490, 300), w * 0.8)])
+    junc, sg, merged = _graph(mask, h)
+    assert len(junc) == 1 and sg.degree(0) == 4
+    cross = np.array([250.0, 250.0])
+    assert np.hypot(*(junc.centers_rc[0] - cross)) <= 3 * h
+
+
+def test_fork_points_lines_and_fallbacks():
+    # three lines through (50, 50): the least-squares point is that point
+    ang = np.radians([0, 120, 240])
+    paths = [np.round(np.array([50 + t * np.sin(a), 50 + t * np.cos(a)]).T[None, :] *
+                      1).astype(int)[0] for a in ang for t in [np.arange(0, 40)]]
+    paths = [np.column_stack([np.round(50 + np.arange(40) * np.sin(a)),
+                              np.round(50 + np.arange(40) * np.cos(a))]).astype(int)
+             for a in ang]
+    out = fork_points(np.array([[46.0, 47.0]]), np.array([4.0]), paths, [0, 0, 0],
+                      thickness_px=2.0)
+    assert np.hypot(*(out[0] - 50)) < 1.0
+    # a single line cannot place a junction: unchanged
+    out = fork_points(np.array([[46.0, 47.0]]), np.array([4.0]), paths[:1], [0],
+                      thickness_px=2.0)
+    np.testing.assert_allclose(out[0], [46.0, 47.0])
+
+
+@pytest.fixture(scope="module")
+def thick_scene():
+    from crosssection.truth.network import make_scene
+
+    return make_scene(seed=3, n_stacks=40, max_layers=25, mean_layers=8, px_per_mm=50.0,
+                      noise_sigma=5.0, blur_px=1.0)
+
+
+def _match(out_rc, truth_rc, radius):
+    from crosssection.truth.scoring import match_points
+
+    r, _ = match_points(out_rc[:, ::-1], truth_rc[:, ::-1], radius)
+    return len(r)
+
+
+def test_generated_thick_trunks_junctions_within_3h(thick_scene):
+    # trunks of 8-25 layers (mean 8): every junction within 3 h of the truth, no extra one
+    sc = thick_scene
+    h = 0.1 * sc.params["px_per_mm"]
+    mask = clean_mask(threshold_rgb(sc.rgb).mask, s_min_px=(10 * h) ** 2, speck_px=10 * h * h)
+    truth = sc.tables["junctions"][["y_px", "x_px"]].to_numpy(float)
+    junc, sg, _ = _graph(mask, h)
+    matched = _match(junc.centers_rc, truth, 3 * h)
+    f1 = 2 * matched / (len(junc) + len(truth))
+    assert f1 >= 0.95
+    assert abs(len(junc) - len(truth)) <= 1
+    # the skeleton's own forks are measurably worse on the same scan
+    junc0, _, _ = _graph(mask, h, refine=False)
+    assert matched >= _match(junc0.centers_rc, truth, 3 * h)
+
+
+def test_low_resolution_junction_counts():
+    # h = 2.5 px (25 px/mm): junction count and placement of a 60-stack network
+    from crosssection.truth.network import make_scene
+
+    sc = make_scene(seed=5, n_stacks=60, max_layers=10, px_per_mm=25.0, noise_sigma=5.0,
+                    blur_px=1.0, specks=20)
+    h = 2.5
+    mask = clean_mask(threshold_rgb(sc.rgb).mask, s_min_px=(10 * h) ** 2, speck_px=10 * h * h,
+                      min_extent_px=10 * h)
+    truth = sc.tables["junctions"][["y_px", "x_px"]].to_numpy(float)
+    junc, _, _ = _graph(mask, h)
+    matched = _match(junc.centers_rc, truth, 3 * h)
+    assert 2 * matched / (len(junc) + len(truth)) >= 0.95

@@ -1,0 +1,168 @@
+"""Self-diagnosis: every quality check is triggered by a scan made to fail it, and stays quiet
+on a clean scan with everything given."""
+from __future__ import annotations
+
+import subprocess
+import sys
+import warnings
+
+import numpy as np
+import pytest
+
+import crosssection
+from crosssection import quality
+from crosssection.core.errors import ParameterError
+from crosssection.truth.backdrop import apply_backdrop
+from crosssection.truth.network import make_scene
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return make_scene(seed=21, n_stacks=30, max_layers=4)
+
+
+def _given(scene, **extra):
+    p = scene.params
+    kw = dict(px_per_mm=p["px_per_mm"], thickness_mm=p["thickness_mm"],
+              calibration=scene.calibration, hole_radius_mm=p["hole_radius_mm"],
+              hole_center_px=tuple(p["hole_center_px"]))
+    kw.update(extra)
+    return kw
+
+
+def _analyze(rgb, **kw):
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = crosssection.analyze(rgb, **kw)
+    return res, [w for w in caught if issubclass(w.category, quality.QualityWarning)]
+
+
+def test_clean_scan_with_everything_given_has_no_flag(scene):
+    res, caught = _analyze(scene.rgb, **_given(scene))
+    assert res.summary["quality"] == {"ok": True, "codes": [], "flags": []}
+    assert caught == []
+
+
+def test_no_calibration_is_flagged(scene):
+    kw = _given(scene)
+    kw.pop("calibration")
+    res, caught = _analyze(scene.rgb, **kw)
+    assert "no_calibration" in res.summary["quality"]["codes"]
+    assert any(w.category is quality.CalibrationWarning for w in caught)
+
+
+def test_low_resolution_is_flagged():
+    sc = make_scene(seed=4, n_stacks=20, max_layers=3, px_per_mm=25.0)
+    res, caught = _analyze(sc.rgb, **_given(sc))
+    assert "low_resolution" in res.summary["quality"]["codes"]
+    flag = next(f for f in res.quality if f.code == "low_resolution")
+    assert flag.value == pytest.approx(2.5) and flag.limit == 3.0
+    assert any(w.category is quality.ResolutionWarning for w in caught)
+
+
+def test_ink_outside_the_given_hole_is_flagged(scene):
+    # a hole smaller than the rod: the wall stacks and more lie outside it
+    kw = _given(scene, hole_radius_mm=0.7 * scene.params["hole_radius_mm"])
+    res, caught = _analyze(scene.rgb, **kw)
+    assert "ink_outside_hole" in res.summary["quality"]["codes"]
+    assert res.summary["cleaning"]["ink_outside_hole_fraction"] > 0.02
+
+
+def test_implausible_epsilon_is_flagged(scene):
+    # a known rod length the hole cannot hold: L h > pi R^2
+    r = scene.params["hole_radius_mm"]
+    res, _ = _analyze(scene.rgb, **_given(scene, rod_length_mm=2 * np.pi * r * r / 0.1))
+    assert "packing" in res.summary["quality"]["codes"]
+
+
+def test_wrong_scale_is_flagged_by_the_ink_area(scene):
+    # a calibration twice too narrow doubles every layer count: L h no longer matches the ink
+    cal = scene.calibration.to_frame()
+    cal["width_mm"] = cal["width_mm"] / 3.0
+    res, _ = _analyze(scene.rgb, **_given(scene, calibration=cal))
+    codes = res.summary["quality"]["codes"]
+    assert "epsilon_ink" in codes or "widths_out_of_range" in codes
+
+
+def test_widths_beyond_the_calibration_are_flagged(scene):
+    cal = scene.calibration.to_frame().iloc[:1]  # calibrated on single layers only
+    res, _ = _analyze(scene.rgb, **_given(scene, calibration=cal))
+    assert "widths_out_of_range" in res.summary["quality"]["codes"]
+
+
+def test_specks_surviving_cleaning_are_flagged(scene):
+    rgb = scene.rgb.copy()
+    rng = np.random.default_rng(3)
+    cy, cx = scene.params["hole_center_px"][1], scene.params["hole_center_px"][0]
+    r = scene.params["hole_radius_mm"] * scene.params["px_per_mm"]
+    for _ in range(40):  # short dark strokes longer than the speck filter, inside the hole
+        a, d = rng.uniform(0, 2 * np.pi), rng.uniform(0, 0.8 * r)
+        y, x = int(cy + d * np.sin(a)), int(cx + d * np.cos(a))
+        rgb[y:y + 3, x:x + 70] = (40, 70, 190)
+    res, _ = _analyze(rgb, **_given(scene, s_min_mm2=0.0))
+    assert "specks" in res.summary["quality"]["codes"]
+
+
+def test_junction_degree_is_flagged():
+    # a star of 8 thick rays meeting at one point: a junction of degree 8
+    import cv2
+
+    img = np.full((400, 400, 3), 245, np.uint8)
+    for k in range(8):
+        a = k * np.pi / 4
+        cv2.line(img, (200, 200), (int(200 + 170 * np.cos(a)), int(200 + 170 * np.sin(a))),
+                 (40, 70, 190), 6)
+    cv2.circle(img, (200, 200), 185, (40, 70, 190), 6)
+    res, _ = _analyze(img, px_per_mm=50, thickness_mm=0.1, hole_radius_mm=188 / 50,
+                      hole_center_px=(200, 200))
+    assert "junction_degree" in res.summary["quality"]["codes"]
+
+
+def test_hole_found_with_low_confidence_is_flagged():
+    import cv2
+
+    img = np.full((300, 300, 3), 245, np.uint8)
+    cv2.line(img, (30, 40), (260, 250), (40, 70, 190), 6)
+    cv2.line(img, (30, 250), (260, 60), (40, 70, 190), 6)
+    res, caught = _analyze(img, px_per_mm=50, thickness_mm=0.1)
+    assert "hole_fitted" in res.summary["quality"]["codes"]
+    assert any(w.category is quality.FrameWarning for w in caught)
+
+
+def test_plate_is_not_ink_and_hole_is_found(scene):
+    p = scene.params
+    cx, cy = p["hole_center_px"]
+    r = p["hole_radius_mm"] * p["px_per_mm"]
+    ink = np.zeros(scene.rgb.shape[:2], bool)
+    rgb = apply_backdrop(scene.rgb, ink_mask=ink, hole_center_rc=(cy, cx), hole_radius_px=r,
+                         rng=np.random.default_rng(0), plate="grey", illumination=0.1,
+                         cast=0.05)
+    res, _ = _analyze(rgb, px_per_mm=50, thickness_mm=0.1, calibration=scene.calibration)
+    hole = res.summary["hole"]
+    assert abs(hole["radius_px"] - r) < 3
+    assert abs(hole["center_x_px"] - cx) < 3 and abs(hole["center_y_px"] - cy) < 3
+    truth = scene.summary["rod_length_mm"]
+    assert abs(res.summary["rod_length_mm"] - truth) / truth < 0.03
+
+
+def test_absurd_inputs_are_errors(scene):
+    with pytest.raises(ParameterError, match="below one pixel"):
+        crosssection.analyze(scene.rgb, px_per_mm=5, thickness_mm=0.1)
+    with pytest.raises(ParameterError, match="twice the scan"):
+        crosssection.analyze(scene.rgb, **_given(scene, hole_radius_mm=1000.0))
+
+
+def test_cli_prints_one_warning_line_per_flag(scene, tmp_path):
+    from crosssection.truth.scene import write_image
+
+    img = tmp_path / "scan.png"
+    write_image(scene.rgb, img)
+    p = scene.params
+    cmd = [sys.executable, "-m", "crosssection", "analyze", str(img), "--no-figure",
+           "--hole-radius-mm", str(p["hole_radius_mm"]),
+           "--hole-center-px", *map(str, p["hole_center_px"]), "--out", str(tmp_path / "o")]
+    run = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr
+    lines = run.stderr.strip().splitlines()
+    assert lines and all(line.startswith(f"warning: {img}: ") for line in lines)
+    assert any("calibration" in line for line in lines)
