@@ -3,7 +3,7 @@
 
 Density 20-300 stacks, layers 1-12, noise, blur, JPEG, smears/specks/pinholes; several seeds
 per condition. Prints one row per scene and the fraction of scenes meeting each target of
-issue 2 (rod length within 3 %, junction F1 >= 0.95, exact n_br on >= 90 % of stack length,
+the pipeline (rod length within 3 %, junction F1 >= 0.95, exact n_br on >= 90 % of stack length,
 void count within 5 %), then the median of each metric.
 
 Usage: python benchmarks/accuracy_sweep.py [--seeds 3] [--quick]

@@ -1,4 +1,4 @@
-"""foldstat.crosssection: from a scan of a cut cross-section to the network of junctions,
+"""crosssection: from a scan of a cut cross-section to the network of junctions,
 stacks, branches and voids, then ensemble statistics.
 
 >>> import crosssection

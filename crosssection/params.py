@@ -24,7 +24,7 @@ __all__ = ["ScanScale", "AnalysisParams", "add_analysis_arguments", "check_param
            "THRESHOLD_METHODS", "CURVATURE_METHODS"]
 
 THRESHOLD_METHODS = ("auto", "fixed", "otsu")
-CURVATURE_METHODS = ("spline", "paper")
+CURVATURE_METHODS = ("missing", "paper")
 
 # Sanity limits that turn absurd values into one clear error rather than a hang or a
 # MemoryError: a sheet thinner than a pixel cannot be resolved, and a scan of more than
@@ -122,9 +122,11 @@ class AnalysisParams:
         "junction pixels closer than this are one junction", "px"))
     merge_thick_crossings: bool = field(default=True, metadata=_opt(
         "merge junctions joined by a stack inside one ink blob", cli=False))
-    curvature_method: str = field(default="paper", metadata=_opt(
-        "curvature estimator: spline (smoothing chosen by the data) or paper (parabolic fits "
-        "over 5 n_br h)", choices=CURVATURE_METHODS))
+    curvature_method: str = field(default="missing", metadata=_opt(
+        "curvature estimator: paper (parabolic fits over 5 n_br h; fork zones take the nearest "
+        "fitted curvature) or missing (the same fits; fork zones as missing data, the "
+        "curvature trend continued to the junction; curvature bounded by 2 / (n_br h))",
+        choices=CURVATURE_METHODS))
 
     # ------------------------------------------------------------------ validation
     def __post_init__(self):

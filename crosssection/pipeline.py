@@ -260,7 +260,8 @@ def analyze(image, params: AnalysisParams | None = None, **overrides) -> Analysi
         n_br = np.asarray(lin.n_br, dtype=np.int64)
     with timer("curvature"):
         profiles = curvature.stack_profiles(sg, n_br, pre.distance_px, thickness_px=h_px,
-                                            px_per_mm=p.px_per_mm, smooth_px=p.smooth_px)
+                                            px_per_mm=p.px_per_mm, smooth_px=p.smooth_px,
+                                            method=p.curvature_method)
     length_mm = scale.to_mm(np.asarray(sg.length_px, dtype=float))
     rod_mm = float(np.sum(n_br * length_mm))
     L = p.rod_length_mm if p.rod_length_mm is not None else rod_mm

@@ -88,6 +88,8 @@ def clean_mask(mask, *, s_min_px: float, speck_px: float | None = None,
     speck_px = s_min_px if speck_px is None else speck_px
     if not np.isfinite(speck_px) or speck_px < 0:
         raise ParameterError(f"speck_px must be a finite number >= 0, got {speck_px}")
+    if not np.isfinite(min_extent_px) or min_extent_px < 0:
+        raise ParameterError(f"min_extent_px must be a finite number >= 0, got {min_extent_px}")
     m = np.ascontiguousarray(m, dtype=bool)
     out = m.copy()
     if s_min_px > 0:
@@ -95,8 +97,6 @@ def clean_mask(mask, *, s_min_px: float, speck_px: float | None = None,
         out |= _small_components(bg, 4, s_min_px)
     if speck_px > 0:
         out &= ~_small_components(out.view(np.uint8), 8, speck_px)
-    if not np.isfinite(min_extent_px) or min_extent_px < 0:
-        raise ParameterError(f"min_extent_px must be a finite number >= 0, got {min_extent_px}")
     if min_extent_px > 0:
         out &= ~_short_components(out.view(np.uint8), min_extent_px)
     return out

@@ -16,14 +16,28 @@ fit on size 5 n_br h, after coordinates translation and rotation in the tangent 
 3. **Fork zones.** Within ``max(n_br h, r_J)`` of a junction, r_J the inscribed ink radius
    there, the bands of the stacks meeting at the junction overlap: the image holds no
    centreline of this stack and the skeleton hooks into the medial-axis fork point. Those
-   samples are not fitted and take the curvature of the nearest fitted sample.
+   samples are not fitted: they are missing data. The default (``method="missing"``)
+   continues the linear trend of the curvature over the nearest fitted window (5 n_br h) to
+   the junction, so that a bend that tightens toward the fork keeps tightening; the paper's
+   rule (``method="paper"``) gives them the curvature of the nearest fitted sample. Free
+   ends keep the paper's rule (their skeleton is shortened, not merged).
+   Everywhere the curvature is bounded by ``2 / (n_br h)``: the innermost layer of a stack
+   cannot have a negative radius, so a tighter estimate is a skeleton kink, not a bend.
 
-**What this estimator misses** (measured, analytic truth centrelines of
-``crosssection.truth.network``): 26-45 % of the true bending energy of interior stacks lies
-within half the widest band of a junction, 54-75 % within one band width, where the window
-(a few h long) cannot follow it: the total energy is low by a median 32 % on typical generated
-networks and 24 % at 25 px/mm. On simulator renders, kinked skeletons at merged junctions
-make it high instead (+28 to +90 %).
+**What these estimators miss** (measured on ``crosssection.truth.network`` scenes, analytic
+truth centrelines): 38 % of the true bending energy of interior stacks lies within n_br h of
+a junction and 75 % within 2.5 n_br h, where the image has no centreline of its own; even on
+the exact truth centrelines rounded to pixels, the paper window recovers 0.66 of it. Median
+total-energy error, paper / missing: typical -32 / -24 %, 25 px/mm -24 / -12 %, thick dense
+-35 / -19 %. On simulator renders both are too high (+122 / +128 %; their truth is itself
+uncertain). The trend continuation is not a model of how layers leave a merged band: a
+least-bending turn from the parent band's axis to the exit direction over the fork zone was
+measured at +150 to +280 % on the same scenes (the generator's branches leave the junction
+already fanned) and is not used.
+
+``CurvatureProfile.energy_rel_uncertainty``: the extrapolated share of ``int kappa^2 ds``
+(not measured: counted in full) plus the noise floor of the window fit, relative to the
+stack's ``int kappa^2 ds``.
 
 4. **Sign.** Positive when the path, followed from its start to its end, turns
    counter-clockwise in the image as displayed (x = column to the right, y = -row).
@@ -63,6 +77,11 @@ class CurvatureProfile:
         Whether the path was treated as a closed loop.
     rc_px : ndarray (n, 2)
         Centreline (row, col) in px, same samples as ``s_mm``.
+    fit_start, fit_stop : int
+        Samples ``fit_start:fit_stop`` were fitted; the others lie in fork zones or at ends.
+    energy_rel_uncertainty : float
+        Relative uncertainty of the stack's ``int kappa^2 ds`` (module docstring; NaN for the
+        paper method).
     """
 
     s_mm: np.ndarray

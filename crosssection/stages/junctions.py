@@ -320,7 +320,7 @@ def _end_lines(pr, pc, offs, sids, rev, c0r, c0c, skip, fit):  # pragma: no cove
 
 
 def fork_points(centers_rc, radius_px, end_paths, end_junction, *, thickness_px: float,
-                skip_factor: float = 1.5, fit_h: float = 4.0, prior_weight: float = 0.05,
+                skip_factor: float = 0.7, fit_h: float = 2.0, prior_weight: float = 0.05,
                 max_shift_factor: float = 1.0) -> np.ndarray:
     """Junction positions where the centrelines of the stacks meeting there intersect.
 

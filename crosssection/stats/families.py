@@ -269,6 +269,8 @@ class Family:
         Which of ``free_names`` are positive (optimised on a log scale).
     positive : bool
         Support in x > 0 (non-positive observations make the family inapplicable).
+    needs_spread : bool
+        Whether identical observations leave a parameter undetermined.
     """
 
     name = ""
@@ -277,6 +279,7 @@ class Family:
     free_names: tuple = ()
     log_params: tuple = ()
     positive = True
+    needs_spread = True
 
     def k(self, truncated: bool) -> int:
         """Number of parameters counted in AIC/BIC."""
@@ -391,6 +394,7 @@ class Exponential(ScipyFamily):
     param_names = ("mu",)
     free_names = ("mu",)
     log_params = (True,)
+    needs_spread = False
     rv = stats.expon
 
     def frozen(self, params):

@@ -192,8 +192,8 @@ def _applicability(fam, x, c, k) -> str:
         return "needs x > 0"
     if c is not None and np.any(x < c):
         raise ParameterError("observations below the truncation cut; drop them first")
-    if fam.name != "exponential" and np.ptp(x) <= 0:
-        return "zero range" if fam.name == "bose_einstein" else "zero spread"
+    if fam.needs_spread and np.ptp(x) <= 0:
+        return "zero spread"
     return ""
 
 

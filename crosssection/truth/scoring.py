@@ -221,7 +221,7 @@ def score_folder(out_dir, scene_dir, *, match_px: float | None = None) -> dict:
 
 
 def meets_targets(s: dict) -> dict:
-    """The issue-2 accuracy targets as booleans: rod length within 3 %, junction F1 >= 0.95,
+    """The accuracy targets of typical scans as booleans: rod length within 3 %, junction F1 >= 0.95,
     exact n_br on >= 90 % of stack length, void count within 5 %."""
     return {
         "rod_length": abs(s["rod_length_rel_error"]) <= 0.03,

@@ -1,5 +1,5 @@
 """Bad inputs to ``python -m crosssection analyze``: non-zero exit, one stderr line naming the
-file and the cause, no traceback (issue 2 contract)."""
+file and the cause, no traceback."""
 from __future__ import annotations
 
 import subprocess

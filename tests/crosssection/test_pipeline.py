@@ -1,4 +1,4 @@
-"""The analyze/steps contract (issue 2): files, columns, summary keys, exit status; the
+"""The analyze/steps contract: files, columns, summary keys, exit status; the
 Python API on several generated scenes; parameter validation."""
 from __future__ import annotations
 

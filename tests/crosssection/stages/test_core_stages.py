@@ -1,4 +1,4 @@
-"""Stages 1-6 alone, on generated images (issue 2): load, threshold, clean, skeleton,
+"""Stages 1-6 alone, on generated images: load, threshold, clean, skeleton,
 junctions, stack graph."""
 from __future__ import annotations
 

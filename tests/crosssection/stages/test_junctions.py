@@ -61,8 +61,6 @@ def test_degree4_crossing_kept_and_centred():
 def test_fork_points_lines_and_fallbacks():
     # three lines through (50, 50): the least-squares point is that point
     ang = np.radians([0, 120, 240])
-    paths = [np.round(np.array([50 + t * np.sin(a), 50 + t * np.cos(a)]).T[None, :] *
-                      1).astype(int)[0] for a in ang for t in [np.arange(0, 40)]]
     paths = [np.column_stack([np.round(50 + np.arange(40) * np.sin(a)),
                               np.round(50 + np.arange(40) * np.cos(a))]).astype(int)
              for a in ang]

@@ -173,8 +173,8 @@ def test_single_row_is_proportional():
     np.testing.assert_allclose(cal.layers([0.06, 0.24]), [0.5, 2.0])
 
 
-# ---- the previous per-stack map_coordinates implementation, kept as the reference of the
-# numba kernel (same numbers, ~100x slower on a 2000^2 scan)
+# ---- a per-stack map_coordinates implementation, the reference of the numba kernel
+# (same numbers, ~100x slower on a 2000^2 scan)
 def _ref_unit_normals(path: np.ndarray, half_window: int = 3) -> np.ndarray:
     """Unit normals (row, col) of a pixel path from central differences over a window."""
     p = path.astype(float)

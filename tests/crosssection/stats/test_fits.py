@@ -1,7 +1,7 @@
 """Maximum-likelihood fits, bootstrap intervals, goodness of fit, model selection, truncation."""
 import numpy as np
 import pytest
-from scipy import integrate, stats
+from scipy import integrate
 
 from crosssection.core.errors import ParameterError
 from crosssection.stats import fits as F

@@ -1,4 +1,4 @@
-"""The whole pipeline on generated scans with exact truth (issue 2, "Accuracy and speed").
+"""The whole pipeline on generated scans with exact truth.
 
 Targets per scene: rod length within 3 %, junction F1 >= 0.95 (matched within 3 h), exact n_br
 on >= 90 % of the stack length, void count within 5 %. Scenes vary in density (20-150 stacks
