@@ -167,7 +167,8 @@ def figures(res, out):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--out", default="bench_fits_out", help="output folder")
+    ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "out" / "fits"),
+                    help="output folder")
     ap.add_argument("--reps", type=int, default=100)
     ap.add_argument("--n-boot", type=int, default=200)
     ap.add_argument("--seed", type=int, default=0)

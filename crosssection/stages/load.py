@@ -1,24 +1,52 @@
 """Stage 1: read a scan as an RGB array at its native bit depth.
 
-Accepted: PNG (8- or 16-bit per channel), TIFF (8- or 16-bit, read with tifffile), JPEG, and
-any other format Pillow reads. Conversions, documented choices:
+Accepted: PNG (1- to 16-bit), TIFF (8- to 64-bit, read with tifffile), JPEG, and any other
+format Pillow reads. Conversions, documented choices:
 
 - RGB: kept as is, dtype uint8 or uint16 (16-bit PNG/TIFF are not reduced to 8 bits; the
   threshold scales its defaults by 257).
 - RGBA (or palette with transparency): a fully opaque alpha is dropped; a partly transparent
   image is composited over white, i.e. transparent pixels are read as paper (a scan has no
-  transparency; white is the neutral background that the threshold rejects).
+  transparency; white is the neutral background that the threshold rejects). The colour key
+  of an RGB PNG (``tRNS``) is ignored: the pixels keep their colour.
 - Palette (indexed) images: expanded to RGB.
+- CMYK (a TIFF with ``photometric = separated`` and four inks, or a CMYK JPEG): converted
+  to RGB with ``R = (1 - C)(1 - K)`` and likewise for G and B, at the native bit depth.
 - Grayscale (L, I;16, 1-bit, two-channel gray+alpha): rejected with ``ImageError``: the
   threshold separates blue ink from grey-blue receding surfaces by colour, which a grey image
-  cannot do.
-- float arrays (TIFF or ``ndarray`` input to ``analyze``) with values in [0, 1]: scaled to
-  uint16.
-- Corrupt, truncated or non-image files, images smaller than 16 px on a side, more than one
-  page/frame of different sizes: ``ImageError`` naming the file.
+  cannot do. Lab, YCbCr, raw-sensor and other TIFF colour spaces are rejected likewise.
+- float arrays (any float TIFF, or an ``ndarray`` given to ``analyze``) with values in
+  [0, 1]: scaled to uint16; other float ranges are rejected. Other integer types with values
+  within 0..65535 are read as uint16 (uint8 if they are one byte wide).
+
+What is never read as valid data, each an ``ImageError`` naming the file and the cause:
+
+- a truncated or corrupt PNG: every chunk's CRC is checked (a single flipped bit anywhere
+  is caught), the file must end with ``IEND``, and the pixel data must fill exactly the rows
+  the header announces (libpng's checks, whose own messages are captured, not printed);
+- a truncated TIFF or JPEG, or one the decoder reports as corrupt. Formats without a
+  checksum over their pixels (raw TIFF strips, JPEG entropy data) cannot reveal a flipped
+  bit inside the pixel data: such a file is read as the decoder sees it;
+- an image of more than ``PIL.Image.MAX_IMAGE_PIXELS`` pixels (decompression bombs), at
+  every bit depth, checked from the header before any pixel is decoded;
+- a multi-page TIFF whose pages differ in size or pixel type (pages of one size: the first
+  is read); images smaller than 16 px on a side; non-image files.
+
+Library messages (tifffile's log, libpng's stderr, Pillow's and numpy's warnings) never reach
+the user: they are captured while decoding, and what signals a corrupt file becomes the
+cause of the ``ImageError``.
 """
 from __future__ import annotations
 
+import logging
+import os
+import struct
+import sys
+import tempfile
+import threading
+import warnings
+import zlib
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -26,7 +54,37 @@ import numpy as np
 from crosssection.core.errors import ImageError
 
 MIN_SIDE_PX = 16
-_TIFF_SUFFIXES = {".tif", ".tiff"}
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+_TIFF_MAGIC = (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+")
+# PNG colour type -> (name, allowed bit depths)
+_PNG_COLOUR_TYPES = {0: ("grayscale", (1, 2, 4, 8, 16)), 2: ("RGB", (8, 16)),
+                     3: ("palette", (1, 2, 4, 8)), 4: ("grayscale+alpha", (8, 16)),
+                     6: ("RGBA", (8, 16))}
+_PNG_CRITICAL = (b"IHDR", b"PLTE", b"IDAT", b"IEND")
+# fd 2 is process-wide: one capture at a time
+_FD2_LOCK = threading.Lock()
+
+
+def max_pixels() -> int | None:
+    """The pixel budget of one image: Pillow's ``Image.MAX_IMAGE_PIXELS`` (None: no limit).
+
+    One knob for every format and depth, so a user who raises Pillow's limit raises ours.
+    """
+    from PIL import Image
+
+    return Image.MAX_IMAGE_PIXELS
+
+
+def _check_budget(width: int, height: int, path) -> None:
+    limit = max_pixels()
+    if limit is not None and int(width) * int(height) > limit:
+        raise ImageError(f"image too large ({width}x{height} = {int(width) * int(height)} px; "
+                         f"at most {limit} px): a decompression bomb or not a scan", path)
+
+
+def _short(exc: BaseException, n: int = 120) -> str:
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    return text[:n]
 
 
 def _composite_alpha(rgba: np.ndarray) -> np.ndarray:
@@ -68,14 +126,22 @@ def as_rgb(arr, *, path=None) -> np.ndarray:
         raise ImageError(f"not an RGB image (array shape {a.shape})", path)
     if a.dtype == np.bool_:
         raise ImageError("binary image: an RGB scan is needed", path)
+    if a.size == 0:
+        raise ImageError(f"empty image (array shape {a.shape})", path)
     if a.dtype.kind == "f":
-        if not np.all(np.isfinite(a)) or a.min() < 0 or a.max() > 1:
-            raise ImageError("float image values must lie in [0, 1]", path)
+        # float64 first: float16 cannot hold 65535, and its product would overflow to inf
+        a = a.astype(np.float64)
+        if not np.all(np.isfinite(a)):
+            raise ImageError("float image with NaN or infinite values", path)
+        lo, hi = float(a.min()), float(a.max())
+        if lo < 0 or hi > 1:
+            raise ImageError(f"float image values {lo:g}..{hi:g}: they must lie in [0, 1]",
+                             path)
         a = np.round(a * 65535.0).astype(np.uint16)
     elif a.dtype not in (np.uint8, np.uint16):
         if a.dtype.kind not in "ui":
             raise ImageError(f"unsupported pixel type {a.dtype}", path)
-        lo, hi = (int(a.min()), int(a.max())) if a.size else (0, 0)
+        lo, hi = int(a.min()), int(a.max())
         if lo < 0 or hi > 65535:
             raise ImageError(f"pixel values {lo}..{hi} out of the 16-bit range", path)
         a = a.astype(np.uint8 if hi <= 255 and a.dtype.itemsize == 1 else np.uint16)
@@ -88,29 +154,230 @@ def as_rgb(arr, *, path=None) -> np.ndarray:
     return np.ascontiguousarray(a)
 
 
-def _png_bit_depth(head: bytes):
-    if head[:8] == b"\x89PNG\r\n\x1a\n" and len(head) >= 26 and head[12:16] == b"IHDR":
-        return head[24], head[25]  # bit depth, colour type
-    return None
+# ----------------------------------------------------------------------------- PNG
+def _png_chunks(data: bytes, path):
+    """Walk the chunks of a PNG, checking each CRC; return [(type, start, end)] up to IEND.
+
+    ``start:end`` is the whole chunk (length, type, data and CRC). Raises ``ImageError`` on
+    a CRC mismatch, a chunk running past the end of the file, or a missing ``IEND``.
+    """
+    view = memoryview(data)
+    n = len(data)
+    pos = len(_PNG_SIGNATURE)
+    chunks = []
+    while True:
+        if pos + 12 > n:
+            raise ImageError(f"truncated PNG: the file ends at byte {n} before the IEND chunk",
+                             path)
+        length, ctype = struct.unpack(">I4s", view[pos:pos + 8])
+        if not ctype.isalpha() or not ctype.isascii():
+            raise ImageError(f"corrupt PNG: invalid chunk type {ctype!r} at byte {pos}", path)
+        end = pos + 12 + length
+        if end > n:
+            raise ImageError(f"truncated or corrupt PNG: the {ctype.decode()} chunk at byte "
+                             f"{pos} runs past the end of the file ({n} bytes)", path)
+        (crc,) = struct.unpack(">I", view[end - 4:end])
+        if zlib.crc32(view[pos + 4:end - 4]) != crc:
+            raise ImageError(f"corrupt PNG: CRC error in the {ctype.decode()} chunk at byte "
+                             f"{pos}", path)
+        chunks.append((ctype, pos, end))
+        if ctype == b"IEND":
+            return chunks
+        pos = end
+
+
+def _png_header(data: bytes, chunks, path):
+    """Validate IHDR and the critical chunks; return (width, height, depth, colour type)."""
+    ctype, start, end = chunks[0]
+    if ctype != b"IHDR" or end - start != 25:
+        raise ImageError("corrupt PNG: the first chunk is not a valid IHDR", path)
+    w, h, depth, colour, comp, filt, interlace = struct.unpack(">IIBBBBB",
+                                                               data[start + 8:start + 21])
+    name, depths = _PNG_COLOUR_TYPES.get(colour, (None, ()))
+    if not (0 < w < 2**31 and 0 < h < 2**31) or depth not in depths or comp != 0 \
+            or filt != 0 or interlace not in (0, 1):
+        raise ImageError(f"corrupt PNG header ({w}x{h} px, bit depth {depth}, colour type "
+                         f"{colour}, compression {comp}, filter {filt}, interlace "
+                         f"{interlace})", path)
+    kinds = [c[0] for c in chunks]
+    unknown = [k for k in kinds if k[:1].isupper() and k not in _PNG_CRITICAL]
+    if unknown:
+        raise ImageError(f"corrupt PNG: unknown critical chunk {unknown[0].decode()}", path)
+    idat = [i for i, k in enumerate(kinds) if k == b"IDAT"]
+    if not idat:
+        raise ImageError("corrupt PNG: no image data (IDAT chunk)", path)
+    if idat != list(range(idat[0], idat[-1] + 1)):
+        raise ImageError("corrupt PNG: the IDAT chunks are not consecutive", path)
+    if colour == 3 and b"PLTE" not in kinds:
+        raise ImageError("corrupt PNG: palette image without a PLTE chunk", path)
+    _check_budget(w, h, path)
+    if colour in (0, 4):
+        raise ImageError(f"grayscale image ({depth}-bit {name} PNG): an RGB scan of blue ink "
+                         "is needed to threshold on colour", path)
+    return w, h, depth, colour
+
+
+@contextmanager
+def _stderr_fd_captured():
+    """Redirect file descriptor 2 while C code runs; yield a list that receives its text.
+
+    libpng, under OpenCV, prints its errors and warnings straight to fd 2, out of reach of
+    Python's ``sys.stderr``. Lines that are not libpng's (another thread writing meanwhile)
+    are written back to fd 2 afterwards.
+    """
+    captured: list[str] = []
+    with _FD2_LOCK, tempfile.TemporaryFile() as tmp:
+        try:
+            sys.stderr.flush()
+            saved = os.dup(2)
+        except (OSError, ValueError, AttributeError):  # no usable fd 2: nothing to capture
+            yield captured
+            return
+        os.dup2(tmp.fileno(), 2)
+        try:
+            yield captured
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            tmp.seek(0)
+            text = tmp.read().decode("utf-8", "replace")
+            ours = [ln for ln in text.splitlines() if "libpng" in ln or "png" in ln.lower()]
+            other = [ln for ln in text.splitlines() if ln not in ours]
+            captured.extend(ours)
+            if other:
+                os.write(2, ("\n".join(other) + "\n").encode())
+
+
+def _read_png(path: Path, data: bytes) -> np.ndarray:
+    """Check a PNG's structure and CRCs, then decode it with libpng (OpenCV) at native depth.
+
+    Pillow accepts a deflate stream that ends cleanly after a part of the rows (it fills the
+    rest with black); libpng rejects it, so libpng decodes. It is given only the critical
+    chunks (and a palette's transparency), which leaves it nothing benign to warn about:
+    whatever it still says means the pixel data do not match the header.
+    """
+    import cv2
+
+    chunks = _png_chunks(data, path)
+    w, h, depth, colour = _png_header(data, chunks, path)
+    keep = _PNG_CRITICAL + ((b"tRNS",) if colour == 3 else ())
+    minimal = _PNG_SIGNATURE + b"".join(data[s:e] for k, s, e in chunks if k in keep)
+    with _stderr_fd_captured() as messages:
+        arr = cv2.imdecode(np.frombuffer(minimal, np.uint8), cv2.IMREAD_UNCHANGED)
+    if arr is None or messages:
+        why = "; ".join(m.strip() for m in messages)[:160] or "the decoder returned no image"
+        raise ImageError(f"corrupt or truncated PNG pixel data ({why})", path)
+    if arr.ndim != 3 or arr.shape[:2] != (h, w) or arr.shape[2] not in (3, 4):
+        raise ImageError(f"corrupt PNG: decoded shape {arr.shape} does not match the header "
+                         f"({w}x{h} px, colour type {colour})", path)
+    return arr[..., [2, 1, 0, 3][:arr.shape[2]]]
+
+
+# ----------------------------------------------------------------------------- TIFF
+class _LogCapture(logging.Handler):
+    def __init__(self):
+        super().__init__(logging.WARNING)
+        self.messages: list[str] = []
+
+    def emit(self, record):
+        self.messages.append(" ".join(record.getMessage().split()))
+
+
+@contextmanager
+def _tifffile_log_captured():
+    """Collect tifffile's log records instead of letting logging's last resort print them."""
+    log = logging.getLogger("tifffile")
+    handler = _LogCapture()
+    old_propagate = log.propagate
+    log.addHandler(handler)
+    log.propagate = False
+    try:
+        yield handler.messages
+    finally:
+        log.removeHandler(handler)
+        log.propagate = old_propagate
+
+
+def _cmyk_to_rgb(cmyk: np.ndarray) -> np.ndarray:
+    """Subtractive inks to RGB at the native depth: R = (1 - C)(1 - K), etc."""
+    vmax = float(np.iinfo(cmyk.dtype).max) if cmyk.dtype.kind in "ui" else 1.0
+    c = cmyk[..., :4].astype(np.float64) / vmax
+    rgb = (1.0 - c[..., :3]) * (1.0 - c[..., 3:4])
+    if cmyk.dtype.kind in "ui":
+        return np.round(rgb * vmax).astype(cmyk.dtype)
+    return rgb
+
+
+def _tiff_page(tif, path):
+    """The page to read: the first, after checking every page's size, type and budget."""
+    pages = list(tif.pages)
+    if not pages:
+        raise ImageError("TIFF without any image page", path)
+    kinds = {(tuple(p.shape), str(p.dtype)) for p in pages}
+    if len(kinds) > 1:
+        shown = ", ".join(f"{'x'.join(map(str, s))} {d}" for s, d in sorted(kinds)[:4])
+        raise ImageError(f"multi-page TIFF with pages of different sizes or types ({shown}): "
+                         "save the scan alone", path)
+    page = pages[0]
+    _check_budget(page.imagewidth, page.imagelength * max(1, page.imagedepth), path)
+    return page
+
+
+def _tiff_colour(page, arr: np.ndarray, path) -> np.ndarray:
+    """Interpret a decoded page by its photometric tag (planar, palette, CMYK, others)."""
+    import tifffile
+
+    ph = tifffile.PHOTOMETRIC
+    photometric = int(page.photometric)
+    if int(page.planarconfig) == 2 and arr.ndim == 3:
+        arr = np.moveaxis(arr, 0, -1)  # separate planes -> (H, W, samples)
+    if photometric == ph.PALETTE and arr.ndim == 2:
+        cmap = page.colormap
+        if cmap is None:
+            raise ImageError("palette TIFF without a colour map", path)
+        cmap = np.ascontiguousarray(np.asarray(cmap).T)
+        if arr.size and int(arr.max()) >= len(cmap):
+            raise ImageError(f"corrupt palette TIFF: index {int(arr.max())} beyond the "
+                             f"{len(cmap)} colours of the map", path)
+        return cmap[arr]
+    if photometric == ph.SEPARATED:
+        inkset = page.tags.valueof(332, 1)  # InkSet: 1 = CMYK
+        if inkset != 1 or arr.ndim != 3 or arr.shape[2] < 4:
+            raise ImageError("unsupported TIFF colour space: separated inks other than CMYK",
+                             path)
+        return _cmyk_to_rgb(arr)
+    if photometric in (ph.RGB, ph.MINISBLACK, ph.MINISWHITE):
+        return arr
+    if photometric == ph.YCBCR and int(page.compression) in (6, 7):
+        return arr  # JPEG-compressed: the decoder returns RGB
+    name = getattr(page.photometric, "name", str(photometric))
+    raise ImageError(f"unsupported TIFF colour space {name}: save the scan as RGB", path)
 
 
 def _read_tiff(path: Path) -> np.ndarray:
+    """Decode the first page of a TIFF with tifffile; corrupt structure is an error.
+
+    tifffile logs what it skips over (a tag whose value lies past the end of the file, an
+    invalid page offset) and goes on; a skipped BitsPerSample or strip offset would then
+    decode other pixels, so any logged warning rejects the file.
+    """
     import tifffile
 
-    try:
-        with tifffile.TiffFile(path) as tif:
-            page = tif.pages[0]
-            arr = page.asarray()
-            photometric = getattr(page, "photometric", None)
-    except Exception as exc:  # tifffile raises several types for bad files
-        raise ImageError(f"cannot read TIFF ({type(exc).__name__}: "
-                         f"{' '.join(str(exc).split())[:120]})", path) from None
-    if arr.ndim == 3 and arr.shape[0] in (3, 4) and arr.shape[2] not in (3, 4):
-        arr = np.moveaxis(arr, 0, -1)  # planar configuration
-    if photometric is not None and int(photometric) == 3 and arr.ndim == 2:  # palette
-        cmap = tif_cmap(path)
-        if cmap is not None:
-            arr = cmap[arr]
+    with _tifffile_log_captured() as logged:
+        try:
+            with tifffile.TiffFile(path) as tif:
+                page = _tiff_page(tif, path)
+                arr = page.asarray()
+                arr = _tiff_colour(page, arr, path)
+        except ImageError:
+            raise
+        except MemoryError:
+            raise ImageError("image too large to decode in memory", path) from None
+        except Exception as exc:  # noqa: BLE001 - tifffile raises many types for bad files
+            raise ImageError(f"cannot read TIFF, corrupt or truncated file "
+                             f"({type(exc).__name__}: {_short(exc)})", path) from None
+    if logged:
+        raise ImageError(f"corrupt TIFF ({logged[0][:160]})", path)
     return arr
 
 
@@ -118,34 +385,24 @@ def tif_cmap(path):
     """The colour map of a palette TIFF as (N, 3) uint16, or None."""
     import tifffile
 
-    with tifffile.TiffFile(path) as tif:
-        cm = tif.pages[0].colormap
+    with _tifffile_log_captured():
+        try:
+            with tifffile.TiffFile(path) as tif:
+                cm = tif.pages[0].colormap
+        except Exception as exc:  # noqa: BLE001 - tifffile raises many types for bad files
+            raise ImageError(f"cannot read TIFF ({_short(exc)})", path) from None
     return None if cm is None else np.ascontiguousarray(np.asarray(cm).T)
 
 
-def _read_pillow(path: Path, head: bytes) -> np.ndarray:
+# ----------------------------------------------------------------------------- others
+def _read_pillow(path: Path) -> np.ndarray:
+    """JPEG and every other format Pillow reads (truncation is an error: Pillow's
+    ``LOAD_TRUNCATED_IMAGES`` is left False)."""
     from PIL import Image, UnidentifiedImageError
 
-    depth = _png_bit_depth(head)
-    if depth is not None and depth[0] == 16 and depth[1] in (2, 6):
-        # 16-bit RGB(A) PNG: Pillow reduces it to 8 bits, OpenCV keeps it. Pillow checks
-        # the file first: libpng, under OpenCV, would print its own errors on stderr
-        import cv2
-
-        try:
-            with Image.open(path) as im:
-                im.load()
-        except (OSError, SyntaxError, ValueError) as exc:
-            msg = " ".join(str(exc).split())[:120]
-            raise ImageError(f"cannot read image (corrupt or truncated file: {msg})",
-                             path) from None
-        data = np.frombuffer(path.read_bytes(), np.uint8)
-        arr = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
-        if arr is None or arr.ndim != 3:
-            raise ImageError("cannot decode 16-bit PNG (corrupt or truncated file)", path)
-        return arr[..., [2, 1, 0, 3][:arr.shape[2]]]
     try:
         with Image.open(path) as im:
+            _check_budget(im.size[0], im.size[1], path)
             im.load()
             mode = im.mode
             if mode == "P":
@@ -158,11 +415,12 @@ def _read_pillow(path: Path, head: bytes) -> np.ndarray:
     except UnidentifiedImageError:
         raise ImageError("not an image file (unknown or corrupt format)", path) from None
     except Image.DecompressionBombError as exc:
-        raise ImageError(f"image too large ({' '.join(str(exc).split())[:100]})",
+        raise ImageError(f"image too large ({_short(exc, 100)})", path) from None
+    except MemoryError:
+        raise ImageError("image too large to decode in memory", path) from None
+    except (OSError, SyntaxError, ValueError, EOFError, struct.error) as exc:
+        raise ImageError(f"cannot read image (corrupt or truncated file: {_short(exc)})",
                          path) from None
-    except (OSError, SyntaxError, ValueError) as exc:
-        msg = " ".join(str(exc).split())[:120]
-        raise ImageError(f"cannot read image (corrupt or truncated file: {msg})", path) from None
     if mode in ("I;16", "I;16B", "I;16L", "I", "F", "L", "1", "LA"):
         raise ImageError(f"grayscale image (mode {mode}): an RGB scan of blue ink is needed "
                          "to threshold on colour", path)
@@ -175,18 +433,19 @@ def load_image(path) -> np.ndarray:
     Parameters
     ----------
     path : str or Path
-        PNG, TIFF, JPEG (or any format Pillow reads).
+        PNG, TIFF, JPEG (or any format Pillow reads); the format is told by the file's
+        first bytes, not by its name.
 
     Returns
     -------
     (H, W, 3) uint8 or uint16 array
-        See the module docstring for the conversions (alpha, palette, float).
+        See the module docstring for the conversions (alpha, palette, CMYK, float).
 
     Raises
     ------
     ImageError
-        Missing, unreadable, corrupt, truncated, grayscale or too small file; one line
-        naming the file.
+        Missing, unreadable, corrupt, truncated, too large, grayscale or too small file; one
+        line naming the file. Nothing is printed: library messages are captured.
     """
     path = Path(path)
     if not path.exists():
@@ -195,14 +454,20 @@ def load_image(path) -> np.ndarray:
         raise ImageError("is a directory, not an image file", path)
     try:
         with open(path, "rb") as fh:
-            head = fh.read(64)
+            head = fh.read(8)
+            data = head + fh.read() if head == _PNG_SIGNATURE else b""
     except OSError as exc:
         raise ImageError(f"cannot open ({exc.strerror or type(exc).__name__})", path) from None
     if not head:
         raise ImageError("empty file", path)
-    is_tiff = head[:4] in (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+")
-    if is_tiff or (path.suffix.lower() in _TIFF_SUFFIXES and not _png_bit_depth(head)):
-        arr = _read_tiff(path)
-    else:
-        arr = _read_pillow(path, head)
-    return as_rgb(arr, path=path)
+    with warnings.catch_warnings(record=True):
+        # Pillow's DecompressionBombWarning and numpy's RuntimeWarnings: what matters of
+        # them is checked here (pixel budget, value ranges) and raised as ImageError
+        warnings.simplefilter("always")
+        if head == _PNG_SIGNATURE:
+            arr = _read_png(path, data)
+        elif head[:4] in _TIFF_MAGIC:
+            arr = _read_tiff(path)
+        else:
+            arr = _read_pillow(path)
+        return as_rgb(arr, path=path)
