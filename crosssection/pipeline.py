@@ -109,25 +109,27 @@ def _threshold_in_frame(rgb, p: AnalysisParams, path, timer):
     inside it, so a plate or a shadow around the hole never chooses the ink's cut.
     """
     m = dict(method=p.threshold_method, blue_min=p.blue_min, rg_max=p.rg_max)
-    with timer("threshold"):
-        whole = threshold_rgb(rgb, **m)
-    _check_fraction(whole, path)
+    given = p.hole_given and p.hole_center_px is not None
+    if not given:
+        with timer("threshold"):
+            whole = threshold_rgb(rgb, **m)
+        _check_fraction(whole, path)
     with timer("hole"):
-        if p.hole_given and p.hole_center_px is not None:
+        if given:
             x, y = p.hole_center_px
-            hole = hole_stage.Hole(np.array([y, x], float), float(p.scale.to_px(p.hole_radius_mm)),
-                                   False)
+            hole = hole_stage.Hole(np.array([y, x], float),
+                                   float(p.scale.to_px(p.hole_radius_mm)), False)
         elif p.hole_given:
-            hole = hole_stage.fit_hole(whole.mask, radius_px=p.scale.to_px(p.hole_radius_mm),
-                                       path=path)
+            hole = hole_stage.fit_hole(whole.mask, path=path,
+                                       radius_px=p.scale.to_px(p.hole_radius_mm))
         else:
             hole = hole_stage.find_hole(rgb, whole.mask, path=path)
         inside = hole_stage.frame_mask(rgb.shape[:2], hole)
     with timer("threshold"):
         thr = threshold_rgb(rgb, region=inside, **m)
     _check_fraction(thr, path)
-    n_all = np.count_nonzero(whole.mask)
-    outside = np.count_nonzero(whole.mask & ~inside) / n_all if n_all else 0.0
+    n_in = np.count_nonzero(thr.mask)
+    outside = thr.n_outside / (thr.n_outside + n_in) if n_in else 0.0
     return thr, hole, outside
 
 

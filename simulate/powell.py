@@ -45,6 +45,8 @@ from typing import NamedTuple
 
 import numpy as np
 from numba import njit
+from numba.core import types
+from numba.experimental import structref
 
 from simulate.intersect import close_pairs, has_contact_grid, seg_dist2
 
@@ -69,7 +71,13 @@ TANGENT = 3   # tangent angle theta_k: segment k turns, the tail translates
 _GRID_CELLS = 41 * 41 + 2
 
 
-class Rod(NamedTuple):
+@structref.register
+class _RodType(types.StructRef):
+    def preprocess_fields(self, fields):
+        return tuple((name, types.unliteral(typ)) for name, typ in fields)
+
+
+class Rod(structref.StructRefProxy):
     """The configuration of a Powell run, kept consistent with ``p`` after every step.
 
     Attributes
@@ -87,14 +95,10 @@ class Rod(NamedTuple):
         ``w_j |R_j|^2`` (index N+1 holds zeros).
     """
 
-    p: np.ndarray
-    xy: np.ndarray
-    theta: np.ndarray
-    w: np.ndarray
-    tail_w: np.ndarray
-    tail_wx: np.ndarray
-    tail_wy: np.ndarray
-    tail_wr2: np.ndarray
+
+
+_ROD_FIELDS = ["p", "xy", "theta", "w", "tail_w", "tail_wx", "tail_wy", "tail_wr2"]
+structref.define_proxy(Rod, _RodType, _ROD_FIELDS)
 
 
 class Line(NamedTuple):
@@ -152,7 +156,13 @@ class Line(NamedTuple):
     direction: np.ndarray
 
 
-class Scratch(NamedTuple):
+@structref.register
+class _ScratchType(types.StructRef):
+    def preprocess_fields(self, fields):
+        return tuple((name, types.unliteral(typ)) for name, typ in fields)
+
+
+class Scratch(structref.StructRefProxy):
     """Buffers reused by every line search of a run, and the run's counters.
 
     The hard-core test of a coordinate move is built lazily, at the first trial of its line
@@ -189,20 +199,12 @@ class Scratch(NamedTuple):
         Counters (see :func:`powell_run`).
     """
 
-    p_trial: np.ndarray
-    xy_trial: np.ndarray
-    theta_trial: np.ndarray
-    reach: np.ndarray
-    clear2: np.ndarray
-    ready: np.ndarray
-    safe: np.ndarray
-    grid_origin: np.ndarray
-    grid_cell: np.ndarray
-    grid_shape: np.ndarray
-    grid_start: np.ndarray
-    grid_items: np.ndarray
-    no_direction: np.ndarray
-    stats: np.ndarray
+
+
+_SCRATCH_FIELDS = ["p_trial", "xy_trial", "theta_trial", "reach", "clear2", "ready", "safe",
+                   "grid_origin", "grid_cell", "grid_shape", "grid_start", "grid_items",
+                   "no_direction", "stats"]
+structref.define_proxy(Scratch, _ScratchType, _SCRATCH_FIELDS)
 
 
 class Model(NamedTuple):
@@ -390,34 +392,18 @@ def _store_head_grid(xy, k, n, scratch):
 
 
 @njit(cache=True)
-def _head_cells(ax, ay, bx, by, pad, scratch):
-    """Cell range ``(x0, x1, y0, y1)`` of the head grid met by the segment's bbox grown by
-    ``pad``, clipped to the grid; empty (``x0 > x1``) when the bbox misses the grid."""
-    xmin = scratch.grid_origin[0]
-    ymin = scratch.grid_origin[1]
-    h = scratch.grid_cell[0]
-    nx = scratch.grid_shape[0]
-    ny = scratch.grid_shape[1]
+def _seg_vs_head(ax, ay, bx, by, j, xy, xmin, ymin, h, nx, ny, start, items, pad):
+    """Smallest squared distance (0 = touching) of segment a-b (index j) to head segments whose
+    cells meet its bbox grown by ``pad``; returns early with 0 on contact."""
     x0 = int(math.floor((min(ax, bx) - pad - xmin) / h))
     x1 = int(math.floor((max(ax, bx) + pad - xmin) / h))
     y0 = int(math.floor((min(ay, by) - pad - ymin) / h))
     y1 = int(math.floor((max(ay, by) + pad - ymin) / h))
-    if x1 < 0 or y1 < 0 or x0 > nx - 1 or y0 > ny - 1:
-        return 0, -1, 0, -1
-    return max(x0, 0), min(x1, nx - 1), max(y0, 0), min(y1, ny - 1)
-
-
-@njit(cache=True)
-def _seg_vs_head(ax, ay, bx, by, j, xy, scratch, pad):
-    """Smallest squared distance (0 = touching) of segment a-b (index j) to head segments whose
-    cells meet its bbox grown by ``pad``; returns early with 0 on contact."""
-    x0, x1, y0, y1 = _head_cells(ax, ay, bx, by, pad, scratch)
-    ny = scratch.grid_shape[1]
-    start = scratch.grid_start
-    items = scratch.grid_items
     best = math.inf
-    for cx in range(x0, x1 + 1):
-        for cy in range(y0, y1 + 1):
+    if x1 < 0 or y1 < 0 or x0 > nx - 1 or y0 > ny - 1:
+        return best
+    for cx in range(max(x0, 0), min(x1, nx - 1) + 1):
+        for cy in range(max(y0, 0), min(y1, ny - 1) + 1):
             c = cx * ny + cy
             for q in range(start[c], start[c + 1]):
                 i = items[q]
@@ -432,14 +418,16 @@ def _seg_vs_head(ax, ay, bx, by, j, xy, scratch, pad):
 
 
 @njit(cache=True)
-def _seg_hits_head(ax, ay, bx, by, j, xy, scratch):
+def _seg_hits_head(ax, ay, bx, by, j, xy, xmin, ymin, h, nx, ny, start, items):
     """Does segment a-b (index j) come closer than ``MARGIN`` to a head segment?"""
-    x0, x1, y0, y1 = _head_cells(ax, ay, bx, by, MARGIN, scratch)
-    ny = scratch.grid_shape[1]
-    start = scratch.grid_start
-    items = scratch.grid_items
-    for cx in range(x0, x1 + 1):
-        for cy in range(y0, y1 + 1):
+    x0 = int(math.floor((min(ax, bx) - MARGIN - xmin) / h))
+    x1 = int(math.floor((max(ax, bx) + MARGIN - xmin) / h))
+    y0 = int(math.floor((min(ay, by) - MARGIN - ymin) / h))
+    y1 = int(math.floor((max(ay, by) + MARGIN - ymin) / h))
+    if x1 < 0 or y1 < 0 or x0 > nx - 1 or y0 > ny - 1:
+        return False
+    for cx in range(max(x0, 0), min(x1, nx - 1) + 1):
+        for cy in range(max(y0, 0), min(y1, ny - 1) + 1):
             c = cx * ny + cy
             for q in range(start[c], start[c + 1]):
                 i = items[q]
@@ -460,6 +448,9 @@ def _prepare_bend(line, xy, scratch, n):
     rky = xy[k, 1]
     safe = math.inf
     pad = h
+    xmin, ymin = scratch.grid_origin[0], scratch.grid_origin[1]
+    nx, ny = scratch.grid_shape[0], scratch.grid_shape[1]
+    start, items = scratch.grid_start, scratch.grid_items
     for j in range(k, n):
         ax = xy[j, 0]
         ay = xy[j, 1]
@@ -467,7 +458,7 @@ def _prepare_bend(line, xy, scratch, n):
         by = xy[j + 1, 1]
         r = max(math.hypot(ax - rkx, ay - rky), math.hypot(bx - rkx, by - rky))
         scratch.reach[j] = r
-        c2 = _seg_vs_head(ax, ay, bx, by, j, xy, scratch, pad)
+        c2 = _seg_vs_head(ax, ay, bx, by, j, xy, xmin, ymin, h, nx, ny, start, items, pad)
         c = max(math.sqrt(min(c2, pad * pad)) - MARGIN, 0.0)
         scratch.clear2[j] = c * c
         if r > 0.0:
@@ -487,6 +478,9 @@ def _prepare_tangent(line, xy, scratch, n):
         h = _store_head_grid(xy, k, n, scratch)
     pad = h
     safe = math.inf
+    xmin, ymin = scratch.grid_origin[0], scratch.grid_origin[1]
+    nx, ny = scratch.grid_shape[0], scratch.grid_shape[1]
+    start, items = scratch.grid_start, scratch.grid_items
     kx0 = xy[k, 0]
     ky0 = xy[k, 1]
     kx1 = xy[k + 1, 0]
@@ -498,7 +492,8 @@ def _prepare_tangent(line, xy, scratch, n):
         by = xy[j + 1, 1]
         c2 = pad * pad
         if k >= 1:
-            c2 = min(c2, _seg_vs_head(ax, ay, bx, by, j, xy, scratch, pad))
+            c2 = min(c2, _seg_vs_head(ax, ay, bx, by, j, xy, xmin, ymin, h, nx, ny, start,
+                                      items, pad))
         if j >= k + 2:
             c2 = min(c2, seg_dist2(kx0, ky0, kx1, ky1, ax, ay, bx, by))
         c = max(math.sqrt(c2) - MARGIN, 0.0)
@@ -510,12 +505,8 @@ def _prepare_tangent(line, xy, scratch, n):
 
 # ----------------------------------------------------------------------------- evaluation
 @njit(cache=True)
-def _energy_trial(a, line, rod, scratch, model, pairs):
-    """Energy at step ``a`` along ``line``: O(1) for coordinate moves, O(N) for ``GENERAL``
-    (which leaves the trial in ``scratch.xy_trial``)."""
-    n = rod.theta.shape[0]
-    lam = model.lam
-    u = model.u
+def _energy_coordinate(a, line, n, lam, u):
+    """Energy at step ``a`` along a coordinate move (``BEND``, ``SHIFT``, ``TANGENT``): O(1)."""
     x = line.sign * a
     if line.mode == BEND:
         e = line.f0
@@ -528,33 +519,35 @@ def _energy_trial(a, line, rod, scratch, model, pairs):
         return e
     if line.mode == SHIFT:
         return line.f0 + lam * (2.0 * x * line.lin_x + x * x * line.weight)
-    if line.mode == TANGENT:
-        c = math.cos(x)
-        sn = math.sin(x)
-        e = line.f0
-        if line.k >= 1:
-            e += n * (2.0 - 2.0 * math.cos(line.phi_k + x) - line.bend_k)
-        if line.k < n - 1:
-            e += n * (2.0 - 2.0 * math.cos(line.phi_k1 - x) - line.bend_k1)
-        vx, vy = _tail_shift(line, c, sn, n)
-        e += lam * (2.0 * (vx * line.lin_x + vy * line.lin_y)
-                    + (vx * vx + vy * vy) * line.weight)
-        if u > 0.0:
-            e += 0.5 * u * ((1.0 - math.cos(2.0 * x)) * line.nem_cos
-                            - math.sin(2.0 * x) * line.nem_sin)
-        return e
-    pt = scratch.p_trial
-    xyt = scratch.xy_trial
+    c = math.cos(x)
+    sn = math.sin(x)
+    e = line.f0
+    if line.k >= 1:
+        e += n * (2.0 - 2.0 * math.cos(line.phi_k + x) - line.bend_k)
+    if line.k < n - 1:
+        e += n * (2.0 - 2.0 * math.cos(line.phi_k1 - x) - line.bend_k1)
+    vx, vy = _tail_shift(line, c, sn, n)
+    e += lam * (2.0 * (vx * line.lin_x + vy * line.lin_y) + (vx * vx + vy * vy) * line.weight)
+    if u > 0.0:
+        e += 0.5 * u * ((1.0 - math.cos(2.0 * x)) * line.nem_cos
+                        - math.sin(2.0 * x) * line.nem_sin)
+    return e
+
+
+@njit(cache=True)
+def _energy_general(a, direction, p, w, pt, xyt, tht, lam, u, pairs):
+    """Energy at step ``a`` along ``direction``: O(N), the trial left in ``pt``, ``xyt``."""
+    n = tht.shape[0]
     for i in range(pt.shape[0]):
-        pt[i] = rod.p[i] + a * line.direction[i]
+        pt[i] = p[i] + a * direction[i]
     _build_xy(pt, n, xyt)
     eb = _bending_p(pt, n)
     ec = 0.0
     for j in range(n + 1):
-        ec += rod.w[j] * (xyt[j, 0] * xyt[j, 0] + xyt[j, 1] * xyt[j, 1])
+        ec += w[j] * (xyt[j, 0] * xyt[j, 0] + xyt[j, 1] * xyt[j, 1])
     if u > 0.0:
-        _theta(pt, n, scratch.theta_trial)
-    return eb + lam * ec + _nematic_p(scratch.theta_trial, pairs, u)
+        _theta(pt, n, tht)
+    return eb + lam * ec + _nematic_p(tht, pairs, u)
 
 
 @njit(cache=True)
@@ -591,12 +584,15 @@ def _admissible_tangent(a, line, xy, wall2, scratch, n):
         scratch.stats[5] += 1
         return True
     scratch.stats[4] += 1
+    xmin, ymin, h = scratch.grid_origin[0], scratch.grid_origin[1], scratch.grid_cell[0]
+    nx, ny = scratch.grid_shape[0], scratch.grid_shape[1]
+    start, items, clear2 = scratch.grid_start, scratch.grid_items, scratch.clear2
     kx0 = xy[k, 0]
     ky0 = xy[k, 1]
     kx1 = kx0 + ds * tx
     ky1 = ky0 + ds * ty
     for j in range(k, n):
-        if v2 < scratch.clear2[j]:
+        if v2 < clear2[j]:
             continue
         if j == k:
             ax, ay, bx, by = kx0, ky0, kx1, ky1
@@ -605,7 +601,8 @@ def _admissible_tangent(a, line, xy, wall2, scratch, n):
             ay = xy[j, 1] + vy
             bx = xy[j + 1, 0] + vx
             by = xy[j + 1, 1] + vy
-        if k >= 1 and _seg_hits_head(ax, ay, bx, by, j, xy, scratch):
+        if k >= 1 and _seg_hits_head(ax, ay, bx, by, j, xy, xmin, ymin, h, nx, ny, start,
+                                     items):
             return False
         if j >= k + 2 and seg_dist2(kx0, ky0, kx1, ky1, ax, ay, bx, by) < _M2:
             return False
@@ -637,8 +634,12 @@ def _admissible_bend(a, line, xy, wall2, scratch, n):
         scratch.stats[5] += 1
         return True
     scratch.stats[4] += 1
+    xmin, ymin, h = scratch.grid_origin[0], scratch.grid_origin[1], scratch.grid_cell[0]
+    nx, ny = scratch.grid_shape[0], scratch.grid_shape[1]
+    start, items = scratch.grid_start, scratch.grid_items
+    reach, clear2 = scratch.reach, scratch.clear2
     for j in range(k, n):
-        if chord * chord * scratch.reach[j] * scratch.reach[j] < scratch.clear2[j]:
+        if chord * chord * reach[j] * reach[j] < clear2[j]:
             continue
         dx = xy[j, 0] - rkx
         dy = xy[j, 1] - rky
@@ -648,7 +649,7 @@ def _admissible_bend(a, line, xy, wall2, scratch, n):
         dy = xy[j + 1, 1] - rky
         bx = rkx + c * dx - s * dy
         by = rky + s * dx + c * dy
-        if _seg_hits_head(ax, ay, bx, by, j, xy, scratch):
+        if _seg_hits_head(ax, ay, bx, by, j, xy, xmin, ymin, h, nx, ny, start, items):
             return False
     return True
 
@@ -685,7 +686,11 @@ def _ev(a, thresh, line, rod, scratch, model, pairs):
     """Energy of the trial at step ``a``, ``BIG`` if it is inadmissible; trials above
     ``thresh`` (the line search's best so far) cannot be accepted and skip the hard-core test."""
     scratch.stats[0] += 1
-    f = _energy_trial(a, line, rod, scratch, model, pairs)
+    if line.mode == GENERAL:
+        f = _energy_general(a, line.direction, rod.p, rod.w, scratch.p_trial, scratch.xy_trial,
+                            scratch.theta_trial, model.lam, model.u, pairs)
+    else:
+        f = _energy_coordinate(a, line, rod.theta.shape[0], model.lam, model.u)
     if f <= thresh and model.hard_core:
         if not _admissible(a, line, rod, scratch, model.wall2):
             return BIG

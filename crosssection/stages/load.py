@@ -261,7 +261,10 @@ def _read_png(path: Path, data: bytes) -> np.ndarray:
     chunks = _png_chunks(data, path)
     w, h, depth, colour = _png_header(data, chunks, path)
     keep = _PNG_CRITICAL + ((b"tRNS",) if colour == 3 else ())
-    minimal = _PNG_SIGNATURE + b"".join(data[s:e] for k, s, e in chunks if k in keep)
+    if all(k in keep for k, _, _ in chunks) and chunks[-1][2] == len(data):
+        minimal = data  # the common case: nothing to drop, no copy
+    else:
+        minimal = _PNG_SIGNATURE + b"".join(data[s:e] for k, s, e in chunks if k in keep)
     with _stderr_fd_captured() as messages:
         arr = cv2.imdecode(np.frombuffer(minimal, np.uint8), cv2.IMREAD_UNCHANGED)
     if arr is None or messages:
@@ -270,7 +273,7 @@ def _read_png(path: Path, data: bytes) -> np.ndarray:
     if arr.ndim != 3 or arr.shape[:2] != (h, w) or arr.shape[2] not in (3, 4):
         raise ImageError(f"corrupt PNG: decoded shape {arr.shape} does not match the header "
                          f"({w}x{h} px, colour type {colour})", path)
-    return arr[..., [2, 1, 0, 3][:arr.shape[2]]]
+    return cv2.cvtColor(arr, cv2.COLOR_BGR2RGB if arr.shape[2] == 3 else cv2.COLOR_BGRA2RGBA)
 
 
 # ----------------------------------------------------------------------------- TIFF
@@ -369,7 +372,9 @@ def _read_tiff(path: Path) -> np.ndarray:
                 page = _tiff_page(tif, path)
                 arr = page.asarray()
                 arr = _tiff_colour(page, arr, path)
-        except ImageError:
+        except ImageError as exc:
+            if logged:  # tifffile's own words say why (e.g. an invalid offset)
+                raise ImageError(f"{exc.cause} ({logged[0][:160]})", path) from None
             raise
         except MemoryError:
             raise ImageError("image too large to decode in memory", path) from None

@@ -75,6 +75,8 @@ class ThresholdResult:
         Fraction of the image inside ``region`` (1 without region).
     note : str
         Why the mask is empty, when it is.
+    n_outside : int
+        Pixels outside ``region`` that pass the same cut: ink (or plate) the frame left out.
     """
 
     mask: np.ndarray
@@ -87,6 +89,7 @@ class ThresholdResult:
     paper_level: tuple | None = None
     region_fraction: float = 1.0
     note: str = ""
+    n_outside: int = 0
 
     @property
     def feature(self) -> str:
@@ -267,13 +270,17 @@ def threshold_rgb(rgb, *, method: str = "auto", region=None, blue_min=None,
     r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
     m = np.maximum(r, g)
 
+    n_out = [0]
+
     def _bounds(mask, blue, rgmax):
         if blue is not None:
             mask &= b >= int(np.ceil(blue))
         if rgmax is not None:
             mask &= m <= int(np.floor(rgmax))
         if reg is not None:
+            n_all = np.count_nonzero(mask)
             mask &= reg
+            n_out[0] = n_all - np.count_nonzero(mask)
         return mask
 
     if method == "fixed":
@@ -281,7 +288,7 @@ def threshold_rgb(rgb, *, method: str = "auto", region=None, blue_min=None,
         rg = RG_MAX_U8 * scale if rg is None else rg
         mask = _bounds(np.ones(rgb.shape[:2], bool), bm, rg)
         return ThresholdResult(mask, float(bm), float(rg), "fixed", None, scale,
-                               region_fraction=reg_frac)
+                               region_fraction=reg_frac, n_outside=n_out[0])
     d = b.astype(np.int32) - m.astype(np.int32)
     if method == "otsu":
         rg = RG_MAX_U8 * scale if rg is None else rg
@@ -291,7 +298,8 @@ def threshold_rgb(rgb, *, method: str = "auto", region=None, blue_min=None,
         else:
             t = max(_otsu_u8(dd / scale) * scale, 1.0)
         mask = _bounds(d >= t, None, rg)
-        return ThresholdResult(mask, None, float(rg), "otsu", t, scale, region_fraction=reg_frac)
+        return ThresholdResult(mask, None, float(rg), "otsu", t, scale, region_fraction=reg_frac,
+                               n_outside=n_out[0])
     levels = _auto_levels(d, m, reg, scale)
     if levels is None:
         return ThresholdResult(np.zeros(rgb.shape[:2], bool), bm, rg, "auto", None, scale,
@@ -305,4 +313,4 @@ def threshold_rgb(rgb, *, method: str = "auto", region=None, blue_min=None,
     mask = _bounds(d >= d_cut, bm, rg_used)
     return ThresholdResult(mask, bm, float(rg_used), "auto", float(d_cut), scale,
                            tuple(v * scale for v in ink), tuple(v * scale for v in paper),
-                           reg_frac)
+                           reg_frac, n_outside=n_out[0])
