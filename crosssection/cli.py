@@ -24,9 +24,18 @@ SUBCOMMANDS = {
 }
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """An ``ArgumentParser`` whose usage errors are one ``error:`` line and exit status 2
+    (argparse's default prints the usage block as well)."""
+
+    def error(self, message):
+        print(f"error: {self.prog}: {' '.join(message.split())}", file=sys.stderr)
+        raise SystemExit(2)
+
+
 def make_parser(prog: str, description: str, subcommands: dict) -> argparse.ArgumentParser:
     """A parser whose subcommands are registered by their modules' ``add_subparser``."""
-    parser = argparse.ArgumentParser(prog=prog, description=description)
+    parser = OneLineParser(prog=prog, description=description)
     parser.add_argument("--version", action="version", version=f"foldstat {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     for modname in dict.fromkeys(subcommands.values()):

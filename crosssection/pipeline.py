@@ -33,7 +33,7 @@ import numpy as np
 from crosssection import quality
 from crosssection import tables as tb
 from crosssection._version import __version__
-from crosssection.core.errors import AnalysisError, ImageError
+from crosssection.core.errors import AnalysisError, FoldstatError, ImageError
 from crosssection.params import AnalysisParams
 from crosssection.result import AnalysisResult, write_step_images
 from crosssection.stages import curvature, hole as hole_stage, voids as void_stage
@@ -142,7 +142,15 @@ def preprocess(image, params: AnalysisParams | None = None, *, timer=None,
     """
     path_hint = str(image) if isinstance(image, (str, Path)) else None
     p = _resolve_params(params, overrides, path_hint)
-    timer = timer or StageTimer()
+    try:
+        return _preprocess(image, p, timer or StageTimer())
+    except FoldstatError as exc:
+        if exc.path is None and path_hint is not None:
+            raise type(exc)(exc.cause, path_hint) from None
+        raise
+
+
+def _preprocess(image, p: AnalysisParams, timer) -> Preprocessed:
     with timer("load"):
         rgb, path = _read(image)
     p.check_image(rgb.shape, path)
@@ -152,7 +160,9 @@ def preprocess(image, params: AnalysisParams | None = None, *, timer=None,
     l_min_px = p.scale.to_px(p.l_min_mm)
     speck_px = min(s_min_px, l_min_px * p.thickness_px) if l_min_px > 0 else s_min_px
     with timer("clean"):
-        mask = clean_mask(thr.mask, s_min_px=s_min_px, speck_px=speck_px)
+        # a blob too small to hold a branch of length l_min goes whatever its area
+        mask = clean_mask(thr.mask, s_min_px=s_min_px, speck_px=speck_px,
+                          min_extent_px=l_min_px)
     _check_clean(mask, speck_px, path)
     with timer("skeleton"):
         skel = skeletonize_mask(mask, l_min_px=l_min_px)
@@ -162,7 +172,8 @@ def preprocess(image, params: AnalysisParams | None = None, *, timer=None,
         dist = cv2.distanceTransform(mask.view(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
     with timer("graph"):
         junc, sg, merged = stack_graph(skel, dist, merge_px=p.merge_px,
-                                       merge_thick_crossings=p.merge_thick_crossings)
+                                       merge_thick_crossings=p.merge_thick_crossings,
+                                       thickness_px=p.thickness_px)
     if sg.n_stacks == 0:
         raise AnalysisError("the skeleton has no stack (only isolated points)", path)
     notes = [] if len(junc) else ["no junction found: every stack is a closed loop or a free "
@@ -244,6 +255,16 @@ def analyze(image, params: AnalysisParams | None = None, **overrides) -> Analysi
         One warning (of a subclass naming the check) per failed quality check
         (:mod:`crosssection.quality`).
     """
+    path_hint = str(image) if isinstance(image, (str, Path)) else None
+    try:
+        return _analyze(image, params, overrides)
+    except FoldstatError as exc:
+        if exc.path is None and path_hint is not None:
+            raise type(exc)(exc.cause, path_hint) from None
+        raise
+
+
+def _analyze(image, params, overrides) -> AnalysisResult:
     t_start = time.perf_counter()
     timer = StageTimer()
     pre = preprocess(image, params, timer=timer, **overrides)

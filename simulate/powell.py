@@ -33,10 +33,12 @@ theta_0``) and the start point, made fast by the structure of the rod:
 Inadmissible trials get the energy ``BIG`` (1e30), "a very large number" as in the paper; a
 trial is inadmissible when two non-adjacent segments come closer than ``MARGIN`` (1e-9 L).
 
-The state shared by the kernels travels in named tuples (typed structures that numba compiles
-to plain structs and caches): :class:`Rod` (the configuration of the run), :class:`Line` (the
-move of one line search and its step-0 constants), :class:`Scratch` (reused buffers, the lazily
-built hard-core test, the counters) and :class:`Model` (energy parameters and constraints).
+The state shared by the kernels has named fields: :class:`Rod` (the configuration of the run)
+and :class:`Scratch` (reused buffers, the lazily built hard-core test, the counters) are
+mutable numba ``structref`` records, passed by reference so that a call does not copy or
+reference-count each of their arrays; :class:`Line` (the move of one line search and its step-0
+constants) and :class:`Model` (energy parameters and constraints) are small named tuples
+passed by value.
 """
 from __future__ import annotations
 
@@ -94,7 +96,6 @@ class Rod(structref.StructRefProxy):
         Suffix sums over nodes ``j >= k`` of ``w_j``, ``w_j x_j``, ``w_j y_j``,
         ``w_j |R_j|^2`` (index N+1 holds zeros).
     """
-
 
 
 _ROD_FIELDS = ["p", "xy", "theta", "w", "tail_w", "tail_wx", "tail_wy", "tail_wr2"]
@@ -200,7 +201,6 @@ class Scratch(structref.StructRefProxy):
     """
 
 
-
 _SCRATCH_FIELDS = ["p_trial", "xy_trial", "theta_trial", "reach", "clear2", "ready", "safe",
                    "grid_origin", "grid_cell", "grid_shape", "grid_start", "grid_items",
                    "no_direction", "stats"]
@@ -255,18 +255,22 @@ def _suffix(rod):
     """Suffix sums of ``w``, ``w x``, ``w y``, ``w |R|^2`` over nodes ``j >= k``."""
     xy = rod.xy
     w = rod.w
+    sw = rod.tail_w
+    swx = rod.tail_wx
+    swy = rod.tail_wy
+    swr2 = rod.tail_wr2
     n1 = xy.shape[0]
-    rod.tail_w[n1] = 0.0
-    rod.tail_wx[n1] = 0.0
-    rod.tail_wy[n1] = 0.0
-    rod.tail_wr2[n1] = 0.0
+    sw[n1] = 0.0
+    swx[n1] = 0.0
+    swy[n1] = 0.0
+    swr2[n1] = 0.0
     for j in range(n1 - 1, -1, -1):
         x = xy[j, 0]
         y = xy[j, 1]
-        rod.tail_w[j] = rod.tail_w[j + 1] + w[j]
-        rod.tail_wx[j] = rod.tail_wx[j + 1] + w[j] * x
-        rod.tail_wy[j] = rod.tail_wy[j + 1] + w[j] * y
-        rod.tail_wr2[j] = rod.tail_wr2[j + 1] + w[j] * (x * x + y * y)
+        sw[j] = sw[j + 1] + w[j]
+        swx[j] = swx[j + 1] + w[j] * x
+        swy[j] = swy[j + 1] + w[j] * y
+        swr2[j] = swr2[j + 1] + w[j] * (x * x + y * y)
 
 
 @njit(cache=True)
@@ -950,9 +954,10 @@ def _move_tangent(line, x, rod):
         rod.p[k + 1] -= x
     rod.theta[k] += x
     vx, vy = _tail_shift(line, math.cos(x), math.sin(x), n)
+    xy = rod.xy
     for j in range(k + 1, n + 1):
-        rod.xy[j, 0] += vx
-        rod.xy[j, 1] += vy
+        xy[j, 0] += vx
+        xy[j, 1] += vy
     _suffix(rod)
 
 
@@ -961,18 +966,20 @@ def _move_bend(line, x, rod):
     """Bend node ``k`` by ``x``: the tail rotates rigidly about it."""
     n = rod.theta.shape[0]
     k = line.k
-    rkx = rod.xy[k, 0]
-    rky = rod.xy[k, 1]
+    xy = rod.xy
+    theta = rod.theta
+    rkx = xy[k, 0]
+    rky = xy[k, 1]
     rod.p[k] += x
     for j in range(k, n):
-        rod.theta[j] += x
+        theta[j] += x
     c = math.cos(x)
     s = math.sin(x)
     for j in range(k + 1, n + 1):
-        dx = rod.xy[j, 0] - rkx
-        dy = rod.xy[j, 1] - rky
-        rod.xy[j, 0] = rkx + c * dx - s * dy
-        rod.xy[j, 1] = rky + s * dx + c * dy
+        dx = xy[j, 0] - rkx
+        dy = xy[j, 1] - rky
+        xy[j, 0] = rkx + c * dx - s * dy
+        xy[j, 1] = rky + s * dx + c * dy
     _suffix(rod)
 
 
@@ -981,8 +988,9 @@ def _move_shift(line, x, rod):
     """Translate the rod by ``x`` along axis ``k``."""
     n = rod.theta.shape[0]
     rod.p[n + line.k] += x
+    xy = rod.xy
     for j in range(n + 1):
-        rod.xy[j, line.k] += x
+        xy[j, line.k] += x
     _suffix(rod)
 
 

@@ -364,7 +364,8 @@ def stack_graph(skel, distance_px, *, merge_px: float = 2.0,
     thickness_px : float, optional
         Sheet thickness h in px. When given, every junction is moved to where the centrelines
         of its stacks meet (:func:`crosssection.stages.junctions.fork_points`) instead of the
-        skeleton's fork, which lies several h away inside thick blobs.
+        skeleton's fork, which lies several h away inside thick blobs; ``length_px`` keeps
+        the fork-to-fork lengths.
 
     Returns
     -------
@@ -387,8 +388,12 @@ def stack_graph(skel, distance_px, *, merge_px: float = 2.0,
             sg = build_stack_graph(skel, junc)
             merged += len(links)
     if thickness_px is not None and len(junc):
+        # lengths stay those between the skeleton's forks: the centreline intersection moves
+        # a junction along some of its stacks and away from others, and the pixel paths
+        # cannot be re-cut consistently inside the ink blob
         junc = _at_fork_points(junc, sg, distance_px, float(thickness_px))
-        sg = build_stack_graph(skel, junc)
+        for j in range(len(junc)):
+            sg.node_rc[j] = junc.centers_rc[j].copy()
     return junc, sg, merged
 
 

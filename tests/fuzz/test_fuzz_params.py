@@ -11,7 +11,6 @@ import itertools
 import math
 import warnings
 
-import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -129,7 +128,7 @@ QUENCH_OPTS = {"--lambda": numbers, "--noise": numbers, "--u": numbers, "--ftol"
 
 
 @pytest.mark.slow
-@settings(FUZZ, max_examples=25)
+@settings(FUZZ, max_examples=8)
 @given(data=st.data())
 def test_quench_command_exit_0_or_one_line(data, fuzz_tools, tmp_path, capsys):
     """``simulate quench`` on a tiny ensemble (1 configuration, <= 12 segments, one short
