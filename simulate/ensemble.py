@@ -29,6 +29,7 @@ total energy 31 (paper 61), branch energy 0.62 (0.31), branch length 1.26 (0.4).
 from __future__ import annotations
 
 import json
+import math
 import time
 from concurrent.futures import as_completed
 from pathlib import Path
@@ -289,28 +290,62 @@ def _add_common(p, command):
     p.set_defaults(func=run, command=command)
 
 
+def _finite(name, value, *, low=None, low_open=False, allow_none=False):
+    """``value`` as a float, finite and above ``low`` (ParameterError naming the option)."""
+    if value is None and allow_none:
+        return None
+    v = float(value)
+    if not math.isfinite(v) or (low is not None and (v < low or (low_open and v == low))):
+        bound = "" if low is None else f" {'>' if low_open else '>='} {low:g}"
+        raise ParameterError(f"{name} must be a finite number{bound}, got {value!r}")
+    return v
+
+
 def params_from_args(args) -> dict:
-    """The parameter dict of :func:`run_ensemble` from parsed CLI arguments."""
+    """The parameter dict of :func:`run_ensemble` from parsed CLI arguments, every value
+    checked (finite, in range, whole where it must be) before anything is written."""
     try:
         nem = [int(x) for x in str(args.nematic_runs).split(",") if x.strip()]
     except ValueError:
         raise ParameterError(f"--nematic-runs must be integers, got {args.nematic_runs!r}")
-    if args.n_configs < 1 or args.segments < 3 or args.lam < 0 or args.noise < 0:
-        raise ParameterError("need --n-configs >= 1, --segments >= 3, --lambda >= 0, "
-                             "--noise >= 0")
+    for name, v, low in (("--n-configs", args.n_configs, 1), ("--segments", args.segments, 3),
+                         ("--runs", args.runs, 1), ("--maxiter", args.maxiter, 1),
+                         ("--seed", args.seed, 0), ("--workers", args.workers, 1)):
+        if v < low:
+            raise ParameterError(f"{name} must be >= {low}, got {v}")
+    if args.segments > 100_000 or args.n_configs > 10_000_000:
+        raise ParameterError("--segments must be <= 100000 and --n-configs <= 10000000")
+    if any(k < 0 or k >= args.runs - 1 for k in nem):
+        raise ParameterError(f"--nematic-runs must name runs 0..{args.runs - 2}: the nematic term "
+                             "must not be used in the last run (paper), got "
+                             f"{args.nematic_runs!r}")
     params = dict(command=args.command, n_configs=args.n_configs, n_segments=args.segments,
-                  lam=args.lam, noise=args.noise, seed=args.seed, method=args.method,
-                  n_runs=args.runs, maxiter=args.maxiter, nematic_runs=nem, u=args.u,
-                  ftol=args.ftol, xtol=args.xtol, wall_radius=args.wall_radius,
-                  contact_distance=args.contact_distance, parametrization=args.parametrization)
+                  lam=_finite("--lambda", args.lam, low=0.0),
+                  noise=_finite("--noise", args.noise, low=0.0), seed=args.seed,
+                  method=args.method, n_runs=args.runs, maxiter=args.maxiter,
+                  nematic_runs=nem, u=_finite("--u", args.u, low=0.0),
+                  ftol=_finite("--ftol", args.ftol, low=0.0, low_open=True),
+                  xtol=_finite("--xtol", args.xtol, low=0.0, low_open=True),
+                  wall_radius=_finite("--wall-radius", args.wall_radius, low=0.0, low_open=True,
+                                      allow_none=True),
+                  contact_distance=_finite("--contact-distance", args.contact_distance, low=0.0,
+                                           low_open=True, allow_none=True),
+                  parametrization=args.parametrization)
     if args.command == "anneal":
-        params.update(lam_start=args.lam_start, stages=args.stages, ramp=args.ramp)
+        if args.stages < 1:
+            raise ParameterError(f"--stages must be >= 1, got {args.stages}")
+        params.update(lam_start=_finite("--lambda-start", args.lam_start, low=0.0,
+                                        low_open=True),
+                      stages=args.stages, ramp=args.ramp)
     return params
 
 
 def run(args) -> int:
     """Entry point of ``quench`` / ``anneal``."""
-    params = params_from_args(args)
+    try:
+        params = params_from_args(args)
+    except ParameterError as exc:
+        raise ParameterError(exc.cause, args.out) from None
     tables = run_ensemble(params, args.out, workers=args.workers, scheduler=args.scheduler,
                           progress=not args.no_progress)
     c = tables["configs"]

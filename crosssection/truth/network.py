@@ -141,8 +141,11 @@ def _voronoi_network(rng, n_cells: int, radius: float, min_edge: float, lloyd: i
             ends.append(node_for(v, wall=not (interior and inside)))
         if ends[0] != ends[1]:
             edges.append((ends[0], ends[1], "ridge"))
-    pos = np.array(pos, float)
+    pos = np.array(pos, float).reshape(-1, 2)
     is_wall = np.array(is_wall, bool)
+    if np.count_nonzero(is_wall) < 3:
+        raise SceneGenerationError("the Voronoi cells give fewer than 3 wall nodes (too few "
+                                   "cells for the disk)")
     # the wall arcs between consecutive wall nodes
     wall_nodes = np.flatnonzero(is_wall)
     phi = np.mod(np.arctan2(pos[wall_nodes, 1], pos[wall_nodes, 0]), 2 * np.pi)
