@@ -77,11 +77,6 @@ def main(argv=None) -> int:
     ap.add_argument("--no-calibration", action="store_true",
                     help="let the pipeline assume its default width law")
     args = ap.parse_args(argv)
-    try:
-        import crosssection.pipeline  # noqa: F401
-    except ImportError as exc:
-        print(f"accuracy_sweep: pipeline not available ({exc})")
-        return 0
     df = run(args.seeds, args.quick, not args.no_calibration)
     pd.set_option("display.width", 200)
     pd.set_option("display.max_columns", 30)

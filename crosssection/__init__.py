@@ -4,14 +4,37 @@ stacks, branches and voids, then ensemble statistics.
 >>> import crosssection
 >>> res = crosssection.analyze("scan.png", px_per_mm=50, thickness_mm=0.1)  # doctest: +SKIP
 >>> res.summary["n_branches"], res.branches.head()  # doctest: +SKIP
-"""
-from crosssection._version import __version__
-from crosssection.core.errors import (AnalysisError, ConfigError, FoldstatError, ImageError,
-                                      ParameterError)
-from crosssection.params import AnalysisParams, ScanScale
-from crosssection.pipeline import AnalysisResult, analyze
-from crosssection.quality import QualityWarning
 
-__all__ = ["__version__", "analyze", "AnalysisParams", "ScanScale", "AnalysisResult",
-           "QualityWarning", "FoldstatError", "ImageError", "ParameterError", "AnalysisError",
-           "ConfigError"]
+The public names are loaded on first use (PEP 562), so that ``import crosssection`` (and the
+simulator, which imports the shared core) does not pay for the whole pipeline's imports.
+"""
+import importlib
+
+from crosssection._version import __version__
+
+_LAZY = {
+    "analyze": "crosssection.pipeline",
+    "AnalysisResult": "crosssection.result",
+    "AnalysisParams": "crosssection.params",
+    "ScanScale": "crosssection.params",
+    "QualityWarning": "crosssection.quality",
+    "FoldstatError": "crosssection.core.errors",
+    "ImageError": "crosssection.core.errors",
+    "ParameterError": "crosssection.core.errors",
+    "AnalysisError": "crosssection.core.errors",
+    "ConfigError": "crosssection.core.errors",
+}
+
+__all__ = ["__version__", *_LAZY]
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        value = getattr(importlib.import_module(_LAZY[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'crosssection' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(__all__)

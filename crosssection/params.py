@@ -14,11 +14,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import tomllib
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
-from crosssection.core.errors import ConfigError, FoldstatError, ParameterError
+from crosssection.core.errors import FoldstatError, ParameterError
+from crosssection.core.fileio import read_toml
 
 __all__ = ["ScanScale", "AnalysisParams", "add_analysis_arguments", "check_param", "PARAM_NAMES",
            "THRESHOLD_METHODS", "CURVATURE_METHODS"]
@@ -219,12 +219,7 @@ class AnalysisParams:
     def from_toml(cls, path, *, table: str | None = None) -> "AnalysisParams":
         """Parameters from a TOML file (top level, or one of its tables)."""
         path = Path(path)
-        try:
-            data = tomllib.loads(path.read_text(encoding="utf-8"))
-        except tomllib.TOMLDecodeError as exc:
-            raise ConfigError(f"invalid TOML: {exc}", path) from None
-        except (OSError, UnicodeDecodeError) as exc:
-            raise ConfigError(f"cannot read: {exc}", path) from None
+        data = read_toml(path)
         if table is not None:
             data = data.get(table, {})
         return cls.from_mapping({k: v for k, v in data.items() if k in PARAM_NAMES}, path=path,

@@ -22,11 +22,11 @@ file must exist and hold the columns ``n_layers,width_mm``.
 from __future__ import annotations
 
 import re
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from crosssection.core.errors import ConfigError, ParameterError
+from crosssection.core.fileio import read_toml
 from crosssection.params import PARAM_NAMES, check_param
 
 SET_FILE = "set.toml"
@@ -184,12 +184,7 @@ def load_set_config(toml_path, *, defaults: dict | None = None) -> SetConfig:
         unsafe set name.
     """
     toml_path = Path(toml_path)
-    try:
-        data = tomllib.loads(toml_path.read_text(encoding="utf-8"))
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"invalid TOML: {exc}", toml_path) from exc
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"cannot read: {exc}", toml_path) from exc
+    data = read_toml(toml_path)
     folder = toml_path.parent
     name = data.get("name", folder.name)
     if not isinstance(name, str) or not _SAFE_NAME.match(name) or name in (".", ".."):

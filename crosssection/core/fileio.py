@@ -116,3 +116,17 @@ def write_npz(path, **arrays) -> Path:
     with atomic_path(path, suffix=".npz") as tmp:
         np.savez_compressed(tmp, **arrays)
     return Path(path)
+
+
+def read_toml(path) -> dict:
+    """A TOML file as a dict; unreadable or invalid files are one ``ConfigError`` naming it."""
+    import tomllib
+
+    from crosssection.core.errors import ConfigError
+
+    try:
+        return tomllib.loads(Path(path).read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"invalid TOML: {exc}", path) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"cannot read: {exc}", path) from None

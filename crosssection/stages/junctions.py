@@ -24,6 +24,7 @@ import numpy as np
 from numba import njit
 
 from crosssection.core.errors import ParameterError
+from crosssection.core.unionfind import find_root, union_roots
 from crosssection.stages.skeleton import nonzero_rc
 
 
@@ -47,14 +48,6 @@ class Junctions:
 
     def __len__(self) -> int:
         return len(self.pixels)
-
-
-@njit(cache=True)
-def _find(parent, i):
-    while parent[i] != i:
-        parent[i] = parent[parent[i]]
-        i = parent[i]
-    return i
 
 
 @njit(cache=True)
@@ -101,15 +94,12 @@ def _junction_labels(img, rows, cols, merge_px):
                     continue
                 k = idx[rr, cc]
                 if k > 0 and dr * dr + dc * dc <= m2:
-                    a = _find(parent, i)
-                    b = _find(parent, k - 1)
-                    if a != b:
-                        parent[a] = b
+                    union_roots(parent, i, k - 1)
     # cluster ids in order of first pixel (raster order)
     cid = -np.ones(n, np.int64)
     k = 0
     for i in range(n):
-        root = _find(parent, i)
+        root = find_root(parent, i)
         if cid[root] < 0:
             cid[root] = k
             k += 1

@@ -334,8 +334,6 @@ def thin_mask(mask) -> np.ndarray:
 
 
 def _skeleton_padded(mask, *, l_min_px):
-    import cv2
-
     h, w = mask.shape
     img = np.zeros((h + 2, w + 2), np.uint8)
     img[1:-1, 1:-1] = mask

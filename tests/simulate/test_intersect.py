@@ -2,8 +2,7 @@ import numpy as np
 import pytest
 
 from simulate.geometry import positions
-from simulate.intersect import (close_pairs, has_intersection, has_intersection_brute,
-                                has_intersection_grid, has_intersection_skip, seg_dist2)
+from simulate.intersect import close_pairs, has_intersection, seg_dist2
 
 METHODS = ("brute", "skip", "grid")
 
