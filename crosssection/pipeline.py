@@ -33,7 +33,7 @@ import numpy as np
 from crosssection import quality
 from crosssection import tables as tb
 from crosssection._version import __version__
-from crosssection.core.errors import AnalysisError, FoldstatError, ImageError
+from crosssection.core.errors import AnalysisError, FoldstatError, ImageError, ParameterError
 from crosssection.params import AnalysisParams
 from crosssection.result import AnalysisResult, write_step_images
 from crosssection.stages import curvature, hole as hole_stage, voids as void_stage
@@ -217,13 +217,18 @@ def _calibration(p: AnalysisParams):
     if cal is None:
         return Calibration.linear(p.thickness_mm, n_max=50)
     if isinstance(cal, (str, Path)):
-        return Calibration.from_csv(cal)
-    if isinstance(cal, Calibration):
-        return cal
-    if not isinstance(cal, pd.DataFrame) and hasattr(cal, "to_frame"):
+        cal = Calibration.from_csv(cal)
+    elif not isinstance(cal, (Calibration, pd.DataFrame)) and hasattr(cal, "to_frame"):
         cal = cal.to_frame()
     if isinstance(cal, pd.DataFrame):
-        return Calibration.from_frame(cal)
+        cal = Calibration.from_frame(cal)
+    # a cut stack of one layer is about one sheet thick (the paper's calibration: 1.1-1.4 h);
+    # a width law off by a factor of 10 is a unit or column error, not a calibration
+    w1 = float(np.asarray(cal.width(1.0)).reshape(-1)[0])
+    if not 0.1 * p.thickness_mm <= w1 <= 10.0 * p.thickness_mm:
+        raise ParameterError(f"calibration {p.calibration_source()}: one layer is {w1:.3g} mm "
+                             f"wide, not about the sheet thickness h = {p.thickness_mm:g} mm "
+                             "(check its units and columns)")
     return cal
 
 

@@ -154,6 +154,20 @@ def _read_part(path):
         return json.loads(str(z["meta"])), z["xy"].copy()
 
 
+def _part_ok(path, config_id: int, seed: int) -> bool:
+    """Whether a part file is a complete result of this configuration (same id and seed);
+    a truncated, garbled or foreign one is redone, so a resume never fails on it."""
+    if not path.exists():
+        return False
+    try:
+        meta, xy = _read_part(path)
+        row = meta["row"]
+        return (int(row["config_id"]) == config_id and int(row["seed"]) == int(seed)
+                and xy.ndim == 2 and xy.shape[1] == 2 and bool(np.isfinite(xy).all()))
+    except Exception:  # noqa: BLE001 - any unreadable part is simply redone
+        return False
+
+
 def assemble(out, n_configs: int) -> dict:
     """Assemble configs.csv, branches.csv, voids.csv and rods.npz from the part files.
 
@@ -229,7 +243,7 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
                                                       if pfile.exists() else n),
                        "version": __version__})
     seeds = spawn_seeds(params["seed"], n)
-    todo = [i for i in range(n) if not part_path(out, i).exists()]
+    todo = [i for i in range(n) if not _part_ok(part_path(out, i), i, seeds[i])]
     bar = None
     if progress:
         from tqdm import tqdm

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import json
 import warnings
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -374,7 +375,12 @@ def render_directory(sim_dir, out_dir, *, configs=None, **kwargs) -> list[Path]:
         lam = float(p.get("lambda", p.get("lam", lam)))
         delta = p.get("contact_distance")
     written = []
-    with np.load(rods_path) as rods:
+    try:
+        rods = np.load(rods_path, allow_pickle=False)
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        raise ConfigError(f"unreadable rods file ({' '.join(str(exc).split())})",
+                          rods_path) from None
+    with rods:
         keys = sorted(rods.files) if configs is None else [k for k in sorted(rods.files)
                                                            if k in set(configs)]
         base_seed = int(kwargs.pop("seed", 0))
@@ -383,10 +389,15 @@ def render_directory(sim_dir, out_dir, *, configs=None, **kwargs) -> list[Path]:
             if (folder / "truth" / "summary.json").exists():
                 written.append(folder)
                 continue
-            xy = np.asarray(rods[key], float)
-            if xy.ndim != 2 or xy.shape[1] != 2:
-                raise ConfigError(f"array {key!r} has shape {xy.shape}, expected (N+1, 2)",
-                                  rods_path)
+            try:
+                xy = np.asarray(rods[key], float)
+            except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+                raise ConfigError(f"array {key!r} unreadable ({exc})", rods_path) from None
+            if xy.ndim != 2 or xy.shape[1] != 2 or len(xy) < 4:
+                raise ConfigError(f"array {key!r} has shape {xy.shape}, expected (N+1, 2) "
+                                  "with N >= 3", rods_path)
+            if not np.isfinite(xy).all():
+                raise ConfigError(f"array {key!r} has non-finite coordinates", rods_path)
             an = analyze_rod(xy, lam=lam, contact_distance=delta)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
