@@ -34,6 +34,7 @@ from crosssection import quality
 from crosssection import tables as tb
 from crosssection._version import __version__
 from crosssection.core.errors import AnalysisError, FoldstatError, ImageError, ParameterError
+from crosssection.linsys import solve_branch_counts
 from crosssection.params import AnalysisParams
 from crosssection.result import AnalysisResult, write_step_images
 from crosssection.stages import curvature, hole as hole_stage, voids as void_stage
@@ -272,18 +273,16 @@ def analyze(image, params: AnalysisParams | None = None, **overrides) -> Analysi
 def _analyze(image, params, overrides) -> AnalysisResult:
     t_start = time.perf_counter()
     timer = StageTimer()
-    pre = preprocess(image, params, timer=timer, **overrides)
-    p = _resolve_params(params, overrides, pre.path)
+    p = _resolve_params(params, overrides, str(image) if isinstance(image, (str, Path)) else None)
+    cal = _calibration(p)  # a bad calibration file fails before any image work
+    pre = _preprocess(image, p, timer)
     sg, h_px, scale = pre.graph, p.thickness_px, p.scale
-    cal = _calibration(p)
     with timer("widths"):
         width_mm = scale.to_mm(stack_widths_px(sg, pre.distance_px, junction_margin_px=2 * h_px))
         layers_est = np.asarray(cal.layers(width_mm), dtype=float)
     with timer("packs"):
         packs = compute_packs(sg, tangent_px=scale.to_px(p.tangent_used_mm))
     with timer("linear_system"):
-        from crosssection.linsys import solve_branch_counts
-
         lin = solve_branch_counts(sg, packs, layers_est)
         n_br = np.asarray(lin.n_br, dtype=np.int64)
     with timer("curvature"):
