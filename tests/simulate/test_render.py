@@ -141,3 +141,27 @@ def test_round_trip_exact_n_br(tmp_path):
         s = score(pair, schema.read_tables(folder / "truth"))
         assert s["n_br_exact_length_fraction"] == pytest.approx(1.0, abs=0.02), (name, s)
         assert pair[0]["n_branches"] == sc.summary["n_branches"], name
+
+
+def test_smooth_line_bends_like_the_discrete_rod():
+    """Nodes on an open arc: the drawn curve passes through every node and its int kappa^2 ds
+    equals the discrete rod's sum (d theta)^2 / ds (the energy the truth counts), where a
+    polyline would put all the turning in corners."""
+    from simulate.render import smooth_line
+
+    r, n = 300.0, 40
+    t = np.linspace(0.0, 1.5 * np.pi, n + 1)
+    nodes = np.c_[r * np.cos(t), r * np.sin(t)]
+    curve = smooth_line(nodes, step_px=0.5)
+    d = np.diff(nodes, axis=0)
+    ds = np.hypot(*d.T)
+    dth = np.diff(np.unwrap(np.arctan2(d[:, 1], d[:, 0])))
+    discrete = np.sum(dth ** 2 / ds[:-1])
+    c1 = np.gradient(curve, axis=0)
+    c2 = np.gradient(c1, axis=0)
+    speed = np.hypot(*c1.T)
+    kappa = (c1[:, 0] * c2[:, 1] - c1[:, 1] * c2[:, 0]) / speed ** 3
+    smooth = np.sum(kappa[5:-5] ** 2 * speed[5:-5])
+    assert smooth == pytest.approx(discrete, rel=0.05)
+    dist = np.min(np.hypot(*(curve[None, :, :] - nodes[:, None, :]).transpose(2, 0, 1)), axis=1)
+    assert dist.max() < 0.3
