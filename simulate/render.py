@@ -116,41 +116,48 @@ def _frame(xy, analysis, cal, *, px_per_mm, thickness_mm, rod_length_mm, hole_ra
                   hole_radius_mm, hole_xy, hole_px)
 
 
-def smooth_line(line_xy, step_px: float = 1.0) -> np.ndarray:
-    """The smooth curve through a stack's nodes, sampled every ``step_px`` of arc length.
+def smooth_line(line_xy, knot_spacing_px: float, step_px: float = 1.0) -> np.ndarray:
+    """The smooth curve of a stack through the rod's discretisation, sampled every ``step_px``.
 
-    The rod is a chain of straight segments, but its energy is that of the smooth sheet it
-    discretises: sum (d theta_i)^2 / ds, the ``int kappa^2 ds`` of a curve turning by d theta_i
-    over each segment. Drawn as a polyline, the same turn sits in a corner a few pixels wide and
-    an image measures several times that energy. An interpolating cubic spline (chord-length
-    parameter; periodic for a closed line) turns gradually between nodes, as the sheet does.
+    The rod is a chain of straight segments of length ``ds`` (``knot_spacing_px``), and its
+    energy is that of the smooth sheet it discretises: sum (d theta_i)^2 / ds, the
+    ``int kappa^2 ds`` of a curve turning by d theta_i over each segment. Drawn as a polyline,
+    the same turns sit in corners a few pixels wide and an image measures several times that
+    energy. Here the stack's line is resampled at the segment length along its arc (which cuts
+    the corners and the short hooks where a line joins its junction) and an interpolating cubic
+    spline through those knots (periodic for a closed line) turns gradually between them.
 
     Parameters
     ----------
     line_xy : (P, 2) array
-        Node positions in pixels (x, y).
+        The stack's line in pixels (x, y), sampled at least once per segment.
+    knot_spacing_px : float
+        The rod's segment length in pixels (rod length / N).
     step_px : float
         Sampling step along the curve.
 
     Returns
     -------
     (Q, 2) array
-        The curve, through every node; lines of fewer than 3 distinct points are returned
-        as they are.
+        The curve from the line's first to its last point; lines shorter than two segments
+        are returned as they are.
     """
     from scipy.interpolate import CubicSpline
 
     p = np.asarray(line_xy, float)
     keep = np.r_[True, np.hypot(*np.diff(p, axis=0).T) > 1e-9]
     p = p[keep]
-    if len(p) < 3:
-        return p
-    closed = np.hypot(*(p[0] - p[-1])) < 1e-6 * max(1.0, np.ptp(p))
     u = np.r_[0.0, np.cumsum(np.hypot(*np.diff(p, axis=0).T))]
+    if len(p) < 3 or u[-1] < 2.0 * knot_spacing_px:
+        return p
+    closed = np.hypot(*(p[0] - p[-1])) <= 1e-6 * max(1.0, u[-1])
+    n_knots = max(int(round(u[-1] / knot_spacing_px)), 3)
+    uk = np.linspace(0.0, u[-1], n_knots + 1)
+    knots = np.c_[np.interp(uk, u, p[:, 0]), np.interp(uk, u, p[:, 1])]
     if closed:
-        p[-1] = p[0]
-    spline = CubicSpline(u, p, axis=0, bc_type="periodic" if closed else "not-a-knot")
-    n = max(int(np.ceil(u[-1] / step_px)), len(p))
+        knots[-1] = knots[0]
+    spline = CubicSpline(uk, knots, axis=0, bc_type="periodic" if closed else "not-a-knot")
+    n = max(int(np.ceil(u[-1] / step_px)), n_knots)
     return spline(np.linspace(0.0, u[-1], n + 1))
 
 
@@ -362,7 +369,8 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
                    rod_length_mm=rod_length_mm, hole_radius_mm=hole_radius_mm,
                    margin_mm=margin_mm, gap_px=gap_px, max_size_px=max_size_px)
     st = analysis.stacks
-    lines_px = [smooth_line(frame.to_px(line)) for line in analysis.stack_lines]
+    segment_px = frame.scale / (len(xy) - 1)
+    lines_px = [smooth_line(frame.to_px(line), segment_px) for line in analysis.stack_lines]
     n_br = st["n_br"].to_numpy(int)
     widths_px = cal.width(n_br) * px_per_mm
     coverage, labels = _draw_bands(lines_px, n_br, widths_px, frame.shape)

@@ -144,15 +144,19 @@ def test_round_trip_exact_n_br(tmp_path):
 
 
 def test_smooth_line_bends_like_the_discrete_rod():
-    """Nodes on an open arc: the drawn curve passes through every node and its int kappa^2 ds
-    equals the discrete rod's sum (d theta)^2 / ds (the energy the truth counts), where a
-    polyline would put all the turning in corners."""
+    """A polyline on an open arc, sampled 6 times per segment as the contact analysis gives
+    it: the drawn curve stays on the rod and its int kappa^2 ds equals the discrete rod's
+    sum (d theta)^2 / ds (the energy the truth counts), where drawing the polyline would put
+    all the turning in corners."""
     from simulate.render import smooth_line
 
     r, n = 300.0, 40
     t = np.linspace(0.0, 1.5 * np.pi, n + 1)
     nodes = np.c_[r * np.cos(t), r * np.sin(t)]
-    curve = smooth_line(nodes, step_px=0.5)
+    dense = np.concatenate([a + np.linspace(0, 1, 6, endpoint=False)[:, None] * (b - a)
+                            for a, b in zip(nodes[:-1], nodes[1:])] + [nodes[-1:]])
+    curve = smooth_line(dense, knot_spacing_px=float(np.hypot(*(nodes[1] - nodes[0]))),
+                        step_px=0.5)
     d = np.diff(nodes, axis=0)
     ds = np.hypot(*d.T)
     dth = np.diff(np.unwrap(np.arctan2(d[:, 1], d[:, 0])))
@@ -164,4 +168,4 @@ def test_smooth_line_bends_like_the_discrete_rod():
     smooth = np.sum(kappa[5:-5] ** 2 * speed[5:-5])
     assert smooth == pytest.approx(discrete, rel=0.05)
     dist = np.min(np.hypot(*(curve[None, :, :] - nodes[:, None, :]).transpose(2, 0, 1)), axis=1)
-    assert dist.max() < 0.3
+    assert dist.max() < 1.0  # within a pixel of every node (corners cut by ~r dtheta^2/8)
