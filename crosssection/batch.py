@@ -93,10 +93,6 @@ class ImageTask:
 # --------------------------------------------------------------------------- discovery
 
 
-def _is_hidden(rel_parts) -> bool:
-    return any(p.startswith(".") for p in rel_parts)
-
-
 def find_images(input_dir, *, exclude=()) -> list[Path]:
     """Image files under ``input_dir`` (recursive, sorted; hidden files and folders skipped).
 

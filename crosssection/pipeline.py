@@ -20,7 +20,6 @@ made here:
 """
 from __future__ import annotations
 
-import math
 import time
 import warnings as _warnings
 from contextlib import contextmanager
@@ -367,6 +366,3 @@ def _max_width_mm(cal, p) -> float | None:
     return float(np.max(cal.width_mm))
 
 
-def epsilon_of(rod_length_mm: float, hole_radius_mm: float) -> float | None:
-    """Confinement epsilon = L / (2 pi R) (paper, section "Simulations vs experiments")."""
-    return rod_length_mm / (2.0 * math.pi * hole_radius_mm) if hole_radius_mm > 0 else None

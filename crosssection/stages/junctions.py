@@ -156,11 +156,6 @@ def _from_pixels(rr, cc, ids, k, lab) -> Junctions:
     return Junctions(centers_rc=centers, pixels=pixels, label_image=lab)
 
 
-def _from_labels(lab, k) -> Junctions:
-    rr, cc = np.nonzero(lab)
-    return _from_pixels(rr, cc, lab[rr, cc].astype(np.int64) - 1, k, lab)
-
-
 def find_junctions(skel, *, merge_px: float = 2.0) -> Junctions:
     """Junction clusters of a one-pixel skeleton.
 

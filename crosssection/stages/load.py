@@ -386,19 +386,6 @@ def _read_tiff(path: Path) -> np.ndarray:
     return arr
 
 
-def tif_cmap(path):
-    """The colour map of a palette TIFF as (N, 3) uint16, or None."""
-    import tifffile
-
-    with _tifffile_log_captured():
-        try:
-            with tifffile.TiffFile(path) as tif:
-                cm = tif.pages[0].colormap
-        except Exception as exc:  # noqa: BLE001 - tifffile raises many types for bad files
-            raise ImageError(f"cannot read TIFF ({_short(exc)})", path) from None
-    return None if cm is None else np.ascontiguousarray(np.asarray(cm).T)
-
-
 # ----------------------------------------------------------------------------- others
 def _read_pillow(path: Path) -> np.ndarray:
     """JPEG and every other format Pillow reads (truncation is an error: Pillow's
