@@ -90,6 +90,25 @@ def _step(img, r, c, prev_r, prev_c):
 
 
 @njit(cache=True)
+def _walk(img, lab, visited, r, c, prev_r, prev_c, w, pr, pc):
+    """Follow the skeleton from (r, c) (coming from prev) until a junction or a free end,
+    appending the pixels to ``pr``, ``pc``; return the (kind, id) of the node reached (a
+    junction's label, or the flat index of the end pixel)."""
+    while True:
+        pr.append(r)
+        pc.append(c)
+        if lab[r - 1, c - 1] != 0:
+            return np.int64(_JUNCTION), np.int64(lab[r - 1, c - 1] - 1)
+        visited[r, c] = 1
+        nr, nc = _step(img, r, c, prev_r, prev_c)
+        # a visited non-junction neighbour cannot happen on a clean skeleton: stop safely
+        if nr < 0 or (lab[nr - 1, nc - 1] == 0 and visited[nr, nc]):
+            return np.int64(_END), np.int64(r * w + c)
+        prev_r, prev_c = r, c
+        r, c = nr, nc
+
+
+@njit(cache=True)
 def _trace(img, lab, jr, jc, sr, sc):
     """Trace all stacks of the padded skeleton ``img`` with junction labels ``lab``.
 
@@ -117,97 +136,56 @@ def _trace(img, lab, jr, jc, sr, sc):
                 continue
             pr.append(r0)
             pc.append(c0)
-            prev_r, prev_c = r0, c0
-            kind_v = np.int64(_END)
-            id_v = np.int64(0)
-            while True:
-                pr.append(r)
-                pc.append(c)
-                if lab[r - 1, c - 1] != 0:
-                    kind_v = _JUNCTION
-                    id_v = np.int64(lab[r - 1, c - 1] - 1)
-                    break
-                visited[r, c] = 1
-                nr, nc = _step(img, r, c, prev_r, prev_c)
-                if nr < 0:
-                    kind_v = _END
-                    id_v = r * w + c
-                    break
-                if lab[nr - 1, nc - 1] == 0 and visited[nr, nc]:
-                    kind_v = _END  # cannot happen on a clean skeleton; stop safely
-                    id_v = r * w + c
-                    break
-                prev_r, prev_c = r, c
-                r, c = nr, nc
+            kind_v, id_v = _walk(img, lab, visited, r, c, r0, c0, w, pr, pc)
             offs.append(len(pr))
             meta.append((np.int64(_JUNCTION), np.int64(lab[r0 - 1, c0 - 1] - 1),
-                         np.int64(kind_v), np.int64(id_v)))
+                         kind_v, id_v))
     # 2. junction-free segments, from a free end to the other
     for i0 in range(sr.shape[0]):
         r0 = sr[i0]
         c0 = sc[i0]
-        if True:
-            if lab[r0 - 1, c0 - 1] != 0 or visited[r0, c0]:
-                continue
-            nb = 0
-            for k in range(8):
-                nb += img[r0 + _DR[k], c0 + _DC[k]]
-            if nb != 1:
-                continue
-            r, c = r0, c0
-            prev_r, prev_c = -1, -1
-            kind_v = np.int64(_END)
-            id_v = np.int64(0)
-            while True:
-                pr.append(r)
-                pc.append(c)
-                if lab[r - 1, c - 1] != 0:
-                    kind_v = _JUNCTION
-                    id_v = np.int64(lab[r - 1, c - 1] - 1)
-                    break
-                visited[r, c] = 1
-                nr, nc = _step(img, r, c, prev_r, prev_c)
-                if nr < 0 or (lab[nr - 1, nc - 1] == 0 and visited[nr, nc]):
-                    kind_v = _END
-                    id_v = r * w + c
-                    break
-                prev_r, prev_c = r, c
-                r, c = nr, nc
-            offs.append(len(pr))
-            meta.append((np.int64(_END), np.int64(r0 * w + c0), np.int64(kind_v), np.int64(id_v)))
+        if lab[r0 - 1, c0 - 1] != 0 or visited[r0, c0]:
+            continue
+        nb = 0
+        for k in range(8):
+            nb += img[r0 + _DR[k], c0 + _DC[k]]
+        if nb != 1:
+            continue
+        kind_v, id_v = _walk(img, lab, visited, r0, c0, -1, -1, w, pr, pc)
+        offs.append(len(pr))
+        meta.append((np.int64(_END), np.int64(r0 * w + c0), kind_v, id_v))
     # 3. closed loops without junction: every remaining pixel has two neighbours
     for i0 in range(sr.shape[0]):
         r0 = sr[i0]
         c0 = sc[i0]
-        if True:
-            if lab[r0 - 1, c0 - 1] != 0 or visited[r0, c0]:
-                continue
-            nb = 0
-            for k in range(8):
-                nb += img[r0 + _DR[k], c0 + _DC[k]]
-            if nb == 0:
-                visited[r0, c0] = 1  # isolated pixel: no stack
-                continue
-            r, c = r0, c0
-            prev_r, prev_c = -1, -1
-            while True:
-                pr.append(r)
-                pc.append(c)
-                visited[r, c] = 1
-                nr, nc = _step(img, r, c, prev_r, prev_c)
-                if nr < 0:
-                    break
-                if nr == r0 and nc == c0:
-                    pr.append(r0)
-                    pc.append(c0)
-                    break
-                if visited[nr, nc]:
-                    break
-                prev_r, prev_c = r, c
-                r, c = nr, nc
-            offs.append(len(pr))
-            meta.append((np.int64(_LOOP), np.int64(r0 * w + c0), np.int64(_LOOP),
-                         np.int64(r0 * w + c0)))
+        if lab[r0 - 1, c0 - 1] != 0 or visited[r0, c0]:
+            continue
+        nb = 0
+        for k in range(8):
+            nb += img[r0 + _DR[k], c0 + _DC[k]]
+        if nb == 0:
+            visited[r0, c0] = 1  # isolated pixel: no stack
+            continue
+        r, c = r0, c0
+        prev_r, prev_c = -1, -1
+        while True:
+            pr.append(r)
+            pc.append(c)
+            visited[r, c] = 1
+            nr, nc = _step(img, r, c, prev_r, prev_c)
+            if nr < 0:
+                break
+            if nr == r0 and nc == c0:
+                pr.append(r0)
+                pc.append(c0)
+                break
+            if visited[nr, nc]:
+                break
+            prev_r, prev_c = r, c
+            r, c = nr, nc
+        offs.append(len(pr))
+        meta.append((np.int64(_LOOP), np.int64(r0 * w + c0), np.int64(_LOOP),
+                     np.int64(r0 * w + c0)))
     return (np.array(pr, np.int64), np.array(pc, np.int64), np.array(offs, np.int64),
             meta)
 

@@ -23,6 +23,8 @@ import tifffile
 from hypothesis import HealthCheck, settings
 from PIL import Image
 
+from crosssection.testing import drawn_scan
+
 # derandomize: the same cases on every run (CI reproducible); no deadline: a loaded machine
 # must not fail a case for being slow (hangs are caught by ``time_limit``)
 settings.register_profile(
@@ -36,17 +38,7 @@ GOOD_ARGS = ["--px-per-mm", "20", "--thickness-mm", "0.1"]
 
 def small_scan(seed: int, size: int = 160) -> np.ndarray:
     """A small RGB uint8 scan: a ring of blue ink and four chords across it."""
-    rng = np.random.default_rng(seed)
-    img = np.full((size, size, 3), 250, np.uint8)
-    c, r = size // 2, int(size * 0.42)
-    ink = (190, 70, 40)  # BGR: cv2 draws in BGR
-    cv2.circle(img, (c, c), r, ink, thickness=4)
-    for _ in range(4):
-        a, b = rng.uniform(0, 2 * np.pi, 2)
-        p = (int(c + r * np.cos(a)), int(c + r * np.sin(a)))
-        q = (int(c + r * np.cos(b)), int(c + r * np.sin(b)))
-        cv2.line(img, p, q, ink, thickness=int(rng.integers(3, 8)))
-    return np.ascontiguousarray(img[..., ::-1])
+    return drawn_scan(seed, size, ring_frac=0.42, ring_px=4, chord_px=(3, 8))
 
 
 def encode(rgb: np.ndarray, fmt: str) -> bytes:

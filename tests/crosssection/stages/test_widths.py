@@ -194,31 +194,7 @@ def _ref_unit_normals(path: np.ndarray, half_window: int = 3) -> np.ndarray:
 def _reference_profile(path_rc: np.ndarray, distance_px: np.ndarray, *,
                           step_px: float = 0.25, normal_half_window: int | None = None
                           ) -> np.ndarray:
-    """Local width (px) at every pixel of a skeleton path.
-
-    Parameters
-    ----------
-    path_rc : (P, 2) int array
-        Skeleton pixel path (row, col).
-    distance_px : 2-D float array
-        Euclidean distance transform of the foreground mask
-        (``scipy.ndimage.distance_transform_edt(mask)``); the mask is ``distance_px > 0``
-        and the EDT bounds how far to look.
-    step_px : float
-        Sampling step along the normal.
-    normal_half_window : int, optional
-        Half window (path pixels) of the central difference giving the local direction;
-        default ``clip(median EDT, 3, 15)`` (a wider band needs a better direction, the
-        width error being ``w (1/cos(angle error) - 1)``).
-
-    Returns
-    -------
-    (P,) float array
-        Distance between the two 0.5-crossings of the bilinearly interpolated mask along the
-        local normal, on the run of foreground containing the skeleton pixel (the
-        sub-pixel iso-contour of the binary image, as ``skimage.measure.find_contours`` at
-        level 0.5 would place it).
-    """
+    """``path_width_profile_px`` by ``map_coordinates`` along each normal (same contract)."""
     path = np.asarray(path_rc).reshape(-1, 2).astype(int)
     if len(path) == 0:
         return np.zeros(0)
