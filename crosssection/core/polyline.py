@@ -23,7 +23,6 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
-from numba import njit
 
 __all__ = ["length", "mid_point", "smooth", "smoothed_lengths", "is_closed"]
 
@@ -111,44 +110,45 @@ def _end_projector(k: int) -> np.ndarray:
     return proj
 
 
-@njit(cache=True)
 def _smooth_into(x, y, k, closed, proj, ox, oy):
-    """Smooth (x, y) into (ox, oy): module rule, window 2k + 1 (k already fits the path)."""
+    """Smooth (x, y) into (ox, oy): module rule, window 2k + 1 (k already fits the path).
+
+    Vectorised over the points; every output is the same sum, in the same order, as a
+    point-by-point loop would form (left to right from 0.0).
+    """
     n = x.shape[0]
     w = 2 * k + 1
     if closed:
-        for i in range(n):
-            sx = 0.0
-            sy = 0.0
-            for d in range(-k, k + 1):
-                q = (i + d) % n
-                sx += x[q]
-                sy += y[q]
-            ox[i] = sx / w
-            oy[i] = sy / w
-        return
-    for i in range(k, n - k):
-        sx = 0.0
-        sy = 0.0
+        i = np.arange(n)
+        sx = np.zeros(n)
+        sy = np.zeros(n)
         for d in range(-k, k + 1):
-            sx += x[i + d]
-            sy += y[i + d]
-        ox[i] = sx / w
-        oy[i] = sy / w
-    for i in range(k):
-        ax = 0.0
-        ay = 0.0
-        bx = 0.0
-        by = 0.0
-        for j in range(w):
-            ax += proj[i, j] * x[j]
-            ay += proj[i, j] * y[j]
-            bx += proj[i, j] * x[n - 1 - j]
-            by += proj[i, j] * y[n - 1 - j]
-        ox[i] = ax
-        oy[i] = ay
-        ox[n - 1 - i] = bx
-        oy[n - 1 - i] = by
+            q = (i + d) % n
+            sx = sx + x[q]
+            sy = sy + y[q]
+        ox[:] = sx / w
+        oy[:] = sy / w
+        return
+    sx = np.zeros(n - 2 * k)
+    sy = np.zeros(n - 2 * k)
+    for d in range(-k, k + 1):
+        sx = sx + x[k + d:n - k + d]
+        sy = sy + y[k + d:n - k + d]
+    ox[k:n - k] = sx / w
+    oy[k:n - k] = sy / w
+    ax = np.zeros(k)
+    ay = np.zeros(k)
+    bx = np.zeros(k)
+    by = np.zeros(k)
+    for j in range(w):
+        ax = ax + proj[:k, j] * x[j]
+        ay = ay + proj[:k, j] * y[j]
+        bx = bx + proj[:k, j] * x[n - 1 - j]
+        by = by + proj[:k, j] * y[n - 1 - j]
+    ox[:k] = ax
+    oy[:k] = ay
+    ox[n - 1 - np.arange(k)] = bx
+    oy[n - 1 - np.arange(k)] = by
 
 
 def _half_window(window_px, n: int, closed: bool) -> int:
@@ -189,35 +189,103 @@ def smooth(path_rc, *, window_px: int = 5, closed: bool = False) -> np.ndarray:
     return out
 
 
-@njit(cache=True)
 def _lengths_kernel(r, c, offs, closed, half, projs):
+    """Lengths of all paths after :func:`smooth` (see :func:`smoothed_lengths`).
+
+    The smoothing is vectorised over all paths of the same half window at once; each length
+    is then a running sum along its path, as a point-by-point loop forms it.
+    """
     m = offs.shape[0] - 1
     out = np.zeros(m)
-    for i in range(m):
-        a = offs[i]
-        b = offs[i + 1]
-        n = b - a
-        if closed[i] and n > 3 and r[a] == r[b - 1] and c[a] == c[b - 1]:
-            n -= 1
-        if n < 2:
-            continue
-        k = min(half, (n - 1) // 2)
-        x = r[a:a + n]
-        y = c[a:a + n]
-        ox = np.empty(n)
-        oy = np.empty(n)
-        if n < 3 or k < 1:
-            ox[:] = x
-            oy[:] = y
-        else:
-            _smooth_into(x, y, k, closed[i], projs[k], ox, oy)
-        total = 0.0
-        for j in range(n - 1):
-            total += np.hypot(ox[j + 1] - ox[j], oy[j + 1] - oy[j])
-        if closed[i]:
-            total += np.hypot(ox[0] - ox[n - 1], oy[0] - oy[n - 1])
-        out[i] = total
+    a = offs[:-1]
+    n = np.diff(offs)
+    ring = closed & (n > 3)
+    ring[ring] = (r[a[ring]] == r[offs[1:][ring] - 1]) & (c[a[ring]] == c[offs[1:][ring] - 1])
+    n = n - ring  # a closed loop's repeated closing point is dropped
+    k = np.minimum(half, (n - 1) // 2)
+    k[n < 3] = 0
+    ox = np.zeros(len(r))
+    oy = np.zeros(len(r))
+    for kk in np.unique(k[n >= 2]):
+        for cl in (False, True):
+            sel = np.flatnonzero((k == kk) & (n >= 2) & (closed == cl))
+            if len(sel):
+                _smooth_many(r, c, a[sel], n[sel], int(kk), cl, projs[kk], ox, oy)
+    paths = np.flatnonzero(n >= 2)
+    if len(paths) == 0:
+        return out
+    step = np.hypot(np.diff(ox), np.diff(oy))  # step t joins points t and t + 1
+    n_steps = n[paths] - 1
+    out[paths] = _running_totals(step, a[paths], n_steps)
+    cl = paths[closed[paths]]
+    last = a[cl] + n[cl] - 1
+    out[cl] += np.hypot(ox[a[cl]] - ox[last], oy[a[cl]] - oy[last])
     return out
+
+
+def _running_totals(values, starts, lens) -> np.ndarray:
+    """``sum(values[s:s + n])`` for every (s, n), each summed left to right from 0.0 (the
+    rounding of a point-by-point loop, which neither ``np.add.reduceat`` nor differences of
+    one cumulative sum reproduce; ``np.bincount`` adds its weights in input order)."""
+    rows = np.repeat(np.arange(len(lens)), lens)
+    cols = np.arange(len(rows)) - np.repeat(np.cumsum(lens) - lens, lens)
+    return np.bincount(rows, weights=values[np.repeat(starts, lens) + cols],
+                       minlength=len(lens))
+
+
+def _smooth_many(r, c, starts, lens, k, closed, proj, ox, oy):
+    """:func:`_smooth_into` for many paths of half window ``k`` (flat ``r``, ``c``; path
+    ``i`` is ``starts[i] .. starts[i] + lens[i]``), written into ``ox``, ``oy``."""
+    if k < 1:
+        idx = np.concatenate([np.arange(s0, s0 + n0) for s0, n0 in zip(starts, lens)])
+        ox[idx] = r[idx]
+        oy[idx] = c[idx]
+        return
+    w = 2 * k + 1
+    seg = np.repeat(np.arange(len(starts)), lens)
+    pos = np.arange(len(seg)) - np.repeat(np.cumsum(lens) - lens, lens)  # index in its path
+    base = starts[seg]
+    nn = lens[seg]
+    if closed:
+        tgt = base + pos
+        sx = np.zeros(len(seg))
+        sy = np.zeros(len(seg))
+        for d in range(-k, k + 1):
+            q = base + (pos + d) % nn
+            sx = sx + r[q]
+            sy = sy + c[q]
+        ox[tgt] = sx / w
+        oy[tgt] = sy / w
+        return
+    mid = (pos >= k) & (pos < nn - k)
+    tgt = (base + pos)[mid]
+    sx = np.zeros(len(tgt))
+    sy = np.zeros(len(tgt))
+    for d in range(-k, k + 1):
+        sx = sx + r[tgt + d]
+        sy = sy + c[tgt + d]
+    ox[tgt] = sx / w
+    oy[tgt] = sy / w
+    ends = pos < k
+    e_start = (base + pos)[ends]       # i-th point from the start ...
+    e_end = (base + nn - 1 - pos)[ends]  # ... and from the end
+    e_i = pos[ends]
+    e_first = base[ends]
+    e_last = (base + nn - 1)[ends]
+    ax = np.zeros(len(e_i))
+    ay = np.zeros(len(e_i))
+    bx = np.zeros(len(e_i))
+    by = np.zeros(len(e_i))
+    for j in range(w):
+        pj = proj[e_i, j]
+        ax = ax + pj * r[e_first + j]
+        ay = ay + pj * c[e_first + j]
+        bx = bx + pj * r[e_last - j]
+        by = by + pj * c[e_last - j]
+    ox[e_start] = ax
+    oy[e_start] = ay
+    ox[e_end] = bx
+    oy[e_end] = by
 
 
 def smoothed_lengths(points_rc, offsets, closed, *, window_px: int = 5) -> np.ndarray:

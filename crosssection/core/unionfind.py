@@ -5,19 +5,26 @@ Three forms, for three kinds of caller:
 * :func:`group_labels` -- all pairs known up front: connected components of the pair graph
   (``scipy.sparse.csgraph.connected_components``), labels numbered in order of first item.
 * :class:`DisjointSet` -- pairs arrive one by one and the caller asks ``connected`` in between
-  (``scipy.cluster.hierarchy.DisjointSet``).
-* :func:`find_root` / :func:`union_roots` -- inside numba kernels, on an int64 parent array
-  (path halving; ``parent[i] == i`` marks a root).
+  (``scipy.cluster.hierarchy.DisjointSet``, imported on first use: ``scipy.cluster`` takes
+  0.15 s to import and the analysis does not need it).
+* :func:`find_root` / :func:`union_roots` -- inside a caller's loop, on a parent list or
+  int array (path halving; ``parent[i] == i`` marks a root).
 """
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
-from scipy.cluster.hierarchy import DisjointSet
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 __all__ = ["group_labels", "DisjointSet", "find_root", "union_roots"]
+
+
+def __getattr__(name):
+    if name == "DisjointSet":
+        from scipy.cluster.hierarchy import DisjointSet
+
+        return DisjointSet
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def group_labels(n: int, pairs) -> np.ndarray:
@@ -49,16 +56,14 @@ def group_labels(n: int, pairs) -> np.ndarray:
     return remap[lab].astype(np.int64)
 
 
-@njit(cache=True)
 def find_root(parent, i):
-    """Root of ``i`` in the int64 ``parent`` array (path halving)."""
+    """Root of ``i`` in the ``parent`` list or array (path halving)."""
     while parent[i] != i:
         parent[i] = parent[parent[i]]
         i = parent[i]
     return i
 
 
-@njit(cache=True)
 def union_roots(parent, a, b):
     """Join the sets of ``a`` and ``b``; the smaller root becomes the root. Returns it."""
     ra = find_root(parent, a)

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.optimize import Bounds, LinearConstraint, milp
 
 __all__ = ["milp_solve"]
 
@@ -48,6 +47,9 @@ def milp_solve(C: sp.csr_matrix, penalties: np.ndarray, e: np.ndarray, w: np.nda
     status : int
         ``scipy.optimize.milp`` status (0 = optimal).
     """
+    # imported here: scipy.optimize takes about 0.3 s to import and most scans never get here
+    from scipy.optimize import Bounds, LinearConstraint, milp
+
     m = len(e)
     k = C.shape[0]
     reach = window + np.ceil(2.0 * sigma).astype(int)

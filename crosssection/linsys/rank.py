@@ -13,7 +13,6 @@ import math
 
 import numpy as np
 import scipy.sparse as sp
-from numba import njit
 from scipy.sparse.linalg import splu
 
 from crosssection.core.unionfind import find_root, union_roots
@@ -97,19 +96,21 @@ def _greedy_general(rows: list, order: list) -> tuple[list, int]:
     return fixed, len(kept)
 
 
-@njit(cache=True)
-def _signed_greedy(order, col_rows, flips, n_rows):  # pragma: no cover - numba
+def _signed_greedy(order, col_rows, flips, n_rows):
     """Kept flags of the stacks taken in ``order`` (see :func:`width_fixed_stacks`).
 
     ``col_rows[s]`` are the (<= 2) rows of column ``s`` (-1: none), ``flips[s]`` is 1 when its
-    two coefficients have the same sign (``y`` changes sign along the stack).
+    two coefficients have the same sign (``y`` changes sign along the stack).  A plain
+    Python loop on lists: a few milliseconds for a thousand stacks, nothing to compile.
     """
-    parts = np.arange(n_rows)
-    cover = np.arange(2 * n_rows)
-    full = np.zeros(n_rows, np.bool_)  # per root: already an unbalanced cycle / half-edge
-    kept = np.zeros(order.shape[0], np.bool_)
-    for i in range(order.shape[0]):
-        j1, j2 = col_rows[order[i], 0], col_rows[order[i], 1]
+    parts = list(range(n_rows))
+    cover = list(range(2 * n_rows))
+    full = [False] * n_rows  # per root: already an unbalanced cycle / half-edge
+    kept = [False] * len(order)
+    rows = col_rows.tolist()
+    flips = flips.tolist()
+    for i, s in enumerate(order.tolist()):
+        j1, j2 = rows[s]
         if j1 < 0:
             continue
         r1 = find_root(parts, j1)
@@ -117,7 +118,7 @@ def _signed_greedy(order, col_rows, flips, n_rows):  # pragma: no cover - numba
             if not full[r1]:
                 full[r1] = kept[i] = True
             continue
-        f = flips[order[i]]
+        f = flips[s]
         r2 = find_root(parts, j2)
         if r1 != r2:
             if not (full[r1] and full[r2]):
@@ -128,7 +129,7 @@ def _signed_greedy(order, col_rows, flips, n_rows):  # pragma: no cover - numba
                 kept[i] = True
         elif not full[r1] and find_root(cover, 2 * j1) == find_root(cover, 2 * j2 + 1 - f):
             full[r1] = kept[i] = True  # unbalanced cycle closes: still independent
-    return kept
+    return np.array(kept, np.bool_)
 
 
 def width_fixed_stacks(rows: list, stacks, score) -> tuple[list, int]:
@@ -142,9 +143,10 @@ def width_fixed_stacks(rows: list, stacks, score) -> tuple[list, int]:
     union-find on the signed double cover (``2j`` stands for ``+y_j``, ``2j + 1`` for
     ``-y_j``), where a cycle is unbalanced exactly when it joins ``+y_j`` to ``-y_j``.  The
     stacks left over must come from widths: the set of most reliable stacks of minimal size
-    that makes ``[C; I_S]`` non-singular.  The greedy runs in numba on the toolkit's
-    union-find kernels: with ``scipy.cluster.hierarchy.DisjointSet`` it took 15-18 ms on a
-    951-stack network, here 2 ms (mostly building the column lists).
+    that makes ``[C; I_S]`` non-singular.  The greedy runs on the toolkit's union-find
+    functions over Python lists: with ``scipy.cluster.hierarchy.DisjointSet`` it took
+    15-18 ms on a 951-stack network, as a compiled kernel 2 ms plus a second of compilation
+    on a first run.
 
     Parameters
     ----------

@@ -29,242 +29,22 @@ __all__ = ["integer_refine", "objective"]
 
 
 @njit(cache=True)
-def _ridx(v):  # pragma: no cover - numba
-    """Slot 0..3 of a residual change v in (-2, -1, 1, 2)."""
-    return v + 2 if v < 0 else v + 1
-
-
-@njit(cache=True)
-def _rho(k):  # pragma: no cover - numba
-    """Residual change of slot k (inverse of :func:`_ridx`)."""
-    return k - 2 if k < 2 else k - 1
-
-
-@njit(cache=True)
-def _tau(R, pen, j, a):  # pragma: no cover - numba
-    """Penalty change when the residual of row j changes by a."""
-    return pen[j] * (abs(R[j] + a) - abs(R[j]))
-
-
-@njit(cache=True)
-def _dcost(n, e, w, s, d):  # pragma: no cover - numba
-    """Width-cost change of stack s moved by d (inf below one layer)."""
-    v = n[s] + d
-    if v < 1:
-        return np.inf
-    return w[s] * ((v - e[s]) ** 2 - (n[s] - e[s]) ** 2)
-
-
-@njit(cache=True)
-def _relax_starts(R, pen, ban_start, dist, par, par_s):  # pragma: no cover - numba
-    """Ground -> start at junction j, paying the residual change there."""
-    changed = False
-    for j in range(R.shape[0]):
-        if ban_start[j]:
-            continue
-        for k in range(4):
-            c = dist[0] + _tau(R, pen, j, _rho(k))
-            st = 1 + 8 * j + k
-            if c < dist[st] - 1e-12:
-                dist[st] = c
-                par[st] = 0
-                par_s[st] = -1
-                changed = True
-    return changed
-
-
-@njit(cache=True)
-def _relax_arrivals(R, pen, ban_end, dist, par, par_s):  # pragma: no cover - numba
-    """Arrivals at a junction: pass through it balanced, or stop there (unbalanced by a)."""
-    changed = False
-    for j in range(R.shape[0]):
-        for k in range(4):
-            a = _rho(k)
-            st = 1 + 8 * j + 4 + k
-            if dist[st] >= 1e300:
-                continue
-            nxt = 1 + 8 * j + _ridx(-a)
-            if dist[st] < dist[nxt] - 1e-12:
-                dist[nxt] = dist[st]
-                par[nxt] = st
-                par_s[nxt] = -1
-                changed = True
-            if ban_end[j]:
-                continue
-            c = dist[st] + _tau(R, pen, j, a)
-            if c < dist[0] - 1e-12:
-                dist[0] = c
-                par[0] = st
-                par_s[0] = -1
-                changed = True
-    return changed
-
-
-@njit(cache=True)
-def _stack_states(ent_row, ent_coef, ne, s, o, dd):  # pragma: no cover - numba
-    """Source and target states of stack s moved by dd, entered by its end o (-1: none).
-
-    With two junctions the walk enters at entry ``o`` and leaves at the other; with one,
-    ``o = 0`` starts from that junction and ends at the ground, ``o = 1`` the reverse.
-    """
-    if ne == 2:
-        j0, c0 = ent_row[s, o], ent_coef[s, o]
-        j1, c1 = ent_row[s, 1 - o], ent_coef[s, 1 - o]
-    elif o == 0:
-        j0, c0 = ent_row[s, 0], ent_coef[s, 0]
-        j1, c1 = -1, 0
-    else:
-        j0, c0 = -1, 0
-        j1, c1 = ent_row[s, 0], ent_coef[s, 0]
-    src = 0
-    if j0 >= 0:
-        rho = c0 * dd
-        if rho < -2 or rho > 2:
-            return -1, -1
-        src = 1 + 8 * j0 + _ridx(rho)
-    dst = 0
-    if j1 >= 0:
-        a = c1 * dd
-        if a < -2 or a > 2:
-            return -1, -1
-        dst = 1 + 8 * j1 + 4 + _ridx(a)
-    return src, dst
-
-
-@njit(cache=True)
-def _relax_stacks(n, e, w, ent_row, ent_coef, n_ent, ban_stack, dist, par, par_s,
-                  par_d):  # pragma: no cover - numba
-    """Edges of the stacks: +-1 on a stack, from its entry state to its exit state."""
-    changed = False
-    for s in range(n.shape[0]):
-        ne = n_ent[s]
-        if ne == 0 or ban_stack[s]:
-            continue
-        for dd in (-1, 1):
-            cost = _dcost(n, e, w, s, dd)
-            if cost >= 1e300:
-                continue
-            for o in range(2):
-                src, dst = _stack_states(ent_row, ent_coef, ne, s, o, dd)
-                if src < 0 or dist[src] >= 1e300:
-                    continue
-                c = dist[src] + cost
-                if c < dist[dst] - 1e-12:
-                    dist[dst] = c
-                    par[dst] = src
-                    par_s[dst] = s
-                    par_d[dst] = dd
-                    changed = True
-    return changed
-
-
-@njit(cache=True)
-def _parent_cycle(par, mark):  # pragma: no cover - numba
-    """A state on a cycle of the parent graph (its cycles are negative), or -1."""
-    mark[:] = -1
-    for v0 in range(par.shape[0]):
-        if mark[v0] != -1:
-            continue
-        v = v0
-        while v != -1 and mark[v] == -1:
-            mark[v] = v0
-            v = par[v]
-        if v != -1 and mark[v] == v0:
-            return v
-    return -1
-
-
-@njit(cache=True)
-def _negative_cycle(n, e, w, ent_row, ent_coef, n_ent, R, pen, bans, work):  # pragma: no cover
-    """Bellman-Ford rounds, checking the parent graph after each; a state on the cycle or -1."""
-    ban_start, ban_end, ban_stack = bans
-    dist, par, par_s, par_d, mark = work
-    dist[:] = 0.0
-    par[:] = -1
-    for _ in range(dist.shape[0] + 1):
-        changed = _relax_starts(R, pen, ban_start, dist, par, par_s)
-        changed = _relax_arrivals(R, pen, ban_end, dist, par, par_s) or changed
-        changed = _relax_stacks(n, e, w, ent_row, ent_coef, n_ent, ban_stack, dist, par,
-                                par_s, par_d) or changed
-        if not changed:
-            return -1
-        found = _parent_cycle(par, mark)
-        if found >= 0:
-            return found
-    return -1
-
-
-@njit(cache=True)
-def _cycle_move(found, par, par_s, par_d, d, vis):  # pragma: no cover - numba
-    """Stack changes ``d`` (and visit counts ``vis``) along the cycle through ``found``."""
-    d[:] = 0
-    vis[:] = 0
-    v = found
-    steps = 0
-    while True:
-        if par_s[v] >= 0:
-            d[par_s[v]] += par_d[v]
-            vis[par_s[v]] += 1
-        v = par[v]
-        steps += 1
-        if v == found or steps > par.shape[0] + 1:
-            break
-
-
-@njit(cache=True)
-def _move_delta(n, e, w, ent_row, ent_coef, n_ent, R, pen, d):  # pragma: no cover - numba
-    """Exact objective change of the move ``d`` (a stack used twice counts +-2) and dR."""
-    delta = 0.0
-    for s in range(n.shape[0]):
-        if d[s] != 0:
-            delta += _dcost(n, e, w, s, d[s])
-    dR = np.zeros(R.shape[0], np.int64)
-    for s in range(n.shape[0]):
-        if d[s] != 0:
-            for q in range(n_ent[s]):
-                dR[ent_row[s, q]] += ent_coef[s, q] * d[s]
-    for j in range(R.shape[0]):
-        if dR[j] != 0:
-            delta += pen[j] * (abs(R[j] + dR[j]) - abs(R[j]))
-    return delta, dR
-
-
-@njit(cache=True)
-def _ban_for_retry(found, par, par_s, vis, bans):  # pragma: no cover - numba
-    """After a cycle that is not improving once evaluated exactly, forbid its cause.
-
-    Either a walk that runs twice through a stack (around an unbalanced cycle), whose convex
-    cost the graph then underestimates: that stack is forbidden; or a walk that starts and
-    ends at the same violated junction, each end claiming the same unit of repair: starting
-    (else ending) there is forbidden.  Returns False when nothing is left to forbid.
-    """
-    ban_start, ban_end, ban_stack = bans
-    for s in range(vis.shape[0]):
-        if vis[s] > 1:
-            ban_stack[s] = True
-            return True
-    V = par.shape[0]
-    first, last = -1, par[0]
-    v = found
-    for _ in range(V + 1):
-        if par[v] == 0:
-            first = v
-            break
-        v = par[v]
-        if v == found:
-            break
-    if first > 0 and par_s[first] < 0 and not ban_start[(first - 1) // 8]:
-        ban_start[(first - 1) // 8] = True
-        return True
-    if last > 0 and not ban_end[(last - 1) // 8]:
-        ban_end[(last - 1) // 8] = True
-        return True
-    return False
-
-
-@njit(cache=True)
-def _improve(n, e, w, ent_row, ent_coef, n_ent, R, pen, max_moves):  # pragma: no cover
+def _improve(n, e, w, ent_row, ent_coef, n_ent, R, pen, max_moves, dist, par, par_s, par_d,
+             mark, ban_start, ban_end, ban_stack, d, vis, dR):  # pragma: no cover - numba
     """Apply improving moves (module docstring) to ``n`` and ``R = C n`` in place.
+
+    One function with the caller's work arrays (states ``V = 1 + 8 K``: ``dist``, ``par``,
+    ``par_s``, ``par_d``, ``mark``; bans per junction and stack; ``d``, ``vis`` per stack,
+    ``dR`` per junction): only loops and scalar arithmetic, which numba compiles several
+    times faster than the same logic split into small functions that allocate.
+
+    Each round: Bellman-Ford over the states, checking the parent graph for a cycle after
+    each pass; the cycle's move ``d`` is evaluated exactly and applied if it lowers the
+    objective. A cycle that does not, once evaluated exactly, has a cause forbidden before
+    searching again: either a walk that runs twice through a stack (around an unbalanced
+    cycle), whose convex cost the graph then underestimates: that stack is forbidden; or a
+    walk that starts and ends at the same violated junction, each end claiming the same
+    unit of repair: starting (else ending) there is forbidden.
 
     Returns
     -------
@@ -274,28 +54,189 @@ def _improve(n, e, w, ent_row, ent_coef, n_ent, R, pen, max_moves):  # pragma: n
     """
     m = n.shape[0]
     K = R.shape[0]
-    V = 1 + 8 * K
-    work = (np.zeros(V), np.full(V, -1, np.int64), np.full(V, -1, np.int64),
-            np.zeros(V, np.int64), np.full(V, -1, np.int64))
-    bans = (np.zeros(K, np.bool_), np.zeros(K, np.bool_), np.zeros(m, np.bool_))
-    d = np.zeros(m, np.int64)
-    vis = np.zeros(m, np.int64)
+    V = dist.shape[0]
     moves = 0
     while moves < max_moves:
-        found = _negative_cycle(n, e, w, ent_row, ent_coef, n_ent, R, pen, bans, work)
+        # Bellman-Ford rounds from all states at 0 (slot k of a junction: residual change
+        # rho = (-2, -1, 1, 2)[k]; states 1 + 8 j + k "leave j changing R_j by rho",
+        # 1 + 8 j + 4 + k "arrived at j having changed R_j by rho")
+        for v in range(V):
+            dist[v] = 0.0
+            par[v] = -1
+        found = -1
+        for _ in range(V + 1):
+            changed = False
+            # ground -> start at junction j, paying the residual change there
+            for j in range(K):
+                if ban_start[j]:
+                    continue
+                for k in range(4):
+                    rho = k - 2 if k < 2 else k - 1
+                    c = dist[0] + pen[j] * (abs(R[j] + rho) - abs(R[j]))
+                    st = 1 + 8 * j + k
+                    if c < dist[st] - 1e-12:
+                        dist[st] = c
+                        par[st] = 0
+                        par_s[st] = -1
+                        changed = True
+            # arrivals at a junction: pass through it balanced, or stop there (unbalanced)
+            for j in range(K):
+                for k in range(4):
+                    a = k - 2 if k < 2 else k - 1
+                    st = 1 + 8 * j + 4 + k
+                    if dist[st] >= 1e300:
+                        continue
+                    nxt = 1 + 8 * j + (-a + 2 if -a < 0 else -a + 1)
+                    if dist[st] < dist[nxt] - 1e-12:
+                        dist[nxt] = dist[st]
+                        par[nxt] = st
+                        par_s[nxt] = -1
+                        changed = True
+                    if ban_end[j]:
+                        continue
+                    c = dist[st] + pen[j] * (abs(R[j] + a) - abs(R[j]))
+                    if c < dist[0] - 1e-12:
+                        dist[0] = c
+                        par[0] = st
+                        par_s[0] = -1
+                        changed = True
+            # the stacks: +-1 on a stack, from its entry state to its exit state; with two
+            # junctions the walk enters at end o and leaves at the other, with one, o = 0
+            # starts from that junction and ends at the ground, o = 1 the reverse
+            for s in range(m):
+                ne = n_ent[s]
+                if ne == 0 or ban_stack[s]:
+                    continue
+                for t in range(2):
+                    dd = -1 if t == 0 else 1
+                    v1 = n[s] + dd
+                    if v1 < 1:
+                        continue  # below one layer: infinite cost
+                    cost = w[s] * ((v1 - e[s]) ** 2 - (n[s] - e[s]) ** 2)
+                    for o in range(2):
+                        if ne == 2:
+                            j0 = ent_row[s, o]
+                            c0 = ent_coef[s, o]
+                            j1 = ent_row[s, 1 - o]
+                            c1 = ent_coef[s, 1 - o]
+                        elif o == 0:
+                            j0 = ent_row[s, 0]
+                            c0 = ent_coef[s, 0]
+                            j1 = -1
+                            c1 = 0
+                        else:
+                            j0 = -1
+                            c0 = 0
+                            j1 = ent_row[s, 0]
+                            c1 = ent_coef[s, 0]
+                        src = 0
+                        if j0 >= 0:
+                            rho = c0 * dd
+                            if rho < -2 or rho > 2:
+                                continue
+                            src = 1 + 8 * j0 + (rho + 2 if rho < 0 else rho + 1)
+                        dst = 0
+                        if j1 >= 0:
+                            a = c1 * dd
+                            if a < -2 or a > 2:
+                                continue
+                            dst = 1 + 8 * j1 + 4 + (a + 2 if a < 0 else a + 1)
+                        if dist[src] >= 1e300:
+                            continue
+                        c = dist[src] + cost
+                        if c < dist[dst] - 1e-12:
+                            dist[dst] = c
+                            par[dst] = src
+                            par_s[dst] = s
+                            par_d[dst] = dd
+                            changed = True
+            if not changed:
+                break
+            # a state on a cycle of the parent graph (its cycles are negative)
+            for v in range(V):
+                mark[v] = -1
+            for v0 in range(V):
+                if mark[v0] != -1:
+                    continue
+                v = v0
+                while v != -1 and mark[v] == -1:
+                    mark[v] = v0
+                    v = par[v]
+                if v != -1 and mark[v] == v0:
+                    found = v
+                    break
+            if found >= 0:
+                break
         if found < 0:
             return moves
-        _, par, par_s, par_d, _ = work
-        _cycle_move(found, par, par_s, par_d, d, vis)
-        delta, dR = _move_delta(n, e, w, ent_row, ent_coef, n_ent, R, pen, d)
+        # stack changes d (and visit counts) along the cycle through `found`
+        for s in range(m):
+            d[s] = 0
+            vis[s] = 0
+        v = found
+        steps = 0
+        while True:
+            if par_s[v] >= 0:
+                d[par_s[v]] += par_d[v]
+                vis[par_s[v]] += 1
+            v = par[v]
+            steps += 1
+            if v == found or steps > V + 1:
+                break
+        # exact objective change of the move (a stack used twice counts +-2) and dR
+        delta = 0.0
+        for s in range(m):
+            if d[s] != 0:
+                v1 = n[s] + d[s]
+                if v1 < 1:
+                    delta += np.inf
+                else:
+                    delta += w[s] * ((v1 - e[s]) ** 2 - (n[s] - e[s]) ** 2)
+        for j in range(K):
+            dR[j] = 0
+        for s in range(m):
+            if d[s] != 0:
+                for q in range(n_ent[s]):
+                    dR[ent_row[s, q]] += ent_coef[s, q] * d[s]
+        for j in range(K):
+            if dR[j] != 0:
+                delta += pen[j] * (abs(R[j] + dR[j]) - abs(R[j]))
         if not (delta < -1e-9):
-            if _ban_for_retry(found, par, par_s, vis, bans):
+            # not improving once evaluated exactly: forbid its cause and search again
+            banned = False
+            for s in range(m):
+                if vis[s] > 1:
+                    ban_stack[s] = True
+                    banned = True
+                    break
+            if not banned:
+                first = -1
+                last = par[0]
+                v = found
+                for _ in range(V + 1):
+                    if par[v] == 0:
+                        first = v
+                        break
+                    v = par[v]
+                    if v == found:
+                        break
+                if first > 0 and par_s[first] < 0 and not ban_start[(first - 1) // 8]:
+                    ban_start[(first - 1) // 8] = True
+                    banned = True
+                elif last > 0 and not ban_end[(last - 1) // 8]:
+                    ban_end[(last - 1) // 8] = True
+                    banned = True
+            if banned:
                 continue
             return -1
-        n += d
-        R += dR
-        for ban in bans:
-            ban[:] = False
+        for s in range(m):
+            n[s] += d[s]
+        for j in range(K):
+            R[j] += dR[j]
+            ban_start[j] = False
+            ban_end[j] = False
+        for s in range(m):
+            ban_stack[s] = False
         moves += 1
     return moves
 
@@ -343,8 +284,14 @@ def integer_refine(C: sp.csr_matrix, pen: np.ndarray, e: np.ndarray, w: np.ndarr
     n = np.maximum(np.asarray(n0, np.int64), 1).copy()
     ent_row, ent_coef, n_ent = _entries(C)
     R = np.asarray(np.round(C @ n.astype(float)), np.int64).reshape(-1)
+    m, K = len(n), len(R)
+    V = 1 + 8 * K
     moves = _improve(n, np.asarray(e, float), np.asarray(w, float), ent_row, ent_coef, n_ent,
-                     R, np.asarray(pen, float), int(max_moves))
+                     R, np.asarray(pen, float), int(max_moves), np.zeros(V),
+                     np.full(V, -1, np.int64), np.full(V, -1, np.int64), np.zeros(V, np.int64),
+                     np.full(V, -1, np.int64), np.zeros(K, np.bool_), np.zeros(K, np.bool_),
+                     np.zeros(m, np.bool_), np.zeros(m, np.int64), np.zeros(m, np.int64),
+                     np.zeros(K, np.int64))
     return n, int(moves)
 
 

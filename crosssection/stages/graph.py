@@ -26,9 +26,6 @@ from crosssection.stages.junctions import (Junctions, find_junctions, fork_point
                                            merge_junctions)
 from crosssection.stages.skeleton import nonzero_rc
 
-_DR = np.array([-1, -1, 0, 1, 1, 1, 0, -1], dtype=np.int64)
-_DC = np.array([0, 1, 1, 1, 0, -1, -1, -1], dtype=np.int64)
-
 # node kinds of the traced paths (numba side)
 _JUNCTION, _END, _LOOP = 0, 1, 2
 
@@ -79,115 +76,119 @@ class StackGraph:
 
 
 @njit(cache=True)
-def _step(img, r, c, prev_r, prev_c):
-    """The neighbour of (r, c) other than prev (non-junction pixels have <= 2 neighbours)."""
-    for k in range(8):
-        rr = r + _DR[k]
-        cc = c + _DC[k]
-        if img[rr, cc] and not (rr == prev_r and cc == prev_c):
-            return rr, cc
-    return -1, -1
-
-
-@njit(cache=True)
-def _walk(img, lab, visited, r, c, prev_r, prev_c, w, pr, pc):
-    """Follow the skeleton from (r, c) (coming from prev) until a junction or a free end,
-    appending the pixels to ``pr``, ``pc``; return the (kind, id) of the node reached (a
-    junction's label, or the flat index of the end pixel)."""
+def _walk(f, lab, visited, p, prev, offs, out, n):  # pragma: no cover - numba
+    """Follow the skeleton from flat pixel ``p`` (coming from ``prev``) until a junction or a
+    free end, appending the pixels to ``out`` from position ``n``; return the (kind, id) of
+    the node reached (a junction's label, or the flat index of the end pixel) and the new
+    ``n``. Non-junction pixels have at most two neighbours: the next pixel is the first
+    neighbour (clockwise from north) other than ``prev``."""
     while True:
-        pr.append(r)
-        pc.append(c)
-        if lab[r - 1, c - 1] != 0:
-            return np.int64(_JUNCTION), np.int64(lab[r - 1, c - 1] - 1)
-        visited[r, c] = 1
-        nr, nc = _step(img, r, c, prev_r, prev_c)
+        out[n] = p
+        n += 1
+        if lab[p] != 0:
+            return _JUNCTION, lab[p] - 1, n
+        visited[p] = 1
+        nxt = -1
+        for k in range(8):
+            q = p + offs[k]
+            if f[q] and q != prev:
+                nxt = q
+                break
         # a visited non-junction neighbour cannot happen on a clean skeleton: stop safely
-        if nr < 0 or (lab[nr - 1, nc - 1] == 0 and visited[nr, nc]):
-            return np.int64(_END), np.int64(r * w + c)
-        prev_r, prev_c = r, c
-        r, c = nr, nc
+        if nxt < 0 or (lab[nxt] == 0 and visited[nxt]):
+            return _END, p, n
+        prev = p
+        p = nxt
 
 
 @njit(cache=True)
-def _trace(img, lab, jr, jc, sr, sc):
-    """Trace all stacks of the padded skeleton ``img`` with junction labels ``lab``.
+def _trace(f, lab, offs, jp, sp, visited, out, path_offs, meta):  # pragma: no cover - numba
+    """Trace all stacks of the flat padded skeleton ``f`` with padded junction labels ``lab``.
 
-    ``lab`` is the unpadded label image (read at skeleton pixels only, ``lab[r - 1, c - 1]``);
-    ``jr``, ``jc``: junction pixels, ``sr``, ``sc``: all skeleton pixels in raster order
-    (padded coords). Returns flat path pixels, path offsets,
-    and per path (kind_u, id_u, kind_v, id_v); for end/loop nodes the id is the flat index of
-    the node pixel (the caller numbers them).
+    ``jp``: junction pixels, ``sp``: all skeleton pixels in raster order (flat padded
+    indices); ``offs``: the 8 neighbour offsets, clockwise from north. Writes the path
+    pixels to ``out``, the path offsets to ``path_offs`` and per path (kind_u, id_u, kind_v,
+    id_v) to ``meta`` (for end/loop nodes the id is the flat index of the node pixel; the
+    caller numbers them); returns the number of paths. ``visited`` is a zeroed uint8 array
+    like ``f``. Only loops and indexing on arrays the caller allocates, so that the kernel
+    compiles quickly.
     """
-    h, w = img.shape
-    visited = np.zeros((h, w), np.uint8)
-    pr = []
-    pc = []
-    offs = [0]
-    meta = []  # kind_u, id_u, kind_v, id_v
-
+    n = 0
+    m = 0
+    path_offs[0] = 0
     # 1. from every junction pixel, every unvisited non-junction neighbour starts a stack
-    for i in range(jr.shape[0]):
-        r0 = jr[i]
-        c0 = jc[i]
+    for i in range(jp.shape[0]):
+        p0 = jp[i]
         for k in range(8):
-            r = r0 + _DR[k]
-            c = c0 + _DC[k]
-            if not img[r, c] or lab[r - 1, c - 1] != 0 or visited[r, c]:
+            p = p0 + offs[k]
+            if not f[p] or lab[p] != 0 or visited[p]:
                 continue
-            pr.append(r0)
-            pc.append(c0)
-            kind_v, id_v = _walk(img, lab, visited, r, c, r0, c0, w, pr, pc)
-            offs.append(len(pr))
-            meta.append((np.int64(_JUNCTION), np.int64(lab[r0 - 1, c0 - 1] - 1),
-                         kind_v, id_v))
+            out[n] = p0
+            n += 1
+            kind_v, id_v, n = _walk(f, lab, visited, p, p0, offs, out, n)
+            path_offs[m + 1] = n
+            meta[m, 0] = _JUNCTION
+            meta[m, 1] = lab[p0] - 1
+            meta[m, 2] = kind_v
+            meta[m, 3] = id_v
+            m += 1
     # 2. junction-free segments, from a free end to the other
-    for i0 in range(sr.shape[0]):
-        r0 = sr[i0]
-        c0 = sc[i0]
-        if lab[r0 - 1, c0 - 1] != 0 or visited[r0, c0]:
+    for i0 in range(sp.shape[0]):
+        p0 = sp[i0]
+        if lab[p0] != 0 or visited[p0]:
             continue
         nb = 0
         for k in range(8):
-            nb += img[r0 + _DR[k], c0 + _DC[k]]
+            nb += f[p0 + offs[k]]
         if nb != 1:
             continue
-        kind_v, id_v = _walk(img, lab, visited, r0, c0, -1, -1, w, pr, pc)
-        offs.append(len(pr))
-        meta.append((np.int64(_END), np.int64(r0 * w + c0), kind_v, id_v))
+        kind_v, id_v, n = _walk(f, lab, visited, p0, -1, offs, out, n)
+        path_offs[m + 1] = n
+        meta[m, 0] = _END
+        meta[m, 1] = p0
+        meta[m, 2] = kind_v
+        meta[m, 3] = id_v
+        m += 1
     # 3. closed loops without junction: every remaining pixel has two neighbours
-    for i0 in range(sr.shape[0]):
-        r0 = sr[i0]
-        c0 = sc[i0]
-        if lab[r0 - 1, c0 - 1] != 0 or visited[r0, c0]:
+    for i0 in range(sp.shape[0]):
+        p0 = sp[i0]
+        if lab[p0] != 0 or visited[p0]:
             continue
         nb = 0
         for k in range(8):
-            nb += img[r0 + _DR[k], c0 + _DC[k]]
+            nb += f[p0 + offs[k]]
         if nb == 0:
-            visited[r0, c0] = 1  # isolated pixel: no stack
+            visited[p0] = 1  # isolated pixel: no stack
             continue
-        r, c = r0, c0
-        prev_r, prev_c = -1, -1
+        p = p0
+        prev = -1
         while True:
-            pr.append(r)
-            pc.append(c)
-            visited[r, c] = 1
-            nr, nc = _step(img, r, c, prev_r, prev_c)
-            if nr < 0:
+            out[n] = p
+            n += 1
+            visited[p] = 1
+            nxt = -1
+            for k in range(8):
+                q = p + offs[k]
+                if f[q] and q != prev:
+                    nxt = q
+                    break
+            if nxt < 0:
                 break
-            if nr == r0 and nc == c0:
-                pr.append(r0)
-                pc.append(c0)
+            if nxt == p0:
+                out[n] = p0
+                n += 1
                 break
-            if visited[nr, nc]:
+            if visited[nxt]:
                 break
-            prev_r, prev_c = r, c
-            r, c = nr, nc
-        offs.append(len(pr))
-        meta.append((np.int64(_LOOP), np.int64(r0 * w + c0), np.int64(_LOOP),
-                     np.int64(r0 * w + c0)))
-    return (np.array(pr, np.int64), np.array(pc, np.int64), np.array(offs, np.int64),
-            meta)
+            prev = p
+            p = nxt
+        path_offs[m + 1] = n
+        meta[m, 0] = _LOOP
+        meta[m, 1] = p0
+        meta[m, 2] = _LOOP
+        meta[m, 3] = p0
+        m += 1
+    return m
 
 
 def path_length_px(points, *, window_px: int = 5, closed: bool = False) -> float:
@@ -236,18 +237,32 @@ def build_stack_graph(skel, junctions: Junctions, *, smooth_px: int = 5) -> Stac
         raise ParameterError(f"skeleton shape {skel.shape} differs from junction label "
                              f"image shape {junctions.label_image.shape}")
     h, w = skel.shape
-    img = np.zeros((h + 2, w + 2), np.uint8)
+    wp = w + 2
+    img = np.zeros((h + 2, wp), np.uint8)
     img[1:-1, 1:-1] = skel
-    lab = junctions.label_image
+    labp = np.zeros((h + 2, wp), np.int64)
+    labp[1:-1, 1:-1] = junctions.label_image
     sr, sc = nonzero_rc(img)
+    sp = sr * wp + sc
     if junctions.pixels:
         jp = np.concatenate(junctions.pixels).astype(np.int64) + 1
     else:
         jp = np.zeros((0, 2), np.int64)
-    pr, pc, offs, meta = _trace(img, lab, np.ascontiguousarray(jp[:, 0]),
-                                np.ascontiguousarray(jp[:, 1]), sr, sc)
-    pr -= 1
-    pc -= 1
+    jflat = jp[:, 0] * wp + jp[:, 1]
+    # every pixel is walked once, except junction pixels, which start or end paths: a path
+    # adds at most two of them (and a loop its closing pixel)
+    cap_paths = 8 * len(jflat) + len(sp) + 1
+    out = np.empty(len(sp) + 2 * cap_paths, np.int64)
+    path_offs = np.empty(cap_paths + 1, np.int64)
+    meta = np.empty((cap_paths, 4), np.int64)
+    offs8 = np.array([-wp, -wp + 1, 1, wp + 1, wp, wp - 1, -1, -wp - 1], np.int64)
+    m = _trace(img.reshape(-1), labp.reshape(-1), offs8, jflat, sp,
+               np.zeros(img.size, np.uint8), out, path_offs, meta)
+    offs = path_offs[:m + 1]
+    pix = out[:offs[-1]]
+    pr = pix // wp - 1
+    pc = pix % wp - 1
+    meta = meta[:m].tolist()
     k = len(junctions)
     g = nx.MultiGraph()
     node_rc: dict[int, np.ndarray] = {}

@@ -21,10 +21,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
 from crosssection.core.errors import ParameterError
-from crosssection.core.unionfind import find_root, union_roots
+from crosssection.core.unionfind import group_labels
 from crosssection.stages.skeleton import nonzero_rc
 
 
@@ -50,99 +49,121 @@ class Junctions:
         return len(self.pixels)
 
 
-@njit(cache=True)
+# the 8 neighbours in raster order (row by row), as the cluster growth visits them
+_NB_DR = np.array([-1, -1, -1, 0, 0, 1, 1, 1])
+_NB_DC = np.array([-1, 0, 1, -1, 1, -1, 0, 1])
+
+
 def _junction_labels(img, rows, cols, merge_px):
     """Label junction clusters of the padded uint8 skeleton ``img``.
 
     ``rows``, ``cols``: the skeleton pixels (padded coordinates, raster order). Returns the
     unpadded int32 label image (0 none, j+1 junction j), the number of clusters, and the
     junction pixels (unpadded row, col) with their cluster ids.
+
+    Vectorised: the pixel pairs closer than ``merge_px`` are joined by connected components,
+    and the growth of the clusters (see :func:`_grow`) runs pass by pass.
     """
     h, w = img.shape
-    # junction pixels: >= 3 neighbours
-    jr = []
-    jc = []
-    for i in range(rows.shape[0]):
-        r = rows[i]
-        c = cols[i]
-        nb = (img[r - 1, c - 1] + img[r - 1, c] + img[r - 1, c + 1] + img[r, c - 1]
-              + img[r, c + 1] + img[r + 1, c - 1] + img[r + 1, c] + img[r + 1, c + 1])
-        if nb >= 3:
-            jr.append(r)
-            jc.append(c)
-    n = len(jr)
+    f = img.reshape(-1)
+    flat = rows * w + cols
+    nb = np.zeros(len(flat), np.int64)
+    for dr, dc in zip(_NB_DR, _NB_DC):
+        nb += f[flat + dr * w + dc]
+    jp = flat[nb >= 3]  # junction pixels: >= 3 neighbours, raster order
+    n = len(jp)
     lab = np.zeros((h, w), np.int32)
     if n == 0:
         e = np.zeros(0, np.int64)
         return lab[1:-1, 1:-1], 0, e, e.copy(), e.copy()
-    idx = np.zeros((h, w), np.int32)  # 1 + junction pixel index
-    for i in range(n):
-        idx[jr[i], jc[i]] = i + 1
-    parent = np.arange(n)
+    idx = np.zeros((h, w), np.int64)  # 1 + junction pixel index
+    idx.reshape(-1)[jp] = np.arange(1, n + 1)
+    jr, jc = jp // w, jp % w
     rad = max(1, int(np.ceil(merge_px)))
     m2 = max(merge_px * merge_px, 2.0)  # touching pixels always merge
-    for i in range(n):
-        r = jr[i]
-        c = jc[i]
-        for dr in range(-rad, rad + 1):
-            rr = r + dr
-            if rr < 0 or rr >= h:
+    pairs = [np.zeros((0, 2), np.int64)]
+    for dr in range(-rad, rad + 1):
+        for dc in range(-rad, rad + 1):
+            if (dr == 0 and dc == 0) or dr * dr + dc * dc > m2:
                 continue
-            for dc in range(-rad, rad + 1):
-                cc = c + dc
-                if cc < 0 or cc >= w or (dr == 0 and dc == 0):
-                    continue
-                k = idx[rr, cc]
-                if k > 0 and dr * dr + dc * dc <= m2:
-                    union_roots(parent, i, k - 1)
+            rr, cc = jr + dr, jc + dc
+            ok = (rr >= 0) & (rr < h) & (cc >= 0) & (cc < w)
+            i = np.flatnonzero(ok)
+            k = idx[rr[i], cc[i]]
+            pairs.append(np.stack([i[k > 0], k[k > 0] - 1], axis=1))
     # cluster ids in order of first pixel (raster order)
-    cid = -np.ones(n, np.int64)
-    k = 0
-    for i in range(n):
-        root = find_root(parent, i)
-        if cid[root] < 0:
-            cid[root] = k
-            k += 1
-        lab[jr[i], jc[i]] = cid[root] + 1
-    # skeleton pixels between two pixels of the same cluster join it
-    changed = True
-    while changed:
-        changed = False
-        for i in range(n):
-            r = jr[i]
-            c = jc[i]
-            j = lab[r, c]
-            for dr in range(-1, 2):
-                for dc in range(-1, 2):
-                    rr = r + dr
-                    cc = c + dc
-                    if img[rr, cc] and lab[rr, cc] == 0:
-                        # all skeleton neighbours of (rr, cc) in cluster j (at least 2)?
-                        n_in = 0
-                        n_out = 0
-                        for er in range(-1, 2):
-                            for ec in range(-1, 2):
-                                if er == 0 and ec == 0:
-                                    continue
-                                if img[rr + er, cc + ec]:
-                                    if lab[rr + er, cc + ec] == j:
-                                        n_in += 1
-                                    else:
-                                        n_out += 1
-                        if n_in >= 2 and n_out == 0:
-                            lab[rr, cc] = j
-                            jr.append(rr)
-                            jc.append(cc)
-                            n += 1
-                            changed = True
-    out_r = np.empty(n, np.int64)
-    out_c = np.empty(n, np.int64)
-    out_id = np.empty(n, np.int64)
-    for i in range(n):
-        out_r[i] = jr[i] - 1
-        out_c[i] = jc[i] - 1
-        out_id[i] = lab[jr[i], jc[i]] - 1
-    return lab[1:-1, 1:-1], k, out_r, out_c, out_id
+    cid = group_labels(n, np.concatenate(pairs))
+    k = int(cid.max()) + 1
+    labf = lab.reshape(-1)
+    labf[jp] = cid + 1
+    members = _grow(f, labf, jp, w)
+    return lab[1:-1, 1:-1], k, members // w - 1, members % w - 1, labf[members].astype(np.int64) - 1
+
+
+def _grow(f, labf, members, w):
+    """Skeleton pixels between two pixels of the same cluster join it.
+
+    Passes over the cluster pixels (in order; pixels added during a pass are visited from the
+    next one): every unlabelled skeleton neighbour (raster order) whose skeleton neighbours
+    are all in the cluster, at least two, joins it, until a pass adds nothing. ``labf`` is
+    updated in place; returns the cluster pixels, the added ones appended in order.
+
+    A pass is evaluated on all candidates at once. That is what the pixel-by-pixel pass gives
+    unless a pixel added in the pass touches another candidate, whose test it could change;
+    such a pass (rare) is run pixel by pixel.
+    """
+    noff = _NB_DR * w + _NB_DC
+    while True:
+        lab_of = labf[members].astype(np.int64)
+        cand = (members[:, None] + noff[None, :]).reshape(-1)  # encounter order
+        want = np.repeat(lab_of, 8)
+        ok = (f[cand] != 0) & (labf[cand] == 0)
+        cand, want = cand[ok], want[ok]
+        if len(cand) == 0:
+            return members
+        n_in = np.zeros(len(cand), np.int64)
+        n_out = np.zeros(len(cand), np.int64)
+        for o in noff:
+            q = cand + o
+            on = f[q] != 0
+            same = labf[q] == want
+            n_in += on & same
+            n_out += on & ~same
+        good = (n_in >= 2) & (n_out == 0)
+        if not good.any():
+            return members
+        new, first = np.unique(cand[good], return_index=True)
+        new = new[np.argsort(first, kind="stable")]
+        new_lab = want[good][np.sort(first)]
+        touched = np.zeros(len(f), np.bool_)
+        for o in noff:
+            touched[new + o] = True
+        if touched[cand[~np.isin(cand, new)]].any():
+            members = _grow_pass(f, labf, members, noff)
+            continue
+        labf[new] = new_lab
+        members = np.concatenate([members, new])
+
+
+def _grow_pass(f, labf, members, noff):
+    """One pass of :func:`_grow`, pixel by pixel."""
+    added = []
+    for p in members.tolist():
+        j = labf[p]
+        for o in noff.tolist():
+            q = p + o
+            if f[q] and labf[q] == 0:
+                n_in = n_out = 0
+                for o2 in noff.tolist():
+                    if f[q + o2]:
+                        if labf[q + o2] == j:
+                            n_in += 1
+                        else:
+                            n_out += 1
+                if n_in >= 2 and n_out == 0:
+                    labf[q] = j
+                    added.append(q)
+    return np.concatenate([members, np.asarray(added, np.int64)])
 
 
 def _from_pixels(rr, cc, ids, k, lab) -> Junctions:
@@ -244,63 +265,69 @@ def merge_junctions(junctions: Junctions, groups, extra_pixels=()) -> Junctions:
                         len(clusters), new_lab)
 
 
-@njit(cache=True)
-def _end_lines(pr, pc, offs, sids, rev, c0r, c0c, skip, fit):  # pragma: no cover - numba
+def _walk_points(offs, sids, rev):
+    """Points of the stack ends, each walked from its junction outwards: (end of every
+    point, its position along the walk, its index in the flat path arrays)."""
+    a = offs[sids]
+    lens = offs[sids + 1] - a
+    end = np.repeat(np.arange(len(sids)), lens)
+    pos = np.arange(len(end)) - np.repeat(np.cumsum(lens) - lens, lens)
+    ii = a[end] + np.where(rev[end], lens[end] - 1 - pos, pos)
+    return end, pos, ii, lens
+
+
+def _end_lines(pr, pc, offs, sids, rev, c0r, c0c, skip, fit):
     """Centreline line of every stack end: mean point and unit direction (PCA) of the path
     pixels between ``skip`` and ``skip + fit`` from the junction's skeleton centre, walked
     from the junction outwards until the path first leaves that annulus. ``n`` = 0 when
-    fewer than three pixels qualify."""
+    fewer than three pixels qualify.
+
+    Vectorised over all ends; the per-end sums are ``np.bincount`` sums, which add in the
+    walk order as a loop would.
+    """
     q = sids.shape[0]
     mean = np.zeros((q, 2))
     direc = np.zeros((q, 2))
     cnt = np.zeros(q, np.int64)
-    for k in range(q):
-        a = offs[sids[k]]
-        n = offs[sids[k] + 1] - a
-        sr = 0.0
-        sc = 0.0
-        m = 0
-        first = -1
-        last = -1
-        for i in range(n):
-            ii = a + (n - 1 - i if rev[k] else i)
-            d = np.hypot(pr[ii] - c0r[k], pc[ii] - c0c[k])
-            if d > skip[k] + fit[k]:
-                break
-            if d >= skip[k]:
-                sr += pr[ii]
-                sc += pc[ii]
-                m += 1
-                if first < 0:
-                    first = ii
-                last = ii
-        if m < 3:
-            continue
-        mr = sr / m
-        mc = sc / m
-        vrr = 0.0
-        vcc = 0.0
-        vrc = 0.0
-        for i in range(n):
-            ii = a + (n - 1 - i if rev[k] else i)
-            d = np.hypot(pr[ii] - c0r[k], pc[ii] - c0c[k])
-            if d > skip[k] + fit[k]:
-                break
-            if d >= skip[k]:
-                vrr += (pr[ii] - mr) ** 2
-                vcc += (pc[ii] - mc) ** 2
-                vrc += (pr[ii] - mr) * (pc[ii] - mc)
-        ang = 0.5 * np.arctan2(2.0 * vrc, vrr - vcc)
-        tr = np.cos(ang)
-        tc = np.sin(ang)
-        if tr * (pr[last] - pr[first]) + tc * (pc[last] - pc[first]) < 0:
-            tr = -tr
-            tc = -tc
-        mean[k, 0] = mr
-        mean[k, 1] = mc
-        direc[k, 0] = tr
-        direc[k, 1] = tc
-        cnt[k] = m
+    end, pos, ii, lens = _walk_points(offs, sids, rev)
+    if len(end) == 0:
+        return mean, direc, cnt
+    d = np.hypot(pr[ii] - c0r[end], pc[ii] - c0c[end])
+    stop = lens.copy()  # first point beyond the annulus, per end
+    out = d > skip[end] + fit[end]
+    np.minimum.at(stop, end[out], pos[out])
+    sel = (pos < stop[end]) & (d >= skip[end])
+    e, ii_s, pos_s = end[sel], ii[sel], pos[sel]
+    m = np.bincount(e, minlength=q)
+    ok = m >= 3
+    mm = np.maximum(m, 1)
+    mr = np.bincount(e, weights=pr[ii_s], minlength=q) / mm
+    mc = np.bincount(e, weights=pc[ii_s], minlength=q) / mm
+    dr = pr[ii_s] - mr[e]
+    dc = pc[ii_s] - mc[e]
+    vrr = np.bincount(e, weights=dr * dr, minlength=q)
+    vcc = np.bincount(e, weights=dc * dc, minlength=q)
+    vrc = np.bincount(e, weights=dr * dc, minlength=q)
+    first = np.full(q, np.iinfo(np.int64).max)
+    last = np.full(q, -1)
+    np.minimum.at(first, e, pos_s)
+    np.maximum.at(last, e, pos_s)
+    ang = 0.5 * np.arctan2(2.0 * vrc[ok], vrr[ok] - vcc[ok])
+    tr = np.cos(ang)
+    tc = np.sin(ang)
+    a = offs[sids[ok]]
+    n = lens[ok]
+    r_ = rev[ok]
+    i0 = a + np.where(r_, n - 1 - first[ok], first[ok])
+    i1 = a + np.where(r_, n - 1 - last[ok], last[ok])
+    flip = tr * (pr[i1] - pr[i0]) + tc * (pc[i1] - pc[i0]) < 0
+    tr[flip] = -tr[flip]
+    tc[flip] = -tc[flip]
+    mean[ok, 0] = mr[ok]
+    mean[ok, 1] = mc[ok]
+    direc[ok, 0] = tr
+    direc[ok, 1] = tc
+    cnt[ok] = m[ok]
     return mean, direc, cnt
 
 

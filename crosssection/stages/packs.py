@@ -26,7 +26,6 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
-from numba import njit
 
 EdgeEnd = tuple[int, int]  # (stack_id, end): end 0 = path start, 1 = path end
 
@@ -157,95 +156,78 @@ def end_tangent(path_rc: np.ndarray, node_rc, end: int, *, tangent_px: float,
     return d / n if n > 1e-9 else np.full(2, np.nan)
 
 
-@njit(cache=True)
-def _tangents_kernel(pr, pc, offs, sids, ends, p0r, p0c, skips, tangent_px):  # pragma: no cover
-    """:func:`end_tangent` for many ends at once (same rules; closed-form 2x2 PCA)."""
+def _tangents_kernel(pr, pc, offs, sids, ends, p0r, p0c, skips, tangent_px):
+    """:func:`end_tangent` for many ends at once (same rules; closed-form 2x2 PCA).
+
+    Vectorised over all ends: every end's points walked from its junction, the per-end sums
+    by ``np.bincount``, which adds in the walk order as a loop would.
+    """
     q = sids.shape[0]
     out = np.full((q, 2), np.nan)
-    for k in range(q):
-        a = offs[sids[k]]
-        n = offs[sids[k] + 1] - a
-        if n == 0:
-            continue
-        rev = ends[k] == 1
-        r0, c0 = p0r[k], p0c[k]
-        lim = skips[k] + tangent_px
-        stop = n
-        for i in range(n):
-            ii = a + (n - 1 - i if rev else i)
-            if np.hypot(pr[ii] - r0, pc[ii] - c0) > lim:
-                stop = i + 1
-                break
-        # selected points: first `stop` points at distance >= skip
-        cnt = 0
-        sr = 0.0
-        sc = 0.0
-        first = -1
-        last = -1
-        for i in range(stop):
-            ii = a + (n - 1 - i if rev else i)
-            if np.hypot(pr[ii] - r0, pc[ii] - c0) >= skips[k]:
-                cnt += 1
-                sr += pr[ii]
-                sc += pc[ii]
-                if first < 0:
-                    first = i
-                last = i
-        use_all = cnt < 2
-        if use_all:  # short stack: take what there is
-            stop = max(2, min(n, int(np.ceil(tangent_px))))
-            stop = min(stop, n)
-            cnt = stop
-            sr = 0.0
-            sc = 0.0
-            for i in range(stop):
-                ii = a + (n - 1 - i if rev else i)
-                sr += pr[ii]
-                sc += pc[ii]
-            first = 0
-            last = stop - 1
-        if cnt >= 2:
-            mr = sr / cnt
-            mc = sc / cnt
-            vrr = 0.0
-            vcc = 0.0
-            vrc = 0.0
-            for i in range(stop):
-                ii = a + (n - 1 - i if rev else i)
-                if use_all or np.hypot(pr[ii] - r0, pc[ii] - c0) >= skips[k]:
-                    dr = pr[ii] - mr
-                    dc = pc[ii] - mc
-                    vrr += dr * dr
-                    vcc += dc * dc
-                    vrc += dr * dc
-            ang = 0.5 * np.arctan2(2.0 * vrc, vrr - vcc)
-            tr = np.cos(ang)
-            tc = np.sin(ang)
-            i0 = a + (n - 1 - first if rev else first)
-            i1 = a + (n - 1 - last if rev else last)
-            orr = float(pr[i1] - pr[i0])
-            orc = float(pc[i1] - pc[i0])
-            if orr * orr + orc * orc < 1e-12:
-                orr = mr - r0
-                orc = mc - c0
-            if tr * orr + tc * orc < 0:
-                tr = -tr
-                tc = -tc
-            if orr * orr + orc * orc >= 1e-12:
-                out[k, 0] = tr
-                out[k, 1] = tc
-                continue
-        mr = 0.0
-        mc = 0.0
-        for i in range(n):
-            mr += pr[a + i]
-            mc += pc[a + i]
-        dr = mr / n - r0
-        dc = mc / n - c0
-        nn = np.hypot(dr, dc)
-        if nn > 1e-9:
-            out[k, 0] = dr / nn
-            out[k, 1] = dc / nn
+    a = offs[sids]
+    lens = offs[sids + 1] - a
+    rev = ends == 1
+    e = np.repeat(np.arange(q), lens)
+    pos = np.arange(len(e)) - np.repeat(np.cumsum(lens) - lens, lens)
+    ii = a[e] + np.where(rev[e], lens[e] - 1 - pos, pos)
+    d = np.hypot(pr[ii] - p0r[e], pc[ii] - p0c[e])
+    # the walk stops after the first point farther than skip + tangent_px
+    stop = lens.copy()
+    beyond = d > skips[e] + tangent_px
+    np.minimum.at(stop, e[beyond], pos[beyond] + 1)
+    near = d >= skips[e]
+    cnt = np.bincount(e[(pos < stop[e]) & near], minlength=q)
+    use_all = cnt < 2  # short stack: take what there is
+    stop = np.where(use_all, np.minimum(np.maximum(2, np.minimum(lens, int(np.ceil(tangent_px)))),
+                                        lens), stop)
+    sel = (pos < stop[e]) & (use_all[e] | near)
+    es, iis, ps = e[sel], ii[sel], pos[sel]
+    cnt = np.bincount(es, minlength=q)
+    fit = cnt >= 2
+    cn = np.maximum(cnt, 1)
+    mr = np.bincount(es, weights=pr[iis], minlength=q) / cn
+    mc = np.bincount(es, weights=pc[iis], minlength=q) / cn
+    dr = pr[iis] - mr[es]
+    dc = pc[iis] - mc[es]
+    vrr = np.bincount(es, weights=dr * dr, minlength=q)
+    vcc = np.bincount(es, weights=dc * dc, minlength=q)
+    vrc = np.bincount(es, weights=dr * dc, minlength=q)
+    first = np.full(q, np.iinfo(np.int64).max)
+    last = np.full(q, -1)
+    np.minimum.at(first, es, ps)
+    np.maximum.at(last, es, ps)
+    done = np.zeros(q, np.bool_)
+    k = np.flatnonzero(fit)
+    if len(k):
+        ang = 0.5 * np.arctan2(2.0 * vrc[k], vrr[k] - vcc[k])
+        tr = np.cos(ang)
+        tc = np.sin(ang)
+        i0 = a[k] + np.where(rev[k], lens[k] - 1 - first[k], first[k])
+        i1 = a[k] + np.where(rev[k], lens[k] - 1 - last[k], last[k])
+        orr = pr[i1] - pr[i0]
+        orc = pc[i1] - pc[i0]
+        flat = orr * orr + orc * orc < 1e-12
+        orr = np.where(flat, mr[k] - p0r[k], orr)
+        orc = np.where(flat, mc[k] - p0c[k], orc)
+        flip = tr * orr + tc * orc < 0
+        tr[flip] = -tr[flip]
+        tc[flip] = -tc[flip]
+        ok = orr * orr + orc * orc >= 1e-12
+        out[k[ok], 0] = tr[ok]
+        out[k[ok], 1] = tc[ok]
+        done[k[ok]] = True
+    # otherwise: the direction from the junction to the mean of the whole path
+    rest = np.flatnonzero(~done & (lens > 0))
+    if len(rest):
+        pe = np.repeat(np.arange(len(rest)), lens[rest])
+        pi = np.arange(len(pe)) - np.repeat(np.cumsum(lens[rest]) - lens[rest], lens[rest])
+        pi = pi + a[rest][pe]
+        dr0 = np.bincount(pe, weights=pr[pi], minlength=len(rest)) / lens[rest] - p0r[rest]
+        dc0 = np.bincount(pe, weights=pc[pi], minlength=len(rest)) / lens[rest] - p0c[rest]
+        nn = np.hypot(dr0, dc0)
+        good = nn > 1e-9
+        out[rest[good], 0] = dr0[good] / nn[good]
+        out[rest[good], 1] = dc0[good] / nn[good]
     return out
 
 
