@@ -553,8 +553,10 @@ def add_subparser(sub):
                     "INPUT_DIR into OUT_DIR/<set>/<image stem>/. A folder with a set.toml is "
                     "a set; finished images are skipped on a re-run; bad images are listed in "
                     "OUT_DIR/failures.csv and the batch goes on.")
-    p.add_argument("input_dir", metavar="INPUT_DIR")
-    p.add_argument("--out", required=True, metavar="OUT_DIR")
+    p.add_argument("input_dir", metavar="INPUT_DIR",
+                   help="folder of scans (searched recursively; a folder with set.toml is a set)")
+    p.add_argument("--out", required=True, metavar="OUT_DIR",
+                   help="output folder (created; finished images are skipped on a re-run)")
     p.add_argument("--workers", type=int, default=None,
                    help="local worker processes (default: all cores; 1 runs inline)")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",

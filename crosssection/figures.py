@@ -1,5 +1,7 @@
-"""Figures of one analysed scan: the overlay (paper Figs. 1c and 9a) and the processing steps
-(paper Fig. 2). matplotlib with the Agg backend; save with ``crosssection.core.fileio.save_figure``.
+"""Figures of one analysed scan: the overlay (paper Figs. 1c and 9a), the processing steps
+(paper Fig. 2), the curvature along the stacks and the stack widths against the calibration.
+matplotlib ``Figure`` objects without pyplot (no GUI backend; they show in a notebook); save
+with ``crosssection.core.fileio.save_figure``. ``AnalysisResult.plot`` draws them all.
 
 Stacks are drawn as one ``LineCollection`` (thousands of stacks render in about a second),
 with a line width proportional to ``n_br`` (one sheet thickness per branch on the image's
@@ -10,7 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["overlay_figure", "steps_figure", "dim_image"]
+__all__ = ["overlay_figure", "draw_overlay", "steps_figure", "curvature_figure",
+           "widths_figure", "dim_image"]
 
 BULK_COLOR = "#1a9641"
 PERIPHERY_COLOR = "#d7191c"
@@ -73,8 +76,36 @@ def overlay_figure(rgb, result=None, *, junctions_df=None, stacks_df=None, paths
     -------
     matplotlib.figure.Figure
     """
-    from matplotlib.collections import LineCollection
     from matplotlib.lines import Line2D
+
+    img = np.asarray(rgb)
+    fig = _figure(img.shape)
+    ax = fig.add_axes([0, 0, 1, 1 - 0.6 / fig.get_figheight()])
+    n_j, m, n_br_total = draw_overlay(
+        ax, img, result, junctions_df=junctions_df, stacks_df=stacks_df, paths=paths,
+        hole=hole, thickness_px=thickness_px, label_min_px=label_min_px,
+        max_labels=max_labels)
+    handles = [Line2D([], [], color=BULK_COLOR, lw=3, label="bulk"),
+               Line2D([], [], color=PERIPHERY_COLOR, lw=3, label="periphery"),
+               Line2D([], [], marker="o", mfc="none", mec="black", ls="none", label="junction")]
+    head = title or "stacks: width and label = n_br"
+    fig.suptitle(f"{head}   ({n_j} junctions, {m} stacks, {n_br_total} branches)",
+                 fontsize=10, y=0.995, x=0.01, ha="left")
+    fig.legend(handles=handles, loc="upper right", ncol=3, fontsize=8, frameon=False)
+    return fig
+
+
+def draw_overlay(ax, rgb, result=None, *, junctions_df=None, stacks_df=None, paths=None,
+                 hole=None, thickness_px=5.0, label_min_px=None, max_labels=600):
+    """Draw the overlay of :func:`overlay_figure` into an existing matplotlib axes (no title,
+    no legend). Parameters as :func:`overlay_figure`.
+
+    Returns
+    -------
+    (n_junctions, n_stacks, n_branches) : tuple of int
+        What was drawn.
+    """
+    from matplotlib.collections import LineCollection
     from matplotlib.patches import Circle
 
     junctions_df = junctions_df if junctions_df is not None else _get(result, "junctions")
@@ -85,13 +116,12 @@ def overlay_figure(rgb, result=None, *, junctions_df=None, stacks_df=None, paths
     paths = list(paths or [])
     img = np.asarray(rgb)
     H, W = img.shape[:2]
-    fig = _figure(img.shape)
-    ax = fig.add_axes([0, 0, 1, 1 - 0.6 / fig.get_figheight()])
     ax.imshow(dim_image(img), interpolation="antialiased")
     ax.set_xlim(-0.5, W - 0.5)
     ax.set_ylim(H - 0.5, -0.5)
     ax.set_axis_off()
-    pt_per_px = fig.get_figwidth() * 72.0 / W
+    # line widths are in points: one image pixel is this many points at the axes' size
+    pt_per_px = ax.get_position().width * ax.figure.get_figwidth() * 72.0 / W
 
     m = len(paths)
     n_br = np.ones(m, dtype=float)
@@ -138,19 +168,12 @@ def overlay_figure(rgb, result=None, *, junctions_df=None, stacks_df=None, paths
     if hole is not None:
         ax.add_patch(Circle((hole.center_rc[1], hole.center_rc[0]), hole.radius_px, fill=False,
                             ls="--", lw=1.2, ec="0.25", zorder=2))
-    handles = [Line2D([], [], color=BULK_COLOR, lw=3, label="bulk"),
-               Line2D([], [], color=PERIPHERY_COLOR, lw=3, label="periphery"),
-               Line2D([], [], marker="o", mfc="none", mec="black", ls="none", label="junction")]
     n_j = 0 if junctions_df is None else len(junctions_df)
-    head = title or "stacks: width and label = n_br"
-    fig.suptitle(f"{head}   ({n_j} junctions, {m} stacks, {int(n_br.sum())} branches)",
-                 fontsize=10, y=0.995, x=0.01, ha="left")
-    fig.legend(handles=handles, loc="upper right", ncol=3, fontsize=8, frameon=False)
-    return fig
+    return n_j, m, int(n_br.sum())
 
 
 def steps_figure(rgb, mask_threshold, mask_clean, skeleton, junction_centers_rc, *,
-                 titles=None):
+                 titles=None, axes=None):
     """The four steps of paper Fig. 2: raw scan, thresholded, cleaned, skeleton + junctions.
 
     Parameters
@@ -159,6 +182,8 @@ def steps_figure(rgb, mask_threshold, mask_clean, skeleton, junction_centers_rc,
     mask_threshold, mask_clean, skeleton : bool arrays (H, W)
     junction_centers_rc : array (K, 2)
     titles : list of 4 str, optional
+    axes : sequence of 4 matplotlib axes, optional
+        Draw into these instead of a new figure.
 
     Returns
     -------
@@ -168,8 +193,15 @@ def steps_figure(rgb, mask_threshold, mask_clean, skeleton, junction_centers_rc,
 
     img = np.asarray(rgb)
     H, W = img.shape[:2]
-    fig = _figure(img.shape, ncols=4, inches=16.0)
-    axes = fig.subplots(1, 4)
+    own = axes is None
+    if own:
+        fig = _figure(img.shape, ncols=4, inches=16.0)
+        axes = fig.subplots(1, 4)
+    else:
+        axes = list(np.ravel(axes))
+        if len(axes) != 4:
+            raise ValueError(f"steps need 4 axes, got {len(axes)}")
+        fig = axes[0].figure
     titles = titles or ["raw scan", "threshold (blue high, red/green low)",
                         "cleaned (voids >= s_min kept)", "skeleton and junctions"]
     axes[0].imshow(dim_image(img, 0.0))
@@ -188,5 +220,105 @@ def steps_figure(rgb, mask_threshold, mask_clean, skeleton, junction_centers_rc,
     for ax, t in zip(axes, titles):
         ax.set_title(t, fontsize=10)
         ax.set_axis_off()
-    fig.subplots_adjust(left=0.01, right=0.99, bottom=0.01, top=0.92, wspace=0.03)
+    if own:
+        fig.subplots_adjust(left=0.01, right=0.99, bottom=0.01, top=0.92, wspace=0.03)
     return fig
+
+
+def curvature_figure(profiles, stacks_df=None, *, ax=None, max_stacks=8):
+    """Local curvature along the longest stacks (``stages.curvature`` profiles).
+
+    Parameters
+    ----------
+    profiles : list of CurvatureProfile
+        ``s_mm``, ``kappa_per_mm``, ``fit_start``, ``fit_stop`` per stack, in the order of
+        ``stacks_df``.
+    stacks_df : DataFrame, optional
+        ``n_br`` of each stack (shown in the legend).
+    ax : matplotlib axes, optional
+        Draw into it instead of a new figure.
+    max_stacks : int
+        The longest this many stacks are drawn.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Solid: the fitted samples; dotted: fork zones and ends (not fitted).
+    """
+    ax = _axes(ax, (7.0, 4.2))
+    profiles = list(profiles or [])
+    order = sorted(range(len(profiles)), key=lambda i: -float(profiles[i].length_mm))
+    for k, i in enumerate(order[:max_stacks]):
+        p = profiles[i]
+        s, kap = np.asarray(p.s_mm, float), np.asarray(p.kappa_per_mm, float)
+        a, b = int(p.fit_start), int(p.fit_stop)
+        n_br = ""
+        if stacks_df is not None and len(stacks_df) == len(profiles) and "n_br" in stacks_df:
+            n_br = f", n_br = {int(stacks_df['n_br'].iloc[i])}"
+        line, = ax.plot(s[a:b], kap[a:b], lw=1.2, label=f"stack {i}{n_br}")
+        ax.plot(s, kap, ":", lw=0.8, color=line.get_color())
+    ax.axhline(0, color="0.6", lw=0.6)
+    ax.set_xlabel("arc length s [mm]")
+    ax.set_ylabel(r"curvature $\kappa$ [1/mm]")
+    ax.set_title(f"curvature along the {min(max_stacks, len(profiles))} longest stacks "
+                 "(dotted: not fitted)", fontsize=10)
+    if profiles:
+        ax.legend(fontsize=7, frameon=False)
+    return ax.figure
+
+
+def widths_figure(stacks_df, calibration=None, *, ax=None):
+    """Measured stack widths against their layer counts, with the calibration law.
+
+    Parameters
+    ----------
+    stacks_df : DataFrame
+        ``width_mm``, ``n_br`` and ``region`` per stack.
+    calibration : Calibration, optional
+        Its ``width(n)`` is drawn as the line the widths are read against.
+    ax : matplotlib axes, optional
+        Draw into it instead of a new figure.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    ax = _axes(ax, (6.0, 4.2))
+    df = stacks_df if stacks_df is not None else None
+    n_max = 1
+    if df is not None and len(df):
+        n = df["n_br"].to_numpy(float)
+        w = df["width_mm"].to_numpy(float)
+        regions = (df["region"].astype(str).to_numpy() if "region" in df
+                   else np.array(["bulk"] * len(df)))
+        # a little horizontal jitter: many stacks share a layer count
+        jitter = (np.arange(len(df)) % 7 - 3) * 0.03
+        for reg, color in (("bulk", BULK_COLOR), ("periphery", PERIPHERY_COLOR)):
+            k = regions == reg
+            if k.any():
+                ax.plot(n[k] + jitter[k], w[k], "o", ms=3, alpha=0.6, color=color, label=reg)
+        other = ~np.isin(regions, ["bulk", "periphery"])
+        if other.any():
+            ax.plot(n[other] + jitter[other], w[other], "o", ms=3, alpha=0.6,
+                    color=OTHER_COLOR)
+        n_max = int(np.nanmax(n)) if np.isfinite(n).any() else 1
+    if calibration is not None:
+        ns = np.arange(1, max(n_max, 1) + 2)
+        ax.plot(ns, calibration.width(ns), "-", color="black", lw=1, label="calibration w(n)")
+    ax.set_xlabel(r"layers $n_{br}$")
+    ax.set_ylabel("stack width [mm]")
+    ax.set_title("stack widths and the calibration they are read against", fontsize=10)
+    ax.legend(fontsize=8, frameon=False)
+    return ax.figure
+
+
+def _axes(ax, figsize):
+    """``ax``, or the single axes of a new (pyplot-free) figure."""
+    if ax is not None:
+        return ax
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=figsize)
+    ax = fig.add_subplot()
+    fig.subplots_adjust(left=0.12, right=0.97, bottom=0.13, top=0.9)
+    return ax

@@ -76,6 +76,122 @@ class AnalysisResult:
         codes = [f.code for f in self.quality]
         return head + (f", warnings: {', '.join(codes)})" if codes else ")")
 
+    def _repr_html_(self) -> str:
+        """A notebook summary: counts, rod length, epsilon and quality warnings, beside a
+        small overlay thumbnail (PNG embedded in base64, a few tens of kB).
+
+        Returns
+        -------
+        str
+            An HTML table (Jupyter shows it as the value of a cell).
+        """
+        import html
+
+        s = self.summary
+
+        def num(key, fmt):
+            v = s.get(key)
+            return "" if v is None else format(v, fmt)
+
+        rows = [("image", html.escape(str(self.path or "array"))),
+                ("junctions", num("n_junctions", "d")), ("stacks", num("n_stacks", "d")),
+                ("branches", num("n_branches", "d")), ("voids", num("n_voids", "d")),
+                ("branches per stack", num("mean_branches_per_stack", ".2f")),
+                ("rod length L", num("rod_length_mm", ".1f") + " mm"),
+                ("epsilon = L / 2 pi R", num("epsilon", ".2f")),
+                ("total energy e", num("total_energy", ".4g"))]
+        warn = "".join(f"<li><b>{html.escape(f.code)}</b>: {html.escape(f.message)}</li>"
+                       for f in self.quality)
+        rows.append(("quality", f"<ul style='margin:0;padding-left:1.2em'>{warn}</ul>" if warn
+                     else "no warning"))
+        table = "".join(f"<tr><th style='text-align:left'>{k}</th><td style='text-align:left'>"
+                        f"{v}</td></tr>" for k, v in rows)
+        thumb = ""
+        if self.rgb is not None:
+            thumb = (f"<td style='vertical-align:top'><img alt='overlay' "
+                     f"src='data:image/png;base64,{self.thumbnail_png(base64=True)}'></td>")
+        return (f"<table><tr><td style='vertical-align:top'><b>AnalysisResult</b><table>"
+                f"{table}</table></td>{thumb}</tr></table>")
+
+    def thumbnail_png(self, size_px: int = 320, *, base64: bool = False):
+        """The overlay, small, as PNG bytes (a 64-colour palette keeps it to tens of kB).
+
+        Parameters
+        ----------
+        size_px : int
+            Longest side in pixels.
+        base64 : bool
+            Return the base64 text (for an HTML ``data:`` URI) instead of bytes.
+
+        Returns
+        -------
+        bytes or str
+        """
+        import base64 as b64
+        import io
+
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+        from PIL import Image
+
+        from crosssection.figures import draw_overlay
+
+        h, w = np.asarray(self.rgb).shape[:2]
+        dpi = 100
+        fig = Figure(figsize=(size_px * w / max(h, w) / dpi, size_px * h / max(h, w) / dpi),
+                     dpi=dpi)
+        canvas = FigureCanvasAgg(fig)
+        ax = fig.add_axes([0, 0, 1, 1])
+        draw_overlay(ax, self.rgb, self, thickness_px=self._drawn_thickness_px(), max_labels=0)
+        canvas.draw()
+        img = Image.fromarray(np.asarray(canvas.buffer_rgba())[..., :3])
+        buf = io.BytesIO()
+        img.quantize(colors=64).save(buf, format="PNG", optimize=True)
+        data = buf.getvalue()
+        return b64.b64encode(data).decode("ascii") if base64 else data
+
+    def plot(self, kind: str = "overlay", ax=None):
+        """A figure of this analysis (the drawing code of :mod:`crosssection.figures`).
+
+        Parameters
+        ----------
+        kind : {"overlay", "steps", "curvature", "widths"}
+            ``overlay``: the network on the dimmed scan (paper Figs. 1c, 9a); ``steps``: raw,
+            threshold, cleaned, skeleton with junctions (Fig. 2); ``curvature``: local
+            curvature along the longest stacks; ``widths``: measured stack widths against
+            n_br with the calibration law.
+        ax : matplotlib axes, optional
+            Draw into it (for ``steps``: a sequence of 4 axes); default a new figure.
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+            Shown as a cell's value in a notebook; save with ``fig.savefig``.
+        """
+        from crosssection import figures as F
+
+        if kind == "overlay":
+            if ax is None:
+                return F.overlay_figure(self.rgb, self, thickness_px=self._drawn_thickness_px())
+            F.draw_overlay(ax, self.rgb, self, thickness_px=self._drawn_thickness_px())
+            return ax.figure
+        if kind == "steps":
+            return F.steps_figure(self.rgb, self.mask_threshold, self.mask_clean, self.skeleton,
+                                  self.graph_junction_centers(), axes=ax)
+        if kind == "curvature":
+            return F.curvature_figure(self.profiles, self.stacks, ax=ax)
+        if kind == "widths":
+            from crosssection.pipeline import _calibration
+
+            cal = _calibration(self.params) if self.params is not None else None
+            return F.widths_figure(self.stacks, cal, ax=ax)
+        raise ValueError(f"kind must be one of 'overlay', 'steps', 'curvature', 'widths', "
+                         f"got {kind!r}")
+
+    def _drawn_thickness_px(self) -> float:
+        # a result assembled by hand may lack its parameters: draw with the figures' default
+        return self.thickness_px if self.params is not None else 5.0
+
     @property
     def tables(self) -> dict:
         """``{"junctions", "stacks", "branches", "voids"}`` -> DataFrame."""

@@ -1,28 +1,347 @@
-"""Generated scans and scan folders for tests of the batch workflow.
+"""Generated scans with exact truth for tests: pytest fixtures, hypothesis strategies, and
+scan folders for tests of the batch workflow.
 
+For users' test suites
+----------------------
+Installing foldstat registers this module as a pytest plugin (entry point ``pytest11``), so
+its fixtures are available in any test without an import; to load it explicitly instead, put
+``pytest_plugins = ["crosssection.testing"]`` in a ``conftest.py``. Fixtures:
+
+``foldstat_scan``
+    A :class:`GeneratedScan` (a scan written with its truth, see :func:`make_generated_scan`):
+    20 stacks of 1-4 layers, 50 px/mm, clean, seed 0 by default. Parametrise it indirectly
+    with a dict of :func:`make_generated_scan` keywords, or with :func:`scan_grid` for a grid
+    of resolutions, layer counts, densities and degradations.
+``foldstat_scan_factory``
+    ``make(**options) -> GeneratedScan``; scans are cached per session and options.
+
+Hypothesis strategies (``pip install foldstat[test]``; hypothesis is imported only when a
+strategy is built): :func:`scan_options`, :func:`scenes`, :func:`analysis_params`.
+
+A test a user would write (analyse a generated scan and compare it with its truth)::
+
+    import pytest
+
+    from crosssection.testing import scan_grid
+    from crosssection.truth.scoring import score
+
+
+    @pytest.mark.parametrize("foldstat_scan", scan_grid(layers=[4], degradations=["clean",
+                                                                                "noisy"]),
+                             indirect=True)
+    def test_my_settings_recover_the_network(foldstat_scan):
+        result = foldstat_scan.analyze(curvature_method="missing")
+        s = score(result, foldstat_scan.truth, px_per_mm=foldstat_scan.px_per_mm,
+                  thickness_mm=foldstat_scan.thickness_mm)
+        assert abs(s["rod_length_rel_error"]) < 0.03
+        assert s["junction_f1"] >= 0.95
+        assert s["n_br_exact_length_fraction"] >= 0.9
+
+Batch workflow
+--------------
 ``make_scan_tree`` lays out a folder the way a lab keeps scans (a set with ``set.toml``, a
 calibration and a per-image override, loose images, and optionally broken inputs), so that a
 test can run :func:`crosssection.batch.run_batch` on it and check what succeeded and failed.
+
+Importing this module (as pytest does for every session once foldstat is installed) loads
+neither numpy nor the pipeline: everything heavy is imported where it is used. It holds no
+test assertion, so pytest need not rewrite it (PYTEST_DONT_REWRITE), which also spares a
+warning when a test module imports it before pytest loads it as a plugin.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
-import pandas as pd
+try:  # the fixtures need pytest; the helpers and strategies do not
+    import pytest
+except ImportError:  # pragma: no cover - pytest is a test extra
+    pytest = None
 
-from crosssection import batch as B
-
-__all__ = ["drawn_scan", "generated_scan", "write_png", "write_calibration", "make_scan_tree",
+__all__ = ["GeneratedScan", "make_generated_scan", "scan_grid", "DEGRADATIONS",
+           "DEFAULT_SCAN", "scan_options", "scenes", "analysis_params",
+           "drawn_scan", "generated_scan", "write_png", "write_calibration", "make_scan_tree",
            "index_numbers", "partial_outputs"]
 
+#: degradation presets: name -> keywords of ``crosssection.truth.network.make_scene``
+DEGRADATIONS = {
+    "clean": {},
+    "noisy": {"noise_sigma": 4.0, "blur_px": 0.7},
+    "jpeg": {"jpeg_quality": 80},
+    "defects": {"smears": 3, "specks": 10, "pinholes": 6},
+}
+
+#: options of the ``foldstat_scan`` fixture when it is not parametrised
+DEFAULT_SCAN = {"seed": 0, "px_per_mm": 50.0, "n_stacks": 20, "max_layers": 4,
+                "degradation": "clean"}
+
+
+@dataclass(frozen=True)
+class GeneratedScan:
+    """A generated scan written as a scene folder, with its exact truth.
+
+    Attributes
+    ----------
+    folder : Path
+        Holds ``image.png``, ``params.json``, ``calibration.csv`` and ``truth/`` (the layout
+        of :func:`crosssection.truth.scene.write_scene`).
+    scene : crosssection.truth.scene.Scene
+        The image (``rgb``), the truth ``summary`` and ``tables``, and the generator's
+        ``params``.
+    options : dict
+        The options it was made with (:func:`make_generated_scan`).
+    """
+
+    folder: Path
+    scene: object
+    options: dict = field(default_factory=dict)
+
+    @property
+    def image(self) -> Path:
+        """The scan file."""
+        return self.folder / "image.png"
+
+    @property
+    def truth(self) -> tuple:
+        """``(summary, tables)``, the pair :func:`crosssection.truth.scoring.score` takes."""
+        return self.scene.summary, self.scene.tables
+
+    @property
+    def px_per_mm(self) -> float:
+        return float(self.scene.params["px_per_mm"])
+
+    @property
+    def thickness_mm(self) -> float:
+        return float(self.scene.params["thickness_mm"])
+
+    def analyze(self, *, use_hole: bool = True, use_calibration: bool = True, **overrides):
+        """Analyse the scan with the parameters it was made with.
+
+        Parameters
+        ----------
+        use_hole, use_calibration : bool
+            Give the pipeline the known hole and width calibration (otherwise it finds the
+            hole and uses the linear law n h).
+        **overrides
+            Fields of :class:`crosssection.params.AnalysisParams`.
+
+        Returns
+        -------
+        crosssection.result.AnalysisResult
+        """
+        from crosssection.truth.scoring import analyze_scene_folder
+
+        result, _ = analyze_scene_folder(self.folder, use_hole=use_hole,
+                                         use_calibration=use_calibration, **overrides)
+        return result
+
+
+def make_generated_scan(folder, *, seed: int = 0, px_per_mm: float = 50.0, n_stacks: int = 20,
+                        max_layers: int = 4, degradation: str = "clean",
+                        **scene_options) -> GeneratedScan:
+    """Generate a scan with :func:`crosssection.truth.network.make_scene` and write it.
+
+    Parameters
+    ----------
+    folder : str or Path
+        Scene folder to write (created).
+    seed : int
+        Same seed and options, same scan.
+    px_per_mm : float
+        Resolution in px/mm (the sheet is h = 0.1 mm thick unless ``thickness_mm`` is given;
+        below 30 px/mm the pipeline warns that h < 3 px).
+    n_stacks : int
+        Approximate number of stacks (density; 10-300).
+    max_layers : int
+        Largest number of layers in a stack (1-12).
+    degradation : str
+        A key of :data:`DEGRADATIONS` (``clean``, ``noisy``, ``jpeg``, ``defects``).
+    **scene_options
+        Further keywords of ``make_scene`` (``noise_sigma``, ``image_size``, ...).
+
+    Returns
+    -------
+    GeneratedScan
+    """
+    from crosssection.core.errors import ParameterError
+    from crosssection.truth.network import make_scene
+    from crosssection.truth.scene import write_scene
+
+    if degradation not in DEGRADATIONS:
+        raise ParameterError(f"degradation must be one of {sorted(DEGRADATIONS)}, got "
+                             f"{degradation!r}")
+    options = dict(seed=seed, px_per_mm=px_per_mm, n_stacks=n_stacks, max_layers=max_layers,
+                   degradation=degradation, **scene_options)
+    kwargs = {**DEGRADATIONS[degradation], **scene_options}
+    scene = make_scene(seed=seed, px_per_mm=px_per_mm, n_stacks=n_stacks,
+                       max_layers=max_layers, **kwargs)
+    return GeneratedScan(Path(write_scene(scene, folder)), scene, options)
+
+
+def scan_grid(*, resolutions=(50.0,), layers=(4,), densities=(20,),
+              degradations=("clean",), seed: int = 0) -> list:
+    """Every combination of the given conditions, as ``pytest.param`` values (readable ids)
+    for an indirect parametrisation of ``foldstat_scan``.
+
+    Parameters
+    ----------
+    resolutions : sequence of float
+        px/mm.
+    layers : sequence of int
+        ``max_layers``.
+    densities : sequence of int
+        ``n_stacks``.
+    degradations : sequence of str
+        Keys of :data:`DEGRADATIONS`.
+    seed : int
+
+    Returns
+    -------
+    list of pytest.param
+    """
+    return [pytest.param(dict(seed=seed, px_per_mm=float(r), max_layers=int(m),
+                              n_stacks=int(n), degradation=d),
+                         id=f"{r:g}pxmm-{m}layers-{n}stacks-{d}")
+            for r in resolutions for m in layers for n in densities for d in degradations]
+
+
+def _cache_key(options: dict) -> str:
+    return repr(sorted(options.items()))
+
+
+if pytest is not None:
+    @pytest.fixture(scope="session")
+    def foldstat_scan_factory(tmp_path_factory):
+        """``make(**options) -> GeneratedScan`` (keywords of :func:`make_generated_scan`);
+        each distinct set of options is generated once per session."""
+        cache = {}
+
+        def make(**options) -> GeneratedScan:
+            options = {**DEFAULT_SCAN, **options}
+            key = _cache_key(options)
+            if key not in cache:
+                folder = tmp_path_factory.mktemp("foldstat_scan")
+                cache[key] = make_generated_scan(folder, **options)
+            return cache[key]
+
+        return make
+
+    @pytest.fixture
+    def foldstat_scan(request, foldstat_scan_factory) -> GeneratedScan:
+        """A generated scan with its truth (:class:`GeneratedScan`); parametrise indirectly
+        with a dict of :func:`make_generated_scan` keywords or with :func:`scan_grid`.
+        Default: :data:`DEFAULT_SCAN`."""
+        return foldstat_scan_factory(**getattr(request, "param", {}))
+
+
+# --------------------------------------------------------------------------- hypothesis
+
+def scan_options(*, resolutions=(25.0, 50.0), max_layers=(1, 6), n_stacks=(10, 40),
+                 degradations=tuple(DEGRADATIONS)):
+    """Hypothesis strategy of :func:`make_generated_scan` keywords.
+
+    Parameters
+    ----------
+    resolutions : sequence of float
+        px/mm to sample from.
+    max_layers, n_stacks : (int, int)
+        Inclusive ranges.
+    degradations : sequence of str
+        Keys of :data:`DEGRADATIONS`.
+
+    Returns
+    -------
+    hypothesis.strategies.SearchStrategy of dict
+    """
+    from hypothesis import strategies as st
+
+    return st.fixed_dictionaries({
+        "seed": st.integers(0, 2**31 - 1),
+        "px_per_mm": st.sampled_from([float(r) for r in resolutions]),
+        "max_layers": st.integers(*max_layers),
+        "n_stacks": st.integers(*n_stacks),
+        "degradation": st.sampled_from(list(degradations)),
+    })
+
+
+def scenes(**bounds):
+    """Hypothesis strategy of generated scans in memory
+    (:class:`crosssection.truth.scene.Scene`: ``rgb``, truth ``summary`` and ``tables``,
+    ``params``); option draws for which no layout exists are rejected.
+
+    Parameters
+    ----------
+    **bounds
+        Keywords of :func:`scan_options`.
+
+    Returns
+    -------
+    hypothesis.strategies.SearchStrategy of Scene
+    """
+    from hypothesis import reject
+
+    def build(options):
+        from crosssection.truth.network import SceneGenerationError, make_scene
+
+        options = dict(options)
+        kwargs = {**DEGRADATIONS[options.pop("degradation")], **options}
+        try:
+            return make_scene(max_tries=8, **kwargs)
+        except SceneGenerationError:
+            reject()
+
+    return scan_options(**bounds).map(build)
+
+
+def analysis_params(**fixed):
+    """Hypothesis strategy of valid :class:`crosssection.params.AnalysisParams`.
+
+    Resolution 20-100 px/mm, h 0.05-0.3 mm (at least 1 px), every threshold and curvature
+    method, l_min 0.2-3 mm, merge distance 0-6 px, optional tangent length, s_min and plastic
+    threshold.
+
+    Parameters
+    ----------
+    **fixed
+        Fields held at a given value (e.g. ``calibration="cal.csv"``).
+
+    Returns
+    -------
+    hypothesis.strategies.SearchStrategy of AnalysisParams
+    """
+    from hypothesis import strategies as st
+
+    from crosssection.params import CURVATURE_METHODS, THRESHOLD_METHODS, AnalysisParams
+
+    def opt(strategy):
+        return st.none() | strategy
+
+    fields = {
+        "px_per_mm": st.floats(20.0, 100.0),
+        "thickness_mm": st.floats(0.05, 0.3),
+        "threshold_method": st.sampled_from(THRESHOLD_METHODS),
+        "curvature_method": st.sampled_from(CURVATURE_METHODS),
+        "l_min_mm": st.floats(0.2, 3.0),
+        "merge_px": st.floats(0.0, 6.0),
+        "tangent_mm": opt(st.floats(0.1, 1.0)),
+        "s_min_mm2": opt(st.floats(0.1, 4.0)),
+        "kappa_c_per_mm": opt(st.floats(0.5, 20.0)),
+    }
+    fields.update({k: st.just(v) for k, v in fixed.items()})
+    return (st.fixed_dictionaries(fields)
+            .filter(lambda f: f["px_per_mm"] * f["thickness_mm"] >= 1.0)
+            .map(lambda f: AnalysisParams(**f)))
+
+
+# --------------------------------------------------------------------------- batch workflow
 
 def drawn_scan(seed: int, size: int = 420, *, ring_frac: float = 0.45, ring_px: int = 10,
-               chord_px: tuple = (5, 16)) -> np.ndarray:
+               chord_px: tuple = (5, 16)):
     """A drawn RGB scan, uint8 (size, size, 3): a ring of blue ink and four chords across it
     of random widths in ``chord_px`` (px, upper bound excluded), on white paper. Draws in
     milliseconds, for tests that need many scans."""
     import cv2
+    import numpy as np
 
     rng = np.random.default_rng(seed)
     img = np.full((size, size, 3), 250, np.uint8)
@@ -38,7 +357,7 @@ def drawn_scan(seed: int, size: int = 420, *, ring_frac: float = 0.45, ring_px: 
     return np.ascontiguousarray(img[:, :, ::-1])
 
 
-def generated_scan(seed: int, size: int = 420) -> np.ndarray:
+def generated_scan(seed: int, size: int = 420):
     """A small RGB scan (about 12 stacks of 1-4 layers in a disk), uint8 (size, size, 3).
 
     The network generator's scene when it finds a layout in 5 tries, else :func:`drawn_scan`.
@@ -52,7 +371,8 @@ def generated_scan(seed: int, size: int = 420) -> np.ndarray:
         return drawn_scan(seed, size)
 
 
-def write_png(path: Path, rgb: np.ndarray):
+def write_png(path: Path, rgb):
+    """Save an RGB (or grey) uint8 array as PNG, creating the folder."""
     from PIL import Image
 
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -60,6 +380,7 @@ def write_png(path: Path, rgb: np.ndarray):
 
 
 def write_calibration(path: Path, h=0.1):
+    """Write a calibration CSV (n_layers,width_mm) of width 1.1 n h for 1-12 layers."""
     path.parent.mkdir(parents=True, exist_ok=True)
     rows = "\n".join(f"{n},{n * h * 1.1:.4f}" for n in range(1, 13))
     path.write_text("n_layers,width_mm\n" + rows + "\n")
@@ -69,6 +390,8 @@ def make_scan_tree(root: Path, seed: int, *, bad=True) -> dict:
     """An input tree: a good set (with calibration and an override), loose images, and
     (``bad``) a corrupt file, a grayscale scan, a set with a bad set.toml and a set whose
     calibration is missing."""
+    import numpy as np
+
     rng = np.random.default_rng(seed)
     seeds = rng.integers(0, 2**31, 6)
     good = root / "setA"
@@ -101,11 +424,18 @@ def make_scan_tree(root: Path, seed: int, *, bad=True) -> dict:
     return {"ok": expect_ok, "failed": expect_failed}
 
 
-def index_numbers(index: pd.DataFrame) -> pd.DataFrame:
+def index_numbers(index):
+    """The finished rows of a batch ``index.csv`` table, by image, with the summary numbers
+    (to compare two runs)."""
+    from crosssection import batch as B
+
     ok = index[index["status"] != "failed"].set_index("image").sort_index()
     return ok[["set", "output"] + B.SUMMARY_NUMBERS]
 
 
 def partial_outputs(out: Path) -> list[Path]:
+    """Leftovers of interrupted writes under a batch output (staging folders, temp files)."""
+    from crosssection import batch as B
+
     return [p for p in out.rglob("*") if B.PARTIAL_TAG in p.name or p.name.endswith(".tmp")
             or (p.name.startswith(".") and p.is_file())]

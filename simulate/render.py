@@ -24,6 +24,7 @@ up; signed curvatures therefore compare in absolute value.
 """
 from __future__ import annotations
 
+import argparse
 import json
 import warnings
 import zipfile
@@ -400,12 +401,32 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
                  paths_rc=[line[:, ::-1] for line in lines_px], ink_mask=ink_mask)
 
 
-def render_directory(sim_dir, out_dir, *, configs=None, **kwargs) -> list[Path]:
+def render_directory(sim_dir, out_dir, *, configs=None, progress: bool | None = False,
+                     **kwargs) -> list[Path]:
     """Render every configuration of ``sim_dir/rods.npz`` into ``out_dir/<key>/``.
 
     ``sim_dir/params.json`` gives ``lambda`` (default 7e5) and optionally ``contact_distance``.
     Scenes already complete (truth/summary.json present) are skipped.
+
+    Parameters
+    ----------
+    sim_dir, out_dir : str or Path
+    configs : sequence of str, optional
+        Keys of ``rods.npz`` to render (default: all).
+    progress : bool or None
+        A tqdm bar on stderr, one step per configuration; None shows it only when stderr is a
+        terminal.
+    **kwargs
+        Keywords of :func:`render_configuration` (``seed`` is the base seed: configuration
+        ``i`` uses ``seed + i``).
+
+    Returns
+    -------
+    list of Path
+        The scene folders, rendered now or before.
     """
+    from tqdm import tqdm
+
     sim_dir, out_dir = Path(sim_dir), Path(out_dir)
     rods_path = sim_dir / "rods.npz"
     if not rods_path.exists():
@@ -430,25 +451,28 @@ def render_directory(sim_dir, out_dir, *, configs=None, **kwargs) -> list[Path]:
         keys = sorted(rods.files) if configs is None else [k for k in sorted(rods.files)
                                                            if k in set(configs)]
         base_seed = int(kwargs.pop("seed", 0))
-        for i, key in enumerate(keys):
-            folder = out_dir / key
-            if (folder / "truth" / "summary.json").exists():
-                written.append(folder)
-                continue
-            try:
-                xy = np.asarray(rods[key], float)
-            except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
-                raise ConfigError(f"array {key!r} unreadable ({exc})", rods_path) from None
-            if xy.ndim != 2 or xy.shape[1] != 2 or len(xy) < 4:
-                raise ConfigError(f"array {key!r} has shape {xy.shape}, expected (N+1, 2) "
-                                  "with N >= 3", rods_path)
-            if not np.isfinite(xy).all():
-                raise ConfigError(f"array {key!r} has non-finite coordinates", rods_path)
-            an = analyze_rod(xy, lam=lam, contact_distance=delta)
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                scene = render_configuration(xy, an, seed=base_seed + i, **kwargs)
-            written.append(write_scene(scene, folder))
+        # disable=None is tqdm's "only on a terminal"
+        with tqdm(keys, desc="render", unit="config",
+                  disable=None if progress is None else not progress) as bar:
+            for i, key in enumerate(bar):
+                folder = out_dir / key
+                if (folder / "truth" / "summary.json").exists():
+                    written.append(folder)
+                    continue
+                try:
+                    xy = np.asarray(rods[key], float)
+                except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+                    raise ConfigError(f"array {key!r} unreadable ({exc})", rods_path) from None
+                if xy.ndim != 2 or xy.shape[1] != 2 or len(xy) < 4:
+                    raise ConfigError(f"array {key!r} has shape {xy.shape}, expected (N+1, 2) "
+                                      "with N >= 3", rods_path)
+                if not np.isfinite(xy).all():
+                    raise ConfigError(f"array {key!r} has non-finite coordinates", rods_path)
+                an = analyze_rod(xy, lam=lam, contact_distance=delta)
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    scene = render_configuration(xy, an, seed=base_seed + i, **kwargs)
+                written.append(write_scene(scene, folder))
     return written
 
 
@@ -457,23 +481,40 @@ def add_subparser(sub) -> None:
     p = sub.add_parser("render", help="render simulated configurations into synthetic scans",
                        description="Render DIR/rods.npz (one scene per configuration) into "
                                    "scene folders with exact truth.")
-    p.add_argument("sim_dir", metavar="DIR")
-    p.add_argument("--out", required=True, metavar="SCENES")
-    p.add_argument("--px-per-mm", type=float, default=50.0)
-    p.add_argument("--thickness-mm", type=float, default=0.1)
+    p.add_argument("sim_dir", metavar="DIR",
+                   help="simulation ensemble folder holding rods.npz (from quench or anneal)")
+    p.add_argument("--out", required=True, metavar="SCENES",
+                   help="folder of the scene folders (created; finished scenes are skipped)")
+    p.add_argument("--px-per-mm", type=float, default=50.0,
+                   help="scan resolution in px/mm (default 50)")
+    p.add_argument("--thickness-mm", type=float, default=0.1,
+                   help="sheet thickness h in mm (default 0.1)")
     p.add_argument("--rod-length-mm", type=float, default=None,
-                   help="default: smallest keeping a visible gap between passes beyond delta")
-    p.add_argument("--noise", type=float, default=0.0, help="Gaussian noise sigma (grey levels)")
-    p.add_argument("--blur", type=float, default=0.0, help="Gaussian blur sigma (px)")
-    p.add_argument("--jpeg", type=int, default=None, help="JPEG quality of a round trip")
-    p.add_argument("--smears", type=int, default=0)
-    p.add_argument("--specks", type=int, default=0)
-    p.add_argument("--pinholes", type=int, default=0)
+                   help="rod length L in mm (default: the smallest keeping a visible gap "
+                        "between passes beyond delta)")
+    p.add_argument("--noise", type=float, default=0.0,
+                   help="Gaussian noise sigma in grey levels (default 0)")
+    p.add_argument("--blur", type=float, default=0.0,
+                   help="Gaussian blur sigma in px (default 0)")
+    p.add_argument("--jpeg", type=int, default=None,
+                   help="JPEG quality 1-100 of a round trip (default: none, lossless PNG)")
+    p.add_argument("--smears", type=int, default=0,
+                   help="number of light-blue smears, rejected by the threshold (default 0)")
+    p.add_argument("--specks", type=int, default=0,
+                   help="number of small ink specks in the paper, removed by cleaning "
+                        "(default 0)")
+    p.add_argument("--pinholes", type=int, default=0,
+                   help="number of paper-coloured pinholes in wide bands (default 0)")
     p.add_argument("--hole", default="auto",
                    help="hole radius in mm, 'auto' (smallest disk around the rod, default) "
                         "or 'none' (the pipeline then fits one)")
-    p.add_argument("--limit", type=int, default=None, help="render only the first K configs")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--limit", type=int, default=None,
+                   help="render only the first K configurations (default: all)")
+    p.add_argument("--seed", type=int, default=0,
+                   help="base seed of colours, noise and defects; configuration i uses "
+                        "seed + i (default 0)")
+    p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
+                   help="progress bar on stderr (default: only when stderr is a terminal)")
     p.set_defaults(func=_run)
 
 
@@ -497,6 +538,7 @@ def _run(args) -> int:
                            thickness_mm=args.thickness_mm, rod_length_mm=args.rod_length_mm,
                            noise_sigma=args.noise, blur_px=args.blur, jpeg_quality=args.jpeg,
                            smears=args.smears, specks=args.specks, pinholes=args.pinholes,
-                           seed=args.seed, hole_radius_mm=_hole_arg(args.hole))
+                           seed=args.seed, hole_radius_mm=_hole_arg(args.hole),
+                           progress=args.progress)
     print(f"{len(out)} scenes in {args.out}")
     return 0

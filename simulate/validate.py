@@ -110,9 +110,12 @@ def add_subparser(sub) -> None:
     p = sub.add_parser("validate", help="run the pipeline on rendered scenes and score it",
                        description="Analyse every scene folder of SCENES and score it against "
                                    "its truth: REPORT/scores.csv, summary.json, failures.csv.")
-    p.add_argument("scenes", metavar="SCENES")
-    p.add_argument("--out", required=True, metavar="REPORT")
-    p.add_argument("--match-px", type=float, default=None)
+    p.add_argument("scenes", metavar="SCENES",
+                   help="folder of scene folders (from render), each with its truth/")
+    p.add_argument("--out", required=True, metavar="REPORT",
+                   help="report folder (created): scores.csv, summary.json, failures.csv")
+    p.add_argument("--match-px", type=float, default=None,
+                   help="junction matching radius in px (default: 3 h of each scene)")
     p.set_defaults(func=_run)
 
 

@@ -321,3 +321,79 @@ def load_any(folder, *, set_name=None, l_min_mm=1.0, s_min_mm2=1.0) -> Ensemble:
         for df in (ens.configs, ens.branches, ens.stacks, ens.voids):
             df["set"] = set_name
     return ens
+
+
+#: the tables of a ``stats`` report folder (CSV files of the same names)
+REPORT_TABLES = ("macro", "micro", "fits", "relations", "dof", "truncation", "correlations",
+                 "per_config")
+
+
+@dataclass
+class Report:
+    """A ``stats`` report folder read back (:func:`load_report`).
+
+    Attributes
+    ----------
+    macro, micro, fits, relations, dof, truncation, correlations, per_config : DataFrame
+        The report's tables (empty when a table was empty).
+    meta : dict
+        ``stats.json``: version, inputs, options and per-set selected laws with their
+        parameters and intervals.
+    folder : Path
+    """
+
+    macro: pd.DataFrame
+    micro: pd.DataFrame
+    fits: pd.DataFrame
+    relations: pd.DataFrame
+    dof: pd.DataFrame
+    truncation: pd.DataFrame
+    correlations: pd.DataFrame
+    per_config: pd.DataFrame
+    meta: dict
+    folder: Path
+
+    def selected(self) -> pd.DataFrame:
+        """The selected law of every set, region and quantity (rows of ``fits``)."""
+        if self.fits.empty or "selected" not in self.fits.columns:
+            return self.fits
+        return self.fits[self.fits["selected"].astype(bool)].reset_index(drop=True)
+
+
+def load_report(folder) -> Report:
+    """Read a report folder written by ``foldstat stats`` (``python -m crosssection stats``).
+
+    Parameters
+    ----------
+    folder : str or Path
+        Holds ``stats.json`` and the CSV tables.
+
+    Returns
+    -------
+    Report
+
+    Raises
+    ------
+    ConfigError
+        No ``stats.json`` (not a report folder), or an unreadable file.
+    """
+    folder = Path(folder)
+    meta_path = folder / "stats.json"
+    try:
+        meta = json.loads(meta_path.read_text())
+    except FileNotFoundError:
+        raise ConfigError("not a stats report folder (no stats.json)", folder) from None
+    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"unreadable stats.json ({type(exc).__name__})", meta_path) from None
+    tables = {}
+    for name in REPORT_TABLES:
+        path = folder / f"{name}.csv"
+        try:
+            tables[name] = pd.read_csv(path)
+        except pd.errors.EmptyDataError:  # an empty table is written without a header
+            tables[name] = pd.DataFrame()
+        except FileNotFoundError:
+            raise ConfigError("missing table", path) from None
+        except (pd.errors.ParserError, UnicodeDecodeError) as exc:
+            raise ConfigError(f"unreadable CSV ({type(exc).__name__})", path) from None
+    return Report(**tables, meta=meta, folder=folder)

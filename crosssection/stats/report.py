@@ -11,22 +11,29 @@ import html
 from pathlib import Path
 
 import matplotlib
+import numpy as np
+import pandas as pd
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
-
-from crosssection._version import __version__  # noqa: E402
-from crosssection.core.fileio import save_figure, write_csv, write_json, write_text  # noqa: E402
-from crosssection.stats import fits as F  # noqa: E402
-from crosssection.stats.families import FAMILIES  # noqa: E402
-from crosssection.stats.data import Ensemble  # noqa: E402
-from crosssection.stats.tables import (EQ1_CONST, QUANTITIES, StatsOptions, StatsResult,  # noqa: E402
+from crosssection._version import __version__
+from crosssection.core.fileio import save_figure, write_csv, write_json, write_text
+from crosssection.stats import fits as F
+from crosssection.stats.families import FAMILIES
+from crosssection.stats.data import Ensemble
+from crosssection.stats.tables import (EQ1_CONST, QUANTITIES, StatsOptions, StatsResult,
                      compute_stats, regions_of, to_markdown)
 
 REGION_COLOR = {"all": "black", "bulk": "tab:green", "periphery": "tab:red"}
-SET_COLORS = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+SET_COLORS = matplotlib.rcParams["axes.prop_cycle"].by_key()["color"]
+
+
+def _subplots(ncols=1, figsize=(6, 4.5)):
+    """A figure and its axes without pyplot: no GUI backend is touched and a notebook's
+    backend is left alone."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=figsize)
+    axes = fig.subplots(1, ncols)
+    return fig, axes
 
 
 def _margins(fig, two=False):
@@ -71,7 +78,7 @@ def pdf_figure(res: StatsResult, ens: Ensemble, set_name: str, quantity: str):
     regs = [r for r in regions_of(sub) if (set_name, r, quantity) in res.summaries]
     if not regs:
         return None
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+    fig, axes = _subplots(2, figsize=(11, 4.2))
     lines = []
     hmax = 0.0
     for reg in regs:
@@ -135,10 +142,67 @@ def pdf_figure(res: StatsResult, ens: Ensemble, set_name: str, quantity: str):
     return fig
 
 
+def plot_pdf(source, quantity: str = "e", *, set_name: str | None = None, seed: int = 0):
+    """The probability density of one quantity of an ensemble with its fitted laws (the
+    report's figure, from Python).
+
+    The laws are fitted here by maximum likelihood, truncation-aware where a detection limit
+    applies, without bootstrap intervals nor goodness of fit (run ``foldstat stats`` for
+    those).
+
+    Parameters
+    ----------
+    source : Ensemble, str or Path
+        An ensemble, or a batch output, ``analyze`` output or simulation folder
+        (:func:`crosssection.stats.data.load_any`).
+    quantity : str
+        A key of :data:`crosssection.stats.tables.QUANTITIES`: ``length_L``, ``kappa_m_L``,
+        ``kappa_plus_L``, ``e``, ``E``, ``n_br``, ``area_L2``, ``shape_ratio``.
+    set_name : str, optional
+        The set to draw (default: the first).
+    seed : int
+        Seed of the fits' random starts.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Linear and logarithmic panels, bulk and periphery apart when the data carry them.
+
+    Raises
+    ------
+    ValueError
+        Unknown quantity or set, or too few values to fit.
+    """
+    from crosssection.stats.data import load_any
+    from crosssection.stats.tables import fit_quantity
+
+    if quantity not in QUANTITIES:
+        raise ValueError(f"quantity must be one of {sorted(QUANTITIES)}, got {quantity!r}")
+    ens = source if isinstance(source, Ensemble) else load_any(source)
+    set_name = ens.sets[0] if set_name is None and ens.sets else set_name
+    if set_name not in ens.sets:
+        raise ValueError(f"set must be one of {ens.sets}, got {set_name!r}")
+    sub = ens.subset(set_name)
+    opts = StatsOptions(seed=seed, n_boot=0, gof=False, quantities=(quantity,))
+    regions = ["all"] if QUANTITIES[quantity][0] in ("configs", "voids") else regions_of(sub)
+    seeds = np.random.SeedSequence(seed).spawn(len(regions))
+    summaries = {}
+    for reg, sd in zip(regions, seeds):
+        summ, _, _ = fit_quantity(sub, quantity, reg, opts, sd)
+        if summ is not None:
+            summaries[(set_name, reg, quantity)] = summ
+    if not summaries:
+        raise ValueError(f"{set_name}: too few positive values of {quantity} to fit "
+                         f"(at least {opts.min_n})")
+    empty = pd.DataFrame()
+    fits_only = StatsResult(empty, empty, empty, empty, empty, empty, empty, empty, summaries)
+    return pdf_figure(fits_only, ens, set_name, quantity)
+
+
 def network_figure(res: StatsResult):
     """N_br vs N_l with Eqs. 1 and 3, and n_br_bar vs N_l with Eqs. 2 and 4, per set."""
     pc = res.per_config
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+    fig, axes = _subplots(2, figsize=(11, 4.2))
     for i, (s, g) in enumerate(pc.groupby("set", sort=False)):
         c = SET_COLORS[i % len(SET_COLORS)]
         rel = res.relations[res.relations["set"] == s].set_index("relation")["fitted"]
@@ -170,7 +234,7 @@ def network_figure(res: StatsResult):
 
 def _scatter_fig(res, x, y, xlabel, ylabel, title, *, through_origin=False, paper_slope=None):
     pc = res.per_config
-    fig, ax = plt.subplots(figsize=(6, 4.5))
+    fig, ax = _subplots()
     for i, (s, g) in enumerate(pc.groupby("set", sort=False)):
         c = SET_COLORS[i % len(SET_COLORS)]
         xv, yv = np.asarray(g[x], float), np.asarray(g[y], float)
@@ -201,7 +265,7 @@ def e_vs_nbr_figure(ens: Ensemble):
     br = ens.branches.dropna(subset=["n_br", "e"])
     if br.empty:
         return None
-    fig, ax = plt.subplots(figsize=(6, 4.5))
+    fig, ax = _subplots()
     for i, s in enumerate(ens.sets):
         g = br[br["set"] == s]
         if g.empty:
@@ -232,7 +296,7 @@ def _html_table(df: pd.DataFrame) -> str:
 
 
 def write_report(ens: Ensemble, out_dir, *, opts: StatsOptions | None = None,
-                 inputs=(), figures: bool = True) -> dict:
+                 inputs=(), figures: bool = True, progress: bool | None = False) -> dict:
     """Compute every statistic of ``ens`` and write the report folder.
 
     Parameters
@@ -246,15 +310,20 @@ def write_report(ens: Ensemble, out_dir, *, opts: StatsOptions | None = None,
         Input folders, recorded in stats.json.
     figures : bool
         Draw the PNG figures.
+    progress : bool or None
+        tqdm bars on stderr over the fits and the figures; None shows them only when stderr
+        is a terminal.
 
     Returns
     -------
     dict
         Name -> written path.
     """
+    from tqdm import tqdm
+
     opts = opts or StatsOptions()
     out = Path(out_dir)
-    res = compute_stats(ens, opts)
+    res = compute_stats(ens, opts, progress=progress)
     paths = {}
     tables = {"macro": res.macro, "micro": res.micro, "fits": res.fits,
               "relations": res.relations, "dof": res.dof, "truncation": res.truncation}
@@ -267,13 +336,14 @@ def write_report(ens: Ensemble, out_dir, *, opts: StatsOptions | None = None,
     figs = []
     if figures:
         fdir = out / "figures"
-        for s in ens.sets:
-            for q in opts.quantities:
-                fig = pdf_figure(res, ens, s, q)
-                if fig is not None:
-                    name = f"pdf_{q}_{_safe(s)}.png"
-                    paths[name] = save_figure(fig, fdir / name)
-                    figs.append((f"{s}: pdf of {q}", f"figures/{name}"))
+        pdfs = [(s, q) for s in ens.sets for q in opts.quantities]
+        for s, q in tqdm(pdfs, desc="stats figures", unit="fig", leave=False,
+                         disable=None if progress is None else not progress):
+            fig = pdf_figure(res, ens, s, q)
+            if fig is not None:
+                name = f"pdf_{q}_{_safe(s)}.png"
+                paths[name] = save_figure(fig, fdir / name)
+                figs.append((f"{s}: pdf of {q}", f"figures/{name}"))
         scatter = [
             ("network_Nbr_vs_Nl.png", "N_br vs N_l (Eqs. 1-4)", lambda: network_figure(res)),
             ("sqrt_s_vs_l.png", "sqrt(s_bar) vs l_bar", lambda: _scatter_fig(

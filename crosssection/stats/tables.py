@@ -177,13 +177,17 @@ def _gamma_params(summ):
     return p["alpha"], p["chi"]
 
 
-def compute_stats(ens: Ensemble, opts: StatsOptions | None = None) -> StatsResult:
+def compute_stats(ens: Ensemble, opts: StatsOptions | None = None, *,
+                  progress: bool | None = False) -> StatsResult:
     """Every table of the report.
 
     Parameters
     ----------
     ens : Ensemble
     opts : StatsOptions, optional
+    progress : bool or None
+        A tqdm bar on stderr over the fits (set, region, quantity: the slow part, bootstrap
+        and goodness of fit); None shows it only when stderr is a terminal.
 
     Returns
     -------
@@ -198,22 +202,32 @@ def compute_stats(ens: Ensemble, opts: StatsOptions | None = None) -> StatsResul
             if not (reg != "all" and QUANTITIES[q][0] in ("configs", "voids"))]
     seeds = np.random.SeedSequence(opts.seed).spawn(len(jobs))
     subsets = {s: ens.subset(s) for s in ens.sets}
-    for (s, reg, q), sd in zip(jobs, seeds):
-        summ, bias, ndrop = fit_quantity(subsets[s], q, reg, opts, sd)
-        if summ is None:
-            continue
-        summaries[(s, reg, q)] = summ
-        t = summ.table.copy()
-        t.insert(0, "quantity", q)
-        t.insert(0, "region", reg)
-        t.insert(0, "set", s)
-        t["n_dropped"] = summ.n_dropped + ndrop
-        fit_rows.append(t)
-        if bias is not None:
-            bias.insert(0, "quantity", q)
-            bias.insert(0, "region", reg)
-            bias.insert(0, "set", s)
-            trunc_rows.append(bias)
+    from tqdm import tqdm
+
+    # disable=None is tqdm's "only on a terminal"
+    bar = tqdm(total=len(jobs), desc="stats fits", unit="fit", leave=False,
+               disable=None if progress is None else not progress)
+    try:
+        for (s, reg, q), sd in zip(jobs, seeds):
+            bar.set_postfix_str(f"{s} {reg} {q}", refresh=False)
+            summ, bias, ndrop = fit_quantity(subsets[s], q, reg, opts, sd)
+            bar.update(1)
+            if summ is None:
+                continue
+            summaries[(s, reg, q)] = summ
+            t = summ.table.copy()
+            t.insert(0, "quantity", q)
+            t.insert(0, "region", reg)
+            t.insert(0, "set", s)
+            t["n_dropped"] = summ.n_dropped + ndrop
+            fit_rows.append(t)
+            if bias is not None:
+                bias.insert(0, "quantity", q)
+                bias.insert(0, "region", reg)
+                bias.insert(0, "set", s)
+                trunc_rows.append(bias)
+    finally:
+        bar.close()
     fits_df = pd.concat(fit_rows, ignore_index=True) if fit_rows else pd.DataFrame()
     trunc_df = pd.concat(trunc_rows, ignore_index=True) if trunc_rows else pd.DataFrame()
 

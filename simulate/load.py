@@ -1,0 +1,221 @@
+"""Simulation ensembles from Python: read a ``quench`` / ``anneal`` output folder and draw its
+configurations.
+
+>>> from simulate.load import load_ensemble
+>>> ens = load_ensemble("sim/")                      # doctest: +SKIP
+>>> ens.configs[["rg", "epsilon", "energy_total"]].describe()  # doctest: +SKIP
+>>> ens.plot(0)                                       # doctest: +SKIP
+
+Lengths are in units of the rod length L. The ensemble statistics of the same folder (the
+fits and the paper's tables) are those of ``crosssection.stats.load_any(folder)`` and
+``crosssection.stats.plot_pdf``.
+"""
+from __future__ import annotations
+
+import json
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from crosssection.core.errors import ConfigError
+
+__all__ = ["SimulationEnsemble", "load_ensemble", "plot_configuration"]
+
+TABLES = ("configs", "branches", "stacks", "voids")
+
+
+@dataclass
+class SimulationEnsemble:
+    """The tables, parameters and rods of one simulation folder (:func:`load_ensemble`).
+
+    Attributes
+    ----------
+    folder : Path
+    configs, branches, stacks, voids : DataFrame
+        The folder's CSV tables (columns in :mod:`simulate.ensemble`); ``stacks`` is empty
+        for folders written without it.
+    params : dict
+        ``params.json``: the command, lambda (``lam``), noise, segments, seed, ...
+    keys : list of str
+        Keys of ``rods.npz`` (``config_00000``, ...), one per configuration.
+    """
+
+    folder: Path
+    configs: pd.DataFrame
+    branches: pd.DataFrame
+    stacks: pd.DataFrame
+    voids: pd.DataFrame
+    params: dict = field(default_factory=dict)
+    keys: list = field(default_factory=list)
+
+    def __repr__(self) -> str:
+        return (f"SimulationEnsemble({self.folder}: {len(self.configs)} configurations, "
+                f"{len(self.branches)} branches, {len(self.voids)} voids, "
+                f"lambda = {self.params.get('lam', 'n/a')})")
+
+    def _key(self, config) -> str:
+        key = f"config_{int(config):05d}" if not isinstance(config, str) else config
+        if key not in self.keys:
+            raise KeyError(f"no configuration {config!r} in {self.folder / 'rods.npz'} "
+                           f"({len(self.keys)} configurations)")
+        return key
+
+    def rod(self, config) -> np.ndarray:
+        """Node positions of one configuration.
+
+        Parameters
+        ----------
+        config : int or str
+            ``config_id`` or a ``rods.npz`` key.
+
+        Returns
+        -------
+        (N+1, 2) float array
+            Units of L.
+        """
+        key = self._key(config)
+        with np.load(self.folder / "rods.npz", allow_pickle=False) as rods:
+            return np.asarray(rods[key], float)
+
+    def plot(self, config=0, *, ax=None, stacks: bool = True):
+        """Draw one configuration (:func:`plot_configuration`).
+
+        Parameters
+        ----------
+        config : int or str
+            ``config_id`` or a ``rods.npz`` key.
+        ax : matplotlib axes, optional
+        stacks : bool
+            Colour the stacks by their number of branches (contact analysis with this
+            ensemble's lambda and contact distance).
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+        """
+        wall = self.params.get("wall_radius")
+        return plot_configuration(
+            self.rod(config), ax=ax, stacks=stacks, lam=float(self.params.get("lam", 7e5)),
+            contact_distance=self.params.get("contact_distance"),
+            wall_radius=float(wall) if wall else None, title=self._key(config))
+
+
+def load_ensemble(folder) -> SimulationEnsemble:
+    """Read a simulation folder written by ``foldstat quench`` or ``foldstat anneal``.
+
+    Parameters
+    ----------
+    folder : str or Path
+        Holds ``configs.csv``, ``branches.csv``, ``voids.csv``, optionally ``stacks.csv``,
+        ``params.json`` and ``rods.npz``.
+
+    Returns
+    -------
+    SimulationEnsemble
+
+    Raises
+    ------
+    ConfigError
+        Not a simulation folder, or an unreadable file (named).
+    """
+    folder = Path(folder)
+    if not (folder / "configs.csv").is_file():
+        raise ConfigError("not a simulation folder (no configs.csv)", folder)
+    tables = {}
+    for name in TABLES:
+        path = folder / f"{name}.csv"
+        if not path.is_file() and name == "stacks":
+            tables[name] = pd.DataFrame()
+            continue
+        try:
+            tables[name] = pd.read_csv(path)
+        except FileNotFoundError:
+            raise ConfigError("missing table", path) from None
+        except pd.errors.EmptyDataError:
+            tables[name] = pd.DataFrame()
+        except (pd.errors.ParserError, UnicodeDecodeError) as exc:
+            raise ConfigError(f"unreadable CSV ({type(exc).__name__})", path) from None
+    params = {}
+    if (folder / "params.json").is_file():
+        try:
+            params = json.loads((folder / "params.json").read_text())
+        except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
+            raise ConfigError(f"unreadable params.json ({type(exc).__name__})",
+                              folder / "params.json") from None
+    keys = []
+    if (folder / "rods.npz").is_file():
+        try:
+            with np.load(folder / "rods.npz", allow_pickle=False) as rods:
+                keys = sorted(rods.files)
+        except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+            raise ConfigError(f"unreadable rods file ({type(exc).__name__})",
+                              folder / "rods.npz") from None
+    return SimulationEnsemble(folder, **tables, params=params, keys=keys)
+
+
+def plot_configuration(xy, *, ax=None, stacks: bool = True, lam: float = 7e5,
+                       contact_distance: float | None = None, wall_radius: float | None = None,
+                       title: str | None = None):
+    """Draw a rod configuration; optionally its stacks coloured by number of branches.
+
+    Parameters
+    ----------
+    xy : (N+1, 2) array
+        Node positions (units of L).
+    ax : matplotlib axes, optional
+        Draw into it; default a new figure (no pyplot).
+    stacks : bool
+        Run :func:`simulate.contacts.analyze_rod` and draw every stack's mean line with a
+        width and colour growing with its n_br.
+    lam : float
+        Lambda of the contact analysis (its energies; the stacks do not depend on it).
+    contact_distance : float, optional
+        Contact cut-off delta in units of L (default: the analysis's, 0.5/N).
+    wall_radius : float, optional
+        A hard wall drawn as a circle of this radius about the centre of mass.
+    title : str, optional
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    from matplotlib.collections import LineCollection
+    from matplotlib.patches import Circle
+
+    xy = np.asarray(xy, float)
+    if ax is None:
+        from matplotlib.figure import Figure
+
+        fig = Figure(figsize=(5.5, 5.5))
+        ax = fig.add_subplot()
+    ax.plot(xy[:, 0], xy[:, 1], "-", color="0.35", lw=0.7, zorder=1)
+    ax.plot(*xy[0], "o", ms=4, color="black", zorder=3)
+    ax.plot(*xy[-1], "s", ms=4, color="black", zorder=3)
+    text = title or "configuration"
+    if stacks:
+        from matplotlib import colormaps
+
+        from simulate.contacts import analyze_rod
+
+        an = analyze_rod(xy, lam=lam, contact_distance=contact_distance)
+        n_br = an.stacks["n_br"].to_numpy(int) if len(an.stacks) else np.zeros(0, int)
+        if len(n_br):
+            cmap = colormaps["viridis"]
+            top = max(int(n_br.max()), 2)
+            lc = LineCollection([np.asarray(line, float) for line in an.stack_lines],
+                                colors=[cmap((n - 1) / (top - 1)) for n in n_br],
+                                linewidths=1.0 + 1.2 * n_br, alpha=0.75, zorder=2)
+            ax.add_collection(lc)
+        text += (f": {an.n_stacks} stacks, {an.n_branches} branches, "
+                 f"{an.n_junctions} junctions (line width and colour: n_br)")
+    if wall_radius:
+        ax.add_patch(Circle(tuple(xy.mean(axis=0)), wall_radius, fill=False, ls="--",
+                            color="0.4"))
+    ax.set_aspect("equal")
+    ax.set_xlabel("x / L")
+    ax.set_ylabel("y / L")
+    ax.set_title(text, fontsize=9)
+    return ax.figure

@@ -1,0 +1,95 @@
+"""Statistics from Python (report folders read back, a density plotted) and the progress bars
+of the ``stats`` command (only on a terminal or when asked)."""
+import argparse
+
+import numpy as np
+import pandas as pd
+import pytest
+from matplotlib.figure import Figure
+
+from crosssection.core.errors import ConfigError
+from crosssection.stats import Ensemble, cli, demo, load_any, load_report, plot_pdf
+from crosssection.stats.data import STACK_COLS, VOID_COLS
+from crosssection.stats.fits import PAPER_FAMILIES, fit_all
+
+
+def _run(argv):
+    p = argparse.ArgumentParser()
+    sub = p.add_subparsers(dest="command", required=True)
+    cli.add_subparser(sub)
+    args = p.parse_args(["stats", *argv])
+    return args.func(args)
+
+
+@pytest.fixture(scope="module")
+def sim(tmp_path_factory):
+    # a simulation: no detection limits, so the fits are quick
+    return demo.write_demo_simulation(tmp_path_factory.mktemp("s") / "sim", n_configs=8,
+                                      seed=2)
+
+
+@pytest.fixture(scope="module")
+def batch(tmp_path_factory):
+    return demo.write_demo_batch(tmp_path_factory.mktemp("b") / "batch", n_images=3, seed=2,
+                                 sets={"s1": {"n_stacks": 25}})
+
+
+def test_report_folder_reads_back(sim, tmp_path, capfd):
+    out = tmp_path / "rep"
+    assert _run([str(sim), "--out", str(out), "--n-boot", "0", "--no-gof", "--no-figures"]) == 0
+    capfd.readouterr()
+    rep = load_report(out)
+    for name in ("macro", "micro", "fits", "relations", "dof", "correlations", "per_config"):
+        written = pd.read_csv(out / f"{name}.csv")
+        pd.testing.assert_frame_equal(getattr(rep, name), written)
+    assert rep.meta["options"]["n_boot"] == 0 and "sim" in rep.meta["sets"]
+    sel = rep.selected()
+    assert len(sel) and sel["selected"].all()
+    assert len(sel) == len(sel.drop_duplicates(["set", "region", "quantity"]))
+    with pytest.raises(ConfigError, match="stats.json"):
+        load_report(sim)
+
+
+def test_batch_folder_loads_into_dataframes_and_plots(batch):
+    ens = load_any(batch)
+    assert isinstance(ens, Ensemble) and ens.sets == ["s1"] and len(ens.configs) == 3
+    fig = plot_pdf(ens, "e")
+    assert isinstance(fig, Figure) and len(fig.axes) == 2
+    # the histogram of every region and its fitted law, in both panels
+    for ax in fig.axes:
+        assert len(ax.lines) >= 2 * 3
+    assert isinstance(plot_pdf(batch, "kappa_m_L"), Figure)  # from the folder itself
+    with pytest.raises(ValueError, match="too few"):
+        plot_pdf(batch, "E")  # one total energy per scan: 3 values
+    with pytest.raises(ValueError, match="quantity"):
+        plot_pdf(ens, "weight")
+    with pytest.raises(ValueError, match="set"):
+        plot_pdf(ens, "e", set_name="nope")
+
+
+def test_plot_pdf_draws_the_fitted_density():
+    rng = np.random.default_rng(0)
+    x = rng.gamma(2.0, 0.5, 400)
+    ens = Ensemble.concat([Ensemble(
+        pd.DataFrame({"set": ["g"], "config_id": ["0"]}),
+        pd.DataFrame({"set": "g", "config_id": "0", "length_L": x, "region": "none"}),
+        pd.DataFrame(columns=STACK_COLS), pd.DataFrame(columns=VOID_COLS))])
+    fig = plot_pdf(ens, "length_L")
+    curve = fig.axes[0].lines[1]  # after the histogram points: the selected law
+    xs, ys = curve.get_xdata(), curve.get_ydata()
+    summ = fit_all(x, PAPER_FAMILIES, n_boot=0, gof=False)
+    assert np.allclose(ys, summ.results[summ.best].pdf(xs), rtol=1e-6)
+    from scipy import stats
+
+    k = (xs > 0.2) & (xs < 2)  # and that law is close to the generating one
+    assert np.allclose(ys[k], stats.gamma(2.0, scale=0.5).pdf(xs[k]), rtol=0.2)
+
+
+@pytest.mark.parametrize("flag, bar", [([], False), (["--progress"], True)])
+def test_progress_only_when_asked_off_a_terminal(sim, tmp_path, capfd, flag, bar):
+    assert _run([str(sim), "--out", str(tmp_path / "r"), "--n-boot", "0", "--no-gof",
+                 "--no-figures", *flag]) == 0
+    err = capfd.readouterr().err
+    assert ("stats fits" in err) == bar
+    if not bar:
+        assert err == ""

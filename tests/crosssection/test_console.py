@@ -1,0 +1,119 @@
+"""The ``foldstat`` console command: every subcommand of both tools, help texts, a light
+start-up, one-line errors, and the bundled samples."""
+import argparse
+import subprocess
+import sys
+
+import pytest
+
+import crosssection.cli
+import simulate.cli
+from crosssection import console
+from crosssection.samples import copy_samples, samples_path
+
+
+def _subparsers(parser):
+    return next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+
+
+def test_every_registered_subcommand_is_listed_with_a_one_line_help(capsys):
+    expected = [*crosssection.cli.SUBCOMMANDS, *simulate.cli.SUBCOMMANDS, "samples"]
+    with pytest.raises(SystemExit) as exc:
+        console.main(["--help"])
+    assert exc.value.code == 0
+    out = capsys.readouterr().out
+    listed = {a.dest: a.help for a in _subparsers(console.build_parser([]))._choices_actions}
+    assert list(listed) == expected
+    for name in expected:
+        assert listed[name].strip() and f"    {name}" in out
+    for code in ("0 ", "2 ", "3 ", "130"):  # the exit status table in the epilog
+        assert f"\n  {code}" in out
+    assert "unavailable" not in out
+
+
+def test_source_reading_agrees_with_the_imported_tables():
+    # the fast path (no import for --help) must see what importing sees
+    for source, module in (("crosssection.cli", crosssection.cli),
+                           ("simulate.cli", simulate.cli)):
+        table = console._literal_table(source)
+        assert table is None or table == module.SUBCOMMANDS
+    commands, broken = console.registered_subcommands()
+    assert not broken
+    for name in [*crosssection.cli.SUBCOMMANDS, *simulate.cli.SUBCOMMANDS]:
+        assert name in commands
+
+
+def test_version(capsys):
+    with pytest.raises(SystemExit) as exc:
+        console.main(["--version"])
+    assert exc.value.code == 0
+    assert capsys.readouterr().out.strip() == f"foldstat {crosssection.__version__}"
+
+
+def test_help_imports_no_heavy_library():
+    code = ("import sys\nfrom crosssection import console\n"
+            "try:\n    console.main(['--help'])\nexcept SystemExit:\n    pass\n"
+            "print([m for m in ('numpy', 'pandas', 'matplotlib', 'skimage', 'scipy', 'cv2') "
+            "if m in sys.modules])")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=60)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.strip().splitlines()[-1] == "[]"
+
+
+def test_every_option_has_help_with_its_default():
+    commands, _ = console.registered_subcommands()
+    checked = 0
+    for name in commands:
+        sub = _subparsers(console.build_parser([name])).choices[name]
+        for action in sub._actions:
+            if isinstance(action, argparse._HelpAction):
+                continue
+            where = f"{name} {'/'.join(action.option_strings) or action.dest}"
+            assert action.help and action.help.strip(), f"{where}: no help"
+            if (action.option_strings and not action.required
+                    and action.default not in (None, False)):
+                assert "default" in action.help.lower(), f"{where}: default not stated"
+            checked += 1
+    assert checked > 60
+
+
+def test_a_missing_module_leaves_the_others_working(monkeypatch, capsys):
+    monkeypatch.setattr(console, "CONSOLE_SUBCOMMANDS",
+                        {**console.CONSOLE_SUBCOMMANDS, "ghost": "simulate.no_such_module"})
+    with pytest.raises(SystemExit):
+        console.main(["--help"])
+    out = capsys.readouterr().out
+    assert "unavailable here:" in out and "ghost" in out and "    render" in out
+    assert console.main(["ghost"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: foldstat ghost: unavailable")
+
+
+def test_bad_input_is_one_line_and_status_2(tmp_path, capsys):
+    assert console.main(["stats", str(tmp_path / "missing"), "--out",
+                         str(tmp_path / "r")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: ") and "missing" in err[0]
+    with pytest.raises(SystemExit) as exc:
+        console.main(["quench", "--n-configs", "many", "--out", str(tmp_path)])
+    assert exc.value.code == 2
+    assert len(capsys.readouterr().err.strip().splitlines()) == 1
+
+
+def test_samples_are_copied_out_and_not_overwritten(tmp_path, capsys):
+    src = samples_path()
+    dest = tmp_path / "samples"
+    assert console.main(["samples", str(dest)]) == 0
+    files = sorted(p.relative_to(src) for p in src.rglob("*") if p.is_file())
+    assert len(files) >= 10 and (dest / "set.toml").is_file()
+    for rel in files:
+        assert (dest / rel).read_bytes() == (src / rel).read_bytes(), rel
+    assert "5 sample scans" in capsys.readouterr().out
+    (dest / "set.toml").write_text("changed")
+    assert console.main(["samples", str(dest)]) == 2  # refuses, names a file
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: {dest}") and "exists already" in err
+    assert (dest / "set.toml").read_text() == "changed"
+    assert len(copy_samples(dest, overwrite=True)) == len(files)
+    assert (dest / "set.toml").read_bytes() == (src / "set.toml").read_bytes()

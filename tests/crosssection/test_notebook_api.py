@@ -1,0 +1,70 @@
+"""The notebook view of an analysis: ``AnalysisResult._repr_html_`` and ``plot``."""
+import base64
+import io
+import re
+
+import numpy as np
+import pytest
+from matplotlib.figure import Figure
+from PIL import Image
+
+pytest_plugins = ["crosssection.testing"]
+
+
+@pytest.fixture(scope="module")
+def result(foldstat_scan_factory):
+    return foldstat_scan_factory(seed=4, n_stacks=20, max_layers=4).analyze()
+
+
+def test_html_summary_and_small_thumbnail(result):
+    page = result._repr_html_()
+    s = result.summary
+    for label, value in (("junctions", s["n_junctions"]), ("stacks", s["n_stacks"]),
+                         ("branches", s["n_branches"]), ("voids", s["n_voids"])):
+        assert re.search(rf"<th[^>]*>{label}</th><td[^>]*>{value}</td>", page), label
+    assert f"{s['rod_length_mm']:.1f} mm" in page and f"{s['epsilon']:.2f}" in page
+    assert "no warning" in page  # a clean generated scan with its calibration and hole
+    data = base64.b64decode(re.search(r"data:image/png;base64,([A-Za-z0-9+/=]+)", page)[1])
+    assert len(data) < 200_000
+    img = Image.open(io.BytesIO(data))
+    assert img.format == "PNG" and max(img.size) == 320
+    rgb = np.asarray(img.convert("RGB")).astype(int)
+    r, g = rgb[..., 0], rgb[..., 1]
+    # the network is drawn: green bulk and red periphery pixels, not only the dimmed scan
+    assert (g > r + 60).sum() > 100 and (r > g + 60).sum() > 20
+
+
+def test_html_lists_quality_warnings(result):
+    from crosssection.quality import QualityFlag
+
+    flagged = type(result)(**{**vars(result), "quality": (
+        QualityFlag("hole_fitted", "hole found with confidence 0.3 < 0.5"),)})
+    page = flagged._repr_html_()
+    assert "<b>hole_fitted</b>" in page and "no warning" not in page
+
+
+@pytest.mark.parametrize("kind, n_axes", [("overlay", 1), ("steps", 4), ("curvature", 1),
+                                          ("widths", 1)])
+def test_plot_kinds(result, kind, n_axes):
+    fig = result.plot(kind)
+    assert isinstance(fig, Figure) and len(fig.axes) == n_axes
+    drawn = sum(len(ax.lines) + len(ax.collections) + len(ax.images) for ax in fig.axes)
+    assert drawn > 0
+
+
+def test_plot_into_given_axes(result):
+    fig = Figure()
+    axes = fig.subplots(2, 2)
+    assert result.plot("widths", ax=axes[0, 0]) is fig
+    assert result.plot("overlay", ax=axes[0, 1]) is fig
+    assert len(axes[0, 1].images) == 1 and len(axes[0, 1].collections) >= 1
+    assert result.plot("curvature", ax=axes[1, 0]) is fig
+    # the widths panel shows every stack and the calibration law
+    n_points = sum(len(line.get_xdata()) for line in axes[0, 0].lines[:-1])
+    assert n_points == len(result.stacks)
+    steps = Figure().subplots(1, 4)
+    assert result.plot("steps", ax=steps) is steps[0].figure
+    with pytest.raises(ValueError, match="4 axes"):
+        result.plot("steps", ax=axes[0, 0])
+    with pytest.raises(ValueError, match="kind"):
+        result.plot("histogram")

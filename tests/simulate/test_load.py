@@ -1,0 +1,64 @@
+"""Simulation ensembles from Python (``simulate.load``) and the progress bar of ``render``."""
+import numpy as np
+import pandas as pd
+import pytest
+from matplotlib.figure import Figure
+
+from crosssection import console
+from crosssection.core.errors import ConfigError
+from simulate.contacts import analyze_rod
+from simulate.load import load_ensemble, plot_configuration
+
+ARGS = ["--n-configs", "2", "--segments", "60", "--lambda", "2e4", "--noise", "300",
+        "--runs", "2", "--maxiter", "3", "--nematic-runs", "0", "--no-progress"]
+
+
+@pytest.fixture(scope="module")
+def sim(tmp_path_factory):
+    out = tmp_path_factory.mktemp("sim") / "q"
+    assert console.main(["quench", *ARGS, "--seed", "5", "--out", str(out)]) == 0
+    return out
+
+
+def test_load_ensemble_tables_params_and_rods(sim):
+    ens = load_ensemble(sim)
+    for name in ("configs", "branches", "stacks", "voids"):
+        pd.testing.assert_frame_equal(getattr(ens, name), pd.read_csv(sim / f"{name}.csv"))
+    assert ens.params["lam"] == 2e4 and ens.params["n_segments"] == 60
+    assert ens.keys == ["config_00000", "config_00001"]
+    xy = ens.rod(1)
+    assert xy.shape == (61, 2)
+    assert np.allclose(xy, ens.rod("config_00001"))
+    # the stored rod is the configuration of the tables
+    assert analyze_rod(xy, lam=2e4).n_branches == int(ens.configs["n_branches"].iloc[1])
+    with pytest.raises(KeyError, match="no configuration"):
+        ens.rod(7)
+    assert "2 configurations" in repr(ens)
+    with pytest.raises(ConfigError, match="configs.csv"):
+        load_ensemble(sim / "parts")
+
+
+def test_plot_configuration_draws_rod_and_stacks(sim):
+    ens = load_ensemble(sim)
+    fig = ens.plot(0)
+    assert isinstance(fig, Figure)
+    ax = fig.axes[0]
+    assert np.allclose(ax.lines[0].get_xydata(), ens.rod(0))
+    n_stacks = int(ens.configs["n_stacks"].iloc[0])
+    assert len(ax.collections[0].get_segments()) == n_stacks
+    assert f"{n_stacks} stacks" in ax.get_title()
+    bare = Figure().add_subplot()
+    assert plot_configuration(ens.rod(0), ax=bare, stacks=False, wall_radius=0.2) is bare.figure
+    assert not bare.collections and len(bare.patches) == 1
+
+
+@pytest.mark.parametrize("flag, bar", [([], False), (["--progress"], True)])
+def test_render_progress_only_when_asked_off_a_terminal(sim, tmp_path, capfd, flag, bar):
+    out = tmp_path / "scenes"
+    assert console.main(["render", str(sim), "--out", str(out), "--limit", "1",
+                         "--px-per-mm", "20", *flag]) == 0
+    err = capfd.readouterr().err
+    assert ("render" in err and "config" in err) == bar
+    if not bar:
+        assert err == ""
+    assert (out / "config_00000" / "truth" / "summary.json").is_file()
