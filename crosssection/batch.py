@@ -34,6 +34,7 @@ Design choices
 """
 from __future__ import annotations
 
+import argparse
 import warnings
 import hashlib
 import json
@@ -414,7 +415,7 @@ def _executor_slots(ex, workers: int) -> int:
 
 def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | None = None,
               seed: int | None = 0, figure: bool = True, cli_params: dict | None = None,
-              force: bool = False, progress: bool = True, task_fn=None) -> pd.DataFrame:
+              force: bool = False, progress: bool | None = None, task_fn=None) -> pd.DataFrame:
     """Analyse every image under ``input_dir`` into ``out_dir`` (see module docstring).
 
     Parameters
@@ -432,8 +433,9 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
         Analysis parameters for images outside any set (and defaults under a ``set.toml``).
     force : bool
         Redo images even when their output is complete.
-    progress : bool
-        Show a tqdm progress bar (with ETA) on stderr.
+    progress : bool or None
+        Show a tqdm progress bar (with ETA) on stderr; None: only when stderr is a terminal,
+        so that logs and pipes get nothing but warnings and errors.
     task_fn : callable, optional
         Replaces :func:`process_image` (a module-level function, for tests).
 
@@ -482,7 +484,8 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
             todo.append(t)
 
     bar = tqdm(total=len(tasks), initial=len(rows), unit="img", desc="batch",
-               disable=not progress, dynamic_ncols=True)
+               disable=None if progress is None else not progress,
+               dynamic_ncols=True)
     last_write = time.monotonic()
     fn = task_fn or process_image
     queue, suspects = deque(todo), deque()
@@ -564,7 +567,9 @@ def add_subparser(sub):
     p.add_argument("--seed", type=int, default=0, help="base seed of the per-image seeds")
     p.add_argument("--no-figure", action="store_true", help="skip overlay.png")
     p.add_argument("--force", action="store_true", help="redo images already complete")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
+                   help="progress bar on stderr (default: only when stderr is a terminal)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar (= --no-progress)")
     add_analysis_arguments(p)
     p.set_defaults(func=run)
     return p
@@ -581,7 +586,8 @@ def run(args) -> int:
         cli_params["merge_thick_crossings"] = False
     index = run_batch(args.input_dir, args.out, workers=args.workers, scheduler=args.scheduler,
                       seed=args.seed, figure=not args.no_figure, cli_params=cli_params,
-                      force=args.force, progress=not args.quiet)
+                      force=args.force,
+                      progress=False if args.quiet else args.progress)
     n = index["status"].value_counts()
     n_failed = int(n.get("failed", 0))
     for _, row in index[index["quality"].fillna("") != ""].iterrows():

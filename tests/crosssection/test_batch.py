@@ -252,3 +252,22 @@ def test_cli_exit_status(tmp_path, capsys):
     with pytest.raises(ConfigError):
         args = parser.parse_args(["batch", str(tmp_path / "nope"), "--out", str(out)])
         args.func(args)
+
+
+def test_cli_batch_stderr_holds_no_progress_bar_when_not_a_terminal(tmp_path):
+    """A batch run from a script or a pipe writes nothing but warnings and errors on stderr."""
+    import subprocess
+    import sys
+
+    inp = tmp_path / "in"
+    inp.mkdir()
+    from crosssection.testing import drawn_scan, write_png
+
+    write_png(inp / "a.png", drawn_scan(3))
+    r = subprocess.run([sys.executable, "-m", "crosssection", "batch", str(inp), "--out",
+                        str(tmp_path / "out"), "--workers", "1", "--no-figure",
+                        "--px-per-mm", "50", "--thickness-mm", "0.1"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert "img/s" not in r.stderr and "batch:" not in r.stderr
+    assert all(line.startswith("warning: ") for line in r.stderr.splitlines())
