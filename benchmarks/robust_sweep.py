@@ -38,21 +38,17 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-PLATES = ("grey", "dark", "brown", "beige", "bluish", "coloured", None)
+# the scene generation is shared with the validation atlas (python -m simulate benchmark)
+from simulate.atlas import quench_rod, render_rod, typical_options, with_backdrop
+
 CONDITIONS = ("typical", "typical_nohole", "lowres", "thick_dense", "renders")
 
 
 def scene_options(condition: str, seed: int) -> dict:
     """Generator options of one scene of a condition (all random choices from ``seed``)."""
     rng = np.random.default_rng([seed, CONDITIONS.index(condition)])
-    opts = dict(n_stacks=int(rng.integers(20, 151)), max_layers=int(rng.choice([3, 6, 9, 12])),
-                noise_sigma=float(rng.uniform(0, 10)), blur_px=float(rng.uniform(0, 1.5)),
-                jpeg_quality=[None, 75, 90][int(rng.integers(3))],
-                specks=int(rng.integers(0, 20)), smears=int(rng.integers(0, 5)),
-                pinholes=int(rng.integers(0, 10)), px_per_mm=50.0)
-    backdrop = dict(plate=PLATES[int(rng.integers(len(PLATES)))],
-                    illumination=float(rng.uniform(0, 0.15)), cast=float(rng.uniform(0, 0.06)),
-                    rim_px=float(rng.choice([0.0, 2.0])))
+    typical = typical_options(rng)
+    opts, backdrop = typical["scene"], typical["backdrop"]
     if condition == "lowres":
         opts.update(px_per_mm=25.0, n_stacks=int(rng.integers(20, 80)))
     if condition == "thick_dense":
@@ -63,23 +59,10 @@ def scene_options(condition: str, seed: int) -> dict:
 
 def make_network_scene(seed: int, options: dict):
     """A network scene with the backdrop applied (plate, illumination, colour cast)."""
-    from crosssection.truth.backdrop import apply_backdrop
     from crosssection.truth.network import make_scene
 
     scene = make_scene(seed=seed, **options["scene"])
-    b = dict(options["backdrop"])
-    p = scene.params
-    cx, cy = p["hole_center_px"]
-    ink = getattr(scene, "ink_mask", None)
-    if ink is None:
-        ink = np.zeros(scene.rgb.shape[:2], bool)
-    plate = b.pop("plate")
-    rgb = apply_backdrop(scene.rgb, ink_mask=ink, hole_center_rc=(cy, cx),
-                         hole_radius_px=p["hole_radius_mm"] * p["px_per_mm"],
-                         rng=np.random.default_rng(seed + 7), plate=plate, **b)
-    import dataclasses
-
-    return dataclasses.replace(scene, rgb=rgb)
+    return with_backdrop(scene, np.random.default_rng(seed + 7), **options["backdrop"])
 
 
 def run_one(condition: str, seed: int) -> dict:
@@ -121,19 +104,8 @@ def run_one(condition: str, seed: int) -> dict:
 
 
 def _render_scene(seed: int):
-    """A simulator configuration (short quench) rendered as a scan."""
-    from simulate.ensemble import minimize_config
-    from simulate.noise import initial_shape
-    from simulate.render import render_configuration
-
-    params = dict(command="quench", n_runs=10, maxiter=30, nematic_runs=[1, 2], u=100.0,
-                  ftol=1e-4, xtol=1e-4, wall_radius=None, lam=7e5, method="powell",
-                  parametrization=None)
-    xy0 = initial_shape(300, 750.0, seed=np.random.default_rng(seed))
-    res = minimize_config(xy0, params, seed)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        return render_configuration(res.xy, seed=seed)
+    """A simulator configuration (short quench: 300 segments, 10 runs) rendered as a scan."""
+    return render_rod(quench_rod(seed), seed)
 
 
 TARGETS = {

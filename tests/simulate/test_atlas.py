@@ -1,0 +1,147 @@
+"""The validation atlas (``python -m simulate benchmark``): tables, charts, readings, CLI."""
+import numpy as np
+import pandas as pd
+import pytest
+
+from simulate import atlas
+from simulate.cli import main
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.fixture(scope="module")
+def report(tmp_path_factory):
+    """The smallest atlas (every sweep, both generators), run inline."""
+    out = tmp_path_factory.mktemp("atlas")
+    res = atlas.run_atlas(out, atlas.AtlasConfig.tiny(), seed=3, workers=1)
+    return out, res
+
+
+def test_every_sweep_has_a_sane_table(report):
+    out, res = report
+    assert set(res["tables"]) == set(atlas.SWEEPS)
+    for name, info in atlas.SWEEPS.items():
+        df = pd.read_csv(out / f"{name}.csv")
+        assert len(df), name
+        swept = [c for c in (info.x, info.y) if c]
+        need = swept + ["generator", "seed", "analyze_s", "rod_length_rel_error", "junction_f1",
+                        "n_br_exact_length_fraction", "n_br_mean_abs_error",
+                        "n_voids_rel_error", "total_energy_rel_error", "error"]
+        assert not [c for c in need if c not in df.columns], name
+        assert list(df.columns[:len(swept)]) == swept, name
+        stages = [c for c in df.columns if c.startswith("t_") and c.endswith("_s")]
+        assert {"t_threshold_s", "t_skeleton_s", "t_curvature_s"} <= set(stages), name
+        ok = df[df["error"].isna()]
+        assert len(ok), name
+        for c in ("rod_length_rel_error", "junction_f1", "n_br_exact_length_fraction",
+                  "total_energy_rel_error", "analyze_s"):
+            assert np.isfinite(ok[c]).all(), (name, c)
+        assert df["junction_f1"].between(0, 1).all(), name
+        assert df["n_br_exact_length_fraction"].between(0, 1).all(), name
+        assert (df["analyze_s"] > 0).all() and (df[stages] >= 0).all().all(), name
+        # the per-stage times are parts of the analysis' wall time
+        assert (df[stages].sum(axis=1) <= df["analyze_s"] * 1.05 + 1e-3).all(), name
+    assert set(pd.read_csv(out / "failures.csv").columns) >= {"sweep", "error"}
+
+
+def test_sweeps_hold_what_they_sweep(report):
+    _, res = report
+    t, cfg = res["tables"], atlas.AtlasConfig.tiny()
+    assert sorted(t["resolution"]["h_px"].unique()) == sorted(cfg.resolution_h)
+    assert set(t["resolution"]["generator"]) == {"network", "render"}
+    assert sorted(t["noise"]["noise_sigma"].unique()) == sorted(cfg.noise)
+    assert np.allclose(t["resolution"]["px_per_mm"] * atlas.THICKNESS_MM,
+                       t["resolution"]["h_px"])
+    v = t["variants"]
+    assert atlas.DEFAULT.name in set(v["variant"])
+    assert set(v["variant"]) == set(cfg.variant_names)
+    # every variant ran on the same scans
+    assert v.groupby("variant")["seed"].apply(frozenset).nunique() == 1
+    m = t["map_h_layers"]
+    assert len(m.groupby(["h_px", "mean_layers"])) == len(cfg.map_h) * len(cfg.map_layers)
+
+
+def test_charts_and_index(report):
+    out, res = report
+    names = list(atlas.SWEEPS) + ["stage_times"]
+    assert set(res["charts"]) == set(names)
+    index = (out / "index.md").read_text()
+    for name in names:
+        png = out / f"{name}.png"
+        data = png.read_bytes()
+        assert data[:8] == PNG_MAGIC and len(data) > 20_000, name
+        assert f"]({name}.png)" in index
+        assert res["readings"][name].strip(), name
+    assert "python -m simulate benchmark" in index
+
+
+def test_failed_analysis_is_scored_as_empty():
+    base = atlas.Base("variants", "network", 5, 3.0, (("max_layers", 3), ("n_stacks", 15)))
+    broken = atlas.Variant("nothing passes", (("threshold_method", "fixed"),
+                                              ("blue_min", 255.0), ("rg_max", 0.0)))
+    rows = atlas.run_base(base, [atlas.Treatment("variants", variant=broken),
+                                 atlas.Treatment("variants")])
+    bad, good = rows
+    assert "empty mask" in bad["error"]
+    assert bad["junction_f1"] == 0 and bad["n_br_exact_length_fraction"] == 0
+    assert bad["rod_length_rel_error"] == -1
+    assert good["error"] == "" and good["junction_f1"] > 0.5
+
+
+def test_readings_come_from_the_numbers():
+    rows = []
+    for h, nbr in [(2.0, 0.5), (2.5, 0.7), (3.0, 0.9), (5.0, 1.0)]:
+        for seed in (1, 2):
+            rows.append(dict(generator="network", seed=seed, h_px=h, analyze_s=0.1 * h,
+                             n_br_exact_length_fraction=nbr, junction_f1=0.95,
+                             rod_length_rel_error=0.0, n_voids_rel_error=0.0,
+                             total_energy_rel_error=0.3 if h == 5.0 else 0.1,
+                             n_br_mean_abs_error=0.0))
+    text = atlas.reading("resolution", pd.DataFrame(rows))
+    assert "exact n_br < 0.8 at h <= 2.5 px" in text
+    assert "junction F1 holds everywhere" in text
+    assert "|energy error| > 20 % at h = 5 px only" in text
+
+
+def test_pareto_front_and_failure_boundary():
+    # time, accuracy: (1, 0.5) beaten by nobody, (2, 0.4) beaten by it, (3, 0.9) best
+    assert atlas.pareto_front([2, 1, 3], [0.4, 0.5, 0.9]).tolist() == [1, 2]
+    assert atlas.pareto_front([2, 1, 3], [4.0, 5.0, 1.0], maximize=False).tolist() == [1, 0, 2]
+    fail = np.array([[True, False], [False, False]])
+    assert sorted(atlas._cell_edges(fail)) == [((-0.5, 0.5), (0.5, 0.5)),
+                                               ((0.5, 0.5), (-0.5, 0.5))]
+
+
+def test_seeds_fix_the_scenes():
+    cfg = atlas.AtlasConfig.quick()
+    a, b, c = (atlas.plan(cfg, s)[1] for s in (1, 1, 2))
+    assert [x[0] for x in a] == [x[0] for x in b]
+    assert [x[0].seed for x in a] != [x[0].seed for x in c]
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--workers", "0"], "--workers"),
+    (["--seed", "-1"], "--seed"),
+    (["--sweeps", "nonsense"], "unknown sweep"),
+])
+def test_bad_options_one_line_exit_2(tmp_path, capsys, args, message):
+    assert main(["benchmark", "--out", str(tmp_path / "r"), *args]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0]
+    assert not (tmp_path / "r").exists()
+
+
+def test_unparsable_option_one_line_exit_2(tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["benchmark", "--out", str(tmp_path / "r"), "--workers", "two"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "invalid int" in err[0]
+
+
+def test_report_folder_is_a_file(tmp_path, capsys):
+    f = tmp_path / "report"
+    f.write_text("x")
+    assert main(["benchmark", "--out", str(f), "--quick"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "file" in err[0]
