@@ -24,16 +24,17 @@ fit on size 5 n_br h, after coordinates translation and rotation in the tangent 
    Everywhere the curvature is bounded by ``2 / (n_br h)``: the innermost layer of a stack
    cannot have a negative radius, so a tighter estimate is a skeleton kink, not a bend.
 
-**What these estimators miss** (measured on ``crosssection.truth.network`` scenes, analytic
-truth centrelines): 38 % of the true bending energy of interior stacks lies within n_br h of
-a junction and 75 % within 2.5 n_br h, where the image has no centreline of its own; even on
-the exact truth centrelines rounded to pixels, the paper window recovers 0.66 of it. Median
-total-energy error, paper / missing: typical -32 / -24 %, 25 px/mm -24 / -12 %, thick dense
--35 / -19 %. On simulator renders both are too high (+122 / +128 %; their truth is itself
-uncertain). The trend continuation is not a model of how layers leave a merged band: a
-least-bending turn from the parent band's axis to the exit direction over the fork zone was
-measured at +150 to +280 % on the same scenes (the generator's branches leave the junction
-already fanned) and is not used.
+**What these estimators miss** (docs/validation/README.md, "Bending energy"): the share of
+the true energy inside fork zones depends on the generator -- 38 % within n_br h of a junction
+on ``crosssection.truth.network`` scenes (branches leave the node fanned and bend back), 3 %
+on simulator renders (rod segments of 6-7 h resolve no bending at that scale). Median
+total-energy error of the default: typical -21 %, 25 px/mm -9 %, thick dense -23 %, renders
++85 % (their excess sits where single-pass stacks run into fold caps). Estimators that follow
+faster curvature changes (a polynomial tangent-angle fit) fit the first and overshoot on the
+second; noise-unbiased ones (a lagged product) the reverse. The trend continuation is not a
+model of how layers leave a merged band: a least-bending turn from the parent band's axis to
+the exit direction over the fork zone was measured at +150 to +280 % on network scenes and is
+not used.
 
 ``CurvatureProfile.energy_rel_uncertainty``: the extrapolated share of ``int kappa^2 ds``
 (not measured: counted in full) plus the noise floor of the window fit, relative to the
