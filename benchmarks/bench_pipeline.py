@@ -14,6 +14,7 @@ Usage: python benchmarks/bench_pipeline.py [--size 2000] [--repeat 3] [--seed 7]
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 import warnings
@@ -87,6 +88,9 @@ def main(argv=None) -> int:
         t_an, result = best_of(lambda: analyze(str(png), **kw), args.repeat)
     print(f"crosssection.analyze end to end (no figure): {t_an:.3f} s (best of {args.repeat})")
     print(f"ratio analyze / skeletonize = {t_an / t_skel:.2f}  (target <= 1.5)")
+    if hasattr(os, "getloadavg"):  # the ratio is what compares across runs; the load says how
+        print("load average (1, 5, 15 min): " + ", ".join(f"{v:.2f}" for v in os.getloadavg())
+              + f" on {os.cpu_count()} cores")
     timings = dict(result.summary.get("timings_s", {}))
     if timings:
         total = sum(timings.values())

@@ -42,7 +42,7 @@ from crosssection.stages.graph import stack_graph
 from crosssection.stages.load import as_rgb, load_image
 from crosssection.stages.packs import compute_packs
 from crosssection.stages.skeleton import skeletonize_mask
-from crosssection.stages.threshold import threshold_rgb
+from crosssection.stages.threshold import colour_features, threshold_rgb
 from crosssection.stages.widths import stack_widths_px
 
 __all__ = ["analyze", "preprocess", "Preprocessed", "AnalysisResult", "write_step_images"]
@@ -108,11 +108,14 @@ def _threshold_in_frame(rgb, p: AnalysisParams, path, timer):
     hole found (plate edge or ink envelope, with a confidence), and the threshold redone
     inside it, so a plate or a shadow around the hole never chooses the ink's cut.
     """
-    m = dict(method=p.threshold_method, blue_min=p.blue_min, rg_max=p.rg_max)
     given = p.hole_given and p.hole_center_px is not None
-    if not given:
-        with timer("threshold"):
+    with timer("threshold"):
+        # the features of the scan, computed once for both thresholds
+        m = dict(method=p.threshold_method, blue_min=p.blue_min, rg_max=p.rg_max,
+                 features=colour_features(rgb))
+        if not given:
             whole = threshold_rgb(rgb, **m)
+    if not given:
         _check_fraction(whole, path)
     with timer("hole"):
         if given:

@@ -10,9 +10,10 @@ s_min = (10 h)^2 are kept, allowing to remove light noise from the binary image"
   the area of the smallest detectable single-sheet stack (l_min long, h thick), so that no
   stack above the detection limit is erased as a speck.
 
-Implemented with OpenCV's connected components and ``np.bincount`` (measured on a 2000x2000
-mask: 2 x 22 ms, against 80 ms for ``skimage.morphology.remove_small_holes`` +
-``remove_small_objects``, same result).
+Implemented with OpenCV's connected components: the background labelled once, the ink once
+with its areas and bounding boxes (specks and short components in the same pass), same result
+as ``skimage.morphology.remove_small_holes`` + ``remove_small_objects`` (2000x2000 scan: about
+half the time of labelling the ink twice and counting areas with ``np.bincount``).
 """
 from __future__ import annotations
 
@@ -22,35 +23,59 @@ from crosssection.core.errors import ParameterError
 
 
 def _small_components(binary_u8: np.ndarray, connectivity: int, max_area: float) -> np.ndarray:
-    """Bool mask of the nonzero pixels of components with area < max_area."""
+    """Bool mask of the nonzero pixels of components with area < max_area.
+
+    Labels are 16-bit while there are fewer than 65 536 components (OpenCV raises past
+    that, and 32-bit labels take over): their areas are then one ``cv2.calcHist`` with a bin
+    per label, 4 ms against 12 ms for ``np.bincount`` of 32-bit labels (2000x2000 scan).
+    Its float32 counts are exact below 2^24 pixels; larger images count with ``bincount``.
+    """
     import cv2
 
-    n, lab = cv2.connectedComponents(binary_u8, connectivity=connectivity, ltype=cv2.CV_32S)
+    lab = None
+    if binary_u8.size < 2**24:
+        try:
+            n, lab = cv2.connectedComponents(binary_u8, connectivity=connectivity,
+                                             ltype=cv2.CV_16U)
+        except cv2.error:  # more than 65 535 labels
+            lab = None
+    if lab is None:
+        n, lab = cv2.connectedComponents(binary_u8, connectivity=connectivity,
+                                         ltype=cv2.CV_32S)
     if n <= 1:
         return np.zeros(binary_u8.shape, bool)
-    area = np.bincount(lab.ravel(), minlength=n)
+    if lab.dtype == np.uint16:
+        # bins of width 1 from 0: bin k counts label k exactly
+        area = cv2.calcHist([lab], [0], None, [n], [0, n]).ravel()
+    else:
+        area = np.bincount(lab.ravel(), minlength=n)
     small = area < max_area
     small[0] = False  # label 0 is the complement
     if not small.any():
         return np.zeros(binary_u8.shape, bool)
-    return small[lab]
+    return np.take(small, lab)
 
 
-def _short_components(binary_u8: np.ndarray, min_extent_px: float) -> np.ndarray:
-    """Bool mask of the 8-connected components whose bounding-box diagonal is shorter than
-    ``min_extent_px``."""
+def _drop_components(binary_u8: np.ndarray, min_area: float, min_extent_px: float) -> np.ndarray:
+    """Bool mask of the 8-connected components of area >= ``min_area`` whose bounding-box
+    diagonal is at least ``min_extent_px``.
+
+    One labelling gives both (the components are the same before and after removing
+    either kind). With statistics, the block-based algorithm labels 8-connected images about
+    3x faster than OpenCV's default (2000x2000 scan: 14 ms against 38 ms of CPU).
+    """
     import cv2
 
-    n, lab, stats, _ = cv2.connectedComponentsWithStats(binary_u8, connectivity=8,
-                                                        ltype=cv2.CV_32S)
+    n, lab, stats, _ = cv2.connectedComponentsWithStatsWithAlgorithm(
+        binary_u8, 8, cv2.CV_32S, cv2.CCL_BBDT)
     if n <= 1:
-        return np.zeros(binary_u8.shape, bool)
+        return binary_u8.view(bool).copy()
     extent = np.hypot(stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT])
-    short = extent < min_extent_px
-    short[0] = False
-    if not short.any():
-        return np.zeros(binary_u8.shape, bool)
-    return short[lab]
+    keep = (stats[:, cv2.CC_STAT_AREA] >= min_area) & ~(extent < min_extent_px)
+    keep[0] = False
+    if keep[1:].all():
+        return binary_u8.view(bool).copy()
+    return np.take(keep, lab)
 
 
 def clean_mask(mask, *, s_min_px: float, speck_px: float | None = None,
@@ -95,8 +120,6 @@ def clean_mask(mask, *, s_min_px: float, speck_px: float | None = None,
     if s_min_px > 0:
         bg = (~m).view(np.uint8)
         out |= _small_components(bg, 4, s_min_px)
-    if speck_px > 0:
-        out &= ~_small_components(out.view(np.uint8), 8, speck_px)
-    if min_extent_px > 0:
-        out &= ~_short_components(out.view(np.uint8), min_extent_px)
+    if speck_px > 0 or min_extent_px > 0:
+        out = _drop_components(out.view(np.uint8), speck_px, min_extent_px)
     return out

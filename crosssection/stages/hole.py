@@ -158,12 +158,17 @@ def fit_hole(mask, *, center_rc=None, radius_px=None, gap_px=None, path=None) ->
     AnalysisError
         Fewer than 3 foreground boundary points to fit.
     """
+    if center_rc is not None and radius_px is not None:
+        return Hole(np.asarray(center_rc, dtype=np.float64).copy(), float(radius_px), False)
+    return _fit_points(_boundary_points(np.asarray(mask, dtype=bool)), center_rc, radius_px,
+                       gap_px, path)
+
+
+def _fit_points(pts, center_rc, radius_px, gap_px, path) -> Hole:
+    """:func:`fit_hole` on the outer border points of the ink (:func:`_boundary_points`)."""
     from scipy.optimize import least_squares
     from scipy.spatial import ConvexHull, QhullError
 
-    if center_rc is not None and radius_px is not None:
-        return Hole(np.asarray(center_rc, dtype=np.float64).copy(), float(radius_px), False)
-    pts = _boundary_points(np.asarray(mask, dtype=bool))
     if len(pts) < 3:
         raise AnalysisError("cannot fit the hole: the mask has no foreground", path)
     try:
@@ -254,9 +259,30 @@ def frame_mask(shape, hole, *, margin_px: float = 2.0) -> np.ndarray:
         See :func:`check_hole`.
     """
     check_hole(shape, hole.center_rc, hole.radius_px)
-    rr, cc = np.ogrid[:shape[0], :shape[1]]
+    H, W = shape[:2]
     r0, c0 = (float(v) for v in hole.center_rc)
-    return (rr - r0) ** 2 + (cc - c0) ** 2 <= (float(hole.radius_px) + margin_px) ** 2
+    lim = (float(hole.radius_px) + margin_px) ** 2
+    # The test is (r - r0)^2 + (c - c0)^2 <= lim in float64. Each rounded term is monotone in
+    # |r - r0| and |c - c0|, so every row's inside is one run of columns: its ends are found
+    # by testing the same expression on the columns next to the ends of the exact circle,
+    # and the runs filled (a 2000x2000 scan: 3 ms and no full-image float64 temporaries,
+    # against 10 ms and 32 MB for the expression on every pixel).
+    a = (np.arange(H) - r0) ** 2
+    b = (np.arange(W) - c0) ** 2
+    half = np.sqrt(np.maximum(lim - a, 0.0))
+    k = np.arange(-2, 3)
+    lo_c = np.clip(np.ceil(c0 - half).astype(np.int64)[:, None] + k, 0, W - 1)
+    hi_c = np.clip(np.floor(c0 + half).astype(np.int64)[:, None] + k, 0, W - 1)
+    lo_in = a[:, None] + b[lo_c] <= lim
+    hi_in = a[:, None] + b[hi_c] <= lim
+    # first inside column among the candidates near the left end, last near the right end
+    lo = np.where(lo_in.any(axis=1), lo_c[np.arange(H), np.argmax(lo_in, axis=1)], W)
+    hi = np.where(hi_in.any(axis=1), hi_c[np.arange(H), 4 - np.argmax(hi_in[:, ::-1], axis=1)],
+                  -1)
+    out = np.zeros((H, W), bool)
+    for r in np.flatnonzero(hi >= lo):
+        out[r, lo[r]:hi[r] + 1] = True
+    return out
 
 
 def _circle_fit(points, c0, r0):
@@ -275,9 +301,9 @@ def _circle_fit(points, c0, r0):
     return x[:2], float(x[2]), keep
 
 
-def _envelope_confidence(mask, hole) -> float:
-    """Fraction of 2-px angular bins whose outermost ink reaches the circle within 3 px."""
-    pts = _boundary_points(mask)
+def _envelope_confidence(pts, hole) -> float:
+    """Fraction of 2-px angular bins whose outermost ink (of the border points ``pts``)
+    reaches the circle within 3 px."""
     n_bins = int(np.clip(np.pi * hole.radius_px, 36, 4096))
     outer, rad = _outermost(pts, hole.center_rc, n_bins)
     return float(np.count_nonzero(rad >= hole.radius_px - 3.5)) / n_bins
@@ -380,8 +406,9 @@ def find_hole(rgb, ink_mask, *, min_confidence: float = 0.5, path=None) -> Hole:
         keep = cv2.dilate(keep, np.ones((3, 3), np.uint8))
         full = cv2.resize(keep, (ink.shape[1], ink.shape[0]), interpolation=cv2.INTER_NEAREST)
         ink = ink & full.view(bool)
-    env = fit_hole(ink, path=path)
-    env_conf = _envelope_confidence(ink, env)
+    pts = _boundary_points(ink)
+    env = _fit_points(pts, None, None, None, path)
+    env_conf = _envelope_confidence(pts, env)
     # one ray per ~2.5 degrees at most: 720 wall points fit a circle to a tenth of a pixel,
     # and the cost of the ray sampling grows with their number
     n_rays = int(np.clip(np.pi * env.radius_px, 90, 720))

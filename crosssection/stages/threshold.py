@@ -148,12 +148,10 @@ def _region(region, shape):
     return reg
 
 
-def _otsu_u8(values) -> float:
-    """Otsu's threshold of values in uint8 units (histogram of 1-unit bins)."""
+def _otsu_hist(counts) -> float:
+    """Otsu's threshold of a histogram of 1-unit bins, bin ``k`` holding the value ``k - 256``."""
     from skimage.filters import threshold_otsu
 
-    idx = np.clip(np.rint(np.ravel(values)).astype(np.int64) + 256, 0, 512)
-    counts = np.bincount(idx, minlength=513)
     nz = np.flatnonzero(counts)
     if len(nz) < 2:
         return float(nz[0] - 256) + 1.0 if len(nz) else 1.0
@@ -162,15 +160,36 @@ def _otsu_u8(values) -> float:
     return float(threshold_otsu(hist=(counts, centers)))
 
 
-def _median_u8(values) -> float:
-    """Median of values in uint8 units, to the nearest unit (a histogram, no sort)."""
-    idx = np.clip(np.rint(values).astype(np.int64) + 256, 0, 512)
-    cum = np.cumsum(np.bincount(idx, minlength=513))
+def _hist_u8(values) -> np.ndarray:
+    """Counts of values in uint8 units rounded to 1-unit bins (:func:`_otsu_hist`'s)."""
+    idx = np.clip(np.rint(np.ravel(values)).astype(np.int64) + 256, 0, 512)
+    return np.bincount(idx, minlength=513)
+
+
+def _hist_int(values) -> np.ndarray:
+    """:func:`_hist_u8` of integer values within -256..256, without the rounding pass."""
+    return np.bincount(np.ravel(values).astype(np.intp) + 256, minlength=513)
+
+
+def _median_hist(counts) -> float:
+    """Median, to the nearest unit, of the values counted by a :func:`_hist_u8` histogram."""
+    cum = np.cumsum(counts)
     return float(np.searchsorted(cum, 0.5 * cum[-1])) - 256.0
 
 
-def _levels_of(prov, ds, ms, reg, ring_px):
-    """Ink levels (median over ``prov``) and paper levels (median over the ring around it)."""
+def _otsu_u8(values) -> float:
+    """Otsu's threshold of values in uint8 units (histogram of 1-unit bins)."""
+    return _otsu_hist(_hist_u8(values))
+
+
+def _median_u8(values) -> float:
+    """Median of values in uint8 units, to the nearest unit (a histogram, no sort)."""
+    return _median_hist(_hist_u8(values))
+
+
+def _ring(prov, reg, ring_px):
+    """The ring 2 to ``ring_px`` px around ``prov`` (inside ``reg``), or None when either
+    holds fewer than 10 pixels."""
     import cv2
 
     if np.count_nonzero(prov) < 10:
@@ -183,12 +202,28 @@ def _levels_of(prov, ds, ms, reg, ring_px):
         ring &= reg
     if np.count_nonzero(ring) < 10:
         return None
+    return ring
+
+
+def _levels_of(prov, ds, ms, reg, ring_px):
+    """Ink levels (median over ``prov``) and paper levels (median over the ring around it)."""
+    ring = _ring(prov, reg, ring_px)
+    if ring is None:
+        return None
     ink = (_median_u8(ds[prov]), _median_u8(ms[prov]))
     paper = (_median_u8(ds[ring]), _median_u8(ms[ring]))
     return ink, paper
 
 
-def _auto_levels(d, m, region, scale):
+def _best_levels(levels, best, best_score):
+    if levels is None:
+        return best, best_score
+    (d_i, m_i), (d_p, m_p) = levels
+    score = min(d_i - d_p, m_p - m_i)
+    return (levels, score) if score >= best_score else (best, best_score)
+
+
+def _auto_levels(d, m, region, scale, features=None):
     """Ink and paper levels (uint8 units) of dominance ``d`` and darkness ``m``.
 
     Candidate ink classes are the upper class of Otsu's split of ``d`` and the upper class of
@@ -199,13 +234,19 @@ def _auto_levels(d, m, region, scale):
     the paper around it, a plate is not. Returns ``((d_ink, m_ink), (d_paper, m_paper))`` or
     None when no candidate contrasts by :data:`MIN_CONTRAST_U8`. Large scans are sampled on a
     2 px lattice (every band, at least a sheet thickness wide, is still sampled).
+    ``features`` (:class:`ColourFeatures` of ``d`` and ``m``) keeps the lattice for the next
+    call.
     """
     step = 2 if d.size > 1_000_000 else 1
+    reg = None if region is None else np.ascontiguousarray(region[::step, ::step])
+    ring_px = 6 // step  # the paper 2-6 px out from the ink
+    if scale == 1.0:
+        ds, ms = features.lattice(step) if features is not None else \
+            (np.ascontiguousarray(d[::step, ::step]), np.ascontiguousarray(m[::step, ::step]))
+        return _auto_levels_u8(ds, ms, reg, ring_px)
     ds = d[::step, ::step].astype(np.float32) / scale
     ms = m[::step, ::step].astype(np.float32) / scale
-    reg = None if region is None else region[::step, ::step]
     vals = ds if reg is None else ds[reg]
-    ring_px = 6 // step  # the paper 2-6 px out from the ink
     best, best_score = None, MIN_CONTRAST_U8
     t = -np.inf
     for _ in range(2):
@@ -218,18 +259,111 @@ def _auto_levels(d, m, region, scale):
         prov = ds > t
         if reg is not None:
             prov &= reg
-        lev = _levels_of(prov, ds, ms, reg, ring_px)
-        if lev is None:
-            continue
-        (d_i, m_i), (d_p, m_p) = lev
-        score = min(d_i - d_p, m_p - m_i)
-        if score >= best_score:
-            best, best_score = lev, score
+        best, best_score = _best_levels(_levels_of(prov, ds, ms, reg, ring_px), best,
+                                        best_score)
     return best
 
 
+def _auto_levels_u8(ds, ms, reg, ring_px):
+    """:func:`_auto_levels` of a uint8 scan: the same statistics from integer features.
+
+    The features are whole numbers, so a histogram of the dominance (1-unit bins) holds all
+    that Otsu's splits and the ink median need: the values above a cut are the bins above
+    it. Only the darkness of the ink and both ring medians read pixels. Same levels as the
+    float path (a 2000 x 2000 scan: 17 ms instead of 45 ms of CPU).
+    """
+    hist = _hist_int(ds if reg is None else ds[reg])
+    value = np.arange(513) - 256.0
+    best, best_score = None, MIN_CONTRAST_U8
+    t = -np.inf
+    for _ in range(2):
+        sub = np.where(value > t, hist, 0)
+        if sub.sum() < 20 or np.count_nonzero(sub) < 2:
+            break
+        t = _otsu_hist(sub)  # the upper class is strictly greater, as in the float path
+        prov = ds > t
+        if reg is not None:
+            prov &= reg
+        ring = _ring(prov, reg, ring_px)
+        if ring is None:
+            continue
+        # the ink's dominance: the region's histogram above the cut
+        ink = (_median_hist(np.where(value > t, hist, 0)), _median_hist(_hist_int(ms[prov])))
+        paper = (_median_hist(_hist_int(ds[ring])), _median_hist(_hist_int(ms[ring])))
+        best, best_score = _best_levels((ink, paper), best, best_score)
+    return best
+
+
+class ColourFeatures:
+    """The per-pixel features of a scan that every method cuts: blue, the red-green darkness
+    ``m = max(red, green)`` and the blue dominance ``d = blue - m``.
+
+    Computed once per scan and given to each :func:`threshold_rgb` call on it (the pipeline
+    thresholds the whole scan to find the hole, then again inside it).
+
+    Parameters
+    ----------
+    rgb : (H, W, 3) uint8 or uint16 array
+
+    Attributes
+    ----------
+    blue, darkness : (H, W) arrays of the image's dtype
+    dominance : (H, W) int16 (uint8 image) or int32 (uint16 image) array
+    scale : float
+        1 for uint8 images, 257 for uint16.
+    shape : tuple
+        (H, W).
+    """
+
+    def __init__(self, rgb):
+        import cv2
+
+        rgb = np.asarray(rgb)
+        if rgb.ndim != 3 or rgb.shape[2] != 3:
+            raise ParameterError(f"threshold needs an (H, W, 3) RGB array, got shape "
+                                 f"{rgb.shape}")
+        self.scale = _scale(rgb)
+        self.shape = rgb.shape[:2]
+        # one split and two element-wise passes in OpenCV (a 2000 x 2000 scan: 8 ms, against
+        # 20 ms for numpy on the interleaved channels and int32 temporaries); d needs one bit
+        # more than the image's depth
+        r, g, b = cv2.split(np.ascontiguousarray(rgb))
+        self.blue = b
+        self.darkness = cv2.max(r, g)
+        self.dominance = cv2.subtract(b, self.darkness,
+                                      dtype=cv2.CV_16S if rgb.dtype == np.uint8 else cv2.CV_32S)
+        self._lattice: dict = {}
+
+    def lattice(self, step: int):
+        """(dominance, darkness) on the ``step`` px lattice, contiguous (copied once)."""
+        if step not in self._lattice:
+            self._lattice[step] = (np.ascontiguousarray(self.dominance[::step, ::step]),
+                                   np.ascontiguousarray(self.darkness[::step, ::step]))
+        return self._lattice[step]
+
+
+def colour_features(rgb) -> ColourFeatures:
+    """The :class:`ColourFeatures` of a scan (to share between :func:`threshold_rgb` calls)."""
+    return ColourFeatures(rgb)
+
+
+def _at_least(a, x):
+    """``a >= x`` for an integer array and a real ``x``: compared with ``ceil(x)`` in the
+    array's own type (no float64 copy of the image)."""
+    info = np.iinfo(a.dtype)
+    return a >= int(np.clip(np.ceil(x), info.min, info.max + 1)) if x <= info.max else \
+        np.zeros(a.shape, bool)
+
+
+def _at_most(a, x):
+    """``a <= x`` for an integer array and a real ``x`` (see :func:`_at_least`)."""
+    info = np.iinfo(a.dtype)
+    return a <= int(np.clip(np.floor(x), info.min - 1, info.max)) if x >= info.min else \
+        np.zeros(a.shape, bool)
+
+
 def threshold_rgb(rgb, *, method: str = "auto", region=None, blue_min=None,
-                  rg_max=None) -> ThresholdResult:
+                  rg_max=None, features: ColourFeatures | None = None) -> ThresholdResult:
     """Binary mask of the blue-inked cut edge.
 
     Parameters
@@ -245,6 +379,8 @@ def threshold_rgb(rgb, *, method: str = "auto", region=None, blue_min=None,
     rg_max : float, optional
         Maximum red and green (native units); ``"fixed"`` and ``"otsu"`` default 130 (uint8),
         130 * 257 (uint16). An extra bound for ``"auto"``.
+    features : ColourFeatures, optional
+        The features of ``rgb`` when already computed (:func:`colour_features`).
 
     Returns
     -------
@@ -267,8 +403,11 @@ def threshold_rgb(rgb, *, method: str = "auto", region=None, blue_min=None,
     reg_frac = 1.0 if reg is None else float(np.count_nonzero(reg)) / reg.size
     rg = None if rg_max is None else _check_value("rg_max", rg_max, vmax)
     bm = None if blue_min is None else _check_value("blue_min", blue_min, vmax)
-    r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
-    m = np.maximum(r, g)
+    if features is None:
+        features = ColourFeatures(rgb)
+    elif features.shape != rgb.shape[:2] or features.scale != scale:
+        raise ParameterError("the colour features are not those of this image")
+    b, m, d = features.blue, features.darkness, features.dominance
 
     n_out = [0]
 
@@ -289,7 +428,6 @@ def threshold_rgb(rgb, *, method: str = "auto", region=None, blue_min=None,
         mask = _bounds(np.ones(rgb.shape[:2], bool), bm, rg)
         return ThresholdResult(mask, float(bm), float(rg), "fixed", None, scale,
                                region_fraction=reg_frac, n_outside=n_out[0])
-    d = b.astype(np.int32) - m.astype(np.int32)
     if method == "otsu":
         rg = RG_MAX_U8 * scale if rg is None else rg
         dd = d if reg is None else d[reg]
@@ -297,10 +435,10 @@ def threshold_rgb(rgb, *, method: str = "auto", region=None, blue_min=None,
             t = float(dd.max()) + 1.0  # uniform image: nothing dominates
         else:
             t = max(_otsu_u8(dd / scale) * scale, 1.0)
-        mask = _bounds(d >= t, None, rg)
+        mask = _bounds(_at_least(d, t), None, rg)
         return ThresholdResult(mask, None, float(rg), "otsu", t, scale, region_fraction=reg_frac,
                                n_outside=n_out[0])
-    levels = _auto_levels(d, m, reg, scale)
+    levels = _auto_levels(d, m, reg, scale, features)
     if levels is None:
         return ThresholdResult(np.zeros(rgb.shape[:2], bool), bm, rg, "auto", None, scale,
                                region_fraction=reg_frac,
@@ -310,7 +448,7 @@ def threshold_rgb(rgb, *, method: str = "auto", region=None, blue_min=None,
     d_cut = 0.5 * (ink[0] + paper[0]) * scale
     m_cut = 0.5 * (ink[1] + paper[1]) * scale
     rg_used = m_cut if rg is None else min(m_cut, rg)
-    mask = _bounds(d >= d_cut, bm, rg_used)
+    mask = _bounds(_at_least(d, d_cut), bm, rg_used)
     return ThresholdResult(mask, bm, float(rg_used), "auto", float(d_cut), scale,
                            tuple(v * scale for v in ink), tuple(v * scale for v in paper),
                            reg_frac, n_outside=n_out[0])
