@@ -15,7 +15,9 @@ independent of the cut position once divided by L); areas by L^2; curvatures tim
 
 Common representation (:class:`Ensemble`):
 
-- ``configs``: set, config_id, N_l, N_br, n_voids, epsilon, E, rod_length_mm, source
+- ``configs``: set, config_id, N_l, N_br, n_voids, epsilon, E, rod_length_mm, source,
+  quality (the image analysis' quality warning codes joined by ";", "" when none; NaN for
+  simulations)
 - ``branches``: set, config_id, length_L, kappa_m_L, kappa_plus_L, e, region, n_br (of the
   branch's stack, NaN if unknown), l_min_L (detection limit in units of L, NaN if none)
 - ``stacks``: set, config_id, n_br, length_L, region
@@ -33,13 +35,13 @@ import pandas as pd
 from crosssection.core.errors import ConfigError
 
 CONFIG_COLS = ["set", "config_id", "N_l", "N_br", "n_voids", "epsilon", "E", "rod_length_mm",
-               "source"]
+               "source", "quality"]
 BRANCH_COLS = ["set", "config_id", "length_L", "kappa_m_L", "kappa_plus_L", "e", "region",
                "n_br", "l_min_L"]
 STACK_COLS = ["set", "config_id", "n_br", "length_L", "region"]
 VOID_COLS = ["set", "config_id", "area_L2", "perimeter_L", "shape_ratio", "n_edges", "s_min_L2"]
 SIM_REGION = "none"  # simulations have no wall: no bulk/periphery split (paper, "Two sub-systems")
-TEXT_COLS = {"set", "config_id", "region", "source"}
+TEXT_COLS = {"set", "config_id", "region", "source", "quality"}
 
 
 def _numeric(df: pd.DataFrame, cols) -> pd.DataFrame:
@@ -213,7 +215,8 @@ def load_image_output(folder, *, set_name: str, config_id: str | None = None,
         "set": set_name, "config_id": str(cid), "N_l": n_stacks,
         "N_br": summary.get("n_branches", len(br)), "n_voids": summary.get("n_voids", len(vo)),
         "epsilon": summary.get("epsilon", np.nan), "E": summary.get("total_energy", np.nan),
-        "rod_length_mm": L, "source": str(folder)}])
+        "rod_length_mm": L, "source": str(folder),
+        "quality": ";".join((summary.get("quality") or {}).get("codes", []))}])
     branches = pd.DataFrame({
         "set": set_name, "config_id": str(cid), "length_L": br["length_mm"] / L,
         "kappa_m_L": br["kappa_m"] * L, "kappa_plus_L": br["kappa_plus"] * L,

@@ -22,6 +22,18 @@ fewer parameters whose BIC is within ``DELTA_BIC_SIMPLER`` = 2 of the minimum is
 ("the simplest law the data support": a BIC difference below 2 is "not worth more than a bare
 mention", Kass & Raftery 1995). Ties in parameter count go to the lower BIC.
 
+Counts (the number of branches per stack n_br, an integer >= 1) are fitted as counts
+(``discrete=True``): observation k stands for the interval [k - 1/2, k + 1/2] of the continuous
+law, which is normalised on [1/2, inf), so P(k) = [S(k - 1/2) - S(k + 1/2)] / S(1/2). A
+continuous density fitted to the integers themselves is ill-posed (the likelihood rewards
+spikes at the integers) and its curve cannot be compared with the fraction of stacks at each
+k. The discretised exponential is the geometric law. The goodness of fit of counts uses the
+likelihood-ratio statistic G = 2 sum_k c_k ln(c_k / (n P_k)) instead of Anderson-Darling
+(which needs a continuous law), with the same parametric bootstrap and refits.
+
+Bootstrap replicates of the parameters are kept in :attr:`FitResult.boot` so that figures can
+draw a confidence band of the fitted density without refitting.
+
 P-values come from n Monte-Carlo resamples, so the smallest one is 1/(n + 1); a p-value at that
 floor only says p < 1/(n + 1) and is printed so (:meth:`FitResult.p_text`).
 """
@@ -32,7 +44,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pandas as pd
-from scipy import stats
+from scipy import optimize, stats
 
 from crosssection.core.errors import ParameterError
 from crosssection.stats.families import FAMILIES
@@ -40,6 +52,8 @@ from crosssection.stats.families import FAMILIES
 DELTA_BIC_SIMPLER = 2.0
 PAPER_FAMILIES = ("exponential", "gamma", "lognormal", "gaussian", "bose_einstein")
 MAX_PARAMS = max(len(f.param_names) for f in FAMILIES.values())
+#: counts start at 1: the discretised law lives on [COUNT_MIN - 1/2, inf)
+COUNT_MIN = 1
 
 
 def _seedseq(seed) -> np.random.SeedSequence:
@@ -95,7 +109,7 @@ class FitResult:
         Goodness-of-fit p-value (Anderson-Darling, parametric bootstrap with refits), NaN if
         not computed.
     statistic : float
-        Anderson-Darling statistic of the data.
+        Anderson-Darling statistic of the data (the G statistic for count fits).
     truncated : bool
         Whether the likelihood was truncated at the detection limit.
     ok : bool
@@ -107,6 +121,12 @@ class FitResult:
         1/(n_mc + 1).
     rejected : str
         Why the fit is degenerate ("" when it is not); a rejected fit is never selected.
+    discrete : bool
+        Whether the law was fitted to counts (see the module docstring); its probability
+        masses are :meth:`pmf`.
+    boot : numpy.ndarray or None
+        Bootstrap replicates of the parameters, shape (n_boot, len(param_names)), rows that
+        could not be refitted are NaN; None without bootstrap. Not compared nor printed.
     """
 
     family: str
@@ -124,6 +144,8 @@ class FitResult:
     note: str = ""
     n_mc: int = 0
     rejected: str = ""
+    discrete: bool = False
+    boot: np.ndarray | None = field(default=None, compare=False, repr=False)
 
     @property
     def selectable(self) -> bool:
@@ -150,6 +172,110 @@ class FitResult:
         """Density of the fitted law (untruncated shape; Bose-Einstein and the power law are
         zero outside their range)."""
         return FAMILIES[self.family].pdf(self.params, np.asarray(x, float))
+
+    def pmf(self, k, params: dict | None = None):
+        """Probability of each integer ``k`` >= :data:`COUNT_MIN` under the law discretised
+        on [k - 1/2, k + 1/2] and normalised over the counts (``params`` overrides the
+        fitted parameters, e.g. with a bootstrap replicate)."""
+        return count_pmf(self.family, self.params if params is None else params, k)
+
+    def replicates(self):
+        """The bootstrap replicates as parameter dicts (empty without bootstrap)."""
+        if self.boot is None:
+            return []
+        names = FAMILIES[self.family].param_names
+        return [dict(zip(names, map(float, row))) for row in self.boot
+                if np.all(np.isfinite(row))]
+
+
+def count_pmf(family: str, params: dict, k):
+    """P(k) = [S(k - 1/2) - S(k + 1/2)] / S(COUNT_MIN - 1/2) of a continuous family.
+
+    Parameters
+    ----------
+    family : str
+    params : dict
+    k : array_like
+        Integers (those below :data:`COUNT_MIN` get 0).
+
+    Returns
+    -------
+    numpy.ndarray
+    """
+    fam = _family(family)
+    k = np.asarray(k, float)
+    with np.errstate(all="ignore"):
+        norm = fam.sf(params, COUNT_MIN - 0.5)
+        p = (fam.sf(params, k - 0.5) - fam.sf(params, k + 0.5)) / norm
+    return np.where(k >= COUNT_MIN, p, 0.0)
+
+
+def _count_logp(fam, theta, ks):
+    """log P(k) of the discretised law from the family's log survival function (scipy.special,
+    no frozen distributions: the bootstrap and the goodness of fit refit hundreds of times)."""
+    lo = fam.logsf_theta(theta, ks - 0.5)
+    hi = fam.logsf_theta(theta, ks + 0.5)
+    ln = fam.logsf_theta(theta, np.array([COUNT_MIN - 0.5]))[0]
+    with np.errstate(all="ignore"):
+        return lo + np.log(-np.expm1(hi - lo)) - ln
+
+
+def _fit_counts(fam, x, theta0=None):
+    """MLE ``(theta, loglik)`` of the discretised law on counts ``x``.
+
+    The exponential is the geometric law in closed form (q = exp(-1/mu) = 1 - 1/(<k> - k0 + 1),
+    k0 = COUNT_MIN); the others by Nelder-Mead on the free parameters, positive ones on a log
+    scale, started at ``theta0`` or at the continuous fit.
+    """
+    ks, cnt = np.unique(np.round(x), return_counts=True)
+    if fam.name == "exponential":
+        m = float(np.mean(x)) - COUNT_MIN + 1
+        mu = -1.0 / np.log1p(-1.0 / m) if m > 1 else 0.0
+        ll = (float(np.sum(cnt * _count_logp(fam, (mu,), ks))) if mu > 0 else 0.0)
+        return (float(mu),), ll
+    logp = np.asarray(fam.log_params, bool)
+    th0 = np.asarray(theta0 if theta0 is not None else fam.fit(x)[0], float)
+    z0 = np.where(logp, np.log(np.abs(th0)), th0)
+
+    def nll(z):
+        lp = _count_logp(fam, np.where(logp, np.exp(z), z), ks)
+        v = -float(np.sum(cnt * lp))
+        return v if np.isfinite(v) else 1e300
+
+    res = optimize.minimize(nll, z0, method="Nelder-Mead",
+                            options={"xatol": 1e-5, "fatol": 1e-7, "maxiter": 1000})
+    th = np.where(logp, np.exp(res.x), res.x)
+    return tuple(map(float, th)), float(-res.fun)
+
+
+def _g_statistic(p, ks, cnt) -> float:
+    """Likelihood-ratio statistic of counts ``cnt`` at ``ks`` against masses ``p``."""
+    n = cnt.sum()
+    with np.errstate(all="ignore"):
+        g = 2.0 * np.sum(cnt * np.log(cnt / (n * p)))
+    return float(g) if np.isfinite(g) else np.inf
+
+
+def _gof_counts(x, fam, params, n_mc, rng) -> "GoodnessOfFit":
+    """Parametric-bootstrap p-value of the G statistic of a count fit (refit per sample)."""
+    ks, cnt = np.unique(np.round(x), return_counts=True)
+    stat0 = _g_statistic(count_pmf(fam.name, params, ks), ks, cnt)
+    theta_hat = fam.theta(params)
+    cut = np.full(x.size, COUNT_MIN - 0.5)
+    null = np.full(n_mc, np.nan)
+    for i in range(n_mc):
+        # rounding a draw of the law truncated at 1/2 is a draw of the discretised law
+        xs = np.round(fam.sample(params, x.size, cut, rng))
+        if not np.all(np.isfinite(xs)) or np.ptp(xs) <= 0:
+            continue
+        th, _ = _fit_counts(fam, xs, theta_hat)
+        kb, cb = np.unique(xs, return_counts=True)
+        null[i] = _g_statistic(count_pmf(fam.name, fam.params(th, xs), kb), kb, cb)
+    null = null[np.isfinite(null)]
+    if null.size == 0:
+        return GoodnessOfFit(stat0, float("nan"), 0)
+    return GoodnessOfFit(stat0, float((np.sum(null >= stat0) + 1) / (null.size + 1)),
+                         int(null.size))
 
 
 @dataclass(frozen=True)
@@ -198,7 +324,8 @@ def _applicability(fam, x, c, k) -> str:
 
 
 def fit_family(x, family: str, *, truncation=None, n_boot: int = 200, seed=0,
-               gof: bool = True, n_mc: int = 199, ci_level: float = 0.95) -> FitResult:
+               gof: bool = True, n_mc: int = 199, ci_level: float = 0.95,
+               discrete: bool = False) -> FitResult:
     """Maximum-likelihood fit of one family, with bootstrap intervals and a GOF p-value.
 
     Parameters
@@ -219,6 +346,9 @@ def fit_family(x, family: str, *, truncation=None, n_boot: int = 200, seed=0,
         Parametric-bootstrap samples for the p-value (99 is a fast option).
     ci_level : float
         Coverage of the percentile intervals.
+    discrete : bool
+        ``x`` are counts >= :data:`COUNT_MIN`: fit the discretised law (module docstring);
+        only the families backed by ``scipy.stats`` and no truncation.
 
     Returns
     -------
@@ -233,31 +363,96 @@ def fit_family(x, family: str, *, truncation=None, n_boot: int = 200, seed=0,
     truncated = c is not None
     k = fam.k(truncated)
     why = _applicability(fam, x, c, k)
+    if not why and discrete:
+        if truncated or getattr(fam, "frozen", None) is None:
+            why = "no count (discrete) fit of this family"
+        elif np.any(x < COUNT_MIN) or np.any(x != np.round(x)):
+            why = f"counts must be integers >= {COUNT_MIN}"
     if why:
         return FitResult(family, {p: float("nan") for p in fam.param_names}, float("nan"),
                          float("nan"), float("nan"), n, k, truncated=truncated, ok=False,
-                         note=why)
+                         note=why, discrete=discrete)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        theta, ll = fam.fit(x, c)
+        theta, ll = _fit_counts(fam, x) if discrete else fam.fit(x, c)
         params = fam.params(theta, x, c)
         res = FitResult(family, params, float(ll), float(2 * k - 2 * ll),
-                        float(k * np.log(n) - 2 * ll), n, k, truncated=truncated)
+                        float(k * np.log(n) - 2 * ll), n, k, truncated=truncated,
+                        discrete=discrete)
         if not all(np.isfinite(v) for v in params.values()):
             return replace(res, rejected="the fit did not converge (non-finite parameter)")
         rejected = fam.degeneracy(params, x, c)
         if rejected:
             return replace(res, rejected=rejected)
         s_boot, s_gof = _seedseq(seed).spawn(2)
-        ci = bootstrap_ci(x, family, truncation=c, n_boot=n_boot, seed=s_boot,
-                          level=ci_level) if n_boot else {}
-        g = (goodness_of_fit(x, family, params, truncation=c, n_mc=n_mc, seed=s_gof)
-             if gof else GoodnessOfFit(float("nan"), float("nan"), 0))
-    return replace(res, ci=ci, pvalue=g.pvalue, statistic=g.statistic, n_mc=g.n_mc)
+        draws = (bootstrap_draws(x, family, truncation=c, n_boot=n_boot, seed=s_boot,
+                                 discrete=discrete) if n_boot else None)
+        ci = _percentile_ci(draws, fam.param_names, ci_level) if n_boot else {}
+        if not gof:
+            g = GoodnessOfFit(float("nan"), float("nan"), 0)
+        elif discrete:
+            g = _gof_counts(x, fam, params, n_mc, np.random.default_rng(s_gof))
+        else:
+            g = goodness_of_fit(x, family, params, truncation=c, n_mc=n_mc, seed=s_gof)
+    return replace(res, ci=ci, pvalue=g.pvalue, statistic=g.statistic, n_mc=g.n_mc,
+                   boot=draws)
+
+
+def bootstrap_draws(x, family: str, *, truncation=None, n_boot: int = 200, seed=0,
+                    discrete: bool = False) -> np.ndarray:
+    """Bootstrap replicates of every parameter of a family (refits of resampled data).
+
+    Parameters
+    ----------
+    x : array_like
+    family : str
+    truncation : float or array_like, optional
+        Cuts move with their observations when resampling.
+    n_boot : int
+    seed : int or SeedSequence
+    discrete : bool
+        Refit as counts (see :func:`fit_family`).
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (n_boot, len(param_names)); NaN rows where a resample could not be refitted.
+    """
+    fam = _family(family)
+    x = np.asarray(x, float)
+    c = _as_cuts(truncation, x.size)
+    rng = np.random.default_rng(seed)
+    names = fam.param_names
+    draws = np.full((n_boot, len(names)), np.nan)
+    # warm start of the numerical refits
+    theta_hat = _fit_counts(fam, x)[0] if discrete else fam.fit(x, c)[0]
+    for b in range(n_boot):
+        idx = rng.integers(0, x.size, x.size)
+        xb = x[idx]
+        cb = None if c is None else c[idx]
+        if np.ptp(xb) <= 0:
+            continue
+        try:
+            th, _ = _fit_counts(fam, xb, theta_hat) if discrete else fam.fit(xb, cb, theta_hat)
+        except (ValueError, FloatingPointError, RuntimeError):
+            continue
+        p = fam.params(th, xb, cb)
+        draws[b] = [p[nm] for nm in names]
+    return draws
+
+
+def _percentile_ci(draws, names, level) -> dict:
+    q = (1 - level) / 2
+    out = {}
+    for j, nm in enumerate(names):
+        d = draws[:, j][np.isfinite(draws[:, j])]
+        out[nm] = ((float(np.quantile(d, q)), float(np.quantile(d, 1 - q))) if d.size
+                   else (float("nan"), float("nan")))
+    return out
 
 
 def bootstrap_ci(x, family: str, *, truncation=None, n_boot: int = 200, seed=0,
-                 level: float = 0.95) -> dict:
+                 level: float = 0.95, discrete: bool = False) -> dict:
     """Percentile bootstrap intervals of every parameter of a family.
 
     Parameters
@@ -269,38 +464,17 @@ def bootstrap_ci(x, family: str, *, truncation=None, n_boot: int = 200, seed=0,
     n_boot : int
     seed : int or SeedSequence
     level : float
+    discrete : bool
+        Refit as counts (see :func:`fit_family`).
 
     Returns
     -------
     dict
         Parameter name -> (low, high).
     """
-    fam = _family(family)
-    x = np.asarray(x, float)
-    c = _as_cuts(truncation, x.size)
-    rng = np.random.default_rng(seed)
-    names = fam.param_names
-    draws = np.full((n_boot, len(names)), np.nan)
-    theta_hat = fam.fit(x, c)[0]  # warm start of the numerical refits
-    for b in range(n_boot):
-        idx = rng.integers(0, x.size, x.size)
-        xb = x[idx]
-        cb = None if c is None else c[idx]
-        if np.ptp(xb) <= 0:
-            continue
-        try:
-            th, _ = fam.fit(xb, cb, theta_hat)
-        except (ValueError, FloatingPointError, RuntimeError):
-            continue
-        p = fam.params(th, xb, cb)
-        draws[b] = [p[nm] for nm in names]
-    q = (1 - level) / 2
-    out = {}
-    for j, nm in enumerate(names):
-        d = draws[:, j][np.isfinite(draws[:, j])]
-        out[nm] = ((float(np.quantile(d, q)), float(np.quantile(d, 1 - q))) if d.size
-                   else (float("nan"), float("nan")))
-    return out
+    draws = bootstrap_draws(x, family, truncation=truncation, n_boot=n_boot, seed=seed,
+                            discrete=discrete)
+    return _percentile_ci(draws, _family(family).param_names, level)
 
 
 def goodness_of_fit(x, family: str, params: dict, *, truncation=None, n_mc: int = 199,
@@ -384,7 +558,7 @@ def select_model(results: dict, *, delta: float = DELTA_BIC_SIMPLER) -> str | No
 
 def fit_all(x, families=PAPER_FAMILIES, *, truncation=None, seed=0, n_boot: int = 200,
             gof: bool = True, n_mc: int = 199, select_from=None,
-            ci_level: float = 0.95) -> FitSummary:
+            ci_level: float = 0.95, discrete: bool = False) -> FitSummary:
     """Fit several families to one sample and select the simplest supported law.
 
     Parameters
@@ -401,6 +575,8 @@ def fit_all(x, families=PAPER_FAMILIES, *, truncation=None, seed=0, n_boot: int 
         See :func:`fit_family`.
     select_from : sequence of str, optional
         Families taking part in model selection (default: all fitted).
+    discrete : bool
+        The observations are counts (see :func:`fit_family`).
 
     Returns
     -------
@@ -419,7 +595,7 @@ def fit_all(x, families=PAPER_FAMILIES, *, truncation=None, seed=0, n_boot: int 
     c = None if c is None else c[keep]
     seeds = _seedseq(seed).spawn(len(families))
     results = {f: fit_family(x, f, truncation=c, n_boot=n_boot, seed=s, gof=gof, n_mc=n_mc,
-                             ci_level=ci_level)
+                             ci_level=ci_level, discrete=discrete)
                for f, s in zip(families, seeds)}
     sel = {f: results[f] for f in (select_from or families) if f in results}
     best = select_model(sel)

@@ -1,16 +1,18 @@
 """Write the statistics report: tables (CSV + Markdown), figures (PNG), stats.json, report.html.
 
-Figures follow the paper's style: probability densities in linear and logarithmic scales with
-the selected fit drawn over the histogram; bulk (green) and periphery (red) superposed as in
-the paper's figure of the two sub-systems; every curve labelled directly in the panel with its
-parameters, so that no legend has to be looked up.
+Figures follow the paper's style: probability densities in linear and logarithmic scales, one
+panel row per sub-system (all branches, bulk, periphery), every set overlaid in its own colour
+(the same colour in every figure, :func:`set_colors`). The data are points with counting
+error bars, sqrt(count) / (n * bin width); the selected law is a line with its 95 % bootstrap
+band (the pointwise 2.5-97.5 % quantiles of the law over the bootstrap replicates of its
+parameters). The number of branches per stack is an integer: it is drawn as a probability mass
+function, the fraction of stacks at each k against the fitted law's mass at k.
 """
 from __future__ import annotations
 
 import html
 from pathlib import Path
 
-import matplotlib
 import numpy as np
 import pandas as pd
 
@@ -19,29 +21,62 @@ from crosssection.core.fileio import save_figure, write_csv, write_json, write_t
 from crosssection.stats import fits as F
 from crosssection.stats.families import FAMILIES
 from crosssection.stats.data import Ensemble
-from crosssection.stats.tables import (EQ1_CONST, QUANTITIES, StatsOptions, StatsResult,
-                     compute_stats, regions_of, to_markdown)
+from crosssection.stats.tables import (COUNT_QUANTITIES, EQ1_CONST, PAPER_DOF, PAPER_MACRO,
+                                       PAPER_MICRO, QUANTITIES, StatsOptions, StatsResult,
+                                       compute_stats, regions_of, to_markdown)
 
-REGION_COLOR = {"all": "black", "bulk": "tab:green", "periphery": "tab:red"}
-SET_COLORS = matplotlib.rcParams["axes.prop_cycle"].by_key()["color"]
+# Okabe-Ito colours (distinguishable with the common colour-vision deficiencies), in the
+# order of the sets; the set's index in the ensemble fixes its colour in every figure.
+PALETTE = ("#0072B2", "#D55E00", "#009E73", "#CC79A7", "#E69F00", "#56B4E9", "#000000",
+           "#F0E442")
+BAND_LEVEL = 0.95
+
+#: axis labels in words with units (lengths in units of the rod length L)
+LABELS = {
+    "length_L": r"branch length $\ell/L$ (rod length L)",
+    "kappa_m_L": r"mean branch curvature $|\kappa_m| L$ (dimensionless)",
+    "kappa_plus_L": r"mean absolute branch curvature $\kappa_+ L$ (dimensionless)",
+    "e": r"branch bending energy $e = L\int\kappa^2\,ds$ (dimensionless)",
+    "E": r"total bending energy of a configuration $E$ (dimensionless)",
+    "n_br": r"number of branches per stack $n_{br}$",
+    "area_L2": r"void area $s/L^2$ (dimensionless)",
+    "shape_ratio": r"void shape ratio $\sqrt{s}/p$ (dimensionless)",
+}
+#: the same quantities in plain words, for captions and tables
+WORDS = {
+    "length_L": "branch length l/L", "kappa_m_L": "mean branch curvature |kappa_m| L",
+    "kappa_plus_L": "mean absolute branch curvature kappa_+ L",
+    "e": "branch bending energy e", "E": "total energy E of a configuration",
+    "n_br": "number of branches per stack n_br", "area_L2": "void area s/L^2",
+    "shape_ratio": "void shape ratio sqrt(s)/p",
+}
+REGION_WORDS = {"all": "whole system", "bulk": "bulk (no wall contact)",
+                "periphery": "periphery (touching the wall)"}
 
 
-def _subplots(ncols=1, figsize=(6, 4.5)):
-    """A figure and its axes without pyplot: no GUI backend is touched and a notebook's
-    backend is left alone."""
+def set_colors(sets) -> dict:
+    """Colour of every set, by its position in ``sets`` (the ensemble's order), so that a set
+    keeps its colour across all figures of a report."""
+    return {s: PALETTE[i % len(PALETTE)] for i, s in enumerate(sets)}
+
+
+def _subplots(nrows=1, ncols=1, figsize=(6, 4.5)):
+    """A figure with constrained layout and its axes, without pyplot: no GUI backend is
+    touched and a notebook's backend is left alone."""
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=figsize)
-    axes = fig.subplots(1, ncols)
+    fig = Figure(figsize=figsize, layout="constrained")
+    axes = fig.subplots(nrows, ncols, squeeze=False)
     return fig, axes
 
 
-def _margins(fig, two=False):
-    """Fixed margins (``tight_layout`` cost 0.36 s per figure, half of a small report)."""
-    if two:
-        fig.subplots_adjust(left=0.07, right=0.98, bottom=0.13, top=0.91, wspace=0.22)
-    else:
-        fig.subplots_adjust(left=0.14, right=0.96, bottom=0.12, top=0.91)
+def _log_ticks(axis):
+    """Labels at 1, 2 and 5 times the powers of ten and none at the other minor ticks: the
+    default labels every minor tick of a short log range, and the labels then overlap."""
+    from matplotlib.ticker import LogLocator, NullFormatter
+
+    axis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+    axis.set_minor_formatter(NullFormatter())
 
 
 def _nanmean(v) -> float:
@@ -50,95 +85,180 @@ def _nanmean(v) -> float:
     return float(np.mean(v)) if v.size else float("nan")
 
 
-def _fit_text(summ: F.FitSummary) -> str:
-    if summ is None or summ.best is None:
-        return "no fit"
-    r = summ.results[summ.best]
+def _fit_text(r: F.FitResult) -> str:
     p = r.p_text()
     return r.label() + (f", {p}" if p else "")
 
 
-def _density_curve(r: F.FitResult, xs, cut):
-    y = r.pdf(xs)
+def _curve(r: F.FitResult, params, xs, cut, count: bool):
+    """The law ``r`` with ``params`` at ``xs``: masses at the integers for counts, else the
+    density (renormalised above the detection limit ``cut`` of a truncated fit)."""
+    if count:
+        return r.pmf(xs, params)
+    y = FAMILIES[r.family].pdf(params, xs)
     if r.truncated and cut is not None:
-        y = np.where(xs >= cut, y / FAMILIES[r.family].sf(r.params, cut), np.nan)
+        y = np.where(xs >= cut, y / FAMILIES[r.family].sf(params, cut), np.nan)
     return y
 
 
-def pdf_figure(res: StatsResult, ens: Ensemble, set_name: str, quantity: str):
-    """Histogram densities of one quantity in linear and log scales with the selected fits.
+def _band(r: F.FitResult, xs, cut, count: bool, level=BAND_LEVEL):
+    """Pointwise ``level`` band of the law over its bootstrap replicates, or None."""
+    reps = r.replicates()
+    if len(reps) < 10:  # too few replicates for a 95 % band
+        return None
+    with np.errstate(all="ignore"):
+        ys = np.array([_curve(r, p, xs, cut, count) for p in reps], float)
+    q = (1 - level) / 2
+    with np.errstate(all="ignore"):
+        import warnings
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            return np.nanquantile(ys, q, axis=0), np.nanquantile(ys, 1 - q, axis=0)
+
+
+def _sample(ens: Ensemble, set_name, reg, quantity, summ):
+    """The fitted values of one set and region, and the mean detection limit (or None)."""
+    table, col, _, tcol, _ = QUANTITIES[quantity]
+    df = getattr(ens.subset(set_name), table)
+    if reg != "all" and "region" in df.columns:
+        df = df[df["region"].astype(str) == reg]
+    x = np.asarray(df[col], float)
+    ok = np.isfinite(x) & (x > 0)
+    cut = None
+    r0 = next(iter(summ.results.values()))
+    if tcol is not None and r0.truncated:
+        c = np.asarray(df[tcol], float)
+        cut = float(np.nanmean(c[ok]))
+        ok &= x >= c
+    return x[ok], cut
+
+
+def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors=None):
+    """Distribution of one quantity, every set overlaid, with the selected laws.
+
+    One panel row per sub-system (whole system, bulk, periphery when present), linear and
+    logarithmic density scales side by side. Points: fraction per unit of the quantity, with
+    counting error bars sqrt(count) / (n * bin width); line: the selected law, shaded: its
+    95 % bootstrap band. For counts (``n_br``) the points are the fraction of stacks at each
+    integer and the line the law's probability mass there.
+
+    Parameters
+    ----------
+    res : StatsResult
+    ens : Ensemble
+    quantity : str
+    sets : sequence of str, optional
+        Sets to draw (default: every set of ``ens`` with a fit).
+    colors : dict, optional
+        Set -> colour (default :func:`set_colors` of ``ens.sets``).
 
     Returns
     -------
     matplotlib.figure.Figure or None
         None when nothing was fitted.
     """
-    table, col, _, tcol, label = QUANTITIES[quantity]
-    sub = ens.subset(set_name)
-    regs = [r for r in regions_of(sub) if (set_name, r, quantity) in res.summaries]
-    if not regs:
+    count = quantity in COUNT_QUANTITIES
+    sets = [s for s in (sets or ens.sets)
+            if any(k[0] == s and k[2] == quantity for k in res.summaries)]
+    if not sets:
         return None
-    fig, axes = _subplots(2, figsize=(11, 4.2))
-    lines = []
-    hmax = 0.0
-    for reg in regs:
-        summ = res.summaries[(set_name, reg, quantity)]
-        df = getattr(sub, table)
-        if reg != "all" and "region" in df.columns:
-            df = df[df["region"].astype(str) == reg]
-        x = np.asarray(df[col], float)
-        x = x[np.isfinite(x) & (x > 0)]
-        cut = None
-        if tcol is not None and summ.results and next(iter(summ.results.values())).truncated:
-            cut = float(np.nanmean(df[tcol]))
-            x = x[x >= np.nanmin(df[tcol])]
-        color = REGION_COLOR.get(reg, "black")
-        best = summ.results.get(summ.best) if summ.best else None
-        for ax, logscale in zip(axes, (False, True)):
-            positive = x.min() > 0
-            if logscale and positive and x.max() / x.min() > 10:
-                bins = np.geomspace(x.min(), x.max(), 30)
-                ax.set_xscale("log")
-            else:
-                bins = np.linspace(x.min(), x.max(), 30)
-            h, edges = np.histogram(x, bins=bins, density=True)
-            mids = np.sqrt(edges[1:] * edges[:-1]) if ax.get_xscale() == "log" \
-                else (edges[1:] + edges[:-1]) / 2
-            ax.plot(mids[h > 0], h[h > 0], "o", ms=4, color=color, alpha=0.8)
-            if not logscale:
-                hmax = max(hmax, float(h.max()))
-            if best is not None:
-                xs = (np.geomspace(bins[0], bins[-1], 300) if ax.get_xscale() == "log"
-                      else np.linspace(bins[0], bins[-1], 300))
-                ax.plot(xs, _density_curve(best, xs, cut), "-", color=color, lw=1.6)
-                gam = summ.results.get("gamma")
-                if summ.best != "gamma" and gam is not None and gam.selectable and reg == "all":
-                    ax.plot(xs, _density_curve(gam, xs, cut), "--", color="grey", lw=1)
-            if cut is not None:
-                ax.axvline(cut, color="grey", ls=":", lw=1)
+    colors = colors or set_colors(ens.sets)
+    regs = [r for r in ("all", "bulk", "periphery")
+            if any((s, r, quantity) in res.summaries for s in sets)]
+    fig, axes = _subplots(len(regs), 2, figsize=(12.5, 0.4 + 3.6 * len(regs)))
+    label = LABELS.get(quantity, quantity)
+    for row, reg in zip(axes, regs):
+        ymin_log, ymax_lin = np.inf, 0.0
+        for s in sets:
+            summ = res.summaries.get((s, reg, quantity))
+            if summ is None:
+                continue
+            x, cut = _sample(ens, s, reg, quantity, summ)
+            if x.size == 0:
+                continue
+            c = colors[s]
+            best = summ.results.get(summ.best) if summ.best else None
+            n = x.size
+            for ax, logscale in zip(row, (False, True)):
+                if count:
+                    ks = np.arange(max(1, int(x.min())), int(x.max()) + 1)
+                    cnt = np.array([(x == k).sum() for k in ks], float)
+                    mids, width = ks.astype(float), np.ones(ks.size)
+                    grid = np.arange(1, int(x.max()) + 3, dtype=float)
+                else:
+                    if logscale and x.max() / x.min() > 10:
+                        edges = np.geomspace(x.min(), x.max(), 25)
+                        ax.set_xscale("log")
+                    else:
+                        edges = np.linspace(x.min(), x.max(), 25)
+                    cnt, edges = np.histogram(x, bins=edges)
+                    cnt = cnt.astype(float)
+                    width = np.diff(edges)
+                    mids = (np.sqrt(edges[1:] * edges[:-1]) if ax.get_xscale() == "log"
+                            else (edges[1:] + edges[:-1]) / 2)
+                    grid = (np.geomspace(edges[0], edges[-1], 300) if ax.get_xscale() == "log"
+                            else np.linspace(edges[0], edges[-1], 300))
+                h = cnt / (n * width)
+                err = np.sqrt(cnt) / (n * width)
+                k = cnt > 0
+                if logscale:  # a bar reaching 0 cannot be drawn on a log axis: stop it short
+                    lo = np.minimum(err, 0.95 * h)
+                    yerr = np.vstack([lo[k], err[k]])
+                    ymin_log = min(ymin_log, float(np.min(h[k])) * 0.3)
+                else:
+                    yerr = err[k]
+                    ymax_lin = max(ymax_lin, float(np.max(h[k] + err[k])))
+                ax.errorbar(mids[k], h[k], yerr=yerr, fmt="o", ms=4, color=c, lw=1,
+                            capsize=2, label=f"{s}: data (n = {n})", gid=f"points:{s}:{reg}")
+                if best is None:
+                    continue
+                band = _band(best, grid, cut, count)
+                band_label = f"{s}: {int(BAND_LEVEL * 100)} % bootstrap band"
+                if band is not None and count:  # masses live at the integers only
+                    ax.vlines(grid, band[0], band[1], color=c, alpha=0.3, lw=7,
+                              label=band_label)
+                elif band is not None:
+                    ax.fill_between(grid, band[0], band[1], color=c, alpha=0.2, lw=0,
+                                    label=band_label)
+                text = _fit_text(best)
+                if count:  # the law's parameters are those of the continuous law: say its mean
+                    kk = np.arange(1, 10 * int(x.max()) + 100)
+                    text += f", mean {float(np.sum(kk * best.pmf(kk))):.3g}"
+                ax.plot(grid, _curve(best, best.params, grid, cut, count),
+                        "s--" if count else "-", ms=4 if count else 0, mfc="none",
+                        color=c, lw=1.6, label=f"{s}: {text}", gid=f"law:{s}:{reg}")
+                if cut is not None:
+                    ax.axvline(cut, color=c, ls=":", lw=1,
+                               label=f"{s}: detection limit" if logscale else None)
+        for ax, logscale in zip(row, (False, True)):
             if logscale:
                 ax.set_yscale("log")
-        lines.append((reg, color, f"{reg} (n={summ.results[next(iter(summ.results))].n}): "
-                                  f"{_fit_text(summ)}"))
-    if hmax > 0:  # a Gamma law with alpha < 1 diverges at 0: keep the histogram readable
-        axes[0].set_ylim(0, 1.35 * hmax)
-    for i, (reg, color, text) in enumerate(lines):
-        axes[0].text(0.98, 0.95 - 0.08 * i, text, transform=axes[0].transAxes, ha="right",
-                     va="top", color=color, fontsize=8)
-    extra = []
-    if any("gamma" in res.summaries[(set_name, r, quantity)].results for r in regs):
-        extra.append("dashed grey: Gamma")
-    if tcol is not None:
-        extra.append("dotted: detection limit (truncation-aware fit)")
-    if extra:
-        axes[1].text(0.02, 0.03, "; ".join(extra), transform=axes[1].transAxes, fontsize=7,
-                     color="grey")
-    for ax in axes:
-        ax.set_xlabel(label)
-        ax.set_ylabel(rf"$\rho$({label})")
-    axes[0].set_title(f"{set_name}: pdf of {label} (linear)")
-    axes[1].set_title(f"{set_name}: pdf of {label} (log)")
-    _margins(fig, two=True)
+                if np.isfinite(ymin_log):
+                    ax.set_ylim(bottom=ymin_log)
+            elif ymax_lin > 0:
+                # a Gamma law with alpha < 1 diverges at 0: scale the axis to the data
+                ax.set_ylim(0, 1.15 * ymax_lin)
+            ax.set_xlabel(label)
+            ax.set_ylabel("fraction of stacks $P(n_{br})$" if count
+                          else "probability density")
+            ax.set_title(f"{REGION_WORDS.get(reg, reg)}: {'linear' if not logscale else 'log'}"
+                         f" scale", fontsize=10)
+            if count:
+                ax.xaxis.get_major_locator().set_params(integer=True)
+            elif ax.get_xscale() == "log":
+                _log_ticks(ax.xaxis)
+        # one legend per row, outside the log panel: never over the data
+        handles, labels = row[1].get_legend_handles_labels()
+        # per set: its data, then its law, then the band and the detection limit
+        order = sorted(range(len(labels)), key=lambda i: (
+            sets.index(labels[i].split(": ")[0]) if labels[i].split(": ")[0] in sets else 0,
+            0 if ": data" in labels[i] else 2 if "band" in labels[i] or "limit" in labels[i]
+            else 1))
+        handles, labels = [handles[i] for i in order], [labels[i] for i in order]
+        if handles:
+            row[1].legend(handles, labels, loc="upper left", bbox_to_anchor=(1.02, 1.0),
+                          fontsize=8, frameon=False)
     return fig
 
 
@@ -159,14 +279,15 @@ def plot_pdf(source, quantity: str = "e", *, set_name: str | None = None, seed: 
         A key of :data:`crosssection.stats.tables.QUANTITIES`: ``length_L``, ``kappa_m_L``,
         ``kappa_plus_L``, ``e``, ``E``, ``n_br``, ``area_L2``, ``shape_ratio``.
     set_name : str, optional
-        The set to draw (default: the first).
+        The only set to draw (default: every set, overlaid).
     seed : int
         Seed of the fits' random starts.
 
     Returns
     -------
     matplotlib.figure.Figure
-        Linear and logarithmic panels, bulk and periphery apart when the data carry them.
+        Linear and logarithmic panels, one row per sub-system (whole system, bulk,
+        periphery) when the data carry them.
 
     Raises
     ------
@@ -179,98 +300,113 @@ def plot_pdf(source, quantity: str = "e", *, set_name: str | None = None, seed: 
     if quantity not in QUANTITIES:
         raise ValueError(f"quantity must be one of {sorted(QUANTITIES)}, got {quantity!r}")
     ens = source if isinstance(source, Ensemble) else load_any(source)
-    set_name = ens.sets[0] if set_name is None and ens.sets else set_name
-    if set_name not in ens.sets:
+    if set_name is not None and set_name not in ens.sets:
         raise ValueError(f"set must be one of {ens.sets}, got {set_name!r}")
-    sub = ens.subset(set_name)
+    sets = ens.sets if set_name is None else [set_name]
     opts = StatsOptions(seed=seed, n_boot=0, gof=False, quantities=(quantity,))
-    regions = ["all"] if QUANTITIES[quantity][0] in ("configs", "voids") else regions_of(sub)
-    seeds = np.random.SeedSequence(seed).spawn(len(regions))
     summaries = {}
-    for reg, sd in zip(regions, seeds):
-        summ, _, _ = fit_quantity(sub, quantity, reg, opts, sd)
-        if summ is not None:
-            summaries[(set_name, reg, quantity)] = summ
+    for s in sets:
+        sub = ens.subset(s)
+        regions = (["all"] if QUANTITIES[quantity][0] in ("configs", "voids")
+                   else regions_of(sub))
+        seeds = np.random.SeedSequence(seed).spawn(len(regions))
+        for reg, sd in zip(regions, seeds):
+            summ, _, _ = fit_quantity(sub, quantity, reg, opts, sd)
+            if summ is not None:
+                summaries[(s, reg, quantity)] = summ
     if not summaries:
-        raise ValueError(f"{set_name}: too few positive values of {quantity} to fit "
+        raise ValueError(f"{', '.join(sets)}: too few positive values of {quantity} to fit "
                          f"(at least {opts.min_n})")
     empty = pd.DataFrame()
     fits_only = StatsResult(empty, empty, empty, empty, empty, empty, empty, empty, summaries)
-    return pdf_figure(fits_only, ens, set_name, quantity)
+    return pdf_figure(fits_only, ens, quantity, sets=sets)
 
 
-def network_figure(res: StatsResult):
+def network_figure(res: StatsResult, colors=None):
     """N_br vs N_l with Eqs. 1 and 3, and n_br_bar vs N_l with Eqs. 2 and 4, per set."""
     pc = res.per_config
-    fig, axes = _subplots(2, figsize=(11, 4.2))
-    for i, (s, g) in enumerate(pc.groupby("set", sort=False)):
-        c = SET_COLORS[i % len(SET_COLORS)]
+    colors = colors or set_colors(list(dict.fromkeys(pc["set"])))
+    fig, axes = _subplots(1, 2, figsize=(12.5, 4.6))
+    axes = axes[0]
+    for s, g in pc.groupby("set", sort=False):
+        c = colors[s]
         rel = res.relations[res.relations["set"] == s].set_index("relation")["fitted"]
         nbr = res.macro.query("set == @s and region == 'all'")["n_br"].iloc[0]
         if not np.isfinite(nbr):  # no per-stack counts (simulations): the Eq. 3 fitted slope
             nbr = rel.get("eq3_slope", np.nan)
-        axes[0].plot(g["N_l"], g["N_br"], "o", color=c, ms=4, alpha=0.7)
-        axes[1].plot(g["N_l"], g["n_br_bar"], "o", color=c, ms=4, alpha=0.7)
+        axes[0].plot(g["N_l"], g["N_br"], "o", color=c, ms=4, alpha=0.8,
+                     label=f"{s}: configurations")
+        axes[1].plot(g["N_l"], g["n_br_bar"], "o", color=c, ms=4, alpha=0.8,
+                     label=f"{s}: configurations")
         nl = np.linspace(max(1, g["N_l"].min() * 0.8), g["N_l"].max() * 1.2, 100)
         ratio = _nanmean(g["sqrt_s_bar"] / g["l_bar"])  # NaN for scans without voids
         eps = _nanmean(g["epsilon"])
         if np.isfinite(ratio) and np.isfinite(eps):
             eq1 = EQ1_CONST * eps * ratio * np.sqrt(nl)  # Eq. 1 with set means
-            axes[0].plot(nl, eq1, "-", color=c)
-            axes[1].plot(nl, eq1 / nl, "-", color=c)  # Eq. 2
+            axes[0].plot(nl, eq1, "-", color=c, label=f"{s}: Eq. 1 with the set means")
+            axes[1].plot(nl, eq1 / nl, "-", color=c, label=f"{s}: Eq. 2")
         if np.isfinite(nbr):
-            axes[0].plot(nl, nbr * nl, "--", color=c)  # Eq. 3
-            axes[1].axhline(nbr, ls="--", color=c)  # Eq. 4
-        axes[0].text(nl[-1], nbr * nl[-1] if np.isfinite(nbr) else g["N_br"].max(),
-                     f" {s}: <n_br>={nbr:.2g}, C={rel.get('eq1_const', np.nan):.2g}",
-                     color=c, fontsize=8, va="center")
-    axes[0].set(xlabel=r"$N_l$", ylabel=r"$N_{br}$",
-                title=r"$N_{br}$ vs $N_l$: solid Eq.1 ($C=2\sqrt{\pi/3}$), dashed Eq.3")
-    axes[1].set(xlabel=r"$N_l$", ylabel=r"$\bar n_{br}=N_{br}/N_l$",
-                title=r"$\bar n_{br}$ vs $N_l$: solid Eq.2, dashed Eq.4")
-    _margins(fig, two=True)
+            axes[0].plot(nl, nbr * nl, "--", color=c,
+                         label=f"{s}: Eq. 3, <n_br> = {nbr:.2g}")
+            axes[1].axhline(nbr, ls="--", color=c, label=f"{s}: Eq. 4, <n_br> = {nbr:.2g}")
+    axes[0].set(xlabel="number of stacks per configuration $N_l$",
+                ylabel="number of branches per configuration $N_{br}$",
+                title="branches against stacks")
+    axes[1].set(xlabel="number of stacks per configuration $N_l$",
+                ylabel=r"mean branches per stack $\bar n_{br}=N_{br}/N_l$",
+                title="mean branches per stack against stacks")
+    # one legend for both panels, right of them (the sets' points are the same in both)
+    seen = {}
+    for ax in axes:
+        for h, lab in zip(*ax.get_legend_handles_labels()):
+            seen.setdefault(lab, h)
+    sets = list(dict.fromkeys(pc["set"]))
+    labels = sorted(seen, key=lambda lab: sets.index(lab.split(": ")[0])
+                    if lab.split(": ")[0] in sets else len(sets))  # grouped by set
+    axes[1].legend([seen[lab] for lab in labels], labels, fontsize=7, frameon=False,
+                   loc="upper left", bbox_to_anchor=(1.01, 1.0))
     return fig
 
 
-def _scatter_fig(res, x, y, xlabel, ylabel, title, *, through_origin=False, paper_slope=None):
+def _scatter_fig(res, x, y, xlabel, ylabel, title, *, through_origin=False, paper_slope=None,
+                 colors=None):
     pc = res.per_config
-    fig, ax = _subplots()
-    for i, (s, g) in enumerate(pc.groupby("set", sort=False)):
-        c = SET_COLORS[i % len(SET_COLORS)]
+    colors = colors or set_colors(list(dict.fromkeys(pc["set"])))
+    fig, ax = _subplots(figsize=(8.5, 4.8))
+    ax = ax[0, 0]
+    for s, g in pc.groupby("set", sort=False):
+        c = colors[s]
         xv, yv = np.asarray(g[x], float), np.asarray(g[y], float)
         k = np.isfinite(xv) & np.isfinite(yv)
-        ax.plot(xv[k], yv[k], "o", color=c, ms=4, alpha=0.7)
-        if k.sum() >= 2:
-            txt = f"{s}"
-            if through_origin:
-                a = np.sum(xv[k] * yv[k]) / np.sum(xv[k] ** 2)
-                xs = np.linspace(0, xv[k].max() * 1.1, 10)
-                ax.plot(xs, a * xs, "-", color=c)
-                txt += f": slope {a:.3g}"
-            elif np.ptp(xv[k]) > 0 and np.ptp(yv[k]) > 0:
-                txt += f": r={np.corrcoef(xv[k], yv[k])[0, 1]:.2f}"
-            ax.annotate(txt, (xv[k].max(), yv[k][np.argmax(xv[k])]), color=c, fontsize=8,
-                        xytext=(4, 0), textcoords="offset points")
+        txt = f"{s}: configurations"
+        if k.sum() >= 2 and not through_origin and np.ptp(xv[k]) > 0 and np.ptp(yv[k]) > 0:
+            txt += f", Pearson r = {np.corrcoef(xv[k], yv[k])[0, 1]:.2f}"
+        ax.plot(xv[k], yv[k], "o", color=c, ms=4, alpha=0.8, label=txt)
+        if k.sum() >= 2 and through_origin:
+            a = np.sum(xv[k] * yv[k]) / np.sum(xv[k] ** 2)
+            xs = np.linspace(0, xv[k].max() * 1.1, 10)
+            ax.plot(xs, a * xs, "-", color=c, label=f"{s}: fit through 0, slope {a:.3g}")
     if paper_slope is not None:
         xs = np.array([0, np.nanmax(pc[x]) * 1.1])
-        ax.plot(xs, paper_slope * xs, ":", color="grey")
-        ax.text(xs[1], paper_slope * xs[1], f"paper {paper_slope}", color="grey", fontsize=8)
+        ax.plot(xs, paper_slope * xs, ":", color="grey", label=f"paper: slope {paper_slope}")
     ax.set(xlabel=xlabel, ylabel=ylabel, title=title)
-    _margins(fig)
+    ax.legend(fontsize=7, frameon=False, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     return fig
 
 
-def e_vs_nbr_figure(ens: Ensemble):
+def e_vs_nbr_figure(ens: Ensemble, colors=None):
     """Mean branch energy against the number of branches of its stack (paper fig energo_micro3)."""
     br = ens.branches.dropna(subset=["n_br", "e"])
     if br.empty:
         return None
-    fig, ax = _subplots()
-    for i, s in enumerate(ens.sets):
+    colors = colors or set_colors(ens.sets)
+    fig, ax = _subplots(figsize=(8.5, 4.8))
+    ax = ax[0, 0]
+    for s in ens.sets:
         g = br[br["set"] == s]
         if g.empty:
             continue
-        c = SET_COLORS[i % len(SET_COLORS)]
+        c = colors[s]
         for reg, ls in (("bulk", ":"), ("periphery", "--"), (None, "-")):
             gg = g if reg is None else g[g["region"] == reg]
             if gg.empty:
@@ -278,21 +414,14 @@ def e_vs_nbr_figure(ens: Ensemble):
             st = gg.groupby("n_br")["e"].agg(["mean", "sem", "size"])
             ax.errorbar(st.index, st["mean"], yerr=st["sem"].fillna(0), fmt="o" + ls, color=c,
                         ms=4 if reg is None else 2, lw=1, capsize=2,
-                        alpha=1 if reg is None else 0.6)
-            if reg is None:
-                ax.annotate(s, (st.index[-1], st["mean"].iloc[-1]), color=c, fontsize=8,
-                            xytext=(4, 0), textcoords="offset points")
-    ax.set(xlabel=r"$n_{br}$ (branches in the stack)", ylabel=r"$\langle e\rangle$",
-           title=r"mean branch energy vs $n_{br}$ (mean $\pm$ s.e.m.)")
-    ax.text(0.98, 0.97, "solid: all; dotted: bulk; dashed: periphery", transform=ax.transAxes,
-            ha="right", va="top", fontsize=8, color="grey")
-    _margins(fig)
+                        alpha=1 if reg is None else 0.6,
+                        label=f"{s}: {REGION_WORDS[reg or 'all']}")
+    ax.set(xlabel="number of branches in the stack $n_{br}$",
+           ylabel=r"mean branch bending energy $\langle e\rangle$ (dimensionless)",
+           title=r"mean branch energy against $n_{br}$ (mean $\pm$ standard error)")
+    ax.xaxis.get_major_locator().set_params(integer=True)
+    ax.legend(fontsize=7, frameon=False, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     return fig
-
-
-def _html_table(df: pd.DataFrame) -> str:
-    return df.to_html(index=False, float_format=lambda v: f"{v:.4g}", na_rep="",
-                      border=0, classes="t")
 
 
 def write_report(ens: Ensemble, out_dir, *, opts: StatsOptions | None = None,
@@ -333,32 +462,49 @@ def write_report(ens: Ensemble, out_dir, *, opts: StatsOptions | None = None,
     paths["correlations.csv"] = write_csv(out / "correlations.csv", res.correlations)
     paths["per_config.csv"] = write_csv(out / "per_config.csv", res.per_config)
 
-    figs = []
+    figs = []  # (title, relative path, one-sentence caption)
     if figures:
         fdir = out / "figures"
-        pdfs = [(s, q) for s in ens.sets for q in opts.quantities]
-        for s, q in tqdm(pdfs, desc="stats figures", unit="fig", leave=False,
-                         disable=None if progress is None else not progress):
-            fig = pdf_figure(res, ens, s, q)
+        colors = set_colors(ens.sets)
+        qs = list(opts.quantities)
+        for q in tqdm(qs, desc="stats figures", unit="fig", leave=False,
+                      disable=None if progress is None else not progress):
+            fig = pdf_figure(res, ens, q, colors=colors)
             if fig is not None:
-                name = f"pdf_{q}_{_safe(s)}.png"
+                name = f"pdf_{q}.png"
                 paths[name] = save_figure(fig, fdir / name)
-                figs.append((f"{s}: pdf of {q}", f"figures/{name}"))
+                figs.append((f"Distribution of the {WORDS[q]}", f"figures/{name}",
+                             _pdf_caption(q)))
         scatter = [
-            ("network_Nbr_vs_Nl.png", "N_br vs N_l (Eqs. 1-4)", lambda: network_figure(res)),
-            ("sqrt_s_vs_l.png", "sqrt(s_bar) vs l_bar", lambda: _scatter_fig(
-                res, "l_bar", "sqrt_s_bar", r"$\bar\ell/L$", r"$\sqrt{\bar s}/L$",
-                r"$\sqrt{\bar s}$ vs $\bar\ell$ per configuration (fit through 0)",
-                through_origin=True, paper_slope=1.1)),
-            ("E_vs_Nbr.png", "E vs N_br", lambda: _scatter_fig(
-                res, "N_br", "E", r"$N_{br}$", r"$E$", r"total energy vs number of branches")),
-            ("e_vs_nbr.png", "e vs n_br", lambda: e_vs_nbr_figure(ens)),
+            ("network_Nbr_vs_Nl.png", "Branches and stacks per configuration (Eqs. 1-4)",
+             "Each point is one configuration; solid lines are Eqs. 1-2 with the set's mean "
+             "compaction, void size and branch length, dashed lines Eqs. 3-4 with its mean "
+             "number of branches per stack.", lambda: network_figure(res, colors)),
+            ("sqrt_s_vs_l.png", "Void size against branch length",
+             "Each point is one configuration: the square root of its mean void area against "
+             "its mean branch length (units of L), with a line through the origin per set and "
+             "the paper's slope 1.1 dotted.", lambda: _scatter_fig(
+                 res, "l_bar", "sqrt_s_bar", r"mean branch length $\bar\ell/L$",
+                 r"root mean void area $\sqrt{\bar s}/L$",
+                 "void size against branch length", through_origin=True, paper_slope=1.1,
+                 colors=colors)),
+            ("E_vs_Nbr.png", "Total energy against the number of branches",
+             "Each point is one configuration: its total bending energy against its number of "
+             "branches; the legend gives the Pearson correlation per set (paper: 0.75).",
+             lambda: _scatter_fig(res, "N_br", "E",
+                                  "number of branches per configuration $N_{br}$",
+                                  "total bending energy $E$ (dimensionless)",
+                                  "total energy against number of branches", colors=colors)),
+            ("e_vs_nbr.png", "Branch energy against the size of its stack",
+             "Mean bending energy of a branch against the number of branches of its stack, "
+             "with standard errors, for the whole system (solid), bulk (dotted) and periphery "
+             "(dashed).", lambda: e_vs_nbr_figure(ens, colors)),
         ]
-        for name, title, make in scatter:
+        for name, title, caption, make in scatter:
             fig = make()
             if fig is not None:
                 paths[name] = save_figure(fig, fdir / name)
-                figs.append((title, f"figures/{name}"))
+                figs.append((title, f"figures/{name}", caption))
 
     stats_json = {
         "package": "foldstat", "version": __version__, "inputs": [str(i) for i in inputs],
@@ -377,7 +523,8 @@ def write_report(ens: Ensemble, out_dir, *, opts: StatsOptions | None = None,
                 "selected": summ.best,
                 "fits": {f: {"params": r.params, "ci": r.ci, "bic": r.bic, "aic": r.aic,
                              "pvalue": r.pvalue, "n_mc": r.n_mc, "p_text": r.p_text(),
-                             "n": r.n, "truncated": r.truncated, "rejected": r.rejected}
+                             "n": r.n, "truncated": r.truncated, "counts": r.discrete,
+                             "rejected": r.rejected}
                          for f, r in summ.results.items() if r.ok}}
         stats_json["sets"][s] = {
             "macro": res.macro[res.macro["set"] == s].to_dict("records"),
@@ -387,7 +534,8 @@ def write_report(ens: Ensemble, out_dir, *, opts: StatsOptions | None = None,
             "dof": res.dof[res.dof["set"] == s].to_dict("records"),
             "fits": sel}
     paths["stats.json"] = write_json(out / "stats.json", stats_json)
-    paths["report.html"] = write_text(out / "report.html", _html(res, figs, stats_json))
+    paths["report.html"] = write_text(out / "report.html",
+                                      _html(res, figs, stats_json, ens, opts))
     return paths
 
 
@@ -395,46 +543,220 @@ def _safe(name: str) -> str:
     return "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in str(name))
 
 
-def _html(res: StatsResult, figs, meta) -> str:
-    sel = res.fits[res.fits["selected"]] if not res.fits.empty else res.fits
-    pcols = tuple(f"p{i}{s}" for i in range(1, F.MAX_PARAMS + 1)
-                  for s in ("_name", "", "_lo", "_hi"))
-    sel_cols = [c for c in ("set", "region", "quantity", "family", "n", *pcols, "delta_bic",
-                            "p_text") if c in sel.columns]
+def _pdf_caption(q: str) -> str:
+    """One sentence saying what a distribution figure shows."""
+    if q in COUNT_QUANTITIES:
+        return (f"Fraction of stacks with each {WORDS[q]} (points, error bars sqrt(count)/n) "
+                f"against the selected law's probability mass at each integer (open squares) "
+                f"with its 95 % bootstrap band, one colour per set, one row per sub-system.")
+    return (f"Probability density of the {WORDS[q]} (points, counting error bars "
+            f"sqrt(count)/(n bin width)) with the selected law (line) and its 95 % bootstrap "
+            f"band, one colour per set, one row per sub-system, linear (left) and logarithmic "
+            f"(right) scales" + ("; dotted: detection limit, below which the fit is truncated."
+                                 if QUANTITIES[q][3] else "."))
+
+
+#: report column -> heading in words with units (lengths in units of the rod length L)
+COLUMN_NAMES = {
+    "set": "set", "region": "sub-system", "n_configs": "configurations",
+    "N_l": "<N_l> stacks per configuration", "N_br": "<N_br> branches per configuration",
+    "n_br": "<n_br> branches per stack", "s_L2": "<s>/L² void area",
+    "sqrt_s_over_p": "<√s/p> void shape ratio", "l_L": "<l>/L branch length",
+    "n_branches": "branches", "n_voids": "voids",
+    "kappa_m_L": "<|κ_m|> L mean curvature", "E_tilde": "<E> total energy",
+    "e": "<e> branch energy", "alpha_e": "α_e (Gamma shape, e)", "chi_e": "χ_e (Gamma scale, e)",
+    "alpha_E": "α_E (Gamma shape, E)", "chi_E": "χ_E (Gamma scale, E)",
+    "alpha_E_over_alpha_e": "α_E/α_e", "paper set": "paper set",
+    "relation": "relation", "fitted": "ours", "expected": "expected / paper",
+    "r2": "R²", "n": "n", "note": "definition",
+    "pair": "pair", "pearson_r": "Pearson r", "spearman_r": "Spearman r", "paper": "paper",
+    "quantity": "quantity", "family": "law", "param": "parameter",
+    "naive": "naive fit", "truncated": "truncation-aware fit",
+    "truncated_lo": "truncation-aware 2.5 %", "truncated_hi": "truncation-aware 97.5 %",
+    "naive_bias_rel": "relative bias of the naive fit", "cut_mean": "mean detection limit",
+    "mean_minus_cut": "<x> - <cut> (= μ for the exponential)", "rejected": "why rejected",
+}
+RELATION_WORDS = {
+    "eq1_const": "Eq. 1 constant C in N_br = C ε (√s̄/l̄) √N_l (expected 2√(π/3))",
+    "slope_sqrt_s_vs_l": "slope of √s̄ against l̄ (paper 1.1)",
+    "eq1_eps_sqrtNl": "K in N_br = K ε √N_l (expected C × slope)",
+    "eq3_slope": "Eq. 3 slope of N_br against N_l (expected <n_br>)",
+    "eq4_fluct": "Eq. 4 mean relative deviation of n̄_br from <n_br>",
+    "eq5": "Eq. 5 <n_br>√<N_l>/ε (paper 2.2√(π/3))",
+    "n_br_exp_mu": "mean of the exponential (geometric) law of n_br (expected <n_br>)",
+    "E_vs_Nbr_e": "<E> against <N_br><e>",
+}
+PAIR_WORDS = {"l_vs_inv_kappa_m": "branch length l vs 1/κ_m",
+              "e_vs_l_kappa_m2": "branch energy e vs l κ_m²",
+              "E_vs_N_br": "total energy E vs N_br"}
+
+
+def _named(df: pd.DataFrame) -> pd.DataFrame:
+    """``df`` for reading: headings in words, codes of relations, pairs, sub-systems and
+    quantities spelled out."""
+    df = df.copy()
+    if "relation" in df.columns:
+        if "note" in df.columns:  # the words of the relation say it; keep the interval note
+            df["note"] = df["note"].where(df["relation"] == "n_br_exp_mu", "")
+            df = df.rename(columns={"note": "interval"})
+        df["relation"] = df["relation"].map(lambda v: RELATION_WORDS.get(v, v))
+    if "pair" in df.columns:
+        df["pair"] = df["pair"].map(lambda v: PAIR_WORDS.get(v, v))
+    if "region" in df.columns:
+        df["region"] = df["region"].map(lambda v: REGION_WORDS.get(v, v))
+    if "quantity" in df.columns:
+        df["quantity"] = df["quantity"].map(lambda v: WORDS.get(v, v))
+    return df.rename(columns=COLUMN_NAMES)
+
+
+def _html_table(df: pd.DataFrame) -> str:
+    return _named(df).to_html(index=False, float_format=lambda v: f"{v:.3g}", na_rep="",
+                              border=0, classes="t")
+
+
+def _with_paper(ours: pd.DataFrame, paper: pd.DataFrame) -> pd.DataFrame:
+    """Our rows followed by the paper's in the same columns (the paper's set in ``set``)."""
+    p = paper.rename(columns={"paper set": "set"}).copy()
+    p["set"] = "paper, set " + p["set"].astype(str)
+    return pd.concat([ours, p.reindex(columns=[c for c in ours.columns if c in p.columns
+                                               or c == "set"])], ignore_index=True)
+
+
+def _selected_table(res: StatsResult) -> pd.DataFrame:
+    """The selected law of every set, sub-system and quantity, parameters with intervals."""
+    rows = []
+    for (s, reg, q), summ in res.summaries.items():
+        r = summ.results.get(summ.best) if summ.best else None
+        if r is None:
+            rows.append({"set": s, "region": reg, "quantity": q, "n": np.nan,
+                         "selected law": "none selectable"})
+            continue
+        ps = []
+        for nm in FAMILIES[r.family].param_names:
+            lo, hi = r.ci.get(nm, (np.nan, np.nan))
+            ci = f" [{lo:.3g}, {hi:.3g}]" if np.isfinite(lo) and np.isfinite(hi) else ""
+            ps.append(f"{nm} = {r.params[nm]:.3g}{ci}")
+        others = sorted((o.bic - r.bic, f) for f, o in summ.results.items()
+                        if o.selectable and f != r.family)
+        rows.append({
+            "set": s, "region": reg, "quantity": q, "n": r.n,
+            "selected law": FAMILIES[r.family].title + (" (fitted as counts)" if r.discrete
+                                                         else "")
+            + (" (truncated at the detection limit)" if r.truncated else ""),
+            "parameters [95 % bootstrap interval]": "; ".join(ps),
+            "runner-up law, BIC − BIC(selected)": (
+                f"{FAMILIES[others[0][1]].title}, {others[0][0]:+.1f}" if others else ""),
+            "goodness of fit": r.p_text() or "not computed"})
+    return pd.DataFrame(rows)
+
+
+def _quality_rows(ens: Ensemble) -> pd.DataFrame:
+    """Configurations whose image analysis raised quality warnings."""
+    c = ens.configs
+    if "quality" not in c.columns:
+        return c.iloc[:0]
+    q = c["quality"].astype(object).where(c["quality"].notna(), "").astype(str)
+    bad = q != ""
+    return pd.DataFrame({"set": c.loc[bad, "set"], "configuration": c.loc[bad, "config_id"],
+                         "quality warnings": q[bad].str.replace(";", ", ")})
+
+
+def _methods(meta, opts: StatsOptions) -> str:
+    """The methods paragraph of the report."""
+    n_mc = opts.n_mc
+    gof = (f"Goodness of fit: Anderson-Darling statistic (for the counts n_br, the "
+           f"likelihood-ratio statistic G) with a parametric-bootstrap p-value from {n_mc} "
+           f"samples drawn from the fitted law and refitted; the smallest resolvable p-value "
+           f"is 1/({n_mc}+1), and a p-value at that floor is printed as "
+           f"\"p &lt; 1/{n_mc + 1}\"." if opts.gof else
+           "Goodness-of-fit p-values were not computed for this report.")
+    return (
+        "<p><b>Methods.</b> Each scan is reduced to its skeleton: junction points split the "
+        "rod into branches, branches in contact between the same junctions form a stack of "
+        "n<sub>br</sub> branches, and the enclosed empty regions are voids. Per branch we "
+        "measure its length l, mean curvature κ<sub>m</sub>, mean absolute curvature "
+        "κ<sub>+</sub> and bending energy e = L∫κ²ds; per configuration the numbers of stacks "
+        "N<sub>l</sub> and branches N<sub>br</sub>, the compaction ε and the total energy E; "
+        "per void its area s and shape ratio √s/p. Lengths are in units of the rod length L. "
+        "Branches touching the container wall form the periphery, the others the bulk "
+        "(images only). Following Adda-Bedia, Boudaoud, Boué and Deboeuf, \"Statistical "
+        "distributions in the folding of elastic structures\", each distribution is fitted by "
+        "maximum likelihood with the exponential, Gamma, log-normal and Gaussian laws (and "
+        "Bose-Einstein or a cut-off power law where the paper uses them); below a detection "
+        "limit (branches shorter than 1 mm, voids smaller than 1 mm²) nothing is seen, so those "
+        "fits are truncated there. The number of branches per stack is an integer and is "
+        "fitted as counts (the law integrated over [k-½, k+½]). Model selection: the law of "
+        "lowest BIC, except that a law with fewer parameters within ΔBIC &lt; "
+        f"{F.DELTA_BIC_SIMPLER:g} of the minimum is preferred (the simplest law the data "
+        "support); AIC and BIC of every law are in fits.csv. Parameter intervals are 95 % "
+        f"percentile bootstrap intervals from {opts.n_boot} resamples, and the shaded bands "
+        f"in the figures the pointwise 95 % range of the law over those resamples. {gof}</p>")
+
+
+def _html(res: StatsResult, figs, meta, ens: Ensemble | None = None,
+          opts: StatsOptions | None = None) -> str:
+    opts = opts or StatsOptions()
     rej = (res.fits[res.fits["rejected"].fillna("").astype(str) != ""]
            if "rejected" in res.fits.columns else res.fits.iloc[:0])
     rej_cols = ["set", "region", "quantity", "family", "rejected"]
     parts = [
         "<!doctype html><html><head><meta charset='utf-8'><title>foldstat statistics</title>",
-        "<style>body{font-family:sans-serif;max-width:1200px;margin:auto}"
-        "table.t{border-collapse:collapse;font-size:12px}table.t td,table.t th"
-        "{border:1px solid #ccc;padding:2px 6px}img{max-width:100%}</style></head><body>",
-        f"<h1>Folding statistics</h1><p>foldstat {html.escape(meta['version'])}; inputs: "
-        f"{html.escape(', '.join(meta['inputs']))}; seed {meta['options']['seed']}, "
-        f"{meta['options']['n_boot']} bootstrap resamples. Model selection: "
-        f"{html.escape(meta['model_selection'])}. Lengths in units of L.</p>",
-        "<p>Tables: " + " ".join(f"<a href='{n}.csv'>{n}.csv</a> <a href='{n}.md'>(md)</a>"
-                                 for n in ("macro", "micro", "fits", "relations", "dof",
-                                           "truncation"))
-        + " <a href='correlations.csv'>correlations.csv</a> <a href='stats.json'>stats.json</a>"
-          "</p>",
-        "<h2>Macro (paper table tab_macro)</h2>", _html_table(res.macro),
-        "<h2>Micro (paper table tab_micro)</h2>", _html_table(res.micro),
-        "<h2>Degrees of freedom: alpha_E/alpha_e vs N_l (paper table tab_res)</h2>",
-        _html_table(res.dof),
-        "<h2>Relations (paper Eqs. 1-5)</h2>", _html_table(res.relations),
+        "<style>body{font-family:sans-serif;max-width:1200px;margin:auto;padding:0 1em;"
+        "line-height:1.4}table.t{border-collapse:collapse;font-size:12px;margin-bottom:1em}"
+        "table.t td,table.t th{border:1px solid #ccc;padding:2px 6px}"
+        "table.t th{background:#f3f3f3}img{max-width:100%}figure{margin:1em 0 2em}"
+        "figcaption{font-size:14px;color:#333}.warn{color:#a00}</style></head><body>",
+        "<h1>Folding statistics</h1>",
+        f"<p>foldstat {html.escape(meta['version'])}; inputs: "
+        f"{html.escape(', '.join(meta['inputs']))}; seed {meta['options']['seed']}.</p>",
+        _methods(meta, opts),
+    ]
+    if ens is not None:
+        qual = _quality_rows(ens)
+        if len(qual):
+            parts += [f"<h2 class='warn'>Input quality warnings ({len(qual)} of "
+                      f"{len(ens.configs)} configurations)</h2><p>The image analysis flagged "
+                      "these scans; their values enter every table and figure below.</p>",
+                      _html_table(qual)]
+        else:
+            parts.append("<p>Input quality: no scan carries an image-analysis quality "
+                         "warning.</p>")
+    parts.append("<h2>Figures</h2><ul>" + "".join(
+        f"<li><a href='#{html.escape(Path(rel).stem)}'>{html.escape(t)}</a></li>"
+        for t, rel, _ in figs) + "</ul>")
+    parts += [
+        "<p>Tables as files: " + " ".join(
+            f"<a href='{n}.csv'>{n}.csv</a> <a href='{n}.md'>(md)</a>"
+            for n in ("macro", "micro", "fits", "relations", "dof", "truncation"))
+        + " <a href='correlations.csv'>correlations.csv</a> "
+          "<a href='per_config.csv'>per_config.csv</a> <a href='stats.json'>stats.json</a></p>",
+        "<h2>Averages per set: stacks, branches and voids</h2><p>Means over all "
+        "configurations of a set; the paper's values below ours.</p>",
+        _html_table(_with_paper(res.macro, PAPER_MACRO)),
+        "<h2>Averages per set: curvature and energy</h2><p>Means, and the shape α and scale χ "
+        "of the Gamma law fitted to the branch energies e and to the total energies E; the "
+        "paper's values below ours.</p>",
+        _html_table(_with_paper(res.micro, PAPER_MICRO)),
+        "<h2>Are branches the independent units? α_E/α_e against the number of stacks</h2>"
+        "<p>A sum of m independent Gamma variables of shape α_e has shape m α_e, so "
+        "α_E/α_e counts the effectively independent energy units of a configuration; the "
+        "paper compares it with the number of stacks &lt;N<sub>l</sub>&gt;. The paper's "
+        "values below ours.</p>",
+        _html_table(_with_paper(res.dof, PAPER_DOF)),
+        "<h2>Stacking relations (paper Eqs. 1-5)</h2>", _html_table(res.relations),
         "<h2>Correlations</h2>", _html_table(res.correlations),
         "<h2>Selected laws</h2>",
-        _html_table(sel[sel_cols].dropna(axis=1, how="all")) if len(sel) else "<p>none</p>",
+        _html_table(_selected_table(res)) if res.summaries else "<p>none</p>",
     ]
     if len(rej):
         parts += ["<h2>Degenerate fits (never selected)</h2>", _html_table(rej[rej_cols])]
     if not res.truncation.empty:
-        parts += ["<h2>Detection limits: naive vs truncation-aware fits</h2>",
+        parts += ["<h2>Detection limits: naive against truncation-aware fits</h2>",
                   _html_table(res.truncation)]
     parts.append("<h2>Figures</h2>")
-    for title, rel in figs:
-        parts.append(f"<h3>{html.escape(title)}</h3><a href='{rel}'><img src='{rel}' "
-                     f"alt='{html.escape(title)}'></a>")
+    for title, rel, caption in figs:
+        parts.append(f"<figure id='{html.escape(Path(rel).stem)}'><h3>{html.escape(title)}"
+                     f"</h3><a href='{rel}'><img src='{rel}' alt='{html.escape(title)}'></a>"
+                     f"<figcaption>{html.escape(caption)}</figcaption></figure>")
     parts.append("</body></html>\n")
     return "\n".join(parts)

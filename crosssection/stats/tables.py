@@ -31,6 +31,26 @@ EQ5_PAPER = 2.2 * np.sqrt(np.pi / 3)  # Eq. 5
 PAPER_SLOPE_S_L = 1.1  # Fig. topolo_macro b
 PAPER_CORR = {"l_vs_inv_kappa_m": 0.45, "e_vs_l_kappa_m2": 0.6, "E_vs_N_br": 0.75}
 
+# The paper's averages per set (experimental sets 1-4, simulations 5), shown beside ours;
+# for the simulations the paper gives N_l, N_br and n_br only as ~10, ~20 and ~2.
+# Macroscopic table: <N_l>, <N_br>, <n_br>, <s>/L^2, <sqrt(s)/p>, <l>/L
+PAPER_MACRO = pd.DataFrame({
+    "paper set": ["1", "2", "3", "4", "5 (simulations)"],
+    "N_l": [90, 80, 40, 80, 10], "N_br": [380, 310, 100, 330, 20],
+    "n_br": [5, 4, 3, 5, 2], "s_L2": [6.6e-6, 1.4e-5, 1.1e-4, 2.6e-5, 3.4e-4],
+    "sqrt_s_over_p": [0.19, 0.18, 0.18, 0.18, 0.19],
+    "l_L": [2.5e-3, 3.4e-3, 10e-3, 4.4e-3, 0.05]})
+# Microscopic table: <kappa_m>L, <l>/L, <E~>, <e>, alpha_e, chi_e, alpha_E, chi_E
+PAPER_MICRO = pd.DataFrame({
+    "paper set": ["1", "2", "3", "4", "5 (simulations)"],
+    "kappa_m_L": [330, 260, 100, 200, 37], "l_L": [2.5e-3, 3.4e-3, 10e-3, 4.4e-3, 0.05],
+    "E_tilde": [13e4, 11e4, 1.3e4, 7.3e4, 0.43e4], "e": [330, 340, 130, 220, 230],
+    "alpha_e": [0.16, 0.19, 0.41, 0.31, 0.31], "chi_e": [2000, 1800, 330, 720, 730],
+    "alpha_E": [10.8, 12.7, 15.9, 5.72, 61], "chi_E": [1.2e4, 8.3e3, 8.4e2, 1.3e4, 70]})
+# Degrees of freedom: <N_l> and alpha_E/alpha_e (experiments)
+PAPER_DOF = pd.DataFrame({"paper set": ["1", "2", "3", "4"], "N_l": [90, 80, 40, 80],
+                          "alpha_E_over_alpha_e": [68, 55, 56, 23]})
+
 # quantity -> (table, column, families, truncation column or None, label)
 _SHORT = ("exponential", "gamma", "lognormal", "gaussian")
 QUANTITIES = {
@@ -45,6 +65,8 @@ QUANTITIES = {
     "shape_ratio": ("voids", "shape_ratio", ("gamma", "lognormal", "gaussian"), None,
                     r"$\sqrt{s}/p$"),
 }
+#: integer quantities, fitted as counts (:func:`crosssection.stats.fits.fit_family`)
+COUNT_QUANTITIES = {"n_br"}
 POSITIVE_QUANTITIES = {"length_L", "kappa_m_L", "kappa_plus_L", "e", "E", "n_br", "area_L2",
                        "shape_ratio"}
 
@@ -161,7 +183,7 @@ def fit_quantity(ens: Ensemble, quantity: str, region: str, opts: StatsOptions, 
         if np.all(np.isfinite(c)):
             cuts = c
     summ = F.fit_all(x, fams, truncation=cuts, seed=seed, n_boot=opts.n_boot, gof=opts.gof,
-                     n_mc=opts.n_mc)
+                     n_mc=opts.n_mc, discrete=quantity in COUNT_QUANTITIES)
     bias = None
     if cuts is not None:
         bias = F.truncation_bias(x, cuts, families=tuple(f for f in fams
@@ -276,6 +298,12 @@ def slope_through_origin(x, y):
     return a, (1 - ss_res / ss_tot) if ss_tot > 0 else np.nan, int(x.size)
 
 
+def _geometric_mean(mu):
+    """Mean of the exponential of scale ``mu`` discretised on the integers k >= 1."""
+    with np.errstate(all="ignore"):
+        return float(1.0 / -np.expm1(-1.0 / mu)) if np.isfinite(mu) and mu > 0 else np.nan
+
+
 def relations_table(ens: Ensemble, per_cfg: pd.DataFrame, summaries: dict) -> pd.DataFrame:
     """Fitted constants of the paper's Eqs. 1-5 per set.
 
@@ -287,7 +315,8 @@ def relations_table(ens: Ensemble, per_cfg: pd.DataFrame, summaries: dict) -> pd
     - ``eq3_slope``: N_br = a N_l through the origin, expected <n_br>;
     - ``eq4_fluct``: <n_br_bar/<n_br> - 1> (paper: a few percent);
     - ``eq5``: <n_br> sqrt(<N_l>)/<eps>, paper 2.2 sqrt(pi/3);
-    - ``n_br_exp_mu``: exponential mean of n_br (= <n_br>), with the selected family;
+    - ``n_br_exp_mu``: mean of the exponential law of n_br (fitted as counts: the geometric
+      law's mean, = <n_br> at the maximum of the likelihood), with the selected family;
     - ``E_vs_Nbr_e``: <E> against <N_br><e> (paper, simulations).
     """
     rows = []
@@ -304,6 +333,10 @@ def relations_table(ens: Ensemble, per_cfg: pd.DataFrame, summaries: dict) -> pd
         nsum = summaries.get((s, "all", "n_br"))
         mu = nsum.results["exponential"].params["mu"] if nsum else np.nan
         ci = nsum.results["exponential"].ci.get("mu", (np.nan, np.nan)) if nsum else (np.nan,) * 2
+        if nsum and nsum.results["exponential"].discrete:
+            # a count fit: the exponential discretised on the integers is the geometric law,
+            # whose mean 1/(1 - exp(-1/mu)) (support k >= 1) is the number to compare
+            mu, ci = _geometric_mean(mu), tuple(_geometric_mean(v) for v in ci)
         rows += [
             {"set": s, "relation": "eq1_const", "fitted": c1, "expected": EQ1_CONST,
              "r2": r1, "n": n1, "note": "N_br = C eps sqrt(s_bar)/l_bar sqrt(N_l)"},

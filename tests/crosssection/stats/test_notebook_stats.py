@@ -54,10 +54,12 @@ def test_batch_folder_loads_into_dataframes_and_plots(batch):
     ens = load_any(batch)
     assert isinstance(ens, Ensemble) and ens.sets == ["s1"] and len(ens.configs) == 3
     fig = plot_pdf(ens, "e")
-    assert isinstance(fig, Figure) and len(fig.axes) == 2
-    # the histogram of every region and its fitted law, in both panels
-    for ax in fig.axes:
-        assert len(ax.lines) >= 2 * 3
+    # one row per sub-system (whole, bulk, periphery), linear and log panels
+    assert isinstance(fig, Figure) and len(fig.axes) == 2 * 3
+    for ax in fig.axes:  # the histogram points and the fitted law in every panel
+        gids = {ln.get_gid() for ln in ax.lines}
+        assert any(str(g).startswith("points:") for g in gids)
+        assert any(str(g).startswith("law:") for g in gids)
     assert isinstance(plot_pdf(batch, "kappa_m_L"), Figure)  # from the folder itself
     with pytest.raises(ValueError, match="too few"):
         plot_pdf(batch, "E")  # one total energy per scan: 3 values
@@ -75,7 +77,7 @@ def test_plot_pdf_draws_the_fitted_density():
         pd.DataFrame({"set": "g", "config_id": "0", "length_L": x, "region": "none"}),
         pd.DataFrame(columns=STACK_COLS), pd.DataFrame(columns=VOID_COLS))])
     fig = plot_pdf(ens, "length_L")
-    curve = fig.axes[0].lines[1]  # after the histogram points: the selected law
+    curve = next(ln for ln in fig.axes[0].lines if ln.get_gid() == "law:g:all")
     xs, ys = curve.get_xdata(), curve.get_ydata()
     summ = fit_all(x, PAPER_FAMILIES, n_boot=0, gof=False)
     assert np.allclose(ys, summ.results[summ.best].pdf(xs), rtol=1e-6)

@@ -41,7 +41,7 @@ def test_stats_report_on_batch_and_simulation(tmp_path, seed):
     assert len(figs) >= 10
     for f in figs:  # the page links every figure
         assert f"figures/{f.name}" in html
-    for name in ("pdf_length_L_s1.png", "pdf_e_sim.png", "network_Nbr_vs_Nl.png",
+    for name in ("pdf_length_L.png", "pdf_e.png", "pdf_n_br.png", "network_Nbr_vs_Nl.png",
                  "sqrt_s_vs_l.png", "E_vs_Nbr.png", "e_vs_nbr.png"):
         assert (out / "figures" / name).is_file(), name
     # atomic writes leave no temporary files behind

@@ -1,0 +1,155 @@
+"""What the report's figures and page show: the number of branches per stack as a probability
+mass function comparable with its fitted law, counting error bars and bootstrap bands, one
+colour per set across figures, and a page that explains its method in words."""
+import numpy as np
+import pandas as pd
+import pytest
+from matplotlib.collections import LineCollection, PolyCollection
+
+from crosssection.stats import Ensemble, demo, load_any
+from crosssection.stats.data import BRANCH_COLS, STACK_COLS, VOID_COLS
+from crosssection.stats.report import (_html, e_vs_nbr_figure, pdf_figure, set_colors)
+from crosssection.stats.tables import StatsOptions, StatsResult, compute_stats, fit_quantity
+
+# column and heading codes of the CSV tables that must not reach the page as headings
+RAW_NAMES = ("n_br_mean", "p1_name", "p1_lo", "p2_hi", "delta_bic", "p_text", "s_L2",
+             "sqrt_s_over_p", "l_L", "kappa_m_L", "E_tilde", "alpha_E_over_alpha_e",
+             "pearson_r", "spearman_r", "naive_bias_rel", "mean_minus_cut", "eq1_const",
+             "eq3_slope", "n_br_exp_mu", "n_branches", "tab_macro", "tab_micro", "tab_res")
+
+
+def _ensemble(sets, rng, n_stacks=250):
+    """Sets whose stacks hold geometric numbers of branches (mean 2) and whose branches have
+    Gamma lengths and energies."""
+    configs, branches, stacks = [], [], []
+    for s in sets:
+        nbr = rng.geometric(0.5, n_stacks)
+        configs.append(pd.DataFrame({"set": [s], "config_id": ["0"]}))
+        stacks.append(pd.DataFrame({"set": s, "config_id": "0", "n_br": nbr,
+                                    "region": "none"}))
+        n = int(nbr.sum())
+        branches.append(pd.DataFrame({
+            "set": s, "config_id": "0", "length_L": rng.gamma(2.0, 0.01, n),
+            "e": rng.gamma(0.5, 300.0, n), "n_br": np.repeat(nbr, nbr), "region": "none"}))
+    return Ensemble(pd.concat(configs, ignore_index=True),
+                    pd.concat(branches, ignore_index=True).reindex(columns=BRANCH_COLS),
+                    pd.concat(stacks, ignore_index=True).reindex(columns=STACK_COLS),
+                    pd.DataFrame(columns=VOID_COLS))
+
+
+def _fits(ens, quantities, n_boot=20):
+    opts = StatsOptions(seed=1, n_boot=n_boot, gof=False, quantities=quantities)
+    summ = {}
+    for s in ens.sets:
+        for q in quantities:
+            summ[(s, "all", q)] = fit_quantity(ens.subset(s), q, "all", opts, 1)[0]
+    empty = pd.DataFrame()
+    return StatsResult(empty, empty, empty, empty, empty, empty, empty, empty, summ)
+
+
+@pytest.fixture(scope="module")
+def geometric():
+    ens = _ensemble(["a", "b"], np.random.default_rng(0))
+    return ens, _fits(ens, ("n_br", "length_L"))
+
+
+def _line(ax, gid):
+    return next(ln for ln in ax.lines if ln.get_gid() == gid)
+
+
+def test_n_br_pmf_points_sum_to_one_and_match_the_law(geometric):
+    ens, res = geometric
+    fig = pdf_figure(res, ens, "n_br")
+    ax = fig.axes[0]  # whole system, linear scale
+    pts = _line(ax, "points:a:all")
+    k, p = pts.get_xdata(), pts.get_ydata()
+    assert np.allclose(k, np.round(k))  # points at the integers
+    assert p.sum() == pytest.approx(1.0)  # fractions of stacks, not a density over bins
+    law = _line(ax, "law:a:all")
+    lk, lp = law.get_xdata(), law.get_ydata()
+    for kk in (1, 2):  # the geometric law: its fitted masses sit on the points
+        assert lp[lk == kk][0] == pytest.approx(p[k == kk][0], rel=0.2)
+    best = res.summaries[("a", "all", "n_br")]
+    r = best.results[best.best]
+    assert r.discrete and r.pmf(np.arange(1, 400)).sum() == pytest.approx(1.0, abs=1e-6)
+
+
+def _errorbar_halfwidths(ax, pts):
+    """Upper half-lengths of the error bars drawn at the points ``pts``."""
+    x, y = pts.get_xdata(), pts.get_ydata()
+    for coll in ax.collections:
+        if isinstance(coll, LineCollection) and len(coll.get_segments()) == len(x):
+            segs = coll.get_segments()
+            if np.allclose([sg[0][0] for sg in segs], x):
+                return np.array([max(sg[0][1], sg[1][1]) for sg in segs]) - y
+    return None
+
+
+def test_counting_error_bars_and_bootstrap_bands(geometric):
+    ens, res = geometric
+    fig = pdf_figure(res, ens, "n_br")
+    ax = fig.axes[0]
+    pts = _line(ax, "points:a:all")
+    n = len(ens.subset("a").stacks)
+    half = _errorbar_halfwidths(ax, pts)
+    assert half is not None  # sqrt(count)/n for unit-wide integer bins
+    assert np.allclose(half, np.sqrt(pts.get_ydata() * n) / n)
+    # the law's band: vertical bars at the integers (counts) ...
+    assert any(isinstance(c, LineCollection) and "bootstrap" in str(c.get_label())
+               for c in ax.collections)
+    # ... and a shaded band around a continuous density, in both scales
+    fig = pdf_figure(res, ens, "length_L")
+    for ax in fig.axes:
+        assert any(isinstance(c, PolyCollection) and "bootstrap" in str(c.get_label())
+                   for c in ax.collections)
+        assert _errorbar_halfwidths(ax, _line(ax, "points:a:all")) is not None
+
+
+def test_a_set_keeps_its_colour_in_every_figure(geometric):
+    ens, res = geometric
+    colors = set_colors(ens.sets)
+    assert colors["a"] != colors["b"]
+    for fig in (pdf_figure(res, ens, "n_br"), pdf_figure(res, ens, "length_L")):
+        for s in ens.sets:  # both sets overlaid on one axis
+            assert _line(fig.axes[0], f"law:{s}:all").get_color() == colors[s]
+            assert _line(fig.axes[0], f"points:{s}:all").get_color() == colors[s]
+    ax = e_vs_nbr_figure(ens).axes[0]
+    for s in ens.sets:
+        assert any(c.lines[0].get_color() == colors[s] and c.get_label().startswith(s)
+                   for c in ax.containers)  # the error-bar series of the set
+    # only "b": it keeps the colour it has beside "a"
+    only_b = pdf_figure(res, ens, "n_br", sets=["b"])
+    assert _line(only_b.axes[0], "law:b:all").get_color() == colors["b"]
+
+
+def test_legends_sit_outside_the_data():
+    ens = _ensemble(["a"], np.random.default_rng(1), n_stacks=60)
+    fig = pdf_figure(_fits(ens, ("length_L",), n_boot=0), ens, "length_L")
+    fig.canvas.draw()
+    legends = [ax.get_legend() for ax in fig.axes if ax.get_legend() is not None]
+    assert legends
+    for leg in legends:
+        box = leg.get_window_extent()
+        for ax in fig.axes:
+            assert not box.overlaps(ax.get_window_extent())
+    text = " ".join(t.get_text() for ax in fig.axes for t in ax.texts)
+    assert "Gamma" not in text  # no note about a curve that is not drawn
+
+
+def test_page_explains_the_method_in_words(tmp_path):
+    b = demo.write_demo_batch(tmp_path / "b", n_images=2, seed=1,
+                              sets={"s1": {"n_stacks": 20}})
+    ens = load_any(b)
+    ens.configs.loc[0, "quality"] = "low_contrast;hole_uncertain"
+    opts = StatsOptions(seed=0, n_boot=0, gof=False, quantities=("n_br", "length_L"))
+    res = compute_stats(ens, opts)
+    meta = {"version": "0", "inputs": ["b"], "options": {"seed": 0}}
+    page = _html(res, [("Distribution", "figures/pdf_n_br.png", "What is seen.")], meta,
+                 ens, StatsOptions(n_mc=199))
+    assert "<b>Methods.</b>" in page and "BIC" in page and "AIC" in page
+    assert "p &lt; 1/200" in page  # the Monte-Carlo floor of the p-values, in words
+    assert "low_contrast, hole_uncertain" in page  # the inputs' quality warnings
+    assert "paper, set 1" in page  # the paper's values beside ours
+    assert "figures/pdf_n_br.png" in page and "What is seen." in page
+    for raw in RAW_NAMES:
+        assert raw not in page, raw
