@@ -10,6 +10,8 @@ SUBCOMMANDS = {
     "anneal": "simulate.ensemble",
     "render": "simulate.render",
     "validate": "simulate.validate",
+    "compact": "simulate.compact",
+    "benchmark": "simulate.atlas",
 }
 
 

@@ -129,12 +129,7 @@ def run_config(config_id: int, seed: int, params: dict, out: str) -> int:
                    epsilon_sqrt2=1.0 / (2.0 * np.pi * np.sqrt(2.0) * rg) if rg > 0 else np.inf,
                    n_stacks=int(an.n_stacks), n_branches=int(an.n_branches),
                    n_junctions=int(an.n_junctions), n_voids=int(an.n_voids))
-        bcols = [c for c in BRANCH_COLUMNS if c != "config_id"]
-        branches = an.branches.reindex(columns=bcols).to_dict("records")
-        vcols = [c for c in VOID_COLUMNS if c != "config_id"]
-        voids = an.voids.reindex(columns=vcols).to_dict("records")
-        scols = [c for c in STACK_COLUMNS if c != "config_id"]
-        stacks = an.stacks.reindex(columns=scols).to_dict("records")
+        branches, voids, stacks = analysis_records(an)
     except Exception as exc:  # noqa: BLE001 - recorded per configuration, the ensemble goes on
         from simulate.geometry import radius_of_gyration
 
@@ -143,10 +138,45 @@ def run_config(config_id: int, seed: int, params: dict, out: str) -> int:
                    epsilon_sqrt2=1.0 / (2.0 * np.pi * np.sqrt(2.0) * rg),
                    analysis_error=f"{type(exc).__name__}: {exc}")
     row.update({f"n_{k}": v for k, v in res.stats.items()})
-    meta = json.dumps({"row": row, "branches": branches, "voids": voids, "stacks": stacks},
-                      default=lambda o: o.item() if hasattr(o, "item") else str(o))
-    write_npz(part_path(out, config_id), xy=res.xy, xy0=xy0, meta=np.array(meta))
+    write_part(out, config_id, row, res.xy, xy0, branches, voids, stacks)
     return config_id
+
+
+def analysis_records(an):
+    """Branch, void and stack records of one :class:`simulate.contacts.RodAnalysis`, with the
+    columns of branches.csv, voids.csv and stacks.csv (config_id added at assembly).
+
+    Returns
+    -------
+    branches, voids, stacks : lists of dict
+    """
+    bcols = [c for c in BRANCH_COLUMNS if c != "config_id"]
+    vcols = [c for c in VOID_COLUMNS if c != "config_id"]
+    scols = [c for c in STACK_COLUMNS if c != "config_id"]
+    return (an.branches.reindex(columns=bcols).to_dict("records"),
+            an.voids.reindex(columns=vcols).to_dict("records"),
+            an.stacks.reindex(columns=scols).to_dict("records"))
+
+
+def write_part(out, config_id: int, row: dict, xy, xy0, branches=(), voids=(), stacks=()):
+    """Write the part file of one configuration atomically (read back by :func:`assemble`).
+
+    Parameters
+    ----------
+    out : path
+        Output folder.
+    config_id : int
+    row : dict
+        Its row of configs.csv (``config_id`` and ``seed`` included: a resume checks them).
+    xy, xy0 : (N+1, 2) arrays
+        Final and initial node positions.
+    branches, voids, stacks : lists of dict
+        See :func:`analysis_records`.
+    """
+    meta = json.dumps({"row": row, "branches": list(branches), "voids": list(voids),
+                       "stacks": list(stacks)},
+                      default=lambda o: o.item() if hasattr(o, "item") else str(o))
+    write_npz(part_path(out, config_id), xy=xy, xy0=xy0, meta=np.array(meta))
 
 
 def _read_part(path):
@@ -168,8 +198,11 @@ def _part_ok(path, config_id: int, seed: int) -> bool:
         return False
 
 
-def assemble(out, n_configs: int) -> dict:
+def assemble(out, n_configs: int, columns=None) -> dict:
     """Assemble configs.csv, branches.csv, voids.csv and rods.npz from the part files.
+
+    ``columns`` are the leading columns of configs.csv (default :data:`CONFIG_COLUMNS`); the
+    other keys of the rows follow in their order.
 
     Returns
     -------
@@ -186,8 +219,9 @@ def assemble(out, n_configs: int) -> dict:
         srows += [{"config_id": i, **v} for v in meta.get("stacks", [])]
         rods[f"config_{i:05d}"] = xy
     configs = pd.DataFrame(rows)
-    extra = [c for c in configs.columns if c not in CONFIG_COLUMNS]
-    configs = configs.reindex(columns=CONFIG_COLUMNS + extra)
+    columns = list(CONFIG_COLUMNS if columns is None else columns)
+    extra = [c for c in configs.columns if c not in columns]
+    configs = configs.reindex(columns=columns + extra)
     branches = pd.DataFrame(brows).reindex(columns=BRANCH_COLUMNS)
     voids = pd.DataFrame(vrows).reindex(columns=VOID_COLUMNS)
     stacks = pd.DataFrame(srows).reindex(columns=STACK_COLUMNS)  # per-stack n_br for the stats
@@ -200,7 +234,7 @@ def assemble(out, n_configs: int) -> dict:
 
 
 def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None = None,
-                 progress: bool = True) -> dict:
+                 progress: bool = True, task=None, columns=None, physics_keys=None) -> dict:
     """Run (or resume) an ensemble and write its tables.
 
     Parameters
@@ -218,6 +252,13 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
         Dask scheduler address.
     progress : bool
         Show a tqdm progress bar (configurations done, ETA).
+    task : callable, optional
+        ``task(config_id, seed, params, out)`` computes one configuration and writes its part
+        file (:func:`write_part`); default :func:`run_config` (quench, anneal).
+    columns : list of str, optional
+        Leading columns of configs.csv (see :func:`assemble`).
+    physics_keys : tuple of str, optional
+        Parameters a re-run into the same folder must agree on (default: quench's).
 
     Returns
     -------
@@ -232,7 +273,7 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
             old = json.loads(pfile.read_text())
         except (OSError, json.JSONDecodeError) as exc:
             raise ConfigError(f"unreadable params.json ({exc})", path=pfile) from None
-        diff = [k for k in _PHYSICS_KEYS
+        diff = [k for k in (_PHYSICS_KEYS if physics_keys is None else physics_keys)
                 if json.dumps(old.get(k)) != json.dumps(params.get(k))]
         if diff:
             raise ConfigError("output folder holds a different ensemble (parameters differ: "
@@ -244,6 +285,7 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
                        "version": __version__})
     seeds = spawn_seeds(params["seed"], n)
     todo = [i for i in range(n) if not _part_ok(part_path(out, i), i, seeds[i])]
+    task = run_config if task is None else task
     bar = None
     if progress:
         from tqdm import tqdm
@@ -254,9 +296,9 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
             with get_executor(workers, scheduler) as ex:
                 if workers == 1 and not scheduler:
                     # inline executor runs at submit: submit one by one so the bar moves
-                    futs = (ex.submit(run_config, i, seeds[i], params, str(out)) for i in todo)
+                    futs = (ex.submit(task, i, seeds[i], params, str(out)) for i in todo)
                 else:
-                    futs = as_completed([ex.submit(run_config, i, seeds[i], params, str(out))
+                    futs = as_completed([ex.submit(task, i, seeds[i], params, str(out))
                                          for i in todo])
                 for fut in futs:
                     fut.result()
@@ -265,42 +307,53 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
     finally:
         if bar is not None:
             bar.close()
-    return assemble(out, n)
+    return assemble(out, n, columns)
 
 
 def _add_common(p, command):
-    p.add_argument("--n-configs", type=int, default=250, help="number of configurations K")
+    p.add_argument("--n-configs", type=int, default=250,
+                   help="number of configurations K (default 250)")
     p.add_argument("--lambda", dest="lam", type=float, default=7e5,
-                   help="confinement Lambda (target Lambda for anneal; paper: 7e5)")
-    p.add_argument("--noise", type=float, default=750.0, help="initial noise D (paper: 750)")
-    p.add_argument("--segments", type=int, default=300, help="number of segments N")
-    p.add_argument("--seed", type=int, default=0, help="ensemble seed")
+                   help="confinement Lambda, dimensionless (target Lambda for anneal; "
+                        "default 7e5, the paper's)")
+    p.add_argument("--noise", type=float, default=750.0,
+                   help="initial noise D, dimensionless (default 750, the paper's)")
+    p.add_argument("--segments", type=int, default=300,
+                   help="number of segments N of the rod of length L (default 300)")
+    p.add_argument("--seed", type=int, default=0, help="ensemble seed (default 0)")
     p.add_argument("--method", choices=["powell", "lbfgs", "scipy-powell"], default="powell",
-                   help="minimiser (powell = the paper's protocol)")
-    p.add_argument("--runs", type=int, default=10, help="Powell runs per configuration")
-    p.add_argument("--maxiter", type=int, default=30, help="iterations per Powell run")
+                   help="minimiser (default powell = the paper's protocol)")
+    p.add_argument("--runs", type=int, default=10,
+                   help="Powell runs per configuration (default 10)")
+    p.add_argument("--maxiter", type=int, default=30,
+                   help="iterations per Powell run (default 30)")
     p.add_argument("--parametrization", choices=["tangent", "bend"], default=None,
                    help="Powell search coordinates (default: tangent for quench = the "
                         "prototype's statistics; bend for anneal = winds into the spiral)")
     p.add_argument("--nematic-runs", type=str, default="1,2",
-                   help="comma-separated Powell runs (0-based) with the nematic term")
-    p.add_argument("--u", type=float, default=100.0, help="nematic strength u (50-150)")
-    p.add_argument("--ftol", type=float, default=1e-4, help="Powell ftol (scipy's default)")
-    p.add_argument("--xtol", type=float, default=1e-4, help="Powell xtol (scipy's default)")
+                   help="comma-separated Powell runs (0-based) with the nematic term "
+                        "(default 1,2)")
+    p.add_argument("--u", type=float, default=100.0,
+                   help="nematic strength u, dimensionless, 50-150 (default 100)")
+    p.add_argument("--ftol", type=float, default=1e-4, help="Powell ftol (default 1e-4, scipy's)")
+    p.add_argument("--xtol", type=float, default=1e-4, help="Powell xtol (default 1e-4, scipy's)")
     p.add_argument("--wall-radius", type=float, default=None,
                    help="hard-wall disk radius in units of L (default: none)")
     p.add_argument("--contact-distance", type=float, default=None,
                    help="contact cut-off of the analysis (units of L; default contacts')")
-    p.add_argument("--workers", type=int, default=1, help="local worker processes")
-    p.add_argument("--scheduler", default=None, help="Dask scheduler address")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--workers", type=int, default=1, help="local worker processes (default 1)")
+    p.add_argument("--scheduler", default=None,
+                   help="Dask scheduler address, e.g. tcp://host:8786 (default: local workers)")
+    p.add_argument("--no-progress", action="store_true",
+                   help="no progress bar (default: a bar on stderr)")
+    p.add_argument("--out", required=True,
+                   help="output folder (created; a re-run with the same parameters resumes)")
     if command == "anneal":
         p.add_argument("--lambda-start", dest="lam_start", type=float, default=1e3,
-                       help="initial Lambda of the ramp")
-        p.add_argument("--stages", type=int, default=24, help="number of Lambda stages")
+                       help="initial Lambda of the ramp (default 1e3)")
+        p.add_argument("--stages", type=int, default=24, help="number of Lambda stages (default 24)")
         p.add_argument("--ramp", choices=["geometric", "linear"], default="geometric",
-                       help="Lambda schedule")
+                       help="Lambda schedule (default geometric)")
     p.set_defaults(func=run, command=command)
 
 
@@ -381,4 +434,5 @@ def add_subparser(sub):
 
 
 __all__ = ["run_ensemble", "run_config", "assemble", "minimize_config", "add_subparser",
+           "analysis_records", "write_part",
            "CONFIG_COLUMNS", "BRANCH_COLUMNS", "VOID_COLUMNS"]

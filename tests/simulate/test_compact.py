@@ -1,0 +1,135 @@
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from simulate import compact
+from simulate.cli import main as simulate_main
+
+EPS = 2.0
+N = 64
+SMALL = ["--epsilon", str(EPS), "--segments", str(N), "--n-configs", "2", "--no-progress"]
+
+
+def _segment_distances(xy):
+    """Brute force, numpy only: distance of every pair of non-adjacent segments (i, j >= i+2).
+
+    In the plane two segments that do not cross are as close as the closest of their four
+    end-to-segment distances; crossing pairs get 0."""
+    a, b = xy[:-1], xy[1:]
+    i, j = np.triu_indices(len(a), k=2)
+
+    def pt_seg(p, s0, s1):
+        u = s1 - s0
+        t = np.clip(np.einsum("ij,ij->i", p - s0, u) / np.einsum("ij,ij->i", u, u), 0, 1)
+        return np.hypot(*(s0 + t[:, None] * u - p).T)
+
+    d = np.minimum.reduce([pt_seg(a[i], a[j], b[j]), pt_seg(b[i], a[j], b[j]),
+                           pt_seg(a[j], a[i], b[i]), pt_seg(b[j], a[i], b[i])])
+
+    def orient(p, q, r):
+        return np.sign((q[:, 0] - p[:, 0]) * (r[:, 1] - p[:, 1])
+                       - (q[:, 1] - p[:, 1]) * (r[:, 0] - p[:, 0]))
+
+    cross = ((orient(a[i], b[i], a[j]) != orient(a[i], b[i], b[j]))
+             & (orient(a[j], b[j], a[i]) != orient(a[j], b[j], b[i])))
+    return np.where(cross, 0.0, d)
+
+
+@pytest.fixture(scope="module")
+def rod():
+    p = compact.CompactParams(epsilon=EPS, n_segments=N)
+    return p, compact.compact_rod(p, np.random.default_rng(3))
+
+
+def test_brute_force_distances_see_overlaps():
+    # the independent check itself: a crossing and a near pair are caught, neighbours ignored
+    xy = np.array([[0, 0], [1, 0], [1, 1], [0.5, -1], [0.5, -2.0]], float)
+    d = _segment_distances(xy)
+    assert d.min() == 0.0
+    straight = np.c_[np.linspace(0, 1, 6), np.zeros(6)]
+    assert _segment_distances(straight).min() == pytest.approx(0.2)
+
+
+def test_final_rod_no_overlap_inside_wall_length(rod):
+    p, r = rod
+    xy = r.xy
+    assert xy.shape == (N + 1, 2)
+    h = p.h
+    assert h == pytest.approx(0.005 / (2 * np.pi * EPS))
+    assert r.wall_radius == pytest.approx(1 / (2 * np.pi * EPS))
+    d = _segment_distances(xy)
+    assert d.min() >= h
+    assert r.min_distance == pytest.approx(min(d.min(), 2 * h), rel=1e-9)
+    assert np.hypot(*xy.T).max() <= r.wall_radius - h / 2
+    seg = np.hypot(*np.diff(xy, axis=0).T)
+    assert abs(seg.sum() - 1.0) < 1e-3 and np.allclose(seg, 1 / N, rtol=1e-6)
+    # it was compacted: the initial shape did not fit in the wall
+    assert np.hypot(*r.xy0.T).max() > r.wall_radius
+    # and it is bent to fit (a straight rod has zero bending energy)
+    assert r.energy_bending > 50
+
+
+def test_seeded_reproducibility(rod):
+    p, r = rod
+    again = compact.compact_rod(p, np.random.default_rng(3))
+    assert np.array_equal(r.xy, again.xy)
+    other = compact.compact_rod(p, np.random.default_rng(4))
+    assert not np.allclose(r.xy0, other.xy0)
+
+
+def test_cli_outputs_and_resume(tmp_path, monkeypatch):
+    out = tmp_path / "c"
+    assert simulate_main(["compact", *SMALL, "--seed", "5", "--out", str(out)]) == 0
+    c = pd.read_csv(out / "configs.csv")
+    assert list(c.columns[:len(compact.CONFIG_COLUMNS)]) == compact.CONFIG_COLUMNS
+    assert list(c.config_id) == [0, 1]
+    assert np.allclose(c.epsilon, EPS) and np.allclose(c.wall_radius, 1 / (2 * np.pi * EPS))
+    assert (c.min_distance >= c.thickness).all()
+    assert (c.max_radius <= c.wall_radius - c.thickness / 2).all()
+    assert "n_iterations" in c.columns and (c.n_iterations > 0).all()
+    params = json.loads((out / "params.json").read_text())
+    h = 0.005 / (2 * np.pi * EPS)
+    assert params["thickness"] == pytest.approx(h)
+    assert params["wall_radius"] == pytest.approx(1 / (2 * np.pi * EPS))
+    assert params["contact_distance"] == pytest.approx(3 * h) and "version" in params
+    rods = np.load(out / "rods.npz")
+    assert sorted(rods.files) == ["config_00000", "config_00001"]
+    for name in ("branches.csv", "stacks.csv", "voids.csv"):
+        assert (out / name).exists()
+    # resume: finished configurations are skipped, a missing one is redone identically
+    first = rods["config_00001"].copy()
+    (out / "parts" / "config_00001.npz").unlink()
+    calls = []
+    real = compact.compact_rod
+    monkeypatch.setattr(compact, "compact_rod", lambda *a, **k: calls.append(1) or real(*a, **k))
+    assert simulate_main(["compact", *SMALL, "--seed", "5", "--out", str(out)]) == 0
+    assert len(calls) == 1
+    assert np.array_equal(np.load(out / "rods.npz")["config_00001"], first)
+    assert simulate_main(["compact", *SMALL, "--seed", "5", "--out", str(out)]) == 0
+    assert len(calls) == 1
+    # a different ensemble in the same folder is refused
+    assert simulate_main(["compact", *SMALL, "--seed", "6", "--out", str(out)]) == 2
+
+
+@pytest.mark.parametrize("bad, word", [
+    (["--epsilon", "0"], "--epsilon"),
+    (["--epsilon", "-3"], "--epsilon"),
+    (["--epsilon", "nan"], "--epsilon"),
+    (["--epsilon", "2", "--segments", "20"], "--segments"),
+    (["--epsilon", "2", "--thickness", "0"], "--thickness"),
+    (["--epsilon", "2", "--thickness", "0.01"], "half a segment"),
+    (["--epsilon", "30", "--segments", "1000", "--thickness", "0.0004"], "fill"),
+    (["--epsilon", "2", "--n-configs", "0"], "--n-configs"),
+    (["--epsilon", "2", "--contact-distance", "1e-5"], "--contact-distance"),
+    (["--epsilon", "2", "--noise", "inf"], "--noise"),
+])
+def test_bad_options_exit_2_one_line(tmp_path, capsys, bad, word):
+    out = tmp_path / "never"
+    argv = ["compact", "--segments", str(N), *bad, "--no-progress", "--out", str(out)]
+    assert simulate_main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert str(out) in err and word in err
+    assert not out.exists()
