@@ -660,6 +660,9 @@ def compact_rod(params: CompactParams, rng) -> CompactResult:
         for key, i in (("iterations", 1), ("builds", 2), ("restarts", 3), ("stiffenings", 6)):
             stats[key] += int(out[i])
         k_phys = out[7] * float(n) ** 3
+        if not (math.isfinite(out[4]) and np.isfinite(xy).all()):
+            raise AnalysisError(f"the relaxation diverged at N = {n}, R = {out[0]:.5g} "
+                                "(non-finite positions or forces)")
         return out
 
     for lvl, n in enumerate(lev):
@@ -678,8 +681,8 @@ def compact_rod(params: CompactParams, rng) -> CompactResult:
     stats["force"] = float(last[4] / (2.0 * ds / r_end ** 3))
     stats["compression"] = float(last[5])
     wall_s = time.perf_counter() - t0
-    if not np.isfinite(xy).all():
-        raise AnalysisError("the relaxation diverged (non-finite node positions)")
+    if not (np.isfinite(xy).all() and math.isfinite(last[4])):
+        raise AnalysisError("the relaxation diverged (non-finite positions or forces)")
     if last[0] > r_end * (1 + 1e-12):
         raise AnalysisError(f"the wall stopped at R = {last[0]:.5g} before {r_end:.5g} "
                             "(relaxation too slow: raise --max-iter)")
