@@ -63,6 +63,7 @@ closed curve) and frictionless. Measured cost and statistics: ``docs/validation/
 """
 from __future__ import annotations
 
+import argparse
 import math
 import time
 from dataclasses import asdict, dataclass, field
@@ -839,7 +840,7 @@ def run(args) -> int:
     except ParameterError as exc:
         raise ParameterError(exc.cause, args.out) from None
     tables = run_ensemble(params, args.out, workers=args.workers, scheduler=args.scheduler,
-                          progress=not args.no_progress, task=run_config,
+                          progress=args.progress, task=run_config,
                           columns=CONFIG_COLUMNS, physics_keys=_PHYSICS_KEYS)
     c = tables["configs"]
     print(f"{len(c)} configurations -> {args.out}: epsilon {params['epsilon']:g} (R = "
@@ -873,8 +874,8 @@ def add_subparser(sub):
     p.add_argument("--workers", type=int, default=1, help="local worker processes (default 1)")
     p.add_argument("--scheduler", default=None,
                    help="Dask scheduler address, e.g. tcp://host:8786 (default: local workers)")
-    p.add_argument("--no-progress", action="store_true",
-                   help="no progress bar (default: a bar on stderr)")
+    p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
+                   help="progress bar on stderr (default: only when stderr is a terminal)")
     p.add_argument("--out", required=True,
                    help="output folder (created; a re-run with the same parameters resumes)")
     p.set_defaults(func=run, command="compact")

@@ -28,6 +28,7 @@ total energy 31 (paper 61), branch energy 0.62 (0.31), branch length 1.26 (0.4).
 """
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import time
@@ -234,7 +235,7 @@ def assemble(out, n_configs: int, columns=None) -> dict:
 
 
 def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None = None,
-                 progress: bool = True, task=None, columns=None, physics_keys=None) -> dict:
+                 progress: bool | None = None, task=None, columns=None, physics_keys=None) -> dict:
     """Run (or resume) an ensemble and write its tables.
 
     Parameters
@@ -250,8 +251,9 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
         Local worker processes (1 = inline).
     scheduler : str, optional
         Dask scheduler address.
-    progress : bool
-        Show a tqdm progress bar (configurations done, ETA).
+    progress : bool or None
+        Show a tqdm progress bar (configurations done, ETA) on stderr; None: only when stderr
+        is a terminal.
     task : callable, optional
         ``task(config_id, seed, params, out)`` computes one configuration and writes its part
         file (:func:`write_part`); default :func:`run_config` (quench, anneal).
@@ -287,10 +289,11 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
     todo = [i for i in range(n) if not _part_ok(part_path(out, i), i, seeds[i])]
     task = run_config if task is None else task
     bar = None
-    if progress:
+    if progress is not False:
         from tqdm import tqdm
 
-        bar = tqdm(total=n, initial=n - len(todo), unit="config", desc=params["command"])
+        bar = tqdm(total=n, initial=n - len(todo), unit="config", desc=params["command"],
+                   disable=None if progress is None else not progress)
     try:
         if todo:
             with get_executor(workers, scheduler) as ex:
@@ -344,8 +347,8 @@ def _add_common(p, command):
     p.add_argument("--workers", type=int, default=1, help="local worker processes (default 1)")
     p.add_argument("--scheduler", default=None,
                    help="Dask scheduler address, e.g. tcp://host:8786 (default: local workers)")
-    p.add_argument("--no-progress", action="store_true",
-                   help="no progress bar (default: a bar on stderr)")
+    p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
+                   help="progress bar on stderr (default: only when stderr is a terminal)")
     p.add_argument("--out", required=True,
                    help="output folder (created; a re-run with the same parameters resumes)")
     if command == "anneal":
@@ -414,7 +417,7 @@ def run(args) -> int:
     except ParameterError as exc:
         raise ParameterError(exc.cause, args.out) from None
     tables = run_ensemble(params, args.out, workers=args.workers, scheduler=args.scheduler,
-                          progress=not args.no_progress)
+                          progress=args.progress)
     c = tables["configs"]
     print(f"{len(c)} configurations -> {args.out}: <E> = {c.energy_total.mean():.1f} "
           f"(bending {c.energy_bending.mean():.1f}, confinement "

@@ -117,3 +117,16 @@ def test_other_methods(command, extra, first, tmp_path):
     assert not np.allclose(c.energy_total, _configs(first).energy_total)
     params = json.loads((out / "params.json").read_text())
     assert params["command"] == command
+
+
+def test_cli_quench_stderr_holds_no_progress_bar_when_not_a_terminal(tmp_path):
+    """Run from a script (stderr not a terminal), quench prints no progress bar."""
+    import subprocess
+    import sys
+
+    argv = [a for a in ARGS if a != "--no-progress"]
+    argv[argv.index("--n-configs") + 1] = "1"
+    r = subprocess.run([sys.executable, "-m", "simulate", "quench", *argv, "--out",
+                        str(tmp_path / "q")], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert r.stderr == ""
