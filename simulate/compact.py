@@ -12,7 +12,7 @@ Protocol
 --------
 * The rod: open, length L = 1, N segments of fixed length 1/N (restored exactly after every
   step, so the final length is 1 to rounding), bending energy ``int (R'')^2 ds`` discretised
-  as in :mod:`simulate.energy` (paper Eq. "modreduced" without the confinement term), hard core
+  as in :mod:`simulate.energy` (paper Eq. (8) without the confinement term), hard core
   of thickness h: non-adjacent segments stay at least h apart.
 * A hard circular wall of radius R shrinks from around the initial shape to
   ``R = 1 / (2 pi epsilon)``; every node stays within ``R - h/2``. This is the experiment's
@@ -260,7 +260,7 @@ def _compress(x, r_start, r_end, h_ratio, margin, rate, k, dt_max, max_iter, fto
         hc = (1.0 + margin) * h
         rw = big_r - 0.5 * hc
         ovl = 0.0
-        # bending force: paper Eq. "modreduced", finite differences (simulate.energy)
+        # bending force: paper Eq. (8), finite differences (simulate.energy)
         f[:] = 0.0
         for i in range(1, n):
             wx = 2.0 * n3 * (x[i + 1, 0] - 2.0 * x[i, 0] + x[i - 1, 0])
@@ -447,7 +447,7 @@ class CompactParams:
     Attributes
     ----------
     epsilon : float
-        Compaction rate ``L / (2 pi R)`` reached at the end (paper Eq. "eq_epsexp").
+        Compaction rate ``L / (2 pi R)`` reached at the end (paper Eq. (5)).
     n_segments : int
         Number of segments N of the final rod.
     thickness : float, optional

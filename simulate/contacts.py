@@ -61,12 +61,12 @@ class RodAnalysis:
     Attributes
     ----------
     rg : float
-        Radius of gyration ``sqrt(int R^2 ds)`` (paper Eq. "raygir", trapezoid rule).
+        Radius of gyration ``sqrt(int R^2 ds)`` (paper Eq. (11), trapezoid rule).
     epsilon, epsilon_sqrt2 : float
         ``1/(2 pi Rg)`` (paper's definition) and ``1/(2 pi sqrt(2) Rg)`` (disk of radius
         sqrt(2) Rg; the reading under which the paper's <eps> = 2.3 matches Rg = 0.05-0.07).
     energy_total, energy_bending, energy_confinement : float
-        Whole-rod energies (paper Eq. "modreduced", hard core 0).
+        Whole-rod energies (paper Eq. (8), hard core 0).
     n_stacks, n_branches, n_junctions, n_voids : int
         ``n_branches = sum(stacks.n_br)``.
     multiplicity : (N+1,) int array
@@ -309,7 +309,7 @@ def analyze_rod(xy, *, lam: float, contact_distance: float | None = None,
 
 
 class _WholeRod(NamedTuple):
-    """Energies and size of the whole rod (paper Eqs. "modreduced", "raygir")."""
+    """Energies and size of the whole rod (paper Eqs. (8) and (11))."""
 
     e_bend: float
     e_conf: float

@@ -1,4 +1,4 @@
-"""Energy of the confined rod, paper Eq. "modreduced" (section "Energy functional").
+"""Energy of the confined rod, paper Eq. (8) (section "Energy functional").
 
 ``E = int (R'')^2 ds + Lambda int R^2 ds + hard core``, with ``R`` and ``s`` in units of L.
 Discretisation (N segments, ``ds = 1/N``, nodes ``xy`` (N+1, 2)):
@@ -32,7 +32,7 @@ def _second_differences(xy):
 
 
 def bending_energy(xy) -> float:
-    """Bending energy ``int (R'')^2 ds`` by finite differences (paper Eq. "modreduced").
+    """Bending energy ``int (R'')^2 ds`` by finite differences (paper Eq. (8)).
 
     Parameters
     ----------
@@ -102,7 +102,7 @@ def confinement_energy(xy, lam: float) -> float:
 
 def total_energy(xy, lam: float, *, wall_radius: float | None = None,
                  hard_core: bool = True) -> float:
-    """Total energy Ẽ of Eq. "modreduced": bending + confinement + hard core.
+    """Total energy Ẽ of Eq. (8): bending + confinement + hard core.
 
     Parameters
     ----------

@@ -10,7 +10,7 @@
 * ``DIR/branches.csv`` -- config_id, branch_id, length, kappa_plus, kappa_pm, energy_bending,
   energy_confinement, energy (from :func:`simulate.contacts.analyze_rod`);
 * ``DIR/voids.csv`` -- config_id, area, perimeter, shape_ratio, n_edges;
-* ``DIR/stacks.csv`` -- config_id, stack_id, n_br, length (for rho(n_br) and paper Eqs. 3-4);
+* ``DIR/stacks.csv`` -- config_id, stack_id, n_br, length (for rho(n_br) and paper Eqs. (14)-(15));
 * ``DIR/rods.npz`` -- node positions of every configuration, key ``config_XXXXX``;
 * ``DIR/params.json`` -- all parameters and the package version.
 

@@ -88,7 +88,7 @@ def center_of_mass(xy) -> np.ndarray:
 
 
 def radius_of_gyration(xy) -> float:
-    """``Rg = sqrt(int R^2 ds)`` about the origin (paper Eq. "raygir", L = 1)."""
+    """``Rg = sqrt(int R^2 ds)`` about the origin (paper Eq. (11), L = 1)."""
     xy = np.asarray(xy, dtype=np.float64)
     w = trapezoid_weights(xy.shape[0] - 1)
     return float(np.sqrt(w @ np.einsum("ij,ij->i", xy, xy)))

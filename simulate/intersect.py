@@ -1,4 +1,4 @@
-"""Self-intersection of a polyline (the hard core of Eq. "modreduced"), in numba.
+"""Self-intersection of a polyline (the hard core of Eq. (8)), in numba.
 
 Rules: segments ``i`` and ``i+1`` share a node and never count as intersecting; any other pair
 that touches (a common point, an endpoint on the other segment, a collinear overlap) IS an

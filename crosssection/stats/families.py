@@ -7,11 +7,11 @@ paper writes none.
 =====================  ======================  ==============================================
 name                   parameters              density
 =====================  ======================  ==============================================
-``exponential``        mu                      exp(-x/mu)/mu                          (eq_exp)
+``exponential``        mu                      exp(-x/mu)/mu                          (Eq. (1))
 ``gamma``              alpha, chi              x^(alpha-1) exp(-x/chi)/(Gamma(alpha) chi^alpha)
-                                               (eq_gam; chi is the *scale*, the mean is alpha chi)
-``lognormal``          mu, sigma               mean and std of ln x                   (eq_logn)
-``gaussian``           mu, sigma                                                      (eq_gaus)
+                                               (Eq. (3); chi is the *scale*, the mean is alpha chi)
+``lognormal``          mu, sigma               mean and std of ln x                   (Eq. (2))
+``gaussian``           mu, sigma                                                      (Eq. (17))
 ``bose_einstein``      alpha, beta, x_lo, x_hi alpha/(exp(beta x) - 1) on [x_lo, x_hi]
 ``powerlaw_cutoff``    tau, chi, x_min         x^(-tau) exp(-x/chi)/Z on [x_min, inf)
 =====================  ======================  ==============================================
@@ -386,7 +386,7 @@ class ScipyFamily(ParametricFamily):
 
 @register
 class Exponential(ScipyFamily):
-    """exp(-x/mu)/mu (paper eq_exp). Truncated MLE in closed form: memoryless, x - c is
+    """exp(-x/mu)/mu (paper, Eq. (1)). Truncated MLE in closed form: memoryless, x - c is
     exponential with the same mu (the paper's note on <l> against mu)."""
 
     name = "exponential"
@@ -422,7 +422,7 @@ class Exponential(ScipyFamily):
 
 @register
 class Gamma(ScipyFamily):
-    """x^(alpha-1) exp(-x/chi)/(Gamma(alpha) chi^alpha) (paper eq_gam, chi the scale)."""
+    """x^(alpha-1) exp(-x/chi)/(Gamma(alpha) chi^alpha) (paper, Eq. (3); chi the scale)."""
 
     name = "gamma"
     title = "Gamma"
@@ -473,7 +473,7 @@ class Gamma(ScipyFamily):
 
 @register
 class LogNormal(ScipyFamily):
-    """Log-normal (paper eq_logn): mu and sigma are the mean and std of ln x."""
+    """Log-normal (paper, Eq. (2)): mu and sigma are the mean and std of ln x."""
 
     name = "lognormal"
     title = "log-normal"
@@ -525,7 +525,7 @@ class LogNormal(ScipyFamily):
 
 @register
 class Gaussian(ScipyFamily):
-    """Gaussian (paper eq_gaus); truncated at the detection limit when there is one."""
+    """Gaussian (paper, Eq. (17)); truncated at the detection limit when there is one."""
 
     name = "gaussian"
     title = "Gaussian"

@@ -605,7 +605,8 @@ def fit_all(x, families=PAPER_FAMILIES, *, truncation=None, seed=0, n_boot: int 
 def summary_table(results: dict, best: str | None) -> pd.DataFrame:
     """One row per family.
 
-    Columns: family, n, k, truncated; p1_name, p1, p1_lo, p1_hi, ... for every parameter
+    Columns: family, n, k, truncated, counts (fitted as a law on the integers);
+    p1_name, p1, p1_lo, p1_hi, ... for every parameter
     (up to :data:`MAX_PARAMS`); loglik, aic, bic, delta_bic (to the best selectable fit),
     ad_statistic, pvalue, n_mc, p_text, selected, rejected, note.
     """
@@ -613,7 +614,8 @@ def summary_table(results: dict, best: str | None) -> pd.DataFrame:
     finite = [r.bic for r in results.values() if r.selectable]
     bmin = min(finite) if finite else np.nan
     for f, r in results.items():
-        row = {"family": f, "n": r.n, "k": r.k, "truncated": r.truncated}
+        row = {"family": f, "n": r.n, "k": r.k, "truncated": r.truncated,
+               "counts": bool(r.discrete)}
         for i, nm in enumerate(FAMILIES[f].param_names, 1):
             lo, hi = r.ci.get(nm, (np.nan, np.nan))
             row.update({f"p{i}_name": nm, f"p{i}": r.params.get(nm, np.nan),
@@ -624,7 +626,7 @@ def summary_table(results: dict, best: str | None) -> pd.DataFrame:
                     "selected": f == best, "rejected": r.rejected, "note": r.note})
         rows.append(row)
     pcols = [f"p{i}{s}" for i in range(1, MAX_PARAMS + 1) for s in ("_name", "", "_lo", "_hi")]
-    cols = ["family", "n", "k", "truncated", *pcols, "loglik", "aic", "bic", "delta_bic",
+    cols = ["family", "n", "k", "truncated", "counts", *pcols, "loglik", "aic", "bic", "delta_bic",
             "ad_statistic", "pvalue", "n_mc", "p_text", "selected", "rejected", "note"]
     return pd.DataFrame(rows).reindex(columns=cols)
 

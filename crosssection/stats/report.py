@@ -323,7 +323,7 @@ def plot_pdf(source, quantity: str = "e", *, set_name: str | None = None, seed: 
 
 
 def network_figure(res: StatsResult, colors=None):
-    """N_br vs N_l with Eqs. 1 and 3, and n_br_bar vs N_l with Eqs. 2 and 4, per set."""
+    """N_br vs N_l with Eqs. (12) and (14), and n_br_bar vs N_l with Eqs. (13) and (15), per set."""
     pc = res.per_config
     colors = colors or set_colors(list(dict.fromkeys(pc["set"])))
     fig, axes = _subplots(1, 2, figsize=(12.5, 4.6))
@@ -332,7 +332,7 @@ def network_figure(res: StatsResult, colors=None):
         c = colors[s]
         rel = res.relations[res.relations["set"] == s].set_index("relation")["fitted"]
         nbr = res.macro.query("set == @s and region == 'all'")["n_br"].iloc[0]
-        if not np.isfinite(nbr):  # no per-stack counts (simulations): the Eq. 3 fitted slope
+        if not np.isfinite(nbr):  # no per-stack counts (simulations): the Eq. (14) fitted slope
             nbr = rel.get("eq3_slope", np.nan)
         axes[0].plot(g["N_l"], g["N_br"], "o", color=c, ms=4, alpha=0.8,
                      label=f"{s}: configurations")
@@ -342,13 +342,13 @@ def network_figure(res: StatsResult, colors=None):
         ratio = _nanmean(g["sqrt_s_bar"] / g["l_bar"])  # NaN for scans without voids
         eps = _nanmean(g["epsilon"])
         if np.isfinite(ratio) and np.isfinite(eps):
-            eq1 = EQ1_CONST * eps * ratio * np.sqrt(nl)  # Eq. 1 with set means
-            axes[0].plot(nl, eq1, "-", color=c, label=f"{s}: Eq. 1 with the set means")
-            axes[1].plot(nl, eq1 / nl, "-", color=c, label=f"{s}: Eq. 2")
+            eq1 = EQ1_CONST * eps * ratio * np.sqrt(nl)  # Eq. (12) with set means
+            axes[0].plot(nl, eq1, "-", color=c, label=f"{s}: Eq. (12) with the set means")
+            axes[1].plot(nl, eq1 / nl, "-", color=c, label=f"{s}: Eq. (13)")
         if np.isfinite(nbr):
             axes[0].plot(nl, nbr * nl, "--", color=c,
-                         label=f"{s}: Eq. 3, <n_br> = {nbr:.2g}")
-            axes[1].axhline(nbr, ls="--", color=c, label=f"{s}: Eq. 4, <n_br> = {nbr:.2g}")
+                         label=f"{s}: Eq. (14), <n_br> = {nbr:.2g}")
+            axes[1].axhline(nbr, ls="--", color=c, label=f"{s}: Eq. (15), <n_br> = {nbr:.2g}")
     axes[0].set(xlabel="number of stacks per configuration $N_l$",
                 ylabel="number of branches per configuration $N_{br}$",
                 title="branches against stacks")
@@ -476,9 +476,9 @@ def write_report(ens: Ensemble, out_dir, *, opts: StatsOptions | None = None,
                 figs.append((f"Distribution of the {WORDS[q]}", f"figures/{name}",
                              _pdf_caption(q)))
         scatter = [
-            ("network_Nbr_vs_Nl.png", "Branches and stacks per configuration (Eqs. 1-4)",
-             "Each point is one configuration; solid lines are Eqs. 1-2 with the set's mean "
-             "compaction, void size and branch length, dashed lines Eqs. 3-4 with its mean "
+            ("network_Nbr_vs_Nl.png", "Branches and stacks per configuration (Eqs. (12)-(15))",
+             "Each point is one configuration; solid lines are Eqs. (12)-(13) with the set's mean "
+             "compaction, void size and branch length, dashed lines Eqs. (14)-(15) with its mean "
              "number of branches per stack.", lambda: network_figure(res, colors)),
             ("sqrt_s_vs_l.png", "Void size against branch length",
              "Each point is one configuration: the square root of its mean void area against "
@@ -577,12 +577,12 @@ COLUMN_NAMES = {
     "mean_minus_cut": "<x> - <cut> (= μ for the exponential)", "rejected": "why rejected",
 }
 RELATION_WORDS = {
-    "eq1_const": "Eq. 1 constant C in N_br = C ε (√s̄/l̄) √N_l (expected 2√(π/3))",
+    "eq1_const": "Eq. (12) constant C in N_br = C ε (√s̄/l̄) √N_l (expected 2√(π/3))",
     "slope_sqrt_s_vs_l": "slope of √s̄ against l̄ (paper 1.1)",
     "eq1_eps_sqrtNl": "K in N_br = K ε √N_l (expected C × slope)",
-    "eq3_slope": "Eq. 3 slope of N_br against N_l (expected <n_br>)",
-    "eq4_fluct": "Eq. 4 mean relative deviation of n̄_br from <n_br>",
-    "eq5": "Eq. 5 <n_br>√<N_l>/ε (paper 2.2√(π/3))",
+    "eq3_slope": "Eq. (14) slope of N_br against N_l (expected <n_br>)",
+    "eq4_fluct": "Eq. (15) mean relative deviation of n̄_br from <n_br>",
+    "eq5": "Eq. (16) <n_br>√<N_l>/ε (paper 2.2√(π/3))",
     "n_br_exp_mu": "mean of the exponential (geometric) law of n_br (expected <n_br>)",
     "E_vs_Nbr_e": "<E> against <N_br><e>",
 }
@@ -743,7 +743,7 @@ def _html(res: StatsResult, figs, meta, ens: Ensemble | None = None,
         "paper compares it with the number of stacks &lt;N<sub>l</sub>&gt;. The paper's "
         "values below ours.</p>",
         _html_table(_with_paper(res.dof, PAPER_DOF)),
-        "<h2>Stacking relations (paper Eqs. 1-5)</h2>", _html_table(res.relations),
+        "<h2>Stacking relations (paper Eqs. (12)-(16))</h2>", _html_table(res.relations),
         "<h2>Correlations</h2>", _html_table(res.correlations),
         "<h2>Selected laws</h2>",
         _html_table(_selected_table(res)) if res.summaries else "<p>none</p>",

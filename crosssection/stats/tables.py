@@ -1,13 +1,15 @@
-"""The paper's per-set tables, relations (Eqs. 1-5), correlations and distribution fits.
+"""The paper's per-set tables, relations (Eqs. (12)-(16)), correlations and distribution fits.
 
 Everything is computed from an :class:`~crosssection.stats.data.Ensemble` (units of L):
 
-- macro (paper table tab_macro): <N_l>, <N_br>, <n_br>, <s>/L^2, <sqrt(s)/p>, <l>/L;
-- micro (table tab_micro): <kappa_m>L, <l>/L, <E~>, <e>, alpha_e, chi_e, alpha_E, chi_E
-  (Gamma fits, eq_gam, chi = scale);
-- degrees of freedom (table tab_res): alpha_E/alpha_e against <N_l>;
-- relations (section "Stacking"): Eq. 1 constant, slope of sqrt(s_bar) vs l_bar, Eq. 3 slope,
-  Eq. 5 ratio, n_br exponential;
+- macro (the paper's table of averages over all realizations): <N_l>, <N_br>, <n_br>,
+  <s>/L^2, <sqrt(s)/p>, <l>/L;
+- micro (the paper's table of curvatures and energies): <kappa_m>L, <l>/L, <E~>, <e>,
+  alpha_e, chi_e, alpha_E, chi_E
+  (Gamma fits of the paper's Eq. (3), chi = scale);
+- degrees of freedom (the paper's table of alpha_E/alpha_e): alpha_E/alpha_e against <N_l>;
+- relations (section "Stacking"): Eq. (12) constant, slope of sqrt(s_bar) vs l_bar, Eq. (14) slope,
+  Eq. (16) ratio, n_br exponential;
 - correlations (Pearson r): l with 1/kappa_m (paper 0.45), e with l kappa_m^2 (0.6),
   E with N_br (0.75);
 - fits of every distribution with model selection, truncation-aware where a detection limit
@@ -26,8 +28,9 @@ import pandas as pd
 from crosssection.stats import fits as F
 from crosssection.stats.data import SIM_REGION, Ensemble
 
-EQ1_CONST = 2 * np.sqrt(np.pi) / np.sqrt(3)  # Eq. 1: N_br = (2 sqrt(pi)/sqrt(3)) eps (sqrt(s)/l) sqrt(N_l)
-EQ5_PAPER = 2.2 * np.sqrt(np.pi / 3)  # Eq. 5
+# Eq. (12): N_br = (2 sqrt(pi)/sqrt(3)) eps (sqrt(s)/l) sqrt(N_l)
+EQ1_CONST = 2 * np.sqrt(np.pi) / np.sqrt(3)
+EQ5_PAPER = 2.2 * np.sqrt(np.pi / 3)  # Eq. (16)
 PAPER_SLOPE_S_L = 1.1  # Fig. topolo_macro b
 PAPER_CORR = {"l_vs_inv_kappa_m": 0.45, "e_vs_l_kappa_m2": 0.6, "E_vs_N_br": 0.75}
 
@@ -120,7 +123,7 @@ def per_config_table(ens: Ensemble) -> pd.DataFrame:
     """Per configuration: N_l, N_br, n_br_bar = N_br/N_l, epsilon, E, s_bar, l_bar, e_bar.
 
     s_bar and l_bar are the configuration means of void area and branch length (units of L),
-    the quantities of Eq. 1.
+    the quantities of Eq. (12).
     """
     c = ens.configs.copy()
     key = ["set", "config_id"]
@@ -135,7 +138,7 @@ def per_config_table(ens: Ensemble) -> pd.DataFrame:
 
 
 def macro_table(ens: Ensemble) -> pd.DataFrame:
-    """Paper table tab_macro per set and region."""
+    """The paper's table of averages (stacks, branches, voids) per set and region."""
     rows = []
     for s in ens.sets:
         e = ens.subset(s)
@@ -305,7 +308,7 @@ def _geometric_mean(mu):
 
 
 def relations_table(ens: Ensemble, per_cfg: pd.DataFrame, summaries: dict) -> pd.DataFrame:
-    """Fitted constants of the paper's Eqs. 1-5 per set.
+    """Fitted constants of the paper's Eqs. (12)-(16) per set.
 
     Rows (relation, fitted, expected):
 

@@ -157,7 +157,7 @@ def test_relations_recover_constants(seed, slope, nbr):
     assert rel.loc["eq4_fluct", "fitted"] == pytest.approx(0.0, abs=1e-12)
     want5 = nbr * np.sqrt(pc["N_l"].mean()) / pc["epsilon"].mean()
     assert rel.loc["eq5", "fitted"] == pytest.approx(want5)
-    # Eq. 1 with data built from it: N_br = C eps sqrt(s)/l sqrt(N_l)
+    # Eq. (12) with data built from it: N_br = C eps sqrt(s)/l sqrt(N_l)
     pc2 = pc.copy()
     pc2["N_br"] = T.EQ1_CONST * pc2["eq1_x"]
     c, r2, _ = T.slope_through_origin(pc2["eq1_x"], pc2["N_br"])
@@ -201,7 +201,7 @@ def test_demo_batch_tables_bulk_periphery_and_truncation(tmp_path):
                         & (res.truncation["region"] == "all")].iloc[0]
     assert tr["naive"] > tr["truncated"]  # naive fit biased upward by l_min
     assert tr["mean_minus_cut"] == pytest.approx(tr["truncated"])
-    # N_br = sum of n_br over stacks, so Eq. 3 holds exactly per configuration
+    # N_br = sum of n_br over stacks, so Eq. (14) holds exactly per configuration
     rel = res.relations.set_index("relation")
     assert rel.loc["eq3_slope", "r2"] == pytest.approx(1.0, abs=0.2)
 
