@@ -44,11 +44,11 @@ LABELS = {
 }
 #: the same quantities in plain words, for captions and tables
 WORDS = {
-    "length_L": "branch length l/L", "kappa_m_L": "mean branch curvature |kappa_m| L",
-    "kappa_plus_L": "mean absolute branch curvature kappa_+ L",
+    "length_L": "branch length l/L", "kappa_m_L": "mean branch curvature |κ_m| L",
+    "kappa_plus_L": "mean absolute branch curvature κ₊ L",
     "e": "branch bending energy e", "E": "total energy E of a configuration",
-    "n_br": "number of branches per stack n_br", "area_L2": "void area s/L^2",
-    "shape_ratio": "void shape ratio sqrt(s)/p",
+    "n_br": "number of branches per stack n_br", "area_L2": "void area s/L²",
+    "shape_ratio": "void shape ratio √s/p",
 }
 REGION_WORDS = {"all": "whole system", "bulk": "bulk (no wall contact)",
                 "periphery": "periphery (touching the wall)"}
@@ -77,6 +77,17 @@ def _log_ticks(axis):
 
     axis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
     axis.set_minor_formatter(NullFormatter())
+
+
+def _linear_ticks(axis):
+    """At most 5 labels, with a common power of ten beside the axis for values below 1e-2 or
+    above 1e4: plain labels such as 0.00015 on a 4-inch axis run into each other."""
+    from matplotlib.ticker import MaxNLocator, ScalarFormatter
+
+    axis.set_major_locator(MaxNLocator(nbins=5))
+    fmt = ScalarFormatter(useMathText=True)
+    fmt.set_powerlimits((-2, 4))
+    axis.set_major_formatter(fmt)
 
 
 def _nanmean(v) -> float:
@@ -169,7 +180,7 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
     fig, axes = _subplots(len(regs), 2, figsize=(12.5, 0.4 + 3.6 * len(regs)))
     label = LABELS.get(quantity, quantity)
     for row, reg in zip(axes, regs):
-        ymin_log, ymax_lin = np.inf, 0.0
+        ymin_log, ymax_lin, x_min = np.inf, 0.0, np.inf
         for s in sets:
             summ = res.summaries.get((s, reg, quantity))
             if summ is None:
@@ -177,6 +188,7 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
             x, cut = _sample(ens, s, reg, quantity, summ)
             if x.size == 0:
                 continue
+            x_min = min(x_min, float(x.min()))
             c = colors[s]
             best = summ.results.get(summ.best) if summ.best else None
             n = x.size
@@ -248,6 +260,10 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
                 ax.xaxis.get_major_locator().set_params(integer=True)
             elif ax.get_xscale() == "log":
                 _log_ticks(ax.xaxis)
+            else:
+                _linear_ticks(ax.xaxis)
+                if ax.get_xlim()[0] < 0 <= x_min:  # no negative ticks under positive data
+                    ax.set_xlim(left=0)
         # one legend per row, outside the log panel: never over the data
         handles, labels = row[1].get_legend_handles_labels()
         # per set: its data, then its law, then the band and the detection limit
@@ -704,7 +720,8 @@ def _html(res: StatsResult, figs, meta, ens: Ensemble | None = None,
         "<style>body{font-family:sans-serif;max-width:1200px;margin:auto;padding:0 1em;"
         "line-height:1.4}table.t{border-collapse:collapse;font-size:12px;margin-bottom:1em}"
         "table.t td,table.t th{border:1px solid #ccc;padding:2px 6px}"
-        "table.t th{background:#f3f3f3}img{max-width:100%}figure{margin:1em 0 2em}"
+        "table.t th{background:#f3f3f3;text-align:left;vertical-align:bottom}"
+        "table.t td{text-align:right}table.t td:first-child{text-align:left}img{max-width:100%}figure{margin:1em 0 2em}"
         "figcaption{font-size:14px;color:#333}.warn{color:#a00}</style></head><body>",
         "<h1>Folding statistics</h1>",
         f"<p>foldstat {html.escape(meta['version'])}; inputs: "

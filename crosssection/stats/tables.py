@@ -156,7 +156,9 @@ def macro_table(ens: Ensemble) -> pd.DataFrame:
             rows.append({"set": s, "region": reg, "n_configs": len(e.configs),
                          "N_l": N_l, "N_br": N_br, "n_br": _mean(st["n_br"]),
                          "s_L2": s_mean, "sqrt_s_over_p": sp, "l_L": _mean(br["length_L"]),
-                         "n_branches": len(br), "n_voids": len(e.voids) if reg == "all" else 0})
+                         "n_branches": len(br),
+                         # voids are counted for the whole system only
+                         "n_voids": len(e.voids) if reg == "all" else np.nan})
     return pd.DataFrame(rows)
 
 

@@ -153,3 +153,36 @@ def test_page_explains_the_method_in_words(tmp_path):
     assert "figures/pdf_n_br.png" in page and "What is seen." in page
     for raw in RAW_NAMES:
         assert raw not in page, raw
+
+
+
+def _overlapping_ticks(fig):
+    """Pairs of tick labels of one axis whose boxes overlap, once the figure is drawn."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    fig.draw(renderer)
+    bad = []
+    for ax in fig.axes:
+        for axis in (ax.xaxis, ax.yaxis):
+            labels = [t for t in axis.get_ticklabels() if t.get_visible() and t.get_text()]
+            boxes = [t.get_window_extent(renderer) for t in labels]
+            bad += [(labels[i].get_text(), labels[j].get_text())
+                    for i in range(len(boxes)) for j in range(i + 1, len(boxes))
+                    if boxes[i].overlaps(boxes[j])]
+    return bad
+
+
+def test_tick_labels_never_run_together(tmp_path):
+    """Small void areas (s/L^2 ~ 1e-4) once gave ten labels like 0.00015 that ran into each
+    other; no panel of any quantity may have overlapping tick labels or negative ticks under
+    positive data."""
+    from crosssection.stats.report import plot_pdf
+
+    b = demo.write_demo_batch(tmp_path / "b", n_images=3, seed=1, sets={"s1": {"n_stacks": 60}})
+    for q in ("area_L2", "length_L", "shape_ratio", "kappa_m_L", "e"):
+        fig = plot_pdf(b, q)
+        assert _overlapping_ticks(fig) == [], q
+        for ax in fig.axes:
+            if ax.get_xscale() == "linear":
+                assert ax.get_xlim()[0] >= 0, q
