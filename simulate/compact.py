@@ -833,7 +833,7 @@ def params_from_args(args) -> dict:
 
 def run(args) -> int:
     """Entry point of ``compact``."""
-    from simulate.ensemble import run_ensemble
+    from simulate.ensemble import report_failures, run_ensemble
 
     try:
         params = params_from_args(args)
@@ -847,7 +847,7 @@ def run(args) -> int:
           f"{params['wall_radius']:.5f}, h = {params['thickness']:.3g}), <E> = "
           f"{c.energy_total.mean():.4g}, <N_l> = {c.n_stacks.mean():.1f}, <N_br> = "
           f"{c.n_branches.mean():.1f}, {c.wall_s.mean():.1f} s per configuration")
-    return 0
+    return report_failures(tables, args.out)
 
 
 def add_subparser(sub):

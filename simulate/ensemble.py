@@ -12,7 +12,10 @@
 * ``DIR/voids.csv`` -- config_id, area, perimeter, shape_ratio, n_edges;
 * ``DIR/stacks.csv`` -- config_id, stack_id, n_br, length (for rho(n_br) and paper Eqs. (14)-(15));
 * ``DIR/rods.npz`` -- node positions of every configuration, key ``config_XXXXX``;
-* ``DIR/params.json`` -- all parameters and the package version.
+* ``DIR/params.json`` -- all parameters and the package version;
+* ``DIR/failures.csv`` -- config_id, seed, error: one line per configuration whose computation
+  raised (its row of configs.csv has the ``error`` and no results; the others go on). A
+  re-run tries the failed configurations again.
 
 Configuration ``i`` always uses the seed ``spawn_seeds(seed, K)[i]``, so results do not depend
 on the number of workers. Every finished configuration is written atomically to
@@ -32,7 +35,7 @@ import argparse
 import json
 import math
 import time
-from concurrent.futures import as_completed
+from concurrent.futures import BrokenExecutor, as_completed
 from pathlib import Path
 
 import numpy as np
@@ -199,11 +202,13 @@ def _part_ok(path, config_id: int, seed: int) -> bool:
         return False
 
 
-def assemble(out, n_configs: int, columns=None) -> dict:
+def assemble(out, n_configs: int, columns=None, failed=None) -> dict:
     """Assemble configs.csv, branches.csv, voids.csv and rods.npz from the part files.
 
     ``columns`` are the leading columns of configs.csv (default :data:`CONFIG_COLUMNS`); the
-    other keys of the rows follow in their order.
+    other keys of the rows follow in their order. ``failed`` maps the id of every
+    configuration that has no part file to ``(seed, error)``: its row holds only
+    ``config_id``, ``seed`` and ``error``, and rods.npz has no entry for it.
 
     Returns
     -------
@@ -212,7 +217,11 @@ def assemble(out, n_configs: int, columns=None) -> dict:
     """
     out = Path(out)
     rows, brows, vrows, srows, rods = [], [], [], [], {}
+    failed = failed or {}
     for i in range(n_configs):
+        if i in failed:
+            rows.append({"config_id": i, "seed": failed[i][0], "error": failed[i][1]})
+            continue
         meta, xy = _read_part(part_path(out, i))
         rows.append(meta["row"])
         brows += [{"config_id": i, **b} for b in meta["branches"]]
@@ -264,7 +273,9 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
 
     Returns
     -------
-    dict of DataFrames (see :func:`assemble`).
+    dict of DataFrames (see :func:`assemble`), and ``"failed"``: DataFrame config_id, seed,
+    error of the configurations whose task raised (also in ``failures.csv``); the others are
+    all computed and written.
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -294,23 +305,46 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
 
         bar = tqdm(total=n, initial=n - len(todo), unit="config", desc=params["command"],
                    disable=None if progress is None else not progress)
+    failed = {}
     try:
         if todo:
             with get_executor(workers, scheduler) as ex:
                 if workers == 1 and not scheduler:
                     # inline executor runs at submit: submit one by one so the bar moves
-                    futs = (ex.submit(task, i, seeds[i], params, str(out)) for i in todo)
+                    done = ((i, ex.submit(task, i, seeds[i], params, str(out))) for i in todo)
                 else:
-                    futs = as_completed([ex.submit(task, i, seeds[i], params, str(out))
-                                         for i in todo])
-                for fut in futs:
-                    fut.result()
+                    ids = {ex.submit(task, i, seeds[i], params, str(out)): i for i in todo}
+                    done = ((ids[f], f) for f in as_completed(ids))
+                for i, fut in done:
+                    try:
+                        fut.result()
+                    except BrokenExecutor:
+                        raise  # a dead pool, not this configuration: stop, a re-run resumes
+                    except Exception as exc:  # noqa: BLE001 - recorded, the ensemble goes on
+                        failed[i] = (int(seeds[i]), f"{type(exc).__name__}: {exc}")
                     if bar is not None:
                         bar.update(1)
     finally:
         if bar is not None:
             bar.close()
-    return assemble(out, n, columns)
+    fail = pd.DataFrame([{"config_id": i, "seed": s, "error": e}
+                         for i, (s, e) in sorted(failed.items())],
+                        columns=["config_id", "seed", "error"])
+    write_csv(out / "failures.csv", fail)
+    tables = assemble(out, n, columns, failed)
+    tables["failed"] = fail
+    return tables
+
+
+def report_failures(tables: dict, out) -> int:
+    """Print one ``warning: OUT: ...`` line on stderr per failed configuration; return the
+    exit status of the command: 3 when some configurations failed, else 0."""
+    import sys
+
+    for r in tables["failed"].itertuples():
+        print(f"warning: {out}: configuration {r.config_id} (seed {r.seed}) failed: {r.error}",
+              file=sys.stderr)
+    return 3 if len(tables["failed"]) else 0
 
 
 def _add_common(p, command):
@@ -422,7 +456,7 @@ def run(args) -> int:
     print(f"{len(c)} configurations -> {args.out}: <E> = {c.energy_total.mean():.1f} "
           f"(bending {c.energy_bending.mean():.1f}, confinement "
           f"{c.energy_confinement.mean():.1f}), <Rg> = {c.rg.mean():.4f}")
-    return 0
+    return report_failures(tables, args.out)
 
 
 def add_subparser(sub):
@@ -436,6 +470,7 @@ def add_subparser(sub):
     _add_common(a, "anneal")
 
 
-__all__ = ["run_ensemble", "run_config", "assemble", "minimize_config", "add_subparser",
+__all__ = ["run_ensemble", "report_failures", "run_config", "assemble", "minimize_config",
+           "add_subparser",
            "analysis_records", "write_part",
            "CONFIG_COLUMNS", "BRANCH_COLUMNS", "VOID_COLUMNS"]

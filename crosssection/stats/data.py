@@ -26,6 +26,7 @@ Common representation (:class:`Ensemble`):
 from __future__ import annotations
 
 import json
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -33,6 +34,7 @@ import numpy as np
 import pandas as pd
 
 from crosssection.core.errors import ConfigError
+from crosssection.quality import QualityWarning
 
 CONFIG_COLS = ["set", "config_id", "N_l", "N_br", "n_voids", "epsilon", "E", "rod_length_mm",
                "source", "quality"]
@@ -146,6 +148,13 @@ def load_simulation(folder, *, set_name=None) -> Ensemble:
     name = set_name or folder.resolve().name
     cfg = _read_csv(folder / "configs.csv", ["config_id", "epsilon", "energy_total", "n_stacks",
                                              "n_branches", "n_voids"], nonempty=True)
+    if "error" in cfg.columns:  # configurations whose simulation raised: no results
+        bad = cfg["error"].notna() & (cfg["error"].astype(str).str.strip() != "")
+        if bad.any():
+            warnings.warn(f"{folder / 'configs.csv'}: {int(bad.sum())} of {len(cfg)} "
+                          "configurations failed in the simulation (see failures.csv) and "
+                          "are left out", QualityWarning, stacklevel=2)
+            cfg = cfg[~bad]
     br = _read_csv(folder / "branches.csv", ["config_id", "length", "kappa_plus", "kappa_pm",
                                              "energy"])
     vo = _read_csv(folder / "voids.csv", ["config_id", "area", "shape_ratio", "n_edges"])

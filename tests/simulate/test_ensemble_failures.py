@@ -1,0 +1,89 @@
+"""A configuration whose computation raises is recorded and the ensemble goes on; a re-run
+tries it again; the statistics leave it out with a warning."""
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from crosssection.quality import QualityWarning
+from crosssection.stats.data import load_any
+from simulate.ensemble import report_failures, run_ensemble, write_part
+
+
+def _task(config_id, seed, params, out):
+    """A stand-in configuration: fails while OUT/fail_<id> exists, else writes a small rod."""
+    if (Path(out) / f"fail_{config_id}").exists():
+        raise FloatingPointError(f"diverged at step {config_id}")
+    xy = np.column_stack([np.linspace(0, 1, 5), np.full(5, 0.1 * config_id)])
+    row = {"config_id": config_id, "seed": seed, "epsilon": 2.0, "energy_total": 10.0 + config_id,
+           "energy_bending": 10.0, "energy_confinement": 0.0, "rg": 0.3, "n_stacks": 2,
+           "n_branches": 3, "n_voids": 1}
+    branches = [{"branch_id": 0, "length": 0.5, "kappa_plus": 1.0, "kappa_pm": 0.5,
+                 "energy_bending": 2.0, "energy": 2.0}]
+    voids = [{"area": 0.01, "perimeter": 0.4, "shape_ratio": 0.25, "n_edges": 3}]
+    (Path(out) / f"ran_{config_id}").write_text("x")
+    write_part(out, config_id, row, xy, xy, branches, voids)
+    return config_id
+
+
+PARAMS = {"command": "quench", "n_configs": 4, "seed": 3}
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_failed_configuration_is_recorded_and_the_others_finish(tmp_path, workers):
+    out = tmp_path / "ens"
+    out.mkdir()
+    (out / "fail_1").write_text("")
+    tables = run_ensemble(PARAMS, out, workers=workers, task=_task, progress=False)
+    assert tables["failed"]["config_id"].tolist() == [1]
+    assert "FloatingPointError: diverged at step 1" in tables["failed"]["error"].iloc[0]
+    assert pd.read_csv(out / "failures.csv")["config_id"].tolist() == [1]
+    cfg = pd.read_csv(out / "configs.csv")
+    assert cfg["config_id"].tolist() == [0, 1, 2, 3]  # every configuration has its row
+    assert cfg["error"].notna().tolist() == [False, True, False, False]
+    assert np.isnan(cfg.loc[1, "energy_total"]) and cfg.loc[2, "energy_total"] == 12.0
+    with np.load(out / "rods.npz") as z:
+        assert sorted(z.files) == ["config_00000", "config_00002", "config_00003"]
+
+
+def test_a_rerun_tries_the_failed_configuration_again_and_only_it(tmp_path):
+    out = tmp_path / "ens"
+    out.mkdir()
+    (out / "fail_2").write_text("")
+    run_ensemble(PARAMS, out, task=_task, progress=False)
+    for f in out.glob("ran_*"):
+        f.unlink()
+    (out / "fail_2").unlink()
+    tables = run_ensemble(PARAMS, out, task=_task, progress=False)
+    assert sorted(p.name for p in out.glob("ran_*")) == ["ran_2"]
+    assert len(tables["failed"]) == 0 and len(pd.read_csv(out / "failures.csv")) == 0
+    cfg = pd.read_csv(out / "configs.csv")
+    assert "error" not in cfg.columns or cfg["error"].isna().all()
+
+
+def test_failures_are_warning_lines_and_exit_status_3(tmp_path, capsys):
+    out = tmp_path / "ens"
+    out.mkdir()
+    (out / "fail_0").write_text("")
+    tables = run_ensemble(PARAMS, out, task=_task, progress=False)
+    assert report_failures(tables, out) == 3
+    err = capsys.readouterr().err.splitlines()
+    assert err == [f"warning: {out}: configuration 0 (seed {tables['failed']['seed'][0]}) "
+                   "failed: FloatingPointError: diverged at step 0"]
+    (out / "fail_0").unlink()
+    assert report_failures(run_ensemble(PARAMS, out, task=_task, progress=False), out) == 0
+
+
+def test_statistics_leave_failed_configurations_out_with_a_warning(tmp_path):
+    out = tmp_path / "ens"
+    out.mkdir()
+    (out / "fail_3").write_text("")
+    run_ensemble(PARAMS, out, task=_task, progress=False)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        ens = load_any(out)
+    assert sorted(ens.configs["config_id"]) == ["0", "1", "2"]
+    msgs = [str(w.message) for w in caught if issubclass(w.category, QualityWarning)]
+    assert len(msgs) == 1 and "1 of 4 configurations failed" in msgs[0]
