@@ -69,6 +69,7 @@ import time
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
+import pandas as pd
 from numba import njit
 
 from crosssection.core.errors import AnalysisError, ParameterError
@@ -715,6 +716,45 @@ _PARAM_FIELDS = ("epsilon", "n_segments", "thickness", "noise", "rate", "max_ite
                  "hold_iter", "ftol")
 
 
+def wall_regions(xy, branches: pd.DataFrame, stacks: pd.DataFrame, *, wall_radius: float,
+                 contact_distance: float) -> tuple[pd.Series, pd.Series]:
+    """Bulk or periphery of every branch and stack (the paper's distinction in the scans:
+    stacks touching the container's wall form the periphery).
+
+    A stack is in the periphery when one of its branches has a node within
+    ``contact_distance`` of the wall (its centre line at radius >= R - delta, the contact rule
+    of the stacks themselves); its branches share its region.
+
+    Parameters
+    ----------
+    xy : (N+1, 2) array
+        Node positions (units of L, wall centred at the origin).
+    branches, stacks : DataFrame
+        Tables of :func:`simulate.contacts.analyze_rod` (branches with ``s_start``, ``s_end``
+        and ``stack_id``).
+    wall_radius, contact_distance : float
+        Units of L.
+
+    Returns
+    -------
+    branch_region, stack_region : Series of "bulk" / "periphery"
+        Aligned with ``branches`` and ``stacks``.
+    """
+    n = xy.shape[0] - 1
+    r = np.hypot(xy[:, 0], xy[:, 1])
+    # running maximum of the radius over node ranges: one pass per branch, N is small
+    near = np.zeros(len(branches), bool)
+    for i, (s0, s1) in enumerate(zip(branches["s_start"], branches["s_end"])):
+        a, b = int(np.floor(s0 * n)), int(np.ceil(s1 * n))
+        near[i] = r[a:b + 1].max() >= wall_radius - contact_distance
+    touching = set(branches["stack_id"][near].astype(int))
+    st = pd.Series(np.where(stacks["stack_id"].astype(int).isin(touching), "periphery", "bulk"),
+                   index=stacks.index)
+    br = pd.Series(np.where(branches["stack_id"].astype(int).isin(touching), "periphery",
+                            "bulk"), index=branches.index)
+    return br, st
+
+
 def run_config(config_id: int, seed: int, params: dict, out: str) -> int:
     """Compact and analyse configuration ``config_id``; write its part file.
 
@@ -753,6 +793,13 @@ def run_config(config_id: int, seed: int, params: dict, out: str) -> int:
         row.update(n_stacks=int(an.n_stacks), n_branches=int(an.n_branches),
                    n_junctions=int(an.n_junctions), n_voids=int(an.n_voids))
         branches, voids, stacks = analysis_records(an)
+        b_reg, s_reg = wall_regions(res.xy, an.branches, an.stacks,
+                                    wall_radius=res.wall_radius,
+                                    contact_distance=params["contact_distance"])
+        for rec, reg in zip(branches, b_reg):
+            rec["region"] = reg
+        for rec, reg in zip(stacks, s_reg):
+            rec["region"] = reg
     except Exception as exc:  # noqa: BLE001 - recorded per configuration, the ensemble goes on
         row["analysis_error"] = f"{type(exc).__name__}: {exc}"
     row.update({f"n_{k}": v for k, v in res.stats.items()})

@@ -232,9 +232,10 @@ def assemble(out, n_configs: int, columns=None, failed=None) -> dict:
     columns = list(CONFIG_COLUMNS if columns is None else columns)
     extra = [c for c in configs.columns if c not in columns]
     configs = configs.reindex(columns=columns + extra)
-    branches = pd.DataFrame(brows).reindex(columns=BRANCH_COLUMNS)
-    voids = pd.DataFrame(vrows).reindex(columns=VOID_COLUMNS)
-    stacks = pd.DataFrame(srows).reindex(columns=STACK_COLUMNS)  # per-stack n_br for the stats
+    # a task's extra columns (compact's wall region) follow the standard ones
+    branches = _with_extras(pd.DataFrame(brows), BRANCH_COLUMNS)
+    voids = _with_extras(pd.DataFrame(vrows), VOID_COLUMNS)
+    stacks = _with_extras(pd.DataFrame(srows), STACK_COLUMNS)  # per-stack n_br for the stats
     write_csv(out / "stacks.csv", stacks)
     write_csv(out / "configs.csv", configs)
     write_csv(out / "branches.csv", branches)
@@ -334,6 +335,10 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
     tables = assemble(out, n, columns, failed)
     tables["failed"] = fail
     return tables
+
+
+def _with_extras(df: pd.DataFrame, columns) -> pd.DataFrame:
+    return df.reindex(columns=list(columns) + [c for c in df.columns if c not in columns])
 
 
 def report_failures(tables: dict, out) -> int:

@@ -173,7 +173,7 @@ def load_simulation(folder, *, set_name=None) -> Ensemble:
         stacks = pd.DataFrame({"set": name, "config_id": st["config_id"].astype(str),
                                "n_br": st["n_br"],
                                "length_L": st["length"] if "length" in st else np.nan,
-                               "region": SIM_REGION})
+                               "region": st["region"] if "region" in st else SIM_REGION})
     else:
         stacks = pd.DataFrame(columns=STACK_COLS)
     voids = pd.DataFrame({

@@ -98,6 +98,11 @@ def test_cli_outputs_and_resume(tmp_path, monkeypatch):
     assert sorted(rods.files) == ["config_00000", "config_00001"]
     for name in ("branches.csv", "stacks.csv", "voids.csv"):
         assert (out / name).exists()
+    # every stack and branch is in the bulk or the periphery; at epsilon 2 some touch the wall
+    br, st = pd.read_csv(out / "branches.csv"), pd.read_csv(out / "stacks.csv")
+    assert set(br.region) <= {"bulk", "periphery"} and "periphery" in set(st.region)
+    both = br.merge(st, on=["config_id", "stack_id"], suffixes=("", "_stack"))
+    assert (both.region == both.region_stack).all()
     # resume: finished configurations are skipped, a missing one is redone identically
     first = rods["config_00001"].copy()
     (out / "parts" / "config_00001.npz").unlink()
@@ -133,3 +138,18 @@ def test_bad_options_exit_2_one_line(tmp_path, capsys, bad, word):
     assert len(err.splitlines()) == 1
     assert str(out) in err and word in err
     assert not out.exists()
+
+
+def test_wall_regions_a_stack_touching_the_wall_is_periphery():
+    # a straight rod across a wall of radius 0.1: nodes at x = -0.1 .. 0.1
+    xy = np.column_stack([np.linspace(-0.1, 0.1, 101), np.zeros(101)])
+    branches = pd.DataFrame({"s_start": [0.0, 0.4, 0.8], "s_end": [0.2, 0.6, 0.85],
+                             "stack_id": [0, 1, 0]})
+    stacks = pd.DataFrame({"stack_id": [0, 1]})
+    br, st = compact.wall_regions(xy, branches, stacks, wall_radius=0.1, contact_distance=0.01)
+    # branch 0 reaches the wall (x = -0.1); branch 2 (x 0.06..0.07) is its stack-mate
+    assert list(st) == ["periphery", "bulk"]
+    assert list(br) == ["periphery", "bulk", "periphery"]
+    # a wall further out than the contact distance: nothing touches it
+    br, st = compact.wall_regions(xy, branches, stacks, wall_radius=0.2, contact_distance=0.01)
+    assert set(br) == set(st) == {"bulk"}
