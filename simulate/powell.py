@@ -24,6 +24,11 @@ theta_0``) and the start point, made fast by the structure of the rod:
   the head (grid, capped) and moves by at most ``2 |sin(alpha/2)| r_j``, so a trial with
   ``|alpha|`` below ``min_j c_j / r_j`` is admissible with no test at all, and otherwise only the
   tail segments that could reach the head are tested, through the head's grid;
+  the clearances skip the exact distance of a pair whose midpoints are farther apart than the
+  smallest distance found so far plus one segment length (it cannot lower the minimum), and
+  measure a segment met in several grid cells once, so they are the same numbers as the plain
+  minimum at 0.65x the CPU time of the whole minimisation (N = 300, 20 starts; same
+  trajectories and counters);
 * general directions (Powell's extrapolated ones) cost O(N) per trial and use the full grid test;
 * the nematic self-contact term ``u sin^2 alpha`` (pairs of segments closer than a cut-off) uses
   the contact list of the configuration at the start of each Powell iteration, kept fixed during
@@ -68,6 +73,10 @@ BEND = 0      # bend angle phi_k: the tail rotates rigidly about node k
 SHIFT = 1     # x0 or y0: the whole rod translates
 GENERAL = 2   # any direction of parameter space (Powell's extrapolated ones): O(N) per trial
 TANGENT = 3   # tangent angle theta_k: segment k turns, the tail translates
+
+# relative slack of the midpoint bounds (segment distance >= midpoint distance - one segment
+# length): far above rounding, so a pair the bound skips is never one the exact test catches
+_REL = 1e-6
 
 # head-grid bounds: cells no smaller than a segment, at most 41 x 41 of them
 _GRID_CELLS = 41 * 41 + 2
@@ -194,6 +203,11 @@ class Scratch(structref.StructRefProxy):
         Its cell counts ``nx, ny``.
     grid_start, grid_items : int64 arrays
         Its segments per cell (CSR).
+    grid_range : (N, 4) int64
+        Cell ranges ``x0, x1, y0, y1`` of each head segment while the grid is built.
+    seen : (N + 1,) int64
+        Per segment, the last clearance query that met it (a segment in several cells is
+        measured once per query); ``seen[N]`` counts the queries.
     no_direction : (0,) float64
         The ``direction`` of coordinate lines.
     stats : (6,) int64
@@ -203,7 +217,7 @@ class Scratch(structref.StructRefProxy):
 
 _SCRATCH_FIELDS = ["p_trial", "xy_trial", "theta_trial", "reach", "clear2", "ready", "safe",
                    "grid_origin", "grid_cell", "grid_shape", "grid_start", "grid_items",
-                   "no_direction", "stats"]
+                   "grid_range", "seen", "no_direction", "stats"]
 structref.define_proxy(Scratch, _ScratchType, _SCRATCH_FIELDS)
 
 
@@ -300,7 +314,8 @@ def _new_scratch(n, stats):
     return Scratch(np.empty(n + 2), np.empty((n + 1, 2)), np.empty(n), np.empty(n),
                    np.empty(n), np.zeros(1, np.bool_), np.zeros(1), np.empty(2), np.empty(1),
                    np.empty(2, np.int64), np.empty(_GRID_CELLS, np.int64),
-                   np.empty(4 * n + 4, np.int64), np.empty(0), stats)
+                   np.empty(4 * n + 4, np.int64), np.empty((n, 4), np.int64),
+                   np.full(n + 1, -1, np.int64), np.empty(0), stats)
 
 
 @njit(cache=True)
@@ -339,6 +354,13 @@ def _outside_wall(xy, wall2):
 
 
 # ----------------------------------------------------------------------------- head/tail test
+@njit(cache=True, inline="always")
+def _seg_reach(xy):
+    """Upper bound of the sum of two segments' half lengths: one nominal segment length
+    ``1/N`` with slack (moves are rigid, so lengths stay ``1/N`` up to rounding)."""
+    return (1.0 + _REL) / (xy.shape[0] - 1) + 1e-15
+
+
 @njit(cache=True)
 def _head_grid(xy, k, hcell):
     """Grid (CSR) of head segments 0..k-1 over their bounding box."""
@@ -383,41 +405,111 @@ def _head_grid(xy, k, hcell):
 
 @njit(cache=True)
 def _store_head_grid(xy, k, n, scratch):
-    """Build the grid of head segments 0..k-1 into ``scratch``; returns its cell side."""
-    xmin, ymin, h, nx, ny, start, items = _head_grid(xy, k, 1.0 / n)
+    """Build the grid of head segments 0..k-1 into ``scratch``; returns its cell side.
+
+    The same grid as :func:`_head_grid` (same cells, same order of segments per cell), built
+    in the scratch buffers without allocating.
+    """
+    hcell = 1.0 / n
+    xmin = xy[0, 0]
+    xmax = xmin
+    ymin = xy[0, 1]
+    ymax = ymin
+    for i in range(1, k + 1):
+        xmin = min(xmin, xy[i, 0])
+        xmax = max(xmax, xy[i, 0])
+        ymin = min(ymin, xy[i, 1])
+        ymax = max(ymax, xy[i, 1])
+    h = max(hcell, max(xmax - xmin, ymax - ymin) / 40.0)
+    nx = int((xmax - xmin) / h) + 1
+    ny = int((ymax - ymin) / h) + 1
+    ncell = nx * ny
+    start = scratch.grid_start
+    items = scratch.grid_items
+    rng = scratch.grid_range
+    for c in range(ncell + 1):
+        start[c] = 0
+    for s in range(k):
+        x0 = int((min(xy[s, 0], xy[s + 1, 0]) - xmin) / h)
+        x1 = int((max(xy[s, 0], xy[s + 1, 0]) - xmin) / h)
+        y0 = int((min(xy[s, 1], xy[s + 1, 1]) - ymin) / h)
+        y1 = int((max(xy[s, 1], xy[s + 1, 1]) - ymin) / h)
+        rng[s, 0] = x0
+        rng[s, 1] = x1
+        rng[s, 2] = y0
+        rng[s, 3] = y1
+        for cx in range(x0, min(x1, nx - 1) + 1):
+            for cy in range(y0, min(y1, ny - 1) + 1):
+                start[cx * ny + cy + 1] += 1
+    for c in range(ncell):
+        start[c + 1] += start[c]
+    # fill with start[c] as the cursor of cell c, then shift the cursors back
+    for s in range(k):
+        x0 = rng[s, 0]
+        x1 = rng[s, 1]
+        y0 = rng[s, 2]
+        y1 = rng[s, 3]
+        for cx in range(x0, min(x1, nx - 1) + 1):
+            for cy in range(y0, min(y1, ny - 1) + 1):
+                c = cx * ny + cy
+                items[start[c]] = s
+                start[c] += 1
+    for c in range(ncell, 0, -1):
+        start[c] = start[c - 1]
+    start[0] = 0
     scratch.grid_origin[0] = xmin
     scratch.grid_origin[1] = ymin
     scratch.grid_cell[0] = h
     scratch.grid_shape[0] = nx
     scratch.grid_shape[1] = ny
-    scratch.grid_start[:nx * ny + 1] = start
-    scratch.grid_items[:items.shape[0]] = items
     return h
 
 
 @njit(cache=True)
-def _seg_vs_head(ax, ay, bx, by, j, xy, xmin, ymin, h, nx, ny, start, items, pad):
-    """Smallest squared distance (0 = touching) of segment a-b (index j) to head segments whose
-    cells meet its bbox grown by ``pad``; returns early with 0 on contact."""
+def _seg_vs_head(ax, ay, bx, by, j, xy, xmin, ymin, h, nx, ny, start, items, pad, seen):
+    """``min(d2, pad^2)``, ``d2`` the smallest squared distance (0 = touching) of segment a-b
+    (index j) to the head segments whose cells meet its bbox grown by ``pad``; returns early
+    with 0 on contact.
+
+    A head segment is skipped, without its exact distance, when the distance of the two
+    midpoints less one segment length (with slack) already exceeds the smallest distance
+    found so far (or ``pad``): it cannot lower the result, which is therefore the same as
+    the minimum over every candidate, capped at ``pad^2``.
+    """
     x0 = int(math.floor((min(ax, bx) - pad - xmin) / h))
     x1 = int(math.floor((max(ax, bx) + pad - xmin) / h))
     y0 = int(math.floor((min(ay, by) - pad - ymin) / h))
     y1 = int(math.floor((max(ay, by) + pad - ymin) / h))
-    best = math.inf
+    cap = pad * pad
+    best = cap
     if x1 < 0 or y1 < 0 or x0 > nx - 1 or y0 > ny - 1:
         return best
+    reach = _seg_reach(xy)
+    mx = 0.5 * (ax + bx)
+    my = 0.5 * (ay + by)
+    thr = pad * (1.0 + _REL) + reach
+    thr2 = thr * thr
+    qid = seen[seen.shape[0] - 1] + 1
+    seen[seen.shape[0] - 1] = qid
     for cx in range(max(x0, 0), min(x1, nx - 1) + 1):
         for cy in range(max(y0, 0), min(y1, ny - 1) + 1):
             c = cx * ny + cy
             for q in range(start[c], start[c + 1]):
                 i = items[q]
-                if i == j - 1:
+                if i == j - 1 or seen[i] == qid:
+                    continue
+                seen[i] = qid
+                ex = 0.5 * (xy[i, 0] + xy[i + 1, 0]) - mx
+                ey = 0.5 * (xy[i, 1] + xy[i + 1, 1]) - my
+                if ex * ex + ey * ey > thr2:
                     continue
                 d2 = seg_dist2(xy[i, 0], xy[i, 1], xy[i + 1, 0], xy[i + 1, 1], ax, ay, bx, by)
                 if d2 < best:
                     best = d2
                     if best == 0.0:
                         return 0.0
+                    thr = math.sqrt(best) * (1.0 + _REL) + reach
+                    thr2 = thr * thr
     return best
 
 
@@ -430,12 +522,20 @@ def _seg_hits_head(ax, ay, bx, by, j, xy, xmin, ymin, h, nx, ny, start, items):
     y1 = int(math.floor((max(ay, by) + MARGIN - ymin) / h))
     if x1 < 0 or y1 < 0 or x0 > nx - 1 or y0 > ny - 1:
         return False
+    mx = 0.5 * (ax + bx)
+    my = 0.5 * (ay + by)
+    thr = MARGIN * (1.0 + _REL) + _seg_reach(xy)
+    thr2 = thr * thr
     for cx in range(max(x0, 0), min(x1, nx - 1) + 1):
         for cy in range(max(y0, 0), min(y1, ny - 1) + 1):
             c = cx * ny + cy
             for q in range(start[c], start[c + 1]):
                 i = items[q]
                 if i == j - 1:
+                    continue
+                ex = 0.5 * (xy[i, 0] + xy[i + 1, 0]) - mx
+                ey = 0.5 * (xy[i, 1] + xy[i + 1, 1]) - my
+                if ex * ex + ey * ey > thr2:
                     continue
                 if seg_dist2(xy[i, 0], xy[i, 1], xy[i + 1, 0], xy[i + 1, 1], ax, ay, bx,
                              by) < _M2:
@@ -462,7 +562,8 @@ def _prepare_bend(line, xy, scratch, n):
         by = xy[j + 1, 1]
         r = max(math.hypot(ax - rkx, ay - rky), math.hypot(bx - rkx, by - rky))
         scratch.reach[j] = r
-        c2 = _seg_vs_head(ax, ay, bx, by, j, xy, xmin, ymin, h, nx, ny, start, items, pad)
+        c2 = _seg_vs_head(ax, ay, bx, by, j, xy, xmin, ymin, h, nx, ny, start, items, pad,
+                          scratch.seen)
         c = max(math.sqrt(min(c2, pad * pad)) - MARGIN, 0.0)
         scratch.clear2[j] = c * c
         if r > 0.0:
@@ -489,6 +590,10 @@ def _prepare_tangent(line, xy, scratch, n):
     ky0 = xy[k, 1]
     kx1 = xy[k + 1, 0]
     ky1 = xy[k + 1, 1]
+    kmx = 0.5 * (kx0 + kx1)
+    kmy = 0.5 * (ky0 + ky1)
+    thr = pad * (1.0 + _REL) + _seg_reach(xy)
+    thr2 = thr * thr
     for j in range(k, n):
         ax = xy[j, 0]
         ay = xy[j, 1]
@@ -497,9 +602,14 @@ def _prepare_tangent(line, xy, scratch, n):
         c2 = pad * pad
         if k >= 1:
             c2 = min(c2, _seg_vs_head(ax, ay, bx, by, j, xy, xmin, ymin, h, nx, ny, start,
-                                      items, pad))
+                                      items, pad, scratch.seen))
         if j >= k + 2:
-            c2 = min(c2, seg_dist2(kx0, ky0, kx1, ky1, ax, ay, bx, by))
+            # segments whose midpoints are farther apart than pad + one segment length
+            # (with slack) are farther apart than pad >= sqrt(c2): the min is unchanged
+            ex = 0.5 * (ax + bx) - kmx
+            ey = 0.5 * (ay + by) - kmy
+            if ex * ex + ey * ey <= thr2:
+                c2 = min(c2, seg_dist2(kx0, ky0, kx1, ky1, ax, ay, bx, by))
         c = max(math.sqrt(c2) - MARGIN, 0.0)
         scratch.clear2[j] = c * c
         safe = min(safe, c)

@@ -227,3 +227,34 @@ def test_lbfgs_slides_below_jammed_state(seed):
     jam = sp_min(hard, np.concatenate([theta, start]), jac=True, method="L-BFGS-B")
     assert r.energy_total < 0.8 * jam.fun
     assert r.energy_total > 2 * np.sqrt(lam) * 0.9
+
+
+def test_head_grid_in_scratch_and_bounded_clearance_match_the_plain_ones():
+    """The allocation-free head grid equals the reference grid, and the clearance query with
+    its midpoint bound and per-query de-duplication returns the capped brute-force minimum."""
+    from numba import njit
+
+    from simulate.intersect import seg_dist2
+    from simulate.powell import _head_grid, _new_scratch, _seg_vs_head, _store_head_grid
+
+    @njit
+    def buffers(scratch):
+        return scratch.grid_start, scratch.grid_items, scratch.seen
+
+    rng = np.random.default_rng(4)
+    n = 120
+    xy = initial_shape(n, 300.0, seed=rng) * 0.3  # crowded: many neighbours per cell
+    scratch = _new_scratch(n, np.zeros(6, np.int64))
+    for k in (1, 7, 60, 119):
+        xmin, ymin, h, nx, ny, start, items = _head_grid(xy, k, 1.0 / n)
+        assert _store_head_grid(xy, k, n, scratch) == h
+        grid_start, grid_items, seen = buffers(scratch)
+        assert np.array_equal(grid_start[:nx * ny + 1], start)
+        assert np.array_equal(grid_items[:items.size], items)
+        for j in range(k, n):
+            a, b = xy[j], xy[j + 1]
+            got = _seg_vs_head(a[0], a[1], b[0], b[1], j, xy, xmin, ymin, h, nx, ny, start,
+                               items, h, seen)
+            brute = min([seg_dist2(*xy[i], *xy[i + 1], *a, *b) for i in range(k) if i != j - 1]
+                        + [h * h])
+            assert got == brute
