@@ -14,7 +14,8 @@ per method with two-sample KS tests (``scipy.stats.ks_2samp``) against ``powell`
 the branch energies; writes ``OUT/quench_methods.png`` (energy against wall time, every run or
 stage of every configuration) and ``OUT/quench_methods.csv``.
 
-Measured (16 starts, N = 300, Lambda = 7e5, D = 750, 2 shared cores under load ~4):
+Measured (16 starts, N = 300, Lambda = 7e5, D = 750, 2 shared cores under load ~4; before the
+clearance speed-up of simulate/powell.py, which cut powell's CPU time 1.54x with identical results):
 
 ============  ========  =====  =====  ======  ======  ====  =======  =======  ========
 method        s/config  <E>    bend   conf    <Rg>    N_br  p(E)     p(Rg)    p(e_br)
