@@ -718,12 +718,16 @@ _PARAM_FIELDS = ("epsilon", "n_segments", "thickness", "noise", "rate", "max_ite
 
 def wall_regions(xy, branches: pd.DataFrame, stacks: pd.DataFrame, *, wall_radius: float,
                  contact_distance: float) -> tuple[pd.Series, pd.Series]:
-    """Bulk or periphery of every branch and stack (the paper's distinction in the scans:
-    stacks touching the container's wall form the periphery).
+    """Bulk or periphery of every branch and stack (paper, "Two sub-systems": branches with an
+    extremity in contact with the container form the periphery).
 
-    A stack is in the periphery when one of its branches has a node within
-    ``contact_distance`` of the wall (its centre line at radius >= R - delta, the contact rule
-    of the stacks themselves); its branches share its region.
+    As in the scans (:func:`crosssection.stages.hole.classify_regions`), a stack is in the
+    periphery when one of its ends touches the wall, and its branches share its region. An
+    end is a branch extremity (the rod at ``s_start`` or ``s_end``); it touches the wall when
+    it lies within ``contact_distance (1 + n_br / 2)`` of it: the stack's passes are up to a
+    contact distance apart, so the extremity of an inner pass of a stack pressed on the wall
+    sits about half the stack's width away from it (the scans' tolerance is likewise half the
+    widest stack plus a margin).
 
     Parameters
     ----------
@@ -731,7 +735,7 @@ def wall_regions(xy, branches: pd.DataFrame, stacks: pd.DataFrame, *, wall_radiu
         Node positions (units of L, wall centred at the origin).
     branches, stacks : DataFrame
         Tables of :func:`simulate.contacts.analyze_rod` (branches with ``s_start``, ``s_end``
-        and ``stack_id``).
+        and ``stack_id``; stacks with ``stack_id`` and ``n_br``).
     wall_radius, contact_distance : float
         Units of L.
 
@@ -740,18 +744,21 @@ def wall_regions(xy, branches: pd.DataFrame, stacks: pd.DataFrame, *, wall_radiu
     branch_region, stack_region : Series of "bulk" / "periphery"
         Aligned with ``branches`` and ``stacks``.
     """
-    n = xy.shape[0] - 1
-    r = np.hypot(xy[:, 0], xy[:, 1])
-    # running maximum of the radius over node ranges: one pass per branch, N is small
-    near = np.zeros(len(branches), bool)
-    for i, (s0, s1) in enumerate(zip(branches["s_start"], branches["s_end"])):
-        a, b = int(np.floor(s0 * n)), int(np.ceil(s1 * n))
-        near[i] = r[a:b + 1].max() >= wall_radius - contact_distance
-    touching = set(branches["stack_id"][near].astype(int))
+    s_node = np.linspace(0.0, 1.0, xy.shape[0])
+    n_br = stacks.set_index(stacks["stack_id"].astype(int))["n_br"]
+    sid = branches["stack_id"].astype(int).to_numpy()
+    tol = contact_distance * (1.0 + 0.5 * n_br.reindex(sid).to_numpy(float))
+    touching = set()
+    for col in ("s_start", "s_end"):
+        s_end = branches[col].to_numpy(float)
+        p = np.column_stack([np.interp(s_end, s_node, xy[:, 0]),
+                             np.interp(s_end, s_node, xy[:, 1])])
+        gap = wall_radius - np.hypot(p[:, 0], p[:, 1])
+        touching |= set(sid[gap <= tol])
     st = pd.Series(np.where(stacks["stack_id"].astype(int).isin(touching), "periphery", "bulk"),
                    index=stacks.index)
-    br = pd.Series(np.where(branches["stack_id"].astype(int).isin(touching), "periphery",
-                            "bulk"), index=branches.index)
+    br = pd.Series(np.where(np.isin(sid, list(touching)), "periphery", "bulk"),
+                   index=branches.index)
     return br, st
 
 

@@ -140,16 +140,23 @@ def test_bad_options_exit_2_one_line(tmp_path, capsys, bad, word):
     assert not out.exists()
 
 
-def test_wall_regions_a_stack_touching_the_wall_is_periphery():
+def test_wall_regions_a_stack_with_an_end_at_the_wall_is_periphery():
     # a straight rod across a wall of radius 0.1: nodes at x = -0.1 .. 0.1
     xy = np.column_stack([np.linspace(-0.1, 0.1, 101), np.zeros(101)])
-    branches = pd.DataFrame({"s_start": [0.0, 0.4, 0.8], "s_end": [0.2, 0.6, 0.85],
-                             "stack_id": [0, 1, 0]})
-    stacks = pd.DataFrame({"stack_id": [0, 1]})
+    branches = pd.DataFrame({"s_start": [0.0, 0.4, 0.8, 0.3], "s_end": [0.2, 0.6, 0.85, 0.35],
+                             "stack_id": [0, 1, 0, 2]})
+    stacks = pd.DataFrame({"stack_id": [0, 1, 2], "n_br": [2, 1, 1]})
     br, st = compact.wall_regions(xy, branches, stacks, wall_radius=0.1, contact_distance=0.01)
-    # branch 0 reaches the wall (x = -0.1); branch 2 (x 0.06..0.07) is its stack-mate
-    assert list(st) == ["periphery", "bulk"]
-    assert list(br) == ["periphery", "bulk", "periphery"]
-    # a wall further out than the contact distance: nothing touches it
-    br, st = compact.wall_regions(xy, branches, stacks, wall_radius=0.2, contact_distance=0.01)
+    # branch 0 starts at the wall (x = -0.1): its stack and stack-mate branch 2 are periphery;
+    # branch 3 ends at x = -0.03, 0.07 from the wall, beyond 1.5 contact distances
+    assert list(st) == ["periphery", "bulk", "bulk"]
+    assert list(br) == ["periphery", "bulk", "periphery", "bulk"]
+    # the tolerance grows with the stack's width: 0.07 is within 0.01 (1 + 12 / 2)
+    stacks["n_br"] = [2, 1, 12]
+    assert list(compact.wall_regions(xy, branches, stacks, wall_radius=0.1,
+                                     contact_distance=0.01)[1]) == ["periphery", "bulk",
+                                                                    "periphery"]
+    # a wall further out: nothing touches it
+    br, st = compact.wall_regions(xy, branches, stacks.assign(n_br=1), wall_radius=0.2,
+                                  contact_distance=0.01)
     assert set(br) == set(st) == {"bulk"}
