@@ -32,6 +32,9 @@ variants       pipeline options (threshold, curvature, calibration, hole, smooth
                (typical scans: plates, illumination, noise, blur, JPEG, specks, smears)
 map_h_layers   h x mean layers (network generator)
 map_h_blur     h x blur (both generators)
+fits           no scenes: samples of the paper's laws fitted by ``crosssection.stats``, the
+               sample size each law needs for a stable model selection and the bias of naive
+               fits under l_min and s_min (:mod:`simulate.atlas_fits`, into ``REPORT/fits/``)
 ============== ===========================================================================
 
 A scene that cannot be analysed (the pipeline raised) is scored as an empty result: rod
@@ -195,6 +198,8 @@ SWEEPS = {
                             ylabel="Gaussian blur sigma (px)"),
 }
 DEGRADATIONS = ("noise", "blur", "jpeg", "plate", "illumination", "cast")
+FITS = "fits"  # the statistics sweep (simulate/atlas_fits.py): no scenes
+ALL_SWEEPS = (*SWEEPS, FITS)
 
 
 @dataclass(frozen=True)
@@ -244,7 +249,8 @@ class AtlasConfig:
 
     @classmethod
     def full(cls) -> "AtlasConfig":
-        """The atlas of ``docs/validation/atlas`` (about 20-30 minutes on 2 cores)."""
+        """The atlas of ``docs/validation/atlas``: about 20-30 minutes on 2 cores for the
+        scene sweeps, plus about an hour for the fits sweep (``--sweeps`` picks)."""
         return cls("full")
 
     @classmethod
@@ -360,8 +366,15 @@ def quench_rod(seed: int, *, n_segments: int = 300, n_runs: int = 10, maxiter: i
     return minimize_config(xy0, params, seed).xy
 
 
+#: The atlas's renders: clean drawings (it adds its own defects and plates), stacks shorter
+#: than two rod segments drawn as the analysis' polylines.
+RENDER_STYLE = {"clean": True, "smooth": "long"}
+
+
 def render_rod(xy, seed: int, analysis=None, **kwargs):
     """Render a rod configuration as a scan (warnings of the renderer silenced).
+
+    :data:`RENDER_STYLE` unless ``kwargs`` say otherwise.
 
     Parameters
     ----------
@@ -381,7 +394,7 @@ def render_rod(xy, seed: int, analysis=None, **kwargs):
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return render_configuration(xy, analysis, seed=seed, **kwargs)
+        return render_configuration(xy, analysis, seed=seed, **{**RENDER_STYLE, **kwargs})
 
 
 @dataclass(frozen=True)
@@ -796,13 +809,14 @@ def run_atlas(out, config: AtlasConfig | None = None, *, seed: int = 1, workers:
 
     config = config or AtlasConfig.full()
     sweeps = _check_sweeps(sweeps)
+    scene_sweeps = tuple(s for s in sweeps if s in SWEEPS)
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ParameterError(f"seed must be a whole number >= 0, got {seed!r}")
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise ParameterError("the report folder is a file", out)
     t_start = time.perf_counter()
-    rod_jobs, tasks = plan(config, int(seed), sweeps)
+    rod_jobs, tasks = plan(config, int(seed), scene_sweeps)
     # the longest tasks first so the pool ends together
     tasks.sort(key=lambda bt: -bt[0].cost() * (1 + 0.1 * len(bt[1])))
     bar = None
@@ -824,30 +838,37 @@ def run_atlas(out, config: AtlasConfig | None = None, *, seed: int = 1, workers:
                 rows.extend(fut.result())
                 if bar is not None:
                     bar.update(1)
-            tables, failures = _tables(rows, sweeps)
+            tables, failures = _tables(rows, scene_sweeps)
             out.mkdir(parents=True, exist_ok=True)
             for name, df in tables.items():
                 write_csv(out / f"{name}.csv", df)
             write_csv(out / "failures.csv", failures)
+            command = _command(config, seed, workers, sweeps)
+            fits = None
+            if FITS in sweeps:
+                from simulate.atlas_fits import SUBDIR, FitsConfig, run_fits
+
+                fits = run_fits(out / SUBDIR, FitsConfig.for_atlas(config.name), seed=int(seed),
+                                executor=ex, command=command)
             elapsed = time.perf_counter() - t_start
-            report = write_report(out, tables, failures, command=_command(config, seed,
-                                                                          workers, sweeps),
-                                  elapsed_s=elapsed, executor=ex)
+            report = write_report(out, tables, failures, command=command,
+                                  elapsed_s=elapsed, executor=ex, fits=fits)
     finally:
         if bar is not None:
             bar.close()
-    return {"tables": tables, "failures": failures, "elapsed_s": elapsed, **report}
+    return {"tables": tables, "failures": failures, "elapsed_s": elapsed, "fits": fits,
+            **report}
 
 
 def _command(config, seed, workers, sweeps) -> str:
     size = {"quick": " --quick", "full": ""}.get(config.name, f" ({config.name} sizes)")
-    only = "" if tuple(sweeps) == tuple(SWEEPS) else f" --sweeps {','.join(sweeps)}"
+    only = "" if tuple(sweeps) == ALL_SWEEPS else f" --sweeps {','.join(sweeps)}"
     return (f"python -m simulate benchmark --out REPORT{size} --seed {seed} "
             f"--workers {workers}{only}")
 
 
 def write_report(out, tables: dict, failures: pd.DataFrame, *, command: str,
-                 elapsed_s: float | None = None, executor=None) -> dict:
+                 elapsed_s: float | None = None, executor=None, fits=None) -> dict:
     """Draw the charts of ``tables`` and write ``index.md`` (readings from the numbers).
 
     Parameters
@@ -863,6 +884,9 @@ def write_report(out, tables: dict, failures: pd.DataFrame, *, command: str,
         Run time named in ``index.md``.
     executor : concurrent.futures.Executor, optional
         Draws the charts in parallel (default: one after the other).
+    fits : dict, optional
+        What :func:`simulate.atlas_fits.run_fits` returned: its section goes into
+        ``index.md``.
 
     Returns
     -------
@@ -881,20 +905,24 @@ def write_report(out, tables: dict, failures: pd.DataFrame, *, command: str,
     readings = {name: reading(name, df) for name, df in tables.items()}
     if "stacks" in tables:
         readings["stage_times"] = _stage_reading(tables["stacks"])
-    write_text(out / "index.md", _index(command, tables, failures, charts, readings,
-                                        elapsed_s))
+    text = _index(command, tables, failures, charts, readings, elapsed_s)
+    if fits is not None:
+        from simulate.atlas_fits import index_section
+
+        text += "\n" + index_section(fits)
+    write_text(out / "index.md", text)
     return {"charts": charts, "readings": readings}
 
 
 def _check_sweeps(sweeps):
     if sweeps is None:
-        return tuple(SWEEPS)
+        return ALL_SWEEPS
     if isinstance(sweeps, str):
         sweeps = [s.strip() for s in sweeps.split(",") if s.strip()]
-    bad = [s for s in sweeps if s not in SWEEPS]
+    bad = [s for s in sweeps if s not in ALL_SWEEPS]
     if bad or not sweeps:
         raise ParameterError(f"unknown sweep {bad[0] if bad else '(none given)'!r}; known: "
-                             f"{', '.join(SWEEPS)}")
+                             f"{', '.join(ALL_SWEEPS)}")
     return tuple(dict.fromkeys(sweeps))
 
 
@@ -1480,7 +1508,8 @@ def add_subparser(sub) -> None:
     p.add_argument("--seed", type=int, default=1, metavar="S", help="seed of every scene "
                    "(default 1)")
     p.add_argument("--sweeps", default=None, metavar="NAMES",
-                   help="comma-separated sweeps to run (default all: " + ", ".join(SWEEPS) + ")")
+                   help="comma-separated sweeps to run (default all: " + ", ".join(ALL_SWEEPS)
+                        + ")")
     p.set_defaults(func=_run)
 
 

@@ -1,23 +1,62 @@
 """Render simulated rods into synthetic scans with exact ground truth (``render`` subcommand).
 
 Each stack of :func:`simulate.contacts.analyze_rod` is drawn as one blue band of width
-``w(n_br)`` along the mean line of its passes, extended to its junctions (paper, section
-"Image analysis procedure": branches in contact closer than the resolution form one band whose
-width counts them). Voids show a light receding surface; the outside is paper. Colours, scan
-defects and the truth voids are those of every scene generator (:mod:`crosssection.truth.ink`,
-:mod:`crosssection.truth.degrade`, :func:`crosssection.truth.voids.truth_voids`), and the result
-is a :class:`crosssection.truth.scene.Scene`.
+``w(n_br)`` along the mean line of its passes, joined to its junctions (paper, section "Image
+analysis procedure": branches in contact closer than the resolution form one band whose width
+counts them). Voids show a light receding surface; the outside of the hole is the plate.
+Colours, scan defects and the truth voids are those of every scene generator
+(:mod:`crosssection.truth.ink`, :mod:`crosssection.truth.degrade`,
+:mod:`crosssection.truth.backdrop`, :func:`crosssection.truth.voids.truth_voids`), and the
+result is a :class:`crosssection.truth.scene.Scene`.
 
-Scale. The rod of length 1 maps to ``rod_length_mm``. Passes closer than the contact cut-off
-delta merge into one band; passes further apart must show a gap, which holds when
-``delta * rod_length_mm >= (w(1) + w(n_max)) / 2 + gap_px / px_per_mm`` (worst case: a single
-pass at distance delta from a stack of n_max coincident passes). The default
-``rod_length_mm`` is the smallest that satisfies this (about 150-250 mm for N = 300 and the
-default delta = 0.5/N), which keeps quench configurations (extent ~0.25 L) under ~2500 px.
+Scale and hole. A rod of finite thickness (``python -m simulate compact``: ``thickness`` and
+``wall_radius`` in units of L in its params.json) is scanned as the experiment's sheet: the
+thickness maps to ``thickness_mm`` (h = 0.1 mm, 5 px at 50 px/mm, paper "Image analysis
+procedure"), so ``rod_length_mm = thickness_mm / thickness``, and the hole is the wall, centred
+on the origin, of radius ``wall_radius * rod_length_mm``. With the compaction's default
+h = 0.005 R this gives R = 20 mm (the experiments' R ~ 2 cm), images of about 2195 x 2195 px,
+and h/L = 0.005 / (2 pi epsilon) = 4.2e-5 at epsilon = 19 (experiments 2.6e-5 to 2.1e-4,
+paper Table 1). A rod without thickness (quench) has no physical scale: ``rod_length_mm`` is
+the smallest for which passes farther apart than the contact cut-off delta show a gap, which
+holds when ``delta * rod_length_mm >= (w(1) + w(n_max)) / 2 + gap_px / px_per_mm`` (worst
+case: a single pass at distance delta from a stack of n_max coincident passes; about 150-250 mm
+for N = 300 and the default delta = 0.5/N, images under ~2500 px), and its hole is the
+smallest disk around the rod plus half the thickest band and 2 h.
 
-Calibration. By default the generators' nonlinear law ``w(n) = h (n + 0.4 sqrt(n))``
-(:meth:`crosssection.core.calibration.Calibration.nonlinear`), written to ``calibration.csv``
-so the pipeline can invert it.
+Wall. Nothing lies beyond the wall, but a band drawn along the mean line of its passes at the
+calibrated width (wider than n h) can cross it, and a junction where a pass leaves a band
+pressed against the wall lies on the band's outer layer: a thick band ending there would poke
+its round end out of the hole (up to 13 h at epsilon = 30). When the hole is the wall, every
+junction is therefore kept half the widest band meeting there inside the wall, and every line
+half its own band: the ink ends at the wall, as the cut sheets do.
+
+Scan defects. Unless ``clean``, a render has the defects of a real scan at the middle of the
+ranges of the typical scans the pipeline is validated on (:func:`simulate.atlas.typical_options`,
+``benchmarks/robust_sweep.py``: noise 0-10, blur 0-1.5 px, JPEG 75/90/none, 0-20 specks,
+0-5 smears, 0-10 pinholes, illumination gradient 0-15 %, colour cast 0-6 %, a plate with a
+0 or 2 px rim): see :data:`SCAN_DEFECTS`. ``clean`` draws ink, paper and receding surfaces
+only (:data:`CLEAN`); any single defect can be set either way.
+
+Lines and energy. The rod is a chain of straight segments; its energy is that of the smooth
+sheet it discretises (:func:`smooth_line`). A stack's band is drawn along the smooth curve
+through its line (knots one segment apart), not along that polyline, whose corners (one per
+segment: every 12 h at N = 2000 with the default h = 0.005 R) an image reads as concentrated
+bending (the pipeline measures 2-6 times more energy on polylines at epsilon = 14-19); links
+shorter than two segments are parabolas through their ends and middle (``smooth="long"``
+leaves them polylines, ``"none"`` draws every polyline). The truth ``energy`` of a branch is
+the rod's: its discrete ``sum dtheta^2 / ds``, the ``int kappa^2 ds`` of a curve turning by
+dtheta over each segment, which the smooth curve reproduces along an arc (the tests). The
+drawn curves themselves are not a usable truth: a stack's line is the mean of its passes,
+hooked to junction points that lie at a band's side, and the stacks shorter than their width
+sit inside junction zones; the ``n_br int kappa^2 ds`` of the drawn curves is 3e4 to 1.5e5
+times the rod's energy at epsilon = 19, nearly all of it in hooks and cusps hidden inside the
+bands (docs/validation/compact.md).
+
+Calibration. The generators' nonlinear law ``w(n) = h (n + 0.4 sqrt(n))``
+(:meth:`crosssection.core.calibration.Calibration.nonlinear`), of the cutting tool's kind:
+the paper calibrates the hot wire's nonlinear thickening of a stack by cutting stacks of
+sheets ("Image analysis procedure"). It is written to ``calibration.csv`` so that the pipeline
+inverts the law the bands were drawn with, as a user passes the tool's calibration.
 
 Coordinates: column = x, row = y (no flip), so the image is the mirror image of a plot with y
 up; signed curvatures therefore compare in absolute value.
@@ -26,6 +65,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import warnings
 import zipfile
 from dataclasses import dataclass
@@ -39,12 +79,26 @@ from crosssection.core import polyline, schema
 from crosssection.core.calibration import Calibration
 from crosssection.core.errors import ConfigError, ParameterError
 from crosssection.truth import degrade, ink
+from crosssection.truth.backdrop import PLATE_NAMES, apply_backdrop, plate_rgb
 from crosssection.truth.scene import Scene, write_scene
 from crosssection.truth.voids import truth_voids
 
 from simulate.contacts import RodAnalysis, analyze_rod
 
-__all__ = ["render_configuration", "render_directory", "add_subparser"]
+__all__ = ["render_configuration", "render_directory", "add_subparser", "smooth_line",
+           "SCAN_DEFECTS", "CLEAN"]
+
+#: Scan defects of a render unless ``clean`` (module docstring): the middle of the typical
+#: scans' ranges. Blur, noise and JPEG are applied last, after the plate
+#: (:func:`crosssection.truth.degrade.finish_scan`); ``rim_px`` is the plate's dark rim just
+#: outside the hole (real scans: 1-3 px).
+SCAN_DEFECTS = {"noise_sigma": 5.0, "blur_px": 0.75, "jpeg_quality": 90, "smears": 2,
+                "specks": 10, "pinholes": 5, "plate": "grey", "rim_px": 2.0,
+                "illumination": 0.075, "cast": 0.03}
+#: The clean drawing: no defect, white paper around the hole.
+CLEAN = {"noise_sigma": 0.0, "blur_px": 0.0, "jpeg_quality": None, "smears": 0, "specks": 0,
+         "pinholes": 0, "plate": None, "rim_px": 0.0, "illumination": 0.0, "cast": 0.0}
+SMOOTH = ("all", "long", "none")
 
 
 @dataclass(frozen=True)
@@ -60,6 +114,7 @@ class _Frame:
     hole_radius_mm: float | None
     hole_xy: np.ndarray | None    # hole centre (x, y) px
     hole_px: float | None
+    hole_is_wall: bool = False    # the hole is the wall the rod was compacted in
 
     def to_px(self, p) -> np.ndarray:
         """(x, y) in units of L -> (x = column, y = row) float pixels."""
@@ -83,10 +138,14 @@ def _rod_length_mm(xy, delta, cal, n_max, *, rod_length_mm, px_per_mm, gap_px, m
 
 
 def _frame(xy, analysis, cal, *, px_per_mm, thickness_mm, rod_length_mm, hole_radius_mm,
-           margin_mm, gap_px, max_size_px) -> _Frame:
+           margin_mm, gap_px, max_size_px, rod_thickness=None, wall_radius=None,
+           wall_center_xy=(0.0, 0.0)) -> _Frame:
     """Scale, margins and hole of the rendering."""
     st = analysis.stacks
     n_max = int(st["n_br"].max()) if len(st) else 1
+    if rod_length_mm is None and rod_thickness is not None:
+        # the rod's thickness is the sheet's: one physical scale
+        rod_length_mm = thickness_mm / rod_thickness
     rod_length_mm, gap_ok = _rod_length_mm(
         xy, analysis.contact_distance, cal, n_max, rod_length_mm=rod_length_mm,
         px_per_mm=px_per_mm, gap_px=gap_px, margin_mm=margin_mm, max_size_px=max_size_px)
@@ -94,17 +153,26 @@ def _frame(xy, analysis, cal, *, px_per_mm, thickness_mm, rod_length_mm, hole_ra
     lo = xy.min(axis=0)
     margin_px = margin_mm * px_per_mm
     hole_center_l = np.average(xy, axis=0)
+    hole_is_wall = False
     if isinstance(hole_radius_mm, str):
         if hole_radius_mm != "auto":
             raise ParameterError(f"hole_radius_mm must be a number, None or 'auto', got "
                                  f"{hole_radius_mm!r}")
-        # the experiment's container: the smallest disk holding the rod, plus the half width
-        # of the thickest band and 2 h of clearance (the pipeline then uses the known hole
-        # instead of fitting one to the ink envelope)
-        (cx, cy), r_l = cv2.minEnclosingCircle(xy.astype(np.float32))
-        hole_center_l = np.array([cx, cy], float)
-        hole_radius_mm = float(r_l * rod_length_mm + 0.5 * float(cal.width(n_max))
-                               + 2 * thickness_mm)
+        if wall_radius is not None:
+            # the hard wall the rod was compacted in is the experiment's hole
+            hole_center_l = np.asarray(wall_center_xy, float)
+            hole_radius_mm = float(wall_radius * rod_length_mm)
+            hole_is_wall = True
+        else:
+            # the experiment's container: the smallest disk holding the rod, plus the half
+            # width of the thickest band and 2 h of clearance (the pipeline then uses the
+            # known hole instead of fitting one to the ink envelope)
+            (cx, cy), r_l = cv2.minEnclosingCircle(xy.astype(np.float32))
+            hole_center_l = np.array([cx, cy], float)
+            hole_radius_mm = float(r_l * rod_length_mm + 0.5 * float(cal.width(n_max))
+                                   + 2 * thickness_mm)
+    elif hole_radius_mm is not None and wall_radius is not None:
+        hole_center_l = np.asarray(wall_center_xy, float)
     hole_px = None if hole_radius_mm is None else hole_radius_mm * px_per_mm
     if hole_px is not None:
         c_off = (hole_center_l - lo) * scale
@@ -114,10 +182,11 @@ def _frame(xy, analysis, cal, *, px_per_mm, thickness_mm, rod_length_mm, hole_ra
     size = np.ceil((xy.max(axis=0) - lo) * scale + 2 * margin_px).astype(int) + 1
     hole_xy = None if hole_px is None else (hole_center_l - lo) * scale + margin_px
     return _Frame(lo, scale, margin_px, (int(size[1]), int(size[0])), rod_length_mm, gap_ok,
-                  hole_radius_mm, hole_xy, hole_px)
+                  hole_radius_mm, hole_xy, hole_px, hole_is_wall)
 
 
-def smooth_line(line_xy, knot_spacing_px: float, step_px: float = 1.0) -> np.ndarray:
+def smooth_line(line_xy, knot_spacing_px: float, step_px: float = 1.0, *,
+                short: bool = False) -> np.ndarray:
     """The smooth curve of a stack through the rod's discretisation, sampled every ``step_px``.
 
     The rod is a chain of straight segments of length ``ds`` (``knot_spacing_px``), and its
@@ -127,6 +196,9 @@ def smooth_line(line_xy, knot_spacing_px: float, step_px: float = 1.0) -> np.nda
     energy. Here the stack's line is resampled at the segment length along its arc (which cuts
     the corners and the short hooks where a line joins its junction) and an interpolating cubic
     spline through those knots (periodic for a closed line) turns gradually between them.
+    A line shorter than two segments has no knot inside; with ``short`` it is drawn as the
+    parabola through its ends and its middle point (such a line is a link between two
+    junctions, whose hooks would otherwise be corners).
 
     Parameters
     ----------
@@ -136,12 +208,15 @@ def smooth_line(line_xy, knot_spacing_px: float, step_px: float = 1.0) -> np.nda
         The rod's segment length in pixels (rod length / N).
     step_px : float
         Sampling step along the curve.
+    short : bool
+        Smooth lines shorter than two segments too (longer than a pixel, three points or
+        more).
 
     Returns
     -------
     (Q, 2) array
         The curve from the line's first to its last point; lines shorter than two segments
-        are returned as they are.
+        are returned as they are unless ``short``.
     """
     from scipy.interpolate import CubicSpline
 
@@ -150,7 +225,12 @@ def smooth_line(line_xy, knot_spacing_px: float, step_px: float = 1.0) -> np.nda
     p = p[keep]
     u = np.r_[0.0, np.cumsum(np.hypot(*np.diff(p, axis=0).T))]
     if len(p) < 3 or u[-1] < 2.0 * knot_spacing_px:
-        return p
+        if not (short and len(p) >= 3 and u[-1] > 1.0):
+            return p
+        uk = np.linspace(0.0, u[-1], 3)
+        knots = np.c_[np.interp(uk, u, p[:, 0]), np.interp(uk, u, p[:, 1])]
+        n = max(int(np.ceil(u[-1] / step_px)), 2)
+        return CubicSpline(uk, knots, axis=0)(np.linspace(0.0, u[-1], n + 1))
     closed = np.hypot(*(p[0] - p[-1])) <= 1e-6 * max(1.0, u[-1])
     n_knots = max(int(round(u[-1] / knot_spacing_px)), 3)
     uk = np.linspace(0.0, u[-1], n_knots + 1)
@@ -160,6 +240,71 @@ def smooth_line(line_xy, knot_spacing_px: float, step_px: float = 1.0) -> np.nda
     spline = CubicSpline(uk, knots, axis=0, bc_type="periodic" if closed else "not-a-knot")
     n = max(int(np.ceil(u[-1] / step_px)), n_knots)
     return spline(np.linspace(0.0, u[-1], n + 1))
+
+
+def _inside_wall(points, centre_xy, limit_px):
+    """``points`` with those farther than ``limit_px`` from ``centre_xy`` moved radially onto
+    that circle."""
+    d = points - np.asarray(centre_xy, float)
+    r = np.hypot(d[:, 0], d[:, 1])
+    far = r > limit_px
+    if not far.any():
+        return points
+    out = points.copy()
+    out[far] = np.asarray(centre_xy, float) + d[far] * (limit_px / r[far])[:, None]
+    return out
+
+
+def _widest(analysis, widths_px):
+    """The junctions at both ends of every stack, and the widest band at every junction."""
+    st = analysis.stacks
+    ends = st[["junction_a", "junction_b"]].to_numpy(int) if len(st) else np.zeros((0, 2), int)
+    widest = {}
+    for sid, pair in enumerate(ends):
+        for j in pair:
+            if j >= 0:
+                widest[j] = max(widest.get(j, 0.0), float(widths_px[sid]))
+    return ends, widest
+
+
+def _junctions_px(analysis, frame, widths_px) -> np.ndarray:
+    """Junction positions (x, y) px, as drawn (kept inside the wall like the lines' ends)."""
+    jt = analysis.junctions
+    if not len(jt):
+        return np.zeros((0, 2))
+    jpx = frame.to_px(jt[["x", "y"]].to_numpy(float))
+    if frame.hole_is_wall and frame.hole_px is not None:
+        _, widest = _widest(analysis, widths_px)
+        for i, j in enumerate(jt["junction_id"].to_numpy(int)):
+            if j in widest:
+                jpx[[i]] = _inside_wall(jpx[[i]], frame.hole_xy, frame.hole_px - 0.5 * widest[j])
+    return jpx
+
+
+def _stack_lines(analysis, frame, widths_px, *, segment_px, smooth):
+    """The drawn centreline of every stack: its line, junctions included, smoothed
+    (:func:`smooth_line`; ``smooth`` of :func:`render_configuration`).
+
+    When the hole is the wall, no ink lies beyond it (module docstring, "Wall"): a junction
+    is kept half the widest band meeting there inside the wall, every line half its own band.
+    """
+    ends, widest = _widest(analysis, widths_px)
+    wall = frame.hole_is_wall and frame.hole_px is not None
+    lines = []
+    for sid, line_l in enumerate(analysis.stack_lines):
+        line = frame.to_px(line_l)
+        if wall:
+            # the analysis puts the junction first / last on the lines that meet there
+            for i, j in ((0, ends[sid][0]), (-1, ends[sid][1])):
+                if j >= 0:
+                    line[[i]] = _inside_wall(line[[i]], frame.hole_xy,
+                                             frame.hole_px - 0.5 * widest[j])
+        if smooth != "none":
+            line = smooth_line(line, segment_px, short=smooth == "all")
+        if wall:
+            line = _inside_wall(line, frame.hole_xy, frame.hole_px - 0.5 * float(widths_px[sid]))
+        lines.append(line)
+    return lines
 
 
 def _draw_bands(lines_px, n_br, widths_px, shape):
@@ -214,6 +359,55 @@ def _draw_scan(rng, coverage, enclosed, frame, lines_px, widths_px, *, smears, s
     return img
 
 
+def _finish(img, rng, frame, ink_mask, d):
+    """Plate, illumination and colour cast (when asked), then blur, noise, uint8 and JPEG."""
+    if d["plate"] is not None or d["illumination"] > 0 or d["cast"] > 0:
+        hole_rc = ((frame.hole_xy[1], frame.hole_xy[0]) if frame.hole_xy is not None
+                   else (0.5 * frame.shape[0], 0.5 * frame.shape[1]))
+        radius = frame.hole_px if frame.hole_px is not None else float(max(frame.shape))
+        rgb = np.clip(np.rint(img), 0, 255).astype(np.uint8)
+        img = apply_backdrop(rgb, ink_mask=ink_mask, hole_center_rc=hole_rc,
+                             hole_radius_px=radius, rng=rng, plate=d["plate"],
+                             rim_px=d["rim_px"], illumination=d["illumination"],
+                             cast=d["cast"]).astype(np.float32)
+    return degrade.finish_scan(img, rng, blur_px=d["blur_px"], noise_sigma=d["noise_sigma"],
+                               jpeg_quality=d["jpeg_quality"])
+
+
+def _defects(clean: bool, given: dict, has_hole: bool) -> dict:
+    """The scan defects: :data:`SCAN_DEFECTS` (or :data:`CLEAN`) overridden by ``given``
+    (None: keep the default), checked."""
+    d = dict(CLEAN if clean else SCAN_DEFECTS)
+    d.update({k: v for k, v in given.items() if v is not None})
+    if isinstance(d["plate"], str) and d["plate"].lower() == "none":
+        d["plate"] = None
+    for k in ("noise_sigma", "blur_px", "rim_px", "illumination", "cast"):
+        v = d[k]
+        if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+            raise ParameterError(f"{k} must be a finite number >= 0, got {v!r}")
+    for k in ("illumination", "cast"):
+        if d[k] >= 1:
+            raise ParameterError(f"{k} must be below 1 (a relative deviation), got {d[k]!r}")
+    for k in ("smears", "specks", "pinholes"):
+        v = d[k]
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
+            raise ParameterError(f"{k} must be a whole number >= 0, got {v!r}")
+    q = d["jpeg_quality"]
+    if q is not None and (isinstance(q, bool) or not isinstance(q, (int, np.integer))
+                          or not 0 <= q <= 100):
+        raise ParameterError(f"jpeg_quality must be a whole number 1-100 (0: none), got {q!r}")
+    if q == 0:
+        d["jpeg_quality"] = None
+    if d["plate"] is not None:
+        plate_rgb(d["plate"], np.random.default_rng(0))  # raises on an unknown plate
+        if not has_hole:
+            if "plate" in given and given["plate"] is not None:
+                raise ParameterError("a plate needs a hole (hole_radius_mm or a wall)")
+            # the default plate lies around a hole; without one there is nothing to frame
+            d["plate"] = None
+    return d
+
+
 def _loop_mid_rc(line_rc):
     """Mid point of a closed line (first point repeated last) started at its raster-first
     point (min row, then min column): the start the pipeline gives a junction-free loop
@@ -251,7 +445,8 @@ def _truth_tables(analysis, frame, lines_px, cal, voids, *, px_per_mm, thickness
     """The four truth tables (crosssection.core.schema), lengths in mm, curvatures in 1/mm."""
     mm_per_l = frame.rod_length_mm
     jt = analysis.junctions
-    jpx = frame.to_px(jt[["x", "y"]].to_numpy(float)) if len(jt) else np.zeros((0, 2))
+    jpx = _junctions_px(analysis, frame, cal.width(analysis.stacks["n_br"].to_numpy(int))
+                        * px_per_mm if len(analysis.stacks) else np.zeros(0))
     junctions = pd.DataFrame({"junction_id": jt["junction_id"].astype(int) if len(jt) else [],
                               "x_px": jpx[:, 0], "y_px": jpx[:, 1],
                               "n_stacks": jt["n_stacks"].astype(int) if len(jt) else []})
@@ -303,13 +498,18 @@ def _summary(analysis, frame, tables, ink_mask, *, px_per_mm):
 def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float = 7e5,
                          px_per_mm: float = 50.0, thickness_mm: float = 0.1,
                          rod_length_mm: float | None = None,
+                         rod_thickness: float | None = None,
+                         wall_radius: float | None = None, wall_center_xy=(0.0, 0.0),
                          calibration: Calibration | None = None,
-                         contact_distance: float | None = None,
-                         noise_sigma: float = 0.0, blur_px: float = 0.0,
-                         jpeg_quality: int | None = None, smears: int = 0, specks: int = 0,
-                         pinholes: int = 0, seed: int = 0, margin_mm: float = 2.0,
+                         contact_distance: float | None = None, clean: bool = False,
+                         noise_sigma: float | None = None, blur_px: float | None = None,
+                         jpeg_quality: int | None = None, smears: int | None = None,
+                         specks: int | None = None, pinholes: int | None = None,
+                         plate=None, rim_px: float | None = None,
+                         illumination: float | None = None, cast: float | None = None,
+                         smooth: str = "all", seed: int = 0, margin_mm: float = 2.0,
                          gap_px: float = 2.0, max_size_px: int = 2500,
-                         hole_radius_mm: float | None = None) -> Scene:
+                         hole_radius_mm: float | str | None = None) -> Scene:
     """Render one rod configuration into an RGB scan with exact truth tables.
 
     Parameters
@@ -323,21 +523,41 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
     px_per_mm, thickness_mm : float
         Scan resolution and sheet thickness h.
     rod_length_mm : float, optional
-        Length of the rod in mm; default: the smallest that keeps a visible gap of
-        ``gap_px`` between passes farther apart than delta (module docstring), capped so the
-        image stays under ``max_size_px``.
+        Length of the rod in mm; default ``thickness_mm / rod_thickness`` when the rod has a
+        thickness, else the smallest that keeps a visible gap of ``gap_px`` between passes
+        farther apart than delta (module docstring), capped so the image stays under
+        ``max_size_px``.
+    rod_thickness : float, optional
+        The rod's thickness h (units of L; ``python -m simulate compact``).
+    wall_radius : float, optional
+        Radius of the hard wall the rod was compacted in (units of L), centred on
+        ``wall_center_xy``: with ``hole_radius_mm="auto"`` it is the hole.
+    wall_center_xy : (float, float)
+        Centre of the wall (units of L; the compaction's is the origin).
     calibration : Calibration, optional
         Width law; default :meth:`Calibration.nonlinear`.
     contact_distance : float, optional
         delta for the analysis when computed here.
-    noise_sigma, blur_px : float
+    clean : bool
+        Start from no defect (:data:`CLEAN`) instead of a real scan's (:data:`SCAN_DEFECTS`).
+    noise_sigma, blur_px : float, optional
         Gaussian noise (grey levels) and Gaussian blur sigma (px).
     jpeg_quality : int, optional
-        JPEG round trip at this quality.
-    smears, specks, pinholes : int
+        JPEG round trip at this quality (1-100; 0: none).
+    smears, specks, pinholes : int, optional
         Numbers of light-blue smears (rejected by the threshold), small ink specks in the
         paper and paper-coloured pinholes in wide bands (both removed by cleaning); see
         :mod:`crosssection.truth.degrade`.
+    plate : str or (3,) float, optional
+        Plate around the hole (:data:`crosssection.truth.backdrop.PLATES`, ``"coloured"``,
+        an RGB triple, or ``"none"``); needs a hole.
+    rim_px, illumination, cast : float, optional
+        Dark rim outside the hole, illumination gradient and colour cast
+        (:func:`crosssection.truth.backdrop.apply_backdrop`).
+    smooth : {"all", "long", "none"}
+        Draw every stack along its smooth curve (:func:`smooth_line`, short links included),
+        only the stacks of two segments or more (the drawing of :mod:`simulate.atlas`), or
+        none: the polylines of the analysis, with their corners.
     seed : int
         Seed of every random choice (colours, noise, defects).
     margin_mm : float
@@ -345,12 +565,16 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
     gap_px : float
         Smallest visible gap between passes farther apart than delta.
     max_size_px : int
-        Largest image side when ``rod_length_mm`` is chosen here.
+        Largest image side when ``rod_length_mm`` is chosen here from the gap.
     hole_radius_mm : float, "auto" or None
-        Draw a hard-wall disk of this radius centred on the rod's centre of mass
-        (stacks touching it are "periphery"); ``"auto"``: the smallest disk enclosing the
-        rod plus the half width of the thickest band and 2 h, centred on it (the CLI
-        default: a scan always has its container); None: no hole (all "bulk").
+        Draw a hard-wall disk of this radius centred on the wall's centre, or without a wall on
+        the rod's centre of mass (stacks touching it are "periphery"); ``"auto"``: the wall,
+        or without one the smallest disk enclosing the rod plus the half width of the thickest
+        band and 2 h, centred on it (the CLI default: a scan always has its container); None:
+        no hole (all "bulk").
+
+    Defects left at None take the value of :data:`SCAN_DEFECTS`, or of :data:`CLEAN` when
+    ``clean``.
 
     Returns
     -------
@@ -358,22 +582,34 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
         With ``paths_rc`` (the drawn centrelines) and ``ink_mask``; no ``packs``.
     """
     xy = np.asarray(xy, float)
-    if px_per_mm <= 0 or thickness_mm <= 0:
+    if smooth not in SMOOTH:
+        raise ParameterError(f"smooth must be one of {SMOOTH}, got {smooth!r}")
+    if not (px_per_mm > 0 and thickness_mm > 0):
         raise ParameterError("px_per_mm and thickness_mm must be positive")
+    for name, v in (("rod_thickness", rod_thickness), ("wall_radius", wall_radius),
+                    ("rod_length_mm", rod_length_mm)):
+        if v is not None and not (math.isfinite(v) and v > 0):
+            raise ParameterError(f"{name} must be a finite number > 0, got {v!r}")
     if calibration is not None and not isinstance(calibration, Calibration):
         raise ParameterError(f"calibration must be a Calibration, got {type(calibration).__name__}")
     if analysis is None:
         analysis = analyze_rod(xy, lam=lam, contact_distance=contact_distance)
     cal = calibration or Calibration.nonlinear(thickness_mm)
-    rng = np.random.default_rng(seed)
     frame = _frame(xy, analysis, cal, px_per_mm=px_per_mm, thickness_mm=thickness_mm,
                    rod_length_mm=rod_length_mm, hole_radius_mm=hole_radius_mm,
-                   margin_mm=margin_mm, gap_px=gap_px, max_size_px=max_size_px)
+                   margin_mm=margin_mm, gap_px=gap_px, max_size_px=max_size_px,
+                   rod_thickness=rod_thickness, wall_radius=wall_radius,
+                   wall_center_xy=wall_center_xy)
+    given = {"noise_sigma": noise_sigma, "blur_px": blur_px, "jpeg_quality": jpeg_quality,
+             "smears": smears, "specks": specks, "pinholes": pinholes, "plate": plate,
+             "rim_px": rim_px, "illumination": illumination, "cast": cast}
+    d = _defects(clean, given, frame.hole_px is not None)
+    rng = np.random.default_rng(seed)
     st = analysis.stacks
     segment_px = frame.scale / (len(xy) - 1)
-    lines_px = [smooth_line(frame.to_px(line), segment_px) for line in analysis.stack_lines]
     n_br = st["n_br"].to_numpy(int)
     widths_px = cal.width(n_br) * px_per_mm
+    lines_px = _stack_lines(analysis, frame, widths_px, segment_px=segment_px, smooth=smooth)
     coverage, labels = _draw_bands(lines_px, n_br, widths_px, frame.shape)
     ink_mask = coverage >= 0.5
     voids = truth_voids(ink_mask, hole_center_xy=frame.hole_xy, hole_radius_px=frame.hole_px,
@@ -381,10 +617,9 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
                         stack_labels=labels,
                         stack_ends=st[["junction_a", "junction_b"]].to_numpy(int),
                         stack_widths_px=widths_px, min_contact_px=2 * thickness_mm * px_per_mm)
-    img = _draw_scan(rng, coverage, voids.enclosed, frame, lines_px, widths_px, smears=smears,
-                     specks=specks, pinholes=pinholes)
-    rgb = degrade.finish_scan(img, rng, blur_px=blur_px, noise_sigma=noise_sigma,
-                              jpeg_quality=jpeg_quality)
+    img = _draw_scan(rng, coverage, voids.enclosed, frame, lines_px, widths_px,
+                     smears=d["smears"], specks=d["specks"], pinholes=d["pinholes"])
+    rgb = _finish(img, rng, frame, ink_mask, d)
     tables = _truth_tables(analysis, frame, lines_px, cal, voids.table, px_per_mm=px_per_mm,
                            thickness_mm=thickness_mm)
     summary = _summary(analysis, frame, tables, ink_mask, px_per_mm=px_per_mm)
@@ -394,19 +629,43 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
               [float(frame.hole_xy[0]), float(frame.hole_xy[1])],
               "seed": int(seed), "rod_length_mm": float(frame.rod_length_mm),
               "contact_distance": analysis.contact_distance, "gap_guaranteed": bool(frame.gap_ok),
-              "noise_sigma": noise_sigma, "blur_px": blur_px, "jpeg_quality": jpeg_quality,
-              "smears": smears, "specks": specks, "pinholes": pinholes,
+              "rod_thickness": rod_thickness, "wall_radius": wall_radius, "clean": bool(clean),
+              **{k: (v if not isinstance(v, np.ndarray) else v.tolist()) for k, v in d.items()},
+              "smooth": smooth,
               "origin_xy": frame.origin_xy.tolist(), "margin_px": float(frame.margin_px)}
     return Scene(rgb, summary, tables, params, cal,
                  paths_rc=[line[:, ::-1] for line in lines_px], ink_mask=ink_mask)
+
+
+def _check_options(kwargs: dict) -> None:
+    """Check the scan options of :func:`render_directory` before any configuration is
+    analysed (a bad value fails at once, not after the first analysis)."""
+    names = ("noise_sigma", "blur_px", "jpeg_quality", "smears", "specks", "pinholes", "plate",
+             "rim_px", "illumination", "cast")
+    given = {k: kwargs[k] for k in names if k in kwargs}
+    has_hole = kwargs.get("hole_radius_mm", None) is not None
+    _defects(bool(kwargs.get("clean", False)), given, has_hole or "plate" not in given)
+    if kwargs.get("smooth", "all") not in SMOOTH:
+        raise ParameterError(f"smooth must be one of {SMOOTH}, got {kwargs['smooth']!r}")
+    for k in ("px_per_mm", "thickness_mm", "rod_length_mm"):
+        v = kwargs.get(k)
+        if v is not None and not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+            raise ParameterError(f"{k} must be a finite number > 0, got {v!r}")
+    h = kwargs.get("hole_radius_mm")
+    if h is not None and h != "auto" and not (isinstance(h, (int, float)) and math.isfinite(h)
+                                              and h > 0):
+        raise ParameterError(f"hole_radius_mm must be a finite number > 0, 'auto' or None, "
+                             f"got {h!r}")
 
 
 def render_directory(sim_dir, out_dir, *, configs=None, progress: bool | None = False,
                      **kwargs) -> list[Path]:
     """Render every configuration of ``sim_dir/rods.npz`` into ``out_dir/<key>/``.
 
-    ``sim_dir/params.json`` gives ``lambda`` (default 7e5) and optionally ``contact_distance``.
-    Scenes already complete (truth/summary.json present) are skipped.
+    ``sim_dir/params.json`` gives ``lambda`` (default 7e5; 0 for a compaction, whose hard wall
+    stores no energy) and optionally ``contact_distance``; a compaction's ``thickness`` and
+    ``wall_radius`` (units of L) set the scale and, unless ``hole_radius_mm`` is given, the
+    hole (module docstring). Scenes already complete (truth/summary.json present) are skipped.
 
     Parameters
     ----------
@@ -427,6 +686,7 @@ def render_directory(sim_dir, out_dir, *, configs=None, progress: bool | None = 
     """
     from tqdm import tqdm
 
+    _check_options(kwargs)
     sim_dir, out_dir = Path(sim_dir), Path(out_dir)
     rods_path = sim_dir / "rods.npz"
     if not rods_path.exists():
@@ -439,7 +699,22 @@ def render_directory(sim_dir, out_dir, *, configs=None, progress: bool | None = 
             p = json.loads(pj.read_text())
         except json.JSONDecodeError as exc:
             raise ConfigError(f"malformed JSON ({exc.msg})", pj) from None
-        lam = float(p.get("lambda", p.get("lam", lam)))
+        if not isinstance(p, dict):
+            raise ConfigError("expected a JSON object", pj)
+        wall = {"rod_thickness": p.get("thickness"), "wall_radius": p.get("wall_radius")}
+        if p.get("thickness") is not None or p.get("wall_radius") is not None:
+            for k, v in wall.items():
+                if not (isinstance(v, (int, float)) and not isinstance(v, bool)
+                        and math.isfinite(v) and v > 0):
+                    raise ConfigError(f"{'thickness' if k == 'rod_thickness' else k} must be a "
+                                      f"number > 0 (units of L), got {v!r}", pj)
+            # the wall is the hole unless the caller draws another (or none)
+            kwargs = {**wall, "hole_radius_mm": "auto", **kwargs}
+            lam = 0.0
+        try:
+            lam = float(p.get("lambda", p.get("lam", lam)))
+        except (TypeError, ValueError):
+            raise ConfigError(f"lambda must be a number, got {p.get('lambda')!r}", pj) from None
         delta = p.get("contact_distance")
     written = []
     try:
@@ -480,9 +755,11 @@ def add_subparser(sub) -> None:
     """Register ``render``: ``python -m simulate render DIR --out SCENES [...]``."""
     p = sub.add_parser("render", help="render simulated configurations into synthetic scans",
                        description="Render DIR/rods.npz (one scene per configuration) into "
-                                   "scene folders with exact truth.")
+                                   "scene folders with exact truth. Scans have the defects "
+                                   "of a real scan unless --clean.")
     p.add_argument("sim_dir", metavar="DIR",
-                   help="simulation ensemble folder holding rods.npz (from quench or anneal)")
+                   help="simulation ensemble folder holding rods.npz (from quench, anneal or "
+                        "compact)")
     p.add_argument("--out", required=True, metavar="SCENES",
                    help="folder of the scene folders (created; finished scenes are skipped)")
     p.add_argument("--px-per-mm", type=float, default=50.0,
@@ -490,24 +767,47 @@ def add_subparser(sub) -> None:
     p.add_argument("--thickness-mm", type=float, default=0.1,
                    help="sheet thickness h in mm (default 0.1)")
     p.add_argument("--rod-length-mm", type=float, default=None,
-                   help="rod length L in mm (default: the smallest keeping a visible gap "
-                        "between passes beyond delta)")
-    p.add_argument("--noise", type=float, default=0.0,
-                   help="Gaussian noise sigma in grey levels (default 0)")
-    p.add_argument("--blur", type=float, default=0.0,
-                   help="Gaussian blur sigma in px (default 0)")
-    p.add_argument("--jpeg", type=int, default=None,
-                   help="JPEG quality 1-100 of a round trip (default: none, lossless PNG)")
-    p.add_argument("--smears", type=int, default=0,
-                   help="number of light-blue smears, rejected by the threshold (default 0)")
-    p.add_argument("--specks", type=int, default=0,
-                   help="number of small ink specks in the paper, removed by cleaning "
-                        "(default 0)")
-    p.add_argument("--pinholes", type=int, default=0,
-                   help="number of paper-coloured pinholes in wide bands (default 0)")
+                   help="rod length L in mm (default: thickness-mm over the rod's thickness "
+                        "for a compaction, else the smallest keeping a visible gap between "
+                        "passes beyond delta)")
+    p.add_argument("--clean", action="store_true",
+                   help="no scan defect, no plate: the clean drawing (each option below "
+                        "still sets its defect)")
+    d = SCAN_DEFECTS
+    p.add_argument("--noise", type=float, default=None,
+                   help=f"Gaussian noise sigma in grey levels (default {d['noise_sigma']:g}, "
+                        "0 with --clean)")
+    p.add_argument("--blur", type=float, default=None,
+                   help=f"Gaussian blur sigma in px (default {d['blur_px']:g}, 0 with --clean)")
+    p.add_argument("--jpeg", type=_jpeg_arg, default=None,
+                   help=f"JPEG quality 1-100 of a round trip, or 'none' (default "
+                        f"{d['jpeg_quality']}, none with --clean)")
+    p.add_argument("--smears", type=int, default=None,
+                   help=f"number of light-blue smears, rejected by the threshold (default "
+                        f"{d['smears']}, 0 with --clean)")
+    p.add_argument("--specks", type=int, default=None,
+                   help=f"number of small ink specks in the paper, removed by cleaning "
+                        f"(default {d['specks']}, 0 with --clean)")
+    p.add_argument("--pinholes", type=int, default=None,
+                   help=f"number of paper-coloured pinholes in wide bands (default "
+                        f"{d['pinholes']}, 0 with --clean)")
+    p.add_argument("--plate", default=None,
+                   help=f"plate around the hole: {', '.join(PLATE_NAMES)} or none (default "
+                        f"{d['plate']} with a {d['rim_px']:g} px dark rim, none with --clean)")
+    p.add_argument("--illumination", type=float, default=None,
+                   help=f"largest relative deviation of an illumination gradient (default "
+                        f"{d['illumination']:g}, 0 with --clean)")
+    p.add_argument("--cast", type=float, default=None,
+                   help=f"largest relative colour cast per channel (default {d['cast']:g}, "
+                        "0 with --clean)")
+    p.add_argument("--smooth", choices=SMOOTH, default="all",
+                   help="draw every stack along its smooth curve (all, default), leave the "
+                        "links shorter than two rod segments polylines (long), or draw the "
+                        "polylines of the analysis (none)")
     p.add_argument("--hole", default="auto",
-                   help="hole radius in mm, 'auto' (smallest disk around the rod, default) "
-                        "or 'none' (the pipeline then fits one)")
+                   help="hole radius in mm, 'auto' (default: the wall of a compaction, else "
+                        "the smallest disk around the rod) or 'none' (the pipeline then fits "
+                        "one)")
     p.add_argument("--limit", type=int, default=None,
                    help="render only the first K configurations (default: all)")
     p.add_argument("--seed", type=int, default=0,
@@ -516,6 +816,31 @@ def add_subparser(sub) -> None:
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
                    help="progress bar on stderr (default: only when stderr is a terminal)")
     p.set_defaults(func=_run)
+
+
+def _jpeg_arg(text):
+    if str(text).lower() in ("none", "off"):
+        return "none"
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number 1-100 or 'none', got "
+                                         f"{text!r}") from None
+
+
+#: API keyword -> CLI option, for error messages
+_OPTION = {"noise_sigma": "--noise", "blur_px": "--blur", "jpeg_quality": "--jpeg",
+           "smears": "--smears", "specks": "--specks", "pinholes": "--pinholes",
+           "plate": "--plate", "illumination": "--illumination", "cast": "--cast",
+           "px_per_mm": "--px-per-mm", "thickness_mm": "--thickness-mm",
+           "rod_length_mm": "--rod-length-mm", "hole_radius_mm": "--hole"}
+
+
+def _cli_names(message: str) -> str:
+    """``message`` with the API's keyword names replaced by the CLI's options."""
+    import re
+
+    return re.sub(r"\b(" + "|".join(_OPTION) + r")\b", lambda m: _OPTION[m.group(1)], message)
 
 
 def _hole_arg(text):
@@ -530,15 +855,27 @@ def _hole_arg(text):
 
 
 def _run(args) -> int:
+    opts = {"noise_sigma": args.noise, "blur_px": args.blur, "smears": args.smears,
+            "specks": args.specks, "pinholes": args.pinholes, "plate": args.plate,
+            "illumination": args.illumination, "cast": args.cast}
+    if args.jpeg is not None:
+        opts["jpeg_quality"] = 0 if args.jpeg == "none" else args.jpeg
+    kwargs = dict(px_per_mm=args.px_per_mm, thickness_mm=args.thickness_mm,
+                  rod_length_mm=args.rod_length_mm, clean=args.clean, seed=args.seed,
+                  smooth=args.smooth,
+                  hole_radius_mm=_hole_arg(args.hole),
+                  **{k: v for k, v in opts.items() if v is not None})
+    try:
+        _check_options(kwargs)
+    except ParameterError as exc:
+        raise ParameterError(_cli_names(exc.cause)) from None
     configs = None
     if args.limit is not None:
+        if args.limit < 0:
+            raise ParameterError(f"--limit must be >= 0, got {args.limit}")
         with np.load(Path(args.sim_dir) / "rods.npz") as rods:
             configs = sorted(rods.files)[: args.limit]
-    out = render_directory(args.sim_dir, args.out, configs=configs, px_per_mm=args.px_per_mm,
-                           thickness_mm=args.thickness_mm, rod_length_mm=args.rod_length_mm,
-                           noise_sigma=args.noise, blur_px=args.blur, jpeg_quality=args.jpeg,
-                           smears=args.smears, specks=args.specks, pinholes=args.pinholes,
-                           seed=args.seed, hole_radius_mm=_hole_arg(args.hole),
-                           progress=args.progress)
+    out = render_directory(args.sim_dir, args.out, configs=configs, progress=args.progress,
+                           **kwargs)
     print(f"{len(out)} scenes in {args.out}")
     return 0

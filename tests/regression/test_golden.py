@@ -73,11 +73,12 @@ def _simulation_tables(tmp):
                   u=100.0, ftol=1e-4, xtol=1e-4, wall_radius=None, contact_distance=None,
                   parametrization=None)
     tabs = run_ensemble(params, tmp / "quench", workers=1, progress=False)
+    assert len(tabs.pop("failed")) == 0
     for t, df in tabs.items():
         yield f"quench_{t}", df.drop(columns=[c for c in df.columns if c.endswith("_s")])
     with np.load(tmp / "quench" / "rods.npz") as rods:
         xy = np.asarray(rods[sorted(rods.files)[0]], float)
-    sc = render_configuration(xy, seed=2)
+    sc = render_configuration(xy, seed=2, clean=True, smooth="long")
     for t, df in sc.tables.items():
         yield f"render_truth_{t}", df
     p = sc.params

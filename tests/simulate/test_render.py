@@ -33,7 +33,7 @@ def threshold(rgb):
 def test_scene_truth_and_layout(tmp_path, seed):
     for name, xy in shapes(seed).items():
         a = analyze_rod(xy, lam=LAM)
-        sc = render_configuration(xy, a, seed=seed)
+        sc = render_configuration(xy, a, seed=seed, clean=True)
         assert sc.rgb.dtype == np.uint8 and max(sc.rgb.shape[:2]) <= 2500
         # default threshold recovers the drawn ink up to anti-aliased edge pixels (no noise)
         edge = ndimage.binary_dilation(sc.ink_mask) & ~ndimage.binary_erosion(sc.ink_mask)
@@ -81,7 +81,7 @@ def test_band_widths_follow_calibration():
     """A stack of n coincident passes is one band of width w(n); arms beyond delta are two."""
     for g, n_bands in [(0.4 * DELTA, 1), (3.5 * DELTA, 2)]:
         xy = resample(hairpin(g, arm=0.15))
-        sc = render_configuration(xy, analyze_rod(xy, lam=LAM), rod_length_mm=150.0)
+        sc = render_configuration(xy, analyze_rod(xy, lam=LAM), rod_length_mm=150.0, clean=True)
         ink = sc.ink_mask
         # transect across the arms half way along the stack
         a = analyze_rod(xy, lam=LAM)
@@ -100,7 +100,8 @@ def test_band_widths_follow_calibration():
 def test_noise_options_are_seeded():
     xy = shapes(3)["spiral3"]
     a = analyze_rod(xy, lam=LAM)
-    kw = dict(noise_sigma=6, blur_px=0.8, jpeg_quality=85, smears=3, specks=5, pinholes=5)
+    kw = dict(noise_sigma=6, blur_px=0.8, jpeg_quality=85, smears=3, specks=5, pinholes=5,
+              clean=True)
     s1 = render_configuration(xy, a, seed=4, **kw)
     s2 = render_configuration(xy, a, seed=4, **kw)
     s3 = render_configuration(xy, a, seed=5, **kw)

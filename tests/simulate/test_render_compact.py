@@ -1,0 +1,217 @@
+"""Renders that look like scans (simulate.render): the wall is the hole, the thickness sets the
+scale, scan defects by default, ``--clean`` for the clean drawing, one-line CLI errors."""
+import json
+
+import numpy as np
+import pytest
+
+from crosssection.core.errors import ParameterError
+from crosssection.truth.scene import read_scene
+from simulate.cli import main
+from simulate.contacts import analyze_rod
+from simulate.render import CLEAN, SCAN_DEFECTS, render_configuration, render_directory
+from simulate.shapes import resample, spiral, transform
+
+PX_PER_MM = 20.0  # h = 2 px: small images, fast tests
+
+
+@pytest.fixture(scope="module")
+def compact_dir(tmp_path_factory):
+    """One rod compacted to epsilon = 3 (200 segments): a compaction's output folder."""
+    out = tmp_path_factory.mktemp("compact") / "sim"
+    assert main(["compact", "--epsilon", "3", "--segments", "200", "--n-configs", "1",
+                 "--seed", "2", "--out", str(out), "--no-progress"]) == 0
+    return out
+
+
+@pytest.fixture(scope="module")
+def compact_scenes(compact_dir, tmp_path_factory):
+    """The compaction rendered with the defaults and with --clean."""
+    base = tmp_path_factory.mktemp("scenes")
+    out = {}
+    for name, flags in (("scan", []), ("clean", ["--clean"])):
+        assert main(["render", str(compact_dir), "--out", str(base / name), "--px-per-mm",
+                     str(PX_PER_MM), "--seed", "5", *flags]) == 0
+        out[name] = read_scene(base / name / "config_00000")
+    return out
+
+
+def test_hole_is_the_wall_and_thickness_sets_the_scale(compact_dir, compact_scenes):
+    p = json.loads((compact_dir / "params.json").read_text())
+    xy = np.load(compact_dir / "rods.npz")["config_00000"]
+    sc = compact_scenes["clean"]
+    q = sc.params
+    # h of the rod is the sheet's 0.1 mm: L = h_mm / h_L, R = wall_radius L
+    assert q["rod_length_mm"] == pytest.approx(0.1 / p["thickness"], rel=1e-12)
+    assert q["hole_radius_mm"] == pytest.approx(p["wall_radius"] * q["rod_length_mm"], rel=1e-12)
+    assert sc.summary["epsilon"] == pytest.approx(3.0, rel=1e-9)
+    # the hole is centred on the wall's centre, the origin of the rod's coordinates
+    origin_px = (np.zeros(2) - np.array(q["origin_xy"])) * q["rod_length_mm"] * PX_PER_MM \
+        + q["margin_px"]
+    assert np.allclose(q["hole_center_px"], origin_px)
+    # every node lies within R - h/2 of the wall centre: in pixels, inside the drawn hole
+    nodes_px = (xy - np.array(q["origin_xy"])) * q["rod_length_mm"] * PX_PER_MM + q["margin_px"]
+    r = np.hypot(*(nodes_px - np.array(q["hole_center_px"])).T)
+    h_px = 0.1 * PX_PER_MM
+    assert r.max() <= q["hole_radius_mm"] * PX_PER_MM - 0.5 * h_px + 1e-6
+    # and the rod, pressed against the wall, reaches it (within a thickness)
+    assert r.max() >= q["hole_radius_mm"] * PX_PER_MM - 1.5 * h_px
+    # a hard wall stores no energy: the analysis ran with lambda = 0
+    assert sc.tables["branches"]["energy_confinement"].abs().max() == 0.0
+    assert sc.summary["total_energy"] == pytest.approx(
+        analyze_rod(xy, lam=0.0, contact_distance=p["contact_distance"]).energy_bending)
+
+
+def test_defaults_degrade_and_clean_does_not(compact_scenes):
+    scan, clean = compact_scenes["scan"], compact_scenes["clean"]
+    # same drawing and truth, different pixels
+    for t in ("junctions", "stacks", "voids"):
+        assert scan.tables[t].equals(clean.tables[t]), t
+    for k, v in SCAN_DEFECTS.items():
+        assert scan.params[k] == v, k
+    for k, v in CLEAN.items():
+        assert clean.params[k] == v, k
+    rgb_s, rgb_c = scan.rgb.astype(float), clean.rgb.astype(float)
+    h, w = rgb_c.shape[:2]
+    cx, cy = scan.params["hole_center_px"]
+    rr, cc = np.mgrid[0:h, 0:w]
+    d = np.hypot(rr - cy, cc - cx)
+    ring = d > scan.params["hole_radius_mm"] * PX_PER_MM + 6
+    # outside the hole: white paper in the clean drawing, the grey plate in the scan
+    assert rgb_c[ring].mean() > 220
+    assert abs(rgb_s[ring].mean() - np.mean([128.0, 125.0, 120.0])) < 25
+    # the commonest colour inside the hole (a void's receding surface): one flat colour in
+    # the clean drawing, noisy in the scan
+    inside = d < scan.params["hole_radius_mm"] * PX_PER_MM - 4
+    colours, counts = np.unique(clean.rgb[inside].reshape(-1, 3), axis=0, return_counts=True)
+    flat = inside & (clean.rgb == colours[np.argmax(counts)]).all(axis=2)
+    assert flat.sum() > 1000
+    assert rgb_s[flat].std(axis=0).min() > 2.0
+
+
+def test_clean_is_the_drawing_without_defects():
+    """clean=True is the same scene as every defect set to none by hand, and an explicit
+    defect still applies on top of clean."""
+    rng = np.random.default_rng(0)
+    xy = transform(resample(spiral(3, 0.7 * 0.5 / 300)), rng)
+    a = analyze_rod(xy, lam=7e5)
+    clean = render_configuration(xy, a, seed=3, clean=True, hole_radius_mm="auto")
+    by_hand = render_configuration(xy, a, seed=3, hole_radius_mm="auto",
+                                   **{**CLEAN, "jpeg_quality": 0, "plate": "none"})
+    assert np.array_equal(clean.rgb, by_hand.rgb)
+    noisy = render_configuration(xy, a, seed=3, clean=True, hole_radius_mm="auto",
+                                 noise_sigma=8.0)
+    assert not np.array_equal(clean.rgb, noisy.rgb)
+    assert noisy.params["noise_sigma"] == 8.0 and noisy.params["plate"] is None
+    # without a hole the default plate has nothing to frame: none, and no error
+    no_hole = render_configuration(xy, a, seed=3)
+    assert no_hole.params["plate"] is None and no_hole.params["noise_sigma"] > 0
+
+
+def test_smooth_none_draws_the_polylines():
+    rng = np.random.default_rng(1)
+    xy = transform(resample(spiral(3, 0.7 * 0.5 / 300)), rng)
+    a = analyze_rod(xy, lam=7e5)
+    poly = render_configuration(xy, a, seed=3, clean=True, smooth="none")
+    smooth = render_configuration(xy, a, seed=3, clean=True)
+    # the polyline paths are the analysis' lines in pixels; the smooth ones are resampled
+    assert sum(len(p) for p in poly.paths_rc) == sum(len(line) for line in a.stack_lines)
+    assert sum(len(p) for p in smooth.paths_rc) != sum(len(p) for p in poly.paths_rc)
+    assert poly.summary["total_energy"] == smooth.summary["total_energy"]
+    with pytest.raises(ParameterError, match="smooth"):
+        render_configuration(xy, a, smooth=True)
+
+
+def test_short_links_are_smoothed():
+    """A link shorter than two segments with hooks to its junctions (a Z): kept as it is by
+    default, a parabola through its ends and middle with ``short``."""
+    from simulate.render import smooth_line
+
+    z = np.array([[0.0, 0.0], [2.0, 10.0], [2.5, 20.0], [12.0, 21.0], [13.0, 30.0],
+                  [15.0, 40.0]])
+    assert np.array_equal(smooth_line(z, knot_spacing_px=60.0), z)
+    curve = smooth_line(z, knot_spacing_px=60.0, short=True)
+    assert np.allclose(curve[0], z[0]) and np.allclose(curve[-1], z[-1])
+    d = np.diff(curve, axis=0)
+    turn = np.abs(np.diff(np.unwrap(np.arctan2(d[:, 1], d[:, 0]))))
+    d0 = np.diff(z, axis=0)
+    corner = np.abs(np.diff(np.unwrap(np.arctan2(d0[:, 1], d0[:, 0])))).max()
+    # no corner left: the largest turn per pixel step is a small fraction of the Z's corners
+    assert turn.max() < 0.1 * corner
+    # a parabola turns one way only
+    cross = d[:-1, 0] * d[1:, 1] - d[:-1, 1] * d[1:, 0]
+    assert np.all(cross >= -1e-9) or np.all(cross <= 1e-9)
+
+
+@pytest.mark.parametrize("flags, names", [
+    (["--noise", "-1"], "--noise"),
+    (["--blur", "nan"], "--blur"),
+    (["--jpeg", "101"], "--jpeg"),
+    (["--jpeg", "high"], "--jpeg"),
+    (["--smears", "-2"], "--smears"),
+    (["--plate", "purple"], "plate"),
+    (["--illumination", "1.5"], "--illumination"),
+    (["--plate", "grey", "--hole", "none"], "plate"),
+    (["--px-per-mm", "0"], "--px-per-mm"),
+    (["--smooth", "some"], "--smooth"),
+])
+def test_bad_options_exit_2_with_one_line(compact_dir, tmp_path, capsys, flags, names):
+    try:
+        status = main(["render", str(compact_dir), "--out", str(tmp_path / "s"), *flags])
+    except SystemExit as exc:  # argparse's own checks (a value of the wrong type)
+        status = exc.code
+    err = capsys.readouterr().err
+    assert status == 2
+    assert len(err.strip().splitlines()) == 1 and err.startswith("error:"), err
+    assert names in err and "Traceback" not in err
+    assert not (tmp_path / "s").exists()
+
+
+def test_bad_compaction_params_exit_2_naming_the_file(compact_dir, tmp_path, capsys):
+    sim = tmp_path / "sim"
+    sim.mkdir()
+    (sim / "rods.npz").write_bytes((compact_dir / "rods.npz").read_bytes())
+    p = json.loads((compact_dir / "params.json").read_text())
+    p["thickness"] = -1.0
+    (sim / "params.json").write_text(json.dumps(p))
+    assert main(["render", str(sim), "--out", str(tmp_path / "s")]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1
+    assert "params.json" in err and "thickness" in err
+
+
+def test_render_directory_api_checks_options_first(compact_dir, tmp_path):
+    with pytest.raises(ParameterError, match="jpeg_quality"):
+        render_directory(compact_dir, tmp_path / "s", jpeg_quality=500)
+    assert not (tmp_path / "s").exists()
+
+
+def test_no_ink_beyond_the_wall(compact_dir):
+    """The wall is the hole: bands pressed against it end there. The same drawing around an
+    explicit hole of the same radius (not the wall) pokes out of it."""
+    p = json.loads((compact_dir / "params.json").read_text())
+    xy = np.load(compact_dir / "rods.npz")["config_00000"]
+    an = analyze_rod(xy, lam=0.0, contact_distance=p["contact_distance"])
+    kw = dict(px_per_mm=PX_PER_MM, clean=True, rod_thickness=p["thickness"],
+              wall_radius=p["wall_radius"])
+    wall = render_configuration(xy, an, hole_radius_mm="auto", **kw)
+    free = render_configuration(xy, an, hole_radius_mm=wall.params["hole_radius_mm"], **kw)
+    beyond = []
+    for sc in (wall, free):
+        cx, cy = sc.params["hole_center_px"]
+        rr, cc = np.nonzero(sc.ink_mask)
+        beyond.append(np.hypot(rr - cy, cc - cx).max()
+                      - sc.params["hole_radius_mm"] * PX_PER_MM)
+    # pixel centres of anti-aliased ink reach at most about half a pixel past the edge
+    assert beyond[0] <= 0.75
+    assert beyond[1] > 1.0
+
+
+def test_render_directory_api_takes_the_wall_by_default(compact_dir, tmp_path):
+    p = json.loads((compact_dir / "params.json").read_text())
+    (folder,) = render_directory(compact_dir, tmp_path / "s", px_per_mm=PX_PER_MM, clean=True)
+    q = json.loads((folder / "params.json").read_text())
+    assert q["hole_radius_mm"] == pytest.approx(p["wall_radius"] * 0.1 / p["thickness"])
+    (none,) = render_directory(compact_dir, tmp_path / "n", px_per_mm=PX_PER_MM, clean=True,
+                               hole_radius_mm=None)
+    assert json.loads((none / "params.json").read_text())["hole_radius_mm"] is None
