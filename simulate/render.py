@@ -822,10 +822,13 @@ def _jpeg_arg(text):
     if str(text).lower() in ("none", "off"):
         return "none"
     try:
-        return int(text)
+        q = int(text)
     except ValueError:
+        q = 0
+    if not 1 <= q <= 100:
         raise argparse.ArgumentTypeError(f"expected a whole number 1-100 or 'none', got "
-                                         f"{text!r}") from None
+                                         f"{text!r}")
+    return q
 
 
 #: API keyword -> CLI option, for error messages
