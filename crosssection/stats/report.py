@@ -721,7 +721,7 @@ def _html(res: StatsResult, figs, meta, ens: Ensemble | None = None,
         "line-height:1.4}table.t{border-collapse:collapse;font-size:12px;margin-bottom:1em}"
         "table.t td,table.t th{border:1px solid #ccc;padding:2px 6px}"
         "table.t th{background:#f3f3f3;text-align:left;vertical-align:bottom}"
-        "table.t td{text-align:right}table.t td:first-child{text-align:left}img{max-width:100%}figure{margin:1em 0 2em}"
+        "table.t td{text-align:left}img{max-width:100%}figure{margin:1em 0 2em}"
         "figcaption{font-size:14px;color:#333}.warn{color:#a00}</style></head><body>",
         "<h1>Folding statistics</h1>",
         f"<p>foldstat {html.escape(meta['version'])}; inputs: "
