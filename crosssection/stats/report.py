@@ -11,6 +11,7 @@ function, the fraction of stacks at each k against the fitted law's mass at k.
 from __future__ import annotations
 
 import html
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -251,7 +252,8 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
             elif ymax_lin > 0:
                 # a Gamma law with alpha < 1 diverges at 0: scale the axis to the data
                 ax.set_ylim(0, 1.15 * ymax_lin)
-            ax.set_xlabel(label)
+            # long names on two lines: side-by-side panels' labels must not run together
+            ax.set_xlabel(textwrap.fill(label, 36))
             ax.set_ylabel("fraction of stacks $P(n_{br})$" if count
                           else "probability density")
             ax.set_title(f"{REGION_WORDS.get(reg, reg)}: {'linear' if not logscale else 'log'}"

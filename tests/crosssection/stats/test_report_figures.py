@@ -180,9 +180,17 @@ def test_tick_labels_never_run_together(tmp_path):
     from crosssection.stats.report import plot_pdf
 
     b = demo.write_demo_batch(tmp_path / "b", n_images=3, seed=1, sets={"s1": {"n_stacks": 60}})
-    for q in ("area_L2", "length_L", "shape_ratio", "kappa_m_L", "e"):
+    for q in ("area_L2", "length_L", "shape_ratio", "kappa_m_L", "kappa_plus_L", "e"):
         fig = plot_pdf(b, q)
         assert _overlapping_ticks(fig) == [], q
+        # the x labels of the linear and log panels of a row stay apart
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+        renderer = FigureCanvasAgg(fig).get_renderer()
+        fig.draw(renderer)
+        boxes = [ax.xaxis.label.get_window_extent(renderer) for ax in fig.axes]
+        for i in range(0, len(boxes) - 1, 2):
+            assert not boxes[i].overlaps(boxes[i + 1]), q
         for ax in fig.axes:
             if ax.get_xscale() == "linear":
                 assert ax.get_xlim()[0] >= 0, q
