@@ -362,53 +362,11 @@ def _seg_reach(xy):
 
 
 @njit(cache=True)
-def _head_grid(xy, k, hcell):
-    """Grid (CSR) of head segments 0..k-1 over their bounding box."""
-    xmin = xy[0, 0]
-    xmax = xmin
-    ymin = xy[0, 1]
-    ymax = ymin
-    for i in range(1, k + 1):
-        xmin = min(xmin, xy[i, 0])
-        xmax = max(xmax, xy[i, 0])
-        ymin = min(ymin, xy[i, 1])
-        ymax = max(ymax, xy[i, 1])
-    h = max(hcell, max(xmax - xmin, ymax - ymin) / 40.0)
-    nx = int((xmax - xmin) / h) + 1
-    ny = int((ymax - ymin) / h) + 1
-    ncell = nx * ny
-    count = np.zeros(ncell + 1, np.int64)
-    for s in range(k):
-        x0 = int((min(xy[s, 0], xy[s + 1, 0]) - xmin) / h)
-        x1 = int((max(xy[s, 0], xy[s + 1, 0]) - xmin) / h)
-        y0 = int((min(xy[s, 1], xy[s + 1, 1]) - ymin) / h)
-        y1 = int((max(xy[s, 1], xy[s + 1, 1]) - ymin) / h)
-        for cx in range(x0, min(x1, nx - 1) + 1):
-            for cy in range(y0, min(y1, ny - 1) + 1):
-                count[cx * ny + cy + 1] += 1
-    for c in range(ncell):
-        count[c + 1] += count[c]
-    items = np.empty(count[ncell], np.int64)
-    fill = count[:-1].copy()
-    for s in range(k):
-        x0 = int((min(xy[s, 0], xy[s + 1, 0]) - xmin) / h)
-        x1 = int((max(xy[s, 0], xy[s + 1, 0]) - xmin) / h)
-        y0 = int((min(xy[s, 1], xy[s + 1, 1]) - ymin) / h)
-        y1 = int((max(xy[s, 1], xy[s + 1, 1]) - ymin) / h)
-        for cx in range(x0, min(x1, nx - 1) + 1):
-            for cy in range(y0, min(y1, ny - 1) + 1):
-                c = cx * ny + cy
-                items[fill[c]] = s
-                fill[c] += 1
-    return xmin, ymin, h, nx, ny, count, items
-
-
-@njit(cache=True)
 def _store_head_grid(xy, k, n, scratch):
     """Build the grid of head segments 0..k-1 into ``scratch``; returns its cell side.
 
-    The same grid as :func:`_head_grid` (same cells, same order of segments per cell), built
-    in the scratch buffers without allocating.
+    Cells no smaller than a segment, at most 41 x 41 of them, over the head's bounding box;
+    CSR in the scratch buffers (built without allocating).
     """
     hcell = 1.0 / n
     xmin = xy[0, 0]

@@ -229,13 +229,56 @@ def test_lbfgs_slides_below_jammed_state(seed):
     assert r.energy_total > 2 * np.sqrt(lam) * 0.9
 
 
+def _head_grid(xy, k, hcell):
+    """Reference grid (CSR) of head segments 0..k-1 over their bounding box, built plainly
+    with its own allocations: what the scratch-buffer builder must reproduce."""
+    xmin = xy[0, 0]
+    xmax = xmin
+    ymin = xy[0, 1]
+    ymax = ymin
+    for i in range(1, k + 1):
+        xmin = min(xmin, xy[i, 0])
+        xmax = max(xmax, xy[i, 0])
+        ymin = min(ymin, xy[i, 1])
+        ymax = max(ymax, xy[i, 1])
+    h = max(hcell, max(xmax - xmin, ymax - ymin) / 40.0)
+    nx = int((xmax - xmin) / h) + 1
+    ny = int((ymax - ymin) / h) + 1
+    ncell = nx * ny
+    count = np.zeros(ncell + 1, np.int64)
+    for s in range(k):
+        x0 = int((min(xy[s, 0], xy[s + 1, 0]) - xmin) / h)
+        x1 = int((max(xy[s, 0], xy[s + 1, 0]) - xmin) / h)
+        y0 = int((min(xy[s, 1], xy[s + 1, 1]) - ymin) / h)
+        y1 = int((max(xy[s, 1], xy[s + 1, 1]) - ymin) / h)
+        for cx in range(x0, min(x1, nx - 1) + 1):
+            for cy in range(y0, min(y1, ny - 1) + 1):
+                count[cx * ny + cy + 1] += 1
+    for c in range(ncell):
+        count[c + 1] += count[c]
+    items = np.empty(count[ncell], np.int64)
+    fill = count[:-1].copy()
+    for s in range(k):
+        x0 = int((min(xy[s, 0], xy[s + 1, 0]) - xmin) / h)
+        x1 = int((max(xy[s, 0], xy[s + 1, 0]) - xmin) / h)
+        y0 = int((min(xy[s, 1], xy[s + 1, 1]) - ymin) / h)
+        y1 = int((max(xy[s, 1], xy[s + 1, 1]) - ymin) / h)
+        for cx in range(x0, min(x1, nx - 1) + 1):
+            for cy in range(y0, min(y1, ny - 1) + 1):
+                c = cx * ny + cy
+                items[fill[c]] = s
+                fill[c] += 1
+    return xmin, ymin, h, nx, ny, count, items
+
+
+
 def test_head_grid_in_scratch_and_bounded_clearance_match_the_plain_ones():
     """The allocation-free head grid equals the reference grid, and the clearance query with
     its midpoint bound and per-query de-duplication returns the capped brute-force minimum."""
     from numba import njit
 
     from simulate.intersect import seg_dist2
-    from simulate.powell import _head_grid, _new_scratch, _seg_vs_head, _store_head_grid
+    from simulate.powell import _new_scratch, _seg_vs_head, _store_head_grid
 
     @njit
     def buffers(scratch):
