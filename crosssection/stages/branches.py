@@ -14,7 +14,10 @@ the rod length, so that a rod of unit length has e = int kappa~^2 ds~):
 
 The linear branch beyond the plastic threshold kappa_c is the paper's plastic softening; it is
 continuous with the same slope at |kappa| = kappa_c. Integrals use the trapezoid rule on the
-centerline samples.
+centerline samples. The curvature noise of the window fit adds its variance v to the mean of
+kappa^2 wherever f is quadratic; v is measured on the scan
+(:func:`crosssection.stages.curvature.noise_variance`) and removed there, the energy never
+going below zero.
 """
 from __future__ import annotations
 
@@ -54,7 +57,8 @@ def energy_density(kappa_per_mm, kappa_c_per_mm=None) -> np.ndarray:
     return f
 
 
-def bending_energy(kappa_per_mm, s_mm, *, rod_length_mm, kappa_c_per_mm=None) -> float:
+def bending_energy(kappa_per_mm, s_mm, *, rod_length_mm, kappa_c_per_mm=None,
+                   noise_var_per_mm2: float = 0.0) -> float:
     """Dimensionless bending energy ``e = L int f(kappa) ds`` of one branch.
 
     Parameters
@@ -67,6 +71,9 @@ def bending_energy(kappa_per_mm, s_mm, *, rod_length_mm, kappa_c_per_mm=None) ->
         Total rod length L, mm (the pipeline uses L = sum of n_br * length over stacks).
     kappa_c_per_mm : float, optional
         Plastic threshold (paper: 0.54 or 0.24 1/mm depending on the sheets).
+    noise_var_per_mm2 : float
+        Variance of the curvature noise, 1/mm^2 (module docstring): removed from ``kappa^2``
+        where ``f`` is quadratic.
 
     Returns
     -------
@@ -79,7 +86,16 @@ def bending_energy(kappa_per_mm, s_mm, *, rod_length_mm, kappa_c_per_mm=None) ->
         raise ParameterError(f"kappa and s have different shapes {k.shape} != {s.shape}")
     if len(s) < 2:
         return 0.0
-    return float(rod_length_mm) * float(np.trapezoid(energy_density(k, kappa_c_per_mm), s))
+    f = energy_density(k, kappa_c_per_mm)
+    v = float(noise_var_per_mm2)
+    if not np.isfinite(v) or v < 0:
+        raise ParameterError(f"noise variance must be finite and >= 0, got {v}")
+    if v > 0:
+        quadratic = (np.ones_like(k) if kappa_c_per_mm is None
+                     else (np.abs(k) <= float(kappa_c_per_mm)).astype(np.float64))
+        integral = float(np.trapezoid(f, s)) - v * float(np.trapezoid(quadratic, s))
+        return float(rod_length_mm) * max(integral, 0.0)
+    return float(rod_length_mm) * float(np.trapezoid(f, s))
 
 
 def rod_length_mm(lengths_mm, n_br) -> float:
@@ -133,7 +149,9 @@ def branch_table(stacks, profiles: Sequence, n_br, regions, *, rod_length_mm=Non
     if rod_length_mm is None:
         rod_length_mm = float(np.sum(np.clip(n_br, 0, None) * lengths))
     energies = np.array([bending_energy(p.kappa_per_mm, p.s_mm, rod_length_mm=rod_length_mm,
-                                        kappa_c_per_mm=kappa_c_per_mm) for p in profiles])
+                                        kappa_c_per_mm=kappa_c_per_mm,
+                                        noise_var_per_mm2=getattr(p, "noise_var_per_mm2", 0.0))
+                         for p in profiles])
     reps = np.clip(n_br, 0, None)
     idx = np.repeat(np.arange(m), reps)
     df = pd.DataFrame({

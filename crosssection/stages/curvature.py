@@ -13,34 +13,47 @@ fit on size 5 n_br h, after coordinates translation and rotation in the tangent 
    is removed (``circle_correction``: exact to O((kappa w)^2) on arcs). Near an open end the
    window keeps its length and is shifted inwards. The window is capped at half the fitted
    length (``max_window_frac``): a longer parabola cannot resolve an S-shaped stack.
-3. **Fork zones.** Within ``max(n_br h, r_J)`` of a junction, r_J the inscribed ink radius
-   there, the bands of the stacks meeting at the junction overlap: the image holds no
-   centreline of this stack and the skeleton hooks into the medial-axis fork point. Those
-   samples are not fitted: they are missing data. The default (``method="missing"``)
-   continues the linear trend of the curvature over the nearest fitted window (5 n_br h) to
-   the junction, so that a bend that tightens toward the fork keeps tightening; the paper's
-   rule (``method="paper"``) gives them the curvature of the nearest fitted sample. Free
-   ends keep the paper's rule (their skeleton is shortened, not merged).
-   Everywhere the curvature is bounded by ``2 / (n_br h)``: the innermost layer of a stack
-   cannot have a negative radius, so a tighter estimate is a skeleton kink, not a bend.
+3. **Fork zones.** Near a junction the bands of the stacks meeting there overlap: the image
+   holds no centreline of this stack, and the skeleton hooks into the medial-axis fork point.
+   The maximal disc at the fork (radius r_J, the inscribed ink radius at the junction) touches
+   both bands, so the skeleton reaches the band's own centre only about one r_J beyond the
+   overlap; layers that peel apart tangentially stay in contact, their bands merged, further
+   still (:func:`contact_arc_px`); and the sliding average carries the hook half a smoothing
+   window beyond: the fork zone is ``max(2 max(n_br h, r_J), contact) + (smooth_px - 1) / 2``
+   of arc from the junction (measured on drawn tangential forks: arms' ``int kappa^2 ds``
+   0.9-2.3 x the truth with ``max(n_br h, r_J)``, 0.9-1.2 x with this zone). Those samples
+   are not fitted: they are missing data. The default (``method="missing"``) continues the
+   linear trend of the curvature over the nearest fitted window (5 n_br h) to the junction,
+   so that a bend that tightens toward the fork keeps tightening; the paper's rule
+   (``method="paper"``) gives them the curvature of the nearest fitted sample. Free ends keep
+   the paper's rule (their skeleton is shortened, not merged). Everywhere the curvature is
+   bounded by ``2 / (n_br h)``: the innermost layer of a stack cannot have a negative radius,
+   so a tighter estimate is a skeleton kink, not a bend.
+4. **Noise floor.** The window fit turns the pixel noise of the centreline into a curvature
+   noise of variance ``v`` that adds ``v l`` to every stack's ``int kappa^2 ds`` whatever its
+   true bending (on a render's long single-pass stacks, curvature about 0.2 /mm, it was a
+   third of the measured energy). ``v`` is measured on the scan itself, for each window (each
+   n_br), from the curvature differences at lags ``d`` and ``2 d`` beyond the noise's
+   correlation length (``d`` = window + smoothing): ``D(d) = v + a d^2`` for a curvature that
+   varies smoothly, so ``v = (4 D(d) - D(2 d)) / 3`` (:func:`noise_variance`). The branch
+   energies subtract ``v`` over the quadratic part of the energy density
+   (:func:`crosssection.stages.branches.bending_energy`); the profile itself is not changed.
 
 **What these estimators miss** (docs/validation/README.md, "Bending energy"): the share of
 the true energy inside fork zones depends on the generator -- 38 % within n_br h of a junction
 on ``crosssection.truth.network`` scenes (branches leave the node fanned and bend back), 3 %
-on simulator renders (rod segments of 6-7 h resolve no bending at that scale). Median
-total-energy error of the default: typical -21 %, 25 px/mm -9 %, thick dense -23 %, renders
-+85 % (their excess sits where single-pass stacks run into fold caps). Estimators that follow
-faster curvature changes (a polynomial tangent-angle fit) fit the first and overshoot on the
-second; noise-unbiased ones (a lagged product) the reverse. The trend continuation is not a
-model of how layers leave a merged band: a least-bending turn from the parent band's axis to
-the exit direction over the fork zone was measured at +150 to +280 % on network scenes and is
-not used.
+on simulator renders (rod segments of 6-7 h resolve no bending at that scale). Estimators
+that follow faster curvature changes (a polynomial tangent-angle fit) fit the first and
+overshoot on the second; noise-unbiased ones (a lagged product) the reverse. The trend
+continuation is not a model of how layers leave a merged band: a least-bending turn from the
+parent band's axis to the exit direction over the fork zone was measured at +150 to +280 % on
+network scenes and is not used.
 
 ``CurvatureProfile.energy_rel_uncertainty``: the extrapolated share of ``int kappa^2 ds``
-(not measured: counted in full) plus the noise floor of the window fit, relative to the
-stack's ``int kappa^2 ds``.
+(not measured: counted in full) plus the removed noise floor, relative to the stack's
+``int kappa^2 ds``.
 
-4. **Sign.** Positive when the path, followed from its start to its end, turns
+5. **Sign.** Positive when the path, followed from its start to its end, turns
    counter-clockwise in the image as displayed (x = column to the right, y = -row).
 
 Per stack: kappa_pm = (1/l) int kappa ds, kappa_plus = (1/l) int |kappa| ds,
@@ -56,7 +69,8 @@ from numba import njit
 from crosssection.core import polyline
 from crosssection.core.errors import ParameterError
 
-__all__ = ["CurvatureProfile", "stack_curvature", "stack_profiles", "default_smooth_px"]
+__all__ = ["CurvatureProfile", "stack_curvature", "stack_profiles", "default_smooth_px",
+           "noise_variance", "contact_arc_px"]
 
 
 @dataclass(frozen=True)
@@ -83,6 +97,9 @@ class CurvatureProfile:
     energy_rel_uncertainty : float
         Relative uncertainty of the stack's ``int kappa^2 ds`` (module docstring; NaN for the
         paper method).
+    noise_var_per_mm2 : float
+        Variance of the curvature noise of the window fit, 1/mm^2 (module docstring, step 4;
+        0 when not measured). The bending energy removes it.
     """
 
     s_mm: np.ndarray
@@ -96,6 +113,7 @@ class CurvatureProfile:
     fit_start: int = 0
     fit_stop: int = -1
     energy_rel_uncertainty: float = float("nan")
+    noise_var_per_mm2: float = 0.0
 
 
 def default_smooth_px(thickness_px: float) -> int:
@@ -281,7 +299,8 @@ def _paper_profile(p, *, closed, n_br, thickness_px, px_per_mm, smooth_px, trims
 
 def stack_curvature(path_rc, *, n_br, thickness_px, px_per_mm, closed=None, smooth_px=None,
                     trim_px=None, window_px=None, circle_correction=True, ends="shift",
-                    max_window_frac=0.5, method="missing") -> CurvatureProfile:
+                    max_window_frac=0.5, method="missing",
+                    noise_var_per_mm2=None) -> CurvatureProfile:
     """Smoothed centreline, arc length and local curvature of one stack.
 
     Parameters
@@ -314,6 +333,10 @@ def stack_curvature(path_rc, *, n_br, thickness_px, px_per_mm, closed=None, smoo
         Fork zones: ``"missing"`` (default) continues the curvature trend of the nearest
         fitted window into them and bounds the curvature by ``2 / (n_br h)``; ``"paper"``
         gives them the nearest fitted curvature (module docstring).
+    noise_var_per_mm2 : float, optional
+        The scan's curvature noise (:func:`noise_variance`): the trend is continued only where
+        it exceeds the noise, and the profile records it for the energy. Default: unknown
+        (trend always continued, nothing removed).
 
     Returns
     -------
@@ -341,7 +364,78 @@ def stack_curvature(path_rc, *, n_br, thickness_px, px_per_mm, closed=None, smoo
         return prof
     # only junction ends are fork zones; a free end keeps the nearest fitted curvature
     forks = tuple(bool(t) and float(t) > 0 for t in trims)
-    return _fill_fork_zones(prof, n_br, thickness_px, px_per_mm, forks)
+    return _fill_fork_zones(prof, n_br, thickness_px, px_per_mm, forks,
+                            noise_var_per_mm2=noise_var_per_mm2)
+
+
+#: How far from a junction (in sheet thicknesses) two stacks' skeletons are compared for
+#: contact: a tangential peel of radius R stays within 1 px over sqrt(2 R) px, 30 h at R = 90 h.
+_CONTACT_REACH_H = 30.0
+#: Largest gap (px) between two bands still counted as contact: a thinner gap is not resolved
+#: by the threshold at the paper's 50 px/mm and 1-px blur.
+_CONTACT_GAP_PX = 1.0
+
+
+def _fork_zone_px(width_px, r_j, touching_px, smooth_px):
+    """Fork zone (module docstring, step 3): the overlap, the hook, the contact, the smoothing."""
+    return max(2.0 * max(width_px, r_j), touching_px) + 0.5 * (smooth_px - 1)
+
+
+def _prefix(path_rc, end, reach):
+    """The first ``reach`` pixels of a path from its start (end 0) or its end (end 1)."""
+    p = np.asarray(path_rc, dtype=np.float64).reshape(-1, 2)
+    return (p if end == 0 else p[::-1])[:reach]
+
+
+def _median_radius(path_rc, distance_px):
+    """Median inscribed ink radius along a skeleton path, px (half the band's width)."""
+    p = np.round(np.asarray(path_rc, float).reshape(-1, 2)).astype(int)
+    if not len(p):
+        return 0.0
+    p = np.clip(p, 0, np.array(distance_px.shape) - 1)
+    return float(np.median(distance_px[p[:, 0], p[:, 1]]))
+
+
+def contact_arc_px(prefix_rc, radius_px, others, *, gap_px: float = _CONTACT_GAP_PX) -> float:
+    """Arc length from a junction along which a stack's band still touches another band there.
+
+    Two layers that peel apart tangentially stay in contact, their bands merged in the image,
+    for a while after the junction (``sqrt(2 R gap)`` for a relative bending radius R): along
+    that stretch the skeleton is the merged band's, not the stack's own centreline (module
+    docstring, step 3).
+
+    Parameters
+    ----------
+    prefix_rc : (P, 2) array
+        The stack's skeleton from the junction outwards, px.
+    radius_px : float
+        The stack's half-width, px (median inscribed radius along its skeleton).
+    others : sequence of ((Q, 2) array, float)
+        The other stacks at that junction: their skeleton from the junction and half-width.
+    gap_px : float
+        Largest gap between the bands still counted as contact.
+
+    Returns
+    -------
+    float
+        Arc length, px, from the junction to the first skeleton pixel farther than
+        ``radius + radius_other + gap_px`` from every other stack's skeleton.
+    """
+    pre = np.asarray(prefix_rc, float).reshape(-1, 2)
+    if len(pre) < 2 or not others:
+        return 0.0
+    first_far = 0
+    for q, r_other in others:
+        q = np.asarray(q, float).reshape(-1, 2)
+        if len(q) < 2:
+            continue
+        d = np.sqrt(((pre[:, None, :] - q[None, :, :]) ** 2).sum(-1)).min(axis=1)
+        far = np.flatnonzero(d > radius_px + r_other + gap_px)
+        first_far = max(first_far, int(far[0]) if len(far) else len(pre))
+    if first_far < 1:
+        return 0.0
+    seg = np.diff(pre[:min(first_far, len(pre) - 1) + 1], axis=0)
+    return float(np.hypot(seg[:, 0], seg[:, 1]).sum())
 
 
 def stack_profiles(graph, n_br, distance_px, *, thickness_px: float, px_per_mm: float,
@@ -362,29 +456,57 @@ def stack_profiles(graph, n_br, distance_px, *, thickness_px: float, px_per_mm: 
         Scan resolution.
     smooth_px : int, optional
         Sliding-average window of the centreline (default :func:`default_smooth_px`).
+    method : {"missing", "paper"}
+        Fork zones (module docstring, step 3); ``"missing"`` also measures the scan's
+        curvature noise (step 4) and records it in every profile.
 
     Returns
     -------
     list of CurvatureProfile
         One per stack, in stack order.
     """
+    if method not in ("missing", "paper"):
+        raise ParameterError(f"curvature method must be 'missing' or 'paper', got {method!r}")
     H, W = distance_px.shape
+    sm = default_smooth_px(thickness_px) if smooth_px is None else int(smooth_px)
+    at_node = {}  # junction -> [(stack, end)]
+    for sid in range(graph.n_stacks):
+        for end, node in enumerate(graph.ends[sid]):
+            if graph.node_kind[node] == "junction":
+                at_node.setdefault(node, []).append((sid, end))
+    reach = int(np.ceil(_CONTACT_REACH_H * float(thickness_px)))
+    prefixes = {key: _prefix(graph.paths[key[0]], key[1], reach) for keys in at_node.values()
+                for key in keys}
+    radius = [_median_radius(graph.paths[sid], distance_px) for sid in range(graph.n_stacks)]
 
-    def fork_radius(node):
-        # the fork zone of a junction: its inscribed ink radius, where the bands overlap
+    def fork_zone(sid, end, nb):
+        # module docstring, step 3
+        node = graph.ends[sid][end]
         if graph.node_kind[node] != "junction":
             return 0.0
         r, c = np.round(graph.node_rc[node]).astype(int)
-        return float(distance_px[min(max(r, 0), H - 1), min(max(c, 0), W - 1)])
+        r_j = float(distance_px[min(max(r, 0), H - 1), min(max(c, 0), W - 1)])
+        others = [(prefixes[k], radius[k[0]]) for k in at_node[node] if k != (sid, end)]
+        touching = contact_arc_px(prefixes[(sid, end)], radius[sid], others)
+        return _fork_zone_px(nb * float(thickness_px), r_j, touching, sm)
 
-    profiles = []
+    profiles, forks = [], []
     for sid in range(graph.n_stacks):
         u, v = graph.ends[sid]
+        nb = max(1, int(n_br[sid]))
+        trims = (fork_zone(sid, 0, nb), fork_zone(sid, 1, nb))
+        forks.append(tuple(t > 0 for t in trims))
         profiles.append(stack_curvature(
-            graph.paths[sid], n_br=int(n_br[sid]), thickness_px=thickness_px,
-            px_per_mm=px_per_mm, smooth_px=smooth_px, closed=(graph.node_kind[u] == "loop"),
-            trim_px=(fork_radius(u), fork_radius(v)), method=method))
-    return profiles
+            graph.paths[sid], n_br=nb, thickness_px=thickness_px,
+            px_per_mm=px_per_mm, smooth_px=sm, closed=(graph.node_kind[u] == "loop"),
+            trim_px=trims, method="paper"))
+    if method == "paper":
+        return profiles
+    var = noise_variance(profiles, n_br, thickness_px=thickness_px, px_per_mm=px_per_mm,
+                         smooth_px=sm)
+    return [_fill_fork_zones(prof, max(1, int(n_br[sid])), thickness_px, px_per_mm, forks[sid],
+                             noise_var_per_mm2=var[max(1, int(n_br[sid]))])
+            for sid, prof in enumerate(profiles)]
 
 
 def _trend(s, k):
@@ -396,12 +518,18 @@ def _trend(s, k):
     return a, float(k.mean()), sm
 
 
-def _fill_fork_zones(prof, n_br, thickness_px, px_per_mm, forks=(True, True), noise_px=0.3):
+def _fill_fork_zones(prof, n_br, thickness_px, px_per_mm, forks=(True, True), noise_px=0.3,
+                     noise_var_per_mm2=None):
     """Fork zones as missing data, and the physical bound on curvature.
 
     Within a fork zone the image holds no centreline of this stack (module docstring), so its
     curvature is not measured there: the linear trend of the curvature over the first (last)
-    fitted window of ``5 n_br h`` is continued to the junction. The curvature is bounded
+    fitted window of ``5 n_br h`` is continued to the junction. With the scan's curvature noise
+    ``v`` known, the trend is continued only where the data show one: the noise is correlated
+    over about a window, so a window holds about one independent sample and its slope has a
+    noise variance of about ``12 v / w^2``; a slope within twice that deviation is noise, and
+    the zone keeps the nearest fitted curvature (extrapolating a noise slope multiplied the
+    noise there by about five on jittered arcs). The curvature is bounded
     everywhere by ``2 / (n_br h)``: the innermost layer of a stack of ``n_br`` layers cannot
     have a negative radius, so anything tighter is a skeleton kink, not a bend.
 
@@ -425,16 +553,99 @@ def _fill_fork_zones(prof, n_br, thickness_px, px_per_mm, forks=(True, True), no
             if z0 == z1 or hi - lo < 3 or not forks[0 if z0 == 0 else 1]:
                 continue
             a, b, sm = _trend(s[lo:hi], k[lo:hi])
+            if noise_var_per_mm2 is not None and a * a * w * w <= 4.0 * 12.0 * noise_var_per_mm2:
+                continue
             k[z0:z1] = np.clip(b + a * (s[z0:z1] - sm), -kmax, kmax)
     out = _make_profile(s * px_per_mm, k / px_per_mm, prof.rc_px, px_per_mm, prof.closed,
                         (t0, t1))
+    if noise_var_per_mm2 is not None:
+        out = replace(out, noise_var_per_mm2=float(noise_var_per_mm2))
+        noise = float(noise_var_per_mm2) * out.length_mm
+    else:
+        noise = 720.0 * noise_px ** 2 / w_px ** 5 * px_per_mm ** 2 * out.length_mm
+    return replace(out, energy_rel_uncertainty=_rel_uncertainty(out, forks, noise))
+
+
+def _rel_uncertainty(prof, forks, noise_int):
+    """(extrapolated part of int kappa^2 ds + the noise floor ``noise_int``) / the integral."""
+    k, s, n = prof.kappa_per_mm, prof.s_mm, len(prof.s_mm)
     if n < 2:
-        return out
+        return float("nan")
     f = k * k
     total = float(np.trapezoid(f, s))
-    z0 = t0 if forks[0] else 0
-    z1 = t1 if forks[1] else n
+    z0 = prof.fit_start if forks[0] else 0
+    z1 = prof.fit_stop if forks[1] else n
     fitted = float(np.trapezoid(f[z0:z1], s[z0:z1])) if z1 - z0 > 1 else 0.0
-    noise = 720.0 * noise_px ** 2 / w_px ** 5 * px_per_mm ** 2 * out.length_mm
-    unc = (max(total - fitted, 0.0) + noise) / max(total, noise, 1e-300)
-    return replace(out, energy_rel_uncertainty=float(unc))
+    return float((max(total - fitted, 0.0) + noise_int) / max(total, noise_int, 1e-300))
+
+
+def _lag_variance(prof, lag_mm):
+    """Half the mean squared curvature difference at ``lag_mm`` over the fitted samples, and
+    the number of pairs (None when the fitted part is shorter than two lags)."""
+    s = prof.s_mm[prof.fit_start:prof.fit_stop]
+    k = prof.kappa_per_mm[prof.fit_start:prof.fit_stop]
+    if len(s) < 3 or s[-1] - s[0] < 2.0 * lag_mm:
+        return None
+    j = np.searchsorted(s, s + lag_mm)
+    ok = j < len(s)
+    d = k[j[ok]] - k[ok]
+    return float(d @ d) / (2.0 * d.size), int(d.size)
+
+
+def noise_variance(profiles, n_br, *, thickness_px: float, px_per_mm: float,
+                   smooth_px: int | None = None, min_pairs: int = 200) -> dict:
+    """Variance of the curvature noise of the window fit, per window (per n_br), 1/mm^2.
+
+    Noise beyond its correlation length ``d`` (the fit window ``5 n_br h`` plus the smoothing
+    window) is independent, so half the mean squared difference of the curvature at lag ``d``
+    is ``D(d) = v + a d^2`` for a curvature that varies smoothly over ``2 d``; two lags give
+    ``v = (4 D(d) - D(2 d)) / 3`` (Richardson). Pooled over the scan's stacks of each n_br:
+    the noise comes from the scan (resolution, blur, edge noise), not from one stack. Windows
+    with fewer than ``min_pairs`` pairs take the nearest measured one scaled as ``w^-5`` (the
+    variance of a parabola's curvature fitted over ``w`` px of independent samples).
+
+    Parameters
+    ----------
+    profiles : sequence of CurvatureProfile
+    n_br : (M,) int array
+    thickness_px, px_per_mm : float
+    smooth_px : int, optional
+        Sliding-average window (default :func:`default_smooth_px`).
+    min_pairs : int
+        Pairs needed for a window's own estimate.
+
+    Returns
+    -------
+    dict
+        n_br -> v (1/mm^2, >= 0); every n_br of ``n_br`` present (0 when no window could be
+        measured).
+    """
+    sm = default_smooth_px(thickness_px) if smooth_px is None else int(smooth_px)
+    nbs = sorted({max(1, int(x)) for x in n_br})
+    window = {nb: 5.0 * nb * float(thickness_px) for nb in nbs}
+    measured = {}
+    for nb in nbs:
+        lag = (window[nb] + sm) / float(px_per_mm)
+        d1 = d2 = 0.0
+        pairs = 0
+        for prof, n in zip(profiles, n_br):
+            if max(1, int(n)) != nb or prof.closed:
+                continue
+            a, b = _lag_variance(prof, lag), _lag_variance(prof, 2.0 * lag)
+            if a is None or b is None:
+                continue
+            d1 += a[0] * a[1]
+            d2 += b[0] * a[1]
+            pairs += a[1]
+        if pairs >= min_pairs:
+            measured[nb] = max((4.0 * d1 - d2) / (3.0 * pairs), 0.0)
+    out = {}
+    for nb in nbs:
+        if nb in measured:
+            out[nb] = measured[nb]
+        elif measured:
+            ref = min(measured, key=lambda m: abs(m - nb))
+            out[nb] = measured[ref] * (window[ref] / window[nb]) ** 5
+        else:
+            out[nb] = 0.0
+    return out
