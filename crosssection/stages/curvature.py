@@ -65,6 +65,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from numba import njit
+from scipy.spatial.distance import cdist
 
 from crosssection.core import polyline
 from crosssection.core.errors import ParameterError
@@ -374,6 +375,7 @@ _CONTACT_REACH_H = 30.0
 #: Largest gap (px) between two bands still counted as contact: a thinner gap is not resolved
 #: by the threshold at the paper's 50 px/mm and 1-px blur.
 _CONTACT_GAP_PX = 1.0
+_CHUNK = 16
 
 
 def _fork_zone_px(width_px, r_j, touching_px, smooth_px):
@@ -419,19 +421,26 @@ def contact_arc_px(prefix_rc, radius_px, others, *, gap_px: float = _CONTACT_GAP
     -------
     float
         Arc length, px, from the junction to the first skeleton pixel farther than
-        ``radius + radius_other + gap_px`` from every other stack's skeleton.
+        ``radius + radius_other + gap_px`` from every other stack's skeleton there.
     """
     pre = np.asarray(prefix_rc, float).reshape(-1, 2)
     if len(pre) < 2 or not others:
         return 0.0
-    first_far = 0
-    for q, r_other in others:
-        q = np.asarray(q, float).reshape(-1, 2)
-        if len(q) < 2:
-            continue
-        d = np.sqrt(((pre[:, None, :] - q[None, :, :]) ** 2).sum(-1)).min(axis=1)
-        far = np.flatnonzero(d > radius_px + r_other + gap_px)
-        first_far = max(first_far, int(far[0]) if len(far) else len(pre))
+    others = [(np.asarray(q, float).reshape(-1, 2), radius_px + r + gap_px) for q, r in others]
+    others = [(q, lim) for q, lim in others if len(q) >= 2]
+    if not others:
+        return 0.0
+    # in chunks from the junction: bands that part at an angle are apart within a few pixels,
+    # so the whole prefix is rarely needed
+    first_far = len(pre)
+    for i in range(0, len(pre), _CHUNK):
+        chunk = pre[i:i + _CHUNK]
+        near = np.zeros(len(chunk), bool)
+        for q, lim in others:
+            near |= cdist(chunk, q).min(axis=1) <= lim
+        if not near.all():
+            first_far = i + int(np.argmin(near))
+            break
     if first_far < 1:
         return 0.0
     seg = np.diff(pre[:min(first_far, len(pre) - 1) + 1], axis=0)

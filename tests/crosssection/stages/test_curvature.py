@@ -373,3 +373,22 @@ def test_noise_variance_fallback_and_guards():
     assert bending_energy(k, s, rod_length_mm=1.0, noise_var_per_mm2=1.0) == 0.0
     with pytest.raises(ParameterError):
         bending_energy(k, s, rod_length_mm=1.0, noise_var_per_mm2=-1.0)
+
+
+def test_contact_arc_of_peeling_and_fanned_bands():
+    from crosssection.stages.curvature import contact_arc_px
+    s = np.arange(0.0, 120.0)
+    # two bands of half-width 2.5 px side by side (centres 5 px apart) for 40 px, then
+    # parting on a parabola: contact while the gap is below 1 px
+    off = 2.5 + np.where(s < 40, 0.0, (s - 40) ** 2 / 200.0)
+    a = np.stack([100 - off, s], 1)
+    b = np.stack([100 + off, s], 1)
+    arc = contact_arc_px(a, 2.5, [(b, 2.5)])
+    assert 40 < arc < 40 + np.sqrt(2 * 100 * 1.0) + 2
+    # bands leaving a common point 60 degrees apart are apart within two widths
+    t = np.deg2rad(30.0)
+    c = np.stack([100 - s * np.sin(t), s * np.cos(t)], 1)
+    d = np.stack([100 + s * np.sin(t), s * np.cos(t)], 1)
+    assert contact_arc_px(c, 2.5, [(d, 2.5)]) < 12
+    # no neighbour, no contact
+    assert contact_arc_px(c, 2.5, []) == 0.0
