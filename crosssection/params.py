@@ -125,7 +125,8 @@ class AnalysisParams:
     curvature_method: str = field(default="missing", metadata=_opt(
         "curvature estimator: paper (parabolic fits over 5 n_br h; fork zones take the nearest "
         "fitted curvature) or missing (the same fits; fork zones as missing data, the "
-        "curvature trend continued to the junction; curvature bounded by 2 / (n_br h))",
+        "curvature trend continued to the junction where it exceeds the noise; the scan's "
+        "curvature noise removed from the energy; curvature bounded by 2 / (n_br h))",
         choices=CURVATURE_METHODS))
 
     # ------------------------------------------------------------------ validation

@@ -337,7 +337,8 @@ def test_noise_variance_is_the_curvature_noise(R, seed):
 def test_noise_floor_removed_from_gentle_arcs(seed):
     # long single-layer arcs of curvature 0.083 /mm: the window fit's noise alone makes
     # int kappa^2 ds several times the truth; the measured floor removed (and no noise slope
-    # continued into the fork zones), within 25 %. Measured (seeds 0-2): raw 2.7 x
+    # continued into the fork zones), within 25 %. Measured (seeds 0-2): raw 2.5-2.7 x, removed
+    # 0.95-1.17 x
     from crosssection.stages.branches import bending_energy
     from crosssection.stages.curvature import noise_variance
     R = 600.0
