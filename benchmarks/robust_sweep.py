@@ -129,6 +129,8 @@ def summarize(df: pd.DataFrame) -> pd.DataFrame:
              "f1_med": ok["junction_f1"].median(), "f1_min": ok["junction_f1"].min(),
              "nbr_med": ok["n_br_exact_length_fraction"].median(),
              "nbr_min": ok["n_br_exact_length_fraction"].min(),
+             "nbr1_med": ok["n_br_within1_length_fraction"].median()
+             if "n_br_within1_length_fraction" in ok else float("nan"),
              "voids_abs_med": ok["n_voids_rel_error"].abs().median(),
              "energy_abs_med": ok["total_energy_rel_error"].abs().median(),
              "energy_signed_med": ok["total_energy_rel_error"].median(),

@@ -78,8 +78,9 @@ LIMIT = {"n_br_exact_length_fraction": 0.8, "junction_f1": 0.9, "total_energy_re
 
 # accuracy columns of every sweep CSV (crosssection.truth.scoring names)
 METRICS = ("rod_length_rel_error", "junction_f1", "junction_precision", "junction_recall",
-           "n_br_exact_length_fraction", "n_br_mean_abs_error", "n_voids_rel_error",
-           "total_energy_rel_error", "n_stacks_rel_error", "stack_match_fraction")
+           "n_br_exact_length_fraction", "n_br_within1_length_fraction", "n_br_mean_abs_error",
+           "n_voids_rel_error", "total_energy_rel_error", "n_stacks_rel_error",
+           "stack_match_fraction")
 
 
 # ----------------------------------------------------------------------------- variants
@@ -982,7 +983,8 @@ def summarize(df: pd.DataFrame, by) -> pd.DataFrame:
     d = df.copy()
     for c in ("rod_length_rel_error", "n_voids_rel_error", "total_energy_rel_error"):
         d["abs_" + c] = d[c].abs()
-    cols = [c for c in ("n_br_exact_length_fraction", "junction_f1", "abs_rod_length_rel_error",
+    cols = [c for c in ("n_br_exact_length_fraction", "n_br_within1_length_fraction",
+                        "junction_f1", "abs_rod_length_rel_error",
                         "total_energy_rel_error", "abs_total_energy_rel_error",
                         "abs_n_voids_rel_error", "n_br_mean_abs_error", "analyze_s")
             if c in d]

@@ -56,6 +56,11 @@ def test_n_br_fraction_weighted_by_length(truth):
     expected = 1 - st["length_mm"][k] / st["length_mm"].sum()
     assert s["n_br_exact_length_fraction"] == pytest.approx(expected)
     assert s["n_br_mean_abs_error"] == pytest.approx(1 / len(st))
+    # one layer off is within +-1; two layers off is not
+    assert s["n_br_within1_length_fraction"] == 1.0
+    tables["stacks"].loc[k, "n_br"] += 1
+    s = score((summary, tables), truth)
+    assert s["n_br_within1_length_fraction"] == pytest.approx(expected)
 
 
 def test_stacks_matched_by_mid_point_not_by_order(truth):
