@@ -109,8 +109,10 @@ def _trace(f, lab, offs, jp, sp, visited, out, path_offs, meta):  # pragma: no c
     indices); ``offs``: the 8 neighbour offsets, clockwise from north. Writes the path
     pixels to ``out``, the path offsets to ``path_offs`` and per path (kind_u, id_u, kind_v,
     id_v) to ``meta`` (for end/loop nodes the id is the flat index of the node pixel; the
-    caller numbers them); returns the number of paths. ``visited`` is a zeroed uint8 array
-    like ``f``. Only loops and indexing on arrays the caller allocates, so that the kernel
+    caller numbers them); returns the number of paths. ``visited`` is a uint8 array like
+    ``f``, zero on the skeleton. ``lab`` and ``visited`` are read and written on the pixels
+    of ``sp`` and ``jp`` only (every neighbour is tested in ``f`` first), so the caller sets
+    them there alone. Only loops and indexing on arrays the caller allocates, so that the kernel
     compiles quickly.
     """
     n = 0
@@ -202,16 +204,34 @@ def path_length_px(points, *, window_px: int = 5, closed: bool = False) -> float
                            closed=closed)
 
 
-def _stack_lengths(paths, u_rc, v_rc, is_loop, window_px) -> np.ndarray:
+def _stack_lengths(rc, offs, u_rc, v_rc, is_loop, window_px) -> np.ndarray:
     """Smoothed lengths of all stacks (:func:`path_length_px`, one compiled pass): open paths
-    run from node position to node position, loops are closed periodically."""
-    pts, offs = [], [0]
-    for i, p in enumerate(paths):
-        q = p.astype(np.float64) if is_loop[i] else np.vstack([u_rc[i], p, v_rc[i]])
-        pts.append(q)
-        offs.append(offs[-1] + len(q))
-    return polyline.smoothed_lengths(np.vstack(pts), np.asarray(offs), is_loop,
-                                     window_px=window_px)
+    run from node position to node position, loops are closed periodically.
+
+    ``rc[offs[i]:offs[i + 1]]`` is the path of stack ``i``; the node positions are inserted
+    around the open paths by one scatter (a stack of ``np.vstack`` per path took 5 ms for
+    the 400 stacks of a 2000x2000 scan).
+    """
+    n = np.diff(offs)
+    is_open = ~np.asarray(is_loop, dtype=bool)
+    starts = np.zeros(len(n) + 1, np.int64)
+    np.cumsum(n + 2 * is_open, out=starts[1:])
+    pts = np.empty((int(starts[-1]), 2))
+    pts[np.arange(len(rc)) + np.repeat(starts[:-1] + is_open - offs[:-1], n)] = rc
+    pts[starts[:-1][is_open]] = u_rc[is_open]
+    pts[starts[1:][is_open] - 1] = v_rc[is_open]
+    return polyline.smoothed_lengths(pts, starts, is_loop, window_px=window_px)
+
+
+def _padded(skel):
+    """What every tracing of the same skeleton reads: the skeleton padded by one background
+    pixel (uint8), its pixels' rows and columns in the padded image (raster order), and the
+    tracing's label and visited arrays (see :func:`_build_stack_graph`), allocated once."""
+    h, w = skel.shape
+    img = np.zeros((h + 2, w + 2), np.uint8)
+    img[1:-1, 1:-1] = skel
+    sr, sc = nonzero_rc(img)
+    return img, sr, sc, np.empty(img.size, np.int64), np.empty(img.size, np.uint8)
 
 
 def build_stack_graph(skel, junctions: Junctions, *, smooth_px: int = 5) -> StackGraph:
@@ -236,19 +256,26 @@ def build_stack_graph(skel, junctions: Junctions, *, smooth_px: int = 5) -> Stac
     if skel.shape != junctions.label_image.shape:
         raise ParameterError(f"skeleton shape {skel.shape} differs from junction label "
                              f"image shape {junctions.label_image.shape}")
-    h, w = skel.shape
-    wp = w + 2
-    img = np.zeros((h + 2, wp), np.uint8)
-    img[1:-1, 1:-1] = skel
-    labp = np.zeros((h + 2, wp), np.int64)
-    labp[1:-1, 1:-1] = junctions.label_image
-    sr, sc = nonzero_rc(img)
+    return _build_stack_graph(_padded(skel), junctions, smooth_px)
+
+
+def _build_stack_graph(padded, junctions: Junctions, smooth_px: int) -> StackGraph:
+    """:func:`build_stack_graph` of a skeleton given as :func:`_padded` returns it."""
+    img, sr, sc, labp, visited = padded
+    wp = img.shape[1]
     sp = sr * wp + sc
+    # the tracing reads the labels and the visited flags on skeleton and junction pixels
+    # only (see _trace): both are set there alone, which spares zeroing 36 MB per tracing
+    # (a 2000x2000 scan: 8 ms; large zeroed blocks come from the reused heap, not from
+    # fresh pages), and lets the tracings of one skeleton share the arrays
+    labp[sp] = junctions.label_image[sr - 1, sc - 1]
+    visited[sp] = 0
     if junctions.pixels:
         jp = np.concatenate(junctions.pixels).astype(np.int64) + 1
     else:
         jp = np.zeros((0, 2), np.int64)
     jflat = jp[:, 0] * wp + jp[:, 1]
+    labp[jflat] = junctions.label_image[jp[:, 0] - 1, jp[:, 1] - 1]  # where paths start
     # every pixel is walked once, except junction pixels, which start or end paths: a path
     # adds at most two of them (and a loop its closing pixel)
     cap_paths = 8 * len(jflat) + len(sp) + 1
@@ -256,12 +283,15 @@ def build_stack_graph(skel, junctions: Junctions, *, smooth_px: int = 5) -> Stac
     path_offs = np.empty(cap_paths + 1, np.int64)
     meta = np.empty((cap_paths, 4), np.int64)
     offs8 = np.array([-wp, -wp + 1, 1, wp + 1, wp, wp - 1, -1, -wp - 1], np.int64)
-    m = _trace(img.reshape(-1), labp.reshape(-1), offs8, jflat, sp,
-               np.zeros(img.size, np.uint8), out, path_offs, meta)
+    m = _trace(img.reshape(-1), labp, offs8, jflat, sp, visited, out, path_offs, meta)
     offs = path_offs[:m + 1]
     pix = out[:offs[-1]]
-    pr = pix // wp - 1
-    pc = pix % wp - 1
+    # all paths in one (N, 2) array, each stack's path a view of its rows
+    rc = np.empty((len(pix), 2), np.int64)
+    np.floor_divide(pix, wp, out=rc[:, 0])
+    np.remainder(pix, wp, out=rc[:, 1])
+    rc -= 1
+    is_loop = meta[:m, 0] == _LOOP
     meta = meta[:m].tolist()
     k = len(junctions)
     g = nx.MultiGraph()
@@ -272,7 +302,6 @@ def build_stack_graph(skel, junctions: Junctions, *, smooth_px: int = 5) -> Stac
         node_rc[j] = np.asarray(junctions.centers_rc[j], dtype=float)
         node_kind[j] = "junction"
     pixel_node: dict[int, int] = {}
-    wp = w + 2
 
     def node_of(kind, ident):
         if kind == _JUNCTION:
@@ -286,24 +315,16 @@ def build_stack_graph(skel, junctions: Junctions, *, smooth_px: int = 5) -> Stac
             node_kind[nid] = "end" if kind == _END else "loop"
         return pixel_node[ident]
 
-    paths, ends = [], []
-    m = len(meta)
-    u_rc = np.zeros((m, 2))
-    v_rc = np.zeros((m, 2))
-    is_loop = np.zeros(m, np.bool_)
-    for i, (ku, iu, kv, iv) in enumerate(meta):
-        path = np.stack([pr[offs[i]:offs[i + 1]], pc[offs[i]:offs[i + 1]]], axis=1)
-        u = node_of(ku, iu)
-        v = node_of(kv, iv)
-        sid = len(paths)
-        paths.append(path)
-        ends.append((u, v))
-        g.add_edge(u, v, key=sid, stack_id=sid)
-        u_rc[i] = node_rc[u]
-        v_rc[i] = node_rc[v]
-        is_loop[i] = ku == _LOOP
-    lengths = (_stack_lengths(paths, u_rc, v_rc, is_loop, int(smooth_px)) if m
-               else np.zeros(0))
+    ends = [(node_of(ku, iu), node_of(kv, iv)) for ku, iu, kv, iv in meta]
+    g.add_edges_from((u, v, sid, {"stack_id": sid}) for sid, (u, v) in enumerate(ends))
+    bounds = offs.tolist()
+    paths = [rc[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
+    if m:
+        u_rc = np.array([node_rc[u] for u, _ in ends])
+        v_rc = np.array([node_rc[v] for _, v in ends])
+        lengths = _stack_lengths(rc, offs, u_rc, v_rc, is_loop, int(smooth_px))
+    else:
+        lengths = np.zeros(0)
     return StackGraph(graph=g, node_rc=node_rc, node_kind=node_kind, paths=paths, ends=ends,
                       length_px=np.asarray(lengths, dtype=float))
 
@@ -368,17 +389,17 @@ def stack_graph(skel, distance_px, *, merge_px: float = 2.0,
         Number of bridging stacks merged into junctions.
     """
     junc = find_junctions(skel, merge_px=merge_px)
-    sg = build_stack_graph(skel, junc)
+    padded = _padded(np.asarray(skel, dtype=bool))  # every tracing below reads it
+    sg = _build_stack_graph(padded, junc, 5)
     merged = 0
     if merge_thick_crossings and len(junc):
         for _ in range(3):
-            radius = np.array([float(distance_px[p[:, 0], p[:, 1]].max()) for p in junc.pixels])
-            links = short_junction_links(sg, radius)
+            links = short_junction_links(sg, _junction_radius(junc, distance_px))
             if not links:
                 break
             groups = [sg.ends[s] for s in links]
             junc = merge_junctions(junc, groups, [sg.paths[s] for s in links])
-            sg = build_stack_graph(skel, junc)
+            sg = _build_stack_graph(padded, junc, 5)
             merged += len(links)
     if thickness_px is not None and len(junc):
         # lengths stay those between the skeleton's forks: the centreline intersection moves
@@ -392,7 +413,7 @@ def stack_graph(skel, distance_px, *, merge_px: float = 2.0,
 
 def _at_fork_points(junc: Junctions, sg: StackGraph, distance_px, thickness_px) -> Junctions:
     """``junc`` with its centres moved to the stacks' centreline intersections."""
-    radius = np.array([float(distance_px[p[:, 0], p[:, 1]].max()) for p in junc.pixels])
+    radius = _junction_radius(junc, distance_px)
     end_paths, end_junction = [], []
     for sid, (u, v) in enumerate(sg.ends):
         for node, path in ((u, sg.paths[sid]), (v, sg.paths[sid][::-1])):
@@ -402,3 +423,16 @@ def _at_fork_points(junc: Junctions, sg: StackGraph, distance_px, thickness_px) 
     centers = fork_points(junc.centers_rc, radius, end_paths, end_junction,
                           thickness_px=thickness_px)
     return Junctions(centers_rc=centers, pixels=junc.pixels, label_image=junc.label_image)
+
+
+def _junction_radius(junc: Junctions, distance_px) -> np.ndarray:
+    """Per junction, the largest distance to the background over its pixels (float64)."""
+    sizes = np.array([len(p) for p in junc.pixels], np.int64)
+    if len(sizes) == 0 or sizes.min() == 0:
+        return np.array([float(np.asarray(distance_px)[p[:, 0], p[:, 1]].max())
+                         for p in junc.pixels])
+    pix = np.concatenate(junc.pixels)
+    vals = np.asarray(distance_px)[pix[:, 0], pix[:, 1]]
+    starts = np.zeros(len(sizes), np.int64)
+    np.cumsum(sizes[:-1], out=starts[1:])
+    return np.maximum.reduceat(vals, starts).astype(np.float64)

@@ -322,14 +322,13 @@ def _prune(f, offs, idx, m, l_min):
 def nonzero_rc(img) -> tuple[np.ndarray, np.ndarray]:
     """(rows, cols) int64 of the nonzero pixels of a 2-D uint8 image, in raster order.
 
-    ``cv2.findNonZero``: 4-5x faster than ``np.nonzero`` on a sparse 2000x2000 skeleton.
+    The flat indices of a boolean image, split into rows and columns: on a sparse 2000x2000
+    skeleton 2 ms, against 6 ms for ``cv2.findNonZero`` and 16 ms for the 2-D
+    ``np.nonzero`` (numpy's nonzero is fast on booleans only, and on one axis).
     """
-    pts = cv2.findNonZero(np.ascontiguousarray(img, dtype=np.uint8))
-    if pts is None:
-        e = np.zeros(0, np.int64)
-        return e, e.copy()
-    pts = pts.reshape(-1, 2)
-    return pts[:, 1].astype(np.int64), pts[:, 0].astype(np.int64)
+    a = np.asarray(img, dtype=np.uint8)
+    flat = np.flatnonzero(a != 0).astype(np.int64, copy=False)
+    return flat // a.shape[1], flat % a.shape[1]
 
 
 def _border_pixels(img) -> np.ndarray:
@@ -337,7 +336,7 @@ def _border_pixels(img) -> np.ndarray:
     background 8-neighbour (the first candidates of the thinning)."""
     inner = cv2.erode(img, np.ones((3, 3), np.uint8), borderType=cv2.BORDER_CONSTANT,
                       borderValue=0)
-    return np.flatnonzero(img > inner).astype(np.int64)
+    return np.flatnonzero(img > inner).astype(np.int64, copy=False)
 
 
 def _check_mask(mask, name="mask"):
@@ -377,7 +376,8 @@ def _skeleton_padded(mask, *, l_min_px):
     lst[:len(start)] = start
     _zhang_suen(f, offs, lst, len(start), np.zeros(f.shape[0], np.uint8),
                 np.empty(cap, np.int64), _ZS1, _ZS2, _SIMPLE, _COUNT)
-    idx = np.flatnonzero(f).astype(np.int64)
+    # numpy's nonzero is 10x faster on booleans than on uint8 (f holds 0 and 1)
+    idx = np.flatnonzero(f.view(np.bool_)).astype(np.int64, copy=False)
     m = _remove_redundant(f, offs, idx, len(idx), _SIMPLE, _COUNT)
     n_removed = 0
     if l_min_px > 0:

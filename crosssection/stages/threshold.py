@@ -113,7 +113,9 @@ class ThresholdResult:
                 "dominance_min": _f(self.dominance_min), "ink_level": _t(self.ink_level),
                 "paper_level": _t(self.paper_level), "dtype_scale": float(self.scale),
                 "region_fraction": float(self.region_fraction),
-                "foreground_fraction": float(self.mask.mean()) if self.mask.size else 0.0,
+                # a count, not a mean: no float64 pass over the image, the same fraction
+                "foreground_fraction": (float(np.count_nonzero(self.mask)) / self.mask.size
+                                        if self.mask.size else 0.0),
                 "note": self.note}
 
 

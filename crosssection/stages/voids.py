@@ -211,7 +211,13 @@ def _extract_voids(mask, hole, s_min_px, wall_voids):
         if circle is not None:
             cr, cc, R = circle
             pts = c.reshape(-1, 2)
-            if np.any((pts[:, 1] - cr) ** 2 + (pts[:, 0] - cc) ** 2 > R * R):
+            # each rounded term grows with the distance along its axis, so no border pixel
+            # lies outside when the box's farthest corner does not: the border is tested only
+            # for the voids near the wall
+            far_r = max(abs(y - cr), abs(y + h - 1 - cr))
+            far_c = max(abs(x - cc), abs(x + w - 1 - cc))
+            if far_r * far_r + far_c * far_c > R * R and \
+                    np.any((pts[:, 1] - cr) ** 2 + (pts[:, 0] - cc) ** 2 > R * R):
                 rr, cc_ = np.nonzero(reg)
                 if np.any((rr + y - cr) ** 2 + (cc_ + x - cc) ** 2 > R * R):
                     continue                      # reaches outside the hole
@@ -323,6 +329,8 @@ def _count_junctions(borders, junction_centers_rc, touch_px):
     border pixel: one KD-tree of all the voids' border pixels ``borders[j]`` (P, 2) answers
     the ball queries around the junction centres (unbalanced tree: 2x faster to build here).
     """
+    from itertools import chain
+
     from scipy.spatial import cKDTree
 
     n = len(borders)
@@ -333,7 +341,12 @@ def _count_junctions(borders, junction_centers_rc, touch_px):
     pts = np.concatenate(borders).astype(np.float64)
     vid = np.repeat(np.arange(n), [len(b) for b in borders])
     tree = cKDTree(pts, leafsize=32, balanced_tree=False, compact_nodes=False)
-    for hit in tree.query_ball_point(jc, float(touch_px)):
-        if hit:
-            counts[np.unique(vid[hit])] += 1
+    hits = tree.query_ball_point(jc, float(touch_px))
+    # distinct (junction, void) pairs at once (a np.unique per junction took half the count)
+    sizes = np.fromiter((len(h) for h in hits), np.int64, len(hits))
+    if sizes.sum() == 0:
+        return counts
+    flat = np.fromiter(chain.from_iterable(hits), np.int64, int(sizes.sum()))
+    pairs = np.unique(np.repeat(np.arange(len(hits), dtype=np.int64), sizes) * n + vid[flat])
+    counts += np.bincount(pairs % n, minlength=n)
     return counts

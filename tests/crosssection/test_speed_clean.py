@@ -1,0 +1,122 @@
+"""Cleaning from the ink's border hierarchy gives the mask that labelling gives.
+
+:func:`crosssection.stages.clean.clean_mask` decides holes and specks from the borders of
+``cv2.findContours`` and flood fills, and falls back on labelling the background and the ink
+(the way it replaced) when the borders cannot settle a case. The labelling is the reference
+here, on random masks of every density and on a generated scan.
+"""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from crosssection.stages import clean as cl
+from crosssection.stages.clean import clean_mask
+
+
+def _by_labelling(m, s_min, speck, extent):
+    """The labelling way: small background components filled, then small or short ink
+    components removed."""
+    out = m.copy()
+    if s_min > 0:
+        out |= cl._small_components((~m).view(np.uint8), 4, s_min)
+    if speck > 0 or extent > 0:
+        out = cl._drop_components(out.view(np.uint8), speck, extent)
+    return out
+
+
+def _random_mask(rng, shape):
+    m = rng.random(shape) < rng.uniform(0.05, 0.9)
+    kind = rng.integers(0, 4)
+    if kind == 1:
+        m = cv2.dilate(m.view(np.uint8), np.ones((2, 2), np.uint8)).view(bool)
+    elif kind == 2:
+        m = cv2.morphologyEx(m.view(np.uint8), cv2.MORPH_OPEN, np.ones((2, 2), np.uint8)
+                             ).view(bool)
+    elif kind == 3:  # rings with holes, islands in the holes, specks in the islands' holes
+        m = np.zeros(shape, bool)
+        for _ in range(rng.integers(1, 6)):
+            c = (int(rng.integers(0, shape[1])), int(rng.integers(0, shape[0])))
+            for r in range(int(rng.integers(2, 20)), 0, -3):
+                cv2.circle(m.view(np.uint8), c, r, 1, 1)
+    if rng.random() < 0.7:  # ink off the image's edge: the borders decide
+        b = int(rng.integers(1, 4))
+        m[:b] = m[-b:] = False
+        m[:, :b] = m[:, -b:] = False
+    return np.ascontiguousarray(m)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_borders_match_labelling_on_random_masks(seed):
+    rng = np.random.default_rng(seed)
+    n_borders = 0
+    for _ in range(400):
+        m = _random_mask(rng, tuple(int(v) for v in rng.integers(3, 90, 2)))
+        s_min = float(rng.choice([0, 1, 2, 3, 5, 10, 30, 100])) + float(rng.choice([0, 0.5]))
+        speck = float(rng.choice([0, 1, 2, 4, 9, 25, 80]))
+        extent = float(rng.choice([0, 0, 1.5, 3, 7]))
+        want = _by_labelling(m, s_min, speck, extent)
+        got = clean_mask(m, s_min_px=s_min, speck_px=speck, min_extent_px=extent)
+        assert np.array_equal(got, want)
+        if cl._borders_settle(m, s_min):
+            n_borders += 1
+            assert np.array_equal(cl._clean_by_borders(m, s_min, speck, extent), want)
+    assert n_borders > 100  # the border path was exercised, not only the fallback
+
+
+def test_borders_match_labelling_on_a_scan():
+    from crosssection.stages.threshold import threshold_rgb
+    from crosssection.truth.network import make_scene
+
+    sc = make_scene(seed=3, n_stacks=40, max_layers=5, noise_sigma=8.0, specks=20,
+                    pinholes=20)
+    m = threshold_rgb(sc.rgb).mask
+    m[:2] = m[-2:] = False
+    m[:, :2] = m[:, -2:] = False
+    for s_min, speck, extent in [(2500, 250, 50), (100, 25, 10), (2500, 0, 0), (0, 250, 0)]:
+        assert cl._borders_settle(m, s_min)
+        assert np.array_equal(clean_mask(m, s_min_px=s_min, speck_px=speck,
+                                         min_extent_px=extent),
+                              _by_labelling(m, s_min, speck, extent))
+
+
+def test_ink_on_the_edge_and_salt_and_pepper_fall_back():
+    rng = np.random.default_rng(7)
+    edge = np.zeros((40, 50), bool)
+    edge[0, 10:20] = edge[1:4, 10] = edge[1:4, 19] = True  # a pocket of background on the edge
+    assert not cl._borders_settle(edge, 5.0)
+    assert np.array_equal(clean_mask(edge, s_min_px=50.0), _by_labelling(edge, 50.0, 50.0, 0.0))
+    noise = np.zeros((300, 300), bool)
+    noise[1:-1, 1:-1] = rng.random((298, 298)) < 0.3
+    assert cl._clean_by_borders(noise, 5.0, 3.0, 0.0) is None  # too many borders
+    assert np.array_equal(clean_mask(noise, s_min_px=5.0, speck_px=3.0),
+                          _by_labelling(noise, 5.0, 3.0, 0.0))
+
+
+def test_empty_and_full_masks():
+    for m in (np.zeros((30, 40), bool), np.ones((30, 40), bool)):
+        for s_min in (0.0, 10.0, 5000.0):
+            assert np.array_equal(clean_mask(m, s_min_px=s_min, speck_px=4.0),
+                                  _by_labelling(m, s_min, 4.0, 0.0))
+
+
+def test_thin_holes_with_large_boxes():
+    # an L-shaped and a diagonal hole, one pixel wide: their boxes hold more than s_min pixels,
+    # their areas fewer (measured, then filled); a wide hole beside them stays
+    m = np.zeros((60, 80), bool)
+    m[5:35, 5:35] = True
+    m[8:31, 10] = False
+    m[30, 10:31] = False
+    m[40:58, 40:75] = True
+    for k in range(15):
+        m[41 + k, 42 + 2 * k:44 + 2 * k] = False
+    m[10:30, 50:75] = True
+    m[13:27, 53:72] = False
+    l_area = int(np.count_nonzero(~m[5:35, 5:35]))
+    assert l_area < 20 * 20
+    for s_min in (30.0, l_area, l_area + 0.5, l_area + 1.0, 100.0, 400.0):
+        got = clean_mask(m, s_min_px=s_min, speck_px=5.0)
+        assert np.array_equal(got, _by_labelling(m, s_min, 5.0, 0.0))
+        assert got[30, 20] == (l_area < s_min)  # the L is filled only below s_min
+        assert got[20, 60] == (14 * 19 < s_min)  # the wide hole too
