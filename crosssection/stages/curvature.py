@@ -424,20 +424,24 @@ def contact_arc_px(prefix_rc, radius_px, others, *, gap_px: float = _CONTACT_GAP
         ``radius + radius_other + gap_px`` from every other stack's skeleton there.
     """
     pre = np.asarray(prefix_rc, float).reshape(-1, 2)
+    others = [(np.asarray(q, float).reshape(-1, 2), float(r)) for q, r in others]
+    others = [(q, r) for q, r in others if len(q) >= 2]
     if len(pre) < 2 or not others:
         return 0.0
-    others = [(np.asarray(q, float).reshape(-1, 2), radius_px + r + gap_px) for q, r in others]
-    others = [(q, lim) for q, lim in others if len(q) >= 2]
-    if not others:
-        return 0.0
+    pts = np.concatenate([q for q, _ in others])
+    limit = np.concatenate([np.full(len(q), radius_px + r + gap_px) for q, r in others])
+    return _contact_arc(pre, pts, limit)
+
+
+def _contact_arc(pre, pts, limit):
+    """:func:`contact_arc_px` on the other bands' skeleton points ``pts`` (K, 2) and the
+    distance ``limit`` (K,) below which each one touches."""
     # in chunks from the junction: bands that part at an angle are apart within a few pixels,
     # so the whole prefix is rarely needed
     first_far = len(pre)
     for i in range(0, len(pre), _CHUNK):
         chunk = pre[i:i + _CHUNK]
-        near = np.zeros(len(chunk), bool)
-        for q, lim in others:
-            near |= cdist(chunk, q).min(axis=1) <= lim
+        near = (cdist(chunk, pts) <= limit).any(axis=1)
         if not near.all():
             first_far = i + int(np.argmin(near))
             break
@@ -484,9 +488,14 @@ def stack_profiles(graph, n_br, distance_px, *, thickness_px: float, px_per_mm: 
             if graph.node_kind[node] == "junction":
                 at_node.setdefault(node, []).append((sid, end))
     reach = int(np.ceil(_CONTACT_REACH_H * float(thickness_px)))
-    prefixes = {key: _prefix(graph.paths[key[0]], key[1], reach) for keys in at_node.values()
-                for key in keys}
     radius = [_median_radius(graph.paths[sid], distance_px) for sid in range(graph.n_stacks)]
+    # per junction: the skeleton points of every band there, their band and half-width
+    near_node = {}
+    for node, keys in at_node.items():
+        pre = [_prefix(graph.paths[sid], end, reach) for sid, end in keys]
+        near_node[node] = (pre, np.concatenate(pre),
+                           np.repeat(np.arange(len(keys)), [len(q) for q in pre]),
+                           np.repeat([radius[sid] for sid, _ in keys], [len(q) for q in pre]))
 
     def fork_zone(sid, end, nb):
         # module docstring, step 3
@@ -495,8 +504,12 @@ def stack_profiles(graph, n_br, distance_px, *, thickness_px: float, px_per_mm: 
             return 0.0
         r, c = np.round(graph.node_rc[node]).astype(int)
         r_j = float(distance_px[min(max(r, 0), H - 1), min(max(c, 0), W - 1)])
-        others = [(prefixes[k], radius[k[0]]) for k in at_node[node] if k != (sid, end)]
-        touching = contact_arc_px(prefixes[(sid, end)], radius[sid], others)
+        pre, pts, owner, r_pts = near_node[node]
+        me = at_node[node].index((sid, end))
+        other = owner != me
+        touching = (_contact_arc(pre[me], pts[other], radius[sid] + r_pts[other]
+                                 + _CONTACT_GAP_PX)
+                    if len(pre[me]) >= 2 and other.any() else 0.0)
         return _fork_zone_px(nb * float(thickness_px), r_j, touching, sm)
 
     profiles, forks = [], []
