@@ -391,11 +391,28 @@ def _prefix(path_rc, end, reach):
 
 def _median_radius(path_rc, distance_px):
     """Median inscribed ink radius along a skeleton path, px (half the band's width)."""
-    p = np.round(np.asarray(path_rc, float).reshape(-1, 2)).astype(int)
-    if not len(p):
-        return 0.0
-    p = np.clip(p, 0, np.array(distance_px.shape) - 1)
-    return float(np.median(distance_px[p[:, 0], p[:, 1]]))
+    return float(_median_radii([path_rc], distance_px)[0])
+
+
+def _median_radii(paths, distance_px) -> np.ndarray:
+    """:func:`_median_radius` of every path, from one gather and one sort (one ``np.median``
+    per path took 30 ms for the 244 stacks of a 2000x2000 scan)."""
+    n = np.array([len(p) for p in paths], np.int64)
+    out = np.zeros(len(paths))
+    if not n.sum():
+        return out
+    rc = np.round(np.concatenate([np.asarray(p, float).reshape(-1, 2) for p in paths if len(p)]))
+    rc = np.clip(rc.astype(np.int64), 0, np.array(distance_px.shape) - 1)
+    vals = distance_px[rc[:, 0], rc[:, 1]].astype(np.float64)
+    gid = np.repeat(np.arange(len(paths)), n)
+    order = np.lexsort((vals, gid))
+    v = vals[order]
+    start = np.concatenate([[0], np.cumsum(n)[:-1]])
+    ok = n > 0
+    lo = start[ok] + (n[ok] - 1) // 2
+    hi = start[ok] + n[ok] // 2
+    out[ok] = 0.5 * (v[lo] + v[hi])
+    return out
 
 
 def contact_arc_px(prefix_rc, radius_px, others, *, gap_px: float = _CONTACT_GAP_PX) -> float:
@@ -488,14 +505,21 @@ def stack_profiles(graph, n_br, distance_px, *, thickness_px: float, px_per_mm: 
             if graph.node_kind[node] == "junction":
                 at_node.setdefault(node, []).append((sid, end))
     reach = int(np.ceil(_CONTACT_REACH_H * float(thickness_px)))
-    radius = [_median_radius(graph.paths[sid], distance_px) for sid in range(graph.n_stacks)]
-    # per junction: the skeleton points of every band there, their band and half-width
-    near_node = {}
+    radius = _median_radii(graph.paths, distance_px)
+    # per band end at a junction: its skeleton from the junction, and the skeleton points of
+    # the other bands there with the distance below which each touches it
+    contact = {}
     for node, keys in at_node.items():
         pre = [_prefix(graph.paths[sid], end, reach) for sid, end in keys]
-        near_node[node] = (pre, np.concatenate(pre),
-                           np.repeat(np.arange(len(keys)), [len(q) for q in pre]),
-                           np.repeat([radius[sid] for sid, _ in keys], [len(q) for q in pre]))
+        for i, (sid, end) in enumerate(keys):
+            others = [j for j in range(len(keys)) if j != i and len(pre[j])]
+            if len(pre[i]) < 2 or not others:
+                contact[(sid, end)] = 0.0
+                continue
+            pts = np.concatenate([pre[j] for j in others])
+            lim = np.repeat([radius[sid] + radius[keys[j][0]] + _CONTACT_GAP_PX
+                             for j in others], [len(pre[j]) for j in others])
+            contact[(sid, end)] = _contact_arc(pre[i], pts, lim)
 
     def fork_zone(sid, end, nb):
         # module docstring, step 3
@@ -504,12 +528,7 @@ def stack_profiles(graph, n_br, distance_px, *, thickness_px: float, px_per_mm: 
             return 0.0
         r, c = np.round(graph.node_rc[node]).astype(int)
         r_j = float(distance_px[min(max(r, 0), H - 1), min(max(c, 0), W - 1)])
-        pre, pts, owner, r_pts = near_node[node]
-        me = at_node[node].index((sid, end))
-        other = owner != me
-        touching = (_contact_arc(pre[me], pts[other], radius[sid] + r_pts[other]
-                                 + _CONTACT_GAP_PX)
-                    if len(pre[me]) >= 2 and other.any() else 0.0)
+        touching = contact[(sid, end)]
         return _fork_zone_px(nb * float(thickness_px), r_j, touching, sm)
 
     profiles, forks = [], []
