@@ -194,6 +194,12 @@ def fit_quantity(ens: Ensemble, quantity: str, region: str, opts: StatsOptions, 
         bias = F.truncation_bias(x, cuts, families=tuple(f for f in fams
                                                           if f in ("exponential", "gamma",
                                                                    "lognormal")))
+        # the truncation-aware fits are those of ``summ`` (same sample, same cuts): their
+        # bootstrap intervals, computed there, fill the table's interval columns
+        for i, row in bias.iterrows():
+            r = summ.results.get(row["family"]) if summ is not None else None
+            if r is not None and r.ci and row["param"] in r.ci:
+                bias.loc[i, ["truncated_lo", "truncated_hi"]] = r.ci[row["param"]]
     return summ, bias, int((~keep).sum())
 
 

@@ -201,6 +201,9 @@ def test_demo_batch_tables_bulk_periphery_and_truncation(tmp_path):
                         & (res.truncation["region"] == "all")].iloc[0]
     assert tr["naive"] > tr["truncated"]  # naive fit biased upward by l_min
     assert tr["mean_minus_cut"] == pytest.approx(tr["truncated"])
+    # the truncation-aware fit's interval is reported beside it, and holds it
+    assert tr["truncated_lo"] <= tr["truncated"] <= tr["truncated_hi"]
+    assert tr["truncated_lo"] == pytest.approx(exp["p1_lo"])
     # N_br = sum of n_br over stacks, so Eq. (14) holds exactly per configuration
     rel = res.relations.set_index("relation")
     assert rel.loc["eq3_slope", "r2"] == pytest.approx(1.0, abs=0.2)
