@@ -248,8 +248,12 @@ def merge_junctions(junctions: Junctions, groups, extra_pixels=()) -> Junctions:
     w = lab.shape[1]
     clusters = []
     for root, parts in members.items():
-        pix = np.unique(np.concatenate(parts), axis=0)
-        clusters.append((int((pix[:, 0] * w + pix[:, 1]).min()), pix))
+        # unique flat indices: the same raster order as np.unique(axis=0) on (row, col)
+        # pairs, which sorts a structured view (24 of 35 ms on a dense 2000x2000 scan)
+        p = np.concatenate(parts)
+        flat = np.unique(p[:, 0] * w + p[:, 1])
+        pix = np.stack([flat // w, flat % w], axis=1)
+        clusters.append((int(flat[0]), pix))
     clusters.sort(key=lambda t: t[0])  # raster order of the first pixel
     new_lab = lab.copy()
     rr, cc, ids = [], [], []
