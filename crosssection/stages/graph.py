@@ -9,16 +9,19 @@ kinds of synthetic nodes keep every skeleton pixel in some stack:
 - ``"loop"``: one node on a closed skeleton loop without any junction (its path starts and ends
   on that node's pixel).
 
-Paths are traced in numba: every non-junction skeleton pixel has at most two neighbours, so a
-stack is followed pixel by pixel from a junction pixel, a free end or a loop start.
+Every non-junction skeleton pixel has at most two neighbours, so the non-junction pixels form
+chains, each one stack: it is followed from a junction pixel, a free end or a loop start, all
+chains at once by one depth-first traversal in scipy (see :func:`_trace`).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import networkx as nx
 import numpy as np
-from numba import njit
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import depth_first_order
 
 from crosssection.core import polyline
 from crosssection.core.errors import ParameterError
@@ -26,7 +29,7 @@ from crosssection.stages.junctions import (Junctions, find_junctions, fork_point
                                            merge_junctions)
 from crosssection.stages.skeleton import nonzero_rc
 
-# node kinds of the traced paths (numba side)
+# node kinds of the traced paths (see _trace)
 _JUNCTION, _END, _LOOP = 0, 1, 2
 
 
@@ -75,122 +78,182 @@ class StackGraph:
         return int(self.graph.degree(node))
 
 
-@njit(cache=True)
-def _walk(f, lab, visited, p, prev, offs, out, n):  # pragma: no cover - numba
-    """Follow the skeleton from flat pixel ``p`` (coming from ``prev``) until a junction or a
-    free end, appending the pixels to ``out`` from position ``n``; return the (kind, id) of
-    the node reached (a junction's label, or the flat index of the end pixel) and the new
-    ``n``. Non-junction pixels have at most two neighbours: the next pixel is the first
-    neighbour (clockwise from north) other than ``prev``."""
-    while True:
-        out[n] = p
-        n += 1
-        if lab[p] != 0:
-            return _JUNCTION, lab[p] - 1, n
-        visited[p] = 1
-        nxt = -1
-        for k in range(8):
-            q = p + offs[k]
-            if f[q] and q != prev:
-                nxt = q
-                break
-        # a visited non-junction neighbour cannot happen on a clean skeleton: stop safely
-        if nxt < 0 or (lab[nxt] == 0 and visited[nxt]):
-            return _END, p, n
-        prev = p
-        p = nxt
+def _bit_tables():
+    """Lookup tables over the 256 8-neighbourhood codes (bit k set: neighbour k, clockwise
+    from north, is on the skeleton).
 
-
-@njit(cache=True)
-def _trace(f, lab, offs, jp, sp, visited, out, path_offs, meta):  # pragma: no cover - numba
-    """Trace all stacks of the flat padded skeleton ``f`` with padded junction labels ``lab``.
-
-    ``jp``: junction pixels, ``sp``: all skeleton pixels in raster order (flat padded
-    indices); ``offs``: the 8 neighbour offsets, clockwise from north. Writes the path
-    pixels to ``out``, the path offsets to ``path_offs`` and per path (kind_u, id_u, kind_v,
-    id_v) to ``meta`` (for end/loop nodes the id is the flat index of the node pixel; the
-    caller numbers them); returns the number of paths. ``visited`` is a uint8 array like
-    ``f``, zero on the skeleton. ``lab`` and ``visited`` are read and written on the pixels
-    of ``sp`` and ``jp`` only (every neighbour is tested in ``f`` first), so the caller sets
-    them there alone. Only loops and indexing on arrays the caller allocates, so that the kernel
-    compiles quickly.
+    Returns
+    -------
+    count, first, second : (256,) int arrays
+        The number of neighbours; the first and the second neighbour clockwise from north
+        (0 where there is none).
+    top : (256,) bool array
+        No neighbour comes before the pixel in raster order (none N, NE, W or NW).
     """
-    n = 0
-    m = 0
-    path_offs[0] = 0
-    # 1. from every junction pixel, every unvisited non-junction neighbour starts a stack
-    for i in range(jp.shape[0]):
-        p0 = jp[i]
-        for k in range(8):
-            p = p0 + offs[k]
-            if not f[p] or lab[p] != 0 or visited[p]:
-                continue
-            out[n] = p0
-            n += 1
-            kind_v, id_v, n = _walk(f, lab, visited, p, p0, offs, out, n)
-            path_offs[m + 1] = n
-            meta[m, 0] = _JUNCTION
-            meta[m, 1] = lab[p0] - 1
-            meta[m, 2] = kind_v
-            meta[m, 3] = id_v
-            m += 1
-    # 2. junction-free segments, from a free end to the other
-    for i0 in range(sp.shape[0]):
-        p0 = sp[i0]
-        if lab[p0] != 0 or visited[p0]:
-            continue
-        nb = 0
-        for k in range(8):
-            nb += f[p0 + offs[k]]
-        if nb != 1:
-            continue
-        kind_v, id_v, n = _walk(f, lab, visited, p0, -1, offs, out, n)
-        path_offs[m + 1] = n
-        meta[m, 0] = _END
-        meta[m, 1] = p0
-        meta[m, 2] = kind_v
-        meta[m, 3] = id_v
-        m += 1
-    # 3. closed loops without junction: every remaining pixel has two neighbours
-    for i0 in range(sp.shape[0]):
-        p0 = sp[i0]
-        if lab[p0] != 0 or visited[p0]:
-            continue
-        nb = 0
-        for k in range(8):
-            nb += f[p0 + offs[k]]
-        if nb == 0:
-            visited[p0] = 1  # isolated pixel: no stack
-            continue
-        p = p0
-        prev = -1
-        while True:
-            out[n] = p
-            n += 1
-            visited[p] = 1
-            nxt = -1
-            for k in range(8):
-                q = p + offs[k]
-                if f[q] and q != prev:
-                    nxt = q
-                    break
-            if nxt < 0:
-                break
-            if nxt == p0:
-                out[n] = p0
-                n += 1
-                break
-            if visited[nxt]:
-                break
-            prev = p
-            p = nxt
-        path_offs[m + 1] = n
-        meta[m, 0] = _LOOP
-        meta[m, 1] = p0
-        meta[m, 2] = _LOOP
-        meta[m, 3] = p0
-        m += 1
-    return m
+    codes = np.arange(256)
+    bits = (codes[:, None] >> np.arange(8)) & 1
+    count = bits.sum(axis=1)
+    first = np.argmax(bits, axis=1)
+    rest = bits.copy()
+    rest[codes, first] = 0
+    second = np.argmax(rest, axis=1)
+    top = (codes & 0b11000011) == 0
+    return count, first, second, top
+
+
+_NB_COUNT, _NB_FIRST, _NB_SECOND, _NB_TOP = _bit_tables()
+
+
+def _trace(sk: _Padded, sp_lab, jflat, j_lab):
+    """Trace all stacks of a skeleton.
+
+    Parameters
+    ----------
+    sk : _Padded
+        The skeleton (:func:`_padded`).
+    sp_lab : (P,) int array
+        The junction label of every skeleton pixel (``sk.sp`` order): ``j + 1`` on the pixels
+        of junction ``j``, else 0.
+    jflat, j_lab : (J,) int64 arrays
+        The junction pixels (flat padded indices) in the order of ``Junctions.pixels``, and
+        their labels.
+
+    Returns
+    -------
+    pix : (N,) int64 array
+        The path pixels (flat padded indices), all paths one after the other.
+    offs : (M + 1,) int64 array
+        ``pix[offs[i]:offs[i + 1]]`` is path ``i``.
+    meta : (M, 4) int64 array
+        Per path (kind_u, id_u, kind_v, id_v): a junction's id, or for an end or loop node the
+        flat index of its pixel (the caller numbers these nodes).
+
+    Raises
+    ------
+    ParameterError
+        If a pixel with three or more neighbours is in no junction, or the junction pixels
+        are not the skeleton pixels the labels mark.
+
+    Notes
+    -----
+    Every non-junction pixel has at most two skeleton neighbours, so the non-junction pixels
+    form chains (open, or closed loops). The stacks, numbered in this order (that of the
+    pixel-by-pixel walk this replaces), are:
+
+    1. from every junction pixel (``jflat`` order), every non-junction neighbour of a chain
+       not yet taken (clockwise from north) starts a stack: the junction pixel, the whole
+       chain, and the junction pixel next to its last pixel (other than the one before it),
+       or that last pixel as a free end;
+    2. every chain left with free ends, from its first end in raster order to the other;
+    3. every closed loop left, from its first pixel in raster order towards that pixel's
+       first neighbour clockwise from north, and back to the first pixel.
+
+    The chains are ordered by one depth-first traversal (``scipy.sparse.csgraph``, compiled)
+    of the graph of the non-junction pixels, from a line of virtual nodes, one per start in
+    the order above, each linked to its start pixel and to the next virtual node: a chain is
+    walked whole from the first start that reaches it, and its other starts fall away.
+    Vectorised over the pixels otherwise: on a dense 2000x2000 scan 2.9 ms per tracing (and
+    0.9 ms once per skeleton in :func:`_padded`) against 1.2 ms for the compiled loop it
+    replaces (and 1 ms per tracing to set that loop's label and visited arrays), with no JIT
+    compilation at first use (3 s).
+    """
+    f, code, w = sk.img.reshape(-1), sk.code, sk.img.shape[1]
+    offs8 = np.array([-w, -w + 1, 1, w + 1, w, w - 1, -1, -w - 1], np.int64)
+    if (len(jflat) and (not f[jflat].all() or j_lab.min() <= 0)) \
+            or np.count_nonzero(sp_lab) != len(np.unique(jflat)):
+        raise ParameterError("the junctions do not match the skeleton: their pixels must be "
+                             "the skeleton pixels their label image marks")
+    free = sp_lab == 0
+    npix = sk.sp[free]  # non-junction pixels, raster order
+    n = len(npix)
+    deg = _NB_COUNT[sk.bits[free]]
+    if n and deg.max() > 2:
+        raise ParameterError("the junctions do not match the skeleton: a pixel with more than "
+                             "two neighbours is in no junction")
+    # code: the junction label on junction pixels, -1 - i on non-junction pixel i
+    code[sk.sp] = np.where(free, -np.cumsum(free), sp_lab)
+    # the (at most two) neighbours, clockwise; code 0 where none
+    q1, q2 = sk.q1[free], sk.q2[free]
+    c1 = np.where(deg >= 1, code[q1], 0)
+    c2 = np.where(deg >= 2, code[q2], 0)
+    # the starts, in the order the walk takes them
+    jnb = offs8[:, None] + jflat  # (8, J): junction pixel fastest, transposed below
+    jon = f[jnb].view(np.bool_).T
+    jrow = np.nonzero(jon)[0]
+    jc = code[jnb.T[jon]]
+    entry = jc < 0
+    start1 = -1 - jc[entry]
+    start1_j = jrow[entry]  # position in jflat of the junction pixel
+    start2 = np.flatnonzero(deg == 1)
+    start3 = np.flatnonzero((deg == 2) & _NB_TOP[sk.bits[free]])  # a loop's first pixel
+    starts = np.concatenate([start1, start2, start3])
+    n1, n12, v = len(start1), len(start1) + len(start2), len(starts)
+    if v == 0:
+        return np.zeros(0, np.int64), np.zeros(1, np.int64), np.zeros((0, 4), np.int64)
+    # rows: a pixel's non-junction neighbours; a virtual node's start and next virtual node
+    nbr = np.stack([-1 - c1, -1 - c2], axis=1)  # < 0: no neighbour, or a junction's
+    has = nbr >= 0
+    indptr = np.empty(n + v + 1, np.int32)
+    indptr[0] = 0
+    np.cumsum(has[:, 0].astype(np.int32) + has[:, 1], out=indptr[1:n + 1])
+    indptr[n + 1:] = indptr[n] + 2 * np.arange(1, v + 1)
+    indptr[-1] -= 1  # the last virtual node has no successor
+    virt = np.empty((v, 2), np.int64)
+    virt[:, 0] = starts
+    virt[:, 1] = np.arange(n + 1, n + v + 1)
+    indices = np.concatenate([nbr[has], virt.reshape(-1)[:-1]]).astype(np.int32)
+    g = csr_matrix((np.ones(len(indices)), indices, indptr), shape=(n + v, n + v))
+    order = depth_first_order(g, n, directed=True, return_predecessors=False)
+    is_virt = order >= n
+    start_of = (np.cumsum(is_virt) - 1)[~is_virt]  # the start each walked pixel comes from
+    seq = order[~is_virt].astype(np.int64)
+    first = np.flatnonzero(np.r_[True, start_of[1:] != start_of[:-1]])
+    run_start = start_of[first]
+    run_len = np.diff(np.r_[first, len(seq)])
+    m = len(first)
+    last = first + run_len - 1
+    ph1 = run_start < n1
+    ph3 = run_start >= n12
+    head = npix[seq[first]]
+    tail = npix[seq[last]]
+    # stacks from a junction: the junction pixel first, then the junction pixel next to the
+    # chain's last pixel (other than the one before it), if any
+    i1 = np.flatnonzero(ph1)
+    jpix = jflat[start1_j[run_start[i1]]]
+    x = seq[last[i1]]
+    prev = np.where(run_len[i1] > 1, npix[seq[np.maximum(last[i1] - 1, 0)]], jpix)
+    to1 = (c1[x] > 0) & (q1[x] != prev)
+    to2 = (c2[x] > 0) & (q2[x] != prev)
+    has_j = to1 | to2
+    jend = np.where(to1, q1[x], q2[x])
+    # a loop goes from its first pixel towards its first neighbour clockwise from north;
+    # which of its two neighbours the traversal took first is not documented by scipy
+    i3 = np.flatnonzero(ph3)
+    flip = np.zeros(m, bool)
+    flip[i3] = npix[seq[first[i3] + 1]] != q1[seq[first[i3]]]
+    pre = ph1.astype(np.int64)
+    post = ph3.astype(np.int64)
+    post[i1] = has_j
+    offs = np.zeros(m + 1, np.int64)
+    np.cumsum(run_len + pre + post, out=offs[1:])
+    pix = np.empty(int(offs[-1]), np.int64)
+    run_of = np.repeat(np.arange(m), run_len)
+    pos = np.arange(len(seq)) - np.repeat(first, run_len)
+    if len(i3):
+        pos = np.where(flip[run_of] & (pos > 0), np.repeat(run_len, run_len) - pos, pos)
+    pix[offs[:-1][run_of] + pre[run_of] + pos] = npix[seq]
+    pix[offs[:-1][i1]] = jpix
+    pix[offs[1:][i1[has_j]] - 1] = jend[has_j]
+    pix[offs[1:][i3] - 1] = head[i3]
+    meta = np.empty((m, 4), np.int64)
+    meta[:, 0] = np.where(ph1, _JUNCTION, np.where(ph3, _LOOP, _END))
+    meta[:, 1] = head
+    meta[i1, 1] = code[jpix] - 1
+    meta[:, 2] = np.where(ph3, _LOOP, _END)
+    meta[i1[has_j], 2] = _JUNCTION
+    meta[:, 3] = np.where(ph3, head, tail)
+    meta[i1[has_j], 3] = code[jend[has_j]] - 1
+    return pix, offs, meta
 
 
 def path_length_px(points, *, window_px: int = 5, closed: bool = False) -> float:
@@ -223,15 +286,47 @@ def _stack_lengths(rc, offs, u_rc, v_rc, is_loop, window_px) -> np.ndarray:
     return polyline.smoothed_lengths(pts, starts, is_loop, window_px=window_px)
 
 
-def _padded(skel):
-    """What every tracing of the same skeleton reads: the skeleton padded by one background
-    pixel (uint8), its pixels' rows and columns in the padded image (raster order), and the
-    tracing's label and visited arrays (see :func:`_build_stack_graph`), allocated once."""
+class _Padded(NamedTuple):
+    """What every tracing of one skeleton reads (see :func:`_padded`)."""
+
+    img: np.ndarray  # (H + 2, W + 2) uint8, the skeleton padded by one background pixel
+    sr: np.ndarray  # rows of the skeleton pixels in img, raster order
+    sc: np.ndarray  # their columns
+    sp: np.ndarray  # their flat indices in img
+    bits: np.ndarray  # their 8-neighbourhood codes (bit k: neighbour k, clockwise from north)
+    q1: np.ndarray  # their first neighbours clockwise from north (flat), where they have one
+    q2: np.ndarray  # their second neighbours, where they have two
+    code: np.ndarray  # scratch array of :func:`_trace`, as large as img
+
+
+def _padded(skel) -> _Padded:
+    """What every tracing of the same skeleton reads, computed once.
+
+    Parameters
+    ----------
+    skel : (H, W) bool array
+        The skeleton.
+
+    Returns
+    -------
+    _Padded
+        Its scratch array is never cleared: the tracing writes and reads it on skeleton pixels
+        only (zeroing a 2000x2000 scan's 32 MB would take longer than the tracing).
+    """
     h, w = skel.shape
     img = np.zeros((h + 2, w + 2), np.uint8)
     img[1:-1, 1:-1] = skel
     sr, sc = nonzero_rc(img)
-    return img, sr, sc, np.empty(img.size, np.int64), np.empty(img.size, np.uint8)
+    wp = w + 2
+    sp = sr * wp + sc
+    f = img.reshape(-1)
+    offs8 = np.array([-wp, -wp + 1, 1, wp + 1, wp, wp - 1, -1, -wp - 1], np.int64)
+    nb = f[offs8[:, None] + sp]  # (8, P): a short inner axis makes numpy slow
+    bits = nb[0].copy()
+    for k in range(1, 8):
+        bits |= nb[k] << np.uint8(k)
+    return _Padded(img, sr, sc, sp, bits, sp + offs8[_NB_FIRST[bits]],
+                   sp + offs8[_NB_SECOND[bits]], np.empty(img.size, np.int64))
 
 
 def build_stack_graph(skel, junctions: Junctions, *, smooth_px: int = 5) -> StackGraph:
@@ -251,6 +346,13 @@ def build_stack_graph(skel, junctions: Junctions, *, smooth_px: int = 5) -> Stac
     StackGraph
         Stacks numbered in tracing order: first those leaving junctions (junction order),
         then junction-free segments, then junction-free closed loops (raster order).
+
+    Raises
+    ------
+    ParameterError
+        If the junctions are not those of this skeleton: a skeleton pixel with three or more
+        neighbours in no junction, or junction pixels other than the skeleton pixels marked
+        in their label image.
     """
     skel = np.asarray(skel, dtype=bool)
     if skel.shape != junctions.label_image.shape:
@@ -259,40 +361,25 @@ def build_stack_graph(skel, junctions: Junctions, *, smooth_px: int = 5) -> Stac
     return _build_stack_graph(_padded(skel), junctions, smooth_px)
 
 
-def _build_stack_graph(padded, junctions: Junctions, smooth_px: int) -> StackGraph:
+def _build_stack_graph(sk: _Padded, junctions: Junctions, smooth_px: int) -> StackGraph:
     """:func:`build_stack_graph` of a skeleton given as :func:`_padded` returns it."""
-    img, sr, sc, labp, visited = padded
-    wp = img.shape[1]
-    sp = sr * wp + sc
-    # the tracing reads the labels and the visited flags on skeleton and junction pixels
-    # only (see _trace): both are set there alone, which spares zeroing 36 MB per tracing
-    # (a 2000x2000 scan: 8 ms; large zeroed blocks come from the reused heap, not from
-    # fresh pages), and lets the tracings of one skeleton share the arrays
-    labp[sp] = junctions.label_image[sr - 1, sc - 1]
-    visited[sp] = 0
+    wp = sk.img.shape[1]
     if junctions.pixels:
         jp = np.concatenate(junctions.pixels).astype(np.int64) + 1
     else:
         jp = np.zeros((0, 2), np.int64)
     jflat = jp[:, 0] * wp + jp[:, 1]
-    labp[jflat] = junctions.label_image[jp[:, 0] - 1, jp[:, 1] - 1]  # where paths start
-    # every pixel is walked once, except junction pixels, which start or end paths: a path
-    # adds at most two of them (and a loop its closing pixel)
-    cap_paths = 8 * len(jflat) + len(sp) + 1
-    out = np.empty(len(sp) + 2 * cap_paths, np.int64)
-    path_offs = np.empty(cap_paths + 1, np.int64)
-    meta = np.empty((cap_paths, 4), np.int64)
-    offs8 = np.array([-wp, -wp + 1, 1, wp + 1, wp, wp - 1, -1, -wp - 1], np.int64)
-    m = _trace(img.reshape(-1), labp, offs8, jflat, sp, visited, out, path_offs, meta)
-    offs = path_offs[:m + 1]
-    pix = out[:offs[-1]]
+    lab = junctions.label_image
+    pix, offs, meta = _trace(sk, lab[sk.sr - 1, sk.sc - 1], jflat,
+                             lab[jp[:, 0] - 1, jp[:, 1] - 1])
+    m = len(meta)
     # all paths in one (N, 2) array, each stack's path a view of its rows
     rc = np.empty((len(pix), 2), np.int64)
     np.floor_divide(pix, wp, out=rc[:, 0])
     np.remainder(pix, wp, out=rc[:, 1])
     rc -= 1
-    is_loop = meta[:m, 0] == _LOOP
-    meta = meta[:m].tolist()
+    is_loop = meta[:, 0] == _LOOP
+    meta = meta.tolist()
     k = len(junctions)
     g = nx.MultiGraph()
     node_rc: dict[int, np.ndarray] = {}

@@ -53,39 +53,6 @@ def test_nonzero_rc_is_raster_order_nonzero():
 
 
 # ----------------------------------------------------------------------------- graph
-def test_tracing_reads_labels_and_flags_on_skeleton_pixels_only():
-    """_build_stack_graph fills its label and visited arrays on skeleton and junction pixels
-    alone: with anything else elsewhere the tracing is the one of the zeroed arrays."""
-    rng = np.random.default_rng(1)
-    for _ in range(60):
-        skel = _random_skeleton(rng)
-        junc = find_junctions(skel)
-        img, sr, sc, _lab, _visited = gr._padded(skel)
-        wp = img.shape[1]
-        sp = sr * wp + sc
-        jp = (np.concatenate(junc.pixels) + 1 if junc.pixels else np.zeros((0, 2), np.int64))
-        jflat = (jp[:, 0] * wp + jp[:, 1]).astype(np.int64)
-        offs8 = np.array([-wp, -wp + 1, 1, wp + 1, wp, wp - 1, -1, -wp - 1], np.int64)
-        runs = []
-        for garbage in (False, True):
-            lab = np.zeros(img.shape, np.int64)
-            lab[1:-1, 1:-1] = junc.label_image
-            lab = lab.reshape(-1)
-            visited = np.zeros(img.size, np.uint8)
-            if garbage:
-                keep = np.zeros(img.size, bool)
-                keep[sp] = keep[jflat] = True
-                lab[~keep] = rng.integers(-5, 50, int((~keep).sum()))
-                visited[~keep] = rng.integers(0, 2, int((~keep).sum()))
-            cap = 8 * len(jflat) + len(sp) + 1
-            out = np.empty(len(sp) + 2 * cap, np.int64)
-            offs = np.empty(cap + 1, np.int64)
-            meta = np.empty((cap, 4), np.int64)
-            m = gr._trace(img.reshape(-1), lab, offs8, jflat, sp, visited, out, offs, meta)
-            runs.append((out[:offs[m]].tolist(), offs[:m + 1].tolist(), meta[:m].tolist()))
-        assert runs[0] == runs[1]
-
-
 def _stack_lengths_plain(paths, u_rc, v_rc, is_loop, window_px):
     """The assembly the scatter replaced: one array per path, stacked."""
     from crosssection.core import polyline
