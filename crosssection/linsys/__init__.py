@@ -22,7 +22,7 @@ Modules, in the order of the paper's system:
   fixed by width (matroid greedy), condition number and residual of ``[C; I_S]``.
 * :mod:`~crosssection.linsys.noise` -- width error model ``sigma_s``, weights ``w_s`` and the
   noise scale measured on the data.
-* :mod:`~crosssection.linsys.search` -- integer search by exact balanced moves (numba).
+* :mod:`~crosssection.linsys.search` -- integer search by exact balanced moves (numpy).
 * :mod:`~crosssection.linsys.milp` -- exact MILP (HiGHS), reference and fallback.
 * :mod:`~crosssection.linsys.solve` -- :func:`solve_branch_counts`, per connected component,
   and its result types.
