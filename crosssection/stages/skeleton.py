@@ -1,7 +1,7 @@
 """Stage 4: a one-pixel skeleton without redundant kinks, spurs shorter than ``l_min`` pruned.
 
 Paper, section "Image analysis procedure": "the binary image is skeletonized -- reduced to a one
-pixel thick skeleton, without redundant kinks". Three steps, all in numba:
+pixel thick skeleton, without redundant kinks". Three steps:
 
 1. Zhang-Suen thinning (Zhang & Suen, Commun. ACM 27, 1984), the algorithm behind
    ``skimage.morphology.skeletonize`` in 2D. Ours visits only the current border pixels instead
@@ -24,6 +24,13 @@ pixel thick skeleton, without redundant kinks". Three steps, all in numba:
    pruned, so an isolated stack is never pruned to nothing; closed loops have no free end and
    are never touched. Removing a spur can leave a redundant pixel at its junction, so step 2 is
    run again.
+
+The thinning is a numba kernel: done with numpy, with the same result (vectorised over the
+pixels to examine, the order of the sequential deletions kept), it took about 100 ms on a dense
+2000x2000 scan against 26 ms, the bookkeeping of which pixel to examine when and in which order
+costing more than the whole compiled loop. Steps 2 and 3 are vectorised with numpy and give the
+same skeleton as their sequential loops, bit for bit, without the 1.2 s those took to compile at
+first use.
 """
 from __future__ import annotations
 
@@ -77,6 +84,7 @@ def _build_luts():
 _ZS1, _ZS2, _SIMPLE, _COUNT = _build_luts()
 
 
+# ----------------------------------------------------------------------------- thinning
 @njit(cache=True)
 def _zhang_suen(f, offs, lst, n, st, flags, zs1, zs2, simple, count):  # pragma: no cover - numba
     """Zhang-Suen thinning of the flat padded uint8 image ``f`` in place.
@@ -141,97 +149,514 @@ def _zhang_suen(f, offs, lst, n, st, flags, zs1, zs2, simple, count):  # pragma:
             n = m
 
 
-@njit(cache=True)
-def _remove_redundant(f, offs, idx, m, simple, count):  # pragma: no cover - numba
-    """Delete simple non-end pixels of ``f`` (flat indices ``idx[:m]``, in order) sequentially
-    until none is left; compact the survivors to the front of ``idx`` and return their
-    number."""
-    changed = True
-    while changed:
-        changed = False
-        for i in range(m):
-            p = idx[i]
-            if f[p]:
-                code = 0
-                for k in range(8):
-                    code |= f[p + offs[k]] << k
-                if count[code] >= 2 and simple[code]:
-                    f[p] = 0
-                    changed = True
-    k = 0
-    for i in range(m):
-        if f[idx[i]]:
-            idx[k] = idx[i]
-            k += 1
-    return k
+# ----------------------------------------------------------------------------- row codes
+# A pixel's 3x3 neighbourhood is read from three entries of ``hc``, the "row code" image:
+# ``hc[p] = f[p - 1] + 2 f[p] + 4 f[p + 1]``. Bit 3 i + j of the 9-bit code
+# ``hc[p - w] + 8 hc[p] + 64 hc[p + w]`` is the pixel at row offset i - 1 and column offset
+# j - 1: three gathers per pixel instead of eight, and deleting a pixel updates three entries.
+_BIT9 = np.array([1, 2, 5, 8, 7, 6, 3, 0])  # 9-bit position of neighbour k (north, clockwise)
+_CENTRE = 16
 
 
-@njit(cache=True)
-def _spurs(f, offs, idx, m, l_min, count, buf, ends, lens, cut):  # pragma: no cover - numba
-    """Free ends whose walk reaches a junction pixel before ``l_min``.
+def _build_luts9():
+    """Tables over the 512 9-bit codes: ``to8`` (the 8-neighbour code), ``del9`` (a
+    foreground pixel that is a simple point with two or more neighbours: ``_DEL`` of its
+    8-neighbour code) and ``end9`` (a foreground pixel with one neighbour)."""
+    c9 = np.arange(512)
+    to8 = np.zeros(512, np.uint8)
+    for k in range(8):
+        to8 |= (((c9 >> _BIT9[k]) & 1) << k).astype(np.uint8)
+    centre = (c9 & _CENTRE) != 0
+    return to8, _DEL[to8] & centre, (_COUNT[to8] == 1) & centre
 
-    ``cut`` False: scan the free ends among ``idx[:m]`` and store those spurs' end pixels and
-    lengths in ``ends``, ``lens``; return their number. ``cut`` True: ``idx[:m]`` are such end
-    pixels (in the order to process); walk each again on the current image and delete it if
-    it is still a spur; return the number of pixels deleted.
 
-    The walk from a free end: 1 per axial step, sqrt 2 per diagonal step, until a pixel with
-    >= 3 neighbours (a junction: a spur), another free end or the length ``l_min`` (not a
-    spur); the walked pixels are kept in ``buf``.
+_DEL = _SIMPLE & (_COUNT >= 2)  # deletable: a simple point with two or more neighbours
+_TO8, _DEL9, _END9 = _build_luts9()
+
+
+def _build_subset_luts():
+    """``alldel[code * 256 + m]`` (``anydel``): deleting the centre is allowed (simple, two
+    or more neighbours) for every (for some) neighbourhood obtained from ``code`` by removing
+    a subset of the neighbours in ``m``. A pixel whose decision is the same for every subset
+    of the neighbours that may be deleted before it is visited does not depend on the order."""
+    alld = np.broadcast_to(_DEL[:, None], (256, 256)).copy()
+    anyd = alld.copy()
+    code = np.arange(256)[:, None]
+    m = np.arange(256)[None, :]
+    for b in range(8):
+        has = ((m >> b) & 1).astype(bool)
+        without = code & ~(1 << b)
+        alld &= np.where(has, alld[without, m], True)
+        anyd |= np.where(has, anyd[without, m], False)
+    return alld.reshape(-1), anyd.reshape(-1)
+
+
+_ALLDEL, _ANYDEL = _build_subset_luts()
+
+
+def _to_row_codes(f, idx) -> None:
+    """Turn the flat padded 0/1 image ``f`` with foreground pixels ``idx`` into its row codes,
+    in place (a pixel is foreground where ``hc & 2``)."""
+    f[idx] = 2
+    f[idx - 1] |= 4
+    f[idx + 1] |= 1
+
+
+def _from_row_codes(hc, idx) -> None:
+    """Undo :func:`_to_row_codes`, ``idx`` being the foreground pixels now."""
+    hc[idx - 1] = 0
+    hc[idx + 1] = 0
+    hc[idx] = 1
+
+
+def _code9(hc, p, w):
+    """9-bit neighbourhood codes (uint16) of the flat pixels ``p``."""
+    c = hc[p + w].astype(np.uint16)
+    c *= 64
+    c += hc[p] * 8
+    c += hc[p - w]
+    return c
+
+
+def _clear(hc, p):
+    """Delete the (distinct) pixels ``p`` from the row codes ``hc``."""
+    q = p - 1
+    hc[q] &= 3
+    hc[p] &= 5
+    q = p + 1
+    hc[q] &= 6
+
+
+# ----------------------------------------------------------------------------- redundant
+_PREV = (0, 1, 6, 7)  # the neighbours before a pixel in raster order (N, NE, W, NW)
+_NEXT = (2, 3, 4, 5)
+
+
+def _prev_mask(mark, p, offs):
+    """8-bit mask of the neighbours before ``p`` in raster order that are marked."""
+    m = mark[p + offs[0]]
+    m = m + mark[p + offs[1]] * 2
+    m += mark[p + offs[6]] * 64
+    m += mark[p + offs[7]] * 128
+    return m
+
+
+def _unique(a):
+    """Sorted distinct values of the int array ``a`` (10x faster than ``np.unique``, which
+    hashes, on a few thousand pixels)."""
+    a = np.sort(a)
+    keep = np.empty(a.shape, bool)
+    keep[:1] = True
+    np.not_equal(a[1:], a[:-1], out=keep[1:])
+    return a[keep]
+
+
+def _fg_neighbours(hc, p, offs):
+    """Foreground 8-neighbours of the pixels ``p`` (repeated where they are shared)."""
+    q = (p[:, None] + offs).ravel()
+    return q[(hc[q] & 2) != 0]
+
+
+def _raster_pass(hc, w, cand, mark, offs):
+    """One raster-order pass deleting simple pixels with two or more neighbours, each decided
+    on the image as the pass has left it.
+
+    Parameters
+    ----------
+    hc : (N,) uint8 array
+        Row codes of the flat padded image (:func:`_to_row_codes`); updated.
+    w : int
+        Row length of the padded image.
+    cand : (k,) int64 array
+        Pixels containing every pixel deletable when the pass starts (repetitions allowed).
+    mark : (N,) uint8 array
+        Zeroed scratch image, left zeroed.
+    offs : (8,) int64 array
+        Neighbour offsets (:func:`_offsets`).
+
+    Returns
+    -------
+    (d,) int64 array
+        The deleted pixels, in raster order.
+
+    Notes
+    -----
+    Besides the pixels deletable at the start, only later neighbours that deletions before
+    them could make deletable (``_ANYDEL``) can go. A pixel whose decision is the same whichever
+    of its earlier such neighbours go (``_ALLDEL``) is decided at once; the others (staircase
+    corners, where the order matters) by :func:`_resolve`.
     """
-    nk = 0
-    removed = 0
-    for i in range(m):
-        p0 = idx[i]
-        if not f[p0]:
-            continue
-        code = 0
-        for k in range(8):
-            code |= f[p0 + offs[k]] << k
-        if count[code] != 1:
-            continue
-        prev = -1
-        p = p0
-        length = 0.0
-        n = 0
-        junction = False
-        while True:
-            code = 0
-            for k in range(8):
-                code |= f[p + offs[k]] << k
-            nb = count[code]
-            if n > 0 and nb >= 3:
-                junction = True
-                break
-            if n > 0 and nb <= 1:
-                break  # another free end: a junction-free segment
-            buf[n] = p
-            n += 1
-            nxt = -1
-            step = 1.0
-            for k in range(8):  # even k axial, odd k diagonal
-                q = p + offs[k]
-                if f[q] and q != prev:
-                    nxt = q
-                    step = 1.0 if k % 2 == 0 else 1.4142135623730951
-                    break
-            if nxt < 0:
-                break
-            length += step
-            if length >= l_min or n >= buf.shape[0]:
-                break
-            prev = p
-            p = nxt
-        if junction and length < l_min:
-            if cut:
-                for j in range(n):
-                    f[buf[j]] = 0
-                removed += n
-            else:
-                ends[nk] = p0
-                lens[nk] = length
-                nk += 1
-    return removed if cut else nk
+    pd = cand[_DEL9[_code9(hc, cand, w)]]
+    if pd.shape[0] == 0:
+        return pd
+    mark[pd] = 1
+    parts = [pd]
+    new = pd
+    nxt = offs[list(_NEXT)]
+    while True:
+        q = _fg_neighbours(hc, new, nxt)
+        q = q[mark[q] == 0]
+        if q.shape[0] == 0:
+            break
+        q = _unique(q)  # without repetitions, whose numbers would multiply along chains
+        key = _TO8[_code9(hc, q, w)].astype(np.intp) * 256 + _prev_mask(mark, q, offs)
+        new = q[_ANYDEL[key]]
+        if new.shape[0] == 0:
+            break
+        mark[new] = 1
+        parts.append(new)
+    pd = _unique(np.concatenate(parts))
+    c8 = _TO8[_code9(hc, pd, w)]
+    key = c8.astype(np.intp) * 256 + _prev_mask(mark, pd, offs)
+    dele = _ALLDEL[key]
+    todo = np.flatnonzero(_ANYDEL[key] & ~dele)
+    if todo.shape[0]:
+        mark[pd] = np.where(dele, _GONE, _KEPT)
+        p = pd[todo]
+        mark[p] = _OPEN
+        _resolve(mark, p, c8[todo], offs)
+        dele[todo] = mark[p] == _GONE
+    mark[pd] = 0
+    gone = pd[dele]
+    _clear(hc, gone)
+    return gone
+
+
+# states of the pixels of a raster pass in its scratch image: 0 is a pixel that stays
+_OPEN, _GONE, _KEPT = 1, 2, 3
+
+
+def _build_order_lut():
+    """``lut[code * 256 + s]``: decision of a pixel of a raster pass with neighbourhood
+    ``code`` at the start of the pass, whose earlier neighbours N, NE, W, NW (those that can be
+    deleted before it is visited) have the states ``s = s_N + 4 s_NE + 16 s_W + 64 s_NW``
+    (0 or ``_KEPT``: stays, ``_GONE``: deleted, ``_OPEN``: undecided); ``_GONE``, ``_KEPT``,
+    or ``_OPEN`` if the decision depends on undecided neighbours."""
+    s = np.arange(256)
+    digits = np.stack([(s >> (2 * i)) & 3 for i in range(4)], 1)
+    bits = np.array([1 << k for k in _PREV])
+    gone = (bits * (digits == _GONE)).sum(1)
+    pending = (bits * (digits == _OPEN)).sum(1)
+    code = np.arange(256)[:, None]
+    key = (code & ~gone[None, :]) * 256 + pending[None, :]
+    lut = np.where(_ALLDEL[key], _GONE, np.where(_ANYDEL[key], _OPEN, _KEPT))
+    return lut.astype(np.uint8).reshape(-1)
+
+
+_ORDER_LUT = _build_order_lut()
+_ORDER_LUT_L = _ORDER_LUT.tolist()
+# below this many pixels left, a round costs more than deciding them one by one in Python
+_FEW_ORDERED = 100
+
+
+def _resolve(state, p, c8, offs):
+    """Decide the pixels of a raster pass whose decision depends on the order, in order: each
+    is deleted if its code without its earlier neighbours deleted is deletable.
+
+    Parameters
+    ----------
+    state : (N,) uint8 array
+        State image: ``_OPEN`` on the pixels ``p``, ``_GONE`` or ``_KEPT`` on the other
+        pixels that may change in the pass, 0 elsewhere; the decisions are written to it.
+    p : (n,) int64 array
+        The pixels to decide, in raster order.
+    c8 : (n,) uint8 array
+        Their 8-neighbour codes at the start of the pass.
+    offs : (8,) int64 array
+        Neighbour offsets (:func:`_offsets`).
+
+    Notes
+    -----
+    Vectorised in rounds, each deciding every pixel whose decision no longer depends on an
+    undecided earlier neighbour (``_ORDER_LUT``); the last pixels of long chains (the
+    two-pixel-thick diagonals the thinning leaves) one by one.
+    """
+    q0, q1, q2, q3 = (p + offs[k] for k in _PREV)
+    base = c8.astype(np.intp) * 256
+    while p.shape[0] > _FEW_ORDERED:
+        s = state[q0] + state[q1] * 4
+        s += state[q2] * 16
+        s += state[q3] * 64
+        dec = _ORDER_LUT[base + s]
+        done = dec != _OPEN
+        state[p[done]] = dec[done]
+        left = ~done
+        p, q0, q1, q2, q3, base = p[left], q0[left], q1[left], q2[left], q3[left], base[left]
+    # the rest in order: the earlier neighbours are decided when a pixel's turn comes
+    if p.shape[0]:
+        look = np.concatenate([p, q0, q1, q2, q3])
+        st = dict(zip(look.tolist(), state[look].tolist()))
+        for i, j0, j1, j2, j3, b in zip(p.tolist(), q0.tolist(), q1.tolist(), q2.tolist(),
+                                        q3.tolist(), base.tolist()):
+            st[i] = _ORDER_LUT_L[b + st[j0] + 4 * st[j1] + 16 * st[j2] + 64 * st[j3]]
+        state[p] = [st[i] for i in p.tolist()]
+
+
+def _remove_redundant(hc, w, idx, cand=None, mark=None):
+    """Delete simple pixels with two or more neighbours in raster order, pass after pass,
+    until none is left.
+
+    Parameters
+    ----------
+    hc : (N,) uint8 array
+        Row codes of the flat padded image (:func:`_to_row_codes`); updated.
+    w : int
+        Row length of the padded image.
+    idx : (m,) int64 array
+        Raster-ordered pixels containing every foreground pixel.
+    cand : (k,) int64 array, optional
+        Pixels containing every pixel deletable at the start (default ``idx``).
+    mark : (N,) uint8 array, optional
+        Zeroed scratch image (left zeroed); a new one by default.
+
+    Returns
+    -------
+    (m',) int64 array
+        The foreground pixels of ``idx`` left, in order.
+
+    Notes
+    -----
+    Each pass gives the deletions of a sequential raster scan (:func:`_raster_pass`); a pixel
+    deletable at the start of a pass is a neighbour of one deleted in the pass before.
+    Vectorised over the candidates: 3.6 ms on a dense 2000x2000 scan against 0.7 ms for the
+    compiled loop it replaces, without its 0.3 s of JIT compilation at first use.
+    """
+    offs = _offsets(w)
+    cand = idx if cand is None else cand
+    mark = np.zeros(hc.shape[0], np.uint8) if mark is None else mark
+    while cand.shape[0]:
+        gone = _raster_pass(hc, w, cand, mark, offs)
+        if gone.shape[0] == 0:
+            break
+        cand = _fg_neighbours(hc, gone, offs)
+    return idx[(hc[idx] & 2) != 0]
+
+
+# ----------------------------------------------------------------------------- spurs
+_STEP = np.array([1.0, 1.4142135623730951] * 4 + [0.0])  # length of a step towards k
+# lowest set bit of a code (8 for none): the first neighbour clockwise from north
+_LOWBIT = np.array([(c & -c).bit_length() - 1 if c else 8 for c in range(256)], np.intp)
+# from a pixel reached by a step towards k, every neighbour but the one just left
+_NOTBACK = np.array([255 & ~(1 << ((k + 4) % 8)) for k in range(8)], np.uint8)
+# the tables as lists, for the walks in Python
+_COUNT_L, _LOWBIT_L, _STEP_L, _NOTBACK_L, _TO8_L = (
+    a.tolist() for a in (_COUNT, _LOWBIT, _STEP, _NOTBACK, _TO8))
+# below this many walkers, a numpy step costs more than walking each in Python
+_FEW_WALKERS = 24
+
+
+def _walk_on(code_of, offs, p, excl, run, n, l_min, buf_len, path):
+    """Go on with one walk of :func:`_walk_all`, in Python.
+
+    Parameters
+    ----------
+    code_of : callable
+        8-neighbour code of a flat pixel.
+    offs : list of int
+        Neighbour offsets.
+    p : int
+        Pixel reached, ``n`` pixels walked so far, walked length ``run``.
+    excl : int
+        Neighbour bits allowed for the next step (all but the pixel just left).
+    l_min, buf_len
+        As in :func:`_walk_all`.
+    path : list
+        The walked pixels are appended to it.
+
+    Returns
+    -------
+    (bool, float, int)
+        A spur, the walked length, the pixel where the walk stopped (its junction).
+    """
+    while True:
+        c8 = code_of(p)
+        if n > 0:
+            nb = _COUNT_L[c8]
+            if nb >= 3:
+                return run < l_min, run, p
+            if nb <= 1:
+                return False, run, p
+        path.append(p)
+        n += 1
+        k = _LOWBIT_L[c8 & excl]
+        if k == 8:
+            return False, run, p
+        run += _STEP_L[k]
+        if run >= l_min or n >= buf_len:
+            return False, run, p
+        p += offs[k]
+        excl = _NOTBACK_L[k]
+
+
+def _walk_all(hc, w, ends, l_min, buf_len, offs):
+    """Walks from the free ends ``ends`` on a fixed image (row codes ``hc``, row length ``w``),
+    all at once.
+
+    From a free end, step to the first foreground neighbour (clockwise from north) other than
+    the pixel just left, adding 1 per axial and sqrt 2 per diagonal step, until a pixel with
+    three or more neighbours (a junction: a spur if the length is below ``l_min``), a pixel
+    with one neighbour or less, the length ``l_min`` or ``buf_len`` pixels. Vectorised over
+    the walkers while there are many; the last few walk on one by one (each numpy step costs
+    about as much as a pixel walked in Python).
+
+    Parameters
+    ----------
+    hc : (N,) uint8 array
+        Row codes of the flat padded image (:func:`_to_row_codes`).
+    w : int
+        Row length of the padded image.
+    ends : (n,) int64 array
+        Free ends (foreground pixels with one neighbour).
+    l_min : float
+        Spur length limit.
+    buf_len : int
+        Most pixels walked.
+    offs : (8,) int64 array
+        Neighbour offsets (:func:`_offsets`).
+
+    Returns
+    -------
+    spur : (n,) bool array
+    length : (n,) float64 array
+        Walked length up to the junction of each spur.
+    walker, pixel : (P,) int64 arrays
+        The walked pixels (junction excluded) of every walk, with the index of their walk.
+    stop : (n,) int64 array
+        The junction pixel of each spur.
+    """
+    n = ends.shape[0]
+    spur = np.zeros(n, bool)
+    length = np.zeros(n)
+    stop = np.zeros(n, np.intp)
+    wid = np.arange(n)
+    p = ends
+    excl = np.full(n, 255, np.uint8)
+    run = np.zeros(n)
+    walkers, pixels = [wid[:0]], [p[:0]]
+    step = 0
+    while wid.shape[0] > _FEW_WALKERS:
+        c8 = _TO8[_code9(hc, p, w)]
+        if step > 0:
+            nb = _COUNT[c8]
+            j = nb >= 3
+            if j.any():
+                spur[wid[j]] = run[j] < l_min
+                length[wid[j]] = run[j]
+                stop[wid[j]] = p[j]
+            go = nb == 2
+            wid, p, c8, excl, run = wid[go], p[go], c8[go], excl[go], run[go]
+        walkers.append(wid)
+        pixels.append(p)
+        k = _LOWBIT[c8 & excl]
+        run = run + _STEP[k]
+        go = (k < 8) & (run < l_min) & (step + 1 < buf_len)
+        wid, p, k, run = wid[go], p[go], k[go], run[go]
+        p = p + offs[k]
+        excl = _NOTBACK[k]
+        step += 1
+    offs_l = offs.tolist()
+
+    def code_of(p):
+        return _TO8_L[int(hc[p - w]) + 8 * int(hc[p]) + 64 * int(hc[p + w])]
+
+    for i, pi, ei, ri in zip(wid.tolist(), p.tolist(), excl.tolist(), run.tolist()):
+        path = []
+        spur[i], length[i], stop[i] = _walk_on(code_of, offs_l, pi, ei, ri, step, l_min,
+                                               buf_len, path)
+        walkers.append(np.full(len(path), i))
+        pixels.append(np.asarray(path, np.intp))
+    length[~spur] = 0.0
+    return spur, length, np.concatenate(walkers), np.concatenate(pixels), stop
+
+
+def _prune(hc, w, idx, l_min, mark=None):
+    """Delete spurs shorter than ``l_min`` ending on a junction, shortest first, until none is
+    left (a spur on a spur included).
+
+    Parameters
+    ----------
+    hc : (N,) uint8 array
+        Row codes of the flat padded skeleton (:func:`_to_row_codes`); updated.
+    w : int
+        Row length of the padded image.
+    idx : (m,) int64 array
+        Raster-ordered skeleton pixels (all of them), without redundant pixels (as
+        :func:`_remove_redundant` leaves them).
+    l_min : float
+        Spur length limit, > 0.
+    mark : (N,) uint8 array, optional
+        Zeroed scratch image for :func:`_remove_redundant`.
+
+    Returns
+    -------
+    idx : (m',) int64 array
+        The skeleton pixels left, in raster order.
+    n_removed : int
+        Number of pixels deleted as spurs.
+
+    Notes
+    -----
+    Each round walks from every free end at once (:func:`_walk_all`), then takes the spurs
+    found by increasing length (ties in the order of :func:`_quicksort_order`) and deletes each
+    one that is still a spur on the current image: a spur whose walk reads no pixel deleted
+    earlier in the round is unchanged, the others are walked again one by one. Then redundant
+    pixels are removed, and a new round starts while something was deleted. Vectorised over
+    the free ends: 2.4 ms on a dense 2000x2000 scan against 1.0 ms for the compiled loops it
+    replaces, without their 0.9 s of JIT compilation at first use.
+    """
+    buf_len = int(l_min) * 2 + 8
+    offs = _offsets(w)
+    offs_l = offs.tolist()
+    box = [0] + offs_l  # a pixel and its neighbours: what a walk reads around a pixel
+    n_removed = 0
+
+    def code_of(p):  # on the current image
+        return _TO8_L[int(hc[p - w]) + 8 * int(hc[p]) + 64 * int(hc[p + w])]
+
+    while True:
+        ends = idx[_END9[_code9(hc, idx, w)]]
+        if ends.shape[0] == 0:
+            break
+        spur, lens, walker, pixel, stop = _walk_all(hc, w, ends, l_min, buf_len, offs)
+        sid = np.flatnonzero(spur)
+        if sid.shape[0] == 0:
+            break
+        # the walked pixels of each spur
+        on = spur[walker]
+        walker, pixel = walker[on], pixel[on]
+        o = np.argsort(walker, kind="stable")
+        walker, pixel = walker[o], pixel[o]
+        paths = [a.tolist() for a in np.split(pixel, np.searchsorted(walker, sid)[1:])]
+        stops = stop[sid].tolist()
+        starts = ends[sid].tolist()
+        removed = 0
+        deleted = set()
+        pending = []  # deleted, not yet cleared from hc (needed before a walk on hc only)
+        for i in _quicksort_order(lens[sid]).tolist():
+            pth = paths[i]
+            # a walk that reads no pixel deleted before it is the one of the scan
+            if deleted and not deleted.isdisjoint(
+                    [q + d for q in pth + [stops[i]] for d in box]):
+                if pending:
+                    _clear(hc, np.asarray(pending, np.intp))
+                    pending = []
+                # the free end is still there: walks stop at free ends, so no cut before
+                # reached it (it may have lost its neighbour: then it is no spur either)
+                pth = []
+                if not _walk_on(code_of, offs_l, starts[i], 255, 0.0, 0, l_min, buf_len,
+                                pth)[0]:
+                    continue
+            pending += pth
+            deleted.update(pth)
+            removed += len(pth)
+        if pending:
+            _clear(hc, np.asarray(pending, np.intp))
+        if removed == 0:
+            break
+        n_removed += removed
+        gone = np.fromiter(deleted, np.intp, len(deleted))
+        idx = _remove_redundant(hc, w, idx, _fg_neighbours(hc, gone, offs), mark)
+    return idx, n_removed
 
 
 def _quicksort_order(keys) -> np.ndarray:
@@ -298,27 +723,6 @@ def _offsets(w: int) -> np.ndarray:
     return (_DR * w + _DC).astype(np.int64)
 
 
-def _prune(f, offs, idx, m, l_min):
-    """Delete spurs shorter than ``l_min`` ending on a junction, shortest first, until none is
-    left (a spur on a spur included); ``idx[:m]`` the skeleton pixels. Returns the number of
-    skeleton pixels left (compacted in ``idx``) and of pixels deleted."""
-    buf = np.empty(int(l_min) * 2 + 8, np.int64)
-    ends = np.empty(max(m, 1), np.int64)
-    lens = np.empty(max(m, 1), np.float64)
-    n_removed = 0
-    while True:
-        k = _spurs(f, offs, idx, m, l_min, _COUNT, buf, ends, lens, False)
-        if k == 0:
-            break
-        order = ends[:k][_quicksort_order(lens[:k])]
-        removed = _spurs(f, offs, order, k, l_min, _COUNT, buf, ends, lens, True)
-        if removed == 0:
-            break
-        n_removed += removed
-        m = _remove_redundant(f, offs, idx, m, _SIMPLE, _COUNT)
-    return m, n_removed
-
-
 def nonzero_rc(img) -> tuple[np.ndarray, np.ndarray]:
     """(rows, cols) int64 of the nonzero pixels of a 2-D uint8 image, in raster order.
 
@@ -374,14 +778,21 @@ def _skeleton_padded(mask, *, l_min_px):
     cap = max(int(np.count_nonzero(f)), 1)
     lst = np.empty(cap, np.int64)
     lst[:len(start)] = start
-    _zhang_suen(f, offs, lst, len(start), np.zeros(f.shape[0], np.uint8),
-                np.empty(cap, np.int64), _ZS1, _ZS2, _SIMPLE, _COUNT)
+    st = np.zeros(f.shape[0], np.uint8)
+    _zhang_suen(f, offs, lst, len(start), st, np.empty(cap, np.int64), _ZS1, _ZS2, _SIMPLE,
+                _COUNT)
     # numpy's nonzero is 10x faster on booleans than on uint8 (f holds 0 and 1)
-    idx = np.flatnonzero(f.view(np.bool_)).astype(np.int64, copy=False)
-    m = _remove_redundant(f, offs, idx, len(idx), _SIMPLE, _COUNT)
+    idx = np.flatnonzero(f.view(np.bool_)).astype(np.intp, copy=False)
+    # the thinning leaves its state on skeleton pixels only: zeroed, it is the scratch image
+    # of the next steps, with its memory already mapped (a new one costs 2 ms on a dense scan)
+    st[idx] = 0
+    # from here on f holds the row codes of the skeleton
+    _to_row_codes(f, idx)
+    idx = _remove_redundant(f, w + 2, idx, mark=st)
     n_removed = 0
     if l_min_px > 0:
-        m, n_removed = _prune(f, offs, idx, m, float(l_min_px))
+        idx, n_removed = _prune(f, w + 2, idx, float(l_min_px), mark=st)
+    _from_row_codes(f, idx)
     return img, n_removed
 
 
