@@ -10,6 +10,7 @@ for the machine's speed, the time of ``python -c "import numpy"`` is measured in
 Warm runs and the reference are the best of ``--repeat``; the cold run is repeated with a new
 empty cache each time, best kept. Target: the cold first analysis (import + analyze) <= 5 s.
 
+The line "numba imported by the analysis" says whether any JIT compiler was loaded at all.
 ``--kernels`` lists, for one cold run, the compile time of every numba function compiled
 (inclusive of the functions it calls, from numba's ``numba:compile`` events), longest first.
 
@@ -60,7 +61,7 @@ with warnings.catch_warnings():
 c2 = time.process_time(); t2 = time.perf_counter()
 print(json.dumps(dict(import_s=t1 - t0, import_cpu_s=c1 - c0, analyze_s=t2 - t1,
                       analyze_cpu_s=c2 - c1, n_stacks=int(res.summary["n_stacks"]),
-                      kernels=kernels)))
+                      numba_loaded="numba" in sys.modules, kernels=kernels)))
 """
 
 
@@ -125,6 +126,8 @@ def main(argv=None) -> int:
     print(_line("warm", w))
     print(f"cold first analysis (import + analyze) = {c['import_s'] + c['analyze_s']:.2f} s "
           "(target <= 5 s)")
+    print("numba imported by the analysis: "
+          + ("yes" if any(r["numba_loaded"] for r in cold) else "no"))
     if args.kernels:
         cache = tempfile.mkdtemp(prefix="numba-cache-")
         try:
