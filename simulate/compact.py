@@ -852,7 +852,7 @@ def check_params(params: CompactParams) -> None:
         raise ParameterError(f"--noise must be a finite number in [0, 3000], got "
                              f"{params.noise!r}")
     if not (math.isfinite(params.rate) and 0.0 < params.rate <= 0.1):
-        raise ParameterError(f"rate must be in (0, 0.1], got {params.rate!r}")
+        raise ParameterError(f"--wall-rate must be in (0, 0.1], got {params.rate!r}")
     if params.max_iter < 1 or params.hold_iter < 1:
         raise ParameterError("--max-iter must be >= 1")
     if not (math.isfinite(params.ftol) and params.ftol > 0.0):
@@ -870,7 +870,8 @@ def params_from_args(args) -> dict:
         raise ParameterError("--n-configs must be <= 10000000")
     p = CompactParams(epsilon=float(args.epsilon), n_segments=int(args.segments),
                       thickness=None if args.thickness is None else float(args.thickness),
-                      noise=float(args.noise), max_iter=int(args.max_iter))
+                      noise=float(args.noise), rate=float(args.wall_rate),
+                      max_iter=int(args.max_iter))
     check_params(p)
     h = p.h
     delta = (CONTACT_DISTANCE * h if args.contact_distance is None
@@ -923,6 +924,10 @@ def add_subparser(sub):
                         "750, the paper's)")
     p.add_argument("--contact-distance", type=float, default=None,
                    help="contact cut-off of the analysis in units of L (default 3 h)")
+    p.add_argument("--wall-rate", type=float, default=CompactParams.rate,
+                   help="largest relative shrink of the wall radius per iteration (default "
+                        f"{CompactParams.rate:g}; smaller is slower and closer to a quasi-static "
+                        "compaction)")
     p.add_argument("--max-iter", type=int, default=2_000_000,
                    help="iterations allowed to each level of the compaction (default 2e6)")
     p.add_argument("--workers", type=int, default=1, help="local worker processes (default 1)")

@@ -129,6 +129,8 @@ def test_cli_outputs_and_resume(tmp_path, monkeypatch):
     (["--epsilon", "2", "--n-configs", "0"], "--n-configs"),
     (["--epsilon", "2", "--contact-distance", "1e-5"], "--contact-distance"),
     (["--epsilon", "2", "--noise", "inf"], "--noise"),
+    (["--epsilon", "2", "--wall-rate", "0"], "--wall-rate"),
+    (["--epsilon", "2", "--wall-rate", "0.5"], "--wall-rate"),
 ])
 def test_bad_options_exit_2_one_line(tmp_path, capsys, bad, word):
     out = tmp_path / "never"
@@ -160,3 +162,16 @@ def test_wall_regions_a_stack_with_an_end_at_the_wall_is_periphery():
     br, st = compact.wall_regions(xy, branches, stacks.assign(n_br=1), wall_radius=0.2,
                                   contact_distance=0.01)
     assert set(br) == set(st) == {"bulk"}
+
+
+def test_wall_rate_reaches_the_params_and_the_output(tmp_path):
+    """``--wall-rate`` is the compaction's ``rate`` and is recorded in params.json."""
+    ns = type("A", (), dict(epsilon=EPS, segments=N, thickness=None, noise=750.0,
+                            wall_rate=5e-4, max_iter=1000, n_configs=1, seed=0, workers=1,
+                            contact_distance=None))
+    params = compact.params_from_args(ns)
+    assert params["rate"] == 5e-4
+    out = tmp_path / "slow"
+    assert simulate_main(["compact", *SMALL, "--n-configs", "1", "--wall-rate", "0.004",
+                          "--out", str(out)]) == 0
+    assert json.loads((out / "params.json").read_text())["rate"] == 0.004
