@@ -448,6 +448,9 @@ def _entries(C: sp.csr_matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per column (stack) its <= 2 non-zero rows and coefficients (signed-graph columns)."""
     Cc = C.tocsc()
     Cc.sum_duplicates()
+    # a loop whose two ends cancel at its junction (coefficient 0) is not constrained there:
+    # an explicit zero would enter the move graph as a change of -1
+    Cc.eliminate_zeros()
     m = C.shape[1]
     # a stack has two ends, so at most two junction entries
     n_ent = np.minimum(np.diff(Cc.indptr), 2).astype(np.int64)
@@ -459,6 +462,19 @@ def _entries(C: sp.csr_matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         ent_row[has, q] = Cc.indices[pos]
         ent_coef[has, q] = np.round(Cc.data[pos]).astype(np.int64)
     return ent_row, ent_coef, n_ent
+
+
+def _start(C, e, w, n0):
+    """The search's start: ``n0`` (at least 1) with every stack that no junction constrains
+    at its own optimum ``round(e)`` (no move reaches such a stack: a loop whose two ends
+    cancel at its junction, or a stack between free ends), its entries and ``R = C n``."""
+    n = np.maximum(np.asarray(n0, np.int64), 1).copy()
+    ent_row, ent_coef, n_ent = _entries(C)
+    e = np.asarray(e, float)
+    free = (n_ent == 0) & np.isfinite(e) & (np.asarray(w, float) > 0)
+    n[free] = np.maximum(np.round(e[free]), 1).astype(np.int64)
+    R = np.asarray(np.round(C @ n.astype(float)), np.int64).reshape(-1)
+    return n, ent_row, ent_coef, n_ent, R
 
 
 def integer_refine(C: sp.csr_matrix, pen: np.ndarray, e: np.ndarray, w: np.ndarray,
@@ -484,9 +500,7 @@ def integer_refine(C: sp.csr_matrix, pen: np.ndarray, e: np.ndarray, w: np.ndarr
         Moves applied; negative when the search stopped on a non-improving cycle (a walk
         using a stack twice; rare, see :func:`_improve`).
     """
-    n = np.maximum(np.asarray(n0, np.int64), 1).copy()
-    ent_row, ent_coef, n_ent = _entries(C)
-    R = np.asarray(np.round(C @ n.astype(float)), np.int64).reshape(-1)
+    n, ent_row, ent_coef, n_ent, R = _start(C, e, w, n0)
     moves = _improve(n, np.asarray(e, float), np.asarray(w, float), ent_row, ent_coef, n_ent,
                      R, np.asarray(pen, float), int(max_moves))
     return n, int(moves)

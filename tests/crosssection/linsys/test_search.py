@@ -79,3 +79,17 @@ def test_integer_search_matches_milp():
     assert np.mean(ratios <= 1 + 1e-9) >= 0.8, ratios
     assert ratios.max() < 1.4, ratios
     assert np.mean(acc_a) >= np.mean(acc_b) - 0.02
+
+
+def test_loop_whose_ends_cancel_at_its_junction_reaches_its_width():
+    """A loop leaving and entering its junction on opposite sides has coefficient 0 there
+    (stored explicitly by the equations): no junction constrains it, so its count is its
+    rounded width whatever the start, and the other stacks are not disturbed."""
+    C = sp.csr_matrix((np.array([1.0, -1.0, 1.0, -1.0]), ([0, 0, 0, 0], [0, 0, 1, 2])),
+                      shape=(1, 3))
+    C.sum_duplicates()
+    assert C.nnz == 3 and C[0, 0] == 0  # the cancelled entry is kept as an explicit zero
+    e = np.array([3.4, 2.1, 1.9])
+    for n0 in ([2, 2, 2], [5, 2, 2], [3, 2, 2]):
+        n, _ = integer_refine(C, np.array([1e4]), e, np.ones(3), np.array(n0))
+        assert n.tolist() == [3, 2, 2]
