@@ -501,15 +501,76 @@ def stack_graph(skel, distance_px, *, merge_px: float = 2.0,
 def _at_fork_points(junc: Junctions, sg: StackGraph, distance_px, thickness_px) -> Junctions:
     """``junc`` with its centres moved to the stacks' centreline intersections."""
     radius = _junction_radius(junc, distance_px)
-    end_paths, end_junction = [], []
+    first_own, last_own = _own_band_span(sg.paths, distance_px, thickness_px)
+    end_paths, end_junction, end_exit = [], [], []
     for sid, (u, v) in enumerate(sg.ends):
-        for node, path in ((u, sg.paths[sid]), (v, sg.paths[sid][::-1])):
+        path = sg.paths[sid]
+        for node, p, k in ((u, path, first_own[sid]),
+                           (v, path[::-1], len(path) - 1 - last_own[sid])):
             if sg.node_kind[node] == "junction":
-                end_paths.append(path)
+                end_paths.append(p)
                 end_junction.append(node)
+                end_exit.append(p[k] if 0 < k < len(p) else None)
+    ej = np.asarray(end_junction, np.int64)
+    skip = np.zeros(len(ej))
+    for i, px in enumerate(end_exit):
+        if px is not None:
+            skip[i] = np.hypot(*(px - junc.centers_rc[ej[i]]))
+    # only a path that runs obliquely through the blob beyond its radius is skipped farther
+    skip[skip <= radius[ej]] = 0.0
     centers = fork_points(junc.centers_rc, radius, end_paths, end_junction,
-                          thickness_px=thickness_px)
+                          thickness_px=thickness_px, skip_px=skip)
     return Junctions(centers_rc=centers, pixels=junc.pixels, label_image=junc.label_image)
+
+
+def _own_band_span(paths, distance_px, thickness_px) -> tuple[np.ndarray, np.ndarray]:
+    """Per stack, the first and the last pixel of its path that lie in its own band.
+
+    A thin stack meeting a thick band at an angle has no centreline of its own inside that
+    band: its skeleton crosses the band obliquely to the medial-axis fork, which thinning
+    places up to 0.8 band half-widths along the thick band (a single sheet on a 16-layer
+    trunk: 34 px at h = 5 px). A pixel is in the stack's own band when its distance to the
+    background is within ``max(1, h / 2)`` of the median along the path (the half width of
+    its own band); :func:`_at_fork_points` fits the centreline beyond these pixels.
+    Vectorised over all stacks (one sort): 2.5 ms on a dense 2000x2000 scan.
+
+    Parameters
+    ----------
+    paths : list of (P, 2) int arrays
+        Stack paths (row, col).
+    distance_px : (H, W) array
+        Distance of every ink pixel to the background.
+    thickness_px : float
+        Sheet thickness h in px.
+
+    Returns
+    -------
+    first, last : (M,) int arrays
+        Positions along each path; ``first = len`` and ``last = -1`` where no pixel is.
+    """
+    q = len(paths)
+    lens = np.fromiter((len(p) for p in paths), np.int64, count=q)
+    if q == 0 or lens.sum() == 0:
+        return np.full(q, 0, np.int64) + lens, np.full(q, -1, np.int64)
+    pix = np.concatenate([np.asarray(p).reshape(-1, 2) for p in paths])
+    dt = np.asarray(distance_px)[pix[:, 0], pix[:, 1]].astype(np.float64)
+    path = np.repeat(np.arange(q), lens)
+    start = np.zeros(q, np.int64)
+    np.cumsum(lens[:-1], out=start[1:])
+    # per-path median (np.median's: the mean of the two middle values of an even count);
+    # distances are >= 0 and below the image size, so path * span + dt sorts by path first
+    span = float(dt.max()) + 1.0
+    srt = dt[np.argsort(path * span + dt, kind="stable")]
+    last_i = len(dt) - 1
+    med = 0.5 * (srt[np.minimum(start + (lens - 1) // 2, last_i)]
+                 + srt[np.minimum(start + lens // 2, last_i)])
+    own = dt <= med[path] + max(1.0, 0.5 * float(thickness_px))
+    pos = np.arange(len(dt)) - start[path]
+    first = lens.copy()
+    last = np.full(q, -1, np.int64)
+    np.minimum.at(first, path[own], pos[own])
+    np.maximum.at(last, path[own], pos[own])
+    return first, last
 
 
 def _junction_radius(junc: Junctions, distance_px) -> np.ndarray:

@@ -337,7 +337,7 @@ def _end_lines(pr, pc, offs, sids, rev, c0r, c0c, skip, fit):
 
 def fork_points(centers_rc, radius_px, end_paths, end_junction, *, thickness_px: float,
                 skip_factor: float = 0.7, fit_h: float = 2.0, prior_weight: float = 0.05,
-                max_shift_factor: float = 1.0) -> np.ndarray:
+                max_shift_factor: float = 1.0, skip_px=None) -> np.ndarray:
     """Junction positions where the centrelines of the stacks meeting there intersect.
 
     The skeleton of thick bands forks where the medial axis does, which is not where the
@@ -371,6 +371,10 @@ def fork_points(centers_rc, radius_px, end_paths, end_junction, *, thickness_px:
     max_shift_factor : float
         A solution farther than ``max_shift_factor * radius + h`` from the skeleton centre
         is rejected (the junction stays on the skeleton).
+    skip_px : (Q,) float array, optional
+        Per stack end, a distance from the centre within which its path is ignored too
+        (where a thin stack crosses a thicker band;
+        :func:`crosssection.stages.graph._own_band_span`).
 
     Returns
     -------
@@ -390,6 +394,8 @@ def fork_points(centers_rc, radius_px, end_paths, end_junction, *, thickness_px:
             if offs[-1] else np.zeros((0, 2)))
     rad = np.asarray(radius_px, float)[end_junction]
     skip = np.maximum(skip_factor * rad, 2.0)
+    if skip_px is not None:
+        skip = np.maximum(skip, np.asarray(skip_px, float))
     fit = np.full(q, max(fit_h * thickness_px, 4.0))
     c0 = centers[end_junction]
     mean, direc, cnt = _end_lines(np.ascontiguousarray(flat[:, 0]),

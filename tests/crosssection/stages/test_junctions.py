@@ -28,13 +28,7 @@ def _graph(mask, h_px, refine=True):
     return stack_graph(skel, dist, thickness_px=h_px if refine else None)
 
 
-_WIDE_T = pytest.mark.xfail(
-    strict=True, reason="a single sheet meeting a band of >= 16 layers at a right angle: its "
-    "skeleton runs inside the band beyond the fitted window, so its line is not its centreline")
-
-
-@pytest.mark.parametrize("n_trunk", [8, pytest.param(16, marks=_WIDE_T),
-                                     pytest.param(25, marks=_WIDE_T)])
+@pytest.mark.parametrize("n_trunk", [8, 16, 25])
 def test_thick_t_junction_placed_at_centreline_meeting(n_trunk):
     # a thick trunk continuing as n_trunk - 1 layers while one sheet leaves at a right angle:
     # the skeleton forks off the centreline meeting point, the refined junction does not
@@ -123,3 +117,21 @@ def test_low_resolution_junction_counts():
     junc, _, _ = _graph(mask, h)
     matched = _match(junc.centers_rc, truth, 3 * h)
     assert 2 * matched / (len(junc) + len(truth)) >= 0.95
+
+
+def test_own_band_span_skips_only_the_crossing_of_a_thicker_band():
+    from crosssection.stages.graph import _own_band_span
+
+    h = 5.0
+    dist = np.zeros((200, 200))
+    dist[100, :] = 3.0           # a thin band along row 100 ...
+    dist[100, :40] = 30.0        # ... that starts inside a thick band (40 px)
+    dist[150, :] = 30.0          # a thick band, uniform
+    dist[50, :] = np.where(np.arange(200) % 2, 3.0, 3.5)  # a thin band with pixel noise
+    paths = [np.column_stack([np.full(200, r), np.arange(200)]) for r in (100, 150, 50)]
+    first, last = _own_band_span(paths, dist, h)
+    assert first.tolist() == [40, 0, 0]
+    assert last.tolist() == [199, 199, 199]
+    # from the other end the thin band is its own all the way to the thick one
+    first, last = _own_band_span([p[::-1] for p in paths], dist, h)
+    assert first.tolist() == [0, 0, 0] and last.tolist() == [159, 199, 199]
