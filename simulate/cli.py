@@ -15,13 +15,14 @@ SUBCOMMANDS = {
 }
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(argv=None) -> argparse.ArgumentParser:
     return make_parser(
         "python -m simulate",
         "Quench simulator of a confined inextensible rod; renders configurations into "
-        "synthetic scans with exact ground truth and validates the pipeline.", SUBCOMMANDS)
+        "synthetic scans with exact ground truth and validates the pipeline.", SUBCOMMANDS,
+        argv)
 
 
 def main(argv=None) -> int:
     """Run the ``simulate`` CLI; return the exit status."""
-    return run_parsed(build_parser(), argv)
+    return run_parsed(build_parser(argv), argv)

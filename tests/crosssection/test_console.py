@@ -117,3 +117,21 @@ def test_samples_are_copied_out_and_not_overwritten(tmp_path, capsys):
     assert (dest / "set.toml").read_text() == "changed"
     assert len(copy_samples(dest, overwrite=True)) == len(files)
     assert (dest / "set.toml").read_bytes() == (src / "set.toml").read_bytes()
+
+
+@pytest.mark.parametrize("tool", [crosssection.cli, simulate.cli])
+def test_module_clis_register_only_the_subcommand_that_runs(tool):
+    every = set(tool.SUBCOMMANDS)
+    assert set(_subparsers(tool.build_parser([])).choices) == every
+    for name, module in tool.SUBCOMMANDS.items():
+        shared = {n for n, m in tool.SUBCOMMANDS.items() if m == module}
+        assert set(_subparsers(tool.build_parser([name, "--help"])).choices) == shared
+
+
+def test_python_m_crosssection_analyze_does_not_import_stats_or_simulator():
+    code = ("import sys; from crosssection.cli import build_parser; "
+            "build_parser(['analyze', 'scan.png']); "
+            "print(sorted(m for m in ('scipy.stats', 'simulate', 'numba') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.strip()
+    assert out == "[]"
