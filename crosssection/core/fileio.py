@@ -101,10 +101,15 @@ def write_text(path, text: str) -> Path:
 
 
 def save_figure(fig, path, **kwargs) -> Path:
-    """Save a matplotlib figure as PNG atomically and close it."""
+    """Save a matplotlib figure as PNG atomically and close it.
+
+    zlib level 3 instead of PIL's default 6: on a 1200 x 1272 scan overlay 0.39 s against
+    1.24 s of encoding, for a file 12 % larger (a dimmed scan's noise compresses poorly).
+    """
     import matplotlib.pyplot as plt
 
     kwargs.setdefault("dpi", 120)
+    kwargs.setdefault("pil_kwargs", {"compress_level": 3})
     with atomic_path(path, suffix=".png") as tmp:
         fig.savefig(tmp, format="png", **kwargs)
     plt.close(fig)
