@@ -55,6 +55,13 @@ REGION_WORDS = {"all": "whole system", "bulk": "bulk (no wall contact)",
                 "periphery": "periphery (touching the wall)"}
 
 
+def _wrap_label(text: str, width: int) -> str:
+    """``textwrap.fill`` that never breaks inside ``$...$`` (a split formula is printed raw)."""
+    parts = text.split("$")
+    for k in range(1, len(parts), 2):
+        parts[k] = parts[k].replace(" ", "\x00")
+    return textwrap.fill("$".join(parts), width).replace("\x00", " ")
+
 def set_colors(sets) -> dict:
     """Colour of every set, by its position in ``sets`` (the ensemble's order), so that a set
     keeps its colour across all figures of a report."""
@@ -253,7 +260,7 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
                 # a Gamma law with alpha < 1 diverges at 0: scale the axis to the data
                 ax.set_ylim(0, 1.15 * ymax_lin)
             # long names on two lines: side-by-side panels' labels must not run together
-            ax.set_xlabel(textwrap.fill(label, 36))
+            ax.set_xlabel(_wrap_label(label, 36))
             ax.set_ylabel("fraction of stacks $P(n_{br})$" if count
                           else "probability density")
             ax.set_title(f"{REGION_WORDS.get(reg, reg)}: {'linear' if not logscale else 'log'}"

@@ -194,3 +194,14 @@ def test_tick_labels_never_run_together(tmp_path):
         for ax in fig.axes:
             if ax.get_xscale() == "linear":
                 assert ax.get_xlim()[0] >= 0, q
+
+
+def test_axis_labels_never_split_a_formula():
+    from crosssection.stats.report import LABELS, _wrap_label
+
+    assert any("$" in label for label in LABELS.values())
+    for label in LABELS.values():
+        wrapped = _wrap_label(label, 36)
+        assert wrapped.replace("\n", " ") == label
+        # every line holds whole formulas: an even number of $ (else matplotlib prints it raw)
+        assert all(line.count("$") % 2 == 0 for line in wrapped.splitlines()), wrapped
