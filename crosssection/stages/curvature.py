@@ -437,28 +437,6 @@ def _parabola_curvatures(fits):
     return [np.zeros(max(c, 0)) if o is None else o for o, c in zip(out, nw)]
 
 
-def _parabola_curvature(x, y, s, half_w, i0, i1, correct, shift):
-    """Signed curvature (1/px) at points ``i0..i1-1`` of one path
-    (:func:`_parabola_curvatures`).
-
-    Parameters
-    ----------
-    x, y, s : ndarray (n,)
-        Coordinates (x = col, y = -row) and increasing arc length, px.
-    half_w : float
-        Half window, px.
-    i0, i1 : int
-        The wanted points.
-    correct, shift : bool
-        Circle correction; windows shifted (not truncated) at the ends.
-
-    Returns
-    -------
-    ndarray (i1 - i0,)
-    """
-    return _parabola_curvatures([(x, y, s, half_w, i0, i1, correct, shift)])[0]
-
-
 def _trim_indices(s, trims):
     total = s[-1]
     t0 = int(np.searchsorted(s, trims[0], side="left"))

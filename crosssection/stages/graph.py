@@ -502,7 +502,7 @@ def _at_fork_points(junc: Junctions, sg: StackGraph, distance_px, thickness_px) 
     """``junc`` with its centres moved to the stacks' centreline intersections."""
     radius = _junction_radius(junc, distance_px)
     first_own, last_own = _own_band_span(sg.paths, distance_px, thickness_px)
-    end_paths, end_junction, end_exit = [], [], []
+    end_paths, end_junction, skip = [], [], []
     for sid, (u, v) in enumerate(sg.ends):
         path = sg.paths[sid]
         for node, p, k in ((u, path, first_own[sid]),
@@ -510,14 +510,11 @@ def _at_fork_points(junc: Junctions, sg: StackGraph, distance_px, thickness_px) 
             if sg.node_kind[node] == "junction":
                 end_paths.append(p)
                 end_junction.append(node)
-                end_exit.append(p[k] if 0 < k < len(p) else None)
-    ej = np.asarray(end_junction, np.int64)
-    skip = np.zeros(len(ej))
-    for i, px in enumerate(end_exit):
-        if px is not None:
-            skip[i] = np.hypot(*(px - junc.centers_rc[ej[i]]))
+                skip.append(np.hypot(*(p[k] - junc.centers_rc[node])) if 0 < k < len(p)
+                            else 0.0)
+    skip = np.asarray(skip, float)
     # only a path that runs obliquely through the blob beyond its radius is skipped farther
-    skip[skip <= radius[ej]] = 0.0
+    skip[skip <= radius[np.asarray(end_junction, np.int64)]] = 0.0
     centers = fork_points(junc.centers_rc, radius, end_paths, end_junction,
                           thickness_px=thickness_px, skip_px=skip)
     return Junctions(centers_rc=centers, pixels=junc.pixels, label_image=junc.label_image)

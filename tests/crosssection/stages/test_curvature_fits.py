@@ -10,8 +10,12 @@ import pytest
 
 from crosssection.core import polyline
 from crosssection.stages import curvature
-from crosssection.stages.curvature import (_parabola_curvature, _parabola_curvatures,
-                                           stack_curvature)
+from crosssection.stages.curvature import _parabola_curvatures, stack_curvature
+
+
+def _parabola_curvature(*fit):
+    """The vectorised fits of one path (a one-entry batch)."""
+    return _parabola_curvatures([fit])[0]
 
 #: agreement asked of the vectorised fits: relative where the curvature is not about 0,
 #: absolute (1/px) near 0
