@@ -9,7 +9,9 @@ Conventions (tested in tests/crosssection/test_pipeline.py):
 - ``mid_x_px``/``mid_y_px`` is the point at half the arc length of the stack's path
   (:func:`crosssection.core.polyline.mid_point`): scoring matches stacks by it.
 - ``junctions.csv`` reports the layer conservation residual under the geometric packs it
-  lists; the linear solve may have repartitioned a junction the widths contradict.
+  lists; the linear solve may have repartitioned a junction the widths contradict. A residual
+  of one layer at a junction where the solve placed a rod end
+  (:func:`crosssection.linsys.equations.rod_end_junctions`) is ``conservation_ok``.
 """
 from __future__ import annotations
 
@@ -125,7 +127,10 @@ def junction_table(junctions, graph, packs, n_br, linear_system) -> pd.DataFrame
 
     comps = getattr(linear_system, "components", None) or []
     repart = {int(j) for c in comps for j in getattr(c, "repartitioned_junctions", [])}
+    rod_end = {int(j) for c in comps for j in getattr(c, "rod_end_junctions", [])}
     cons = [residual(j) for j in range(k)]
+    # a rod end at a junction leaves one layer unmatched there: conservation holds up to it
+    ok = [r == 0 or (j in rod_end and abs(r) == 1) for j, r in enumerate(cons)]
     return pd.DataFrame({
         "junction_id": np.arange(k, dtype=np.int64),
         "x_px": junctions.centers_rc[:, 1] if k else np.zeros(0),
@@ -137,7 +142,7 @@ def junction_table(junctions, graph, packs, n_br, linear_system) -> pd.DataFrame
         "reference_dependent": [bool(getattr(packs.get(j), "reference_dependent", False))
                                 for j in range(k)],
         "conservation_residual": cons,
-        "conservation_ok": [r == 0 for r in cons],
+        "conservation_ok": ok,
         "repartitioned": [j in repart for j in range(k)],
         "n_pixels": [len(p) for p in junctions.pixels],
     })

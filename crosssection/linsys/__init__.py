@@ -16,8 +16,8 @@ M x M system is n_br, an integer >= 1.  Here every width contributes with its we
 Modules, in the order of the paper's system:
 
 * :mod:`~crosssection.linsys.equations` -- the rows: junction conservation ``C n = 0`` from
-  the packs (uncertain junctions decided by the widths), the width equations ``I_S n =
-  round(e_S)`` and the assembled ``[C; I_S]``.
+  the packs (uncertain junctions decided by the widths; junctions where a rod end lies left
+  out), the width equations ``I_S n = round(e_S)`` and the assembled ``[C; I_S]``.
 * :mod:`~crosssection.linsys.rank` -- rank of ``C`` (signed-graph incidence), the stacks ``S``
   fixed by width (matroid greedy), condition number and residual of ``[C; I_S]``.
 * :mod:`~crosssection.linsys.noise` -- width error model ``sigma_s``, weights ``w_s`` and the
@@ -27,12 +27,13 @@ Modules, in the order of the paper's system:
 * :mod:`~crosssection.linsys.solve` -- :func:`solve_branch_counts`, per connected component,
   and its result types.
 """
-from crosssection.linsys.equations import conservation_equations, reliability_score
+from crosssection.linsys.equations import (conservation_equations, reliability_score,
+                                           rod_end_junctions)
 from crosssection.linsys.noise import estimate_noise_scale
 from crosssection.linsys.rank import incidence_rank, width_fixed_stacks
 from crosssection.linsys.search import integer_refine
 from crosssection.linsys.solve import ComponentInfo, LinearSystemResult, solve_branch_counts
 
 __all__ = ["LinearSystemResult", "ComponentInfo", "solve_branch_counts",
-           "conservation_equations", "incidence_rank", "width_fixed_stacks",
+           "conservation_equations", "rod_end_junctions", "incidence_rank", "width_fixed_stacks",
            "reliability_score", "estimate_noise_scale", "integer_refine"]

@@ -22,7 +22,7 @@ import math
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["conservation_equations", "sparse_rows", "reliability_score",
+__all__ = ["conservation_equations", "rod_end_junctions", "sparse_rows", "reliability_score",
            "select_width_stacks", "paper_system"]
 
 
@@ -171,6 +171,61 @@ def conservation_equations(graph, packs: dict, layers_est=None, sigma=None, *,
         elif kind == "drop":
             dropped.append(node)
     return hard, soft, dropped, repartitioned
+
+
+def rod_end_junctions(graph, packs: dict, layers_est, sigma, *, hidden_ends: int,
+                      z_max: float = 4.0) -> list:
+    """Junctions where a rod end lies: conservation holds there up to one layer.
+
+    A rod has two ends. One that is not a free end of the skeleton lies in a band: a free end
+    abutting another sheet draws a T that the skeleton reads as a junction of three stacks,
+    and an end inside a band at a junction leaves one more layer on one side than on the other.
+    Either way one layer ends there, so ``sum_A n - sum_B n = +-1``, and the hard equation
+    ``= 0`` forces a wrong count on a whole chain of stacks (three single sheets meeting at
+    a T: one of them counted as two, and every stack conservation ties to it).
+
+    A junction is taken for a rod end when the widths say so under every pack partition:
+    the conservation residual of the widths is beyond ``z_max`` sigma for every candidate
+    partition (:func:`_zscore`), and that of the rounded widths is one layer for the best of
+    them (an odd number of layer ends meet there; one rod end accounts for exactly one).
+    Such junctions are kept only if there are no more of them than the rod ends not seen as
+    free ends (``hidden_ends``): more contradictions than ends are width errors, not ends.
+
+    Parameters
+    ----------
+    graph : StackGraph
+    packs : dict node -> Pack
+    layers_est, sigma : (M,) arrays
+        Width estimates and their errors (layers).
+    hidden_ends : int
+        Rod ends that are not free ends of the skeleton (two per rod, minus the free ends).
+    z_max : float
+        Contradiction level of :func:`conservation_equations`.
+
+    Returns
+    -------
+    list of node
+        The junctions whose conservation equation is left out (the widths decide there).
+    """
+    if hidden_ends <= 0 or layers_est is None or sigma is None:
+        return []
+    e = np.asarray(layers_est, float)
+    rounded = np.maximum(np.round(np.where(np.isfinite(e), e, 1.0)), 1.0)
+    by_node = _ends_by_node(graph)
+    found = []
+    for node, pack in packs.items():
+        ends = by_node.get(node, set())
+        # every row has the parity of the sum over the stack ends (cheap: most junctions stop);
+        # a stack without a width says nothing about where the rod ends
+        if int(sum(rounded[s] for s, _ in ends)) % 2 == 0 \
+                or not all(np.isfinite(e[s]) for s, _ in ends):
+            continue
+        rows = _candidate_rows(pack, ends)
+        if not rows or min(abs(sum(c * rounded[s] for s, c in r.items())) for r in rows) != 1:
+            continue
+        if min(_zscore(r, e, sigma) for r in rows) > z_max:
+            found.append(node)
+    return found if len(found) <= hidden_ends else []
 
 
 def sparse_rows(rows: list, col_index: dict, m: int) -> sp.csr_matrix:

@@ -34,7 +34,8 @@ from scipy.sparse.linalg import spsolve
 
 from crosssection.core.unionfind import group_labels
 from crosssection.linsys.equations import (conservation_equations, paper_system,
-                                           reliability_score, select_width_stacks, sparse_rows)
+                                           reliability_score, rod_end_junctions,
+                                           select_width_stacks, sparse_rows)
 from crosssection.linsys.milp import milp_solve
 from crosssection.linsys.noise import WidthWeights, width_weights
 from crosssection.linsys.rank import system_diagnostics, width_fixed_stacks
@@ -60,6 +61,7 @@ class ComponentInfo:
     dropped_junctions: list = field(default_factory=list)
     violated_junctions: list = field(default_factory=list)
     repartitioned_junctions: list = field(default_factory=list)
+    rod_end_junctions: list = field(default_factory=list)
 
 
 @dataclass
@@ -82,8 +84,8 @@ class LinearSystemResult:
     flags : list of str
         ``"disconnected"``, and ``"<flag>:component=<c>"`` for every component flag
         (``underdetermined``, ``inconsistent``, ``fallback-to-width``, ``soft-junctions``,
-        ``dropped-junctions``, ``repartitioned-junctions``, ``not-optimal``,
-        ``search-stopped``).
+        ``dropped-junctions``, ``repartitioned-junctions``, ``rod-end-junctions``,
+        ``not-optimal``, ``search-stopped``).
     components : list of ComponentInfo
     conservation_residual : int
         Max ``|sum_A n - sum_B n|`` over the hard junction equations (0 when exact).
@@ -144,6 +146,7 @@ class _Equations:
     soft: list
     dropped: list
     repartitioned: list
+    rod_ends: list
 
 
 def _components(graph, M: int) -> list:
@@ -168,16 +171,21 @@ def _components(graph, M: int) -> list:
     return comps
 
 
-def _equations_by_component(comps, equations) -> list:
-    """Split the output of :func:`conservation_equations` by component."""
+def _equations_by_component(comps, equations, rod_ends=()) -> list:
+    """Split the output of :func:`conservation_equations` by component; the junctions of
+    ``rod_ends`` (:func:`~crosssection.linsys.equations.rod_end_junctions`) lose their
+    equation."""
     hard, soft, dropped, repart = equations
+    ends = set(rod_ends)
     comp_of_node = {nd: ci for ci, (nodes, _) in enumerate(comps) for nd in nodes}
-    by = [([], [], [], []) for _ in comps]
+    by = [([], [], [], [], []) for _ in comps]
     for slot, lst in enumerate((hard, soft)):
         for nd, r in lst:
-            if nd in comp_of_node:
+            if nd in comp_of_node and nd not in ends:
                 by[comp_of_node[nd]][slot].append((nd, r))
-    for slot, lst in ((2, dropped), (3, repart)):
+    repart = [nd for nd in repart if nd not in ends]
+    dropped = [nd for nd in dropped if nd not in ends]
+    for slot, lst in ((2, dropped), (3, repart), (4, list(rod_ends))):
         for nd in lst:
             if nd in comp_of_node:
                 by[comp_of_node[nd]][slot].append(nd)
@@ -269,12 +277,14 @@ def _solve_component(nodes, stacks, eqs: _Equations, packs, wts: WidthWeights, s
                          residual=0.0, method="search",
                          soft_junctions=[nd for nd, _ in eqs.soft],
                          dropped_junctions=eqs.dropped,
-                         repartitioned_junctions=list(eqs.repartitioned))
+                         repartitioned_junctions=list(eqs.repartitioned),
+                         rod_end_junctions=list(eqs.rod_ends))
     ee, ww, sg = wts.layers[idx], wts.weights_eff[idx], wts.sigma[idx]
     C = sparse_rows(rows, {s: i for i, s in enumerate(stacks)}, len(idx))
     sel = _paper_system_info(info, C, rows, idx, score, ee, opts)
     for flag, present in (("dropped-junctions", eqs.dropped), ("soft-junctions", eqs.soft),
-                          ("repartitioned-junctions", eqs.repartitioned)):
+                          ("repartitioned-junctions", eqs.repartitioned),
+                          ("rod-end-junctions", eqs.rod_ends)):
         if present:
             info.flags.append(flag)
     if not rows:
@@ -297,7 +307,7 @@ def solve_branch_counts(graph, packs: dict, layers_est, *, reliability=None,
                         z_max: float = 4.0, soft_penalty: float = 4.0,
                         robust_penalty: float | None = 1.5, start: str = "wls",
                         noise_scale="auto", switch_llr: float | None = 9.0,
-                        milp_max_stacks: int = 60, time_limit_s: float = 1.0,
+                        rod_ends: int = 2, milp_max_stacks: int = 60, time_limit_s: float = 1.0,
                         dense_max: int = 50, compute_residual: bool = True,
                         method: str = "auto") -> LinearSystemResult:
     """Integer number of branches per stack (paper, "Image analysis procedure").
@@ -347,6 +357,12 @@ def solve_branch_counts(graph, packs: dict, layers_est, *, reliability=None,
     switch_llr : float or None
         Repartition of clear junctions by the widths
         (:func:`~crosssection.linsys.equations.conservation_equations`).
+    rod_ends : int
+        Most rod ends the scan may hide: 2 for one open rod (a simulated configuration, or
+        a sheet whose rim crosses the cut), 0 for a section known to be closed. Those not seen
+        as free ends of the skeleton lie in bands, and up to that many junctions where the
+        widths contradict conservation by exactly one layer lose their equation
+        (:func:`~crosssection.linsys.equations.rod_end_junctions`); 0 keeps every equation.
     milp_max_stacks, time_limit_s : int, float
         MILP fallback (see above); on expiry the best integer solution found is compared.
     dense_max : int
@@ -377,8 +393,12 @@ def solve_branch_counts(graph, packs: dict, layers_est, *, reliability=None,
                         noise_growth=noise_growth, noise_scale=noise_scale)
     score = reliability_score(e_raw, wts.weights)
     comps = _components(graph, M)
+    # the rod ends seen as free ends of the skeleton cannot also lie at junctions
+    free_ends = sum(1 for kind in getattr(graph, "node_kind", {}).values() if kind == "end")
+    ends_at = rod_end_junctions(graph, packs, e_raw, wts.sigma, z_max=z_max,
+                                hidden_ends=rod_ends - free_ends)
     eqs = _equations_by_component(comps, conservation_equations(
-        graph, packs, e_raw, wts.sigma, z_max=z_max, switch_llr=switch_llr))
+        graph, packs, e_raw, wts.sigma, z_max=z_max, switch_llr=switch_llr), ends_at)
     med_w = float(np.median(wts.weights_eff)) if M else 1.0
     n_br = np.maximum(np.round(wts.layers), 1).astype(np.int64)
     fixed = np.zeros(M, bool)

@@ -5,7 +5,7 @@ import networkx as nx
 import numpy as np
 import pytest
 
-from crosssection.linsys import solve_branch_counts
+from crosssection.linsys import rod_end_junctions, solve_branch_counts
 from crosssection.stages.packs import Pack
 from crosssection.truth.graphs import NetworkGraph, random_network
 
@@ -66,6 +66,31 @@ def test_inconsistent_system_flagged_not_crash(tiny_graph):
     assert np.all(res.n_br >= 1)
     assert any("inconsistent" in f for f in res.flags)
     assert res.conservation_residual > 0
+
+
+def test_rod_ends_at_junctions_leave_the_widths_in_charge(tiny_graph):
+    # theta: a 3-layer stack and two single sheets between two junctions; 3 = 1 + 1 + one
+    # rod end at each junction. Exact conservation made the 3-layer stack 2 layers.
+    fg = tiny_graph([(0, 1), (0, 1), (0, 1)], {0: "junction", 1: "junction"})
+    packs = {0: Pack(0, [(0, 0)], [(1, 0), (2, 0)]), 1: Pack(1, [(0, 1)], [(1, 1), (2, 1)])}
+    est = np.array([3.04, 0.98, 1.03])
+    res = solve_branch_counts(fg, packs, est, noise_scale=0.25)
+    np.testing.assert_array_equal(res.n_br, [3, 1, 1])
+    assert res.components[0].rod_end_junctions == [0, 1]
+    assert any("rod-end-junctions" in f for f in res.flags)
+    old = solve_branch_counts(fg, packs, est, noise_scale=0.25, rod_ends=0)
+    np.testing.assert_array_equal(old.n_br, [2, 1, 1])
+    sigma = np.full(3, 0.1)
+    assert rod_end_junctions(fg, packs, est, sigma, hidden_ends=2) == [0, 1]
+    # more such junctions than hidden rod ends: the widths are wrong, not the equations
+    assert rod_end_junctions(fg, packs, est, sigma, hidden_ends=1) == []
+    # widths that do not contradict conservation clearly (z <= z_max), or are missing
+    assert rod_end_junctions(fg, packs, est, np.full(3, 0.3), hidden_ends=2) == []
+    assert rod_end_junctions(fg, packs, np.array([3.04, np.nan, 1.03]), sigma,
+                             hidden_ends=2) == []
+    # an even number of layer ends (4 = 1 + 1 + 2 ends): no single rod end explains it
+    assert rod_end_junctions(fg, packs, np.array([4.0, 1.0, 1.0]), sigma,
+                             hidden_ends=2) == []
 
 
 def test_singular_and_isolated_components(tiny_graph):
