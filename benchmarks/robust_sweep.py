@@ -44,11 +44,16 @@ from simulate.atlas import quench_rod, render_rod, typical_options, with_backdro
 CONDITIONS = ("typical", "typical_nohole", "lowres", "thick_dense", "renders")
 
 
-def scene_options(condition: str, seed: int) -> dict:
-    """Generator options of one scene of a condition (all random choices from ``seed``)."""
+def scene_options(condition: str, seed: int, fan_deg: float | None = None) -> dict:
+    """Generator options of one scene of a condition (all random choices from ``seed``).
+
+    ``fan_deg`` sets the generator's fork opening (its default, 60 degrees, when None; 30-35
+    gives the tangential forks of real scans) without changing the other random choices."""
     rng = np.random.default_rng([seed, CONDITIONS.index(condition)])
     typical = typical_options(rng)
     opts, backdrop = typical["scene"], typical["backdrop"]
+    if fan_deg is not None:
+        opts["fan_deg"] = float(fan_deg)
     if condition == "lowres":
         opts.update(px_per_mm=25.0, n_stacks=int(rng.integers(20, 80)))
     if condition == "thick_dense":

@@ -465,8 +465,9 @@ def stack_graph(skel, distance_px, *, merge_px: float = 2.0,
     thickness_px : float, optional
         Sheet thickness h in px. When given, every junction is moved to where the centrelines
         of its stacks meet (:func:`crosssection.stages.junctions.fork_points`) instead of the
-        skeleton's fork, which lies several h away inside thick blobs; ``length_px`` keeps
-        the fork-to-fork lengths.
+        skeleton's fork, which lies several h away inside thick blobs (and, at a tangential
+        fork, not beyond where the ink's width departs from the trunk's band); ``length_px``
+        keeps the fork-to-fork lengths.
 
     Returns
     -------
@@ -516,7 +517,7 @@ def _at_fork_points(junc: Junctions, sg: StackGraph, distance_px, thickness_px) 
     # only a path that runs obliquely through the blob beyond its radius is skipped farther
     skip[skip <= radius[np.asarray(end_junction, np.int64)]] = 0.0
     centers = fork_points(junc.centers_rc, radius, end_paths, end_junction,
-                          thickness_px=thickness_px, skip_px=skip)
+                          thickness_px=thickness_px, skip_px=skip, distance_px=distance_px)
     return Junctions(centers_rc=centers, pixels=junc.pixels, label_image=junc.label_image)
 
 

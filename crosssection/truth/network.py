@@ -22,10 +22,12 @@ Construction (paper, sections "Image analysis procedure", "Stacking" and "Tiling
    its stack length and its voids. Pairing the A and B layers at each junction decomposes the
    counts into closed strands that only ever pass A <-> B, i.e. physical sheet layers.
 3. *Geometry.* Pack A leaves a junction along -t, pack B along +t, the members of a pack fanned
-   by about 60 degrees, so two branches leave side by side and separate (the Y of paper Fig. 1c).
-   The 60 degree opening puts the centre of the largest inscribed disc of the fork (the
-   skeleton's branch point, the paper's junction definition) at the junction node, which is the
-   truth position. Every interior stack is a cubic Bezier with these end tangents; wall stacks
+   by ``fan_deg`` (60 degrees by default), so two branches leave side by side and separate (the
+   Y of paper Fig. 1c). The 60 degree opening puts the centre of the largest inscribed disc of
+   the fork (the skeleton's branch point, the paper's junction definition) at the junction node,
+   which is the truth position; narrower fans (30-35 degrees, the tangential forks of real
+   scans) keep the truth at the node, where the centrelines start, while the bands stay merged
+   farther out. Every interior stack is a cubic Bezier with these end tangents; wall stacks
    are arcs of radius R - w/2 (touching the wall). Each stack is drawn as a band of width
    ``calibration.width(n_br)`` at 4x resolution and area-averaged (anti-aliasing).
 4. *Validation.* Distinct stacks keep a gap >= 2h except within a disc around their common
@@ -443,7 +445,11 @@ def _check_gaps(stacks, net, shape, centre, gap_px, node_xy):
     """Indices of pairs of stacks closer than ``gap_px`` away from a shared junction.
 
     Each band is drawn widened by the gap; overlaps of two widened bands outside the discs
-    around the junctions (radius = widest stack there + 2 gaps) are contacts."""
+    around the junctions (radius = widest stack there + 2 gaps) are contacts. The disc also
+    suffices for 30-45 degree fans (``make_scene(fan_deg=...)``): the branches of a fork are
+    narrower than its trunk, the widest band there, and part by 2h within it (measured: a disc
+    widened by sin(30 deg) / sin(fan / 2) accepts no other layout of the typical and thick
+    dense scenes of ``benchmarks/robust_sweep.py``, seeds 100-107 and 100-103)."""
     H, W = shape
     count = np.zeros((H, W), np.uint8)
     one = np.zeros((H, W), np.uint8)
@@ -507,9 +513,9 @@ def _stack_caps(net, radius_px, spacing, widths_table_px, max_layers):
     return np.minimum(caps, max_layers)
 
 
-def _place_stacks(net, ends, chosen, n, widths_px, radius_px):
+def _place_stacks(net, ends, chosen, n, widths_px, radius_px, fan_deg=60.0):
     """Centrelines of all stacks and the junction positions they end at."""
-    dep = _departures(net, ends, chosen)
+    dep = _departures(net, ends, chosen, fan_deg=fan_deg)
     # wall junctions sit half the widest wall band inside the wall
     node_xy = net.pos.copy()
     for v in np.flatnonzero(net.is_wall):
@@ -533,7 +539,7 @@ def _place_stacks(net, ends, chosen, n, widths_px, radius_px):
 
 
 def _attempt_layout(rng, *, n_cells, radius_px, image_size, max_layers, mean_layers, cal,
-                    px_per_mm, gap_px):
+                    px_per_mm, gap_px, fan_deg=60.0):
     """One layout try: a :class:`_Layout`, or the reason (str) it was rejected."""
     size = image_size or int(math.ceil(2 * radius_px / 0.9))
     shape = (size, size)
@@ -554,7 +560,8 @@ def _attempt_layout(rng, *, n_cells, radius_px, image_size, max_layers, mean_lay
     n, chosen = _solve_counts(rng, net, ends, caps, mean_layers)
     if n is None:
         return "counts infeasible"
-    stacks, node_xy = _place_stacks(net, ends, chosen, n, cal.width(n) * px_per_mm, radius_px)
+    stacks, node_xy = _place_stacks(net, ends, chosen, n, cal.width(n) * px_per_mm, radius_px,
+                                    fan_deg=fan_deg)
     out = max(float(np.max(np.hypot(st.xy[:, 0], st.xy[:, 1]) + st.width_px / 2 - radius_px))
               for st in stacks)
     if out > 1.0:
@@ -697,7 +704,7 @@ def make_scene(*, seed: int, n_stacks: int = 40, max_layers: int = 6, px_per_mm:
                smears: int = 0, specks: int = 0, pinholes: int = 0,
                image_size: int | None = None, mean_layers: float | None = None,
                receding_fraction: float = 0.3, kappa_c_per_mm: float | None = None,
-               max_tries: int = 40) -> Scene:
+               fan_deg: float = 60.0, max_tries: int = 40) -> Scene:
     """Generate a synthetic cross-section scan with exact truth.
 
     Parameters
@@ -733,6 +740,11 @@ def make_scene(*, seed: int, n_stacks: int = 40, max_layers: int = 6, px_per_mm:
         Fraction of voids showing a light grey-blue receding surface.
     kappa_c_per_mm : float, optional
         Plastic threshold used in the truth energies (paper, "Expression of energy").
+    fan_deg : float
+        Angle in degrees between neighbouring members of a pack leaving an interior junction
+        (0 < fan_deg <= 90). The default 60 opens the forks quickly; 30-35 gives the tangential
+        forks of real scans, where two branches leave side by side and stay merged longer.
+        Wall junctions keep their own fan.
     max_tries : int
         Layouts tried before giving up.
 
@@ -748,6 +760,8 @@ def make_scene(*, seed: int, n_stacks: int = 40, max_layers: int = 6, px_per_mm:
     """
     if calibration is not None and not isinstance(calibration, Calibration):
         raise ParameterError(f"calibration must be a Calibration, got {type(calibration).__name__}")
+    if not 0.0 < fan_deg <= 90.0:
+        raise ParameterError(f"fan_deg must be in (0, 90], got {fan_deg}")
     rng = np.random.default_rng(seed)
     cal = calibration or Calibration.nonlinear(thickness_mm, n_max=max(40, max_layers + 5))
     s_min_mm2 = (10 * thickness_mm) ** 2
@@ -765,7 +779,7 @@ def make_scene(*, seed: int, n_stacks: int = 40, max_layers: int = 6, px_per_mm:
         layout = _attempt_layout(rng, n_cells=n_cells, radius_px=radius_px,
                                  image_size=image_size, max_layers=max_layers,
                                  mean_layers=mean_layers, cal=cal, px_per_mm=px_per_mm,
-                                 gap_px=2 * thickness_mm * px_per_mm)
+                                 gap_px=2 * thickness_mm * px_per_mm, fan_deg=fan_deg)
         if isinstance(layout, str):
             failures.append(layout)
             continue
@@ -796,7 +810,7 @@ def make_scene(*, seed: int, n_stacks: int = 40, max_layers: int = 6, px_per_mm:
                     "blur_px": blur_px, "jpeg_quality": jpeg_quality, "smears": smears,
                     "specks": specks, "pinholes": pinholes, "image_size": layout.shape[0],
                     "mean_layers": mean_layers, "kappa_c_per_mm": kappa_c_per_mm,
-                    "layout_attempts": len(failures) + 1},
+                    "fan_deg": fan_deg, "layout_attempts": len(failures) + 1},
     }
     ends = layout.ends
     packs = [([int(ends[v][i][0]) for i in A], [int(ends[v][i][0]) for i in B])

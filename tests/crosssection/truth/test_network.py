@@ -8,6 +8,7 @@ import pytest
 
 from crosssection.core import schema
 from crosssection.core.calibration import Calibration
+from crosssection.core.errors import ParameterError
 from crosssection.truth.network import make_scene
 from crosssection.truth.scene import write_scene
 
@@ -235,3 +236,41 @@ def _big_bg(m, s_min_px=2500):
     keep = sizes >= s_min_px
     keep[0] = False
     return keep[lab]
+
+
+def _pack_opening_deg(sc):
+    """Per interior junction with a pack of two stacks, the angle between their departures."""
+    st = sc.tables["stacks"]
+    jt = sc.tables["junctions"]
+    out = []
+    for j, (a, b) in enumerate(sc.packs):
+        if jt["wall"].iat[j]:
+            continue
+        for pack in (a, b):
+            if len(pack) != 2:
+                continue
+            dirs = []
+            for sid in pack:
+                path = sc.paths_rc[sid]
+                path = path if st["junction_a"].iat[sid] == j else path[::-1]
+                d = path[1] - path[0]  # the Bezier leaves along its end tangent
+                dirs.append(d / np.hypot(*d))
+            out.append(np.degrees(np.arccos(np.clip(dirs[0] @ dirs[1], -1, 1))))
+    return np.array(out)
+
+
+def test_fan_angle_sets_the_fork_opening():
+    default = make_scene(seed=2, n_stacks=20, max_layers=4)
+    wide = make_scene(seed=2, n_stacks=20, max_layers=4, fan_deg=60.0)
+    narrow = make_scene(seed=2, n_stacks=20, max_layers=4, fan_deg=30.0)
+    # the default is the 60 degree fan, bit for bit
+    assert np.array_equal(default.rgb, wide.rgb)
+    np.testing.assert_allclose(np.median(_pack_opening_deg(wide)), 60.0, atol=2.0)
+    np.testing.assert_allclose(np.median(_pack_opening_deg(narrow)), 30.0, atol=2.0)
+    assert narrow.params["options"]["fan_deg"] == 30.0
+    assert not (narrow.rgb.shape == wide.rgb.shape and np.array_equal(narrow.rgb, wide.rgb))
+    # a tangential-fork layout is still valid: every face is one void
+    faces = narrow.summary["n_stacks"] - narrow.summary["n_junctions"] + 1
+    assert narrow.summary["n_voids"] == faces
+    with pytest.raises(ParameterError):
+        make_scene(seed=2, n_stacks=20, max_layers=4, fan_deg=0.0)
