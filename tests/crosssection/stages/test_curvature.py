@@ -393,3 +393,52 @@ def test_contact_arc_of_peeling_and_fanned_bands():
     assert contact_arc_px(c, 2.5, [(d, 2.5)]) < 12
     # no neighbour, no contact
     assert contact_arc_px(c, 2.5, []) == 0.0
+
+
+def _raster(rc):
+    """Integer pixel path of a densely sampled curve (consecutive repeats dropped)."""
+    p = np.round(np.asarray(rc, float)).astype(int)
+    keep = np.r_[True, np.any(np.diff(p, axis=0) != 0, axis=1)]
+    return p[keep]
+
+
+@pytest.mark.parametrize("link_px, fitted", [(24.0, False), (60.0, True)])
+def test_lump_between_two_junctions_takes_its_neighbours_curvature(link_px, fitted):
+    """A band of 3 layers bent at R = 400 px runs through two junctions 24 px apart (less
+    than twice its width, 2 r = 20 px): the skeleton between them is the link between two
+    medial-axis fork points, here a bulge of 6 px (curvature about 4 /mm), not the band's
+    centreline. It is not fitted and takes the neighbours' curvature (0.125 /mm); a link of
+    60 px (three widths) is fitted as before."""
+    from crosssection.stages.curvature import stack_profiles
+    from crosssection.stages.graph import StackGraph
+
+    R, r0, c0 = 400.0, 200.0, 300.0
+    t = np.linspace(0.0, 1.0, 4000)
+    # arcs of radius R curving the same way (centre below), tangent to the row at the joins
+    a = (400.0 / R) * t[::-1]
+    left = np.c_[r0 + R * (1 - np.cos(a)), c0 - R * np.sin(a)]
+    c1 = c0 + link_px
+    right = np.c_[r0 + R * (1 - np.cos(a[::-1])), c1 + R * np.sin(a[::-1])]
+    link = np.c_[r0 - 6.0 * np.sin(np.pi * t), c0 + link_px * t]
+    paths = [_raster(left), _raster(link), _raster(right)]
+    g = nx.MultiGraph()
+    ends = [(2, 0), (0, 1), (1, 3)]
+    for sid, (u, v) in enumerate(ends):
+        g.add_edge(u, v, key=sid, stack_id=sid)
+    graph = StackGraph(graph=g, node_rc={0: np.array([r0, c0]), 1: np.array([r0, c1]),
+                                         2: left[0], 3: right[-1]},
+                       node_kind={0: "junction", 1: "junction", 2: "end", 3: "end"},
+                       paths=paths, ends=ends)
+    distance = np.full((600, 1000), 10.0)
+    prof = stack_profiles(graph, np.array([3, 3, 3]), distance, thickness_px=H,
+                          px_per_mm=50.0)
+    lump = prof[1]
+    if fitted:
+        assert lump.fit_stop - lump.fit_start == len(lump.s_mm)
+        return
+    k_true = 50.0 / R  # 1/mm
+    assert np.all(np.abs(np.abs(lump.kappa_per_mm) / k_true - 1) < 0.5)
+    assert lump.fit_start == lump.fit_stop == 0
+    # the same sign as the band's (turning the same way along the path)
+    assert np.sign(lump.kappa_per_mm.mean()) == np.sign(prof[0].kappa_per_mm.mean())
+    assert lump.energy_rel_uncertainty >= 1.0
