@@ -16,11 +16,13 @@ typical_nohole  the same scenes, hole not given
 lowres          as typical at 25 px/mm (h = 2.5 px)
 thick_dense     mean 5-8 layers per stack, 100-160 stacks
 renders         simulator configurations rendered as scans (``simulate.render``)
+tangential      as typical, the forks opening by 30-35 degrees (``make_scene(fan_deg=...)``):
+                two branches leave side by side and stay merged longer, as in real scans
 ==============  ==========================================================================
 
 Targets: typical: median |rod length error| <= 3 %, junction F1 >= 0.95, exact n_br >= 0.95 of
 stack length, void count within 5 %, median |energy error| <= 15 %; hole not given: F1 >=
-0.93, exact n_br >= 0.92, energy <= 20 %; hard (lowres, thick_dense): each rod <= 3 %, F1 >=
+0.93, exact n_br >= 0.92, energy <= 20 %; tangential: as typical; hard (lowres, thick_dense): each rod <= 3 %, F1 >=
 0.92, exact n_br >= 0.92, energy <= 20 %; renders: median |energy error| <= 20 %.
 
 Usage: python benchmarks/robust_sweep.py [--quick] [--per-condition N] [--workers 2]
@@ -41,7 +43,7 @@ import pandas as pd
 # the scene generation is shared with the validation atlas (python -m simulate benchmark)
 from simulate.atlas import quench_rod, render_rod, typical_options, with_backdrop
 
-CONDITIONS = ("typical", "typical_nohole", "lowres", "thick_dense", "renders")
+CONDITIONS = ("typical", "typical_nohole", "lowres", "thick_dense", "renders", "tangential")
 
 
 def scene_options(condition: str, seed: int, fan_deg: float | None = None) -> dict:
@@ -52,6 +54,8 @@ def scene_options(condition: str, seed: int, fan_deg: float | None = None) -> di
     rng = np.random.default_rng([seed, CONDITIONS.index(condition)])
     typical = typical_options(rng)
     opts, backdrop = typical["scene"], typical["backdrop"]
+    if condition == "tangential":
+        fan_deg = float(rng.uniform(30.0, 35.0)) if fan_deg is None else fan_deg
     if fan_deg is not None:
         opts["fan_deg"] = float(fan_deg)
     if condition == "lowres":
@@ -119,6 +123,7 @@ TARGETS = {
     "lowres": dict(rod=0.03, f1=0.92, nbr=0.92, energy=0.20),
     "thick_dense": dict(rod=0.03, f1=0.92, nbr=0.92, energy=0.20),
     "renders": dict(energy=0.20),
+    "tangential": dict(rod=0.03, f1=0.95, nbr=0.95, energy=0.15, voids=0.05),
 }
 
 
