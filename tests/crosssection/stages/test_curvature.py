@@ -442,3 +442,38 @@ def test_lump_between_two_junctions_takes_its_neighbours_curvature(link_px, fitt
     # the same sign as the band's (turning the same way along the path)
     assert np.sign(lump.kappa_per_mm.mean()) == np.sign(prof[0].kappa_per_mm.mean())
     assert lump.energy_rel_uncertainty >= 1.0
+
+
+def test_unfitted_lump_keeps_its_own_curvature_bound():
+    """A thick lump (20 layers, 24 px between two junctions) between single sheets bent at
+    R = 25 px (2 /mm) takes their curvature only up to its own bound 2 / (n_br h): its
+    innermost layer cannot have a negative radius (without the bound a 41-layer lump of a
+    compacted render took 2.7 /mm)."""
+    from crosssection.stages.curvature import stack_profiles
+    from crosssection.stages.graph import StackGraph
+
+    R, r0, c0, link_px = 25.0, 200.0, 300.0, 24.0
+    t = np.linspace(0.0, 1.0, 4000)
+    a = (60.0 / R) * t[::-1]
+    left = np.c_[r0 + R * (1 - np.cos(a)), c0 - R * np.sin(a)]
+    c1 = c0 + link_px
+    right = np.c_[r0 + R * (1 - np.cos(a[::-1])), c1 + R * np.sin(a[::-1])]
+    link = np.c_[np.full_like(t, r0), c0 + link_px * t]
+    paths = [_raster(left), _raster(link), _raster(right)]
+    g = nx.MultiGraph()
+    ends = [(2, 0), (0, 1), (1, 3)]
+    for sid, (u, v) in enumerate(ends):
+        g.add_edge(u, v, key=sid, stack_id=sid)
+    graph = StackGraph(graph=g, node_rc={0: np.array([r0, c0]), 1: np.array([r0, c1]),
+                                         2: left[0], 3: right[-1]},
+                       node_kind={0: "junction", 1: "junction", 2: "end", 3: "end"},
+                       paths=paths, ends=ends)
+    n_br = np.array([1, 20, 1])
+    prof = stack_profiles(graph, n_br, np.full((600, 1000), 10.0), thickness_px=H,
+                          px_per_mm=50.0)
+    lump = prof[1]
+    assert lump.fit_start == lump.fit_stop == 0
+    kmax = 2.0 * 50.0 / (20 * H)
+    assert np.max(np.abs(prof[0].kappa_per_mm)) > 1.5 * kmax  # the neighbours are tighter
+    assert np.all(np.abs(lump.kappa_per_mm) <= kmax + 1e-9)
+    assert np.all(np.abs(lump.kappa_per_mm) > 0.5 * kmax)
