@@ -402,6 +402,22 @@ def _raster(rc):
     return p[keep]
 
 
+def _link_between_two_junctions(left, link, right, j0_rc, j1_rc):
+    """Stack graph of three stacks: free end - left - junction - link - junction - right -
+    free end (stack ids 0, 1, 2)."""
+    from crosssection.stages.graph import StackGraph
+
+    paths = [_raster(left), _raster(link), _raster(right)]
+    g = nx.MultiGraph()
+    ends = [(2, 0), (0, 1), (1, 3)]
+    for sid, (u, v) in enumerate(ends):
+        g.add_edge(u, v, key=sid, stack_id=sid)
+    return StackGraph(graph=g, node_rc={0: np.array(j0_rc, float), 1: np.array(j1_rc, float),
+                                        2: left[0], 3: right[-1]},
+                      node_kind={0: "junction", 1: "junction", 2: "end", 3: "end"},
+                      paths=paths, ends=ends)
+
+
 @pytest.mark.parametrize("link_px, fitted", [(24.0, False), (60.0, True)])
 def test_lump_between_two_junctions_takes_its_neighbours_curvature(link_px, fitted):
     """A band of 3 layers bent at R = 400 px runs through two junctions 24 px apart (less
@@ -410,7 +426,6 @@ def test_lump_between_two_junctions_takes_its_neighbours_curvature(link_px, fitt
     centreline. It is not fitted and takes the neighbours' curvature (0.125 /mm); a link of
     60 px (three widths) is fitted as before."""
     from crosssection.stages.curvature import stack_profiles
-    from crosssection.stages.graph import StackGraph
 
     R, r0, c0 = 400.0, 200.0, 300.0
     t = np.linspace(0.0, 1.0, 4000)
@@ -420,15 +435,7 @@ def test_lump_between_two_junctions_takes_its_neighbours_curvature(link_px, fitt
     c1 = c0 + link_px
     right = np.c_[r0 + R * (1 - np.cos(a[::-1])), c1 + R * np.sin(a[::-1])]
     link = np.c_[r0 - 6.0 * np.sin(np.pi * t), c0 + link_px * t]
-    paths = [_raster(left), _raster(link), _raster(right)]
-    g = nx.MultiGraph()
-    ends = [(2, 0), (0, 1), (1, 3)]
-    for sid, (u, v) in enumerate(ends):
-        g.add_edge(u, v, key=sid, stack_id=sid)
-    graph = StackGraph(graph=g, node_rc={0: np.array([r0, c0]), 1: np.array([r0, c1]),
-                                         2: left[0], 3: right[-1]},
-                       node_kind={0: "junction", 1: "junction", 2: "end", 3: "end"},
-                       paths=paths, ends=ends)
+    graph = _link_between_two_junctions(left, link, right, (r0, c0), (r0, c1))
     distance = np.full((600, 1000), 10.0)
     prof = stack_profiles(graph, np.array([3, 3, 3]), distance, thickness_px=H,
                           px_per_mm=50.0)
@@ -450,7 +457,6 @@ def test_unfitted_lump_keeps_its_own_curvature_bound():
     innermost layer cannot have a negative radius (without the bound a 41-layer lump of a
     compacted render took 2.7 /mm)."""
     from crosssection.stages.curvature import stack_profiles
-    from crosssection.stages.graph import StackGraph
 
     R, r0, c0, link_px = 25.0, 200.0, 300.0, 24.0
     t = np.linspace(0.0, 1.0, 4000)
@@ -459,15 +465,7 @@ def test_unfitted_lump_keeps_its_own_curvature_bound():
     c1 = c0 + link_px
     right = np.c_[r0 + R * (1 - np.cos(a[::-1])), c1 + R * np.sin(a[::-1])]
     link = np.c_[np.full_like(t, r0), c0 + link_px * t]
-    paths = [_raster(left), _raster(link), _raster(right)]
-    g = nx.MultiGraph()
-    ends = [(2, 0), (0, 1), (1, 3)]
-    for sid, (u, v) in enumerate(ends):
-        g.add_edge(u, v, key=sid, stack_id=sid)
-    graph = StackGraph(graph=g, node_rc={0: np.array([r0, c0]), 1: np.array([r0, c1]),
-                                         2: left[0], 3: right[-1]},
-                       node_kind={0: "junction", 1: "junction", 2: "end", 3: "end"},
-                       paths=paths, ends=ends)
+    graph = _link_between_two_junctions(left, link, right, (r0, c0), (r0, c1))
     n_br = np.array([1, 20, 1])
     prof = stack_profiles(graph, n_br, np.full((600, 1000), 10.0), thickness_px=H,
                           px_per_mm=50.0)
