@@ -23,8 +23,11 @@ fit on size 5 n_br h, after coordinates translation and rotation in the tangent 
    of arc from the junction (measured on drawn tangential forks: arms' ``int kappa^2 ds``
    0.9-2.3 x the truth with ``max(n_br h, r_J)``, 0.9-1.2 x with this zone). Those samples
    are not fitted: they are missing data. The default (``method="missing"``) continues the
-   linear trend of the curvature over the nearest fitted window (5 n_br h) to the junction,
-   so that a bend that tightens toward the fork keeps tightening; the paper's rule
+   linear trend of the curvature over the nearest window (5 n_br h) of fits centred on their
+   own sample to the junction, so that a bend that tightens toward the fork keeps
+   tightening; the fits within half a window of the zone, whose windows are shifted inwards
+   onto one window's mean (flat whatever the bend does), are replaced by the trend too
+   (:func:`_fill_fork_zones`); the paper's rule
    (``method="paper"``) gives them the curvature of the nearest fitted sample. Free ends keep
    the paper's rule (their skeleton is shortened, not merged). Everywhere the curvature is
    bounded by ``2 / (n_br h)``: the innermost layer of a stack cannot have a negative radius,
@@ -48,8 +51,10 @@ fit on size 5 n_br h, after coordinates translation and rotation in the tangent 
 the true energy inside fork zones depends on the generator -- 54 % within 2 n_br h of a
 junction on ``crosssection.truth.network`` scenes (36 % of the length: its branches leave the
 node fanned and bend back), 3-7 % on simulator renders (rod segments of 6-7 h resolve no
-bending at that scale). Median total-energy error of the default: renders +4 %, 25 px/mm
--17 %, network typical -32 %, thick dense -29 %. Models that add bending inside the zone (a
+bending at that scale). Median total-energy error of the default (seeds 100-107 of
+``benchmarks/robust_sweep.py``, 8 scenes per condition): renders +6 %, 25 px/mm +2 % (median
+absolute 26 %), network typical -19 %, thick dense -18 %, tangential forks -51 % (with the
+trend over the first fitted window, half of it shifted fits: +4, -17, -32, -29, -59 %). Models that add bending inside the zone (a
 curve constrained to reach the junction point, a least-bending turn from the parent band's
 axis) overshoot every generator (+36 to +280 %): the skeleton's junction point is not on any
 layer's path.
@@ -609,7 +614,9 @@ def stack_curvature(path_rc, *, n_br, thickness_px, px_per_mm, closed=None, smoo
     # only junction ends are fork zones; a free end keeps the nearest fitted curvature
     forks = tuple(bool(t) and float(t) > 0 for t in trims)
     return _fill_fork_zones(prof, n_br, thickness_px, px_per_mm, forks,
-                            noise_var_per_mm2=noise_var_per_mm2)
+                            noise_var_per_mm2=noise_var_per_mm2,
+                            max_window_frac=max_window_frac, window_px=window_px,
+                            shifted=(ends == "shift"))
 
 
 #: How far from a junction (in sheet thicknesses) two stacks' skeletons are compared for
@@ -791,7 +798,8 @@ def stack_profiles(graph, n_br, distance_px, *, thickness_px: float, px_per_mm: 
     var = noise_variance(profiles, n_br, thickness_px=thickness_px, px_per_mm=px_per_mm,
                          smooth_px=sm)
     profiles = [_fill_fork_zones(prof, max(1, int(n_br[sid])), thickness_px, px_per_mm,
-                                 forks[sid], noise_var_per_mm2=var[max(1, int(n_br[sid]))])
+                                 forks[sid], noise_var_per_mm2=var[max(1, int(n_br[sid]))],
+                                 max_window_frac=0.5, shifted=True)
                 for sid, prof in enumerate(profiles)]
     return _fill_unfitted_stacks(profiles, at_node, n_br, px_per_mm=px_per_mm,
                                  thickness_px=thickness_px)
@@ -913,23 +921,65 @@ def _trend(s, k):
 
 
 def _fill_fork_zones(prof, n_br, thickness_px, px_per_mm, forks=(True, True), noise_px=0.3,
-                     noise_var_per_mm2=None):
+                     noise_var_per_mm2=None, max_window_frac=0.5, shifted=True, window_px=None):
     """Fork zones as missing data, and the physical bound on curvature.
 
     Within a fork zone the image holds no centreline of this stack (module docstring), so its
     curvature is not measured there: the linear trend of the curvature over the first (last)
-    fitted window of ``5 n_br h`` is continued to the junction. With the scan's curvature noise
-    ``v`` known, the trend is continued only where the data show one: the noise is correlated
-    over about a window, so a window holds about one independent sample and its slope has a
-    noise variance of about ``12 v / w^2``; a slope within twice that deviation is noise, and
-    the zone keeps the nearest fitted curvature (extrapolating a noise slope multiplied the
-    noise there by about five on jittered arcs). The curvature is bounded
+    window of centred fits is continued to the junction. With shifted windows (``shifted``,
+    ``ends="shift"``) the fitted samples within half a window ``w/2`` of the zone all fit the
+    same window, the one next to the zone: their curvature is that window's mean, located at
+    its centre, not a local value, and it is flat there whatever the bend does. The trend is
+    therefore taken over the next window (arc ``w/2 .. 3 w/2`` from the zone: the first fits
+    centred on their own sample) and, where it is continued, it replaces those shifted fits
+    as well. (Taken over the first ``w`` of arc, half of it flat, the slope came out about
+    half the bend's: on a clothoid whose curvature rises toward the zone, the zone's
+    ``int kappa^2 ds`` was 0.84-0.95 x the truth, 1.00 x now; on the network generator's
+    tangential forks the visible arc of the zones, outside the merged bands, got 32 % of its
+    true ``int kappa^2 ds``, 52 % now.) ``w`` is the window actually fitted: ``5 n_br h`` (or
+    ``window_px``), capped at ``max_window_frac`` of the fitted length as in
+    :func:`_paper_job`. With the scan's curvature noise ``v`` known, the trend is continued
+    only where the data show one: the noise is correlated over about a window, so a window
+    holds about one independent sample and its slope has a noise variance of about
+    ``12 v / w^2``; a slope within twice that deviation is noise, and the zone keeps the
+    nearest fitted curvature and the shifted fits their own (extrapolating a noise slope
+    multiplied the noise there by about five on jittered arcs). The curvature is bounded
     everywhere by ``2 / (n_br h)``: the innermost layer of a stack of ``n_br`` layers cannot
     have a negative radius, so anything tighter is a skeleton kink, not a bend.
 
     The relative uncertainty of ``int kappa^2 ds`` adds the extrapolated part (not measured:
     counted in full) and the noise floor of the parabolic fit, ``720 sigma^2 / w^5`` per unit
     length for ``noise_px`` of centreline noise and a window of ``w`` px.
+
+    Parameters
+    ----------
+    prof : CurvatureProfile
+        The window fits (:func:`_paper_job`): samples ``fit_start:fit_stop`` fitted, the
+        others holding the nearest fitted curvature.
+    n_br : int
+        Layers of the stack (window ``5 n_br h``, bound ``2 / (n_br h)``).
+    thickness_px, px_per_mm : float
+        Sheet thickness h in px; scan resolution.
+    forks : (bool, bool)
+        Whether the path's start and end are fork zones (free ends are never extrapolated).
+    noise_px : float
+        Centreline noise assumed for the uncertainty when ``noise_var_per_mm2`` is None.
+    noise_var_per_mm2 : float, optional
+        The scan's curvature noise (:func:`noise_variance`); None: trend always continued.
+    max_window_frac : float or None
+        The cap of the fitted window as a fraction of the fitted length (as given to the
+        fits).
+    shifted : bool
+        Whether the windows near the fitted part's ends were shifted inwards
+        (``ends="shift"``); with truncated windows the trend starts at the fitted end.
+    window_px : float, optional
+        The fitted window when it overrides ``5 n_br h``, px.
+
+    Returns
+    -------
+    CurvatureProfile
+        Same samples and ``fit_start``/``fit_stop``; ``noise_var_per_mm2`` and
+        ``energy_rel_uncertainty`` set.
     """
     n = len(prof.s_mm)
     t0, t1 = prof.fit_start, prof.fit_stop
@@ -938,17 +988,28 @@ def _fill_fork_zones(prof, n_br, thickness_px, px_per_mm, forks=(True, True), no
     s = prof.s_mm
     kmax = 2.0 * px_per_mm / (nb * float(thickness_px))
     k = np.clip(prof.kappa_per_mm, -kmax, kmax)
-    w = w_px / px_per_mm
     # an unfitted stack (t1 == t0) has no trend to continue: _fill_unfitted_stacks fills it
     if not prof.closed and n >= 3 and (t0 > 0 or t1 < n) and t1 > t0:
-        lo_end = int(np.searchsorted(s, s[t0] + w))
-        hi_start = int(np.searchsorted(s, s[t1 - 1] - w))
-        for lo, hi, z0, z1 in ((t0, min(max(lo_end, t0 + 3), t1), 0, t0),
-                               (max(min(hi_start, t1 - 3), t0), t1, t1, n)):
-            if z0 == z1 or hi - lo < 3 or not forks[0 if z0 == 0 else 1]:
+        # the window the fits used (_paper_job caps it at a fraction of the fitted length)
+        w = (w_px if window_px is None else float(window_px)) / px_per_mm
+        if max_window_frac is not None and max_window_frac > 0:
+            w = min(w, float(max_window_frac) * float(s[t1 - 1] - s[t0]))
+        # shifted fits within w/2 of the zone: the trend window starts beyond them
+        off = 0.5 * w if shifted else 0.0
+        c0 = int(np.searchsorted(s, s[t0] + off))  # first centred fit after the start zone
+        c1 = int(np.searchsorted(s, s[t1 - 1] - off, side="right"))  # end of the last
+        lo_end = int(np.searchsorted(s, s[t0] + off + w))
+        hi_start = int(np.searchsorted(s, s[t1 - 1] - off - w, side="right"))
+        for lo, hi, z0, z1, fork in (
+                (c0, min(max(lo_end, c0 + 3), t1), 0, c0, forks[0] and t0 > 0),
+                (max(min(hi_start, c1 - 3), t0), c1, c1, n, forks[1] and t1 < n)):
+            lo, hi = max(lo, t0), min(hi, t1)
+            if not fork or hi - lo < 3:
                 continue
             a, b, sm = _trend(s[lo:hi], k[lo:hi])
             if noise_var_per_mm2 is not None and a * a * w * w <= 4.0 * 12.0 * noise_var_per_mm2:
+                # no trend beyond the noise: the zone keeps the nearest fitted curvature and
+                # the shifted fits their own
                 continue
             k[z0:z1] = np.clip(b + a * (s[z0:z1] - sm), -kmax, kmax)
     out = _make_profile(s * px_per_mm, k / px_per_mm, prof.rc_px, px_per_mm, prof.closed,
