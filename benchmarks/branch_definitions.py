@@ -23,6 +23,10 @@ Usage::
 
     foldstat quench --n-configs 120 --lambda 7e5 --noise 750 --segments 300 --seed 1 --out Q
     python benchmarks/branch_definitions.py Q --out OUT.csv [--workers 2] [--structure]
+
+Without ``Q`` the quench is run first (``--n-configs``, default 120; ``--quick``: 12, and
+the default cut-off grid only) into ``benchmarks/out/branch_definitions/quench_N`` (resumed
+when already there); ``--out`` defaults to ``benchmarks/out/branch_definitions.csv``.
 """
 from __future__ import annotations
 
@@ -142,15 +146,30 @@ def paper_row(n_segments: int) -> dict:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("quench", type=Path, help="output folder of `foldstat quench`")
-    ap.add_argument("--out", type=Path, required=True, help="CSV of one row per definition")
+    out_dir = Path(__file__).resolve().parent / "out"
+    ap.add_argument("quench", type=Path, nargs="?",
+                    help="output folder of `foldstat quench` (default: run it)")
+    ap.add_argument("--out", type=Path, default=out_dir / "branch_definitions.csv",
+                    help="CSV of one row per definition (a chart beside it, .png)")
     ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--n-configs", type=int, default=120,
+                    help="configurations of the quench run when none is given")
+    ap.add_argument("--quick", action="store_true", help="12 configurations, default grid")
     ap.add_argument("--structure", action="store_true",
                     help="also keep fold caps / two-ended junctions (at the default delta)")
     args = ap.parse_args(argv)
+    if args.quench is None:
+        import subprocess
+        n = 12 if args.quick else args.n_configs
+        args.quench = out_dir / "branch_definitions" / f"quench_{n}"
+        subprocess.run([sys.executable, "-m", "simulate", "quench", "--n-configs", str(n),
+                        "--lambda", "7e5", "--noise", "750", "--segments", "300", "--seed", "1",
+                        "--workers", str(max(1, args.workers)), "--out", str(args.quench)],
+                       check=True)
     rods, lam = load_rods(args.quench)
     n_seg = rods[0].shape[0] - 1
-    plan = [(f"delta {f:g} seg, min_run {m:g} delta", f, m, False, False) for f, m in GRID]
+    grid = GRID[:4] if args.quick else GRID
+    plan = [(f"delta {f:g} seg, min_run {m:g} delta", f, m, False, False) for f, m in grid]
     if args.structure:
         plan += [(f"fold caps kept, min_run {m:g} delta", 0.5, m, True, False) for m in (3.0, 0.01)]
         plan += [(f"two-ended junctions kept, min_run {m:g} delta", 0.5, m, False, True)
