@@ -31,7 +31,8 @@ import robust_sweep  # noqa: E402  (the scene definitions are shared)
 
 
 def _curvature(path_rc: np.ndarray):
-    """Arc length of the interior samples, their curvature (1/px) and the weights ds."""
+    """Arc length of the interior samples, their curvature (1/px), the path's length, the
+    weights ds and the interior samples themselves (row, col)."""
     d = np.diff(path_rc, axis=0)
     keep = np.r_[True, np.hypot(d[:, 0], d[:, 1]) > 1e-9]
     p = path_rc[keep]
@@ -40,7 +41,7 @@ def _curvature(path_rc: np.ndarray):
     theta = np.unwrap(np.arctan2(d[:, 0], d[:, 1]))
     k = np.diff(theta) / (0.5 * (ds[:-1] + ds[1:]))
     s = np.cumsum(ds)[:-1]
-    return s, k, float(ds.sum()), 0.5 * (ds[:-1] + ds[1:])
+    return s, k, float(ds.sum()), 0.5 * (ds[:-1] + ds[1:]), p[1:-1]
 
 
 def shares(scene, multiples=(1, 2, 3)) -> dict:
@@ -54,7 +55,7 @@ def shares(scene, multiples=(1, 2, 3)) -> dict:
         p = np.asarray(scene.paths_rc[i], float)
         if len(p) < 8:
             continue
-        s, k, length, w = _curvature(p)
+        s, k, length, w, _ = _curvature(p)
         s, k, w = s[2:-2], k[2:-2], w[2:-2]
         f = k * k * w
         n = int(row.n_br)
@@ -96,10 +97,8 @@ def merged_share(scene) -> dict:
     for i, p in enumerate(paths):
         if len(p) < 8:
             continue
-        s, k, length, w = _curvature(p)
-        s, k, w = s[2:-2], k[2:-2], w[2:-2]
-        d = np.diff(p, axis=0)
-        pts = p[np.r_[True, np.hypot(d[:, 0], d[:, 1]) > 1e-9]][1:-1][2:-2]  # as _curvature
+        s, k, length, w, pts = _curvature(p)
+        s, k, w, pts = s[2:-2], k[2:-2], w[2:-2], pts[2:-2]
         merged = np.zeros(len(pts), bool)
         for q, near in enumerate(tree.query_ball_point(pts, half[i] + half.max())):
             others = owner[near]

@@ -78,6 +78,7 @@ from scipy.spatial.distance import cdist
 
 from crosssection.core import polyline
 from crosssection.core.errors import ParameterError
+from crosssection.stages.junctions import median_radii_px
 
 __all__ = ["CurvatureProfile", "stack_curvature", "stack_profiles", "default_smooth_px",
            "noise_variance", "contact_arc_px"]
@@ -642,28 +643,6 @@ def _prefix(path_rc, end, reach):
     return (p if end == 0 else p[::-1])[:reach]
 
 
-def _median_radii(paths, distance_px) -> np.ndarray:
-    """Median inscribed ink radius along every skeleton path, px (half each band's width),
-    from one gather and one sort (one ``np.median`` per path took 30 ms for the 244 stacks of
-    a 2000x2000 scan)."""
-    n = np.array([len(p) for p in paths], np.int64)
-    out = np.zeros(len(paths))
-    if not n.sum():
-        return out
-    rc = np.round(np.concatenate([np.asarray(p, float).reshape(-1, 2) for p in paths if len(p)]))
-    rc = np.clip(rc.astype(np.int64), 0, np.array(distance_px.shape) - 1)
-    vals = distance_px[rc[:, 0], rc[:, 1]].astype(np.float64)
-    gid = np.repeat(np.arange(len(paths)), n)
-    order = np.lexsort((vals, gid))
-    v = vals[order]
-    start = np.concatenate([[0], np.cumsum(n)[:-1]])
-    ok = n > 0
-    lo = start[ok] + (n[ok] - 1) // 2
-    hi = start[ok] + n[ok] // 2
-    out[ok] = 0.5 * (v[lo] + v[hi])
-    return out
-
-
 def contact_arc_px(prefix_rc, radius_px, others, *, gap_px: float = _CONTACT_GAP_PX) -> float:
     """Arc length from a junction along which a stack's band still touches another band there.
 
@@ -754,7 +733,7 @@ def stack_profiles(graph, n_br, distance_px, *, thickness_px: float, px_per_mm: 
             if graph.node_kind[node] == "junction":
                 at_node.setdefault(node, []).append((sid, end))
     reach = int(np.ceil(_CONTACT_REACH_H * float(thickness_px)))
-    radius = _median_radii(graph.paths, distance_px)
+    radius = median_radii_px(graph.paths, distance_px)
     # per band end at a junction: its skeleton from the junction, and the skeleton points of
     # the other bands there with the distance below which each touches it
     contact = {}

@@ -427,7 +427,8 @@ def fork_points(centers_rc, radius_px, end_paths, end_junction, *, thickness_px:
     b_vec += prior[:, None] * centers
     sol = np.linalg.solve(a_mat, b_vec[..., None])[..., 0]
     if distance_px is not None:
-        half_width = _half_widths_px(np.asarray(distance_px), end_paths)
+        # each end's band half width (the median ignores the blobs at its ends)
+        half_width = median_radii_px(end_paths, np.asarray(distance_px))
         sol = _limit_to_band_end(sol, np.asarray(distance_px) > 0, end_junction, mean, direc, ok,
                                  half_width, fit)
     radius = np.asarray(radius_px, float)
@@ -437,11 +438,26 @@ def fork_points(centers_rc, radius_px, end_paths, end_junction, *, thickness_px:
     return out
 
 
-def _half_widths_px(distance_px, end_paths) -> np.ndarray:
-    """Per stack end, the median distance to the background along its path (its band's half
-    width; the median ignores the blobs at its ends)."""
-    return np.array([float(np.median(distance_px[p[:, 0], p[:, 1]])) if len(p) else 0.0
-                     for p in (np.asarray(p, np.int64).reshape(-1, 2) for p in end_paths)])
+def median_radii_px(paths, distance_px) -> np.ndarray:
+    """Median inscribed ink radius along every skeleton path, px (half each band's width),
+    from one gather and one sort (one ``np.median`` per path took 30 ms for the 244 stacks of
+    a 2000x2000 scan)."""
+    n = np.array([len(p) for p in paths], np.int64)
+    out = np.zeros(len(paths))
+    if not n.sum():
+        return out
+    rc = np.round(np.concatenate([np.asarray(p, float).reshape(-1, 2) for p in paths if len(p)]))
+    rc = np.clip(rc.astype(np.int64), 0, np.array(distance_px.shape) - 1)
+    vals = distance_px[rc[:, 0], rc[:, 1]].astype(np.float64)
+    gid = np.repeat(np.arange(len(paths)), n)
+    order = np.lexsort((vals, gid))
+    v = vals[order]
+    start = np.concatenate([[0], np.cumsum(n)[:-1]])
+    ok = n > 0
+    lo = start[ok] + (n[ok] - 1) // 2
+    hi = start[ok] + n[ok] // 2
+    out[ok] = 0.5 * (v[lo] + v[hi])
+    return out
 
 
 _RAY_STEP_PX = 0.25  # sample spacing of the rays that measure a band's extents
