@@ -13,7 +13,9 @@ An estimator that does not see a fork zone can only recover its energy by a mode
 the energy share exceeds the length share, the bending is concentrated at the forks.
 
 The share inside the forks' merged zones, where a stack's band overlaps another's (the image
-shows one band there), is reported beside them (``energy_merged``, ``length_merged``).
+shows one band there), is reported beside them (``energy_merged``, ``length_merged``), and
+the share where a stack's centreline lies inside another band's ink (``energy_covered``,
+``length_covered``: not even its position is in the image there).
 
 Usage: python benchmarks/fork_energy_share.py [--per-condition 8] [--seed 100]
 """
@@ -78,13 +80,17 @@ def shares(scene, multiples=(1, 2, 3)) -> dict:
 
 
 def merged_share(scene) -> dict:
-    """Energy and length shares where a stack's band overlaps another band.
+    """Energy and length shares where a stack's band overlaps another band, and where its
+    centreline lies inside another band.
 
     Two bands overlap where their centrelines are closer than half the sum of their widths:
-    the image shows one merged band there and no centreline of either. Distinct stacks keep
-    a gap of 2h away from their junctions, so overlaps are the forks' merged zones. (The
-    generator draws overlapping bands; real layers cannot interpenetrate, they lie side by
-    side in contact.)"""
+    the image shows one merged band there and no centreline of either (``energy_merged``,
+    ``length_merged``). Where a stack's centreline is closer to another stack's centreline
+    than half that other band's width, its centre is covered by the other band's ink: not
+    even the stack's position is in the image there, only its outer face at best
+    (``energy_covered``, ``length_covered``). Distinct stacks keep a gap of 2h away from
+    their junctions, so both are the forks'. (The generator draws overlapping bands; real
+    layers cannot interpenetrate, they lie side by side in contact.)"""
     from scipy.spatial import cKDTree
 
     st = scene.tables["stacks"].reset_index(drop=True)
@@ -93,27 +99,33 @@ def merged_share(scene) -> dict:
     half = st["width_mm"].to_numpy(float) * px / 2
     owner = np.concatenate([np.full(len(p), i) for i, p in enumerate(paths)])
     tree = cKDTree(np.concatenate(paths))
-    e_in = l_in = e_tot = l_tot = 0.0
+    e = dict(merged=0.0, covered=0.0, total=0.0)
+    ln = dict(merged=0.0, covered=0.0, total=0.0)
     for i, p in enumerate(paths):
         if len(p) < 8:
             continue
         s, k, length, w, pts = _curvature(p)
         s, k, w, pts = s[2:-2], k[2:-2], w[2:-2], pts[2:-2]
         merged = np.zeros(len(pts), bool)
+        covered = np.zeros(len(pts), bool)
         for q, near in enumerate(tree.query_ball_point(pts, half[i] + half.max())):
             others = owner[near]
-            other_pts = tree.data[near][others != i]
-            if len(other_pts):
-                d = np.hypot(*(other_pts - pts[q]).T)
-                merged[q] = np.any(d < half[i] + half[others[others != i]] - 0.5)
+            other = others != i
+            if other.any():
+                d = np.hypot(*(tree.data[near][other] - pts[q]).T)
+                h_other = half[others[other]]
+                merged[q] = np.any(d < half[i] + h_other - 0.5)
+                covered[q] = np.any(d < h_other - 0.5)
         n = int(st.n_br[i])
         f = k * k * w
-        e_tot += n * f.sum()
-        l_tot += n * w.sum()
-        e_in += n * f[merged].sum()
-        l_in += n * w[merged].sum()
-    return {"energy_merged": e_in / e_tot if e_tot else np.nan,
-            "length_merged": l_in / l_tot if l_tot else np.nan}
+        for key, sel in (("merged", merged), ("covered", covered), ("total", slice(None))):
+            e[key] += n * f[sel].sum()
+            ln[key] += n * w[sel].sum()
+    out = {}
+    for key in ("merged", "covered"):
+        out[f"energy_{key}"] = e[key] / e["total"] if e["total"] else np.nan
+        out[f"length_{key}"] = ln[key] / ln["total"] if ln["total"] else np.nan
+    return out
 
 
 def main(argv=None) -> int:
