@@ -72,9 +72,11 @@ kappa_m = |kappa_pm| (paper, section "Curvature of branches"), in 1/mm, trapezoi
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 
 import numpy as np
+from numba import njit
 from scipy.spatial.distance import cdist
 
 from crosssection.core import polyline
@@ -139,20 +141,36 @@ def default_smooth_px(thickness_px: float) -> int:
     return 2 * k + 1
 
 
-def _make_profile(s_px, kappa_px, rc, px_per_mm, closed, fit=(0, -1)) -> CurvatureProfile:
+def _trapezoid(y, x):
+    """``np.trapezoid(y, x)`` along the last axis, the same sums (its products, then numpy's
+    pairwise sum of each row), without its overhead (a third of a profile's cost)."""
+    return np.add.reduce((x[1:] - x[:-1]) * (y[..., 1:] + y[..., :-1]) / 2.0, axis=-1)
+
+
+def _make_profile(s_px, kappa_px, rc, px_per_mm, closed, fit=(0, -1), *,
+                  energy_rel_uncertainty=float("nan"), noise_var_per_mm2=0.0
+                  ) -> CurvatureProfile:
     kappa = np.asarray(kappa_px, float) * float(px_per_mm)
     s_mm = np.asarray(s_px, float) / float(px_per_mm)
-    length_mm = float(s_mm[-1] - s_mm[0]) if len(s_mm) > 1 else 0.0
+    n = len(s_mm)
+    length_mm = float(s_mm[-1] - s_mm[0]) if n > 1 else 0.0
     if length_mm > 0:
-        kpm = float(np.trapezoid(kappa, s_mm) / length_mm)
-        kplus = float(np.trapezoid(np.abs(kappa), s_mm) / length_mm)
+        # both integrals in one pass: a reduction along rows sums each row as a 1-D one
+        both = np.empty((2, n))
+        both[0] = kappa
+        np.abs(kappa, out=both[1])
+        ints = _trapezoid(both, s_mm)
+        kpm = float(ints[0] / length_mm)
+        kplus = float(ints[1] / length_mm)
     else:
         kpm = float(kappa.mean()) if len(kappa) else np.nan
         kplus = float(np.abs(kappa).mean()) if len(kappa) else np.nan
     return CurvatureProfile(s_mm=s_mm, kappa_per_mm=kappa, length_mm=length_mm, kappa_pm=kpm,
                             kappa_plus=kplus, kappa_m=abs(kpm), closed=bool(closed),
                             rc_px=np.asarray(rc, float), fit_start=int(fit[0]),
-                            fit_stop=int(len(s_mm) if fit[1] < 0 else fit[1]))
+                            fit_stop=int(len(s_mm) if fit[1] < 0 else fit[1]),
+                            energy_rel_uncertainty=energy_rel_uncertainty,
+                            noise_var_per_mm2=noise_var_per_mm2)
 
 
 def _solve3(S0, S1, S2, S3, S4, T0, T1, T2):
@@ -237,23 +255,14 @@ def _chord_end(i, lim, step, inside, estimate):
     return _settle(estimate(), i, lim, step, inside)
 
 
-#: Window samples (window length x points) summed at once: a block's temporaries stay in
-#: the processor's cache, few enough blocks that numpy's call overhead stays small (2^13 to
-#: 2^15 equally fast on the 633 000 samples of a dense 2000x2000 scan).
-_BLOCK = 1 << 14
-
-
-def _window_sums(X, Y, i, a0, m, tx, ty):
+@njit(cache=True)
+def _window_sums(X, Y, i, a0, m, tx, ty):  # pragma: no cover - numba
     """Sums over every window of ``u, u^2 .. u^6, v, u v, u^2 v`` in its point's tangent frame.
 
-    Points are sorted by window length and taken in blocks; a block's windows are gathered
-    into a (window length, points) array, the samples beyond a shorter window repeat its
-    point (they add exact zeros), and the sums run along the window axis, the outer one:
-    numpy adds the samples one after the other (with at least two points per block), as a
-    loop over the window would. Each point sums in its own frame: running sums over a path
-    in a common frame would subtract sums of u^6 grown over thousands of px. (Prefix sums of
-    the 27 monomials in frames shared by a window's worth of points, and row copies summed
-    by BLAS, took 2.4 and 1.4 times as long for the 633 000 window samples of a dense scan.)
+    Point by point, each window's samples added one after the other from its first, in the
+    point's own frame: running sums over a path in a common frame would subtract sums of u^6
+    grown over thousands of px. Compiled: 2-3 ms against 11-12 ms for the same sums by numpy
+    over blocks of gathered windows (the 633 000 window samples of a dense 2000x2000 scan).
 
     Parameters
     ----------
@@ -268,53 +277,51 @@ def _window_sums(X, Y, i, a0, m, tx, ty):
     -------
     ndarray (9, n)
     """
-    n = len(i)
-    sums = np.empty((9, n))
-    order = np.argsort(m, kind="stable")
-    ms = m[order]
-    red = np.add.reduce
-    p = 0
-    while p < n:
-        e = min(n, p + max(2, _BLOCK // (int(ms[min(n - 1, p + _BLOCK // (int(ms[p]) + 1))]) + 1)))
-        if n - e == 1:
-            e = n
-        pts = order[p:e] if e - p > 1 else order[[p, p]]
-        w = int(ms[e - 1]) + 1
-        t = np.arange(w)[:, None]
-        ip = i.take(pts)
-        j = a0.take(pts) + t
-        if ms[p] != ms[e - 1]:
-            j = np.where(t <= m.take(pts), j, ip)
-        # take: a third faster than indexing with an array here
-        dx = X.take(j)
-        dx -= X.take(ip)
-        dy = Y.take(j)
-        dy -= Y.take(ip)
-        ptx = tx.take(pts)
-        pty = ty.take(pts)
-        tmp = dy * pty
-        u = dx * ptx
-        u += tmp
-        v = dy * ptx
-        v -= np.multiply(dx, pty, out=tmp)  # = -dx ty + dy tx
-        u2 = u * u
-        u4 = u2 * u2
-        tmp = dx
-        blk = sums[:, p:e] if e - p > 1 else np.empty((9, 2))
-        red(u, axis=0, out=blk[0])
-        red(u2, axis=0, out=blk[1])
-        red(np.multiply(u2, u, out=tmp), axis=0, out=blk[2])
-        red(u4, axis=0, out=blk[3])
-        red(np.multiply(u4, u, out=tmp), axis=0, out=blk[4])
-        red(np.multiply(u4, u2, out=tmp), axis=0, out=blk[5])
-        red(v, axis=0, out=blk[6])
-        red(np.multiply(u, v, out=tmp), axis=0, out=blk[7])
-        red(np.multiply(u2, v, out=tmp), axis=0, out=blk[8])
-        if e - p == 1:
-            sums[:, p] = blk[:, 0]
-        p = e
-    out = np.empty_like(sums)
-    out[:, order] = sums
+    n = i.shape[0]
+    out = np.empty((9, n))
+    for p in range(n):
+        xp = X[i[p]]
+        yp = Y[i[p]]
+        ptx = tx[p]
+        pty = ty[p]
+        s0 = s1 = s2 = s3 = s4 = s5 = s6 = s7 = s8 = 0.0
+        for t in range(m[p] + 1):
+            j = a0[p] + t
+            dx = X[j] - xp
+            dy = Y[j] - yp
+            u = dx * ptx + dy * pty
+            v = dy * ptx - dx * pty
+            u2 = u * u
+            u4 = u2 * u2
+            if t == 0:
+                s0 = u
+                s1 = u2
+                s2 = u2 * u
+                s3 = u4
+                s4 = u4 * u
+                s5 = u4 * u2
+                s6 = v
+                s7 = u * v
+                s8 = u2 * v
+            else:
+                s0 += u
+                s1 += u2
+                s2 += u2 * u
+                s3 += u4
+                s4 += u4 * u
+                s5 += u4 * u2
+                s6 += v
+                s7 += u * v
+                s8 += u2 * v
+        out[0, p] = s0
+        out[1, p] = s1
+        out[2, p] = s2
+        out[3, p] = s3
+        out[4, p] = s4
+        out[5, p] = s5
+        out[6, p] = s6
+        out[7, p] = s7
+        out[8, p] = s8
     return out
 
 
@@ -457,13 +464,15 @@ def _trim_indices(s, trims):
 
 
 def _paper_job(p, *, closed, n_br, thickness_px, px_per_mm, smooth_px, trims, window_px,
-               circle_correction, ends, max_window_frac, unfitted=False):
+               circle_correction, ends, max_window_frac, unfitted=False, smoothed=None):
     """Profile by the paper's parabolic window (module docstring), in two steps so that the
     window fits of many stacks run in one call of :func:`_parabola_curvatures`.
 
     An open path whose trims leave a fitted part shorter than the two trims together is
     fitted whole; with ``unfitted`` nothing of it is fitted (zero curvature, no fitted
     sample: ``fit_start == fit_stop == 0``), to be filled by :func:`_fill_unfitted_stacks`.
+    ``smoothed``, when given, is ``polyline.smooth(p, window_px=smooth_px, closed=closed)``
+    (computed for all stacks at once by :func:`stack_profiles`).
 
     Returns
     -------
@@ -474,7 +483,8 @@ def _paper_job(p, *, closed, n_br, thickness_px, px_per_mm, smooth_px, trims, wi
         (ignored when ``fit`` is None).
     """
     n = len(p)
-    sm = polyline.smooth(p, window_px=smooth_px, closed=closed)
+    sm = (polyline.smooth(p, window_px=smooth_px, closed=closed) if smoothed is None
+          else smoothed)
     d = np.diff(np.vstack([sm, sm[:1]]) if closed else sm, axis=0)
     seg = np.hypot(d[:, 0], d[:, 1])
     total_px = float(seg.sum())
@@ -532,17 +542,26 @@ def _paper_job(p, *, closed, n_br, thickness_px, px_per_mm, smooth_px, trims, wi
     return fit, finish
 
 
-def _stack_job(path_rc, *, n_br, thickness_px, px_per_mm, closed, smooth_px, trim_px,
-               window_px, circle_correction, ends, max_window_frac, method, unfitted=False):
-    """:func:`stack_curvature` up to the window fits: ``(fit, finish, trims)`` as
-    :func:`_paper_job` (``unfitted`` there), and the fork zones (None for an empty path,
-    whose profile ``finish`` returns as it is)."""
+def _prepared_path(path_rc, closed):
+    """The points of a stack's path as the fits take them, and whether it is closed."""
     p = np.asarray(path_rc, dtype=np.float64).reshape(-1, 2)
     if closed is None:
         closed = polyline.is_closed(p)
     closed = bool(closed)
     if closed and len(p) > 1 and np.all(p[0] == p[-1]):
         p = p[:-1]  # the repeated closing pixel would count twice
+    return p, closed
+
+
+def _stack_job(path_rc, *, n_br, thickness_px, px_per_mm, closed, smooth_px, trim_px,
+               window_px, circle_correction, ends, max_window_frac, method, unfitted=False,
+               smoothed=None):
+    """:func:`stack_curvature` up to the window fits: ``(fit, finish, trims)`` as
+    :func:`_paper_job` (``unfitted`` and ``smoothed`` there; ``path_rc`` and ``closed`` then
+    as :func:`_prepared_path` returns them), and the fork zones (None for an empty path,
+    whose profile ``finish`` returns as it is)."""
+    # with ``smoothed`` the path comes prepared (preparing it twice could drop two points)
+    p, closed = _prepared_path(path_rc, closed) if smoothed is None else (path_rc, closed)
     if len(p) == 0:
         z = np.zeros(0)
         empty = CurvatureProfile(z, z, 0.0, np.nan, np.nan, np.nan, closed, np.zeros((0, 2)))
@@ -556,7 +575,7 @@ def _stack_job(path_rc, *, n_br, thickness_px, px_per_mm, closed, smooth_px, tri
                              px_per_mm=px_per_mm, smooth_px=int(smooth_px), trims=trims,
                              window_px=window_px, circle_correction=circle_correction,
                              ends=ends, max_window_frac=max_window_frac,
-                             unfitted=unfitted)
+                             unfitted=unfitted, smoothed=smoothed)
     return fit, finish, trims
 
 
@@ -697,6 +716,93 @@ def _contact_arc(pre, pts, limit):
     return float(np.hypot(seg[:, 0], seg[:, 1]).sum())
 
 
+@njit(cache=True)
+def _first_far_kernel(pr, pc, offs, rad, group_lo, group_hi, gap_px):  # pragma: no cover
+    """Per stack end, the first point of its prefix farther than ``rad[e] + rad[o] + gap_px``
+    from every point of every other prefix ``o`` of its junction (``group_lo[e] <= o <
+    group_hi[e]``); the prefix's length when there is none. The test of
+    :func:`_contact_arc` (``cdist``'s distance, ``sqrt(dr^2 + dc^2)``), point after point.
+
+    Compiled: all contact arcs (:func:`_contact_arcs`) in 7-10 ms against 30-50 ms for
+    :func:`contact_arc_px` end by end (its ``cdist`` calls and their set-up) on the 488 stack
+    ends of a dense 2000x2000 scan.
+    """
+    q = offs.shape[0] - 1
+    out = np.empty(q, np.int64)
+    for e in range(q):
+        a, b = offs[e], offs[e + 1]
+        out[e] = b - a
+        for i in range(a, b):
+            near = False
+            for o in range(group_lo[e], group_hi[e]):
+                if o == e:
+                    continue
+                lim = rad[e] + rad[o] + gap_px
+                for k in range(offs[o], offs[o + 1]):
+                    dr = pr[i] - pr[k]
+                    dc = pc[i] - pc[k]
+                    if math.sqrt(dr * dr + dc * dc) <= lim:
+                        near = True
+                        break
+                if near:
+                    break
+            if not near:
+                out[e] = i - a
+                break
+    return out
+
+
+def _contact_arcs(paths, at_node, radius, reach, gap_px: float = _CONTACT_GAP_PX) -> dict:
+    """:func:`contact_arc_px` of every stack end at a junction against the other ends there.
+
+    Parameters
+    ----------
+    paths : list of (P, 2) arrays
+        Stack paths.
+    at_node : dict
+        Junction -> list of (stack, end) meeting there.
+    radius : (M,) float array
+        Half width of every stack (median inscribed radius).
+    reach : int
+        Prefix length, pixels, compared from each junction.
+    gap_px : float
+        As in :func:`contact_arc_px`.
+
+    Returns
+    -------
+    dict
+        (stack, end) -> arc length, px.
+    """
+    keys = [key for ks in at_node.values() for key in ks]
+    if not keys:
+        return {}
+    pre = [_prefix(paths[sid], end, reach) for sid, end in keys]
+    sizes = np.array([len(ks) for ks in at_node.values()], np.int64)
+    ends = np.cumsum(sizes)
+    group_lo = np.repeat(ends - sizes, sizes)
+    group_hi = np.repeat(ends, sizes)
+    lens = np.fromiter((len(p) for p in pre), np.int64, count=len(pre))
+    offs = np.zeros(len(pre) + 1, np.int64)
+    np.cumsum(lens, out=offs[1:])
+    flat = np.concatenate(pre) if offs[-1] else np.zeros((0, 2))
+    rad = np.asarray(radius, np.float64)[np.array([sid for sid, _ in keys], np.int64)]
+    first_far = _first_far_kernel(np.ascontiguousarray(flat[:, 0]),
+                                  np.ascontiguousarray(flat[:, 1]), offs, rad, group_lo,
+                                  group_hi, float(gap_px))
+    # an end whose junction has no other end with a prefix has nothing to touch
+    filled = (lens > 0).astype(np.int64)
+    has_other = np.repeat(np.add.reduceat(filled, ends - sizes), sizes) - filled > 0
+    out = {}
+    for e, key in enumerate(keys):
+        p, ff = pre[e], int(first_far[e])
+        if len(p) < 2 or ff < 1 or not has_other[e]:
+            out[key] = 0.0
+            continue
+        seg = np.diff(p[:min(ff, len(p) - 1) + 1], axis=0)
+        out[key] = float(np.hypot(seg[:, 0], seg[:, 1]).sum())
+    return out
+
+
 def stack_profiles(graph, n_br, distance_px, *, thickness_px: float, px_per_mm: float,
                    smooth_px: int | None = None, method: str = "missing") -> list:
     """Curvature profile of every stack of a stack graph (paper: parabolic fits over 5 n_br h).
@@ -737,12 +843,7 @@ def stack_profiles(graph, n_br, distance_px, *, thickness_px: float, px_per_mm: 
     radius = median_radii_px(graph.paths, distance_px)
     # per band end at a junction: its skeleton from the junction, and the skeleton points of
     # the other bands there with the distance below which each touches it
-    contact = {}
-    for node, keys in at_node.items():
-        pre = [_prefix(graph.paths[sid], end, reach) for sid, end in keys]
-        for i, (sid, end) in enumerate(keys):
-            others = [(pre[j], radius[keys[j][0]]) for j in range(len(keys)) if j != i]
-            contact[(sid, end)] = contact_arc_px(pre[i], radius[sid], others)
+    contact = _contact_arcs(graph.paths, at_node, radius, reach)
 
     def fork_zone(sid, end, nb):
         # module docstring, step 3
@@ -754,6 +855,10 @@ def stack_profiles(graph, n_br, distance_px, *, thickness_px: float, px_per_mm: 
         touching = contact[(sid, end)]
         return _fork_zone_px(nb * float(thickness_px), r_j, touching, sm)
 
+    prepared = [_prepared_path(graph.paths[sid], graph.node_kind[graph.ends[sid][0]] == "loop")
+                for sid in range(graph.n_stacks)]
+    smoothed = polyline.smooth_paths([p for p, _ in prepared], window_px=sm,
+                                     closed=[c for _, c in prepared])
     jobs, forks = [], []
     for sid in range(graph.n_stacks):
         u, v = graph.ends[sid]
@@ -765,10 +870,10 @@ def stack_profiles(graph, n_br, distance_px, *, thickness_px: float, px_per_mm: 
         lump = (method == "missing" and any(forks[-1]) and graph.node_kind[u] != "loop"
                 and polyline.length(graph.paths[sid]) < _LUMP_WIDTHS * 2.0 * radius[sid])
         jobs.append(_stack_job(
-            graph.paths[sid], n_br=nb, thickness_px=thickness_px, px_per_mm=px_per_mm,
-            closed=(graph.node_kind[u] == "loop"), smooth_px=sm, trim_px=trims,
+            prepared[sid][0], n_br=nb, thickness_px=thickness_px, px_per_mm=px_per_mm,
+            closed=prepared[sid][1], smooth_px=sm, trim_px=trims,
             window_px=None, circle_correction=True, ends="shift", max_window_frac=0.5,
-            method="paper", unfitted=lump))
+            method="paper", unfitted=lump, smoothed=smoothed[sid]))
     # the window fits of all stacks in one call (numpy's overhead per call is that of a
     # whole stack's fits)
     kin = iter(_parabola_curvatures([fit for fit, _, _ in jobs if fit is not None]))
@@ -896,8 +1001,9 @@ def _trend(s, k):
     sm = s.mean()
     ds = s - sm
     den = float(ds @ ds)
-    a = float(ds @ (k - k.mean())) / den if den > 0 else 0.0
-    return a, float(k.mean()), sm
+    km = k.mean()
+    a = float(ds @ (k - km)) / den if den > 0 else 0.0
+    return a, float(km), sm
 
 
 def _fill_fork_zones(prof, n_br, thickness_px, px_per_mm, forks=(True, True), noise_px=0.3,
@@ -992,26 +1098,40 @@ def _fill_fork_zones(prof, n_br, thickness_px, px_per_mm, forks=(True, True), no
                 # the shifted fits their own
                 continue
             k[z0:z1] = np.clip(b + a * (s[z0:z1] - sm), -kmax, kmax)
-    out = _make_profile(s * px_per_mm, k / px_per_mm, prof.rc_px, px_per_mm, prof.closed,
-                        (t0, t1))
+    s_px = s * px_per_mm
+    k_px = k / px_per_mm
+    # the profile's own arrays and length (those _make_profile forms), for the uncertainty
+    s_out = np.asarray(s_px, float) / float(px_per_mm)
+    length_mm = float(s_out[-1] - s_out[0]) if len(s_out) > 1 else 0.0
     if noise_var_per_mm2 is not None:
-        out = replace(out, noise_var_per_mm2=float(noise_var_per_mm2))
-        noise = float(noise_var_per_mm2) * out.length_mm
+        noise = float(noise_var_per_mm2) * length_mm
     else:
-        noise = 720.0 * noise_px ** 2 / w_px ** 5 * px_per_mm ** 2 * out.length_mm
-    return replace(out, energy_rel_uncertainty=_rel_uncertainty(out, forks, noise))
+        noise = 720.0 * noise_px ** 2 / w_px ** 5 * px_per_mm ** 2 * length_mm
+    rel = _rel_uncertainty_of(np.asarray(k_px, float) * float(px_per_mm), s_out, t0,
+                              len(s_out) if t1 < 0 else t1, forks, noise)
+    return _make_profile(s_px, k_px, prof.rc_px, px_per_mm, prof.closed, (t0, t1),
+                         energy_rel_uncertainty=rel,
+                         noise_var_per_mm2=(0.0 if noise_var_per_mm2 is None
+                                            else float(noise_var_per_mm2)))
 
 
 def _rel_uncertainty(prof, forks, noise_int):
     """(extrapolated part of int kappa^2 ds + the noise floor ``noise_int``) / the integral."""
-    k, s, n = prof.kappa_per_mm, prof.s_mm, len(prof.s_mm)
+    return _rel_uncertainty_of(prof.kappa_per_mm, prof.s_mm, prof.fit_start, prof.fit_stop,
+                               forks, noise_int)
+
+
+def _rel_uncertainty_of(k, s, fit_start, fit_stop, forks, noise_int):
+    """:func:`_rel_uncertainty` of the curvature ``k`` (1/mm) at ``s`` (mm), fitted on
+    ``fit_start:fit_stop``."""
+    n = len(s)
     if n < 2:
         return float("nan")
     f = k * k
-    total = float(np.trapezoid(f, s))
-    z0 = prof.fit_start if forks[0] else 0
-    z1 = prof.fit_stop if forks[1] else n
-    fitted = float(np.trapezoid(f[z0:z1], s[z0:z1])) if z1 - z0 > 1 else 0.0
+    total = float(_trapezoid(f, s))
+    z0 = fit_start if forks[0] else 0
+    z1 = fit_stop if forks[1] else n
+    fitted = float(_trapezoid(f[z0:z1], s[z0:z1])) if z1 - z0 > 1 else 0.0
     return float((max(total - fitted, 0.0) + noise_int) / max(total, noise_int, 1e-300))
 
 

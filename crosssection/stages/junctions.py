@@ -21,6 +21,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from crosssection.core.errors import ParameterError
 from crosssection.core.unionfind import group_labels
@@ -463,30 +464,70 @@ def median_radii_px(paths, distance_px) -> np.ndarray:
 _RAY_STEP_PX = 0.25  # sample spacing of the rays that measure a band's extents
 
 
+@njit(cache=True)
+def _first_background(ink, pr, pc, nr, nc, t):  # pragma: no cover - numba
+    """Per point (``pr``, ``pc``) and side (row 0: ``+normal``, row 1: ``-normal``), the index
+    of the first sample ``point + (side t) normal``, rounded to the pixel grid, off ``ink``
+    or off the image (``len(t) - 1`` when every sample is ink).
+
+    Compiled, each ray stopping at its first background sample: 1.3 ms against 14-24 ms for
+    all samples of all rays in numpy (132 junctions of a dense 2000x2000 scan).
+    """
+    h, w = ink.shape
+    n = pr.shape[0]
+    out = np.empty((2, n), np.int64)
+    for i in range(n):
+        for side in range(2):
+            sign = 1.0 if side == 0 else -1.0
+            first = t.shape[0] - 1
+            for j in range(t.shape[0]):
+                st = sign * t[j]
+                r = np.rint(pr[i] + st * nr)
+                c = np.rint(pc[i] + st * nc)
+                if not (0.0 <= r < h and 0.0 <= c < w and ink[int(r), int(c)]):
+                    first = j
+                    break
+            out[side, i] = first
+    return out
+
+
 def _side_extents_px(ink, points_rc, normal_rc, max_px, step_px=_RAY_STEP_PX):
     """Distance from each point to the first background sample along ``+normal`` and along
     ``-normal`` (``max_px`` when none is met): the ink's extent on either side of a line.
 
     Returns two (N,) float arrays (left = ``+normal``, right = ``-normal``)."""
-    h, w = ink.shape
     t = np.arange(step_px, max_px + step_px, step_px)
-    out = []
-    for sign in (1.0, -1.0):
-        r = np.rint(points_rc[:, None, 0] + sign * t[None, :] * normal_rc[0]).astype(np.int64)
-        c = np.rint(points_rc[:, None, 1] + sign * t[None, :] * normal_rc[1]).astype(np.int64)
-        inside = (r >= 0) & (r < h) & (c >= 0) & (c < w)
-        on_ink = np.zeros(r.shape, bool)
-        on_ink[inside] = ink[r[inside], c[inside]]
-        first_bg = np.where((~on_ink).any(axis=1), np.argmax(~on_ink, axis=1), len(t) - 1)
-        out.append(t[first_bg] - 0.5 * step_px)  # the edge lies between two samples
-    return out[0], out[1]
+    pts = np.asarray(points_rc, np.float64).reshape(-1, 2)
+    first_bg = _first_background(ink, np.ascontiguousarray(pts[:, 0]),
+                                 np.ascontiguousarray(pts[:, 1]), float(normal_rc[0]),
+                                 float(normal_rc[1]), t)
+    ext = t[first_bg] - 0.5 * step_px  # the edge lies between two samples
+    return ext[0], ext[1]
 
 
 def _median3(v):
-    """Running median of three (ends repeated): removes one-sample jitter of a binary edge."""
+    """Running median of three (ends repeated): removes one-sample jitter of a binary edge.
+
+    The middle value as ``max(min(a, b), min(max(a, b), c))``, which is ``np.median`` of the
+    three for finite values (the extents always are) at a tenth of its cost.
+    """
     if len(v) < 3:
         return v
-    return np.median(np.stack([v, np.r_[v[1:], v[-1]], np.r_[v[0], v[:-1]]]), axis=0)
+    nxt = np.empty_like(v)
+    nxt[:-1] = v[1:]
+    nxt[-1] = v[-1]
+    prv = np.empty_like(v)
+    prv[1:] = v[:-1]
+    prv[0] = v[0]
+    return np.maximum(np.minimum(v, nxt), np.minimum(np.maximum(v, nxt), prv))
+
+
+def _median_finite(v):
+    """``np.median`` of a non-empty 1-D array of finite values (the middle one, or the mean
+    of the two middle ones, bit for bit), without its overhead (80 us a call)."""
+    s = np.sort(v)
+    m = len(s) // 2
+    return s[m] if len(s) % 2 else (s[m - 1] + s[m]) / 2
 
 
 def _limit_to_band_end(sol, ink, end_junction, mean, direc, ok, half_width_px, fit_px,
@@ -565,7 +606,7 @@ def _limit_to_band_end(sol, ink, end_junction, mean, direc, ok, half_width_px, f
         left, right = _side_extents_px(ink, mean[trunk] + x_all[:, None] * d, normal, max_px)
         both = left + right
         width = _median3(both[len(x_ref):])
-        departs = np.abs(width - np.median(both[:len(x_ref)])) > tol_px
+        departs = np.abs(width - _median_finite(both[:len(x_ref)])) > tol_px
         if departs.any():
             x_end = x_walk[int(np.argmax(departs))]
             out[j] = sol[j] + (x_end - x_sol) * d

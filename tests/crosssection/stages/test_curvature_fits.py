@@ -352,15 +352,28 @@ def test_batch_equals_one_path_at_a_time():
         _assert_matches_reference(fit, k)
 
 
-def test_many_paths_in_small_blocks(monkeypatch):
-    """Blocks of a few samples (one or two points each) give the same sums."""
+def test_window_sums_are_each_windows_sums():
+    """The window sums are those of a plain loop over each window's samples, in its point's
+    tangent frame (windows of one sample and of many, points anywhere in them)."""
     rng = np.random.default_rng(12)
-    fits = [_open_fit(_noisy_arc(rng), rng) for _ in range(4)]
-    want = _parabola_curvatures(fits)
-    monkeypatch.setattr(curvature, "_BLOCK", 8)
-    for fit, k, w in zip(fits, _parabola_curvatures(fits), want):
-        np.testing.assert_allclose(k, w, rtol=1e-12, atol=1e-15)
-        _assert_matches_reference(fit, k)
+    n_pts = 400
+    X = np.cumsum(rng.standard_normal(n_pts))
+    Y = np.cumsum(rng.standard_normal(n_pts))
+    m = rng.integers(0, 40, 300)
+    a0 = rng.integers(0, n_pts - m)
+    i = a0 + (rng.random(300) * (m + 1)).astype(np.int64)
+    ang = rng.random(300) * 2 * np.pi
+    tx, ty = np.cos(ang), np.sin(ang)
+    got = curvature._window_sums(X, Y, i, a0, m, tx, ty)
+    assert got.shape == (9, 300)
+    for p in range(300):
+        j = np.arange(a0[p], a0[p] + m[p] + 1)
+        dx, dy = X[j] - X[i[p]], Y[j] - Y[i[p]]
+        u = dx * tx[p] + dy * ty[p]
+        v = dy * tx[p] - dx * ty[p]
+        want = [u, u ** 2, u ** 3, u ** 4, u ** 5, u ** 6, v, u * v, u * u * v]
+        np.testing.assert_allclose(got[:, p], [w.sum() for w in want], rtol=1e-9,
+                                   atol=1e-9 * (1 + np.abs(u).max()) ** 6)
 
 
 @pytest.mark.parametrize("closed", [False, True])
