@@ -163,9 +163,11 @@ def branch_table(profiles, n_br, regions, length_mm, *, rod_length_mm,
                                rod_length_mm=rod_length_mm, kappa_c_per_mm=kappa_c_per_mm)
     if len(branches):
         branches["length_mm"] = length_mm[branches["stack_id"].to_numpy()]
+    # the branches' own energy (the scan's noise floor removed, as in branches.csv)
     stack_energy = np.array([br.bending_energy(p.kappa_per_mm, p.s_mm,
                                                rod_length_mm=rod_length_mm,
-                                               kappa_c_per_mm=kappa_c_per_mm)
+                                               kappa_c_per_mm=kappa_c_per_mm,
+                                               noise_var_per_mm2=p.noise_var_per_mm2)
                              for p in profiles]) if m else np.zeros(0)
     return schema.check_table("branches", branches), stack_energy
 

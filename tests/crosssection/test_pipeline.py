@@ -123,6 +123,12 @@ def test_api_on_generated_scenes(seed, n_stacks, max_layers, extra):
     assert (st.n_br >= 1).all()
     assert np.all(np.abs(res.branches["length_mm"].to_numpy()
                          - st.length_mm.to_numpy()[res.branches["stack_id"]]) < 1e-12)
+    # a stack's energy per branch is its branches' energy (the noise floor removed in both)
+    per_stack = res.branches.groupby("stack_id").energy.first()
+    np.testing.assert_allclose(st.set_index("stack_id").energy_per_branch.loc[per_stack.index],
+                               per_stack.to_numpy(), rtol=1e-12)
+    assert res.summary["total_energy"] == pytest.approx(
+        float((st.n_br * st.energy_per_branch).sum()), rel=1e-9)
     # stack lengths match truth (matched by mid point) within a few percent
     a, b = match_points(st[["mid_x_px", "mid_y_px"]].to_numpy(float),
                         scene.tables["stacks"][["mid_x_px", "mid_y_px"]].to_numpy(float), 20.0)
