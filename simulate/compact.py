@@ -931,7 +931,7 @@ def add_subparser(sub):
                         f"{CompactParams.rate:g}); the shrink is also at most h/8 per "
                         "iteration, which binds above h/(8R) = 6.25e-4 at the default "
                         "thickness: only smaller rates change the compaction; the ensemble "
-                        "statistics converge from 6.25e-5 down)")
+                        "statistics converge from 6.25e-5 down")
     p.add_argument("--max-iter", type=int, default=2_000_000,
                    help="iterations allowed to each level of the compaction (default 2e6)")
     p.add_argument("--workers", type=int, default=1, help="local worker processes (default 1)")
