@@ -159,16 +159,14 @@ def branch_table(profiles, n_br, regions, length_mm, *, rod_length_mm,
     stack_energy : (M,) float array
     """
     m = len(profiles)
+    # one energy per stack, shared by its branches and stacks.csv
+    stack_energy = br.stack_energies(profiles, rod_length_mm=rod_length_mm,
+                                     kappa_c_per_mm=kappa_c_per_mm)
     branches = br.branch_table(np.arange(m), profiles, n_br, regions,
-                               rod_length_mm=rod_length_mm, kappa_c_per_mm=kappa_c_per_mm)
+                               rod_length_mm=rod_length_mm, kappa_c_per_mm=kappa_c_per_mm,
+                               energies=stack_energy)
     if len(branches):
         branches["length_mm"] = length_mm[branches["stack_id"].to_numpy()]
-    # the branches' own energy (the scan's noise floor removed, as in branches.csv)
-    stack_energy = np.array([br.bending_energy(p.kappa_per_mm, p.s_mm,
-                                               rod_length_mm=rod_length_mm,
-                                               kappa_c_per_mm=kappa_c_per_mm,
-                                               noise_var_per_mm2=p.noise_var_per_mm2)
-                             for p in profiles]) if m else np.zeros(0)
     return schema.check_table("branches", branches), stack_energy
 
 

@@ -29,7 +29,8 @@ import pandas as pd
 from crosssection.core.errors import ParameterError
 from crosssection.core.schema import BRANCH_COLUMNS
 
-__all__ = ["bending_energy", "energy_density", "branch_table", "rod_length_mm"]
+__all__ = ["bending_energy", "energy_density", "stack_energies", "branch_table",
+           "rod_length_mm"]
 
 
 def energy_density(kappa_per_mm, kappa_c_per_mm=None) -> np.ndarray:
@@ -111,8 +112,17 @@ def _stack_ids(stacks, m):
     return np.asarray(stacks)
 
 
+def stack_energies(profiles: Sequence, *, rod_length_mm, kappa_c_per_mm=None) -> np.ndarray:
+    """The energy ``e`` of one branch of every stack (:func:`bending_energy` of its profile,
+    the scan's noise floor removed), in profile order."""
+    return np.array([bending_energy(p.kappa_per_mm, p.s_mm, rod_length_mm=rod_length_mm,
+                                    kappa_c_per_mm=kappa_c_per_mm,
+                                    noise_var_per_mm2=getattr(p, "noise_var_per_mm2", 0.0))
+                     for p in profiles], dtype=np.float64).reshape(-1)
+
+
 def branch_table(stacks, profiles: Sequence, n_br, regions, *, rod_length_mm=None,
-                 kappa_c_per_mm=None) -> pd.DataFrame:
+                 kappa_c_per_mm=None, energies=None) -> pd.DataFrame:
     """One row per branch: every stack of ``n_br`` layers contributes ``n_br`` branches.
 
     Parameters
@@ -129,6 +139,8 @@ def branch_table(stacks, profiles: Sequence, n_br, regions, *, rod_length_mm=Non
         L; default ``sum n_br * length_mm``.
     kappa_c_per_mm : float, optional
         Plastic threshold.
+    energies : array (M,), optional
+        :func:`stack_energies` of ``profiles`` when already computed (with the same L).
 
     Returns
     -------
@@ -148,10 +160,10 @@ def branch_table(stacks, profiles: Sequence, n_br, regions, *, rod_length_mm=Non
     lengths = np.array([p.length_mm for p in profiles], dtype=np.float64)
     if rod_length_mm is None:
         rod_length_mm = float(np.sum(np.clip(n_br, 0, None) * lengths))
-    energies = np.array([bending_energy(p.kappa_per_mm, p.s_mm, rod_length_mm=rod_length_mm,
-                                        kappa_c_per_mm=kappa_c_per_mm,
-                                        noise_var_per_mm2=getattr(p, "noise_var_per_mm2", 0.0))
-                         for p in profiles])
+    if energies is None:
+        energies = stack_energies(profiles, rod_length_mm=rod_length_mm,
+                                  kappa_c_per_mm=kappa_c_per_mm)
+    energies = np.asarray(energies, dtype=np.float64)
     reps = np.clip(n_br, 0, None)
     idx = np.repeat(np.arange(m), reps)
     df = pd.DataFrame({
