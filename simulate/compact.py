@@ -32,9 +32,12 @@ Protocol
   between a node and the nearby segments of other passes (their shared joints subtracted, so
   that a node sliding along a pass feels it once), and between a node and the wall, acting
   within ``MARGIN h`` outside the hard core; forces are projected on
-  the fixed segment lengths and the lengths restored by a tridiagonal SHAKE step. Contacts come
+  the fixed segment lengths and the lengths restored by a tridiagonal SHAKE step; a step whose
+  restoration does not converge is taken again at half its size (counter ``n_halved_steps``,
+  see :func:`_compress`), so the lengths are exact after every step. Contacts come
   from a Verlet list of (node, segment) pairs built with a spatial hash (cell list), O(N).
-  The wall moves by at most ``min(1e-3 R, h/8)`` per iteration and waits while any spring is
+  The wall moves by at most ``min(6.25e-5 R, h/8)`` per iteration (the step at which the
+  ensemble statistics converge, ``docs/validation/compact.md``) and waits while any spring is
   compressed by half its range, so the rod is compacted quasi-statically and no pass ever
   comes closer than h to another; springs stiffen when the packing's pressure holds one at
   that threshold (see :func:`_compress`). Nodes move at most h/4 per iteration.
@@ -59,7 +62,15 @@ re-run.
 
 Limits: the discretised rod cannot fold tighter than about one segment (ds/2 radius), while
 the real sheet folds down to a few h; the rod is open (the experiment's cross-section is a
-closed curve) and frictionless. Measured cost and statistics: ``docs/validation/compact.md``.
+closed curve) and frictionless. A stretch of rod lining the wall carries the wall's pressure
+as a compression along it; with many segments per wall radius (every level starts at
+R/ds = N / (pi epsilon): 80 at epsilon 8 and N = 2000, 67 at epsilon 19 and N = 4000, 34 at
+epsilon 19 and N = 2000) the compression passes the buckling load of a single segment,
+8 N^2 for Eq. (8)'s bending energy on a zigzag of alternate nodes: the stretch buckles into a
+zigzag of a few degrees per node, which the continuous rod does not have, and straightens
+once the compression is released. The length restoration of those snapping steps is the one
+that needs the halving.
+Measured cost and statistics: ``docs/validation/compact.md``.
 """
 from __future__ import annotations
 
@@ -84,6 +95,9 @@ STIFFNESS = 8.0
 RESOLUTION = 16.0
 #: FIRE's largest time step in units of ``N^-3/2`` (stable below ~0.2 for these stiffnesses)
 DT_MAX = 0.12
+#: a step whose length restoration does not converge is retried at most this many times,
+#: halved each time (see :func:`_compress`)
+SHAKE_HALVINGS = 8
 #: default contact distance of the analysis, in units of the thickness (see run_config)
 CONTACT_DISTANCE = 3.0
 #: largest area fraction ``L h / (pi (R - h/2)^2)`` accepted (see :func:`check_params`)
@@ -189,6 +203,40 @@ def _tridiag(lo, di, up, rhs):
 
 
 @njit(cache=True)
+def _restore_lengths(x, rxs, rys, ds, dxs, dys, lo, di, up, rhs):
+    """Restore every segment length of ``x`` (N+1, 2) to ``ds`` in place (SHAKE): Newton on
+    ``|x_{j+1} - x_j|^2 = ds^2``, moving the ends of segment j along its direction before the
+    step ``(rxs[j], rys[j])``; the chain makes the system tridiagonal. ``dxs`` to ``rhs`` are
+    work arrays of length N. Returns whether the largest ``|l_j^2 - ds^2| / 2`` fell below
+    ``1e-10 ds^2`` within 20 Newton steps."""
+    n = x.shape[0] - 1
+    for _k in range(21):
+        err = 0.0
+        for j in range(n):
+            dxs[j] = x[j + 1, 0] - x[j, 0]
+            dys[j] = x[j + 1, 1] - x[j, 1]
+            rhs[j] = -0.5 * (dxs[j] * dxs[j] + dys[j] * dys[j] - ds * ds)
+            err = max(err, abs(rhs[j]))
+        if err < 1e-10 * ds * ds:
+            return True
+        if _k == 20 or not math.isfinite(err):
+            return False
+        for j in range(n):
+            di[j] = 2.0 * (dxs[j] * rxs[j] + dys[j] * rys[j])
+            if j > 0:
+                lo[j] = -(dxs[j] * rxs[j - 1] + dys[j] * rys[j - 1])
+            if j < n - 1:
+                up[j] = -(dxs[j] * rxs[j + 1] + dys[j] * rys[j + 1])
+        mu = _tridiag(lo, di, up, rhs)
+        for j in range(n):
+            x[j, 0] -= rxs[j] * mu[j]
+            x[j, 1] -= rys[j] * mu[j]
+            x[j + 1, 0] += rxs[j] * mu[j]
+            x[j + 1, 1] += rys[j] * mu[j]
+    return False
+
+
+@njit(cache=True)
 def _compress(x, r_start, r_end, h_ratio, margin, rate, k, dt_max, max_iter, ftol):
     """Shrink the wall from ``r_start`` to ``r_end`` while relaxing the rod, then relax it
     at ``r_end``. ``x`` (N+1, 2) is updated in place.
@@ -210,10 +258,24 @@ def _compress(x, r_start, r_end, h_ratio, margin, rate, k, dt_max, max_iter, fto
     the springs stiffen by 1.5 and the step shortens by sqrt(1.5), at most every 500
     iterations (the rod must respond before the next).
 
+    A step whose length restoration (:func:`_restore_lengths`) has not converged after 20
+    Newton steps is taken again from its start at half its size, at most
+    :data:`SHAKE_HALVINGS` times; the velocity follows the shorter displacement. The Newton
+    system is nearly singular on a long stretch of rod lining the wall: its softest mode, a
+    tension along the arc, has an eigenvalue ~ (ds / R)^2 (3e-4 against 4 for the stiffest at
+    76 segments per wall radius), while a step of the zigzag that such a stretch takes when
+    the wall's compression buckles it (module docstring, "Limits") leaves a length error of
+    1e-4 to 1e-3 ds^2. Newton then cycles instead of converging; a step kept with wrong
+    lengths passes them, and a velocity taken from them, to the next step, which can diverge
+    outright (turning angles near 180 degrees appear then, after the lengths went wrong, not
+    before). The restoration's error falls as the step squared: one halving made both traced
+    steps converge in three Newton steps. The bending force is left as it is (Eq. (8), the
+    energy :mod:`simulate.energy` reports).
+
     Returns
     -------
     (wall radius, iterations, list builds, FIRE restarts, largest node force, largest
-    spring compression / range, stiffenings, final stiffness)
+    spring compression / range, stiffenings, final stiffness, halved steps)
     """
     n = x.shape[0] - 1
     ds = 1.0 / n
@@ -243,6 +305,7 @@ def _compress(x, r_start, r_end, h_ratio, margin, rate, k, dt_max, max_iter, fto
     ovl = 0.0
     n_stiff = 0
     last_stiff = 0
+    n_half = 0
     while it < max_iter:
         it += 1
         h = h_ratio * big_r
@@ -377,35 +440,21 @@ def _compress(x, r_start, r_end, h_ratio, margin, rate, k, dt_max, max_iter, fto
         if math.sqrt(vmax2) * dt > 0.25 * h:
             step = 0.25 * h / math.sqrt(vmax2)
         xo[:] = x
-        for i in range(n + 1):
-            x[i, 0] += step * v[i, 0]
-            x[i, 1] += step * v[i, 1]
-        # restore the segment lengths: Newton on |x_{j+1} - x_j|^2 = ds^2, moving along the
-        # segment directions before the step (SHAKE); the chain makes it tridiagonal
         for j in range(n):
             rxs[j] = xo[j + 1, 0] - xo[j, 0]
             rys[j] = xo[j + 1, 1] - xo[j, 1]
-        for _k in range(20):
-            err = 0.0
-            for j in range(n):
-                dxs[j] = x[j + 1, 0] - x[j, 0]
-                dys[j] = x[j + 1, 1] - x[j, 1]
-                rhs[j] = -0.5 * (dxs[j] * dxs[j] + dys[j] * dys[j] - ds * ds)
-                err = max(err, abs(rhs[j]))
-            if err < 1e-10 * ds * ds:
+        # a step whose length restoration does not converge is taken again from xo at half
+        # its size: the restoration's error grows as the step squared, and a long stretch of
+        # rod lining the wall makes its Newton system nearly singular (see the docstring)
+        for _half in range(SHAKE_HALVINGS + 1):
+            for i in range(n + 1):
+                x[i, 0] = xo[i, 0] + step * v[i, 0]
+                x[i, 1] = xo[i, 1] + step * v[i, 1]
+            if _restore_lengths(x, rxs, rys, ds, dxs, dys, lo, di, up, rhs):
                 break
-            for j in range(n):
-                di[j] = 2.0 * (dxs[j] * rxs[j] + dys[j] * rys[j])
-                if j > 0:
-                    lo[j] = -(dxs[j] * rxs[j - 1] + dys[j] * rys[j - 1])
-                if j < n - 1:
-                    up[j] = -(dxs[j] * rxs[j + 1] + dys[j] * rys[j + 1])
-            mu = _tridiag(lo, di, up, rhs)
-            for j in range(n):
-                x[j, 0] -= rxs[j] * mu[j]
-                x[j, 1] -= rys[j] * mu[j]
-                x[j + 1, 0] += rxs[j] * mu[j]
-                x[j + 1, 1] += rys[j] * mu[j]
+            if _half < SHAKE_HALVINGS:
+                step *= 0.5
+                n_half += 1
         moved2 = 0.0
         for i in range(n + 1):
             v[i, 0] = (x[i, 0] - xo[i, 0]) / dt
@@ -419,7 +468,7 @@ def _compress(x, r_start, r_end, h_ratio, margin, rate, k, dt_max, max_iter, fto
             xref[:] = x
             n_build += 1
     return (big_r, it, n_build, n_restart, fmax, ovl / (margin * h_ratio * big_r), n_stiff,
-            k)
+            k, n_half)
 
 
 # ----------------------------------------------------------------------------------------
@@ -458,7 +507,9 @@ class CompactParams:
     rate : float
         Largest relative shrink of the wall per iteration; the shrink is also at most
         ``h / 8`` per iteration, which binds whenever ``rate > h / (8 R)`` (6.25e-4 at the
-        default h = 0.005 R, so the default 1e-3 gives a shrink of R/1600 per iteration).
+        default h = 0.005 R). Default 6.25e-5 (a shrink of R/16000 per iteration): the
+        ensemble statistics at epsilon 19 agree with those of half that step and move beyond
+        their errors at twice it (``docs/validation/compact.md``, "Protocol").
     max_iter : int
         Iterations allowed to each level of the compaction.
     hold_iter : int
@@ -472,7 +523,7 @@ class CompactParams:
     n_segments: int = 2000
     thickness: float | None = None
     noise: float = 750.0
-    rate: float = 1e-3
+    rate: float = 6.25e-5
     max_iter: int = 2_000_000
     hold_iter: int = 50_000
     ftol: float = 1.0
@@ -507,8 +558,9 @@ class CompactResult:
     length : float
         Sum of the segment lengths (1 up to rounding).
     stats : dict
-        Counters: iterations, levels, list builds, FIRE restarts, final largest force over
-        its scale, final largest spring compression over its range.
+        Counters: iterations, levels, list builds, FIRE restarts, spring stiffenings, steps
+        halved for the length restoration (:func:`_compress`), final largest force over its
+        scale, final largest spring compression over its range.
     wall_s : float
         Wall time of the compaction (s).
     """
@@ -653,7 +705,8 @@ def compact_rod(params: CompactParams, rng) -> CompactResult:
     xy = initial_rod(n0, params.noise, (1.0 + MARGIN) * cap0, rng)
     xy0 = xy.copy()
     big_r = max(float(np.hypot(xy[:, 0], xy[:, 1]).max()) + (1.0 + MARGIN) * cap0, r_end)
-    stats = {"levels": len(lev), "iterations": 0, "builds": 0, "restarts": 0, "stiffenings": 0}
+    stats = {"levels": len(lev), "iterations": 0, "builds": 0, "restarts": 0, "stiffenings": 0,
+             "halved_steps": 0}
     k_phys = 0.0  # spring stiffness reached so far, in absolute units (carried across levels)
 
     def run(xy, n, r_from, r_to, ratio, max_iter, ftol):
@@ -661,7 +714,8 @@ def compact_rod(params: CompactParams, rng) -> CompactResult:
         k = max(_stiffness(n, r_to), k_phys / float(n) ** 3)
         out = _compress(xy, r_from, r_to, ratio, MARGIN, params.rate, k,
                         DT_MAX / n ** 1.5 / math.sqrt(k / STIFFNESS), max_iter, ftol)
-        for key, i in (("iterations", 1), ("builds", 2), ("restarts", 3), ("stiffenings", 6)):
+        for key, i in (("iterations", 1), ("builds", 2), ("restarts", 3), ("stiffenings", 6),
+                       ("halved_steps", 8)):
             stats[key] += int(out[i])
         k_phys = out[7] * float(n) ** 3
         if not (math.isfinite(out[4]) and np.isfinite(xy).all()):
@@ -931,7 +985,7 @@ def add_subparser(sub):
                         f"{CompactParams.rate:g}); the shrink is also at most h/8 per "
                         "iteration, which binds above h/(8R) = 6.25e-4 at the default "
                         "thickness: only smaller rates change the compaction; the ensemble "
-                        "statistics converge from 6.25e-5 down")
+                        "statistics converge at the default")
     p.add_argument("--max-iter", type=int, default=2_000_000,
                    help="iterations allowed to each level of the compaction (default 2e6)")
     p.add_argument("--workers", type=int, default=1, help="local worker processes (default 1)")

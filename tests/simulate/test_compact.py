@@ -175,3 +175,37 @@ def test_wall_rate_reaches_the_params_and_the_output(tmp_path):
     assert simulate_main(["compact", *SMALL, "--n-configs", "1", "--wall-rate", "0.004",
                           "--out", str(out)]) == 0
     assert json.loads((out / "params.json").read_text())["rate"] == 0.004
+
+
+def _zigzag_arc_on_wall(n, wall_over_ds, amplitude):
+    """A rod of n segments lining a wall of radius ``wall_over_ds / n`` with its nodes
+    alternately ``amplitude h`` outside and inside the wall springs' reach: the zigzag that a
+    stretch of rod pressed along the wall takes when it buckles at the scale of a segment."""
+    ds = 1.0 / n
+    big_r = wall_over_ds * ds
+    h = compact.H_OVER_R * big_r
+    reach = big_r - 0.5 * (1.0 + compact.MARGIN) * h
+    rad = np.where(np.arange(n + 1) % 2 == 0, reach + amplitude * h, reach - amplitude * h)
+    phi = np.r_[0.0, np.cumsum(np.arccos((rad[:-1] ** 2 + rad[1:] ** 2 - ds * ds)
+                                         / (2.0 * rad[:-1] * rad[1:])))]
+    return np.c_[rad * np.cos(phi), rad * np.sin(phi)], big_r
+
+
+def test_segment_lengths_exact_after_every_step_of_a_rod_pressed_along_the_wall():
+    """A long stretch of rod along the wall (76 segments per wall radius, as the coarse levels
+    at epsilon 8, N = 2000) makes the length restoration's Newton system nearly singular; the
+    steps of its snapping zigzag must still end with exact segment lengths (a step whose
+    restoration does not converge is taken again at half its size), at every iteration."""
+    n = 200
+    outs = []
+    for max_iter in range(1, 81):
+        x, big_r = _zigzag_arc_on_wall(n, 76.0, 0.1)
+        k = compact._stiffness(n, big_r)
+        out = compact._compress(x, big_r, big_r, compact.H_OVER_R, compact.MARGIN, 6.25e-5, k,
+                                compact.DT_MAX / n ** 1.5 / np.sqrt(k / compact.STIFFNESS),
+                                max_iter, 0.0)
+        assert out[1] == max_iter
+        seg = np.hypot(*np.diff(x, axis=0).T)
+        assert np.abs(seg * n - 1.0).max() < 1e-8, max_iter
+        outs.append(out)
+    assert max(out[8] for out in outs) > 0  # halved steps: the case is the one they are for
