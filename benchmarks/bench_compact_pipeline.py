@@ -16,6 +16,10 @@ scan       the defaults: a real scan's defects and plate (``simulate.render.SCAN
 clean      ``--clean``: the drawing alone
 polyline   clean, the stacks drawn as the analysis' polylines (``smooth="none"``): what the
            corners of an unsmoothed drawing do to the measured energy
+passes     the defaults, the rod itself drawn (``draw="passes"``: every pass a stroke, the
+           passes of a stack pressed together) instead of one band per stack
+passes_    ``passes``, clean
+clean
 =========  ================================================================================
 
 Each scene is analysed with the calibration and the hole given, as a user who measured them
@@ -55,7 +59,8 @@ from simulate.contacts import analyze_rod
 from simulate.render import render_configuration
 
 CONDITIONS = {"scan": {}, "clean": {"clean": True},
-              "polyline": {"clean": True, "smooth": "none"}}
+              "polyline": {"clean": True, "smooth": "none"},
+              "passes": {"draw": "passes"}, "passes_clean": {"clean": True, "draw": "passes"}}
 TARGETS = {"n_br_exact_length_fraction": 0.85, "junction_f1": 0.90, "rod_length": 0.05,
            "total_energy": 0.25}
 PX_PER_MM, THICKNESS_MM = 50.0, 0.1

@@ -58,6 +58,32 @@ the paper calibrates the hot wire's nonlinear thickening of a stack by cutting s
 sheets ("Image analysis procedure"). It is written to ``calibration.csv`` so that the pipeline
 inverts the law the bands were drawn with, as a user passes the tool's calibration.
 
+Drawing the rod itself (``draw="passes"``, experimental). The bands drawing draws the truth's
+stacks, not the rod: mean lines hooked into junction points at a band's side, a band holding a
+rod end drawn at its larger layer count over its whole length, lumps where junctions cluster
+(docs/validation/compact.md). ``draw="passes"`` draws each pass of the rod as a stroke
+``pass_width`` h wide along the smooth curve through the rod's nodes (:func:`smooth_line`, one
+knot per node), so that what is drawn is the rod and its length. The passes of a compacted
+rod's stack lie 1.2-3 h apart (frictionless hard core): drawn as they lie they would show
+paper between them, and a band's width would not count its passes. Every stack is therefore
+pressed, cross-section by cross-section, into a band of touching strokes centred where its
+passes were (:func:`_press_stack`); a pass occupies only the part of a stack it covers, so the
+band narrows where a rod end lies inside it or a pass leaves it. Beyond its stack a pass returns
+to its own position over ``pass_taper`` pass widths (raised cosine), and the displacements are
+smoothed along the rod over one pitch so that a change of the passes present leaves no step.
+Adjacent pressed strokes overlap by :data:`PASS_OVERLAP_PX` so that their rasterisation leaves
+no paper line between them; the calibration is the drawing's own, linear law
+``w(n) = n pitch + overlap`` with ``pitch = pass_width h - overlap``
+(:func:`passes_calibration`; at 5 px per h: 6.25 px for one pass, 5.25 px per further pass).
+The truth tables are the contact analysis' (stacks, junctions, branches, voids, the rod's
+energy). A junction point, the mean of the run ends meeting there, lies where the pressed
+passes part (the tip of the paper wedge between them), about half the trunk's width ahead of
+the skeleton fork an image analysis finds there: with junctions matched within 3 h the mode
+scores poorly on junctions for that reason, not for want of forks
+(docs/validation/compact.md). A stack's truth line is its mean line, which can cover only part
+of its passes; its mid point, length and band width are the analysis', as in the bands
+drawing.
+
 Coordinates: column = x, row = y (no flip), so the image is the mirror image of a plot with y
 up; signed curvatures therefore compare in absolute value.
 """
@@ -86,7 +112,7 @@ from crosssection.truth.voids import truth_voids
 from simulate.contacts import RodAnalysis, analyze_rod
 
 __all__ = ["render_configuration", "render_directory", "add_subparser", "smooth_line",
-           "SCAN_DEFECTS", "CLEAN"]
+           "passes_calibration", "SCAN_DEFECTS", "CLEAN", "DRAW"]
 
 #: Scan defects of a render unless ``clean`` (module docstring): the middle of the typical
 #: scans' ranges. Blur, noise and JPEG are applied last, after the plate
@@ -99,6 +125,26 @@ SCAN_DEFECTS = {"noise_sigma": 5.0, "blur_px": 0.75, "jpeg_quality": 90, "smears
 CLEAN = {"noise_sigma": 0.0, "blur_px": 0.0, "jpeg_quality": None, "smears": 0, "specks": 0,
          "pinholes": 0, "plate": None, "rim_px": 0.0, "illumination": 0.0, "cast": 0.0}
 SMOOTH = ("all", "long", "none")
+#: What is drawn: one band per stack (``"bands"``) or the rod itself (``"passes"``).
+DRAW = ("bands", "passes")
+#: ``draw="passes"``: ink width of one pass, in units of the sheet thickness h.
+PASS_WIDTH = 1.25
+#: ``draw="passes"``: length over which a pressed pass returns to its own position, in units
+#: of the pass width.
+PASS_TAPER = 4.0
+#: ``draw="passes"``: adjacent pressed passes overlap by this much so that the rasterised
+#: strokes leave no paper line between them.
+PASS_OVERLAP_PX = 1.0
+
+
+def passes_calibration(stroke_mm: float, pitch_mm: float, n_max: int = 60) -> Calibration:
+    """The width law of ``draw="passes"``: ``w(n) = n pitch + (stroke - pitch)``.
+
+    ``n`` strokes ``stroke`` wide whose axes lie ``pitch`` apart cover ``(n - 1) pitch +
+    stroke``.
+    """
+    n = np.arange(1, int(n_max) + 1, dtype=float)
+    return Calibration(tuple(n), tuple(n * pitch_mm + (stroke_mm - pitch_mm)))
 
 
 @dataclass(frozen=True)
@@ -281,6 +327,23 @@ def _junctions_px(analysis, frame, widths_px) -> np.ndarray:
     return jpx
 
 
+def _pass_junctions_px(analysis, frame, stroke_px) -> np.ndarray:
+    """Junction positions (x, y) px of the passes drawing: the analysis' points, kept half a
+    stroke inside the wall like the drawn rod.
+
+    Not moved with the pressing: the mean of the pressed run ends that meet at a junction
+    lies a median 1 px from the analysis' point (at most 5 px at epsilon = 19), and matching
+    against it did not bring the junctions closer to the forks an image analysis finds.
+    """
+    jt = analysis.junctions
+    if not len(jt):
+        return np.zeros((0, 2))
+    jpx = frame.to_px(jt[["x", "y"]].to_numpy(float))
+    if frame.hole_is_wall and frame.hole_px is not None:
+        jpx = _inside_wall(jpx, frame.hole_xy, frame.hole_px - 0.5 * stroke_px)
+    return jpx
+
+
 def _stack_lines(analysis, frame, widths_px, *, segment_px, smooth):
     """The drawn centreline of every stack: its line, junctions included, smoothed
     (:func:`smooth_line`; ``smooth`` of :func:`render_configuration`).
@@ -330,6 +393,188 @@ def _draw_bands(lines_px, n_br, widths_px, shape):
     for sid, p in enumerate(pts):
         cv2.polylines(labels, [p], False, sid + 1, max(1, int(round(widths_px[sid]))),
                       cv2.LINE_8, shift)
+    labels[coverage < 0.5] = 0
+    return coverage, labels
+
+
+def _press_stack(curve, normals, members, pitch_px, reach_px, sub=4):
+    """Displacements that press the passes of one stack together, cross-section by
+    cross-section.
+
+    At a sample of a pass, the cross-section of the stack is the normal of that pass there:
+    every other pass of the stack whose nearest sample lies within ``reach_px`` and is not
+    one of its two ends (a pass that ends before the cross-section is not in it) is taken at
+    its signed offset along that normal. With ``m`` passes present, their centroid ``c`` and
+    the pass the ``k``-th of them across the section, the pass is moved along the normal to
+    ``c + (k - (m - 1) / 2) * pitch_px``: adjacent passes touch, the band is centred where
+    the passes were, and narrows where one of them ends or leaves. No axis of the stack is
+    needed, so a mean line that covers only part of its passes does not bend them.
+
+    Parameters
+    ----------
+    curve, normals : (Q, 2) arrays
+        The rod's smooth curve in px and its unit normals.
+    members : list of int arrays
+        Indices into ``curve`` of every pass of the stack (each contiguous).
+    pitch_px : float
+        Distance between the axes of adjacent pressed passes.
+    reach_px : float
+        Farthest a pass of the same cross-section can lie.
+    sub : int
+        The sections are computed every ``sub`` samples and interpolated between.
+
+    Returns
+    -------
+    list of (len(members[k]), 2) arrays
+        The displacement of every sample of every pass.
+    """
+    from scipy.spatial import cKDTree
+
+    trees = [cKDTree(curve[idx]) for idx in members]
+    out = []
+    for k, idx in enumerate(members):
+        at = np.unique(np.r_[np.arange(0, len(idx), sub), len(idx) - 1])
+        p, nrm = curve[idx[at]], normals[idx[at]]
+        total = np.zeros(len(at))
+        count = np.ones(len(at))
+        below = np.zeros(len(at))
+        for j, tree in enumerate(trees):
+            if j == k:
+                continue
+            dist, nn = tree.query(p, distance_upper_bound=reach_px)
+            ok = np.isfinite(dist) & (nn > 0) & (nn < len(members[j]) - 1)
+            nn = np.where(ok, nn, 0)
+            off = np.einsum("ij,ij->i", curve[members[j][nn]] - p, nrm)
+            total += np.where(ok, off, 0.0)
+            count += ok
+            below += ok & (off < 0)
+        shift = total / count + (below - 0.5 * (count - 1)) * pitch_px
+        shift = np.interp(np.arange(len(idx)), at, shift)
+        out.append(shift[:, None] * normals[idx])
+    return out
+
+
+def _split_folds(idx, tan, window):
+    """The samples ``idx`` of a pass cut at its collapsed folds.
+
+    A fold tighter than the contact distance is one pass at its apex for the contact analysis
+    (:mod:`simulate.contacts`), so a run can hold both arms of a fold; pressed as one pass, its
+    arms would keep their gap. A fold is where the tangent turns by more than 150 degrees
+    within ``window`` samples either side; the pass is cut where it turns most.
+    """
+    if len(idx) <= 2 * window + 2:
+        return [idx]
+    t = tan[idx]
+    dot = np.full(len(idx), 1.0)
+    dot[window:-window] = np.einsum("ij,ij->i", t[:-2 * window], t[2 * window:])
+    fold = dot < -0.87
+    if not fold.any():
+        return [idx]
+    edges = np.diff(np.r_[0, fold.astype(int), 0])
+    cuts = [a + int(np.argmin(dot[a:b])) for a, b in zip(np.flatnonzero(edges == 1),
+                                                          np.flatnonzero(edges == -1))]
+    return np.split(idx, cuts)
+
+
+def _taper_fill(disp, pressed, taper_samples):
+    """Displacements along the rod: those of the pressed samples, blended to zero over
+    ``taper_samples`` samples (a raised cosine) on the unpressed samples beyond them."""
+    n = len(disp)
+    out = np.where(pressed[:, None], disp, 0.0)
+    if taper_samples <= 0 or pressed.all() or not pressed.any():
+        return out
+    idx = np.arange(n)
+    # nearest pressed sample before and after every sample
+    prev = np.maximum.accumulate(np.where(pressed, idx, -1))
+    nxt = np.minimum.accumulate(np.where(pressed, idx, n)[::-1])[::-1]
+    free = ~pressed
+    for near in (prev, nxt):
+        ok = free & (near >= 0) & (near < n)
+        dist = np.abs(idx[ok] - near[ok])
+        w = np.where(dist < taper_samples, 0.5 * (1 + np.cos(np.pi * dist / taper_samples)), 0.0)
+        out[ok] += w[:, None] * disp[near[ok]]
+    return out
+
+
+def _pass_curves(xy, analysis, frame, *, segment_px, pitch_px, stroke_px, taper_px,
+                 step_px=0.5):
+    """The drawn rod: its smooth curve with the passes of every stack pressed together.
+
+    Returns
+    -------
+    curve : (Q, 2) array
+        The pressed curve in px, sampled every ``step_px`` along the rod.
+    branch_of : (Q,) int array
+        The branch of every sample.
+    disp : (Q, 2) array
+        The displacement applied to every sample (pressing and taper).
+    """
+    from scipy.ndimage import gaussian_filter1d
+
+    base = smooth_line(frame.to_px(xy), segment_px, step_px)
+    s = np.linspace(0.0, 1.0, len(base))
+    br = analysis.branches
+    s0 = br["s_start"].to_numpy(float)
+    branch_of = np.clip(np.searchsorted(s0, s, side="right") - 1, 0, len(br) - 1)
+    stack_of_branch = br["stack_id"].to_numpy(int)
+    n_br = analysis.stacks["n_br"].to_numpy(int)
+    tan = np.gradient(base, axis=0)
+    tan /= np.maximum(np.hypot(tan[:, 0], tan[:, 1]), 1e-12)[:, None]
+    normals = np.c_[-tan[:, 1], tan[:, 0]]
+    # passes of one stack are chained within the contact distance
+    reach = analysis.contact_distance * frame.scale
+    disp = np.zeros_like(base)
+    pressed = np.zeros(len(base), bool)
+    fold_window = max(int(round(reach / step_px)), 1)
+    for sid in np.flatnonzero(n_br >= 2):
+        members = [piece for b in np.flatnonzero(stack_of_branch == sid)
+                   for piece in _split_folds(np.flatnonzero(branch_of == b), tan, fold_window)]
+        members = [m for m in members if len(m) > 2]
+        if len(members) < 2:
+            continue
+        for idx, dd in zip(members, _press_stack(base, normals, members, pitch_px,
+                                                 reach * len(members))):
+            disp[idx] = dd
+            pressed[idx] = True
+    arc_step = float(np.hypot(*np.diff(base, axis=0).T).mean()) if len(base) > 1 else 1.0
+    disp = _taper_fill(disp, pressed, taper_px / arc_step)
+    # the order of the passes present changes where one ends or leaves: no step in the drawing
+    sigma = pitch_px / arc_step
+    if sigma > 0:
+        disp = gaussian_filter1d(disp, sigma, axis=0, mode="nearest")
+    curve = base + disp
+    if frame.hole_is_wall and frame.hole_px is not None:
+        curve = _inside_wall(curve, frame.hole_xy, frame.hole_px - 0.5 * stroke_px)
+    return curve, branch_of, curve - base
+
+
+def _draw_passes(curve, branch_of, stack_of_branch, stroke_px, shape):
+    """Anti-aliased ink of the rod drawn as one stroke ``stroke_px`` wide, and the stack label
+    image (``k + 1`` on the ink of stack ``k``)."""
+    shift = 4
+    canvas = np.full(shape, 255, np.uint8)
+    labels = np.zeros(shape, np.int32)
+    cuts = np.flatnonzero(np.diff(branch_of)) + 1
+    starts = np.r_[0, cuts]
+    ends = np.r_[cuts, len(curve)]
+    thick = max(1, int(round(stroke_px)))
+    for a, b in zip(starts, ends):
+        # one sample into the next branch: no hole at the boundary
+        p = np.round(curve[a:min(b + 1, len(curve))] * (1 << shift)).astype(np.int32)
+        p = p.reshape(-1, 1, 2)
+        cv2.polylines(canvas, [p], False, 0, 1, cv2.LINE_8, shift)
+        cv2.polylines(labels, [p], False, int(stack_of_branch[branch_of[a]]) + 1, thick,
+                      cv2.LINE_8, shift)
+    d = cv2.distanceTransform(canvas, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    # the rasterised line sits up to half a pixel off the curve, which would make strokes and
+    # pressed bands up to a pixel wider than w(n): near the ink, measure from the curve itself
+    # (samples half a pixel apart)
+    from scipy.spatial import cKDTree
+
+    rr, cc = np.nonzero(d <= 0.5 * stroke_px + 1.5)
+    exact, _ = cKDTree(curve).query(np.c_[cc, rr].astype(float))
+    d[rr, cc] = exact
+    coverage = np.clip(0.5 * stroke_px - d + 0.5, 0, 1).astype(np.float32)
     labels[coverage < 0.5] = 0
     return coverage, labels
 
@@ -441,12 +686,15 @@ def _stack_table(st, lines_px, frame, cal, *, px_per_mm, thickness_mm):
     return pd.DataFrame(rows, columns=schema.STACK_COLUMNS)
 
 
-def _truth_tables(analysis, frame, lines_px, cal, voids, *, px_per_mm, thickness_mm):
-    """The four truth tables (crosssection.core.schema), lengths in mm, curvatures in 1/mm."""
+def _truth_tables(analysis, frame, lines_px, cal, voids, *, px_per_mm, thickness_mm,
+                  junctions_px=None):
+    """The four truth tables (crosssection.core.schema), lengths in mm, curvatures in 1/mm;
+    ``junctions_px`` replaces the junction points of the bands drawing."""
     mm_per_l = frame.rod_length_mm
     jt = analysis.junctions
-    jpx = _junctions_px(analysis, frame, cal.width(analysis.stacks["n_br"].to_numpy(int))
-                        * px_per_mm if len(analysis.stacks) else np.zeros(0))
+    jpx = junctions_px if junctions_px is not None else _junctions_px(
+        analysis, frame, cal.width(analysis.stacks["n_br"].to_numpy(int)) * px_per_mm
+        if len(analysis.stacks) else np.zeros(0))
     junctions = pd.DataFrame({"junction_id": jt["junction_id"].astype(int) if len(jt) else [],
                               "x_px": jpx[:, 0], "y_px": jpx[:, 1],
                               "n_stacks": jt["n_stacks"].astype(int) if len(jt) else []})
@@ -507,7 +755,9 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
                          specks: int | None = None, pinholes: int | None = None,
                          plate=None, rim_px: float | None = None,
                          illumination: float | None = None, cast: float | None = None,
-                         smooth: str = "all", seed: int = 0, margin_mm: float = 2.0,
+                         smooth: str = "all", draw: str = "bands",
+                         pass_width: float = PASS_WIDTH, pass_taper: float = PASS_TAPER,
+                         seed: int = 0, margin_mm: float = 2.0,
                          gap_px: float = 2.0, max_size_px: int = 2500,
                          hole_radius_mm: float | str | None = None) -> Scene:
     """Render one rod configuration into an RGB scan with exact truth tables.
@@ -557,7 +807,18 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
     smooth : {"all", "long", "none"}
         Draw every stack along its smooth curve (:func:`smooth_line`, short links included),
         only the stacks of two segments or more (the drawing of :mod:`simulate.atlas`), or
-        none: the polylines of the analysis, with their corners.
+        none: the polylines of the analysis, with their corners. Bands drawing only.
+    draw : {"bands", "passes"}
+        One band of the calibrated width per stack, along its mean line (default), or the rod
+        itself: every pass a stroke along the smooth curve through the nodes, the passes of
+        every stack pressed into touching strokes (module docstring, "Drawing the rod
+        itself"). With ``"passes"`` the default calibration is :func:`passes_calibration`.
+    pass_width : float
+        ``draw="passes"``: ink width of one pass, in units of h (default :data:`PASS_WIDTH`;
+        more than :data:`PASS_OVERLAP_PX`).
+    pass_taper : float
+        ``draw="passes"``: length, in pass widths, over which a pass pressed into a stack
+        returns to its own position outside it (default :data:`PASS_TAPER`).
     seed : int
         Seed of every random choice (colours, noise, defects).
     margin_mm : float
@@ -592,9 +853,22 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
             raise ParameterError(f"{name} must be a finite number > 0, got {v!r}")
     if calibration is not None and not isinstance(calibration, Calibration):
         raise ParameterError(f"calibration must be a Calibration, got {type(calibration).__name__}")
+    if draw not in DRAW:
+        raise ParameterError(f"draw must be one of {DRAW}, got {draw!r}")
+    for name, v in (("pass_width", pass_width), ("pass_taper", pass_taper)):
+        if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+            raise ParameterError(f"{name} must be a finite number >= 0, got {v!r}")
+    if draw == "passes" and not pass_width * thickness_mm * px_per_mm > PASS_OVERLAP_PX:
+        raise ParameterError(f"pass_width must exceed {PASS_OVERLAP_PX} px, got "
+                             f"{pass_width * thickness_mm * px_per_mm:g} px")
     if analysis is None:
         analysis = analyze_rod(xy, lam=lam, contact_distance=contact_distance)
-    cal = calibration or Calibration.nonlinear(thickness_mm)
+    if draw == "passes":
+        stroke_px = pass_width * thickness_mm * px_per_mm
+        pitch_px = stroke_px - PASS_OVERLAP_PX
+        cal = calibration or passes_calibration(stroke_px / px_per_mm, pitch_px / px_per_mm)
+    else:
+        cal = calibration or Calibration.nonlinear(thickness_mm)
     frame = _frame(xy, analysis, cal, px_per_mm=px_per_mm, thickness_mm=thickness_mm,
                    rod_length_mm=rod_length_mm, hole_radius_mm=hole_radius_mm,
                    margin_mm=margin_mm, gap_px=gap_px, max_size_px=max_size_px,
@@ -610,7 +884,17 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
     n_br = st["n_br"].to_numpy(int)
     widths_px = cal.width(n_br) * px_per_mm
     lines_px = _stack_lines(analysis, frame, widths_px, segment_px=segment_px, smooth=smooth)
-    coverage, labels = _draw_bands(lines_px, n_br, widths_px, frame.shape)
+    if draw == "passes":
+        curve, branch_of, _ = _pass_curves(
+            xy, analysis, frame, segment_px=segment_px, pitch_px=pitch_px, stroke_px=stroke_px,
+            taper_px=pass_taper * stroke_px)
+        junctions_px = _pass_junctions_px(analysis, frame, stroke_px)
+        coverage, labels = _draw_passes(curve, branch_of,
+                                        analysis.branches["stack_id"].to_numpy(int), stroke_px,
+                                        frame.shape)
+    else:
+        junctions_px = None
+        coverage, labels = _draw_bands(lines_px, n_br, widths_px, frame.shape)
     ink_mask = coverage >= 0.5
     voids = truth_voids(ink_mask, hole_center_xy=frame.hole_xy, hole_radius_px=frame.hole_px,
                         s_min_px=(10 * thickness_mm * px_per_mm) ** 2, px_per_mm=px_per_mm,
@@ -621,7 +905,7 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
                      smears=d["smears"], specks=d["specks"], pinholes=d["pinholes"])
     rgb = _finish(img, rng, frame, ink_mask, d)
     tables = _truth_tables(analysis, frame, lines_px, cal, voids.table, px_per_mm=px_per_mm,
-                           thickness_mm=thickness_mm)
+                           thickness_mm=thickness_mm, junctions_px=junctions_px)
     summary = _summary(analysis, frame, tables, ink_mask, px_per_mm=px_per_mm)
     params = {"px_per_mm": float(px_per_mm), "thickness_mm": float(thickness_mm),
               "hole_radius_mm": frame.hole_radius_mm,
@@ -631,7 +915,9 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
               "contact_distance": analysis.contact_distance, "gap_guaranteed": bool(frame.gap_ok),
               "rod_thickness": rod_thickness, "wall_radius": wall_radius, "clean": bool(clean),
               **{k: (v if not isinstance(v, np.ndarray) else v.tolist()) for k, v in d.items()},
-              "smooth": smooth,
+              "smooth": smooth, "draw": draw,
+              **({"pass_width": float(pass_width), "pass_taper": float(pass_taper)}
+                 if draw == "passes" else {}),
               "origin_xy": frame.origin_xy.tolist(), "margin_px": float(frame.margin_px)}
     return Scene(rgb, summary, tables, params, cal,
                  paths_rc=[line[:, ::-1] for line in lines_px], ink_mask=ink_mask)
@@ -647,6 +933,8 @@ def _check_options(kwargs: dict) -> None:
     _defects(bool(kwargs.get("clean", False)), given, has_hole or "plate" not in given)
     if kwargs.get("smooth", "all") not in SMOOTH:
         raise ParameterError(f"smooth must be one of {SMOOTH}, got {kwargs['smooth']!r}")
+    if kwargs.get("draw", "bands") not in DRAW:
+        raise ParameterError(f"draw must be one of {DRAW}, got {kwargs['draw']!r}")
     for k in ("px_per_mm", "thickness_mm", "rod_length_mm"):
         v = kwargs.get(k)
         if v is not None and not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
@@ -804,6 +1092,10 @@ def add_subparser(sub) -> None:
                    help="draw every stack along its smooth curve (all, default), leave the "
                         "links shorter than two rod segments polylines (long), or draw the "
                         "polylines of the analysis (none)")
+    p.add_argument("--draw", choices=DRAW, default="bands",
+                   help="draw one band of the calibrated width per stack (bands, default) or "
+                        "the rod itself, every pass a stroke and the passes of a stack "
+                        "pressed together (passes; its calibration w(n) is linear in n)")
     p.add_argument("--hole", default="auto",
                    help="hole radius in mm, 'auto' (default: the wall of a compaction, else "
                         "the smallest disk around the rod) or 'none' (the pipeline then fits "
@@ -865,7 +1157,7 @@ def _run(args) -> int:
         opts["jpeg_quality"] = 0 if args.jpeg == "none" else args.jpeg
     kwargs = dict(px_per_mm=args.px_per_mm, thickness_mm=args.thickness_mm,
                   rod_length_mm=args.rod_length_mm, clean=args.clean, seed=args.seed,
-                  smooth=args.smooth,
+                  smooth=args.smooth, draw=args.draw,
                   hole_radius_mm=_hole_arg(args.hole),
                   **{k: v for k, v in opts.items() if v is not None})
     try:
