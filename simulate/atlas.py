@@ -3,8 +3,9 @@ charted against the scene, the scan and the method, on scenes with exact truth.
 
 ``python -m simulate benchmark --out REPORT [--quick] [--workers W] [--seed S]`` generates
 scenes from both generators (the network generator :func:`crosssection.truth.network.make_scene`
-and quenched simulator rods rendered by :func:`simulate.render.render_configuration`), degrades
-them, analyses each with :func:`crosssection.analyze` and scores it against its truth with
+and simulator rods rendered by :func:`simulate.render.render_configuration`: short quenches,
+and rods compacted by a shrinking wall to the experiments' epsilon), degrades them,
+analyses each with :func:`crosssection.analyze` and scores it against its truth with
 :func:`crosssection.truth.scoring.score` (junctions matched within 3 h). It writes into REPORT:
 
 - one tidy CSV per sweep (``SWEEP.csv``): the swept parameters, the scene, the accuracy
@@ -27,6 +28,9 @@ illumination,
 cast
 layers         mean layers per stack 1-12 (network generator)
 stacks         stacks per scene 15-300 (network generator; the largest only in the full run)
+epsilon        compaction rate epsilon = L / (2 pi R) = 4-30 (rods of 2000 segments compacted
+               by :func:`simulate.compact.compact_rod`, rendered as ``python -m simulate
+               render`` renders a compaction: clean, the wall is the hole, h = 5 px)
 variants       pipeline options (threshold, curvature, calibration, hole, smoothing, tangent
                length, l_min, thick-crossing merge) one at a time, on the same scenes
                (typical scans: plates, illumination, noise, blur, JPEG, specks, smears)
@@ -60,8 +64,8 @@ from crosssection.core.fileio import save_figure, write_csv, write_text
 
 __all__ = ["AtlasConfig", "Variant", "VARIANTS", "SWEEPS", "Rod", "Base", "Treatment",
            "run_atlas", "write_report", "draw_chart", "reading", "plan", "run_base",
-           "quench_rod", "render_rod", "typical_options", "with_backdrop", "pareto_front",
-           "add_subparser", "PLATES", "THICKNESS_MM"]
+           "quench_rod", "render_rod", "compact_scene", "typical_options", "with_backdrop",
+           "pareto_front", "add_subparser", "PLATES", "THICKNESS_MM"]
 
 THICKNESS_MM = 0.1  # the paper's sheet; every scene of the atlas uses it
 PLATES = ("grey", "dark", "brown", "beige", "bluish", "coloured", None)
@@ -186,6 +190,9 @@ SWEEPS = {
     "stacks": SweepInfo("line", "n_stacks", "stacks per scene (realised, truth)",
                         "Scene size: accuracy and time against the number of stacks",
                         plot_x="truth_n_stacks", log_x=True),
+    "epsilon": SweepInfo("line", "epsilon", "compaction rate epsilon = L / (2 pi R)",
+                         "Compaction rate: accuracy and time against epsilon (simulator rods "
+                         "compacted in a shrinking wall)"),
     "variants": SweepInfo("variants", "variant", "",
                           "Pipeline variants: accuracy against analysis time on the same "
                           "scans"),
@@ -209,7 +216,9 @@ class AtlasConfig:
 
     ``rods`` quenched rods (``rod_segments`` segments, ``rod_runs`` Powell runs of at most
     ``rod_maxiter`` iterations) are rendered wherever a sweep uses the simulator; the other
-    counts are network scenes (seeds) or rods per swept value.
+    counts are network scenes (seeds) or rods per swept value. The ``epsilon`` sweep compacts
+    ``epsilon_configs`` rods of ``epsilon_segments`` segments to every value of ``epsilon``
+    (the same initial shapes at every epsilon).
     """
 
     name: str
@@ -237,6 +246,13 @@ class AtlasConfig:
     stacks_seeds: int = 4
     large_stacks: int = 150          # from this size on, only large_seeds scenes
     large_seeds: int = 2
+    # the experiments' sets sit at epsilon 8-19 (Table 1 of the paper); 4 is as far as the
+    # quench gets, 30 beyond any set. 2000 segments is the compaction's default (its
+    # energies converged); fewer run into a level's iteration cap more often (N = 1000 at
+    # epsilon 8, 400-800 at epsilon 4).
+    epsilon: tuple = (4.0, 8.0, 14.0, 19.0, 30.0)
+    epsilon_configs: int = 3
+    epsilon_segments: int = 2000
     variant_seeds: int = 8
     variant_rods: int = 4
     variant_max_stacks: int = 100
@@ -251,7 +267,8 @@ class AtlasConfig:
     @classmethod
     def full(cls) -> "AtlasConfig":
         """The atlas of ``docs/validation/atlas``: about 20-30 minutes on 2 cores for the
-        scene sweeps, plus about an hour for the fits sweep (``--sweeps`` picks)."""
+        scene sweeps, plus about 5 minutes for the compactions of the epsilon sweep and about
+        an hour for the fits sweep (``--sweeps`` picks)."""
         return cls("full")
 
     @classmethod
@@ -264,7 +281,8 @@ class AtlasConfig:
                    illumination=(0.0, 0.15, 0.3), cast=(0.0, 0.1), degradation_seeds=1,
                    degradation_rods=1, layers=(1.5, 4.0, 8.0), layers_seeds=1,
                    layers_stacks=15, stacks=(15, 20, 40), stacks_seeds=1, large_stacks=1000,
-                   variant_seeds=2, variant_rods=1, variant_max_stacks=25, map_h=(2.0, 4.0),
+                   epsilon=(4.0,), epsilon_configs=1, epsilon_segments=600, variant_seeds=2,
+                   variant_rods=1, variant_max_stacks=25, map_h=(2.0, 4.0),
                    map_layers=(1.5, 4.0), map_blur=(0.0, 2.0), map_seeds=1, map_rods=1,
                    map_stacks=15)
 
@@ -274,7 +292,8 @@ class AtlasConfig:
         return replace(cls.quick(), name="tiny", rod_segments=150, rod_runs=4, rod_maxiter=10,
                        resolution_h=(2.0, 5.0), noise=(0.0, 45.0), blur=(0.0, 3.0),
                        jpeg=(None, 30), plates=(None, "dark"), illumination=(0.0, 0.3),
-                       cast=(0.0, 0.1), layers=(1.5, 4.0), stacks=(15, 20), variant_seeds=1,
+                       cast=(0.0, 0.1), layers=(1.5, 4.0), stacks=(15, 20),
+                       epsilon=(3.0,), epsilon_segments=300, variant_seeds=1,
                        variant_names=("default", "threshold otsu", "curvature paper",
                                       "hole fitted"), degradation_rods=0, map_rods=0)
 
@@ -428,6 +447,51 @@ def make_rod(index: int, seed: int, config: AtlasConfig) -> Rod:
     return Rod(index, seed, xy, analysis, float(ref.params["rod_length_mm"]))
 
 
+def compact_scene(epsilon: float, n_segments: int, seed: int, *, px_per_mm: float = 50.0):
+    """A rod compacted to ``epsilon`` by a shrinking wall, rendered as a clean scan.
+
+    The conventions of ``python -m simulate render`` on a compaction folder
+    (:func:`simulate.render.render_directory`): contact analysis with ``lam = 0`` (a hard wall
+    stores no energy) and contact distance :data:`simulate.compact.CONTACT_DISTANCE` h, the
+    scale set by the rod's thickness (h = ``THICKNESS_MM``), the wall drawn as the hole,
+    every stack along its smooth curve (short links included).
+
+    Parameters
+    ----------
+    epsilon : float
+        Compaction rate ``L / (2 pi R)``.
+    n_segments : int
+        Segments of the rod.
+    seed : int
+        Seed of the initial shape and of the rendering.
+    px_per_mm : float
+        Scan resolution.
+
+    Returns
+    -------
+    Scene
+
+    Raises
+    ------
+    AnalysisError
+        If the compaction did not converge (:func:`simulate.compact.compact_rod`).
+    """
+    from simulate.compact import CONTACT_DISTANCE, CompactParams, compact_rod
+    from simulate.contacts import analyze_rod
+
+    res = compact_rod(CompactParams(epsilon=float(epsilon), n_segments=int(n_segments)),
+                      np.random.default_rng(seed))
+    h = res.thickness
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        analysis = analyze_rod(res.xy, lam=0.0, contact_distance=CONTACT_DISTANCE * h)
+    # smooth="all": the short links between close junctions drawn as parabolas, as the
+    # renders of compactions are drawn and measured (docs/validation/compact.md)
+    return render_rod(res.xy, seed, analysis, rod_thickness=h, wall_radius=res.wall_radius,
+                      hole_radius_mm="auto", px_per_mm=px_per_mm, thickness_mm=THICKNESS_MM,
+                      smooth="all")
+
+
 @dataclass(frozen=True)
 class Base:
     """One generated scene, before the treatments (degradations, variants) applied to it.
@@ -437,13 +501,14 @@ class Base:
     sweep : str
         The sweep it belongs to (the degradation sweeps share their bases).
     generator : str
-        ``"network"`` or ``"render"``.
+        ``"network"``, ``"render"`` (a quenched rod) or ``"compact"`` (a rod compacted in the
+        task, :func:`compact_scene`).
     seed : int
     h_px : float
         Sheet thickness in pixels (px_per_mm = h_px / THICKNESS_MM).
     options : tuple of (str, object)
         Network: keyword arguments of ``make_scene``; render: ``smears``, ``specks``,
-        ``pinholes``.
+        ``pinholes``; compact: ``epsilon``, ``n_segments``.
     rod : int
         Rod index (renders).
     labels : tuple of (str, object)
@@ -468,6 +533,10 @@ class Base:
         area = (self.h_px / 5.0) ** 2
         if self.generator == "render":
             return 40.0 * area
+        if self.generator == "compact":
+            # 10-20 CPU s of compaction at N = 2000, then 0.3-4 s of contact analysis and 1-5 s
+            # of rendering, growing with epsilon: far above any other scene
+            return 0.5 * o.get("n_segments", 2000) * (1.0 + o.get("epsilon", 10.0) / 20.0)
         return area * o.get("n_stacks", 40) * (1.0 + (o.get("mean_layers") or 2.0))
 
 
@@ -584,6 +653,14 @@ def plan(config: AtlasConfig, seed: int, sweeps=None):
             k = c.stacks_seeds if n < c.large_stacks else c.large_seeds
             tasks += [(network("stacks", i, 5.0, lab, n_stacks=n), (Treatment("stacks", lab),))
                       for i in range(k)]
+    if "epsilon" in sweeps:
+        for e in c.epsilon:
+            lab = (("epsilon", float(e)),)
+            # seeded by configuration only: the same initial shapes compacted further
+            tasks += [(Base("epsilon", "compact", _seed(seed, "epsilon", i), 5.0,
+                            (("epsilon", float(e)), ("n_segments", int(c.epsilon_segments))),
+                            labels=lab), (Treatment("epsilon", lab),))
+                      for i in range(c.epsilon_configs)]
     if "variants" in sweeps:
         treats = tuple(Treatment("variants", (("variant", v.name),), variant=v)
                        for v in VARIANTS if c.variant_names is None
@@ -622,7 +699,7 @@ def plan(config: AtlasConfig, seed: int, sweeps=None):
             tasks += [(render("map_h_blur", r, h, lab), treats) for r in range(c.map_rods)]
         n_rods = max(n_rods, c.map_rods)
     n_rods = min(n_rods, c.rods) if n_rods else 0
-    tasks = [(b, t) for b, t in tasks if b.generator == "network" or b.rod < n_rods]
+    tasks = [(b, t) for b, t in tasks if b.generator != "render" or b.rod < n_rods]
     rods = [(r, _seed(seed, "rod", r)) for r in range(n_rods)]
     return rods, tasks
 
@@ -658,6 +735,9 @@ def _generate(base: Base, rod: Rod | None):
     if base.generator == "network":
         scene = make_scene(seed=base.seed, px_per_mm=base.px_per_mm, thickness_mm=THICKNESS_MM,
                            **o)
+    elif base.generator == "compact":
+        scene = compact_scene(o["epsilon"], o["n_segments"], base.seed,
+                              px_per_mm=base.px_per_mm)
     else:
         scene = render_rod(rod.xy, base.seed, rod.analysis, px_per_mm=base.px_per_mm,
                            thickness_mm=THICKNESS_MM, rod_length_mm=rod.rod_length_mm,
@@ -731,7 +811,8 @@ def run_base(base: Base, treatments, rod: Rod | None = None) -> list:
                 truth_n_junctions=len(scene.tables["junctions"]),
                 image_px=int(scene.rgb.shape[0] * scene.rgb.shape[1]), generate_s=gen_s)
     opts = dict(base.options)
-    head.update({k: opts[k] for k in ("n_stacks", "mean_layers", "max_layers") if k in opts})
+    head.update({k: opts[k] for k in ("n_stacks", "mean_layers", "max_layers", "n_segments")
+                 if k in opts})
     base_kw = dict(px_per_mm=base.px_per_mm, thickness_mm=THICKNESS_MM,
                    calibration=scene.calibration)
     try:
@@ -1056,7 +1137,8 @@ PANELS = (  # (column, y label, limit line, limit label, is an error in %)
     ("analyze_s", "analysis time per scan (s)", None, "", False),
 )
 GEN_STYLE = {"network": ("tab:blue", "o", "network generator"),
-             "render": ("tab:orange", "s", "simulator renders")}
+             "render": ("tab:orange", "s", "simulator renders"),
+             "compact": ("tab:green", "D", "compacted simulator rods")}
 
 
 def _figure(w, h):
@@ -1344,7 +1426,8 @@ def _stage_chart(df):
 _SHORT = {"h_px": ("h", " px"), "noise_sigma": ("noise sigma", ""), "blur_px": ("blur", " px"),
           "jpeg_quality": ("JPEG quality", ""), "plate": ("plate", ""),
           "illumination": ("illumination", " %"), "cast": ("cast", " %"),
-          "mean_layers": ("mean layers", ""), "n_stacks": ("stacks", "")}
+          "mean_layers": ("mean layers", ""), "n_stacks": ("stacks", ""),
+          "epsilon": ("epsilon", "")}
 
 
 def _where(values, failing, info: SweepInfo, only: str = " only") -> str:
@@ -1473,7 +1556,8 @@ def _index(command, tables, failures, charts, readings, elapsed) -> str:
     took = "" if elapsed is None else f" ({elapsed / 60:.1f} min)"
     lines = ["# Validation atlas", "",
              f"Command: `{command}`{took}. Scenes with exact truth from "
-             "the network generator and from quenched simulator rods rendered as scans, "
+             "the network generator and from simulator rods (quenched, or compacted by a "
+             "shrinking wall) rendered as scans, "
              "analysed with the default settings unless a sweep says otherwise (scale, "
              "calibration and hole given) and scored against their truth (junctions matched "
              "within 3 h). Failure limits: exact n_br < 0.8, junction F1 < 0.9, |total "

@@ -59,6 +59,66 @@ def test_sweeps_hold_what_they_sweep(report):
     assert v.groupby("variant")["seed"].apply(frozenset).nunique() == 1
     m = t["map_h_layers"]
     assert len(m.groupby(["h_px", "mean_layers"])) == len(cfg.map_h) * len(cfg.map_layers)
+    e = t["epsilon"]
+    assert sorted(e["epsilon"].unique()) == sorted(cfg.epsilon)
+    assert set(e["generator"]) == {"compact"}
+    assert (e["n_segments"] == cfg.epsilon_segments).all()
+    assert (e["truth_n_stacks"] > 0).all() and (e["h_px"] == 5.0).all()
+
+
+def test_epsilon_sweep_plan():
+    cfg = atlas.AtlasConfig.full()
+    rods, tasks = atlas.plan(cfg, 1, ["epsilon"])
+    assert rods == []  # nothing to quench: the rods are compacted in the tasks
+    assert len(tasks) == len(cfg.epsilon) * cfg.epsilon_configs
+    bases = [b for b, _ in tasks]
+    assert {b.generator for b in bases} == {"compact"}
+    for b, treats in tasks:
+        o = dict(b.options)
+        assert o["n_segments"] == cfg.epsilon_segments
+        assert dict(b.labels)["epsilon"] == o["epsilon"]
+        assert [t.sweep for t in treats] == ["epsilon"]
+    # the same initial shapes at every epsilon
+    seeds = {e: sorted(b.seed for b in bases if dict(b.options)["epsilon"] == e)
+             for e in cfg.epsilon}
+    assert len({tuple(v) for v in seeds.values()}) == 1
+    assert len(seeds[cfg.epsilon[0]]) == len(set(seeds[cfg.epsilon[0]])) == cfg.epsilon_configs
+    # compactions are the longest tasks: they start first
+    others = atlas.plan(cfg, 1, [s for s in atlas.SWEEPS if s != "epsilon"])[1]
+    assert min(b.cost() for b in bases) > max(b.cost() for b, _ in others)
+
+
+def test_compaction_grows_the_stacks():
+    """A tiny rod compacted further: thicker stacks in its scan's truth, and the rows carry
+    epsilon and the rod's segments."""
+    rows = {}
+    for eps in (3.0, 8.0):
+        lab = (("epsilon", eps),)
+        base = atlas.Base("epsilon", "compact", 11, 5.0, (("epsilon", eps), ("n_segments", 300)),
+                          labels=lab)
+        (row,) = atlas.run_base(base, [atlas.Treatment("epsilon", lab)])
+        assert row["error"] == "" and row["epsilon"] == eps and row["n_segments"] == 300
+        rows[eps] = row
+    assert rows[8.0]["truth_mean_n_br"] > rows[3.0]["truth_mean_n_br"]
+    assert rows[8.0]["truth_max_n_br"] > rows[3.0]["truth_max_n_br"]
+
+
+def test_failed_compaction_is_a_generation_failure(monkeypatch):
+    from crosssection.core.errors import AnalysisError
+
+    def fail(params, rng):
+        raise AnalysisError("the wall stopped at R = 0.1 before 0.05")
+
+    monkeypatch.setattr("simulate.compact.compact_rod", fail)
+    lab = (("epsilon", 19.0),)
+    base = atlas.Base("epsilon", "compact", 1, 5.0, (("epsilon", 19.0), ("n_segments", 2000)),
+                      labels=lab)
+    rows = atlas.run_base(base, [atlas.Treatment("epsilon", lab)])
+    assert len(rows) == 1 and rows[0]["stage"] == "generate"
+    assert "wall stopped" in rows[0]["error"] and rows[0]["epsilon"] == 19.0
+    tables, failures = atlas._tables(rows, ["epsilon"])
+    assert "epsilon" not in tables  # left out of the table, listed as a failure
+    assert failures[["sweep", "generator"]].values.tolist() == [["epsilon", "compact"]]
 
 
 def test_charts_and_index(report):
@@ -73,6 +133,7 @@ def test_charts_and_index(report):
         assert f"]({name}.png)" in index
         assert res["readings"][name].strip(), name
     assert "python -m simulate benchmark" in index
+    assert res["readings"]["epsilon"].startswith("compacted simulator rods:")
 
 
 def test_failed_analysis_is_scored_as_empty():
