@@ -584,6 +584,8 @@ def run(args) -> int:
                   if getattr(args, k, None) is not None}
     if getattr(args, "no_merge_thick_crossings", False):
         cli_params["merge_thick_crossings"] = False
+    if getattr(args, "no_integer_refinement", False):
+        cli_params["integer_refinement"] = False
     index = run_batch(args.input_dir, args.out, workers=args.workers, scheduler=args.scheduler,
                       seed=args.seed, figure=not args.no_figure, cli_params=cli_params,
                       force=args.force,

@@ -21,10 +21,12 @@ from crosssection.core.errors import FoldstatError, ParameterError
 from crosssection.core.fileio import read_toml
 
 __all__ = ["ScanScale", "AnalysisParams", "add_analysis_arguments", "check_param", "PARAM_NAMES",
-           "THRESHOLD_METHODS", "CURVATURE_METHODS"]
+           "THRESHOLD_METHODS", "CURVATURE_METHODS", "SKELETON_METHODS", "WIDTH_STATISTICS"]
 
 THRESHOLD_METHODS = ("auto", "fixed", "otsu")
 CURVATURE_METHODS = ("missing", "paper")
+SKELETON_METHODS = ("thinning", "skimage")
+WIDTH_STATISTICS = ("median", "mean")
 
 # Sanity limits that turn absurd values into one clear error rather than a hang or a
 # MemoryError: a sheet thinner than a pixel cannot be resolved, and a scan of more than
@@ -108,10 +110,17 @@ class AnalysisParams:
         "fixed threshold: maximum red and green, native units (default 130 for 8-bit)"))
     s_min_mm2: float | None = field(default=None, metadata=_opt(
         "smallest void (default (10 h)^2, the paper's)", "mm^2"))
+    skeleton_method: str = field(default="thinning", metadata=_opt(
+        "thinning step of the skeleton: thinning (the package's Zhang-Suen thinning) or "
+        "skimage (skimage.morphology.skeletonize); both followed by the same removal of "
+        "redundant pixels and spur pruning", choices=SKELETON_METHODS))
     l_min_mm: float = field(default=1.0, metadata=_opt(
         "shortest branch detected; shorter skeleton spurs are pruned (paper: 1 mm)", "mm"))
     kappa_c_per_mm: float | None = field(default=None, metadata=_opt(
         "plastic curvature threshold of the bending energy (default: none)", "1/mm"))
+    width_statistic: str = field(default="median", metadata=_opt(
+        "width of a stack from its width profile away from its ends: median or mean",
+        choices=WIDTH_STATISTICS))
     tangent_mm: float | None = field(default=None, metadata=_opt(
         "length of the stack-tangent fit at junctions (default 3 h)", "mm"))
     bending_rigidity_J: float | None = field(default=None, metadata=_opt(
@@ -128,6 +137,10 @@ class AnalysisParams:
         "curvature trend continued to the junction where it exceeds the noise; the scan's "
         "curvature noise removed from the energy; curvature bounded by 2 / (n_br h))",
         choices=CURVATURE_METHODS))
+    integer_refinement: bool = field(default=True, metadata=_opt(
+        "improve the rounded least-squares branch counts by exact integer moves, and by the "
+        "MILP on small components the moves leave unbalanced; off: the rounding is the "
+        "result", cli=False))
 
     # ------------------------------------------------------------------ validation
     def __post_init__(self):
@@ -234,6 +247,8 @@ class AnalysisParams:
             values["calibration"] = str(Path(values["calibration"]).resolve())
         if getattr(args, "no_merge_thick_crossings", False):
             values["merge_thick_crossings"] = False
+        if getattr(args, "no_integer_refinement", False):
+            values["integer_refinement"] = False
         return cls.from_mapping(values, path=path)
 
     def to_dict(self) -> dict:
@@ -322,7 +337,8 @@ def check_param(name: str, value):
     """Validate and normalise one parameter value (``ParameterError`` naming it)."""
     if value is None:
         if name in ("px_per_mm", "thickness_mm", "l_min_mm", "merge_px", "threshold_method",
-                    "curvature_method", "merge_thick_crossings"):
+                    "curvature_method", "merge_thick_crossings", "skeleton_method",
+                    "width_statistic", "integer_refinement"):
             raise ParameterError(f"{name} is required")
         return None
     if name in _POSITIVE:
@@ -350,7 +366,11 @@ def check_param(name: str, value):
         return _choice(name, value, THRESHOLD_METHODS)
     if name == "curvature_method":
         return _choice(name, value, CURVATURE_METHODS)
-    if name == "merge_thick_crossings":
+    if name == "skeleton_method":
+        return _choice(name, value, SKELETON_METHODS)
+    if name == "width_statistic":
+        return _choice(name, value, WIDTH_STATISTICS)
+    if name in ("merge_thick_crossings", "integer_refinement"):
         if not isinstance(value, bool):
             raise ParameterError(f"{name} must be true or false, got {value!r}")
         return value
@@ -404,3 +424,7 @@ def add_analysis_arguments(parser, *, exclude=()) -> None:
     if "merge_thick_crossings" not in exclude:
         group.add_argument("--no-merge-thick-crossings", action="store_true",
                            help="keep the two junctions of a crossing of thick stacks apart")
+    if "integer_refinement" not in exclude:
+        group.add_argument("--no-integer-refinement", action="store_true",
+                           help="branch counts: the rounded least squares, without the "
+                                "integer search and the MILP fallback")

@@ -168,7 +168,7 @@ def _preprocess(image, p: AnalysisParams, timer) -> Preprocessed:
                           min_extent_px=l_min_px)
     _check_clean(mask, speck_px, path)
     with timer("skeleton"):
-        skel = skeletonize_mask(mask, l_min_px=l_min_px)
+        skel = skeletonize_mask(mask, l_min_px=l_min_px, method=p.skeleton_method)
     if not skel.any():
         raise AnalysisError("empty skeleton", path)
     with timer("distance"):
@@ -280,12 +280,14 @@ def _analyze(image, params, overrides) -> AnalysisResult:
     pre = _preprocess(image, p, timer)
     sg, h_px, scale = pre.graph, p.thickness_px, p.scale
     with timer("widths"):
-        width_mm = scale.to_mm(stack_widths_px(sg, pre.distance_px, junction_margin_px=2 * h_px))
+        width_mm = scale.to_mm(stack_widths_px(sg, pre.distance_px, junction_margin_px=2 * h_px,
+                                               statistic=p.width_statistic))
         layers_est = np.asarray(cal.layers(width_mm), dtype=float)
     with timer("packs"):
         packs = compute_packs(sg, tangent_px=scale.to_px(p.tangent_used_mm))
     with timer("linear_system"):
-        lin = solve_branch_counts(sg, packs, layers_est)
+        lin = solve_branch_counts(sg, packs, layers_est,
+                                  integer_refinement=p.integer_refinement)
         n_br = np.asarray(lin.n_br, dtype=np.int64)
     with timer("curvature"):
         profiles = curvature.stack_profiles(sg, n_br, pre.distance_px, thickness_px=h_px,

@@ -96,7 +96,8 @@ def _check_value(key, value, path, where):
             cal = Path(path).parent / cal
         check_calibration(cal, origin=path)
         return str(cal.resolve())
-    if isinstance(value, str) and key not in ("threshold_method", "curvature_method"):
+    if isinstance(value, str) and key not in ("threshold_method", "curvature_method",
+                                              "skeleton_method", "width_statistic"):
         raise ConfigError(f"{ctx} must be a number, got {value!r}", path)
     try:
         value = check_param(key, value)

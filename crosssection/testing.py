@@ -296,9 +296,9 @@ def scenes(**bounds):
 def analysis_params(**fixed):
     """Hypothesis strategy of valid :class:`crosssection.params.AnalysisParams`.
 
-    Resolution 20-100 px/mm, h 0.05-0.3 mm (at least 1 px), every threshold and curvature
-    method, l_min 0.2-3 mm, merge distance 0-6 px, optional tangent length, s_min and plastic
-    threshold.
+    Resolution 20-100 px/mm, h 0.05-0.3 mm (at least 1 px), every threshold, curvature and
+    skeleton method and width statistic, integer refinement on or off, l_min 0.2-3 mm, merge
+    distance 0-6 px, optional tangent length, s_min and plastic threshold.
 
     Parameters
     ----------
@@ -311,7 +311,8 @@ def analysis_params(**fixed):
     """
     from hypothesis import strategies as st
 
-    from crosssection.params import CURVATURE_METHODS, THRESHOLD_METHODS, AnalysisParams
+    from crosssection.params import (CURVATURE_METHODS, SKELETON_METHODS, THRESHOLD_METHODS,
+                                     WIDTH_STATISTICS, AnalysisParams)
 
     def opt(strategy):
         return st.none() | strategy
@@ -321,6 +322,9 @@ def analysis_params(**fixed):
         "thickness_mm": st.floats(0.05, 0.3),
         "threshold_method": st.sampled_from(THRESHOLD_METHODS),
         "curvature_method": st.sampled_from(CURVATURE_METHODS),
+        "skeleton_method": st.sampled_from(SKELETON_METHODS),
+        "width_statistic": st.sampled_from(WIDTH_STATISTICS),
+        "integer_refinement": st.booleans(),
         "l_min_mm": st.floats(0.2, 3.0),
         "merge_px": st.floats(0.0, 6.0),
         "tangent_mm": opt(st.floats(0.1, 1.0)),

@@ -32,7 +32,8 @@ epsilon        compaction rate epsilon = L / (2 pi R) = 4-30 (rods of 2000 segme
                by :func:`simulate.compact.compact_rod`, rendered as ``python -m simulate
                render`` renders a compaction: clean, the wall is the hole, h = 5 px)
 variants       pipeline options (threshold, curvature, calibration, hole, smoothing, tangent
-               length, l_min, thick-crossing merge) one at a time, on the same scenes
+               length, l_min, thick-crossing merge, skeleton thinning, width statistic,
+               integer refinement) one at a time, on the same scenes
                (typical scans: plates, illumination, noise, blur, JPEG, specks, smears)
 map_h_layers   h x mean layers (network generator)
 map_h_blur     h x blur (both generators)
@@ -126,7 +127,8 @@ class Variant:
 DEFAULT = Variant("default")
 # one option changed at a time (plus the paper's own combination); defaults: auto threshold,
 # missing-data curvature, calibration and hole given, smoothing 2 h + 1, tangent 3 h,
-# l_min 1 mm, thick crossings merged
+# l_min 1 mm, thick crossings merged, the package's thinning, median width, integer
+# refinement on
 VARIANTS = (
     DEFAULT,
     Variant("threshold otsu", (("threshold_method", "otsu"),)),
@@ -142,6 +144,9 @@ VARIANTS = (
     Variant("l_min 0.5 mm", (("l_min_mm", 0.5),)),
     Variant("l_min 2 mm", (("l_min_mm", 2.0),)),
     Variant("thick crossings kept", (("merge_thick_crossings", False),)),
+    Variant("skeleton skimage", (("skeleton_method", "skimage"),)),
+    Variant("width mean", (("width_statistic", "mean"),)),
+    Variant("no integer refinement", (("integer_refinement", False),)),
 )
 VARIANT_NAMES = tuple(v.name for v in VARIANTS)
 
@@ -1350,7 +1355,8 @@ def _variants_chart(df, info: SweepInfo):
     fig = _figure(15, 3.9 * len(gens) + 1.0)
     axes = fig.subplots(len(gens), len(VARIANT_PANELS), squeeze=False)
     colors = {v: _VARIANT_COLORS[i % len(_VARIANT_COLORS)] for i, v in enumerate(VARIANT_NAMES)}
-    markers = {v: "os^Dvp<>hX*Pd8"[i % 14] for i, v in enumerate(VARIANT_NAMES)}
+    markers = {v: _VARIANT_MARKERS[i % len(_VARIANT_MARKERS)]
+               for i, v in enumerate(VARIANT_NAMES)}
     for gi, gen in enumerate(gens):
         g = s[s["generator"] == gen].reset_index(drop=True)
         n = int(g["n_scenes"].median())
@@ -1387,7 +1393,9 @@ def _variants_chart(df, info: SweepInfo):
 
 _VARIANT_COLORS = ("black", "tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple",
                    "tab:brown", "tab:pink", "tab:olive", "tab:cyan", "navy", "gold", "teal",
-                   "grey")
+                   "grey", "lime", "magenta", "sienna")
+# as many as colours, so that no variant repeats the default's black circle
+_VARIANT_MARKERS = "os^Dvp<>hX*Pd8HDs"
 
 
 def _stage_columns(df):

@@ -9,7 +9,9 @@ the integer version of the paper's weighted least squares (an estimate half-way 
 integers is indifferent between them).  The continuous problem (conservation penalised, one
 sparse solve) is rounded, then improved by exact integer moves
 (:mod:`~crosssection.linsys.search`); the MILP (:mod:`~crosssection.linsys.milp`) is the
-fallback on small components whose hard equations the search leaves violated.
+fallback on small components whose hard equations the search leaves violated. Without
+integer refinement (``integer_refinement=False``) the rounding is the result, violated
+junctions included (flagged): the reference that shows what the integer steps are worth.
 
 Robustness to wrong equations (blurred junctions where the tangents mislead, the paper's
 +-1 errors along chains): by default a junction equation is not hard but costs
@@ -54,7 +56,7 @@ class ComponentInfo:
     rank: int
     condition_number: float
     residual: float
-    method: str                      # "search" | "milp" | "width"
+    method: str                      # "search" | "milp" | "width" | "rounded"
     rank_conservation: int = 0       # rank of the junction equations alone
     flags: list = field(default_factory=list)
     soft_junctions: list = field(default_factory=list)
@@ -136,6 +138,7 @@ class _Options:
     dense_max: int
     compute_residual: bool
     method: str
+    integer_refinement: bool = True
 
 
 @dataclass(frozen=True)
@@ -236,7 +239,11 @@ def _weighted_least_squares(C, P, ee, ww) -> np.ndarray:
 
 
 def _integer_solution(info, C, n_hard, pen, ee, ww, sg, x, opts) -> np.ndarray:
-    """Search from the rounding, MILP where the search leaves hard equations violated."""
+    """Search from the rounding, MILP where the search leaves hard equations violated; the
+    rounding alone without integer refinement."""
+    if not opts.integer_refinement:
+        info.method = "rounded"
+        return np.maximum(np.round(x if opts.start == "wls" else ee), 1).astype(np.int64)
     n_loc = None
     if opts.method != "milp":
         n_loc, moves = integer_refine(C, pen, ee, ww,
@@ -309,7 +316,8 @@ def solve_branch_counts(graph, packs: dict, layers_est, *, reliability=None,
                         noise_scale="auto", switch_llr: float | None = 9.0,
                         rod_ends: int = 2, milp_max_stacks: int = 60, time_limit_s: float = 1.0,
                         dense_max: int = 50, compute_residual: bool = True,
-                        method: str = "auto") -> LinearSystemResult:
+                        method: str = "auto", integer_refinement: bool = True
+                        ) -> LinearSystemResult:
     """Integer number of branches per stack (paper, "Image analysis procedure").
 
     Per connected component: the continuous weighted least squares (penalised conservation,
@@ -373,6 +381,14 @@ def solve_branch_counts(graph, packs: dict, layers_est, *, reliability=None,
     method : {"auto", "milp", "search"}
         "milp" solves every component with equations by the MILP (reference, slow);
         "search" never calls it.
+    integer_refinement : bool
+        False: the start of the search (``start``), clipped to >= 1, is the result of every
+        component with equations -- neither the integer search nor the MILP fallback runs
+        (the MILP is an integer refinement too, and running it alone would make this the
+        ``method="milp"`` reference). Junctions the rounding leaves unbalanced stay so: they
+        are listed in ``violated_junctions``, flagged ``inconsistent`` and counted in
+        ``conservation_residual``. Components are reported with method ``"rounded"``.
+        Incompatible with ``method="milp"``.
 
     Returns
     -------
@@ -381,6 +397,9 @@ def solve_branch_counts(graph, packs: dict, layers_est, *, reliability=None,
     """
     if method not in ("auto", "milp", "search"):
         raise ValueError(f"method must be auto, milp or search, got {method!r}")
+    if method == "milp" and not integer_refinement:
+        raise ValueError("method='milp' is an integer refinement: it needs "
+                         "integer_refinement=True")
     M = len(graph.paths)
     e_raw = np.asarray(layers_est, dtype=float).reshape(-1)
     if len(e_raw) != M:
@@ -388,7 +407,8 @@ def solve_branch_counts(graph, packs: dict, layers_est, *, reliability=None,
     opts = _Options(noise_layers=noise_layers, width_fraction=width_fraction, window=window,
                     soft_penalty=soft_penalty, robust_penalty=robust_penalty, start=start,
                     milp_max_stacks=milp_max_stacks, time_limit_s=time_limit_s,
-                    dense_max=dense_max, compute_residual=compute_residual, method=method)
+                    dense_max=dense_max, compute_residual=compute_residual, method=method,
+                    integer_refinement=bool(integer_refinement))
     wts = width_weights(e_raw, reliability=reliability, noise_layers=noise_layers,
                         noise_growth=noise_growth, noise_scale=noise_scale)
     score = reliability_score(e_raw, wts.weights)

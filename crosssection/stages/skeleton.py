@@ -10,7 +10,9 @@ pixel thick skeleton, without redundant kinks". Three steps:
    simple point and not an end point: the parallel algorithm's known failures (2x2 squares and
    two-pixel-thick diagonal lines vanishing) cannot break a stack. Measured on a 2000x2000 scan
    mask (16 % ink, bands 5-60 px): 0.04 s against 0.38 s for ``skimage.morphology.skeletonize``
-   (``thin`` takes 7.8 s); the skeletons differ only by single pixels.
+   (``thin`` takes 7.8 s); the skeletons differ only by single pixels. ``method="skimage"``
+   (the analysis option ``skeleton_method``) takes ``skimage.morphology.skeletonize`` for this
+   step instead, as a reference; steps 2 and 3 are the same for both.
 2. Removal of redundant pixels: any skeleton pixel that is a simple point (8-connected
    foreground, 4-connected background) with two or more neighbours is deleted, sequentially,
    until none is left. This removes the staircase corners that Zhang-Suen leaves (a pixel whose
@@ -767,25 +769,33 @@ def thin_mask(mask) -> np.ndarray:
     return skel[1:-1, 1:-1].astype(bool)
 
 
-def _skeleton_padded(mask, *, l_min_px):
+def _skeleton_padded(mask, *, l_min_px, method="thinning"):
     h, w = mask.shape
     img = np.zeros((h + 2, w + 2), np.uint8)
-    img[1:-1, 1:-1] = mask
     f = img.reshape(-1)
-    offs = _offsets(w + 2)
-    start = _border_pixels(img)
-    # a pixel enters the thinning's list at most once: room for every foreground pixel
-    cap = max(int(np.count_nonzero(f)), 1)
-    lst = np.empty(cap, np.int64)
-    lst[:len(start)] = start
-    st = np.zeros(f.shape[0], np.uint8)
-    _zhang_suen(f, offs, lst, len(start), st, np.empty(cap, np.int64), _ZS1, _ZS2, _SIMPLE,
-                _COUNT)
-    # numpy's nonzero is 10x faster on booleans than on uint8 (f holds 0 and 1)
-    idx = np.flatnonzero(f.view(np.bool_)).astype(np.intp, copy=False)
-    # the thinning leaves its state on skeleton pixels only: zeroed, it is the scratch image
-    # of the next steps, with its memory already mapped (a new one costs 2 ms on a dense scan)
-    st[idx] = 0
+    if method == "skimage":
+        from skimage.morphology import skeletonize
+
+        img[1:-1, 1:-1] = skeletonize(mask)
+        idx = np.flatnonzero(f.view(np.bool_)).astype(np.intp, copy=False)
+        st = np.zeros(f.shape[0], np.uint8)
+    else:
+        img[1:-1, 1:-1] = mask
+        offs = _offsets(w + 2)
+        start = _border_pixels(img)
+        # a pixel enters the thinning's list at most once: room for every foreground pixel
+        cap = max(int(np.count_nonzero(f)), 1)
+        lst = np.empty(cap, np.int64)
+        lst[:len(start)] = start
+        st = np.zeros(f.shape[0], np.uint8)
+        _zhang_suen(f, offs, lst, len(start), st, np.empty(cap, np.int64), _ZS1, _ZS2,
+                    _SIMPLE, _COUNT)
+        # numpy's nonzero is 10x faster on booleans than on uint8 (f holds 0 and 1)
+        idx = np.flatnonzero(f.view(np.bool_)).astype(np.intp, copy=False)
+        # the thinning leaves its state on skeleton pixels only: zeroed, it is the scratch
+        # image of the next steps, with its memory already mapped (a new one costs 2 ms on a
+        # dense scan)
+        st[idx] = 0
     # from here on f holds the row codes of the skeleton
     _to_row_codes(f, idx)
     idx = _remove_redundant(f, w + 2, idx, mark=st)
@@ -796,7 +806,7 @@ def _skeleton_padded(mask, *, l_min_px):
     return img, n_removed
 
 
-def skeletonize_mask(mask, *, l_min_px: float) -> np.ndarray:
+def skeletonize_mask(mask, *, l_min_px: float, method: str = "thinning") -> np.ndarray:
     """One-pixel skeleton without redundant kinks; spurs shorter than ``l_min_px`` pruned.
 
     Parameters
@@ -807,6 +817,11 @@ def skeletonize_mask(mask, *, l_min_px: float) -> np.ndarray:
         Detection limit in pixels (paper: l_min = 1 mm). A terminal branch (free end to a
         junction pixel) shorter than this is a spur and is deleted, iteratively; a segment
         without junction and closed loops are kept whatever their length. 0 disables pruning.
+    method : {"thinning", "skimage"}
+        The thinning step (step 1 of the module docstring): this module's Zhang-Suen
+        thinning, or ``skimage.morphology.skeletonize`` (the reference implementation,
+        slower). Both are followed by the same removal of redundant pixels and
+        the same spur pruning, so the two skeletons differ only by what the thinnings do.
 
     Returns
     -------
@@ -820,7 +835,9 @@ def skeletonize_mask(mask, *, l_min_px: float) -> np.ndarray:
     mask = _check_mask(mask)
     if not np.isfinite(l_min_px) or l_min_px < 0:
         raise ParameterError(f"l_min_px must be a finite number >= 0, got {l_min_px}")
-    img, _ = _skeleton_padded(mask, l_min_px=l_min_px)
+    if method not in ("thinning", "skimage"):
+        raise ParameterError(f"skeleton method must be 'thinning' or 'skimage', got {method!r}")
+    img, _ = _skeleton_padded(mask, l_min_px=l_min_px, method=method)
     return img[1:-1, 1:-1].astype(bool)
 
 

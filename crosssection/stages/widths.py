@@ -16,7 +16,10 @@ within half a pixel, so ``width = d(-1) + d(+1) + 1``.  The residual bias, measu
 of known width 5..60 px at several angles (tests/test_widths.py), is below 0.3 px.
 The per-stack value is the median along the path, skipping the parts within
 ``max(junction_margin_px, width)`` of a junction or a free end, where the mask widens (or
-narrows); short stacks fall back to their central half.
+narrows); short stacks fall back to their central half. ``statistic="mean"`` (the analysis
+option ``width_statistic``) takes the mean of the same samples instead: the samples skipped
+are chosen from a median first estimate either way, so the two differ only where the
+profile has outliers (a speck or a smear on the stack, a pinch).
 """
 from __future__ import annotations
 
@@ -26,6 +29,7 @@ import numpy as np
 from numba import njit
 
 from crosssection.core.calibration import Calibration
+from crosssection.core.errors import ParameterError
 
 __all__ = ["stack_widths", "stack_widths_px", "path_width_profile_px", "Calibration"]
 
@@ -43,6 +47,16 @@ def _segment_medians(values, seg, n_seg) -> np.ndarray:
     lo = (offs[:-1] + (lens - 1) // 2)[ok]
     hi = (offs[:-1] + lens // 2)[ok]
     out[ok] = np.where(lens[ok] % 2 == 1, srt[lo], (srt[lo] + srt[hi]) / 2)
+    return out
+
+
+def _segment_means(values, seg, n_seg) -> np.ndarray:
+    """Mean of the values of every segment id ``0 .. n_seg - 1`` (NaN when empty)."""
+    lens = np.bincount(seg, minlength=n_seg)
+    sums = np.bincount(seg, weights=values, minlength=n_seg)
+    out = np.full(n_seg, np.nan)
+    ok = lens > 0
+    out[ok] = sums[ok] / lens[ok]
     return out
 
 
@@ -214,8 +228,13 @@ def path_width_profile_px(path_rc: np.ndarray, distance_px: np.ndarray, *,
     return prof
 
 
-def _stack_medians(prof, pr, pc, offs, margin_abs, loop_u, loop_v, factor):
-    """Per stack, the median width away from its ends (:func:`stack_widths_px`)."""
+def _stack_medians(prof, pr, pc, offs, margin_abs, loop_u, loop_v, factor,
+                   statistic="median"):
+    """Per stack, the median (or mean) width away from its ends (:func:`stack_widths_px`).
+
+    The samples kept are chosen with the median first estimate ``w0`` whatever the
+    statistic, so that "mean" and "median" summarise the same samples.
+    """
     m = offs.shape[0] - 1
     lens = np.diff(offs)
     seg = np.repeat(np.arange(m), lens)
@@ -240,12 +259,18 @@ def _stack_medians(prof, pr, pc, offs, margin_abs, loop_u, loop_v, factor):
     keep = np.ones(len(pr), np.bool_)
     keep &= loop_u[seg] | (s >= margin)
     keep &= loop_v[seg] | (s <= tot - margin)
-    w_keep = _segment_medians(prof[keep], seg[keep], m)
+    if statistic == "mean":
+        w0 = np.where(np.bincount(seg[central], minlength=m) > 0,
+                      _segment_means(prof[central], seg[central], m),
+                      _segment_means(prof, seg, m))
+        w_keep = _segment_means(prof[keep], seg[keep], m)
+    else:
+        w_keep = _segment_medians(prof[keep], seg[keep], m)
     return np.where(np.bincount(seg[keep], minlength=m) >= 3, w_keep, w0)
 
 
 def stack_widths_px(graph, distance_px: np.ndarray, *, junction_margin_px: float,
-                    margin_width_factor: float = 1.0) -> np.ndarray:
+                    margin_width_factor: float = 1.0, statistic: str = "median") -> np.ndarray:
     """Width in pixels of every stack (median of the local width away from its ends).
 
     Parameters
@@ -261,12 +286,22 @@ def stack_widths_px(graph, distance_px: np.ndarray, *, junction_margin_px: float
         (closed loops without a junction) get no margin.
     margin_width_factor : float
         See above: a thick stack's junction blob extends about one width.
+    statistic : {"median", "mean"}
+        Summary of the local widths kept (or, for a stack with fewer than 3 of them, of
+        its central half). The samples kept are the same for both.
 
     Returns
     -------
     (M,) float array
         Width in px; NaN for an empty path.
+
+    Raises
+    ------
+    ParameterError
+        An unknown ``statistic``.
     """
+    if statistic not in ("median", "mean"):
+        raise ParameterError(f"width statistic must be 'median' or 'mean', got {statistic!r}")
     paths = [np.asarray(p).reshape(-1, 2) for p in graph.paths]
     if not paths:
         return np.zeros(0)
@@ -276,7 +311,7 @@ def stack_widths_px(graph, distance_px: np.ndarray, *, junction_margin_px: float
     loop_v = np.array([kind.get(v, "junction") == "loop" for _, v in graph.ends], np.bool_)
     return _stack_medians(prof, np.ascontiguousarray(flat[:, 0]),
                           np.ascontiguousarray(flat[:, 1]), offs, float(junction_margin_px),
-                          loop_u, loop_v, float(margin_width_factor))
+                          loop_u, loop_v, float(margin_width_factor), statistic)
 
 
 def stack_widths(graph, distance_px: np.ndarray, *, px_per_mm: float,

@@ -178,13 +178,63 @@ def test_thick_x_crossing_becomes_degree_4():
     {"px_per_mm": 0}, {"px_per_mm": -5}, {"thickness_mm": 0}, {"thickness_mm": float("nan")},
     {"s_min_mm2": 1e6}, {"hole_radius_mm": -1}, {"rod_length_mm": 0},
     {"hole_center_px": (1, "a")}, {"threshold_method": "magic"}, {"thickness_mm": 50.0},
-    {"l_min_mm": -1},
+    {"l_min_mm": -1}, {"skeleton_method": "zhang"}, {"width_statistic": "mode"},
+    {"integer_refinement": "no"},
 ])
 def test_absurd_parameters_raise(kwargs):
     img = np.full((100, 100, 3), 245, np.uint8)
     img[40:60, 10:90] = (40, 70, 190)
     with pytest.raises(ParameterError):
         analyze(img, **kwargs)
+
+
+@pytest.mark.parametrize("name,value,expected", [
+    ("skeleton_method", "zhang", "skeleton_method must be one of thinning, skimage"),
+    ("width_statistic", "mode", "width_statistic must be one of median, mean"),
+    ("integer_refinement", 0, "integer_refinement must be true or false"),
+])
+def test_method_options_fail_in_one_line(name, value, expected):
+    from crosssection.params import AnalysisParams
+
+    with pytest.raises(ParameterError) as err:
+        AnalysisParams.from_mapping({name: value}, path="scan.png")
+    line = err.value.one_line()
+    assert "\n" not in line and line.startswith("scan.png: ") and expected in line
+
+
+def test_method_options_reach_their_stages():
+    """Each option changes what it should on a generated scene (defaults recorded in the
+    summary), and ``--no-integer-refinement`` sets its field."""
+    import argparse
+
+    from crosssection.params import AnalysisParams, add_analysis_arguments
+
+    scene = make_scene(seed=42, n_stacks=30, max_layers=6, noise_sigma=6.0)
+    p = scene.params
+    kw = dict(px_per_mm=p["px_per_mm"], thickness_mm=p["thickness_mm"],
+              hole_radius_mm=p["hole_radius_mm"], hole_center_px=p["hole_center_px"],
+              calibration=scene.calibration.to_frame(20))
+    base = analyze(scene.rgb, **kw)
+    assert {k: base.summary["parameters"][k] for k in
+            ("skeleton_method", "width_statistic", "integer_refinement")} == {
+        "skeleton_method": "thinning", "width_statistic": "median", "integer_refinement": True}
+    skim = analyze(scene.rgb, skeleton_method="skimage", **kw)
+    assert not np.array_equal(skim.skeleton, base.skeleton)
+    assert skim.summary["n_junctions"] == base.summary["n_junctions"]
+    mean = analyze(scene.rgb, width_statistic="mean", **kw)
+    np.testing.assert_array_equal(mean.skeleton, base.skeleton)
+    assert not np.allclose(mean.stacks.width_mm, base.stacks.width_mm)
+    raw = analyze(scene.rgb, integer_refinement=False, **kw)
+    assert {c.method for c in raw.linear_system.components} <= {"rounded", "width"}
+    assert "rounded" in {c.method for c in raw.linear_system.components}
+    assert "rounded" not in {c.method for c in base.linear_system.components}
+    parser = argparse.ArgumentParser()
+    add_analysis_arguments(parser)
+    args = parser.parse_args(["--no-integer-refinement", "--skeleton-method", "skimage",
+                              "--width-statistic", "mean"])
+    cli = AnalysisParams.from_cli_args(args)
+    assert (cli.integer_refinement, cli.skeleton_method, cli.width_statistic) == (
+        False, "skimage", "mean")
 
 
 def test_uniform_images_raise_analysis_error():

@@ -185,3 +185,50 @@ def test_bad_arguments_raise(tiny_graph):
         solve_branch_counts(fg, {}, np.ones(1), method="exact")
     with pytest.raises(ValueError, match="layers_est"):
         solve_branch_counts(fg, {}, np.ones(2))
+
+
+def test_without_integer_refinement_the_rounding_stays_unbalanced():
+    """A Y junction (trunk = two branches) whose least squares round to 3 = 1 + 1: the
+    integer steps balance it, without them it stays violated and is reported."""
+    G = nx.MultiGraph()
+    G.add_edges_from([(0, 1, {"stack_id": 0}), (0, 2, {"stack_id": 1}),
+                      (0, 3, {"stack_id": 2})])
+    kind = {0: "junction", 1: "end", 2: "end", 3: "end"}
+    fg = NetworkGraph(G, {k: np.zeros(2) for k in kind}, kind,
+                      [np.zeros((2, 2), int)] * 3, [(0, 1), (0, 2), (0, 3)])
+    packs = {0: Pack(0, [(0, 0)], [(1, 0), (2, 0)])}
+    est = np.array([2.6, 1.4, 1.4])
+    on = solve_branch_counts(fg, packs, est)
+    off = solve_branch_counts(fg, packs, est, integer_refinement=False)
+    np.testing.assert_array_equal(on.n_br, [2, 1, 1])
+    assert on.conservation_residual == 0 and on.components[0].method == "search"
+    np.testing.assert_array_equal(off.n_br, [3, 1, 1])
+    assert off.conservation_residual == 1
+    assert off.components[0].violated_junctions == [0]
+    assert off.components[0].method == "rounded"
+    assert "inconsistent:component=0" in off.flags
+
+
+def test_integer_refinement_is_what_balances_noisy_networks():
+    """sigma = 0.3 layers on random networks: the rounding alone leaves junctions
+    unbalanced and fewer stacks exact; the default balances every one."""
+    exact = {True: 0, False: 0}
+    unbalanced = {True: 0, False: 0}
+    total = 0
+    for seed in range(100, 112):
+        fg = random_network(seed, n_junctions=30, n_free=4)
+        est = fg.n_true + np.random.default_rng(seed + 7).normal(0, 0.3, len(fg.n_true))
+        for refine in (True, False):
+            res = solve_branch_counts(fg, fg.packs, est, integer_refinement=refine)
+            assert np.all(res.n_br >= 1)
+            exact[refine] += int(np.sum(res.n_br == fg.n_true))
+            unbalanced[refine] += res.conservation_residual > 0
+        total += len(fg.n_true)
+    assert unbalanced[True] == 0 and unbalanced[False] > 0
+    assert exact[True] > exact[False]
+
+
+def test_milp_needs_integer_refinement(tiny_graph):
+    fg = tiny_graph([(0, 1)], {0: "end", 1: "end"})
+    with pytest.raises(ValueError, match="integer_refinement"):
+        solve_branch_counts(fg, {}, np.ones(1), method="milp", integer_refinement=False)

@@ -11,7 +11,9 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
+from scipy import ndimage as ndi
 
+from crosssection.core.errors import ParameterError
 from crosssection.stages import skeleton as sk
 
 
@@ -437,3 +439,45 @@ def test_skeletonize_mask_matches_sequential_loops():
         if l_min == 0:
             assert np.array_equal(sk.thin_mask(mask), ref)
 
+
+
+def _codes(skel):
+    """8-neighbour code of every pixel of a bool image (bit k = neighbour k of ``sk._DR``,
+    ``sk._DC``)."""
+    p = np.pad(skel.astype(np.uint8), 1)
+    h, w = skel.shape
+    code = np.zeros((h, w), np.intp)
+    for k in range(8):
+        code |= p[1 + sk._DR[k]:1 + sk._DR[k] + h, 1 + sk._DC[k]:1 + sk._DC[k] + w].astype(
+            np.intp) << k
+    return code
+
+
+def _topology(skel):
+    """(free ends, junction clusters, connected components) of a skeleton."""
+    n = sk.neighbour_count(skel)
+    eight = np.ones((3, 3), int)
+    return (int(np.count_nonzero(n == 1)), ndi.label(n >= 3, structure=eight)[1],
+            ndi.label(skel, structure=eight)[1])
+
+
+@pytest.mark.parametrize("seed", [1, 3])
+def test_skimage_thinning_gives_the_same_topology(seed):
+    """The skimage thinning followed by the same redundant-pixel removal and pruning: other
+    pixels, the same junctions, ends and components, and no redundant pixel left."""
+    from crosssection.truth.network import make_scene
+
+    rgb = make_scene(seed=seed, n_stacks=30, max_layers=6).rgb.astype(int)
+    mask = (rgb[..., 2] > rgb[..., 0] + 40) & (rgb.sum(-1) < 600)
+    ours = sk.skeletonize_mask(mask, l_min_px=25.0)
+    ref = sk.skeletonize_mask(mask, l_min_px=25.0, method="skimage")
+    assert np.count_nonzero(ours != ref) > 0  # the option does change the thinning
+    assert _topology(ref) == _topology(ours)
+    assert _topology(ours)[1] >= 10
+    code = _codes(ref)[ref]
+    assert not np.any(sk._SIMPLE[code].astype(bool) & (sk._COUNT[code] >= 2))
+
+
+def test_unknown_skeleton_method_raises():
+    with pytest.raises(ParameterError, match="skeleton method"):
+        sk.skeletonize_mask(np.ones((5, 5), bool), l_min_px=0.0, method="thin")

@@ -8,7 +8,7 @@ from scipy import ndimage
 from skimage.draw import circle_perimeter, line
 from skimage.morphology import skeletonize
 
-from crosssection.core.errors import ConfigError
+from crosssection.core.errors import ConfigError, ParameterError
 from crosssection.core.calibration import Calibration
 from crosssection.stages.widths import path_width_profile_px, stack_widths, stack_widths_px
 from crosssection.truth.graphs import NetworkGraph
@@ -111,6 +111,25 @@ def test_junction_margin_excludes_blob_and_short_stack_fallback():
     assert abs(w[0] - 10) < 0.6
     empty = NetworkGraph(fg.graph, fg.node_rc, fg.node_kind, [np.zeros((0, 2), int)], fg.ends)
     assert np.isnan(stack_widths_px(empty, d, junction_margin_px=5)[0])
+
+
+def test_mean_width_statistic_follows_a_bump_the_median_ignores():
+    """A band 10 px wide with a bump (a disc 30 px across) a quarter of the way along: the
+    median ignores it, the mean of the same samples does not; on the plain band they agree."""
+    fg, mask = band_graph(10, 0.3, length=200)
+    d = ndimage.distance_transform_edt(mask)
+    plain = {s: stack_widths_px(fg, d, junction_margin_px=5, statistic=s)[0]
+             for s in ("median", "mean")}
+    assert abs(plain["median"] - 10) < 0.5 and abs(plain["mean"] - plain["median"]) < 0.3
+    p = fg.paths[0][len(fg.paths[0]) // 4]
+    rr, cc = np.mgrid[:mask.shape[0], :mask.shape[1]]
+    d = ndimage.distance_transform_edt(mask | (np.hypot(rr - p[0], cc - p[1]) < 15))
+    bumped = {s: stack_widths_px(fg, d, junction_margin_px=5, statistic=s)[0]
+              for s in ("median", "mean")}
+    assert abs(bumped["median"] - 10) < 0.5
+    assert bumped["mean"] > bumped["median"] + 1.0
+    with pytest.raises(ParameterError, match="width statistic"):
+        stack_widths_px(fg, d, junction_margin_px=5, statistic="mode")
 
 
 # ------------------------------------------------------------------ calibration
