@@ -209,3 +209,17 @@ def test_segment_lengths_exact_after_every_step_of_a_rod_pressed_along_the_wall(
         assert np.abs(seg * n - 1.0).max() < 1e-8, max_iter
         outs.append(out)
     assert max(out[8] for out in outs) > 0  # halved steps: the case is the one they are for
+
+
+def test_a_ring_lining_the_wall_end_to_end_does_not_stall_the_wall():
+    """At epsilon 2, N = 300 the second level ends at epsilon 1: the relaxed rod lines the wall
+    as a ring whose ends butt against each other, a compression the wall's position imposes
+    and stiffer springs cannot release. The wall must go on (buckling the ring off the wall)
+    instead of waiting the level's whole iteration cap on an exact equilibrium, restarting
+    FIRE every iteration (2.06e6 iterations, 1.98e6 restarts and an unconverged hold, force
+    48, when it waited)."""
+    p = compact.CompactParams(epsilon=2.0, n_segments=300)
+    r = compact.compact_rod(p, np.random.default_rng(1))
+    assert r.stats["iterations"] < 200_000
+    assert r.stats["restarts"] < 20_000
+    assert r.stats["force"] < 1.0  # the final hold converged
