@@ -438,12 +438,15 @@ class Rod:
     rod_length_mm: float
 
 
-def make_rod(index: int, seed: int, config: AtlasConfig) -> Rod:
-    """Quench rod ``index`` and fix its scan scale (a worker task)."""
+def make_rod(index: int, seed: int, config: AtlasConfig, xy=None) -> Rod:
+    """Quench rod ``index`` (or take the given node positions ``xy``) and fix its scan scale
+    (a worker task)."""
     from simulate.contacts import analyze_rod
 
-    xy = quench_rod(seed, n_segments=config.rod_segments, n_runs=config.rod_runs,
-                    maxiter=config.rod_maxiter)
+    if xy is None:
+        xy = quench_rod(seed, n_segments=config.rod_segments, n_runs=config.rod_runs,
+                        maxiter=config.rod_maxiter)
+    xy = np.asarray(xy, float)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         analysis = analyze_rod(xy, lam=7e5)
@@ -868,7 +871,7 @@ def run_base(base: Base, treatments, rod: Rod | None = None) -> list:
 
 # ----------------------------------------------------------------------------- the run
 def run_atlas(out, config: AtlasConfig | None = None, *, seed: int = 1, workers: int = 1,
-              sweeps=None, progress: bool = False) -> dict:
+              sweeps=None, progress: bool = False, rods=None) -> dict:
     """Run the atlas and write its tables, charts and ``index.md`` into ``out``.
 
     Parameters
@@ -885,6 +888,11 @@ def run_atlas(out, config: AtlasConfig | None = None, *, seed: int = 1, workers:
         Sweeps to run (default all).
     progress : bool
         Show a progress bar.
+    rods : str or Path, optional
+        A ``rods.npz`` written by an earlier run (key ``rod_<index>_<seed>``): its rods are
+        rendered instead of quenching them again. The quench is chaotic, so another build of
+        numba or numpy gives other rods from the same seeds; this reproduces a report's render
+        points whatever the build. Every run writes the rods it used to ``out/rods.npz``.
 
     Returns
     -------
@@ -904,6 +912,7 @@ def run_atlas(out, config: AtlasConfig | None = None, *, seed: int = 1, workers:
         raise ParameterError("the report folder is a file", out)
     t_start = time.perf_counter()
     rod_jobs, tasks = plan(config, int(seed), scene_sweeps)
+    given = _read_rods(rods, rod_jobs) if rods is not None else {}
     # the longest tasks first so the pool ends together
     tasks.sort(key=lambda bt: -bt[0].cost() * (1 + 0.1 * len(bt[1])))
     bar = None
@@ -914,13 +923,14 @@ def run_atlas(out, config: AtlasConfig | None = None, *, seed: int = 1, workers:
     rows = []
     try:
         with get_executor(workers) as ex:
-            rods = {}
-            for fut in as_completed([ex.submit(make_rod, i, s, config) for i, s in rod_jobs]):
+            rods_used = {}
+            for fut in as_completed([ex.submit(make_rod, i, s, config, given.get(i))
+                                     for i, s in rod_jobs]):
                 rod = fut.result()
-                rods[rod.index] = rod
+                rods_used[rod.index] = rod
                 if bar is not None:
                     bar.update(1)
-            futs = [ex.submit(run_base, b, t, rods.get(b.rod)) for b, t in tasks]
+            futs = [ex.submit(run_base, b, t, rods_used.get(b.rod)) for b, t in tasks]
             for fut in as_completed(futs):
                 rows.extend(fut.result())
                 if bar is not None:
@@ -929,6 +939,8 @@ def run_atlas(out, config: AtlasConfig | None = None, *, seed: int = 1, workers:
             out.mkdir(parents=True, exist_ok=True)
             for name, df in tables.items():
                 write_csv(out / f"{name}.csv", df)
+            if rods_used:
+                _write_rods(out / "rods.npz", rods_used)
             write_csv(out / "failures.csv", failures)
             command = _command(config, seed, workers, sweeps)
             fits = None
@@ -945,6 +957,42 @@ def run_atlas(out, config: AtlasConfig | None = None, *, seed: int = 1, workers:
             bar.close()
     return {"tables": tables, "failures": failures, "elapsed_s": elapsed, "fits": fits,
             **report}
+
+
+def _rod_key(index: int, seed: int) -> str:
+    return f"rod_{index}_{seed}"
+
+
+def _write_rods(path: Path, rods: dict) -> None:
+    """The node positions of every rod used, atomically (temp file, then rename)."""
+    tmp = path.with_name(path.name + ".tmp.npz")
+    np.savez_compressed(tmp, **{_rod_key(r.index, r.seed): r.xy for r in rods.values()})
+    tmp.replace(path)
+
+
+def _read_rods(path, rod_jobs) -> dict:
+    """Rod index -> node positions, from a report's ``rods.npz`` (see :func:`run_atlas`)."""
+    import zipfile
+
+    path = Path(path)
+    try:
+        with np.load(path, allow_pickle=False) as f:
+            stored = {k: np.asarray(f[k], float) for k in f.files}
+    except FileNotFoundError:
+        raise ParameterError("rods file not found", path) from None
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        raise ParameterError(f"unreadable rods file ({' '.join(str(exc).split())})",
+                             path) from None
+    out = {}
+    for i, s in rod_jobs:
+        xy = stored.get(_rod_key(i, s))
+        if xy is None:
+            raise ParameterError(f"no rod {_rod_key(i, s)} (rods of another seed or size?)",
+                                 path)
+        if xy.ndim != 2 or xy.shape[1] != 2 or len(xy) < 4 or not np.isfinite(xy).all():
+            raise ParameterError(f"rod {_rod_key(i, s)} is not an (N+1, 2) finite array", path)
+        out[i] = xy
+    return out
 
 
 def _command(config, seed, workers, sweeps) -> str:
@@ -1604,6 +1652,10 @@ def add_subparser(sub) -> None:
     p.add_argument("--sweeps", default=None, metavar="NAMES",
                    help="comma-separated sweeps to run (default all: " + ", ".join(ALL_SWEEPS)
                         + ")")
+    p.add_argument("--rods", default=None, metavar="FILE",
+                   help="render the quenched rods of an earlier report (its rods.npz) instead "
+                        "of quenching them again: the quench is chaotic, so another build of "
+                        "numba or numpy gives other rods from the same seeds")
     p.set_defaults(func=_run)
 
 
@@ -1614,7 +1666,7 @@ def _run(args) -> int:
         raise ParameterError(f"--seed must be >= 0, got {args.seed}")
     config = AtlasConfig.quick() if args.quick else AtlasConfig.full()
     res = run_atlas(args.out, config, seed=args.seed, workers=args.workers,
-                    sweeps=args.sweeps, progress=sys.stderr.isatty())
+                    sweeps=args.sweeps, progress=sys.stderr.isatty(), rods=args.rods)
     n = sum(len(t) for t in res["tables"].values())
     print(f"{n} analyses in {res['elapsed_s']:.0f} s; {len(res['charts'])} charts, index in "
           f"{Path(args.out) / 'index.md'}")

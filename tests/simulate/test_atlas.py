@@ -180,6 +180,40 @@ def test_seeds_fix_the_scenes():
     assert [x[0].seed for x in a] != [x[0].seed for x in c]
 
 
+def test_rods_are_recorded_and_reused(report, tmp_path, monkeypatch):
+    """A report keeps the quenched rods it rendered; ``rods=`` renders them again instead of
+    quenching (the quench is chaotic across library builds), the render rows unchanged."""
+    out, res = report
+    with np.load(out / "rods.npz") as f:
+        keys = list(f.files)
+        assert keys and all(k.startswith("rod_") for k in keys)
+        assert all(f[k].ndim == 2 and f[k].shape[1] == 2 for k in keys)
+
+    def no_quench(*args, **kwargs):
+        raise AssertionError("the rod was quenched again")
+
+    monkeypatch.setattr(atlas, "quench_rod", no_quench)
+    again = atlas.run_atlas(tmp_path / "again", atlas.AtlasConfig.tiny(), seed=3, workers=1,
+                            sweeps=("resolution",), rods=out / "rods.npz")
+    cols = ["h_px", "seed", "truth_n_stacks", "n_br_exact_length_fraction", "junction_f1",
+            "rod_length_rel_error"]
+    first = res["tables"]["resolution"]
+    first = first[first["generator"] == "render"][cols].reset_index(drop=True)
+    second = again["tables"]["resolution"]
+    second = second[second["generator"] == "render"][cols].reset_index(drop=True)
+    assert len(first) and first.equals(second)
+
+
+def test_rods_of_another_seed_are_refused(report, tmp_path):
+    out, _ = report
+    with pytest.raises(atlas.ParameterError, match="no rod"):
+        atlas.run_atlas(tmp_path / "r", atlas.AtlasConfig.tiny(), seed=4, workers=1,
+                        sweeps=("resolution",), rods=out / "rods.npz")
+    with pytest.raises(atlas.ParameterError, match="not found"):
+        atlas.run_atlas(tmp_path / "r", atlas.AtlasConfig.tiny(), seed=3, workers=1,
+                        sweeps=("resolution",), rods=tmp_path / "missing.npz")
+
+
 @pytest.mark.parametrize("args, message", [
     (["--workers", "0"], "--workers"),
     (["--seed", "-1"], "--seed"),
