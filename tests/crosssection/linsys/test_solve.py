@@ -38,16 +38,21 @@ def test_noisy_widths_recover_integers(tree, assert_conserved):
     assert frac > rounding_exact / total  # conservation must help
 
 
+def _y_junction():
+    """One junction, stack 0 in one pack against stacks 1 and 2 in the other."""
+    G = nx.MultiGraph()
+    G.add_edges_from([(0, 1, {"stack_id": 0}), (0, 2, {"stack_id": 1}),
+                      (0, 3, {"stack_id": 2})])
+    kind = {0: "junction", 1: "end", 2: "end", 3: "end"}
+    fg = NetworkGraph(G, {k: np.zeros(2) for k in kind}, kind,
+                      [np.zeros((2, 2), int)] * 3, [(0, 1), (0, 2), (0, 3)])
+    return fg, {0: Pack(0, [(0, 0)], [(1, 0), (2, 0)])}
+
+
 def test_y_junction_splits():
     """n=2 splits into 1+1, 5 into 2+3 (trunk on one pack, two branches on the other)."""
     for trunk, left, right in [(2, 1, 1), (5, 2, 3), (7, 3, 4)]:
-        G = nx.MultiGraph()
-        G.add_edges_from([(0, 1, {"stack_id": 0}), (0, 2, {"stack_id": 1}),
-                          (0, 3, {"stack_id": 2})])
-        kind = {0: "junction", 1: "end", 2: "end", 3: "end"}
-        fg = NetworkGraph(G, {k: np.zeros(2) for k in kind}, kind,
-                          [np.zeros((2, 2), int)] * 3, [(0, 1), (0, 2), (0, 3)])
-        packs = {0: Pack(0, [(0, 0)], [(1, 0), (2, 0)])}
+        fg, packs = _y_junction()
         rng = np.random.default_rng(trunk)
         est = np.array([trunk, left, right]) + rng.normal(0, 0.15, 3)
         res = solve_branch_counts(fg, packs, est)
@@ -190,13 +195,7 @@ def test_bad_arguments_raise(tiny_graph):
 def test_without_integer_refinement_the_rounding_stays_unbalanced():
     """A Y junction (trunk = two branches) whose least squares round to 3 = 1 + 1: the
     integer steps balance it, without them it stays violated and is reported."""
-    G = nx.MultiGraph()
-    G.add_edges_from([(0, 1, {"stack_id": 0}), (0, 2, {"stack_id": 1}),
-                      (0, 3, {"stack_id": 2})])
-    kind = {0: "junction", 1: "end", 2: "end", 3: "end"}
-    fg = NetworkGraph(G, {k: np.zeros(2) for k in kind}, kind,
-                      [np.zeros((2, 2), int)] * 3, [(0, 1), (0, 2), (0, 3)])
-    packs = {0: Pack(0, [(0, 0)], [(1, 0), (2, 0)])}
+    fg, packs = _y_junction()
     est = np.array([2.6, 1.4, 1.4])
     on = solve_branch_counts(fg, packs, est)
     off = solve_branch_counts(fg, packs, est, integer_refinement=False)
