@@ -1,4 +1,4 @@
-"""Full sweep of the statistics targets (issue 4): run ``python benchmarks/bench_fits.py``.
+"""Full sweep of the statistics targets: run ``python benchmarks/bench_fits.py``.
 
 1. Coverage: 95% percentile-bootstrap intervals contain the generating parameters at about
    the nominal rate, per family and n in (200, 1000, 5000).
