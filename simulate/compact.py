@@ -205,6 +205,21 @@ def _tridiag(lo, di, up, rhs):
     return d
 
 
+@njit(cache=True, inline="always")
+def _chain_matrix(ax, ay, bx, by, lo, di, up):
+    """The tridiagonal matrix ``M[j, k] = (2 if j == k else -1) a_j . b_k`` (|j - k| <= 1) of
+    a chain's segment constraints, into ``lo``, ``di``, ``up``: with ``b = a`` the Gram matrix
+    ``J J^T`` of the force projection, with ``b`` the directions before the step the Newton
+    matrix of the length restoration."""
+    n = ax.shape[0]
+    for j in range(n):
+        di[j] = 2.0 * (ax[j] * bx[j] + ay[j] * by[j])
+        if j > 0:
+            lo[j] = -(ax[j] * bx[j - 1] + ay[j] * by[j - 1])
+        if j < n - 1:
+            up[j] = -(ax[j] * bx[j + 1] + ay[j] * by[j + 1])
+
+
 @njit(cache=True)
 def _restore_lengths(x, rxs, rys, ds, dxs, dys, lo, di, up, rhs):
     """Restore every segment length of ``x`` (N+1, 2) to ``ds`` in place (SHAKE): Newton on
@@ -224,12 +239,7 @@ def _restore_lengths(x, rxs, rys, ds, dxs, dys, lo, di, up, rhs):
             return True
         if _k == 20 or not math.isfinite(err):
             return False
-        for j in range(n):
-            di[j] = 2.0 * (dxs[j] * rxs[j] + dys[j] * rys[j])
-            if j > 0:
-                lo[j] = -(dxs[j] * rxs[j - 1] + dys[j] * rys[j - 1])
-            if j < n - 1:
-                up[j] = -(dxs[j] * rxs[j + 1] + dys[j] * rys[j + 1])
+        _chain_matrix(dxs, dys, rxs, rys, lo, di, up)
         mu = _tridiag(lo, di, up, rhs)
         for j in range(n):
             x[j, 0] -= rxs[j] * mu[j]
@@ -419,13 +429,9 @@ def _compress(x, r_start, r_end, h_ratio, margin, rate, k, dt_max, max_iter, fto
         for j in range(n):
             dxs[j] = x[j + 1, 0] - x[j, 0]
             dys[j] = x[j + 1, 1] - x[j, 1]
+        _chain_matrix(dxs, dys, dxs, dys, lo, di, up)
         for j in range(n):
-            di[j] = 2.0 * (dxs[j] * dxs[j] + dys[j] * dys[j])
             rhs[j] = dxs[j] * (f[j + 1, 0] - f[j, 0]) + dys[j] * (f[j + 1, 1] - f[j, 1])
-            if j > 0:
-                lo[j] = -(dxs[j] * dxs[j - 1] + dys[j] * dys[j - 1])
-            if j < n - 1:
-                up[j] = -(dxs[j] * dxs[j + 1] + dys[j] * dys[j + 1])
         mu = _tridiag(lo, di, up, rhs)
         for j in range(n):
             f[j, 0] += dxs[j] * mu[j]
