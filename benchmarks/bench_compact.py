@@ -1,13 +1,14 @@
 """Time of the ``compact`` protocol against the compaction rate epsilon and the segments N.
 
     python benchmarks/bench_compact.py [--grid 8:2000,19:2000,30:2000,19:1000,19:4000]
-        [--seeds 1] [--out benchmarks/out]
+        [--seeds 1] [--hold-iter H] [--out benchmarks/out]
 
 Every (epsilon, N) of the grid is compacted from ``--seeds`` initial shapes (seeds 0, 1, ...)
 by :func:`simulate.compact.compact_rod` in this process, one after the other (one core).
 Records per configuration: CPU time (``time.process_time``, what one core spends, whatever
-else runs on the machine), wall time, iterations, levels, the epsilon reached and the final
-checks (smallest distance between non-adjacent segments over h, largest radius over R - h/2,
+else runs on the machine), wall time, iterations, levels, iterations and final force over
+``2 ds / R^3`` of the final hold (``hold_iter`` default or ``--hold-iter``), the epsilon reached
+and the final checks (smallest distance between non-adjacent segments over h, largest radius over R - h/2,
 length); a compaction that fails its checks is recorded with its error. Writes ``OUT/bench_compact.csv`` and ``OUT/bench_compact.png`` (CPU time against
 epsilon at fixed N and against N at fixed epsilon). Numba compiles outside the timings.
 
@@ -40,6 +41,9 @@ def main(argv=None):
     ap.add_argument("--grid", type=_grid, default=_grid("8:2000,19:2000,30:2000,19:1000,19:4000"),
                     help="comma-separated epsilon:N pairs")
     ap.add_argument("--seeds", type=int, default=1, help="configurations per grid point")
+    ap.add_argument("--hold-iter", type=int, default=CompactParams.hold_iter,
+                    help="iterations allowed to the final hold (default "
+                         f"{CompactParams.hold_iter})")
     ap.add_argument("--out", default=str(Path(__file__).parent / "out"))
     a = ap.parse_args(argv)
     out = Path(a.out)
@@ -47,7 +51,7 @@ def main(argv=None):
     rows = []
     for eps, n in a.grid:
         for seed in range(a.seeds):
-            p = CompactParams(epsilon=eps, n_segments=n)
+            p = CompactParams(epsilon=eps, n_segments=n, hold_iter=a.hold_iter)
             c0, w0 = time.process_time(), time.perf_counter()
             try:
                 r = compact_rod(p, np.random.default_rng(seed))
@@ -61,6 +65,7 @@ def main(argv=None):
             cpu, wall = time.process_time() - c0, time.perf_counter() - w0
             row = dict(epsilon=eps, n_segments=n, seed=seed, cpu_s=cpu, wall_s=wall,
                        iterations=r.stats["iterations"], levels=r.stats["levels"],
+                       hold_iterations=r.stats["hold_iterations"], force=r.stats["force"],
                        epsilon_reached=1.0 / (2.0 * np.pi * r.wall_radius),
                        min_distance_over_h=r.min_distance / r.thickness,
                        max_radius_over_limit=r.max_radius / (r.wall_radius - r.thickness / 2),
