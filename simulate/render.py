@@ -52,6 +52,26 @@ sit inside junction zones; the ``n_br int kappa^2 ds`` of the drawn curves is 3e
 times the rod's energy at epsilon = 19, nearly all of it in hooks and cusps hidden inside the
 bands (docs/validation/compact.md).
 
+Rod ends. A free end of the rod can lie inside a band: the band holds n passes on one side
+of it and n - 1 on the other, and the contact analysis makes the two parts one stack of n
+branches (:func:`simulate.contacts.analyze_rod`, two-ended junctions). Such a band is drawn
+with the passes present (:func:`_rod_end_cuts`): the pass holding the rod end is laid along
+the stack's line from the end its other end lies at, over its own length, and the band is
+``w(n)`` wide there and ``w(n - 1)`` beyond, the wider piece cut square at the step (the last
+layer ends at the rod end, not half a band width further). A band without a rod end inside
+is drawn as it would be without this rule, bit for bit, and so is every scene without one.
+The truth keeps the contact analysis' stack: ``n_br`` its branches (the rod pieces in the
+band, so that ``n_branches`` is the branch table's length), ``width_mm`` ``w(n_br)`` (the
+band's widest), its mid point the drawn line's; its ``length_mm`` is the mean drawn length
+of its passes, which is the line's length for every band whose passes all run its whole
+length (the contact analysis' own stack length is the mean of its branches'), so that
+``sum(n_br * length_mm)`` is the rod drawn (1.003-1.012 L on the robust sweep's renders,
+against 1.13 and 1.28 at two of them with the band drawn at n over its whole length;
+docs/validation/compact.md, "A rod end inside a band"). An image analysis that
+reads one layer count per band (its median width) reads n - 1 on a band that is mostly
+narrow, and is scored wrong there. A fold inside a band (the same merge, a pass folding back
+within the band) is not cut: that band is drawn at its larger count over its whole length.
+
 Calibration. The generators' nonlinear law ``w(n) = h (n + 0.4 sqrt(n))``
 (:meth:`crosssection.core.calibration.Calibration.nonlinear`), of the cutting tool's kind:
 the paper calibrates the hot wire's nonlinear thickening of a stack by cutting stacks of
@@ -60,7 +80,7 @@ inverts the law the bands were drawn with, as a user passes the tool's calibrati
 
 Drawing the rod itself (``draw="passes"``, experimental). The bands drawing draws the truth's
 stacks, not the rod: mean lines hooked into junction points at a band's side, a band holding a
-rod end drawn at its larger layer count over its whole length, lumps where junctions cluster
+fold drawn at its larger layer count over its whole length, lumps where junctions cluster
 (docs/validation/compact.md). ``draw="passes"`` draws each pass of the rod as a stroke
 ``pass_width`` h wide along the smooth curve through the rod's nodes (:func:`smooth_line`, one
 knot per node), so that what is drawn is the rod and its length. The passes of a compacted
@@ -370,8 +390,134 @@ def _stack_lines(analysis, frame, widths_px, *, segment_px, smooth):
     return lines
 
 
-def _draw_bands(lines_px, n_br, widths_px, shape):
+def _rod_end_cuts(analysis, frame, lines_px, widths_px):
+    """Where a rod end lies inside a band, along the drawn line of its stack.
+
+    A pass of a stack runs from one end of the stack to the other (a run ends where the set
+    of passes in contact changes: a junction, a fold cap, a loop cut), except a pass holding a
+    free end of the rod inside the band or folding back within it, which the contact analysis
+    merges with the band it continues (:func:`simulate.contacts._merge_two_ended_junctions`);
+    only the first is cut here. Such a pass runs from
+    the end of the line its other end lies at over its own length; the cut is there. Measured
+    along the line rather than by projecting the rod end onto it: a band that bends back
+    (a teardrop loop closing on itself) can pass closer to the rod end than the part of the
+    line the pass runs along, and the pass lengths then sum to the rod exactly. A cut within
+    one band width of an end of the line is the band's end: no cut. A closed line (a loop
+    stack) has no end to measure from and is left whole.
+
+    Returns
+    -------
+    dict
+        Stack id -> list of ``(u, before)``: arc length of the cut along the drawn line (px)
+        and whether the pass is present before it (``u`` smaller) rather than after.
+    """
+    br = analysis.branches
+    st = analysis.stacks
+    if not len(br) or analysis.samples_xy is None:
+        return {}
+    cuts = {}
+    for b, far_col in ((0, "s_end"), (len(br) - 1, "s_start")):
+        sid = int(br["stack_id"].iloc[b])
+        line = lines_px[sid]
+        n = int(st["n_br"].iloc[sid])
+        if n < 2 or len(line) < 2:
+            continue
+        u_len = float(np.hypot(*np.diff(line, axis=0).T).sum())
+        if np.hypot(*(line[0] - line[-1])) < 1e-6 * max(u_len, 1.0):
+            continue
+        k_far = min(int(np.searchsorted(analysis.samples_s, float(br[far_col].iloc[b]))),
+                    len(analysis.samples_s) - 1)
+        far = frame.to_px(analysis.samples_xy[k_far])
+        d0, d1 = np.hypot(*(far - line[0])), np.hypot(*(far - line[-1]))
+        # the pass's other end is an end of its stack, within the band's reach of the line's
+        # end (passes chained at most delta apart); otherwise it is not a pass to cut
+        if min(d0, d1) > n * analysis.contact_distance * frame.scale + float(widths_px[sid]):
+            continue
+        before = bool(d0 <= d1)
+        length = float(br["length"].iloc[b]) * frame.scale
+        u = length if before else u_len - length
+        if float(widths_px[sid]) < u < u_len - float(widths_px[sid]):
+            cuts.setdefault(sid, []).append((u, before))
+    return cuts
+
+
+def _layer_pieces(line, n, cuts):
+    """The drawn line of a stack of ``n`` passes cut where rod ends lie inside it.
+
+    Returns
+    -------
+    list of ((P, 2) array, int)
+        Consecutive pieces of the line and the number of passes present along each: ``n``
+        minus the passes holding a rod end that lie on the other side of their cut.
+    """
+    seg = np.hypot(*np.diff(line, axis=0).T)
+    u = np.r_[0.0, np.cumsum(seg)]
+    edges = np.unique([c for c, _ in cuts])
+    pieces = []
+    for a, b in zip(np.r_[0.0, edges], np.r_[edges, u[-1]]):
+        ends = np.c_[np.interp([a, b], u, line[:, 0]), np.interp([a, b], u, line[:, 1])]
+        piece = np.concatenate([ends[:1], line[(u > a) & (u < b)], ends[1:]])
+        mid = 0.5 * (a + b)
+        absent = sum(1 for c, before in cuts if (mid > c) == before)
+        pieces.append((piece, max(n - absent, 1)))
+    return pieces
+
+
+def _piece_coverage(piece, width_px, shape, flat_ends, shift=4):
+    """Anti-aliased coverage of one band piece, in the window around it.
+
+    The distance band of :func:`_draw_bands` around the piece, its round cap cut square at the
+    ends listed in ``flat_ends`` (0: first point, -1: last): where the band narrows at a rod
+    end, the last layer ends there, not half a band width beyond.
+
+    Returns
+    -------
+    (slice, slice), (h, w) array
+    """
+    pad = 0.5 * width_px + 2.0
+    lo = np.maximum(np.floor(piece.min(axis=0) - pad), 0).astype(int)
+    hi = np.minimum(np.ceil(piece.max(axis=0) + pad) + 1, [shape[1], shape[0]]).astype(int)
+    win = (slice(lo[1], hi[1]), slice(lo[0], hi[0]))
+    canvas = np.full((hi[1] - lo[1], hi[0] - lo[0]), 255, np.uint8)
+    pts = np.round((piece - lo) * (1 << shift)).astype(np.int32).reshape(-1, 1, 2)
+    cv2.polylines(canvas, [pts], False, 0, 1, cv2.LINE_8, shift)
+    d = cv2.distanceTransform(canvas, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    cov = np.clip(0.5 * width_px - d + 0.5, 0, 1)
+    if flat_ends:
+        rr, cc = np.mgrid[lo[1]:hi[1], lo[0]:hi[0]]
+        u = np.r_[0.0, np.cumsum(np.hypot(*np.diff(piece, axis=0).T))]
+        for e in flat_ends:
+            p = piece[e]
+            # the direction in which the piece leaves through this end, over half a width
+            back = np.interp(u[-1] - 0.5 * width_px if e == -1 else 0.5 * width_px, u,
+                             np.arange(len(piece)))
+            q = np.array([np.interp(back, np.arange(len(piece)), piece[:, i]) for i in (0, 1)])
+            t = p - q
+            norm = np.hypot(*t)
+            if norm < 1e-9:
+                continue
+            t /= norm
+            ahead = (cc - p[0]) * t[0] + (rr - p[1]) * t[1]
+            # only the cap: a band bending back elsewhere in the window keeps its ink
+            cap = np.hypot(cc - p[0], rr - p[1]) <= 0.5 * width_px + 1.5
+            cov = np.where(cap, cov * np.clip(0.5 - ahead, 0, 1), cov)
+    return win, cov
+
+
+def _draw_bands(lines_px, n_br, widths_px, shape, steps=None):
     """Anti-aliased ink coverage (exact distance bands) and the stack label image.
+
+    Parameters
+    ----------
+    lines_px : list of (P, 2) arrays
+    n_br : (M,) int array
+    widths_px : (M,) array
+        Width of every band, ``w(n_br)``.
+    shape : (int, int)
+    steps : dict, optional
+        Stack id -> list of (piece, width_px) of a band whose width changes along it (a rod
+        end inside it, :func:`_layer_pieces`); those stacks are drawn piece by piece, a piece
+        narrowing into the next cut square.
 
     Returns
     -------
@@ -379,18 +525,34 @@ def _draw_bands(lines_px, n_br, widths_px, shape):
     labels : (H, W) int32, ``k + 1`` on the ink of stack ``k`` (band drawn at its width)
     """
     h_px, w_px = shape
+    steps = steps or {}
     coverage = np.zeros(shape, np.float32)
     labels = np.zeros(shape, np.int32)
     shift = 4
     pts = [np.round(line * (1 << shift)).astype(np.int32).reshape(-1, 1, 2) for line in lines_px]
-    for n in sorted(set(n_br.tolist())):
+    plain = np.array([sid not in steps for sid in range(len(lines_px))], bool)
+    for n in sorted(set(n_br[plain].tolist())):
         canvas = np.full((h_px, w_px), 255, np.uint8)
-        members = np.flatnonzero(n_br == n)
+        members = np.flatnonzero((n_br == n) & plain)
         for sid in members:
             cv2.polylines(canvas, [pts[sid]], False, 0, 1, cv2.LINE_8, shift)
         d = cv2.distanceTransform(canvas, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
         coverage = np.maximum(coverage, np.clip(0.5 * widths_px[members[0]] - d + 0.5, 0, 1))
+    # the coverage is the largest over the bands, so a band drawn on its own adds to it as it
+    # would in its width's canvas
+    for sid, pieces in steps.items():
+        for i, (piece, width) in enumerate(pieces):
+            flat = [e for e, j in ((0, i - 1), (-1, i + 1))
+                    if 0 <= j < len(pieces) and pieces[j][1] < width]
+            win, cov = _piece_coverage(piece, width, shape, flat, shift)
+            coverage[win] = np.maximum(coverage[win], cov)
     for sid, p in enumerate(pts):
+        if sid in steps:
+            for piece, width in steps[sid]:
+                q = np.round(piece * (1 << shift)).astype(np.int32).reshape(-1, 1, 2)
+                cv2.polylines(labels, [q], False, sid + 1, max(1, int(round(width))),
+                              cv2.LINE_8, shift)
+            continue
         cv2.polylines(labels, [p], False, sid + 1, max(1, int(round(widths_px[sid]))),
                       cv2.LINE_8, shift)
     labels[coverage < 0.5] = 0
@@ -664,8 +826,14 @@ def _loop_mid_rc(line_rc):
     return polyline.mid_point(np.concatenate([q[i0:], q[:i0]]), closed=True)
 
 
-def _stack_table(st, lines_px, frame, cal, *, px_per_mm, thickness_mm):
-    """stacks.csv of the truth (schema order) and the region of every stack."""
+def _stack_table(st, lines_px, frame, cal, *, px_per_mm, thickness_mm, layer_px=None):
+    """stacks.csv of the truth (schema order) and the region of every stack.
+
+    ``layer_px``: stack id -> drawn length of its passes summed (px), for the bands that
+    narrow at a rod end (:func:`_layer_pieces`); their length is that over ``n_br``, the mean
+    length of their passes (module docstring, "Rod ends").
+    """
+    layer_px = layer_px or {}
     rows = []
     for sid, row in st.iterrows():
         line_rc = lines_px[sid][:, ::-1]
@@ -680,16 +848,19 @@ def _stack_table(st, lines_px, frame, cal, *, px_per_mm, thickness_mm):
         mid_rc = _loop_mid_rc(line_rc) if closed else polyline.mid_point(line_rc)
         rows.append({"stack_id": int(sid), "junction_a": int(row.junction_a),
                      "junction_b": int(row.junction_b),
-                     "length_mm": polyline.length(line_rc) / px_per_mm, "width_mm": width_mm,
+                     "length_mm": (layer_px[sid] / row.n_br if sid in layer_px
+                                   else polyline.length(line_rc)) / px_per_mm,
+                     "width_mm": width_mm,
                      "n_br": int(row.n_br), "region": region, "mid_x_px": float(mid_rc[1]),
                      "mid_y_px": float(mid_rc[0])})
     return pd.DataFrame(rows, columns=schema.STACK_COLUMNS)
 
 
 def _truth_tables(analysis, frame, lines_px, cal, voids, *, px_per_mm, thickness_mm,
-                  junctions_px=None):
+                  junctions_px=None, layer_px=None):
     """The four truth tables (crosssection.core.schema), lengths in mm, curvatures in 1/mm;
-    ``junctions_px`` replaces the junction points of the bands drawing."""
+    ``junctions_px`` replaces the junction points of the bands drawing, ``layer_px`` the
+    lengths of the bands that narrow at a rod end (:func:`_stack_table`)."""
     mm_per_l = frame.rod_length_mm
     jt = analysis.junctions
     jpx = junctions_px if junctions_px is not None else _junctions_px(
@@ -699,7 +870,7 @@ def _truth_tables(analysis, frame, lines_px, cal, voids, *, px_per_mm, thickness
                               "x_px": jpx[:, 0], "y_px": jpx[:, 1],
                               "n_stacks": jt["n_stacks"].astype(int) if len(jt) else []})
     stacks = _stack_table(analysis.stacks, lines_px, frame, cal, px_per_mm=px_per_mm,
-                          thickness_mm=thickness_mm)
+                          thickness_mm=thickness_mm, layer_px=layer_px)
     br = analysis.branches
     branches = pd.DataFrame({
         "branch_id": br["branch_id"].astype(int), "stack_id": br["stack_id"].astype(int),
@@ -889,12 +1060,20 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
             xy, analysis, frame, segment_px=segment_px, pitch_px=pitch_px, stroke_px=stroke_px,
             taper_px=pass_taper * stroke_px)
         junctions_px = _pass_junctions_px(analysis, frame, stroke_px)
+        layer_px = None
         coverage, labels = _draw_passes(curve, branch_of,
                                         analysis.branches["stack_id"].to_numpy(int), stroke_px,
                                         frame.shape)
     else:
         junctions_px = None
-        coverage, labels = _draw_bands(lines_px, n_br, widths_px, frame.shape)
+        # a band holding a rod end narrows there (module docstring, "Rod ends")
+        pieces = {sid: _layer_pieces(lines_px[sid], int(n_br[sid]), cuts)
+                  for sid, cuts in _rod_end_cuts(analysis, frame, lines_px, widths_px).items()}
+        layer_px = {sid: sum(c * polyline.length(q) for q, c in pp)
+                    for sid, pp in pieces.items()}
+        steps = {sid: [(q, float(cal.width(c)) * px_per_mm) for q, c in pp]
+                 for sid, pp in pieces.items()}
+        coverage, labels = _draw_bands(lines_px, n_br, widths_px, frame.shape, steps)
     ink_mask = coverage >= 0.5
     voids = truth_voids(ink_mask, hole_center_xy=frame.hole_xy, hole_radius_px=frame.hole_px,
                         s_min_px=(10 * thickness_mm * px_per_mm) ** 2, px_per_mm=px_per_mm,
@@ -905,7 +1084,8 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
                      smears=d["smears"], specks=d["specks"], pinholes=d["pinholes"])
     rgb = _finish(img, rng, frame, ink_mask, d)
     tables = _truth_tables(analysis, frame, lines_px, cal, voids.table, px_per_mm=px_per_mm,
-                           thickness_mm=thickness_mm, junctions_px=junctions_px)
+                           thickness_mm=thickness_mm, junctions_px=junctions_px,
+                           layer_px=layer_px)
     summary = _summary(analysis, frame, tables, ink_mask, px_per_mm=px_per_mm)
     params = {"px_per_mm": float(px_per_mm), "thickness_mm": float(thickness_mm),
               "hole_radius_mm": frame.hole_radius_mm,
