@@ -474,6 +474,37 @@ def test_lump_between_two_junctions_takes_its_neighbours_curvature(link_px, fitt
     assert lump.energy_rel_uncertainty >= 1.0
 
 
+def test_link_within_two_wide_junction_blobs_is_not_fitted():
+    """The same 60-px link (three band widths: fitted when the junctions are as wide as the
+    band) between two junction blobs of inscribed radius 20 px (thick stacks meeting, as at
+    epsilon 19): each fork's hook reaches one r_J beyond an overlap of r_J, 80 px of the link
+    in all, so no sample of it is the band's own centreline. It takes the neighbours'
+    curvature instead of fitting the bulge between the fork points (fitted whole it read
+    4.9 times the band's curvature, root mean square: 24 times its energy)."""
+    from crosssection.stages.curvature import stack_profiles
+
+    R, r0, c0, link_px = 400.0, 200.0, 300.0, 60.0
+    t = np.linspace(0.0, 1.0, 4000)
+    a = (400.0 / R) * t[::-1]
+    left = np.c_[r0 + R * (1 - np.cos(a)), c0 - R * np.sin(a)]
+    c1 = c0 + link_px
+    right = np.c_[r0 + R * (1 - np.cos(a[::-1])), c1 + R * np.sin(a[::-1])]
+    link = np.c_[r0 - 6.0 * np.sin(np.pi * t), c0 + link_px * t]
+    graph = _link_between_two_junctions(left, link, right, (r0, c0), (r0, c1))
+    distance = np.full((600, 1000), 10.0)
+    distance[int(r0), int(c0)] = distance[int(r0), int(c1)] = 20.0
+    prof = stack_profiles(graph, np.array([3, 3, 3]), distance, thickness_px=H,
+                          px_per_mm=50.0)
+    lump = prof[1]
+    assert lump.fit_start == lump.fit_stop == 0
+    k_true = 50.0 / R  # 1/mm
+    assert np.all(np.abs(np.abs(lump.kappa_per_mm) / k_true - 1) < 0.5)
+    # with band-wide junctions the same link is fitted (the case above)
+    prof_narrow = stack_profiles(graph, np.array([3, 3, 3]), np.full((600, 1000), 10.0),
+                                 thickness_px=H, px_per_mm=50.0)
+    assert prof_narrow[1].fit_stop > prof_narrow[1].fit_start
+
+
 def test_unfitted_lump_keeps_its_own_curvature_bound():
     """A thick lump (20 layers, 24 px between two junctions) between single sheets bent at
     R = 25 px (2 /mm) takes their curvature only up to its own bound 2 / (n_br h): its
