@@ -441,6 +441,21 @@ def _link_between_two_junctions(left, link, right, j0_rc, j1_rc):
                       paths=paths, ends=ends)
 
 
+def _band_through_link(R, arc_px, link_px, bulge_px, r0=200.0, c0=300.0):
+    """A band bent at radius R (px) on both sides of a link of ``link_px`` between two
+    junctions: arcs of ``arc_px`` curving the same way (centre below), tangent to the row at
+    the joins, and the link bulging ``bulge_px`` off it (the skeleton between two medial-axis
+    fork points). Returns the stack graph and the two junction points (row, col)."""
+    t = np.linspace(0.0, 1.0, 4000)
+    a = (arc_px / R) * t[::-1]
+    left = np.c_[r0 + R * (1 - np.cos(a)), c0 - R * np.sin(a)]
+    c1 = c0 + link_px
+    right = np.c_[r0 + R * (1 - np.cos(a[::-1])), c1 + R * np.sin(a[::-1])]
+    link = np.c_[r0 - bulge_px * np.sin(np.pi * t), c0 + link_px * t]
+    graph = _link_between_two_junctions(left, link, right, (r0, c0), (r0, c1))
+    return graph, (int(r0), int(c0)), (int(r0), int(c1))
+
+
 @pytest.mark.parametrize("link_px, fitted", [(24.0, False), (60.0, True)])
 def test_lump_between_two_junctions_takes_its_neighbours_curvature(link_px, fitted):
     """A band of 3 layers bent at R = 400 px runs through two junctions 24 px apart (less
@@ -450,15 +465,8 @@ def test_lump_between_two_junctions_takes_its_neighbours_curvature(link_px, fitt
     60 px (three widths) is fitted as before."""
     from crosssection.stages.curvature import stack_profiles
 
-    R, r0, c0 = 400.0, 200.0, 300.0
-    t = np.linspace(0.0, 1.0, 4000)
-    # arcs of radius R curving the same way (centre below), tangent to the row at the joins
-    a = (400.0 / R) * t[::-1]
-    left = np.c_[r0 + R * (1 - np.cos(a)), c0 - R * np.sin(a)]
-    c1 = c0 + link_px
-    right = np.c_[r0 + R * (1 - np.cos(a[::-1])), c1 + R * np.sin(a[::-1])]
-    link = np.c_[r0 - 6.0 * np.sin(np.pi * t), c0 + link_px * t]
-    graph = _link_between_two_junctions(left, link, right, (r0, c0), (r0, c1))
+    R = 400.0
+    graph, _, _ = _band_through_link(R, 400.0, link_px, 6.0)
     distance = np.full((600, 1000), 10.0)
     prof = stack_profiles(graph, np.array([3, 3, 3]), distance, thickness_px=H,
                           px_per_mm=50.0)
@@ -483,16 +491,10 @@ def test_link_within_two_wide_junction_blobs_is_not_fitted():
     4.9 times the band's curvature, root mean square: 24 times its energy)."""
     from crosssection.stages.curvature import stack_profiles
 
-    R, r0, c0, link_px = 400.0, 200.0, 300.0, 60.0
-    t = np.linspace(0.0, 1.0, 4000)
-    a = (400.0 / R) * t[::-1]
-    left = np.c_[r0 + R * (1 - np.cos(a)), c0 - R * np.sin(a)]
-    c1 = c0 + link_px
-    right = np.c_[r0 + R * (1 - np.cos(a[::-1])), c1 + R * np.sin(a[::-1])]
-    link = np.c_[r0 - 6.0 * np.sin(np.pi * t), c0 + link_px * t]
-    graph = _link_between_two_junctions(left, link, right, (r0, c0), (r0, c1))
+    R = 400.0
+    graph, j0, j1 = _band_through_link(R, 400.0, 60.0, 6.0)
     distance = np.full((600, 1000), 10.0)
-    distance[int(r0), int(c0)] = distance[int(r0), int(c1)] = 20.0
+    distance[j0] = distance[j1] = 20.0
     prof = stack_profiles(graph, np.array([3, 3, 3]), distance, thickness_px=H,
                           px_per_mm=50.0)
     lump = prof[1]
@@ -512,14 +514,7 @@ def test_unfitted_lump_keeps_its_own_curvature_bound():
     compacted render took 2.7 /mm)."""
     from crosssection.stages.curvature import stack_profiles
 
-    R, r0, c0, link_px = 25.0, 200.0, 300.0, 24.0
-    t = np.linspace(0.0, 1.0, 4000)
-    a = (60.0 / R) * t[::-1]
-    left = np.c_[r0 + R * (1 - np.cos(a)), c0 - R * np.sin(a)]
-    c1 = c0 + link_px
-    right = np.c_[r0 + R * (1 - np.cos(a[::-1])), c1 + R * np.sin(a[::-1])]
-    link = np.c_[np.full_like(t, r0), c0 + link_px * t]
-    graph = _link_between_two_junctions(left, link, right, (r0, c0), (r0, c1))
+    graph, _, _ = _band_through_link(25.0, 60.0, 24.0, 0.0)
     n_br = np.array([1, 20, 1])
     prof = stack_profiles(graph, n_br, np.full((600, 1000), 10.0), thickness_px=H,
                           px_per_mm=50.0)
