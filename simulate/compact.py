@@ -50,9 +50,10 @@ Protocol
   relaxation is what takes a fine rod longest.
 * The final relaxation ("hold") at the final wall radius stops when no node force exceeds
   ``ftol * 2 ds / R^3`` and no spring is compressed by half its range, within
-  :attr:`CompactParams.hold_iter` iterations; a hold ending at that cap unconverged keeps its
-  rod and warns (``RuntimeWarning``), and configs.csv records its force over that scale and
-  its iterations (``n_force``, ``n_hold_iterations``).
+  :attr:`CompactParams.hold_iter` iterations (springs left stiff by the compaction soften
+  after :data:`HOLD_PATIENCE` of them, see :func:`_compress`); a hold ending at that cap
+  unconverged keeps its rod and warns (``RuntimeWarning``), and configs.csv records its force
+  over that scale and its iterations (``n_force``, ``n_hold_iterations``).
 * The final rod is checked: every pair of non-adjacent segments at least h apart, every node
   within ``R - h/2``, length 1 within 1e-3; a configuration failing a check is an error
   (never written).
@@ -108,6 +109,10 @@ DT_MAX = 0.12
 #: a step whose length restoration does not converge is retried at most this many times,
 #: halved each time (see :func:`_compress`)
 SHAKE_HALVINGS = 8
+#: iterations of the final hold after which springs far below their range soften (see
+#: :func:`_compress`): beyond the longest hold measured to converge with the compaction's
+#: springs (154 000 at N = 2000, 178 000 at N = 4000, ``docs/validation/compact.md``)
+HOLD_PATIENCE = 200_000
 #: default contact distance of the analysis, in units of the thickness (see run_config)
 CONTACT_DISTANCE = 3.0
 #: largest area fraction ``L h / (pi (R - h/2)^2)`` accepted (see :func:`check_params`)
@@ -257,7 +262,8 @@ def _restore_lengths(x, rxs, rys, ds, dxs, dys, lo, di, up, rhs):
 
 
 @njit(cache=True)
-def _compress(x, r_start, r_end, h_ratio, margin, rate, k, dt_max, max_iter, ftol):
+def _compress(x, r_start, r_end, h_ratio, margin, rate, k, dt_max, max_iter, ftol,
+              patience=HOLD_PATIENCE):
     """Shrink the wall from ``r_start`` to ``r_end`` while relaxing the rod, then relax it
     at ``r_end``. ``x`` (N+1, 2) is updated in place.
 
@@ -309,10 +315,23 @@ def _compress(x, r_start, r_end, h_ratio, margin, rate, k, dt_max, max_iter, fto
     steps converge in three Newton steps. The bending force is left as it is (Eq. (8), the
     energy :mod:`simulate.energy` reports).
 
+    Springs stiffened during the compaction stay stiff in the final hold, where the wall no
+    longer presses: the step shrinks as ``k^-1/2``, and so does the relaxation of the rod's
+    bending. Springs at the cap (``k`` near 1e4, the step 38 times below its value at
+    :data:`STIFFNESS`) relax a rod left with 3-9 times the bending energy of the others by
+    about a decade of force per 150 000 iterations, steadily (no plateau, no oscillation,
+    FIRE at its largest step between rare restarts), and a budget of 5e5 iterations ends
+    them at 60-200 times ``ftol`` (epsilon 19 and 30, N = 2000). So a hold still running
+    ``patience`` iterations after the wall reached ``r_end`` softens the springs by 1.5
+    (the step lengthens by sqrt(1.5)) whenever the largest compression is below a fifth of
+    the range, at most every 500 iterations and down to the stiffness a level starts with:
+    a compression at equilibrium stays below 0.3 of the range, short of the 0.5 at which
+    they stiffen again. A hold converging within ``patience`` iterations is unchanged.
+
     Returns
     -------
     (wall radius, iterations, list builds, FIRE restarts, largest node force, largest
-    spring compression / range, stiffenings, final stiffness, halved steps)
+    spring compression / range, stiffenings, final stiffness, halved steps, softenings)
     """
     n = x.shape[0] - 1
     ds = 1.0 / n
@@ -344,6 +363,11 @@ def _compress(x, r_start, r_end, h_ratio, margin, rate, k, dt_max, max_iter, fto
     last_stiff = 0
     ovl_stiff = np.inf
     n_half = 0
+    n_soft = 0
+    # the iteration at which the wall reached r_end (-1: not yet), and the softest springs
+    # of the hold: those a level starts with (_stiffness), for which dt_max is stable
+    it_hold = 0 if r_start <= r_end else -1
+    k_min = STIFFNESS * max(1.0, (RESOLUTION / (n * r_end)) ** 4)
     while it < max_iter:
         it += 1
         h = h_ratio * big_r
@@ -371,6 +395,16 @@ def _compress(x, r_start, r_end, h_ratio, margin, rate, k, dt_max, max_iter, fto
                 n_stiff += 1
                 last_stiff = it
                 ovl_stiff = ovl
+        elif (it_hold >= 0 and it - it_hold > patience and ovl < 0.2 * margin * h
+              and k > k_min and it - last_stiff > 500):
+            # a long hold on springs far below their range: stiffness only shortens the step
+            k_soft = max(k / 1.5, k_min)
+            dt_max *= math.sqrt(k / k_soft)
+            k = k_soft
+            n_soft += 1
+            last_stiff = it
+        if it_hold < 0 and big_r <= r_end:
+            it_hold = it
         hc = (1.0 + margin) * h
         rw = big_r - 0.5 * hc
         ovl = 0.0
@@ -514,7 +548,7 @@ def _compress(x, r_start, r_end, h_ratio, margin, rate, k, dt_max, max_iter, fto
             xref[:] = x
             n_build += 1
     return (big_r, it, n_build, n_restart, fmax, ovl / (margin * h_ratio * big_r), n_stiff,
-            k, n_half)
+            k, n_half, n_soft)
 
 
 # ----------------------------------------------------------------------------------------
@@ -613,7 +647,8 @@ class CompactResult:
         Sum of the segment lengths (1 up to rounding).
     stats : dict
         Counters: iterations, levels, list builds, FIRE restarts, spring stiffenings, steps
-        halved for the length restoration (:func:`_compress`), iterations of the final hold
+        halved for the length restoration, spring softenings of a long final hold
+        (:func:`_compress`), iterations of the final hold
         (``hold_iterations``), final largest node force over ``2 ds / R^3`` (``force``: the
         hold converged when it is below ``ftol``), final largest spring compression over its
         range (``compression``: below 0.5 when converged).
@@ -769,7 +804,7 @@ def compact_rod(params: CompactParams, rng) -> CompactResult:
     xy0 = xy.copy()
     big_r = max(float(np.hypot(xy[:, 0], xy[:, 1]).max()) + (1.0 + MARGIN) * cap0, r_end)
     stats = {"levels": len(lev), "iterations": 0, "builds": 0, "restarts": 0, "stiffenings": 0,
-             "halved_steps": 0}
+             "halved_steps": 0, "softenings": 0}
     k_phys = 0.0  # spring stiffness reached so far, in absolute units (carried across levels)
 
     def run(xy, n, r_from, r_to, ratio, max_iter, ftol):
@@ -778,7 +813,7 @@ def compact_rod(params: CompactParams, rng) -> CompactResult:
         out = _compress(xy, r_from, r_to, ratio, MARGIN, params.rate, k,
                         DT_MAX / n ** 1.5 / math.sqrt(k / STIFFNESS), max_iter, ftol)
         for key, i in (("iterations", 1), ("builds", 2), ("restarts", 3), ("stiffenings", 6),
-                       ("halved_steps", 8)):
+                       ("halved_steps", 8), ("softenings", 9)):
             stats[key] += int(out[i])
         k_phys = out[7] * float(n) ** 3
         if not (math.isfinite(out[4]) and np.isfinite(xy).all()):
