@@ -284,3 +284,22 @@ def test_a_long_hold_on_stiff_springs_softens_them_and_converges():
     assert np.hypot(*soft_x.T).max() <= big_r - h / 2
     # until the patience runs out the hold is the stiff one
     assert np.array_equal(hold(1000, 1000)[0], hold(1000, 10 ** 9)[0])
+
+
+def test_cli_reports_unconverged_holds_as_one_warning_line(tmp_path, monkeypatch, capsys):
+    """A final hold cut short (a budget of one iteration) keeps its rod; the command says so
+    in one ``warning: OUT: ...`` line on stderr and nothing else there, and configs.csv
+    records the force over its tolerance."""
+    real = compact.params_from_args
+
+    def one_iteration_hold(args):
+        return {**real(args), "hold_iter": 1}
+
+    monkeypatch.setattr(compact, "params_from_args", one_iteration_hold)
+    out = tmp_path / "c"
+    assert simulate_main(["compact", *SMALL, "--seed", "5", "--out", str(out)]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1
+    assert err[0].startswith(f"warning: {out}: ") and "unconverged" in err[0]
+    c = pd.read_csv(out / "configs.csv")
+    assert (c.n_hold_iterations == 1).all() and (c.n_force >= 1.0).any()
