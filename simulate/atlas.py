@@ -478,6 +478,8 @@ def compact_scene(epsilon: float, n_segments: int, seed: int, *, px_per_mm: floa
     Returns
     -------
     Scene
+        ``params["hold_force"]``: the compaction's final largest node force over
+        ``2 ds / R^3`` (the hold converged when it is below ``CompactParams.ftol``).
 
     Raises
     ------
@@ -487,17 +489,24 @@ def compact_scene(epsilon: float, n_segments: int, seed: int, *, px_per_mm: floa
     from simulate.compact import CONTACT_DISTANCE, CompactParams, compact_rod
     from simulate.contacts import analyze_rod
 
-    res = compact_rod(CompactParams(epsilon=float(epsilon), n_segments=int(n_segments)),
-                      np.random.default_rng(seed))
+    with warnings.catch_warnings():
+        # an unconverged final hold is recorded with the scene (params "hold_force", the
+        # atlas table's column) rather than printed by a worker
+        warnings.simplefilter("ignore", RuntimeWarning)
+        res = compact_rod(CompactParams(epsilon=float(epsilon), n_segments=int(n_segments)),
+                          np.random.default_rng(seed))
     h = res.thickness
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         analysis = analyze_rod(res.xy, lam=0.0, contact_distance=CONTACT_DISTANCE * h)
     # smooth="all": the short links between close junctions drawn as parabolas, as the
     # renders of compactions are drawn and measured (docs/validation/compact.md)
-    return render_rod(res.xy, seed, analysis, rod_thickness=h, wall_radius=res.wall_radius,
-                      hole_radius_mm="auto", px_per_mm=px_per_mm, thickness_mm=THICKNESS_MM,
-                      smooth="all")
+    scene = render_rod(res.xy, seed, analysis, rod_thickness=h, wall_radius=res.wall_radius,
+                       hole_radius_mm="auto", px_per_mm=px_per_mm, thickness_mm=THICKNESS_MM,
+                       smooth="all")
+    # the final hold's largest force over its scale (converged below CompactParams.ftol)
+    scene.params["hold_force"] = float(res.stats["force"])
+    return scene
 
 
 @dataclass(frozen=True)
@@ -821,6 +830,8 @@ def run_base(base: Base, treatments, rod: Rod | None = None) -> list:
     opts = dict(base.options)
     head.update({k: opts[k] for k in ("n_stacks", "mean_layers", "max_layers", "n_segments")
                  if k in opts})
+    if "hold_force" in p:
+        head["hold_force"] = float(p["hold_force"])
     base_kw = dict(px_per_mm=base.px_per_mm, thickness_mm=THICKNESS_MM,
                    calibration=scene.calibration)
     try:

@@ -64,6 +64,8 @@ def test_sweeps_hold_what_they_sweep(report):
     assert set(e["generator"]) == {"compact"}
     assert (e["n_segments"] == cfg.epsilon_segments).all()
     assert (e["truth_n_stacks"] > 0).all() and (e["h_px"] == 5.0).all()
+    # the compaction's final hold is recorded with every compacted scene
+    assert (e["hold_force"] > 0).all()
 
 
 def test_epsilon_sweep_plan():
