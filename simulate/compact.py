@@ -262,7 +262,7 @@ def _restore_lengths(x, rxs, rys, ds, dxs, dys, lo, di, up, rhs):
 
 
 @njit(cache=True)
-def _compress(x, r_start, r_end, h_ratio, margin, rate, k, dt_max, max_iter, ftol,
+def _compress(x, r_start, r_end, h_ratio, margin, rate, k, dt_max, max_iter, ftol, k_min,
               patience=HOLD_PATIENCE):
     """Shrink the wall from ``r_start`` to ``r_end`` while relaxing the rod, then relax it
     at ``r_end``. ``x`` (N+1, 2) is updated in place.
@@ -324,7 +324,8 @@ def _compress(x, r_start, r_end, h_ratio, margin, rate, k, dt_max, max_iter, fto
     them at 60-200 times ``ftol`` (epsilon 19 and 30, N = 2000). So a hold still running
     ``patience`` iterations after the wall reached ``r_end`` softens the springs by 1.5
     (the step lengthens by sqrt(1.5)) whenever the largest compression is below a fifth of
-    the range, at most every 500 iterations and down to the stiffness a level starts with:
+    the range, at most every 500 iterations and down to ``k_min``, the stiffness a level
+    starts with (:func:`_stiffness`, for which ``dt_max`` is stable):
     a compression at equilibrium stays below 0.3 of the range, short of the 0.5 at which
     they stiffen again. A hold converging within ``patience`` iterations is unchanged.
 
@@ -364,10 +365,8 @@ def _compress(x, r_start, r_end, h_ratio, margin, rate, k, dt_max, max_iter, fto
     ovl_stiff = np.inf
     n_half = 0
     n_soft = 0
-    # the iteration at which the wall reached r_end (-1: not yet), and the softest springs
-    # of the hold: those a level starts with (_stiffness), for which dt_max is stable
+    # the iteration at which the wall reached r_end (-1: not yet)
     it_hold = 0 if r_start <= r_end else -1
-    k_min = STIFFNESS * max(1.0, (RESOLUTION / (n * r_end)) ** 4)
     while it < max_iter:
         it += 1
         h = h_ratio * big_r
@@ -809,9 +808,10 @@ def compact_rod(params: CompactParams, rng) -> CompactResult:
 
     def run(xy, n, r_from, r_to, ratio, max_iter, ftol):
         nonlocal k_phys
-        k = max(_stiffness(n, r_to), k_phys / float(n) ** 3)
+        k0 = _stiffness(n, r_to)
+        k = max(k0, k_phys / float(n) ** 3)
         out = _compress(xy, r_from, r_to, ratio, MARGIN, params.rate, k,
-                        DT_MAX / n ** 1.5 / math.sqrt(k / STIFFNESS), max_iter, ftol)
+                        DT_MAX / n ** 1.5 / math.sqrt(k / STIFFNESS), max_iter, ftol, k0)
         for key, i in (("iterations", 1), ("builds", 2), ("restarts", 3), ("stiffenings", 6),
                        ("halved_steps", 8), ("softenings", 9)):
             stats[key] += int(out[i])

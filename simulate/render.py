@@ -251,6 +251,26 @@ def _frame(xy, analysis, cal, *, px_per_mm, thickness_mm, rod_length_mm, hole_ra
                   hole_radius_mm, hole_xy, hole_px, hole_is_wall)
 
 
+def _arc_px(line) -> np.ndarray:
+    """Arc length (px) at every point of a polyline, from 0 at its first point."""
+    return np.r_[0.0, np.cumsum(np.hypot(*np.diff(line, axis=0).T))]
+
+
+def _fixed_point(line, shift: int) -> np.ndarray:
+    """A polyline (x, y) as OpenCV draws it with sub-pixel precision: coordinates times
+    ``2^shift``, int32, shape (P, 1, 2)."""
+    return np.round(line * (1 << shift)).astype(np.int32).reshape(-1, 1, 2)
+
+
+def _distance_band(shape, pts, width_px: float, shift: int) -> np.ndarray:
+    """Anti-aliased coverage of a band ``width_px`` wide around polylines (:func:`_fixed_point`):
+    1 within ``width_px / 2`` of a line, falling to 0 over one pixel (exact distance)."""
+    canvas = np.full(shape, 255, np.uint8)
+    cv2.polylines(canvas, pts, False, 0, 1, cv2.LINE_8, shift)
+    d = cv2.distanceTransform(canvas, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    return np.clip(0.5 * width_px - d + 0.5, 0, 1)
+
+
 def smooth_line(line_xy, knot_spacing_px: float, step_px: float = 1.0, *,
                 short: bool = False) -> np.ndarray:
     """The smooth curve of a stack through the rod's discretisation, sampled every ``step_px``.
@@ -289,7 +309,7 @@ def smooth_line(line_xy, knot_spacing_px: float, step_px: float = 1.0, *,
     p = np.asarray(line_xy, float)
     keep = np.r_[True, np.hypot(*np.diff(p, axis=0).T) > 1e-9]
     p = p[keep]
-    u = np.r_[0.0, np.cumsum(np.hypot(*np.diff(p, axis=0).T))]
+    u = _arc_px(p)
     if len(p) < 3 or u[-1] < 2.0 * knot_spacing_px:
         if not (short and len(p) >= 3 and u[-1] > 1.0):
             return p
@@ -422,7 +442,7 @@ def _rod_end_cuts(analysis, frame, lines_px, widths_px):
         n = int(st["n_br"].iloc[sid])
         if n < 2 or len(line) < 2:
             continue
-        u_len = float(np.hypot(*np.diff(line, axis=0).T).sum())
+        u_len = polyline.length(line)
         if np.hypot(*(line[0] - line[-1])) < 1e-6 * max(u_len, 1.0):
             continue
         k_far = min(int(np.searchsorted(analysis.samples_s, float(br[far_col].iloc[b]))),
@@ -450,8 +470,7 @@ def _layer_pieces(line, n, cuts):
         Consecutive pieces of the line and the number of passes present along each: ``n``
         minus the passes holding a rod end that lie on the other side of their cut.
     """
-    seg = np.hypot(*np.diff(line, axis=0).T)
-    u = np.r_[0.0, np.cumsum(seg)]
+    u = _arc_px(line)
     edges = np.unique([c for c, _ in cuts])
     pieces = []
     for a, b in zip(np.r_[0.0, edges], np.r_[edges, u[-1]]):
@@ -478,14 +497,11 @@ def _piece_coverage(piece, width_px, shape, flat_ends, shift=4):
     lo = np.maximum(np.floor(piece.min(axis=0) - pad), 0).astype(int)
     hi = np.minimum(np.ceil(piece.max(axis=0) + pad) + 1, [shape[1], shape[0]]).astype(int)
     win = (slice(lo[1], hi[1]), slice(lo[0], hi[0]))
-    canvas = np.full((hi[1] - lo[1], hi[0] - lo[0]), 255, np.uint8)
-    pts = np.round((piece - lo) * (1 << shift)).astype(np.int32).reshape(-1, 1, 2)
-    cv2.polylines(canvas, [pts], False, 0, 1, cv2.LINE_8, shift)
-    d = cv2.distanceTransform(canvas, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
-    cov = np.clip(0.5 * width_px - d + 0.5, 0, 1)
+    cov = _distance_band((hi[1] - lo[1], hi[0] - lo[0]), [_fixed_point(piece - lo, shift)],
+                         width_px, shift)
     if flat_ends:
         rr, cc = np.mgrid[lo[1]:hi[1], lo[0]:hi[0]]
-        u = np.r_[0.0, np.cumsum(np.hypot(*np.diff(piece, axis=0).T))]
+        u = _arc_px(piece)
         for e in flat_ends:
             p = piece[e]
             # the direction in which the piece leaves through this end, over half a width
@@ -524,20 +540,16 @@ def _draw_bands(lines_px, n_br, widths_px, shape, steps=None):
     coverage : (H, W) float32 in [0, 1]
     labels : (H, W) int32, ``k + 1`` on the ink of stack ``k`` (band drawn at its width)
     """
-    h_px, w_px = shape
     steps = steps or {}
     coverage = np.zeros(shape, np.float32)
     labels = np.zeros(shape, np.int32)
     shift = 4
-    pts = [np.round(line * (1 << shift)).astype(np.int32).reshape(-1, 1, 2) for line in lines_px]
+    pts = [_fixed_point(line, shift) for line in lines_px]
     plain = np.array([sid not in steps for sid in range(len(lines_px))], bool)
     for n in sorted(set(n_br[plain].tolist())):
-        canvas = np.full((h_px, w_px), 255, np.uint8)
         members = np.flatnonzero((n_br == n) & plain)
-        for sid in members:
-            cv2.polylines(canvas, [pts[sid]], False, 0, 1, cv2.LINE_8, shift)
-        d = cv2.distanceTransform(canvas, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
-        coverage = np.maximum(coverage, np.clip(0.5 * widths_px[members[0]] - d + 0.5, 0, 1))
+        coverage = np.maximum(coverage, _distance_band(shape, [pts[sid] for sid in members],
+                                                       widths_px[members[0]], shift))
     # the coverage is the largest over the bands, so a band drawn on its own adds to it as it
     # would in its width's canvas
     for sid, pieces in steps.items():
@@ -549,9 +561,8 @@ def _draw_bands(lines_px, n_br, widths_px, shape, steps=None):
     for sid, p in enumerate(pts):
         if sid in steps:
             for piece, width in steps[sid]:
-                q = np.round(piece * (1 << shift)).astype(np.int32).reshape(-1, 1, 2)
-                cv2.polylines(labels, [q], False, sid + 1, max(1, int(round(width))),
-                              cv2.LINE_8, shift)
+                cv2.polylines(labels, [_fixed_point(piece, shift)], False, sid + 1,
+                              max(1, int(round(width))), cv2.LINE_8, shift)
             continue
         cv2.polylines(labels, [p], False, sid + 1, max(1, int(round(widths_px[sid]))),
                       cv2.LINE_8, shift)

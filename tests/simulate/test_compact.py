@@ -205,7 +205,7 @@ def test_segment_lengths_exact_after_every_step_of_a_rod_pressed_along_the_wall(
         k = compact._stiffness(n, big_r)
         out = compact._compress(x, big_r, big_r, compact.H_OVER_R, compact.MARGIN, 6.25e-5, k,
                                 compact.DT_MAX / n ** 1.5 / np.sqrt(k / compact.STIFFNESS),
-                                max_iter, 0.0)
+                                max_iter, 0.0, k)
         assert out[1] == max_iter
         seg = np.hypot(*np.diff(x, axis=0).T)
         assert np.abs(seg * n - 1.0).max() < 1e-8, max_iter
@@ -272,7 +272,7 @@ def test_a_long_hold_on_stiff_springs_softens_them_and_converges():
         x = start.xy.copy()
         out = compact._compress(x, big_r, big_r, h / big_r, compact.MARGIN, p.rate, k,
                                 compact.DT_MAX / n ** 1.5 / np.sqrt(k / compact.STIFFNESS),
-                                max_iter, ftol, patience)
+                                max_iter, ftol, compact._stiffness(n, big_r), patience)
         return x, out
 
     stiff_x, stiff = hold(6000, 10 ** 9)
