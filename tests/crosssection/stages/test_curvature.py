@@ -559,3 +559,36 @@ def test_noise_variance_where_the_curvature_reverses(seed):
     emp = np.mean(np.concatenate(err) ** 2)
     v = noise_variance(profs, np.ones(len(profs), int), thickness_px=H, px_per_mm=50.0)[1]
     assert 0.35 < v / emp < 1.3
+
+
+
+@pytest.mark.parametrize("zone_px", [40.0, 50.0, 60.0])
+def test_fork_zone_turns_at_most_a_quarter_turn(zone_px):
+    """A single sheet whose visible curvature rises steeply toward a fork zone (a clothoid,
+    0 to 1/15 px^-1 over 150 px): its trend, continued over a zone of 40-60 px, would turn it
+    by 2.4-3.2 radians there, a loop inside the junction's ink. The zone turns by a quarter
+    turn at most (a branch's true turn over 1.4-3 mm from a junction is at most 1.23 rad on
+    compacted rods at epsilon 19, and the network generator's zones turn by at most 1.48 rad;
+    hooks of thin sheets into the wide junction blobs of compacted renders were extrapolated
+    to 4-8.5 radians, 95 % of their stacks' energy)."""
+    from crosssection.stages.curvature import _fill_fork_zones
+
+    rc, _ = _clothoid(150.0, 1.0 / 15.0)
+    t = np.arange(0.0, 150.0 + 1e-9, 1.0)
+    s = np.linspace(0.0, 150.0, len(rc))
+    path = np.stack([np.interp(t, s, rc[:, 0]), np.interp(t, s, rc[:, 1])], 1)
+    kw = dict(n_br=1, thickness_px=H, px_per_mm=1.0, trim_px=(1e-9, zone_px))
+    prof = stack_curvature(path, **kw)
+    paper = stack_curvature(path, method="paper", **kw)
+    free = _fill_fork_zones(paper, 1, H, 1.0, (True, True), max_turn=np.inf)
+
+    def zone_turn(p):
+        z = slice(p.fit_stop - 1, len(p.s_mm))
+        return np.trapezoid(np.abs(p.kappa_per_mm[z]), p.s_mm[z])
+
+    assert zone_turn(free) > 1.5
+    assert zone_turn(prof) <= np.pi / 2 + 1e-9
+    # the fitted part is not touched beyond the shifted fits the trend replaces (half a
+    # window from the zone)
+    f = prof.s_mm < prof.s_mm[prof.fit_stop - 1] - 2.5 * H
+    np.testing.assert_array_equal(prof.kappa_per_mm[f], free.kappa_per_mm[f])
