@@ -34,6 +34,7 @@ import robust_sweep  # noqa: E402  (the scene definitions are shared)
 def rod_turns(sim_dir, ells_mm=(0.5, 1.4, 3.0)) -> list:
     """Rows (config, ell_mm, ends, median, q90, q99, max) of the true turn near junctions."""
     from simulate.contacts import analyze_rod
+    from simulate.geometry import angles
 
     sim_dir = Path(sim_dir)
     params = json.loads((sim_dir / "params.json").read_text())
@@ -44,8 +45,7 @@ def rod_turns(sim_dir, ells_mm=(0.5, 1.4, 3.0)) -> list:
         xy = rods[key]
         an = analyze_rod(xy, lam=7e5, contact_distance=params.get("contact_distance"))
         n = len(xy) - 1
-        seg = np.diff(xy, axis=0)
-        dth = np.abs(np.diff(np.unwrap(np.arctan2(seg[:, 1], seg[:, 0]))))
+        dth = np.abs(np.diff(angles(xy)[0]))  # the turn at each inner node
         node_s = np.arange(1, n) / n
         for ell_mm in ells_mm:
             ell = ell_mm / rod_mm
@@ -70,9 +70,9 @@ def zone_turns(condition: str, seeds) -> tuple:
     bound = curvature._bound_turn
 
     def spy(k, s, z0, z1, edge, limit):
-        if z1 > z0 and 0 <= edge < len(k):
-            i, j = min(z0, edge), max(z1, edge + 1)
-            turns.append(float(np.trapezoid(np.abs(k[i:j]), s[i:j])))
+        turn = curvature._zone_turn(k, s, z0, z1, edge)
+        if turn is not None:
+            turns.append(turn)
         return bound(k, s, z0, z1, edge, limit)
 
     curvature._bound_turn = spy

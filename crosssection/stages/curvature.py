@@ -36,8 +36,8 @@ fit on size 5 n_br h, after coordinates translation and rotation in the tangent 
    most 1.0 (1.23) rad on compacted rods at epsilon 19, and the zones filled on the network
    generator's scenes turn by at most 1.48 rad (``benchmarks/zone_turns.py``); a trend
    continued from a skeleton's hook into a wide junction blob of a compacted render turned
-   4-8.5 rad, a loop the image would show, and carried up to 42 % of its measured energy. Free ends keep
-   the paper's rule (their skeleton is shortened, not merged). Everywhere the curvature is
+   4-8.5 rad, a loop the image would show, and carried up to 42 % of its measured energy.
+   Free ends keep the paper's rule (their skeleton is shortened, not merged). Everywhere the curvature is
    bounded by ``2 / (n_br h)``: the innermost layer of a stack cannot have a negative radius,
    so a tighter estimate is a skeleton kink, not a bend. A stack at a junction shorter than
    twice ``max(2 r, r_Ja + r_Jb)`` (r its median inscribed radius, r_J the inscribed radius
@@ -1139,14 +1139,20 @@ def _fill_fork_zones(prof, n_br, thickness_px, px_per_mm, forks=(True, True), no
                    energy_rel_uncertainty=_rel_uncertainty(out, forks, noise))
 
 
-def _bound_turn(k, s, z0, z1, edge, limit):
-    """Scale the fork zone ``k[z0:z1]`` in place so that its total turn ``int |kappa| ds``,
-    up to the fitted sample ``edge`` next to it, is at most ``limit`` radians."""
+def _zone_turn(k, s, z0, z1, edge) -> float | None:
+    """Total turn ``int |kappa| ds`` of the fork zone ``k[z0:z1]`` up to the fitted sample
+    ``edge`` next to it, radians (None for an empty zone)."""
     if z1 <= z0 or not 0 <= edge < len(k):
-        return
+        return None
     i, j = min(z0, edge), max(z1, edge + 1)
-    turn = float(_trapezoid(np.abs(k[i:j]), s[i:j]))
-    if turn <= limit:
+    return float(_trapezoid(np.abs(k[i:j]), s[i:j]))
+
+
+def _bound_turn(k, s, z0, z1, edge, limit):
+    """Scale the fork zone ``k[z0:z1]`` in place so that its total turn
+    (:func:`_zone_turn`) is at most ``limit`` radians."""
+    turn = _zone_turn(k, s, z0, z1, edge)
+    if turn is None or turn <= limit:
         return
     # the edge sample's half of its interval is measured, not scaled
     half = 0.5 * abs(float(k[edge])) * abs(float(s[edge] - s[edge + (1 if edge < z0 else -1)]))

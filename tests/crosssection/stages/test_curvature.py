@@ -561,7 +561,6 @@ def test_noise_variance_where_the_curvature_reverses(seed):
     assert 0.35 < v / emp < 1.3
 
 
-
 @pytest.mark.parametrize("zone_px", [40.0, 50.0, 60.0])
 def test_fork_zone_turns_at_most_a_quarter_turn(zone_px):
     """A single sheet whose visible curvature rises steeply toward a fork zone (a clothoid,
