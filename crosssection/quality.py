@@ -16,6 +16,7 @@ junction_degree          largest junction degree (paper: degree 4 ~ 1 %)      > 
 packing                  L h / (pi R^2): area of the rod over the hole's      > 1 (impossible)
 epsilon_ink              L h over the ink area inside the hole                outside [0.4, 2.5]
 specks                   free stacks (both ends free) shorter than 2 l_min    > 5 % of stacks
+loops                    closed loops of ink touching no other stack          any, beside others
 widths_out_of_range      stacks wider than the calibration's widest entry     > 5 % of stacks
 linear_system            conservation residuals / repartitioned junctions     > 10 % of junctions
 =======================  ===================================================  ====================
@@ -67,6 +68,7 @@ CATEGORIES = {
     "packing": NetworkWarning,
     "epsilon_ink": NetworkWarning,
     "specks": NetworkWarning,
+    "loops": NetworkWarning,
     "linear_system": LinearSystemWarning,
 }
 for _name, _cls in {c.__name__: c for c in CATEGORIES.values()}.items():
@@ -189,6 +191,13 @@ def _stack_checks(params, stacks, calibration_max_width_mm) -> list[QualityFlag]
     if _frac(specks, m) > 0.05:
         flags.append(QualityFlag("specks", f"{specks} of {m} stacks are short isolated pieces "
                                  "(specks surviving the cleaning?)", _frac(specks, m), 0.05))
+    # one rod's cross-section is a connected curve: a closed ring that touches none of the
+    # other stacks is not a part of it (a ring stain, or a speck whose hole exceeds s_min)
+    loops = int((stacks["kind"] == "loop").sum())
+    if loops and m > loops:
+        flags.append(QualityFlag("loops", f"{loops} closed loop(s) of ink touching no other "
+                                 "stack (ring stains or holed specks surviving the cleaning?)",
+                                 loops, 0))
     if calibration_max_width_mm:
         wide = int((stacks["width_mm"] > 1.05 * calibration_max_width_mm).sum())
         if _frac(wide, m) > 0.05:

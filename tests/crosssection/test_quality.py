@@ -103,6 +103,45 @@ def test_specks_surviving_cleaning_are_flagged(scene):
     assert "specks" in res.summary["quality"]["codes"]
 
 
+def _grid_scan():
+    """A 600-px scan at 50 px/mm: single sheets (5 px) in a grid, crossing one another and
+    ending on a one-layer wall band."""
+    import cv2
+
+    img = np.full((600, 600, 3), 245, np.uint8)
+    ink = (40, 70, 190)
+    for x in (150, 300, 450):
+        cv2.line(img, (x, 0), (x, 599), ink, 5)
+        cv2.line(img, (0, x), (599, x), ink, 5)
+    yy, xx = np.indices(img.shape[:2])
+    img[(yy - 300) ** 2 + (xx - 300) ** 2 > 278 ** 2] = 245
+    cv2.circle(img, (300, 300), 280, ink, 5)
+    return img, dict(px_per_mm=50, thickness_mm=0.1, hole_radius_mm=283 / 50,
+                     hole_center_px=(300, 300))
+
+
+def test_rings_of_ink_apart_from_the_network_are_flagged():
+    import cv2
+
+    img, kw = _grid_scan()
+    res0, _ = _analyze(img, **kw)
+    cv2.circle(img, (225, 225), 40, (40, 70, 190), 5)  # a ring stain 1.6 mm across, in a cell
+    res, caught = _analyze(img, **kw)
+    assert "loops" not in res0.summary["quality"]["codes"]
+    assert "loops" in res.summary["quality"]["codes"]
+    assert any(w.category is quality.NetworkWarning for w in caught)
+
+
+def test_layer_conservation_violated_is_flagged():
+    # three single sheets meet at every T on the wall: 1 != 1 + 1 (the crossings conserve)
+    img, kw = _grid_scan()
+    res, caught = _analyze(img, **kw)
+    flag = next(f for f in res.quality if f.code == "linear_system")
+    assert flag.value > flag.limit
+    assert (~res.junctions["conservation_ok"].astype(bool)).sum() >= 4  # the four T's
+    assert any(w.category is quality.LinearSystemWarning for w in caught)
+
+
 def test_junction_degree_is_flagged():
     # a star of 8 thick rays meeting at one point: a junction of degree 8
     import cv2
