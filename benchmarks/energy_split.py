@@ -14,6 +14,11 @@ its fork zones and ends. Per scene, summed over matched stacks and weighted by n
 * ``zone_ratio``: the same for the rest of each stack;
 * ``window_truth_ratio``: the truth's curvature averaged over the paper's window (a box of
   ``5 n_br h``) / the truth, on the fitted part: what the window's averaging alone keeps;
+* ``design_on_truth``: the estimator's design applied to the truth's own curvature (no
+  pixels, no noise, no gate): the curvature averaged over the window in the fitted part, and
+  at each fork end the line through those averages over ``w/2 .. 3 w/2`` from the fitted
+  end, continued over the first ``w/2`` and the zone; over the whole matched stacks, / the
+  truth there. What the design loses by itself, apart from the measurement;
 * ``restored``: the total energy error once ``mu2 int kappa'^2`` is added over each fitted
   part (``mu2 = w^2 / 28`` for a least-squares parabola over ``w``, plus ``(m^2 - 1) / 12``
   px^2 for the ``m``-point sliding average before it; ``kappa'`` from the profile, its own noise
@@ -53,6 +58,24 @@ def _window_average(k, w_step, width):
     return (c[hi] - c[lo]) / span
 
 
+def _design_on_truth(k, u, f0, f1, w):
+    """``int kappa^2`` of the estimator's design applied to the true curvature ``k`` at arc
+    ``u`` (mm) of a stack whose fitted part is ``[f0, f1]``, window ``w`` (module docstring)."""
+    du = np.gradient(u)
+    kb = _window_average(k, du, w)
+    fitted = (u >= f0) & (u <= f1)
+    inner = (u >= f0 + w / 2) & (u <= f1 - w / 2)
+    est = np.where(fitted, kb, 0.0)
+    for zone, d in ((u < f0 + w / 2, u - f0), (u > f1 - w / 2, f1 - u)):
+        sel = (d >= w / 2) & (d <= 1.5 * w) & inner
+        if sel.sum() >= 3:
+            slope, icpt = np.polyfit(d[sel], kb[sel], 1)
+            est[zone] = icpt + slope * d[zone]
+        else:  # no centred fit: the fitted part's mean, as the estimator's nearest value
+            est[zone] = kb[fitted].mean() if fitted.any() else 0.0
+    return float((est * est * du).sum())
+
+
 def split_scene(condition: str, seed: int, near_px: float = 3.0) -> dict:
     """The ratios of the module docstring for one scene."""
     import crosssection
@@ -84,7 +107,8 @@ def split_scene(condition: str, seed: int, near_px: float = 3.0) -> dict:
         dprofs.append(replace(prof, kappa_per_mm=kd))
     vd = noise_variance(dprofs, n_out, thickness_px=h, px_per_mm=px)
     m = default_smooth_px(h)
-    acc = dict.fromkeys(("t_fit", "m_fit", "t_rest", "m_rest", "t_win", "restore"), 0.0)
+    acc = dict.fromkeys(("t_fit", "m_fit", "t_rest", "m_rest", "t_win", "restore", "t_all",
+                         "design"), 0.0)
     for ro, ct in zip(r, c):
         prof, nb = res.profiles[ro], max(1, int(n_out[ro]))
         t0, t1 = prof.fit_start, prof.fit_stop
@@ -106,6 +130,13 @@ def split_scene(condition: str, seed: int, near_px: float = 3.0) -> dict:
         acc["t_fit"] += n_true * float((k[near] ** 2 * w[near]).sum())
         acc["t_rest"] += n_true * float((k[~near] ** 2 * w[~near]).sum())
         acc["t_win"] += n_true * float((k_win[near] ** 2 * w[near]).sum())
+        u = np.cumsum(w)
+        idx = np.flatnonzero(near)
+        if len(idx) >= 5:
+            f0, f1 = u[idx[0]], u[idx[-1]]
+            w_des = min(5.0 * nb * h, 0.5 * (f1 - f0) * px) / px
+            acc["design"] += n_true * _design_on_truth(k, u, f0, f1, w_des)
+            acc["t_all"] += n_true * float((k * k * w).sum())
         acc["m_fit"] += nb * m_fit
         acc["m_rest"] += nb * (m_all - m_fit)
         w_fit = min(5.0 * nb * h, 0.5 * fitted_len * px) / px
@@ -121,6 +152,7 @@ def split_scene(condition: str, seed: int, near_px: float = 3.0) -> dict:
             "fitted_ratio": acc["m_fit"] / acc["t_fit"] if acc["t_fit"] else np.nan,
             "zone_ratio": acc["m_rest"] / acc["t_rest"] if acc["t_rest"] else np.nan,
             "window_truth_ratio": acc["t_win"] / acc["t_fit"] if acc["t_fit"] else np.nan,
+            "design_on_truth": acc["design"] / acc["t_all"] if acc["t_all"] else np.nan,
             "truth_share_zones": acc["t_rest"] / (acc["t_fit"] + acc["t_rest"]),
             "energy_error": e_out / e_true - 1.0,
             "restored": (e_out + L * acc["restore"]) / e_true - 1.0}
