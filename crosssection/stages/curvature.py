@@ -1061,12 +1061,12 @@ def _fill_fork_zones(prof, n_br, thickness_px, px_per_mm, forks=(True, True), no
     :data:`_SLOPE_NOISE` (measured on noise-only stacks: 2.0-2.9, median 2.4); a slope within
     twice that deviation is noise, and the zone keeps the nearest fitted curvature and the
     shifted fits their own (extrapolating a noise slope multiplied the noise there by about
-    five on jittered arcs). With ``c = 12`` (one independent sample per window, the earlier
-    model) the gate stood at about four deviations and dropped real bends: energy on the
-    network generator's typical scans -16.7 % against -13.0 % with the measured ``c``, and
-    at 25 px/mm median |error| 19.5 against 11.9 % (24 scenes each); a long gentle arc whose
-    energy is nearly all noise keeps the two deviations' share of noise slopes (about 5 %). The curvature is bounded
-    everywhere by ``2 / (n_br h)``: the innermost layer of a stack of ``n_br`` layers cannot
+    five on jittered arcs). With ``c = 12`` (one independent sample per window) the gate
+    would stand at about four deviations and drop real bends: energy on the network
+    generator's typical scans -16.7 % against -13.0 % with the measured ``c``, and at
+    25 px/mm median |error| 19.5 against 11.9 % (24 scenes each); a long gentle arc whose
+    energy is nearly all noise keeps the two deviations' share of noise slopes (about 5 %).
+    The curvature is bounded everywhere by ``2 / (n_br h)``: the innermost layer of a stack of ``n_br`` layers cannot
     have a negative radius, so anything tighter is a skeleton kink, not a bend. A zone's
     total turn, up to the fitted sample next to it, is bounded by ``max_turn`` (the zone's
     curvature scaled down; module docstring, step 3).
