@@ -50,7 +50,7 @@ fit on size 5 n_br h, after coordinates translation and rotation in the tangent 
    shifted onto one window's mean, give way at a fork end to the trend of its centred fits
    where the scan's noise is known and the trend exceeds it, as next to a zone (on S-shaped
    links of 50-80 px whose curvature runs from 1/r to -1/r: 0.96-1.02 x the truth against
-   0.49-0.78 x; network generator, typical scans -12 % -> +1 %, thick dense -15 % -> -2 %,
+   0.49-0.78 x; network generator, typical scans -15 % -> -2 %, thick dense -17.5 % -> -3 %,
    docs/validation/README.md).
 4. **Noise floor.** The window fit turns the pixel noise of the centreline into a curvature
    noise of variance ``v`` that adds ``v l`` to every stack's ``int kappa^2 ds`` whatever its
@@ -1077,10 +1077,10 @@ def _fill_fork_zones(prof, n_br, thickness_px, px_per_mm, forks=(True, True), no
     A stack fitted whole (its zones would cover it) has no zone, but at a fork end its fits
     within ``w/2`` are shifted as next to a zone: the trend replaces them under the same test,
     only where the noise is known (``noise_var_per_mm2 > 0``), for they are measured values.
-    The curvature is bounded everywhere by ``2 / (n_br h)``: the innermost layer of a stack of ``n_br`` layers cannot
-    have a negative radius, so anything tighter is a skeleton kink, not a bend. A zone's
-    total turn, up to the fitted sample next to it, is bounded by ``max_turn`` (the zone's
-    curvature scaled down; module docstring, step 3).
+    The curvature is bounded everywhere by ``2 / (n_br h)``: the innermost layer of a stack of
+    ``n_br`` layers cannot have a negative radius, so anything tighter is a skeleton kink, not
+    a bend. A zone's total turn, up to the fitted sample next to it, is bounded by ``max_turn``
+    (the zone's curvature scaled down; module docstring, step 3).
 
     The relative uncertainty of ``int kappa^2 ds`` adds the extrapolated part (not measured:
     counted in full) and the noise floor of the parabolic fit, ``720 sigma^2 / w^5`` per unit
