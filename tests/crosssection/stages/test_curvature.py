@@ -586,6 +586,28 @@ def test_link_within_two_wide_junction_blobs_is_not_fitted():
     assert prof_narrow[1].fit_stop > prof_narrow[1].fit_start
 
 
+def test_lump_takes_its_neighbours_measured_curvature_not_their_continued_trend():
+    """A lump takes, across its junction, its neighbour's centred fit nearest to that
+    junction: a measured value. The neighbour's shifted fits next to the junction may hold a
+    trend continued beyond its centred fits (_fill_fork_zones); on compacted renders a
+    13-layer lump 10 mm long took such a value and 12 times its earlier energy (epsilon 30,
+    configuration 1: total energy +601 % -> +172 % when it takes the centred fit)."""
+    from crosssection.stages.curvature import _fill_unfitted_stacks, _make_profile
+
+    px = 50.0
+    n = 200
+    s_px = np.arange(n, dtype=float)  # 4 mm, one layer: window 5 h = 25 px
+    k_mm = np.full(n, 0.5)
+    k_mm[n - 12:] = np.linspace(0.5, 3.0, 12)  # a trend continued over the last half window
+    rc = np.stack([np.zeros(n), s_px], 1)
+    source = _make_profile(s_px, k_mm / px, rc, px, False, (0, n))
+    lump = _make_profile(np.arange(30.0), np.zeros(30), rc[:30], px, False, (0, 0))
+    out = _fill_unfitted_stacks([source, lump], {7: [(0, 1), (1, 0)]}, np.array([1, 1]),
+                                px_per_mm=px, thickness_px=H)
+    assert np.allclose(out[1].kappa_per_mm, 0.5)
+    assert out[0] is source
+
+
 def test_unfitted_lump_keeps_its_own_curvature_bound():
     """A thick lump (20 layers, 24 px between two junctions) between single sheets bent at
     R = 25 px (2 /mm) takes their curvature only up to its own bound 2 / (n_br h): its
