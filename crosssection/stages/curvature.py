@@ -928,6 +928,24 @@ def _unfitted(prof) -> bool:
     return len(prof.s_mm) > 0 and prof.fit_stop <= prof.fit_start
 
 
+def _fitted_window_mm(s, t0, t1, window_px, px_per_mm, max_window_frac=0.5) -> float:
+    """The window the fits of samples ``t0:t1`` used, mm: ``window_px``, capped by
+    :func:`_paper_job` at ``max_window_frac`` of the fitted length."""
+    w = float(window_px) / px_per_mm
+    if max_window_frac is not None and max_window_frac > 0:
+        w = min(w, float(max_window_frac) * float(s[t1 - 1] - s[t0]))
+    return w
+
+
+def _centred_fits(s, t0, t1, half_mm):
+    """``(c0, c1)``: the fits of samples ``t0:t1`` centred on their own sample, those
+    ``half_mm`` (half the window) or more from both ends of the fitted part; the others
+    are shifted inwards onto the window next to the end."""
+    c0 = int(np.searchsorted(s, s[t0] + half_mm))
+    c1 = int(np.searchsorted(s, s[t1 - 1] - half_mm, side="right"))
+    return c0, c1
+
+
 def _fill_unfitted_stacks(profiles, at_node, n_br, *, px_per_mm, thickness_px):
     """Stacks without a centreline of their own: the nearest fitted curvature, across their
     junctions.
@@ -992,12 +1010,10 @@ def _fill_unfitted_stacks(profiles, at_node, n_br, *, px_per_mm, thickness_px):
         t0, t1 = prof.fit_start, prof.fit_stop
         # the centred fit nearest to each end: a measured value, not the trend continued
         # beyond it over the shifted fits (_fill_fork_zones)
-        half = 0.5 * min(5.0 * nb[sid] * float(thickness_px) / px_per_mm,
-                         0.5 * float(s[t1 - 1] - s[t0]))
-        c0 = min(int(np.searchsorted(s, s[t0] + half)), t1 - 1)
-        c1 = max(int(np.searchsorted(s, s[t1 - 1] - half, side="right")) - 1, t0)
-        end_value[(sid, 0)] = (float(k[c0]), v)
-        end_value[(sid, 1)] = (float(k[c1]), v)
+        w = _fitted_window_mm(s, t0, t1, 5.0 * nb[sid] * float(thickness_px), px_per_mm)
+        c0, c1 = _centred_fits(s, t0, t1, 0.5 * w)
+        end_value[(sid, 0)] = (float(k[min(c0, t1 - 1)]), v)
+        end_value[(sid, 1)] = (float(k[max(c1 - 1, t0)]), v)
     while todo:
         filled = {}
         for sid in sorted(todo):
@@ -1137,14 +1153,11 @@ def _fill_fork_zones(prof, n_br, thickness_px, px_per_mm, forks=(True, True), no
     k = np.clip(prof.kappa_per_mm, -kmax, kmax)
     # an unfitted stack (t1 == t0) has no trend to continue: _fill_unfitted_stacks fills it
     if not prof.closed and n >= 3 and (t0 > 0 or t1 < n or any(forks)) and t1 > t0:
-        # the window the fits used (_paper_job caps it at a fraction of the fitted length)
-        w = (w_px if window_px is None else float(window_px)) / px_per_mm
-        if max_window_frac is not None and max_window_frac > 0:
-            w = min(w, float(max_window_frac) * float(s[t1 - 1] - s[t0]))
+        w = _fitted_window_mm(s, t0, t1, w_px if window_px is None else float(window_px),
+                              px_per_mm, max_window_frac)
         # shifted fits within w/2 of the zone: the trend window starts beyond them
         off = 0.5 * w if shifted else 0.0
-        c0 = int(np.searchsorted(s, s[t0] + off))  # first centred fit after the start zone
-        c1 = int(np.searchsorted(s, s[t1 - 1] - off, side="right"))  # end of the last
+        c0, c1 = _centred_fits(s, t0, t1, off)
         lo_end = int(np.searchsorted(s, s[t0] + off + w))
         hi_start = int(np.searchsorted(s, s[t1 - 1] - off - w, side="right"))
         for side, (lo, hi, z0, z1, fork) in enumerate((
