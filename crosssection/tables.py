@@ -8,9 +8,10 @@ Conventions (tested in tests/crosssection/test_pipeline.py):
   the same values, so that ``rod_length_mm = sum n_br * length_mm`` holds in both tables.
 - ``mid_x_px``/``mid_y_px`` is the point at half the arc length of the stack's path
   (:func:`crosssection.core.polyline.mid_point`): scoring matches stacks by it.
-- ``junctions.csv`` reports the layer conservation residual under the geometric packs it
-  lists; the linear solve may have repartitioned a junction the widths contradict. A residual
-  of one layer at a junction where the solve placed a rod end
+- ``junctions.csv`` reports the layer conservation residual of the final counts under the
+  packs it lists, which are the partition the linear solve used there (``equation``: the
+  geometric packs, or the candidate the widths picked at an uncertain or a contradicted
+  junction). A residual of one layer at a junction where the solve placed a rod end
   (:func:`crosssection.linsys.equations.rod_end_junctions`) is ``conservation_ok``.
 """
 from __future__ import annotations
@@ -19,6 +20,7 @@ import numpy as np
 import pandas as pd
 
 from crosssection.core import schema
+from crosssection.linsys.equations import candidate_partitions, pack_row
 from crosssection.stages import branches as br
 
 __all__ = ["stack_table", "junction_table", "branch_table"]
@@ -96,8 +98,38 @@ def stack_table(graph, *, length_mm, width_mm, layers_est, n_br, fixed_by_width,
     return pd.DataFrame(cols)
 
 
+def _junction_equations(linear_system) -> dict:
+    """node -> (equation kind, row used) from the linear system's components.
+
+    Kinds: ``packs`` (the geometric packs' conservation), ``widths`` (an uncertain junction
+    whose partition the widths picked), ``repartitioned`` (a clear junction switched by the
+    widths), ``dropped`` (uncertain, no partition clearly best: no equation), ``rod_end`` (a rod
+    end lies there: no equation), ``none`` (no equation: the packs cancel or no packs).
+    """
+    out = {}
+    for c in getattr(linear_system, "components", None) or []:
+        rows = getattr(c, "equation_rows", {})
+        soft = set(getattr(c, "soft_junctions", []))
+        repart = set(getattr(c, "repartitioned_junctions", []))
+        for j, r in rows.items():
+            kind = "repartitioned" if j in repart else "widths" if j in soft else "packs"
+            out[int(j)] = (kind, r)
+        for kind, nodes in (("dropped", getattr(c, "dropped_junctions", [])),
+                            ("rod_end", getattr(c, "rod_end_junctions", []))):
+            for j in nodes:
+                out.setdefault(int(j), (kind, None))
+    return out
+
+
 def junction_table(junctions, graph, packs, n_br, linear_system) -> pd.DataFrame:
     """One row per junction: position, degree, packs and the conservation residual.
+
+    ``pack_a`` / ``pack_b`` are the partition whose conservation the linear system used (the
+    geometric packs, or the candidate partition the widths picked: ``equation``), and the
+    residual ``sum n_br[pack_a] - sum n_br[pack_b]`` is the final counts' under it.  Where the
+    system used no equation (``dropped``: no partition clearly best; ``rod_end``; ``none``)
+    the packs are the geometric ones and ``conservation_ok`` says whether some candidate
+    partition conserves.
 
     Parameters
     ----------
@@ -114,36 +146,42 @@ def junction_table(junctions, graph, packs, n_br, linear_system) -> pd.DataFrame
     """
     k = len(junctions)
     deg = np.array([graph.degree(j) for j in range(k)], dtype=np.int64)
-
-    def side(j, name):
-        p = packs.get(j)
-        return " ".join(f"{s}.{e}" for s, e in getattr(p, name, [])) if p else ""
-
-    def residual(j):
-        p = packs.get(j)
-        if p is None:
-            return 0
-        return int(sum(n_br[s] for s, _ in p.side_a) - sum(n_br[s] for s, _ in p.side_b))
-
+    eqs = _junction_equations(linear_system)
     comps = getattr(linear_system, "components", None) or []
-    repart = {int(j) for c in comps for j in getattr(c, "repartitioned_junctions", [])}
     rod_end = {int(j) for c in comps for j in getattr(c, "rod_end_junctions", [])}
-    cons = [residual(j) for j in range(k)]
-    # a rod end at a junction leaves one layer unmatched there: conservation holds up to it
-    ok = [r == 0 or (j in rod_end and abs(r) == 1) for j, r in enumerate(cons)]
+
+    def net(a, b) -> int:
+        return int(sum(n_br[s] for s, _ in a) - sum(n_br[s] for s, _ in b))
+
+    kinds, sides, cons, ok = [], [], [], []
+    for j in range(k):
+        p = packs.get(j)
+        kind, row = eqs.get(j, ("none", None))
+        parts = candidate_partitions(p) if p is not None else [([], [])]
+        used = next((ab for ab in parts if row is not None and pack_row(*ab) == row), parts[0])
+        r = net(*used)
+        good = r == 0 or (j in rod_end and abs(r) == 1)
+        if row is None and not good:
+            # no equation was used here: any partition that conserves will do
+            good = any(net(*ab) == 0 for ab in parts)
+        kinds.append(kind)
+        sides.append(used)
+        cons.append(r)
+        ok.append(bool(good))
     return pd.DataFrame({
         "junction_id": np.arange(k, dtype=np.int64),
         "x_px": junctions.centers_rc[:, 1] if k else np.zeros(0),
         "y_px": junctions.centers_rc[:, 0] if k else np.zeros(0),
         "n_stacks": deg,
-        "pack_a": [side(j, "side_a") for j in range(k)],
-        "pack_b": [side(j, "side_b") for j in range(k)],
+        "pack_a": [" ".join(f"{s}.{e}" for s, e in a) for a, _ in sides],
+        "pack_b": [" ".join(f"{s}.{e}" for s, e in b) for _, b in sides],
         "ambiguous": [bool(getattr(packs.get(j), "ambiguous", False)) for j in range(k)],
         "reference_dependent": [bool(getattr(packs.get(j), "reference_dependent", False))
                                 for j in range(k)],
+        "equation": kinds,
         "conservation_residual": cons,
         "conservation_ok": ok,
-        "repartitioned": [j in repart for j in range(k)],
+        "repartitioned": [kd == "repartitioned" for kd in kinds],
         "n_pixels": [len(p) for p in junctions.pixels],
     })
 

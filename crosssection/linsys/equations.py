@@ -23,7 +23,7 @@ import numpy as np
 import scipy.sparse as sp
 
 __all__ = ["conservation_equations", "rod_end_junctions", "sparse_rows", "reliability_score",
-           "select_width_stacks", "paper_system"]
+           "select_width_stacks", "paper_system", "pack_row", "candidate_partitions"]
 
 
 def _ends_by_node(graph) -> dict:
@@ -35,7 +35,7 @@ def _ends_by_node(graph) -> dict:
     return out
 
 
-def _row(side_a, side_b) -> dict:
+def pack_row(side_a, side_b) -> dict:
     """Coefficients of ``sum_A n - sum_B n`` (a stack ending twice on one pack counts 2)."""
     row: dict[int, int] = {}
     for sid, _ in side_a:
@@ -62,14 +62,18 @@ def _zscore(row: dict, layers_est, sigma) -> float:
     return abs(c @ est) / math.sqrt(float(np.sum(c ** 2 * sig ** 2)) + 1e-12)
 
 
+def candidate_partitions(pack) -> list:
+    """The geometric partition of a junction's packs first, then ``pack.candidates``."""
+    return [(list(pack.side_a), list(pack.side_b))] + \
+        [(list(a), list(b)) for a, b in getattr(pack, "candidates", [])]
+
+
 def _candidate_rows(pack, ends) -> list:
     """Distinct non-trivial rows of the geometric partition and of ``pack.candidates``."""
-    cands = [(list(pack.side_a), list(pack.side_b))] + \
-        [tuple(c) for c in getattr(pack, "candidates", [])]
     rows = []
-    for a, b in cands:
+    for a, b in candidate_partitions(pack):
         if _covers(list(a), list(b), ends):
-            r = _row(a, b)
+            r = pack_row(a, b)
             if r and r not in rows:
                 rows.append(r)
     return rows
@@ -104,7 +108,7 @@ def _junction_equation(pack, ends, layers_est, sigma, *, z_max, z_gap, switch_ll
     if uncertain:
         choice = _width_choice(_candidate_rows(pack, ends), layers_est, sigma, z_max, z_gap)
         return ("drop", None) if choice is None else ("soft", choice)
-    row = _row(side_a, side_b)
+    row = pack_row(side_a, side_b)
     if not row:
         return "none", None
     if layers_est is None:

@@ -64,6 +64,9 @@ class ComponentInfo:
     violated_junctions: list = field(default_factory=list)
     repartitioned_junctions: list = field(default_factory=list)
     rod_end_junctions: list = field(default_factory=list)
+    #: node -> the conservation row the system used there (stack id -> coefficient): the
+    #: geometric packs' or the candidate partition the widths picked
+    equation_rows: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -285,7 +288,8 @@ def _solve_component(nodes, stacks, eqs: _Equations, packs, wts: WidthWeights, s
                          soft_junctions=[nd for nd, _ in eqs.soft],
                          dropped_junctions=eqs.dropped,
                          repartitioned_junctions=list(eqs.repartitioned),
-                         rod_end_junctions=list(eqs.rod_ends))
+                         rod_end_junctions=list(eqs.rod_ends),
+                         equation_rows={nd: dict(r) for nd, r in rows})
     ee, ww, sg = wts.layers[idx], wts.weights_eff[idx], wts.sigma[idx]
     C = sparse_rows(rows, {s: i for i, s in enumerate(stacks)}, len(idx))
     sel = _paper_system_info(info, C, rows, idx, score, ee, opts)

@@ -205,3 +205,21 @@ def test_cli_prints_one_warning_line_per_flag(scene, tmp_path):
     lines = run.stderr.strip().splitlines()
     assert lines and all(line.startswith(f"warning: {img}: ") for line in lines)
     assert any("calibration" in line for line in lines)
+
+
+@pytest.mark.parametrize("violated, repartitioned, flagged", [
+    (0, 0, False), (2, 0, False), (3, 0, True),     # violations: limit 10 % of 20
+    (0, 3, False), (0, 5, False), (0, 6, True),     # repartitions: limit 25 % of 20
+])
+def test_linear_system_flag_counts_violations_and_repartitions_apart(violated, repartitioned,
+                                                                      flagged):
+    """A repartition corrects a misread fork (an independent generator's exact scans have up
+    to 18 % of them), a violation is a count that does not conserve: separate limits."""
+    import pandas as pd
+
+    j = pd.DataFrame({"conservation_ok": np.arange(20) >= violated,
+                      "repartitioned": np.arange(20) >= 20 - repartitioned})
+    flags = quality._linear_system_checks(j)
+    assert bool(flags) == flagged
+    if flagged:
+        assert flags[0].code == "linear_system" and flags[0].value > flags[0].limit

@@ -216,3 +216,96 @@ def test_render_directory_api_takes_the_wall_by_default(compact_dir, tmp_path):
     (none,) = render_directory(compact_dir, tmp_path / "n", px_per_mm=PX_PER_MM, clean=True,
                                hole_radius_mm=None)
     assert json.loads((none / "params.json").read_text())["hole_radius_mm"] is None
+
+
+def _drawn_energy(scene, rod_length_px: float) -> float:
+    """``L sum n_br int kappa^2 ds`` of the drawn centrelines (turning angles at 1 px)."""
+    total = 0.0
+    for path, n in zip(scene.paths_rc, scene.tables["stacks"]["n_br"]):
+        p = np.asarray(path, float)
+        if len(p) < 3:
+            continue
+        u = np.r_[0.0, np.cumsum(np.hypot(*np.diff(p, axis=0).T))]
+        q = np.c_[np.interp(np.arange(0.0, u[-1], 1.0), u, p[:, 0]),
+                  np.interp(np.arange(0.0, u[-1], 1.0), u, p[:, 1])]
+        if len(q) < 3:
+            continue
+        d = np.diff(q, axis=0)
+        total += n * rod_length_px * float(np.sum(np.diff(np.unwrap(np.arctan2(*d.T))) ** 2))
+    return total
+
+
+def test_hooked_bands_bend_as_the_rod_and_stay_connected(tmp_path):
+    """At epsilon = 8 the analysis' lines hooked into junction points at a band's side bend
+    hundreds of times more than the rod; the bands joined along their own lines (the default
+    for a compacted rod) bend about as much as it, and the drawing stays one piece."""
+    import cv2
+
+    out = tmp_path / "sim"
+    assert main(["compact", "--epsilon", "8", "--segments", "400", "--n-configs", "1",
+                 "--seed", "2", "--out", str(out), "--no-progress"]) == 0
+    p = json.loads((out / "params.json").read_text())
+    xy = np.load(out / "rods.npz")["config_00000"]
+    a = analyze_rod(xy, lam=0.0, contact_distance=p["contact_distance"])
+    rod = float(a.branches["energy_bending"].sum())
+    kw = dict(px_per_mm=PX_PER_MM, rod_thickness=p["thickness"], wall_radius=p["wall_radius"],
+              hole_radius_mm="auto", clean=True, seed=1)
+    scenes = {join: render_configuration(xy, a, join=join, **kw)
+              for join in ("auto", "hook", "junction")}
+    assert scenes["auto"].params["join"] == "hook"
+    assert np.array_equal(scenes["auto"].rgb, scenes["hook"].rgb)
+    length_px = scenes["hook"].params["rod_length_mm"] * PX_PER_MM
+    hook, junction = (_drawn_energy(scenes[j], length_px) for j in ("hook", "junction"))
+    assert junction > 50 * rod
+    assert 0.3 * rod < hook < 3 * rod
+    for join in ("hook", "junction"):
+        rgb = scenes[join].rgb.astype(int)
+        ink = ((rgb[..., 2] - rgb[..., 0] > 40) & (rgb[..., 2] > 100)).astype(np.uint8)
+        n_parts = cv2.connectedComponents(ink, connectivity=8)[0] - 1
+        assert n_parts == 1, join
+    with pytest.raises(ParameterError, match="join"):
+        render_configuration(xy, a, join="bridge", **kw)
+
+
+def test_a_junction_beside_a_band_is_looked_for_near_its_end():
+    """A stack leaving its junction and passing by it again further on (a teardrop) is joined
+    at its end, not cut where it passes by; a junction point beside the band near its end is
+    joined where the band passes it."""
+    from simulate.render import _beside
+
+    # out along y = 0, round a half circle, back along y = -40 past the start
+    t = np.linspace(0.0, np.pi, 60)
+    loop = np.concatenate([np.c_[np.linspace(0.0, 400.0, 201), np.zeros(201)],
+                           np.c_[400.0 + 20.0 * np.sin(t), -20.0 + 20.0 * np.cos(t)][1:],
+                           np.c_[np.linspace(400.0, -100.0, 251), np.full(251, -40.0)][1:]])
+    jp = np.array([-20.0, -30.0])  # 36 px from the start, 10 px from the way back
+    out, hooked = _beside(loop, jp, 0, 2.0, reach_px=60.0)
+    assert hooked and len(out) == len(loop)
+    line = np.c_[np.linspace(0.0, 400.0, 201), np.zeros(201)]
+    out, hooked = _beside(line, np.array([40.0, 20.0]), 0, 2.0, reach_px=60.0)
+    assert hooked and np.allclose(out[0], [40.0, 0.0])  # cut where it passes the point
+    out, hooked = _beside(line, np.array([40.0, 1.0]), 0, 2.0, reach_px=60.0)
+    assert not hooked and len(out) == len(line)  # the band covers the point
+
+
+def test_junction_points_far_from_the_bands_are_not_joined(tmp_path, monkeypatch):
+    """At low compaction a junction point (the mean of run ends lying far apart) can sit
+    tens of band widths from where the stacks' passes end: joined to it, the bands would
+    cross the paper and bend 80 times more than the rod; left free they bend about as it."""
+    import simulate.render as render
+
+    out = tmp_path / "sim"
+    assert main(["compact", "--epsilon", "6", "--segments", "400", "--n-configs", "1",
+                 "--seed", "2", "--out", str(out), "--no-progress"]) == 0
+    p = json.loads((out / "params.json").read_text())
+    xy = np.load(out / "rods.npz")["config_00000"]
+    a = analyze_rod(xy, lam=0.0, contact_distance=p["contact_distance"])
+    rod = float(a.branches["energy_bending"].sum())
+    kw = dict(px_per_mm=PX_PER_MM, rod_thickness=p["thickness"], wall_radius=p["wall_radius"],
+              hole_radius_mm="auto", clean=True, seed=1)
+    kept = render_configuration(xy, a, **kw)
+    length_px = kept.params["rod_length_mm"] * PX_PER_MM
+    monkeypatch.setattr(render, "FAR_JUNCTION", np.inf)
+    joined = render_configuration(xy, a, **kw)
+    assert _drawn_energy(kept, length_px) < 3 * rod
+    assert _drawn_energy(joined, length_px) > 20 * rod

@@ -60,13 +60,12 @@ def test_reference_dependent_junction_uses_width_choice():
     np.testing.assert_array_equal(res.n_br, [1, 1, 1])
 
 
-def test_wrong_geometric_pack_is_repartitioned_by_widths():
-    """A clear (not flagged) junction with the wrong partition, contradicted by thin exact
-    widths, is switched to the candidate the widths support."""
+def _misread_junction():
+    """A random network whose one degree-3 junction lists a wrong partition (a member of the
+    larger pack moved to the other), the right one among its candidates; thin exact widths.
+    Returns (graph, width estimates, node, right partition)."""
     fg = random_network(21, n_junctions=30)
-    rng = np.random.default_rng(5)
-    est = fg.n_true + rng.normal(0, 0.1, len(fg.paths))
-    # corrupt one degree-3 junction: move a member of the larger pack to the other pack
+    est = fg.n_true + np.random.default_rng(5).normal(0, 0.1, len(fg.paths))
     node = next(nd for nd, p in fg.packs.items() if len(p.side_a) == 1 and len(p.side_b) == 2
                 and len({s for s, _ in p.side_a + p.side_b}) == 3
                 and abs(sum(fg.n_true[s] for s, _ in p.side_b[1:]) * 2) >= 4)
@@ -74,6 +73,13 @@ def test_wrong_geometric_pack_is_repartitioned_by_widths():
     right = (list(p.side_a), list(p.side_b))
     fg.packs[node] = Pack(node, p.side_a + p.side_b[1:], p.side_b[:1],
                           candidates=[right, (p.side_a + p.side_b[1:], p.side_b[:1])])
+    return fg, est, node, right
+
+
+def test_wrong_geometric_pack_is_repartitioned_by_widths():
+    """A clear (not flagged) junction with the wrong partition, contradicted by thin exact
+    widths, is switched to the candidate the widths support."""
+    fg, est, node, _ = _misread_junction()
     _, _, _, repart = conservation_equations(fg, fg.packs, est, np.full(len(est), 0.3))
     assert repart == [node]
     _, _, _, repart = conservation_equations(fg, fg.packs, est, np.full(len(est), 0.3),
@@ -108,3 +114,43 @@ def test_paper_system_rows():
     np.testing.assert_array_equal(A[2], [0, 0, 1])
     np.testing.assert_array_equal(b, [0, 0, 1])
     assert np.linalg.matrix_rank(A) == 3
+
+
+def _junction_rows(fg, packs, res):
+    from crosssection.stages.junctions import Junctions
+    from crosssection.tables import junction_table
+
+    class Degrees:
+        def degree(self, j):
+            return fg.graph.degree(j) if j in fg.graph else 0
+
+    k = max(packs) + 1
+    js = Junctions(np.zeros((k, 2)), [np.zeros((1, 2), int)] * k, np.zeros((1, 1), np.int32))
+    return junction_table(js, Degrees(), packs, res.n_br, res)
+
+
+def test_junction_table_reports_the_partition_the_system_used():
+    """The symmetric Y's geometric packs (0 | 1 2) do not conserve the counts (1, 1, 2) the
+    widths chose with the partition (2 | 0 1): the table lists that partition, its zero
+    residual, and how it was chosen; without a clear choice no equation is used and the
+    junction conserves under some candidate."""
+    fg, packs = _symmetric_y()
+    res = solve_branch_counts(fg, packs, np.array([1.1, 0.9, 2.3]))
+    row = _junction_rows(fg, packs, res).iloc[0]
+    assert (row["pack_a"], row["pack_b"]) == ("2.0", "0.0 1.0")
+    assert row["equation"] == "widths" and row["conservation_residual"] == 0
+    assert row["conservation_ok"] and not row["repartitioned"]
+    res = solve_branch_counts(fg, packs, np.array([1.0, 1.0, 1.0]))
+    row = _junction_rows(fg, packs, res).iloc[0]
+    assert row["equation"] == "dropped" and row["pack_a"] == "0.0"
+    assert row["conservation_residual"] == -1 and not row["conservation_ok"]
+
+
+def test_junction_table_marks_repartitioned_junctions_conserved():
+    fg, est, node, right = _misread_junction()
+    res = solve_branch_counts(fg, fg.packs, est)
+    table = _junction_rows(fg, fg.packs, res).set_index("junction_id")
+    assert table.loc[node, "equation"] == "repartitioned" and table.loc[node, "repartitioned"]
+    assert table.loc[node, "pack_a"] == " ".join(f"{s}.{e}" for s, e in right[0])
+    assert table["conservation_ok"].loc[list(fg.packs)].all()
+    assert set(table["equation"].loc[list(fg.packs)]) <= {"packs", "repartitioned", "none"}
