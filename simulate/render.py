@@ -62,9 +62,9 @@ is not joined to it: at low compaction the mean of run ends lying far apart can 
 widths away, in the paper (epsilon = 4-6, 400 segments: the hooked bands bend 50-260 times
 more than the rod when joined there, 1.3-6.6 times when not). It is the default for a rod of
 finite thickness (a compaction). Quenched rods (N = 300) keep ``join="junction"``, which the
-validation atlas and the robust sweep measure: on six clean quench renders the hook join read
-a median |energy error| of 26 % against 40 %, but mixed rod by rod (+97 -> -19 %, +67 ->
-+104 %, -11 -> -32 %; docs/validation/compact.md). The
+validation atlas and the robust sweep measure: on 32 quench renders it reads a median
+|energy error| of 12 % (hook 17 %) but has more outliers (7 beyond 50 % against 3, worst
++324 % against +99 %; docs/validation/compact.md). The
 stacks shorter than their width still sit inside junction zones: neither drawing is a usable
 truth for the energy, which stays the rod's.
 

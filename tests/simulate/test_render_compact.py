@@ -155,6 +155,7 @@ def test_short_links_are_smoothed():
     (["--plate", "grey", "--hole", "none"], "plate"),
     (["--px-per-mm", "0"], "--px-per-mm"),
     (["--smooth", "some"], "--smooth"),
+    (["--join", "bridge"], "--join"),
 ])
 def test_bad_options_exit_2_with_one_line(compact_dir, tmp_path, capsys, flags, names):
     try:
