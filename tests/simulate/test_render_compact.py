@@ -236,21 +236,27 @@ def _drawn_energy(scene, rod_length_px: float) -> float:
     return total
 
 
+def _compacted(tmp_path, epsilon: float):
+    """A rod of 400 segments compacted to ``epsilon`` (seed 2), its contact analysis, its
+    energy and the render keywords of a clean scan of it."""
+    out = tmp_path / "sim"
+    assert main(["compact", "--epsilon", str(epsilon), "--segments", "400", "--n-configs", "1",
+                 "--seed", "2", "--out", str(out), "--no-progress"]) == 0
+    p = json.loads((out / "params.json").read_text())
+    xy = np.load(out / "rods.npz")["config_00000"]
+    a = analyze_rod(xy, lam=0.0, contact_distance=p["contact_distance"])
+    kw = dict(px_per_mm=PX_PER_MM, rod_thickness=p["thickness"], wall_radius=p["wall_radius"],
+              hole_radius_mm="auto", clean=True, seed=1)
+    return xy, a, float(a.branches["energy_bending"].sum()), kw
+
+
 def test_hooked_bands_bend_as_the_rod_and_stay_connected(tmp_path):
     """At epsilon = 8 the analysis' lines hooked into junction points at a band's side bend
     hundreds of times more than the rod; the bands joined along their own lines (the default
     for a compacted rod) bend about as much as it, and the drawing stays one piece."""
     import cv2
 
-    out = tmp_path / "sim"
-    assert main(["compact", "--epsilon", "8", "--segments", "400", "--n-configs", "1",
-                 "--seed", "2", "--out", str(out), "--no-progress"]) == 0
-    p = json.loads((out / "params.json").read_text())
-    xy = np.load(out / "rods.npz")["config_00000"]
-    a = analyze_rod(xy, lam=0.0, contact_distance=p["contact_distance"])
-    rod = float(a.branches["energy_bending"].sum())
-    kw = dict(px_per_mm=PX_PER_MM, rod_thickness=p["thickness"], wall_radius=p["wall_radius"],
-              hole_radius_mm="auto", clean=True, seed=1)
+    xy, a, rod, kw = _compacted(tmp_path, 8)
     scenes = {join: render_configuration(xy, a, join=join, **kw)
               for join in ("auto", "hook", "junction")}
     assert scenes["auto"].params["join"] == "hook"
@@ -295,15 +301,7 @@ def test_junction_points_far_from_the_bands_are_not_joined(tmp_path, monkeypatch
     cross the paper and bend 80 times more than the rod; left free they bend about as it."""
     import simulate.render as render
 
-    out = tmp_path / "sim"
-    assert main(["compact", "--epsilon", "6", "--segments", "400", "--n-configs", "1",
-                 "--seed", "2", "--out", str(out), "--no-progress"]) == 0
-    p = json.loads((out / "params.json").read_text())
-    xy = np.load(out / "rods.npz")["config_00000"]
-    a = analyze_rod(xy, lam=0.0, contact_distance=p["contact_distance"])
-    rod = float(a.branches["energy_bending"].sum())
-    kw = dict(px_per_mm=PX_PER_MM, rod_thickness=p["thickness"], wall_radius=p["wall_radius"],
-              hole_radius_mm="auto", clean=True, seed=1)
+    xy, a, rod, kw = _compacted(tmp_path, 6)
     kept = render_configuration(xy, a, **kw)
     length_px = kept.params["rod_length_mm"] * PX_PER_MM
     monkeypatch.setattr(render, "FAR_JUNCTION", np.inf)
