@@ -24,8 +24,11 @@ def test_noise_scale_follows_the_data(sigma):
 
 def test_width_weights_model():
     e = np.array([1.0, 3.0, np.nan, 5.0])
-    wts = width_weights(e, reliability=np.array([1.0, 2.0, 1.0, np.nan]), noise_scale=0.5)
+    wts = width_weights(e, reliability=np.array([1.0, 2.0, 1.0, np.nan]), noise_scale=0.5,
+                        noise_growth=0.05)
     np.testing.assert_allclose(wts.sigma, 0.5 * np.array([0.3, 0.4, 0.3, 0.5]))
+    # the default model is this one
+    np.testing.assert_allclose(width_weights(e, noise_scale=0.5).sigma, wts.sigma)
     np.testing.assert_allclose(wts.weights, [1 / 0.15 ** 2, 2 / 0.2 ** 2, 0, 0])
     np.testing.assert_array_equal(wts.layers, [1, 3, 1, 5])
     assert np.all(wts.weights_eff > 0)
