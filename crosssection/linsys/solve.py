@@ -39,7 +39,7 @@ from crosssection.linsys.equations import (conservation_equations, paper_system,
                                            reliability_score, rod_end_junctions,
                                            select_width_stacks, sparse_rows)
 from crosssection.linsys.milp import milp_solve
-from crosssection.linsys.noise import NOISE_GROWTH, NOISE_LAYERS, WidthWeights, width_weights
+from crosssection.linsys.noise import NOISE_LAYERS, WidthWeights, width_weights
 from crosssection.linsys.rank import system_diagnostics, width_fixed_stacks
 from crosssection.linsys.search import integer_refine, objective
 
@@ -314,7 +314,7 @@ def _solve_component(nodes, stacks, eqs: _Equations, packs, wts: WidthWeights, s
 
 def solve_branch_counts(graph, packs: dict, layers_est, *, reliability=None,
                         noise_layers: float = NOISE_LAYERS,
-                        noise_growth: float = NOISE_GROWTH,
+                        noise_growth="auto",
                         width_fraction: float = 1.0 / 3.0, window: int = 3,
                         z_max: float = 4.0, soft_penalty: float = 4.0,
                         robust_penalty: float | None = 1.5, start: str = "wls",
@@ -349,7 +349,8 @@ def solve_branch_counts(graph, packs: dict, layers_est, *, reliability=None,
         profile); 0 means "ignore this width".
     noise_layers, noise_growth : float
         Width error model ``sigma = noise_layers + noise_growth * (e - 1)`` (layers;
-        :mod:`crosssection.linsys.noise`).
+        :mod:`crosssection.linsys.noise`); ``noise_growth="auto"`` (default) measures it
+        (:func:`crosssection.linsys.noise.estimate_growth`).
     width_fraction : float
         Fraction of stacks fixed by width in the paper's system (1/3).
     window : int

@@ -41,3 +41,21 @@ def test_width_weights_rejects_bad_arguments():
         width_weights(np.ones(3), noise_scale="fast")
     with pytest.raises(ValueError, match="reliability"):
         width_weights(np.ones(3), reliability=np.ones(2))
+
+
+def test_width_error_grows_only_where_thick_widths_do_not_resolve_layers():
+    """Thick stacks whose estimates sit on integers (a calibrated, sharp scan) get the thin
+    stacks' error; estimates spread between integers (no calibration: w = n h read for
+    h (n + 0.4 sqrt n)) keep the growing error, and so do scans with few thick stacks."""
+    from crosssection.linsys.noise import NOISE_GROWTH, estimate_growth
+
+    rng = np.random.default_rng(3)
+    n = rng.integers(5, 16, 40)
+    assert estimate_growth(n + rng.normal(0, 0.08, 40)) == 0.0
+    assert estimate_growth(n + 0.4 * np.sqrt(n)) == NOISE_GROWTH
+    assert estimate_growth(n + rng.uniform(-0.5, 0.5, 40)) == NOISE_GROWTH
+    assert estimate_growth(np.r_[np.ones(30), 7.0, 9.0, np.nan]) == NOISE_GROWTH
+    wts = width_weights(np.r_[np.ones(10), n + 0.01], noise_scale=1.0)
+    np.testing.assert_allclose(wts.sigma, 0.3)
+    with pytest.raises(ValueError, match="noise_growth"):
+        width_weights(np.ones(3), noise_growth="fast")
