@@ -219,9 +219,10 @@ def _runs(labels):
 
 
 def _smooth_short_runs(mult, min_len):
-    """Give runs shorter than ``min_len`` samples the multiplicity of their longer neighbour."""
+    """Give runs shorter than ``min_len`` samples the multiplicity of their longer neighbour,
+    the shortest first, until none is left (every merge removes at least one run)."""
     mult = mult.copy()
-    for _ in range(20):
+    for _ in range(len(_runs(mult))):
         runs = _runs(mult)
         if len(runs) < 2:
             break
@@ -339,6 +340,7 @@ class _Samples(NamedTuple):
     clusters: list        # chained contact cluster of every sample (one sample per pass)
     mult_raw: np.ndarray  # (K,) passes in every cluster
     mult: np.ndarray      # mult_raw with runs shorter than min_run merged into a neighbour
+    min_len: int = 1      # min_run in samples
 
 
 def _sample_contacts(xy, delta, min_run) -> _Samples:
@@ -351,7 +353,7 @@ def _sample_contacts(xy, delta, min_run) -> _Samples:
     mult_raw = np.array([len(c) for c in clusters], dtype=np.int64)
     mult = _smooth_short_runs(mult_raw, max(1, int(round(min_run / h))))
     return _Samples(s=s, pts=pts, sub=sub, h=h, same_pass=same_pass, clusters=clusters,
-                    mult_raw=mult_raw, mult=mult)
+                    mult_raw=mult_raw, mult=mult, min_len=max(1, int(round(min_run / h))))
 
 
 def _run_ids(runs, k_total):
@@ -651,16 +653,29 @@ def _trapezoid_piece(r2, n, s0, s1):
 
 def _mean_line(st, members, topo, smp, run_id, j_xy, ja, jb):
     """Centroid line of a stack's passes along its longest run, extended to its junctions
-    (side 0 first)."""
+    (side 0 first).
+
+    Where a pass stands off the others for less than ``min_run`` (a run merged by
+    :func:`_smooth_short_runs`), the sample's contact cluster lacks it: the centroid of the
+    passes found there would jump by up to the band's width. Such stretches (fewer passes of
+    the stack than the run's multiplicity, shorter than ``min_run``, between samples that
+    hold them all) take the centroid interpolated between their ends.
+    """
     runs, pts = topo.runs, smp.pts
     r0 = max(members, key=lambda r: runs[r][1] - runs[r][0])
     a, b = runs[r0]
     b_incl = min(b, len(pts) - 1)
     idx = np.arange(a, b_incl + 1)
     line = np.empty((len(idx), 2))
+    full = np.zeros(len(idx), bool)
     for t, k in enumerate(idx):
         mem = [q for q in smp.clusters[k] if topo.run_stack[run_id[q]] == st]
         line[t] = pts[mem].mean(axis=0) if mem else pts[k]
+        full[t] = len(mem) >= smp.mult[min(k, b - 1)]
+    for lo, hi in _runs(full.astype(np.int64)):
+        if not full[lo] and lo > 0 and hi < len(idx) and hi - lo < smp.min_len:
+            w = (np.arange(lo, hi) - (lo - 1)) / (hi - (lo - 1))
+            line[lo:hi] = (1 - w)[:, None] * line[lo - 1] + w[:, None] * line[hi]
     if topo.side[(r0, 0)] == 1 or topo.side[(r0, 1)] == 0:
         line = line[::-1]
     head = [j_xy[ja]] if ja >= 0 else []

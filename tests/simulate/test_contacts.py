@@ -227,3 +227,59 @@ def test_free_end_inside_band_is_not_a_junction(seed):
     assert sorted([tail.junction_a, tail.junction_b]) == [-1, 0]
     assert a.n_branches == 3
     check_totals(a, xy)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_every_short_run_is_merged(seed):
+    """Runs of constant multiplicity shorter than min_run are merged into a neighbour however
+    many there are (a compacted rod of 2000 segments has a hundred or more)."""
+    from simulate.contacts import _runs, _smooth_short_runs
+
+    rng = np.random.default_rng(seed)
+    min_len = 9
+    parts, long_values = [], []
+    for _ in range(80):  # long runs separated by one to three short blips each
+        v = int(rng.integers(2, 6))
+        parts.append(np.full(int(rng.integers(min_len, 4 * min_len)), v))
+        long_values.append((len(np.concatenate(parts)) - len(parts[-1]), len(parts[-1]), v))
+        for _ in range(int(rng.integers(1, 4))):
+            parts.append(np.full(int(rng.integers(1, min_len)), int(rng.integers(1, 8))))
+    mult = np.concatenate(parts)
+    before = _runs(mult)
+    assert sum(b - a < min_len for a, b in before) > 100
+    out = _smooth_short_runs(mult, min_len)
+    assert all(b - a >= min_len for a, b in _runs(out))
+    # the samples of the runs that were long enough keep their multiplicity
+    for start, n, v in long_values:
+        assert (out[start:start + n] == v).all()
+
+
+def test_many_short_separations_do_not_split_a_band():
+    """A band of two passes whose outer pass leaves contact for less than min_run at 30
+    places (60 short runs, 206 in all) is one stack: the single pass of a bump is not a
+    branch."""
+    n = 2000
+    delta = 4.0 / n  # 8 segments: a bump over two segments is far shorter than 3 delta
+    g = 0.5 * delta
+    arm = 0.45
+    x = np.linspace(0.0, arm, 9001)
+    top = np.c_[x, np.full_like(x, g / 2)]
+    for xc in np.linspace(0.03, arm - 0.03, 30):
+        top[:, 1] += 2.5 * delta * np.clip(1 - np.abs(x - xc) / (1.0 / n), 0, None)
+    th = np.linspace(np.pi / 2, -np.pi / 2, 400)
+    cap = np.c_[arm + g / 2 * np.cos(th), g / 2 * np.sin(th)]
+    curve = np.concatenate([lines((-0.1, 0.06), (0, g / 2)), top, cap,
+                            lines((arm, -g / 2), (0, -g / 2), (-0.1, -0.06))])
+    xy = resample(curve, n)
+    a = analyze_rod(xy, lam=LAM, contact_distance=delta)
+    # as the plain hairpin: one band of 2 from the Y junction to the fold, two single tails
+    assert a.n_junctions == 1
+    assert sorted(a.stacks["n_br"]) == [1, 1, 2]
+    check_totals(a, xy)
+    # the band's mean line stays between its passes: at a bump the cluster lacks the pass
+    # standing off, and the centroid of the one left would jump by 1.7 delta
+    band = int(np.flatnonzero(a.stacks["n_br"].to_numpy() == 2)[0])
+    line = a.stack_lines[band][1:-1]
+    inner = (line[:, 0] > 0.02) & (line[:, 0] < arm - 0.02)
+    assert inner.sum() > 1000
+    assert np.abs(line[inner, 1]).max() < delta
