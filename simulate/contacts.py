@@ -351,9 +351,10 @@ def _sample_contacts(xy, delta, min_run) -> _Samples:
     same_pass = int(np.ceil(2.0 * delta / h)) + 1
     clusters = _clusters(partners, same_pass)
     mult_raw = np.array([len(c) for c in clusters], dtype=np.int64)
-    mult = _smooth_short_runs(mult_raw, max(1, int(round(min_run / h))))
+    min_len = max(1, int(round(min_run / h)))
+    mult = _smooth_short_runs(mult_raw, min_len)
     return _Samples(s=s, pts=pts, sub=sub, h=h, same_pass=same_pass, clusters=clusters,
-                    mult_raw=mult_raw, mult=mult, min_len=max(1, int(round(min_run / h))))
+                    mult_raw=mult_raw, mult=mult, min_len=min_len)
 
 
 def _run_ids(runs, k_total):
