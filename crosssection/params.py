@@ -110,6 +110,10 @@ class AnalysisParams:
         "fixed threshold: maximum red and green, native units (default 130 for 8-bit)"))
     s_min_mm2: float | None = field(default=None, metadata=_opt(
         "smallest void (default (10 h)^2, the paper's)", "mm^2"))
+    sliver_width_h: float = field(default=1.5, metadata=_opt(
+        "a hole below s_min at least this many h wide, l_min long and 4 times longer than "
+        "wide is kept as the gap between two stacks (0: every hole below s_min is filled, the "
+        "paper's rule)"))
     skeleton_method: str = field(default="thinning", metadata=_opt(
         "thinning step of the skeleton: thinning (the package's Zhang-Suen thinning) or "
         "skimage (skimage.morphology.skeletonize); both followed by the same removal of "
@@ -330,13 +334,14 @@ def _number(name, value, *, minimum=0.0, allow_equal=False, integer=False):
 # field -> checker; None values (derived) are accepted for the optional fields
 _POSITIVE = ("px_per_mm", "thickness_mm", "hole_radius_mm", "rod_length_mm", "kappa_c_per_mm",
              "tangent_mm", "bending_rigidity_J")
-_NON_NEGATIVE = ("s_min_mm2", "l_min_mm", "merge_px", "blue_min", "rg_max")
+_NON_NEGATIVE = ("s_min_mm2", "l_min_mm", "merge_px", "blue_min", "rg_max", "sliver_width_h")
 
 
 def check_param(name: str, value):
     """Validate and normalise one parameter value (``ParameterError`` naming it)."""
     if value is None:
-        if name in ("px_per_mm", "thickness_mm", "l_min_mm", "merge_px", "threshold_method",
+        if name in ("px_per_mm", "thickness_mm", "l_min_mm", "merge_px", "sliver_width_h",
+                    "threshold_method",
                     "curvature_method", "merge_thick_crossings", "skeleton_method",
                     "width_statistic", "integer_refinement"):
             raise ParameterError(f"{name} is required")

@@ -6,6 +6,7 @@ import json
 import math
 import subprocess
 import sys
+import warnings
 
 import cv2
 import numpy as np
@@ -172,6 +173,39 @@ def test_thick_x_crossing_becomes_degree_4():
     assert res.junctions["n_stacks"].iloc[0] == 4
     assert abs(res.junctions["x_px"].iloc[0] - 200) < 6
     assert abs(res.junctions["y_px"].iloc[0] - 200) < 6
+
+
+def test_a_lens_below_s_min_keeps_its_two_stacks():
+    # a single sheet across the hole parts into two for 3.2 mm and joins again: the paper
+    # between them (about 2.5 h wide, 1300 px^2 < s_min = 2500 px^2) is a sliver, not noise
+    img = np.full((420, 420, 3), 245, np.uint8)
+    mask = np.zeros((420, 420), np.uint8)
+    cv2.circle(mask, (210, 210), 190, 1, 8)
+    x = np.arange(130, 291)
+    bulge = 10.5 * np.sin(np.pi * (x - 130) / 160)
+    for sign in (1, -1):
+        pts = np.stack([x, 210 + sign * bulge], 1).round().astype(np.int32)
+        cv2.polylines(mask, [pts], False, 1, thickness=5)
+    cv2.line(mask, (22, 210), (130, 210), 1, 5)
+    cv2.line(mask, (290, 210), (398, 210), 1, 5)
+    img[mask > 0] = (40, 70, 190)
+    tips = np.array([[130.0, 210.0], [290.0, 210.0]])
+    kw = dict(px_per_mm=50.0, thickness_mm=0.1, hole_radius_mm=3.9, hole_center_px=(210, 210))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        kept = analyze(img, **kw)
+        filled = analyze(img, **kw, sliver_width_h=0.0)
+
+    def near_tips(res):
+        xy = res.junctions[["x_px", "y_px"]].to_numpy(float)
+        return [bool(len(xy)) and float(np.hypot(*(xy - t).T).min()) <= 15 for t in tips]
+
+    assert near_tips(kept) == [True, True]
+    assert near_tips(filled) == [False, False]
+    assert kept.summary["n_stacks"] == filled.summary["n_stacks"] + 3
+    assert kept.summary["n_voids"] == filled.summary["n_voids"]  # below s_min: not a void
+    lens = kept.stacks[np.hypot(kept.stacks["mid_x_px"] - 210, kept.stacks["mid_y_px"] - 210) < 30]
+    assert sorted(lens["n_br"]) == [1, 1]
 
 
 @pytest.mark.parametrize("kwargs", [
