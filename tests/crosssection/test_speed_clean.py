@@ -120,3 +120,38 @@ def test_thin_holes_with_large_boxes():
         assert np.array_equal(got, _by_labelling(m, s_min, 5.0, 0.0))
         assert got[30, 20] == (l_area < s_min)  # the L is filled only below s_min
         assert got[20, 60] == (14 * 19 < s_min)  # the wide hole too
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_slivers_same_by_borders_and_by_labelling(seed, monkeypatch):
+    # random bands with lenses, slits and discs between and inside them: the border path keeps
+    # the same slivers as the labelling fallback, and keeps some (the case is exercised)
+    rng = np.random.default_rng(seed)
+    kept_any = 0
+    for _ in range(40):
+        m = np.zeros((160, 200), np.uint8)
+        for _ in range(int(rng.integers(2, 6))):
+            y0, y1 = (int(v) for v in rng.integers(20, 140, 2))
+            gap = float(rng.uniform(0, 14))
+            x = np.arange(10, 190)
+            t = (x - 10) / 180.0
+            for sign in (1, -1):
+                y = y0 + (y1 - y0) * t + sign * gap / 2 * np.sin(np.pi * t)
+                pts = np.stack([x, y], 1).round().astype(np.int32)
+                cv2.polylines(m, [pts], False, 1, thickness=int(rng.integers(3, 8)))
+        for _ in range(int(rng.integers(0, 4))):
+            cv2.circle(m, (int(rng.integers(20, 180)), int(rng.integers(20, 140))),
+                       int(rng.integers(2, 8)), 0, -1)
+        m = m.view(bool)
+        kw = dict(s_min_px=float(rng.choice([300, 600, 700])), speck_px=30.0,
+                  min_extent_px=20.0, sliver_length_px=float(rng.choice([20, 50])),
+                  sliver_width_px=float(rng.choice([3, 5, 7.5])))
+        assert cl._borders_settle(m, kw["s_min_px"])
+        got = clean_mask(m, **kw)
+        with monkeypatch.context() as mp:
+            mp.setattr(cl, "_borders_settle", lambda *a: False)
+            want = clean_mask(m, **kw)
+        assert np.array_equal(got, want)
+        kept_any += int((~got & ~clean_mask(m, s_min_px=kw["s_min_px"], speck_px=30.0,
+                                             min_extent_px=20.0)).any())
+    assert kept_any > 3, kept_any
