@@ -6,13 +6,17 @@ s_min = (10 h)^2 are kept, allowing to remove light noise from the binary image"
 - background components (4-connected, the dual of 8-connected ink) with area < ``s_min_px``
   are filled; the paper detects voids of area >= s_min only;
 - except the slivers (:func:`is_sliver`): a hole smaller than ``s_min`` whose length reaches
-  the detection limit ``l_min`` and whose width reaches a sheet thickness h is paper between
-  two stacks, not noise. The paper's stacks are "branches in close contact, separated by
-  distances smaller than the image resolution"; a gap a sheet wide along a branch's length is
-  resolved, so filling it would merge two stacks into one and erase the two junctions at its
-  tips. Compact holes (pinholes, a small void between three stacks) stay filled: a sliver is
-  at least :data:`SLIVER_ASPECT` times longer than wide. The void statistics still count only
-  voids of area >= s_min (:mod:`crosssection.stages.voids`);
+  the detection limit ``l_min`` and whose width reaches 1.5 sheet thicknesses
+  (``AnalysisParams.sliver_width_h``) is paper between two stacks, not noise. The paper's
+  stacks are "branches in close contact, separated by distances smaller than the image
+  resolution"; a gap wider than a sheet along a branch's length is resolved, so filling it
+  would merge two stacks into one and erase the two junctions at its tips. On renders of rods
+  compacted to epsilon 14-19 (11 scans) the lenses between two truth stacks were 1.8-2.9 h
+  wide and the holes inside one truth stack (a pass standing off a band by less than the
+  contact distance) 0.7-1.1 h (docs/validation/compact.md, "Slivers between stacks are
+  kept"). Compact holes (pinholes, a small void between three stacks) stay filled: a sliver
+  is at least :data:`SLIVER_ASPECT` times longer than wide. The void statistics still count
+  only voids of area >= s_min (:mod:`crosssection.stages.voids`);
 - foreground components (8-connected) with area < ``speck_px`` are removed. The design default
   is ``speck_px = s_min_px``; ``pipeline.analyze`` passes ``min(s_min_px, l_min h)`` in px,
   the area of the smallest detectable single-sheet stack (l_min long, h thick), so that no
@@ -152,7 +156,7 @@ def clean_mask(mask, *, s_min_px: float, speck_px: float | None = None,
         Holes smaller than ``s_min_px`` that are at least this long and this wide, and
         :data:`SLIVER_ASPECT` times longer than wide, are kept (:func:`is_sliver`; module
         docstring). Default 0: off, every hole below ``s_min_px`` is filled. The pipeline
-        passes ``l_min`` and h in px.
+        passes ``l_min`` and ``sliver_width_h`` h in px.
 
     Returns
     -------
