@@ -587,8 +587,9 @@ class CompactParams:
         Largest relative shrink of the wall per iteration; the shrink is also at most
         ``h / 8`` per iteration, which binds whenever ``rate > h / (8 R)`` (6.25e-4 at the
         default h = 0.005 R). Default 6.25e-5 (a shrink of R/16000 per iteration): the
-        ensemble statistics at epsilon 19 agree with those of half that step and move beyond
-        their errors at twice it (``docs/validation/compact.md``, "Protocol").
+        ensemble statistics at epsilon 19 agree with those of half that step, move by about
+        two standard errors at twice it and beyond their errors from four times it
+        (``docs/validation/compact.md``, "Protocol").
     max_iter : int
         Iterations allowed to each level of the compaction.
     hold_iter : int
