@@ -166,7 +166,7 @@ def _preprocess(image, p: AnalysisParams, timer) -> Preprocessed:
         # a blob too small to hold a branch of length l_min goes whatever its area
         mask = clean_mask(thr.mask, s_min_px=s_min_px, speck_px=speck_px,
                           min_extent_px=l_min_px,
-                          sliver_length_px=l_min_px if p.sliver_width_h > 0 else 0.0,
+                          sliver_length_px=l_min_px,
                           sliver_width_px=p.sliver_width_h * p.thickness_px)
     _check_clean(mask, speck_px, path)
     with timer("skeleton"):

@@ -155,8 +155,8 @@ def clean_mask(mask, *, s_min_px: float, speck_px: float | None = None,
     sliver_length_px, sliver_width_px : float, optional
         Holes smaller than ``s_min_px`` that are at least this long and this wide, and
         :data:`SLIVER_ASPECT` times longer than wide, are kept (:func:`is_sliver`; module
-        docstring). Default 0: off, every hole below ``s_min_px`` is filled. The pipeline
-        passes ``l_min`` and ``sliver_width_h`` h in px.
+        docstring). Either one 0 (the default): off, every hole below ``s_min_px`` is
+        filled. The pipeline passes ``l_min`` and ``sliver_width_h`` h in px.
 
     Returns
     -------
@@ -177,7 +177,8 @@ def clean_mask(mask, *, s_min_px: float, speck_px: float | None = None,
     for name, v in (("sliver_length_px", sliver_length_px), ("sliver_width_px", sliver_width_px)):
         if not np.isfinite(v) or v < 0:
             raise ParameterError(f"{name} must be a finite number >= 0, got {v}")
-    sliver = (float(sliver_length_px), float(sliver_width_px)) if sliver_length_px > 0 else None
+    sliver = ((float(sliver_length_px), float(sliver_width_px))
+              if sliver_length_px > 0 and sliver_width_px > 0 else None)
     m = np.ascontiguousarray(m, dtype=bool)
     if m.size and _borders_settle(m, s_min_px):
         out = _clean_by_borders(m, s_min_px, speck_px, min_extent_px, sliver)
@@ -290,10 +291,8 @@ def _clean_by_borders(m: np.ndarray, s_min_px: float, speck_px: float,
             box = pad[y:y + bh, x:x + bw].copy()
             seed = (int(starts[i][0]) + 1 - x, int(starts[i][1]) - y)
             area, *_ = cv2.floodFill(box, None, seed, 1, flags=4)
-            if area < s_min_px and _may_be_sliver(bw, bh, sliver) and is_sliver(
-                    box ^ pad[y:y + bh, x:x + bw], length_px=sliver[0], width_px=sliver[1]):
-                continue
-            if area < s_min_px:
+            if area < s_min_px and not (_may_be_sliver(bw, bh, sliver) and is_sliver(
+                    box ^ pad[y:y + bh, x:x + bw], length_px=sliver[0], width_px=sliver[1])):
                 pad[y:y + bh, x:x + bw] = box
                 filled[i] = True
     if speck_px > 0 or min_extent_px > 0:
