@@ -295,7 +295,7 @@ def test_a_junction_beside_a_band_is_looked_for_near_its_end():
     assert not hooked and len(out) == len(line)  # the band covers the point
 
 
-def test_junction_points_far_from_the_bands_are_not_joined(tmp_path, monkeypatch):
+def test_junction_points_across_the_paper_are_not_joined(tmp_path, monkeypatch):
     """At low compaction a junction point (the mean of run ends lying far apart) can sit
     tens of band widths from where the stacks' passes end: joined to it, the bands would
     cross the paper and bend 80 times more than the rod; left free they bend about as it."""
@@ -304,7 +304,24 @@ def test_junction_points_far_from_the_bands_are_not_joined(tmp_path, monkeypatch
     xy, a, rod, kw = _compacted(tmp_path, 6)
     kept = render_configuration(xy, a, **kw)
     length_px = kept.params["rod_length_mm"] * PX_PER_MM
-    monkeypatch.setattr(render, "FAR_JUNCTION", np.inf)
+    monkeypatch.setattr(render, "PAPER_JOIN", np.inf)
     joined = render_configuration(xy, a, **kw)
     assert _drawn_energy(kept, length_px) < 3 * rod
     assert _drawn_energy(joined, length_px) > 20 * rod
+
+
+def test_paper_crossed_by_a_join():
+    """The length of a straight join outside every band: none inside a band, the gap between
+    two bands when it crosses one, all of it on bare paper."""
+    from simulate.render import _distance_to_line, _paper_px
+
+    line = np.c_[np.linspace(0.0, 100.0, 11), np.zeros(11)]
+    assert np.allclose(_distance_to_line(np.array([[50.0, 7.0], [-3.0, 4.0], [130.0, 0.0]]),
+                                         line), [7.0, 5.0, 30.0])
+    left = (line, 5.0)
+    right = (line + [0.0, 40.0], 5.0)
+    start, end = np.array([50.0, 0.0]), np.array([50.0, 40.0])
+    assert _paper_px(np.array([10.0, 0.0]), np.array([90.0, 2.0]), [left]) == 0.0
+    # 40 px between the two lines, 6 px of each covered (half width 5 px + 1 px)
+    assert abs(_paper_px(start, end, [left, right]) - 28.0) <= 2.0
+    assert _paper_px(start, end, []) == 40.0
