@@ -64,7 +64,7 @@ from crosssection.setconfig import (DEFAULT_PARAMS, DEFAULT_SET_NAME, SET_FILE, 
 
 IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg")
 SUMMARY_NUMBERS = ["n_junctions", "n_stacks", "n_branches", "n_voids", "mean_branches_per_stack",
-                   "rod_length_mm", "epsilon", "total_energy"]
+                   "rod_length_mm", "epsilon", "total_energy", "total_energy_rel_uncertainty"]
 INDEX_COLUMNS = (["image", "set", "status", "output"] + SUMMARY_NUMBERS
                  + ["quality", "wall_s", "seed", "params_hash", "peak_rss_mb", "reason"])
 FAILURE_COLUMNS = ["image", "set", "reason"]

@@ -208,6 +208,21 @@ def branch_table(profiles, n_br, regions, length_mm, *, rod_length_mm,
     return schema.check_table("branches", branches), stack_energy
 
 
+def _energy_rel_uncertainty(stacks: pd.DataFrame) -> float | None:
+    """Share of the total bending energy that rests on the fork-zone model or the noise floor:
+    ``sum_i E_i min(u_i, 1) / sum_i E_i`` over stacks, ``E_i = n_br e_i`` their energy and
+    ``u_i`` their ``energy_rel_uncertainty`` (a stack without one counted in full); None when
+    the total is 0 or the column is absent."""
+    if "energy_rel_uncertainty" not in stacks or not len(stacks):
+        return None
+    e = (stacks["energy_per_branch"] * stacks["n_br"]).to_numpy(float)
+    total = float(np.nansum(e))
+    if not total > 0:
+        return None
+    u = np.nan_to_num(stacks["energy_rel_uncertainty"].to_numpy(float), nan=1.0)
+    return float(np.nansum(e * np.minimum(u, 1.0)) / total)
+
+
 def summary(*, pre, params, linear_system, junctions, stacks, branches, voids, rod_measured_mm,
             rod_used_mm, calibration_source, timings, total_time_s, version) -> dict:
     """The ``summary.json`` of one analysis (``schema.SUMMARY_KEYS`` first, then the
@@ -249,6 +264,7 @@ def summary(*, pre, params, linear_system, junctions, stacks, branches, voids, r
         "rod_length_given": params.rod_length_mm is not None,
         "epsilon": rod_used_mm / (2.0 * np.pi * radius_mm) if radius_mm > 0 else None,
         "total_energy": total_energy,
+        "total_energy_rel_uncertainty": _energy_rel_uncertainty(stacks),
         "hole": {**pre.hole.as_summary(), "fitted": bool(pre.hole.fitted),
                  "radius_mm": float(radius_mm), "confidence": pre.hole_confidence},
         "timings_s": {k: round(v, 6) for k, v in timings.items()},

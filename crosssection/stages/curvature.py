@@ -79,8 +79,8 @@ overshoot every generator (+36 to +280 %): the skeleton's junction point is not 
 layer's path.
 
 ``CurvatureProfile.energy_rel_uncertainty``: the extrapolated share of ``int kappa^2 ds``
-(not measured: counted in full) plus the removed noise floor, relative to the stack's
-``int kappa^2 ds``.
+(not measured: counted in full; all of it for a stack fitted whole inside its fork zones) plus
+the removed noise floor, relative to the stack's ``int kappa^2 ds``.
 
 5. **Sign.** Positive when the path, followed from its start to its end, turns
    counter-clockwise in the image as displayed (x = column to the right, y = -row).
@@ -1220,7 +1220,9 @@ def _rel_uncertainty(prof, forks, noise_int):
     total = float(_trapezoid(f, s))
     z0 = prof.fit_start if forks[0] else 0
     z1 = prof.fit_stop if forks[1] else n
-    fitted = float(_trapezoid(f[z0:z1], s[z0:z1])) if z1 - z0 > 1 else 0.0
+    # fitted whole because its fork zones would cover it: every sample is a fork's
+    whole = any(forks) and prof.fit_start == 0 and prof.fit_stop == n
+    fitted = float(_trapezoid(f[z0:z1], s[z0:z1])) if z1 - z0 > 1 and not whole else 0.0
     return float((max(total - fitted, 0.0) + noise_int) / max(total, noise_int, 1e-300))
 
 

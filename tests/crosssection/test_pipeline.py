@@ -130,6 +130,13 @@ def test_api_on_generated_scenes(seed, n_stacks, max_layers, extra):
                                per_stack.to_numpy(), rtol=1e-12)
     assert res.summary["total_energy"] == pytest.approx(
         float((st.n_br * st.energy_per_branch).sum()), rel=1e-9)
+    # the share of the total resting on the fork zones and the noise floor: each stack's
+    # uncertain share, capped at its energy, weighted by its energy
+    e = st.n_br * st.energy_per_branch
+    share = res.summary["total_energy_rel_uncertainty"]
+    assert 0.0 < share < 1.0
+    assert share == pytest.approx(float((e * st.energy_rel_uncertainty.clip(upper=1.0)).sum()
+                                        / e.sum()), rel=1e-9)
     # stack lengths match truth (matched by mid point) within a few percent
     a, b = match_points(st[["mid_x_px", "mid_y_px"]].to_numpy(float),
                         scene.tables["stacks"][["mid_x_px", "mid_y_px"]].to_numpy(float), 20.0)

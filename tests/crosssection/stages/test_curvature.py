@@ -541,7 +541,8 @@ def test_lump_between_two_junctions_takes_its_neighbours_curvature(link_px, fitt
     than twice its width, 2 r = 20 px): the skeleton between them is the link between two
     medial-axis fork points, here a bulge of 6 px (curvature about 4 /mm), not the band's
     centreline. It is not fitted and takes the neighbours' curvature (0.125 /mm); a link of
-    60 px (three widths) is fitted as before."""
+    60 px (three widths) is fitted as before, whole: every sample lies in a fork zone, so
+    all its energy counts as uncertain."""
     from crosssection.stages.curvature import stack_profiles
 
     R = 400.0
@@ -552,6 +553,8 @@ def test_lump_between_two_junctions_takes_its_neighbours_curvature(link_px, fitt
     lump = prof[1]
     if fitted:
         assert lump.fit_stop - lump.fit_start == len(lump.s_mm)
+        assert lump.energy_rel_uncertainty >= 1.0
+        assert prof[0].energy_rel_uncertainty < 1.0
         return
     k_true = 50.0 / R  # 1/mm
     assert np.all(np.abs(np.abs(lump.kappa_per_mm) / k_true - 1) < 0.5)
