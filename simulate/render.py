@@ -58,17 +58,17 @@ at each junction, and smooths it into the junction point (:func:`_hooked_lines`)
 the rod's energy in all, 1.05 to 1.8 times outside the discs, the bands still overlapping at
 every junction, and the drawn rod (``sum n_br x length``) 1.02-1.16 L instead of 1.09-1.45 L.
 A band is not joined to a junction point that its straight join would reach only across
-more than :data:`PAPER_JOIN` of its own widths of paper (outside every band meeting there): the
-mean of run ends lying far apart can sit where no pass of the band goes (400 segments, seed
-2: the drawn lines bend 78, 82 and 1.2 times more than the rod at epsilon = 4, 6 and 8 when
-joined there, 24, 1.3 and 0.9 times when not; at epsilon = 19 a two-layer link drawn across
-a thick band to its junction point read 95 000 against the rod's 330). It is the default for a rod of
-finite thickness (a compaction). Quenched rods (N = 300) keep ``join="junction"``, which the
-validation atlas and the robust sweep measure: on 32 quench renders it reads a median
-|energy error| of 12 % (hook 17 %) but has more outliers (7 beyond 50 % against 3, worst
-+324 % against +99 %; docs/validation/compact.md). The
-stacks shorter than their width still sit inside junction zones: neither drawing is a usable
-truth for the energy, which stays the rod's.
+more than :data:`PAPER_JOIN` of its own widths of paper (outside every band meeting there):
+the mean of run ends lying far apart can sit where no pass of the band goes (400 segments,
+seed 2: the drawn lines bend 78, 82 and 1.2 times as much as the rod at epsilon = 4, 6 and 8
+when joined there, 24, 1.3 and 0.9 times when not; at epsilon = 19 a two-layer link drawn
+across a thick band to its junction point read 95 000 against the rod's 330). ``join="hook"``
+is the default for a rod of finite thickness (a compaction). Quenched rods (N = 300) keep
+``join="junction"``, which the validation atlas and the robust sweep measure: on 32 quench
+renders it reads a median |energy error| of 12 % (hook 17 %) but has more outliers (7 beyond
+50 % against 3, worst +324 % against +99 %; docs/validation/compact.md). The stacks shorter
+than their width still sit inside junction zones: neither drawing is a usable truth for the
+energy, which stays the rod's.
 
 Rod ends. A free end of the rod can lie inside a band: the band holds n passes on one side
 of it and n - 1 on the other, and the contact analysis makes the two parts one stack of n
@@ -176,8 +176,8 @@ JOIN = ("auto", "hook", "junction")
 HOOK_TRIM = 0.5
 #: ``join="hook"``: a junction point is not joined to a band whose straight join to it would
 #: cross more paper (outside every band meeting there) than this many of the band's own widths
-#: (joins within a junction's ink cross at most 10 px of paper at epsilon = 19, the widths
-#: being 7-100 px; the ones dropped 29 and 54 px; module docstring, "Joining bands").
+#: (at epsilon = 14 and 19 the joins within a junction's ink cross at most 1.7 widths, the two
+#: that cross the paper 4.2 and 17.6; docs/validation/compact.md, "Joins across the paper").
 PAPER_JOIN = 3.0
 #: ``draw="passes"``: ink width of one pass, in units of the sheet thickness h.
 PASS_WIDTH = 1.25
@@ -609,8 +609,8 @@ def _hooked_lines(analysis, frame, widths_px, *, segment_px, smooth, trim=HOOK_T
         own = owns[sid]
         # a junction point where none of the band's passes goes (the mean of run ends lying
         # far apart) is not joined: the join would draw the band across the paper
-        far = [j >= 0 and len(own) > 0
-               and _paper_px(own[e], jpx[row_of[j]], bands[j]) > PAPER_JOIN * float(widths_px[sid])
+        limit_px = PAPER_JOIN * float(widths_px[sid])
+        far = [j >= 0 and len(own) > 0 and _paper_px(own[e], jpx[row_of[j]], bands[j]) > limit_px
                for e, j in ((0, a), (-1, b))]
         own = _trim_ends(own, trim * widest[a] if a >= 0 else 0.0,
                          trim * widest[b] if b >= 0 else 0.0)
