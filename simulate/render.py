@@ -176,8 +176,8 @@ JOIN = ("auto", "hook", "junction")
 HOOK_TRIM = 0.5
 #: ``join="hook"``: a junction point is not joined to a band whose straight join to it would
 #: cross more paper (outside every band meeting there) than this many of the band's own widths
-#: (at epsilon = 14 and 19 the joins within a junction's ink cross at most 1.7 widths, the two
-#: that cross the paper 4.2 and 17.6; docs/validation/compact.md, "Joins across the paper").
+#: (at epsilon = 14 and 19 the joins within a junction's ink cross at most 1.7 widths, those
+#: across the paper 4.2 (two at 19) and 17.6 (one at 14); docs/validation/compact.md).
 PAPER_JOIN = 3.0
 #: ``draw="passes"``: ink width of one pass, in units of the sheet thickness h.
 PASS_WIDTH = 1.25
