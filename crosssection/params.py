@@ -341,9 +341,8 @@ def check_param(name: str, value):
     """Validate and normalise one parameter value (``ParameterError`` naming it)."""
     if value is None:
         if name in ("px_per_mm", "thickness_mm", "l_min_mm", "merge_px", "sliver_width_h",
-                    "threshold_method",
-                    "curvature_method", "merge_thick_crossings", "skeleton_method",
-                    "width_statistic", "integer_refinement"):
+                    "threshold_method", "curvature_method", "merge_thick_crossings",
+                    "skeleton_method", "width_statistic", "integer_refinement"):
             raise ParameterError(f"{name} is required")
         return None
     if name in _POSITIVE:

@@ -602,11 +602,9 @@ def _hooked_lines(analysis, frame, widths_px, *, segment_px, smooth, trim=HOOK_T
         for j in {int(a), int(b)} - {-1}:
             bands.setdefault(j, []).append((owns[sid], 0.5 * float(widths_px[sid])))
     lines = []
-    for sid, line_l in enumerate(analysis.stack_lines):
-        line = frame.to_px(line_l)
+    for sid, own in enumerate(owns):
         a, b = (int(x) for x in ends[sid])
         half = 0.5 * float(widths_px[sid]) - 1.0
-        own = owns[sid]
         # a junction point where none of the band's passes goes (the mean of run ends lying
         # far apart) is not joined: the join would draw the band across the paper
         limit_px = PAPER_JOIN * float(widths_px[sid])
