@@ -62,13 +62,16 @@ more than :data:`PAPER_JOIN` of its own widths of paper (outside every band meet
 the mean of run ends lying far apart can sit where no pass of the band goes (400 segments,
 seed 2: the drawn lines bend 78, 82 and 1.2 times as much as the rod at epsilon = 4, 6 and 8
 when joined there, 24, 1.3 and 0.9 times when not; at epsilon = 19 a two-layer link drawn
-across a thick band to its junction point read 95 000 against the rod's 330). ``join="hook"``
-is the default for a rod of finite thickness (a compaction). Quenched rods (N = 300) keep
-``join="junction"``, which the validation atlas and the robust sweep measure: on 32 quench
-renders it reads a median |energy error| of 12 % (hook 17 %) but has more outliers (7 beyond
-50 % against 3, worst +324 % against +99 %; docs/validation/compact.md). The stacks shorter
-than their width still sit inside junction zones: neither drawing is a usable truth for the
-energy, which stays the rod's.
+across a thick band to its junction point read 95 000 against the rod's 330). A junction
+point that only one band would still reach is not joined either: the hook would only curl
+that band's end (a three-layer band's end curled into a point its neighbours no longer reach
+read 3 200 against the rod's 86). ``join="hook"`` is the default for every rod. On 104
+quench renders (N = 300; the robust sweep's renders, seeds 1-40, 100-131 and 200-231) the
+analysis reads a median |energy error| of 14.8 % with it, 13.6 % with ``join="junction"``,
+with half the outliers (9 beyond 50 % against 17, worst +372 % against +586 %; rod length
+wrong by more than 5 % on 13 against 17; docs/validation/README.md, "The renders'
+outliers"). The stacks shorter than their width still sit inside junction zones: neither
+drawing is a usable truth for the energy, which stays the rod's.
 
 Rod ends. A free end of the rod can lie inside a band: the band holds n passes on one side
 of it and n - 1 on the other, and the contact analysis makes the two parts one stack of n
@@ -168,9 +171,8 @@ DRAW = ("bands", "passes")
 #: How a band of the bands drawing joins its junctions: along its own mean line, cleaned and
 #: cut back near the junction, then smoothed into the junction point (``"hook"``,
 #: :func:`_hooked_lines`), or the analysis' line, the junction points first and last, smoothed
-#: as it is (``"junction"``); ``"auto"``: hook for a rod of finite thickness (a compaction),
-#: junction for one without (a quench; module docstring, "Lines and energy").
-JOIN = ("auto", "hook", "junction")
+#: as it is (``"junction"``; module docstring, "Lines and energy").
+JOIN = ("hook", "junction")
 #: ``join="hook"``: length of a mean line dropped at a junction, in widths of the widest band
 #: there (at most a third of the line at each end).
 HOOK_TRIM = 0.5
@@ -554,6 +556,32 @@ def _paper_px(start, end, bands, step_px: float = 2.0) -> float:
     return float((~inside).sum()) * np.hypot(*(end - start)) / n
 
 
+def _joined_hooks(hooks, ends):
+    """The hooks that join a junction point reached by at least two band ends.
+
+    A junction point that only one band end would reach (the others' joins cross the paper
+    or were cut) joins nothing: the hook would only curl that band's end.
+
+    Parameters
+    ----------
+    hooks : list of [bool, bool]
+        Per stack, whether its first / last point is to be joined to its junction.
+    ends : (S, 2) int array
+        Junctions at the stacks' ends (-1: a free end).
+
+    Returns
+    -------
+    list of [bool, bool]
+    """
+    joined = {}
+    for pair, (a, b) in zip(hooks, ends):
+        for hooked, j in zip(pair, (int(a), int(b))):
+            if hooked:
+                joined[j] = joined.get(j, 0) + 1
+    return [[bool(h) and joined[int(j)] >= 2 for h, j in zip(pair, js)]
+            for pair, js in zip(hooks, ends)]
+
+
 def _hooked_lines(analysis, frame, widths_px, *, segment_px, smooth, trim=HOOK_TRIM):
     """The drawn centreline of every stack, ``join="hook"`` (:func:`render_configuration`).
 
@@ -577,6 +605,8 @@ def _hooked_lines(analysis, frame, widths_px, *, segment_px, smooth, trim=HOOK_T
       widest widths of arc from the end (:func:`_beside`);
     * a stack with both ends at one junction is joined at the ends lying within ``trim + 2``
       widest widths of its point (:func:`_loop_hooks`);
+    * a junction point that only one band end would still reach is not joined
+      (:func:`_joined_hooks`);
     * a stack shorter than two segments between two junctions (a link between close
       junctions, or a lump) is its centroid only (joined once to a junction holding both its
       ends), and a line through it shorter than two segments is the straight chord between
@@ -601,7 +631,7 @@ def _hooked_lines(analysis, frame, widths_px, *, segment_px, smooth, trim=HOOK_T
     for sid, (a, b) in enumerate(ends):
         for j in {int(a), int(b)} - {-1}:
             bands.setdefault(j, []).append((owns[sid], 0.5 * float(widths_px[sid])))
-    lines = []
+    plans = []  # (own line, [hook at start, hook at end]) of every stack
     for sid, own in enumerate(owns):
         a, b = (int(x) for x in ends[sid])
         half = 0.5 * float(widths_px[sid]) - 1.0
@@ -625,6 +655,11 @@ def _hooked_lines(analysis, frame, widths_px, *, segment_px, smooth, trim=HOOK_T
                 if hooks[end]:
                     own, hooks[end] = _beside(own, jpx[row_of[j]], end, half,
                                               (trim + 2.0) * widest[j])
+        plans.append((own, hooks))
+    kept = _joined_hooks([hooks for _, hooks in plans], ends)
+    lines = []
+    for sid, ((own, _), hooks) in enumerate(zip(plans, kept)):
+        a, b = (int(x) for x in ends[sid])
         line = np.concatenate([jpx[[row_of[a]]] if hooks[0] else np.zeros((0, 2)), own,
                                jpx[[row_of[b]]] if hooks[1] else np.zeros((0, 2))])
         if a >= 0 and b >= 0 and len(line) >= 2 and polyline.length(line) < 2.0 * segment_px:
@@ -1165,7 +1200,7 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
                          specks: int | None = None, pinholes: int | None = None,
                          plate=None, rim_px: float | None = None,
                          illumination: float | None = None, cast: float | None = None,
-                         smooth: str = "all", draw: str = "bands", join: str = "auto",
+                         smooth: str = "all", draw: str = "bands", join: str = "hook",
                          pass_width: float = PASS_WIDTH, pass_taper: float = PASS_TAPER,
                          seed: int = 0, margin_mm: float = 2.0,
                          gap_px: float = 2.0, max_size_px: int = 2500,
@@ -1218,13 +1253,12 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
         Draw every stack along its smooth curve (:func:`smooth_line`, short links included),
         only the stacks of two segments or more (the drawing of :mod:`simulate.atlas`), or
         none: the polylines of the analysis, with their corners. Bands drawing only.
-    join : {"auto", "hook", "junction"}
+    join : {"hook", "junction"}
         Bands drawing: how a band joins its junctions (:data:`JOIN`): its own mean line, cleaned
-        and cut back near the junction, smoothed into the junction point (``"hook"``,
-        :func:`_hooked_lines`), or the analysis' line through the junction points as it is
-        (``"junction"``; also whenever ``smooth="none"``, which draws the analysis'
-        polylines). ``"auto"`` (default): hook when ``rod_thickness`` is given (a compacted
-        rod), junction otherwise.
+        and cut back near the junction, smoothed into the junction point (``"hook"``, the
+        default, :func:`_hooked_lines`), or the analysis' line through the junction points as
+        it is (``"junction"``; also whenever ``smooth="none"``, which draws the analysis'
+        polylines).
     draw : {"bands", "passes"}
         One band of the calibrated width per stack, along its mean line (default), or the rod
         itself: every pass a stroke along the smooth curve through the nodes, the passes of
@@ -1302,8 +1336,6 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
     segment_px = frame.scale / (len(xy) - 1)
     n_br = st["n_br"].to_numpy(int)
     widths_px = cal.width(n_br) * px_per_mm
-    if join == "auto":
-        join = "hook" if rod_thickness is not None else "junction"
     if smooth == "none":
         join = "junction"  # the analysis' polylines as they are
     if draw == "bands" and join == "hook":
@@ -1372,7 +1404,7 @@ def _check_options(kwargs: dict) -> None:
         raise ParameterError(f"smooth must be one of {SMOOTH}, got {kwargs['smooth']!r}")
     if kwargs.get("draw", "bands") not in DRAW:
         raise ParameterError(f"draw must be one of {DRAW}, got {kwargs['draw']!r}")
-    if kwargs.get("join", "auto") not in JOIN:
+    if kwargs.get("join", "hook") not in JOIN:
         raise ParameterError(f"join must be one of {JOIN}, got {kwargs['join']!r}")
     for k in ("px_per_mm", "thickness_mm", "rod_length_mm"):
         v = kwargs.get(k)
@@ -1531,12 +1563,11 @@ def add_subparser(sub) -> None:
                    help="draw every stack along its smooth curve (all, default), leave the "
                         "links shorter than two rod segments polylines (long), or draw the "
                         "polylines of the analysis (none)")
-    p.add_argument("--join", choices=JOIN, default="auto",
+    p.add_argument("--join", choices=JOIN, default="hook",
                    help="bands drawing: join every band to its junctions along its own mean "
                         "line, cleaned and cut back near the junction, smoothed into the "
-                        "junction point (hook), or through the analysis' line as it is "
-                        "(junction); auto (default): hook for a compaction's rods (finite "
-                        "thickness), junction for a quench's")
+                        "junction point (hook, default), or through the analysis' line as it "
+                        "is (junction)")
     p.add_argument("--draw", choices=DRAW, default="bands",
                    help="draw one band of the calibrated width per stack (bands, default) or "
                         "the rod itself, every pass a stroke and the passes of a stack "

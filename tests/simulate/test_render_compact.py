@@ -257,10 +257,10 @@ def test_hooked_bands_bend_as_the_rod_and_stay_connected(tmp_path):
     import cv2
 
     xy, a, rod, kw = _compacted(tmp_path, 8)
-    scenes = {join: render_configuration(xy, a, join=join, **kw)
-              for join in ("auto", "hook", "junction")}
-    assert scenes["auto"].params["join"] == "hook"
-    assert np.array_equal(scenes["auto"].rgb, scenes["hook"].rgb)
+    scenes = {join: render_configuration(xy, a, join=join, **kw) for join in ("hook", "junction")}
+    default = render_configuration(xy, a, **kw)
+    assert default.params["join"] == "hook"
+    assert np.array_equal(default.rgb, scenes["hook"].rgb)
     length_px = scenes["hook"].params["rod_length_mm"] * PX_PER_MM
     hook, junction = (_drawn_energy(scenes[j], length_px) for j in ("hook", "junction"))
     assert junction > 50 * rod
@@ -325,3 +325,32 @@ def test_paper_crossed_by_a_join():
     # 40 px between the two lines, 6 px of each covered (half width 5 px + 1 px)
     assert abs(_paper_px(start, end, [left, right]) - 28.0) <= 2.0
     assert _paper_px(start, end, []) == 40.0
+
+
+def test_a_junction_point_reached_by_one_band_is_not_joined():
+    """Hooks are kept only at junction points that two band ends or more still reach."""
+    from simulate.render import _joined_hooks
+
+    ends = np.array([[0, 1], [1, 2], [2, -1], [3, 3]])
+    hooks = [[True, True], [False, True], [True, False], [True, True]]
+    # junction 0 and junction 1 are reached by one end each; 2 by two; the loop's two ends
+    # meet at its own junction 3
+    assert _joined_hooks(hooks, ends) == [[False, False], [False, True], [True, False],
+                                          [True, True]]
+
+
+def test_a_lone_hook_would_curl_a_band_end(monkeypatch):
+    """A quench (seed 14) holds a junction whose other bands end across the paper: the one
+    band still joined there curled into the point, and the drawn lines bent 11.6 times the
+    rod; ending on its own it bends about twice the rod (the rest: fold caps and hooks)."""
+    import simulate.render as render
+    from simulate.atlas import quench_rod, render_rod
+
+    xy = quench_rod(14)
+    kept = render_rod(xy, 14)
+    length_px = kept.params["rod_length_mm"] * kept.params["px_per_mm"]
+    rod = float(kept.summary["total_energy"])
+    monkeypatch.setattr(render, "_joined_hooks", lambda hooks, ends: hooks)
+    joined = render_rod(xy, 14)
+    assert _drawn_energy(kept, length_px) < 3 * rod
+    assert _drawn_energy(joined, length_px) > 8 * rod
