@@ -41,7 +41,9 @@ the plate/paper boundary is the wall, a full circle even where the rod leaves th
 The confidence is the fraction of rays that give a wall point within 2 px of the circle;
 without a plate distinct from the paper the ink envelope is returned with the fraction of its
 angular bins where ink reaches the circle as confidence (a rod pressed all around the wall
-gives 1).
+gives 1), grown to hold every piece of the rod: each ink component of at least
+:data:`PIECE_FRACTION` of the largest one's area (a rod drawn without its wall in two pieces
+lost 37 % of its length to a frame around its largest piece).
 """
 from __future__ import annotations
 
@@ -50,6 +52,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from crosssection.core.errors import AnalysisError, ParameterError
+
+#: Without a plate, ink components of at least this fraction of the largest one's area are
+#: pieces of the rod and lie inside the frame; smaller ones (specks) may be cut.
+PIECE_FRACTION = 0.02
 
 __all__ = ["Hole", "fit_hole", "find_hole", "frame_mask", "check_hole", "classify_regions",
            "wall_tolerance_px", "kasa_fit"]
@@ -377,6 +383,14 @@ def _wall_points(rgb, ink_mask, c0, r0, n_rays):
     return np.concatenate(pts)
 
 
+def _upsampled(small_mask, shape):
+    """A half-resolution component mask dilated by one of its pixels, brought to ``shape``."""
+    import cv2
+
+    keep = cv2.dilate(np.ascontiguousarray(small_mask).view(np.uint8), np.ones((3, 3), np.uint8))
+    return cv2.resize(keep, (shape[1], shape[0]), interpolation=cv2.INTER_NEAREST).view(bool)
+
+
 def find_hole(rgb, ink_mask, *, min_confidence: float = 0.5, path=None) -> Hole:
     """The hole found in the scan: the plate's circular edge, else the ink envelope.
 
@@ -411,12 +425,13 @@ def find_hole(rgb, ink_mask, *, min_confidence: float = 0.5, path=None) -> Hole:
     # (the areas by a count of the labels: OpenCV's statistics pass costs 4x the labelling)
     small = np.ascontiguousarray(ink[::2, ::2]).view(np.uint8)
     n, lab = cv2.connectedComponents(small, connectivity=8)
+    big = ()  # the labels of the rod's pieces, when it is in more than one
     if n > 2:
         area = np.bincount(lab.reshape(-1), minlength=n)
-        keep = (lab == 1 + int(np.argmax(area[1:]))).view(np.uint8)
-        keep = cv2.dilate(keep, np.ones((3, 3), np.uint8))
-        full = cv2.resize(keep, (ink.shape[1], ink.shape[0]), interpolation=cv2.INTER_NEAREST)
-        ink = ink & full.view(bool)
+        largest = 1 + int(np.argmax(area[1:]))
+        ink = ink & _upsampled(lab == largest, ink.shape)
+        big = np.flatnonzero(area >= PIECE_FRACTION * area[largest])
+        big = big[big > 0] if len(big) > 2 else ()
     border = _boundary_points(ink)
     env = _fit_points(border, None, None, None, path)
     env_conf = _envelope_confidence(border, env)
@@ -447,6 +462,11 @@ def find_hole(rgb, ink_mask, *, min_confidence: float = 0.5, path=None) -> Hole:
     # The ink pixel farthest from the centre has a 4-neighbour farther still, from which the
     # background runs outwards to the edge: it lies on an outer border, so the border pixels
     # give the same farthest distance as every ink pixel (without a pass over the scan)
+    # The rod may be drawn or cut in pieces (a broken line, a layer lost in the cut): every
+    # piece as large as PIECE_FRACTION of the largest is held too, specks are not
+    if len(big):
+        border = _boundary_points(np.asarray(ink_mask, dtype=bool)
+                                  & _upsampled(np.isin(lab, big), ink.shape))
     reach = float(np.sqrt(((border - env.center_rc) ** 2).sum(axis=1).max())) + 1.0 \
         if len(border) else env.radius_px
     return Hole(env.center_rc, max(env.radius_px, reach), True, env_conf,

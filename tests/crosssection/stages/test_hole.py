@@ -61,6 +61,32 @@ def test_without_plate_the_ink_envelope(scene):
     assert 0.6 < part.confidence < 0.85
 
 
+def test_without_plate_the_frame_holds_every_piece_of_the_rod():
+    """A drawing without a wall (a rod in two pieces, specks around): the envelope of the
+    largest piece must not cut the other off; specks may lie outside."""
+    import cv2
+
+    from crosssection.stages.hole import PIECE_FRACTION
+
+    rgb = np.full((400, 600, 3), PAPER_RGB, np.uint8)
+    blue = (40, 60, 200)
+    cv2.ellipse(rgb, (200, 200), (150, 120), 0, 0, 360, blue, 6)  # the large piece: a loop
+    cv2.polylines(rgb, [np.array([[420, 100], [500, 180], [560, 330]], np.int32)], False,
+                  blue, 6)  # a piece of the rod off it
+    for x, y in ((20, 20), (580, 20), (590, 390)):
+        cv2.circle(rgb, (x, y), 2, blue, -1)  # specks
+    ink = threshold_rgb(rgb).mask
+    hole = find_hole(rgb, ink)
+    inside = frame_mask(rgb.shape[:2], hole)
+    piece = ink.copy()
+    piece[:, :400] = False
+    piece[:40] = piece[360:] = False
+    piece[:, 570:] = False
+    assert piece.sum() > PIECE_FRACTION * ink.sum()
+    assert np.all(inside[piece])
+    assert hole.confidence < 0.5  # nothing marks a wall
+
+
 def test_frame_mask_area_and_margin():
     hole = Hole(np.array([40.0, 55.0]), 30.0, False)
     m0 = frame_mask((100, 120), hole, margin_px=0.0)
