@@ -389,6 +389,32 @@ def test_noise_variance_is_the_curvature_noise(R, seed):
     assert 0.6 < v / emp < 1.5
 
 
+def _kinked_path(seed, r_px=12.0, arm_px=400.0):
+    """A jittered pixel chain: a straight arm, a 90-degree turn of radius ``r_px``, an arm."""
+    a = np.linspace(0.0, arm_px, 4000)
+    t = np.linspace(0.0, 0.5 * np.pi, 400)
+    turn = np.stack([r_px * (1 - np.cos(t)), arm_px + r_px * np.sin(t)], 1)
+    xy = np.concatenate([np.stack([np.zeros_like(a), a], 1), turn[1:],
+                         turn[-1] + np.outer(a[1:], [1.0, 0.0])])
+    return _noisy_pixel_path(xy + 30 + np.random.default_rng(seed).uniform(0, 1, 2), 0.4,
+                             seed + 7)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_noise_variance_ignores_a_kinked_stack(seed):
+    # six jittered arcs and one stack turning by 90 degrees over 12 px: pooled with the others,
+    # the kink's own differences read 12 times the arcs' noise (it would be removed from
+    # every stack of the scan); left out, the estimate is the arcs' own (measured 0.86-0.95)
+    from crosssection.stages.curvature import noise_variance
+    profs = _noisy_arc_profiles(600.0, 6, 0.4, seed)
+    kink = stack_curvature(_kinked_path(seed), n_br=1, thickness_px=H, px_per_mm=50.0,
+                           trim_px=(20.0, 20.0))
+    emp = np.mean(np.concatenate([(p.kappa_per_mm[p.fit_start:p.fit_stop] - 50.0 / 600.0) ** 2
+                                  for p in profs]))
+    v = noise_variance(profs + [kink], np.ones(7, int), thickness_px=H, px_per_mm=50.0)[1]
+    assert 0.6 < v / emp < 1.5
+
+
 def _fitted_energy(p, v=0.0):
     """``int kappa^2 ds`` over a profile's fitted samples, the noise floor ``v`` removed."""
     from crosssection.stages.branches import bending_energy
