@@ -1,7 +1,8 @@
 """Stage 1: read a scan as an RGB array at its native bit depth.
 
-Accepted: PNG (1- to 16-bit), TIFF (8- to 64-bit, read with tifffile), JPEG, and any other
-format Pillow reads. Conversions, documented choices:
+Accepted: PNG (1- to 16-bit), TIFF (8- to 64-bit, read with tifffile; its LZW, Deflate,
+PackBits, JPEG and Zstandard compressions decoded by imagecodecs), JPEG, and any other format
+Pillow reads. Conversions, documented choices:
 
 - RGB: kept as is, dtype uint8 or uint16 (16-bit PNG/TIFF are not reduced to 8 bits; the
   threshold scales its defaults by 257).

@@ -72,6 +72,28 @@ def test_multipage_tiff_of_different_sizes_is_rejected(tmp_path, capfd):
     assert "pages of different sizes" in _error(p, capfd)
 
 
+@pytest.mark.parametrize("compression, dtype", [
+    (c, d) for c in ("lzw", "zlib", "packbits", "zstd") for d in (np.uint8, np.uint16)]
+    + [("jpeg", np.uint8)])  # baseline JPEG has no 16-bit mode
+def test_compressed_tiff_reads_as_the_uncompressed_one(tmp_path, capfd, compression, dtype):
+    # scanners write LZW, Deflate or JPEG-compressed TIFFs: their codecs come with imagecodecs
+    img = _scan(3).astype(dtype) * (257 if dtype == np.uint16 else 1)
+    p = tmp_path / f"{compression}.tif"
+    tifffile.imwrite(p, img, photometric="rgb", compression=compression)
+    out = load_image(p)
+    assert capfd.readouterr().err == ""
+    assert out.dtype == dtype and out.shape == img.shape
+    tol = 12 if compression == "jpeg" else 0
+    assert np.abs(out.astype(int) - img.astype(int)).mean() <= tol
+
+
+def test_pillow_lzw_tiff_reads_as_the_png(tmp_path):
+    img = _scan(4)
+    p = tmp_path / "scan.tif"
+    Image.fromarray(img).save(p, compression="tiff_lzw")
+    np.testing.assert_array_equal(load_image(p), img)
+
+
 def test_multipage_tiff_of_one_size_reads_the_first_page(tmp_path):
     p = tmp_path / "mp.tif"
     with tifffile.TiffWriter(p) as w:
