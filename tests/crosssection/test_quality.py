@@ -84,6 +84,32 @@ def test_wrong_scale_is_flagged_by_the_ink_area(scene):
     assert "epsilon_ink" in codes or "widths_out_of_range" in codes
 
 
+@pytest.mark.parametrize("factor", [0.7, 1.4])
+def test_a_wrong_scale_is_flagged_by_the_layer_lattice(scene, factor):
+    # px_per_mm off by 0.7 or 1.4: every width reads between two whole layer counts
+    kw = _given(scene, px_per_mm=factor * scene.params["px_per_mm"],
+                hole_radius_mm=scene.params["hole_radius_mm"] / factor)
+    res, caught = _analyze(scene.rgb, **kw)
+    flag = [f for f in res.summary["quality"]["flags"] if f["code"] == "layer_lattice"]
+    assert len(flag) == 1 and flag[0]["value"] > quality.LATTICE_LIMIT
+    assert any(issubclass(w.category, quality.CalibrationWarning)
+               and "whole layer counts" in str(w.message) for w in caught)
+    # the right scale sits on the lattice
+    right, _ = _analyze(scene.rgb, **_given(scene))
+    assert quality._lattice_check(right.stacks) == []
+
+
+def test_the_layer_lattice_is_not_read_at_low_resolution():
+    # at h < 3 px the widths scatter as much as a wrong scale: low_resolution speaks instead
+    sc = make_scene(seed=4, n_stacks=20, max_layers=3, px_per_mm=25.0)
+    p = sc.params
+    res, _ = _analyze(sc.rgb, **_given(sc, px_per_mm=0.7 * p["px_per_mm"],
+                                       hole_radius_mm=p["hole_radius_mm"] / 0.7))
+    codes = res.summary["quality"]["codes"]
+    assert "low_resolution" in codes and "layer_lattice" not in codes
+    assert quality._lattice_check(res.stacks) != []  # off the lattice, yet not reported
+
+
 def test_widths_beyond_the_calibration_are_flagged(scene):
     cal = scene.calibration.to_frame().iloc[:1]  # calibrated on single layers only
     res, _ = _analyze(scene.rgb, **_given(scene, calibration=cal))
