@@ -587,6 +587,14 @@ def _kappa_limit(n, ppm, peel_p):
     return 1.0 / max(0.6 * width_px(n, ppm), 0.25 * ppm)
 
 
+def _lead_arc(P, T, arc):
+    """A lead arc ``arc = (k, s)`` from ``P`` along ``T``: its points, end tangent,
+    int kappa^2 ds, length and |kappa|."""
+    k, s = arc
+    pts, T_end, I = _arc_points(P, T, k, s)
+    return pts, T_end, I, s, abs(k)
+
+
 def _stack_curve(ei, e, V, tang, lead, n, ppm, peel_p, rng):
     """Centreline points, int kappa^2 ds (1/px), length (px) and max |kappa| of an interior
     stack: lead arcs at its ends and the least-bending cubic between them."""
@@ -598,21 +606,13 @@ def _stack_curve(ei, e, V, tang, lead, n, ppm, peel_p, rng):
     kmax = 0.0
     parts_u, parts_v = [Pu[None]], [Pv[None]]
     if (ei, u) in lead:
-        k, s = lead[(ei, u)]
-        pts_u, Tu, Iu = _arc_points(Pu, Tu, k, s)
-        parts_u = [pts_u]
-        Pu = pts_u[-1]
-        I += Iu
-        length += s
-        kmax = max(kmax, abs(k))
+        pts_u, Tu, Iu, s_u, k_u = _lead_arc(Pu, Tu, lead[(ei, u)])
+        parts_u, Pu = [pts_u], pts_u[-1]
+        I, length, kmax = I + Iu, length + s_u, max(kmax, k_u)
     if (ei, w) in lead:
-        k, s = lead[(ei, w)]
-        pts_v, Tv, Iv = _arc_points(Pv, Tv, k, s)
-        parts_v = [pts_v]
-        Pv = pts_v[-1]
-        I += Iv
-        length += s
-        kmax = max(kmax, abs(k))
+        pts_v, Tv, Iv, s_v, k_v = _lead_arc(Pv, Tv, lead[(ei, w)])
+        parts_v, Pv = [pts_v], pts_v[-1]
+        I, length, kmax = I + Iv, length + s_v, max(kmax, k_v)
     chord = np.linalg.norm(Pv - Pu)
     if chord < 5:
         raise SceneRejected("lead arcs meet")
