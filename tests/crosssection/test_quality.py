@@ -91,7 +91,7 @@ def test_a_wrong_scale_is_flagged_by_the_layer_lattice(scene, factor):
                 hole_radius_mm=scene.params["hole_radius_mm"] / factor)
     res, caught = _analyze(scene.rgb, **kw)
     flag = [f for f in res.summary["quality"]["flags"] if f["code"] == "layer_lattice"]
-    assert len(flag) == 1 and flag[0]["value"] > quality.LATTICE_LIMIT
+    assert len(flag) == 1 and flag[0]["value"] > flag[0]["limit"] >= quality.LATTICE_LIMIT
     assert any(issubclass(w.category, quality.CalibrationWarning)
                and "whole layer counts" in str(w.message) for w in caught)
     # the right scale sits on the lattice
@@ -100,14 +100,14 @@ def test_a_wrong_scale_is_flagged_by_the_layer_lattice(scene, factor):
 
 
 def test_the_layer_lattice_is_not_read_at_low_resolution():
-    # at h < 3 px the widths scatter as much as a wrong scale: low_resolution speaks instead
+    # at h < 3 px right widths scatter as much as a wrong scale's: low_resolution speaks instead
     sc = make_scene(seed=4, n_stacks=20, max_layers=3, px_per_mm=25.0)
     p = sc.params
     res, _ = _analyze(sc.rgb, **_given(sc, px_per_mm=0.7 * p["px_per_mm"],
                                        hole_radius_mm=p["hole_radius_mm"] / 0.7))
     codes = res.summary["quality"]["codes"]
     assert "low_resolution" in codes and "layer_lattice" not in codes
-    assert quality._lattice_check(res.stacks) != []  # off the lattice, yet not reported
+    assert quality._lattice_check(res.stacks, 3.0) != []  # off the lattice, yet not reported
 
 
 def test_widths_beyond_the_calibration_are_flagged(scene):
