@@ -31,6 +31,10 @@ Design choices
   reason in ``failures.csv``. A worker process that dies (crash, out-of-memory kill) is
   replaced; the images that were in flight are re-run one at a time, and the one whose worker
   dies alone is recorded as failed.
+- A calibration is used only when a ``set.toml`` or ``--calibration`` names it. A
+  ``calibration.csv`` lying beside scans that are analysed without one is named in a
+  ``warning:`` line (and in batch.json): every such scan would otherwise read its layer counts
+  as ``n h`` wide and be flagged ``no_calibration``.
 """
 from __future__ import annotations
 
@@ -168,6 +172,9 @@ def _safe_component(text: str) -> str:
     return "".join(c if (c.isalnum() or c in "-_+") else "_" for c in text)
 
 
+CALIBRATION_FILE = "calibration.csv"
+
+
 def plan_batch(input_dir, out_dir, *, cli_params: dict | None = None, seed: int | None = 0,
                figure: bool = True) -> tuple[list[ImageTask], dict[str, SetConfig]]:
     """Find the images and sets under ``input_dir`` and build one task per image.
@@ -258,7 +265,22 @@ def plan_batch(input_dir, out_dir, *, cli_params: dict | None = None, seed: int 
             t.params_hash = params_hash(resolved, _sha256(t.image))
     if any(t.set_name == DEFAULT_SET_NAME and t.error is None for t in tasks):
         sets.setdefault("<no set.toml>", default_set)
+    default_set.warnings.extend(_unused_calibrations(tasks))
     return tasks, sets
+
+
+def _unused_calibrations(tasks) -> list[str]:
+    """A ``calibration.csv`` lying beside scans analysed without any calibration: the user
+    most likely meant it (only a ``set.toml`` or ``--calibration`` names one)."""
+    found = []
+    for t in tasks:
+        if t.set_name != DEFAULT_SET_NAME or t.error is not None or t.params.get("calibration"):
+            continue
+        cal = Path(t.image).parent / CALIBRATION_FILE
+        if cal.is_file() and str(cal) not in found:
+            found.append(str(cal))
+    return [f"{c}: not used (its scans have no calibration): name it in a {SET_FILE} "
+            f"(calibration = \"{CALIBRATION_FILE}\") or pass --calibration" for c in found]
 
 
 # --------------------------------------------------------------------------- worker side

@@ -120,6 +120,24 @@ def test_plan_assigns_sets_seeds_and_outputs(tmp_path, seed):
     assert t2["loose.png"].params_hash != by["loose.png"].params_hash
 
 
+def test_a_calibration_beside_scans_without_one_is_named(tmp_path):
+    inp = tmp_path / "in"
+    save_png(inp / "loose.png", draw_scan(1))
+    save_png(inp / "setA" / "s0.png", draw_scan(2))
+    (inp / "calibration.csv").write_text("n_layers,width_mm\n1,0.1\n2,0.2\n")
+    (inp / "setA" / "calibration.csv").write_text("n_layers,width_mm\n1,0.1\n2,0.2\n")
+    (inp / "setA" / "set.toml").write_text('name = "alpha"\ncalibration = "calibration.csv"\n')
+    _, sets = B.plan_batch(inp, tmp_path / "out")
+    remarks = [w for s in sets.values() for w in s.warnings]
+    # the loose scan's neighbour is named; the set's own calibration is used, not named
+    assert len(remarks) == 1 and str(inp / "calibration.csv") in remarks[0]
+    assert "--calibration" in remarks[0]
+    # given on the command line, it is used: nothing to say
+    _, sets = B.plan_batch(inp, tmp_path / "out",
+                           cli_params={"calibration": str(inp / "calibration.csv")})
+    assert [w for s in sets.values() for w in s.warnings] == []
+
+
 def test_missing_or_empty_input(tmp_path):
     with pytest.raises(ConfigError, match="does not exist"):
         B.plan_batch(tmp_path / "nope", tmp_path / "out")
