@@ -35,7 +35,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import platform
 import sys
 import time
@@ -242,13 +241,6 @@ def summarize(df: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def _write_atomic(path: Path, write) -> None:
-    """``write(tmp_path)``, then rename over ``path``: a reader never sees half a file."""
-    tmp = path.with_name(f".{path.name}.tmp")
-    write(tmp)
-    os.replace(tmp, path)
-
-
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--conditions", default=",".join(CONDITIONS))
@@ -267,6 +259,7 @@ def main(argv=None) -> int:
     import crosssection
     import cv2
     import scipy
+    from crosssection.core.fileio import write_csv, write_json
 
     n = 2 if args.quick else args.per_condition
     out = Path(args.out)
@@ -298,7 +291,7 @@ def main(argv=None) -> int:
                         "error") if c in df]
     df = df[[c for c in df if c not in last] + last]
     csv = out / "independent_sweep.csv"
-    _write_atomic(csv, lambda p: df.to_csv(p, index=False))
+    write_csv(csv, df)
     meta = {"foldstat_version": crosssection.__version__,
             "parameters": {"conditions": conditions, "seed": args.seed, "per_condition": n,
                            "workers": args.workers, "scene_folder": SCENE_DIR,
@@ -311,8 +304,7 @@ def main(argv=None) -> int:
                          "scipy": scipy.__version__, "opencv": cv2.__version__,
                          "pandas": pd.__version__},
             "n_scenes": len(df), "wall_s": round(wall, 1)}
-    _write_atomic(out / "independent_sweep.json",
-                  lambda p: p.write_text(json.dumps(meta, indent=1) + "\n"))
+    write_json(out / "independent_sweep.json", meta)
     pd.set_option("display.width", 200)
     print(summarize(df).to_string(index=False, float_format=lambda v: f"{v:.3f}"))
     print(f"{len(df)} scenes in {wall:.0f} s -> {csv}")
