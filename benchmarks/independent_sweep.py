@@ -6,7 +6,8 @@ The scenes come from ``benchmarks/independent_scenes.py``, written apart from th
 four conditions). Each scene is generated once (scenes already in OUT/independent_scenes
 are reused), analysed by ``crosssection.analyze`` with default settings, given only what a
 user knows about a scan: the scale (px/mm, layer thickness 0.1 mm), the generator's width
-law as the calibration, the hole (radius and centre) and the rod length, and scored:
+law as the calibration, the hole (radius and centre; left for the pipeline to find with
+``--hole-not-given``) and the rod length, and scored:
 
 ==========================  =======================================================
 rod_length_rel_error        sum of n_br * length over the output stacks / truth L - 1
@@ -19,6 +20,9 @@ n_br_exact_length_fraction  fraction of the truth stack length whose nearest out
                             (mid points within max(3 h, length / 4)) has exactly the
                             truth number of layers; unmatched stacks count as wrong
 total_energy_rel_error      sum of the output branch energies / truth energy - 1
+n_voids_rel_error           output voids / truth voids - 1; the truth voids are the
+                            faces of the generator's planar graph inside the wall band
+                            (stacks - junctions + connected components)
 hidden_energy_fraction      fraction of the truth energy lying where a stack's centreline
                             is inside another band (fork zones merged in the ink, which no
                             skeleton sees): the part of the energy the scan does not show
@@ -26,7 +30,8 @@ hidden_energy_fraction      fraction of the truth energy lying where a stack's c
 
 Usage: python benchmarks/independent_sweep.py [--conditions typical,thick,lowres,peel]
        [--seed 1] [--per-condition 8] [--workers 2] [--out benchmarks/out] [--quick]
-Writes OUT/independent_sweep.csv (one row per scene: condition, seed, the scene's
+       [--hole-not-given]
+Writes OUT/independent_sweep.csv (OUT/independent_sweep_nohole.csv with --hole-not-given) (one row per scene: condition, seed, the scene's
 description, generate_s (empty when the scene was on disk), the scores above, warnings,
 analyze_s) and OUT/independent_sweep.json (package version, parameters, library versions);
 prints the median of each score per condition.
@@ -45,6 +50,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 from scipy.optimize import linear_sum_assignment
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -53,7 +60,27 @@ import independent_scenes as gen  # noqa: E402  (the generator, deliberately not
 CONDITIONS = tuple(gen.CONDITIONS)
 SCENE_DIR = "independent_scenes"
 METRICS = ("rod_length_rel_error", "junction_f1", "junction_f1_visible",
-           "n_br_exact_length_fraction", "total_energy_rel_error", "hidden_energy_fraction")
+           "n_br_exact_length_fraction", "total_energy_rel_error", "n_voids_rel_error",
+           "hidden_energy_fraction")
+
+
+def truth_void_count(truth: dict) -> int:
+    """Faces of the generator's planar graph inside its outer boundary (the wall band).
+
+    Euler's formula for a plane graph with V vertices, E edges and C components gives
+    ``E - V + C`` bounded faces; every vertex is a junction (the generator draws no free
+    end) and the wall band closes the outer boundary, so each bounded face is a void.
+    """
+    ids = {j["id"]: i for i, j in enumerate(truth["junctions"])}
+    for s in truth["stacks"]:
+        for k in ("u", "v"):
+            ids.setdefault(s[k], len(ids))
+    u = np.array([ids[s["u"]] for s in truth["stacks"]], np.int64)
+    v = np.array([ids[s["v"]] for s in truth["stacks"]], np.int64)
+    n = len(ids)
+    adj = coo_matrix((np.ones(len(u)), (u, v)), shape=(n, n))
+    n_comp = connected_components(adj, directed=False)[0] if n else 0
+    return len(u) - n + n_comp
 
 
 def junction_f1(out_xy: np.ndarray, truth_xy: np.ndarray, tol: float) -> float:
@@ -159,6 +186,7 @@ def score(truth: dict, lines, res) -> dict:
         "n_br_exact_length_fraction": float(lengths[np.array(exact, bool)].sum()
                                             / lengths.sum()),
         "total_energy_rel_error": float(res.branches["energy"].sum()) / truth["energy_total"] - 1,
+        "n_voids_rel_error": len(res.voids) / max(truth_void_count(truth), 1) - 1,
         "n_stacks_out": len(st), "n_junctions_out": len(out_xy),
     }
 
@@ -189,7 +217,7 @@ def _scene_on_disk(folder: Path, name: str) -> bool:
     return True
 
 
-def run_one(condition: str, seed: int, folder: str) -> dict:
+def run_one(condition: str, seed: int, folder: str, hole_given: bool = True) -> dict:
     """Generate (unless on disk), analyse and score one scene; return its row."""
     import crosssection
 
@@ -210,11 +238,12 @@ def run_one(condition: str, seed: int, folder: str) -> dict:
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
+            hole = (dict(hole_radius_mm=truth["hole_radius_mm"],
+                         hole_center_px=tuple(truth["hole_center_px"])) if hole_given else {})
             res = crosssection.analyze(
                 str(folder / f"{name}.png"), px_per_mm=truth["px_per_mm"],
                 thickness_mm=truth["thickness_mm"], calibration=str(folder / "calibration.csv"),
-                hole_radius_mm=truth["hole_radius_mm"],
-                hole_center_px=tuple(truth["hole_center_px"]), rod_length_mm=truth["L_mm"])
+                rod_length_mm=truth["L_mm"], **hole)
     except crosssection.FoldstatError as exc:
         row.update(error=exc.one_line(), analyze_s=time.perf_counter() - t0)
         return row
@@ -249,6 +278,8 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="2 scenes per condition")
     ap.add_argument("--workers", type=int, default=2, help="processes, one scene each")
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "out"))
+    ap.add_argument("--hole-not-given", action="store_true",
+                    help="the pipeline finds the hole (default: radius and centre given)")
     args = ap.parse_args(argv)
     conditions = [c for c in args.conditions.split(",") if c]
     unknown = sorted(set(conditions) - set(CONDITIONS))
@@ -259,6 +290,7 @@ def main(argv=None) -> int:
     import crosssection
     import cv2
     import scipy
+    import skimage
     from crosssection.core.fileio import write_csv, write_json
 
     n = 2 if args.quick else args.per_condition
@@ -271,14 +303,15 @@ def main(argv=None) -> int:
     rows = []
     if args.workers == 1:
         for c, s in jobs:
-            rows.append(run_one(c, s, str(folder)))
+            rows.append(run_one(c, s, str(folder), not args.hole_not_given))
             _progress(rows[-1])
     else:
         import multiprocessing as mp
 
         # 'spawn': workers start clean, without the parent's threads (numba, BLAS)
         with ProcessPoolExecutor(args.workers, mp_context=mp.get_context("spawn")) as ex:
-            futures = [ex.submit(run_one, c, s, str(folder)) for c, s in jobs]
+            futures = [ex.submit(run_one, c, s, str(folder), not args.hole_not_given)
+                       for c, s in jobs]
             for fut in as_completed(futures):
                 rows.append(fut.result())
                 _progress(rows[-1])
@@ -290,21 +323,24 @@ def main(argv=None) -> int:
     last = [c for c in (*METRICS, "n_stacks_out", "n_junctions_out", "warnings", "analyze_s",
                         "error") if c in df]
     df = df[[c for c in df if c not in last] + last]
-    csv = out / "independent_sweep.csv"
+    stem = "independent_sweep_nohole" if args.hole_not_given else "independent_sweep"
+    csv = out / f"{stem}.csv"
     write_csv(csv, df)
     meta = {"foldstat_version": crosssection.__version__,
             "parameters": {"conditions": conditions, "seed": args.seed, "per_condition": n,
                            "workers": args.workers, "scene_folder": SCENE_DIR,
                            "analyze": "defaults; px_per_mm, thickness_mm, calibration, "
-                                      "hole_radius_mm, hole_center_px, rod_length_mm given",
+                                      + ("" if args.hole_not_given else
+                                         "hole_radius_mm, hole_center_px, ")
+                                      + "rod_length_mm given",
                            "junction_match": "Hungarian within 3 h"},
             "generator": {"milp_node_limit": gen.MILP_NODE_LIMIT,
                           "max_attempts": gen.MAX_ATTEMPTS},
             "versions": {"python": platform.python_version(), "numpy": np.__version__,
                          "scipy": scipy.__version__, "opencv": cv2.__version__,
-                         "pandas": pd.__version__},
+                         "pandas": pd.__version__, "scikit-image": skimage.__version__},
             "n_scenes": len(df), "wall_s": round(wall, 1)}
-    write_json(out / "independent_sweep.json", meta)
+    write_json(out / f"{stem}.json", meta)
     pd.set_option("display.width", 200)
     print(summarize(df).to_string(index=False, float_format=lambda v: f"{v:.3f}"))
     print(f"{len(df)} scenes in {wall:.0f} s -> {csv}")
@@ -318,7 +354,8 @@ def _progress(row: dict) -> None:
     print(f"{row['scene']}: rod {row['rod_length_rel_error']:+.4f}, F1 {row['junction_f1']:.3f}"
           f" (visible {row['junction_f1_visible']:.3f}), exact n_br "
           f"{row['n_br_exact_length_fraction']:.3f}, energy {row['total_energy_rel_error']:+.3f}"
-          f", hidden {row['hidden_energy_fraction']:.3f}", flush=True)
+          f", voids {row['n_voids_rel_error']:+.3f}, hidden {row['hidden_energy_fraction']:.3f}",
+          flush=True)
 
 
 if __name__ == "__main__":

@@ -159,3 +159,37 @@ def test_the_same_seed_gives_the_same_bytes(scene, gen, tmp_path):
     with np.load(folder / f"{name}_lines.npz") as a, np.load(tmp_path / f"{name}_lines.npz") as b:
         assert a.files == b.files
         assert all(np.array_equal(a[k], b[k]) for k in a.files)
+
+
+@pytest.fixture(scope="module")
+def sweep():
+    return _load(REPO / "benchmarks" / "independent_sweep.py")
+
+
+def test_the_truth_void_count_is_euler_s_count_of_bounded_faces(sweep):
+    # a square with a diagonal (two faces) and, apart, a triangle (one face)
+    edges = [(0, 1), (1, 2), (2, 3), (3, 0), (0, 2), (4, 5), (5, 6), (6, 4)]
+    truth = {"junctions": [{"id": i} for i in range(7)],
+             "stacks": [{"u": u, "v": v} for u, v in edges]}
+    assert sweep.truth_void_count(truth) == 3
+    truth["stacks"] = truth["stacks"][:4]  # the square alone: one face, the triangle gone
+    truth["junctions"] = truth["junctions"][:4]
+    assert sweep.truth_void_count(truth) == 1
+
+
+def test_the_truth_void_count_is_the_drawn_faces(scene, sweep):
+    """The faces of the drawn centrelines (background regions not reaching the image's
+    border) are the count the sweep takes for the truth."""
+    folder, name, truth = scene
+    size = truth["render"]["size"]
+    canvas = np.zeros((size, size), np.uint8)
+    with np.load(folder / f"{name}_lines.npz") as lines:
+        for s in truth["stacks"]:
+            pts = np.round(lines[f"s{s['id']}"]).astype(np.int32)
+            cv2.polylines(canvas, [pts.reshape(-1, 1, 2)], False, 1, 1, cv2.LINE_8)
+    n, lab = cv2.connectedComponents((canvas == 0).astype(np.uint8), connectivity=4)
+    border = set(np.unique(np.r_[lab[0], lab[-1], lab[:, 0], lab[:, -1]]))
+    sizes = np.bincount(lab.ravel(), minlength=n)
+    # faces a few pixels wide are the lines' own rasterisation where two lines run close
+    faces = [k for k in range(1, n) if k not in border and sizes[k] > 20]
+    assert len(faces) == sweep.truth_void_count(truth) > 3
