@@ -31,10 +31,11 @@ hidden_energy_fraction      fraction of the truth energy lying where a stack's c
 Usage: python benchmarks/independent_sweep.py [--conditions typical,thick,lowres,peel]
        [--seed 1] [--per-condition 8] [--workers 2] [--out benchmarks/out] [--quick]
        [--hole-not-given]
-Writes OUT/independent_sweep.csv (OUT/independent_sweep_nohole.csv with --hole-not-given) (one row per scene: condition, seed, the scene's
+Writes OUT/independent_sweep.csv (one row per scene: condition, seed, the scene's
 description, generate_s (empty when the scene was on disk), the scores above, warnings,
-analyze_s) and OUT/independent_sweep.json (package version, parameters, library versions);
-prints the median of each score per condition.
+analyze_s) and OUT/independent_sweep.json (package version, parameters, library versions),
+named ``independent_sweep_nohole`` with ``--hole-not-given``; prints the median of each
+score per condition.
 """
 from __future__ import annotations
 
