@@ -11,6 +11,8 @@ paper Fig. 2: ``step1_raw.png``, ``step2_threshold.png``, ``step3_clean.png``,
 """
 from __future__ import annotations
 
+import math
+import warnings
 from pathlib import Path
 
 from crosssection.params import AnalysisParams, add_analysis_arguments
@@ -47,6 +49,11 @@ def run(args) -> int:
     from crosssection.pipeline import analyze
 
     params = AnalysisParams.from_cli_args(args, path=args.image)
+    note = set_not_read(args.image, params)
+    if note:
+        from crosssection.quality import QualityWarning
+
+        warnings.warn(note, QualityWarning, stacklevel=2)
     result = analyze(args.image, params)
     result.write(Path(args.out), figure=not args.no_figure, steps=args.steps)
     s = result.summary
@@ -66,3 +73,71 @@ def run_steps(args) -> int:
                               figure=not args.no_figure)
     print(f"{args.image}: {len(paths)} step images -> {args.out}")
     return 0
+
+
+def _shown(path: Path) -> Path:
+    """``path`` relative to the working folder where it lies below it (as a user typed it)."""
+    try:
+        return path.relative_to(Path.cwd().resolve())
+    except ValueError:
+        return path
+
+
+def _same(a, b) -> bool:
+    if isinstance(a, (int, float)) and isinstance(b, (int, float)):
+        return math.isclose(float(a), float(b), rel_tol=1e-9)
+    if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
+    return a == b
+
+
+def set_not_read(image, params: AnalysisParams) -> str | None:
+    """Why the scan's own set would analyse it differently, or None.
+
+    ``analyze`` reads only its options; the ``set.toml`` of the set a scan belongs to (the
+    nearest one in its folder or above) is read by ``batch``. Where that file sets values
+    other than the ones used (a calibration, the scale, the hole), the same scan gives other
+    numbers in a batch: the user most likely meant them. Without a ``set.toml``, a
+    ``calibration.csv`` beside an uncalibrated scan is named the same way.
+
+    Parameters
+    ----------
+    image : str or Path
+        The scan.
+    params : AnalysisParams
+        The parameters the analysis uses.
+
+    Returns
+    -------
+    str or None
+        A ``FILE: ...`` message, None when nothing differs.
+    """
+    from crosssection.batch import CALIBRATION_FILE
+    from crosssection.core.errors import FoldstatError
+    from crosssection.setconfig import SET_FILE, load_set_config
+
+    image = Path(image)
+    for folder in image.resolve().parents:
+        toml = folder / SET_FILE
+        if not toml.is_file():
+            continue
+        shown, where = _shown(toml), _shown(folder)
+        try:
+            wanted = load_set_config(toml).params_for(image)
+        except (FoldstatError, OSError, ValueError):
+            return f"{image}: {shown} is not read by analyze (and it is not valid: run batch " \
+                   "on its folder to see why)"
+        used = {k: getattr(params, k, None) for k in wanted}
+        if used.get("calibration") is not None and isinstance(used["calibration"], (str, Path)):
+            used["calibration"] = str(Path(used["calibration"]).resolve())
+        differ = [k for k, v in wanted.items() if not _same(v, used[k])]
+        if not differ:
+            return None
+        return (f"{image}: {shown} is not read by analyze; its {', '.join(differ)} for this "
+                f"scan differ from the ones used: pass them as options, or run batch on "
+                f"{where}")
+    cal = image.parent / CALIBRATION_FILE
+    if params.calibration is None and cal.is_file():
+        return (f"{image}: {cal} beside it is not used (no calibration given): pass "
+                f"--calibration {cal}")
+    return None
