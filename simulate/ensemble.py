@@ -244,6 +244,24 @@ def assemble(out, n_configs: int, columns=None, failed=None) -> dict:
     return {"configs": configs, "branches": branches, "voids": voids, "stacks": stacks}
 
 
+def library_versions() -> dict:
+    """Versions of the numerical libraries a configuration depends on.
+
+    A quench or a compaction is chaotic: the same seed gives the same rod only with the same
+    floating-point operations, and a new release of numpy, scipy, numba or llvmlite can move
+    their last bits, after which the run ends on another rod. Recorded in ``params.json``
+    beside the package version.
+    """
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = {}
+    for name in ("numpy", "scipy", "numba", "llvmlite"):
+        try:
+            out[name] = version(name)
+        except PackageNotFoundError:
+            out[name] = None
+    return out
+
 def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None = None,
                  progress: bool | None = None, task=None, columns=None, physics_keys=None) -> dict:
     """Run (or resume) an ensemble and write its tables.
@@ -296,7 +314,7 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
     write_json(pfile, {**params, "n_configs": max(n, int(json.loads(pfile.read_text())
                                                           .get("n_configs", 0))
                                                       if pfile.exists() else n),
-                       "version": __version__})
+                       "version": __version__, "libraries": library_versions()})
     seeds = spawn_seeds(params["seed"], n)
     todo = [i for i in range(n) if not _part_ok(part_path(out, i), i, seeds[i])]
     task = run_config if task is None else task

@@ -48,6 +48,7 @@ def test_outputs_and_schema(first):
     assert rods["config_00001"].shape == (61, 2)
     params = json.loads((first / "params.json").read_text())
     assert params["lam"] == 2e4 and params["seed"] == 11 and "version" in params
+    assert params["libraries"]["numpy"] == np.__version__  # a chaotic run depends on them
 
 
 def test_stacks_table_consistent_with_branches(first):
