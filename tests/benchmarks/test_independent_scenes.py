@@ -193,3 +193,42 @@ def test_the_truth_void_count_is_the_drawn_faces(scene, sweep):
     # faces a few pixels wide are the lines' own rasterisation where two lines run close
     faces = [k for k in range(1, n) if k not in border and sizes[k] > 20]
     assert len(faces) == sweep.truth_void_count(truth) > 3
+
+
+def test_the_medial_fork_of_a_symmetric_y_is_its_junction(sweep):
+    """Three equal bands meeting at 120 degrees: the medial axis forks at the meeting point
+    (to the thinning's couple of pixels), and the junction of a band's far end, which has no
+    fork near it, keeps its own point."""
+    c = np.array([200.0, 200.0])
+    lines, stacks = {}, []
+    for i, a in enumerate(np.deg2rad([90.0, 210.0, 330.0])):
+        t = np.arange(0.0, 150.0, 0.25)
+        lines[f"s{i}"] = c + t[:, None] * [np.cos(a), np.sin(a)]
+        stacks.append({"id": i, "n": 4, "u": 0, "v": i + 1})
+    ends = [{"id": i + 1, "x": lines[f"s{i}"][-1, 0], "y": lines[f"s{i}"][-1, 1]}
+            for i in range(3)]
+    truth = {"render": {"size": 400}, "px_per_mm": 50.0, "stacks": stacks,
+             "junctions": [{"id": 0, "x": c[0], "y": c[1]}] + ends}
+    pts = sweep.medial_fork_points(truth, lines)
+    half = sweep.gen.width_mm(4) * 50.0 / 2
+    assert np.hypot(*(pts[0] - c)) < 0.3 * half
+    assert np.allclose(pts[1:], [[e["x"], e["y"]] for e in ends])
+
+
+@pytest.mark.parametrize("angle_deg", [90.0, 60.0, 30.0])
+def test_the_medial_fork_of_a_branch_leaving_a_thick_band(sweep, angle_deg):
+    """A single sheet leaving a 12-layer band at an angle a: the medial axis forks on the
+    band's axis where the sheet's centreline crosses the band's edge, ``w / tan(a)`` (w the
+    band's half width) beyond the centrelines' meeting point -- 58 px at 30 degrees, the
+    difference between the two ways of placing a thick trunk's junction."""
+    c = np.array([200.0, 200.0])
+    a = np.deg2rad(angle_deg)
+    lines = {"s0": c + np.arange(-150.0, 150.0, 0.25)[:, None] * [1.0, 0.0],
+             "s1": c + np.arange(0.0, 180.0, 0.25)[:, None] * [np.cos(a), np.sin(a)]}
+    stacks = [{"id": 0, "n": 12, "u": 0, "v": 0}, {"id": 1, "n": 1, "u": 0, "v": 1}]
+    truth = {"render": {"size": 400}, "px_per_mm": 50.0, "stacks": stacks,
+             "junctions": [{"id": 0, "x": c[0], "y": c[1]}]}
+    (x, y), = sweep.medial_fork_points(truth, lines)
+    half = sweep.gen.width_mm(12) * 50.0 / 2
+    assert abs(y - c[1]) < 1.0
+    assert x - c[0] == pytest.approx(half / np.tan(a), abs=3.0)
