@@ -1,7 +1,8 @@
 """The independent scene generator (``benchmarks/independent_scenes.py``): it imports nothing of
 the package, one small scene is drawn, its truth agrees with itself and with the drawn
 centrelines, the scan is an RGB image with the hole inside it, and a seed gives the same
-bytes twice.
+bytes twice; the sweep's truth void count and medial-axis fork points
+(``benchmarks/independent_sweep.py``) are what they claim.
 
 ``benchmarks/`` is a folder of scripts, not a package: the module is loaded from its file.
 """
