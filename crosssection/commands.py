@@ -79,7 +79,7 @@ def _shown(path: Path) -> Path:
     """``path`` relative to the working folder where it lies below it (as a user typed it)."""
     try:
         return path.relative_to(Path.cwd().resolve())
-    except ValueError:
+    except (ValueError, OSError):  # not below it, or the working folder is gone
         return path
 
 
