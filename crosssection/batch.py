@@ -269,15 +269,21 @@ def plan_batch(input_dir, out_dir, *, cli_params: dict | None = None, seed: int 
     return tasks, sets
 
 
+def loose_calibration(image, calibration) -> Path | None:
+    """The ``calibration.csv`` lying beside a scan analysed without any calibration (the user
+    most likely meant it: only a ``set.toml`` or ``--calibration`` names one), or None."""
+    cal = Path(image).parent / CALIBRATION_FILE
+    return cal if not calibration and cal.is_file() else None
+
+
 def _unused_calibrations(tasks) -> list[str]:
-    """A ``calibration.csv`` lying beside scans analysed without any calibration: the user
-    most likely meant it (only a ``set.toml`` or ``--calibration`` names one)."""
+    """:func:`loose_calibration` of the scans outside any set, each file once."""
     found = []
     for t in tasks:
-        if t.set_name != DEFAULT_SET_NAME or t.error is not None or t.params.get("calibration"):
+        if t.set_name != DEFAULT_SET_NAME or t.error is not None:
             continue
-        cal = Path(t.image).parent / CALIBRATION_FILE
-        if cal.is_file() and str(cal) not in found:
+        cal = loose_calibration(t.image, t.params.get("calibration"))
+        if cal is not None and str(cal) not in found:
             found.append(str(cal))
     return [f"{c}: not used (its scans have no calibration): name it in a {SET_FILE} "
             f"(calibration = \"{CALIBRATION_FILE}\") or pass --calibration" for c in found]

@@ -84,6 +84,7 @@ def _shown(path: Path) -> Path:
 
 
 def _same(a, b) -> bool:
+    """Equal parameter values: numbers to rounding, sequences element by element."""
     if isinstance(a, (int, float)) and isinstance(b, (int, float)):
         return math.isclose(float(a), float(b), rel_tol=1e-9)
     if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
@@ -112,7 +113,7 @@ def set_not_read(image, params: AnalysisParams) -> str | None:
     str or None
         A ``FILE: ...`` message, None when nothing differs.
     """
-    from crosssection.batch import CALIBRATION_FILE
+    from crosssection.batch import loose_calibration
     from crosssection.core.errors import FoldstatError
     from crosssection.setconfig import SET_FILE, load_set_config
 
@@ -128,7 +129,7 @@ def set_not_read(image, params: AnalysisParams) -> str | None:
             return f"{image}: {shown} is not read by analyze (and it is not valid: run batch " \
                    "on its folder to see why)"
         used = {k: getattr(params, k, None) for k in wanted}
-        if used.get("calibration") is not None and isinstance(used["calibration"], (str, Path)):
+        if isinstance(used.get("calibration"), (str, Path)):
             used["calibration"] = str(Path(used["calibration"]).resolve())
         differ = [k for k, v in wanted.items() if not _same(v, used[k])]
         if not differ:
@@ -136,8 +137,8 @@ def set_not_read(image, params: AnalysisParams) -> str | None:
         return (f"{image}: {shown} is not read by analyze; its {', '.join(differ)} for this "
                 f"scan differ from the ones used: pass them as options, or run batch on "
                 f"{where}")
-    cal = image.parent / CALIBRATION_FILE
-    if params.calibration is None and cal.is_file():
+    cal = loose_calibration(image, params.calibration)
+    if cal is not None:
         return (f"{image}: {cal} beside it is not used (no calibration given): pass "
                 f"--calibration {cal}")
     return None

@@ -262,6 +262,7 @@ def library_versions() -> dict:
             out[name] = None
     return out
 
+
 def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None = None,
                  progress: bool | None = None, task=None, columns=None, physics_keys=None) -> dict:
     """Run (or resume) an ensemble and write its tables.
