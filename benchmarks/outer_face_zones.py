@@ -22,8 +22,9 @@ scenes of both generators, with everything else the default:
    keeps the default reading.
 
 Variants (``--variants``): ``default``; ``face`` (tol_rel 0.5, tol_px 2: the face followed
-onto the trunk's face); ``face_kink`` (the same with kink 1); ``face_own`` (tol_rel 0.15,
-tol_px 0.75, kink 1: only while the face is the stack's own).
+onto the trunk's face); ``face_kink``, ``face_kink075``, ``face_kink05`` (the same with kink
+1, 0.75, 0.5); ``face_own`` (tol_rel 0.15, tol_px 0.75, kink 1: only while the face is the
+stack's own).
 
 Scenes: the network generator's conditions of ``benchmarks/robust_sweep.py`` (typical,
 thick_dense, lowres, tangential, renders; seeds 100-107) and the independent generator's
@@ -32,7 +33,7 @@ to ``OUT/independent_scenes`` as ``benchmarks/independent_sweep.py`` does). Each
 installed in its worker process by replacing ``crosssection.stages.curvature.stack_profiles``.
 
 Usage: python benchmarks/outer_face_zones.py [--per-condition 8] [--quick] [--workers 2]
-       [--variants default,face,face_kink,face_own] [--out benchmarks/out]
+       [--variants default,face,face_kink,...] [--out benchmarks/out]
 Writes OUT/outer_face_zones.csv (generator, condition, seed, variant, total energy error) and
 prints the median (and median absolute) error per condition and variant.
 """
@@ -56,6 +57,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 VARIANTS = {"default": None,
             "face": dict(tol_rel=0.5, tol_px=2.0, kink=0.0),
             "face_kink": dict(tol_rel=0.5, tol_px=2.0, kink=1.0),
+            "face_kink075": dict(tol_rel=0.5, tol_px=2.0, kink=0.75),
+            "face_kink05": dict(tol_rel=0.5, tol_px=2.0, kink=0.5),
             "face_own": dict(tol_rel=0.15, tol_px=0.75, kink=1.0)}
 NETWORK = ("typical", "thick_dense", "lowres", "tangential", "renders")
 INDEPENDENT = ("typical", "thick", "lowres")
