@@ -32,7 +32,10 @@ stacks shorter than twice their band width (lumps in junction zones rather than 
 missed truth junctions at one of them, the energy of matched stacks by n_br (truth and
 measured) and of unmatched ones, and the share of the rod's energy at nodes turning more than
 90 degrees (collapsed folds, drawn as band ends), and how much rod the bands draw (the sum of
-n_br times the drawn stack length, over the rod length). Times (wall): compaction
+n_br times the drawn stack length, over the rod length) and how much bending: the drawn
+centrelines' ``sum n_br int kappa^2 ds`` over the rod's energy, in all and outside discs of
+the widest band's width around every truth junction (``drawn_energy_ratio``, ``drawn_energy_ratio_outside``: the bending the
+image holds, where the truth is the rod's). Times (wall): compaction
 (``configs.csv`` wall_s), contact analysis, render, analysis.
 
 Writes ``OUT/compact_pipeline.csv`` (one row per scene) and, with ``--overlays``,
@@ -73,6 +76,49 @@ def _fold_share(xy) -> float:
     dth = np.abs(np.diff(np.unwrap(np.arctan2(d[:, 1], d[:, 0]))))
     e = dth ** 2
     return float(e[dth > np.pi / 2].sum() / e.sum()) if e.sum() > 0 else 0.0
+
+
+def _drawn_energy(scene) -> tuple[float, float]:
+    """The drawn bands' ``sum n_br int kappa^2 ds`` over the rod's energy: in all, and outside
+    discs of the widest band's width around every truth junction.
+
+    The curvature of each drawn centreline (``scene.paths_rc``, about one point per px) is its
+    turning angle per unit arc; the rod's energy is the truth's ``total_energy`` (``L int
+    kappa^2 ds`` summed over branches) over L.
+    """
+    from scipy.spatial import cKDTree
+
+    st = scene.tables["stacks"].reset_index(drop=True)
+    px = scene.params["px_per_mm"]
+    jt = scene.tables["junctions"]
+    junctions = jt[["y_px", "x_px"]].to_numpy(float)
+    width_px = st["width_mm"].to_numpy(float) * px
+    widest = np.zeros(len(jt))
+    row = {int(j): i for i, j in enumerate(jt["junction_id"].to_numpy(int))}
+    for end in ("junction_a", "junction_b"):
+        for j, wd in zip(st[end].to_numpy(int), width_px):
+            if j in row:
+                widest[row[j]] = max(widest[row[j]], wd)
+    tree = cKDTree(junctions) if len(junctions) else None
+    total = outside = 0.0
+    for k, path in enumerate(scene.paths_rc):
+        p = np.asarray(path, float).reshape(-1, 2)
+        d = np.diff(p, axis=0)
+        ds = np.hypot(d[:, 0], d[:, 1])
+        p, d, ds = p[1:][ds > 1e-9], d[ds > 1e-9], ds[ds > 1e-9]
+        if len(ds) < 5:
+            continue
+        theta = np.unwrap(np.arctan2(d[:, 0], d[:, 1]))
+        w = 0.5 * (ds[:-1] + ds[1:])
+        f = (np.diff(theta) / w) ** 2 * w * px * int(st["n_br"][k])  # 1/mm
+        total += f.sum()
+        inside = np.zeros(len(f), bool)
+        if tree is not None:
+            for i, near in enumerate(tree.query_ball_point(p[:-1], widest.max())):
+                inside[i] = any(np.hypot(*(junctions[j] - p[i])) < widest[j] for j in near)
+        outside += f[~inside].sum()
+    rod = scene.summary["total_energy"] / scene.summary["rod_length_mm"]
+    return total / rod, outside / rod
 
 
 def _breakdown(pair, truth, h_px: float) -> dict:
@@ -235,6 +281,8 @@ def run(epsilons, *, segments, seed, conditions, work, overlays):
                        "drawn_rod_ratio": float((truth.tables["stacks"]["n_br"]
                                                  * truth.tables["stacks"]["length_mm"]).sum()
                                                 / truth.summary["rod_length_mm"]),
+                       **dict(zip(("drawn_energy_ratio", "drawn_energy_ratio_outside"),
+                                  _drawn_energy(scene))),
                        "compact_s": float(configs.loc[configs["config_id"] == i, "wall_s"]
                                           .iloc[0]) if "wall_s" in configs else np.nan,
                        "contacts_s": contacts_s, "render_s": render_s,
