@@ -1,0 +1,67 @@
+"""The drawn bands' bending beside the rod's (``benchmarks/bench_compact_pipeline.py``,
+``_drawn_energy``): an arc drawn as it bends reads the rod's energy, and the discs around the
+junctions take out what lies within the widest band's width of them.
+
+``benchmarks/`` is a folder of scripts, not a package: the module is loaded from its file.
+"""
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pandas as pd
+import pytest
+
+SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_compact_pipeline.py"
+
+
+@pytest.fixture(scope="module")
+def bench():
+    spec = importlib.util.spec_from_file_location(SCRIPT.stem, SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[SCRIPT.stem] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+def _arc_scene(radius_px=200.0, n_br=3, width_mm=0.4, px=50.0, span=1.5):
+    """One stack drawn as an arc, a junction at each end, the rod's energy that of the arc."""
+    a = np.linspace(0.0, span, int(radius_px * span) + 1)
+    path = 300.0 + radius_px * np.stack([np.sin(a), np.cos(a)], axis=1)  # (row, col)
+    length_mm = radius_px * span / px
+    rod_int = n_br * length_mm * (px / radius_px) ** 2  # sum n int kappa^2 ds, 1/mm
+    L = 1000.0
+    stacks = pd.DataFrame({"stack_id": [0], "junction_a": [0], "junction_b": [1],
+                           "n_br": [n_br], "width_mm": [width_mm]})
+    junctions = pd.DataFrame({"junction_id": [0, 1], "y_px": path[[0, -1], 0],
+                              "x_px": path[[0, -1], 1]})
+    return SimpleNamespace(tables={"stacks": stacks, "junctions": junctions},
+                           params={"px_per_mm": px}, paths_rc=[path],
+                           summary={"total_energy": rod_int * L, "rod_length_mm": L})
+
+
+def test_an_arc_drawn_as_it_bends_reads_the_rods_energy(bench):
+    scene = _arc_scene()
+    total, outside = bench._drawn_energy(scene)
+    assert total == pytest.approx(1.0, rel=0.02)
+    # one width (20 px) of arc is inside each junction's disc: 40 of 300 px
+    assert outside == pytest.approx(1.0 - 40.0 / 300.0, abs=0.02)
+
+
+def test_a_hook_into_a_junction_point_is_inside_its_disc(bench):
+    scene = _arc_scene()
+    path = scene.paths_rc[0]
+    # a hook: the last 15 px turn by a quarter turn into the junction point
+    t = np.linspace(0.0, 0.5 * np.pi, 40)
+    end, d = path[-1], path[-1] - path[-2]
+    d /= np.hypot(*d)
+    nrm = np.array([-d[1], d[0]])
+    hook = end + 10.0 * (np.sin(t)[:, None] * d + (1 - np.cos(t))[:, None] * nrm)
+    scene.paths_rc = [np.concatenate([path, hook[1:]])]
+    scene.tables["junctions"].loc[1, ["y_px", "x_px"]] = hook[-1]
+    total, outside = bench._drawn_energy(scene)
+    assert total > 1.5  # the hook bends far more than the arc
+    assert outside < 1.0  # and it lies within the junction's disc
