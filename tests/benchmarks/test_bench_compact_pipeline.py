@@ -1,30 +1,19 @@
 """The drawn bands' bending beside the rod's (``benchmarks/bench_compact_pipeline.py``,
 ``_drawn_energy``): an arc drawn as it bends reads the rod's energy, and the discs around the
 junctions take out what lies within the widest band's width of them.
-
-``benchmarks/`` is a folder of scripts, not a package: the module is loaded from its file.
 """
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 import pandas as pd
 import pytest
 
-SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_compact_pipeline.py"
-
 
 @pytest.fixture(scope="module")
-def bench():
-    spec = importlib.util.spec_from_file_location(SCRIPT.stem, SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[SCRIPT.stem] = module
-    spec.loader.exec_module(module)
-    return module
+def bench(load_script):
+    return load_script("bench_compact_pipeline")
 
 
 def _arc_scene(radius_px=200.0, n_br=3, width_mm=0.4, px=50.0, span=1.5):

@@ -3,15 +3,11 @@ the package, one small scene is drawn, its truth agrees with itself and with the
 centrelines, the scan is an RGB image with the hole inside it, and a seed gives the same
 bytes twice; the sweep's truth void count and medial-axis fork points
 (``benchmarks/independent_sweep.py``) are what they claim.
-
-``benchmarks/`` is a folder of scripts, not a package: the module is loaded from its file.
 """
 from __future__ import annotations
 
 import ast
-import importlib.util
 import json
-import sys
 from collections import Counter
 from pathlib import Path
 
@@ -26,17 +22,9 @@ SCRIPT = REPO / "benchmarks" / "independent_scenes.py"
 SEED, COND = 4, "peel"
 
 
-def _load(path: Path):
-    spec = importlib.util.spec_from_file_location(path.stem, path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[path.stem] = module  # dataclasses look their module up while being built
-    spec.loader.exec_module(module)
-    return module
-
-
 @pytest.fixture(scope="module")
-def gen():
-    return _load(SCRIPT)
+def gen(load_script):
+    return load_script("independent_scenes")
 
 
 @pytest.fixture(scope="module")
@@ -163,8 +151,8 @@ def test_the_same_seed_gives_the_same_bytes(scene, gen, tmp_path):
 
 
 @pytest.fixture(scope="module")
-def sweep():
-    return _load(REPO / "benchmarks" / "independent_sweep.py")
+def sweep(load_script):
+    return load_script("independent_sweep")
 
 
 def test_the_truth_void_count_is_euler_s_count_of_bounded_faces(sweep):

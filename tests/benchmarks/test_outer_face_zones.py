@@ -1,30 +1,17 @@
 """The outer-face reading of fork zones (``benchmarks/outer_face_zones.py``): the edge is found
 at the band's half width along a normal, and a band's centreline rebuilt from one face has the
 band's curvature.
-
-``benchmarks/`` is a folder of scripts, not a package: the module is loaded from its file.
 """
 from __future__ import annotations
-
-import importlib.util
-import sys
-from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
 
-REPO = Path(__file__).resolve().parents[2]
-SCRIPT = REPO / "benchmarks" / "outer_face_zones.py"
-
 
 @pytest.fixture(scope="module")
-def face():
-    spec = importlib.util.spec_from_file_location(SCRIPT.stem, SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[SCRIPT.stem] = module
-    spec.loader.exec_module(module)
-    return module
+def face(load_script):
+    return load_script("outer_face_zones")
 
 
 def _annulus(radius_px, half_width_px, size=400):
