@@ -343,7 +343,8 @@ def _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, void
         params=p, hole=pre.hole, hole_confidence=pre.hole_confidence,
         ink_outside_fraction=pre.ink_outside_fraction, degrees=degrees, stacks=stacks,
         rod_length_mm=L, rod_measured_mm=rod_mm, ink_area_in_hole_mm2=ink_area_mm2,
-        calibration_max_width_mm=_max_width_mm(cal, p), junctions=junctions)
+        calibration_max_width_mm=_max_width_mm(cal, p), junctions=junctions,
+        image_shape=pre.rgb.shape)
     notes = list(pre.warnings) + [f"linear system: {f}" for f in lin.flags
                                   if not str(f).startswith("disconnected")]
     summary = tb.summary(pre=pre, params=p, linear_system=lin, junctions=junctions,

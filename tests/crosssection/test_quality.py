@@ -249,3 +249,44 @@ def test_linear_system_flag_counts_violations_and_repartitions_apart(violated, r
     assert bool(flags) == flagged
     if flagged:
         assert flags[0].code == "linear_system" and flags[0].value > flags[0].limit
+
+
+@pytest.mark.parametrize("depth", [0.0, 0.05, 0.2, 1.0])
+def test_hole_outside_fraction_is_the_circular_segment(depth):
+    # a disc of radius r whose left edge lies depth * r beyond the image's left border
+    r = 300.0
+    d = depth * r
+    frac = quality.hole_outside_fraction((1000, 1000), (500.0, r - 0.5 - d), r)
+    segment = r * r * np.arccos((r - d) / r) - (r - d) * np.sqrt(max(2 * r * d - d * d, 0.0))
+    assert frac == pytest.approx(segment / (np.pi * r * r), abs=1e-4)
+
+
+def _cut_left(scene, depth):
+    """The scene's scan with its left columns cut so that ``depth`` of the hole's radius lies
+    beyond the border, and the hole's centre in the cut scan."""
+    p = scene.params
+    cx, cy = p["hole_center_px"]
+    r = p["hole_radius_mm"] * p["px_per_mm"]
+    cut = int(round(cx - r + depth * r))
+    return scene.rgb[:, cut:].copy(), (cx - cut, cy)
+
+
+def test_a_hole_cut_by_the_scan_border_is_flagged(scene):
+    rgb, centre = _cut_left(scene, 0.15)
+    res, caught = _analyze(rgb, **_given(scene, hole_center_px=centre))
+    assert "hole_cut" in res.summary["quality"]["codes"]
+    flag = next(f for f in res.quality if f.code == "hole_cut")
+    assert 0.02 < flag.value < 0.04 and flag.limit == quality.HOLE_CUT_LIMIT  # segment: 2.7 %
+    assert any(w.category is quality.FrameWarning and "outside the scan" in str(w.message)
+               for w in caught)
+    # found rather than given, the hole is fitted to the wall's arc and still flagged
+    kw = _given(scene)
+    kw.pop("hole_radius_mm"), kw.pop("hole_center_px")
+    res, _ = _analyze(rgb, **kw)
+    assert "hole_cut" in res.summary["quality"]["codes"]
+
+
+def test_a_hole_touching_the_border_is_not_flagged(scene):
+    rgb, centre = _cut_left(scene, 0.0)
+    res, _ = _analyze(rgb, **_given(scene, hole_center_px=centre))
+    assert "hole_cut" not in res.summary["quality"]["codes"]
