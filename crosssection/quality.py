@@ -62,7 +62,8 @@ on the lattice: it is seen only as h below 3 px when the true h is below 6 px.
 The ``hole_cut`` check: a scan cropped through the hole loses the stacks beyond its border (the
 wall band lines the whole hole), and the counts, lengths and epsilon are those of a part. The
 hole, given or found, is known beyond the image (a found hole is fitted to the wall's arc
-that the scan holds); the limit, 0.5 % of its area, is a band about 12 px deep on a hole of
+that the scan holds; one found with low confidence is not checked, ``hole_fitted`` says it
+already); the limit, 0.5 % of its area, is a band about 12 px deep on a hole of
 400 px radius, and a hole tangent to the border within a pixel stays below 0.05 %.
 
 The ``epsilon_ink`` check uses that a rod of length L and thickness h covers about L h of ink:
@@ -212,7 +213,8 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
         flags.append(QualityFlag("ink_outside_hole", f"{100 * ink_outside_fraction:.1f} % of the "
                                  "ink lies outside the hole (ignored): check the hole and the "
                                  "threshold", ink_outside_fraction, 0.02))
-    if image_shape is not None:
+    # a hole found with low confidence may be cut by nothing but its own misfit
+    if image_shape is not None and not (hole_confidence is not None and hole_confidence < 0.5):
         cut = hole_outside_fraction(image_shape, hole.center_rc, hole.radius_px)
         if cut > HOLE_CUT_LIMIT:
             flags.append(QualityFlag("hole_cut", f"{100 * cut:.1f} % of the hole lies outside "

@@ -56,6 +56,9 @@ from crosssection.core.errors import AnalysisError, ParameterError
 #: Without a plate, ink components of at least this fraction of the largest one's area are
 #: pieces of the rod and lie inside the frame; smaller ones (specks) may be cut.
 PIECE_FRACTION = 0.02
+#: Without a plate, a circle grown by more than this to hold every piece of ink takes the
+#: confidence of the grown circle (:func:`find_hole`).
+GROWN_PX = 3.0
 
 __all__ = ["Hole", "fit_hole", "find_hole", "frame_mask", "check_hole", "classify_regions",
            "wall_tolerance_px", "kasa_fit"]
@@ -469,6 +472,15 @@ def find_hole(rgb, ink_mask, *, min_confidence: float = 0.5, path=None) -> Hole:
                                   & _upsampled(np.isin(lab, big), ink.shape))
     reach = float(np.sqrt(((border - env.center_rc) ** 2).sum(axis=1).max())) + 1.0 \
         if len(border) else env.radius_px
+    if reach > env.radius_px + GROWN_PX:
+        # grown to hold ink far beyond the envelope (a second piece of the rod, or a label or
+        # a mark beside the hole): the confidence is that of the circle returned, which the
+        # ink reaches only where that piece lies
+        grown = Hole(env.center_rc, reach, True)
+        conf = min(env_conf, _envelope_confidence(border, grown))
+        return Hole(env.center_rc, reach, True, conf,
+                    f"{why}: ink envelope grown by {reach - env.radius_px:.0f} px to hold every "
+                    f"piece of ink; ink reaches it on {100 * conf:.0f} % of the circle")
     return Hole(env.center_rc, max(env.radius_px, reach), True, env_conf,
                 f"{why}: ink envelope, ink reaches it on {100 * env_conf:.0f} % of the circle")
 

@@ -87,6 +87,27 @@ def test_without_plate_the_frame_holds_every_piece_of_the_rod():
     assert hole.confidence < 0.5  # nothing marks a wall
 
 
+def test_without_plate_a_mark_beside_the_hole_lowers_the_confidence(scene):
+    """A blue label and a filled mark on the paper beside the hole (no plate): the circle
+    grows to hold them, and its confidence is the grown circle's, not the envelope's."""
+    import cv2
+
+    sc, c, R = scene
+    h, w = sc.rgb.shape[:2]
+    rgb = np.full((h + 200, w + 300, 3), PAPER_RGB, np.uint8)
+    rgb[100:100 + h, 150:150 + w] = sc.rgb
+    blue = (40, 70, 190)
+    cv2.putText(rgb, "sample 12", (20, 60), cv2.FONT_HERSHEY_SIMPLEX, 1.5, blue, 4)
+    cv2.rectangle(rgb, (w + 170, 200), (w + 280, 260), blue, -1)
+    plain = np.full_like(rgb, PAPER_RGB)
+    plain[100:100 + h, 150:150 + w] = sc.rgb
+    clean = find_hole(plain, threshold_rgb(plain).mask)
+    assert clean.confidence > 0.95
+    marked = find_hole(rgb, threshold_rgb(rgb).mask)
+    assert marked.radius_px > R + 50  # it holds the marks
+    assert marked.confidence < 0.5 and "grown" in marked.reason
+
+
 def test_frame_mask_area_and_margin():
     hole = Hole(np.array([40.0, 55.0]), 30.0, False)
     m0 = frame_mask((100, 120), hole, margin_px=0.0)
