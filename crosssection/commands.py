@@ -134,8 +134,10 @@ def set_not_read(image, params: AnalysisParams) -> str | None:
         differ = [k for k, v in wanted.items() if not _same(v, used[k])]
         if not differ:
             return None
+        plural = len(differ) > 1
         return (f"{image}: {shown} is not read by analyze; its {', '.join(differ)} for this "
-                f"scan differ from the ones used: pass them as options, or run batch on "
+                f"scan {'differ from the ones' if plural else 'differs from the one'} used: "
+                f"pass {'them as options' if plural else 'it as an option'}, or run batch on "
                 f"{where}")
     cal = loose_calibration(image, params.calibration)
     if cal is not None:
