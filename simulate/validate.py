@@ -9,6 +9,7 @@ per scene that could not be analysed: the run goes on).
 """
 from __future__ import annotations
 
+import argparse
 import time
 from pathlib import Path
 
@@ -62,8 +63,10 @@ def score_scene(scene_dir, *, match_px: float | None = None) -> dict:
 
 
 def validate_scenes(scenes_dir, out_dir, *, match_px: float | None = None,
-                    progress: bool = True) -> pd.DataFrame:
+                    progress: bool | None = None) -> pd.DataFrame:
     """Score every scene folder under ``scenes_dir``; write the report into ``out_dir``.
+
+    ``progress``: a progress bar on stderr (None: only when stderr is a terminal).
 
     Returns
     -------
@@ -77,11 +80,10 @@ def validate_scenes(scenes_dir, out_dir, *, match_px: float | None = None,
     if not scenes:
         raise ConfigError("no scene folders (with truth/summary.json) inside", scenes_dir)
     rows, failures = [], []
-    it = scenes
-    if progress:
-        from tqdm import tqdm
+    from tqdm import tqdm
 
-        it = tqdm(scenes, desc="validate", unit="scene")
+    it = tqdm(scenes, desc="validate", unit="scene",
+              disable=None if progress is None else not progress)
     for scene in it:
         try:
             rows.append(score_scene(scene, match_px=match_px))
@@ -116,10 +118,12 @@ def add_subparser(sub) -> None:
                    help="report folder (created): scores.csv, summary.json, failures.csv")
     p.add_argument("--match-px", type=float, default=None,
                    help="junction matching radius in px (default: 3 h of each scene)")
+    p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
+                   help="progress bar on stderr (default: only when stderr is a terminal)")
     p.set_defaults(func=_run)
 
 
 def _run(args) -> int:
-    df = validate_scenes(args.scenes, args.out, match_px=args.match_px)
+    df = validate_scenes(args.scenes, args.out, match_px=args.match_px, progress=args.progress)
     print(f"{len(df)} scenes scored; report in {args.out}")
     return 0

@@ -110,7 +110,7 @@ def test_noise_options_are_seeded():
     assert (threshold(s1.rgb) == s1.ink_mask).mean() > 0.99
 
 
-def test_cli_render_and_validate(tmp_path):
+def test_cli_render_and_validate(tmp_path, capsys):
     from simulate.cli import main
 
     sim = tmp_path / "sim"
@@ -123,7 +123,10 @@ def test_cli_render_and_validate(tmp_path):
     assert [f.name for f in folders] == sorted(rods)
     # validate never crashes: a scene that cannot be analysed is one line of failures.csv
     (folders[0] / "image.png").write_bytes(b"not a png")
+    capsys.readouterr()
     assert main(["validate", str(tmp_path / "scenes"), "--out", str(tmp_path / "rep")]) == 0
+    # stderr is not a terminal here: no progress bar, nothing on stderr
+    assert capsys.readouterr().err == ""
     failures = pd.read_csv(tmp_path / "rep" / "failures.csv")
     assert folders[0].name in failures["scene"].tolist()
     summary = json.loads((tmp_path / "rep" / "summary.json").read_text())
