@@ -218,8 +218,8 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
         cut = hole_outside_fraction(image_shape, hole.center_rc, hole.radius_px)
         if cut > HOLE_CUT_LIMIT:
             flags.append(QualityFlag("hole_cut", f"{100 * cut:.1f} % of the hole lies outside "
-                                     "the scan: the stacks cut off by the image border are "
-                                     "missing, and the counts and lengths are those of a part",
+                                     "the scan: a scan cropped through the hole misses the "
+                                     "stacks beyond its border (or the hole is wrong)",
                                      cut, HOLE_CUT_LIMIT))
     if len(degrees) and int(np.max(degrees)) > 6:
         flags.append(QualityFlag("junction_degree", f"a junction of degree {int(np.max(degrees))} "
