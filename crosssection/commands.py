@@ -65,12 +65,14 @@ def run(args) -> int:
 
 def run_steps(args) -> int:
     """``steps``: stages 1-6 only, then the step images."""
+    from crosssection.figures import step_titles
     from crosssection.pipeline import preprocess, write_step_images
 
     pre = preprocess(args.image, AnalysisParams.from_cli_args(args, path=args.image))
     paths = write_step_images(args.out, pre.rgb, pre.threshold.mask, pre.mask_clean,
                               pre.skeleton, pre.junctions.centers_rc,
-                              figure=not args.no_figure)
+                              figure=not args.no_figure,
+                              titles=step_titles(pre.threshold.as_summary()))
     print(f"{args.image}: {len(paths)} step images -> {args.out}")
     return 0
 

@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["overlay_figure", "draw_overlay", "steps_figure", "curvature_figure",
-           "widths_figure", "dim_image"]
+__all__ = ["overlay_figure", "draw_overlay", "steps_figure", "threshold_title",
+           "step_titles", "curvature_figure", "widths_figure", "dim_image"]
 
 BULK_COLOR = "#1a9641"
 PERIPHERY_COLOR = "#d7191c"
@@ -172,6 +172,29 @@ def draw_overlay(ax, rgb, result=None, *, junctions_df=None, stacks_df=None, pat
     return n_j, m, int(n_br.sum())
 
 
+def threshold_title(thresholds: dict | None) -> str:
+    """The steps figure's title of the threshold panel, from ``summary['thresholds']``: the
+    rule and the cuts used (:func:`crosssection.stages.threshold.threshold_rgb`)."""
+    t = thresholds or {}
+
+    def num(x):
+        return f"{x:.0f}" if x is not None and float(x).is_integer() else f"{x:.1f}"
+
+    if t.get("method") == "fixed" and t.get("blue_min") is not None:
+        return f"threshold: B \u2265 {num(t['blue_min'])}, R, G \u2264 {num(t['rg_max'])}"
+    if t.get("cut") is not None:
+        rg = f", R, G \u2264 {num(t['rg_max'])}" if t.get("rg_max") is not None else ""
+        return f"threshold ({t.get('method')}): B \u2212 max(R, G) \u2265 {num(t['cut'])}{rg}"
+    return "threshold (blue high, red/green low)"
+
+
+def step_titles(thresholds: dict | None = None) -> list:
+    """The four panel titles of :func:`steps_figure`, the threshold's from
+    :func:`threshold_title`."""
+    return ["raw scan", threshold_title(thresholds), "cleaned (voids \u2265 s_min kept)",
+            "skeleton and junctions"]
+
+
 def steps_figure(rgb, mask_threshold, mask_clean, skeleton, junction_centers_rc, *,
                  titles=None, axes=None):
     """The four steps of paper Fig. 2: raw scan, thresholded, cleaned, skeleton + junctions.
@@ -202,8 +225,7 @@ def steps_figure(rgb, mask_threshold, mask_clean, skeleton, junction_centers_rc,
         if len(axes) != 4:
             raise ValueError(f"steps need 4 axes, got {len(axes)}")
         fig = axes[0].figure
-    titles = titles or ["raw scan", "threshold (blue high, red/green low)",
-                        "cleaned (voids >= s_min kept)", "skeleton and junctions"]
+    titles = titles or step_titles()
     axes[0].imshow(dim_image(img, 0.0))
     axes[1].imshow(np.asarray(mask_threshold, bool), cmap="gray_r", interpolation="nearest")
     axes[2].imshow(np.asarray(mask_clean, bool), cmap="gray_r", interpolation="nearest")

@@ -177,7 +177,8 @@ class AnalysisResult:
             return ax.figure
         if kind == "steps":
             return F.steps_figure(self.rgb, self.mask_threshold, self.mask_clean, self.skeleton,
-                                  self.graph_junction_centers(), axes=ax)
+                                  self.graph_junction_centers(), axes=ax,
+                                  titles=self._step_titles())
         if kind == "curvature":
             return F.curvature_figure(self.profiles, self.stacks, ax=ax)
         if kind == "widths":
@@ -245,7 +246,14 @@ class AnalysisResult:
         ``figures.steps_figure``) when ``figure``.
         """
         return write_step_images(out_dir, self.rgb, self.mask_threshold, self.mask_clean,
-                                 self.skeleton, self.graph_junction_centers(), figure=figure)
+                                 self.skeleton, self.graph_junction_centers(), figure=figure,
+                                 titles=self._step_titles())
+
+    def _step_titles(self) -> list:
+        """The steps figure's panel titles, the threshold's with the rule and cuts used."""
+        from crosssection.figures import step_titles
+
+        return step_titles(self.summary.get("thresholds"))
 
     def graph_junction_centers(self) -> np.ndarray:
         if self.junction_clusters is not None:
@@ -254,8 +262,9 @@ class AnalysisResult:
 
 
 def write_step_images(out_dir, rgb, mask_threshold, mask_clean, skeleton, junction_centers_rc,
-                      *, figure: bool = True) -> dict:
-    """Write the four step images of paper Fig. 2 (see ``AnalysisResult.write_steps``)."""
+                      *, figure: bool = True, titles=None) -> dict:
+    """Write the four step images of paper Fig. 2 (see ``AnalysisResult.write_steps``);
+    ``titles``: the four panel titles of ``steps.png`` (``figures.steps_figure``)."""
     import cv2
 
     from crosssection.core.fileio import atomic_path
@@ -285,6 +294,7 @@ def write_step_images(out_dir, rgb, mask_threshold, mask_clean, skeleton, juncti
         from crosssection.figures import steps_figure
         from crosssection.core.fileio import save_figure
 
-        fig = steps_figure(raw, mask_threshold, mask_clean, skeleton, junction_centers_rc)
+        fig = steps_figure(raw, mask_threshold, mask_clean, skeleton, junction_centers_rc,
+                           titles=titles)
         paths["steps"] = save_figure(fig, out / "steps.png")
     return paths

@@ -88,3 +88,25 @@ def test_steps_figure(tmp_path):
     assert all(ax.get_title() for ax in fig.axes)
     out = save_figure(fig, tmp_path / "steps.png")
     assert Image.open(out).size[0] > Image.open(out).size[1]
+
+
+@pytest.mark.parametrize("method", ["auto", "fixed"])
+def test_steps_figure_names_the_threshold_used(method):
+    # the threshold panel's title is the rule and cuts of this analysis, not a fixed text
+    import matplotlib.pyplot as plt
+
+    from crosssection import analyze
+    from crosssection.truth.network import make_scene
+
+    sc = make_scene(seed=3, n_stacks=12, max_layers=3)
+    res = analyze(sc.rgb, px_per_mm=50.0, thickness_mm=0.1, calibration=sc.calibration,
+                  threshold_method=method)
+    t = res.summary["thresholds"]
+    fig = res.plot("steps")
+    title = fig.axes[1].get_title()
+    plt.close(fig)
+    if method == "fixed":
+        assert title == "threshold: B \u2265 100, R, G \u2264 130"
+    else:
+        assert title.startswith("threshold (auto): B \u2212 max(R, G) \u2265 ")
+        assert f"{t['cut']:.1f}".rstrip("0").rstrip(".") in title
