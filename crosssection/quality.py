@@ -63,8 +63,8 @@ The ``hole_cut`` check: a scan cropped through the hole loses the stacks beyond 
 wall band lines the whole hole), and the counts, lengths and epsilon are those of a part. The
 hole, given or found, is known beyond the image (a found hole is fitted to the wall's arc
 that the scan holds; one found with low confidence is not checked, ``hole_fitted`` says it
-already); the limit, 0.5 % of its area, is a band about 12 px deep on a hole of
-400 px radius, and a hole tangent to the border within a pixel stays below 0.05 %.
+already); the limit, 0.5 % of its area, is a segment about 16 px deep on a hole of
+400 px radius, and a hole reaching a pixel beyond the border stays below 0.01 %.
 
 The ``epsilon_ink`` check uses that a rod of length L and thickness h covers about L h of ink:
 a rod length far from the ink area means the layer counts or the threshold are wrong.

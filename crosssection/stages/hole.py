@@ -45,8 +45,9 @@ gives 1), grown to hold every piece of the rod: each ink component of at least
 :data:`PIECE_FRACTION` of the largest one's area (a rod drawn without its wall in two pieces
 lost 37 % of its length to a frame around its largest piece). Grown by more than
 :data:`GROWN_PX`, the circle takes its own confidence, the fraction of it that the ink reaches:
-a blue label and a mark on the paper beside a sample scan's hole grew it from 398 to 668 px
-with a confidence of 1.0, the envelope's; it is 0.002 now, and the scan is flagged.
+a blue label and a mark on the paper beside a sample scan's hole grow it from 398 to 668 px,
+which the ink reaches on 0.2 % of the circle (the envelope's confidence, 1.0, would hide the
+misfit), and the scan is flagged.
 """
 from __future__ import annotations
 
