@@ -86,7 +86,7 @@ def _drawn_energy(scene) -> tuple[float, float]:
     turning angle per unit arc; the rod's energy is the truth's ``total_energy`` (``L int
     kappa^2 ds`` summed over branches) over L.
     """
-    from scipy.spatial import cKDTree
+    from scipy.spatial.distance import cdist
 
     st = scene.tables["stacks"].reset_index(drop=True)
     px = scene.params["px_per_mm"]
@@ -99,7 +99,6 @@ def _drawn_energy(scene) -> tuple[float, float]:
         for j, wd in zip(st[end].to_numpy(int), width_px):
             if j in row:
                 widest[row[j]] = max(widest[row[j]], wd)
-    tree = cKDTree(junctions) if len(junctions) else None
     total = outside = 0.0
     for k, path in enumerate(scene.paths_rc):
         p = np.asarray(path, float).reshape(-1, 2)
@@ -112,10 +111,7 @@ def _drawn_energy(scene) -> tuple[float, float]:
         w = 0.5 * (ds[:-1] + ds[1:])
         f = (np.diff(theta) / w) ** 2 * w * px * int(st["n_br"][k])  # 1/mm
         total += f.sum()
-        inside = np.zeros(len(f), bool)
-        if tree is not None:
-            for i, near in enumerate(tree.query_ball_point(p[:-1], widest.max())):
-                inside[i] = any(np.hypot(*(junctions[j] - p[i])) < widest[j] for j in near)
+        inside = (cdist(p[:-1], junctions) < widest).any(axis=1)
         outside += f[~inside].sum()
     rod = scene.summary["total_energy"] / scene.summary["rod_length_mm"]
     return total / rod, outside / rod
