@@ -56,7 +56,7 @@ VOID_COLUMNS = ["config_id", "area", "perimeter", "shape_ratio", "n_edges"]
 
 # parameters that define the physics: a re-run into the same folder must agree on them
 _PHYSICS_KEYS = ("command", "n_segments", "lam", "noise", "seed", "method", "n_runs",
-                 "maxiter", "nematic_runs", "u", "ftol", "xtol", "wall_radius",
+                 "maxiter", "nematic_runs", "u", "nematic_cutoff", "ftol", "xtol", "wall_radius",
                  "contact_distance", "lam_start", "stages", "ramp", "parametrization")
 
 
@@ -92,7 +92,8 @@ def minimize_config(xy0, params: dict, seed: int):
                                stages=params["stages"], ramp=params["ramp"],
                                method=params["method"], **common)
     if params["method"] == "powell":
-        return optimize.powell_protocol(xy0, params["lam"], **common)
+        return optimize.powell_protocol(xy0, params["lam"],
+                                        contact_cutoff=params.get("nematic_cutoff"), **common)
     if params["method"] == "lbfgs":
         return optimize.lbfgs_quench(xy0, params["lam"], seed=seed,
                                      wall_radius=params["wall_radius"])
@@ -396,6 +397,9 @@ def _add_common(p, command):
                         "(default 1,2)")
     p.add_argument("--u", type=float, default=100.0,
                    help="nematic strength u, dimensionless, 50-150 (default 100)")
+    p.add_argument("--nematic-cutoff", type=float, default=None,
+                   help="distance within which two segments touch for the nematic term, in "
+                        "units of L (quench with --method powell; default one segment, 1/N)")
     p.add_argument("--ftol", type=float, default=1e-4, help="Powell ftol (default 1e-4, scipy's)")
     p.add_argument("--xtol", type=float, default=1e-4, help="Powell xtol (default 1e-4, scipy's)")
     p.add_argument("--wall-radius", type=float, default=None,
@@ -452,6 +456,8 @@ def params_from_args(args) -> dict:
                   noise=_finite("--noise", args.noise, low=0.0), seed=args.seed,
                   method=args.method, n_runs=args.runs, maxiter=args.maxiter,
                   nematic_runs=nem, u=_finite("--u", args.u, low=0.0),
+                  nematic_cutoff=_finite("--nematic-cutoff", args.nematic_cutoff, low=0.0,
+                                         low_open=True, allow_none=True),
                   ftol=_finite("--ftol", args.ftol, low=0.0, low_open=True),
                   xtol=_finite("--xtol", args.xtol, low=0.0, low_open=True),
                   wall_radius=_finite("--wall-radius", args.wall_radius, low=0.0, low_open=True,
@@ -459,6 +465,9 @@ def params_from_args(args) -> dict:
                   contact_distance=_finite("--contact-distance", args.contact_distance, low=0.0,
                                            low_open=True, allow_none=True),
                   parametrization=args.parametrization)
+    if params["nematic_cutoff"] is not None and (args.command != "quench"
+                                                 or args.method != "powell"):
+        raise ParameterError("--nematic-cutoff applies to quench with --method powell")
     if args.command == "anneal":
         if args.stages < 1:
             raise ParameterError(f"--stages must be >= 1, got {args.stages}")

@@ -131,3 +131,30 @@ def test_cli_quench_stderr_holds_no_progress_bar_when_not_a_terminal(tmp_path):
                         str(tmp_path / "q")], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     assert r.stderr == ""
+
+
+def test_nematic_cutoff_reaches_the_minimiser(first, tmp_path):
+    # one segment (1/60 L) is the default: the same rods; a wider touching distance lets the
+    # nematic term act on other pairs: other rods, recorded in params.json
+    same = tmp_path / "same"
+    assert _run(["quench", *ARGS, "--seed", "11", "--nematic-cutoff", repr(1 / 60),
+                 "--out", str(same)]) == 0
+    a, b = np.load(first / "rods.npz"), np.load(same / "rods.npz")
+    assert all(np.array_equal(a[k], b[k]) for k in a.files)
+    wide = tmp_path / "wide"
+    assert _run(["quench", *ARGS, "--seed", "11", "--nematic-cutoff", "0.1",
+                 "--out", str(wide)]) == 0
+    c = np.load(wide / "rods.npz")
+    assert not all(np.array_equal(a[k], c[k]) for k in a.files)
+    assert json.loads((wide / "params.json").read_text())["nematic_cutoff"] == 0.1
+    # a folder of the default ensemble is not resumed with another cutoff
+    with pytest.raises(ConfigError, match="nematic_cutoff"):
+        _run(["quench", *ARGS, "--seed", "11", "--nematic-cutoff", "0.1", "--out", str(first)])
+
+
+@pytest.mark.parametrize("extra", [["--nematic-cutoff", "0"], ["--nematic-cutoff", "nan"],
+                                   ["--nematic-cutoff", "0.1", "--method", "lbfgs"]])
+def test_nematic_cutoff_checked(tmp_path, extra):
+    from crosssection.core.errors import ParameterError
+    with pytest.raises(ParameterError, match="nematic-cutoff"):
+        _run(["quench", *ARGS, "--seed", "11", *extra, "--out", str(tmp_path / "x")])
