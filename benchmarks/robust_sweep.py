@@ -51,7 +51,9 @@ def scene_options(condition: str, seed: int, fan_deg: float | None = None) -> di
 
     ``fan_deg`` sets the generator's fork opening (its default, 60 degrees, when None; 30-35
     gives the tangential forks of real scans) without changing the other random choices."""
-    rng = np.random.default_rng([seed, CONDITIONS.index(condition)])
+    # typical_nohole draws the typical scenes themselves: only the hole is withheld
+    drawn_as = "typical" if condition == "typical_nohole" else condition
+    rng = np.random.default_rng([seed, CONDITIONS.index(drawn_as)])
     typical = typical_options(rng)
     opts, backdrop = typical["scene"], typical["backdrop"]
     if condition == "tangential":
