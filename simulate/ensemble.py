@@ -273,8 +273,9 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
     params : dict
         ``command`` ("quench" or "anneal"), ``n_configs``, ``n_segments``, ``lam``, ``noise``,
         ``seed``, ``method``, ``n_runs``, ``maxiter``, ``nematic_runs``, ``u``, ``ftol``,
-        ``xtol``, ``wall_radius``, ``contact_distance``, and for anneal ``lam_start``,
-        ``stages``, ``ramp``.
+        ``xtol``, ``wall_radius``, ``contact_distance``, optionally ``nematic_cutoff`` (quench
+        with Powell: the distance within which segments touch for the nematic term, units of
+        L; absent or None: one segment), and for anneal ``lam_start``, ``stages``, ``ramp``.
     out : path
         Output folder.
     workers : int
