@@ -27,9 +27,13 @@ Each variant is ``python -m simulate quench ... --nematic-runs R --u U`` into ``
 Per variant: the paper's simulation statistics (set 5 of its tables, and Rg = 0.05 from its
 text): <E~>, Rg, N_br per configuration, N_br/N_l, <e>, alpha_e and chi_e (Gamma, maximum
 likelihood, ``floc=0``), the branch-length Gamma shape alpha_l, alpha_E, <kappa_m> L, <s>/L^2,
-<sqrt(s)/p>, with 95 % bootstrap intervals over configurations (their branches, stacks and
+<sqrt(s)/p> and <S>/L^2 (the summed area of a configuration's voids, the paper's "surface
+occupied by the open rod"), with 95 % bootstrap intervals over configurations (their branches, stacks and
 voids resampled with them); and per configuration the change from the default variant (the
-same start): the energy reached and N_br/N_l, paired.
+same start): the energy reached and N_br/N_l, paired. Beside them, the share of the rod's
+convex hull that its voids fill (median over configurations) and the stack length bounding
+them per configuration (the sum of the void perimeters), to set <s>/L^2 against the area the
+rods span.
 
 Usage::
 
@@ -49,6 +53,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 from scipy import stats
+from scipy.spatial import ConvexHull
 
 HERE = Path(__file__).resolve().parent
 #: (name, Powell runs with the nematic term, u, touching distance in segments: None = one)
@@ -58,15 +63,17 @@ VARIANTS = [("default", "1,2", 100.0, None), ("none", "", 0.0, None),
             ("touching 0.5 segment", "1,2", 100.0, 0.5), ("touching 3 segments", "1,2", 100.0, 3.0),
             ("touching 3 segments, u 1000", "1,2", 1000.0, 3.0)]
 N_SEGMENTS = 300
-#: The paper's simulations (its tables' set 5; Rg from its text; alpha_l from its length law)
+#: The paper's simulations (its tables' set 5; Rg, alpha_l and S, the area its voids fill per
+#: configuration, from its text)
 PAPER = {"E": 4300.0, "rg": 0.05, "n_br_per_config": 4676 / 252, "nbr_nl": 2.0, "e": 230.0,
          "alpha_e": 0.31, "chi_e": 730.0, "alpha_l": 0.4, "alpha_E": 61.0, "kappa_m_L": 37.0,
-         "s_L2": 3.4e-4, "sqrt_s_over_p": 0.19}
+         "s_L2": 3.4e-4, "S_L2": 4e-3, "sqrt_s_over_p": 0.19}
 STATS = list(PAPER)
 LABELS = {"E": r"$\langle\tilde E\rangle$", "rg": r"$R_g$", "n_br_per_config": r"$N_{br}$",
           "nbr_nl": r"$N_{br}/N_l$", "e": r"$\langle e\rangle$", "alpha_e": r"$\alpha_e$",
           "chi_e": r"$\chi_e$", "alpha_l": r"$\alpha_\ell$", "alpha_E": r"$\alpha_E$",
           "kappa_m_L": r"$\langle\kappa_m\rangle L$", "s_L2": r"$\langle s\rangle/L^2$",
+          "S_L2": r"$\langle S\rangle/L^2$",
           "sqrt_s_over_p": r"$\langle\sqrt{s}/p\rangle$"}
 
 
@@ -89,6 +96,14 @@ def load(folder: Path) -> dict:
     t = {"configs": pd.read_csv(folder / "configs.csv").set_index("config_id")}
     for k in ("branches", "stacks", "voids"):
         t[k] = pd.read_csv(folder / f"{k}.csv")
+    # how much of the area the rod spans its voids fill, and how much stack bounds them
+    with np.load(folder / "rods.npz") as rods:
+        hull = {int(k.split("_")[-1]): ConvexHull(rods[k]).volume for k in rods.files}
+    cfg = t["configs"]
+    cfg["hull_area"] = pd.Series(hull).reindex(cfg.index)
+    for col in ("area", "perimeter"):
+        cfg[f"void_{col}"] = t["voids"].groupby("config_id")[col].sum().reindex(
+            cfg.index, fill_value=0.0)
     t["by_config"] = {k: dict(tuple(t[k].groupby("config_id")))
                       for k in ("branches", "stacks", "voids")}
     return t
@@ -123,6 +138,9 @@ def statistics(t: dict, ids: np.ndarray) -> dict:
             "alpha_e": a_e, "chi_e": chi_e, "alpha_l": a_l, "alpha_E": a_E,
             "kappa_m_L": br["kappa_pm"].abs().mean(), "s_L2": vo["area"].mean(),
             "sqrt_s_over_p": vo["shape_ratio"].mean(),
+            "S_L2": cfg["void_area"].mean(),
+            "void_share_of_hull": float(np.median(cfg["void_area"] / cfg["hull_area"])),
+            "void_perimeter_per_config": cfg["void_perimeter"].mean(),
             "stacks_one_branch": float(np.mean(st["n_br"] == 1))}
 
 

@@ -30,7 +30,8 @@ def _tables(nem, rng, *, n_configs=60, energy_scale=1.0, alpha_e=0.3, alpha_l=0.
                                 "perimeter": 0.1, "shape_ratio": rng.uniform(0.15, 0.23, 5),
                                 "n_edges": 4}))
         cfg.append({"config_id": c, "energy_total": e.sum(), "rg": 0.05 + 0.01 * rng.random(),
-                    "n_stacks": len(n_br), "n_branches": k})
+                    "n_stacks": len(n_br), "n_branches": k, "hull_area": 0.01,
+                    "void_area": vo[-1]["area"].sum(), "void_perimeter": 0.5})
     t = {"configs": pd.DataFrame(cfg).set_index("config_id"),
          "branches": pd.concat(br, ignore_index=True), "stacks": pd.concat(st, ignore_index=True),
          "voids": pd.concat(vo, ignore_index=True)}
@@ -49,6 +50,27 @@ def test_statistics_recover_the_drawn_laws(nem):
     assert s["e"] == pytest.approx(t["branches"]["energy"].mean())
     assert s["sqrt_s_over_p"] == pytest.approx(0.19, abs=0.01)
     assert 0.4 < s["stacks_one_branch"] < 0.6
+    assert s["void_share_of_hull"] == pytest.approx(
+        np.median(t["configs"]["void_area"] / 0.01))
+    assert s["void_perimeter_per_config"] == pytest.approx(0.5)
+    assert s["S_L2"] == pytest.approx(t["voids"]["area"].sum() / 60)
+
+
+def test_load_measures_the_voids_against_the_hull(nem, tmp_path):
+    square = np.array([[0, 0], [1, 0], [1, 1], [0, 1], [0, 0.5]], float) * 0.1
+    np.savez(tmp_path / "rods.npz", config_00000=square, config_00001=2 * square)
+    pd.DataFrame({"config_id": [0, 1], "energy_total": [1.0, 2.0], "rg": 0.05,
+                  "n_stacks": 2, "n_branches": 3}).to_csv(tmp_path / "configs.csv", index=False)
+    pd.DataFrame({"config_id": [0, 0], "branch_id": [0, 1], "length": 0.1, "energy": 1.0,
+                  "kappa_pm": 1.0}).to_csv(tmp_path / "branches.csv", index=False)
+    pd.DataFrame({"config_id": [0], "stack_id": [0], "n_br": [1]}).to_csv(
+        tmp_path / "stacks.csv", index=False)
+    pd.DataFrame({"config_id": [0, 0], "area": [0.002, 0.003], "perimeter": [0.2, 0.3],
+                  "shape_ratio": 0.2}).to_csv(tmp_path / "voids.csv", index=False)
+    cfg = nem.load(tmp_path)["configs"]
+    assert cfg["hull_area"].tolist() == pytest.approx([0.01, 0.04])
+    assert cfg["void_area"].tolist() == pytest.approx([0.005, 0.0])
+    assert cfg["void_perimeter"].tolist() == pytest.approx([0.5, 0.0])
 
 
 def test_resampled_configurations_carry_their_branches(nem):
