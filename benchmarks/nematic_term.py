@@ -55,6 +55,9 @@ import pandas as pd
 from scipy import stats
 from scipy.spatial import ConvexHull
 
+from crosssection.core.fileio import atomic_path
+from crosssection.stats.tables import PAPER_MACRO, PAPER_MICRO
+
 HERE = Path(__file__).resolve().parent
 #: (name, Powell runs with the nematic term, u, touching distance in segments: None = one)
 VARIANTS = [("default", "1,2", 100.0, None), ("none", "", 0.0, None),
@@ -63,11 +66,15 @@ VARIANTS = [("default", "1,2", 100.0, None), ("none", "", 0.0, None),
             ("touching 0.5 segment", "1,2", 100.0, 0.5), ("touching 3 segments", "1,2", 100.0, 3.0),
             ("touching 3 segments, u 1000", "1,2", 1000.0, 3.0)]
 N_SEGMENTS = 300
-#: The paper's simulations (its tables' set 5; Rg, alpha_l and S, the area its voids fill per
-#: configuration, from its text)
-PAPER = {"E": 4300.0, "rg": 0.05, "n_br_per_config": 4676 / 252, "nbr_nl": 2.0, "e": 230.0,
-         "alpha_e": 0.31, "chi_e": 730.0, "alpha_l": 0.4, "alpha_E": 61.0, "kappa_m_L": 37.0,
-         "s_L2": 3.4e-4, "S_L2": 4e-3, "sqrt_s_over_p": 0.19}
+_SIM_MACRO, _SIM_MICRO = PAPER_MACRO.iloc[-1], PAPER_MICRO.iloc[-1]  # set 5: simulations
+#: The paper's simulations: its tables' set 5, and from its text Rg, the branch count (4676
+#: branches in 252 configurations), alpha_l and S, the area its voids fill per configuration
+PAPER = {"E": float(_SIM_MICRO["E_tilde"]), "rg": 0.05, "n_br_per_config": 4676 / 252,
+         "nbr_nl": float(_SIM_MACRO["n_br"]), "e": float(_SIM_MICRO["e"]),
+         "alpha_e": float(_SIM_MICRO["alpha_e"]), "chi_e": float(_SIM_MICRO["chi_e"]),
+         "alpha_l": 0.4, "alpha_E": float(_SIM_MICRO["alpha_E"]),
+         "kappa_m_L": float(_SIM_MICRO["kappa_m_L"]), "s_L2": float(_SIM_MACRO["s_L2"]),
+         "S_L2": 4e-3, "sqrt_s_over_p": float(_SIM_MACRO["sqrt_s_over_p"])}
 STATS = list(PAPER)
 LABELS = {"E": r"$\langle\tilde E\rangle$", "rg": r"$R_g$", "n_br_per_config": r"$N_{br}$",
           "nbr_nl": r"$N_{br}/N_l$", "e": r"$\langle e\rangle$", "alpha_e": r"$\alpha_e$",
@@ -229,9 +236,8 @@ def main(argv=None) -> int:
               f"paired dE {row['paired_energy_change_median']:+.3f}", flush=True)
     df = pd.DataFrame(rows)
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = args.out.with_suffix(".tmp")
-    df.to_csv(tmp, index=False, float_format="%.4g")
-    tmp.replace(args.out)
+    with atomic_path(args.out) as tmp:
+        df.to_csv(tmp, index=False, float_format="%.4g")
     chart(df, args.out.with_suffix(".png"))
     return 0
 
