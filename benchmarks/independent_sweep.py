@@ -3,7 +3,7 @@
 
 The scenes come from ``benchmarks/independent_scenes.py``, written apart from the package
 (its own topology, fork geometry, width law, colours and defects; see its docstring for the
-four conditions). Each scene is generated once (scenes already in OUT/independent_scenes
+five conditions). Each scene is generated once (scenes already in OUT/independent_scenes
 are reused), analysed by ``crosssection.analyze`` with default settings, given only what a
 user knows about a scan: the scale (px/mm, layer thickness 0.1 mm), the generator's width
 law as the calibration, the hole (radius and centre; left for the pipeline to find with
@@ -34,7 +34,7 @@ hidden_energy_fraction      fraction of the truth energy lying where a stack's c
                             skeleton sees): the part of the energy the scan does not show
 ==========================  =======================================================
 
-Usage: python benchmarks/independent_sweep.py [--conditions typical,thick,lowres,peel]
+Usage: python benchmarks/independent_sweep.py [--conditions typical,thick,lowres,peel,thick_dense]
        [--seed 1] [--per-condition 8] [--workers 2] [--out benchmarks/out] [--quick]
        [--hole-not-given]
 Writes OUT/independent_sweep.csv (one row per scene: condition, seed, the scene's

@@ -221,3 +221,50 @@ def test_the_medial_fork_of_a_branch_leaving_a_thick_band(sweep, angle_deg):
     half = sweep.gen.width_mm(12) * 50.0 / 2
     assert abs(y - c[1]) < 1.0
     assert x - c[0] == pytest.approx(half / np.tan(a), abs=3.0)
+
+
+def test_a_dense_topology_is_repaired_by_dropping_the_site_at_its_defect(gen):
+    """Among dense draws one breaks a rule (a short edge or wall arc); the check says where,
+    and dropping the sites nearest to that point gives a topology that passes."""
+    Rw, dmin = 1100.0, 210.0
+    for seed in range(40):
+        sites = gen._poisson_disc(np.random.default_rng(seed), Rw * 0.97, dmin)
+        try:
+            gen._topology_checked(sites, Rw, dmin)
+        except gen.SceneRejected as exc:
+            where = exc.where
+            if where is not None:
+                break
+    else:
+        pytest.fail("no draw with a located defect in 40 seeds")
+    assert np.hypot(*where) <= Rw + 1  # the defect lies inside the wall
+    n_sites = len(sites)
+    for _ in range(30):
+        try:
+            V, kind, edges = gen._topology_checked(sites, Rw, dmin)
+            break
+        except gen.SceneRejected as e:
+            assert e.where is not None
+            sites = np.delete(sites, np.argmin(np.hypot(*(sites - e.where).T)), axis=0)
+    else:
+        pytest.fail("no topology after 30 repairs")
+    assert n_sites - 30 < len(sites) < n_sites
+    assert all(np.linalg.norm(V[e[0]] - V[e[1]]) >= 0.2 * dmin for e in edges if e[2] == "line")
+    assert all((e[3][1] - e[3][0]) * Rw >= 0.2 * dmin for e in edges if e[2] == "wall")
+
+
+def test_a_stack_too_tight_for_its_band_is_rejected_or_repaired(gen):
+    """End tangents at 80 degrees to a 1.2 mm chord bend a 10-layer band tighter than itself:
+    rejected by default, drawn with its tangents clamped towards the chord with ``repair``."""
+    ppm, n = 50.0, 10
+    V = [np.array([0.0, 0.0]), np.array([60.0, 0.0])]
+    tang = {(0, 0): gen._rot(np.array([1.0, 0.0]), np.radians(80)),
+            (0, 1): gen._rot(np.array([-1.0, 0.0]), np.radians(80))}
+    e = [0, 1, "line"]
+    with pytest.raises(gen.SceneRejected, match="tighter"):
+        gen._stack_curve(0, e, V, tang, {}, n, ppm, 0.0, np.random.default_rng(1))
+    pts, I, length, kmax = gen._stack_curve(0, e, V, tang, {}, n, ppm, 0.0,
+                                             np.random.default_rng(1), repair=True)
+    assert kmax <= gen._kappa_limit(n, ppm, 0.0)
+    assert np.allclose(pts[0], V[0]) and np.allclose(pts[-1], V[1])
+    assert 60.0 <= length < 90.0 and I > 0
