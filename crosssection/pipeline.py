@@ -169,12 +169,13 @@ def _preprocess(image, p: AnalysisParams, timer) -> Preprocessed:
                           sliver_length_px=l_min_px,
                           sliver_width_px=p.sliver_width_h * p.thickness_px)
     _check_clean(mask, speck_px, path)
-    with timer("skeleton"):
-        skel = skeletonize_mask(mask, l_min_px=l_min_px, method=p.skeleton_method)
-    if not skel.any():
-        raise AnalysisError("empty skeleton", path)
     with timer("distance"):
         dist = cv2.distanceTransform(mask.view(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    with timer("skeleton"):
+        skel = skeletonize_mask(mask, l_min_px=l_min_px, method=p.skeleton_method,
+                                distance_px=dist)
+    if not skel.any():
+        raise AnalysisError("empty skeleton", path)
     with timer("graph"):
         junc, sg, merged = stack_graph(skel, dist, merge_px=p.merge_px,
                                        merge_thick_crossings=p.merge_thick_crossings,

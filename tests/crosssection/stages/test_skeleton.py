@@ -481,3 +481,42 @@ def test_skimage_thinning_gives_the_same_topology(seed):
 def test_unknown_skeleton_method_raises():
     with pytest.raises(ParameterError, match="skeleton method"):
         sk.skeletonize_mask(np.ones((5, 5), bool), l_min_px=0.0, method="thin")
+
+
+def _wide_band_with_branches():
+    """A band 120 px wide (half width 60) along the columns, with a 6-px bump on its lower
+    edge, a thin band leaving its upper edge for 70 px and another for 30 px."""
+    mask = np.zeros((320, 600), bool)
+    mask[120:240, 20:580] = True
+    mask[240:246, 300:306] = True           # edge bump: a spur ending on the band's edge
+    mask[50:120, 150:158] = True            # a branch reaching 70 px beyond the band
+    mask[90:120, 450:458] = True            # a branch reaching 30 px beyond it (< l_min)
+    return mask
+
+
+def test_spurs_are_measured_beyond_the_band_they_leave():
+    """With the distance map, a terminal branch is a spur when it reaches less than l_min
+    beyond its band: the bump's spur (66 px from the axis, 6 beyond the edge) and the 30-px
+    branch go, the 70-px branch stays. Measured from the junction pixel alone (no distance
+    map) all three exceed l_min = 50 px and stay."""
+    mask = _wide_band_with_branches()
+    dist = cv2.distanceTransform(mask.view(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    plain = sk.skeletonize_mask(mask, l_min_px=50.0)
+    wide = sk.skeletonize_mask(mask, l_min_px=50.0, distance_px=dist)
+    bump = (slice(200, 246), slice(290, 316))
+    long_branch = (slice(50, 110), slice(148, 160))
+    short_branch = (slice(90, 115), slice(448, 460))
+    assert plain[bump].any() and plain[long_branch].any() and plain[short_branch].any()
+    assert not wide[bump].any()
+    assert not wide[short_branch].any()
+    assert wide[long_branch].sum() >= 50
+    # the band's axis is kept whole either way, and nothing but spurs is removed
+    assert wide[180, 100:500].any() or wide[179, 100:500].any()
+    assert not (wide & ~plain).any()
+    assert ndi.label(wide, np.ones((3, 3)))[1] == 1
+
+
+def test_distance_map_of_another_shape_is_refused():
+    mask = _wide_band_with_branches()
+    with pytest.raises(ParameterError, match="distance_px"):
+        sk.skeletonize_mask(mask, l_min_px=50.0, distance_px=np.zeros((10, 10)))
