@@ -502,7 +502,7 @@ def _walk_on(code_of, offs, p, excl, run, n, l_min, buf_len, path, extra=None, l
         excl = _NOTBACK_L[k]
 
 
-def _walk_all(hc, w, ends, l_min, buf_len, offs, extra=None):
+def _walk_all(hc, w, ends, l_min, buf_len, offs, extra=None, l_walk=None):
     """Walks from the free ends ``ends`` on a fixed image (row codes ``hc``, row length ``w``),
     all at once.
 
@@ -529,8 +529,10 @@ def _walk_all(hc, w, ends, l_min, buf_len, offs, extra=None):
         Neighbour offsets (:func:`_offsets`).
     extra : (N,) float array, optional
         Added to ``l_min`` at the junction a walk reaches (the flat padded image's pixels):
-        a spur is shorter than ``l_min + extra[junction]``; walks go on up to
-        ``l_min + extra.max()``.
+        a spur is shorter than ``l_min + extra[junction]``.
+    l_walk : float, optional
+        Longest walk: ``l_min``, or ``l_min + extra.max()`` with ``extra`` (computed when not
+        given).
 
     Returns
     -------
@@ -551,7 +553,8 @@ def _walk_all(hc, w, ends, l_min, buf_len, offs, extra=None):
     excl = np.full(n, 255, np.uint8)
     run = np.zeros(n)
     walkers, pixels = [wid[:0]], [p[:0]]
-    l_walk = l_min if extra is None else l_min + float(extra.max(initial=0.0))
+    if l_walk is None:
+        l_walk = l_min if extra is None else l_min + float(extra.max(initial=0.0))
     step = 0
     while wid.shape[0] > _FEW_WALKERS:
         c8 = _TO8[_code9(hc, p, w)]
@@ -589,8 +592,8 @@ def _walk_all(hc, w, ends, l_min, buf_len, offs, extra=None):
 
 
 def _prune(hc, w, idx, l_min, mark=None, extra=None):
-    """Delete spurs shorter than ``l_min`` ending on a junction, shortest first, until none is
-    left (a spur on a spur included).
+    """Delete spurs shorter than ``l_min`` (plus ``extra`` at their junction) ending on a
+    junction, shortest first, until none is left (a spur on a spur included).
 
     Parameters
     ----------
@@ -639,7 +642,8 @@ def _prune(hc, w, idx, l_min, mark=None, extra=None):
         ends = idx[_END9[_code9(hc, idx, w)]]
         if ends.shape[0] == 0:
             break
-        spur, lens, walker, pixel, stop = _walk_all(hc, w, ends, l_min, buf_len, offs, extra)
+        spur, lens, walker, pixel, stop = _walk_all(hc, w, ends, l_min, buf_len, offs, extra,
+                                                    l_walk)
         sid = np.flatnonzero(spur)
         if sid.shape[0] == 0:
             break
