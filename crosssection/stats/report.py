@@ -56,11 +56,19 @@ REGION_WORDS = {"all": "whole system", "bulk": "bulk (no wall contact)",
 
 
 def _wrap_label(text: str, width: int) -> str:
-    """``textwrap.fill`` that never breaks inside ``$...$`` (a split formula is printed raw)."""
-    parts = text.split("$")
-    for k in range(1, len(parts), 2):
-        parts[k] = parts[k].replace(" ", "\x00")
-    return textwrap.fill("$".join(parts), width).replace("\x00", " ")
+    """``textwrap.fill`` that never breaks inside ``$...$`` (a split formula is printed raw)
+    nor inside parentheses (a unit such as "(rod length L)" is not left with "L)" alone on
+    the next line)."""
+    out, math, depth = [], False, 0
+    for ch in text:
+        if ch == "$":
+            math = not math
+        elif not math and ch in "()":
+            depth = max(depth + (1 if ch == "(" else -1), 0)
+        out.append("\x00" if ch == " " and (math or depth) else ch)
+    return textwrap.fill("".join(out), width, break_long_words=False,
+                         break_on_hyphens=False).replace("\x00", " ")
+
 
 def set_colors(sets) -> dict:
     """Colour of every set, by its position in ``sets`` (the ensemble's order), so that a set

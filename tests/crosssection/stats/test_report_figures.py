@@ -205,3 +205,16 @@ def test_axis_labels_never_split_a_formula():
         assert wrapped.replace("\n", " ") == label
         # every line holds whole formulas: an even number of $ (else matplotlib prints it raw)
         assert all(line.count("$") % 2 == 0 for line in wrapped.splitlines()), wrapped
+
+
+def test_axis_labels_never_split_a_parenthesis():
+    """A unit in parentheses moves to the next line whole: "(rod length L)" is not cut into
+    "(rod length" and a lone "L)"."""
+    from crosssection.stats.report import LABELS, _wrap_label
+
+    wrapped = _wrap_label(LABELS["length_L"], 36)
+    assert wrapped.splitlines()[-1] == "(rod length L)"
+    for label in LABELS.values():
+        for line in _wrap_label(label, 36).splitlines():
+            assert line.count("(") == line.count(")"), line
+    assert _wrap_label("a (b c) d", 3) == "a\n(b c)\nd"
