@@ -360,6 +360,21 @@ def _topology_checked(sites, Rw, dmin):
     return V, kind, edges
 
 
+def _topology_repaired(sites, Rw, dmin, max_repairs):
+    """:func:`_topology_checked`, dropping the site nearest to each located defect and
+    rebuilding, at most ``max_repairs`` times (0: the first defect rejects the draw).
+
+    Returns ``V``, ``kind``, ``edges`` and the sites kept."""
+    for _ in range(max_repairs + 1):
+        try:
+            return (*_topology_checked(sites, Rw, dmin), sites)
+        except SceneRejected as exc:
+            if max_repairs == 0 or exc.where is None:
+                raise
+            sites = np.delete(sites, np.argmin(np.hypot(*(sites - exc.where).T)), axis=0)
+    raise SceneRejected("topology not repaired")
+
+
 def _relabel(edges, old, new):
     for f in edges:
         if f[0] == old:
@@ -728,16 +743,7 @@ def make_scene(seed, cond):
     gap_wall = rng.uniform(2, 6)
     Rw = R - gap_wall - width_px(spec.provisional_layers, ppm) / 2
     sites = _poisson_disc(rng, Rw * 0.97, dmin)
-    for _ in range(200 if spec.repair else 1):
-        try:
-            V, kind, edges = _topology_checked(sites, Rw, dmin)
-            break
-        except SceneRejected as exc:
-            if not spec.repair or exc.where is None:
-                raise
-            sites = np.delete(sites, np.argmin(np.hypot(*(sites - exc.where).T)), axis=0)
-    else:
-        raise SceneRejected("topology not repaired")
+    V, kind, edges, _ = _topology_repaired(sites, Rw, dmin, 200 if spec.repair else 0)
     inc = _incident(len(V), edges)
     pair, n = _assign_pairing(V, kind, edges, inc, rng, cap, tmean)
     # now that the counts are known, rescale so that the widest wall stack keeps its gap
@@ -761,7 +767,7 @@ def make_scene(seed, cond):
             kmax = 1 / Rw
         else:
             pts, I, length, kmax = _stack_curve(ei, e, V, tang, lead, n[ei], ppm, mode_p, rng,
-                                                      repair=spec.repair)
+                                                repair=spec.repair)
         stacks.append(dict(id=ei, u=int(u), v=int(w), n=int(n[ei]), kind=e[2], pts=pts,
                            int_k2_px=I, length_px=length, kmax_px=kmax))
     for st in stacks:  # the wall arcs too

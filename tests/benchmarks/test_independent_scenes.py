@@ -238,17 +238,10 @@ def test_a_dense_topology_is_repaired_by_dropping_the_site_at_its_defect(gen):
     else:
         pytest.fail("no draw with a located defect in 40 seeds")
     assert np.hypot(*where) <= Rw + 1  # the defect lies inside the wall
-    n_sites = len(sites)
-    for _ in range(30):
-        try:
-            V, kind, edges = gen._topology_checked(sites, Rw, dmin)
-            break
-        except gen.SceneRejected as e:
-            assert e.where is not None
-            sites = np.delete(sites, np.argmin(np.hypot(*(sites - e.where).T)), axis=0)
-    else:
-        pytest.fail("no topology after 30 repairs")
-    assert n_sites - 30 < len(sites) < n_sites
+    with pytest.raises(gen.SceneRejected):  # no repair allowed: rejected
+        gen._topology_repaired(sites, Rw, dmin, 0)
+    V, kind, edges, kept = gen._topology_repaired(sites, Rw, dmin, 30)
+    assert len(sites) - 30 <= len(kept) < len(sites)
     assert all(np.linalg.norm(V[e[0]] - V[e[1]]) >= 0.2 * dmin for e in edges if e[2] == "line")
     assert all((e[3][1] - e[3][0]) * Rw >= 0.2 * dmin for e in edges if e[2] == "wall")
 
