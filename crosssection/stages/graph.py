@@ -517,7 +517,7 @@ def _at_fork_points(junc: Junctions, sg: StackGraph, distance_px, thickness_px) 
     # only a path that runs obliquely through the blob beyond its radius is skipped farther
     skip[skip <= radius[np.asarray(end_junction, np.int64)]] = 0.0
     centers = fork_points(junc.centers_rc, radius, end_paths, end_junction,
-                          thickness_px=thickness_px, skip_px=skip, distance_px=distance_px)
+                          thickness_px=thickness_px, skip_px=skip)
     return Junctions(centers_rc=centers, pixels=junc.pixels, label_image=junc.label_image)
 
 

@@ -21,7 +21,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
 from crosssection.core.errors import ParameterError
 from crosssection.core.unionfind import group_labels
@@ -338,7 +337,7 @@ def _end_lines(pr, pc, offs, sids, rev, c0r, c0c, skip, fit):
 
 def fork_points(centers_rc, radius_px, end_paths, end_junction, *, thickness_px: float,
                 skip_factor: float = 0.7, fit_h: float = 2.0, prior_weight: float = 0.05,
-                max_shift_factor: float = 1.0, skip_px=None, distance_px=None) -> np.ndarray:
+                max_shift_factor: float = 1.0, skip_px=None) -> np.ndarray:
     """Junction positions where the centrelines of the stacks meeting there intersect.
 
     The skeleton of thick bands forks where the medial axis does, which is not where the
@@ -350,11 +349,13 @@ def fork_points(centers_rc, radius_px, end_paths, end_junction, *, thickness_px:
     point of those lines (paper, "Image analysis procedure": the junction is where two
     neighbouring stacks are delimited).
 
-    Where two branches leave side by side (a tangential fork, 30-35 degrees between them),
-    the lines meet at a small angle and the branches bend apart beyond the blob, so their
-    tangents, extended back, meet the trunk too far out (on generated 30 degree forks about
-    a quarter of the trunk's width). Given ``distance_px``, the point is then held back to
-    where the ink's width first departs from the trunk's (:func:`_limit_to_band_end`).
+    Where two branches leave side by side (a tangential fork) and bend apart beyond the blob,
+    their tangents, extended back, meet where the bands separate, near the medial-axis fork
+    (the paper's junction is a skeleton pixel with three neighbours, "Image analysis
+    procedure"), not at a node inside the merged band where no image shows the branches
+    apart. It is not held back to where the ink's width first departs from the trunk's: that
+    moves it towards such nodes and away from the medial-axis forks of thick trunks
+    (docs/validation/README.md, "Junctions where the bands separate").
 
     Parameters
     ----------
@@ -382,10 +383,6 @@ def fork_points(centers_rc, radius_px, end_paths, end_junction, *, thickness_px:
         Per stack end, a distance from the centre within which its path is ignored too
         (where a thin stack crosses a thicker band;
         :func:`crosssection.stages.graph._own_band_span`).
-    distance_px : (H, W) array, optional
-        Distance of every ink pixel to the background (0 off the ink). When given, a
-        junction whose widest band is its trunk is not placed beyond the point where the
-        ink's width first departs from that band's (:func:`_limit_to_band_end`).
 
     Returns
     -------
@@ -427,11 +424,6 @@ def fork_points(centers_rc, radius_px, end_paths, end_junction, *, thickness_px:
     a_mat += prior[:, None, None] * np.eye(2)[None]
     b_vec += prior[:, None] * centers
     sol = np.linalg.solve(a_mat, b_vec[..., None])[..., 0]
-    if distance_px is not None:
-        # each end's band half width (the median ignores the blobs at its ends)
-        half_width = median_radii_px(end_paths, np.asarray(distance_px))
-        sol = _limit_to_band_end(sol, np.asarray(distance_px) > 0, end_junction, mean, direc, ok,
-                                 half_width, fit)
     radius = np.asarray(radius_px, float)
     shift = np.hypot(*(sol - centers).T)
     good = (n_lines >= 2) & (shift <= max_shift_factor * radius + thickness_px)
@@ -458,156 +450,4 @@ def median_radii_px(paths, distance_px) -> np.ndarray:
     lo = start[ok] + (n[ok] - 1) // 2
     hi = start[ok] + n[ok] // 2
     out[ok] = 0.5 * (v[lo] + v[hi])
-    return out
-
-
-_RAY_STEP_PX = 0.25  # sample spacing of the rays that measure a band's extents
-
-
-@njit(cache=True)
-def _first_background(ink, pr, pc, nr, nc, t):  # pragma: no cover - numba
-    """Per point (``pr``, ``pc``) and side (row 0: ``+normal``, row 1: ``-normal``), the index
-    of the first sample ``point + (side t) normal``, rounded to the pixel grid, off ``ink``
-    or off the image (``len(t) - 1`` when every sample is ink).
-
-    Compiled, each ray stopping at its first background sample: 1.3 ms against 14-24 ms for
-    all samples of all rays in numpy (132 junctions of a dense 2000x2000 scan).
-    """
-    h, w = ink.shape
-    n = pr.shape[0]
-    out = np.empty((2, n), np.int64)
-    for i in range(n):
-        for side in range(2):
-            sign = 1.0 if side == 0 else -1.0
-            first = t.shape[0] - 1
-            for j in range(t.shape[0]):
-                st = sign * t[j]
-                r = np.rint(pr[i] + st * nr)
-                c = np.rint(pc[i] + st * nc)
-                if not (0.0 <= r < h and 0.0 <= c < w and ink[int(r), int(c)]):
-                    first = j
-                    break
-            out[side, i] = first
-    return out
-
-
-def _side_extents_px(ink, points_rc, normal_rc, max_px, step_px=_RAY_STEP_PX):
-    """Distance from each point to the first background sample along ``+normal`` and along
-    ``-normal`` (``max_px`` when none is met): the ink's extent on either side of a line.
-
-    Returns two (N,) float arrays (left = ``+normal``, right = ``-normal``)."""
-    t = np.arange(step_px, max_px + step_px, step_px)
-    pts = np.asarray(points_rc, np.float64).reshape(-1, 2)
-    first_bg = _first_background(ink, np.ascontiguousarray(pts[:, 0]),
-                                 np.ascontiguousarray(pts[:, 1]), float(normal_rc[0]),
-                                 float(normal_rc[1]), t)
-    ext = t[first_bg] - 0.5 * step_px  # the edge lies between two samples
-    return ext[0], ext[1]
-
-
-def _median3(v):
-    """Running median of three (ends repeated): removes one-sample jitter of a binary edge.
-
-    The middle value as ``max(min(a, b), min(max(a, b), c))``, which is ``np.median`` of the
-    three for finite values (the extents always are) at a tenth of its cost.
-    """
-    if len(v) < 3:
-        return v
-    nxt = np.empty_like(v)
-    nxt[:-1] = v[1:]
-    nxt[-1] = v[-1]
-    prv = np.empty_like(v)
-    prv[1:] = v[:-1]
-    prv[0] = v[0]
-    return np.maximum(np.minimum(v, nxt), np.minimum(np.maximum(v, nxt), prv))
-
-
-def _median_finite(v):
-    """``np.median`` of a non-empty 1-D array of finite values (the middle one, or the mean
-    of the two middle ones, bit for bit), without its overhead (80 us a call)."""
-    s = np.sort(v)
-    m = len(s) // 2
-    return s[m] if len(s) % 2 else (s[m - 1] + s[m]) / 2
-
-
-def _limit_to_band_end(sol, ink, end_junction, mean, direc, ok, half_width_px, fit_px,
-                       tol_px=None):
-    """Junction points held back to where the ink stops being the trunk's band.
-
-    The trunk of a fork (its widest band, which splits into the narrower branches) keeps its
-    width up to the junction: its edges run parallel until a branch peels off (the ink grows
-    on one side) or the band ends (it shrinks on one side). The junction cannot lie beyond
-    the first point where the width departs from the trunk's, so a point found beyond it
-    (branches bending apart make their tangents meet the trunk too far out) is moved back
-    along the trunk's centreline to it; its position across the trunk is kept. Walking from
-    the trunk's fitted stretch towards the junction, the ink's width across the trunk's line
-    (extent on one side plus extent on the other: a line a little off the centreline or
-    turned by a degree or two moves one edge out and the other in, and leaves the width) is
-    compared with its median on that stretch; a departure is a change by more than ``tol_px``.
-    The measured width of a straight binary band wanders by up to 1 px + 2 ray steps (each
-    edge is quantised to the pixel grid, +-0.5 px, and found to within one ray step), hence
-    the default 1.5 px; a running median of three samples removes one-sample jitter.
-
-    The bound holds only where no other band reaches across the trunk's edge before the
-    junction. A band of half width ``w_c`` leaving at an angle ``phi`` to the trunk's
-    continuation reaches at most ``w_c / cos(phi)`` from the trunk's centreline behind the
-    junction, so every other band must satisfy ``w_c <= w_trunk cos(phi)`` (tangential forks
-    of a wider trunk; not T junctions, nor the wide-angle departures at the hole's wall);
-    otherwise the point is kept.
-
-    Parameters
-    ----------
-    sol : (K, 2) float array
-        Junction points (row, col) from the centreline intersection.
-    ink : (H, W) bool array
-        Cleaned ink mask.
-    end_junction : (Q,) int array
-        Junction of every stack end.
-    mean, direc : (Q, 2) float arrays
-        Centre and unit direction (pointing away from the junction) of each end's fitted line.
-    ok : (Q,) bool array
-        Ends with a fitted line.
-    half_width_px : (Q,) float array
-        Half width of each end's band.
-    fit_px : (Q,) float array
-        Length of each end's fitted stretch (centred on ``mean``).
-    tol_px : float, optional
-        Change of the width that counts as a departure (default 1 px + 2 ray steps).
-
-    Returns
-    -------
-    (K, 2) float array
-    """
-    if tol_px is None:
-        tol_px = 1.0 + 2 * _RAY_STEP_PX
-    out = sol.copy()
-    order = np.argsort(end_junction, kind="stable")
-    bounds = np.searchsorted(end_junction[order], np.arange(len(sol) + 1))
-    for j in range(len(sol)):
-        ends = order[bounds[j]:bounds[j + 1]]
-        if len(ends) < 3 or not ok[ends].all():
-            continue
-        trunk = ends[int(np.argmax(half_width_px[ends]))]
-        others = ends[ends != trunk]
-        d = direc[trunk]
-        cos_phi = -(direc[others] @ d)  # angle to the trunk's continuation through j
-        if np.any(half_width_px[others] > half_width_px[trunk] * cos_phi):
-            continue
-        half_fit = 0.5 * fit_px[trunk]
-        x_sol = float((sol[j] - mean[trunk]) @ d)  # < 0: the junction is behind the stretch
-        x_walk = np.arange(-half_fit, x_sol, -1.0)
-        if len(x_walk) == 0:
-            continue
-        normal = np.array([-d[1], d[0]])
-        max_px = 2.0 * half_width_px[trunk] + 2.0 * tol_px + 2.0
-        x_ref = np.arange(-half_fit, half_fit + 0.5, 1.0)
-        # the fitted stretch and the walk in one call (the call's overhead dominates)
-        x_all = np.concatenate([x_ref, x_walk])
-        left, right = _side_extents_px(ink, mean[trunk] + x_all[:, None] * d, normal, max_px)
-        both = left + right
-        width = _median3(both[len(x_ref):])
-        departs = np.abs(width - _median_finite(both[:len(x_ref)])) > tol_px
-        if departs.any():
-            x_end = x_walk[int(np.argmax(departs))]
-            out[j] = sol[j] + (x_end - x_sol) * d
     return out
