@@ -56,7 +56,8 @@ import pandas as pd
 
 from crosssection.core.fileio import write_csv
 from crosssection.truth.scene import read_scene, write_scene
-from crosssection.truth.scoring import analyze_scene_folder, match_points, score
+from crosssection.truth.scoring import (analyze_scene_folder, match_points, medial_fork_points,
+                                         score)
 from simulate.cli import main as simulate_main
 from simulate.contacts import analyze_rod
 from simulate.render import render_configuration
@@ -115,6 +116,21 @@ def _drawn_energy(scene) -> tuple[float, float]:
         outside += f[~inside].sum()
     rod = scene.summary["total_energy"] / scene.summary["rod_length_mm"]
     return total / rod, outside / rod
+
+
+def _fork_f1(scene, pair, h_px: float) -> float:
+    """Junction F1 against the truth junctions moved to where the drawn bands separate (the
+    medial-axis forks of the bands drawn without defects,
+    :func:`crosssection.truth.scoring.medial_fork_points`): the targets' placement, where the
+    contact analysis' points lie inside merged ink."""
+    st, jt = scene.tables["stacks"], scene.tables["junctions"]
+    forks = medial_fork_points(scene.paths_rc, st["width_mm"] * scene.params["px_per_mm"],
+                               st[["junction_a", "junction_b"]].to_numpy(int),
+                               jt["junction_id"].to_numpy(int),
+                               jt[["y_px", "x_px"]].to_numpy(float), scene.rgb.shape)
+    out = pair[1]["junctions"][["x_px", "y_px"]].to_numpy(float)
+    r, _ = match_points(out, forks[:, ::-1], 3 * h_px)
+    return 2.0 * len(r) / (len(out) + len(forks)) if len(out) + len(forks) else 1.0
 
 
 def _breakdown(pair, truth, h_px: float) -> dict:
@@ -265,6 +281,7 @@ def run(epsilons, *, segments, seed, conditions, work, overlays):
                        "junction_f1": s["junction_f1"],
                        "junction_precision": s["junction_precision"],
                        "junction_recall": s["junction_recall"],
+                       "junction_f1_fork": _fork_f1(scene, pair, h_px),
                        "rod_length_error": s["rod_length_rel_error"],
                        "total_energy_error": s["total_energy_rel_error"],
                        "total_energy_out": s["total_energy"],
@@ -296,6 +313,7 @@ def run(epsilons, *, segments, seed, conditions, work, overlays):
 def _line(r) -> str:
     return (f"| {r['epsilon']:g} | {r['config'][-1]} | {r['condition']} | {r['n_br_exact']:.3f} | "
             f"{r['junction_f1']:.3f} ({r['junction_precision']:.2f}/{r['junction_recall']:.2f}) | "
+            f"{r['junction_f1_fork']:.3f} | "
             f"{100 * r['rod_length_error']:+.1f} % | {100 * r['total_energy_error']:+.0f} % | "
             f"{100 * r['unmatched_length_fraction']:.0f} % + "
             f"{100 * r['nbr_wrong_length_fraction']:.0f} % | "
@@ -304,10 +322,10 @@ def _line(r) -> str:
             f"{r['render_s']:.0f} | {r['analyze_s']:.1f} |")
 
 
-HEADER = ("| epsilon | config | condition | exact n_br | junction F1 (P/R) | rod length | "
-          "total energy | stack length unmatched + n_br wrong | thick stacks wrong (+-1) | "
+HEADER = ("| epsilon | config | condition | exact n_br | junction F1 (P/R) | F1 fork | "
+          "rod length | total energy | stack length unmatched + n_br wrong | thick stacks wrong (+-1) | "
           "junctions missed (at a stack < 2 widths) | render s | analyze s |\n"
-          "|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "|---|---|---|---|---|---|---|---|---|---|---|---|---|")
 
 
 def main(argv=None):

@@ -111,34 +111,17 @@ def medial_fork_points(truth: dict, lines) -> np.ndarray:
     (J, 2) float array
         x, y px per junction, in the order of ``truth["junctions"]``.
     """
-    import cv2
-    from scipy import ndimage
-    from skimage.morphology import skeletonize
+    from crosssection.truth.scoring import medial_fork_points as forks_rc
 
-    size = int(truth["render"]["size"])
     ppm = float(truth["px_per_mm"])
-    mask = np.zeros((size, size), np.uint8)
-    widest = {}
-    for st in truth["stacks"]:
-        w_px = float(gen.width_mm(st["n"])) * ppm
-        for end in ("u", "v"):
-            widest[st[end]] = max(widest.get(st[end], 0.0), w_px)
-        r16 = int(round(8.0 * w_px))  # radius in 1/16 px (shift=4)
-        for x, y in np.asarray(lines[f"s{st['id']}"], float)[::4]:
-            cv2.circle(mask, (int(round(16 * x)), int(round(16 * y))), r16, 1, -1,
-                       cv2.LINE_8, 4)
-    skel = skeletonize(mask > 0)
-    nb = ndimage.convolve(skel.astype(np.uint8), np.ones((3, 3), np.uint8), mode="constant")
-    lab, n = ndimage.label(skel & (nb >= 4), structure=np.ones((3, 3)))
-    out = np.array([[j["x"], j["y"]] for j in truth["junctions"]], float)
-    if n == 0:
-        return out
-    forks = np.array(ndimage.center_of_mass(lab > 0, lab, np.arange(1, n + 1)))[:, ::-1]
-    d, k = cKDTree(forks).query(out)
-    lim = np.array([widest.get(j["id"], 0.0) for j in truth["junctions"]])
-    near = d <= lim
-    out[near] = forks[k[near]]
-    return out
+    stacks = truth["stacks"]
+    size = int(truth["render"]["size"])
+    out_rc = forks_rc([np.asarray(lines[f"s{st['id']}"], float)[:, ::-1] for st in stacks],
+                      [float(gen.width_mm(st["n"])) * ppm for st in stacks],
+                      [(st["u"], st["v"]) for st in stacks],
+                      [j["id"] for j in truth["junctions"]],
+                      [[j["y"], j["x"]] for j in truth["junctions"]], (size, size), stride=4)
+    return out_rc[:, ::-1]
 
 
 def junction_f1(out_xy: np.ndarray, truth_xy: np.ndarray, tol: float) -> float:

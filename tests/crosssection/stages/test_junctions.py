@@ -104,40 +104,12 @@ def test_generated_thick_trunks_junctions_within_3h(thick_scene):
     assert matched >= _match(junc0.centers_rc, truth, 3 * h)
 
 
-def _medial_forks(sc, nodes_rc):
-    """Each node of a generated scene moved to the nearest fork of the medial axis of its
-    bands drawn without defects (within the widest band meeting there): where the bands
-    separate."""
-    from scipy import ndimage
-    from scipy.spatial import cKDTree
-    from skimage.morphology import skeletonize
-
-    st = sc.tables["stacks"]
-    width = st["width_mm"].to_numpy(float) * sc.params["px_per_mm"]
-    mask = np.zeros(sc.rgb.shape[:2], np.uint8)
-    widest = {}
-    for k, path in enumerate(sc.paths_rc):
-        for j in st[["junction_a", "junction_b"]].to_numpy(int)[k]:
-            widest[j] = max(widest.get(j, 0.0), width[k])
-        for r, c in np.asarray(path, float)[::2]:
-            cv2.circle(mask, (int(round(16 * c)), int(round(16 * r))), int(round(8 * width[k])),
-                       1, -1, cv2.LINE_8, 4)
-    skel = skeletonize(mask > 0)
-    nb = ndimage.convolve(skel.astype(np.uint8), np.ones((3, 3), np.uint8), mode="constant")
-    lab, n = ndimage.label(skel & (nb >= 4), structure=np.ones((3, 3)))
-    forks = np.array(ndimage.center_of_mass(lab > 0, lab, np.arange(1, n + 1)))
-    d, k = cKDTree(forks).query(nodes_rc)
-    lim = np.array([widest.get(j, 0.0) for j in sc.tables["junctions"]["junction_id"]])
-    out = np.array(nodes_rc, float)
-    out[d <= lim] = forks[k[d <= lim]]
-    return out
-
-
 def test_generated_tangential_forks_junctions_where_the_bands_separate():
     # 30 degree forks of thick trunks (8-25 layers): the branches leave the generator's node
     # side by side inside the trunk's band and bend apart; the junctions lie where the bands
     # separate (the medial-axis forks, F1 0.96), not at the nodes (0.58)
     from crosssection.truth.network import make_scene
+    from crosssection.truth.scoring import medial_fork_points
 
     sc = make_scene(seed=3, n_stacks=40, max_layers=25, mean_layers=8, px_per_mm=50.0,
                     noise_sigma=5.0, blur_px=1.0, fan_deg=30.0)
@@ -145,7 +117,12 @@ def test_generated_tangential_forks_junctions_where_the_bands_separate():
     mask = clean_mask(threshold_rgb(sc.rgb).mask, s_min_px=(10 * h) ** 2, speck_px=10 * h * h)
     nodes = sc.tables["junctions"][["y_px", "x_px"]].to_numpy(float)
     junc, _, _ = _graph(mask, h)
-    at_fork = _match(junc.centers_rc, _medial_forks(sc, nodes), 3 * h)
+    st = sc.tables["stacks"]
+    forks = medial_fork_points(sc.paths_rc, st["width_mm"] * sc.params["px_per_mm"],
+                               st[["junction_a", "junction_b"]].to_numpy(int),
+                               sc.tables["junctions"]["junction_id"], nodes, sc.rgb.shape,
+                               stride=2)
+    at_fork = _match(junc.centers_rc, forks, 3 * h)
     at_node = _match(junc.centers_rc, nodes, 3 * h)
     assert 2 * at_fork / (len(junc) + len(nodes)) >= 0.9
     assert at_fork > at_node

@@ -105,3 +105,29 @@ def test_score_folder(tmp_path):
     folder = write_scene(sc, tmp_path / "scene")
     s = score_folder(folder / "truth", folder)
     assert s["junction_f1"] == 1.0 and s["match_px"] == pytest.approx(15.0)
+
+
+def _line(p0, p1, n=200):
+    return np.linspace(p0, p1, n)
+
+
+def test_medial_fork_points_where_the_bands_separate():
+    from crosssection.truth.scoring import medial_fork_points
+
+    node = np.array([150.0, 100.0])
+    # a symmetric Y of thin bands at 120 degrees: the bands separate at the node
+    arms = [node + 80 * np.array([np.sin(a), np.cos(a)]) for a in np.radians([180, 60, -60])]
+    paths = [_line(node, a) for a in arms]
+    out = medial_fork_points(paths, [8, 8, 8], [(0, -1)] * 3, [0], [node], (300, 300))
+    assert np.hypot(*(out[0] - node)) <= 3.0
+    # a trunk 30 px wide whose two 16-px branches leave the node side by side at +-15 degrees:
+    # the bands part ahead of the node, on the trunk's axis
+    branches = [node + 150 * np.array([np.sin(a), np.cos(a)]) for a in np.radians([15, -15])]
+    paths = [_line(node - [0, 90], node)] + [_line(node, b) for b in branches]
+    out = medial_fork_points(paths, [30, 16, 16], [(-1, 0)] * 3, [0], [node], (300, 300))
+    assert out[0, 1] - node[1] > 10.0
+    assert abs(out[0, 0] - node[0]) <= 2.0
+    # a node with no fork within its widest band keeps its point
+    far = np.array([[20.0, 20.0]])
+    out = medial_fork_points(paths, [30, 16, 16], [(-1, 7)] * 3, [7], far, (300, 300))
+    np.testing.assert_allclose(out, far)
