@@ -79,6 +79,20 @@ def _fold_share(xy) -> float:
     return float(e[dth > np.pi / 2].sum() / e.sum()) if e.sum() > 0 else 0.0
 
 
+def _junction_discs(scene) -> tuple[np.ndarray, np.ndarray]:
+    """Truth junctions (row, col) px and the widest band width meeting at each, px."""
+    st = scene.tables["stacks"].reset_index(drop=True)
+    jt = scene.tables["junctions"]
+    width_px = st["width_mm"].to_numpy(float) * scene.params["px_per_mm"]
+    widest = np.zeros(len(jt))
+    row = {int(j): i for i, j in enumerate(jt["junction_id"].to_numpy(int))}
+    for end in ("junction_a", "junction_b"):
+        for j, wd in zip(st[end].to_numpy(int), width_px):
+            if j in row:
+                widest[row[j]] = max(widest[row[j]], wd)
+    return jt[["y_px", "x_px"]].to_numpy(float), widest
+
+
 def _drawn_energy(scene) -> tuple[float, float]:
     """The drawn bands' ``sum n_br int kappa^2 ds`` over the rod's energy: in all, and outside
     discs of the widest band's width around every truth junction.
@@ -91,15 +105,7 @@ def _drawn_energy(scene) -> tuple[float, float]:
 
     st = scene.tables["stacks"].reset_index(drop=True)
     px = scene.params["px_per_mm"]
-    jt = scene.tables["junctions"]
-    junctions = jt[["y_px", "x_px"]].to_numpy(float)
-    width_px = st["width_mm"].to_numpy(float) * px
-    widest = np.zeros(len(jt))
-    row = {int(j): i for i, j in enumerate(jt["junction_id"].to_numpy(int))}
-    for end in ("junction_a", "junction_b"):
-        for j, wd in zip(st[end].to_numpy(int), width_px):
-            if j in row:
-                widest[row[j]] = max(widest[row[j]], wd)
+    junctions, widest = _junction_discs(scene)
     total = outside = 0.0
     for k, path in enumerate(scene.paths_rc):
         p = np.asarray(path, float).reshape(-1, 2)
@@ -116,6 +122,22 @@ def _drawn_energy(scene) -> tuple[float, float]:
         outside += f[~inside].sum()
     rod = scene.summary["total_energy"] / scene.summary["rod_length_mm"]
     return total / rod, outside / rod
+
+
+def _measured_outside(scene, result) -> float:
+    """The analysis' ``sum n_br int kappa^2 ds`` outside the discs of :func:`_drawn_energy`
+    (its curvature profiles, fork zones included, before the noise floor is removed), over
+    the rod's energy."""
+    from scipy.spatial.distance import cdist
+
+    junctions, widest = _junction_discs(scene)
+    outside = 0.0
+    for prof, n in zip(result.profiles, result.stacks["n_br"].to_numpy(int)):
+        if len(prof.s_mm) < 2:
+            continue
+        e = n * prof.kappa_per_mm ** 2 * np.gradient(prof.s_mm)
+        outside += e[~(cdist(prof.rc_px, junctions) < widest).any(axis=1)].sum()
+    return outside / (scene.summary["total_energy"] / scene.summary["rod_length_mm"])
 
 
 def _fork_f1(scene, pair, h_px: float) -> float:
@@ -268,7 +290,7 @@ def run(epsilons, *, segments, seed, conditions, work, overlays):
                 t0 = time.perf_counter()
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
-                    _, pair = analyze_scene_folder(folder)
+                    result, pair = analyze_scene_folder(folder)
                 analyze_s = time.perf_counter() - t0
                 truth = read_scene(folder, image=False)
                 tpair = (truth.summary, truth.tables)
@@ -296,6 +318,7 @@ def run(epsilons, *, segments, seed, conditions, work, overlays):
                                                 / truth.summary["rod_length_mm"]),
                        **dict(zip(("drawn_energy_ratio", "drawn_energy_ratio_outside"),
                                   _drawn_energy(scene))),
+                       "measured_energy_ratio_outside": _measured_outside(scene, result),
                        "compact_s": float(configs.loc[configs["config_id"] == i, "wall_s"]
                                           .iloc[0]) if "wall_s" in configs else np.nan,
                        "contacts_s": contacts_s, "render_s": render_s,
