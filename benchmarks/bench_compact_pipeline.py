@@ -140,6 +140,22 @@ def _measured_outside(scene, result) -> float:
     return outside / (scene.summary["total_energy"] / scene.summary["rod_length_mm"])
 
 
+def _rod_outside(xy, scene) -> float:
+    """Share of the rod's discrete energy (``sum dtheta^2 / ds`` over its nodes, equal
+    segments) at nodes outside the discs of :func:`_drawn_energy`, the rod placed as the
+    render placed it (``origin_xy``, ``margin_px``, px per unit L)."""
+    from scipy.spatial.distance import cdist
+
+    p = scene.params
+    px = ((np.asarray(xy, float) - np.asarray(p["origin_xy"], float))
+          * p["rod_length_mm"] * p["px_per_mm"] + p["margin_px"])[:, ::-1]  # (row, col)
+    d = np.diff(np.asarray(xy, float), axis=0)
+    e = np.angle(np.exp(1j * np.diff(np.arctan2(d[:, 1], d[:, 0])))) ** 2
+    junctions, widest = _junction_discs(scene)
+    inside = (cdist(px[1:-1], junctions) < widest).any(axis=1)
+    return float(e[~inside].sum() / e.sum()) if e.sum() > 0 else float("nan")
+
+
 def _fork_f1(scene, pair, h_px: float) -> float:
     """Junction F1 against the truth junctions moved to where the drawn bands separate (the
     medial-axis forks of the bands drawn without defects,
@@ -319,6 +335,7 @@ def run(epsilons, *, segments, seed, conditions, work, overlays):
                        **dict(zip(("drawn_energy_ratio", "drawn_energy_ratio_outside"),
                                   _drawn_energy(scene))),
                        "measured_energy_ratio_outside": _measured_outside(scene, result),
+                       "rod_energy_share_outside": _rod_outside(xy, scene),
                        "compact_s": float(configs.loc[configs["config_id"] == i, "wall_s"]
                                           .iloc[0]) if "wall_s" in configs else np.nan,
                        "contacts_s": contacts_s, "render_s": render_s,
