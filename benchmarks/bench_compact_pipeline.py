@@ -363,8 +363,9 @@ def _line(r) -> str:
 
 
 HEADER = ("| epsilon | config | condition | exact n_br | junction F1 (P/R) | F1 fork | "
-          "rod length | total energy | stack length unmatched + n_br wrong | thick stacks wrong (+-1) | "
-          "junctions missed (at a stack < 2 widths) | render s | analyze s |\n"
+          "rod length | total energy | stack length unmatched + n_br wrong | "
+          "thick stacks wrong (+-1) | junctions missed (at a stack < 2 widths) | render s | "
+          "analyze s |\n"
           "|---|---|---|---|---|---|---|---|---|---|---|---|---|")
 
 
