@@ -54,3 +54,24 @@ def test_a_hook_into_a_junction_point_is_inside_its_disc(bench):
     total, outside = bench._drawn_energy(scene)
     assert total > 1.5  # the hook bends far more than the arc
     assert outside < 1.0  # and it lies within the junction's disc
+
+
+def test_the_rod_and_the_analysis_outside_the_discs(bench):
+    # the rod itself placed along the drawn arc, and an analysis reading the arc's curvature:
+    # both hold the arc's share outside the two junction discs (40 of 300 px inside)
+    scene = _arc_scene()
+    path = scene.paths_rc[0]
+    px, L = scene.params["px_per_mm"], scene.summary["rod_length_mm"]
+    scene.params.update(origin_xy=[0.0, 0.0], margin_px=0.0, rod_length_mm=L)
+    xy = path[::5, ::-1] / (L * px)  # nodes every 5 px, units of L, (x, y)
+    assert bench._rod_outside(xy, scene) == pytest.approx(1.0 - 40.0 / 300.0, abs=0.03)
+    s_mm = np.r_[0.0, np.cumsum(np.hypot(*np.diff(path, axis=0).T))] / px
+    prof = SimpleNamespace(s_mm=s_mm, kappa_per_mm=np.full(len(path), px / 200.0), rc_px=path)
+    result = SimpleNamespace(profiles=[prof], stacks=pd.DataFrame({"n_br": [3]}))
+    assert bench._measured_outside(scene, result) == pytest.approx(1.0 - 40.0 / 300.0,
+                                                                   abs=0.02)
+    # a rod bent only at its ends, inside the discs, holds nothing outside them
+    straight = np.stack([np.linspace(0, 5e-3, 60), np.zeros(60)], axis=1)  # 250 px
+    bent = np.concatenate([[[0.0, 2e-4]], straight, [[5e-3, 2e-4]]])  # 10-px hooks
+    scene.tables["junctions"][["y_px", "x_px"]] = (bent[[0, -1]] * L * px)[:, ::-1]
+    assert bench._rod_outside(bent, scene) == pytest.approx(0.0, abs=1e-9)
