@@ -9,6 +9,8 @@ stderr from the command line, and the ``quality`` column of a batch's ``index.cs
 code                     what is measured                                     limit
 =======================  ===================================================  ====================
 no_calibration           no width calibration given: layers from width = n h  always flagged
+scale_mismatch           px_per_mm used / the resolution the file records     off by > 2 %
+                         (a scanner's: 100 dpi or more)
 low_resolution           sheet thickness h in pixels                          h < 3 px
 hole_fitted              hole found in the scan, with its confidence          confidence < 0.5
 ink_outside_hole         ink pixels outside the hole / all ink pixels         > 2 %
@@ -78,6 +80,11 @@ import numpy as np
 
 __all__ = ["QualityFlag", "QualityWarning", "CATEGORIES", "assess", "quality_block"]
 
+#: ``scale_mismatch``: relative difference between ``px_per_mm`` and the file's recorded
+#: resolution beyond which the scale is doubtful (a scanner's nominal resolution is exact;
+#: 2 % of a 50 px/mm scan is 1 px per mm of length, 0.1 px of a sheet's 5 px)
+SCALE_TOLERANCE = 0.02
+
 
 class QualityWarning(UserWarning):
     """Base class of the warnings that say an analysis' numbers are doubtful."""
@@ -105,6 +112,7 @@ class LinearSystemWarning(QualityWarning):
 
 CATEGORIES = {
     "no_calibration": CalibrationWarning,
+    "scale_mismatch": CalibrationWarning,
     "widths_out_of_range": CalibrationWarning,
     "layer_lattice": CalibrationWarning,
     "low_resolution": ResolutionWarning,
@@ -165,7 +173,7 @@ HOLE_CUT_LIMIT = 0.005
 
 def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stacks,
            rod_length_mm, rod_measured_mm, ink_area_in_hole_mm2, calibration_max_width_mm,
-           junctions, image_shape=None) -> list[QualityFlag]:
+           junctions, image_shape=None, file_px_per_mm=None) -> list[QualityFlag]:
     """Run every check of the module table on one analysis.
 
     Parameters
@@ -192,6 +200,10 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
         The junction table (``conservation_ok``, ``repartitioned``).
     image_shape : tuple, optional
         The scan's (rows, cols): the ``hole_cut`` check (not made without it).
+    file_px_per_mm : float, optional
+        The resolution the scan file records
+        (:func:`crosssection.stages.load.recorded_px_per_mm`): the ``scale_mismatch`` check
+        (not made without it).
 
     Returns
     -------
@@ -202,6 +214,13 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
     if params.calibration is None:
         flags.append(QualityFlag("no_calibration", "no width calibration: layer counts assume "
                                  "a stack of n layers is n h wide (pass a calibration CSV)"))
+    if file_px_per_mm and abs(params.px_per_mm / file_px_per_mm - 1.0) > SCALE_TOLERANCE:
+        flags.append(QualityFlag(
+            "scale_mismatch", f"the file records {25.4 * file_px_per_mm:.0f} dpi "
+            f"({file_px_per_mm:.2f} px/mm) but px_per_mm = {params.px_per_mm:g} is used: every "
+            f"length, width and layer count rests on the scale (pass px_per_mm = "
+            f"{file_px_per_mm:.2f} if the file is right)",
+            value=params.px_per_mm / file_px_per_mm - 1.0, limit=SCALE_TOLERANCE))
     if h_px < 3.0:
         flags.append(QualityFlag("low_resolution", f"sheet thickness is {h_px:.2f} px (< 3 px): "
                                  "layer counts from widths are unreliable", h_px, 3.0))

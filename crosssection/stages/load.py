@@ -40,6 +40,7 @@ cause of the ``ImageError``.
 from __future__ import annotations
 
 import logging
+import math
 import os
 import struct
 import sys
@@ -426,6 +427,42 @@ def _read_pillow(path: Path) -> np.ndarray:
         raise ImageError(f"grayscale image (mode {mode}): an RGB scan of blue ink is needed "
                          "to threshold on colour", path)
     return arr
+
+
+#: Recorded resolutions below this (dpi) are not a scanner's: 72 and 96 dpi are what image
+#: software writes by default, whatever the scan.
+MIN_SCANNER_DPI = 100.0
+
+
+def recorded_px_per_mm(path) -> float | None:
+    """The resolution a scan file records (PNG ``pHYs``, TIFF ``XResolution``, JPEG JFIF
+    density), in px/mm, or None.
+
+    Scanners write their resolution into the file (1200 dpi = 47.24 px/mm); image software
+    writes 72 or 96 dpi whatever the image, so a value below :data:`MIN_SCANNER_DPI`, a
+    different resolution across and along the scan (more than 1 %), a missing or unreadable
+    one give None. Only the header is read (Pillow); the file is not checked here.
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    float or None
+    """
+    from PIL import Image
+
+    try:
+        with Image.open(path) as im:
+            dpi = im.info.get("dpi")
+        x, y = (float(v) for v in dpi)
+    except Exception:  # noqa: BLE001 - metadata is advisory: any failure means no value
+        return None
+    if not (math.isfinite(x) and math.isfinite(y)) or min(x, y) < MIN_SCANNER_DPI \
+            or abs(x - y) > 0.01 * max(x, y):
+        return None
+    return 0.5 * (x + y) / 25.4
 
 
 def load_image(path) -> np.ndarray:

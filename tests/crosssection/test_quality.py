@@ -290,3 +290,43 @@ def test_a_hole_touching_the_border_is_not_flagged(scene):
     rgb, centre = _cut_left(scene, 0.0)
     res, _ = _analyze(rgb, **_given(scene, hole_center_px=centre))
     assert "hole_cut" not in res.summary["quality"]["codes"]
+
+
+def test_a_scale_other_than_the_files_recorded_resolution_is_flagged(scene, tmp_path):
+    # a scanner writes its resolution into the file: 1270 dpi is exactly 50 px/mm, 1200 dpi
+    # (47.24 px/mm) is 6 % off the scale the scene was drawn at
+    from PIL import Image
+
+    for dpi, flagged in ((1270, False), (1200, True)):
+        img = tmp_path / f"scan_{dpi}.png"
+        Image.fromarray(scene.rgb).save(img, dpi=(dpi, dpi))
+        res, caught = _analyze(str(img), **_given(scene))
+        assert res.summary["file_px_per_mm"] == pytest.approx(dpi / 25.4, rel=1e-3)
+        assert ("scale_mismatch" in res.summary["quality"]["codes"]) is flagged
+        if flagged:
+            flag = next(f for f in res.quality if f.code == "scale_mismatch")
+            assert flag.value == pytest.approx(50.0 / (1200 / 25.4) - 1, rel=1e-3)
+            assert any(w.category is quality.CalibrationWarning and "1200 dpi" in str(w.message)
+                       for w in caught)
+    # the same scale is right when given as the file records it
+    res, _ = _analyze(str(tmp_path / "scan_1200.png"), **_given(scene, px_per_mm=1200 / 25.4))
+    assert "scale_mismatch" not in res.summary["quality"]["codes"]
+
+
+@pytest.mark.parametrize("dpi, expected", [
+    ((1200, 1200), 1200 / 25.4), ((600, 600), 600 / 25.4),
+    ((72, 72), None), ((96, 96), None),     # image software's defaults, not a scanner's
+    ((600, 300), None), (None, None),       # anisotropic or not recorded
+])
+def test_the_recorded_resolution_of_png_tiff_and_jpeg(tmp_path, dpi, expected):
+    from PIL import Image
+
+    from crosssection.stages.load import recorded_px_per_mm
+
+    rgb = np.zeros((32, 32, 3), np.uint8)
+    for ext in ("png", "tif", "jpg"):
+        path = tmp_path / f"scan.{ext}"
+        Image.fromarray(rgb).save(path, **({"dpi": dpi} if dpi else {}))
+        got = recorded_px_per_mm(path)
+        assert (got is None) if expected is None else got == pytest.approx(expected, rel=1e-3)
+    assert recorded_px_per_mm(tmp_path / "missing.png") is None
