@@ -454,8 +454,10 @@ def recorded_px_per_mm(path) -> float | None:
     from PIL import Image
 
     try:
-        with Image.open(path) as im:
-            dpi = im.info.get("dpi")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # e.g. Pillow's DecompressionBombWarning
+            with Image.open(path) as im:
+                dpi = im.info.get("dpi")
         x, y = (float(v) for v in dpi)
     except Exception:  # noqa: BLE001 - metadata is advisory: any failure means no value
         return None
