@@ -203,6 +203,14 @@ class AnalysisResult:
     def thickness_px(self) -> float:
         return self.params.thickness_px
 
+    def network(self):
+        """The folded network as a ``networkx.MultiGraph``: junctions as nodes, stacks as
+        edges carrying their table columns and ``energy``
+        (:func:`crosssection.tables.network_graph`)."""
+        from crosssection.tables import network_graph
+
+        return network_graph(self.junctions, self.stacks, self.branches)
+
     def write(self, out_dir, figure: bool = True, *, steps: bool = False) -> dict:
         """Write ``summary.json``, the four CSV tables and (optionally) ``overlay.png``.
 

@@ -23,7 +23,7 @@ from crosssection.core import schema
 from crosssection.linsys.equations import candidate_partitions, pack_row
 from crosssection.stages import branches as br
 
-__all__ = ["stack_table", "junction_table", "branch_table"]
+__all__ = ["stack_table", "junction_table", "branch_table", "network_graph"]
 
 
 def _mid_points(paths) -> np.ndarray:
@@ -292,3 +292,54 @@ def summary(*, pre, params, linear_system, junctions, stacks, branches, voids, r
         out["total_energy_J"] = total_energy * params.bending_rigidity_J / (2.0 * rod_used_mm
                                                                             * 1e-3)
     return out
+
+
+def network_graph(junctions: pd.DataFrame, stacks: pd.DataFrame,
+                  branches: pd.DataFrame | None = None):
+    """The folded network as a graph: junctions are its nodes, stacks its links, ``n_br``
+    the links' values (paper, "Topological properties").
+
+    Works on an analysis' tables or on ``junctions.csv``, ``stacks.csv`` and
+    ``branches.csv`` read back from disk.
+
+    Parameters
+    ----------
+    junctions, stacks : DataFrame
+        The junction and stack tables.
+    branches : DataFrame, optional
+        The branch table: each link then carries ``energy``, the sum of its branches'.
+
+    Returns
+    -------
+    networkx.MultiGraph
+        Junction nodes are keyed by ``junction_id`` with the junction table's columns as
+        attributes and ``kind="junction"``. A stack end that meets no junction is a node
+        ``"end<stack_id>a"`` or ``"end<stack_id>b"`` (``kind="free_end"``, at no position); a
+        closed loop without junction is a self-loop on a node ``"loop<stack_id>"``
+        (``kind="loop"``). Each stack is one edge, keyed by its ``stack_id``, with the stack
+        table's columns as attributes (two stacks between the same junctions are two edges).
+    """
+    import networkx as nx
+
+    graph = nx.MultiGraph()
+    for row in junctions.to_dict("records"):
+        graph.add_node(int(row["junction_id"]), kind="junction", **row)
+    energy = (branches.groupby("stack_id")["energy"].sum()
+              if branches is not None and len(branches) else pd.Series(dtype=float))
+    for row in stacks.to_dict("records"):
+        sid = int(row["stack_id"])
+        a, b = int(row["junction_a"]), int(row["junction_b"])
+        if a < 0 and b < 0 and row.get("kind") == "loop":
+            u = v = f"loop{sid}"
+            graph.add_node(u, kind="loop")
+        else:
+            u = a if a >= 0 else f"end{sid}a"
+            v = b if b >= 0 else f"end{sid}b"
+            for node in (u, v):
+                if isinstance(node, str):
+                    graph.add_node(node, kind="free_end")
+        attrs = dict(row)
+        if branches is not None:
+            attrs["energy"] = float(energy.get(sid, 0.0))
+        graph.add_edge(u, v, key=sid, **attrs)
+    return graph
