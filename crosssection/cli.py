@@ -74,7 +74,10 @@ def run_parsed(parser: argparse.ArgumentParser, argv=None) -> int:
     except OSError as exc:
         # the output (or an input) path cannot be used: the user's to fix, not a bug
         where = exc.filename if exc.filename is not None else "output"
-        print(f"error: {where}: {exc.strerror or exc}", file=sys.stderr)
+        why = exc.strerror or str(exc)
+        if isinstance(exc, (FileExistsError, NotADirectoryError)):
+            why = f"{why}: a file is in the way of a folder (give another --out)"
+        print(f"error: {where}: {why}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("error: interrupted (re-run the same command to resume)", file=sys.stderr)

@@ -121,3 +121,15 @@ def test_truncated_16bit_png_one_line_no_libpng_noise(tmp_path, capfd):
     assert status != 0
     lines = [line for line in err.splitlines() if line.strip()]
     assert len(lines) == 1 and "trunc16.png" in lines[0], err
+
+
+@pytest.mark.parametrize("out", ["a_file", "a_file/sub"])
+def test_an_output_folder_blocked_by_a_file_is_one_line(out, tmp_path, capsys):
+    p = tmp_path / "scan.png"
+    Image.fromarray(_good_rgb(0)).save(p)
+    (tmp_path / "a_file").write_text("not a folder")
+    status = main(["analyze", str(p), "--no-figure", "--out", str(tmp_path / out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert status == 2
+    assert len(err) == 1 and err[0].startswith(f"error: {tmp_path / out}: ")
+    assert "a file is in the way of a folder" in err[0]
