@@ -20,6 +20,7 @@ made here:
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 import warnings as _warnings
 from contextlib import contextmanager
@@ -131,6 +132,10 @@ def _threshold_in_frame(rgb, p: AnalysisParams, path, timer):
         inside = hole_stage.frame_mask(rgb.shape[:2], hole)
     with timer("threshold"):
         thr = threshold_rgb(rgb, region=inside, **m)
+        # the frame's margin holds the wall band's edge, not a plate the colour rule passed
+        trimmed, n_cut = hole_stage.trim_margin(thr.mask, hole)
+        if n_cut:
+            thr = dataclasses.replace(thr, mask=trimmed, n_outside=thr.n_outside + n_cut)
     _check_fraction(thr, path)
     n_in = np.count_nonzero(thr.mask)
     outside = thr.n_outside / (thr.n_outside + n_in) if n_in else 0.0

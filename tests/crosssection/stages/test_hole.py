@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from crosssection.core.errors import ParameterError
-from crosssection.stages.hole import Hole, check_hole, find_hole, frame_mask
+from crosssection.stages.hole import Hole, check_hole, find_hole, frame_mask, trim_margin
 from crosssection.stages.threshold import threshold_rgb
 from crosssection.truth.backdrop import apply_backdrop
 from crosssection.truth.network import make_scene
@@ -116,6 +116,46 @@ def test_frame_mask_area_and_margin():
     assert abs(m0.sum() - np.pi * 30 ** 2) < 0.01 * np.pi * 30 ** 2
     assert abs(m2.sum() - np.pi * 32 ** 2) < 0.01 * np.pi * 32 ** 2
     assert m0[40, 55] and not m0[40, 86] and m2[40, 86]
+
+
+def test_trim_margin_keeps_the_wall_band_and_drops_a_ring():
+    hole = Hole(np.array([60.0, 60.0]), 40.0, False)
+    rr, cc = np.mgrid[:120, :120]
+    d = np.hypot(rr - 60, cc - 60)
+    ring = (d > 40) & (d <= 42)                       # a plate the colour rule passed
+    band = (d > 34) & (d <= 40) & (cc > 60)           # a wall band on the right half only
+    mask = (ring | band) & frame_mask((120, 120), hole)
+    kept, n = trim_margin(mask, hole)
+    # the ring beside paper, give or take the pixels where the band's edge meets it
+    assert (np.count_nonzero(mask & (d > 40) & (cc < 59)) <= n
+            <= np.count_nonzero(mask & (d > 40) & (cc < 62)))
+    assert kept[band].all()                           # the band is never touched
+    assert not (kept & (d > 40) & (cc < 59)).any()    # the ring beside paper goes
+    assert (kept & (d > 40) & (cc > 61)).sum() > 0.9 * (ring & (cc > 61)).sum()
+    same, n0 = trim_margin(band & frame_mask((120, 120), hole), hole)
+    assert n0 == 0 and same[band].all()
+
+
+def test_a_blue_plate_outside_a_given_hole_never_enters(scene):
+    """A plate coloured like the ink passes any colour rule; the given hole keeps it out,
+    margin included: the same network as on the scan without a plate."""
+    from crosssection import analyze
+
+    sc, c, R = scene
+    base = _leave_wall(sc.rgb, c, R)
+    ink = threshold_rgb(base, method="fixed").mask
+    img = apply_backdrop(base, ink_mask=ink, hole_center_rc=c, hole_radius_px=R,
+                         rng=np.random.default_rng(5), plate=(60, 90, 170), rim_px=0)
+    p = sc.params
+    kw = dict(px_per_mm=p["px_per_mm"], thickness_mm=p["thickness_mm"],
+              calibration=sc.calibration, hole_radius_mm=p["hole_radius_mm"],
+              hole_center_px=tuple(p["hole_center_px"]))
+    plain = analyze(base, **kw)
+    with pytest.warns(Warning):  # most of the scan's ink-coloured pixels lie outside
+        plated = analyze(img, **kw)
+    assert plated.summary["n_loops"] == plain.summary["n_loops"]
+    assert abs(plated.summary["rod_length_mm"] / plain.summary["rod_length_mm"] - 1) < 0.01
+    assert len(plated.stacks) == len(plain.stacks)
 
 
 def test_absurd_holes_raise():
