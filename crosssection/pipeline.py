@@ -40,7 +40,7 @@ from crosssection.result import AnalysisResult, write_step_images
 from crosssection.stages import curvature, hole as hole_stage, voids as void_stage
 from crosssection.stages.clean import clean_mask
 from crosssection.stages.graph import stack_graph
-from crosssection.stages.load import as_rgb, load_image, recorded_px_per_mm
+from crosssection.stages.load import as_rgb, load_image, recorded_pages, recorded_px_per_mm
 from crosssection.stages.packs import compute_packs
 from crosssection.stages.skeleton import skeletonize_mask
 from crosssection.stages.threshold import colour_features, threshold_rgb
@@ -85,6 +85,7 @@ class Preprocessed:
     warnings: list
     merged_links: int
     file_px_per_mm: float | None = None
+    file_pages: int = 1
 
 
 def _read(image):
@@ -163,6 +164,7 @@ def _preprocess(image, p: AnalysisParams, timer) -> Preprocessed:
     with timer("load"):
         rgb, path = _read(image)
         file_px_per_mm = recorded_px_per_mm(path) if path is not None else None
+        file_pages = recorded_pages(path) if path is not None else 1
     p.check_image(rgb.shape, path)
     thr, hole, outside = _threshold_in_frame(rgb, p, path, timer)
     confidence = None if p.hole_given else hole.confidence
@@ -195,7 +197,8 @@ def _preprocess(image, p: AnalysisParams, timer) -> Preprocessed:
                         ink_outside_fraction=float(outside), mask_clean=mask, skeleton=skel,
                         junctions=junc, graph=sg, distance_px=dist, path=path,
                         s_min_px=s_min_px, speck_px=speck_px, l_min_px=l_min_px,
-                        warnings=notes, merged_links=merged, file_px_per_mm=file_px_per_mm)
+                        warnings=notes, merged_links=merged, file_px_per_mm=file_px_per_mm,
+                        file_pages=file_pages)
 
 
 def _check_fraction(thr, path):
@@ -352,7 +355,8 @@ def _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, void
         ink_outside_fraction=pre.ink_outside_fraction, degrees=degrees, stacks=stacks,
         rod_length_mm=L, rod_measured_mm=rod_mm, ink_area_in_hole_mm2=ink_area_mm2,
         calibration_max_width_mm=_max_width_mm(cal, p), junctions=junctions,
-        image_shape=pre.rgb.shape, file_px_per_mm=pre.file_px_per_mm)
+        image_shape=pre.rgb.shape, file_px_per_mm=pre.file_px_per_mm,
+        file_pages=pre.file_pages)
     notes = list(pre.warnings) + [f"linear system: {f}" for f in lin.flags
                                   if not str(f).startswith("disconnected")]
     summary = tb.summary(pre=pre, params=p, linear_system=lin, junctions=junctions,

@@ -8,6 +8,8 @@ stderr from the command line, and the ``quality`` column of a batch's ``index.cs
 =======================  ===================================================  ====================
 code                     what is measured                                     limit
 =======================  ===================================================  ====================
+pages                    images (pages, frames) the scan file holds; only     > 1
+                         the first is analysed
 no_calibration           no width calibration given: layers from width = n h  always flagged
 scale_mismatch           px_per_mm used / the resolution the file records     off by > 2 %
                          (a scanner's: 100 dpi or more)
@@ -90,6 +92,10 @@ class QualityWarning(UserWarning):
     """Base class of the warnings that say an analysis' numbers are doubtful."""
 
 
+class InputWarning(QualityWarning):
+    """The file holds more than the one scan analysed."""
+
+
 class CalibrationWarning(QualityWarning):
     """No width calibration, or widths beyond its range."""
 
@@ -111,6 +117,7 @@ class LinearSystemWarning(QualityWarning):
 
 
 CATEGORIES = {
+    "pages": InputWarning,
     "no_calibration": CalibrationWarning,
     "scale_mismatch": CalibrationWarning,
     "widths_out_of_range": CalibrationWarning,
@@ -173,7 +180,8 @@ HOLE_CUT_LIMIT = 0.005
 
 def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stacks,
            rod_length_mm, rod_measured_mm, ink_area_in_hole_mm2, calibration_max_width_mm,
-           junctions, image_shape=None, file_px_per_mm=None) -> list[QualityFlag]:
+           junctions, image_shape=None, file_px_per_mm=None,
+           file_pages=1) -> list[QualityFlag]:
     """Run every check of the module table on one analysis.
 
     Parameters
@@ -204,6 +212,9 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
         The resolution the scan file records
         (:func:`crosssection.stages.load.recorded_px_per_mm`): the ``scale_mismatch`` check
         (not made without it).
+    file_pages : int
+        Images the scan file holds (:func:`crosssection.stages.load.recorded_pages`): the
+        ``pages`` check.
 
     Returns
     -------
@@ -211,6 +222,10 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
     """
     flags = []
     h_px = params.thickness_px
+    if file_pages > 1:
+        flags.append(QualityFlag("pages", f"the file holds {file_pages} images (pages or "
+                                 "frames); only the first is analysed: save each scan as its "
+                                 "own file", file_pages, 1))
     if params.calibration is None:
         flags.append(QualityFlag("no_calibration", "no width calibration: layer counts assume "
                                  "a stack of n layers is n h wide (pass a calibration CSV)"))

@@ -274,6 +274,7 @@ def summary(*, pre, params, linear_system, junctions, stacks, branches, voids, r
         "n_loops": int(sum(1 for k in kinds if k == "loop")),
         "n_free_end_stacks": int(sum(1 for k in kinds if k == "free_end")),
         "file_px_per_mm": pre.file_px_per_mm,
+        "file_pages": pre.file_pages,
         "thresholds": pre.threshold.as_summary(),
         "cleaning": {"s_min_px": pre.s_min_px, "speck_px": pre.speck_px,
                      "foreground_fraction": float(pre.mask_clean.mean()),

@@ -467,6 +467,31 @@ def recorded_px_per_mm(path) -> float | None:
     return 0.5 * (x + y) / 25.4
 
 
+def recorded_pages(path) -> int:
+    """How many images (TIFF pages, animation frames) a scan file holds; 1 when unknown.
+
+    The loader decodes the first; the others would be left out without a word (a scanner's
+    batch saved as one multi-page TIFF holds several cuts). Only the header is read (Pillow).
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    int
+    """
+    from PIL import Image
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            with Image.open(path) as im:
+                return max(int(getattr(im, "n_frames", 1)), 1)
+    except Exception:  # noqa: BLE001 - advisory, as the recorded resolution
+        return 1
+
+
 def load_image(path) -> np.ndarray:
     """Read a scan as an RGB array at native dtype.
 

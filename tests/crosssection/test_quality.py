@@ -330,3 +330,27 @@ def test_the_recorded_resolution_of_png_tiff_and_jpeg(tmp_path, dpi, expected):
         got = recorded_px_per_mm(path)
         assert (got is None) if expected is None else got == pytest.approx(expected, rel=1e-3)
     assert recorded_px_per_mm(tmp_path / "missing.png") is None
+
+
+def test_a_file_holding_several_scans_is_flagged(scene, tmp_path):
+    # a scanner's batch saved as one multi-page TIFF: the first page is analysed, the others
+    # would be left out without a word
+    import tifffile
+
+    from crosssection.stages.load import recorded_pages
+
+    one, three = tmp_path / "one.tif", tmp_path / "three.tif"
+    tifffile.imwrite(one, scene.rgb, photometric="rgb")
+    with tifffile.TiffWriter(three) as tif:
+        for k in range(3):
+            tif.write(np.roll(scene.rgb, 7 * k, axis=1), photometric="rgb")
+    assert recorded_pages(one) == 1 and recorded_pages(three) == 3
+    assert recorded_pages(tmp_path / "missing.tif") == 1
+    res1, _ = _analyze(str(one), **_given(scene))
+    res3, caught = _analyze(str(three), **_given(scene))
+    assert "pages" not in res1.summary["quality"]["codes"] and res1.summary["file_pages"] == 1
+    assert "pages" in res3.summary["quality"]["codes"] and res3.summary["file_pages"] == 3
+    assert any(w.category is quality.InputWarning and "3 images" in str(w.message)
+               for w in caught)
+    # the first page is the one analysed
+    assert res3.summary["n_stacks"] == res1.summary["n_stacks"]
