@@ -25,6 +25,10 @@ only the radius is given the centre is fitted with the radius fixed.
 Finding the hole in the scan (:func:`find_hole`). A scan often shows the plate around the hole;
 the plate/paper boundary is the wall, a full circle even where the rod leaves the wall:
 
+0. A plate blue enough to pass the ink's colour rule joins the wall band into one ink
+   component reaching the scan's border; its pixels are told from the ink's by their hue and
+   brightness (:func:`_without_plate`) and leave the ink mask of the search. A plate coloured
+   like the ink cannot be told apart: the search then fails its confidence and says so.
 1. First guess: the ink envelope (:func:`fit_hole`).
 2. Rays from its centre, 0.7 R to 1.2 R + 10 px, sampled every half pixel on the image
    smoothed over 3x3 px (plate texture). Per sector of 1/16 of the circle a local paper colour
@@ -63,6 +67,14 @@ PIECE_FRACTION = 0.02
 #: Without a plate, a circle grown by more than this to hold every piece of ink takes the
 #: confidence of the grown circle (:func:`find_hole`).
 GROWN_PX = 3.0
+#: An ink component touching this fraction of the scan's border is a plate that passed the
+#: ink's colour rule: a rod inside its hole never reaches the border (a scan cropped through
+#: the hole lets its wall band touch a chord of it, a few % of the border).
+PLATE_BORDER_FRACTION = 0.2
+#: ... told apart from the ink by colour only when the two colours lie this many times the
+#: plate's own colour spread apart.
+PLATE_INK_SEPARATION = 4.0
+PLATE_MIN_SPREAD = 0.005
 
 __all__ = ["Hole", "fit_hole", "find_hole", "frame_mask", "trim_margin", "check_hole",
            "classify_regions", "wall_tolerance_px", "kasa_fit"]
@@ -460,6 +472,93 @@ def _wall_points(rgb, ink_mask, c0, r0, n_rays):
     return np.concatenate(pts)
 
 
+def _plate_features(rgb) -> np.ndarray:
+    """Colour features that illumination leaves alone: chromaticity and a tenth of the log
+    brightness (a gain of +-15 % moves the latter by 0.014, a factor 2 by 0.07)."""
+    c = np.asarray(rgb, dtype=np.float32)
+    s = np.maximum(c.sum(axis=-1), 1.0)
+    return np.stack([c[..., 0] / s, c[..., 2] / s, 0.1 * np.log(s)], axis=-1)
+
+
+def _without_plate(rgb, ink_mask):
+    """The ink mask without a plate that passed the ink's colour rule, or None.
+
+    A blue plate around the hole is ink to any colour rule, and its pixels join the rod's
+    wall band into one component reaching the scan's border. The plate's colour is read on
+    that component's pixels in the outer sixteenth of the scan, the ink's as the other centre
+    of a two-means split of the component's colours (started from the darker half of those
+    far from the plate's), both in chromaticity and log brightness
+    (:func:`_plate_features`: an illumination gradient or the plate's texture changes the
+    brightness, not the hue); a pixel (smoothed over 3 x 3) nearer the plate's colour leaves
+    the mask. When the two colours are not apart by :data:`PLATE_INK_SEPARATION` times the
+    plate's own spread, nothing tells them apart and None is returned (the hole's search
+    then flags itself: give the hole).
+
+    Parameters
+    ----------
+    rgb : (H, W, 3) array
+    ink_mask : (H, W) bool array
+
+    Returns
+    -------
+    (H, W) bool array or None
+    """
+    import cv2
+
+    step = 4
+    small = np.ascontiguousarray(ink_mask[::step, ::step]).view(np.uint8)
+    if min(small.shape) < 8:
+        return None
+    n, lab = cv2.connectedComponents(small, connectivity=8)
+    if n < 2:
+        return None
+    edge = np.concatenate([lab[0], lab[-1], lab[1:-1, 0], lab[1:-1, -1]])
+    touch = np.bincount(edge, minlength=n)
+    touch[0] = 0
+    k = int(np.argmax(touch))
+    if touch[k] < PLATE_BORDER_FRACTION * edge.size:
+        return None
+    comp = lab == k
+    # block means: the scan's noise averaged over step x step pixels
+    rgb_s = cv2.resize(np.ascontiguousarray(rgb).astype(np.float32),
+                       (small.shape[1], small.shape[0]), interpolation=cv2.INTER_AREA)
+    f_s = _plate_features(rgb_s)
+    m = max(max(comp.shape) // 16, 1)
+    outer = np.zeros_like(comp)
+    outer[:m], outer[-m:], outer[:, :m], outer[:, -m:] = True, True, True, True
+    plate_px, col = f_s[comp & outer], f_s[comp]
+    if len(plate_px) < 20 or len(col) < 40:
+        return None
+    plate = np.median(plate_px, axis=0)
+    # (a flat plate has no spread: the floor is about a grey level and a half of the features)
+    spread = max(float(np.linalg.norm(1.4826 * np.median(np.abs(plate_px - plate), axis=0))),
+                 PLATE_MIN_SPREAD)
+    d = np.linalg.norm(col - plate, axis=1)
+    far = col[d > PLATE_INK_SEPARATION * spread]
+    if len(far) < 20:
+        return None
+    # the ink's first guess: the darker half of the colours far from the plate's (a blurred
+    # band's edge, ink mixed with paper, is brighter than its core and can have the hue of
+    # a light plate)
+    ink = np.median(far[far[:, 2] <= np.median(far[:, 2])], axis=0)
+    for _ in range(10):  # two-means from the plate and that guess
+        near_ink = np.linalg.norm(col - ink, axis=1) < np.linalg.norm(col - plate, axis=1)
+        if near_ink.all() or not near_ink.any():
+            return None
+        plate_new, ink_new = np.median(col[~near_ink], axis=0), np.median(col[near_ink], axis=0)
+        if np.allclose(plate_new, plate) and np.allclose(ink_new, ink):
+            break
+        plate, ink = plate_new, ink_new
+    gap = float(np.linalg.norm(ink - plate))
+    if gap < PLATE_INK_SEPARATION * spread:
+        return None
+    f = _plate_features(cv2.blur(np.ascontiguousarray(rgb).astype(np.float32), (3, 3)))
+    axis = ((ink - plate) / gap).astype(np.float32)
+    # nearer the ink than the plate: the projection on the plate -> ink axis past half way
+    proj = (f - plate.astype(np.float32)) @ axis
+    return np.asarray(ink_mask, bool) & (proj > 0.5 * gap)
+
+
 def _upsampled(small_mask, shape):
     """A half-resolution component mask dilated by one of its pixels, brought to ``shape``."""
     import cv2
@@ -495,6 +594,10 @@ def find_hole(rgb, ink_mask, *, min_confidence: float = 0.5, path=None) -> Hole:
     import cv2
 
     ink = np.asarray(ink_mask, dtype=bool)
+    # a plate the colour rule passed is told from the ink by its own colour where it can be
+    unplated = _without_plate(rgb, ink)
+    if unplated is not None:
+        ink = ink_mask = unplated
     # the rod is one network (wall stacks link it): its largest component gives the first
     # guess, free of specks and of any plate pixels that passed the threshold
     # (found on the scan at half resolution: bands are >= 2 px wide, and the labelling is

@@ -234,12 +234,16 @@ def _auto_levels(d, m, region, scale, features=None):
     candidate kept is the one that contrasts most with the ring of surface that borders it,
     ``min(d_ink - d_ring, m_ring - m_ink)``: ink is bluer and darker in red and green than
     the paper around it, a plate is not. Returns ``((d_ink, m_ink), (d_paper, m_paper))`` or
-    None when no candidate contrasts by :data:`MIN_CONTRAST_U8`. Large scans are sampled on a
-    2 px lattice (every band, at least a sheet thickness wide, is still sampled).
+    None when no candidate contrasts by :data:`MIN_CONTRAST_U8`. Large scans (more than a
+    million pixels in the region) are sampled on a 2 px lattice (every band, at least a sheet
+    thickness wide, is still sampled).
     ``features`` (:class:`ColourFeatures` of ``d`` and ``m``) keeps the lattice for the next
     call.
     """
-    step = 2 if d.size > 1_000_000 else 1
+    # the lattice follows the pixels that choose the cut (the frame's, when given), so that
+    # paper around the scan (a wider scan of the same cut) leaves the levels unchanged
+    n_px = d.size if region is None else int(np.count_nonzero(region))
+    step = 2 if n_px > 1_000_000 else 1
     reg = None if region is None else np.ascontiguousarray(region[::step, ::step])
     ring_px = 6 // step  # the paper 2-6 px out from the ink
     if scale == 1.0:

@@ -158,6 +158,33 @@ def test_a_blue_plate_outside_a_given_hole_never_enters(scene):
     assert len(plated.stacks) == len(plain.stacks)
 
 
+@pytest.mark.parametrize("plate", [(100, 120, 190), (150, 170, 215), (60, 90, 170)])
+def test_a_plate_passed_as_ink_is_told_apart_by_its_colour(scene, plate):
+    """A blue plate is ink to the colour rule; without the hole given, its own colour
+    (hue and brightness, whatever the light) separates it from the rod's ink."""
+    sc, c, R = scene
+    base = _leave_wall(sc.rgb, c, R)
+    ink = threshold_rgb(base, method="fixed").mask
+    img = apply_backdrop(base, ink_mask=ink, hole_center_rc=c, hole_radius_px=R,
+                         rng=np.random.default_rng(3), plate=plate, rim_px=0,
+                         illumination=0.15, cast=0.06)
+    passed = threshold_rgb(img).mask
+    assert passed[:20].mean() > 0.9  # the plate passes the ink's colour rule
+    hole = find_hole(img, passed)
+    assert np.hypot(*(hole.center_rc - c)) < 1.5 and abs(hole.radius_px - R) < 1.5
+    assert hole.confidence > 0.9 and "plate" in hole.reason
+
+
+def test_a_plate_coloured_as_the_ink_is_flagged(scene):
+    sc, c, R = scene
+    ink = threshold_rgb(sc.rgb, method="fixed").mask
+    ink_rgb = np.median(sc.rgb[ink], axis=0)
+    img = apply_backdrop(sc.rgb, ink_mask=ink, hole_center_rc=c, hole_radius_px=R,
+                         rng=np.random.default_rng(3), plate=tuple(ink_rgb), rim_px=0)
+    hole = find_hole(img, threshold_rgb(img).mask)
+    assert hole.confidence < 0.5  # nothing tells the two apart: the hole must be given
+
+
 def test_absurd_holes_raise():
     check_hole((850, 850), (425, 425), 800)                      # large but possible
     with pytest.raises(ParameterError, match="twice"):

@@ -152,3 +152,18 @@ def test_auto_on_a_two_level_image_is_exact():
     img[mask > 0] = (40, 70, 190)
     res = threshold_rgb(img, method="auto")
     assert np.array_equal(res.mask, mask > 0)
+
+
+def test_paper_around_the_scan_leaves_the_cut_unchanged():
+    # a wider scan of the same cut (white paper added around it, the frame moved with it):
+    # the levels are read on the same pixels, so the mask inside the frame is the same
+    sc = make_scene(seed=21, n_stacks=40, max_layers=5, noise_sigma=8, blur_px=1.2,
+                    image_size=900, px_per_mm=25.0)
+    c = np.array(sc.params["hole_center_px"][::-1], float)
+    R = sc.params["hole_radius_mm"] * sc.params["px_per_mm"]
+    pad = 150  # 900^2 px < 1e6 <= 1200^2 px: the padded scan alone would be sampled coarser
+    wide = np.pad(sc.rgb, ((pad, pad), (pad, pad), (0, 0)), constant_values=250)
+    a = threshold_rgb(sc.rgb, region=frame_mask(sc.rgb.shape, Hole(c, R, False)))
+    b = threshold_rgb(wide, region=frame_mask(wide.shape, Hole(c + pad, R, False)))
+    assert a.dominance_min == b.dominance_min and a.rg_max == b.rg_max
+    assert np.array_equal(a.mask, b.mask[pad:-pad, pad:-pad])
