@@ -74,6 +74,8 @@ PLATE_BORDER_FRACTION = 0.2
 #: ... told apart from the ink by colour only when the two colours lie this many times the
 #: plate's own colour spread apart.
 PLATE_INK_SEPARATION = 4.0
+#: The least spread of a plate's colour features (:func:`_plate_features`): a flat plate has
+#: none, and one grey level moves a chromaticity by about 1/300.
 PLATE_MIN_SPREAD = 0.005
 
 __all__ = ["Hole", "fit_hole", "find_hole", "frame_mask", "trim_margin", "check_hole",
@@ -530,7 +532,6 @@ def _without_plate(rgb, ink_mask):
     if len(plate_px) < 20 or len(col) < 40:
         return None
     plate = np.median(plate_px, axis=0)
-    # (a flat plate has no spread: the floor is about a grey level and a half of the features)
     spread = max(float(np.linalg.norm(1.4826 * np.median(np.abs(plate_px - plate), axis=0))),
                  PLATE_MIN_SPREAD)
     d = np.linalg.norm(col - plate, axis=1)
