@@ -43,7 +43,8 @@ from crosssection.stages.graph import stack_graph
 from crosssection.stages.load import as_rgb, load_image, recorded_pages, recorded_px_per_mm
 from crosssection.stages.packs import compute_packs
 from crosssection.stages.skeleton import skeletonize_mask
-from crosssection.stages.threshold import colour_features, threshold_rgb
+from crosssection.stages.threshold import (BRIDGE_MAX_H_PX, bridge_broken_lines,
+                                           colour_features, threshold_rgb)
 from crosssection.stages.widths import stack_widths_px
 
 __all__ = ["analyze", "preprocess", "Preprocessed", "AnalysisResult", "write_step_images"]
@@ -133,6 +134,12 @@ def _threshold_in_frame(rgb, p: AnalysisParams, path, timer):
         inside = hole_stage.frame_mask(rgb.shape[:2], hole)
     with timer("threshold"):
         thr = threshold_rgb(rgb, region=inside, **m)
+        n_px = 0
+        if p.thickness_px < BRIDGE_MAX_H_PX:
+            bridged, n_px = bridge_broken_lines(thr, m["features"], inside,
+                                                min_piece_px=3.0 * p.thickness_px ** 2)
+        if n_px:
+            thr = dataclasses.replace(thr, mask=bridged, bridged_px=n_px)
         # the frame's margin holds the wall band's edge, not a plate the colour rule passed
         trimmed, n_cut = hole_stage.trim_margin(thr.mask, hole)
         if n_cut:
