@@ -265,6 +265,9 @@ def check_hole(shape, center_rc, radius_px, *, path=None) -> None:
 
 #: Extra radius of the scan's frame beyond the hole's radius, px (:func:`frame_mask`).
 FRAME_MARGIN_PX = 2.0
+#: Pixels inside the wall read to decide whether a margin pixel continues the ink inside
+#: (:func:`trim_margin`).
+TRIM_DEPTH_PX = 3
 
 
 def frame_mask(shape, hole, *, margin_px: float = FRAME_MARGIN_PX) -> np.ndarray:
@@ -323,9 +326,11 @@ def trim_margin(mask, hole, *, margin_px: float = FRAME_MARGIN_PX) -> tuple[np.n
     a pixel or two too small) in whole. A plate that passes the ink's colour rule (a blue
     plate: no colour rule can exclude it) would enter through it as a thin ring around the
     whole hole, one closed stack of the hole's circumference (+9 to +11 % rod length on
-    drawn scans with a blue plate and the hole given). A margin pixel is kept when the pixel
-    one inside the wall on its ray from the centre is ink: the wall band continues there,
-    paper does not.
+    drawn scans with a blue plate and the hole given). A margin pixel is kept when one of the
+    :data:`TRIM_DEPTH_PX` pixels inside the wall on its ray from the centre is ink: the wall
+    band continues there, paper does not. (With one pixel, noise of 30 grey levels left the
+    wall band's outer edge ragged and read +30 % of energy on the validation atlas's network
+    scenes, +2 % without the trim.)
 
     Parameters
     ----------
@@ -371,10 +376,13 @@ def trim_margin(mask, hole, *, margin_px: float = FRAME_MARGIN_PX) -> tuple[np.n
     if not out_.any():
         return mask, 0
     rr, cc, dist = rr[out_], cc[out_], dist[out_]
-    f = max(R - 1.0, 0.0) / dist
-    ri = np.clip(np.rint(r0 + (rr - r0) * f).astype(np.int64), 0, H - 1)
-    ci = np.clip(np.rint(c0 + (cc - c0) * f).astype(np.int64), 0, W - 1)
-    drop = ~mask[ri, ci]
+    backed = np.zeros(len(rr), bool)
+    for k in range(1, TRIM_DEPTH_PX + 1):
+        f = max(R - k, 0.0) / dist
+        ri = np.clip(np.rint(r0 + (rr - r0) * f).astype(np.int64), 0, H - 1)
+        ci = np.clip(np.rint(c0 + (cc - c0) * f).astype(np.int64), 0, W - 1)
+        backed |= mask[ri, ci]
+    drop = ~backed
     if not drop.any():
         return mask, 0
     mask = mask.copy()
