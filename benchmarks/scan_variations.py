@@ -205,7 +205,8 @@ def main(argv=None) -> int:
     ap.add_argument("--hole-not-given", action="store_true")
     args = ap.parse_args(argv)
     variations = [v for v in args.variations.split(",") if v]
-    bad = [v for v in variations if v not in VARIATIONS and not v.startswith(("plate_", "textured_"))]
+    bad = [v for v in variations
+           if v not in VARIATIONS and not v.startswith(("plate_", "textured_"))]
     if bad:
         ap.error(f"unknown variation(s) {', '.join(bad)}; known: {', '.join(VARIATIONS)}")
     from crosssection.core.fileio import write_csv

@@ -35,7 +35,8 @@ Methods
 With ``"auto"``, a given ``blue_min`` or ``rg_max`` is an extra bound (it can only remove
 pixels). Below 3 px per sheet a single sheet blurred by the scanner may not reach the cut
 along its whole length; :func:`bridge_broken_lines` joins such dashes again with one-pixel
-threads (the pipeline calls it; ``bridged_px`` in the summary's thresholds). All values are in the native units of the image (uint16: uint8 values times 257).
+threads (the pipeline calls it; ``bridged_px`` in the summary's thresholds). All values are
+in the native units of the image (uint16: uint8 values times 257).
 """
 from __future__ import annotations
 
@@ -535,7 +536,7 @@ def bridge_broken_lines(thr: ThresholdResult, features: ColourFeatures, region=N
     if region is not None:
         low &= region
     low |= mask
-    n_low, lab_low = cv2.connectedComponents(low.view(np.uint8), connectivity=8)
+    _, lab_low = cv2.connectedComponents(low.view(np.uint8), connectivity=8)
     big_px = big[lab_main]
     keep = np.unique(lab_low[big_px])
     keep = keep[keep > 0]
