@@ -40,7 +40,7 @@ from crosssection.result import AnalysisResult, write_step_images
 from crosssection.stages import curvature, hole as hole_stage, voids as void_stage
 from crosssection.stages.clean import clean_mask
 from crosssection.stages.graph import stack_graph
-from crosssection.stages.load import as_rgb, load_image, recorded_pages, recorded_px_per_mm
+from crosssection.stages.load import as_rgb, load_image, recorded_header
 from crosssection.stages.packs import compute_packs
 from crosssection.stages.skeleton import skeletonize_mask
 from crosssection.stages.threshold import (BRIDGE_MAX_H_PX, bridge_broken_lines,
@@ -170,8 +170,8 @@ def preprocess(image, params: AnalysisParams | None = None, *, timer=None,
 def _preprocess(image, p: AnalysisParams, timer) -> Preprocessed:
     with timer("load"):
         rgb, path = _read(image)
-        file_px_per_mm = recorded_px_per_mm(path) if path is not None else None
-        file_pages = recorded_pages(path) if path is not None else 1
+        file_px_per_mm, file_pages = (recorded_header(path) if path is not None
+                                      else (None, 1))
     p.check_image(rgb.shape, path)
     thr, hole, outside = _threshold_in_frame(rgb, p, path, timer)
     confidence = None if p.hole_given else hole.confidence

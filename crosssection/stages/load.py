@@ -434,14 +434,16 @@ def _read_pillow(path: Path) -> np.ndarray:
 MIN_SCANNER_DPI = 100.0
 
 
-def recorded_px_per_mm(path) -> float | None:
-    """The resolution a scan file records (PNG ``pHYs``, TIFF ``XResolution``, JPEG JFIF
-    density), in px/mm, or None.
+def recorded_header(path) -> tuple[float | None, int]:
+    """What a scan file's header records: its resolution in px/mm (or None) and how many
+    images it holds, from one read of the header (Pillow; the file is not checked here).
 
-    Scanners write their resolution into the file (1200 dpi = 47.24 px/mm); image software
-    writes 72 or 96 dpi whatever the image, so a value below :data:`MIN_SCANNER_DPI`, a
-    different resolution across and along the scan (more than 1 %), a missing or unreadable
-    one give None. Only the header is read (Pillow); the file is not checked here.
+    The resolution: scanners write it into the file (PNG ``pHYs``, TIFF ``XResolution``, JPEG
+    JFIF density; 1200 dpi = 47.24 px/mm); image software writes 72 or 96 dpi whatever the
+    image, so a value below :data:`MIN_SCANNER_DPI`, a different resolution across and along
+    the scan (more than 1 %), a missing or unreadable one give None. The images (TIFF pages,
+    animation frames): the loader decodes the first; the others would be left out without a
+    word (a scanner's batch saved as one multi-page TIFF holds several cuts); 1 when unknown.
 
     Parameters
     ----------
@@ -449,7 +451,7 @@ def recorded_px_per_mm(path) -> float | None:
 
     Returns
     -------
-    float or None
+    (float or None, int)
     """
     from PIL import Image
 
@@ -458,38 +460,27 @@ def recorded_px_per_mm(path) -> float | None:
             warnings.simplefilter("ignore")  # e.g. Pillow's DecompressionBombWarning
             with Image.open(path) as im:
                 dpi = im.info.get("dpi")
-        x, y = (float(v) for v in dpi)
+                pages = max(int(getattr(im, "n_frames", 1)), 1)
     except Exception:  # noqa: BLE001 - metadata is advisory: any failure means no value
-        return None
+        return None, 1
+    try:
+        x, y = (float(v) for v in dpi)
+    except (TypeError, ValueError):
+        return None, pages
     if not (math.isfinite(x) and math.isfinite(y)) or min(x, y) < MIN_SCANNER_DPI \
             or abs(x - y) > 0.01 * max(x, y):
-        return None
-    return 0.5 * (x + y) / 25.4
+        return None, pages
+    return 0.5 * (x + y) / 25.4, pages
+
+
+def recorded_px_per_mm(path) -> float | None:
+    """The resolution a scan file records, in px/mm, or None (:func:`recorded_header`)."""
+    return recorded_header(path)[0]
 
 
 def recorded_pages(path) -> int:
-    """How many images (TIFF pages, animation frames) a scan file holds; 1 when unknown.
-
-    The loader decodes the first; the others would be left out without a word (a scanner's
-    batch saved as one multi-page TIFF holds several cuts). Only the header is read (Pillow).
-
-    Parameters
-    ----------
-    path : str or Path
-
-    Returns
-    -------
-    int
-    """
-    from PIL import Image
-
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            with Image.open(path) as im:
-                return max(int(getattr(im, "n_frames", 1)), 1)
-    except Exception:  # noqa: BLE001 - advisory, as the recorded resolution
-        return 1
+    """How many images a scan file holds; 1 when unknown (:func:`recorded_header`)."""
+    return recorded_header(path)[1]
 
 
 def load_image(path) -> np.ndarray:
