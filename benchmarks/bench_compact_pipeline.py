@@ -20,6 +20,11 @@ passes     the defaults, the rod itself drawn (``draw="passes"``: every pass a s
            passes of a stack pressed together) instead of one band per stack
 passes_    ``passes``, clean
 clean
+passes_    ``passes`` with the pressing smoothed over one rod segment (``pass_smooth=1``): the
+smooth     drawn passes bend as the rod does (1.00-1.01 times its energy at epsilon = 19)
+passes_    ``passes_smooth``, clean
+smooth_
+clean
 =========  ================================================================================
 
 Each scene is analysed with the calibration and the hole given, as a user who measured them
@@ -64,7 +69,9 @@ from simulate.render import render_configuration
 
 CONDITIONS = {"scan": {}, "clean": {"clean": True},
               "polyline": {"clean": True, "smooth": "none"},
-              "passes": {"draw": "passes"}, "passes_clean": {"clean": True, "draw": "passes"}}
+              "passes": {"draw": "passes"}, "passes_clean": {"clean": True, "draw": "passes"},
+              "passes_smooth": {"draw": "passes", "pass_smooth": 1.0},
+              "passes_smooth_clean": {"clean": True, "draw": "passes", "pass_smooth": 1.0}}
 TARGETS = {"n_br_exact_length_fraction": 0.85, "junction_f1": 0.90, "rod_length": 0.05,
            "total_energy": 0.25}
 PX_PER_MM, THICKNESS_MM = 50.0, 0.1

@@ -24,7 +24,8 @@ __all__ = ["ScanScale", "AnalysisParams", "add_analysis_arguments", "check_param
            "THRESHOLD_METHODS", "CURVATURE_METHODS", "SKELETON_METHODS", "WIDTH_STATISTICS"]
 
 THRESHOLD_METHODS = ("auto", "fixed", "otsu")
-CURVATURE_METHODS = ("missing", "paper")
+#: the first is the default (crosssection.stages.curvature, step 3)
+CURVATURE_METHODS = ("walls", "missing", "paper")
 SKELETON_METHODS = ("thinning", "skimage")
 WIDTH_STATISTICS = ("median", "mean")
 
@@ -135,11 +136,13 @@ class AnalysisParams:
         "junction pixels closer than this are one junction", "px"))
     merge_thick_crossings: bool = field(default=True, metadata=_opt(
         "merge junctions joined by a stack inside one ink blob", cli=False))
-    curvature_method: str = field(default="missing", metadata=_opt(
+    curvature_method: str = field(default=CURVATURE_METHODS[0], metadata=_opt(
         "curvature estimator: paper (parabolic fits over 5 n_br h; fork zones take the nearest "
-        "fitted curvature) or missing (the same fits; fork zones as missing data, the "
+        "fitted curvature), missing (the same fits; fork zones as missing data, the "
         "curvature trend continued to the junction where it exceeds the noise; the scan's "
-        "curvature noise removed from the energy; curvature bounded by 2 / (n_br h))",
+        "curvature noise removed from the energy; curvature bounded by 2 / (n_br h)) or walls "
+        "(as missing, but a fork zone whose arm runs along the merged ink's outer wall is "
+        "measured there, at the arm's half width from that wall)",
         choices=CURVATURE_METHODS))
     integer_refinement: bool = field(default=True, metadata=_opt(
         "improve the rounded least-squares branch counts by exact integer moves, and by the "

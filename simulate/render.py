@@ -111,7 +111,8 @@ pressed, cross-section by cross-section, into a band of touching strokes centred
 passes were (:func:`_press_stack`); a pass occupies only the part of a stack it covers, so the
 band narrows where a rod end lies inside it or a pass leaves it. Beyond its stack a pass returns
 to its own position over ``pass_taper`` pass widths (raised cosine), and the displacements are
-smoothed along the rod over one pitch so that a change of the passes present leaves no step.
+smoothed along the rod over one pitch (``pass_smooth`` rod segments when given) so that a
+change of the passes present leaves no step.
 Adjacent pressed strokes overlap by :data:`PASS_OVERLAP_PX` so that their rasterisation leaves
 no paper line between them; the calibration is the drawing's own, linear law
 ``w(n) = n pitch + overlap`` with ``pitch = pass_width h - overlap``
@@ -186,6 +187,14 @@ PASS_WIDTH = 1.25
 #: ``draw="passes"``: length over which a pressed pass returns to its own position, in units
 #: of the pass width.
 PASS_TAPER = 4.0
+#: ``draw="passes"``: the pressing displacements are smoothed along the rod over this many
+#: rod segments (0: over one pitch, the pressing exact at every cross-section). Over one
+#: pitch the pressed passes follow their neighbours' segment-scale wiggles and carry 62-88
+#: times the rod's bending energy (four rods at epsilon = 19; the rod's own smooth curve
+#: 1.00 times); over half a segment 1.17-1.26 times, over one segment, the rod's own
+#: resolution, 1.00-1.01 times, but the pressing is then loose where a stack's spacing
+#: changes within a segment (docs/validation/compact.md, "Drawing the rod itself").
+PASS_SMOOTH = 0.0
 #: ``draw="passes"``: adjacent pressed passes overlap by this much so that the rasterised
 #: strokes leave no paper line between them.
 PASS_OVERLAP_PX = 1.0
@@ -933,7 +942,7 @@ def _taper_fill(disp, pressed, taper_samples):
 
 
 def _pass_curves(xy, analysis, frame, *, segment_px, pitch_px, stroke_px, taper_px,
-                 step_px=0.5):
+                 smooth_px=0.0, step_px=0.5):
     """The drawn rod: its smooth curve with the passes of every stack pressed together.
 
     Returns
@@ -975,7 +984,7 @@ def _pass_curves(xy, analysis, frame, *, segment_px, pitch_px, stroke_px, taper_
     arc_step = float(np.hypot(*np.diff(base, axis=0).T).mean()) if len(base) > 1 else 1.0
     disp = _taper_fill(disp, pressed, taper_px / arc_step)
     # the order of the passes present changes where one ends or leaves: no step in the drawing
-    sigma = pitch_px / arc_step
+    sigma = max(pitch_px, smooth_px) / arc_step
     if sigma > 0:
         disp = gaussian_filter1d(disp, sigma, axis=0, mode="nearest")
     curve = base + disp
@@ -1202,6 +1211,7 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
                          illumination: float | None = None, cast: float | None = None,
                          smooth: str = "all", draw: str = "bands", join: str = "hook",
                          pass_width: float = PASS_WIDTH, pass_taper: float = PASS_TAPER,
+                         pass_smooth: float = PASS_SMOOTH,
                          seed: int = 0, margin_mm: float = 2.0,
                          gap_px: float = 2.0, max_size_px: int = 2500,
                          hole_radius_mm: float | str | None = None) -> Scene:
@@ -1270,6 +1280,9 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
     pass_taper : float
         ``draw="passes"``: length, in pass widths, over which a pass pressed into a stack
         returns to its own position outside it (default :data:`PASS_TAPER`).
+    pass_smooth : float
+        ``draw="passes"``: the pressing displacements smoothed along the rod over this many
+        rod segments; 0 (default, :data:`PASS_SMOOTH`): over one pitch.
     seed : int
         Seed of every random choice (colours, noise, defects).
     margin_mm : float
@@ -1308,7 +1321,8 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
         raise ParameterError(f"draw must be one of {DRAW}, got {draw!r}")
     if join not in JOIN:
         raise ParameterError(f"join must be one of {JOIN}, got {join!r}")
-    for name, v in (("pass_width", pass_width), ("pass_taper", pass_taper)):
+    for name, v in (("pass_width", pass_width), ("pass_taper", pass_taper),
+                    ("pass_smooth", pass_smooth)):
         if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
             raise ParameterError(f"{name} must be a finite number >= 0, got {v!r}")
     if draw == "passes" and not pass_width * thickness_mm * px_per_mm > PASS_OVERLAP_PX:
@@ -1347,7 +1361,7 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
     if draw == "passes":
         curve, branch_of, _ = _pass_curves(
             xy, analysis, frame, segment_px=segment_px, pitch_px=pitch_px, stroke_px=stroke_px,
-            taper_px=pass_taper * stroke_px)
+            taper_px=pass_taper * stroke_px, smooth_px=pass_smooth * segment_px)
         junctions_px = _pass_junctions_px(analysis, frame, stroke_px)
         layer_px = None
         coverage, labels = _draw_passes(curve, branch_of,
@@ -1385,7 +1399,8 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
               "rod_thickness": rod_thickness, "wall_radius": wall_radius, "clean": bool(clean),
               **{k: (v if not isinstance(v, np.ndarray) else v.tolist()) for k, v in d.items()},
               "smooth": smooth, "draw": draw, **({"join": join} if draw == "bands" else {}),
-              **({"pass_width": float(pass_width), "pass_taper": float(pass_taper)}
+              **({"pass_width": float(pass_width), "pass_taper": float(pass_taper),
+                  "pass_smooth": float(pass_smooth)}
                  if draw == "passes" else {}),
               "origin_xy": frame.origin_xy.tolist(), "margin_px": float(frame.margin_px)}
     return Scene(rgb, summary, tables, params, cal,

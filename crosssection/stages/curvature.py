@@ -22,11 +22,25 @@ fit on size 5 n_br h, after coordinates translation and rotation in the tangent 
    window beyond: the fork zone is ``max(2 max(n_br h, r_J), contact) + (smooth_px - 1) / 2``
    of arc from the junction (measured on drawn tangential forks: arms' ``int kappa^2 ds``
    0.9-2.3 x the truth with ``max(n_br h, r_J)``, 0.9-1.2 x with this zone). Those samples
-   are not fitted: they are missing data. The default (``method="missing"``) continues the
-   linear trend of the curvature over the nearest window (5 n_br h) of fits centred on their
-   own sample to the junction, so that a bend that tightens toward the fork keeps
-   tightening; the fits within half a window of the zone, whose windows are shifted inwards
-   onto one window's mean (flat whatever the bend does), are replaced by the trend too
+   are not measured on the skeleton. **Sheets cannot cross**: an arm in contact with a band
+   lies along that band's outer layer, so its own outer layer is the merged ink's wall on its
+   side, and its centreline runs at its half width from that wall. The default
+   (``method="walls"``, :func:`_walled_path`) follows that wall from the zone's edge to the
+   junction, on each side, while the wall stays at the distance it had at the zone's edge
+   (within ``_WALL_TOL`` of the band's inscribed radius) and the direction within
+   ``_WALL_MAX_TURN`` of its start; a zone followed on a side is measured there and fitted
+   like the rest of the stack (a stack whose zones would cover it is followed from its
+   middle). On rods compacted to epsilon 19 and drawn as they lie (every pass a stroke,
+   ``simulate.render``, ``pass_smooth=1``), the total energy reads -2 to +9 %, against +18
+   to +169 % with the zones as missing data, whose trend continues the skeleton's hooks
+   (docs/validation/README.md, "Fork zones along the outer wall"). A wall that turns a corner
+   (an arm meeting a band at an angle) or runs into another band holds no layer of this arm:
+   the zone stays missing data. Missing data (``method="missing"``, and where no wall is
+   followed) continues the linear trend of the curvature over the nearest window (5 n_br h)
+   of fits centred on their own sample to the junction, so that a bend that tightens toward
+   the fork keeps tightening; the fits within half a window of the zone, whose windows are
+   shifted inwards onto one window's mean (flat whatever the bend does), are replaced by the
+   trend too
    (:func:`_fill_fork_zones`); the paper's rule
    (``method="paper"``) gives them the curvature of the nearest fitted sample. Over one fork
    zone a stack turns by a quarter turn at most (``int |kappa| ds <= pi / 2``,
@@ -68,10 +82,11 @@ the true energy inside fork zones depends on the generator -- 54 % within 2 n_br
 junction on ``crosssection.truth.network`` scenes (36 % of the length: its branches leave the
 node fanned and bend back), 3-7 % on simulator renders (rod segments of 6-7 h resolve no
 bending at that scale). Median total-energy error of the default (seeds 100-107 of
-``benchmarks/robust_sweep.py``, 8 scenes per condition): renders -1 % (median absolute
-9 %), 25 px/mm +9 % (16 %), network typical -2 %, thick dense -3 %, tangential forks
--46 % (with the short links' shifted end fits kept: -1, +9, -15, -17.5, -48 %). The
-construction applied to the network generator's own curvature (no pixels, no noise) keeps
+``benchmarks/robust_sweep.py``, 8 scenes per condition): renders +4 % (median absolute
+14 %), 25 px/mm +3.5 % (16 %), network typical -9 %, thick dense -9 %, tangential forks
+-51 %; with the zones as missing data +6.6 % (15 %), +9 % (16 %), -2 %, -2 %, -46 %: the
+network generator's centrelines bend inside merged ink, where no wall shows it. The missing
+data's construction applied to the network generator's own curvature (no pixels, no noise) keeps
 0.99 of its energy: the continued trends make up for what the window averages away
 (``benchmarks/energy_split.py``). Models that add bending inside the zone (a curve
 constrained to reach the junction point, a least-bending turn from the parent band's axis)
@@ -99,6 +114,7 @@ from scipy.spatial.distance import cdist
 
 from crosssection.core import polyline
 from crosssection.core.errors import ParameterError
+from crosssection.params import CURVATURE_METHODS as METHODS
 from crosssection.stages.junctions import median_radii_px
 
 __all__ = ["CurvatureProfile", "stack_curvature", "stack_profiles", "default_smooth_px",
@@ -678,6 +694,173 @@ _TREND_DEVIATIONS = 4.0
 _CHUNK = 16
 
 
+#: Wall following through a fork zone (module docstring, step 3): a point of the arm's outer
+#: wall further from the followed centreline than ``_WALL_TOL`` times the band's inscribed
+#: radius (at least ``_WALL_TOL_MIN_PX``) from where it started is no longer the arm's own
+#: outer layer (the tip of the paper wedge, another band against it): the follow stops.
+_WALL_TOL = 0.35
+_WALL_TOL_MIN_PX = 1.5
+#: A followed centreline turning by more than this from its start (radians, 20 degrees) has
+#: gone round a corner of the ink (an arm meeting a band at an angle), not along a layer.
+_WALL_MAX_TURN = 0.35
+#: Weight of each step's new direction in the followed direction (a low-pass of the pixel
+#: steps of the wall).
+_WALL_DAMP = 0.3
+
+
+@njit(cache=True)
+def _bilinear(img, r, c):  # pragma: no cover - numba
+    H, W = img.shape
+    if r < 0.0 or c < 0.0 or r > H - 1.001 or c > W - 1.001:
+        return 0.0
+    r0 = int(r)
+    c0 = int(c)
+    fr = r - r0
+    fc = c - c0
+    return ((1.0 - fr) * ((1.0 - fc) * img[r0, c0] + fc * img[r0, c0 + 1])
+            + fr * ((1.0 - fc) * img[r0 + 1, c0] + fc * img[r0 + 1, c0 + 1]))
+
+
+@njit(cache=True)
+def _wall_distance(dt, qr, qc, nr, nc, max_t):  # pragma: no cover - numba
+    # distance from q along the unit ray n to the ink's edge (distance transform 0.5, linear
+    # between quarter-pixel samples); -1 when the edge is not within max_t
+    prev = _bilinear(dt, qr, qc)
+    if prev < 0.5:
+        return 0.0
+    t = 0.0
+    while t < max_t:
+        t2 = t + 0.25
+        v = _bilinear(dt, qr + t2 * nr, qc + t2 * nc)
+        if v < 0.5:
+            return t + 0.25 * (prev - 0.5) / max(prev - v, 1e-9)
+        prev = v
+        t = t2
+    return -1.0
+
+
+@njit(cache=True)
+def _follow_wall(dt, pr, pc, tr, tc, side, length, tol, max_ref, max_turn,
+                 damp):  # pragma: no cover - numba
+    # from (pr, pc) in the direction (tr, tc), 1-px steps kept at the starting distance from
+    # the wall on ``side`` (+1: left of the direction in (row, col)), over ``length`` px of
+    # arc; returns the points and whether the whole length was followed
+    out = np.empty((int(length) + 3, 2))
+    ref = _wall_distance(dt, pr, pc, -tc * side, tr * side, max_ref)
+    if ref <= 0.0:
+        return out[:0], False
+    out[0, 0] = pr
+    out[0, 1] = pc
+    t0r, t0c = tr, tc
+    cos_turn = math.cos(max_turn)
+    k = 1
+    travelled = 0.0
+    while travelled < length and k < out.shape[0]:
+        qr, qc = pr + tr, pc + tc
+        nr, nc = -tc * side, tr * side
+        e = _wall_distance(dt, qr, qc, nr, nc, ref + tol + 1.0)
+        if e < 0.0 or abs(e - ref) > tol:
+            return out[:k], False
+        qr += (e - ref) * nr
+        qc += (e - ref) * nc
+        d = math.hypot(qr - pr, qc - pc)
+        if d < 1e-9:
+            return out[:k], False
+        ur = (1.0 - damp) * tr + damp * (qr - pr) / d
+        uc = (1.0 - damp) * tc + damp * (qc - pc) / d
+        nu = math.hypot(ur, uc)
+        tr, tc = ur / nu, uc / nu
+        if tr * t0r + tc * t0c < cos_turn:
+            return out[:k], False
+        out[k, 0] = qr
+        out[k, 1] = qc
+        k += 1
+        travelled += d
+        pr, pc = qr, qc
+    return out[:k], travelled >= length
+
+
+def _walled_path(path_rc, trims, radius_px, dt):
+    """A stack's smoothed centreline with its fork zones followed along the outer wall.
+
+    Inside a fork zone the arm's band is merged with its neighbour's and its skeleton hooks
+    into the medial-axis fork point, but sheets cannot cross: an arm in contact with a band
+    lies along that band's outer layer, and its own outer layer is the merged ink's wall on
+    its side (module docstring, step 3). From the end of the zone the centreline is followed
+    at its distance from that wall (about its inscribed radius), on each side, up to the
+    junction. A side is followed only while the wall stays within ``_WALL_TOL`` of that
+    distance and the direction within ``_WALL_MAX_TURN`` of its start; the zone takes the
+    mean of the sides followed to the end, and keeps its skeleton when neither is. A stack
+    whose zones would cover it is followed from its middle.
+
+    Parameters
+    ----------
+    path_rc : (n, 2) array
+        The smoothed centreline (row, col) px, junction ends first and last.
+    trims : (float, float)
+        Fork zone at the start and the end, px of arc (0: a free end, not followed).
+    radius_px : float
+        The band's median inscribed radius, px.
+    dt : 2-D float32 array
+        Distance transform of the ink (distance to the paper), px.
+
+    Returns
+    -------
+    path : (m, 2) array
+        The centreline with every followed zone replaced (1-px steps).
+    followed : (bool, bool)
+        Whether the start's and the end's zones were followed.
+    """
+    p = np.asarray(path_rc, dtype=np.float64)
+    n = len(p)
+    if n < 5:
+        return p, (False, False)
+    d = np.diff(p, axis=0)
+    s = np.empty(n)
+    s[0] = 0.0
+    np.cumsum(np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]), out=s[1:])
+    total = s[-1]
+    z0, z1 = (float(t or 0.0) for t in trims)
+    if total >= z0 + z1 + 4.0:
+        a0 = int(np.searchsorted(s, z0)) if z0 > 0 else 0
+        a1 = int(np.searchsorted(s, total - z1)) - 1 if z1 > 0 else n - 1
+        a1 = max(a1, a0)
+    else:
+        a0 = a1 = int(np.searchsorted(s, 0.5 * total))
+    k = max(3, int(round(2.0 * radius_px + 2.0)))
+    tol = max(_WALL_TOL_MIN_PX, _WALL_TOL * float(radius_px))
+    pieces, followed = [None, None], [False, False]
+    for end, (a, z) in enumerate(((a0, z0), (a1, z1))):
+        if z <= 0:
+            continue
+        # the direction at the zone's edge from the centreline beyond it (one-sided: the
+        # zone's side is the hook)
+        t = p[a] - p[min(a + k, n - 1)] if end == 0 else p[a] - p[max(a - k, 0)]
+        norm = math.hypot(t[0], t[1])
+        if norm < 1e-9:
+            continue
+        t = t / norm
+        length = float(s[a] if end == 0 else total - s[a])
+        r_px = float(radius_px)
+        runs = []
+        for side in (1.0, -1.0):
+            pts, ok = _follow_wall(dt, float(p[a, 0]), float(p[a, 1]), float(t[0]),
+                                   float(t[1]), side, length, tol, 2.0 * r_px + 3.0,
+                                   _WALL_MAX_TURN, _WALL_DAMP)
+            if ok:
+                runs.append(pts)
+        if len(runs) == 1:
+            pieces[end], followed[end] = runs[0], True
+        elif runs:
+            m = min(len(runs[0]), len(runs[1]))
+            pieces[end], followed[end] = 0.5 * (runs[0][:m] + runs[1][:m]), True
+    if not any(followed) or (a0 == a1 and not all(followed)):
+        return p, (False, False)
+    head = pieces[0][::-1][:-1] if followed[0] else p[:a0]
+    tail = pieces[1][1:] if followed[1] else p[a1 + 1:]
+    return np.vstack([head, p[a0:a1 + 1], tail]), tuple(followed)
+
+
 def _fork_zone_px(width_px, r_j, touching_px, smooth_px):
     """Fork zone (module docstring, step 3): the overlap, the hook, the contact, the smoothing."""
     return max(2.0 * max(width_px, r_j), touching_px) + 0.5 * (smooth_px - 1)
@@ -830,7 +1013,7 @@ def _contact_arcs(paths, at_node, radius, reach, gap_px: float = _CONTACT_GAP_PX
 
 
 def stack_profiles(graph, n_br, distance_px, *, thickness_px: float, px_per_mm: float,
-                   smooth_px: int | None = None, method: str = "missing") -> list:
+                   smooth_px: int | None = None, method: str = METHODS[0]) -> list:
     """Curvature profile of every stack of a stack graph (paper: parabolic fits over 5 n_br h).
 
     Parameters
@@ -847,17 +1030,20 @@ def stack_profiles(graph, n_br, distance_px, *, thickness_px: float, px_per_mm: 
         Scan resolution.
     smooth_px : int, optional
         Sliding-average window of the centreline (default :func:`default_smooth_px`).
-    method : {"missing", "paper"}
-        Fork zones (module docstring, step 3); ``"missing"`` also measures the scan's
-        curvature noise (step 4) and records it in every profile.
+    method : {"walls", "missing", "paper"}
+        Fork zones (module docstring, step 3): followed along the merged ink's outer wall
+        where it holds the arm's outer layer, as missing data elsewhere (``"walls"``), as
+        missing data everywhere (``"missing"``), or given the nearest fitted curvature
+        (``"paper"``). ``"walls"`` and ``"missing"`` also measure the scan's curvature noise
+        (step 4) and record it in every profile.
 
     Returns
     -------
     list of CurvatureProfile
         One per stack, in stack order.
     """
-    if method not in ("missing", "paper"):
-        raise ParameterError(f"curvature method must be 'missing' or 'paper', got {method!r}")
+    if method not in METHODS:
+        raise ParameterError(f"curvature method must be one of {METHODS}, got {method!r}")
     H, W = distance_px.shape
     sm = default_smooth_px(thickness_px) if smooth_px is None else int(smooth_px)
     at_node = {}  # junction -> [(stack, end)]
@@ -890,7 +1076,8 @@ def stack_profiles(graph, n_br, distance_px, *, thickness_px: float, px_per_mm: 
                 for sid in range(graph.n_stacks)]
     smoothed = polyline.smooth_paths([p for p, _ in prepared], window_px=sm,
                                      closed=[c for _, c in prepared])
-    jobs, forks = [], []
+    jobs, forks, walled = [], [], {}
+    dt32 = None
     for sid in range(graph.n_stacks):
         u, v = graph.ends[sid]
         nb = max(1, int(n_br[sid]))
@@ -900,21 +1087,42 @@ def stack_profiles(graph, n_br, distance_px, *, thickness_px: float, px_per_mm: 
         # medial-axis fork points, no centreline of its own (step 3). A junction blob wider
         # than the band (thick stacks meeting, at epsilon 19) holds longer such links.
         hooks = max(2.0 * radius[sid], junction_radius(sid, 0) + junction_radius(sid, 1))
-        lump = (method == "missing" and any(forks[-1]) and graph.node_kind[u] != "loop"
+        lump = (method != "paper" and any(forks[-1]) and graph.node_kind[u] != "loop"
                 and polyline.length(graph.paths[sid]) < _LUMP_WIDTHS * hooks)
         jobs.append(_stack_job(
             prepared[sid][0], n_br=nb, thickness_px=thickness_px, px_per_mm=px_per_mm,
             closed=prepared[sid][1], smooth_px=sm, trim_px=trims,
             window_px=None, circle_correction=True, ends="shift", max_window_frac=0.5,
             method="paper", unfitted=lump, smoothed=smoothed[sid]))
+        if method == "walls" and not prepared[sid][1] and any(forks[-1]) and not lump:
+            if dt32 is None:
+                dt32 = np.ascontiguousarray(distance_px, dtype=np.float32)
+            path, followed = _walled_path(smoothed[sid], trims, radius[sid], dt32)
+            if any(followed):
+                # a followed zone is measured: fitted, not extrapolated
+                walled[sid] = (path, tuple(0.0 if f else t for t, f in zip(trims, followed)))
+    wsids = sorted(walled)
+    wsmooth = polyline.smooth_paths([walled[sid][0] for sid in wsids], window_px=sm,
+                                    closed=False) if wsids else []
+    for sid, wsm in zip(wsids, wsmooth):
+        path, trims = walled[sid]
+        jobs.append(_stack_job(
+            path, n_br=max(1, int(n_br[sid])), thickness_px=thickness_px, px_per_mm=px_per_mm,
+            closed=False, smooth_px=sm, trim_px=trims, window_px=None, circle_correction=True,
+            ends="shift", max_window_frac=0.5, method="paper", smoothed=wsm))
     # the window fits of all stacks in one call (numpy's overhead per call is that of a
     # whole stack's fits)
     kin = iter(_parabola_curvatures([fit for fit, _, _ in jobs if fit is not None]))
-    profiles = [finish(None if fit is None else next(kin)) for fit, finish, _ in jobs]
+    every = [finish(None if fit is None else next(kin)) for fit, finish, _ in jobs]
+    profiles = every[:graph.n_stacks]
     if method == "paper":
         return profiles
+    # the scan's noise from the skeleton's own centrelines
     var = noise_variance(profiles, n_br, thickness_px=thickness_px, px_per_mm=px_per_mm,
                          smooth_px=sm)
+    for sid, prof in zip(wsids, every[graph.n_stacks:]):
+        profiles[sid] = prof
+        forks[sid] = tuple(t > 0 for t in walled[sid][1])
     profiles = [_fill_fork_zones(prof, max(1, int(n_br[sid])), thickness_px, px_per_mm,
                                  forks[sid], noise_var_per_mm2=var[max(1, int(n_br[sid]))],
                                  max_window_frac=0.5, shifted=True)
