@@ -728,7 +728,11 @@ def _wall_distance(dt, qr, qc, nr, nc, max_t):  # pragma: no cover - numba
     prev = _bilinear(dt, qr, qc)
     if prev < 0.5:
         return 0.0
-    t = 0.0
+    # no paper lies nearer than the distance transform at q (less a pixel for the bilinear
+    # interpolation): the march starts there
+    t = max(0.0, math.floor(4.0 * (prev - 1.0)) * 0.25)
+    if t > 0.0:
+        prev = _bilinear(dt, qr + t * nr, qc + t * nc)
     while t < max_t:
         t2 = t + 0.25
         v = _bilinear(dt, qr + t2 * nr, qc + t2 * nc)
