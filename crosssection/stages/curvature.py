@@ -30,7 +30,8 @@ fit on size 5 n_br h, after coordinates translation and rotation in the tangent 
    (within ``_WALL_TOL`` of the band's inscribed radius) and the direction within
    ``_WALL_MAX_TURN`` of its start; a zone followed on a side is measured there and fitted
    like the rest of the stack (a stack whose zones would cover it is followed from its
-   middle). On rods compacted to epsilon 19 and drawn as they lie (every pass a stroke,
+   middle). A band narrower than ``2 _WALL_MIN_RADIUS_PX`` is not followed: its wall's pixel
+   steps are as large as the distance kept from it. On rods compacted to epsilon 19 and drawn as they lie (every pass a stroke,
    ``simulate.render``, ``pass_smooth=1``), the total energy reads -2 to +9 %, against +18
    to +169 % with the zones as missing data, whose trend continues the skeleton's hooks
    (docs/validation/README.md, "Fork zones along the outer wall"). A wall that turns a corner
@@ -83,7 +84,7 @@ junction on ``crosssection.truth.network`` scenes (36 % of the length: its branc
 node fanned and bend back), 3-7 % on simulator renders (rod segments of 6-7 h resolve no
 bending at that scale). Median total-energy error of the default (seeds 100-107 of
 ``benchmarks/robust_sweep.py``, 8 scenes per condition): renders +4 % (median absolute
-14 %), 25 px/mm +3.5 % (16 %), network typical -9 %, thick dense -9 %, tangential forks
+14 %), 25 px/mm +8 % (17 %), network typical -9 %, thick dense -9 %, tangential forks
 -51 %; with the zones as missing data +6.6 % (15 %), +9 % (16 %), -2 %, -2 %, -46 %: the
 network generator's centrelines bend inside merged ink, where no wall shows it. The missing
 data's construction applied to the network generator's own curvature (no pixels, no noise) keeps
@@ -700,6 +701,10 @@ _CHUNK = 16
 #: outer layer (the tip of the paper wedge, another band against it): the follow stops.
 _WALL_TOL = 0.35
 _WALL_TOL_MIN_PX = 1.5
+#: A band narrower than twice this (its inscribed radius, px) is not followed: its wall's
+#: pixel steps are as large as the distance kept from it (at h <= 3 px, renders read -23 to
+#: -40 % along such walls against -17 to +3 % with the zones as missing data).
+_WALL_MIN_RADIUS_PX = 3.0
 #: A followed centreline turning by more than this from its start (radians, 20 degrees) has
 #: gone round a corner of the ink (an arm meeting a band at an angle), not along a layer.
 _WALL_MAX_TURN = 0.35
@@ -1098,7 +1103,8 @@ def stack_profiles(graph, n_br, distance_px, *, thickness_px: float, px_per_mm: 
             closed=prepared[sid][1], smooth_px=sm, trim_px=trims,
             window_px=None, circle_correction=True, ends="shift", max_window_frac=0.5,
             method="paper", unfitted=lump, smoothed=smoothed[sid]))
-        if method == "walls" and not prepared[sid][1] and any(forks[-1]) and not lump:
+        if (method == "walls" and not prepared[sid][1] and any(forks[-1]) and not lump
+                and radius[sid] >= _WALL_MIN_RADIUS_PX):
             if dt32 is None:
                 dt32 = np.ascontiguousarray(distance_px, dtype=np.float32)
             path, followed = _walled_path(smoothed[sid], trims, radius[sid], dt32)
