@@ -820,54 +820,85 @@ def _walled_path(path_rc, trims, radius_px, dt):
     followed : (bool, bool)
         Whether the start's and the end's zones were followed.
     """
-    p = np.asarray(path_rc, dtype=np.float64)
-    n = len(p)
-    if n < 5:
+    p = np.ascontiguousarray(path_rc, dtype=np.float64)
+    if len(p) < 5:
         return p, (False, False)
-    d = np.diff(p, axis=0)
-    s = np.empty(n)
-    s[0] = 0.0
-    np.cumsum(np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]), out=s[1:])
-    total = s[-1]
     z0, z1 = (float(t or 0.0) for t in trims)
+    tol = max(_WALL_TOL_MIN_PX, _WALL_TOL * float(radius_px))
+    out, f0, f1 = _walled_kernel(p, z0, z1, float(radius_px), dt, tol, _WALL_MAX_TURN,
+                                 _WALL_DAMP)
+    return out, (bool(f0), bool(f1))
+
+
+@njit(cache=True)
+def _walled_kernel(p, z0, z1, radius_px, dt, tol, max_turn,
+                   damp):  # pragma: no cover - numba
+    # _walled_path in one call (its Python took as long as the follow itself)
+    n = p.shape[0]
+    s = np.zeros(n)
+    for i in range(1, n):
+        s[i] = s[i - 1] + math.hypot(p[i, 0] - p[i - 1, 0], p[i, 1] - p[i - 1, 1])
+    total = s[n - 1]
     if total >= z0 + z1 + 4.0:
-        a0 = int(np.searchsorted(s, z0)) if z0 > 0 else 0
-        a1 = int(np.searchsorted(s, total - z1)) - 1 if z1 > 0 else n - 1
+        a0 = np.searchsorted(s, z0) if z0 > 0 else 0
+        a1 = np.searchsorted(s, total - z1) - 1 if z1 > 0 else n - 1
         a1 = max(a1, a0)
     else:
-        a0 = a1 = int(np.searchsorted(s, 0.5 * total))
+        a0 = np.searchsorted(s, 0.5 * total)
+        a1 = a0
     k = max(3, int(round(2.0 * radius_px + 2.0)))
-    tol = max(_WALL_TOL_MIN_PX, _WALL_TOL * float(radius_px))
-    pieces, followed = [None, None], [False, False]
-    for end, (a, z) in enumerate(((a0, z0), (a1, z1))):
+    max_ref = 2.0 * radius_px + 3.0
+    piece0 = np.empty((0, 2))
+    piece1 = np.empty((0, 2))
+    f0 = False
+    f1 = False
+    for end in range(2):
+        a = a0 if end == 0 else a1
+        z = z0 if end == 0 else z1
         if z <= 0:
             continue
         # the direction at the zone's edge from the centreline beyond it (one-sided: the
         # zone's side is the hook)
-        t = p[a] - p[min(a + k, n - 1)] if end == 0 else p[a] - p[max(a - k, 0)]
-        norm = math.hypot(t[0], t[1])
+        b = min(a + k, n - 1) if end == 0 else max(a - k, 0)
+        tr = p[a, 0] - p[b, 0]
+        tc = p[a, 1] - p[b, 1]
+        norm = math.hypot(tr, tc)
         if norm < 1e-9:
             continue
-        t = t / norm
-        length = float(s[a] if end == 0 else total - s[a])
-        r_px = float(radius_px)
-        runs = []
-        for side in (1.0, -1.0):
-            pts, ok = _follow_wall(dt, float(p[a, 0]), float(p[a, 1]), float(t[0]),
-                                   float(t[1]), side, length, tol, 2.0 * r_px + 3.0,
-                                   _WALL_MAX_TURN, _WALL_DAMP)
-            if ok:
-                runs.append(pts)
-        if len(runs) == 1:
-            pieces[end], followed[end] = runs[0], True
-        elif runs:
-            m = min(len(runs[0]), len(runs[1]))
-            pieces[end], followed[end] = 0.5 * (runs[0][:m] + runs[1][:m]), True
-    if not any(followed) or (a0 == a1 and not all(followed)):
-        return p, (False, False)
-    head = pieces[0][::-1][:-1] if followed[0] else p[:a0]
-    tail = pieces[1][1:] if followed[1] else p[a1 + 1:]
-    return np.vstack([head, p[a0:a1 + 1], tail]), tuple(followed)
+        tr /= norm
+        tc /= norm
+        length = s[a] if end == 0 else total - s[a]
+        pa, oka = _follow_wall(dt, p[a, 0], p[a, 1], tr, tc, 1.0, length, tol, max_ref,
+                               max_turn, damp)
+        pb, okb = _follow_wall(dt, p[a, 0], p[a, 1], tr, tc, -1.0, length, tol, max_ref,
+                               max_turn, damp)
+        if oka and okb:
+            m = min(pa.shape[0], pb.shape[0])
+            piece = 0.5 * (pa[:m] + pb[:m])
+        elif oka:
+            piece = pa.copy()
+        elif okb:
+            piece = pb.copy()
+        else:
+            continue
+        if end == 0:
+            piece0 = piece
+            f0 = True
+        else:
+            piece1 = piece
+            f1 = True
+    if not (f0 or f1) or (a0 == a1 and not (f0 and f1)):
+        return p, False, False
+    nh = piece0.shape[0] - 1 if f0 else a0
+    nt = piece1.shape[0] - 1 if f1 else n - 1 - a1
+    mid = a1 - a0 + 1
+    out = np.empty((nh + mid + nt, 2))
+    for i in range(nh):
+        out[i] = piece0[piece0.shape[0] - 1 - i] if f0 else p[i]
+    out[nh:nh + mid] = p[a0:a1 + 1]
+    for i in range(nt):
+        out[nh + mid + i] = piece1[i + 1] if f1 else p[a1 + 1 + i]
+    return out, f0, f1
 
 
 def _fork_zone_px(width_px, r_j, touching_px, smooth_px):
