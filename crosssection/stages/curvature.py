@@ -560,6 +560,8 @@ def _paper_job(p, *, closed, n_br, thickness_px, px_per_mm, smooth_px, trims, wi
             kappa_px = kin
         else:
             kappa_px = np.empty(n)
+            if ends == "shift":
+                kin = _flat_shifted(kin, s_px[t0:t1], half_w)
             kappa_px[t0:t1] = kin
             kappa_px[:t0] = kin[0]
             kappa_px[t1:] = kin[-1]
@@ -582,6 +584,28 @@ def _prepared_path(path_rc, closed):
     if closed and len(p) > 1 and np.all(p[0] == p[-1]):
         p = p[:-1]  # the repeated closing pixel would count twice
     return p, closed
+
+
+def _flat_shifted(kin, s, half_w):
+    """The fits of the samples within ``half_w`` of an end of the fitted part ``s`` (px):
+    they all fit the window next to that end, so they hold its fit read at its centre, the
+    nearest sample fitted on a window centred on it.
+
+    Read again in the tangent frame of every end sample, the same window gave a curvature
+    that turns with the skeleton's last pixels: where the skeleton hooks into a fork of merged
+    ink the end samples' frames turn with the hook and the parabola, fitted in a frame
+    oblique to the window, bent with them (a 7-layer link between two forks, drawn as the
+    rod lies and blurred by 0.75 px: ``int kappa^2 ds`` 87 times its neighbour scan's, at
+    the curvature bound at its end; docs/validation/README.md, "Shifted windows").
+    """
+    c0 = int(np.searchsorted(s, s[0] + half_w))
+    c1 = int(np.searchsorted(s, s[-1] - half_w, side="right"))
+    if not 0 <= c0 < c1 <= len(kin):
+        return kin
+    k = np.array(kin, dtype=float)
+    k[:c0] = k[c0]
+    k[c1:] = k[c1 - 1]
+    return k
 
 
 def _stack_job(path_rc, *, n_br, thickness_px, px_per_mm, closed, smooth_px, trim_px,
