@@ -11,8 +11,9 @@ fit on size 5 n_br h, after coordinates translation and rotation in the tangent 
    ``w = 5 n_br h``, are rotated into the local tangent frame and ``y = a x^2 + b x + c`` is
    fitted; ``kappa = 2 a / (1 + b^2)^1.5``. The known leak of a circle's x^4 term into ``a``
    is removed (``circle_correction``: exact to O((kappa w)^2) on arcs). Near an open end the
-   window keeps its length and is shifted inwards. The window is capped at half the fitted
-   length (``max_window_frac``): a longer parabola cannot resolve an S-shaped stack.
+   window keeps its length and is shifted inwards; the samples it serves hold its fit read at
+   its centre (:func:`_flat_shifted`). The window is capped at half the fitted length
+   (``max_window_frac``): a longer parabola cannot resolve an S-shaped stack.
 3. **Fork zones.** Near a junction the bands of the stacks meeting there overlap: the image
    holds no centreline of this stack, and the skeleton hooks into the medial-axis fork point.
    The maximal disc at the fork (radius r_J, the inscribed ink radius at the junction) touches
@@ -593,10 +594,10 @@ def _flat_shifted(kin, s, half_w):
 
     Read again in the tangent frame of every end sample, the same window gave a curvature
     that turns with the skeleton's last pixels: where the skeleton hooks into a fork of merged
-    ink the end samples' frames turn with the hook and the parabola, fitted in a frame
-    oblique to the window, bent with them (a 7-layer link between two forks, drawn as the
-    rod lies and blurred by 0.75 px: ``int kappa^2 ds`` 87 times its neighbour scan's, at
-    the curvature bound at its end; docs/validation/README.md, "Shifted windows").
+    ink, the end samples' frames turn with the hook, and the parabola, fitted in a frame
+    oblique to the window, bends with them. A 7-layer link between two forks of a compacted
+    rod, blurred by 0.75 px, read 87 times the ``int kappa^2 ds`` it read unblurred, at the
+    curvature bound at its end (docs/validation/README.md, "Shifted end windows").
     """
     c0 = int(np.searchsorted(s, s[0] + half_w))
     c1 = int(np.searchsorted(s, s[-1] - half_w, side="right"))
