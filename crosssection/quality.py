@@ -210,10 +210,10 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
         The scan's (rows, cols): the ``hole_cut`` check (not made without it).
     file_px_per_mm : float, optional
         The resolution the scan file records
-        (:func:`crosssection.stages.load.recorded_px_per_mm`): the ``scale_mismatch`` check
+        (:func:`crosssection.stages.load.recorded_header`): the ``scale_mismatch`` check
         (not made without it).
     file_pages : int
-        Images the scan file holds (:func:`crosssection.stages.load.recorded_pages`): the
+        Images the scan file holds (:func:`crosssection.stages.load.recorded_header`): the
         ``pages`` check.
 
     Returns

@@ -599,9 +599,8 @@ def _flat_shifted(kin, s, half_w):
     rod, blurred by 0.75 px, read 87 times the ``int kappa^2 ds`` it read unblurred, at the
     curvature bound at its end (docs/validation/README.md, "Shifted end windows").
     """
-    c0 = int(np.searchsorted(s, s[0] + half_w))
-    c1 = int(np.searchsorted(s, s[-1] - half_w, side="right"))
-    if not 0 <= c0 < c1 <= len(kin):
+    c0, c1 = _centred_fits(s, 0, len(s), half_w)
+    if c0 >= c1:
         return kin
     k = np.array(kin, dtype=float)
     k[:c0] = k[c0]

@@ -473,15 +473,6 @@ def recorded_header(path) -> tuple[float | None, int]:
     return 0.5 * (x + y) / 25.4, pages
 
 
-def recorded_px_per_mm(path) -> float | None:
-    """The resolution a scan file records, in px/mm, or None (:func:`recorded_header`)."""
-    return recorded_header(path)[0]
-
-
-def recorded_pages(path) -> int:
-    """How many images a scan file holds; 1 when unknown (:func:`recorded_header`)."""
-    return recorded_header(path)[1]
-
 
 def load_image(path) -> np.ndarray:
     """Read a scan as an RGB array at native dtype.

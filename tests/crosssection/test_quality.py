@@ -321,15 +321,15 @@ def test_a_scale_other_than_the_files_recorded_resolution_is_flagged(scene, tmp_
 def test_the_recorded_resolution_of_png_tiff_and_jpeg(tmp_path, dpi, expected):
     from PIL import Image
 
-    from crosssection.stages.load import recorded_px_per_mm
+    from crosssection.stages.load import recorded_header
 
     rgb = np.zeros((32, 32, 3), np.uint8)
     for ext in ("png", "tif", "jpg"):
         path = tmp_path / f"scan.{ext}"
         Image.fromarray(rgb).save(path, **({"dpi": dpi} if dpi else {}))
-        got = recorded_px_per_mm(path)
+        got = recorded_header(path)[0]
         assert (got is None) if expected is None else got == pytest.approx(expected, rel=1e-3)
-    assert recorded_px_per_mm(tmp_path / "missing.png") is None
+    assert recorded_header(tmp_path / "missing.png")[0] is None
 
 
 def test_a_file_holding_several_scans_is_flagged(scene, tmp_path):
@@ -337,15 +337,15 @@ def test_a_file_holding_several_scans_is_flagged(scene, tmp_path):
     # would be left out without a word
     import tifffile
 
-    from crosssection.stages.load import recorded_pages
+    from crosssection.stages.load import recorded_header
 
     one, three = tmp_path / "one.tif", tmp_path / "three.tif"
     tifffile.imwrite(one, scene.rgb, photometric="rgb")
     with tifffile.TiffWriter(three) as tif:
         for k in range(3):
             tif.write(np.roll(scene.rgb, 7 * k, axis=1), photometric="rgb")
-    assert recorded_pages(one) == 1 and recorded_pages(three) == 3
-    assert recorded_pages(tmp_path / "missing.tif") == 1
+    assert recorded_header(one)[1] == 1 and recorded_header(three)[1] == 3
+    assert recorded_header(tmp_path / "missing.tif")[1] == 1
     res1, _ = _analyze(str(one), **_given(scene))
     res3, caught = _analyze(str(three), **_given(scene))
     assert "pages" not in res1.summary["quality"]["codes"] and res1.summary["file_pages"] == 1
