@@ -61,7 +61,7 @@ from crosssection._version import __version__
 from crosssection.core.errors import ConfigError, FoldstatError, ParameterError
 from crosssection.core.fileio import write_csv, write_json
 from crosssection.core.parallel import get_executor, spawn_seeds
-from crosssection.params import AnalysisParams, add_analysis_arguments
+from crosssection.params import AnalysisParams, add_analysis_arguments, switched_off
 from crosssection.quality import QualityWarning
 from crosssection.setconfig import (DEFAULT_PARAMS, DEFAULT_SET_NAME, SET_FILE, SetConfig, check_params,
                         failed_set, load_set_config)
@@ -610,10 +610,7 @@ def run(args) -> int:
         raise ParameterError(f"--workers must be >= 1, got {args.workers}", args.input_dir)
     cli_params = {k: v for k, v in AnalysisParams.from_cli_args(args).to_dict().items()
                   if getattr(args, k, None) is not None}
-    if getattr(args, "no_merge_thick_crossings", False):
-        cli_params["merge_thick_crossings"] = False
-    if getattr(args, "no_integer_refinement", False):
-        cli_params["integer_refinement"] = False
+    cli_params.update(switched_off(args))
     index = run_batch(args.input_dir, args.out, workers=args.workers, scheduler=args.scheduler,
                       seed=args.seed, figure=not args.no_figure, cli_params=cli_params,
                       force=args.force,

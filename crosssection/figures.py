@@ -88,11 +88,23 @@ def overlay_figure(rgb, result=None, *, junctions_df=None, stacks_df=None, paths
     handles = [Line2D([], [], color=BULK_COLOR, lw=3, label="bulk"),
                Line2D([], [], color=PERIPHERY_COLOR, lw=3, label="periphery"),
                Line2D([], [], marker="o", mfc="none", mec="black", ls="none", label="junction")]
+    if len(_step_points(result)):
+        handles.append(Line2D([], [], marker="D", mfc="white", mec="black", ls="none",
+                              label="layer step"))
     head = title or "stacks: width and label = n_br"
     fig.suptitle(f"{head}   ({n_j} junctions, {m} stacks, {n_br_total} branches)",
                  fontsize=10, y=0.995, x=0.01, ha="left")
-    fig.legend(handles=handles, loc="upper right", ncol=3, fontsize=8, frameon=False)
+    fig.legend(handles=handles, loc="upper right", ncol=len(handles), fontsize=8,
+               frameon=False)
     return fig
+
+
+def _step_points(result) -> np.ndarray:
+    """(x, y) of the result's layer steps (graph nodes of kind ``"step"``), (0, 2) if none."""
+    graph = _get(result, "graph")
+    kinds = _get(graph, "node_kind", {}) or {}
+    rc = [graph.node_rc[n] for n, k in kinds.items() if k == "step"]
+    return np.asarray(rc, float)[:, ::-1] if rc else np.zeros((0, 2))
 
 
 def draw_overlay(ax, rgb, result=None, *, junctions_df=None, stacks_df=None, paths=None,
@@ -165,6 +177,11 @@ def draw_overlay(ax, rgb, result=None, *, junctions_df=None, stacks_df=None, pat
         ax.scatter(junctions_df["x_px"], junctions_df["y_px"],
                    s=max(12.0, (2.5 * thickness_px * pt_per_px) ** 2), facecolors="none",
                    edgecolors="black", linewidths=1.0, zorder=3)
+    steps = _step_points(result)
+    if len(steps):
+        ax.scatter(steps[:, 0], steps[:, 1], marker="D",
+                   s=max(10.0, (1.5 * thickness_px * pt_per_px) ** 2), facecolors="white",
+                   edgecolors="black", linewidths=0.8, zorder=3)
     if hole is not None:
         ax.add_patch(Circle((hole.center_rc[1], hole.center_rc[0]), hole.radius_px, fill=False,
                             ls="--", lw=1.2, ec="0.25", zorder=2))

@@ -21,7 +21,18 @@ from crosssection.core.errors import FoldstatError, ParameterError
 from crosssection.core.fileio import read_toml
 
 __all__ = ["ScanScale", "AnalysisParams", "add_analysis_arguments", "check_param", "PARAM_NAMES",
-           "THRESHOLD_METHODS", "CURVATURE_METHODS", "SKELETON_METHODS", "WIDTH_STATISTICS"]
+           "THRESHOLD_METHODS", "CURVATURE_METHODS", "SKELETON_METHODS", "WIDTH_STATISTICS",
+           "SWITCHES", "switched_off"]
+
+#: The parameters that are on by default, each turned off by ``--no-<name>`` on the command
+#: line (its help text here).
+SWITCHES = {
+    "merge_thick_crossings": "keep the two junctions of a crossing of thick stacks apart",
+    "integer_refinement": "branch counts: the rounded least squares, without the integer "
+                          "search and the MILP fallback",
+    "layer_steps": "one stack between two junctions even where its width steps by whole "
+                   "layers (the paper's stacks)",
+}
 
 THRESHOLD_METHODS = ("auto", "fixed", "otsu")
 #: the first is the default (crosssection.stages.curvature, step 3)
@@ -148,6 +159,10 @@ class AnalysisParams:
         "improve the rounded least-squares branch counts by exact integer moves, and by the "
         "MILP on small components the moves leave unbalanced; off: the rounding is the "
         "result", cli=False))
+    layer_steps: bool = field(default=True, metadata=_opt(
+        "cut a stack where its width steps by whole layers along it (layers ending inside "
+        "the band: a rod end, or folds at a band's end while a layer goes on); off: one "
+        "stack between two junctions, the paper's", cli=False))
 
     # ------------------------------------------------------------------ validation
     def __post_init__(self):
@@ -252,10 +267,7 @@ class AnalysisParams:
         values = {name: getattr(args, name, None) for name in PARAM_NAMES}
         if values.get("calibration"):
             values["calibration"] = str(Path(values["calibration"]).resolve())
-        if getattr(args, "no_merge_thick_crossings", False):
-            values["merge_thick_crossings"] = False
-        if getattr(args, "no_integer_refinement", False):
-            values["integer_refinement"] = False
+        values.update(switched_off(args))
         return cls.from_mapping(values, path=path)
 
     def to_dict(self) -> dict:
@@ -344,8 +356,8 @@ def check_param(name: str, value):
     """Validate and normalise one parameter value (``ParameterError`` naming it)."""
     if value is None:
         if name in ("px_per_mm", "thickness_mm", "l_min_mm", "merge_px", "sliver_width_h",
-                    "threshold_method", "curvature_method", "merge_thick_crossings",
-                    "skeleton_method", "width_statistic", "integer_refinement"):
+                    "threshold_method", "curvature_method", "skeleton_method",
+                    "width_statistic") + tuple(SWITCHES):
             raise ParameterError(f"{name} is required")
         return None
     if name in _POSITIVE:
@@ -377,7 +389,7 @@ def check_param(name: str, value):
         return _choice(name, value, SKELETON_METHODS)
     if name == "width_statistic":
         return _choice(name, value, WIDTH_STATISTICS)
-    if name in ("merge_thick_crossings", "integer_refinement"):
+    if name in SWITCHES:
         if not isinstance(value, bool):
             raise ParameterError(f"{name} must be true or false, got {value!r}")
         return value
@@ -428,10 +440,12 @@ def add_analysis_arguments(parser, *, exclude=()) -> None:
             kwargs["nargs"] = meta["nargs"]
             kwargs["metavar"] = meta["metavar"]
         group.add_argument("--" + f.name.replace("_", "-"), dest=f.name, **kwargs)
-    if "merge_thick_crossings" not in exclude:
-        group.add_argument("--no-merge-thick-crossings", action="store_true",
-                           help="keep the two junctions of a crossing of thick stacks apart")
-    if "integer_refinement" not in exclude:
-        group.add_argument("--no-integer-refinement", action="store_true",
-                           help="branch counts: the rounded least squares, without the "
-                                "integer search and the MILP fallback")
+    for name, help_text in SWITCHES.items():
+        if name not in exclude:
+            group.add_argument("--no-" + name.replace("_", "-"), action="store_true",
+                               help=help_text)
+
+
+def switched_off(args) -> dict:
+    """``{name: False}`` for every :data:`SWITCHES` parameter whose ``--no-`` option is set."""
+    return {name: False for name in SWITCHES if getattr(args, "no_" + name, False)}

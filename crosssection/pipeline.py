@@ -39,13 +39,13 @@ from crosssection.params import AnalysisParams
 from crosssection.result import AnalysisResult, write_step_images
 from crosssection.stages import curvature, hole as hole_stage, voids as void_stage
 from crosssection.stages.clean import clean_mask
-from crosssection.stages.graph import stack_graph
+from crosssection.stages.graph import split_stacks, stack_graph
 from crosssection.stages.load import as_rgb, load_image, recorded_header
 from crosssection.stages.packs import compute_packs
 from crosssection.stages.skeleton import skeletonize_mask
 from crosssection.stages.threshold import (BRIDGE_MAX_H_PX, bridge_broken_lines,
                                            colour_features, threshold_rgb)
-from crosssection.stages.widths import stack_widths_px
+from crosssection.stages.widths import layer_steps, stack_widths_px, width_profiles_px
 
 __all__ = ["analyze", "preprocess", "Preprocessed", "AnalysisResult", "write_step_images"]
 
@@ -300,8 +300,16 @@ def _analyze(image, params, overrides) -> AnalysisResult:
     pre = _preprocess(image, p, timer)
     sg, h_px, scale = pre.graph, p.thickness_px, p.scale
     with timer("widths"):
+        # layers ending inside a band leave no junction: the band is cut where its width steps
+        profiles = width_profiles_px(sg.paths, pre.distance_px)
+        cuts = layer_steps(sg, pre.distance_px, lambda w: cal.layers(scale.to_mm(w)),
+                           thickness_px=h_px, profiles=profiles) if p.layer_steps else {}
+        if cuts:
+            sg, profiles = split_stacks(sg, cuts), None
+            pre = dataclasses.replace(pre, graph=sg)
         width_mm = scale.to_mm(stack_widths_px(sg, pre.distance_px, junction_margin_px=2 * h_px,
-                                               statistic=p.width_statistic))
+                                               statistic=p.width_statistic,
+                                               profiles=profiles))
         layers_est = np.asarray(cal.layers(width_mm), dtype=float)
     with timer("packs"):
         packs = compute_packs(sg, tangent_px=scale.to_px(p.tangent_used_mm))

@@ -343,7 +343,7 @@ def _stack_checks(params, stacks, calibration_max_width_mm) -> list[QualityFlag]
     m = len(stacks)
     if not m:
         return flags
-    free = (stacks["junction_a"] < 0) & (stacks["junction_b"] < 0) & (stacks["kind"] != "loop")
+    free = (stacks["junction_a"] < 0) & (stacks["junction_b"] < 0) & (stacks["kind"] == "free_end")
     specks = int((free & (stacks["length_mm"] < 2 * params.l_min_mm)).sum())
     if _frac(specks, m) > 0.05:
         flags.append(QualityFlag("specks", f"{specks} of {m} stacks are short isolated pieces "

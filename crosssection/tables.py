@@ -45,11 +45,16 @@ def _end_junctions(graph):
 
 
 def stack_kinds(graph) -> list[str]:
-    """``"junction"`` (both ends at junctions), ``"free_end"`` or ``"loop"`` per stack."""
-    ja, jb = _end_junctions(graph)
-    return ["loop" if graph.node_kind[u] == "loop" else
-            ("junction" if (ja[i] >= 0 and jb[i] >= 0) else "free_end")
-            for i, (u, _v) in enumerate(graph.ends)]
+    """Per stack: ``"loop"`` (a closed loop without junction), ``"step"`` (an end where the
+    band's layer count steps, :func:`crosssection.stages.widths.layer_steps`), ``"free_end"``
+    (an end of the skeleton) or ``"junction"`` (both ends at junctions)."""
+    kind = graph.node_kind
+    out = []
+    for u, v in graph.ends:
+        ku, kv = kind[u], kind[v]
+        out.append("loop" if ku == "loop" else "step" if "step" in (ku, kv) else
+                   "free_end" if "end" in (ku, kv) else "junction")
+    return out
 
 
 def stack_table(graph, *, length_mm, width_mm, layers_est, n_br, fixed_by_width, regions,
@@ -273,6 +278,7 @@ def summary(*, pre, params, linear_system, junctions, stacks, branches, voids, r
                                   zip(*np.unique(deg, return_counts=True))} if len(deg) else {},
         "n_loops": int(sum(1 for k in kinds if k == "loop")),
         "n_free_end_stacks": int(sum(1 for k in kinds if k == "free_end")),
+        "n_layer_steps": int(sum(1 for k in pre.graph.node_kind.values() if k == "step")),
         "file_px_per_mm": pre.file_px_per_mm,
         "file_pages": pre.file_pages,
         "thresholds": pre.threshold.as_summary(),
@@ -314,7 +320,8 @@ def network_graph(junctions: pd.DataFrame, stacks: pd.DataFrame,
     -------
     networkx.MultiGraph
         Junction nodes are keyed by ``junction_id`` with the junction table's columns as
-        attributes and ``kind="junction"``. A stack end that meets no junction is a node
+        attributes and ``kind="junction"``. A stack end that meets no junction (a free end, or
+        a layer step where the table does not say which stack goes on) is a node
         ``"end<stack_id>a"`` or ``"end<stack_id>b"`` (``kind="free_end"``, at no position); a
         closed loop without junction is a self-loop on a node ``"loop<stack_id>"``
         (``kind="loop"``). Each stack is one edge, keyed by its ``stack_id``, with the stack

@@ -24,7 +24,21 @@ from functools import lru_cache
 
 import numpy as np
 
-__all__ = ["length", "mid_point", "smooth", "smooth_paths", "smoothed_lengths", "is_closed"]
+__all__ = ["length", "mid_point", "smooth", "smooth_paths", "smoothed_lengths", "is_closed",
+           "concat_paths"]
+
+
+def concat_paths(paths) -> tuple[np.ndarray, np.ndarray]:
+    """Pixel paths in one array: ``(flat, offsets)``, path ``i`` being
+    ``flat[offsets[i]:offsets[i + 1]]`` ((N, 2) int64; ``(0, 2)`` when all are empty)."""
+    lens = np.fromiter((len(p) for p in paths), dtype=np.int64, count=len(paths))
+    offs = np.zeros(len(paths) + 1, dtype=np.int64)
+    np.cumsum(lens, out=offs[1:])
+    if offs[-1]:
+        flat = np.concatenate([np.asarray(p, dtype=np.int64).reshape(-1, 2) for p in paths])
+    else:
+        flat = np.zeros((0, 2), np.int64)
+    return flat, offs
 
 
 def _as_points(path_rc) -> np.ndarray:

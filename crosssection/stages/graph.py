@@ -7,7 +7,9 @@ kinds of synthetic nodes keep every skeleton pixel in some stack:
 
 - ``"end"``: a free end of the skeleton (a rod end, or a stack cut by the image);
 - ``"loop"``: one node on a closed skeleton loop without any junction (its path starts and ends
-  on that node's pixel).
+  on that node's pixel);
+- ``"step"``: where a stack's layer count steps along its path, some of its layers ending
+  inside the band (added by :func:`split_stacks` once the widths are read).
 
 Every non-junction skeleton pixel has at most two neighbours, so the non-junction pixels form
 chains, each one stack: it is followed from a junction pixel, a free end or a loop start, all
@@ -44,8 +46,8 @@ class StackGraph:
     node_rc : dict[int, ndarray]
         (row, col) float position of every node.
     node_kind : dict[int, str]
-        ``"junction"`` (ids 0..K-1, the order of ``Junctions.centers_rc``), ``"end"`` or
-        ``"loop"`` (ids >= K).
+        ``"junction"`` (ids 0..K-1, the order of ``Junctions.centers_rc``), ``"end"``,
+        ``"loop"`` or ``"step"`` (ids >= K).
     paths : list of (P, 2) int arrays
         ``paths[stack_id]``: (row, col) skeleton pixels ordered from node u to node v. A path
         leaving a junction starts on the junction pixel it touches and ends on the junction
@@ -414,6 +416,68 @@ def _build_stack_graph(sk: _Padded, junctions: Junctions, smooth_px: int) -> Sta
         lengths = np.zeros(0)
     return StackGraph(graph=g, node_rc=node_rc, node_kind=node_kind, paths=paths, ends=ends,
                       length_px=np.asarray(lengths, dtype=float))
+
+
+def split_stacks(sg: StackGraph, cuts: dict, *, smooth_px: int = 5) -> StackGraph:
+    """The graph with stacks cut at layer steps (:func:`crosssection.stages.widths.layer_steps`).
+
+    Each cut is a new node of kind ``"step"`` at the path pixel where it lies; the first part
+    of a cut stack keeps its id, the others are numbered after the existing stacks (in the
+    order of ``cuts``). Both parts hold the cut pixel, as the paths leaving a junction hold
+    its pixel. ``sg`` is not modified.
+
+    Parameters
+    ----------
+    sg : StackGraph
+    cuts : dict stack_id -> list of int
+        Ascending path indices, strictly inside each path.
+    smooth_px : int
+        Sliding-average window of the lengths (as :func:`build_stack_graph`).
+
+    Returns
+    -------
+    StackGraph
+    """
+    if not cuts:
+        return sg
+    g = sg.graph.copy()
+    node_rc, node_kind = dict(sg.node_rc), dict(sg.node_kind)
+    paths, ends = list(sg.paths), list(sg.ends)
+    changed = []
+    nid = max(node_kind) + 1 if node_kind else 0
+    for sid in sorted(cuts):
+        path = sg.paths[sid]
+        u, v = sg.ends[sid]
+        g.remove_edge(u, v, key=sid)
+        bounds = [0, *[int(c) for c in cuts[sid]], len(path) - 1]
+        nodes = [u]
+        for c in bounds[1:-1]:
+            node_rc[nid] = np.asarray(path[c], dtype=float)
+            node_kind[nid] = "step"
+            g.add_node(nid)
+            nodes.append(nid)
+            nid += 1
+        nodes.append(v)
+        for i in range(len(bounds) - 1):
+            k = sid if i == 0 else len(paths)
+            part = path[bounds[i]:bounds[i + 1] + 1]
+            if i == 0:
+                paths[k], ends[k] = part, (nodes[0], nodes[1])
+            else:
+                paths.append(part)
+                ends.append((nodes[i], nodes[i + 1]))
+            g.add_edge(nodes[i], nodes[i + 1], key=k, stack_id=k)
+            changed.append(k)
+    lengths = np.concatenate([np.asarray(sg.length_px, float),
+                              np.zeros(len(paths) - len(sg.paths))])
+    changed = np.asarray(sorted(changed), np.int64)
+    rc, offs = polyline.concat_paths([paths[k] for k in changed])
+    u_rc = np.array([node_rc[ends[k][0]] for k in changed])
+    v_rc = np.array([node_rc[ends[k][1]] for k in changed])
+    lengths[changed] = _stack_lengths(rc, offs, u_rc, v_rc, np.zeros(len(changed), bool),
+                                      int(smooth_px))
+    return StackGraph(graph=g, node_rc=node_rc, node_kind=node_kind, paths=paths, ends=ends,
+                      length_px=lengths)
 
 
 def short_junction_links(sg: StackGraph, radius_px) -> list[int]:

@@ -29,9 +29,18 @@ import numpy as np
 from numba import njit
 
 from crosssection.core.calibration import Calibration
+from crosssection.core.polyline import concat_paths
 from crosssection.core.errors import ParameterError
 
-__all__ = ["stack_widths", "stack_widths_px", "path_width_profile_px", "Calibration"]
+__all__ = ["stack_widths", "stack_widths_px", "path_width_profile_px", "width_profiles_px",
+           "layer_steps", "Calibration"]
+
+#: A level of :func:`layer_steps` is at least this many of its own widths long.
+STEP_SIDE_WIDTHS = 3.0
+#: Largest distance (layers) of a smoothed sample to a whole number of layers on a level.
+STEP_ON_LEVEL = 0.3
+#: Longest transition between two levels of a step, in widths of the wider.
+STEP_TRANSITION_WIDTHS = 3.0
 
 
 def _segment_medians(values, seg, n_seg) -> np.ndarray:
@@ -162,20 +171,9 @@ def _walk_widths(pr, pc, nr, nc, d_path, j0, dist, step):  # pragma: no cover - 
     return out
 
 
-def _concat(paths):
-    lens = np.fromiter((len(p) for p in paths), dtype=np.int64, count=len(paths))
-    offs = np.zeros(len(paths) + 1, dtype=np.int64)
-    np.cumsum(lens, out=offs[1:])
-    if offs[-1]:
-        flat = np.concatenate([np.asarray(p, dtype=np.int64).reshape(-1, 2) for p in paths])
-    else:
-        flat = np.zeros((0, 2), np.int64)
-    return flat, offs
-
-
 def _profiles(paths, dist, *, step_px=0.25, normal_half_window=None):
     """Width profiles of many paths at once: (flat profile, offsets, flat path)."""
-    flat, offs = _concat(paths)
+    flat, offs = concat_paths(paths)
     dist = np.ascontiguousarray(dist, dtype=np.float32) if dist.dtype != np.float64 \
         else np.ascontiguousarray(dist)
     if len(flat) == 0:
@@ -187,6 +185,26 @@ def _profiles(paths, dist, *, step_px=0.25, normal_half_window=None):
     prof = _profiles_kernel(np.ascontiguousarray(flat[:, 0]), np.ascontiguousarray(flat[:, 1]),
                             offs, hw, dist, float(step_px))
     return prof, offs, flat
+
+
+def width_profiles_px(paths, distance_px: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`path_width_profile_px` of many paths at once.
+
+    Parameters
+    ----------
+    paths : list of (P, 2) int arrays
+    distance_px : 2-D float array
+
+    Returns
+    -------
+    profile : (N,) float array
+        The widths (px) of all paths' pixels, concatenated.
+    offsets : (M + 1,) int array
+        Path ``i`` is ``profile[offsets[i]:offsets[i + 1]]``.
+    """
+    prof, offs, _ = _profiles([np.asarray(p).reshape(-1, 2) for p in paths],
+                              np.asarray(distance_px))
+    return prof, offs
 
 
 def path_width_profile_px(path_rc: np.ndarray, distance_px: np.ndarray, *,
@@ -270,7 +288,8 @@ def _stack_medians(prof, pr, pc, offs, margin_abs, loop_u, loop_v, factor,
 
 
 def stack_widths_px(graph, distance_px: np.ndarray, *, junction_margin_px: float,
-                    margin_width_factor: float = 1.0, statistic: str = "median") -> np.ndarray:
+                    margin_width_factor: float = 1.0, statistic: str = "median",
+                    profiles=None) -> np.ndarray:
     """Width in pixels of every stack (median of the local width away from its ends).
 
     Parameters
@@ -289,6 +308,8 @@ def stack_widths_px(graph, distance_px: np.ndarray, *, junction_margin_px: float
     statistic : {"median", "mean"}
         Summary of the local widths kept (or, for a stack with fewer than 3 of them, of
         its central half). The samples kept are the same for both.
+    profiles : (profile, offsets), optional
+        :func:`width_profiles_px` of the graph's paths, if already computed.
 
     Returns
     -------
@@ -305,7 +326,10 @@ def stack_widths_px(graph, distance_px: np.ndarray, *, junction_margin_px: float
     paths = [np.asarray(p).reshape(-1, 2) for p in graph.paths]
     if not paths:
         return np.zeros(0)
-    prof, offs, flat = _profiles(paths, np.asarray(distance_px))
+    if profiles is None:
+        prof, offs, flat = _profiles(paths, np.asarray(distance_px))
+    else:
+        (prof, offs), (flat, _) = profiles, concat_paths(paths)
     kind = graph.node_kind
     loop_u = np.array([kind.get(u, "junction") == "loop" for u, _ in graph.ends], np.bool_)
     loop_v = np.array([kind.get(v, "junction") == "loop" for _, v in graph.ends], np.bool_)
@@ -339,3 +363,141 @@ def stack_widths(graph, distance_px: np.ndarray, *, px_per_mm: float,
         raise ValueError("px_per_mm must be positive")
     return stack_widths_px(graph, distance_px, junction_margin_px=junction_margin_px,
                            margin_width_factor=margin_width_factor) / float(px_per_mm)
+
+
+def layer_steps(graph, distance_px: np.ndarray, layers_of_px, *, thickness_px: float,
+                side_widths: float = STEP_SIDE_WIDTHS, on_level: float = STEP_ON_LEVEL,
+                max_transition_widths: float = STEP_TRANSITION_WIDTHS,
+                profiles=None) -> dict:
+    """Where a stack's layer count steps along it: some of its layers end inside the band.
+
+    A rod end lying in a band, or passes folding back at a band's end while one pass goes on
+    (a Z fold), leave ``n`` layers on one side and fewer on the other with no junction of the
+    skeleton between them: the ink narrows, the skeleton runs on. Read as one stack, the band
+    gets one count from its median width, and the rod length and energy are wrong by the
+    missing layers over the other part (a 13-mm band of 5 layers read as one single sheet
+    drops 52 mm of rod).
+
+    The local width along each path (:func:`path_width_profile_px`) is turned into layers and
+    smoothed by a running median over one band width. Runs of samples on one whole number of
+    layers (within ``on_level``) at least ``side_widths`` times their own width long are the
+    levels; two consecutive levels that differ, each at least ``side_widths`` widths of the
+    wider long, with at most ``max_transition_widths`` such widths between them, are a step,
+    placed at the middle of that transition. The parts
+    within one width (and at least ``2 h``) of a junction or free end, where the ink widens
+    into the junction or rounds off, are not read. Closed loops without a junction are not
+    split.
+
+    Parameters
+    ----------
+    graph : StackGraph
+    distance_px : 2-D float array
+        Distance transform of the cleaned mask.
+    layers_of_px : callable
+        Width in px -> continuous number of layers (the calibration at the scan's scale).
+    thickness_px : float
+        Sheet thickness h in px.
+    side_widths, on_level, max_transition_widths : float
+        See above.
+    profiles : (profile, offsets), optional
+        :func:`width_profiles_px` of the graph's paths, if already computed.
+
+    Returns
+    -------
+    dict stack_id -> list of int
+        Path indices where each stack with steps is to be split (ascending).
+    """
+    from scipy.ndimage import median_filter
+
+    paths = [np.asarray(p).reshape(-1, 2) for p in graph.paths]
+    if profiles is None:
+        profiles = width_profiles_px(paths, distance_px)
+    prof, offs = profiles
+    if len(prof) == 0:
+        return {}
+    # the calibration once on a grid of widths, then interpolated: its monotone inverse is
+    # a bisection, 60 passes over every path pixel otherwise
+    grid = np.linspace(0.0, float(np.nanmax(prof)) + 1.0, 512)
+    lay = np.interp(prof, grid, np.asarray(layers_of_px(grid), float))
+    kind = graph.node_kind
+    out = {}
+    for sid in _step_candidates(lay, prof, offs, thickness_px, 1.0 - 2.0 * on_level):
+        path = paths[sid]
+        a, b = int(offs[sid]), int(offs[sid + 1])
+        if kind.get(graph.ends[sid][0]) == "loop":
+            continue
+        x = lay[a:b]
+        w = prof[a:b]
+        s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(path, axis=0).T))])
+        lo = np.searchsorted(s, max(2.0 * thickness_px, w[0]))
+        hi = np.searchsorted(s, s[-1] - max(2.0 * thickness_px, w[-1]), side="right")
+        if hi - lo < 8:
+            continue
+        k = max(int(round(float(np.median(w[lo:hi])))) | 1, 5)
+        xs = median_filter(x[lo:hi], size=k, mode="nearest")
+        level = np.round(xs)
+        on = np.abs(xs - level) <= on_level
+        runs = _level_runs(level, on, s[lo:hi], w[lo:hi], side_widths)
+        cuts = []
+        ss = s[lo:hi]
+        for (a0, b0, l0, w0), (a1, b1, l1, w1) in zip(runs[:-1], runs[1:]):
+            wide = max(w0, w1)
+            # both sides long against the wider band: a thin tail shorter than that is
+            # the rounding of a band's end or a junction's ink, not a stack of its own
+            if l0 != l1 and ss[a1] - ss[b0 - 1] <= max_transition_widths * wide \
+                    and min(ss[b0 - 1] - ss[a0], ss[b1 - 1] - ss[a1]) >= side_widths * wide:
+                cuts.append(lo + (b0 - 1 + a1) // 2)
+        if cuts:
+            out[sid] = cuts
+    return out
+
+
+def _step_candidates(lay, prof, offs, thickness_px, min_range) -> np.ndarray:
+    """Stacks whose layer profile, averaged over ``2 h`` and away from their ends, spans at
+    least ``min_range`` layers: the only ones :func:`layer_steps` reads sample by sample
+    (all stacks at once; 0.5 ms on a dense 2000x2000 scan, against 15 ms for reading
+    every stack)."""
+    lens = np.diff(offs)
+    m = len(lens)
+    seg = np.repeat(np.arange(m), lens)
+    i = np.arange(len(lay)) - offs[:-1][seg]
+    n = lens[seg]
+    r = max(int(round(thickness_px)), 2)
+    lo = offs[:-1][seg] + np.maximum(i - r, 0)
+    hi = offs[:-1][seg] + np.minimum(i + r, n - 1)
+    cs = np.concatenate([[0.0], np.cumsum(np.nan_to_num(lay))])
+    mean = (cs[hi + 1] - cs[lo]) / (hi - lo + 1)
+    # path steps are at least one pixel: trimming by index trims at least as much arc
+    w_first = prof[offs[:-1][lens > 0]]
+    w_last = prof[offs[1:][lens > 0] - 1]
+    margin = np.zeros(m)
+    margin[lens > 0] = np.maximum(2.0 * thickness_px, np.maximum(w_first, w_last))
+    inner = (i >= margin[seg]) & (i < n - margin[seg])
+    top = np.full(m, -np.inf)
+    bottom = np.full(m, np.inf)
+    np.maximum.at(top, seg[inner], mean[inner])
+    np.minimum.at(bottom, seg[inner], mean[inner])
+    return np.flatnonzero(top - bottom >= min_range)
+
+
+def _level_runs(level, on, s, w, side_widths):
+    """Maximal runs of on-level samples of one level, kept when ``side_widths`` times their
+    median width long: ``(start, stop, level, width)``, consecutive kept runs of the same
+    level merged."""
+    runs = []
+    i, n = 0, len(level)
+    while i < n:
+        if not on[i]:
+            i += 1
+            continue
+        j = i
+        while j + 1 < n and on[j + 1] and level[j + 1] == level[i]:
+            j += 1
+        wr = float(np.median(w[i:j + 1]))
+        if s[j] - s[i] >= side_widths * wr:
+            if runs and runs[-1][2] == level[i]:
+                runs[-1] = (runs[-1][0], j + 1, level[i], max(runs[-1][3], wr))
+            else:
+                runs.append((i, j + 1, level[i], wr))
+        i = j + 1
+    return runs

@@ -272,10 +272,11 @@ def test_method_options_reach_their_stages():
     parser = argparse.ArgumentParser()
     add_analysis_arguments(parser)
     args = parser.parse_args(["--no-integer-refinement", "--skeleton-method", "skimage",
-                              "--width-statistic", "mean"])
+                              "--width-statistic", "mean", "--no-layer-steps"])
     cli = AnalysisParams.from_cli_args(args)
-    assert (cli.integer_refinement, cli.skeleton_method, cli.width_statistic) == (
-        False, "skimage", "mean")
+    assert (cli.integer_refinement, cli.skeleton_method, cli.width_statistic,
+            cli.layer_steps, cli.merge_thick_crossings) == (False, "skimage", "mean", False,
+                                                            True)
 
 
 def test_uniform_images_raise_analysis_error():
