@@ -467,12 +467,13 @@ def _step_candidates(lay, prof, offs, thickness_px, min_range) -> np.ndarray:
     hi = offs[:-1][seg] + np.minimum(i + r, n - 1)
     cs = np.concatenate([[0.0], np.cumsum(np.nan_to_num(lay))])
     mean = (cs[hi + 1] - cs[lo]) / (hi - lo + 1)
-    # path steps are at least one pixel: trimming by index trims at least as much arc
-    w_first = prof[offs[:-1][lens > 0]]
-    w_last = prof[offs[1:][lens > 0] - 1]
-    margin = np.zeros(m)
-    margin[lens > 0] = np.maximum(2.0 * thickness_px, np.maximum(w_first, w_last))
-    inner = (i >= margin[seg]) & (i < n - margin[seg])
+    # the ends' margins of layer_steps, in samples: a path step is 1 to sqrt(2) px long, so
+    # a sample that layer_steps reads is at least margin / sqrt(2) samples from its end
+    first = np.zeros(m)
+    last = np.zeros(m)
+    first[lens > 0] = np.maximum(2.0 * thickness_px, prof[offs[:-1][lens > 0]])
+    last[lens > 0] = np.maximum(2.0 * thickness_px, prof[offs[1:][lens > 0] - 1])
+    inner = (i >= first[seg] / np.sqrt(2.0)) & (i < n - last[seg] / np.sqrt(2.0))
     top = np.full(m, -np.inf)
     bottom = np.full(m, np.inf)
     np.maximum.at(top, seg[inner], mean[inner])
