@@ -8,8 +8,10 @@ Conventions
 -----------
 - Pixel coordinates are (row, col) internally; CSV columns say ``x_px`` (column) and
   ``y_px`` (row).
-- ``junction_a`` / ``junction_b`` of a stack are junction ids, or ``-1`` for a free rod end
-  or a closed loop without any junction.
+- ``junction_a`` / ``junction_b`` of a stack are junction ids, or ``-1`` for a free rod end,
+  a closed loop without any junction, or a layer step (the stack's ``kind`` column says
+  which: ``"free_end"``, ``"loop"`` or ``"step"``, where its band's layer count steps with
+  no junction, :func:`crosssection.stages.widths.layer_steps`).
 - ``region`` is ``"bulk"`` or ``"periphery"`` (paper, section "Two sub-systems").
 - Curvatures are in 1/mm, lengths in mm, areas in mm^2; ``energy`` is dimensionless,
   e = L * integral(kappa^2 ds) with L the rod length (paper, section "Energetical properties").
