@@ -424,7 +424,8 @@ def split_stacks(sg: StackGraph, cuts: dict, *, smooth_px: int = 5) -> StackGrap
     Each cut is a new node of kind ``"step"`` at the path pixel where it lies; the first part
     of a cut stack keeps its id, the others are numbered after the existing stacks (in the
     order of ``cuts``). Both parts hold the cut pixel, as the paths leaving a junction hold
-    its pixel. ``sg`` is not modified.
+    its pixel. A closed loop without junction (two cuts or more) becomes the arcs between its
+    steps, and its ``"loop"`` node goes. ``sg`` is not modified.
 
     Parameters
     ----------
@@ -449,18 +450,29 @@ def split_stacks(sg: StackGraph, cuts: dict, *, smooth_px: int = 5) -> StackGrap
         path = sg.paths[sid]
         u, v = sg.ends[sid]
         g.remove_edge(u, v, key=sid)
-        bounds = [0, *[int(c) for c in cuts[sid]], len(path) - 1]
-        nodes = [u]
-        for c in bounds[1:-1]:
+        loop = node_kind[u] == "loop"
+        at = [int(c) for c in cuts[sid]]
+        steps = []
+        for c in at:
             node_rc[nid] = np.asarray(path[c], dtype=float)
             node_kind[nid] = "step"
             g.add_node(nid)
-            nodes.append(nid)
+            steps.append(nid)
             nid += 1
-        nodes.append(v)
-        for i in range(len(bounds) - 1):
+        if loop:
+            # the loop's node goes: its path (whose first pixel closes it) is cut into the
+            # arcs between consecutive steps, the last one running on through that pixel
+            g.remove_node(u)
+            del node_rc[u], node_kind[u]
+            parts = [path[a:b + 1] for a, b in zip(at[:-1], at[1:])]
+            parts.append(np.concatenate([path[at[-1]:], path[1:at[0] + 1]]))
+            nodes = steps + [steps[0]]
+        else:
+            bounds = [0, *at, len(path) - 1]
+            parts = [path[a:b + 1] for a, b in zip(bounds[:-1], bounds[1:])]
+            nodes = [u, *steps, v]
+        for i, part in enumerate(parts):
             k = sid if i == 0 else len(paths)
-            part = path[bounds[i]:bounds[i + 1] + 1]
             if i == 0:
                 paths[k], ends[k] = part, (nodes[0], nodes[1])
             else:

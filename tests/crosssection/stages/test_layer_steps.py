@@ -164,3 +164,51 @@ def test_pipeline_counts_each_side_of_a_step():
     def legend(r):
         return [x.get_text() for x in overlay_figure(rgb, r).legends[0].get_texts()]
     assert "layer step" in legend(res) and "layer step" not in legend(paper)
+
+
+def _rolled_ring(h_px=5.0, radius_px=150.0, size=400):
+    """A rolled sheet's cross-section: a ring of 2 layers over half the turn and 3 over the
+    other half (the two rod ends lie in the band, at angles 0 and pi), the inner edge whole."""
+    rr, cc = np.mgrid[:size, :size].astype(float)
+    c = (size - 1) / 2
+    r = np.hypot(rr - c, cc - c)
+    n = np.where(np.arctan2(rr - c, cc - c) >= 0, 2, 3)
+    mask = (r >= radius_px) & (r <= radius_px + n * h_px)
+    rod_px = 2 * np.pi * (radius_px + h_px) + 3 * np.pi * (radius_px + 1.5 * h_px)
+    return mask, rod_px
+
+
+def test_a_rolled_ring_is_cut_at_its_two_steps():
+    h = 5.0
+    mask, rod_px = _rolled_ring(h)
+    sg, _, cuts = _cuts(mask, h)
+    assert sg.n_stacks == 1 and sg.node_kind[sg.ends[0][0]] == "loop"
+    assert len(cuts[0]) == 2
+    split = split_stacks(sg, cuts)
+    assert "loop" not in split.node_kind.values()
+    assert sorted(split.node_kind.values()) == ["step", "step"]
+    assert split.n_stacks == 2 and split.ends[0] == split.ends[1][::-1]
+    # the arcs hold the ring's pixels once each, the steps twice
+    assert sum(len(p) for p in split.paths) == len(sg.paths[0]) - 1 + 2
+    assert abs(split.length_px.sum() - sg.length_px[0]) < 3.0
+    c = (np.asarray(mask.shape) - 1) / 2
+    angles = sorted(np.arctan2(*(split.node_rc[n] - c)) for n in split.node_kind)
+    # the steps lie where the outer edge steps: at 0 and at +-pi, within one wide width
+    assert min(abs(angles[0] + np.pi), abs(angles[0])) * 150 < 3 * h
+    assert min(abs(angles[1] - np.pi), abs(angles[1])) * 150 < 3 * h
+
+
+def test_pipeline_reads_a_rolled_ring_by_its_two_parts():
+    mask, rod_px = _rolled_ring()
+    rgb = _scan(mask)
+    cy, cx = (np.asarray(mask.shape) - 1) / 2
+    kw = dict(px_per_mm=50.0, thickness_mm=0.1, calibration=Calibration.linear(0.1, n_max=20),
+              hole_center_px=(cx, cy), hole_radius_mm=0.5 * max(mask.shape) / 50.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = analyze(rgb, **kw)
+        paper = analyze(rgb, layer_steps=False, **kw)
+    assert sorted(res.stacks["n_br"]) == [2, 3] and set(res.stacks["kind"]) == {"step"}
+    assert abs(res.summary["rod_length_mm"] / (rod_px / 50.0) - 1) < 0.03
+    assert list(paper.stacks["kind"]) == ["loop"]
+    assert abs(paper.summary["rod_length_mm"] / (rod_px / 50.0) - 1) > 0.1
