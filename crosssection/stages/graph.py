@@ -472,13 +472,15 @@ def split_stacks(sg: StackGraph, cuts: dict, *, smooth_px: int = 5) -> StackGrap
             parts = [path[a:b + 1] for a, b in zip(bounds[:-1], bounds[1:])]
             nodes = [u, *steps, v]
         for i, part in enumerate(parts):
-            k = sid if i == 0 else len(paths)
+            end = (nodes[i], nodes[i + 1])
             if i == 0:
-                paths[k], ends[k] = part, (nodes[0], nodes[1])
+                k = sid
+                paths[k], ends[k] = part, end
             else:
+                k = len(paths)
                 paths.append(part)
-                ends.append((nodes[i], nodes[i + 1]))
-            g.add_edge(nodes[i], nodes[i + 1], key=k, stack_id=k)
+                ends.append(end)
+            g.add_edge(*end, key=k, stack_id=k)
             changed.append(k)
     lengths = np.concatenate([np.asarray(sg.length_px, float),
                               np.zeros(len(paths) - len(sg.paths))])
