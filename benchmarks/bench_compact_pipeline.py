@@ -329,6 +329,9 @@ def run(epsilons, *, segments, seed, conditions, work, overlays):
                        "junction_f1_fork": _fork_f1(scene, pair, h_px),
                        "rod_length_error": s["rod_length_rel_error"],
                        "total_energy_error": s["total_energy_rel_error"],
+                       "total_energy_rel_uncertainty": pair[0].get(
+                           "total_energy_rel_uncertainty"),
+                       "quality": ";".join(pair[0]["quality"]["codes"]),
                        "total_energy_out": s["total_energy"],
                        "total_energy_truth": s["total_energy_truth"],
                        "n_br_mean_abs_error": s["n_br_mean_abs_error"],

@@ -296,6 +296,8 @@ def run_one(condition: str, seed: int, folder: str, hole_given: bool = True) -> 
     with np.load(folder / f"{name}_lines.npz") as lines:
         row.update(score(truth, lines, res))
         row["hidden_energy_fraction"] = hidden_energy_fraction(truth, lines)
+    row["total_energy_rel_uncertainty"] = res.summary.get("total_energy_rel_uncertainty")
+    row["quality"] = ";".join(res.summary["quality"]["codes"])
     row["warnings"] = " | ".join(
         f"{w.category.__name__}: {str(w.message).split(': ', 1)[-1]}" for w in caught)
     return row

@@ -110,6 +110,7 @@ def run_one(condition: str, seed: int) -> dict:
     s = score((res.summary, res.tables), (scene.summary, scene.tables), match_px=3 * h_px)
     row.update({k: v for k, v in s.items() if np.isscalar(v)})
     row["quality"] = ";".join(res.summary["quality"]["codes"])
+    row["total_energy_rel_uncertainty"] = res.summary.get("total_energy_rel_uncertainty")
     row["n_warnings"] = len(caught)
     return row
 
