@@ -70,6 +70,12 @@ that the scan holds; one found with low confidence is not checked, ``hole_fitted
 already); the limit, 0.5 % of its area, is a segment about 16 px deep on a hole of
 400 px radius, and a hole reaching a pixel beyond the border stays below 0.01 %.
 
+The ``low_resolution`` check: at h < 3 px one pixel of width is a third of a layer or more,
+and the bending energy rests on windows of a few pixels. On the robust sweep's scans at 25
+px/mm (h = 2.5 px) the counts are exact on the network generator, but the same scan turned
+or mirrored reads an energy that moves by 23 % of the truth in the median (up to 109 %; at
+50 px/mm 5 %, ``benchmarks/orientation_spread.py``).
+
 The ``epsilon_ink`` check uses that a rod of length L and thickness h covers about L h of ink:
 a rod length far from the ink area means the layer counts or the threshold are wrong.
 """
@@ -238,7 +244,8 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
             value=params.px_per_mm / file_px_per_mm - 1.0, limit=SCALE_TOLERANCE))
     if h_px < 3.0:
         flags.append(QualityFlag("low_resolution", f"sheet thickness is {h_px:.2f} px (< 3 px): "
-                                 "layer counts from widths are unreliable", h_px, 3.0))
+                                 "layer counts from widths and bending energies are unreliable",
+                                 h_px, 3.0))
     if hole_confidence is not None and hole_confidence < 0.5:
         flags.append(QualityFlag("hole_fitted", f"hole found with low confidence "
                                  f"{hole_confidence:.2f}: pass hole_radius_mm and "

@@ -266,19 +266,22 @@ def test_short_link_fitted_whole_continues_its_trend_at_both_ends(l_px, r_px, se
     # whole; its curvature runs from 1/r to -1/r, so the shifted fits at both ends, flat at
     # one window's mean, miss the ends' bending. With the scan's noise known the trend of the
     # centred fits replaces them (a trend within the noise would not). Measured (seeds 0-2):
-    # paper 0.49-0.78 x the truth, trend 0.96-1.02 x; noise unknown: the shifted fits stay
+    # paper 0.49-0.78 x the truth, trend 0.96-1.02 x; noise unknown: the shifted fits stay.
+    # A measured noise of 0 (below what the lags resolve) is known: it reads as a noise just
+    # above 0, not as unknown
     rc, truth = _s_link(l_px, 1.0 / r_px)
     path = _noisy_pixel_path(rc + 50.0 + np.random.default_rng(seed).uniform(0, 1, 2), 0.0,
                              seed)
     kw = dict(n_br=1, thickness_px=H, px_per_mm=1.0, trim_px=(40.0, 40.0))
     e = {}
     for name, extra in (("paper", dict(method="paper")), ("trend", dict(noise_var_per_mm2=1e-6)),
-                        ("unknown", dict(noise_var_per_mm2=0.0))):
+                        ("zero", dict(noise_var_per_mm2=0.0)), ("unknown", dict())):
         prof = stack_curvature(path, **kw, **extra)
         assert (prof.fit_start, prof.fit_stop) == (0, len(prof.s_mm))  # fitted whole
         e[name] = np.trapezoid(prof.kappa_per_mm ** 2, prof.s_mm) / truth
     assert e["paper"] < 0.85
     assert e["trend"] == pytest.approx(1.0, abs=0.1)
+    assert e["zero"] == pytest.approx(e["trend"], rel=1e-6)
     assert e["unknown"] == pytest.approx(e["paper"], rel=1e-9)
 
 
@@ -498,8 +501,12 @@ def test_noise_variance_fallback_and_guards():
     v2 = noise_variance(profs + short, np.array([1, 1, 1, 2]), thickness_px=H,
                         px_per_mm=50.0)
     assert v2[2] == pytest.approx(v2[1] / 32.0) and v[1] > 0
-    # nothing measurable: no correction
+    # nothing measurable: no correction, or unknown when asked to say so
     assert noise_variance(short, [1], thickness_px=H, px_per_mm=50.0) == {1: 0.0}
+    assert noise_variance(short, [1], thickness_px=H, px_per_mm=50.0,
+                          unmeasured=None) == {1: None}
+    assert noise_variance(profs, np.ones(3, int), thickness_px=H, px_per_mm=50.0,
+                          unmeasured=None) == v
     # the energy never goes negative, and a bad variance is refused
     k = np.full(50, 0.01)
     s = np.linspace(0.0, 1.0, 50)

@@ -1,0 +1,54 @@
+"""The same scan turned, mirrored or saved again as JPEG reads the same.
+
+A quarter turn or a mirror moves pixels without changing them, and a JPEG round trip at
+quality 85-95 changes them by a few grey levels: the structure must not move, and the energy
+must not jump with a decision that one pixel tips (``benchmarks/orientation_spread.py``
+measures the spread on every condition of the robust sweep).
+"""
+from __future__ import annotations
+
+import io
+import warnings
+
+import numpy as np
+import pytest
+
+import crosssection
+
+
+def _analyze(rgb, **kw):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return crosssection.analyze(np.ascontiguousarray(rgb), **kw).summary
+
+
+def test_structure_does_not_depend_on_the_orientation():
+    # measured on 10 seeds of this kind and on the robust sweep's 16 scenes (typical, 25
+    # px/mm, thick dense, renders): branch counts identical, rod length within 0.15 %
+    from crosssection.truth.network import make_scene
+
+    scene = make_scene(seed=3, n_stacks=40, max_layers=4, noise_sigma=3.0, image_size=800)
+    kw = dict(px_per_mm=50.0, thickness_mm=0.1, calibration=scene.calibration)
+    out = [_analyze(np.rot90(scene.rgb[:, ::-1] if m else scene.rgb, k), **kw)
+           for m in (False, True) for k in range(4)]
+    for key in ("n_branches", "n_stacks", "n_junctions", "n_voids"):
+        assert len({s[key] for s in out}) == 1, key
+    rods = np.array([s["rod_length_mm"] for s in out])
+    assert rods.max() / rods.min() - 1.0 < 0.005
+
+
+def test_energy_does_not_jump_when_the_scan_is_saved_as_jpeg(sample_dir):
+    # the medium sample scan's curvature noise is measured at about 0: a JPEG copy read it as
+    # exactly 0, which was taken for "not measured", and its short links fitted whole kept
+    # their flat end fits: -26 % of the truth against -6 % for the PNG. Now -2 to -7 %.
+    from PIL import Image
+
+    rgb = np.array(Image.open(sample_dir / "scan_02_medium.png").convert("RGB"))
+    kw = dict(px_per_mm=50.0, calibration=str(sample_dir / "calibration.csv"))
+    ref = _analyze(rgb, **kw)
+    for quality in (95, 90, 85):
+        buf = io.BytesIO()
+        Image.fromarray(rgb).save(buf, "JPEG", quality=quality)
+        out = _analyze(np.array(Image.open(buf).convert("RGB")), **kw)
+        assert out["n_branches"] == ref["n_branches"]
+        assert out["total_energy"] == pytest.approx(ref["total_energy"], rel=0.08), quality
