@@ -1587,7 +1587,9 @@ def noise_variance(profiles, n_br, *, thickness_px: float, px_per_mm: float,
     smooth_px : int, optional
         Sliding-average window (default :func:`default_smooth_px`).
     min_pairs : int
-        Pairs needed for a window's own estimate.
+        Pairs at the first lag needed for a window's own estimate, counted one per pixel of
+        arc whatever the skeleton's direction (its samples are 1 to 1.4 px apart); the pooled
+        estimate weights each stack by the same count.
     unmeasured : float or None
         The value of every window when none could be measured. A measured estimate at or
         below 0 is 0: noise below what the lags resolve, which is not the same as unknown.
@@ -1612,7 +1614,10 @@ def noise_variance(profiles, n_br, *, thickness_px: float, px_per_mm: float,
             if any(x is None for x in lags):
                 continue
             per_stack.append(3.0 * lags[0][0] - 3.0 * lags[1][0] + lags[2][0])
-            weights.append(lags[0][1])
+            # pairs per pixel of arc, not per sample: a diagonal skeleton has 1.4 px between
+            # samples, and counting samples made a scan turned by 45 degrees lose its estimate
+            fitted = prof.s_mm[prof.fit_stop - 1] - prof.s_mm[prof.fit_start]
+            weights.append((fitted - lag) * float(px_per_mm))
         v, w = _without_outliers(np.asarray(per_stack, float), np.asarray(weights, float))
         if w.sum() >= min_pairs:
             measured[nb] = max(float(v @ w) / float(w.sum()), 0.0)
