@@ -116,7 +116,8 @@ def main(argv=None) -> int:
             rows += out
             r = pd.DataFrame(out)
             print(f"{out[0]['condition']} {out[0]['seed']}: energy "
-                  + " ".join(f"{x:+.3f}" for x in r["total_energy_rel_error"]), flush=True)
+                  + " ".join(f"{x:+.3f}" for x in r.get("total_energy_rel_error", [])),
+                  flush=True)
     df = pd.DataFrame(rows)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -38,9 +38,10 @@ def test_structure_does_not_depend_on_the_orientation():
 
 
 def test_energy_does_not_jump_when_the_scan_is_saved_as_jpeg(sample_dir):
-    # the medium sample scan's curvature noise is measured at about 0: a JPEG copy read it as
-    # exactly 0, which was taken for "not measured", and its short links fitted whole kept
-    # their flat end fits: -26 % of the truth against -6 % for the PNG. Now -2 to -7 %.
+    # the medium sample scan's curvature noise is measured at about 0, and at exactly 0 on its
+    # JPEG copies. A measured 0 is known noise; read as "not measured", the short links fitted
+    # whole keep their flat end fits: -26 % of the truth against -6 % for the PNG. Measured:
+    # the copies read -2 to -7 %
     from PIL import Image
 
     rgb = np.array(Image.open(sample_dir / "scan_02_medium.png").convert("RGB"))
@@ -56,9 +57,9 @@ def test_energy_does_not_jump_when_the_scan_is_saved_as_jpeg(sample_dir):
 
 def test_energy_of_a_scan_turned_by_45_degrees(sample_dir):
     # the medium sample's curvature noise rests on one stack of about 5 mm fitted; turned by
-    # 45 degrees its skeleton has fewer samples per mm, and counted in samples the stack fell
-    # below the pairs an estimate needs: the noise became unknown and the short links lost
-    # their trends (-37 % of the truth against -6 %). Counted in pixels of arc: -18 %
+    # 45 degrees its skeleton has fewer samples per mm. Counted in samples, that stack falls
+    # below the pairs an estimate needs, the noise is unknown and the short links lose their
+    # trends (-37 % of the truth against -6 %); counted in pixels of arc it reads -18 %
     import cv2
     from PIL import Image
 
