@@ -39,6 +39,10 @@ THRESHOLD_METHODS = ("auto", "fixed", "otsu")
 CURVATURE_METHODS = ("walls", "missing", "paper")
 SKELETON_METHODS = ("thinning", "skimage")
 WIDTH_STATISTICS = ("median", "mean")
+#: Sheet thickness in pixels below which a scan is low resolution: one pixel of width is a
+#: third of a layer or more, and a curvature window of one layer spans under 15 px
+#: (``crosssection.quality``, ``low_resolution``; ``crosssection.stages.curvature``, step 3)
+LOW_RESOLUTION_H_PX = 3.0
 
 # Sanity limits that turn absurd values into one clear error rather than a hang or a
 # MemoryError: a sheet thinner than a pixel cannot be resolved, and a scan of more than

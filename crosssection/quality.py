@@ -74,7 +74,7 @@ The ``low_resolution`` check: at h < 3 px one pixel of width is a third of a lay
 and the bending energy rests on windows of a few pixels. On the robust sweep's scans at 25
 px/mm (h = 2.5 px) the counts are exact on the network generator, but the same scan turned
 or mirrored reads an energy that moves by 23 % of the truth in the median (up to 86 %; at
-50 px/mm 5 %, ``benchmarks/orientation_spread.py``).
+50 px/mm 5-6 %, ``benchmarks/orientation_spread.py``).
 
 The ``epsilon_ink`` check uses that a rod of length L and thickness h covers about L h of ink:
 a rod length far from the ink area means the layer counts or the threshold are wrong.
@@ -85,6 +85,8 @@ import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
+
+from crosssection.params import LOW_RESOLUTION_H_PX
 
 __all__ = ["QualityFlag", "QualityWarning", "CATEGORIES", "assess", "quality_block"]
 
@@ -242,10 +244,10 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
             f"length, width and layer count rests on the scale (pass px_per_mm = "
             f"{file_px_per_mm:.2f} if the file is right)",
             value=params.px_per_mm / file_px_per_mm - 1.0, limit=SCALE_TOLERANCE))
-    if h_px < 3.0:
-        flags.append(QualityFlag("low_resolution", f"sheet thickness is {h_px:.2f} px (< 3 px): "
-                                 "layer counts from widths and bending energies are unreliable",
-                                 h_px, 3.0))
+    if h_px < LOW_RESOLUTION_H_PX:
+        flags.append(QualityFlag("low_resolution", f"sheet thickness is {h_px:.2f} px "
+                                 f"(< {LOW_RESOLUTION_H_PX:g} px): layer counts from widths and "
+                                 "bending energies are unreliable", h_px, LOW_RESOLUTION_H_PX))
     if hole_confidence is not None and hole_confidence < 0.5:
         flags.append(QualityFlag("hole_fitted", f"hole found with low confidence "
                                  f"{hole_confidence:.2f}: pass hole_radius_mm and "
