@@ -84,10 +84,11 @@ the true energy inside fork zones depends on the generator -- 54 % within 2 n_br
 junction on ``crosssection.truth.network`` scenes (36 % of the length: its branches leave the
 node fanned and bend back), 3-7 % on simulator renders (rod segments of 6-7 h resolve no
 bending at that scale). Median total-energy error of the default (seeds 100-107 of
-``benchmarks/robust_sweep.py``, 8 scenes per condition): renders +4 % (median absolute
-14 %), 25 px/mm +8 % (17 %), network typical -9 %, thick dense -9 %, tangential forks
--51 %; with the zones as missing data +6.6 % (15 %), +9 % (16 %), -2 %, -2 %, -46 %: the
-network generator's centrelines bend inside merged ink, where no wall shows it. The missing
+``benchmarks/robust_sweep.py``, 8 scenes per condition): renders +5 % (median absolute
+6 %), 25 px/mm +8 % (16 %), network typical -10 %, thick dense -9 %, tangential forks
+-46 %; with the zones as missing data (measured with an earlier default) +6.6 % (15 %),
++9 % (16 %), -2 %, -2 %, -46 %: the network generator's centrelines bend inside merged ink,
+where no wall shows it. The missing
 data's construction applied to the network generator's own curvature (no pixels, no noise) keeps
 0.99 of its energy: the continued trends make up for what the window averages away
 (``benchmarks/energy_split.py``). Models that add bending inside the zone (a curve
