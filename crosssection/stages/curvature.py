@@ -1524,8 +1524,8 @@ def _rel_uncertainty(prof, forks, noise_int):
 
 
 def _lag_variance(prof, lag_mm):
-    """Half the mean squared curvature difference at ``lag_mm`` over the fitted samples, and
-    the number of pairs (None when the fitted part is shorter than two lags)."""
+    """Half the mean squared curvature difference at ``lag_mm`` over the fitted samples (None
+    when the fitted part is shorter than two lags)."""
     s = prof.s_mm[prof.fit_start:prof.fit_stop]
     k = prof.kappa_per_mm[prof.fit_start:prof.fit_stop]
     if len(s) < 3 or s[-1] - s[0] < 2.0 * lag_mm:
@@ -1533,7 +1533,7 @@ def _lag_variance(prof, lag_mm):
     j = np.searchsorted(s, s + lag_mm)
     ok = j < len(s)
     d = k[j[ok]] - k[ok]
-    return float(d @ d) / (2.0 * d.size), int(d.size)
+    return float(d @ d) / (2.0 * d.size)
 
 
 #: A stack whose own noise estimate exceeds this many times the pooled estimate of the scan's
@@ -1624,7 +1624,7 @@ def noise_variance(profiles, n_br, *, thickness_px: float, px_per_mm: float,
             lags = [_lag_variance(prof, m * lag) for m in (1.0, 2.0, 3.0)]
             if any(x is None for x in lags):
                 continue
-            per_stack.append(3.0 * lags[0][0] - 3.0 * lags[1][0] + lags[2][0])
+            per_stack.append(3.0 * lags[0] - 3.0 * lags[1] + lags[2])
             # pairs per pixel of arc, not per sample: a diagonal skeleton has 1.4 px between
             # samples, and counted in samples a scan turned by 45 degrees can lose its estimate
             # (a sample scan's one 5-mm stack: 180 pairs against 215 unturned, 200 needed)

@@ -473,7 +473,6 @@ def recorded_header(path) -> tuple[float | None, int]:
     return 0.5 * (x + y) / 25.4, pages
 
 
-
 def load_image(path) -> np.ndarray:
     """Read a scan as an RGB array at native dtype.
 
