@@ -41,7 +41,7 @@ SKELETON_METHODS = ("thinning", "skimage")
 WIDTH_STATISTICS = ("median", "mean")
 #: Sheet thickness in pixels below which a scan is low resolution: one pixel of width is a
 #: third of a layer or more, and a curvature window of one layer spans under 15 px
-#: (``crosssection.quality``, ``low_resolution``; ``crosssection.stages.curvature``, step 3)
+#: (``crosssection.quality``, ``low_resolution``)
 LOW_RESOLUTION_H_PX = 3.0
 
 # Sanity limits that turn absurd values into one clear error rather than a hang or a
