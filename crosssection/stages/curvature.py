@@ -892,7 +892,7 @@ def _midlines(paths, smoothed, closed, radius_px, dt) -> list:
     out = []
     for p, sm, c, r in zip(paths, smoothed, closed, radius_px):
         p = np.ascontiguousarray(p, dtype=np.float64)
-        if len(p) < 3:
+        if len(p) < 3 or not np.isfinite(r) or r <= 0:
             out.append(p)
             continue
         # a band of w pixels has walls w px apart and a distance transform of about w / 2 + 0.5
