@@ -1439,7 +1439,7 @@ def _trend(s, k):
 
 
 def _fill_fork_zones(prof, n_br, thickness_px, px_per_mm, forks=(True, True), noise_px=0.3,
-                     noise_var_per_mm2=None, trend_whole=True, max_window_frac=0.5,
+                     noise_var_per_mm2=None, max_window_frac=0.5,
                      shifted=True, window_px=None, max_turn=_ZONE_MAX_TURN):
     """Fork zones as missing data, and the physical bound on curvature.
 
@@ -1476,8 +1476,8 @@ def _fill_fork_zones(prof, n_br, thickness_px, px_per_mm, forks=(True, True), no
     it). Read as unknown, a measured 0 would make the energy of a clean scan follow the sign
     of a noise estimate near 0 (a sample scan's stacks fitted whole: 8 370 with the trends,
     4 990 without, 7 970 in the truth; its PNG and its JPEG copies at quality 85-95 fall on
-    either side). On a scan where no stack could be measured the links take their trends too
-    (``trend_whole``), as every other stack does there: 12 of 32 held-out typical network
+    either side). On a scan where no stack could be measured the pipeline passes 0, and the
+    links take their trends too, as every other stack does there: 12 of 32 held-out typical network
     scenes have no measured noise, and read -18 % in the median with it against -20 % (each
     of the 12 toward the truth), the tangential forks -46 % against -52 %, the renders (whose
     noise is measured) the same. At 25 px/mm, where a window of one layer spans under 15 px,
@@ -1510,9 +1510,6 @@ def _fill_fork_zones(prof, n_br, thickness_px, px_per_mm, forks=(True, True), no
     noise_var_per_mm2 : float, optional
         The scan's curvature noise (:func:`noise_variance`); None: trend always continued
         beyond the zones, and a stack fitted whole keeps its fits.
-    trend_whole : bool
-        Whether a stack fitted whole may replace its shifted end fits by its trend (under the
-        noise test) when ``noise_var_per_mm2`` is given (the pipeline: always).
     max_window_frac : float or None
         The cap of the fitted window as a fraction of the fitted length (as given to the
         fits).
@@ -1554,8 +1551,7 @@ def _fill_fork_zones(prof, n_br, thickness_px, px_per_mm, forks=(True, True), no
             # a stack fitted whole (its zones would cover it) has measured fits at its ends,
             # shifted onto one window's mean: they give way to a trend only where the scan's
             # noise is known and the trend exceeds it
-            if not fork or hi - lo < 3 or (whole and not (trend_whole
-                                                         and noise_var_per_mm2 is not None)):
+            if not fork or hi - lo < 3 or (whole and noise_var_per_mm2 is None):
                 continue
             a, b, sm = _trend(s[lo:hi], k[lo:hi])
             if (noise_var_per_mm2 is not None and a * a * w * w
