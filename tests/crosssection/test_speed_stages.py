@@ -208,7 +208,7 @@ def _wall_points_plain(rgb, ink_mask, c0, r0, n_rays):
         p0, p1 = proj[i, j], proj[i, j + 1]
         f = np.clip((0.5 - p0) / np.maximum(p1 - p0, 1e-6), 0.0, 1.0)
         f[ink[rays[i], j]] = 0.5
-        rw = rad[j] + 0.5 * f
+        rw = rad[j] + f  # samples 1 px apart
         a = ang[rays[i]]
         pts.append(np.column_stack([c0[0] + np.sin(a) * rw, c0[1] + np.cos(a) * rw]))
     return np.concatenate(pts) if pts else np.zeros((0, 2))
