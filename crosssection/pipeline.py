@@ -87,6 +87,9 @@ class Preprocessed:
     merged_links: int
     file_px_per_mm: float | None = None
     file_pages: int = 1
+    #: The threshold's feature (``blue - max(red, green)``) whose cut places the walls to a
+    #: fraction of a pixel (None with the fixed thresholds, which cut several features).
+    edge_feature: np.ndarray | None = None
 
 
 def _read(image):
@@ -147,7 +150,7 @@ def _threshold_in_frame(rgb, p: AnalysisParams, path, timer):
     _check_fraction(thr, path)
     n_in = np.count_nonzero(thr.mask)
     outside = thr.n_outside / (thr.n_outside + n_in) if n_in else 0.0
-    return thr, hole, outside
+    return thr, hole, outside, m["features"].dominance
 
 
 def preprocess(image, params: AnalysisParams | None = None, *, timer=None,
@@ -173,7 +176,7 @@ def _preprocess(image, p: AnalysisParams, timer) -> Preprocessed:
         file_px_per_mm, file_pages = (recorded_header(path) if path is not None
                                       else (None, 1))
     p.check_image(rgb.shape, path)
-    thr, hole, outside = _threshold_in_frame(rgb, p, path, timer)
+    thr, hole, outside, dominance = _threshold_in_frame(rgb, p, path, timer)
     confidence = None if p.hole_given else hole.confidence
     s_min_px = p.scale.area_to_px2(p.s_min_used_mm2)
     l_min_px = p.scale.to_px(p.l_min_mm)
@@ -205,7 +208,8 @@ def _preprocess(image, p: AnalysisParams, timer) -> Preprocessed:
                         junctions=junc, graph=sg, distance_px=dist, path=path,
                         s_min_px=s_min_px, speck_px=speck_px, l_min_px=l_min_px,
                         warnings=notes, merged_links=merged, file_px_per_mm=file_px_per_mm,
-                        file_pages=file_pages)
+                        file_pages=file_pages,
+                        edge_feature=dominance if thr.dominance_min is not None else None)
 
 
 def _check_fraction(thr, path):
@@ -318,9 +322,11 @@ def _analyze(image, params, overrides) -> AnalysisResult:
                                   integer_refinement=p.integer_refinement)
         n_br = np.asarray(lin.n_br, dtype=np.int64)
     with timer("curvature"):
+        edge = (None if pre.edge_feature is None else
+                (pre.edge_feature, float(pre.threshold.dominance_min)))
         profiles = curvature.stack_profiles(sg, n_br, pre.distance_px, thickness_px=h_px,
                                             px_per_mm=p.px_per_mm, smooth_px=p.smooth_px,
-                                            method=p.curvature_method)
+                                            method=p.curvature_method, edge=edge)
     length_mm = scale.to_mm(np.asarray(sg.length_px, dtype=float))
     rod_mm = float(np.sum(n_br * length_mm))
     L = p.rod_length_mm if p.rod_length_mm is not None else rod_mm

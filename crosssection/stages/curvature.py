@@ -830,13 +830,42 @@ def _follow_wall(dt, pr, pc, tr, tc, side, length, tol, max_ref, max_turn,
 _MIDLINE_WIDTH_TOL = 0.15
 _MIDLINE_WIDTH_TOL_MIN_PX = 1.0
 _MIDLINE_MAX_SHIFT_PX = 0.75
+#: A wall found on the mask is looked for in the threshold's feature within this distance
+#: (px): the mask moves an edge by at most half a pixel, its cleaning and a 1-px blur by
+#: about one more.
+_EDGE_SEARCH_PX = 1.5
 
 
 @njit(cache=True)
-def _midline_kernel(raw, sm, dt, width, tol, max_shift, closed):  # pragma: no cover - numba
+def _refine_wall(feat, level, qr, qc, nr, nc, t):  # pragma: no cover - numba
+    # the wall where the threshold's feature ``feat`` falls through its cut ``level`` along
+    # the ray, the crossing nearest ``t`` (the mask's wall) within _EDGE_SEARCH_PX of it;
+    # ``t`` itself where there is none (a filled void, a thread drawn across a gap)
+    best = t
+    gap = _EDGE_SEARCH_PX
+    x = max(0.0, t - _EDGE_SEARCH_PX)
+    prev = _bilinear(feat, qr + x * nr, qc + x * nc) - level
+    while x < t + _EDGE_SEARCH_PX:
+        x2 = x + 0.25
+        v = _bilinear(feat, qr + x2 * nr, qc + x2 * nc) - level
+        if prev > 0.0 and v <= 0.0:
+            c = x + 0.25 * prev / (prev - v)
+            if abs(c - t) < gap:
+                gap = abs(c - t)
+                best = c
+        prev = v
+        x = x2
+    return best
+
+
+@njit(cache=True)
+def _midline_kernel(raw, sm, dt, width, tol, max_shift, closed, feat,
+                    level):  # pragma: no cover - numba
     # every point of ``raw`` moved along the normal of ``sm`` (the smoothed path) to the
     # midpoint of the two walls, where they lie ``width`` +- ``tol`` apart and the move is at
-    # most ``max_shift``; the other points as they are
+    # most ``max_shift``; the other points as they are. With a feature (``feat.size > 1``)
+    # each wall is placed where it crosses ``level``
+    sub = feat.size > 1
     out = raw.copy()
     n = raw.shape[0]
     max_t = width + tol + 1.0
@@ -856,6 +885,9 @@ def _midline_kernel(raw, sm, dt, width, tol, max_shift, closed):  # pragma: no c
         d2 = _wall_distance(dt, raw[i, 0], raw[i, 1], -nr, -nc, max_t)
         if d1 <= 0.0 or d2 <= 0.0 or abs(d1 + d2 - width) > tol:
             continue
+        if sub:
+            d1 = _refine_wall(feat, level, raw[i, 0], raw[i, 1], nr, nc, d1)
+            d2 = _refine_wall(feat, level, raw[i, 0], raw[i, 1], -nr, -nc, d2)
         shift = 0.5 * (d1 - d2)
         if abs(shift) <= max_shift:
             out[i, 0] = raw[i, 0] + shift * nr
@@ -863,7 +895,7 @@ def _midline_kernel(raw, sm, dt, width, tol, max_shift, closed):  # pragma: no c
     return out
 
 
-def _midlines(paths, smoothed, closed, radius_px, dt) -> list:
+def _midlines(paths, smoothed, closed, radius_px, dt, edge=None) -> list:
     """Every stack's skeleton pixels moved to the midpoint of its band's walls.
 
     Along the normal of the smoothed centreline, the band's walls (where the distance
@@ -884,11 +916,18 @@ def _midlines(paths, smoothed, closed, radius_px, dt) -> list:
         Median inscribed radius of every band (distance transform on its skeleton), px.
     dt : 2-D float32 array
         Distance transform of the ink, px.
+    edge : (2-D array, float), optional
+        The threshold's feature and its cut: each wall found on the mask is moved to where
+        the feature crosses the cut (within :data:`_EDGE_SEARCH_PX`), a fraction of a pixel
+        that the mask rounds away.
 
     Returns
     -------
     list of (n, 2) float arrays
     """
+    feat, level = (np.zeros((1, 1), np.int16), 0.0) if edge is None else edge
+    if feat.dtype not in (np.int16, np.float32):
+        feat = feat.astype(np.float32)  # one compiled kernel per type
     out = []
     for p, sm, c, r in zip(paths, smoothed, closed, radius_px):
         p = np.ascontiguousarray(p, dtype=np.float64)
@@ -900,7 +939,7 @@ def _midlines(paths, smoothed, closed, radius_px, dt) -> list:
         width = 2.0 * float(r) - 0.5
         tol = max(_MIDLINE_WIDTH_TOL_MIN_PX, _MIDLINE_WIDTH_TOL * width)
         out.append(_midline_kernel(p, np.ascontiguousarray(sm, dtype=np.float64), dt, width,
-                                   tol, _MIDLINE_MAX_SHIFT_PX, bool(c)))
+                                   tol, _MIDLINE_MAX_SHIFT_PX, bool(c), feat, float(level)))
     return out
 
 
@@ -1169,7 +1208,7 @@ def _contact_arcs(paths, at_node, radius, reach, gap_px: float = _CONTACT_GAP_PX
 
 
 def stack_profiles(graph, n_br, distance_px, *, thickness_px: float, px_per_mm: float,
-                   smooth_px: int | None = None, method: str = METHODS[0]) -> list:
+                   smooth_px: int | None = None, method: str = METHODS[0], edge=None) -> list:
     """Curvature profile of every stack of a stack graph (paper: parabolic fits over 5 n_br h).
 
     Parameters
@@ -1192,6 +1231,10 @@ def stack_profiles(graph, n_br, distance_px, *, thickness_px: float, px_per_mm: 
         missing data everywhere (``"missing"``), or given the nearest fitted curvature
         (``"paper"``). ``"walls"`` and ``"missing"`` also measure the scan's curvature noise
         (step 4) and record it in every profile.
+    edge : (2-D array, float), optional
+        The threshold's feature (the scan's ``blue - max(red, green)``) and its cut: the
+        centreline's walls (step 1) are placed where the feature crosses the cut, to a
+        fraction of a pixel. None: on the mask's distance transform alone.
 
     Returns
     -------
@@ -1235,7 +1278,7 @@ def stack_profiles(graph, n_br, distance_px, *, thickness_px: float, px_per_mm: 
     dt32 = np.ascontiguousarray(distance_px, dtype=np.float32)
     if method != "paper":
         # the paper's centreline is the skeleton's; the others read it between the walls
-        mid = _midlines([p for p, _ in prepared], smoothed, closed, radius, dt32)
+        mid = _midlines([p for p, _ in prepared], smoothed, closed, radius, dt32, edge)
         prepared = list(zip(mid, closed))
         smoothed = polyline.smooth_paths(mid, window_px=sm, closed=closed)
     jobs, forks, walled = [], [], {}

@@ -844,23 +844,26 @@ def test_short_links_take_their_trends_where_no_noise_is_measured(sample_dir):
 
 def _arc_band(radius_px, width_px, start_deg, size=700, sub=8):
     """A band of ``width_px`` along a circle of ``radius_px`` about the image centre, 200
-    degrees from ``start_deg``, drawn 8 times finer and averaged down (a scan's pixels)."""
+    degrees from ``start_deg``, drawn 8 times finer and averaged down (a scan's pixels):
+    its ink coverage (0-255), and the centre."""
     import cv2
 
     big = np.zeros((size * sub, size * sub), np.uint8)
     c = size * sub // 2
     cv2.ellipse(big, (c, c), (int(radius_px * sub), int(radius_px * sub)), 0, start_deg,
                 start_deg + 200, 255, thickness=int(width_px * sub))
-    mask = cv2.resize(big, (size, size), interpolation=cv2.INTER_AREA) > 127
+    cover = cv2.resize(big, (size, size), interpolation=cv2.INTER_AREA)
     # the drawing's centre in pixel coordinates of the small image
-    return mask, (c + 0.5) / sub - 0.5
+    return cover, (c + 0.5) / sub - 0.5
 
 
 @pytest.mark.parametrize("width_px,h_px", [(3, 2.5), (5, 5.0), (11, 5.0)])
 def test_centreline_between_the_walls_is_nearer_the_arc(width_px, h_px):
     # the thinning's staircases depend on the band's direction, its walls do not. Measured
-    # over radii 60-300 px and nine angles: the smoothed skeleton's radial scatter 0.17-0.20
-    # px, the centreline between the walls 0.08-0.12 px
+    # over radii 60-300 px and five angles (medians over the 15 bands, widths 3/5/11 px):
+    # the smoothed skeleton's radial scatter 0.18/0.17/0.19 px, the centreline between the
+    # mask's walls 0.11/0.11/0.13 px, between the walls where the ink's coverage crosses the
+    # cut 0.045/0.048/0.077 px
     import cv2
 
     from crosssection.core.polyline import smooth_paths
@@ -869,25 +872,29 @@ def test_centreline_between_the_walls_is_nearer_the_arc(width_px, h_px):
     from crosssection.stages.junctions import median_radii_px
     from crosssection.stages.skeleton import skeletonize_mask
 
-    sd = {"skeleton": [], "walls": []}
+    sd = {"skeleton": [], "walls": [], "feature": []}
     for radius in (60.0, 150.0, 300.0):
         for start in range(0, 90, 22):
-            mask, centre = _arc_band(radius, width_px, start)
+            cover, centre = _arc_band(radius, width_px, start)
+            mask = cover > 127
             dist = cv2.distanceTransform(mask.view(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
             skel = skeletonize_mask(mask, l_min_px=10, distance_px=dist)
             _, sg, _ = stack_graph(skel, dist, merge_px=3, thickness_px=h_px)
             path = np.asarray(sg.paths[int(np.argmax(sg.length_px))], float)
             sm_px = default_smooth_px(h_px)
             smoothed = smooth_paths([path], window_px=sm_px, closed=[False])
-            mid = _midlines([path], smoothed, [False], median_radii_px([path], dist),
-                            dist.astype(np.float32))
-            for key, p in (("skeleton", path), ("walls", mid[0])):
+            radii = median_radii_px([path], dist)
+            mid = _midlines([path], smoothed, [False], radii, dist.astype(np.float32))
+            sub = _midlines([path], smoothed, [False], radii, dist.astype(np.float32),
+                            edge=(cover.astype(np.int16), 127.5))
+            for key, p in (("skeleton", path), ("walls", mid[0]), ("feature", sub[0])):
                 q = smooth_paths([p], window_px=sm_px, closed=[False])[0]
                 r = np.hypot(q[:, 0] - centre, q[:, 1] - centre)
                 n = len(r)
                 sd[key].append(np.std(r[n // 5: -n // 5]))  # away from the band's ends
-    skel_sd, walls_sd = np.median(sd["skeleton"]), np.median(sd["walls"])
+    skel_sd, walls_sd, sub_sd = (np.median(sd[k]) for k in ("skeleton", "walls", "feature"))
     assert walls_sd < 0.14 and walls_sd < 0.75 * skel_sd, (walls_sd, skel_sd)
+    assert sub_sd < 0.09 and sub_sd < 0.7 * walls_sd, (sub_sd, walls_sd)
 
 
 def test_noise_outlier_beside_estimates_scattered_about_zero():
