@@ -73,9 +73,9 @@ already); the limit, 0.5 % of its area, is a segment about 16 px deep on a hole 
 The ``low_resolution`` check: at h < 3 px one pixel of width is a third of a layer or more,
 and the bending energy rests on windows of a few pixels. On the robust sweep's scans at 25
 px/mm (h = 2.5 px) the counts are exact on the network generator, but the same scan turned
-or mirrored reads an energy that moves by 8 % of the truth in the median (up to 44 %; at
-50 px/mm 2-5 %, ``benchmarks/orientation_spread.py``), and the independent generator's
-scans there read -25 %.
+or mirrored reads an energy that moves by 10 % of the truth in the median (up to 40 %; at
+50 px/mm 2.5-4 %, ``benchmarks/orientation_spread.py``), and the independent generator's
+scans there read -28 %.
 
 The ``epsilon_ink`` check uses that a rod of length L and thickness h covers about L h of ink:
 a rod length far from the ink area means the layer counts or the threshold are wrong.

@@ -10,9 +10,14 @@ fit on size 5 n_br h, after coordinates translation and rotation in the tangent 
    Before the smoothing (methods ``"walls"`` and ``"missing"``), each skeleton pixel is moved
    along the centreline's normal to the midpoint of the band's two walls, where both walls
    are the band's own (:func:`_midlines`). The thinning's pixel staircases depend on the
-   scan's orientation and the walls do not: on drawn arc bands the smoothed centreline's
-   radial scatter falls from 0.17-0.20 px to 0.08-0.12 px, and the total energy of one scan
-   read in the eight orientations of the square spreads by 8 % instead of 23 % at 25 px/mm
+   scan's orientation and the walls do not. A wall is found on the mask's distance transform,
+   then placed where the threshold's feature crosses its cut along the same normal, to a
+   fraction of a pixel that the mask rounds away (:func:`_refine_wall`). On drawn arc bands
+   (widths 3-11 px) the smoothed centreline's radial scatter is 0.17-0.19 px on the
+   skeleton, 0.11-0.13 px between the mask's walls and 0.05-0.08 px between the feature's;
+   at 25 px/mm the total energy of one scan read in the eight orientations of the square
+   spreads by 10 % instead of 23 % on the skeleton, and a JPEG copy at quality 95 moves a
+   typical scan's energy by 2.6 % instead of 4.4 % between the mask's walls
    (docs/validation/README.md, "Stability").
 2. **Local curvature.** At every centreline point the neighbours within +- w/2 of arc length,
    ``w = 5 n_br h``, are rotated into the local tangent frame and ``y = a x^2 + b x + c`` is
@@ -92,8 +97,8 @@ junction on ``crosssection.truth.network`` scenes (36 % of the length: its branc
 node fanned and bend back), 3-7 % on simulator renders (rod segments of 6-7 h resolve no
 bending at that scale). Median total-energy error of the default (seeds 100-107 of
 ``benchmarks/robust_sweep.py``, 8 scenes per condition): renders +4 % (median absolute
-7 %), 25 px/mm -0.2 % (2 %), network typical -10 %, thick dense -9 %, tangential forks
--46 %; with the zones as missing data (measured with an earlier default) +6.6 % (15 %),
+6 %), 25 px/mm -6 % (11 %), network typical -11 %, thick dense -11 %, tangential forks
+-47 %; with the zones as missing data (measured with an earlier default) +6.6 % (15 %),
 +9 % (16 %), -2 %, -2 %, -46 %: the network generator's centrelines bend inside merged ink,
 where no wall shows it. The missing
 data's construction applied to the network generator's own curvature (no pixels, no noise) keeps
