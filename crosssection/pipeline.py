@@ -109,7 +109,8 @@ def _resolve_params(params, overrides, path) -> AnalysisParams:
 
 
 def _threshold_in_frame(rgb, p: AnalysisParams, path, timer):
-    """Threshold, hole and frame: the ink inside the hole and the ink fraction left outside.
+    """Threshold, hole and frame: the ink inside the hole, the hole, the ink fraction left
+    outside, and the threshold's feature (the blue dominance, for the centreline's walls).
 
     A given hole frames the threshold directly; otherwise the whole scan is thresholded, the
     hole found (plate edge or ink envelope, with a confidence), and the threshold redone

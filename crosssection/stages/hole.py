@@ -47,7 +47,7 @@ the plate/paper boundary is the wall, a full circle even where the rod leaves th
    render of a free rod, the hole twice the rod's size). The rays then run to the scan's
    border, the plate's colour taken on the outer fifth of each beyond the envelope; the
    circle through the edge found there is read again as in 4, and kept when it holds the
-   whole rod. On 12 renders of quenched rods (``python -m simulate render``; the hole is
+   rod (its largest piece of ink). On 12 renders of quenched rods (``python -m simulate render``; the hole is
    larger than the rod), the edge is found on all 12 on 94-100 % of the rays, centres within
    0.1 px and radii 0.6 px short of the drawn plate's edge (its 2-px dark rim, blurred
    into the paper's side, crosses the midpoint early); without steps 4 and 5, two
@@ -698,7 +698,7 @@ def find_hole(rgb, ink_mask, *, min_confidence: float = 0.5, path=None) -> Hole:
     far = _wall_points(np.asarray(rgb), ink, env.center_rc, env.radius_px, n_far, far=True)
     if len(far) >= 0.1 * n_far:
         c, r, conf = _wall_circle(rgb, ink, *_circle_fit(far, *kasa_fit(far))[:2])
-        # the hole holds the rod
+        # the hole holds the rod's largest piece
         holds = len(border) and np.hypot(*(border - c).T).max() <= r + 2.0
         if conf >= min_confidence and holds:
             return Hole(np.asarray(c, dtype=np.float64), r, True, conf,
