@@ -134,6 +134,19 @@ def test_a_plate_edge_beyond_a_rod_that_does_not_reach_it(scene, offset):
     assert hole.confidence > 0.9 and "plate" in hole.reason
 
 
+def test_the_search_beyond_the_envelope_takes_no_scanner_lid_for_a_plate(scene):
+    """The sheet on a dark scanner lid, no plate: the search out to the scan's border meets
+    the paper's straight edges, which no circle fits; the ink's envelope is the hole."""
+    sc, c, R = scene
+    h, w = sc.rgb.shape[:2]
+    rgb = np.full((h + 200, w + 200, 3), 20, np.uint8)
+    rgb[100:100 + h, 100:100 + w] = sc.rgb
+    hole = find_hole(rgb, threshold_rgb(rgb).mask)
+    assert "envelope" in hole.reason and "beyond" not in hole.reason
+    assert np.hypot(*(hole.center_rc - (c + 100))) < 1.5 and abs(hole.radius_px - R) < 1.5
+    assert hole.confidence > 0.95
+
+
 def test_frame_mask_area_and_margin():
     hole = Hole(np.array([40.0, 55.0]), 30.0, False)
     m0 = frame_mask((100, 120), hole, margin_px=0.0)
