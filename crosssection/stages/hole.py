@@ -521,14 +521,18 @@ def _wall_points(rgb, ink_mask, c0, r0, n_rays, *, far=False):
 
 def _wall_circle(rgb, ink, c0, r0):
     """The plate's edge read on rays from the circle (``c0``, ``r0``) and fitted:
-    ``(centre, radius, confidence)``, confidence 0 when too few rays cross it."""
+    ``(centre, radius, confidence)``, or None when fewer than a fifth of the rays cross it.
+
+    One ray per ~2.5 degrees at most: 720 wall points fit a circle to a tenth of a pixel, and
+    the cost of the ray sampling grows with their number."""
     if not r0 > 0:
-        return c0, r0, 0.0
+        return None
     n = int(np.clip(np.pi * r0, 90, 720))
-    pts = _wall_points(np.asarray(rgb), ink, np.asarray(c0, float), float(r0), n)
+    c0 = np.asarray(c0, float)
+    pts = _wall_points(np.asarray(rgb), ink, c0, float(r0), n)
     if len(pts) < 0.2 * n:
-        return c0, r0, 0.0
-    c, r, keep = _circle_fit(pts, np.asarray(c0, float), float(r0))
+        return None
+    c, r, keep = _circle_fit(pts, c0, float(r0))
     return c, r, float(np.count_nonzero(keep)) / n
 
 
@@ -674,30 +678,28 @@ def find_hole(rgb, ink_mask, *, min_confidence: float = 0.5, path=None) -> Hole:
     border = _boundary_points(ink)
     env = _fit_points(border, None, None, None, path)
     env_conf = _envelope_confidence(border, env)
-    # one ray per ~2.5 degrees at most: 720 wall points fit a circle to a tenth of a pixel,
-    # and the cost of the ray sampling grows with their number
-    n_rays = int(np.clip(np.pi * env.radius_px, 90, 720))
-    pts = _wall_points(np.asarray(rgb), ink, env.center_rc, env.radius_px, n_rays)
     plate_conf = 0.0
-    if len(pts) >= 0.2 * n_rays:
-        c, r, keep = _circle_fit(pts, env.center_rc, env.radius_px)
-        plate_conf = float(np.count_nonzero(keep)) / n_rays
+    fit = _wall_circle(rgb, ink, env.center_rc, env.radius_px)
+    if fit is not None:
+        c, r, plate_conf = fit
         if plate_conf < _REREAD_BELOW:
             # rays from an envelope off the hole's centre meet the edge obliquely, or miss it:
             # read it again from the circle found
-            c2, r2, conf2 = _wall_circle(rgb, ink, c, r)
-            if conf2 > plate_conf:
-                c, r, plate_conf = c2, r2, conf2
+            again = _wall_circle(rgb, ink, c, r)
+            if again is not None and again[2] > plate_conf:
+                c, r, plate_conf = again
         if plate_conf >= min_confidence:
             return Hole(np.asarray(c, dtype=np.float64), r, True, plate_conf,
                         f"plate edge on {100 * plate_conf:.0f} % of directions")
     # no plate edge near the envelope: the rod may not reach the wall (a loosely packed rod,
     # a render of a free rod). The edge is looked for out to the scan's border, then read
     # again on rays from the circle found there, which cross it square.
-    n_far = min(n_rays, _FAR_RAYS)
+    n_far = int(np.clip(np.pi * env.radius_px, 90, _FAR_RAYS))
     far = _wall_points(np.asarray(rgb), ink, env.center_rc, env.radius_px, n_far, far=True)
-    if len(far) >= 0.1 * n_far:
-        c, r, conf = _wall_circle(rgb, ink, *_circle_fit(far, *kasa_fit(far))[:2])
+    fit = (_wall_circle(rgb, ink, *_circle_fit(far, *kasa_fit(far))[:2])
+           if len(far) >= 0.1 * n_far else None)
+    if fit is not None:
+        c, r, conf = fit
         # the hole holds the rod's largest piece
         holds = len(border) and np.hypot(*(border - c).T).max() <= r + 2.0
         if conf >= min_confidence and holds:
