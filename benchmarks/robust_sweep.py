@@ -26,7 +26,7 @@ stack length, void count within 5 %, median |energy error| <= 15 %; hole not giv
 0.92, exact n_br >= 0.92, energy <= 20 %; renders: median |energy error| <= 20 %.
 
 Usage: python benchmarks/robust_sweep.py [--quick] [--per-condition N] [--workers 2]
-       [--conditions typical,lowres,...] [--out benchmarks/out]
+       [--conditions typical,lowres,...] [--seed 100] [--px-per-mm P] [--out benchmarks/out]
 Writes OUT/robust_sweep.csv (one row per scene: condition, generator options, metrics, time).
 """
 from __future__ import annotations
@@ -76,12 +76,15 @@ def make_network_scene(seed: int, options: dict):
     return with_backdrop(scene, np.random.default_rng(seed + 7), **options["backdrop"])
 
 
-def run_one(condition: str, seed: int) -> dict:
-    """Generate, analyse and score one scene; return its row."""
+def run_one(condition: str, seed: int, px_per_mm: float | None = None) -> dict:
+    """Generate, analyse and score one scene; return its row. ``px_per_mm`` draws the
+    generator's scenes at that scale instead of the condition's (renders keep theirs)."""
     import crosssection
     from crosssection.truth.scoring import score
 
     options = scene_options(condition, seed)
+    if px_per_mm is not None:
+        options["scene"]["px_per_mm"] = float(px_per_mm)
     t0 = time.perf_counter()
     if condition == "renders":
         scene = _render_scene(seed)
@@ -172,12 +175,15 @@ def main(argv=None) -> int:
     ap.add_argument("--conditions", default=",".join(CONDITIONS))
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--seed", type=int, default=100)
+    ap.add_argument("--px-per-mm", type=float, default=None,
+                    help="draw the generator's scenes at this scale (default: the condition's)")
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "out"))
     args = ap.parse_args(argv)
     from crosssection.core.parallel import get_executor
 
     n = 3 if args.quick else args.per_condition
-    jobs = [(c, args.seed + i) for c in args.conditions.split(",") for i in range(n)]
+    jobs = [(c, args.seed + i, args.px_per_mm) for c in args.conditions.split(",")
+            for i in range(n)]
     t0 = time.perf_counter()
     with get_executor(args.workers, None) as ex:
         rows = list(ex.map(run_one, *zip(*jobs)))

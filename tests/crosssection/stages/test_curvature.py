@@ -911,3 +911,14 @@ def test_noise_outlier_beside_estimates_scattered_about_zero():
     v = np.array([-0.001, -0.0005, 0.0002, 0.0008, 0.0012])
     kept, _ = _without_outliers(v, np.ones(5))
     assert len(kept) == 5
+
+
+@pytest.mark.parametrize("h_px", [1.0, 2.0, 2.5, 3.0, 3.5, 3.8, 4.0, 4.5, 5.0, 5.5, 6.0, 7.5, 10.0])
+def test_smoothing_window_is_about_two_thicknesses_never_wider(h_px):
+    # an odd window of 2 floor(h) + 1 points: at most 2 h + 1, more than 2 h - 1; rounded to
+    # the nearest instead, h = 3.5 px took 9 points (2.6 h) and lost bending near the forks
+    w = default_smooth_px(h_px)
+    assert w % 2 == 1
+    assert 2 * h_px - 1 < w <= 2 * h_px + 1
+    # a scale read from a file's DPI lands a hair below its nominal value
+    assert default_smooth_px(h_px * (1 - 1e-12)) == w
