@@ -90,7 +90,6 @@ def run_arcs(px_per_mm: float, seed: int) -> dict:
 
 
 def run_network(px_per_mm: float, seed: int) -> dict:
-    from robust_sweep import run_one  # noqa: F401  (scene options)
     from robust_sweep import make_network_scene, scene_options
 
     import crosssection
