@@ -68,6 +68,8 @@ thick_dense hole radius 20-24 mm, spacing 4.2-4.8 mm, 1-20 layers (target mean 5
             about 120 stacks of 6-7 layers in the mean; drawn with repairs (a site next to
             a short edge or wall arc dropped, a stack too tight for its band clamped towards
             its chord) instead of rejections, which alone cannot draw so many stacks
+midres      as typical at 35 px/mm (h = 3.5 px, a sheet thickness that is not a whole
+            number of pixels)
 ==========  ===============================================================================
 
 Reproducibility: a seed gives the same PNG bytes and truth JSON on the same numpy, scipy
@@ -136,6 +138,7 @@ CONDITIONS = MappingProxyType({
     "lowres": Condition(25.0, (14, 20), (2.8, 4.4), 8, (2.5, 4.5), 0.0, 8),
     "peel": Condition(50.0, (13, 18), (4.0, 5.5), 8, (2.5, 4.0), 0.3, 8),
     "thick_dense": Condition(50.0, (20, 24), (4.2, 4.8), 20, (5.5, 8.0), 0.0, 12, repair=True),
+    "midres": Condition(35.0, (13, 18), (3.2, 4.6), 8, (2.5, 4.5), 0.0, 8),
 })
 
 PAPERS = ((252, 251, 247), (247, 242, 228), (245, 240, 232), (250, 250, 250), (240, 236, 222))

@@ -34,7 +34,7 @@ hidden_energy_fraction      fraction of the truth energy lying where a stack's c
                             skeleton sees): the part of the energy the scan does not show
 ==========================  =======================================================
 
-Usage: python benchmarks/independent_sweep.py [--conditions typical,thick,lowres,peel,thick_dense]
+Usage: python benchmarks/independent_sweep.py [--conditions typical,thick,lowres,peel,thick_dense,midres]
        [--seed 1] [--per-condition 8] [--workers 2] [--out benchmarks/out] [--quick]
        [--hole-not-given]
 Writes OUT/independent_sweep.csv (one row per scene: condition, seed, the scene's
