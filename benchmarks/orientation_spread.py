@@ -15,7 +15,7 @@ energy error in each orientation, its spread (largest minus smallest, in units o
 energy) and the spread of the branch count.
 
 Usage: python benchmarks/orientation_spread.py [--conditions typical,lowres,renders]
-       [--per-condition 4] [--seed 100] [--workers 2] [--out benchmarks/out]
+       [--per-condition 4] [--seed 100] [--workers 2] [--px-per-mm P] [--out benchmarks/out]
 Writes OUT/orientation_spread.csv (one row per scene and orientation) and prints per condition
 the median spread and the median |energy error| over all orientations.
 """
@@ -50,12 +50,15 @@ def _jpeg(rgb: np.ndarray, quality: int = 95) -> np.ndarray:
     return np.array(Image.open(buf).convert("RGB"))
 
 
-def scene_rows(condition: str, seed: int) -> list[dict]:
-    """Analyse one scene in every orientation and after a JPEG round trip."""
+def scene_rows(condition: str, seed: int, px_per_mm: float | None = None) -> list[dict]:
+    """Analyse one scene in every orientation and after a JPEG round trip (``px_per_mm``: the
+    generator's scenes drawn at that scale, as ``robust_sweep.py --px-per-mm``)."""
     import crosssection
     from robust_sweep import _render_scene, make_network_scene, scene_options
 
     options = scene_options(condition, seed)
+    if px_per_mm is not None:
+        options["scene"]["px_per_mm"] = float(px_per_mm)
     scene = _render_scene(seed) if condition == "renders" else make_network_scene(seed, options)
     p = scene.params
     kw = dict(px_per_mm=p["px_per_mm"], thickness_mm=p["thickness_mm"],
@@ -106,9 +109,11 @@ def main(argv=None) -> int:
     ap.add_argument("--per-condition", type=int, default=4)
     ap.add_argument("--seed", type=int, default=100)
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--px-per-mm", type=float, default=None,
+                    help="draw the generator's scenes at this scale (default: the condition's)")
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "out"))
     args = ap.parse_args(argv)
-    jobs = [(c, args.seed + i) for c in args.conditions.split(",")
+    jobs = [(c, args.seed + i, args.px_per_mm) for c in args.conditions.split(",")
             for i in range(args.per_condition)]
     rows = []
     with ProcessPoolExecutor(max_workers=args.workers) as ex:
