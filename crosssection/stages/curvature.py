@@ -190,7 +190,9 @@ def default_smooth_px(thickness_px: float) -> int:
     nearest (9 points, 2.6 h, at h = 3.5 px) it cost the network generator's typical scans at
     35 px/mm 4.3 points of energy (16 scenes: median -19.2 % against -14.9 % with 7 points;
     38 px/mm -15.0 against -13.7 %, 55 px/mm -11.6 against -10.5 %, 75 px/mm -10.8 against
-    -9.7 %; docs/validation/README.md, "Other resolutions"). The narrower window costs
+    -9.7 %; on 32 held-out scenes at 35 px/mm a wash, median -17.6 against -18.3 %, mean
+    -18.0 against -16.6 %; 39 of 56 scenes of two generators closer to their truth;
+    docs/validation/README.md, "Other resolutions"). The narrower window costs
     stability where it differs: the 35 px/mm scans' energy spread over the eight orientations
     of the square is 9.0 % in the median against 5.7 % with 9 points, that of the 25 px/mm
     scans (9.9 %), whose 5 points are the same 2 h.
