@@ -95,8 +95,7 @@ def run_network(px_per_mm: float, seed: int) -> dict:
     import crosssection
     from crosssection.truth.scoring import score
 
-    opts = scene_options("typical", seed)
-    opts["scene"]["px_per_mm"] = px_per_mm
+    opts = scene_options("typical", seed, px_per_mm=px_per_mm)
     scene = make_network_scene(seed, opts)
     p = scene.params
     with warnings.catch_warnings():

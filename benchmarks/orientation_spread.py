@@ -56,9 +56,7 @@ def scene_rows(condition: str, seed: int, px_per_mm: float | None = None) -> lis
     import crosssection
     from robust_sweep import _render_scene, make_network_scene, scene_options
 
-    options = scene_options(condition, seed)
-    if px_per_mm is not None:
-        options["scene"]["px_per_mm"] = float(px_per_mm)
+    options = scene_options(condition, seed, px_per_mm=px_per_mm)
     scene = _render_scene(seed) if condition == "renders" else make_network_scene(seed, options)
     p = scene.params
     kw = dict(px_per_mm=p["px_per_mm"], thickness_mm=p["thickness_mm"],

@@ -46,11 +46,13 @@ from simulate.atlas import quench_rod, render_rod, typical_options, with_backdro
 CONDITIONS = ("typical", "typical_nohole", "lowres", "thick_dense", "renders", "tangential")
 
 
-def scene_options(condition: str, seed: int, fan_deg: float | None = None) -> dict:
+def scene_options(condition: str, seed: int, fan_deg: float | None = None,
+                  px_per_mm: float | None = None) -> dict:
     """Generator options of one scene of a condition (all random choices from ``seed``).
 
     ``fan_deg`` sets the generator's fork opening (its default, 60 degrees, when None; 30-35
-    gives the tangential forks of real scans) without changing the other random choices."""
+    gives the tangential forks of real scans) and ``px_per_mm`` the scale the scene is drawn
+    at (the condition's when None), without changing the other random choices."""
     # typical_nohole draws the typical scenes themselves: only the hole is withheld
     drawn_as = "typical" if condition == "typical_nohole" else condition
     rng = np.random.default_rng([seed, CONDITIONS.index(drawn_as)])
@@ -65,6 +67,8 @@ def scene_options(condition: str, seed: int, fan_deg: float | None = None) -> di
     if condition == "thick_dense":
         opts.update(n_stacks=int(rng.integers(100, 161)), max_layers=16,
                     mean_layers=float(rng.uniform(5, 8)))
+    if px_per_mm is not None:
+        opts["px_per_mm"] = float(px_per_mm)
     return {"scene": opts, "backdrop": backdrop, "hole_given": condition != "typical_nohole"}
 
 
@@ -82,9 +86,7 @@ def run_one(condition: str, seed: int, px_per_mm: float | None = None) -> dict:
     import crosssection
     from crosssection.truth.scoring import score
 
-    options = scene_options(condition, seed)
-    if px_per_mm is not None:
-        options["scene"]["px_per_mm"] = float(px_per_mm)
+    options = scene_options(condition, seed, px_per_mm=px_per_mm)
     t0 = time.perf_counter()
     if condition == "renders":
         scene = _render_scene(seed)

@@ -1290,12 +1290,13 @@ def stack_profiles(graph, n_br, distance_px, *, thickness_px: float, px_per_mm: 
 
     prepared = [_prepared_path(graph.paths[sid], graph.node_kind[graph.ends[sid][0]] == "loop")
                 for sid in range(graph.n_stacks)]
+    raw = [p for p, _ in prepared]
     closed = [c for _, c in prepared]
-    smoothed = polyline.smooth_paths([p for p, _ in prepared], window_px=sm, closed=closed)
+    smoothed = polyline.smooth_paths(raw, window_px=sm, closed=closed)
     dt32 = np.ascontiguousarray(distance_px, dtype=np.float32)
     if method != "paper":
         # the paper's centreline is the skeleton's; the others read it between the walls
-        mid = _midlines([p for p, _ in prepared], smoothed, closed, radius, dt32, edge)
+        mid = _midlines(raw, smoothed, closed, radius, dt32, edge)
         prepared = list(zip(mid, closed))
         smoothed = polyline.smooth_paths(mid, window_px=sm, closed=closed)
     jobs, forks, walled = [], [], {}
