@@ -361,6 +361,33 @@ def test_energy_uncertainty_grows_with_fork_zones():
     assert all(np.isfinite(u)) and u[0] >= 0
     assert u[0] < u[1] < u[2]
 
+def test_energy_uncertainty_counts_the_arc_followed_along_a_wall():
+    # a zone followed along a merged band's wall is fitted, but not on a free centreline:
+    # its share of int kappa^2 ds is the wall model's. Here all the bending lies in the
+    # first millimetre, so following it there makes the whole integral the model's
+    from dataclasses import replace
+
+    from crosssection.stages.curvature import CurvatureProfile, _rel_uncertainty
+
+    s = np.linspace(0.0, 5.0, 501)
+    k = np.where(s < 1.0, 0.2, 0.0)
+    prof = CurvatureProfile(s_mm=s, kappa_per_mm=k, length_mm=5.0, kappa_pm=0.04,
+                            kappa_plus=0.04, kappa_m=0.04, fit_start=0, fit_stop=len(s))
+    free = (False, False)
+    assert _rel_uncertainty(prof, free, 0.0) == 0.0
+    assert _rel_uncertainty(prof, free, 0.0, walled_mm=(0.0, 1.0)) == pytest.approx(0.0, abs=1e-9)
+    assert _rel_uncertainty(prof, free, 0.0, walled_mm=(1.0, 0.0)) == pytest.approx(1.0, abs=0.01)
+    half = _rel_uncertainty(prof, free, 0.0, walled_mm=(0.5, 0.0))
+    assert half == pytest.approx(0.5, abs=0.01)
+    # the removed noise floor adds its own share
+    assert (_rel_uncertainty(prof, free, 0.004, walled_mm=(0.5, 0.0))
+            == pytest.approx(half + 0.1, abs=0.01))
+    # an extrapolated zone and a followed one overlapping count once
+    zoned = replace(prof, fit_start=50)
+    assert (_rel_uncertainty(zoned, (True, False), 0.0, walled_mm=(0.8, 0.0))
+            == pytest.approx(0.8, abs=0.01))
+
+
 
 def test_unknown_method_rejected():
     from crosssection.core.errors import ParameterError
