@@ -17,7 +17,8 @@ Common representation (:class:`Ensemble`):
 
 - ``configs``: set, config_id, N_l, N_br, n_voids, epsilon, E, rod_length_mm, source,
   quality (the image analysis' quality warning codes joined by ";", "" when none; NaN for
-  simulations)
+  simulations), E_model_share (the analysis' ``total_energy_rel_uncertainty``: the share of E
+  not measured on a free centreline; NaN for simulations)
 - ``branches``: set, config_id, length_L, kappa_m_L, kappa_plus_L, e, region, n_br (of the
   branch's stack, NaN if unknown), l_min_L (detection limit in units of L, NaN if none)
 - ``stacks``: set, config_id, n_br, length_L, region
@@ -37,7 +38,7 @@ from crosssection.core.errors import ConfigError
 from crosssection.quality import QualityWarning
 
 CONFIG_COLS = ["set", "config_id", "N_l", "N_br", "n_voids", "epsilon", "E", "rod_length_mm",
-               "source", "quality"]
+               "source", "quality", "E_model_share"]
 BRANCH_COLS = ["set", "config_id", "length_L", "kappa_m_L", "kappa_plus_L", "e", "region",
                "n_br", "l_min_L"]
 STACK_COLS = ["set", "config_id", "n_br", "length_L", "region"]
@@ -225,7 +226,8 @@ def load_image_output(folder, *, set_name: str, config_id: str | None = None,
         "N_br": summary.get("n_branches", len(br)), "n_voids": summary.get("n_voids", len(vo)),
         "epsilon": summary.get("epsilon", np.nan), "E": summary.get("total_energy", np.nan),
         "rod_length_mm": L, "source": str(folder),
-        "quality": ";".join((summary.get("quality") or {}).get("codes", []))}])
+        "quality": ";".join((summary.get("quality") or {}).get("codes", [])),
+        "E_model_share": summary.get("total_energy_rel_uncertainty", np.nan)}])
     branches = pd.DataFrame({
         "set": set_name, "config_id": str(cid), "length_L": br["length_mm"] / L,
         "kappa_m_L": br["kappa_m"] * L, "kappa_plus_L": br["kappa_plus"] * L,

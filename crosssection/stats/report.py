@@ -694,6 +694,21 @@ def _quality_rows(ens: Ensemble) -> pd.DataFrame:
                          "quality warnings": q[bad].str.replace(";", ", ")})
 
 
+def _model_share_note(ens: Ensemble) -> str:
+    """What the scans' bending energies rest on: the share of E not measured on a free
+    centreline (``total_energy_rel_uncertainty`` of each analysis), '' without images."""
+    share = pd.to_numeric(ens.configs.get("E_model_share"), errors="coerce").dropna()
+    if share.empty:
+        return ""
+    return (f"<p>Bending energy of the scans: a median {share.median():.2f} of each scan's "
+            f"total (range {share.min():.2f}-{share.max():.2f}, {len(share)} scans) lies where "
+            "a band is merged with its neighbours and rests on the fork-zone model, not on a "
+            "free centreline (<code>total_energy_rel_uncertainty</code>). Measured on "
+            "generated scans with exact truth, one branch's e is good to about a factor 1.5 "
+            "and a scan's E to 5-30 %: the laws of e are wider on scans than on the sheets "
+            "themselves, and the means are the robust numbers.</p>")
+
+
 def _methods(meta, opts: StatsOptions) -> str:
     """The methods paragraph of the report."""
     n_mc = opts.n_mc
@@ -710,8 +725,9 @@ def _methods(meta, opts: StatsOptions) -> str:
         "measure its length l, mean curvature κ<sub>m</sub>, mean absolute curvature "
         "κ<sub>+</sub> and bending energy e = L∫κ²ds (images: κ from parabolic fits over "
         "5 n<sub>br</sub> h along the smoothed skeleton, as in the paper; near junctions, where "
-        "a band is still merged with its neighbours, κ is extrapolated from the nearest fitted "
-        "window, and the scan's own fit noise is removed from e); per configuration the "
+        "a band is still merged with its neighbours, κ is read along the merged band's outer "
+        "wall where a layer lies along it and otherwise continued from the nearest fitted "
+        "windows, and the scan's own fit noise is removed from e); per configuration the "
         "numbers of stacks "
         "N<sub>l</sub> and branches N<sub>br</sub>, the compaction ε and the total energy E; "
         "per void its area s and shape ratio √s/p. Lengths are in units of the rod length L. "
@@ -759,6 +775,7 @@ def _html(res: StatsResult, figs, meta, ens: Ensemble | None = None,
         else:
             parts.append("<p>Input quality: no scan carries an image-analysis quality "
                          "warning.</p>")
+        parts.append(_model_share_note(ens))
     parts.append("<h2>Figures</h2><ul>" + "".join(
         f"<li><a href='#{html.escape(Path(rel).stem)}'>{html.escape(t)}</a></li>"
         for t, rel, _ in figs) + "</ul>")

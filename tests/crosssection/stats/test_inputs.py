@@ -70,3 +70,12 @@ def test_empty_configs_file_is_a_one_line_error(tmp_path):
     (s / "configs.csv").write_text("")
     with pytest.raises(ConfigError, match="configs.csv"):
         _run([str(s), "--out", str(tmp_path / "rep")])
+
+
+def test_a_scans_model_share_is_read_with_it(tmp_path):
+    from crosssection.stats.data import load_any
+
+    summary, tables = demo.demo_image_tables(np.random.default_rng(6), n_stacks=15)
+    summary["total_energy_rel_uncertainty"] = 0.42
+    write_tables(tmp_path / "scan", summary, tables)
+    assert load_any(tmp_path / "scan").configs["E_model_share"].tolist() == [0.42]

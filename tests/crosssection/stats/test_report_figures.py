@@ -155,6 +155,20 @@ def test_page_explains_the_method_in_words(tmp_path):
         assert raw not in page, raw
 
 
+def test_page_says_what_the_scans_energies_rest_on(tmp_path):
+    b = demo.write_demo_batch(tmp_path / "b", n_images=3, seed=1,
+                              sets={"s1": {"n_stacks": 20}})
+    ens = load_any(b)
+    ens.configs["E_model_share"] = [0.5, 0.7, float("nan")]
+    opts = StatsOptions(seed=0, n_boot=0, gof=False, quantities=("n_br",))
+    meta = {"version": "0", "inputs": ["b"], "options": {"seed": 0}}
+    page = _html(compute_stats(ens, opts), [], meta, ens, opts)
+    assert "a median 0.60 of each scan's total (range 0.50-0.70, 2 scans)" in page
+    # simulations have no such share: no note
+    ens.configs["E_model_share"] = float("nan")
+    assert "of each scan's total" not in _html(compute_stats(ens, opts), [], meta, ens, opts)
+
+
 
 def _overlapping_ticks(fig):
     """Pairs of tick labels of one axis whose boxes overlap, once the figure is drawn."""
