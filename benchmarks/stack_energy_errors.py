@@ -16,7 +16,7 @@ Generators: the network generator's typical and thick dense scans and the simula
 scans (:mod:`independent_sweep`'s scenes, generated into ``--independent DIR`` unless there).
 
 Usage: python benchmarks/stack_energy_errors.py [--per-condition 8] [--seed 100]
-       [--independent DIR] [--workers 2] [--out DIR]
+       [--independent-seed 1] [--independent DIR] [--workers 2] [--out DIR]
 Writes DIR/stack_energy_errors.csv (one row per matched stack) and prints the summaries.
 """
 from __future__ import annotations
@@ -124,8 +124,10 @@ def summarize(df: pd.DataFrame, by: str, bins) -> pd.DataFrame:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--per-condition", type=int, default=8)
-    ap.add_argument("--seed", type=int, default=100, help="first seed of the network scenes "
-                    "and renders (the independent scenes are numbered from 1)")
+    ap.add_argument("--seed", type=int, default=100,
+                    help="first seed of the network scenes and renders")
+    ap.add_argument("--independent-seed", type=int, default=1,
+                    help="first seed of the independent generator's scenes")
     ap.add_argument("--independent", default=None,
                     help="folder of the independent generator's scenes (default OUT/independent_scenes)")
     ap.add_argument("--workers", type=int, default=2)
@@ -135,9 +137,13 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     ind = args.independent or str(out / "independent_scenes")
     Path(ind).mkdir(parents=True, exist_ok=True)
+    if not (Path(ind) / "calibration.csv").is_file():
+        import independent_scenes
+
+        independent_scenes.write_calibration(Path(ind) / "calibration.csv")
     n = args.per_condition
     jobs = ([(g, args.seed + i) for g in GENERATORS[:3] for i in range(n)]
-            + [("independent", 1 + i) for i in range(n)])
+            + [("independent", args.independent_seed + i) for i in range(n)])
     with ProcessPoolExecutor(max(1, args.workers)) as ex:
         parts = list(ex.map(run_one, *zip(*jobs), [ind] * len(jobs)))
     df = pd.DataFrame([row for part in parts for row in part])
