@@ -707,7 +707,7 @@ def _model_share_note(ens: Ensemble) -> str:
             "generated scans with exact truth, one branch's e is good to about a factor 1.5 "
             "and a scan's E to within 5-30 %; the largest energies tend to read low and "
             "nearly straight branches high, and α<sub>e</sub> (the Gamma shape of e) came "
-            "out 10-13 % above the truth's on two generators.</p>")
+            "out 3-15 % above the truth's on two generators.</p>")
 
 
 def _methods(meta, opts: StatsOptions) -> str:
