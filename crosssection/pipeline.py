@@ -365,6 +365,17 @@ def _touch_px(sg, width_px, h_px) -> float:
     return (0.5 * float(np.percentile(node_w, 90)) if k else 0.0) + h_px
 
 
+def _network_shares(lin, stacks) -> list[float]:
+    """Each connected network's share of the measured rod ``sum n_br l`` (the linear
+    system's components; the ``networks`` quality check)."""
+    rod = (stacks["n_br"] * stacks["length_mm"]).to_numpy(float)
+    total = float(rod.sum())
+    if not total > 0:
+        return []
+    return [float(rod[np.asarray(info.stacks, np.int64)].sum()) / total
+            for info in lin.components]
+
+
 def _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, voids, rod_mm, L,
             timer, t_start) -> AnalysisResult:
     """Summary, quality checks and warnings: the :class:`AnalysisResult` built in one place."""
@@ -378,7 +389,7 @@ def _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, void
         rod_length_mm=L, rod_measured_mm=rod_mm, ink_area_in_hole_mm2=ink_area_mm2,
         calibration_max_width_mm=_max_width_mm(cal, p), junctions=junctions,
         image_shape=pre.rgb.shape, file_px_per_mm=pre.file_px_per_mm,
-        file_pages=pre.file_pages)
+        file_pages=pre.file_pages, network_shares=_network_shares(lin, stacks))
     notes = list(pre.warnings) + [f"linear system: {f}" for f in lin.flags
                                   if not str(f).startswith("disconnected")]
     summary = tb.summary(pre=pre, params=p, linear_system=lin, junctions=junctions,

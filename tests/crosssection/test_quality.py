@@ -354,3 +354,30 @@ def test_a_file_holding_several_scans_is_flagged(scene, tmp_path):
                for w in caught)
     # the first page is the one analysed
     assert res3.summary["n_stacks"] == res1.summary["n_stacks"]
+
+
+def test_two_cross_sections_in_one_scan_are_flagged(scene):
+    # two cuts scanned side by side, the hole left to be found: one sheet's cross-section is
+    # one network, these are two (each about half of the rod)
+    one, _ = _analyze(scene.rgb, **_given(scene))
+    twice = np.concatenate([scene.rgb, scene.rgb], axis=1)
+    kw = _given(scene)
+    for k in ("hole_radius_mm", "hole_center_px"):
+        kw.pop(k)
+    res, caught = _analyze(twice, **kw)
+    assert "networks" not in one.summary["quality"]["codes"]
+    flag = next(f for f in res.quality if f.code == "networks")
+    assert flag.value == 2 and flag.limit == 1
+    assert any(w.category is quality.NetworkWarning and "2 separate networks" in str(w.message)
+               for w in caught)
+
+
+@pytest.mark.parametrize("shares, flagged", [
+    ([1.0], False), ([0.95, 0.05], False), ([0.8, 0.06, 0.06, 0.08], False),
+    ([0.85, 0.15], True), ([0.4, 0.35, 0.25], True)])
+def test_a_network_counts_from_a_tenth_of_the_rod(shares, flagged):
+    # a scrap beside the network holds less than a tenth of the rod: not a second cut
+    flags = quality._network_check(shares)
+    assert bool(flags) == flagged
+    if flagged:
+        assert flags[0].value == sum(x >= 0.1 for x in shares)
