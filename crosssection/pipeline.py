@@ -124,7 +124,7 @@ def _threshold_in_frame(rgb, p: AnalysisParams, path, timer):
         if not given:
             whole = threshold_rgb(rgb, **m)
     if not given:
-        _check_fraction(whole, path)
+        _check_fraction(whole, path, rgb)
     with timer("hole"):
         if given:
             x, y = p.hole_center_px
@@ -148,7 +148,7 @@ def _threshold_in_frame(rgb, p: AnalysisParams, path, timer):
         trimmed, n_cut = hole_stage.trim_margin(thr.mask, hole)
         if n_cut:
             thr = dataclasses.replace(thr, mask=trimmed, n_outside=thr.n_outside + n_cut)
-    _check_fraction(thr, path)
+    _check_fraction(thr, path, rgb)
     n_in = np.count_nonzero(thr.mask)
     outside = thr.n_outside / (thr.n_outside + n_in) if n_in else 0.0
     return thr, hole, outside, m["features"].dominance
@@ -213,15 +213,33 @@ def _preprocess(image, p: AnalysisParams, timer) -> Preprocessed:
                         edge_feature=dominance if thr.dominance_min is not None else None)
 
 
-def _check_fraction(thr, path):
+def _check_fraction(thr, path, rgb=None):
     frac = np.count_nonzero(thr.mask) / thr.mask.size
     if frac == 0:
         why = getattr(thr, "note", "") or "not a blue-ink scan, or adjust the threshold"
+        if rgb is not None and _achromatic(rgb):
+            why = ("the image has no colour (red, green and blue equal to within 2 levels on "
+                   "99.9 % of the pixels): a grayscale scan saved as RGB, or no ink at all? "
+                   "scan in colour")
         raise AnalysisError(f"empty mask: no pixel passes the {thr.method} threshold: {why}",
                             path)
     if frac > 0.95:
         raise AnalysisError(f"{100 * frac:.0f} % of the image passes the threshold: no "
                             "background to separate stacks (all-ink image?)", path)
+
+
+def _achromatic(rgb) -> bool:
+    """Whether a scan carries no colour: its channels within 2 levels of each other on
+    99.9 % of a sample of its pixels (only asked once the threshold found no ink)."""
+    a = np.asarray(rgb)
+    if a.ndim != 3 or not np.issubdtype(a.dtype, np.integer):
+        return False
+    step = max(1, int(np.sqrt(a.shape[0] * a.shape[1] / 250_000)))
+    sub = a[::step, ::step].reshape(-1, a.shape[-1])[:, :3].astype(np.float64)
+    if a.dtype.itemsize > 1:
+        sub *= 255.0 / np.iinfo(a.dtype).max
+    spread = sub.max(axis=1) - sub.min(axis=1)
+    return bool(np.mean(spread <= 2.0) >= 0.999)
 
 
 def _check_clean(mask, speck_px, path):
