@@ -456,7 +456,9 @@ def threshold_rgb(rgb, *, method: str = "auto", region=None, blue_min=None,
         return ThresholdResult(np.zeros(rgb.shape[:2], bool), bm, rg, "auto", None, scale,
                                region_fraction=reg_frac,
                                note="no blue-dominant class: no ink darker in red and green "
-                                    f"than the paper by {MIN_CONTRAST_U8:g} (uint8 units)")
+                                    f"than the paper by {MIN_CONTRAST_U8:g} (uint8 units); for "
+                                    "faint ink set the cut with --threshold-method fixed "
+                                    "--blue-min B --rg-max R")
     ink, paper = levels
     d_cut = 0.5 * (ink[0] + paper[0]) * scale
     m_cut = 0.5 * (ink[1] + paper[1]) * scale
