@@ -82,8 +82,8 @@ scans there read -28 %.
 The ``networks`` check: one sheet's cross-section is one curve, so its ink is one connected
 network (the layer steps and rod ends inside bands keep it one; the linear system's components,
 ``linear_system.n_components`` in summary.json). Two networks that each hold a tenth of the rod
-or more are two cross-sections scanned together (the hole found around both with a low
-confidence, or given around one), or a sheet that the threshold cut apart. Measured: on the
+or more are two cross-sections scanned together (the hole then found around both, with a low
+confidence), or a sheet that the threshold cut apart. Measured: on the
 scans of the robust sweep (five conditions, seeds 100-107), 16 held-out renders (200-215), the
 independent sweep (six conditions, seeds 1-8), the five sample scans and four renders of rods
 compacted to epsilon 19, 113 scans, every scan is one network; two sample scans side by side,
