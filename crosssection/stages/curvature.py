@@ -1323,9 +1323,10 @@ def stack_profiles(graph, n_br, distance_px, *, thickness_px: float, px_per_mm: 
                 and radius[sid] >= _WALL_MIN_RADIUS_PX):
             path, followed = _walled_path(smoothed[sid], trims, radius[sid], dt32)
             if any(followed):
-                # a followed zone is measured: fitted, not extrapolated
+                # a followed zone is measured: fitted, not extrapolated, but on the merged
+                # band's edge, not on a free centreline (``energy_rel_uncertainty``)
                 walled[sid] = (path, tuple(0.0 if f else t for t, f in zip(trims, followed)),
-                               trims)
+                               tuple(t if f else 0.0 for t, f in zip(trims, followed)))
     wsids = sorted(walled)
     wsmooth = polyline.smooth_paths([walled[sid][0] for sid in wsids], window_px=sm,
                                     closed=False) if wsids else []
@@ -1351,17 +1352,9 @@ def stack_profiles(graph, n_br, distance_px, *, thickness_px: float, px_per_mm: 
         forks[sid] = tuple(t > 0 for t in walled[sid][1])
     profiles = [_fill_fork_zones(prof, max(1, int(n_br[sid])), thickness_px, px_per_mm,
                                  forks[sid], noise_var_per_mm2=var[max(1, int(n_br[sid]))] or 0.0,
-                                 max_window_frac=0.5, shifted=True)
+                                 max_window_frac=0.5, shifted=True,
+                                 walled_px=walled[sid][2] if sid in walled else (0.0, 0.0))
                 for sid, prof in enumerate(profiles)]
-    for sid in wsids:
-        # the zones followed along a wall are measured on the merged band's edge, not on a
-        # free centreline: their share is the wall model's (``energy_rel_uncertainty``)
-        prof = profiles[sid]
-        zones = [t if t > 0 and w == 0 else 0.0
-                 for t, w in zip(walled[sid][2], walled[sid][1])]
-        noise = prof.noise_var_per_mm2 * prof.length_mm
-        profiles[sid] = replace(prof, energy_rel_uncertainty=_rel_uncertainty(
-            prof, forks[sid], noise, walled_mm=[z / px_per_mm for z in zones]))
     return _fill_unfitted_stacks(profiles, at_node, n_br, px_per_mm=px_per_mm,
                                  thickness_px=thickness_px)
 
@@ -1514,7 +1507,8 @@ def _trend(s, k):
 
 def _fill_fork_zones(prof, n_br, thickness_px, px_per_mm, forks=(True, True), noise_px=0.3,
                      noise_var_per_mm2=None, max_window_frac=0.5,
-                     shifted=True, window_px=None, max_turn=_ZONE_MAX_TURN):
+                     shifted=True, window_px=None, max_turn=_ZONE_MAX_TURN,
+                     walled_px=(0.0, 0.0)):
     """Fork zones as missing data, and the physical bound on curvature.
 
     Within a fork zone the image holds no centreline of this stack (module docstring), so its
@@ -1594,6 +1588,9 @@ def _fill_fork_zones(prof, n_br, thickness_px, px_per_mm, forks=(True, True), no
         The fitted window when it overrides ``5 n_br h``, px.
     max_turn : float
         Largest ``int |kappa| ds`` over one fork zone, radians (``numpy.inf``: no bound).
+    walled_px : (float, float)
+        Arc at the start and the end followed along a merged band's wall (fitted, but counted
+        in ``energy_rel_uncertainty`` as not measured on a free centreline), px.
 
     Returns
     -------
@@ -1644,8 +1641,8 @@ def _fill_fork_zones(prof, n_br, thickness_px, px_per_mm, forks=(True, True), no
     else:
         v = 0.0
         noise = 720.0 * noise_px ** 2 / w_px ** 5 * px_per_mm ** 2 * out.length_mm
-    return replace(out, noise_var_per_mm2=v,
-                   energy_rel_uncertainty=_rel_uncertainty(out, forks, noise))
+    return replace(out, noise_var_per_mm2=v, energy_rel_uncertainty=_rel_uncertainty(
+        out, forks, noise, walled_mm=[w / px_per_mm for w in walled_px]))
 
 
 def _zone_turn(k, s, z0, z1, edge) -> float | None:
