@@ -453,12 +453,13 @@ def threshold_rgb(rgb, *, method: str = "auto", region=None, blue_min=None,
                                n_outside=n_out[0])
     levels = _auto_levels(d, m, reg, scale, features)
     if levels is None:
+        note = _marks_of_another_colour(rgb, reg, scale) or (
+            f"no ink darker in red and green than the paper by {MIN_CONTRAST_U8:g} (uint8 "
+            "units); for faint ink set the cut with --threshold-method fixed --blue-min B "
+            "--rg-max R")
         return ThresholdResult(np.zeros(rgb.shape[:2], bool), bm, rg, "auto", None, scale,
                                region_fraction=reg_frac,
-                               note="no blue-dominant class: no ink darker in red and green "
-                                    f"than the paper by {MIN_CONTRAST_U8:g} (uint8 units); for "
-                                    "faint ink set the cut with --threshold-method fixed "
-                                    "--blue-min B --rg-max R")
+                               note="no blue-dominant class: " + note)
     ink, paper = levels
     d_cut = 0.5 * (ink[0] + paper[0]) * scale
     m_cut = 0.5 * (ink[1] + paper[1]) * scale
@@ -467,6 +468,57 @@ def threshold_rgb(rgb, *, method: str = "auto", region=None, blue_min=None,
     return ThresholdResult(mask, bm, float(rg_used), "auto", float(d_cut), scale,
                            tuple(v * scale for v in ink), tuple(v * scale for v in paper),
                            reg_frac, n_outside=n_out[0])
+
+
+#: Least difference (uint8 units) between the darkest channel of the paper and of a class of
+#: marks for :func:`_marks_of_another_colour` to name them: a pen's line on paper differs by
+#: 150 or more, a faded blue ink by less than the automatic cut's own contrast.
+OTHER_MARKS_CONTRAST_U8 = 60.0
+#: Marks whose channels spread less than this (uint8 units) are neutral (black or grey).
+NEUTRAL_SPREAD_U8 = 40.0
+_HUES = ((15, "red"), (45, "orange or brown"), (70, "yellow"), (165, "green"), (195, "cyan"),
+         (255, "blue"), (335, "purple"), (360, "red"))
+
+
+def _marks_of_another_colour(rgb, reg, scale) -> str:
+    """Why a scan without a blue-dominant class holds no blue ink, when it holds dark marks.
+
+    The darkest channel of each pixel is split by Otsu's method (a sample of about 250 000
+    pixels of ``reg``); a dark class of at most half the pixels, darker than the paper by
+    :data:`OTHER_MARKS_CONTRAST_U8`, is named by its median colour. Neutral marks (a black or
+    grey pen, a photocopy) can still be cut by the paper's rule with the blue bound removed,
+    and the note says with which bound; marks of a blue hue are left to the faint-ink advice.
+    Returns ``""`` when there is no such class.
+    """
+    import colorsys
+
+    step = max(1, int(np.sqrt(rgb.shape[0] * rgb.shape[1] / 250_000)))
+    px = rgb[::step, ::step]
+    if reg is not None:
+        px = px[reg[::step, ::step]]
+    px = px.reshape(-1, 3).astype(np.float32) / scale
+    if len(px) < 20:
+        return ""
+    low = px.min(axis=1)
+    dark = low <= _otsu_u8(low)
+    if not 0 < np.count_nonzero(dark) <= 0.5 * len(px):
+        return ""
+    ink, paper = np.median(px[dark], axis=0), np.median(px[~dark], axis=0)
+    if paper.min() - ink.min() < OTHER_MARKS_CONTRAST_U8:
+        return ""
+    colours = (f"(median RGB ({ink[0]:.0f}, {ink[1]:.0f}, {ink[2]:.0f}) on paper "
+               f"({paper[0]:.0f}, {paper[1]:.0f}, {paper[2]:.0f}))")
+    if ink.max() - ink.min() < NEUTRAL_SPREAD_U8:
+        rg_cut = 0.5 * (ink[:2].max() + paper[:2].max())
+        return (f"the scan's dark marks are black or grey {colours}, not blue ink; to read them "
+                f"with the paper's rule without its blue bound: --threshold-method fixed "
+                f"--blue-min 0 --rg-max {rg_cut * scale:.0f}")
+    hue = 360.0 * colorsys.rgb_to_hsv(*(ink / 255.0))[0]
+    name = next(n for h, n in _HUES if hue < h)
+    if name == "blue":
+        return ""
+    return (f"the scan's dark marks are {name} {colours}, not blue ink: the threshold is the "
+            f"paper's rule for a cut inked in blue")
 
 
 #: Thin lines are looked for below this sheet thickness, px: a single sheet is then narrower

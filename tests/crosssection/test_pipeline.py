@@ -318,13 +318,13 @@ def test_uniform_images_raise_analysis_error():
 
 def test_a_colourless_scan_says_so():
     # a colour scan made grey (channels equal, as a grayscale scan saved as RGB): no ink passes,
-    # and the error names the cause; a scan that has colour but no blue ink keeps the other
+    # and the error names the cause; a scan whose ink is of another colour says which
     scene = make_scene(seed=44, n_stacks=20, max_layers=3)
     grey = np.repeat(scene.rgb.mean(axis=2, keepdims=True).astype(np.uint8), 3, axis=2)
     with pytest.raises(AnalysisError, match="no colour"):
         analyze(grey)
-    with pytest.raises(AnalysisError, match="no blue-dominant class.*threshold-method fixed"):
-        analyze(np.ascontiguousarray(scene.rgb[..., ::-1]))  # blue ink turned red
+    with pytest.raises(AnalysisError, match="no blue-dominant class.*marks are orange"):
+        analyze(np.ascontiguousarray(scene.rgb[..., ::-1]))  # blue ink turned orange
 
 
 def test_result_write_roundtrip(tmp_path):

@@ -247,3 +247,42 @@ def test_the_pipeline_bridges_only_below_three_pixels_per_sheet():
         high = crosssection.analyze(img, px_per_mm=40.0, hole_radius_mm=195 / 40.0, **kw)
     assert low.summary["thresholds"]["bridged_px"] > 0          # h = 2 px
     assert high.summary["thresholds"]["bridged_px"] == 0        # h = 4 px: noise, not thinness
+
+
+def _recoloured(sc, ink_rgb):
+    """The scene's ink redrawn in ``ink_rgb`` on its paper, mixed by how much ink covers a
+    pixel (the blue dominance of the clean drawing)."""
+    rgb = sc.rgb.astype(np.float32)
+    d = rgb[..., 2] - rgb[..., :2].max(axis=2)
+    w = np.clip(d / max(np.percentile(d, 99.5), 1.0), 0, 1)[..., None]
+    paper = np.median(rgb.reshape(-1, 3), axis=0)
+    return np.clip(paper * (1 - w) + np.asarray(ink_rgb, np.float32) * w, 0, 255).astype(np.uint8)
+
+
+@pytest.mark.parametrize("ink_rgb, colour", [((35, 35, 40), "black or grey"),
+                                             ((150, 35, 45), "red"),
+                                             ((40, 120, 50), "green")])
+def test_marks_of_another_colour_are_named(ink_rgb, colour):
+    """A scan drawn with a pen of another colour fails the blue rule, and the note says what
+    the marks are rather than calling them faint; black marks get a cut that reads them."""
+    sc = make_scene(seed=13, receding_fraction=0.0, **KW)
+    truth = threshold_rgb(sc.rgb).mask
+    res = threshold_rgb(_recoloured(sc, ink_rgb))
+    assert not res.mask.any()
+    assert f"marks are {colour}" in res.note and "faint" not in res.note
+    if colour == "black or grey":
+        cut = int(res.note.rsplit("--rg-max ", 1)[1])
+        fixed = threshold_rgb(_recoloured(sc, ink_rgb), method="fixed", blue_min=0, rg_max=cut)
+        iou = np.count_nonzero(fixed.mask & truth) / np.count_nonzero(fixed.mask | truth)
+        assert iou > 0.9
+    else:
+        assert "--blue-min 0" not in res.note
+
+
+def test_faint_blue_ink_keeps_the_faint_ink_advice():
+    sc = make_scene(seed=13, receding_fraction=0.0, **KW)
+    rgb = sc.rgb.astype(np.float32)
+    paper = np.median(rgb.reshape(-1, 3), axis=0)
+    faded = np.clip(paper + 0.15 * (rgb - paper), 0, 255).astype(np.uint8)
+    res = threshold_rgb(faded)
+    assert not res.mask.any() and "faint ink" in res.note and "marks are" not in res.note
