@@ -32,6 +32,7 @@ SWITCHES = {
                           "search and the MILP fallback",
     "layer_steps": "one stack between two junctions even where its width steps by whole "
                    "layers (the paper's stacks)",
+    "hole_correction": "use a given hole as given even where the ink crosses its circle",
 }
 
 THRESHOLD_METHODS = ("auto", "fixed", "otsu")
@@ -163,6 +164,10 @@ class AnalysisParams:
         "improve the rounded least-squares branch counts by exact integer moves, and by the "
         "MILP on small components the moves leave unbalanced; off: the rounding is the "
         "result", cli=False))
+    hole_correction: bool = field(default=True, metadata=_opt(
+        "when the ink crosses a given hole's circle (a radius or centre given a little off "
+        "cuts the wall band), use the hole found in the scan if it lies near the given one "
+        "and frames the ink; off: the given hole as given (both flagged)", cli=False))
     layer_steps: bool = field(default=True, metadata=_opt(
         "cut a stack where its width steps by whole layers along it (layers ending inside "
         "the band: a rod end, or folds at a band's end while a layer goes on); off: one "

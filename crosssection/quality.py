@@ -16,6 +16,9 @@ scale_mismatch           px_per_mm used / the resolution the file records     of
 low_resolution           sheet thickness h in pixels                          h < 3 px
 hole_fitted              hole found in the scan, with its confidence          confidence < 0.5
 ink_outside_hole         ink pixels outside the hole / all ink pixels         > 2 %
+hole_crossed             fraction of a given hole's circle beyond which ink   > 1 %, where the
+                         goes on (the circle cuts the wall band); the hole    hole found near it
+                         found in the scan replaces it                        frames the ink
 hole_cut                 area of the hole outside the scan / the hole's area  > 0.5 %
 junction_degree          largest junction degree (paper: degree 4 ~ 1 %)      > 6
 networks                 separate networks of ink each holding at least 10 %  > 1
@@ -153,6 +156,7 @@ CATEGORIES = {
     "low_resolution": ResolutionWarning,
     "hole_fitted": FrameWarning,
     "ink_outside_hole": FrameWarning,
+    "hole_crossed": FrameWarning,
     "hole_cut": FrameWarning,
     "junction_degree": NetworkWarning,
     "networks": NetworkWarning,
@@ -205,6 +209,34 @@ def hole_outside_fraction(shape, center_rc, radius_px, n: int = 4096) -> float:
 
 
 HOLE_CUT_LIMIT = 0.005
+
+
+def _crossed_check(params, hole) -> list[QualityFlag]:
+    """The ``hole_crossed`` check: a given hole beyond which the rod's ink goes on, where the
+    hole found in the scan frames it."""
+    from crosssection.stages.hole import GIVEN_CROSSED_LIMIT
+
+    cut = float(getattr(hole, "given_crossed", 0.0))
+    other = getattr(hole, "alternative", None)
+    if cut <= GIVEN_CROSSED_LIMIT or other is None:
+        return []
+    mm = params.scale.to_mm
+    used, unused = ((hole.center_rc, hole.radius_px), other)
+    if not hole.replaced:
+        used, unused = unused, used
+
+    def describe(h):
+        (r0, c0), rad = h
+        return f"radius {mm(rad):.2f} mm, centre x = {c0:.0f}, y = {r0:.0f} px"
+    head = (f"ink goes on beyond the given hole on {100 * cut:.0f} % of its circle (it cuts "
+            f"the wall band)")
+    if hole.replaced:
+        msg = (f"{head}: the hole found in the scan is used ({describe(used)}; given "
+               f"{describe(unused)}): check the hole given")
+    else:
+        msg = (f"{head}: the hole found in the scan ({describe(used)}) frames the ink; check "
+               f"hole_radius_mm and hole_center_px")
+    return [QualityFlag("hole_crossed", msg, cut, GIVEN_CROSSED_LIMIT)]
 
 
 def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stacks,
@@ -276,6 +308,7 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
         flags.append(QualityFlag("hole_fitted", f"hole found with low confidence "
                                  f"{hole_confidence:.2f}: pass hole_radius_mm and "
                                  "hole_center_px", hole_confidence, 0.5))
+    flags += _crossed_check(params, hole)
     if ink_outside_fraction > 0.02:
         flags.append(QualityFlag("ink_outside_hole", f"{100 * ink_outside_fraction:.1f} % of the "
                                  "ink lies outside the hole (ignored): check the hole and the "

@@ -326,6 +326,7 @@ def analysis_params(**fixed):
         "width_statistic": st.sampled_from(WIDTH_STATISTICS),
         "integer_refinement": st.booleans(),
         "layer_steps": st.booleans(),
+        "hole_correction": st.booleans(),
         "l_min_mm": st.floats(0.2, 3.0),
         "merge_px": st.floats(0.0, 6.0),
         "tangent_mm": opt(st.floats(0.1, 1.0)),

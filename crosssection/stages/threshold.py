@@ -355,6 +355,32 @@ class ColourFeatures:
         return self._lattice[step]
 
 
+def passes_at(thr: ThresholdResult, features: ColourFeatures, rows, cols) -> np.ndarray:
+    """Whether the pixels at ``(rows, cols)`` pass the cut of ``thr``, its region ignored.
+
+    Parameters
+    ----------
+    thr : ThresholdResult
+    features : ColourFeatures
+        Those of the image ``thr`` was cut from.
+    rows, cols : int arrays
+
+    Returns
+    -------
+    bool array
+    """
+    ok = np.ones(np.shape(rows), bool)
+    if thr.method != "fixed" and thr.dominance_min is None:
+        return ~ok  # no cut found: nothing is ink
+    if thr.blue_min is not None:
+        ok &= features.blue[rows, cols] >= np.ceil(thr.blue_min)
+    if thr.rg_max is not None:
+        ok &= features.darkness[rows, cols] <= np.floor(thr.rg_max)
+    if thr.dominance_min is not None:
+        ok &= features.dominance[rows, cols] >= np.ceil(thr.dominance_min)
+    return ok
+
+
 def colour_features(rgb) -> ColourFeatures:
     """The :class:`ColourFeatures` of a scan (to share between :func:`threshold_rgb` calls)."""
     return ColourFeatures(rgb)

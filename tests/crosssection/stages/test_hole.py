@@ -237,3 +237,75 @@ def test_absurd_holes_raise():
         check_hole((100, 100), None, -3)
     with pytest.raises(ParameterError):
         check_hole((100, 100), (np.nan, 3), 10)
+
+
+def _ring_scan(R=300.0, band=12.0, size=760):
+    """Paper with a blue wall band of ``band`` px inside a circle of radius ``R``."""
+    rr, cc = np.mgrid[:size, :size]
+    d = np.hypot(rr - size / 2, cc - size / 2)
+    img = np.empty((size, size, 3), np.uint8)
+    img[:] = PAPER_RGB
+    img[(d <= R) & (d > R - band)] = (40, 70, 170)
+    return img, np.array([size / 2, size / 2])
+
+
+@pytest.mark.parametrize("radius_factor,shift_px,crossed", [(1.0, 0, False), (1.02, 0, False),
+                                                            (0.97, 0, True), (1.0, 8, True)])
+@pytest.mark.parametrize("band", [12.0, 3.0])
+def test_ink_across_circle_finds_a_given_hole_that_cuts_the_wall_band(radius_factor, shift_px,
+                                                                      crossed, band):
+    """A circle 3 % short or 8 px off cuts a wall band 12 px wide, and leaves one of 3 px
+    (a single sheet at 30 px/mm) wholly beyond it: both count."""
+    from crosssection.stages.hole import GIVEN_CROSSED_LIMIT, ink_across_circle
+
+    img, c = _ring_scan(band=band)
+    ink = threshold_rgb(img).mask
+    hole = Hole(c + [0, shift_px], 300.0 * radius_factor, False)
+    frac = ink_across_circle(lambda r, cc: ink[r, cc], img.shape, hole)
+    assert (frac > GIVEN_CROSSED_LIMIT) == crossed
+    if crossed:
+        assert frac > 0.1
+
+
+def test_ink_across_circle_ignores_a_background_that_passes_everywhere():
+    """A blue plate (or background) passing the ink's cut all round is not a cut band."""
+    from crosssection.stages.hole import ink_across_circle
+
+    img, c = _ring_scan()
+    rr, cc = np.mgrid[:img.shape[0], :img.shape[1]]
+    img[np.hypot(rr - c[0], cc - c[1]) > 300.0] = (60, 90, 170)
+    ink = threshold_rgb(img, method="fixed").mask
+    assert ink_across_circle(lambda r, q: ink[r, q], img.shape, Hole(c, 300.0, False)) == 0.0
+
+
+@pytest.mark.parametrize("radius_factor,shift_mm", [(0.97, 0.0), (1.0, 0.5)])
+def test_a_given_hole_a_little_off_is_replaced_by_the_hole_found(scene, radius_factor, shift_mm):
+    """A hole given 3 % short, or its centre 0.5 mm off, cuts the wall band: the hole found in
+    the scan replaces it (flagged), and the analysis is that of the right hole; without the
+    correction the wall band is lost (flagged too)."""
+    from crosssection import analyze
+    from crosssection.quality import FrameWarning
+
+    sc, c, R = scene
+    ink = threshold_rgb(sc.rgb, method="fixed").mask
+    img = apply_backdrop(sc.rgb, ink_mask=ink, hole_center_rc=c, hole_radius_px=R,
+                         rng=np.random.default_rng(5), plate="grey", rim_px=0)
+    p = sc.params
+    kw = dict(px_per_mm=p["px_per_mm"], thickness_mm=p["thickness_mm"],
+              calibration=sc.calibration)
+    exact = analyze(img, hole_radius_mm=p["hole_radius_mm"],
+                    hole_center_px=tuple(p["hole_center_px"]), **kw)
+    assert "hole_crossed" not in exact.summary["quality"]["codes"]
+    off = dict(hole_radius_mm=p["hole_radius_mm"] * radius_factor,
+               hole_center_px=(p["hole_center_px"][0] + shift_mm * p["px_per_mm"],
+                               p["hole_center_px"][1]))
+    with pytest.warns(FrameWarning, match="the hole found in the scan is used"):
+        fixed = analyze(img, **off, **kw)
+    assert abs(fixed.hole.radius_px - exact.hole.radius_px) < 2.0
+    assert np.hypot(*(fixed.hole.center_rc - exact.hole.center_rc)) < 2.0
+    assert abs(fixed.summary["rod_length_mm"] / exact.summary["rod_length_mm"] - 1) < 0.005
+    assert len(fixed.stacks) == len(exact.stacks)
+    with pytest.warns(FrameWarning, match="frames the ink; check hole_radius_mm"):
+        kept = analyze(img, **off, **kw, hole_correction=False)
+    assert kept.hole.radius_px == pytest.approx(off["hole_radius_mm"] * p["px_per_mm"])
+    assert kept.summary["rod_length_mm"] < 0.99 * exact.summary["rod_length_mm"]
