@@ -58,10 +58,12 @@ from pathlib import Path
 import pandas as pd
 
 from crosssection._version import __version__
+from crosssection.core import schema
 from crosssection.core.errors import ConfigError, FoldstatError, ParameterError
 from crosssection.core.fileio import write_csv, write_json
 from crosssection.core.parallel import get_executor, spawn_seeds
-from crosssection.params import AnalysisParams, add_analysis_arguments, switched_off
+from crosssection.params import (PARAM_NAMES, AnalysisParams, add_analysis_arguments,
+                                 check_param, switched_off)
 from crosssection.quality import QualityWarning
 from crosssection.setconfig import (DEFAULT_PARAMS, DEFAULT_SET_NAME, SET_FILE, SetConfig, check_params,
                         failed_set, load_set_config)
@@ -98,8 +100,17 @@ class ImageTask:
 # --------------------------------------------------------------------------- discovery
 
 
+def is_output_folder(folder) -> bool:
+    """Whether ``folder`` holds foldstat's own output: a batch's (``batch.json``) or one
+    scan's analysis (``summary.json`` beside ``junctions.csv``), whose figures are not scans."""
+    folder = Path(folder)
+    return (folder / "batch.json").is_file() or (
+        (folder / "summary.json").is_file() and (folder / "junctions.csv").is_file())
+
+
 def find_images(input_dir, *, exclude=()) -> list[Path]:
-    """Image files under ``input_dir`` (recursive, sorted; hidden files and folders skipped).
+    """Image files under ``input_dir`` (recursive, sorted; hidden files and folders skipped,
+    and foldstat's output folders, :func:`is_output_folder`).
 
     Parameters
     ----------
@@ -117,7 +128,8 @@ def find_images(input_dir, *, exclude=()) -> list[Path]:
     for dirpath, dirnames, filenames in os.walk(root):
         here = Path(dirpath)
         dirnames[:] = sorted(d for d in dirnames if not d.startswith(".")
-                             and (here / d).resolve() not in excluded)
+                             and (here / d).resolve() not in excluded
+                             and not is_output_folder(here / d))
         for fn in filenames:
             if not fn.startswith(".") and fn.lower().endswith(IMAGE_SUFFIXES):
                 found.append(here / fn)
@@ -172,6 +184,32 @@ def _safe_component(text: str) -> str:
     return "".join(c if (c.isalnum() or c in "-_+") else "_" for c in text)
 
 
+def _collisions(tasks) -> list[list[int]]:
+    """Groups of tasks whose output folders would be one (compared case-blind: a.png and
+    A.png share a folder on macOS and Windows)."""
+    groups: dict[str, list[int]] = {}
+    for i, t in enumerate(tasks):
+        groups.setdefault(t.out_rel.lower(), []).append(i)
+    return [idx for idx in groups.values() if len(idx) > 1]
+
+
+def _unique_out_rels(tasks) -> None:
+    """Give every task its own output folder, in place.
+
+    A scan's folder is its stem; two scans of one set with one stem (a.png and a.tif, or
+    sub/a.png) are named by their paths, and names that the safe characters still merge
+    ("a b.png" and "a_b.png") get a hash of the path as well.
+    """
+    for idx in _collisions(tasks):
+        for i in idx:
+            t = tasks[i]
+            t.out_rel = f"{_set_folder(t.set_name)}/{_safe_component(t.rel.replace('/', '__'))}"
+    for idx in _collisions(tasks):
+        for i in idx:
+            t = tasks[i]
+            t.out_rel += "-" + hashlib.sha256(t.rel.encode()).hexdigest()[:8]
+
+
 CALIBRATION_FILE = "calibration.csv"
 
 
@@ -204,11 +242,14 @@ def plan_batch(input_dir, out_dir, *, cli_params: dict | None = None, seed: int 
     """
     root = Path(input_dir)
     if not root.is_dir():
-        raise ConfigError("input folder does not exist", root)
+        raise ConfigError("not a folder (batch reads a folder of scans; analyze reads one "
+                          "scan)" if root.exists() else "input folder does not exist", root)
     root = root.resolve()
     out = Path(out_dir).resolve()
     defaults = dict(DEFAULT_PARAMS)
-    defaults.update(check_params(cli_params or {}, Path.cwd() / "command line"))
+    given = check_params(cli_params or {}, Path.cwd() / "command line",
+                         origin="--calibration")
+    defaults.update(given)
     images = find_images(root, exclude=[out])
     if not images:
         raise ConfigError(f"no image ({', '.join(IMAGE_SUFFIXES)}) found", root)
@@ -225,7 +266,7 @@ def plan_batch(input_dir, out_dir, *, cli_params: dict | None = None, seed: int 
             toml = cand / SET_FILE
             if toml.is_file():
                 try:
-                    sets[key] = load_set_config(toml, defaults=defaults)
+                    sets[key] = load_set_config(toml, defaults=defaults, given=given)
                 except FoldstatError as exc:
                     sets[key] = failed_set(toml, exc.one_line())
                 return sets[key]
@@ -235,23 +276,16 @@ def plan_batch(input_dir, out_dir, *, cli_params: dict | None = None, seed: int 
 
     seeds = spawn_seeds(seed, len(images))
 
-    tasks, used = [], {}
+    tasks = []
     for img, task_seed in zip(images, seeds):
         cfg = set_of(img.parent)
         rel = img.relative_to(root).as_posix()
         out_rel = f"{_set_folder(cfg.name)}/{_safe_component(img.stem)}"
-        used.setdefault(out_rel, []).append(len(tasks))
         params = {} if cfg.error else cfg.params_for(img)
         tasks.append(ImageTask(image=str(img), rel=rel, set_name=cfg.name, out_dir="",
                                out_rel=out_rel, params=params, seed=task_seed,
                                figure=figure, error=cfg.error))
-    # two images with one stem in one set (a.png and a.tif, or sub/a.png): name them by path
-    for out_rel, idx in used.items():
-        if len(idx) > 1:
-            for i in idx:
-                t = tasks[i]
-                t.out_rel = (f"{_set_folder(t.set_name)}/"
-                             f"{_safe_component(t.rel.replace('/', '__'))}")
+    _unique_out_rels(tasks)
     for t in tasks:
         t.out_dir = str(out / t.out_rel)
         if t.error is None:
@@ -411,6 +445,10 @@ def completed_row(task: ImageTask) -> dict | None:
     if info.get("params_hash") != task.params_hash:
         return None
     if task.figure and not (final / "overlay.png").is_file():
+        return None
+    # a table deleted or emptied since (by hand, or a disk that filled up) is redone
+    if any(not (final / f"{name}.csv").is_file() or (final / f"{name}.csv").stat().st_size == 0
+           for name in schema.TABLES):
         return None
     row = _row(task, "skipped", summary, wall_s=info.get("wall_s", math.nan))
     row["seed"] = info.get("seed", task.seed)  # the seed the image was analysed with
@@ -607,16 +645,35 @@ def run(args) -> int:
     """Entry point of ``python -m crosssection batch``; returns the exit status (0 all images
     done, 3 finished with some images failed, 2 bad arguments)."""
     if args.workers is not None and args.workers < 1:
-        raise ParameterError(f"--workers must be >= 1, got {args.workers}", args.input_dir)
+        raise ParameterError(f"must be >= 1, got {args.workers}", "--workers")
+    if args.seed is not None and args.seed < 0:
+        raise ParameterError(f"must be >= 0, got {args.seed}", "--seed")
+    for name in PARAM_NAMES:
+        value = getattr(args, name, None)
+        if value is not None and name != "calibration":
+            try:
+                check_param(name, value)
+            except ParameterError as exc:
+                raise ParameterError(exc.cause, "--" + name.replace("_", "-")) from None
     cli_params = {k: v for k, v in AnalysisParams.from_cli_args(args).to_dict().items()
                   if getattr(args, k, None) is not None}
     cli_params.update(switched_off(args))
-    index = run_batch(args.input_dir, args.out, workers=args.workers, scheduler=args.scheduler,
+    workers = args.workers
+    n_cpu = os.cpu_count() or 1
+    if workers is not None and workers > n_cpu and args.scheduler is None:
+        # each worker holds one scan's analysis (about 0.5 GB for a 2000 x 2000 scan)
+        print(f"warning: --workers {workers}: this machine has {n_cpu} CPUs; {n_cpu} workers "
+              f"are used", file=sys.stderr)
+        workers = n_cpu
+    index = run_batch(args.input_dir, args.out, workers=workers, scheduler=args.scheduler,
                       seed=args.seed, figure=not args.no_figure, cli_params=cli_params,
                       force=args.force,
                       progress=False if args.quiet else args.progress)
     n = index["status"].value_counts()
     n_failed = int(n.get("failed", 0))
+    for _, row in index[index["status"] == "failed"].iterrows():
+        print(f"warning: {Path(args.input_dir) / row['image']}: not analysed: {row['reason']}",
+              file=sys.stderr)
     for _, row in index[index["quality"].fillna("") != ""].iterrows():
         print(f"warning: {Path(args.input_dir) / row['image']}: doubtful results "
               f"({row['quality'].replace(';', ', ')}; see "

@@ -82,9 +82,10 @@ class SetConfig:
         return out
 
 
-def _check_value(key, value, path, where):
+def _check_value(key, value, path, where, origin=None):
     """Validate one parameter value (the checks of :class:`AnalysisParams`); return it
-    normalised (floats, absolute calibration path)."""
+    normalised (floats, absolute calibration path). ``origin`` names where the value was
+    given in a calibration's errors (default: ``path``)."""
     ctx = f"{where}{key}"
     if key not in PARAM_KEYS:
         raise ConfigError(f"unknown key {ctx!r}; allowed: {', '.join(ALLOWED_KEYS)}", path)
@@ -94,7 +95,7 @@ def _check_value(key, value, path, where):
         cal = Path(value)
         if not cal.is_absolute():
             cal = Path(path).parent / cal
-        check_calibration(cal, origin=path)
+        check_calibration(cal, origin=path if origin is None else origin)
         return str(cal.resolve())
     if isinstance(value, str) and key not in ("threshold_method", "curvature_method",
                                               "skeleton_method", "width_statistic"):
@@ -143,7 +144,7 @@ def check_calibration(cal_path, origin=None) -> Path:
     return cal_path
 
 
-def check_params(params: dict, path=None, where: str = "") -> dict:
+def check_params(params: dict, path=None, where: str = "", origin=None) -> dict:
     """Validate a dict of analysis parameters (the keys of :data:`PARAM_KEYS`).
 
     Parameters
@@ -154,17 +155,22 @@ def check_params(params: dict, path=None, where: str = "") -> dict:
         File the values come from; relative calibration paths are resolved against its folder.
     where : str
         Prefix naming the table in messages (``'images."a.png".'``).
+    origin : str, optional
+        Where the values were given, named in a calibration's errors (default: ``path``;
+        ``"--calibration"`` for the command line).
 
     Returns
     -------
     dict
         Normalised parameters.
     """
-    return {k: _check_value(k, v, path if path is not None else Path.cwd() / "cli", where)
+    return {k: _check_value(k, v, path if path is not None else Path.cwd() / "cli", where,
+                            origin)
             for k, v in params.items() if v is not None}
 
 
-def load_set_config(toml_path, *, defaults: dict | None = None) -> SetConfig:
+def load_set_config(toml_path, *, defaults: dict | None = None,
+                    given: dict | None = None) -> SetConfig:
     """Read and validate a ``set.toml``.
 
     Parameters
@@ -173,6 +179,9 @@ def load_set_config(toml_path, *, defaults: dict | None = None) -> SetConfig:
         The file.
     defaults : dict, optional
         Parameters used where the set is silent (the command-line values).
+    given : dict, optional
+        The values given on the command line: one the set's file replaces is named in a
+        warning.
 
     Returns
     -------
@@ -197,8 +206,15 @@ def load_set_config(toml_path, *, defaults: dict | None = None) -> SetConfig:
                           "[images.\"scan_03.png\"]", toml_path)
     top = {k: v for k, v in data.items() if k not in ("name", "images")}
     params = dict(defaults or {})
-    params.update(check_params(top, toml_path))
+    checked = check_params(top, toml_path)
+    params.update(checked)
     overrides, warnings = {}, []
+    # a set's file wins over the command line (its values belong to its scans): say so
+    for key, value in checked.items():
+        if key in (given or {}) and given[key] != value:
+            warnings.append(f"{toml_path}: sets {key} = {value!r}, which replaces "
+                            f"--{key.replace('_', '-')} {given[key]!r} for the scans of "
+                            f"this set")
     for rel, table in images.items():
         bad = [k for k in table if k not in PARAM_KEYS]
         if bad:

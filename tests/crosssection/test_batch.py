@@ -132,10 +132,13 @@ def test_a_calibration_beside_scans_without_one_is_named(tmp_path):
     # the loose scan's neighbour is named; the set's own calibration is used, not named
     assert len(remarks) == 1 and str(inp / "calibration.csv") in remarks[0]
     assert "--calibration" in remarks[0]
-    # given on the command line, it is used: nothing to say
+    # given on the command line, it is used for the loose scan: only the set's own file,
+    # which replaces it for the set's scans, is named
     _, sets = B.plan_batch(inp, tmp_path / "out",
                            cli_params={"calibration": str(inp / "calibration.csv")})
-    assert [w for s in sets.values() for w in s.warnings] == []
+    remarks = [w for s in sets.values() for w in s.warnings]
+    assert len(remarks) == 1 and remarks[0].startswith(str(inp / "setA" / "set.toml"))
+    assert "replaces --calibration" in remarks[0]
 
 
 def test_missing_or_empty_input(tmp_path):
@@ -289,3 +292,75 @@ def test_cli_batch_stderr_holds_no_progress_bar_when_not_a_terminal(tmp_path):
     assert r.returncode == 0, r.stderr
     assert "img/s" not in r.stderr and "batch:" not in r.stderr
     assert all(line.startswith("warning: ") for line in r.stderr.splitlines())
+
+
+# ----------------------------------------------------------------------------- what users bring
+
+
+def test_scans_whose_names_merge_get_their_own_folders(tmp_path):
+    """"a b.png" and "a_b.png" make one safe name, "A_b.png" the same folder on a case-blind
+    disk, sub/a_b.png the same stem: every scan gets its own folder."""
+    inp = tmp_path / "in"
+    (inp / "sub").mkdir(parents=True)
+    for name in ("a b.png", "a_b.png", "A_b.png", "sub/a_b.png", "c.png"):
+        (inp / name).write_bytes(b"")
+    tasks, _ = B.plan_batch(inp, tmp_path / "out")
+    names = [t.out_rel.lower() for t in tasks]
+    assert len(set(names)) == len(tasks) == 5
+    assert {t.rel: t.out_rel for t in tasks}["c.png"] == "default/c"
+
+
+def test_resume_redoes_a_scan_whose_table_is_missing_or_empty(tmp_path):
+    inp = tmp_path / "in"
+    inp.mkdir()
+    (inp / "a.png").write_bytes(b"\x89PNG")
+    (task,), _ = B.plan_batch(inp, tmp_path / "out", figure=False)
+    folder = Path(task.out_dir)
+    folder.mkdir(parents=True)
+    (folder / "summary.json").write_text(json.dumps({"batch": {"params_hash":
+                                                               task.params_hash}}))
+    for name in ("junctions", "stacks", "branches", "voids"):
+        (folder / f"{name}.csv").write_text("id\n")
+    assert B.completed_row(task)["status"] == "skipped"
+    (folder / "branches.csv").write_text("")
+    assert B.completed_row(task) is None
+    (folder / "branches.csv").unlink()
+    assert B.completed_row(task) is None
+
+
+def test_output_folders_inside_the_input_are_not_scans(tmp_path):
+    inp = tmp_path / "in"
+    (inp / "old_batch" / "default" / "s").mkdir(parents=True)
+    (inp / "old_batch" / "batch.json").write_text("{}")
+    (inp / "old_batch" / "default" / "s" / "overlay.png").write_bytes(b"")
+    (inp / "one" / "result").mkdir(parents=True)
+    for name in ("summary.json", "junctions.csv", "overlay.png"):
+        (inp / "one" / "result" / name).write_text("")
+    (inp / "one" / "scan.png").write_bytes(b"")
+    assert [p.relative_to(inp).as_posix() for p in B.find_images(inp)] == ["one/scan.png"]
+
+
+def test_a_set_file_replacing_a_command_line_value_says_so(tmp_path):
+    (tmp_path / "set.toml").write_text("px_per_mm = 50\nthickness_mm = 0.1\n")
+    cfg = load_set_config(tmp_path / "set.toml", defaults={"px_per_mm": 45.0},
+                          given={"px_per_mm": 45.0, "thickness_mm": 0.1})
+    assert cfg.params["px_per_mm"] == 50.0
+    assert len(cfg.warnings) == 1 and "replaces --px-per-mm 45.0" in cfg.warnings[0]
+
+
+@pytest.mark.parametrize("option, named", [(["--seed", "-1"], "--seed"),
+                                           (["--px-per-mm", "0"], "--px-per-mm"),
+                                           (["--thickness-mm", "nan"], "--thickness-mm"),
+                                           (["--workers", "0"], "--workers")])
+def test_cli_batch_absurd_options_name_the_option(tmp_path, option, named):
+    import subprocess
+    import sys
+
+    inp = tmp_path / "in"
+    inp.mkdir()
+    (inp / "a.png").write_bytes(b"")
+    r = subprocess.run([sys.executable, "-m", "crosssection", "batch", str(inp), "--out",
+                        str(tmp_path / "out"), *option], capture_output=True, text=True)
+    assert r.returncode == 2
+    assert r.stderr.count("\n") == 1 and r.stderr.startswith(f"error: {named}: ")
+    assert not (tmp_path / "out").exists()
