@@ -3,10 +3,16 @@
 Each DIR is a batch output (every set folder inside becomes a set), a single ``analyze``
 output, or a simulation ensemble from ``python -m simulate quench`` (one set named after the
 folder, or after ``--name``).
+
+REPORT_DIR is created, or replaced whole when it holds an earlier report: the new report is
+written beside it and swapped in at the end, so an interrupted run leaves it as it was.
 """
 from __future__ import annotations
 
 import argparse
+import math
+import sys
+import warnings
 from pathlib import Path
 
 from crosssection.core.errors import ParameterError
@@ -20,7 +26,8 @@ def add_subparser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("dirs", nargs="+", metavar="DIR",
                    help="batch output, analyze output or simulation ensemble folder")
     p.add_argument("--out", required=True, metavar="REPORT_DIR",
-                   help="report folder (created; files in it are replaced)")
+                   help="report folder (created, or replaced whole when it holds a "
+                        "previous report)")
     p.add_argument("--name", action="append", default=None,
                    help="set name for each DIR in order (repeat; default: the folder names)")
     p.add_argument("--seed", type=int, default=0, help="seed of bootstrap and GOF (default 0)")
@@ -45,33 +52,58 @@ def add_subparser(subparsers) -> argparse.ArgumentParser:
     return p
 
 
+def check_options(args) -> None:
+    """Refuse absurd option values before any input is read.
+
+    Raises
+    ------
+    ParameterError
+        Naming the option: a count or seed below 0, a detection limit that is negative or
+        not finite, or ``--name`` not given once per DIR.
+    """
+    if args.name and len(args.name) != len(args.dirs):
+        raise ParameterError(f"given {len(args.name)} times for {len(args.dirs)} DIRs", "--name")
+    for flag, v in (("--seed", args.seed), ("--n-boot", args.n_boot), ("--n-mc", args.n_mc)):
+        if v < 0:
+            raise ParameterError(f"must be an integer >= 0, got {v}", flag)
+    for flag, v in (("--l-min-mm", args.l_min_mm), ("--s-min-mm2", args.s_min_mm2)):
+        if not (math.isfinite(v) and v >= 0):
+            raise ParameterError(f"must be a finite number >= 0 (0 = no limit), got {v:g}",
+                                 flag)
+
+
 def run(args) -> int:
-    """Load every DIR, compute the statistics and write the report."""
+    """Load every DIR, compute the statistics and write the report.
+
+    An interrupt leaves the report folder as it was (the report is swapped in whole at the
+    end): one ``error:`` line saying so and exit status 130. Warnings about the inputs are
+    then dropped with the run, as they are with an error.
+    """
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            status = _run(args)
+    except KeyboardInterrupt:
+        print(f"error: {args.out}: interrupted; the report folder was left as it was "
+              "(re-run the command to write it)", file=sys.stderr)
+        return 130
+    for w in caught:  # hand them on to the command line, which prints ours as lines
+        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    return status
+
+
+def _run(args) -> int:
     import matplotlib
 
     matplotlib.use("Agg")  # a command line draws files, never windows
-    from crosssection.stats.data import Ensemble, load_any
-    from crosssection.stats.report import write_report
+    from crosssection.stats.data import load_inputs
+    from crosssection.stats.report import check_report_dir, write_report
     from crosssection.stats.tables import StatsOptions
 
-    if args.name and len(args.name) != len(args.dirs):
-        raise ParameterError(f"--name given {len(args.name)} times for {len(args.dirs)} DIRs")
-    for v, flag in ((args.n_boot, "--n-boot"), (args.n_mc, "--n-mc")):
-        if v < 0:
-            raise ParameterError(f"{flag} must be >= 0, got {v}")
-    parts, seen = [], set()
-    for i, d in enumerate(args.dirs):
-        ens = load_any(d, set_name=args.name[i] if args.name else None,
-                       l_min_mm=args.l_min_mm or None, s_min_mm2=args.s_min_mm2 or None)
-        for s in ens.sets:  # two DIRs with the same folder name: keep the sets apart
-            if s in seen:
-                new = f"{s}#{i + 1}"
-                for df in (ens.configs, ens.branches, ens.stacks, ens.voids):
-                    df.loc[df["set"] == s, "set"] = new
-                s = new
-            seen.add(s)
-        parts.append(ens)
-    ens = Ensemble.concat(parts)
+    check_options(args)
+    check_report_dir(args.out, args.dirs)  # before the work, not after it
+    ens = load_inputs(args.dirs, names=args.name, l_min_mm=args.l_min_mm or None,
+                      s_min_mm2=args.s_min_mm2 or None)
     n_boot, n_mc = (50, 49) if args.fast else (args.n_boot, args.n_mc)
     opts = StatsOptions(seed=args.seed, n_boot=n_boot, n_mc=n_mc, gof=not args.no_gof)
     paths = write_report(ens, args.out, opts=opts, inputs=args.dirs,

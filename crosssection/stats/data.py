@@ -26,6 +26,8 @@ Common representation (:class:`Ensemble`):
 """
 from __future__ import annotations
 
+import csv
+import io
 import json
 import warnings
 from dataclasses import dataclass
@@ -96,19 +98,85 @@ class Ensemble:
         self.voids = _numeric(self.voids, VOID_COLS)
 
 
-def _read_csv(path: Path, required, *, nonempty: bool = False) -> pd.DataFrame:
+def _read_csv(path: Path, required, *, numeric=(), nonempty: bool = False) -> pd.DataFrame:
+    """A table with its ``required`` columns, and its ``numeric`` columns (those present) as
+    floats.
+
+    Raises
+    ------
+    ConfigError
+        The file is missing or unreadable, lacks a required column, holds no row while
+        ``nonempty``, or holds text in a numeric column (an empty cell is a missing value).
+    """
     try:
         df = pd.read_csv(path)
     except FileNotFoundError:
         raise ConfigError("missing table", path) from None
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
         raise ConfigError(f"unreadable CSV ({type(exc).__name__})", path) from None
+    except OSError as exc:
+        raise ConfigError(f"unreadable CSV ({exc.strerror or type(exc).__name__})",
+                          path) from None
     missing = [c for c in required if c not in df.columns]
     if missing:
         raise ConfigError(f"lacks columns {missing}", path)
     if nonempty and df.empty:
         raise ConfigError("holds no rows (header only)", path)
+    for c in numeric:
+        if c in df.columns:
+            df[c] = _numbers(df[c], c, path)
     return df
+
+
+def _numbers(col: pd.Series, name: str, path: Path) -> pd.Series:
+    """``col`` as floats; a cell that is not a number is a ``ConfigError`` naming the
+    column, the cell and its row (1 = the first row under the header)."""
+    if col.dtype.kind in "biuf":
+        return col.astype(float)
+    num = pd.to_numeric(col, errors="coerce")
+    bad = num.isna() & col.notna()
+    if bad.any():
+        pos = int(np.argmax(bad.to_numpy()))
+        raise ConfigError(f"column {name} holds {str(col.iloc[pos])!r} in data row {pos + 1} "
+                          "where a number is expected", path)
+    return num.astype(float)
+
+
+#: summary.json entries read as numbers (null stands for unknown)
+SUMMARY_NUMBERS = ("rod_length_mm", "n_stacks", "n_branches", "n_voids", "epsilon",
+                   "total_energy", "total_energy_rel_uncertainty")
+
+
+def _read_summary(path: Path) -> dict:
+    """``summary.json`` of an ``analyze`` output, checked for the entries read here.
+
+    Raises
+    ------
+    ConfigError
+        The file is unreadable, is not a JSON object, or an entry has the wrong type.
+    """
+    try:
+        summary = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"unreadable summary.json ({type(exc).__name__})", path) from None
+    if not isinstance(summary, dict):
+        raise ConfigError(f"holds a JSON {_json_kind(summary)}, not an object", path)
+    for key in SUMMARY_NUMBERS:
+        v = summary.get(key)
+        # bool is an int in Python, but true/false is no count nor length
+        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float))):
+            raise ConfigError(f"{key} is {json.dumps(v)}, not a number", path)
+    quality = summary.get("quality")
+    codes = quality.get("codes", []) if isinstance(quality, dict) else None
+    if quality is not None and not (isinstance(codes, list)
+                                    and all(isinstance(c, str) for c in codes)):
+        raise ConfigError("quality is not an object with a list of codes", path)
+    return summary
+
+
+def _json_kind(value) -> str:
+    return {list: "list", str: "string", bool: "boolean", int: "number", float: "number",
+            type(None): "null"}.get(type(value), type(value).__name__)
 
 
 def detect_kind(folder) -> str:
@@ -148,7 +216,8 @@ def load_simulation(folder, *, set_name=None) -> Ensemble:
     folder = Path(folder)
     name = set_name or folder.resolve().name
     cfg = _read_csv(folder / "configs.csv", ["config_id", "epsilon", "energy_total", "n_stacks",
-                                             "n_branches", "n_voids"], nonempty=True)
+                                             "n_branches", "n_voids"], nonempty=True,
+                    numeric=["epsilon", "energy_total", "n_stacks", "n_branches", "n_voids"])
     if "error" in cfg.columns:  # configurations whose simulation raised: no results
         bad = cfg["error"].notna() & (cfg["error"].astype(str).str.strip() != "")
         if bad.any():
@@ -157,8 +226,10 @@ def load_simulation(folder, *, set_name=None) -> Ensemble:
                           "are left out", QualityWarning, stacklevel=2)
             cfg = cfg[~bad]
     br = _read_csv(folder / "branches.csv", ["config_id", "length", "kappa_plus", "kappa_pm",
-                                             "energy"])
-    vo = _read_csv(folder / "voids.csv", ["config_id", "area", "shape_ratio", "n_edges"])
+                                             "energy"],
+                   numeric=["length", "kappa_plus", "kappa_pm", "energy", "n_br"])
+    vo = _read_csv(folder / "voids.csv", ["config_id", "area", "shape_ratio", "n_edges"],
+                   numeric=["area", "perimeter", "shape_ratio", "n_edges"])
     configs = pd.DataFrame({
         "set": name, "config_id": cfg["config_id"].astype(str), "N_l": cfg["n_stacks"],
         "N_br": cfg["n_branches"], "n_voids": cfg["n_voids"], "epsilon": cfg["epsilon"],
@@ -170,7 +241,7 @@ def load_simulation(folder, *, set_name=None) -> Ensemble:
         "e": br["energy"], "region": br["region"] if "region" in br.columns else SIM_REGION,
         "n_br": n_br, "l_min_L": np.nan})
     if (folder / "stacks.csv").is_file():  # optional: per-stack branch counts
-        st = _read_csv(folder / "stacks.csv", ["config_id", "n_br"])
+        st = _read_csv(folder / "stacks.csv", ["config_id", "n_br"], numeric=["n_br", "length"])
         stacks = pd.DataFrame({"set": name, "config_id": st["config_id"].astype(str),
                                "n_br": st["n_br"],
                                "length_L": st["length"] if "length" in st else np.nan,
@@ -206,19 +277,22 @@ def load_image_output(folder, *, set_name: str, config_id: str | None = None,
     """
     folder = Path(folder)
     cid = config_id or folder.name
-    try:
-        summary = json.loads((folder / "summary.json").read_text())
-    except (OSError, json.JSONDecodeError) as exc:
-        raise ConfigError(f"unreadable summary.json ({type(exc).__name__})",
-                          folder / "summary.json") from None
+    summary = _read_summary(folder / "summary.json")
     L = summary.get("rod_length_mm")
     if L is None or not np.isfinite(L) or L <= 0:
         raise ConfigError("summary.json has no positive rod_length_mm", folder / "summary.json")
     L = float(L)
     br = _read_csv(folder / "branches.csv", ["stack_id", "length_mm", "kappa_plus", "kappa_m",
-                                             "energy", "region"])
-    st = _read_csv(folder / "stacks.csv", ["stack_id", "n_br", "length_mm", "region"])
-    vo = _read_csv(folder / "voids.csv", ["area_mm2", "perimeter_mm", "shape_ratio", "n_edges"])
+                                             "energy", "region"],
+                   numeric=["stack_id", "length_mm", "kappa_plus", "kappa_m", "energy"])
+    st = _read_csv(folder / "stacks.csv", ["stack_id", "n_br", "length_mm", "region"],
+                   numeric=["stack_id", "n_br", "length_mm"])
+    vo = _read_csv(folder / "voids.csv", ["area_mm2", "perimeter_mm", "shape_ratio", "n_edges"],
+                   numeric=["area_mm2", "perimeter_mm", "shape_ratio", "n_edges"])
+    for table, df, key, what in (("stacks.csv", st, "n_stacks", "stacks"),
+                                 ("branches.csv", br, "n_branches", "branches"),
+                                 ("voids.csv", vo, "n_voids", "voids")):
+        _check_count(folder / table, len(df), summary.get(key), what)
     n_stacks = summary.get("n_stacks", len(st))
     n_br_map = dict(zip(st["stack_id"], st["n_br"]))
     configs = pd.DataFrame([{
@@ -244,6 +318,68 @@ def load_image_output(folder, *, set_name: str, config_id: str | None = None,
                     stacks.reindex(columns=STACK_COLS), voids.reindex(columns=VOID_COLS))
 
 
+def _check_count(path: Path, rows: int, counted, what: str) -> None:
+    """Warn when a table holds another number of rows than ``summary.json`` counts: the
+    analysis writes both from the same tables, so a difference is a truncated or edited
+    file, whose statistics are then those of the rows left."""
+    if counted is None or not np.isfinite(counted) or rows == counted:
+        return
+    warnings.warn(f"{path}: holds {rows} {what} where summary.json counts {counted:g} "
+                  f"(truncated or edited?); the {rows} rows are used", QualityWarning,
+                  stacklevel=3)
+
+
+def _listed(items, limit: int = 5) -> str:
+    items = [str(i) for i in items]
+    return ", ".join(items[:limit]) + (", ..." if len(items) > limit else "")
+
+
+def _read_index(index: Path, folder: Path):
+    """Rows of a batch's ``index.csv`` as dicts, or None when the file cannot be used.
+
+    A line that cannot be parsed (another number of fields than the header) is left out; a
+    file that cannot be used at all makes the caller read every ``summary.json`` instead.
+    Either gives one warning naming the file.
+    """
+    fallback = f"every */summary.json below {folder} is read instead"
+    try:
+        text = index.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        warnings.warn(f"{index}: unreadable ({type(exc).__name__}); {fallback}", QualityWarning,
+                      stacklevel=3)
+        return None
+    reader = csv.reader(io.StringIO(text, newline=""))
+    try:
+        header = next(reader, [])
+    except csv.Error:
+        header = []
+    missing = [c for c in ("set", "status", "output") if c not in header]
+    if missing:
+        warnings.warn(f"{index}: lacks columns {missing}; {fallback}", QualityWarning,
+                      stacklevel=3)
+        return None
+    rows, bad = [], []
+    while True:
+        try:
+            row = next(reader)
+        except StopIteration:
+            break
+        except csv.Error:
+            bad.append(reader.line_num)
+            continue
+        if not row:  # a blank line
+            continue
+        if len(row) != len(header):
+            bad.append(reader.line_num)
+            continue
+        rows.append(dict(zip(header, row)))
+    if bad:
+        warnings.warn(f"{index}: cannot parse line(s) {_listed(bad)} (not one field per "
+                      "column); the images listed there are left out", QualityWarning,
+                      stacklevel=3)
+    return rows
+
+
 def _batch_image_folders(folder: Path):
     """(set, config_id, folder) of every finished image of a batch output.
 
@@ -254,21 +390,24 @@ def _batch_image_folders(folder: Path):
     """
     index = folder / "index.csv"
     if index.is_file():
-        try:
-            idx = pd.read_csv(index)
-        except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError):
-            idx = None
-        if idx is not None and {"set", "status", "output"} <= set(idx.columns):
-            out = []
-            for row in idx.itertuples(index=False):
-                if str(row.status) not in ("ok", "skipped") or not isinstance(row.output, str):
-                    continue
-                img = folder / row.output
-                if (img / "summary.json").is_file():
-                    cid = "/".join(Path(row.output).parts[1:]) or Path(row.output).name
-                    out.append((str(row.set), cid, img))
-            if out:
-                return out
+        rows = _read_index(index, folder)
+        out, lost = [], []
+        for row in rows or ():
+            output = row["output"].strip()
+            if row["status"].strip() not in ("ok", "skipped") or not output:
+                continue
+            img = folder / output
+            if not (img / "summary.json").is_file():
+                lost.append(output)
+                continue
+            cid = "/".join(Path(output).parts[1:]) or Path(output).name
+            out.append((row["set"] or Path(output).parts[0], cid, img))
+        if lost:
+            warnings.warn(f"{index}: {len(lost)} image(s) listed as done have no summary.json "
+                          f"({_listed(lost, 3)}) and are left out", QualityWarning,
+                          stacklevel=2)
+        if out:
+            return out
     out = []
     for summ in sorted(folder.glob("**/summary.json")):
         img = summ.parent
@@ -282,12 +421,37 @@ def _batch_image_folders(folder: Path):
     return out
 
 
+def _check_finished(folder: Path, n_found: int) -> None:
+    """Warn when the batch's ``batch.json`` does not mark it complete: an interrupted (or
+    still running) batch lacks images, and its statistics are those of the images done."""
+    path = folder / "batch.json"
+    if not path.is_file():  # not written by ``batch`` (copied or generated folders)
+        return
+    try:
+        meta = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:  # JSON and Unicode decoding errors are ValueErrors
+        warnings.warn(f"{path}: unreadable ({type(exc).__name__}), so whether the batch "
+                      f"finished is unknown; its {n_found} finished image(s) are used",
+                      QualityWarning, stacklevel=3)
+        return
+    if isinstance(meta, dict) and meta.get("complete") is True:
+        return
+    n = meta.get("n_images") if isinstance(meta, dict) else None
+    of = f" of its {n}" if isinstance(n, int) and not isinstance(n, bool) else ""
+    warnings.warn(f"{path}: the batch did not finish (interrupted, or still running): only "
+                  f"{n_found}{of} images are done and used", QualityWarning, stacklevel=3)
+
+
 def load_batch(folder, *, l_min_mm=1.0, s_min_mm2=1.0) -> Ensemble:
     """Read every per-image folder of a batch output.
 
     The set of an image folder is its first path component under ``folder``; an image folder
     directly under ``folder`` belongs to the set named after ``folder``. Folders without a
     ``summary.json`` (unfinished or failed images, see ``failures.csv``) are skipped.
+    Doubtful inputs that are still used give a :class:`~crosssection.quality.QualityWarning`
+    naming the file: a ``batch.json`` that does not mark the batch complete, a line of
+    ``index.csv`` that cannot be parsed, a table shorter or longer than its ``summary.json``
+    says.
 
     Parameters
     ----------
@@ -301,11 +465,13 @@ def load_batch(folder, *, l_min_mm=1.0, s_min_mm2=1.0) -> Ensemble:
     """
     folder = Path(folder)
     parts = []
-    for set_name, cid, img in _batch_image_folders(folder):
+    found = _batch_image_folders(folder)
+    for set_name, cid, img in found:
         parts.append(load_image_output(img, set_name=set_name, config_id=cid,
                                        l_min_mm=l_min_mm, s_min_mm2=s_min_mm2))
     if not parts:
         raise ConfigError("batch output holds no finished image (no */summary.json)", folder)
+    _check_finished(folder, len(found))
     return Ensemble.concat(parts)
 
 
@@ -335,6 +501,77 @@ def load_any(folder, *, set_name=None, l_min_mm=1.0, s_min_mm2=1.0) -> Ensemble:
         for df in (ens.configs, ens.branches, ens.stacks, ens.voids):
             df["set"] = set_name
     return ens
+
+
+def load_inputs(folders, *, names=None, l_min_mm=1.0, s_min_mm2=1.0) -> Ensemble:
+    """Load several folders (``foldstat stats DIR...``) into one ensemble, each counted once.
+
+    A folder given twice (under any spelling of its path) is read once, and an image output
+    already read through another folder (a batch and one of its image folders) is left out
+    of the later one; either gives a :class:`~crosssection.quality.QualityWarning`. Sets of
+    the same name from different folders are kept apart as ``name#k`` (k = the folder's
+    position).
+
+    Parameters
+    ----------
+    folders : sequence of path
+    names : sequence of str, optional
+        Set name of each folder (see :func:`load_any`).
+    l_min_mm, s_min_mm2 : float or None
+        Image detection limits.
+
+    Returns
+    -------
+    Ensemble
+    """
+    folders = list(folders)
+    names = list(names) if names else [None] * len(folders)
+    parts, seen_sets, seen_dirs, seen_images = [], set(), {}, {}
+    for i, (d, name) in enumerate(zip(folders, names)):
+        key = Path(d).resolve()
+        if key in seen_dirs:
+            warnings.warn(f"{d}: given twice (also as {seen_dirs[key]}); counted once",
+                          QualityWarning, stacklevel=2)
+            continue
+        seen_dirs[key] = d
+        kind = detect_kind(d)
+        ens = load_any(d, set_name=name, l_min_mm=l_min_mm, s_min_mm2=s_min_mm2)
+        if kind != "simulation":
+            ens = _drop_images_seen(ens, d, seen_images)
+            if ens is None:
+                continue
+        for s in ens.sets:  # two DIRs with the same folder name: keep the sets apart
+            if s in seen_sets:
+                new = f"{s}#{i + 1}"
+                for df in (ens.configs, ens.branches, ens.stacks, ens.voids):
+                    df.loc[df["set"] == s, "set"] = new
+                s = new
+            seen_sets.add(s)
+        parts.append(ens)
+    return Ensemble.concat(parts)
+
+
+def _drop_images_seen(ens: Ensemble, folder, seen: dict) -> Ensemble | None:
+    """``ens`` without the image outputs already read from another input folder (recorded
+    in ``seen``: resolved image folder -> input folder), or None when none is left."""
+    src = [Path(v).resolve() for v in ens.configs["source"]]
+    dup = np.array([p in seen for p in src], bool)
+    if dup.any():
+        first = _listed(dict.fromkeys(seen[p] for p, k in zip(src, dup) if k), 3)
+        what = ("its image outputs were" if dup.all() else
+                f"{int(dup.sum())} of its {len(src)} image outputs were")
+        warnings.warn(f"{folder}: {what} already read from {first}; counted once",
+                      QualityWarning, stacklevel=3)
+    for p in src:
+        seen.setdefault(p, folder)
+    if not dup.any():
+        return ens
+    if dup.all():
+        return None
+    drop = set(zip(ens.configs.loc[dup, "set"], ens.configs.loc[dup, "config_id"]))
+    keep = lambda df: df[[k not in drop for k in zip(df["set"], df["config_id"])]]  # noqa: E731
+    return Ensemble(*(keep(df).reset_index(drop=True)
+                      for df in (ens.configs, ens.branches, ens.stacks, ens.voids)))
 
 
 #: the tables of a ``stats`` report folder (CSV files of the same names)

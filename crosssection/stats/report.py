@@ -10,18 +10,24 @@ function, the fraction of stacks at each k against the fitted law's mass at k.
 """
 from __future__ import annotations
 
+import errno
 import html
+import os
+import shutil
+import tempfile
 import textwrap
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from crosssection._version import __version__
+from crosssection.core.errors import ParameterError
 from crosssection.core.fileio import save_figure, write_csv, write_json, write_text
 from crosssection.stats import fits as F
 from crosssection.stats.families import FAMILIES
-from crosssection.stats.data import Ensemble
+from crosssection.stats.data import REPORT_TABLES, Ensemble
 from crosssection.stats.tables import (COUNT_QUANTITIES, EQ1_CONST, PAPER_DOF, PAPER_MACRO,
                                        PAPER_MICRO, QUANTITIES, StatsOptions, StatsResult,
                                        compute_stats, regions_of, to_markdown)
@@ -461,15 +467,22 @@ def write_report(ens: Ensemble, out_dir, *, opts: StatsOptions | None = None,
                  inputs=(), figures: bool = True, progress: bool | None = False) -> dict:
     """Compute every statistic of ``ens`` and write the report folder.
 
+    The folder appears whole: it is written into a hidden sibling folder, which then takes
+    the place of ``out_dir`` (a previous report is renamed away first and deleted last). An
+    interrupted or failed run leaves ``out_dir`` as it was, the previous report or nothing,
+    and never a mix of two reports (such as the figures of an older one beside the tables of
+    a run without figures).
+
     Parameters
     ----------
     ens : Ensemble
     out_dir : path
         Receives macro/micro/fits/relations/dof/truncation (.csv, .md), correlations.csv,
-        per_config.csv, stats.json, figures/*.png and report.html. All writes are atomic.
+        per_config.csv, stats.json, figures/*.png and report.html. It is created, or
+        replaced when it holds a previous report (see :func:`check_report_dir`).
     opts : StatsOptions, optional
     inputs : sequence of str
-        Input folders, recorded in stats.json.
+        Input folders, recorded in stats.json; ``out_dir`` must not be nor hold one.
     figures : bool
         Draw the PNG figures.
     progress : bool or None
@@ -479,13 +492,170 @@ def write_report(ens: Ensemble, out_dir, *, opts: StatsOptions | None = None,
     Returns
     -------
     dict
-        Name -> written path.
-    """
-    from tqdm import tqdm
+        Name -> written path (inside ``out_dir``).
 
+    Raises
+    ------
+    ParameterError, OSError
+        ``out_dir`` cannot take the report (see :func:`check_report_dir`) or cannot be
+        written.
+    """
     opts = opts or StatsOptions()
     out = Path(out_dir)
+    check_report_dir(out, inputs)
     res = compute_stats(ens, opts, progress=progress)
+    with _staged_folder(out) as stage:
+        paths = _write_files(res, ens, stage, opts=opts, inputs=inputs, figures=figures,
+                             progress=progress)
+    return {k: out / p.relative_to(stage) for k, p in paths.items()}
+
+
+#: the files of a report folder (figures/ holds PNG files only)
+REPORT_FILES = frozenset(
+    {f"{n}.csv" for n in REPORT_TABLES}
+    | {f"{n}.md" for n in ("macro", "micro", "fits", "relations", "dof", "truncation")}
+    | {"stats.json", "report.html", "figures"})
+#: files that file browsers leave in the folders they show
+BROWSER_FILES = frozenset({".DS_Store", "Thumbs.db", "desktop.ini"})
+
+
+def _foreign_entry(folder: Path) -> str | None:
+    """The first entry of ``folder`` that no report writes, or None (a leftover temporary
+    file of an atomic write, ``.<name>.<random>``, is the report's)."""
+    for p in sorted(folder.iterdir()):
+        name = p.name
+        if name in BROWSER_FILES:
+            continue
+        if name == "figures" and p.is_dir() and not p.is_symlink():
+            for f in sorted(p.iterdir()):
+                if not (f.suffix == ".png" and f.is_file()) and f.name not in BROWSER_FILES:
+                    return f"figures/{f.name}"
+            continue
+        if name in REPORT_FILES and p.is_file():
+            continue
+        if any(name.startswith(f".{k}.") for k in REPORT_FILES) and p.is_file():
+            continue
+        return name
+    return None
+
+
+def check_report_dir(out_dir, inputs=()) -> None:
+    """Refuse a report folder that a report must not take the place of.
+
+    ``out_dir`` may be missing (it is created), empty, or hold a previous report, which the
+    new one replaces whole; nothing else is ever deleted.
+
+    Parameters
+    ----------
+    out_dir : path
+    inputs : sequence of path
+        The input folders: ``out_dir`` must be none of them and hold none of them.
+
+    Raises
+    ------
+    FileExistsError
+        ``out_dir`` is a file.
+    ParameterError
+        ``out_dir`` is or holds an input folder, or holds files that are no part of a
+        report.
+    """
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise FileExistsError(errno.EEXIST, os.strerror(errno.EEXIST), str(out))
+    up = out.absolute().parent
+    while not up.exists() and up != up.parent:
+        up = up.parent
+    if not up.is_dir():  # the folder cannot be created under a file
+        raise NotADirectoryError(errno.ENOTDIR, os.strerror(errno.ENOTDIR), str(out))
+    real = out.resolve()
+    if real == real.parent:
+        raise ParameterError("a file system root cannot be a report folder", out)
+    for d in inputs:
+        src = Path(d).resolve()
+        if src == real or real in src.parents:
+            raise ParameterError(f"{'is' if src == real else 'holds'} the input folder {d}, "
+                                 "which the report would replace: give another --out", out)
+    if out.is_dir():
+        foreign = _foreign_entry(out)
+        if foreign is not None:
+            raise ParameterError(
+                f"holds {foreign}, which is no part of a stats report, and a report replaces "
+                "the whole folder: give a new folder, an empty one or a previous report's",
+                out)
+
+
+def _current_umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+# read once at import: os.umask can only be read by setting it, which is not thread-safe
+_UMASK = _current_umask()
+
+
+def _named_error(exc: OSError, path) -> OSError:
+    """``exc`` naming ``path`` (the report folder) rather than a hidden working folder."""
+    return type(exc)(exc.errno, exc.strerror or str(exc), str(path))
+
+
+@contextmanager
+def _staged_folder(out: Path):
+    """Yield a new hidden folder beside ``out``; on success it takes the place of ``out``.
+
+    Hidden working folders of a killed earlier run (``.<name>.partial-*``, ``.<name>.old-*``)
+    are removed first. On failure or interrupt the working folder is removed and ``out`` is
+    left as it was.
+    """
+    real = out.resolve()
+    parent, name = real.parent, real.name
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+        for p in parent.iterdir():
+            if p.name.startswith((f".{name}.partial-", f".{name}.old-")) and p.is_dir():
+                shutil.rmtree(p, ignore_errors=True)
+        stage = Path(tempfile.mkdtemp(prefix=f".{name}.partial-", dir=parent))
+    except OSError as exc:
+        raise _named_error(exc, out) from None
+    try:
+        os.chmod(stage, 0o777 & ~_UMASK)  # mkdtemp's 0700 would hide the report from others
+        yield stage
+        try:
+            _swap_in(stage, real)
+        except OSError as exc:
+            raise _named_error(exc, out) from None
+    finally:
+        if stage.exists():
+            shutil.rmtree(stage, ignore_errors=True)
+
+
+def _swap_in(stage: Path, real: Path) -> None:
+    """Rename ``stage`` to ``real``, moving a previous ``real`` away first and deleting it
+    last; if the second rename fails the previous folder is put back."""
+    if not real.exists():
+        os.replace(stage, real)
+        return
+    old = Path(tempfile.mkdtemp(prefix=f".{real.name}.old-", dir=real.parent))
+    os.replace(real, old / real.name)
+    try:
+        os.replace(stage, real)
+    except BaseException:
+        os.replace(old / real.name, real)
+        shutil.rmtree(old, ignore_errors=True)
+        raise
+    try:
+        shutil.rmtree(old)
+    except (OSError, KeyboardInterrupt):
+        # the new report is complete and in place: what is left of the old one is a hidden
+        # folder that the next run removes, not a reason to report a failure
+        pass
+
+
+def _write_files(res: StatsResult, ens: Ensemble, out: Path, *, opts: StatsOptions, inputs,
+                 figures: bool, progress: bool | None) -> dict:
+    """Write the report's files into the folder ``out``; return name -> path."""
+    from tqdm import tqdm
+
     paths = {}
     tables = {"macro": res.macro, "micro": res.micro, "fits": res.fits,
               "relations": res.relations, "dof": res.dof, "truncation": res.truncation}

@@ -1,0 +1,358 @@
+"""The ``stats`` command line on malformed and doubtful inputs, absurd options and report
+folders: one ``error:`` line and status 2 for what cannot be used, one ``warning:`` line for
+what is used anyway, and a report folder that is always one whole report."""
+import json
+import os
+
+import pandas as pd
+import pytest
+
+from crosssection.cli import main
+from crosssection.core.errors import ParameterError
+from crosssection.quality import QualityWarning
+from crosssection.stats import demo, report
+from crosssection.stats.data import load_any
+
+FAST = ["--n-boot", "0", "--no-gof", "--no-figures"]
+
+
+def _stats(capfd, *argv):
+    """Run ``stats``; return (status, stdout lines, stderr lines)."""
+    capfd.readouterr()
+    status = main(["stats", *map(str, argv)])
+    out, err = capfd.readouterr()
+    return status, out.splitlines(), err.splitlines()
+
+
+def _batch(root, n_images=3, complete=True):
+    """A small batch output with the ``batch.json`` of a finished (or interrupted) batch."""
+    demo.write_demo_batch(root, n_images=n_images, seed=4, sets={"s1": {"n_stacks": 15}})
+    meta = {"n_images": n_images, "complete": complete}
+    (root / "batch.json").write_text(json.dumps(meta))
+    return root
+
+
+@pytest.fixture
+def batch(tmp_path):
+    return _batch(tmp_path / "batch")
+
+
+def _replace_cell(path, column, value, row=0):
+    df = pd.read_csv(path)
+    df[column] = df[column].astype(object)
+    df.loc[row, column] = value
+    df.to_csv(path, index=False)
+
+
+# --------------------------------------------------------------- malformed inputs: status 2
+
+
+@pytest.mark.parametrize("table, column", [("branches.csv", "length_mm"),
+                                           ("branches.csv", "energy"),
+                                           ("stacks.csv", "n_br"),
+                                           ("voids.csv", "area_mm2")])
+def test_text_in_a_numeric_column_of_a_scan_is_one_error_line(batch, tmp_path, capfd, table,
+                                                              column):
+    path = batch / "s1" / "img001" / table
+    _replace_cell(path, column, "abc", row=2)
+    status, out, err = _stats(capfd, batch, "--out", tmp_path / "rep", *FAST)
+    assert status == 2 and out == []
+    assert err == [f"error: {path}: column {column} holds 'abc' in data row 3 where a number "
+                   "is expected"]
+    assert not (tmp_path / "rep").exists()
+
+
+def test_text_in_a_simulation_table_is_one_error_line(tmp_path, capfd):
+    sim = demo.write_demo_simulation(tmp_path / "sim", n_configs=4, seed=1)
+    _replace_cell(sim / "branches.csv", "kappa_pm", "abc")
+    status, _, err = _stats(capfd, sim, "--out", tmp_path / "rep", *FAST)
+    assert status == 2
+    assert err == [f"error: {sim / 'branches.csv'}: column kappa_pm holds 'abc' in data row 1 "
+                   "where a number is expected"]
+
+
+@pytest.mark.parametrize("content, cause", [
+    ("[1, 2]", "holds a JSON list, not an object"),
+    ('"text"', "holds a JSON string, not an object"),
+    (None, 'n_branches is "many", not a number'),
+    (None, "rod_length_mm is true, not a number"),
+    (None, "quality is not an object with a list of codes"),
+    (b"\xff\xfe\x00binary", "unreadable summary.json (UnicodeDecodeError)"),
+])
+def test_malformed_summary_is_one_error_line(batch, tmp_path, capfd, content, cause):
+    path = batch / "s1" / "img000" / "summary.json"
+    if isinstance(content, bytes):
+        path.write_bytes(content)
+    elif content is not None:
+        path.write_text(content)
+    else:
+        summary = json.loads(path.read_text())
+        key = cause.split()[0]
+        summary[key] = {"n_branches": "many", "rod_length_mm": True, "quality": "bad"}[key]
+        path.write_text(json.dumps(summary))
+    status, _, err = _stats(capfd, batch, "--out", tmp_path / "rep", *FAST)
+    assert status == 2 and err == [f"error: {path}: {cause}"]
+
+
+# ------------------------------------------------------------------ absurd options: status 2
+
+
+@pytest.mark.parametrize("option, value, cause", [
+    ("--seed", "-1", "must be an integer >= 0, got -1"),
+    ("--n-boot", "-1", "must be an integer >= 0, got -1"),
+    ("--n-mc", "-5", "must be an integer >= 0, got -5"),
+    ("--l-min-mm", "-1", "must be a finite number >= 0 (0 = no limit), got -1"),
+    ("--l-min-mm", "inf", "must be a finite number >= 0 (0 = no limit), got inf"),
+    ("--s-min-mm2", "nan", "must be a finite number >= 0 (0 = no limit), got nan"),
+    ("--s-min-mm2", "-0.5", "must be a finite number >= 0 (0 = no limit), got -0.5"),
+])
+def test_absurd_option_is_one_error_line_naming_it(batch, tmp_path, capfd, option, value,
+                                                   cause):
+    status, _, err = _stats(capfd, batch, "--out", tmp_path / "rep", *FAST, option, value)
+    assert status == 2 and err == [f"error: {option}: {cause}"]
+    assert not (tmp_path / "rep").exists()
+
+
+def test_zero_detection_limits_mean_none(batch, tmp_path, capfd):
+    status, _, err = _stats(capfd, batch, "--out", tmp_path / "rep", "--l-min-mm", "0",
+                            "--s-min-mm2", "0", *FAST)
+    assert status == 0 and err == []
+
+
+# ------------------------------------------------------- doubtful inputs: one warning, used
+
+
+def test_clean_batch_gives_no_warning(batch, tmp_path, capfd):
+    status, out, err = _stats(capfd, batch, "--out", tmp_path / "rep", *FAST)
+    assert status == 0 and err == [] and "3 configurations" in out[0]
+
+
+def test_interrupted_batch_is_used_with_a_warning(tmp_path, capfd):
+    b = _batch(tmp_path / "batch", complete=False)
+    meta = json.loads((b / "batch.json").read_text())
+    meta.update(n_images=10)
+    (b / "batch.json").write_text(json.dumps(meta))
+    status, out, err = _stats(capfd, b, "--out", tmp_path / "rep", *FAST)
+    assert status == 0 and "3 configurations" in out[0]
+    assert err == [f"warning: {b / 'batch.json'}: the batch did not finish (interrupted, or "
+                   "still running): only 3 of its 10 images are done and used"]
+
+
+def test_batch_json_without_complete_is_an_unfinished_batch(tmp_path, capfd):
+    b = _batch(tmp_path / "batch")
+    (b / "batch.json").write_text(json.dumps({"n_images": 3}))  # written when a batch starts
+    status, _, err = _stats(capfd, b, "--out", tmp_path / "rep", *FAST)
+    assert status == 0 and len(err) == 1 and "did not finish" in err[0]
+
+
+def test_truncated_branch_table_is_used_with_a_warning(batch, tmp_path, capfd):
+    path = batch / "s1" / "img002" / "branches.csv"
+    n = len(pd.read_csv(path))
+    pd.read_csv(path).head(3).to_csv(path, index=False)
+    status, out, err = _stats(capfd, batch, "--out", tmp_path / "rep", *FAST)
+    assert status == 0
+    assert err == [f"warning: {path}: holds 3 branches where summary.json counts {n} "
+                   "(truncated or edited?); the 3 rows are used"]
+    with pytest.warns(QualityWarning, match="summary.json counts"):
+        assert len(load_any(batch).branches.query("config_id == 'img002'")) == 3
+
+
+def test_the_same_folder_twice_is_counted_once(batch, tmp_path, capfd):
+    status, out, err = _stats(capfd, batch, f"{batch}{os.sep}", "--out", tmp_path / "rep",
+                              *FAST)
+    assert status == 0 and "1 set(s), 3 configurations" in out[0]
+    assert err == [f"warning: {batch}{os.sep}: given twice (also as {batch}); counted once"]
+    assert set(pd.read_csv(tmp_path / "rep" / "macro.csv")["set"]) == {"s1"}
+
+
+def test_an_image_folder_of_a_batch_given_too_is_counted_once(batch, tmp_path, capfd):
+    img = batch / "s1" / "img001"
+    status, out, err = _stats(capfd, batch, img, "--out", tmp_path / "rep", *FAST)
+    assert status == 0 and "1 set(s), 3 configurations" in out[0]
+    assert err == [f"warning: {img}: its image outputs were already read from {batch}; "
+                   "counted once"]
+    status, out, err = _stats(capfd, img, batch, "--out", tmp_path / "rep2", *FAST)
+    assert status == 0 and "3 configurations" in out[0]
+    assert err == [f"warning: {batch}: 1 of its 3 image outputs were already read from {img}; "
+                   "counted once"]
+
+
+def test_unparsable_index_line_is_left_out_with_a_warning(batch, tmp_path, capfd):
+    index = batch / "index.csv"
+    lines = index.read_text().splitlines()
+    lines[2] = "img001.png,s1,ok"  # too few fields: the image it lists is unknown
+    index.write_text("\n".join(lines) + "\n")
+    status, out, err = _stats(capfd, batch, "--out", tmp_path / "rep", *FAST)
+    assert status == 0 and "2 configurations" in out[0]
+    assert err == [f"warning: {index}: cannot parse line(s) 3 (not one field per column); "
+                   "the images listed there are left out"]
+
+
+def test_unreadable_index_falls_back_to_the_folders_with_a_warning(batch, tmp_path, capfd):
+    index = batch / "index.csv"
+    index.write_bytes(b"\xff\xfe\x00\x01garbage")
+    status, out, err = _stats(capfd, batch, "--out", tmp_path / "rep", *FAST)
+    assert status == 0 and "3 configurations" in out[0]
+    assert err == [f"warning: {index}: unreadable (UnicodeDecodeError); every */summary.json "
+                   f"below {batch} is read instead"]
+
+
+def test_image_listed_as_done_without_its_folder_gives_a_warning(batch, tmp_path, capfd):
+    (batch / "s1" / "img000" / "summary.json").unlink()
+    status, out, err = _stats(capfd, batch, "--out", tmp_path / "rep", *FAST)
+    assert status == 0 and "2 configurations" in out[0]
+    assert err == [f"warning: {batch / 'index.csv'}: 1 image(s) listed as done have no "
+                   "summary.json (s1/img000) and are left out"]
+
+
+# ------------------------------------------------------ the report folder: old or new, whole
+
+
+def _interrupted(*args, **kwargs):
+    raise KeyboardInterrupt
+
+
+def _snapshot(folder):
+    return {p.relative_to(folder): p.read_bytes() for p in sorted(folder.rglob("*"))
+            if p.is_file()}
+
+
+def _hidden_beside(folder):
+    return sorted(p.name for p in folder.parent.iterdir() if p.name.startswith("."))
+
+
+def test_a_report_without_figures_replaces_one_with_figures(tmp_path, capfd):
+    sim = demo.write_demo_simulation(tmp_path / "sim", n_configs=6, seed=1)
+    rep = tmp_path / "rep"
+    assert _stats(capfd, sim, "--out", rep, "--n-boot", "0", "--no-gof")[0] == 0
+    assert list((rep / "figures").glob("*.png"))
+    status, out, _ = _stats(capfd, sim, "--out", rep, *FAST)
+    assert status == 0 and "(16 files)" in out[0]
+    assert not (rep / "figures").exists()  # no stale figures beside the new tables
+    assert "figures/" not in (rep / "report.html").read_text()
+    assert _hidden_beside(rep) == []
+
+
+def test_an_interrupted_report_leaves_the_old_one_whole(tmp_path, capfd, monkeypatch):
+    sim = demo.write_demo_simulation(tmp_path / "sim", n_configs=6, seed=1)
+    rep = tmp_path / "rep"
+    assert _stats(capfd, sim, "--out", rep, *FAST)[0] == 0
+    before = _snapshot(rep)
+
+    # the new report's tables are written by then, its figures not yet
+    monkeypatch.setattr(report, "save_figure", _interrupted)
+    status, out, err = _stats(capfd, sim, "--out", rep, "--n-boot", "0", "--no-gof",
+                              "--seed", "5")
+    assert status == 130 and out == []
+    assert err == [f"error: {rep}: interrupted; the report folder was left as it was (re-run "
+                   "the command to write it)"]
+    assert _snapshot(rep) == before
+    assert _hidden_beside(rep) == []
+
+
+def test_an_interrupted_first_report_leaves_nothing(tmp_path, capfd, monkeypatch):
+    sim = demo.write_demo_simulation(tmp_path / "sim", n_configs=6, seed=1)
+    monkeypatch.setattr(report, "write_text", _interrupted)
+    assert _stats(capfd, sim, "--out", tmp_path / "rep", *FAST)[0] == 130
+    assert not (tmp_path / "rep").exists() and _hidden_beside(tmp_path / "rep") == []
+
+
+def test_a_failed_swap_puts_the_old_report_back(tmp_path, monkeypatch):
+    old, new = tmp_path / "rep", tmp_path / ".rep.partial-x"
+    for folder, text in ((old, "old"), (new, "new")):
+        folder.mkdir()
+        (folder / "report.html").write_text(text)
+    real_replace = os.replace
+
+    def failing(src, dst):
+        if src == new:
+            raise OSError(28, "No space left on device", str(dst))
+        real_replace(src, dst)
+
+    monkeypatch.setattr(report.os, "replace", failing)
+    with pytest.raises(OSError):
+        report._swap_in(new, old)
+    assert (old / "report.html").read_text() == "old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".rep.partial-x", "rep"]
+
+
+def test_leftovers_of_a_killed_run_are_removed(tmp_path, capfd):
+    sim = demo.write_demo_simulation(tmp_path / "sim", n_configs=6, seed=1)
+    for name in (".rep.partial-abc", ".rep.old-def"):
+        (tmp_path / name / "figures").mkdir(parents=True)
+    assert _stats(capfd, sim, "--out", tmp_path / "rep", *FAST)[0] == 0
+    assert _hidden_beside(tmp_path / "rep") == []
+
+
+def test_report_folder_is_created_with_its_parents(tmp_path, capfd):
+    sim = demo.write_demo_simulation(tmp_path / "sim", n_configs=6, seed=1)
+    out = tmp_path / "a" / "b" / "rep"
+    assert _stats(capfd, sim, "--out", out, *FAST)[0] == 0
+    assert (out / "report.html").is_file() and (out / "stats.json").is_file()
+    assert out.stat().st_mode & 0o777 == 0o777 & ~_umask()  # not mkdtemp's 0700
+
+
+def _umask():
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+@pytest.mark.parametrize("where", ["file", "under_file"])
+def test_a_file_in_the_way_is_refused_before_the_work(tmp_path, capfd, monkeypatch, where):
+    sim = demo.write_demo_simulation(tmp_path / "sim", n_configs=6, seed=1)
+    (tmp_path / "afile").write_text("keep")
+    out = tmp_path / "afile" if where == "file" else tmp_path / "afile" / "rep"
+    monkeypatch.setattr(report, "compute_stats", None)  # never reached
+    status, _, err = _stats(capfd, sim, "--out", out, *FAST)
+    assert status == 2 and len(err) == 1
+    assert err[0].startswith(f"error: {out}: ") and "a file is in the way" in err[0]
+    assert (tmp_path / "afile").read_text() == "keep"
+
+
+@pytest.mark.parametrize("out_of", ["the input", "a parent of the input"])
+def test_the_report_never_replaces_an_input(batch, capfd, out_of):
+    out = batch if out_of == "the input" else batch.parent
+    before = _snapshot(batch)
+    status, _, err = _stats(capfd, batch, "--out", out, *FAST)
+    verb = "is" if out_of == "the input" else "holds"
+    assert status == 2
+    assert err == [f"error: {out}: {verb} the input folder {batch}, which the report would "
+                   "replace: give another --out"]
+    assert _snapshot(batch) == before
+
+
+def test_a_folder_holding_other_files_is_not_replaced(tmp_path, capfd):
+    sim = demo.write_demo_simulation(tmp_path / "sim", n_configs=6, seed=1)
+    out = tmp_path / "rep"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    status, _, err = _stats(capfd, sim, "--out", out, *FAST)
+    assert status == 2 and len(err) == 1
+    assert err[0].startswith(f"error: {out}: holds notes.txt, which is no part of a stats "
+                             "report")
+    assert (out / "notes.txt").read_text() == "mine"
+
+
+def test_an_empty_folder_or_a_report_with_browser_files_is_replaced(tmp_path):
+    out = tmp_path / "rep"
+    out.mkdir()
+    report.check_report_dir(out)
+    for name in ("macro.csv", "report.html", ".DS_Store", ".macro.csv.x1y2.csv"):
+        (out / name).write_text("")
+    (out / "figures").mkdir()
+    (out / "figures" / "pdf_e.png").write_bytes(b"")
+    report.check_report_dir(out)
+    (out / "figures" / "draft.svg").write_text("")
+    with pytest.raises(ParameterError, match="figures/draft.svg"):
+        report.check_report_dir(out)
+
+
+def test_write_report_returns_the_final_paths(tmp_path):
+    ens = load_any(demo.write_demo_simulation(tmp_path / "sim", n_configs=6, seed=1))
+    from crosssection.stats.tables import StatsOptions
+
+    paths = report.write_report(ens, tmp_path / "rep", figures=False,
+                                opts=StatsOptions(n_boot=0, gof=False))
+    assert all(p.parent == tmp_path / "rep" and p.is_file() for p in paths.values())
+    assert all(p.name in report.REPORT_FILES for p in paths.values())
