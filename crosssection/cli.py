@@ -57,7 +57,7 @@ def run_parsed(parser: argparse.ArgumentParser, argv=None) -> int:
     """Parse ``argv`` and run the chosen subcommand.
 
     Returns the exit status: 0 success, 2 bad input (one line naming the file and the cause),
-    3 a batch finished with some images failed, 130 interrupted (re-running resumes),
+    3 a batch finished with some images failed, 130 interrupted (re-running resumes; stats leaves its report as it was),
     1 unexpected error (one line, never a traceback). Quality warnings are printed as
     ``warning: FILE: ...`` lines on stderr.
     """
