@@ -1055,8 +1055,9 @@ def params_from_args(args) -> dict:
 
 def run(args) -> int:
     """Entry point of ``compact``."""
-    from simulate.ensemble import report_failures, run_ensemble
+    from simulate.ensemble import check_out, report_failures, run_ensemble
 
+    check_out(args.out)
     try:
         params = params_from_args(args)
     except ParameterError as exc:

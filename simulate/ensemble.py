@@ -475,11 +475,21 @@ def params_from_args(args) -> dict:
         params.update(lam_start=_finite("--lambda-start", args.lam_start, low=0.0,
                                         low_open=True),
                       stages=args.stages, ramp=args.ramp)
+        if params["lam_start"] > params["lam"]:
+            raise ParameterError(f"--lambda-start {args.lam_start:g} is above --lambda "
+                                 f"{args.lam:g}: the ramp compacts the rod toward --lambda")
     return params
+
+
+def check_out(out) -> None:
+    """Refuse an empty ``--out`` (it would write into the current folder)."""
+    if not str(out).strip():
+        raise ParameterError("empty path: give the output folder", "--out")
 
 
 def run(args) -> int:
     """Entry point of ``quench`` / ``anneal``."""
+    check_out(args.out)
     try:
         params = params_from_args(args)
     except ParameterError as exc:
@@ -505,6 +515,6 @@ def add_subparser(sub):
 
 
 __all__ = ["run_ensemble", "report_failures", "run_config", "assemble", "minimize_config",
-           "add_subparser",
+           "add_subparser", "check_out",
            "analysis_records", "write_part",
            "CONFIG_COLUMNS", "BRANCH_COLUMNS", "VOID_COLUMNS"]

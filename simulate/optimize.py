@@ -358,6 +358,8 @@ def anneal(xy0, lam: float, *, lam_start: float = 1e3, stages: int = 24,
         lams = np.linspace(min(lam_start, lam), lam, stages)
     else:
         raise ParameterError(f"unknown ramp {ramp!r}")
+    # the last stage is the target: with one stage, numpy's ramp holds only its start
+    lams[-1] = lam
     ss = np.random.SeedSequence(seed)
     xy = np.asarray(xy0, dtype=np.float64)
     history = []

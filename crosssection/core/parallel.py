@@ -93,7 +93,13 @@ def get_executor(workers: int | None = 1, scheduler: str | None = None):
     if scheduler:
         from distributed import Client
 
-        client = Client(scheduler)
+        try:
+            client = Client(scheduler)
+        except (ValueError, OSError, TimeoutError) as exc:
+            from crosssection.core.errors import ParameterError
+
+            raise ParameterError(f"no Dask scheduler reached at {scheduler!r}: "
+                                 f"{' '.join(str(exc).split())}", "--scheduler") from None
         try:
             yield client.get_executor(pure=False)
         finally:

@@ -1,0 +1,48 @@
+"""Options of quench, anneal and compact as users give them: absurd values are one error line
+naming the option, and what is accepted does what it says."""
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from simulate.energy import bending_energy, confinement_energy
+from simulate.noise import initial_shape
+from simulate.optimize import anneal, powell_protocol
+
+
+def test_one_stage_anneal_is_a_quench_at_the_target_lambda():
+    """A single stage is the last one, the target: numpy's one-point ramp is its start."""
+    xy0 = initial_shape(40, 100.0, seed=3)
+    kw = dict(seed=1, n_runs=2, maxiter=5, nematic_runs=())
+    one = anneal(xy0, 2e4, lam_start=10.0, stages=1, **kw)
+    # the stage minimised the energy at the target: it is the quench at the target
+    ref = powell_protocol(xy0, 2e4, seed=np.random.SeedSequence(1).spawn(1)[0], n_runs=2,
+                          maxiter=5, nematic_runs=(), parametrization="bend")
+    assert one.energy_total == pytest.approx(ref.energy_total)
+    assert one.energy_total == pytest.approx(bending_energy(one.xy)
+                                             + confinement_energy(one.xy, 2e4))
+
+
+@pytest.mark.parametrize("argv, named", [
+    (["anneal", "--lambda-start", "1e9"], "--lambda-start"),
+    (["quench", "--scheduler", "nowhere"], "--scheduler"),
+])
+def test_absurd_simulation_options_are_one_line(tmp_path, argv, named):
+    out = tmp_path / "out"
+    r = subprocess.run([sys.executable, "-m", "simulate", *argv, "--n-configs", "1",
+                        "--segments", "40", "--out", str(out)], capture_output=True, text=True)
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.count("\n") == 1 and named in r.stderr and "Traceback" not in r.stderr
+
+
+@pytest.mark.parametrize("command", ["quench", "compact"])
+def test_an_empty_out_is_refused(tmp_path, command):
+    extra = ["--epsilon", "4"] if command == "compact" else []
+    r = subprocess.run([sys.executable, "-m", "simulate", command, "--n-configs", "1",
+                        "--segments", "200", *extra, "--out", ""], capture_output=True,
+                       text=True, cwd=tmp_path)
+    assert r.returncode == 2 and r.stderr.startswith("error: --out: empty path")
+    assert list(tmp_path.iterdir()) == []
