@@ -314,10 +314,9 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
             raise ConfigError("output folder holds a different ensemble (parameters differ: "
                               + ", ".join(diff) + "); use another --out", path=out)
     n = int(params["n_configs"])
-    write_json(pfile, {**params, "n_configs": max(n, int(json.loads(pfile.read_text())
-                                                          .get("n_configs", 0))
-                                                      if pfile.exists() else n),
-                       "version": __version__, "libraries": library_versions()})
+    # the tables hold the first n configurations: so does the record (parts of a larger
+    # earlier run stay on disk, and a re-run that asks for them again reuses them)
+    write_json(pfile, {**params, "version": __version__, "libraries": library_versions()})
     seeds = spawn_seeds(params["seed"], n)
     todo = [i for i in range(n) if not _part_ok(part_path(out, i), i, seeds[i])]
     task = run_config if task is None else task

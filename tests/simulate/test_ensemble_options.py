@@ -46,3 +46,20 @@ def test_an_empty_out_is_refused(tmp_path, command):
                        text=True, cwd=tmp_path)
     assert r.returncode == 2 and r.stderr.startswith("error: --out: empty path")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_smaller_rerun_records_the_configurations_its_tables_hold(tmp_path):
+    import json
+
+    import pandas as pd
+
+    from simulate.ensemble import run_ensemble
+
+    params = dict(command="quench", n_configs=3, n_segments=30, lam=2e4, noise=75.0, seed=2,
+                  method="lbfgs", n_runs=1, maxiter=3, nematic_runs=[], u=0.0,
+                  nematic_cutoff=None, ftol=1e-4, xtol=1e-4, wall_radius=None,
+                  contact_distance=None, parametrization="bend")
+    run_ensemble(params, tmp_path, progress=False)
+    run_ensemble({**params, "n_configs": 2}, tmp_path, progress=False)
+    assert json.loads((tmp_path / "params.json").read_text())["n_configs"] == 2
+    assert len(pd.read_csv(tmp_path / "configs.csv")) == 2
