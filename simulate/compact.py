@@ -1006,13 +1006,16 @@ def check_params(params: CompactParams) -> None:
     h = params.h
     if not (math.isfinite(h) and h > 0.0):
         raise ParameterError(f"--thickness must be a finite number > 0, got {params.thickness!r}")
+    # without --thickness, h follows from epsilon (h / R of the experiments): say so
+    given = ("--thickness" if params.thickness is not None else
+             f"the thickness that epsilon {eps:g} implies (h/R = {H_OVER_R:g})")
     if h >= 0.5 / n:
-        raise ParameterError(f"--thickness {h:.3g} must be below half a segment 1/(2N) = "
+        raise ParameterError(f"{given} {h:.3g} must be below half a segment 1/(2N) = "
                              f"{0.5 / n:.3g}: use fewer segments or a thinner rod")
     r = params.wall_radius
     frac = h / (math.pi * (r - 0.5 * h) ** 2) if r > 0.5 * h else math.inf
     if frac >= MAX_AREA_FRACTION:
-        raise ParameterError(f"--thickness {h:.3g} too large: the rod (area L h) would fill "
+        raise ParameterError(f"{given} {h:.3g} too large: the rod (area L h) would fill "
                              f"{frac:.0%} of the disk of radius R = {r:.4g} (at most "
                              f"{MAX_AREA_FRACTION:.0%})")
     if not (math.isfinite(params.noise) and 0.0 <= params.noise <= 3000.0):

@@ -448,9 +448,11 @@ def params_from_args(args) -> dict:
     if args.segments > 100_000 or args.n_configs > 10_000_000:
         raise ParameterError("--segments must be <= 100000 and --n-configs <= 10000000")
     if any(k < 0 or k >= args.runs - 1 for k in nem):
-        raise ParameterError(f"--nematic-runs must name runs 0..{args.runs - 2}: the nematic term "
-                             "must not be used in the last run (paper), got "
-                             f"{args.nematic_runs!r}")
+        runs = (f"runs 0..{args.runs - 2} of the --runs {args.runs}" if args.runs > 1 else
+                f"no run: --runs {args.runs} has only the last")
+        raise ParameterError(f"--nematic-runs must name {runs}: the nematic term must not be "
+                             f"used in the last run (paper), got {args.nematic_runs!r} "
+                             "(--nematic-runs '' for none)")
     params = dict(command=args.command, n_configs=args.n_configs, n_segments=args.segments,
                   lam=_finite("--lambda", args.lam, low=0.0),
                   noise=_finite("--noise", args.noise, low=0.0), seed=args.seed,

@@ -63,3 +63,15 @@ def test_a_smaller_rerun_records_the_configurations_its_tables_hold(tmp_path):
     run_ensemble({**params, "n_configs": 2}, tmp_path, progress=False)
     assert json.loads((tmp_path / "params.json").read_text())["n_configs"] == 2
     assert len(pd.read_csv(tmp_path / "configs.csv")) == 2
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["quench", "--runs", "1", "--out", "q"], "--runs 1 has only the last"),
+    (["compact", "--epsilon", "0.01", "--segments", "200", "--out", "c"],
+     "the thickness that epsilon 0.01 implies"),
+])
+def test_an_error_names_the_option_the_user_gave(tmp_path, argv, says):
+    """A default that cannot hold with the value given is explained by that value."""
+    r = subprocess.run([sys.executable, "-m", "simulate", *argv, "--n-configs", "1"],
+                       capture_output=True, text=True, cwd=tmp_path)
+    assert r.returncode == 2 and says in r.stderr and r.stderr.count("\n") == 1
