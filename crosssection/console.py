@@ -33,8 +33,8 @@ EXIT_STATUS = """\
 exit status:
   0    success
   2    bad input or parameters: one line on stderr naming the file and the cause
-  3    a batch or an ensemble finished but some images or configurations failed (listed
-       in OUT_DIR/failures.csv; a re-run tries them again)
+  3    a batch, an ensemble or a validation finished but some images, configurations or
+       scenes failed (listed in OUT_DIR/failures.csv; a re-run tries them again)
   130  interrupted (re-run the same command to resume; stats leaves its report as it was)
   1    a bug (one line on stderr, never a traceback)
 Doubtful results are printed as 'warning: FILE: ...' lines on stderr."""

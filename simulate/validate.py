@@ -4,29 +4,128 @@
 folder of SCENES (``image.png``, ``params.json``, ``calibration.csv``, ``truth/``; written by
 ``python -m simulate render``), scores it against the truth with
 ``crosssection.truth.scoring.score`` and writes ``REPORT/scores.csv`` (one row per scene),
-``REPORT/summary.json`` (means over the scored scenes) and ``REPORT/failures.csv`` (one line
-per scene that could not be analysed: the run goes on).
+``REPORT/summary.json`` (means over the scored scenes, the options, the input folder and the
+package version) and ``REPORT/failures.csv`` (one line per scene that could not be analysed or
+scored: the run goes on). Every subfolder of SCENES is taken for a scene, so that one whose
+``truth/`` is missing is listed as failed rather than lost.
 """
 from __future__ import annotations
 
 import argparse
+import json
+import math
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from crosssection.core.errors import ConfigError, FoldstatError
+from crosssection._version import __version__
+from crosssection.core import schema
+from crosssection.core.errors import ConfigError, FoldstatError, ParameterError
 from crosssection.core.fileio import write_csv, write_json
-from crosssection.truth.scene import read_scene
+from crosssection.truth.scene import read_scene_params
 from crosssection.truth.scoring import analyze_scene_folder, score
 
-__all__ = ["validate_scenes", "score_scene", "add_subparser"]
+__all__ = ["validate_scenes", "score_scene", "read_truth", "add_subparser"]
 
 # the headline scores, first in scores.csv (crosssection.truth.scoring names)
 KEY_COLUMNS = ["scene", "rod_length_rel_error", "n_branches_rel_error", "junction_precision",
                "junction_recall", "n_br_exact_length_fraction", "n_voids_rel_error",
                "void_area_mean_rel_error", "total_energy_rel_error"]
+
+#: exit status of a run that finished with some scenes failed (as ``batch``, ``quench``)
+EXIT_SOME_FAILED = 3
+
+# the truth columns that score() turns into numbers: a text or missing value there would
+# either crash the scoring with a message naming no file or score garbage
+_NUMERIC_TRUTH = {
+    "junctions": ["x_px", "y_px"],
+    "stacks": ["length_mm", "n_br", "mid_x_px", "mid_y_px"],
+    "branches": ["energy"],
+    "voids": ["area_mm2", "centroid_x_px", "centroid_y_px"],
+}
+# truth totals that score() prefers to the tables' sums when present
+_SUMMARY_TOTALS = ["rod_length_mm", "n_branches", "total_energy"]
+
+
+def _check_match_px(value, name: str) -> None:
+    """Raise ParameterError unless ``value`` is None or a finite number > 0."""
+    if value is None:
+        return
+    ok = (not isinstance(value, bool) and isinstance(value, (int, float, np.number))
+          and math.isfinite(value) and value > 0)
+    if not ok:
+        shown = f"{value:g}" if isinstance(value, (float, np.floating)) else repr(value)
+        raise ParameterError(f"must be a finite number > 0, got {shown}", name)
+
+
+def read_truth(truth_dir) -> tuple[dict, dict]:
+    """Read a scene's ``truth/`` folder, checking what the scoring relies on.
+
+    Parameters
+    ----------
+    truth_dir : str or Path
+        Holds ``summary.json`` and the four tables of :data:`crosssection.core.schema.TABLES`.
+
+    Returns
+    -------
+    (summary, tables) : (dict, dict of DataFrame)
+        The pair :func:`crosssection.truth.scoring.score` takes; each table has the schema's
+        columns first.
+
+    Raises
+    ------
+    ConfigError
+        A file is missing or unreadable, ``summary.json`` is not a JSON object or holds a
+        non-numeric total, a table lacks one of the schema's columns or holds a non-numeric
+        or missing value where the scoring needs a number. The message names the file.
+    """
+    truth_dir = Path(truth_dir)
+    path = truth_dir / "summary.json"
+    try:
+        summary = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise ConfigError("file not found", path) from None
+    except OSError as exc:
+        raise ConfigError(f"cannot read ({exc.strerror or type(exc).__name__})", path) from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"malformed JSON ({getattr(exc, 'msg', exc)})", path) from None
+    if not isinstance(summary, dict):
+        raise ConfigError("must hold a JSON object", path)
+    for key in _SUMMARY_TOTALS:
+        value = summary.get(key)
+        if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))
+                                  or not math.isfinite(value)):
+            raise ConfigError(f"{key} must be a finite number or null, got {value!r}", path)
+    tables = {}
+    for name, required in schema.TABLES.items():
+        path = truth_dir / f"{name}.csv"
+        try:
+            df = pd.read_csv(path)
+        except FileNotFoundError:
+            raise ConfigError("file not found", path) from None
+        except pd.errors.EmptyDataError:
+            raise ConfigError("empty file (no header line)", path) from None
+        except OSError as exc:
+            raise ConfigError(f"cannot read ({exc.strerror or type(exc).__name__})",
+                              path) from None
+        except ValueError as exc:  # parser and decoding errors
+            raise ConfigError(f"malformed CSV ({type(exc).__name__})", path) from None
+        missing = [c for c in required if c not in df.columns]
+        if len(missing) == len(required):
+            raise ConfigError(f"not a {name} table (expected the header "
+                              f"{','.join(required)})", path)
+        if missing:
+            raise ConfigError(f"lacks column(s) {', '.join(missing)}", path)
+        for col in _NUMERIC_TRUTH[name]:
+            values = pd.to_numeric(df[col], errors="coerce")
+            if not np.isfinite(values.to_numpy(float)).all():
+                raise ConfigError(f"column {col} must hold finite numbers", path)
+            df[col] = values
+        tables[name] = schema.check_table(name, df)
+    return summary, tables
 
 
 def score_scene(scene_dir, *, match_px: float | None = None) -> dict:
@@ -36,7 +135,8 @@ def score_scene(scene_dir, *, match_px: float | None = None) -> dict:
     ----------
     scene_dir : str or Path
     match_px : float, optional
-        Junction matching radius (default: the scorer's, 3 h in pixels).
+        Junction matching radius in pixels, finite and > 0 (default: the scorer's, 3 h in
+        pixels).
 
     Returns
     -------
@@ -45,40 +145,91 @@ def score_scene(scene_dir, *, match_px: float | None = None) -> dict:
 
     Raises
     ------
+    ParameterError
+        ``match_px`` is not a finite number > 0.
     FoldstatError
-        Not a scene folder (:func:`crosssection.truth.scene.read_scene`), or the analysis
-        failed.
+        Not a scene folder (no ``truth/summary.json``), malformed ``truth/``
+        (:func:`read_truth`) or ``params.json``, or the analysis failed.
     """
+    _check_match_px(match_px, "match_px")
     scene_dir = Path(scene_dir)
-    truth = read_scene(scene_dir, image=False)
+    # the truth first: a folder without it is no scene, whatever else it holds
+    if not (scene_dir / "truth" / "summary.json").is_file():
+        raise ConfigError("no truth/summary.json (not a scene folder)", scene_dir)
+    truth = read_truth(scene_dir / "truth")
+    params = read_scene_params(scene_dir)
     t0 = time.perf_counter()
     _, pair = analyze_scene_folder(scene_dir)
     dt = time.perf_counter() - t0
     out = {"scene": scene_dir.name}
-    out.update(score(pair, (truth.summary, truth.tables), match_px=match_px,
-                     px_per_mm=truth.params["px_per_mm"],
-                     thickness_mm=truth.params["thickness_mm"]))
+    out.update(score(pair, truth, match_px=match_px, px_per_mm=params["px_per_mm"],
+                     thickness_mm=params["thickness_mm"]))
     out["analyze_s"] = dt
     return out
+
+
+def _scene_folders(scenes_dir: Path, out_dir: Path) -> list[Path]:
+    """Every subfolder of ``scenes_dir`` but hidden ones and the report folder itself."""
+    out = out_dir.resolve()
+    return sorted(p for p in scenes_dir.iterdir()
+                  if p.is_dir() and not p.name.startswith(".") and p.resolve() != out)
+
+
+def _one_line(exc: BaseException) -> str:
+    if isinstance(exc, FoldstatError):
+        return exc.one_line()
+    return f"{type(exc).__name__}: {' '.join(str(exc).split())}"
 
 
 def validate_scenes(scenes_dir, out_dir, *, match_px: float | None = None,
                     progress: bool | None = None) -> pd.DataFrame:
     """Score every scene folder under ``scenes_dir``; write the report into ``out_dir``.
 
-    ``progress``: a progress bar on stderr (None: only when stderr is a terminal).
+    Every subfolder of ``scenes_dir`` (but hidden ones and ``out_dir``) is a scene; one that
+    cannot be analysed or scored, or has no ``truth/summary.json``, is a line of
+    ``failures.csv`` (``scene``, ``error``) and the run goes on.
+
+    Parameters
+    ----------
+    scenes_dir : str or Path
+        Folder of scene folders (``python -m simulate render``).
+    out_dir : str or Path
+        Report folder, created first: ``scores.csv``, ``summary.json``, ``failures.csv``.
+    match_px : float, optional
+        Junction matching radius in pixels, finite and > 0 (default: 3 h of each scene).
+    progress : bool, optional
+        A progress bar on stderr (None: only when stderr is a terminal).
 
     Returns
     -------
     DataFrame
         One row per scored scene (also written to ``scores.csv``).
+
+    Raises
+    ------
+    ParameterError
+        ``match_px`` is not a finite number > 0.
+    ConfigError
+        ``scenes_dir`` is not a folder or no subfolder of it has a ``truth/summary.json``.
+    OSError
+        ``out_dir`` cannot be created or written.
     """
+    return _validate(scenes_dir, out_dir, match_px=match_px, progress=progress)[0]
+
+
+def _validate(scenes_dir, out_dir, *, match_px, progress) -> tuple[pd.DataFrame, list]:
+    """:func:`validate_scenes`, returning the failures (dicts ``scene``, ``error``) too."""
+    _check_match_px(match_px, "match_px")
     scenes_dir, out_dir = Path(scenes_dir), Path(out_dir)
+    if not scenes_dir.exists():
+        raise ConfigError("folder not found", scenes_dir)
     if not scenes_dir.is_dir():
         raise ConfigError("not a folder", scenes_dir)
-    scenes = sorted(p for p in scenes_dir.iterdir() if (p / "truth" / "summary.json").exists())
-    if not scenes:
+    scenes = _scene_folders(scenes_dir, out_dir)
+    if not any((p / "truth" / "summary.json").is_file() for p in scenes):
         raise ConfigError("no scene folders (with truth/summary.json) inside", scenes_dir)
+    # before the analyses: an unusable --out should not cost the whole run
+    out_dir.mkdir(parents=True, exist_ok=True)
     rows, failures = [], []
     from tqdm import tqdm
 
@@ -87,11 +238,8 @@ def validate_scenes(scenes_dir, out_dir, *, match_px: float | None = None,
     for scene in it:
         try:
             rows.append(score_scene(scene, match_px=match_px))
-        except FoldstatError as exc:
-            failures.append({"scene": scene.name, "error": exc.one_line()})
         except Exception as exc:  # noqa: BLE001 - one line per failed scene, never a crash
-            failures.append({"scene": scene.name,
-                             "error": f"{type(exc).__name__}: {' '.join(str(exc).split())}"})
+            failures.append({"scene": scene.name, "error": _one_line(exc)})
     df = pd.DataFrame(rows)
     if len(df):
         df = df[[c for c in KEY_COLUMNS if c in df.columns]
@@ -99,31 +247,48 @@ def validate_scenes(scenes_dir, out_dir, *, match_px: float | None = None,
     write_csv(out_dir / "scores.csv", df)
     write_csv(out_dir / "failures.csv", pd.DataFrame(failures, columns=["scene", "error"]))
     numeric = df.select_dtypes(include=[np.number, "bool"]) if len(df) else pd.DataFrame()
-    summary = {"n_scenes": len(scenes), "n_scored": len(df), "n_failed": len(failures),
+    summary = {"package": "foldstat", "version": __version__,
+               "scenes_dir": str(scenes_dir.resolve()),
+               # null match_px: each scene's own 3 h (the scorer's default)
+               "options": {"match_px": None if match_px is None else float(match_px)},
+               "n_scenes": len(scenes), "n_scored": len(df), "n_failed": len(failures),
+               "failed": [f["scene"] for f in failures],
                "mean": {c: float(numeric[c].astype(float).mean()) for c in numeric.columns},
                "mean_abs": {c: float(numeric[c].astype(float).abs().mean())
                             for c in numeric.columns if c.endswith("error")}}
     write_json(out_dir / "summary.json", summary)
-    return df
+    return df, failures
 
 
 def add_subparser(sub) -> None:
     """Register ``validate``: ``python -m simulate validate SCENES --out REPORT``."""
-    p = sub.add_parser("validate", help="run the pipeline on rendered scenes and score it",
-                       description="Analyse every scene folder of SCENES and score it against "
-                                   "its truth: REPORT/scores.csv, summary.json, failures.csv.")
+    p = sub.add_parser(
+        "validate", help="run the pipeline on rendered scenes and score it",
+        description="Analyse every scene folder of SCENES and score it against its truth: "
+                    "REPORT/scores.csv, summary.json, failures.csv. A scene that cannot be "
+                    "analysed or scored (a subfolder without truth/ included) is listed in "
+                    "REPORT/failures.csv and on stderr as 'warning: SCENE: not analysed: "
+                    "REASON'; the run goes on and exits with status 3.")
     p.add_argument("scenes", metavar="SCENES",
                    help="folder of scene folders (from render), each with its truth/")
     p.add_argument("--out", required=True, metavar="REPORT",
                    help="report folder (created): scores.csv, summary.json, failures.csv")
     p.add_argument("--match-px", type=float, default=None,
-                   help="junction matching radius in px (default: 3 h of each scene)")
+                   help="junction matching radius in px, > 0 (default: 3 h of each scene)")
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
                    help="progress bar on stderr (default: only when stderr is a terminal)")
     p.set_defaults(func=_run)
 
 
 def _run(args) -> int:
-    df = validate_scenes(args.scenes, args.out, match_px=args.match_px, progress=args.progress)
-    print(f"{len(df)} scenes scored; report in {args.out}")
-    return 0
+    """Entry point of ``validate``; returns the exit status (0 every scene scored, 3 some
+    failed, each named in one ``warning:`` line on stderr)."""
+    _check_match_px(args.match_px, "--match-px")
+    df, failures = _validate(args.scenes, args.out, match_px=args.match_px,
+                             progress=args.progress)
+    for f in failures:
+        print(f"warning: {Path(args.scenes) / f['scene']}: not analysed: {f['error']}",
+              file=sys.stderr)
+    print(f"{len(df)} scenes scored, {len(failures)} failed; report in {args.out}"
+          + (f" (see {Path(args.out) / 'failures.csv'})" if len(failures) else ""))
+    return EXIT_SOME_FAILED if len(failures) else 0

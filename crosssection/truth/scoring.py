@@ -301,6 +301,14 @@ def meets_targets(s: dict) -> dict:
     }
 
 
+def _beside_or_above(scene_dir: Path, name: str) -> Path:
+    """``scene_dir / name``, or the same name two folders up when only that exists: the
+    bundled samples keep each scan beside its set, and its truth in ``scenes/<stem>/``."""
+    here = scene_dir / name
+    up = scene_dir.parent.parent / name
+    return up if not here.exists() and up.exists() else here
+
+
 def analyze_scene_folder(scene_dir, *, image_name: str | None = None, use_hole: bool = True,
                          use_calibration: bool = True, **kwargs):
     """Run ``crosssection.analyze`` on a scene folder with the parameters of its ``params.json``.
@@ -309,7 +317,8 @@ def analyze_scene_folder(scene_dir, *, image_name: str | None = None, use_hole: 
     ----------
     scene_dir : str or Path
         Holds the image (``image.png`` unless ``image_name``), ``params.json`` and
-        ``calibration.csv``.
+        ``calibration.csv`` (the image and calibration may lie two folders up instead, as in
+        the bundled samples: ``scan.png`` beside ``scenes/scan/``).
     use_hole : bool
         Pass the known hole (radius, centre); otherwise the pipeline fits it.
     use_calibration : bool
@@ -326,14 +335,14 @@ def analyze_scene_folder(scene_dir, *, image_name: str | None = None, use_hole: 
 
     scene_dir = Path(scene_dir)
     params = read_scene_params(scene_dir)
-    image = scene_dir / (image_name or params.get("image") or "image.png")
+    image = _beside_or_above(scene_dir, image_name or params.get("image") or "image.png")
     want = {"px_per_mm": params.get("px_per_mm", 50.0),
             "thickness_mm": params.get("thickness_mm", 0.1)}
     if use_hole and params.get("hole_radius_mm"):
         want["hole_radius_mm"] = params["hole_radius_mm"]
         if params.get("hole_center_px"):
             want["hole_center_px"] = tuple(params["hole_center_px"])
-    cal = scene_dir / "calibration.csv"
+    cal = _beside_or_above(scene_dir, "calibration.csv")
     if use_calibration and cal.exists():
         want["calibration"] = str(cal)
     want.update(kwargs)

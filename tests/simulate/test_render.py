@@ -119,14 +119,16 @@ def test_cli_render_and_validate(tmp_path, capsys):
     np.savez(sim / "rods.npz", **rods)
     (sim / "params.json").write_text(json.dumps({"lambda": LAM}))
     assert main(["render", str(sim), "--out", str(tmp_path / "scenes"), "--seed", "3"]) == 0
-    folders = sorted((tmp_path / "scenes").iterdir())
+    folders = sorted(p for p in (tmp_path / "scenes").iterdir() if p.is_dir())
     assert [f.name for f in folders] == sorted(rods)
-    # validate never crashes: a scene that cannot be analysed is one line of failures.csv
+    # validate never crashes: a scene that cannot be analysed is one line of failures.csv,
+    # one warning line, and the status of a run with failures
     (folders[0] / "image.png").write_bytes(b"not a png")
     capsys.readouterr()
-    assert main(["validate", str(tmp_path / "scenes"), "--out", str(tmp_path / "rep")]) == 0
-    # stderr is not a terminal here: no progress bar, nothing on stderr
-    assert capsys.readouterr().err == ""
+    assert main(["validate", str(tmp_path / "scenes"), "--out", str(tmp_path / "rep")]) == 3
+    # stderr is not a terminal here: no progress bar, only that line
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith(f"warning: {folders[0]}: not analysed: ")
     failures = pd.read_csv(tmp_path / "rep" / "failures.csv")
     assert folders[0].name in failures["scene"].tolist()
     summary = json.loads((tmp_path / "rep" / "summary.json").read_text())

@@ -1,0 +1,181 @@
+"""The ``validate`` command: option checks, failed scenes, truth tables, the report's record."""
+import json
+import shutil
+
+import pandas as pd
+import pytest
+
+from crosssection._version import __version__
+from crosssection.core.errors import ConfigError, ParameterError
+from simulate.cli import main
+from simulate.validate import read_truth, validate_scenes
+
+
+@pytest.fixture(scope="module")
+def rendered(tmp_path_factory):
+    """One quenched rod rendered into a SCENES folder (about 1 s): ``(scenes, scene)``."""
+    root = tmp_path_factory.mktemp("validate")
+    assert main(["quench", "--n-configs", "1", "--segments", "100", "--seed", "1",
+                 "--workers", "1", "--out", str(root / "sim")]) == 0
+    assert main(["render", str(root / "sim"), "--out", str(root / "scenes"),
+                 "--no-progress"]) == 0
+    scenes = root / "scenes"
+    return scenes, sorted(scenes.iterdir())[0]
+
+
+@pytest.fixture
+def scenes(rendered, tmp_path):
+    """A fresh copy of the rendered SCENES folder: ``(scenes, scene)`` to damage at will."""
+    src, scene = rendered
+    dst = tmp_path / "scenes"
+    shutil.copytree(src, dst)
+    return dst, dst / scene.name
+
+
+def run(scenes, out, *extra):
+    return main(["validate", str(scenes), "--out", str(out), "--no-progress", *extra])
+
+
+def not_analysed(err: str) -> list[str]:
+    return [line for line in err.splitlines() if ": not analysed: " in line]
+
+
+@pytest.mark.parametrize("value", ["0", "-1", "nan", "inf"])
+def test_match_px_must_be_finite_and_positive(scenes, tmp_path, capsys, value):
+    folder, _ = scenes
+    assert run(folder, tmp_path / "rep", "--match-px", value) == 2
+    assert capsys.readouterr().err == \
+        f"error: --match-px: must be a finite number > 0, got {value}\n"
+    assert not (tmp_path / "rep").exists()
+    with pytest.raises(ParameterError, match="match_px"):
+        validate_scenes(folder, tmp_path / "rep", match_px=float(value))
+
+
+def damage_image(scene):
+    (scene / "image.png").write_bytes(b"not a png")
+    return "image.png"
+
+
+def damage_summary(scene):
+    (scene / "truth" / "summary.json").write_text("{bad")
+    return "summary.json"
+
+
+def damage_params(scene):
+    (scene / "params.json").write_text("{bad")
+    return "params.json"
+
+
+def damage_calibration(scene):
+    (scene / "calibration.csv").write_text("x\n")
+    return "calibration.csv"
+
+
+@pytest.mark.parametrize("damage", [damage_image, damage_summary, damage_params,
+                                    damage_calibration])
+def test_failed_scene_is_a_warning_and_exit_3(scenes, tmp_path, capsys, damage):
+    folder, scene = scenes
+    name = damage(scene)
+    assert run(folder, tmp_path / "rep") == 3
+    lines = not_analysed(capsys.readouterr().err)
+    assert len(lines) == 1
+    assert lines[0].startswith(f"warning: {scene}: not analysed: ") and name in lines[0]
+    failures = pd.read_csv(tmp_path / "rep" / "failures.csv")
+    assert failures["scene"].tolist() == [scene.name]
+    summary = json.loads((tmp_path / "rep" / "summary.json").read_text())
+    assert summary["n_failed"] == 1 and summary["failed"] == [scene.name]
+
+
+def test_scene_without_truth_is_failed_not_skipped(scenes, tmp_path, capsys):
+    folder, scene = scenes
+    bare = folder / "config_99999"
+    shutil.copytree(scene, bare)
+    shutil.rmtree(bare / "truth")
+    assert run(folder, tmp_path / "rep") == 3
+    lines = not_analysed(capsys.readouterr().err)
+    assert lines == [f"warning: {bare}: not analysed: {bare}: no truth/summary.json "
+                     f"(not a scene folder)"]
+    summary = json.loads((tmp_path / "rep" / "summary.json").read_text())
+    assert (summary["n_scenes"], summary["n_scored"], summary["n_failed"]) == (2, 1, 1)
+
+
+def test_report_folder_inside_scenes_is_not_a_scene(scenes, capsys):
+    folder, _ = scenes
+    assert run(folder, folder / "rep") == 0
+    # a second run sees rep/ among the subfolders: still not a failed scene
+    assert run(folder, folder / "rep") == 0
+    assert not_analysed(capsys.readouterr().err) == []
+
+
+def test_corrupt_truth_table_fails_its_scene(scenes, tmp_path, capsys):
+    folder, scene = scenes
+    (scene / "truth" / "stacks.csv").write_text("x\n")
+    assert run(folder, tmp_path / "rep") == 3
+    lines = not_analysed(capsys.readouterr().err)
+    assert len(lines) == 1 and "truth/stacks.csv: not a stacks table" in lines[0]
+    summary = json.loads((tmp_path / "rep" / "summary.json").read_text())
+    assert (summary["n_scored"], summary["n_failed"]) == (0, 1)
+
+
+@pytest.mark.parametrize("file, content, cause", [
+    ("stacks.csv", "x\n", "not a stacks table"),
+    ("junctions.csv", "junction_id,x_px\n0,1.0\n", "lacks column(s) y_px, n_stacks"),
+    ("voids.csv", "", "empty file"),
+    ("summary.json", "[1, 2]", "must hold a JSON object"),
+    ("summary.json", '{"rod_length_mm": "long"}', "rod_length_mm must be a finite number"),
+])
+def test_read_truth_checks_the_tables(rendered, tmp_path, file, content, cause):
+    _, scene = rendered
+    truth = tmp_path / "truth"
+    shutil.copytree(scene / "truth", truth)
+    (truth / file).write_text(content)
+    with pytest.raises(ConfigError) as err:
+        read_truth(truth)
+    assert err.value.path == str(truth / file) and cause in err.value.cause
+
+
+def test_read_truth_rejects_text_in_a_scored_column(rendered, tmp_path):
+    _, scene = rendered
+    truth = tmp_path / "truth"
+    shutil.copytree(scene / "truth", truth)
+    stacks = pd.read_csv(truth / "stacks.csv").astype({"n_br": object})
+    stacks.loc[0, "n_br"] = "many"
+    stacks.to_csv(truth / "stacks.csv", index=False)
+    with pytest.raises(ConfigError, match="column n_br must hold finite numbers"):
+        read_truth(truth)
+
+
+def test_read_truth_reads_an_intact_folder(rendered):
+    _, scene = rendered
+    summary, tables = read_truth(scene / "truth")
+    assert summary["n_stacks"] == len(tables["stacks"])
+    assert set(tables) == {"junctions", "stacks", "branches", "voids"}
+
+
+def test_summary_records_version_options_and_input(scenes, tmp_path):
+    folder, _ = scenes
+    assert run(folder, tmp_path / "rep", "--match-px", "4.5") == 0
+    summary = json.loads((tmp_path / "rep" / "summary.json").read_text())
+    assert summary["version"] == __version__
+    assert summary["options"] == {"match_px": 4.5}
+    assert summary["scenes_dir"] == str(folder.resolve())
+    assert pd.read_csv(tmp_path / "rep" / "scores.csv")["match_px"].tolist() == [4.5]
+
+
+def test_unusable_out_is_one_error_line(scenes, tmp_path, capsys):
+    folder, _ = scenes
+    (tmp_path / "rep").write_text("a file")
+    assert run(folder, tmp_path / "rep") == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: {tmp_path / 'rep'}: ") and err.count("\n") == 1
+
+
+def test_the_bundled_samples_validate(tmp_path):
+    """The samples keep each scan beside its set and its truth in scenes/<stem>/: validate
+    finds the scan two folders up and scores all five."""
+    from crosssection.samples import copy_samples
+    from simulate.validate import validate_scenes
+
+    copy_samples(tmp_path / "samples")
+    scores = validate_scenes(tmp_path / "samples" / "scenes", tmp_path / "v")
+    assert len(scores) == 5 and (scores["n_br_exact_length_fraction"] > 0.95).all()
