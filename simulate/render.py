@@ -198,6 +198,11 @@ PASS_SMOOTH = 0.0
 #: ``draw="passes"``: adjacent pressed passes overlap by this much so that the rasterised
 #: strokes leave no paper line between them.
 PASS_OVERLAP_PX = 1.0
+#: Largest scene drawn, in pixels (10 000 x 10 000): the drawing holds several float images
+#: of this size (a 1e8 px scene needs several GB); the defaults give about 2500 x 2500 px.
+MAX_SCENE_PX = 10_000 * 10_000
+#: Thinnest sheet drawn, px (the analysis' own limit, ``crosssection.params``).
+MIN_SHEET_PX = 1.0
 
 
 def passes_calibration(stroke_mm: float, pitch_mm: float, n_max: int = 60) -> Calibration:
@@ -239,6 +244,13 @@ def _rod_length_mm(xy, delta, cal, n_max, *, rod_length_mm, px_per_mm, gap_px, m
         return rod_length_mm, delta * rod_length_mm >= need_mm
     rod_length_mm = need_mm / delta
     cap = ((max_size_px - 2) / px_per_mm - 2 * margin_mm) / max(extent, 1e-9)
+    if cap <= 0:
+        # the margins alone exceed max_size_px: no rod length keeps the image under it, and a
+        # negative one would mirror the drawing; the pixel budget of render_configuration
+        # refuses the scene if it is too large
+        warnings.warn(f"the {margin_mm:g} mm margins alone exceed {max_size_px} px at "
+                      f"{px_per_mm:g} px/mm: rod length not capped", stacklevel=4)
+        return rod_length_mm, True
     if rod_length_mm > cap:
         warnings.warn(f"rod length capped at {cap:.1f} mm to keep the image under "
                       f"{max_size_px} px: passes just beyond delta may touch", stacklevel=4)
@@ -292,6 +304,27 @@ def _frame(xy, analysis, cal, *, px_per_mm, thickness_mm, rod_length_mm, hole_ra
     hole_xy = None if hole_px is None else (hole_center_l - lo) * scale + margin_px
     return _Frame(lo, scale, margin_px, (int(size[1]), int(size[0])), rod_length_mm, gap_ok,
                   hole_radius_mm, hole_xy, hole_px, hole_is_wall)
+
+
+def _check_scene_size(frame: _Frame, px_per_mm: float) -> None:
+    """Refuse a scene larger than :data:`MAX_SCENE_PX` before anything is drawn.
+
+    Raises
+    ------
+    ParameterError
+        Naming ``px_per_mm`` (every pixel size scales with it) and the sizes in mm that set
+        the image: the rod length and the hole.
+    """
+    h_px, w_px = frame.shape
+    if h_px * w_px <= MAX_SCENE_PX:
+        return
+    side = math.isqrt(MAX_SCENE_PX)
+    hole = ("" if frame.hole_radius_mm is None
+            else f" in a hole of radius {frame.hole_radius_mm:.4g} mm")
+    raise ParameterError(
+        f"the scene would be {w_px} x {h_px} px (> {side} x {side} px): a rod of "
+        f"{frame.rod_length_mm:.4g} mm{hole} at {px_per_mm:g} px/mm; lower px_per_mm, "
+        "thickness_mm, rod_length_mm or hole_radius_mm", "px_per_mm")
 
 
 def _arc_px(line) -> np.ndarray:
@@ -1305,12 +1338,24 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
     -------
     Scene
         With ``paths_rc`` (the drawn centrelines) and ``ink_mask``; no ``packs``.
+
+    Raises
+    ------
+    ParameterError
+        An absurd option, or a scene that would exceed :data:`MAX_SCENE_PX` pixels (checked
+        before anything is drawn).
     """
     xy = np.asarray(xy, float)
+    _check_seed(seed)
     if smooth not in SMOOTH:
         raise ParameterError(f"smooth must be one of {SMOOTH}, got {smooth!r}")
     if not (px_per_mm > 0 and thickness_mm > 0):
         raise ParameterError("px_per_mm and thickness_mm must be positive")
+    if px_per_mm * thickness_mm < MIN_SHEET_PX:
+        # the analysis refuses such a scan: a sheet thinner than a pixel cannot be resolved
+        raise ParameterError(f"a sheet would be {px_per_mm * thickness_mm:.3g} px thick (< "
+                             f"{MIN_SHEET_PX:g} px at {px_per_mm:g} px/mm and h = "
+                             f"{thickness_mm:g} mm): no scan to analyse", "px_per_mm")
     for name, v in (("rod_thickness", rod_thickness), ("wall_radius", wall_radius),
                     ("rod_length_mm", rod_length_mm)):
         if v is not None and not (math.isfinite(v) and v > 0):
@@ -1341,6 +1386,7 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
                    margin_mm=margin_mm, gap_px=gap_px, max_size_px=max_size_px,
                    rod_thickness=rod_thickness, wall_radius=wall_radius,
                    wall_center_xy=wall_center_xy)
+    _check_scene_size(frame, px_per_mm)
     given = {"noise_sigma": noise_sigma, "blur_px": blur_px, "jpeg_quality": jpeg_quality,
              "smears": smears, "specks": specks, "pinholes": pinholes, "plate": plate,
              "rim_px": rim_px, "illumination": illumination, "cast": cast}
@@ -1407,12 +1453,27 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
                  paths_rc=[line[:, ::-1] for line in lines_px], ink_mask=ink_mask)
 
 
+#: Scan defect keywords of :func:`render_configuration`.
+_DEFECT_NAMES = ("noise_sigma", "blur_px", "jpeg_quality", "smears", "specks", "pinholes",
+                 "plate", "rim_px", "illumination", "cast")
+#: The record of a render in its output folder: its parameters, source and the package
+#: version; a re-run into the folder resumes only when they agree (:func:`_claim_out`).
+RENDER_RECORD = "render.json"
+#: Entries of a simulation's params.json a render does not depend on: a re-run of the
+#: ensemble adds configurations and records the versions it ran with.
+_SOURCE_IGNORED = ("n_configs", "version", "libraries")
+
+
+def _check_seed(seed) -> None:
+    """Refuse a seed numpy's generators do not take (they need a whole number >= 0)."""
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ParameterError(f"seed must be a whole number >= 0, got {seed!r}")
+
+
 def _check_options(kwargs: dict) -> None:
     """Check the scan options of :func:`render_directory` before any configuration is
     analysed (a bad value fails at once, not after the first analysis)."""
-    names = ("noise_sigma", "blur_px", "jpeg_quality", "smears", "specks", "pinholes", "plate",
-             "rim_px", "illumination", "cast")
-    given = {k: kwargs[k] for k in names if k in kwargs}
+    given = {k: kwargs[k] for k in _DEFECT_NAMES if k in kwargs}
     has_hole = kwargs.get("hole_radius_mm", None) is not None
     _defects(bool(kwargs.get("clean", False)), given, has_hole or "plate" not in given)
     if kwargs.get("smooth", "all") not in SMOOTH:
@@ -1430,6 +1491,130 @@ def _check_options(kwargs: dict) -> None:
                                               and h > 0):
         raise ParameterError(f"hole_radius_mm must be a finite number > 0, 'auto' or None, "
                              f"got {h!r}")
+    _check_seed(kwargs.get("seed", 0))
+
+
+def _rods_path(sim_dir: Path) -> Path:
+    """``sim_dir/rods.npz``, once ``sim_dir`` is known to be a folder holding it."""
+    if sim_dir.exists() and not sim_dir.is_dir():
+        raise ConfigError("not a simulation folder (a file; give the folder holding rods.npz)",
+                          sim_dir)
+    rods_path = sim_dir / "rods.npz"
+    if not rods_path.exists():
+        raise ConfigError("no rods.npz (run `python -m simulate quench` first)", rods_path)
+    return rods_path
+
+
+def _open_rods(rods_path: Path):
+    """The configurations archive, opened lazily (arrays are read on access)."""
+    try:
+        rods = np.load(rods_path, allow_pickle=False)
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        raise ConfigError(f"unreadable rods file ({' '.join(str(exc).split())})",
+                          rods_path) from None
+    if not isinstance(rods, np.lib.npyio.NpzFile):
+        # a bare .npy array under the archive's name
+        raise ConfigError("unreadable rods file (one array, not an .npz archive of "
+                          "configurations)", rods_path)
+    return rods
+
+
+def _jsonable(obj):
+    """JSON form of the keyword values a record may hold (numpy scalars and arrays exactly,
+    anything else by its repr)."""
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    return repr(obj)
+
+
+def _render_record(sim_dir: Path, source_params: dict | None, kwargs: dict) -> dict:
+    """The content of ``render.json``: every keyword of :func:`render_configuration` as
+    this render uses it (defaults filled in, scan defects resolved; ``seed`` the base seed),
+    the source folder, its parameters and the package version."""
+    import inspect
+
+    from crosssection._version import __version__
+
+    params = {k: p.default for k, p in inspect.signature(render_configuration).parameters.items()
+              if p.kind is p.KEYWORD_ONLY}
+    params.update(kwargs)
+    # an option left at None and the same defect given explicitly draw the same scans
+    params.update(_defects(bool(params["clean"]),
+                           {k: params[k] for k in _DEFECT_NAMES}, True))
+    source = None if source_params is None else {
+        k: v for k, v in source_params.items() if k not in _SOURCE_IGNORED}
+    # the scan options as given (None: the default), so that a difference of clean is
+    # reported as such rather than as every defect it changes
+    given = {k: kwargs.get(k) for k in ("clean", *_DEFECT_NAMES)}
+    return json.loads(json.dumps({"command": "render", "params": params, "given": given,
+                                  "source": str(sim_dir.resolve()), "source_params": source,
+                                  "version": __version__}, default=_jsonable))
+
+
+def _holds_scenes(out_dir: Path) -> bool:
+    """Whether ``out_dir`` holds a scene folder, finished or not."""
+    return out_dir.is_dir() and any(
+        p.is_dir() and ((p / "params.json").exists() or (p / "truth").exists())
+        for p in out_dir.iterdir())
+
+
+def _claim_out(out_dir: Path, record: dict, name=str) -> bool:
+    """Refuse an output folder whose scenes were rendered otherwise.
+
+    A re-run resumes (finished scenes are skipped), so the scenes there must have been
+    rendered with the same parameters from the same ensemble: otherwise the folder would mix
+    scans of two renders. A folder without scenes is free.
+
+    Parameters
+    ----------
+    out_dir : Path
+    record : dict
+        This render's :func:`_render_record`.
+    name : callable
+        Keyword -> the name shown for it (the CLI's options).
+
+    Returns
+    -------
+    bool
+        Whether the folder holds scenes of this render (its render.json is kept as it is).
+
+    Raises
+    ------
+    ConfigError
+        The folder holds scenes without ``render.json`` (parameters unknown), an unreadable
+        one, or one of another render (the parameters that differ are listed).
+    """
+    if not _holds_scenes(out_dir):
+        return False
+    path = out_dir / RENDER_RECORD
+    if not path.exists():
+        raise ConfigError(f"output folder holds scenes but no {RENDER_RECORD} (rendered by an "
+                          "older version: their parameters are unknown); use another --out",
+                          out_dir)
+    try:
+        old = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ConfigError(f"unreadable {RENDER_RECORD} ({' '.join(str(exc).split())})",
+                          path) from None
+    if not isinstance(old, dict) or not isinstance(old.get("params"), dict):
+        raise ConfigError("malformed (expected a JSON object with params)", path)
+    new = record["params"]
+    keys = [k for k in sorted(set(old["params"]) | set(new)) if old["params"].get(k) != new.get(k)]
+    if "clean" in keys:
+        # a defect left at its default changes with clean: clean is the difference
+        was, now = old.get("given") or {}, record["given"]
+        keys = [k for k in keys if k not in _DEFECT_NAMES or was.get(k) != now.get(k)]
+    diff = [name(k) for k in keys]
+    if old.get("source") != record["source"]:
+        diff.append(f"source folder (was {old.get('source')})")
+    elif old.get("source_params") != record["source_params"]:
+        diff.append("source ensemble (its params.json)")
+    if diff:
+        raise ConfigError("output folder holds scenes of another render (parameters differ: "
+                          + ", ".join(diff) + "); use another --out", out_dir)
+    return True
 
 
 def render_directory(sim_dir, out_dir, *, configs=None, progress: bool | None = False,
@@ -1439,11 +1624,18 @@ def render_directory(sim_dir, out_dir, *, configs=None, progress: bool | None = 
     ``sim_dir/params.json`` gives ``lambda`` (default 7e5; 0 for a compaction, whose hard wall
     stores no energy) and optionally ``contact_distance``; a compaction's ``thickness`` and
     ``wall_radius`` (units of L) set the scale and, unless ``hole_radius_mm`` is given, the
-    hole (module docstring). Scenes already complete (truth/summary.json present) are skipped.
+    hole (module docstring). Without params.json the rods are drawn as a quench's (a
+    :class:`~crosssection.quality.QualityWarning` says so).
+
+    ``out_dir/render.json`` records the render's parameters, its source folder and the
+    package version. A re-run into the same folder resumes: scenes already complete
+    (truth/summary.json present) are skipped, provided the folder's render.json has the same
+    parameters and source.
 
     Parameters
     ----------
     sim_dir, out_dir : str or Path
+        ``out_dir`` is not ``sim_dir`` itself.
     configs : sequence of str, optional
         Keys of ``rods.npz`` to render (default: all).
     progress : bool or None
@@ -1457,16 +1649,41 @@ def render_directory(sim_dir, out_dir, *, configs=None, progress: bool | None = 
     -------
     list of Path
         The scene folders, rendered now or before.
+
+    Raises
+    ------
+    ParameterError
+        An absurd option or output folder, or a scene over :data:`MAX_SCENE_PX` pixels.
+    ConfigError
+        ``sim_dir`` is not a readable simulation folder, or ``out_dir`` holds scenes of
+        another render (or of one that recorded no parameters).
     """
+    return _render_directory(sim_dir, out_dir, configs=configs, progress=progress,
+                             kwargs=kwargs)
+
+
+def _render_directory(sim_dir, out_dir, *, configs=None, limit=None, progress=False, kwargs,
+                      name=str) -> list[Path]:
+    """:func:`render_directory`, the first ``limit`` configurations only when given; the
+    keywords of the messages shown as ``name(keyword)``."""
     from tqdm import tqdm
 
+    from crosssection.core.fileio import write_json
+    from crosssection.quality import QualityWarning
+
     _check_options(kwargs)
+    if not str(out_dir).strip():
+        # Path("") is the current folder
+        raise ParameterError("empty path: give the output folder", name("out_dir"))
     sim_dir, out_dir = Path(sim_dir), Path(out_dir)
-    rods_path = sim_dir / "rods.npz"
-    if not rods_path.exists():
-        raise ConfigError("no rods.npz (run `python -m simulate quench` first)", rods_path)
+    rods_path = _rods_path(sim_dir)
+    if out_dir.resolve() == sim_dir.resolve():
+        raise ParameterError(f"{out_dir} is the simulation folder being rendered: the scenes "
+                             "go to another folder", name("out_dir"))
+    user_kwargs = dict(kwargs)
     lam = 7e5
     delta = None
+    p = None
     pj = sim_dir / "params.json"
     if pj.exists():
         try:
@@ -1491,14 +1708,20 @@ def render_directory(sim_dir, out_dir, *, configs=None, progress: bool | None = 
             raise ConfigError(f"lambda must be a number, got {p.get('lambda')!r}", pj) from None
         delta = p.get("contact_distance")
     written = []
-    try:
-        rods = np.load(rods_path, allow_pickle=False)
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
-        raise ConfigError(f"unreadable rods file ({' '.join(str(exc).split())})",
-                          rods_path) from None
+    rods = _open_rods(rods_path)
     with rods:
         keys = sorted(rods.files) if configs is None else [k for k in sorted(rods.files)
                                                            if k in set(configs)]
+        if limit is not None:
+            keys = keys[:limit]
+        record = _render_record(sim_dir, p, user_kwargs)
+        # a resumed render keeps the record of the render that made the folder's scenes
+        recorded = _claim_out(out_dir, record, name)
+        if p is None:
+            # a compaction's wall and scale are in its params.json: without it the rods are
+            # drawn with no wall at the gap's scale, which is silently wrong for a compaction
+            warnings.warn(f"{pj}: missing: the rods are drawn as a quench's (no wall, default "
+                          f"scale, lambda {lam:g})", QualityWarning, stacklevel=3)
         base_seed = int(kwargs.pop("seed", 0))
         # disable=None is tqdm's "only on a terminal"
         with tqdm(keys, desc="render", unit="config",
@@ -1521,6 +1744,10 @@ def render_directory(sim_dir, out_dir, *, configs=None, progress: bool | None = 
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
                     scene = render_configuration(xy, an, seed=base_seed + i, **kwargs)
+                if not recorded:
+                    # before the first scene: a folder never holds scenes without their record
+                    write_json(out_dir / RENDER_RECORD, record)
+                    recorded = True
                 written.append(write_scene(scene, folder))
     return written
 
@@ -1535,7 +1762,9 @@ def add_subparser(sub) -> None:
                    help="simulation ensemble folder holding rods.npz (from quench, anneal or "
                         "compact)")
     p.add_argument("--out", required=True, metavar="SCENES",
-                   help="folder of the scene folders (created; finished scenes are skipped)")
+                   help="folder of the scene folders (created; its render.json records the "
+                        "parameters: a re-run with the same ones resumes, skipping finished "
+                        "scenes)")
     p.add_argument("--px-per-mm", type=float, default=50.0,
                    help="scan resolution in px/mm (default 50)")
     p.add_argument("--thickness-mm", type=float, default=0.1,
@@ -1619,7 +1848,9 @@ _OPTION = {"noise_sigma": "--noise", "blur_px": "--blur", "jpeg_quality": "--jpe
            "smears": "--smears", "specks": "--specks", "pinholes": "--pinholes",
            "plate": "--plate", "illumination": "--illumination", "cast": "--cast",
            "px_per_mm": "--px-per-mm", "thickness_mm": "--thickness-mm",
-           "rod_length_mm": "--rod-length-mm", "hole_radius_mm": "--hole"}
+           "rod_length_mm": "--rod-length-mm", "hole_radius_mm": "--hole", "seed": "--seed",
+           "clean": "--clean", "smooth": "--smooth", "draw": "--draw", "join": "--join",
+           "out_dir": "--out"}
 
 
 def _cli_names(message: str) -> str:
@@ -1627,6 +1858,18 @@ def _cli_names(message: str) -> str:
     import re
 
     return re.sub(r"\b(" + "|".join(_OPTION) + r")\b", lambda m: _OPTION[m.group(1)], message)
+
+
+def _cli_error(exc: ParameterError) -> ParameterError:
+    """``exc`` as the CLI shows it: options instead of keywords, the option a message starts
+    with as the one it is about (``error: --seed: must be ...``)."""
+    import re
+
+    cause, where = _cli_names(exc.cause), _OPTION.get(exc.path, exc.path)
+    lead = re.match(r"(--[a-z][a-z-]*) (.+)", cause, re.S)
+    if where is None and lead:
+        where, cause = lead.groups()
+    return ParameterError(cause, where)
 
 
 def _hole_arg(text):
@@ -1637,7 +1880,8 @@ def _hole_arg(text):
     try:
         return float(text)
     except ValueError:
-        raise ParameterError(f"--hole must be a number, 'auto' or 'none', got {text!r}") from None
+        raise ParameterError(f"must be a number, 'auto' or 'none', got {text!r}",
+                             "--hole") from None
 
 
 def _run(args) -> int:
@@ -1651,17 +1895,15 @@ def _run(args) -> int:
                   smooth=args.smooth, draw=args.draw, join=args.join,
                   hole_radius_mm=_hole_arg(args.hole),
                   **{k: v for k, v in opts.items() if v is not None})
+    if args.limit is not None and args.limit < 0:
+        raise ParameterError(f"must be >= 0, got {args.limit}", "--limit")
     try:
         _check_options(kwargs)
+        out = _render_directory(args.sim_dir, args.out, limit=args.limit,
+                                progress=args.progress, kwargs=kwargs,
+                                name=lambda k: _OPTION.get(k, k))
     except ParameterError as exc:
-        raise ParameterError(_cli_names(exc.cause)) from None
-    configs = None
-    if args.limit is not None:
-        if args.limit < 0:
-            raise ParameterError(f"--limit must be >= 0, got {args.limit}")
-        with np.load(Path(args.sim_dir) / "rods.npz") as rods:
-            configs = sorted(rods.files)[: args.limit]
-    out = render_directory(args.sim_dir, args.out, configs=configs, progress=args.progress,
-                           **kwargs)
+        # the API names keywords; the user typed options
+        raise _cli_error(exc) from None
     print(f"{len(out)} scenes in {args.out}")
     return 0

@@ -1,0 +1,215 @@
+"""``render`` refuses bad input with one ``error:`` line and exit status 2, and never mixes two
+renders in one output folder (simulate.render)."""
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from crosssection._version import __version__
+from crosssection.core.calibration import Calibration
+from crosssection.core.errors import ParameterError
+from simulate import render
+from simulate.cli import main
+from simulate.render import render_configuration, render_directory
+
+#: small clean scans: a scene of the quench below is about 200 x 230 px
+FAST = ["--px-per-mm", "10", "--clean"]
+
+
+@pytest.fixture(scope="module")
+def sim(tmp_path_factory):
+    """A quench ensemble of two short rods."""
+    out = tmp_path_factory.mktemp("quench") / "sim"
+    assert main(["quench", "--n-configs", "2", "--segments", "100", "--seed", "1",
+                 "--workers", "1", "--runs", "2", "--nematic-runs", "0", "--maxiter", "5",
+                 "--no-progress", "--out", str(out)]) == 0
+    return out
+
+
+def _render(capsys, *argv):
+    """Exit status and stderr of ``render *argv``."""
+    capsys.readouterr()
+    status = main(["render", *map(str, argv)])
+    return status, capsys.readouterr().err
+
+
+def _one_error(err: str) -> str:
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: "), err
+    assert "Traceback" not in err and "unexpected" not in err, err
+    return lines[0]
+
+
+def test_negative_seed_exits_2_naming_the_option(sim, tmp_path, capsys):
+    status, err = _render(capsys, sim, "--out", tmp_path / "s", "--seed", "-1", "--limit", "1")
+    assert status == 2
+    assert _one_error(err).startswith("error: --seed: must be a whole number >= 0")
+    assert not (tmp_path / "s").exists()
+    xy = np.load(sim / "rods.npz")["config_00000"]
+    with pytest.raises(ParameterError, match="seed"):
+        render_configuration(xy, seed=-1)
+
+
+@pytest.mark.parametrize("content", ["garbage", "truncated", "npy"])
+@pytest.mark.parametrize("limit", [[], ["--limit", "1"]])
+def test_unreadable_rods_exit_2_with_or_without_limit(sim, tmp_path, capsys, content, limit):
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    shutil.copy(sim / "params.json", bad)
+    data = (sim / "rods.npz").read_bytes()
+    if content == "garbage":
+        (bad / "rods.npz").write_bytes(b"not an archive\n")
+    elif content == "truncated":
+        (bad / "rods.npz").write_bytes(data[: len(data) // 3])
+    else:
+        with open(bad / "rods.npz", "wb") as f:  # one bare array under the archive's name
+            np.save(f, np.zeros((5, 2)))
+    status, err = _render(capsys, bad, "--out", tmp_path / "s", *limit, *FAST)
+    assert status == 2
+    assert _one_error(err).startswith(f"error: {bad / 'rods.npz'}: unreadable rods file (")
+
+
+@pytest.mark.parametrize("limit", [[], ["--limit", "1"]])
+def test_a_file_given_as_the_input_is_not_a_simulation_folder(tmp_path, capsys, limit):
+    afile = tmp_path / "afile"
+    afile.write_text("hello\n")
+    status, err = _render(capsys, afile, "--out", tmp_path / "s", *limit)
+    assert status == 2
+    line = _one_error(err)
+    assert line.startswith(f"error: {afile}: not a simulation folder")
+    assert "--out" not in line
+
+
+@pytest.mark.parametrize("flags", [["--px-per-mm", "1e6"], ["--thickness-mm", "100"],
+                                   ["--rod-length-mm", "1e5"]])
+def test_a_scene_over_the_pixel_budget_is_refused_before_drawing(sim, tmp_path, capsys,
+                                                                 monkeypatch, flags):
+    def drawn(*args, **kwargs):
+        raise AssertionError("drawn")
+
+    # the first steps whose memory grows with the image
+    for f in ("_hooked_lines", "_stack_lines", "_draw_bands", "_draw_passes"):
+        monkeypatch.setattr(render, f, drawn)
+    status, err = _render(capsys, sim, "--out", tmp_path / "s", "--limit", "1", *flags)
+    assert status == 2
+    line = _one_error(err)
+    assert line.startswith("error: --px-per-mm: the scene would be ")
+    w, h = (int(v) for v in line.split("would be ")[1].split(" px")[0].split(" x "))
+    assert w * h > render.MAX_SCENE_PX
+    assert "(> 10000 x 10000 px)" in line
+    assert not (tmp_path / "s").exists()
+
+
+@pytest.mark.parametrize("flags", [["--px-per-mm", "0.01"], ["--thickness-mm", "0.005"]])
+def test_a_sheet_thinner_than_a_pixel_is_refused(sim, tmp_path, capsys, flags):
+    status, err = _render(capsys, sim, "--out", tmp_path / "s", "--limit", "1", *flags)
+    assert status == 2
+    assert _one_error(err).startswith("error: --px-per-mm: a sheet would be ")
+    assert not (tmp_path / "s").exists()
+
+
+def test_margins_over_the_size_cap_do_not_mirror_the_rod():
+    """Margins alone wider than max_size_px leave no positive rod length under the cap: the
+    gap's length is kept (a negative one would draw the rod mirrored)."""
+    xy = np.c_[np.linspace(0.0, 0.2, 11), np.zeros(11)]
+    with pytest.warns(UserWarning, match="margins alone"):
+        length, gap_ok = render._rod_length_mm(
+            xy, 0.01, Calibration.nonlinear(0.1), 1, rod_length_mm=None, px_per_mm=50.0,
+            gap_px=2.0, margin_mm=30.0, max_size_px=2500)
+    assert length > 0 and gap_ok
+
+
+@pytest.mark.parametrize("out", ["", "  "])
+def test_an_empty_out_is_refused(sim, tmp_path, capsys, monkeypatch, out):
+    monkeypatch.chdir(tmp_path)
+    status, err = _render(capsys, sim, "--out", out, "--limit", "1", *FAST)
+    assert status == 2
+    assert _one_error(err) == "error: --out: empty path: give the output folder"
+    assert list(tmp_path.iterdir()) == []
+    with pytest.raises(ParameterError, match="empty path"):
+        render_directory(sim, out, configs=["config_00000"])
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_the_input_folder_is_not_an_output(sim, capsys):
+    before = sorted(p.name for p in sim.iterdir())
+    status, err = _render(capsys, sim, "--out", sim / ".", "--limit", "1", *FAST)
+    assert status == 2
+    assert _one_error(err).startswith("error: --out: ")
+    assert "simulation folder" in err
+    assert sorted(p.name for p in sim.iterdir()) == before
+
+
+def test_a_rerun_resumes_only_with_the_same_parameters_and_source(sim, tmp_path, capsys):
+    out = tmp_path / "scenes"
+    base = ["--out", out, "--seed", "1", *FAST]
+    assert _render(capsys, sim, *base, "--limit", "1") == (0, "")
+    record = json.loads((out / "render.json").read_text())
+    assert record["version"] == __version__
+    assert record["source"] == str(sim.resolve())
+    assert record["params"]["seed"] == 1 and record["params"]["px_per_mm"] == 10.0
+    assert record["params"]["clean"] is True and record["source_params"]["seed"] == 1
+    first = (out / "config_00000" / "image.png").read_bytes()
+
+    # the same parameters (a defect given at the value it has anyway): resume
+    assert _render(capsys, sim, *base, "--noise", "0") == (0, "")
+    assert sorted(p.name for p in out.iterdir() if p.is_dir()) == ["config_00000",
+                                                                   "config_00001"]
+
+    for flags, named in ((["--seed", "2", *FAST], "--seed"),
+                         (["--seed", "1", "--px-per-mm", "12", "--clean"], "--px-per-mm"),
+                         (["--seed", "1", "--px-per-mm", "10"], "--clean"),
+                         (["--seed", "1", *FAST, "--draw", "passes"], "--draw")):
+        status, err = _render(capsys, sim, "--out", out, *flags)
+        assert status == 2, flags
+        line = _one_error(err)
+        assert line.startswith(f"error: {out}: output folder holds scenes of another render "
+                               "(parameters differ: ")
+        assert line.split("differ: ")[1].split(")")[0] == named, line
+    # another ensemble, even with the same rods
+    other = tmp_path / "other"
+    shutil.copytree(sim, other)
+    status, err = _render(capsys, other, *base)
+    assert status == 2 and "source folder" in _one_error(err)
+    assert (out / "config_00000" / "image.png").read_bytes() == first
+
+
+def test_a_changed_source_ensemble_is_refused(sim, tmp_path, capsys):
+    src = tmp_path / "sim"
+    shutil.copytree(sim, src)
+    out = tmp_path / "scenes"
+    assert _render(capsys, src, "--out", out, "--limit", "1", *FAST)[0] == 0
+    p = json.loads((src / "params.json").read_text())
+    (src / "params.json").write_text(json.dumps({**p, "seed": 99}))
+    status, err = _render(capsys, src, "--out", out, *FAST)
+    assert status == 2 and "source ensemble" in _one_error(err)
+    assert not (out / "config_00001").exists()
+
+
+def test_scenes_without_a_record_are_refused(sim, tmp_path, capsys):
+    out = tmp_path / "scenes"
+    assert _render(capsys, sim, "--out", out, "--limit", "1", *FAST)[0] == 0
+    (out / "render.json").unlink()
+    status, err = _render(capsys, sim, "--out", out, *FAST)
+    assert status == 2
+    assert _one_error(err).startswith(f"error: {out}: output folder holds scenes but no "
+                                      "render.json")
+    assert not (out / "config_00001").exists()
+    (out / "render.json").write_text("{not json")
+    status, err = _render(capsys, sim, "--out", out, *FAST)
+    assert status == 2 and "render.json: unreadable render.json" in _one_error(err)
+
+
+def test_a_missing_params_json_is_a_warning(sim, tmp_path, capsys):
+    bare = tmp_path / "bare"
+    bare.mkdir()
+    shutil.copy(sim / "rods.npz", bare)
+    status, err = _render(capsys, bare, "--out", tmp_path / "s", "--limit", "1", *FAST)
+    assert status == 0
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith(f"warning: {bare / 'params.json'}: missing: the rods are drawn "
+                               "as a quench's (no wall, default scale")
+    # with its params.json the same render says nothing
+    assert _render(capsys, sim, "--out", tmp_path / "t", "--limit", "1", *FAST) == (0, "")
