@@ -12,7 +12,6 @@ scored: the run goes on). Every subfolder of SCENES is taken for a scene, so tha
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 import time
@@ -24,7 +23,7 @@ import pandas as pd
 from crosssection._version import __version__
 from crosssection.core import schema
 from crosssection.core.errors import ConfigError, FoldstatError, ParameterError
-from crosssection.core.fileio import write_csv, write_json
+from crosssection.core.fileio import read_json_object, write_csv, write_json
 from crosssection.truth.scene import read_scene_params
 from crosssection.truth.scoring import analyze_scene_folder, score
 
@@ -84,16 +83,7 @@ def read_truth(truth_dir) -> tuple[dict, dict]:
     """
     truth_dir = Path(truth_dir)
     path = truth_dir / "summary.json"
-    try:
-        summary = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise ConfigError("file not found", path) from None
-    except OSError as exc:
-        raise ConfigError(f"cannot read ({exc.strerror or type(exc).__name__})", path) from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"malformed JSON ({getattr(exc, 'msg', exc)})", path) from None
-    if not isinstance(summary, dict):
-        raise ConfigError("must hold a JSON object", path)
+    summary = read_json_object(path)
     for key in _SUMMARY_TOTALS:
         value = summary.get(key)
         if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))

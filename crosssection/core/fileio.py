@@ -135,3 +135,21 @@ def read_toml(path) -> dict:
         raise ConfigError(f"invalid TOML: {exc}", path) from None
     except (OSError, UnicodeDecodeError) as exc:
         raise ConfigError(f"cannot read: {exc}", path) from None
+
+
+def read_json_object(path) -> dict:
+    """A JSON file holding one object, as a dict; a missing, unreadable or malformed file, or
+    one holding anything but an object, is one ``ConfigError`` naming it."""
+    from crosssection.core.errors import ConfigError
+
+    try:
+        data = json.loads(Path(path).read_text())
+    except FileNotFoundError:
+        raise ConfigError("file not found", path) from None
+    except OSError as exc:
+        raise ConfigError(f"cannot read ({exc.strerror or type(exc).__name__})", path) from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"malformed JSON ({getattr(exc, 'msg', exc)})", path) from None
+    if not isinstance(data, dict):
+        raise ConfigError("must hold a JSON object", path)
+    return data

@@ -13,7 +13,6 @@ Both generators (``crosssection.truth.network.make_scene``, ``simulate.render``)
 """
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,7 +23,7 @@ import numpy as np
 from crosssection.core import schema
 from crosssection.core.calibration import Calibration
 from crosssection.core.errors import ConfigError, ImageError
-from crosssection.core.fileio import atomic_path, write_json
+from crosssection.core.fileio import atomic_path, read_json_object, write_json
 
 __all__ = ["Scene", "write_scene", "read_scene", "read_scene_params", "write_image"]
 
@@ -177,16 +176,7 @@ def read_scene_params(folder) -> dict:
         Missing or malformed file, or a missing or invalid entry; the message names the file.
     """
     path = Path(folder) / "params.json"
-    try:
-        params = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise ConfigError("file not found", path) from None
-    except OSError as exc:
-        raise ConfigError(f"cannot read ({exc.strerror or type(exc).__name__})", path) from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"malformed JSON ({getattr(exc, 'msg', exc)})", path) from None
-    if not isinstance(params, dict):
-        raise ConfigError("must hold a JSON object", path)
+    params = read_json_object(path)
     _check_number(params, "px_per_mm", path, required=True)
     _check_number(params, "thickness_mm", path, required=True)
     _check_number(params, "hole_radius_mm", path, required=False)
