@@ -23,6 +23,7 @@ _LAZY = {
     "ParameterError": "crosssection.core.errors",
     "AnalysisError": "crosssection.core.errors",
     "ConfigError": "crosssection.core.errors",
+    "OutputError": "crosssection.core.errors",
 }
 
 __all__ = ["__version__", *_LAZY]

@@ -240,7 +240,9 @@ def steps_figure(rgb, mask_threshold, mask_clean, skeleton, junction_centers_rc,
     else:
         axes = list(np.ravel(axes))
         if len(axes) != 4:
-            raise ValueError(f"steps need 4 axes, got {len(axes)}")
+            from crosssection.core.errors import ParameterError
+
+            raise ParameterError(f"steps need 4 axes, got {len(axes)}")
         fig = axes[0].figure
     titles = titles or step_titles()
     axes[0].imshow(dim_image(img, 0.0))

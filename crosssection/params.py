@@ -50,6 +50,9 @@ LOW_RESOLUTION_H_PX = 3.0
 # 2 000 px per mm (a 12.7 um pixel) is beyond any flatbed scanner.
 _MAX_PX_PER_MM = 2000.0
 _MIN_THICKNESS_PX = 1.0
+#: A hole narrower than this many sheet thicknesses holds no folded rod (the experiments'
+#: holes are 200 h wide and more).
+MIN_HOLE_SHEETS = 5.0
 
 
 @dataclass(frozen=True)
@@ -320,6 +323,11 @@ class AnalysisParams:
                 raise ParameterError(f"hole radius {self.hole_radius_mm:g} mm = {r_px:.0f} px: "
                                      f"the hole is more than twice the scan ({w}x{h} px); "
                                      "check hole_radius_mm and px_per_mm", path)
+            if r_px < MIN_HOLE_SHEETS * self.thickness_px:
+                raise ParameterError(f"hole radius {self.hole_radius_mm:g} mm = {r_px:.1g} px: "
+                                     f"narrower than {MIN_HOLE_SHEETS:g} sheet thicknesses "
+                                     f"({self.thickness_mm:g} mm), no rod fits in it; check "
+                                     "hole_radius_mm and px_per_mm", path)
             if self.hole_center_px is not None:
                 x, y = self.hole_center_px
                 if not (-r_px < x < w + r_px and -r_px < y < h + r_px):

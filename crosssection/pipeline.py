@@ -96,7 +96,9 @@ def _read(image):
     if isinstance(image, (str, Path)):
         return load_image(image), str(image)
     if isinstance(image, np.ndarray):
-        return as_rgb(image), None
+        rgb = as_rgb(image)
+        # the result keeps the scan: never the caller's own array, which the caller may draw on
+        return (rgb.copy() if np.shares_memory(rgb, image) else rgb), None
     raise ImageError(f"image must be a file path or an RGB array, got {type(image).__name__}")
 
 
@@ -105,6 +107,10 @@ def _resolve_params(params, overrides, path) -> AnalysisParams:
         return AnalysisParams.from_mapping(overrides, path=path)
     if isinstance(params, dict):
         return AnalysisParams.from_mapping({**params, **overrides}, path=path)
+    if not isinstance(params, AnalysisParams):
+        raise ParameterError(f"params must be an AnalysisParams or a dict of parameters, got "
+                             f"{type(params).__name__} (keyword parameters go as px_per_mm=50)",
+                             path)
     return AnalysisParams.from_mapping(overrides, path=path, base=params)
 
 
@@ -472,7 +478,8 @@ def _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, void
     summary["warnings"] = notes + [f.message for f in flags]
     where = pre.path or "<array>"
     for f in flags:
-        _warnings.warn(f"{where}: {f.message}", f.category, stacklevel=3)
+        # user -> analyze -> _analyze -> _result: the warning points at the user's call
+        _warnings.warn(f"{where}: {f.message}", f.category, stacklevel=4)
     return AnalysisResult(
         summary=summary, junctions=junctions, stacks=stacks, branches=branches,
         voids=schema.check_table("voids", voids) if len(voids.columns) else

@@ -20,6 +20,7 @@ hole_crossed             fraction of a given hole's circle beyond which ink   > 
                          goes on (the circle cuts the wall band); the hole    hole found near it
                          found in the scan replaces it                        frames the ink
 hole_cut                 area of the hole outside the scan / the hole's area  > 0.5 %
+no_junction              junctions found                                      none
 junction_degree          largest junction degree (paper: degree 4 ~ 1 %)      > 6
 networks                 separate networks of ink each holding at least 10 %  > 1
                          of the rod (``sum n_br l``)
@@ -158,6 +159,7 @@ CATEGORIES = {
     "ink_outside_hole": FrameWarning,
     "hole_crossed": FrameWarning,
     "hole_cut": FrameWarning,
+    "no_junction": NetworkWarning,
     "junction_degree": NetworkWarning,
     "networks": NetworkWarning,
     "packing": NetworkWarning,
@@ -321,6 +323,11 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
                                      "the scan: a scan cropped through the hole misses the "
                                      "stacks beyond its border (or the hole is wrong)",
                                      cut, HOLE_CUT_LIMIT))
+    if not len(degrees):
+        flags.append(QualityFlag("no_junction", "no junction found: every stack is a closed "
+                                 "loop or a free segment, while a folded sheet's cross-section "
+                                 "is a network (check the scan, the threshold and the scale)",
+                                 0, 1))
     if len(degrees) and int(np.max(degrees)) > 6:
         flags.append(QualityFlag("junction_degree", f"a junction of degree {int(np.max(degrees))} "
                                  "(> 6): bands merged by the threshold or the cleaning",

@@ -1,6 +1,7 @@
 """The result of one analysis, :class:`AnalysisResult`, and how it is written to disk."""
 from __future__ import annotations
 
+import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -9,7 +10,7 @@ import numpy as np
 import pandas as pd
 
 from crosssection.core import schema
-from crosssection.core.errors import ImageError
+from crosssection.core.errors import ImageError, OutputError, ParameterError, output_error
 
 __all__ = ["AnalysisResult", "write_step_images"]
 
@@ -186,8 +187,8 @@ class AnalysisResult:
 
             cal = _calibration(self.params) if self.params is not None else None
             return F.widths_figure(self.stacks, cal, ax=ax)
-        raise ValueError(f"kind must be one of 'overlay', 'steps', 'curvature', 'widths', "
-                         f"got {kind!r}")
+        raise ParameterError(f"kind must be one of 'overlay', 'steps', 'curvature', 'widths', "
+                             f"got {kind!r}")
 
     def _drawn_thickness_px(self) -> float:
         # a result assembled by hand may lack its parameters: draw with the figures' default
@@ -227,22 +228,38 @@ class AnalysisResult:
         -------
         dict
             Name -> written path.
-        """
-        out = Path(out_dir)
-        out.mkdir(parents=True, exist_ok=True)
-        paths = {}
-        if figure:
-            from crosssection.figures import overlay_figure
-            from crosssection.core.fileio import save_figure
 
-            t0 = time.perf_counter()
-            fig = overlay_figure(self.rgb, self, thickness_px=self.thickness_px)
-            paths["overlay"] = save_figure(fig, out / "overlay.png")
-            self.summary.setdefault("output_timings_s", {})["overlay_figure"] = \
-                time.perf_counter() - t0
-        if steps:
-            paths.update(self.write_steps(out))
-        paths.update(schema.write_tables(out, self.summary, self.tables))
+        Raises
+        ------
+        ParameterError
+            ``out_dir`` is not a path.
+        OutputError
+            The folder cannot be created or written (a file in the way, no permission).
+        """
+        if not isinstance(out_dir, (str, os.PathLike)) or not str(out_dir).strip():
+            raise ParameterError(f"out_dir must be a folder path, got {out_dir!r}")
+        out = Path(out_dir).expanduser()
+        # the result stays as analysed: the figure's timing goes to the file only
+        summary = dict(self.summary)
+        paths = {}
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+            if figure:
+                from crosssection.figures import overlay_figure
+                from crosssection.core.fileio import save_figure
+
+                t0 = time.perf_counter()
+                fig = overlay_figure(self.rgb, self, thickness_px=self.thickness_px)
+                paths["overlay"] = save_figure(fig, out / "overlay.png")
+                summary["output_timings_s"] = {**summary.get("output_timings_s", {}),
+                                               "overlay_figure": time.perf_counter() - t0}
+            if steps:
+                paths.update(self.write_steps(out))
+            paths.update(schema.write_tables(out, summary, self.tables))
+        except OutputError:
+            raise
+        except OSError as exc:
+            raise output_error(exc, out) from None
         return paths
 
     def write_steps(self, out_dir, *, figure: bool = True) -> dict:

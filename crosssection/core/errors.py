@@ -38,3 +38,16 @@ class AnalysisError(FoldstatError):
 
 class ConfigError(FoldstatError):
     """A set.toml, calibration file or other configuration is missing or malformed."""
+
+
+class OutputError(FoldstatError, OSError):
+    """An output folder or file cannot be written (a file in the way, no permission, a
+    read-only or full disk). Also an ``OSError``, which it replaces."""
+
+
+def output_error(exc: OSError, path) -> OutputError:
+    """``exc`` as an :class:`OutputError` naming ``path`` and the cause in one line."""
+    why = exc.strerror or type(exc).__name__
+    if isinstance(exc, (FileExistsError, NotADirectoryError)):
+        why = f"{why}: a file is in the way of a folder"
+    return OutputError(f"cannot write ({why})", exc.filename or path)

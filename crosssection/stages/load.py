@@ -18,7 +18,8 @@ Pillow reads. Conversions, documented choices:
   cannot do. Lab, YCbCr, raw-sensor and other TIFF colour spaces are rejected likewise.
 - float arrays (any float TIFF, or an ``ndarray`` given to ``analyze``) with values in
   [0, 1]: scaled to uint16; other float ranges are rejected. Other integer types with values
-  within 0..65535 are read as uint16 (uint8 if they are one byte wide).
+  within 0..65535 are read as uint16, and every integer image whose values all lie within
+  0..255 as uint8 (an 8-bit image in a wider type; as 16 bits it would be black).
 
 What is never read as valid data, each an ``ImageError`` naming the file and the cause:
 
@@ -107,7 +108,8 @@ def as_rgb(arr, *, path=None) -> np.ndarray:
     ----------
     arr : array_like
         (H, W, 3) or (H, W, 4) array; uint8, uint16, or float in [0, 1]; other integer
-        types with values within 0..65535 are accepted as uint16 when needed.
+        types with values within 0..65535 are accepted as uint16, and any integer image
+        whose values all lie within 0..255 as uint8 (an 8-bit image held in a wider type).
     path : str, optional
         File the array came from, for error messages.
 
@@ -140,13 +142,19 @@ def as_rgb(arr, *, path=None) -> np.ndarray:
             raise ImageError(f"float image values {lo:g}..{hi:g}: they must lie in [0, 1]",
                              path)
         a = np.round(a * 65535.0).astype(np.uint16)
-    elif a.dtype not in (np.uint8, np.uint16):
+    elif a.dtype != np.uint8:
         if a.dtype.kind not in "ui":
             raise ImageError(f"unsupported pixel type {a.dtype}", path)
         lo, hi = int(a.min()), int(a.max())
         if lo < 0 or hi > 65535:
             raise ImageError(f"pixel values {lo}..{hi} out of the 16-bit range", path)
-        a = a.astype(np.uint8 if hi <= 255 and a.dtype.itemsize == 1 else np.uint16)
+        # values within 0..255 are an 8-bit image in a wider type (numpy arithmetic, or
+        # astype(int)): read as 16-bit they would be a black scan. A real 16-bit scan whose
+        # brightest pixel is 255 of 65535 holds no image either.
+        if hi <= 255:
+            a = a.astype(np.uint8)
+        elif a.dtype != np.uint16:
+            a = a.astype(np.uint16)
     if a.shape[2] == 4:
         a = _composite_alpha(a)
     h, w = a.shape[:2]
@@ -493,7 +501,7 @@ def load_image(path) -> np.ndarray:
         Missing, unreadable, corrupt, truncated, too large, grayscale or too small file; one
         line naming the file. Nothing is printed: library messages are captured.
     """
-    path = Path(path)
+    path = Path(path).expanduser()
     if not path.exists():
         raise ImageError("file not found", path)
     if path.is_dir():

@@ -8,6 +8,8 @@ import pytest
 from matplotlib.figure import Figure
 from PIL import Image
 
+from crosssection.core.errors import ParameterError
+
 pytest_plugins = ["crosssection.testing"]
 
 
@@ -64,7 +66,7 @@ def test_plot_into_given_axes(result):
     assert n_points == len(result.stacks)
     steps = Figure().subplots(1, 4)
     assert result.plot("steps", ax=steps) is steps[0].figure
-    with pytest.raises(ValueError, match="4 axes"):
+    with pytest.raises(ParameterError, match="4 axes"):
         result.plot("steps", ax=axes[0, 0])
-    with pytest.raises(ValueError, match="kind"):
+    with pytest.raises(ParameterError, match="kind"):
         result.plot("histogram")

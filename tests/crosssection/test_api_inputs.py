@@ -1,0 +1,100 @@
+"""The Python API given what notebook users pass: integer images of any width, their own
+arrays, paths with ``~``, a mistaken ``params``, outputs that cannot be written."""
+from __future__ import annotations
+
+import os
+import warnings
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+import crosssection as cs
+from crosssection.core.errors import OutputError, ParameterError
+from crosssection.quality import NetworkWarning
+from crosssection.testing import generated_scan
+
+KW = dict(px_per_mm=50.0, thickness_mm=0.1)
+
+
+@pytest.fixture(scope="module")
+def scan():
+    return generated_scan(5)
+
+
+@pytest.fixture(scope="module")
+def result(scan):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return cs.analyze(scan, **KW)
+
+
+@pytest.mark.parametrize("dtype", [np.int16, np.int32, np.int64, np.uint16, np.uint32])
+def test_an_8_bit_image_in_a_wider_integer_type_reads_as_8_bit(scan, result, dtype):
+    """numpy arithmetic or astype(int) widens an 8-bit scan: read as 16 bits it is black."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        wide = cs.analyze(scan.astype(dtype), **KW)
+    assert wide.summary["n_branches"] == result.summary["n_branches"]
+    assert wide.summary["total_energy"] == result.summary["total_energy"]
+
+
+def test_the_result_holds_its_own_copy_of_the_scan(scan, result):
+    assert not np.shares_memory(result.rgb, scan)
+
+
+def test_write_leaves_the_result_as_analysed(result, tmp_path):
+    before = dict(result.summary)
+    result.write(tmp_path / "out")
+    assert result.summary == before
+
+
+@pytest.mark.parametrize("where", ["file", "under_file"])
+def test_write_where_a_file_is_in_the_way_is_one_error(result, tmp_path, where):
+    blocker = tmp_path / "blocker.txt"
+    blocker.write_text("x")
+    target = blocker if where == "file" else blocker / "sub"
+    with pytest.raises(OutputError, match="a file is in the way"):
+        result.write(target)
+    assert isinstance(OutputError("x"), OSError)  # callers catching OSError still do
+
+
+def test_write_needs_a_path(result):
+    with pytest.raises(ParameterError, match="folder path"):
+        result.write(None)
+
+
+def test_a_hole_too_small_for_a_rod_is_a_parameter_error(scan):
+    with pytest.raises(ParameterError, match="narrower than 5 sheet thicknesses"):
+        cs.analyze(scan, **KW, hole_radius_mm=0.01, hole_center_px=(200.0, 200.0))
+
+
+def test_params_given_as_text_is_a_parameter_error(scan):
+    with pytest.raises(ParameterError, match="AnalysisParams or a dict"):
+        cs.analyze(scan, "px_per_mm=50")
+
+
+def test_a_path_with_a_tilde_is_the_home_folder(scan, result, tmp_path, monkeypatch):
+    monkeypatch.setenv("HOME", str(tmp_path))
+    cv2.imwrite(str(tmp_path / "scan.png"), np.ascontiguousarray(scan[..., ::-1]))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = cs.analyze("~/scan.png", **KW)
+    assert res.summary["n_branches"] == result.summary["n_branches"]
+    result.write("~/out", figure=False)
+    assert (tmp_path / "out" / "summary.json").is_file() and not Path("~").exists()
+
+
+def test_a_scan_without_junctions_is_flagged_where_it_was_analysed():
+    """A closed ring of ink: no junction, which no folded sheet gives; the warning points at
+    the caller's line, not the package's."""
+    img = np.full((400, 400, 3), 245, np.uint8)
+    cv2.circle(img, (200, 200), 150, (170, 70, 40), thickness=10)  # BGR: blue ink
+    rgb = np.ascontiguousarray(img[..., ::-1])
+    with pytest.warns(NetworkWarning, match="no junction found") as caught:
+        res = cs.analyze(rgb, **KW)
+    assert "no_junction" in res.summary["quality"]["codes"]
+    assert any(Path(w.filename).resolve() == Path(__file__).resolve() for w in caught
+               if issubclass(w.category, NetworkWarning))
+    assert os.path.basename(__file__) in {os.path.basename(w.filename) for w in caught}
