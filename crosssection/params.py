@@ -225,7 +225,18 @@ class AnalysisParams:
             return "linear n*h"
         if isinstance(c, (str, Path)):
             return str(c)
-        return type(c).__name__
+        # a table given in memory is recorded whole: the width law is part of the result
+        import numpy as np
+
+        try:
+            if hasattr(c, "n_layers") and hasattr(c, "width_mm"):
+                pairs = zip(np.ravel(c.n_layers), np.ravel(c.width_mm))
+            else:
+                pairs = zip(c["n_layers"], c["width_mm"])
+            law = ", ".join(f"({float(n):g}, {float(w):g})" for n, w in pairs)
+        except (KeyError, TypeError, ValueError):
+            return type(c).__name__
+        return f"{type(c).__name__} (n_layers, width_mm): {law}"
 
     # ------------------------------------------------------------------ constructors
     def replace(self, **changes) -> "AnalysisParams":

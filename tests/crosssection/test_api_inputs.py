@@ -98,3 +98,13 @@ def test_a_scan_without_junctions_is_flagged_where_it_was_analysed():
     assert any(Path(w.filename).resolve() == Path(__file__).resolve() for w in caught
                if issubclass(w.category, NetworkWarning))
     assert os.path.basename(__file__) in {os.path.basename(w.filename) for w in caught}
+
+
+def test_a_calibration_table_given_in_memory_is_recorded_whole(scan):
+    import pandas as pd
+
+    cal = pd.DataFrame({"n_layers": [1, 2, 3], "width_mm": [0.11, 0.205, 0.3]})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = cs.analyze(scan, **KW, calibration=cal)
+    assert res.summary["calibration"].endswith("(1, 0.11), (2, 0.205), (3, 0.3)")
