@@ -58,14 +58,19 @@ def check_options(args) -> None:
     Raises
     ------
     ParameterError
-        Naming the option: a count or seed below 0, a detection limit that is negative or
-        not finite, or ``--name`` not given once per DIR.
+        Naming the option: a count or seed below 0, ``--n-mc 0`` with p-values asked for,
+        a detection limit that is negative or not finite, or ``--name`` not given once per
+        DIR.
     """
     if args.name and len(args.name) != len(args.dirs):
         raise ParameterError(f"given {len(args.name)} times for {len(args.dirs)} DIRs", "--name")
     for flag, v in (("--seed", args.seed), ("--n-boot", args.n_boot), ("--n-mc", args.n_mc)):
         if v < 0:
             raise ParameterError(f"must be an integer >= 0, got {v}", flag)
+    if args.n_mc == 0 and not (args.no_gof or args.fast):
+        # --fast replaces it with 49; without a resample there is no p-value to give
+        raise ParameterError("0 resamples give no p-value: give an integer >= 1, or "
+                             "--no-gof", "--n-mc")
     for flag, v in (("--l-min-mm", args.l_min_mm), ("--s-min-mm2", args.s_min_mm2)):
         if not (math.isfinite(v) and v >= 0):
             raise ParameterError(f"must be a finite number >= 0 (0 = no limit), got {v:g}",

@@ -5,9 +5,11 @@ Three kinds of input folders are detected automatically:
 - a simulation ensemble (``configs.csv`` + ``branches.csv`` + ``voids.csv``, from
   ``python -m simulate quench``): lengths already in units of L, one set;
 - a single ``analyze`` output (``summary.json`` + the schema tables): one configuration;
-- a batch output (``index.csv`` and/or per-image folders ``<set>/<stem>/summary.json``):
-  the set is the first folder level under the batch root (or the folder name when images sit
-  directly under it).
+- a batch output (``index.csv``, ``batch.json`` and/or per-image folders
+  ``<set>/<stem>/summary.json``): the set is the first folder level under the batch root (or
+  the folder name when images sit directly under it). The ``truth/`` folder of a generated
+  scene (beside its ``params.json``, :mod:`crosssection.truth.scene`) holds the same tables
+  but is no analysis; a folder of scans is refused (``foldstat batch`` reads those).
 
 Image lengths are in mm (schema.py) and are normalised by each image's rod length
 L = ``summary["rod_length_mm"]`` (paper, section "Experimental set-up": lengths become
@@ -29,14 +31,18 @@ from __future__ import annotations
 import csv
 import io
 import json
+import math
+import os
+import reprlib
 import warnings
 from dataclasses import dataclass
+from numbers import Real
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from crosssection.core.errors import ConfigError
+from crosssection.core.errors import ConfigError, ParameterError
 from crosssection.quality import QualityWarning
 
 CONFIG_COLS = ["set", "config_id", "N_l", "N_br", "n_voids", "epsilon", "E", "rod_length_mm",
@@ -47,6 +53,38 @@ STACK_COLS = ["set", "config_id", "n_br", "length_L", "region"]
 VOID_COLS = ["set", "config_id", "area_L2", "perimeter_L", "shape_ratio", "n_edges", "s_min_L2"]
 SIM_REGION = "none"  # simulations have no wall: no bulk/periphery split (paper, "Two sub-systems")
 TEXT_COLS = {"set", "config_id", "region", "source", "quality"}
+
+
+def _folder(folder, name: str = "folder") -> Path:
+    """``folder`` as a Path, or a ParameterError naming ``name`` when it is no path (None, a
+    number) or an empty string (which would read the working folder)."""
+    if isinstance(folder, (str, os.PathLike)) and not isinstance(folder, bytes):
+        path = Path(folder)
+        if str(folder) == "":
+            raise ParameterError(f"{name} is an empty string, not a folder")
+        return path
+    raise ParameterError(f"{name} must be a folder path (str or pathlib.Path), got "
+                         f"{reprlib.repr(folder)}")
+
+
+def _limit(value, name: str):
+    """A detection limit: None, or a finite number >= 0 (0 = none)."""
+    if value is None:
+        return None
+    if (isinstance(value, (bool, np.bool_)) or not isinstance(value, Real)
+            or not (math.isfinite(value) and value >= 0)):
+        raise ParameterError(f"{name} must be None or a finite number >= 0 (0 = no limit), "
+                             f"got {reprlib.repr(value)}")
+    return value
+
+
+def _set_name(value, name: str = "set_name", *, required: bool = False):
+    """A set name or configuration id: a string (or None where it is optional)."""
+    if value is None and not required:
+        return None
+    if not isinstance(value, str):
+        raise ParameterError(f"{name} must be a string, got {reprlib.repr(value)}")
+    return value
 
 
 def _numeric(df: pd.DataFrame, cols) -> pd.DataFrame:
@@ -179,25 +217,72 @@ def _json_kind(value) -> str:
             type(None): "null"}.get(type(value), type(value).__name__)
 
 
+def _is_scene_truth(folder: Path) -> bool:
+    """Whether ``folder`` is the ``truth/`` of a generated scene (a scene folder holds
+    ``params.json`` and ``truth/``, :mod:`crosssection.truth.scene`): the exact tables of a
+    generated scan, written like an analysis output but not one."""
+    return folder.name == "truth" and (folder.parent / "params.json").is_file()
+
+
+def _analysis_summaries(folder: Path, *, hidden: bool = False):
+    """Every ``summary.json`` of an analysis output below ``folder`` (an iterator): not those
+    of generated scenes' truth, nor, unless ``hidden``, those in hidden folders (the batch's
+    ``.<stem>.partial-*`` staging folders of interrupted runs)."""
+    for summ in folder.glob("**/summary.json"):
+        rel = summ.parent.relative_to(folder)
+        if not hidden and any(part.startswith(".") for part in rel.parts):
+            continue
+        if not _is_scene_truth(summ.parent):
+            yield summ
+
+
+def _not_an_output(folder: Path) -> ConfigError:
+    """The error for a folder holding no foldstat output, saying what it holds instead
+    when that is scans or generated scenes (a common mix-up: the input of ``batch``)."""
+    # imported here: only this error needs the batch's idea of a scan
+    from crosssection.batch import find_images
+
+    scans = find_images(folder)
+    if scans:
+        return ConfigError(f"holds {len(scans)} scan(s) ({scans[0].name}, ...), not analysis "
+                           "outputs: run foldstat batch on it first and load the batch's "
+                           "output", folder)
+    if any(_is_scene_truth(t.parent) for t in folder.glob("**/truth/summary.json")):
+        return ConfigError("holds the truth of generated scenes (truth/ beside params.json), "
+                           "not analysis outputs: run foldstat batch on the scans first",
+                           folder)
+    return ConfigError("neither a batch output (index.csv, batch.json, */summary.json), an "
+                       "analyze output (summary.json) nor a simulation ensemble "
+                       "(configs.csv)", folder)
+
+
 def detect_kind(folder) -> str:
     """``"simulation"``, ``"image"`` (one analyze output) or ``"batch"``.
 
+    A batch is recognised by foldstat's own files: its ``index.csv`` or ``batch.json``, or
+    else the ``summary.json`` of analysis outputs below the folder. The ``truth/`` folders of
+    generated scenes (such as the sample scans' ``scenes/*/truth``) hold the same tables but
+    are no analysis: they do not make a batch.
+
     Raises
     ------
+    ParameterError
+        ``folder`` is not a path.
     ConfigError
-        When the folder holds none of them.
+        When the folder holds none of them (a folder of scans, or of generated scenes, is
+        named as such).
     """
-    folder = Path(folder)
+    folder = _folder(folder)
     if not folder.is_dir():
         raise ConfigError("not a folder", folder)
     if (folder / "configs.csv").is_file():
         return "simulation"
     if (folder / "summary.json").is_file():
         return "image"
-    if (folder / "index.csv").is_file() or any(folder.glob("**/summary.json")):
+    if ((folder / "index.csv").is_file() or (folder / "batch.json").is_file()
+            or any(_analysis_summaries(folder, hidden=True))):
         return "batch"
-    raise ConfigError("neither a batch output (index.csv, */summary.json), an analyze "
-                      "output (summary.json) nor a simulation ensemble (configs.csv)", folder)
+    raise _not_an_output(folder)
 
 
 def load_simulation(folder, *, set_name=None) -> Ensemble:
@@ -212,9 +297,16 @@ def load_simulation(folder, *, set_name=None) -> Ensemble:
     Returns
     -------
     Ensemble
+
+    Raises
+    ------
+    ParameterError
+        ``folder`` is not a path or ``set_name`` not a string.
+    ConfigError
+        A table is missing or malformed.
     """
-    folder = Path(folder)
-    name = set_name or folder.resolve().name
+    folder = _folder(folder)
+    name = _set_name(set_name) or folder.resolve().name
     cfg = _read_csv(folder / "configs.csv", ["config_id", "epsilon", "energy_total", "n_stacks",
                                              "n_branches", "n_voids"], nonempty=True,
                     numeric=["epsilon", "energy_total", "n_stacks", "n_branches", "n_voids"])
@@ -269,13 +361,25 @@ def load_image_output(folder, *, set_name: str, config_id: str | None = None,
         Defaults to the folder name.
     l_min_mm, s_min_mm2 : float or None
         Detection limits (paper: l_min = 1 mm, s_min = (10 h)^2 = 1 mm^2 for h = 0.1 mm),
-        recorded per observation in units of L / L^2.
+        recorded per observation in units of L / L^2; None or 0: none.
 
     Returns
     -------
     Ensemble
+
+    Raises
+    ------
+    ParameterError
+        ``folder`` is not a path, a name not a string, or a detection limit not a finite
+        number >= 0.
+    ConfigError
+        A file is missing or malformed.
     """
-    folder = Path(folder)
+    folder = _folder(folder)
+    _set_name(set_name, required=True)
+    _set_name(config_id, "config_id")
+    _limit(l_min_mm, "l_min_mm")
+    _limit(s_min_mm2, "s_min_mm2")
     cid = config_id or folder.name
     summary = _read_summary(folder / "summary.json")
     L = summary.get("rod_length_mm")
@@ -386,7 +490,7 @@ def _batch_image_folders(folder: Path):
     ``index.csv`` (columns set, status, output) is used when present: rows with status ``ok``
     or ``skipped`` (done in an earlier run) whose folder holds a summary. Otherwise every
     ``summary.json`` below ``folder`` counts, except in hidden folders (the batch's
-    ``.<stem>.partial-*`` staging folders of interrupted runs).
+    ``.<stem>.partial-*`` staging folders of interrupted runs) and generated scenes' truth.
     """
     index = folder / "index.csv"
     if index.is_file():
@@ -409,11 +513,9 @@ def _batch_image_folders(folder: Path):
         if out:
             return out
     out = []
-    for summ in sorted(folder.glob("**/summary.json")):
+    for summ in sorted(_analysis_summaries(folder)):
         img = summ.parent
         rel = img.relative_to(folder)
-        if any(part.startswith(".") for part in rel.parts):
-            continue
         if len(rel.parts) >= 2:
             out.append((rel.parts[0], "/".join(rel.parts[1:]), img))
         else:
@@ -462,8 +564,17 @@ def load_batch(folder, *, l_min_mm=1.0, s_min_mm2=1.0) -> Ensemble:
     Returns
     -------
     Ensemble
+
+    Raises
+    ------
+    ParameterError
+        ``folder`` is not a path, or a detection limit is not a finite number >= 0.
+    ConfigError
+        No finished image, or a malformed file.
     """
-    folder = Path(folder)
+    folder = _folder(folder)
+    _limit(l_min_mm, "l_min_mm")
+    _limit(s_min_mm2, "s_min_mm2")
     parts = []
     found = _batch_image_folders(folder)
     for set_name, cid, img in found:
@@ -484,12 +595,25 @@ def load_any(folder, *, set_name=None, l_min_mm=1.0, s_min_mm2=1.0) -> Ensemble:
     set_name : str, optional
         Overrides the set name (all sets of a batch are then merged under it).
     l_min_mm, s_min_mm2 : float or None
-        Image detection limits.
+        Image detection limits, in mm and mm^2: None or a finite number >= 0 (0 = none).
 
     Returns
     -------
     Ensemble
+
+    Raises
+    ------
+    ParameterError
+        ``folder`` is not a path, ``set_name`` not a string, or a detection limit not a
+        finite number >= 0.
+    ConfigError
+        The folder is none of the three kinds (a folder of scans is named as such: run
+        ``foldstat batch`` on it first), or a file is missing or malformed.
     """
+    folder = _folder(folder)
+    _set_name(set_name)
+    _limit(l_min_mm, "l_min_mm")
+    _limit(s_min_mm2, "s_min_mm2")
     kind = detect_kind(folder)
     if kind == "simulation":
         return load_simulation(folder, set_name=set_name)
@@ -514,7 +638,7 @@ def load_inputs(folders, *, names=None, l_min_mm=1.0, s_min_mm2=1.0) -> Ensemble
 
     Parameters
     ----------
-    folders : sequence of path
+    folders : path or sequence of path
     names : sequence of str, optional
         Set name of each folder (see :func:`load_any`).
     l_min_mm, s_min_mm2 : float or None
@@ -523,9 +647,24 @@ def load_inputs(folders, *, names=None, l_min_mm=1.0, s_min_mm2=1.0) -> Ensemble
     Returns
     -------
     Ensemble
+
+    Raises
+    ------
+    ParameterError
+        A folder is not a path, ``names`` is not one name per folder, or a detection limit
+        is not a finite number >= 0.
+    ConfigError
+        As :func:`load_any`.
     """
-    folders = list(folders)
+    # one path is one folder, not a sequence of one-letter folders
+    folders = [folders] if isinstance(folders, (str, os.PathLike)) else list(folders)
+    for d in folders:
+        _folder(d, "folders")
     names = list(names) if names else [None] * len(folders)
+    if len(names) != len(folders):
+        raise ParameterError(f"names gives {len(names)} names for {len(folders)} folders")
+    _limit(l_min_mm, "l_min_mm")
+    _limit(s_min_mm2, "s_min_mm2")
     parts, seen_sets, seen_dirs, seen_images = [], set(), {}, {}
     for i, (d, name) in enumerate(zip(folders, names)):
         key = Path(d).resolve()
@@ -625,10 +764,12 @@ def load_report(folder) -> Report:
 
     Raises
     ------
+    ParameterError
+        ``folder`` is not a path.
     ConfigError
         No ``stats.json`` (not a report folder), or an unreadable file.
     """
-    folder = Path(folder)
+    folder = _folder(folder)
     meta_path = folder / "stats.json"
     try:
         meta = json.loads(meta_path.read_text())

@@ -271,6 +271,9 @@ class Family:
         Support in x > 0 (non-positive observations make the family inapplicable).
     needs_spread : bool
         Whether identical observations leave a parameter undetermined.
+    normalisable_at_zero : bool
+        Whether the law can be normalised down to x = 0, so that a detection limit of 0 is
+        no limit (False: a cut must be > 0).
     """
 
     name = ""
@@ -280,6 +283,7 @@ class Family:
     log_params: tuple = ()
     positive = True
     needs_spread = True
+    normalisable_at_zero = True
 
     def k(self, truncated: bool) -> int:
         """Number of parameters counted in AIC/BIC."""
@@ -580,6 +584,7 @@ class BoseEinstein(Family):
     param_names = ("alpha", "beta", "x_lo", "x_hi")
     free_names = ("beta",)
     log_params = (True,)
+    normalisable_at_zero = False  # 1/(beta x) near 0
     search = (-12.0, 6.0)  # ln(beta <x>): beta x from 1/x-like to exponential-like
 
     def k(self, truncated):
@@ -636,6 +641,7 @@ class PowerLawCutoff(ParametricFamily):
     param_names = ("tau", "chi", "x_min")
     free_names = ("tau", "chi")
     log_params = (False, True)
+    normalisable_at_zero = False  # x_min > 0 (module docstring)
 
     def k(self, truncated):
         return 2 if truncated else 3  # tau, chi + the sample minimum as x_min

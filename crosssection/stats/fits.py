@@ -36,17 +36,30 @@ draw a confidence band of the fitted density without refitting.
 
 P-values come from n Monte-Carlo resamples, so the smallest one is 1/(n + 1); a p-value at that
 floor only says p < 1/(n + 1) and is printed so (:meth:`FitResult.p_text`).
+
+Inputs: the observations are a 1-D array of numbers (a list, a numpy array, a pandas Series);
+anything else, and absurd options (negative resample counts, a coverage outside (0, 1), a seed
+numpy cannot use), is a :class:`~crosssection.core.errors.ParameterError` naming the argument.
+Every fit entry point (:func:`fit_family`, :func:`fit_all`, :func:`bootstrap_ci`,
+:func:`bootstrap_draws`, :func:`goodness_of_fit`, :func:`truncation_bias`) leaves out the
+observations that are not finite (NaN, inf), or whose cut is not, with one
+:class:`~crosssection.quality.QualityWarning` giving their number: a table read with missing
+cells still fits, and the fit says on how many values.
 """
 from __future__ import annotations
 
+import reprlib
 import warnings
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
+from numbers import Integral, Real
 
 import numpy as np
 import pandas as pd
 from scipy import optimize, stats
 
 from crosssection.core.errors import ParameterError
+from crosssection.quality import QualityWarning
 from crosssection.stats.families import FAMILIES
 
 DELTA_BIC_SIMPLER = 2.0
@@ -61,22 +74,144 @@ def _seedseq(seed) -> np.random.SeedSequence:
     return seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
 
 
+def _short(value) -> str:
+    """``repr`` of an argument cut to one short line, for error messages."""
+    return reprlib.repr(value)
+
+
+def _numbers(values, name: str) -> np.ndarray:
+    """``values`` as a float array, or a ParameterError naming ``name``.
+
+    Text, dates and complex numbers are refused rather than converted: numpy would read
+    ``"3"`` as 3.0 and fail on ``"a"`` with its own message.
+    """
+    if isinstance(values, (str, bytes)):
+        raise ParameterError(f"{name} must be numbers, got the string {_short(values)}")
+    if isinstance(values, (pd.Series, pd.Index, pd.api.extensions.ExtensionArray)):
+        if pd.api.types.is_bool_dtype(values.dtype):
+            raise ParameterError(f"{name} must be numbers, got {values.dtype} values")
+        if pd.api.types.is_numeric_dtype(values.dtype):
+            # a nullable column holds pd.NA, which numpy cannot turn into a float itself
+            return values.to_numpy(dtype=float, na_value=np.nan)
+        values = values.to_numpy()  # object or text: checked below like any array
+    try:
+        a = np.asarray(values)
+    except (TypeError, ValueError) as exc:  # ragged nested lists
+        raise ParameterError(f"{name} must be a 1-D array of numbers ({exc})") from None
+    if a.dtype.kind == "O":
+        try:
+            return a.astype(float)
+        except (TypeError, ValueError):
+            raise ParameterError(f"{name} must be numbers, got {_short(values)}") from None
+    if a.dtype.kind not in "iuf":
+        what = {"U": "text", "S": "text", "b": "booleans", "c": "complex numbers",
+                "M": "dates", "m": "time spans"}.get(a.dtype.kind, f"{a.dtype} values")
+        raise ParameterError(f"{name} must be numbers, got {what} {_short(values)}")
+    return np.asarray(values, dtype=float)
+
+
+def _observations(x, name: str = "x") -> np.ndarray:
+    """``x`` as a 1-D float array (a ParameterError for any other shape or for text)."""
+    a = _numbers(x, name)
+    if a.ndim != 1:
+        got = "a single number" if a.ndim == 0 else f"an array of shape {a.shape}"
+        raise ParameterError(f"{name} must be a 1-D array of observations, got {got}")
+    return a
+
+
 def _as_cuts(truncation, n):
     if truncation is None:
         return None
-    c = np.asarray(truncation, dtype=float)
+    c = _numbers(truncation, "truncation")
     if c.ndim == 0:
+        if not np.isfinite(c):
+            # a NaN cut compares false with every observation: the fit would go on with a
+            # likelihood of -1e300 and report it as fine
+            raise ParameterError(f"truncation must be a finite number, got {float(c)}")
         return np.full(n, float(c))
     if c.shape != (n,):
         raise ParameterError(f"truncation has shape {c.shape}, expected a scalar or ({n},)")
     return c
 
 
+def _finite(x, c, *, stacklevel: int = 3):
+    """``(x, c, n_left_out)`` without the observations that are not finite or whose cut is
+    not, with one QualityWarning giving their number (none when all are finite)."""
+    bad_x = ~np.isfinite(x)
+    bad = bad_x if c is None else bad_x | ~np.isfinite(c)
+    n_bad = int(bad.sum())
+    if not n_bad:
+        return x, c, 0
+    parts = []
+    if bad_x.any():
+        parts.append(f"{int(bad_x.sum())} not finite (NaN or inf)")
+    if c is not None and (bad & ~bad_x).any():
+        parts.append(f"{int((bad & ~bad_x).sum())} with a cut that is not finite")
+    warnings.warn(f"x: {n_bad} of {x.size} observations left out of the fit: "
+                  f"{' and '.join(parts)}", QualityWarning, stacklevel=stacklevel)
+    keep = ~bad
+    return x[keep], (None if c is None else c[keep]), n_bad
+
+
+def _count(value, name: str, minimum: int = 0) -> None:
+    """A ParameterError unless ``value`` is an integer >= ``minimum``."""
+    if (isinstance(value, (bool, np.bool_)) or not isinstance(value, Integral)
+            or value < minimum):
+        raise ParameterError(f"{name} must be an integer >= {minimum}, got {_short(value)}")
+
+
+def _level(value, name: str) -> None:
+    """A ParameterError unless ``value`` is a coverage strictly between 0 and 1."""
+    if (isinstance(value, (bool, np.bool_)) or not isinstance(value, Real)
+            or not 0 < value < 1):
+        raise ParameterError(f"{name} must be a number between 0 and 1 (exclusive), e.g. "
+                             f"0.95, got {_short(value)}")
+
+
+def _check_seed(seed, *, generator: bool = False, name: str = "seed") -> None:
+    """A ParameterError unless numpy can seed from ``seed``: None, an integer >= 0, a
+    sequence of them or a SeedSequence (and a Generator where ``generator``)."""
+    if seed is None or isinstance(seed, np.random.SeedSequence):
+        return
+    if generator and isinstance(seed, (np.random.Generator, np.random.BitGenerator)):
+        return
+    try:
+        np.random.SeedSequence(seed)
+    except (TypeError, ValueError):
+        raise ParameterError(f"{name} must be an integer >= 0, None or a "
+                             f"numpy.random.SeedSequence, got {_short(seed)}") from None
+
+
+def _check_mc(n_mc, gof: bool) -> None:
+    """n_mc is a resample count; with a p-value asked for, at least one resample."""
+    _count(n_mc, "n_mc")
+    if gof and n_mc < 1:
+        raise ParameterError("n_mc must be >= 1 when gof is True (the p-value needs "
+                             "resamples; gof=False computes none), got 0")
+
+
 def _family(name: str):
     try:
         return FAMILIES[name]
-    except KeyError:
-        raise ParameterError(f"unknown family {name!r}; choose from {tuple(FAMILIES)}") from None
+    except (KeyError, TypeError):  # TypeError: a list or dict is not a name
+        raise ParameterError(f"unknown family {_short(name)}; choose from "
+                             f"{tuple(FAMILIES)}") from None
+
+
+def _family_names(families, name: str = "families") -> tuple:
+    """A tuple of known family names from one name or a sequence of names."""
+    if isinstance(families, str):  # one name, not its letters
+        families = (families,)
+    try:
+        families = tuple(families)
+    except TypeError:
+        raise ParameterError(f"{name} must be a family name or a sequence of names, got "
+                             f"{_short(families)}") from None
+    if not families:
+        raise ParameterError(f"{name} is empty; choose from {tuple(FAMILIES)}")
+    for f in families:
+        _family(f)
+    return families
 
 
 def anderson_darling(u) -> float:
@@ -315,7 +450,15 @@ def _applicability(fam, x, c, k) -> str:
     if n < max(3, k + 1):
         return f"too few observations ({n})"
     if fam.positive and np.any(x <= 0):
-        return "needs x > 0"
+        n_low = int(np.sum(x <= 0))
+        return f"needs x > 0 ({n_low} value{'s' if n_low > 1 else ''} <= 0)"
+    if fam.positive and c is not None:
+        # a law of x > 0 has nothing below 0 to lose; the laws not normalisable at 0 need
+        # a cut above it
+        low = c < 0 if fam.normalisable_at_zero else c <= 0
+        if np.any(low):
+            bound = ">= 0" if fam.normalisable_at_zero else "> 0"
+            return f"needs a truncation {bound} ({int(np.sum(low))} cuts are not)"
     if c is not None and np.any(x < c):
         raise ParameterError("observations below the truncation cut; drop them first")
     if fam.needs_spread and np.ptp(x) <= 0:
@@ -331,11 +474,14 @@ def fit_family(x, family: str, *, truncation=None, n_boot: int = 200, seed=0,
     Parameters
     ----------
     x : array_like
-        Observations (finite). For a truncated fit, all must be >= their cut.
+        Observations, 1-D. Those that are not finite (or whose cut is not) are left out with
+        a :class:`~crosssection.quality.QualityWarning`. For a truncated fit, all must be >=
+        their cut.
     family : str
         A key of :data:`FAMILIES`.
     truncation : float or array_like, optional
-        Detection limit: observations below it are never seen. Scalar or one per observation.
+        Detection limit: observations below it are never seen. A finite scalar or one cut per
+        observation; >= 0 for the laws of x > 0 (> 0 for Bose-Einstein and the power law).
     n_boot : int
         Bootstrap resamples for the percentile intervals (0: no intervals).
     seed : int or numpy.random.SeedSequence
@@ -343,9 +489,10 @@ def fit_family(x, family: str, *, truncation=None, n_boot: int = 200, seed=0,
     gof : bool
         Compute the goodness-of-fit p-value.
     n_mc : int
-        Parametric-bootstrap samples for the p-value (99 is a fast option).
+        Parametric-bootstrap samples for the p-value (99 is a fast option); at least 1 when
+        ``gof``.
     ci_level : float
-        Coverage of the percentile intervals.
+        Coverage of the percentile intervals, between 0 and 1.
     discrete : bool
         ``x`` are counts >= :data:`COUNT_MIN`: fit the discretised law (module docstring);
         only the families backed by ``scipy.stats`` and no truncation.
@@ -354,20 +501,32 @@ def fit_family(x, family: str, *, truncation=None, n_boot: int = 200, seed=0,
     -------
     FitResult
         Degenerate fits (see the module docstring) carry the reason in ``rejected`` and
-        neither intervals nor p-value.
+        neither intervals nor p-value; a family that does not apply to ``x`` (too few
+        observations, values <= 0 for a law of x > 0, ...) has ``ok`` False and the reason
+        in ``note``.
+
+    Raises
+    ------
+    ParameterError
+        ``x`` is not a 1-D array of numbers, ``family`` is unknown, ``truncation`` is not
+        finite or has another length than ``x``, an observation lies below its cut, or an
+        option is absurd (negative ``n_boot``, ``n_mc`` < 1 with ``gof``, ``ci_level``
+        outside (0, 1), a seed numpy cannot use).
     """
     fam = _family(family)
-    x = np.asarray(x, float)
+    x = _observations(x)
+    _count(n_boot, "n_boot")
+    _check_mc(n_mc, gof)
+    _level(ci_level, "ci_level")
+    _check_seed(seed)
+    c = _as_cuts(truncation, x.size)
+    x, c, _ = _finite(x, c)
     n = x.size
-    c = _as_cuts(truncation, n)
     truncated = c is not None
     k = fam.k(truncated)
     why = _applicability(fam, x, c, k)
     if not why and discrete:
-        if truncated or getattr(fam, "frozen", None) is None:
-            why = "no count (discrete) fit of this family"
-        elif np.any(x < COUNT_MIN) or np.any(x != np.round(x)):
-            why = f"counts must be integers >= {COUNT_MIN}"
+        why = _count_problem(fam, x, c)
     if why:
         return FitResult(family, {p: float("nan") for p in fam.param_names}, float("nan"),
                          float("nan"), float("nan"), n, k, truncated=truncated, ok=False,
@@ -405,11 +564,13 @@ def bootstrap_draws(x, family: str, *, truncation=None, n_boot: int = 200, seed=
     Parameters
     ----------
     x : array_like
+        Observations, 1-D; those that are not finite are left out with a warning (see
+        :func:`fit_family`).
     family : str
     truncation : float or array_like, optional
         Cuts move with their observations when resampling.
     n_boot : int
-    seed : int or SeedSequence
+    seed : int, SeedSequence or numpy.random.Generator
     discrete : bool
         Refit as counts (see :func:`fit_family`).
 
@@ -417,10 +578,20 @@ def bootstrap_draws(x, family: str, *, truncation=None, n_boot: int = 200, seed=
     -------
     numpy.ndarray
         Shape (n_boot, len(param_names)); NaN rows where a resample could not be refitted.
+
+    Raises
+    ------
+    ParameterError
+        Bad arguments (as for :func:`fit_family`), or a family that cannot be fitted to
+        ``x`` (too few observations, values <= 0 for a law of x > 0, no spread).
     """
     fam = _family(family)
-    x = np.asarray(x, float)
+    x = _observations(x)
+    _count(n_boot, "n_boot")
+    _check_seed(seed, generator=True)
     c = _as_cuts(truncation, x.size)
+    x, c, _ = _finite(x, c)
+    _require_applicable(fam, x, c, discrete)
     rng = np.random.default_rng(seed)
     names = fam.param_names
     draws = np.full((n_boot, len(names)), np.nan)
@@ -441,6 +612,26 @@ def bootstrap_draws(x, family: str, *, truncation=None, n_boot: int = 200, seed=
     return draws
 
 
+def _require_applicable(fam, x, c, discrete: bool) -> None:
+    """A ParameterError saying why ``fam`` cannot be fitted to ``x`` (fit_family returns the
+    reason in a FitResult instead; the functions that return bare numbers have no room for
+    it)."""
+    why = _applicability(fam, x, c, fam.k(c is not None))
+    if not why and discrete:
+        why = _count_problem(fam, x, c)
+    if why:
+        raise ParameterError(f"cannot fit {fam.name} to x: {why}")
+
+
+def _count_problem(fam, x, c) -> str:
+    """Why ``x`` cannot be fitted as counts with ``fam`` ("" when it can)."""
+    if c is not None or getattr(fam, "frozen", None) is None:
+        return "no count (discrete) fit of this family"
+    if np.any(x < COUNT_MIN) or np.any(x != np.round(x)):
+        return f"counts must be integers >= {COUNT_MIN}"
+    return ""
+
+
 def _percentile_ci(draws, names, level) -> dict:
     q = (1 - level) / 2
     out = {}
@@ -458,12 +649,14 @@ def bootstrap_ci(x, family: str, *, truncation=None, n_boot: int = 200, seed=0,
     Parameters
     ----------
     x : array_like
+        Observations, 1-D; those that are not finite are left out with a warning.
     family : str
     truncation : float or array_like, optional
         Cuts move with their observations when resampling.
     n_boot : int
-    seed : int or SeedSequence
+    seed : int, SeedSequence or numpy.random.Generator
     level : float
+        Coverage, between 0 and 1.
     discrete : bool
         Refit as counts (see :func:`fit_family`).
 
@@ -471,7 +664,13 @@ def bootstrap_ci(x, family: str, *, truncation=None, n_boot: int = 200, seed=0,
     -------
     dict
         Parameter name -> (low, high).
+
+    Raises
+    ------
+    ParameterError
+        As :func:`bootstrap_draws`, or ``level`` outside (0, 1).
     """
+    _level(level, "level")
     draws = bootstrap_draws(x, family, truncation=truncation, n_boot=n_boot, seed=seed,
                             discrete=discrete)
     return _percentile_ci(draws, _family(family).param_names, level)
@@ -481,34 +680,49 @@ def goodness_of_fit(x, family: str, params: dict, *, truncation=None, n_mc: int 
                     seed=0) -> GoodnessOfFit:
     """Anderson-Darling goodness of fit with a p-value that accounts for fitted parameters.
 
-    Untruncated fits of the families backed by ``scipy.stats`` (exponential, Gamma,
-    log-normal, Gaussian) use ``scipy.stats.goodness_of_fit`` (parametric bootstrap,
-    parameters refitted on every sample, loc fixed at 0 for the positive laws). Truncated fits
-    and the other families use the same procedure written here: samples drawn from the fitted
-    (truncated) law with the same cuts, refitted, and the statistic computed on the
-    probability integral transform.
+    The statistic is that of ``x`` under the law of ``params``; its p-value comes from
+    samples drawn from that law (truncated at the same cuts), each refitted, the statistic
+    computed on the probability integral transform. With ``params`` the maximum-likelihood
+    fit of ``x`` (``fit_family(x, family).params``) this is the test of the family with
+    fitted parameters. For that case, untruncated, the families backed by ``scipy.stats``
+    (exponential, Gamma, log-normal, Gaussian) use ``scipy.stats.goodness_of_fit`` (the same
+    procedure, loc fixed at 0 for the positive laws), which refits ``x`` itself; other
+    parameters are tested as given by the procedure written here.
 
     Parameters
     ----------
     x : array_like
+        Observations, 1-D; those that are not finite are left out with a warning.
     family : str
     params : dict
-        The fitted parameters of ``x``.
+        Every parameter of the family (its ``param_names``), normally the fit of ``x``.
     truncation : float or array_like, optional
     n_mc : int
-        Monte Carlo samples (the p-value resolution is 1/(n_mc + 1)).
-    seed : int or SeedSequence
+        Monte Carlo samples, at least 1 (the p-value resolution is 1/(n_mc + 1)).
+    seed : int, SeedSequence or numpy.random.Generator
 
     Returns
     -------
     GoodnessOfFit
         ``n_mc`` there counts the resamples that could be refitted.
+
+    Raises
+    ------
+    ParameterError
+        ``params`` lacks a parameter of the family, names one it does not have or holds a
+        value that is not a finite number; the family cannot be fitted to ``x``; or another
+        bad argument (as for :func:`fit_family`).
     """
     fam = _family(family)
-    x = np.asarray(x, float)
+    x = _observations(x)
+    _count(n_mc, "n_mc", 1)
+    _check_seed(seed, generator=True)
     c = _as_cuts(truncation, x.size)
+    x, c, _ = _finite(x, c)
+    _require_applicable(fam, x, c, False)
+    params = _checked_params(fam, params)
     rng = np.random.default_rng(seed)
-    if c is None and getattr(fam, "rv", None) is not None:
+    if c is None and getattr(fam, "rv", None) is not None and _is_mle(fam, params, x):
         res = stats.goodness_of_fit(fam.rv, x, known_params=fam.known, statistic="ad",
                                     n_mc_samples=n_mc, random_state=rng)
         return GoodnessOfFit(float(res.statistic), float(res.pvalue), n_mc)
@@ -531,6 +745,38 @@ def goodness_of_fit(x, family: str, params: dict, *, truncation=None, n_mc: int 
                          int(null.size))
 
 
+def _checked_params(fam, params) -> dict:
+    """``params`` as a dict of floats over exactly the family's parameter names."""
+    if not isinstance(params, Mapping):
+        raise ParameterError(f"params must be a dict of the parameters of {fam.name} "
+                             f"{fam.param_names}, got {_short(params)}")
+    extra = [k for k in params if k not in fam.param_names]
+    if extra:
+        raise ParameterError(f"params names {_short(extra)}, not parameters of {fam.name} "
+                             f"{fam.param_names}")
+    missing = [k for k in fam.param_names if k not in params]
+    if missing:
+        raise ParameterError(f"params lacks {missing} of {fam.name} {fam.param_names}")
+    out = {}
+    for k in fam.param_names:
+        v = params[k]
+        if (isinstance(v, (bool, np.bool_)) or not isinstance(v, Real)
+                or not np.isfinite(v)):
+            raise ParameterError(f"params[{k!r}] must be a finite number, got {_short(v)}")
+        out[k] = float(v)
+    return out
+
+
+def _is_mle(fam, params, x) -> bool:
+    """Whether ``params`` are the untruncated maximum-likelihood fit of ``x``: the only
+    parameters ``scipy.stats.goodness_of_fit`` tests, since it refits ``x`` itself."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        fitted = np.asarray(fam.naive_theta(x), float)
+    return bool(np.allclose(np.asarray(fam.theta(params), float), fitted, rtol=1e-9,
+                            atol=1e-12))
+
+
 def select_model(results: dict, *, delta: float = DELTA_BIC_SIMPLER) -> str | None:
     """The simplest family the data support.
 
@@ -543,11 +789,28 @@ def select_model(results: dict, *, delta: float = DELTA_BIC_SIMPLER) -> str | No
     results : dict
         family -> FitResult.
     delta : float
+        A BIC difference > 0.
 
     Returns
     -------
     str or None
+
+    Raises
+    ------
+    ParameterError
+        ``results`` is not a dict of FitResult, or ``delta`` is not a finite number > 0
+        (with none, no family would be within it of the minimum).
     """
+    if not isinstance(results, Mapping):
+        raise ParameterError(f"results must be a dict of family -> FitResult, got "
+                             f"{_short(results)}")
+    for f, r in results.items():
+        if not isinstance(r, FitResult):
+            raise ParameterError(f"results[{f!r}] must be a FitResult (from fit_family), "
+                                 f"got {type(r).__name__}")
+    if (isinstance(delta, (bool, np.bool_)) or not isinstance(delta, Real)
+            or not (np.isfinite(delta) and delta > 0)):
+        raise ParameterError(f"delta must be a finite number > 0, got {_short(delta)}")
     ok = {f: r for f, r in results.items() if r.selectable}
     if not ok:
         return None
@@ -564,42 +827,78 @@ def fit_all(x, families=PAPER_FAMILIES, *, truncation=None, seed=0, n_boot: int 
     Parameters
     ----------
     x : array_like
-        Observations; non-finite values are dropped, and with a truncation the observations
-        below their cut are dropped (counted in ``n_dropped``).
-    families : sequence of str
-        Keys of :data:`FAMILIES` (default: the paper's five laws).
+        Observations, 1-D; those that are not finite (or whose cut is not) are dropped with
+        a :class:`~crosssection.quality.QualityWarning`, and with a truncation the
+        observations below their cut are dropped; both are counted in ``n_dropped``.
+    families : str or sequence of str
+        One key of :data:`FAMILIES` or several (default: the paper's five laws).
     truncation : float or array_like, optional
-        Detection limit (scalar or one per observation).
+        Detection limit (a finite scalar or one per observation).
     seed : int
     n_boot, gof, n_mc, ci_level
         See :func:`fit_family`.
-    select_from : sequence of str, optional
-        Families taking part in model selection (default: all fitted).
+    select_from : str or sequence of str, optional
+        Families taking part in model selection, among ``families`` (default: all fitted).
     discrete : bool
         The observations are counts (see :func:`fit_family`).
 
     Returns
     -------
     FitSummary
+        A family that does not apply keeps its row (``ok`` False, the reason in ``note``);
+        when laws of x > 0 are left out so, one QualityWarning says which and why, since
+        the law selected is then chosen among the others only.
+
+    Raises
+    ------
+    ParameterError
+        As :func:`fit_family`, or ``select_from`` names a family not in ``families``.
     """
-    families = tuple(families)
-    for f in families:
-        _family(f)
-    x = np.asarray(x, float)
+    families = _family_names(families)
+    select = families
+    if select_from:  # None or empty: every family fitted
+        select = _family_names(select_from, "select_from")
+        outside = [f for f in select if f not in families]
+        if outside:
+            raise ParameterError(f"select_from names {outside}, which are not among the "
+                                 f"families fitted {families}")
+    x = _observations(x)
+    _count(n_boot, "n_boot")
+    _check_mc(n_mc, gof)
+    _level(ci_level, "ci_level")
+    _check_seed(seed)
     c = _as_cuts(truncation, x.size)
-    keep = np.isfinite(x)
+    x, c, n_dropped = _finite(x, c)
     if c is not None:
-        keep &= np.isfinite(c) & (x >= np.where(np.isfinite(c), c, -np.inf))
-    n_dropped = int(x.size - keep.sum())
-    x = x[keep]
-    c = None if c is None else c[keep]
+        keep = x >= c
+        n_dropped += int(x.size - keep.sum())
+        x, c = x[keep], c[keep]
     seeds = _seedseq(seed).spawn(len(families))
     results = {f: fit_family(x, f, truncation=c, n_boot=n_boot, seed=s, gof=gof, n_mc=n_mc,
                              ci_level=ci_level, discrete=discrete)
                for f, s in zip(families, seeds)}
-    sel = {f: results[f] for f in (select_from or families) if f in results}
+    sel = {f: results[f] for f in select}
     best = select_model(sel)
+    _warn_positive_left_out(results, best)
     return FitSummary(results, best, summary_table(results, best), n_dropped)
+
+
+def _warn_positive_left_out(results: dict, best) -> None:
+    """One warning naming the laws of x > 0 that did not apply because of the values or the
+    cuts (not because of the sample size): the law selected is then one of the others, a
+    Gaussian for a single negative value among thousands, and only the table's notes
+    would say why."""
+    why = {}
+    for f, r in results.items():
+        if not r.ok and FAMILIES[f].positive and r.note.startswith("needs "):
+            why.setdefault(r.note, []).append(f)
+    if not why:
+        return
+    causes = "; ".join(f"{', '.join(fs)}: {note}" for note, fs in why.items())
+    chosen = (f"{best} is selected among the others" if best
+              else "no other law was selected")
+    warnings.warn(f"x: the laws of x > 0 were not fitted ({causes}); {chosen}",
+                  QualityWarning, stacklevel=3)
 
 
 def summary_table(results: dict, best: str | None) -> pd.DataFrame:
@@ -638,10 +937,11 @@ def truncation_bias(x, truncation, families=("exponential", "gamma", "lognormal"
     Parameters
     ----------
     x : array_like
-        Observations (those below their cut are dropped first).
+        Observations, 1-D (those below their cut are dropped first; those that are not
+        finite, or whose cut is not, are left out with a warning).
     truncation : float or array_like
-        Detection limit.
-    families : sequence of str
+        Detection limit (required).
+    families : str or sequence of str
     n_boot : int
         Bootstrap resamples for intervals of the truncated fit (0: none).
     seed : int
@@ -651,11 +951,29 @@ def truncation_bias(x, truncation, families=("exponential", "gamma", "lognormal"
     pandas.DataFrame
         Columns family, param, naive, truncated, naive_bias_rel = naive/truncated - 1
         (the relative bias a naive fit would have had), and for the exponential the paper's
-        check mean(x) - mean(cut) which equals mu exactly.
+        check mean(x) - mean(cut) which equals mu exactly. NaN where a family cannot be
+        fitted (too few observations, values <= 0 for a law of x > 0).
+
+    Raises
+    ------
+    ParameterError
+        No truncation, no observation at or above its cut, or another bad argument (as for
+        :func:`fit_family`).
     """
-    x = np.asarray(x, float)
+    families = _family_names(families)
+    x = _observations(x)
+    if truncation is None:
+        raise ParameterError("truncation is required: the detection limit the truncated "
+                             "fits are compared with")
+    _count(n_boot, "n_boot")
+    _check_seed(seed)
     c = _as_cuts(truncation, x.size)
-    keep = np.isfinite(x) & (x >= c)
+    x, c, _ = _finite(x, c)
+    keep = x >= c
+    if not keep.any():
+        raise ParameterError("x holds no observation" if x.size == 0 else
+                             f"x holds no observation at or above its cut (all {x.size} "
+                             "lie below)")
     x, c = x[keep], c[keep]
     rows = []
     seeds = _seedseq(seed).spawn(len(families))

@@ -301,13 +301,20 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
     return fig
 
 
+class PlotPdfError(ParameterError, ValueError):
+    """A bad argument of :func:`plot_pdf`: a ParameterError like every bad argument of the
+    toolkit, and a ValueError as well, since plot_pdf raised ValueError before and code
+    catching that must keep working."""
+
+
 def plot_pdf(source, quantity: str = "e", *, set_name: str | None = None, seed: int = 0):
     """The probability density of one quantity of an ensemble with its fitted laws (the
     report's figure, from Python).
 
     The laws are fitted here by maximum likelihood, truncation-aware where a detection limit
     applies, without bootstrap intervals nor goodness of fit (run ``foldstat stats`` for
-    those).
+    those). Values that are not finite or are <= 0 are left out, with a
+    :class:`~crosssection.quality.QualityWarning` giving their number.
 
     Parameters
     ----------
@@ -320,7 +327,7 @@ def plot_pdf(source, quantity: str = "e", *, set_name: str | None = None, seed: 
     set_name : str, optional
         The only set to draw (default: every set, overlaid).
     seed : int
-        Seed of the fits' random starts.
+        Seed of the fits' random starts (an integer >= 0, or None for fresh entropy).
 
     Returns
     -------
@@ -330,17 +337,23 @@ def plot_pdf(source, quantity: str = "e", *, set_name: str | None = None, seed: 
 
     Raises
     ------
-    ValueError
-        Unknown quantity or set, or too few values to fit.
+    ParameterError
+        Unknown quantity or set, or too few values to fit (a :class:`PlotPdfError`, also a
+        ValueError); a bad seed, or a source that is neither an ensemble nor a path.
+    ConfigError
+        The folder cannot be read (:func:`crosssection.stats.data.load_any`).
     """
     from crosssection.stats.data import load_any
     from crosssection.stats.tables import fit_quantity
 
-    if quantity not in QUANTITIES:
-        raise ValueError(f"quantity must be one of {sorted(QUANTITIES)}, got {quantity!r}")
+    if not isinstance(quantity, str) or quantity not in QUANTITIES:
+        raise PlotPdfError(f"quantity must be one of {sorted(QUANTITIES)}, got "
+                           f"{quantity!r}")
+    if seed is not None:
+        F._count(seed, "seed")
     ens = source if isinstance(source, Ensemble) else load_any(source)
     if set_name is not None and set_name not in ens.sets:
-        raise ValueError(f"set must be one of {ens.sets}, got {set_name!r}")
+        raise PlotPdfError(f"set_name must be one of {ens.sets}, got {set_name!r}")
     sets = ens.sets if set_name is None else [set_name]
     opts = StatsOptions(seed=seed, n_boot=0, gof=False, quantities=(quantity,))
     summaries = {}
@@ -354,8 +367,8 @@ def plot_pdf(source, quantity: str = "e", *, set_name: str | None = None, seed: 
             if summ is not None:
                 summaries[(s, reg, quantity)] = summ
     if not summaries:
-        raise ValueError(f"{', '.join(sets)}: too few positive values of {quantity} to fit "
-                         f"(at least {opts.min_n})")
+        raise PlotPdfError(f"{', '.join(map(str, sets))}: too few positive values of "
+                           f"{quantity} to fit (at least {opts.min_n})")
     empty = pd.DataFrame()
     fits_only = StatsResult(empty, empty, empty, empty, empty, empty, empty, empty, summaries)
     return pdf_figure(fits_only, ens, quantity, sets=sets)

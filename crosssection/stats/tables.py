@@ -20,11 +20,14 @@ simulations have region ``"none"`` and only the ``"all"`` rows.
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
 
+from crosssection.core.errors import ParameterError
+from crosssection.quality import QualityWarning
 from crosssection.stats import fits as F
 from crosssection.stats.data import SIM_REGION, Ensemble
 
@@ -76,7 +79,29 @@ POSITIVE_QUANTITIES = {"length_L", "kappa_m_L", "kappa_plus_L", "e", "E", "n_br"
 
 @dataclass
 class StatsOptions:
-    """Knobs of the statistics (all random choices derive from ``seed``)."""
+    """Knobs of the statistics (all random choices derive from ``seed``).
+
+    Attributes
+    ----------
+    seed : int or None
+        An integer >= 0 (None: fresh entropy, a different result every run).
+    n_boot : int
+        Bootstrap resamples of the parameter intervals (0: none).
+    gof : bool
+        Compute goodness-of-fit p-values.
+    n_mc : int
+        Resamples of each p-value (at least 1 with ``gof``).
+    quantities : str or tuple of str
+        Keys of :data:`QUANTITIES` to fit (one name or several).
+    min_n : int
+        Fewest values (at least 1) for a quantity to be fitted.
+
+    Raises
+    ------
+    ParameterError
+        Naming the attribute whose value is absurd (checked again by
+        :func:`compute_stats`, since the attributes may be changed afterwards).
+    """
 
     seed: int = 0
     n_boot: int = 200
@@ -84,6 +109,28 @@ class StatsOptions:
     n_mc: int = 199
     quantities: tuple = tuple(QUANTITIES)
     min_n: int = 5
+
+    def __post_init__(self):
+        self.check()
+
+    def check(self) -> None:
+        """Raise a ParameterError naming the first absurd attribute."""
+        if self.seed is not None:  # None: fresh entropy, as numpy takes it
+            F._count(self.seed, "seed")
+        F._count(self.n_boot, "n_boot")
+        F._check_mc(self.n_mc, self.gof)
+        F._count(self.min_n, "min_n", 1)
+        if isinstance(self.quantities, str):  # one name, not its letters
+            self.quantities = (self.quantities,)
+        try:
+            qs = tuple(self.quantities)
+        except TypeError:
+            raise ParameterError(f"quantities must be names of {tuple(QUANTITIES)}, got "
+                                 f"{self.quantities!r}") from None
+        unknown = [q for q in qs if not isinstance(q, str) or q not in QUANTITIES]
+        if unknown:
+            raise ParameterError(f"quantities holds unknown {unknown}; choose from "
+                                 f"{tuple(QUANTITIES)}")
 
 
 @dataclass
@@ -170,8 +217,28 @@ def _clean(x, positive=True):
     return x[keep], keep
 
 
+def _warn_left_out(ens: Ensemble, quantity: str, values, positive: bool) -> None:
+    """One warning giving how many values of ``quantity`` the fits leave out and why (not
+    finite; <= 0 where the laws fitted live on x > 0); none when every value is used."""
+    v = np.asarray(values, float)
+    n_nan = int(np.sum(~np.isfinite(v)))
+    n_low = int(np.sum(np.isfinite(v) & (v <= 0))) if positive else 0
+    if not (n_nan or n_low):
+        return
+    parts = ([f"{n_nan} not finite (NaN or inf)"] if n_nan else []) + (
+        [f"{n_low} <= 0 (the laws fitted live on x > 0)"] if n_low else [])
+    where = f"set {', '.join(map(str, ens.sets))}: " if len(ens.sets) else ""
+    warnings.warn(f"{where}{quantity}: {n_nan + n_low} of {v.size} values left out of the "
+                  f"fits: {' and '.join(parts)}", QualityWarning, stacklevel=4)
+
+
 def fit_quantity(ens: Ensemble, quantity: str, region: str, opts: StatsOptions, seed):
     """Fit every family of ``quantity`` in one set and region.
+
+    Values that are not finite, and values <= 0 of the quantities fitted with laws of
+    x > 0 (all of :data:`POSITIVE_QUANTITIES`), are left out, counted in the third element
+    and, for the whole system (region ``"all"``; a sub-system's are among them), told in one
+    :class:`~crosssection.quality.QualityWarning`.
 
     Returns
     -------
@@ -179,6 +246,8 @@ def fit_quantity(ens: Ensemble, quantity: str, region: str, opts: StatsOptions, 
     """
     table, col, fams, tcol, _ = QUANTITIES[quantity]
     df = _in_region(getattr(ens, table), region)
+    if region == "all":
+        _warn_left_out(ens, quantity, df[col], quantity in POSITIVE_QUANTITIES)
     x, keep = _clean(df[col], quantity in POSITIVE_QUANTITIES)
     if x.size < opts.min_n or np.ptp(x) <= 0:
         return None, None, int((~keep).sum())
@@ -190,7 +259,8 @@ def fit_quantity(ens: Ensemble, quantity: str, region: str, opts: StatsOptions, 
     summ = F.fit_all(x, fams, truncation=cuts, seed=seed, n_boot=opts.n_boot, gof=opts.gof,
                      n_mc=opts.n_mc, discrete=quantity in COUNT_QUANTITIES)
     bias = None
-    if cuts is not None:
+    # with every value below its cut, nothing is left to compare the fits on
+    if cuts is not None and np.any(x >= cuts):
         bias = F.truncation_bias(x, cuts, families=tuple(f for f in fams
                                                           if f in ("exponential", "gamma",
                                                                    "lognormal")))
@@ -217,6 +287,9 @@ def compute_stats(ens: Ensemble, opts: StatsOptions | None = None, *,
     Parameters
     ----------
     ens : Ensemble
+        Values the fits leave out (not finite, or <= 0) are counted in the ``n_dropped``
+        column of ``fits`` and told in one warning per set and quantity
+        (:func:`fit_quantity`).
     opts : StatsOptions, optional
     progress : bool or None
         A tqdm bar on stderr over the fits (set, region, quantity: the slow part, bootstrap
@@ -225,8 +298,19 @@ def compute_stats(ens: Ensemble, opts: StatsOptions | None = None, *,
     Returns
     -------
     StatsResult
+
+    Raises
+    ------
+    ParameterError
+        ``ens`` is not an :class:`Ensemble` or ``opts`` not a valid :class:`StatsOptions`.
     """
+    if not isinstance(ens, Ensemble):
+        raise ParameterError(f"ens must be an Ensemble (from crosssection.stats.load_any), "
+                             f"got {type(ens).__name__}")
+    if opts is not None and not isinstance(opts, StatsOptions):
+        raise ParameterError(f"opts must be a StatsOptions, got {type(opts).__name__}")
     opts = opts or StatsOptions()
+    opts.check()
     per_cfg = per_config_table(ens)
     macro = macro_table(ens)
     fit_rows, trunc_rows, summaries = [], [], {}
