@@ -50,6 +50,8 @@ warning when a test module imports it before pytest loads it as a plugin.
 """
 from __future__ import annotations
 
+import math
+import numbers
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -74,6 +76,11 @@ DEGRADATIONS = {
 #: options of the ``foldstat_scan`` fixture when it is not parametrised
 DEFAULT_SCAN = {"seed": 0, "px_per_mm": 50.0, "n_stacks": 20, "max_layers": 4,
                 "degradation": "clean"}
+
+#: documented ranges of :func:`make_generated_scan`: below them no layout exists, beyond them
+#: one scan takes tens of seconds or more (n_stacks 1000: 76 s; max_layers 100: 23 s)
+N_STACKS_RANGE = (10, 300)
+MAX_LAYERS_RANGE = (1, 12)
 
 
 @dataclass(frozen=True)
@@ -151,7 +158,8 @@ def make_generated_scan(folder, *, seed: int = 0, px_per_mm: float = 50.0, n_sta
         Resolution in px/mm (the sheet is h = 0.1 mm thick unless ``thickness_mm`` is given;
         below 30 px/mm the pipeline warns that h < 3 px).
     n_stacks : int
-        Approximate number of stacks (density; 10-300).
+        Approximate number of stacks (density; 10-300). Below about 14 the disk holds 3-4
+        Voronoi cells and some seeds (all at 10) find no layout.
     max_layers : int
         Largest number of layers in a stack (1-12).
     degradation : str
@@ -162,20 +170,129 @@ def make_generated_scan(folder, *, seed: int = 0, px_per_mm: float = 50.0, n_sta
     Returns
     -------
     GeneratedScan
+
+    Raises
+    ------
+    ParameterError
+        An option of the wrong type or outside its range, or an unknown keyword.
+    ConfigError
+        ``folder`` is an existing file, or cannot be written.
+    SceneGenerationError
+        No layout found for these options (a :class:`ParameterError` naming them).
     """
-    from crosssection.core.errors import ParameterError
-    from crosssection.truth.network import make_scene
+    import inspect
+
+    from crosssection.core.errors import ConfigError, ParameterError
+    from crosssection.truth.network import SceneGenerationError, make_scene
     from crosssection.truth.scene import write_scene
 
-    if degradation not in DEGRADATIONS:
-        raise ParameterError(f"degradation must be one of {sorted(DEGRADATIONS)}, got "
-                             f"{degradation!r}")
+    own = ("seed", "px_per_mm", "n_stacks", "max_layers")
+    scene_keywords = [k for k in inspect.signature(make_scene).parameters if k not in own]
+    unknown = sorted(set(scene_options) - set(scene_keywords))
+    if unknown:
+        import difflib
+
+        near = difflib.get_close_matches(unknown[0], [*own, "degradation", *scene_keywords], 1)
+        hint = f" (did you mean {near[0]}?)" if near else ""
+        raise ParameterError(f"unknown keyword {', '.join(unknown)}{hint}: make_generated_scan "
+                             f"takes {', '.join(own)}, degradation and make_scene's "
+                             f"{', '.join(sorted(scene_keywords))}")
+    _check_whole("seed", seed, 0)
+    _check_positive("px_per_mm", px_per_mm)
+    _check_whole("n_stacks", n_stacks, *N_STACKS_RANGE, floats=True)
+    _check_whole("max_layers", max_layers, *MAX_LAYERS_RANGE, floats=True)
+    _check_degradation(degradation)
+    if scene_options.get("thickness_mm") is not None:
+        _check_positive("thickness_mm", scene_options["thickness_mm"])
+    if scene_options.get("image_size") is not None:
+        _check_whole("image_size", scene_options["image_size"], 1)
+    folder = _scene_folder(folder)
     options = dict(seed=seed, px_per_mm=px_per_mm, n_stacks=n_stacks, max_layers=max_layers,
                    degradation=degradation, **scene_options)
     kwargs = {**DEGRADATIONS[degradation], **scene_options}
-    scene = make_scene(seed=seed, px_per_mm=px_per_mm, n_stacks=n_stacks,
-                       max_layers=max_layers, **kwargs)
-    return GeneratedScan(Path(write_scene(scene, folder)), scene, options)
+    try:
+        scene = make_scene(seed=seed, px_per_mm=px_per_mm, n_stacks=n_stacks,
+                           max_layers=max_layers, **kwargs)
+    except SceneGenerationError as exc:
+        # the generator's cause (Voronoi cells, layer counts) does not say which option to
+        # change: name them
+        raise SceneGenerationError(f"no scan for n_stacks={n_stacks}, max_layers={max_layers}, "
+                                   f"px_per_mm={px_per_mm:g}, seed={seed} ({exc.cause}); try "
+                                   "more stacks, fewer layers or another seed") from None
+    try:
+        written = write_scene(scene, folder)
+    except OSError as exc:
+        raise ConfigError(f"cannot write the scene folder ({exc.strerror or exc})",
+                          folder) from None
+    return GeneratedScan(Path(written), scene, options)
+
+
+def _scene_folder(folder) -> Path:
+    """``folder`` as a Path a scene folder can be written to (checked before a scan is
+    generated, which takes up to a minute)."""
+    import os
+
+    from crosssection.core.errors import ConfigError, ParameterError
+
+    if not isinstance(folder, (str, os.PathLike)) or not str(folder).strip():
+        # Path("") is the current folder: a scene would be written among the caller's files
+        raise ParameterError(f"folder must be a non-empty path, got {folder!r}")
+    folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise ConfigError("exists and is not a folder (a scene folder is written there)", folder)
+    for parent in folder.parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise ConfigError(f"{parent} is a file, not a folder", folder)
+            break
+    return folder
+
+
+def _is_whole(value, *, floats: bool = False) -> bool:
+    """Whether ``value`` is a whole number: an integer, or with ``floats`` also a whole float
+    such as 20.0 (taken where the value is only counted with, refused where numpy needs an
+    int: seeds and array sizes). A bool is not one: True would be read as 1."""
+    kind = numbers.Real if floats else numbers.Integral
+    return (isinstance(value, kind) and not isinstance(value, bool)
+            and math.isfinite(value) and value == int(value))
+
+
+def _check_whole(name: str, value, lo: int, hi: int | None = None, *,
+                 floats: bool = False) -> None:
+    """Refuse ``value`` unless it is a whole number (:func:`_is_whole`) in ``[lo, hi]``."""
+    from crosssection.core.errors import ParameterError
+
+    if not (_is_whole(value, floats=floats) and lo <= value and (hi is None or value <= hi)):
+        where = f"in {lo}-{hi}" if hi is not None else f">= {lo}"
+        raise ParameterError(f"{name} must be a whole number {where}, got {value!r}")
+
+
+def _check_positive(name: str, value) -> None:
+    """Refuse ``value`` unless it is a finite number > 0."""
+    from crosssection.core.errors import ParameterError
+
+    if not (isinstance(value, numbers.Real) and not isinstance(value, bool)
+            and math.isfinite(value) and value > 0):
+        raise ParameterError(f"{name} must be a finite number > 0, got {value!r}")
+
+
+def _check_degradation(name) -> None:
+    """Refuse ``name`` unless it is a key of :data:`DEGRADATIONS`."""
+    from crosssection.core.errors import ParameterError
+
+    if not isinstance(name, str) or name not in DEGRADATIONS:
+        raise ParameterError(f"degradation must be one of {sorted(DEGRADATIONS)}, got "
+                             f"{name!r}")
+
+
+def _sequence(name: str, values) -> list:
+    """``values`` as a list, refusing a single value (a string would be read letter by
+    letter, a number not at all)."""
+    from crosssection.core.errors import ParameterError
+
+    if isinstance(values, (str, bytes)) or not hasattr(values, "__iter__"):
+        raise ParameterError(f"{name} must be a sequence (a list of values), got {values!r}")
+    return list(values)
 
 
 def scan_grid(*, resolutions=(50.0,), layers=(4,), densities=(20,),
@@ -198,7 +315,26 @@ def scan_grid(*, resolutions=(50.0,), layers=(4,), densities=(20,),
     Returns
     -------
     list of pytest.param
+
+    Raises
+    ------
+    ParameterError
+        A condition :func:`make_generated_scan` refuses (checked here, at collection, not
+        when the first test runs).
     """
+    resolutions, layers, densities, degradations = (
+        _sequence(name, values) for name, values in
+        (("resolutions", resolutions), ("layers", layers), ("densities", densities),
+         ("degradations", degradations)))
+    _check_whole("seed", seed, 0)
+    for r in resolutions:
+        _check_positive("resolutions", r)
+    for m in layers:
+        _check_whole("layers", m, *MAX_LAYERS_RANGE, floats=True)
+    for n in densities:
+        _check_whole("densities", n, *N_STACKS_RANGE, floats=True)
+    for d in degradations:
+        _check_degradation(d)
     return [pytest.param(dict(seed=seed, px_per_mm=float(r), max_layers=int(m),
                               n_stacks=int(n), degradation=d),
                          id=f"{r:g}pxmm-{m}layers-{n}stacks-{d}")
@@ -345,9 +481,39 @@ def drawn_scan(seed: int, size: int = 420, *, ring_frac: float = 0.45, ring_px: 
                chord_px: tuple = (5, 16)):
     """A drawn RGB scan, uint8 (size, size, 3): a ring of blue ink and four chords across it
     of random widths in ``chord_px`` (px, upper bound excluded), on white paper. Draws in
-    milliseconds, for tests that need many scans."""
+    milliseconds, for tests that need many scans.
+
+    Parameters
+    ----------
+    seed : int
+        Whole number >= 0.
+    size : int
+        Side in px (>= 1).
+    ring_frac : float
+        Ring radius over the side (> 0).
+    ring_px : int
+        Ring line width in px (>= 1).
+    chord_px : (int, int)
+        Chord widths drawn from ``low`` (>= 1) up to ``high`` (> low, excluded).
+
+    Raises
+    ------
+    ParameterError
+        An argument outside these ranges.
+    """
     import cv2
     import numpy as np
+
+    from crosssection.core.errors import ParameterError
+
+    _check_whole("seed", seed, 0)
+    _check_whole("size", size, 1)
+    _check_positive("ring_frac", ring_frac)
+    _check_whole("ring_px", ring_px, 1)
+    if not (isinstance(chord_px, (tuple, list)) and len(chord_px) == 2
+            and all(_is_whole(w) for w in chord_px) and 1 <= chord_px[0] < chord_px[1]):
+        raise ParameterError(f"chord_px must be a pair (low, high) of whole numbers with "
+                             f"1 <= low < high (px), got {chord_px!r}")
 
     rng = np.random.default_rng(seed)
     img = np.full((size, size, 3), 250, np.uint8)
@@ -367,8 +533,16 @@ def generated_scan(seed: int, size: int = 420):
     """A small RGB scan (about 12 stacks of 1-4 layers in a disk), uint8 (size, size, 3).
 
     The network generator's scene when it finds a layout in 5 tries, else :func:`drawn_scan`.
+
+    Raises
+    ------
+    ParameterError
+        ``seed`` not a whole number >= 0, or ``size`` not one >= 1.
     """
     from crosssection.truth.network import SceneGenerationError, make_scene
+
+    _check_whole("seed", seed, 0)
+    _check_whole("size", size, 1)
 
     try:
         return make_scene(seed=seed, n_stacks=12, max_layers=4, image_size=size,

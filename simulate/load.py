@@ -13,6 +13,9 @@ fits and the paper's tables) are those of ``crosssection.stats.load_any(folder)`
 from __future__ import annotations
 
 import json
+import math
+import numbers
+import reprlib
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,11 +23,24 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from crosssection.core.errors import ConfigError
+from crosssection.core.errors import ConfigError, ParameterError
 
-__all__ = ["SimulationEnsemble", "load_ensemble", "plot_configuration"]
+__all__ = ["SimulationEnsemble", "load_ensemble", "plot_configuration", "ConfigurationNotFound"]
 
 TABLES = ("configs", "branches", "stacks", "voids")
+
+
+class ConfigurationNotFound(ParameterError, KeyError):
+    """No configuration of that id or key in the folder's ``rods.npz``.
+
+    A :class:`~crosssection.core.errors.ParameterError` that is also a :class:`KeyError`:
+    the lookup of a missing key raised ``KeyError`` before, and callers catching it keep
+    working.
+    """
+
+    # KeyError's own __str__ shows the message quoted (the repr of a missing key); the
+    # package's errors are one plain line
+    __str__ = ParameterError.__str__
 
 
 @dataclass
@@ -57,10 +73,23 @@ class SimulationEnsemble:
                 f"lambda = {self.params.get('lam', 'n/a')})")
 
     def _key(self, config) -> str:
-        key = f"config_{int(config):05d}" if not isinstance(config, str) else config
+        """The ``rods.npz`` key of ``config`` (checked: a stored configuration)."""
+        if isinstance(config, str):
+            key = config
+        elif (isinstance(config, numbers.Real) and not isinstance(config, bool)
+              and math.isfinite(config) and config == int(config)):
+            # a whole float (a config_id read from a table with gaps) names its configuration;
+            # 1.7 names none, and int() would silently pick configuration 1
+            key = f"config_{int(config):05d}"
+        else:
+            raise ParameterError(f"config must be a whole number (config_id) or a rods.npz "
+                                 f"key, got {config!r}")
+        rods = self.folder / "rods.npz"
+        if not self.keys and not rods.is_file():
+            raise ConfigError("missing: the folder holds no rods (tables only)", rods)
         if key not in self.keys:
-            raise KeyError(f"no configuration {config!r} in {self.folder / 'rods.npz'} "
-                           f"({len(self.keys)} configurations)")
+            raise ConfigurationNotFound(f"no configuration {config!r} in {rods} "
+                                        f"({len(self.keys)} configurations)")
         return key
 
     def rod(self, config) -> np.ndarray:
@@ -75,10 +104,24 @@ class SimulationEnsemble:
         -------
         (N+1, 2) float array
             Units of L.
+
+        Raises
+        ------
+        ConfigurationNotFound
+            No such configuration (a :class:`ParameterError` and a :class:`KeyError`).
+        ParameterError
+            ``config`` is neither a whole number nor a string.
+        ConfigError
+            The folder has no ``rods.npz``, or it can no longer be read.
         """
         key = self._key(config)
-        with np.load(self.folder / "rods.npz", allow_pickle=False) as rods:
-            return np.asarray(rods[key], float)
+        path = self.folder / "rods.npz"
+        try:
+            with np.load(path, allow_pickle=False) as rods:
+                return np.asarray(rods[key], float)
+        except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+            # the file was read when the ensemble was loaded: it changed since
+            raise ConfigError(f"unreadable rods file ({type(exc).__name__})", path) from None
 
     def plot(self, config=0, *, ax=None, stacks: bool = True):
         """Draw one configuration (:func:`plot_configuration`).
@@ -95,6 +138,11 @@ class SimulationEnsemble:
         Returns
         -------
         matplotlib.figure.Figure
+
+        Raises
+        ------
+        ConfigurationNotFound, ParameterError, ConfigError
+            As :meth:`rod`.
         """
         wall = self.params.get("wall_radius")
         return plot_configuration(
@@ -181,11 +229,17 @@ def plot_configuration(xy, *, ax=None, stacks: bool = True, lam: float = 7e5,
     Returns
     -------
     matplotlib.figure.Figure
+
+    Raises
+    ------
+    ParameterError
+        ``xy`` is not an (N+1, 2) array of finite numbers with N >= 1 (N >= 2 with
+        ``stacks``: the contact analysis needs two segments).
     """
     from matplotlib.collections import LineCollection
     from matplotlib.patches import Circle
 
-    xy = np.asarray(xy, float)
+    xy = _checked_xy(xy, stacks=stacks)
     if ax is None:
         from matplotlib.figure import Figure
 
@@ -219,3 +273,30 @@ def plot_configuration(xy, *, ax=None, stacks: bool = True, lam: float = 7e5,
     ax.set_ylabel("y / L")
     ax.set_title(text, fontsize=9)
     return ax.figure
+
+
+def _checked_xy(xy, *, stacks: bool) -> np.ndarray:
+    """``xy`` as an (N+1, 2) float array of finite numbers with N >= 1 (N >= 2 for the
+    ``stacks`` analysis).
+
+    Raises
+    ------
+    ParameterError
+        Naming ``xy``, its shape and the cause.
+    """
+    need = "xy must be an (N+1, 2) array of finite numbers with N >= 1"
+    try:
+        arr = np.asarray(xy, float)
+    except (TypeError, ValueError):
+        raise ParameterError(f"{need}, got {reprlib.repr(xy)}") from None
+    if arr.ndim != 2 or arr.shape[1] != 2 or len(arr) < 2:
+        hint = (" (transposed? pass xy.T)"
+                if arr.ndim == 2 and arr.shape[0] == 2 and arr.shape[1] != 2 else "")
+        raise ParameterError(f"{need}, got shape {arr.shape}{hint}")
+    bad = int(np.count_nonzero(~np.isfinite(arr)))
+    if bad:
+        raise ParameterError(f"{need}, got {bad} non-finite coordinate(s)")
+    if stacks and len(arr) < 3:
+        raise ParameterError("xy has N = 1 segment: the contact analysis of stacks=True needs "
+                             "N >= 2 (stacks=False draws it)")
+    return arr

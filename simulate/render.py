@@ -134,6 +134,8 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import numbers
+import reprlib
 import warnings
 import zipfile
 from dataclasses import dataclass
@@ -244,16 +246,23 @@ def _rod_length_mm(xy, delta, cal, n_max, *, rod_length_mm, px_per_mm, gap_px, m
         return rod_length_mm, delta * rod_length_mm >= need_mm
     rod_length_mm = need_mm / delta
     cap = ((max_size_px - 2) / px_per_mm - 2 * margin_mm) / max(extent, 1e-9)
+    # max_size_px is a soft cap on the rod length chosen here (a given rod length or rod
+    # thickness ignores it); the hard limit is MAX_SCENE_PX, refused by _check_scene_size.
+    # Both warnings say the pixel budget does not fit the resolution: ResolutionWarning
+    from crosssection.quality import ResolutionWarning
+
     if cap <= 0:
         # the margins alone exceed max_size_px: no rod length keeps the image under it, and a
         # negative one would mirror the drawing; the pixel budget of render_configuration
         # refuses the scene if it is too large
         warnings.warn(f"the {margin_mm:g} mm margins alone exceed {max_size_px} px at "
-                      f"{px_per_mm:g} px/mm: rod length not capped", stacklevel=4)
+                      f"{px_per_mm:g} px/mm: rod length not capped, the image is larger "
+                      "than max_size_px", ResolutionWarning, stacklevel=4)
         return rod_length_mm, True
     if rod_length_mm > cap:
         warnings.warn(f"rod length capped at {cap:.1f} mm to keep the image under "
-                      f"{max_size_px} px: passes just beyond delta may touch", stacklevel=4)
+                      f"{max_size_px} px: passes just beyond delta may touch",
+                      ResolutionWarning, stacklevel=4)
         return cap, False
     return rod_length_mm, True
 
@@ -1253,7 +1262,7 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
     Parameters
     ----------
     xy : (N+1, 2) array
-        Rod node positions (units of L).
+        Rod node positions (units of L), finite, N >= 2.
     analysis : RodAnalysis, optional
         Result of :func:`simulate.contacts.analyze_rod` (computed when omitted).
     lam : float
@@ -1323,7 +1332,8 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
     gap_px : float
         Smallest visible gap between passes farther apart than delta.
     max_size_px : int
-        Largest image side when ``rod_length_mm`` is chosen here from the gap.
+        Largest image side when ``rod_length_mm`` is chosen here from the gap: a soft cap
+        (a warning when it cannot be kept; the hard limit is :data:`MAX_SCENE_PX`).
     hole_radius_mm : float, "auto" or None
         Draw a hard-wall disk of this radius centred on the wall's centre, or without a wall on
         the rod's centre of mass (stacks touching it are "periphery"); ``"auto"``: the wall,
@@ -1344,13 +1354,36 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
     ParameterError
         An absurd option, or a scene that would exceed :data:`MAX_SCENE_PX` pixels (checked
         before anything is drawn).
+
+    Warns
+    -----
+    crosssection.quality.ResolutionWarning
+        ``max_size_px`` is not kept: the rod length was capped to it (passes just beyond delta
+        may touch), or the margins alone exceed it (the image is larger).
     """
-    xy = np.asarray(xy, float)
+    xy = _checked_rod(xy)
+    if analysis is not None and not isinstance(analysis, RodAnalysis):
+        raise ParameterError(f"analysis must be a RodAnalysis (simulate.contacts.analyze_rod) "
+                             f"or None, got {type(analysis).__name__}")
     _check_seed(seed)
     if smooth not in SMOOTH:
         raise ParameterError(f"smooth must be one of {SMOOTH}, got {smooth!r}")
-    if not (px_per_mm > 0 and thickness_mm > 0):
-        raise ParameterError("px_per_mm and thickness_mm must be positive")
+    for name, v in (("px_per_mm", px_per_mm), ("thickness_mm", thickness_mm),
+                    ("max_size_px", max_size_px)):
+        _check_real(name, v, positive=True)
+    for name, v in (("margin_mm", margin_mm), ("gap_px", gap_px)):
+        _check_real(name, v, positive=False)
+    if analysis is None:
+        # only the analysis computed here reads them
+        _check_real("lam", lam, positive=False)
+        if contact_distance is not None:
+            _check_real("contact_distance", contact_distance, positive=True)
+    if not (hole_radius_mm is None or isinstance(hole_radius_mm, str)
+            and hole_radius_mm == "auto"):
+        _check_real("hole_radius_mm", hole_radius_mm, positive=True, also="'auto' or None")
+    if wall_radius is not None and not _is_point(wall_center_xy):
+        raise ParameterError(f"wall_center_xy must be two finite numbers (x, y), got "
+                             f"{wall_center_xy!r}")
     if px_per_mm * thickness_mm < MIN_SHEET_PX:
         # the analysis refuses such a scan: a sheet thinner than a pixel cannot be resolved
         raise ParameterError(f"a sheet would be {px_per_mm * thickness_mm:.3g} px thick (< "
@@ -1358,8 +1391,8 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
                              f"{thickness_mm:g} mm): no scan to analyse", "px_per_mm")
     for name, v in (("rod_thickness", rod_thickness), ("wall_radius", wall_radius),
                     ("rod_length_mm", rod_length_mm)):
-        if v is not None and not (math.isfinite(v) and v > 0):
-            raise ParameterError(f"{name} must be a finite number > 0, got {v!r}")
+        if v is not None:
+            _check_real(name, v, positive=True)
     if calibration is not None and not isinstance(calibration, Calibration):
         raise ParameterError(f"calibration must be a Calibration, got {type(calibration).__name__}")
     if draw not in DRAW:
@@ -1462,6 +1495,43 @@ RENDER_RECORD = "render.json"
 #: Entries of a simulation's params.json a render does not depend on: a re-run of the
 #: ensemble adds configurations and records the versions it ran with.
 _SOURCE_IGNORED = ("n_configs", "version", "libraries")
+
+
+def _checked_rod(xy) -> np.ndarray:
+    """``xy`` as an (N+1, 2) float array of finite numbers with N >= 2 (the contact analysis
+    needs two segments), else a :class:`ParameterError` naming ``xy``."""
+    need = "xy must be an (N+1, 2) array of finite numbers with N >= 2"
+    try:
+        arr = np.asarray(xy, float)
+    except (TypeError, ValueError):
+        raise ParameterError(f"{need}, got {reprlib.repr(xy)}") from None
+    if arr.ndim != 2 or arr.shape[1] != 2 or len(arr) < 3:
+        hint = (" (transposed? pass xy.T)"
+                if arr.ndim == 2 and arr.shape[0] == 2 and arr.shape[1] != 2 else "")
+        raise ParameterError(f"{need}, got shape {arr.shape}{hint}")
+    bad = int(np.count_nonzero(~np.isfinite(arr)))
+    if bad:
+        raise ParameterError(f"{need}, got {bad} non-finite coordinate(s)")
+    return arr
+
+
+def _check_real(name: str, v, *, positive: bool, also: str = "") -> None:
+    """Refuse ``v`` unless it is a finite real number, > 0 (``positive``) or >= 0; ``also``
+    names the other values the option takes. A bool is refused: True would be read as 1."""
+    ok = (isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v)
+          and (v > 0 if positive else v >= 0))
+    if not ok:
+        what = f"a finite number {'>' if positive else '>='} 0" + (f", {also}" if also else "")
+        raise ParameterError(f"{name} must be {what}, got {v!r}")
+
+
+def _is_point(p) -> bool:
+    """Whether ``p`` is two finite numbers."""
+    try:
+        arr = np.asarray(p, float)
+    except (TypeError, ValueError):
+        return False
+    return arr.shape == (2,) and bool(np.isfinite(arr).all())
 
 
 def _check_seed(seed) -> None:

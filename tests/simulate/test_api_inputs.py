@@ -1,0 +1,160 @@
+"""Bad input to the Python API of the simulator (``simulate.load``, ``render_configuration``)
+is refused with the package's own errors, one line naming the argument; doubtful input is
+warned about with a package warning category."""
+import warnings
+
+import numpy as np
+import pandas as pd
+import pytest
+from matplotlib.figure import Figure
+
+from crosssection.core.errors import ConfigError, ParameterError
+from crosssection.quality import QualityWarning, ResolutionWarning
+from simulate.contacts import analyze_rod
+from simulate.load import ConfigurationNotFound, load_ensemble, plot_configuration
+from simulate.render import render_configuration
+from simulate.shapes import hairpin, resample
+
+#: a short folded rod: its clean scene at 20 px/mm is about 150 x 200 px
+XY = resample(hairpin(0.01, arm=0.3), 60)
+LAM = 2e4
+FAST = {"lam": LAM, "px_per_mm": 20.0, "clean": True}
+
+
+def _folder(root, *, rods=True):
+    """A simulation folder of two configurations (the tables are not read by ``rod``)."""
+    root.mkdir()
+    pd.DataFrame({"config_id": [0, 1], "n_stacks": [1, 1]}).to_csv(root / "configs.csv",
+                                                                 index=False)
+    for name in ("branches", "voids"):
+        pd.DataFrame({"config_id": [0]}).to_csv(root / f"{name}.csv", index=False)
+    if rods:
+        np.savez(root / "rods.npz", config_00000=XY, config_00001=XY[::-1])
+    return root
+
+
+@pytest.fixture
+def ens(tmp_path):
+    return load_ensemble(_folder(tmp_path / "sim"))
+
+
+# --- simulate.load ---------------------------------------------------------------------------
+
+@pytest.mark.parametrize("config", [5, -1, "x"])
+def test_a_missing_configuration_is_a_parameter_error_and_still_a_key_error(ens, config):
+    with pytest.raises(ConfigurationNotFound) as info:
+        ens.rod(config)
+    assert isinstance(info.value, ParameterError) and isinstance(info.value, KeyError)
+    # one plain line, not the quoted repr KeyError shows
+    assert str(info.value) == (f"no configuration {config!r} in {ens.folder / 'rods.npz'} "
+                               "(2 configurations)")
+    with pytest.raises(ParameterError, match="no configuration"):
+        ens.plot(config)
+
+
+@pytest.mark.parametrize("config", [None, 1.7, True, [0], float("nan")])
+def test_rod_refuses_a_config_that_is_not_a_whole_number_or_a_key(ens, config):
+    with pytest.raises(ParameterError, match="^config must be a whole number"):
+        ens.rod(config)
+
+
+def test_rod_takes_whole_numbers_of_any_type(ens):
+    for config in (1, np.int64(1), 1.0, "config_00001"):
+        assert np.array_equal(ens.rod(config), XY[::-1])
+
+
+def test_rod_of_a_folder_without_rods_says_rods_npz_is_missing(tmp_path):
+    ens = load_ensemble(_folder(tmp_path / "sim", rods=False))
+    for call in (lambda: ens.rod(0), lambda: ens.plot(0)):
+        with pytest.raises(ConfigError, match=r"rods\.npz: missing"):
+            call()
+
+
+def test_rod_of_a_rods_file_removed_after_loading_is_a_config_error(ens):
+    (ens.folder / "rods.npz").unlink()
+    with pytest.raises(ConfigError, match=r"rods\.npz: unreadable rods file"):
+        ens.rod(0)
+
+
+@pytest.mark.parametrize("xy, cause", [
+    (np.zeros((0, 2)), r"got shape \(0, 2\)"),
+    (np.zeros(5), r"got shape \(5,\)"),
+    (np.zeros((1, 2)), r"got shape \(1, 2\)"),
+    (XY.T, r"got shape \(2, 61\) \(transposed\? pass xy\.T\)"),
+    (np.where(np.arange(61)[:, None] == 3, np.nan, XY), r"got 2 non-finite coordinate\(s\)"),
+    ("abc", "got 'abc'"),
+    ([[0, 0], [1]], r"got \[\[0, 0\], \[1\]\]"),
+])
+def test_plot_configuration_refuses_what_is_not_a_rod(xy, cause):
+    for stacks in (True, False):
+        with pytest.raises(ParameterError, match=r"^xy must be an \(N\+1, 2\) array of finite "
+                                                 rf"numbers with N >= 1, {cause}$"):
+            plot_configuration(xy, stacks=stacks)
+
+
+def test_a_one_segment_rod_is_drawn_but_has_no_stacks_analysis():
+    two = np.array([[0.0, 0.0], [1.0, 0.0]])
+    assert isinstance(plot_configuration(two, stacks=False), Figure)
+    with pytest.raises(ParameterError, match="needs N >= 2 .stacks=False draws it"):
+        plot_configuration(two)
+
+
+# --- simulate.render.render_configuration ---------------------------------------------------
+
+@pytest.mark.parametrize("xy, cause", [
+    (XY.T, r"got shape \(2, 61\) \(transposed\? pass xy\.T\)"),
+    (np.zeros((0, 2)), r"got shape \(0, 2\)"),
+    # one segment: the contact analysis needs two
+    (XY[:2], r"got shape \(2, 2\)"),
+    (np.where(np.arange(61)[:, None] == 3, np.nan, XY), r"got 2 non-finite coordinate\(s\)"),
+    (np.where(np.arange(61)[:, None] == 3, np.inf, XY), r"got 2 non-finite coordinate\(s\)"),
+    ("abc", "got 'abc'"),
+])
+def test_render_refuses_what_is_not_a_rod(xy, cause):
+    with pytest.raises(ParameterError, match=r"^xy must be an \(N\+1, 2\) array of finite "
+                                             rf"numbers with N >= 2, {cause}$"):
+        render_configuration(xy, **FAST)
+
+
+@pytest.mark.parametrize("name, value", [
+    ("px_per_mm", "50"), ("px_per_mm", float("inf")), ("px_per_mm", True),
+    ("thickness_mm", "0.1"), ("lam", "x"), ("lam", -1.0), ("contact_distance", "x"),
+    ("contact_distance", -1.0), ("margin_mm", "x"), ("margin_mm", -1.0), ("gap_px", "x"),
+    ("gap_px", -1.0), ("max_size_px", "x"), ("max_size_px", -5), ("rod_length_mm", "5"),
+    ("rod_thickness", "0.01"), ("hole_radius_mm", -1.0), ("hole_radius_mm", "3"),
+])
+def test_render_refuses_an_option_that_is_not_a_number_in_range(name, value):
+    with pytest.raises(ParameterError, match=f"^{name} must be a finite number [>=]+ 0"):
+        render_configuration(XY, **{**FAST, name: value})
+
+
+def test_render_refuses_a_bad_wall_centre_and_analysis():
+    with pytest.raises(ParameterError, match="^wall_center_xy must be two finite numbers"):
+        render_configuration(XY, wall_radius=1.0, wall_center_xy="ab", **FAST)
+    with pytest.raises(ParameterError, match="^analysis must be a RodAnalysis"):
+        render_configuration(XY, "an analysis", **FAST)
+
+
+def test_render_options_of_any_number_type_give_the_same_scene():
+    a = render_configuration(XY, **FAST)
+    b = render_configuration(XY, **{**FAST, "px_per_mm": np.float32(20.0), "lam": int(LAM)},
+                             max_size_px=np.int64(2500), margin_mm=2)
+    assert np.array_equal(a.rgb, b.rgb)
+
+
+def test_a_size_cap_the_scene_cannot_keep_is_a_resolution_warning():
+    an = analyze_rod(XY, lam=LAM)
+    free = render_configuration(XY, an, **FAST)
+    # the margins alone exceed 10 px: the scene is drawn as without the cap
+    with pytest.warns(ResolutionWarning, match="margins alone exceed 10 px") as caught:
+        tiny = render_configuration(XY, an, max_size_px=10, **FAST)
+    assert all(issubclass(w.category, QualityWarning) for w in caught)
+    assert np.array_equal(tiny.rgb, free.rgb)
+    # a cap the margins leave room for shortens the rod
+    side = max(free.rgb.shape[:2]) - 40
+    with pytest.warns(ResolutionWarning, match="rod length capped"):
+        capped = render_configuration(XY, an, max_size_px=side, **FAST)
+    assert max(capped.rgb.shape[:2]) < side
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        render_configuration(XY, an, **FAST)
