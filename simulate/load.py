@@ -15,6 +15,7 @@ from __future__ import annotations
 import json
 import math
 import numbers
+import os
 import reprlib
 import zipfile
 from dataclasses import dataclass, field
@@ -168,8 +169,12 @@ def load_ensemble(folder) -> SimulationEnsemble:
     ------
     ConfigError
         Not a simulation folder, or an unreadable file (named).
+    ParameterError
+        ``folder`` is not a path.
     """
-    folder = Path(folder)
+    if not isinstance(folder, (str, os.PathLike)) or not str(folder).strip():
+        raise ParameterError(f"folder must be a simulation folder's path, got {folder!r}")
+    folder = Path(folder).expanduser()
     if not (folder / "configs.csv").is_file():
         raise ConfigError("not a simulation folder (no configs.csv)", folder)
     tables = {}

@@ -158,3 +158,12 @@ def test_a_size_cap_the_scene_cannot_keep_is_a_resolution_warning():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         render_configuration(XY, an, **FAST)
+
+
+@pytest.mark.parametrize("folder", [None, 3, ""])
+def test_load_ensemble_needs_a_folder_path(folder):
+    from crosssection.core.errors import ParameterError
+    from simulate.load import load_ensemble
+
+    with pytest.raises(ParameterError, match="simulation folder's path"):
+        load_ensemble(folder)
