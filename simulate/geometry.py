@@ -94,4 +94,32 @@ def radius_of_gyration(xy) -> float:
     return float(np.sqrt(w @ np.einsum("ij,ij->i", xy, xy)))
 
 
-__all__ = ["positions", "angles", "trapezoid_weights", "center_of_mass", "radius_of_gyration"]
+__all__ = ["positions", "angles", "trapezoid_weights", "center_of_mass", "radius_of_gyration",
+           "checked_rod"]
+
+
+def checked_rod(xy, *, min_segments: int = 1) -> np.ndarray:
+    """``xy`` as an (N+1, 2) float array of finite numbers with ``N >= min_segments``.
+
+    Raises
+    ------
+    ParameterError
+        Naming ``xy``, its shape (with a hint when it looks transposed) and the cause.
+    """
+    import reprlib
+
+    from crosssection.core.errors import ParameterError
+
+    need = f"xy must be an (N+1, 2) array of finite numbers with N >= {min_segments}"
+    try:
+        arr = np.asarray(xy, float)
+    except (TypeError, ValueError):
+        raise ParameterError(f"{need}, got {reprlib.repr(xy)}") from None
+    if arr.ndim != 2 or arr.shape[1] != 2 or len(arr) < min_segments + 1:
+        hint = (" (transposed? pass xy.T)"
+                if arr.ndim == 2 and arr.shape[0] == 2 and arr.shape[1] != 2 else "")
+        raise ParameterError(f"{need}, got shape {arr.shape}{hint}")
+    bad = int(np.count_nonzero(~np.isfinite(arr)))
+    if bad:
+        raise ParameterError(f"{need}, got {bad} non-finite coordinate(s)")
+    return arr

@@ -16,7 +16,6 @@ import json
 import math
 import numbers
 import os
-import reprlib
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -25,6 +24,7 @@ import numpy as np
 import pandas as pd
 
 from crosssection.core.errors import ConfigError, ParameterError
+from simulate.geometry import checked_rod
 
 __all__ = ["SimulationEnsemble", "load_ensemble", "plot_configuration", "ConfigurationNotFound"]
 
@@ -289,18 +289,7 @@ def _checked_xy(xy, *, stacks: bool) -> np.ndarray:
     ParameterError
         Naming ``xy``, its shape and the cause.
     """
-    need = "xy must be an (N+1, 2) array of finite numbers with N >= 1"
-    try:
-        arr = np.asarray(xy, float)
-    except (TypeError, ValueError):
-        raise ParameterError(f"{need}, got {reprlib.repr(xy)}") from None
-    if arr.ndim != 2 or arr.shape[1] != 2 or len(arr) < 2:
-        hint = (" (transposed? pass xy.T)"
-                if arr.ndim == 2 and arr.shape[0] == 2 and arr.shape[1] != 2 else "")
-        raise ParameterError(f"{need}, got shape {arr.shape}{hint}")
-    bad = int(np.count_nonzero(~np.isfinite(arr)))
-    if bad:
-        raise ParameterError(f"{need}, got {bad} non-finite coordinate(s)")
+    arr = checked_rod(xy, min_segments=1)
     if stacks and len(arr) < 3:
         raise ParameterError("xy has N = 1 segment: the contact analysis of stacks=True needs "
                              "N >= 2 (stacks=False draws it)")

@@ -135,7 +135,6 @@ import argparse
 import json
 import math
 import numbers
-import reprlib
 import warnings
 import zipfile
 from dataclasses import dataclass
@@ -154,6 +153,7 @@ from crosssection.truth.scene import Scene, write_scene
 from crosssection.truth.voids import truth_voids
 
 from simulate.contacts import RodAnalysis, analyze_rod
+from simulate.geometry import checked_rod
 
 __all__ = ["render_configuration", "render_directory", "add_subparser", "smooth_line",
            "passes_calibration", "SCAN_DEFECTS", "CLEAN", "DRAW", "JOIN"]
@@ -1500,19 +1500,7 @@ _SOURCE_IGNORED = ("n_configs", "version", "libraries")
 def _checked_rod(xy) -> np.ndarray:
     """``xy`` as an (N+1, 2) float array of finite numbers with N >= 2 (the contact analysis
     needs two segments), else a :class:`ParameterError` naming ``xy``."""
-    need = "xy must be an (N+1, 2) array of finite numbers with N >= 2"
-    try:
-        arr = np.asarray(xy, float)
-    except (TypeError, ValueError):
-        raise ParameterError(f"{need}, got {reprlib.repr(xy)}") from None
-    if arr.ndim != 2 or arr.shape[1] != 2 or len(arr) < 3:
-        hint = (" (transposed? pass xy.T)"
-                if arr.ndim == 2 and arr.shape[0] == 2 and arr.shape[1] != 2 else "")
-        raise ParameterError(f"{need}, got shape {arr.shape}{hint}")
-    bad = int(np.count_nonzero(~np.isfinite(arr)))
-    if bad:
-        raise ParameterError(f"{need}, got {bad} non-finite coordinate(s)")
-    return arr
+    return checked_rod(xy, min_segments=2)
 
 
 def _check_real(name: str, v, *, positive: bool, also: str = "") -> None:

@@ -466,6 +466,17 @@ def _applicability(fam, x, c, k) -> str:
     return ""
 
 
+def _checked_sample(x, truncation, *, n_boot, n_mc, gof, ci_level, seed):
+    """The observations and cuts of a fit with its options checked: ``(x, cuts, n_dropped)``
+    with the non-finite values left out (:func:`_finite`)."""
+    x = _observations(x)
+    _count(n_boot, "n_boot")
+    _check_mc(n_mc, gof)
+    _level(ci_level, "ci_level")
+    _check_seed(seed)
+    return _finite(x, _as_cuts(truncation, x.size))
+
+
 def fit_family(x, family: str, *, truncation=None, n_boot: int = 200, seed=0,
                gof: bool = True, n_mc: int = 199, ci_level: float = 0.95,
                discrete: bool = False) -> FitResult:
@@ -514,13 +525,8 @@ def fit_family(x, family: str, *, truncation=None, n_boot: int = 200, seed=0,
         outside (0, 1), a seed numpy cannot use).
     """
     fam = _family(family)
-    x = _observations(x)
-    _count(n_boot, "n_boot")
-    _check_mc(n_mc, gof)
-    _level(ci_level, "ci_level")
-    _check_seed(seed)
-    c = _as_cuts(truncation, x.size)
-    x, c, _ = _finite(x, c)
+    x, c, _ = _checked_sample(x, truncation, n_boot=n_boot, n_mc=n_mc, gof=gof,
+                              ci_level=ci_level, seed=seed)
     n = x.size
     truncated = c is not None
     k = fam.k(truncated)
@@ -862,13 +868,8 @@ def fit_all(x, families=PAPER_FAMILIES, *, truncation=None, seed=0, n_boot: int 
         if outside:
             raise ParameterError(f"select_from names {outside}, which are not among the "
                                  f"families fitted {families}")
-    x = _observations(x)
-    _count(n_boot, "n_boot")
-    _check_mc(n_mc, gof)
-    _level(ci_level, "ci_level")
-    _check_seed(seed)
-    c = _as_cuts(truncation, x.size)
-    x, c, n_dropped = _finite(x, c)
+    x, c, n_dropped = _checked_sample(x, truncation, n_boot=n_boot, n_mc=n_mc, gof=gof,
+                                      ci_level=ci_level, seed=seed)
     if c is not None:
         keep = x >= c
         n_dropped += int(x.size - keep.sum())
