@@ -170,7 +170,8 @@ def test_a_non_finite_truncation_is_refused(cut):
 
 
 def test_cuts_outside_a_positive_laws_support_make_it_inapplicable():
-    # a negative cut used to fit the exponential to x - c and the log-normal to -1e300
+    # below 0 a positive law has no mass to truncate: fitted anyway, the exponential would
+    # fit x - c and the log-normal reach a log-likelihood of -1e300
     for family in ("exponential", "lognormal", "gamma"):
         r = fit_family(G, family, truncation=-1.0, **QUICK)
         assert not r.ok and "needs a truncation >= 0" in r.note
