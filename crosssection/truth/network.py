@@ -484,6 +484,11 @@ class _Layout:
     radius_px: float
 
 
+#: Largest scene generated, in pixels (10 000 x 10 000; the typical scenes are 1000-2500 px a
+#: side).
+MAX_SCENE_PX = 10_000 * 10_000
+
+
 def _initial_radius_px(*, n_cells, image_size, hole_radius_mm, px_per_mm, w_max_px):
     """Hole radius: given, from the image size, or room for the widest bands plus voids."""
     if hole_radius_mm is not None:
@@ -771,6 +776,12 @@ def make_scene(*, seed: int, n_stacks: int = 40, max_layers: int = 6, px_per_mm:
     radius_px = _initial_radius_px(n_cells=n_cells, image_size=image_size,
                                    hole_radius_mm=hole_radius_mm, px_per_mm=px_per_mm,
                                    w_max_px=float(cal.width(max_layers)) * px_per_mm)
+    side = image_size or 2 * radius_px / 0.9
+    if side * side > MAX_SCENE_PX:
+        # the drawing holds several float images of the scene: refuse before allocating them
+        raise ParameterError(f"the scene would be about {side:.0f} x {side:.0f} px (> "
+                             f"{math.isqrt(MAX_SCENE_PX)} px a side) at {px_per_mm:g} px/mm: "
+                             "lower px_per_mm, n_stacks, image_size or hole_radius_mm")
     fixed_radius = image_size is not None or hole_radius_mm is not None
     failures = []
     for attempt in range(max_tries):

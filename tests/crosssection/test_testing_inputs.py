@@ -116,3 +116,11 @@ def test_the_default_scan_is_accepted(tmp_path):
     scan = make_generated_scan(tmp_path / "scan", **DEFAULT_SCAN)
     again = make_generated_scan(tmp_path / "again", **{**DEFAULT_SCAN, "n_stacks": 20.0})
     assert np.array_equal(scan.scene.rgb, again.scene.rgb)
+
+
+def test_a_scene_too_large_to_draw_is_refused_before_drawing():
+    from crosssection.core.errors import ParameterError
+    from crosssection.truth.network import make_scene
+
+    with pytest.raises(ParameterError, match="the scene would be about"):
+        make_scene(seed=1, px_per_mm=1e4)
