@@ -46,7 +46,6 @@ import math
 import os
 import shutil
 import sys
-import tempfile
 import time
 import traceback
 from collections import deque
@@ -60,7 +59,8 @@ import pandas as pd
 from crosssection._version import __version__
 from crosssection.core import schema
 from crosssection.core.errors import ConfigError, FoldstatError, ParameterError
-from crosssection.core.fileio import write_csv, write_json
+from crosssection.core.fileio import (PARTIAL_TAG, clear_stale_folders, staging_folder,
+                                      swap_in_folder, write_csv, write_json)
 from crosssection.core.parallel import get_executor, spawn_seeds
 from crosssection.params import (PARAM_NAMES, AnalysisParams, add_analysis_arguments,
                                  check_param, switched_off)
@@ -74,7 +74,6 @@ SUMMARY_NUMBERS = ["n_junctions", "n_stacks", "n_branches", "n_voids", "mean_bra
 INDEX_COLUMNS = (["image", "set", "status", "output"] + SUMMARY_NUMBERS
                  + ["quality", "wall_s", "seed", "params_hash", "peak_rss_mb", "reason"])
 FAILURE_COLUMNS = ["image", "set", "reason"]
-PARTIAL_TAG = ".partial-"
 #: exit status of a batch that finished but could not analyse every image
 EXIT_SOME_FAILED = 3
 #: how often (s) the index is rewritten while the batch runs, so a killed batch leaves one
@@ -339,15 +338,6 @@ def _row(task: ImageTask, status: str, summary: dict | None = None, reason: str 
     return row
 
 
-def _read_umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
-_UMASK = _read_umask()  # read once at import: os.umask is process-wide, not thread-safe
-
-
 def _peak_rss_mb() -> float:
     """Peak resident memory of this process so far (MB; Linux reports ru_maxrss in kB)."""
     try:
@@ -365,14 +355,6 @@ def _one_line(exc: BaseException) -> str:
     tb = traceback.extract_tb(exc.__traceback__)
     where = f" (at {Path(tb[-1].filename).name}:{tb[-1].lineno})" if tb else ""
     return " ".join(f"unexpected {type(exc).__name__}: {exc}{where}".split())
-
-
-def _clear_partials(final: Path):
-    """Remove staging folders a killed task left next to ``final``."""
-    parent = final.parent
-    if parent.is_dir():
-        for p in parent.glob(f".{final.name}{PARTIAL_TAG}*"):
-            shutil.rmtree(p, ignore_errors=True) if p.is_dir() else p.unlink(missing_ok=True)
 
 
 def process_image(task: ImageTask) -> dict:
@@ -396,7 +378,7 @@ def process_image(task: ImageTask) -> dict:
     try:
         from crosssection.pipeline import analyze
 
-        _clear_partials(final)
+        clear_stale_folders(final)
         params = AnalysisParams.from_mapping(task.params, path=task.image)
         with warnings.catch_warnings():
             # the flags are in the summary; the driver prints them once per image
@@ -406,23 +388,15 @@ def process_image(task: ImageTask) -> dict:
                 "seed": task.seed, "params": task.params, "version": __version__}
         if isinstance(getattr(result, "summary", None), dict):
             result.summary["batch"] = dict(info)
-        final.parent.mkdir(parents=True, exist_ok=True)
-        staging = Path(tempfile.mkdtemp(prefix=f".{final.name}{PARTIAL_TAG}", dir=final.parent))
-        os.chmod(staging, 0o777 & ~_UMASK)  # mkdtemp makes 0700; outputs get the usual mode
+        staging = staging_folder(final)
         result.write(staging, figure=task.figure)
         summary_path = staging / "summary.json"
         summary = json.loads(summary_path.read_text())
         info["wall_s"] = time.perf_counter() - t0
         summary["batch"] = info
         write_json(summary_path, summary)
-        # swap the complete folder into place; an old one (other parameters) goes first
-        if final.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{final.name}{PARTIAL_TAG}", dir=final.parent))
-            os.replace(final, old / "old")
-            os.replace(staging, final)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.replace(staging, final)
+        # the complete folder takes the place of an old one (other parameters)
+        swap_in_folder(staging, final)
         staging = None
         row = _row(task, "ok", summary, wall_s=info["wall_s"])
         row["peak_rss_mb"] = _peak_rss_mb()

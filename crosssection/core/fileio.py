@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
@@ -20,7 +21,12 @@ def _current_umask() -> int:
     return mask
 
 
-_UMASK = _current_umask()
+# read once at import: os.umask can only be read by setting it, which is not thread-safe
+UMASK = _current_umask()
+#: infix of the hidden working folders beside an output folder: ``.<name>.partial-*`` being
+#: written, ``.<name>.old-*`` the previous output on its way out
+PARTIAL_TAG = ".partial-"
+OLD_TAG = ".old-"
 
 
 @contextmanager
@@ -46,7 +52,7 @@ def atomic_path(path, suffix=None):
                                dir=path.parent)
     os.close(fd)
     tmp = Path(tmp)
-    os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp creates 0600; outputs get the usual mode
+    os.chmod(tmp, 0o666 & ~UMASK)  # mkstemp creates 0600; outputs get the usual mode
     try:
         yield tmp
         os.replace(tmp, path)
@@ -153,3 +159,50 @@ def read_json_object(path) -> dict:
     if not isinstance(data, dict):
         raise ConfigError("must hold a JSON object", path)
     return data
+
+
+def staging_folder(final) -> Path:
+    """A new hidden folder beside ``final`` (``.<name>.partial-*``, the parent created) with
+    the mode of an ordinary new folder, to write an output folder into before
+    :func:`swap_in_folder`."""
+    final = Path(final)
+    final.parent.mkdir(parents=True, exist_ok=True)
+    stage = Path(tempfile.mkdtemp(prefix=f".{final.name}{PARTIAL_TAG}", dir=final.parent))
+    os.chmod(stage, 0o777 & ~UMASK)  # mkdtemp makes 0700, which would hide it from others
+    return stage
+
+
+def clear_stale_folders(final) -> None:
+    """Remove the hidden working folders (and files) a killed run left beside ``final``."""
+    final = Path(final)
+    if final.parent.is_dir():
+        for tag in (PARTIAL_TAG, OLD_TAG):
+            for p in final.parent.glob(f".{final.name}{tag}*"):
+                if p.is_dir():
+                    shutil.rmtree(p, ignore_errors=True)
+                else:
+                    p.unlink(missing_ok=True)
+
+
+def swap_in_folder(stage, final) -> None:
+    """Rename ``stage`` to ``final``: a previous ``final`` is moved away first and deleted
+    last, and put back if the second rename fails, so ``final`` is the old folder or the new
+    one, never a mix."""
+    stage, final = Path(stage), Path(final)
+    if not final.exists():
+        os.replace(stage, final)
+        return
+    old = Path(tempfile.mkdtemp(prefix=f".{final.name}{OLD_TAG}", dir=final.parent))
+    os.replace(final, old / final.name)
+    try:
+        os.replace(stage, final)
+    except BaseException:
+        os.replace(old / final.name, final)
+        shutil.rmtree(old, ignore_errors=True)
+        raise
+    try:
+        shutil.rmtree(old)
+    except (OSError, KeyboardInterrupt):
+        # the new folder is complete and in place: what is left of the old one is a hidden
+        # folder that the next run removes (clear_stale_folders), not a failure
+        pass

@@ -14,7 +14,6 @@ import errno
 import html
 import os
 import shutil
-import tempfile
 import textwrap
 from contextlib import contextmanager
 from pathlib import Path
@@ -24,7 +23,8 @@ import pandas as pd
 
 from crosssection._version import __version__
 from crosssection.core.errors import ParameterError
-from crosssection.core.fileio import save_figure, write_csv, write_json, write_text
+from crosssection.core.fileio import (clear_stale_folders, save_figure, staging_folder,
+                                      swap_in_folder, write_csv, write_json, write_text)
 from crosssection.stats import fits as F
 from crosssection.stats.families import FAMILIES
 from crosssection.stats.data import REPORT_TABLES, Ensemble
@@ -597,16 +597,6 @@ def check_report_dir(out_dir, inputs=()) -> None:
                 out)
 
 
-def _current_umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
-# read once at import: os.umask can only be read by setting it, which is not thread-safe
-_UMASK = _current_umask()
-
-
 def _named_error(exc: OSError, path) -> OSError:
     """``exc`` naming ``path`` (the report folder) rather than a hidden working folder."""
     return type(exc)(exc.errno, exc.strerror or str(exc), str(path))
@@ -621,47 +611,20 @@ def _staged_folder(out: Path):
     left as it was.
     """
     real = out.resolve()
-    parent, name = real.parent, real.name
     try:
-        parent.mkdir(parents=True, exist_ok=True)
-        for p in parent.iterdir():
-            if p.name.startswith((f".{name}.partial-", f".{name}.old-")) and p.is_dir():
-                shutil.rmtree(p, ignore_errors=True)
-        stage = Path(tempfile.mkdtemp(prefix=f".{name}.partial-", dir=parent))
+        clear_stale_folders(real)
+        stage = staging_folder(real)
     except OSError as exc:
         raise _named_error(exc, out) from None
     try:
-        os.chmod(stage, 0o777 & ~_UMASK)  # mkdtemp's 0700 would hide the report from others
         yield stage
         try:
-            _swap_in(stage, real)
+            swap_in_folder(stage, real)
         except OSError as exc:
             raise _named_error(exc, out) from None
     finally:
         if stage.exists():
             shutil.rmtree(stage, ignore_errors=True)
-
-
-def _swap_in(stage: Path, real: Path) -> None:
-    """Rename ``stage`` to ``real``, moving a previous ``real`` away first and deleting it
-    last; if the second rename fails the previous folder is put back."""
-    if not real.exists():
-        os.replace(stage, real)
-        return
-    old = Path(tempfile.mkdtemp(prefix=f".{real.name}.old-", dir=real.parent))
-    os.replace(real, old / real.name)
-    try:
-        os.replace(stage, real)
-    except BaseException:
-        os.replace(old / real.name, real)
-        shutil.rmtree(old, ignore_errors=True)
-        raise
-    try:
-        shutil.rmtree(old)
-    except (OSError, KeyboardInterrupt):
-        # the new report is complete and in place: what is left of the old one is a hidden
-        # folder that the next run removes, not a reason to report a failure
-        pass
 
 
 def _write_files(res: StatsResult, ens: Ensemble, out: Path, *, opts: StatsOptions, inputs,

@@ -13,6 +13,7 @@ import pandas as pd
 import pytest
 
 from crosssection import batch as B
+from crosssection.core import fileio
 from crosssection.params import AnalysisParams
 from crosssection.core.errors import ConfigError
 from crosssection.setconfig import check_params, load_set_config
@@ -188,7 +189,7 @@ def test_batch_records_failures_and_finishes_good_images(tmp_path):
         assert s["n_junctions"] == row["n_junctions"]
     assert (out / "alpha" / "s1").is_dir() and (out / "default" / "loose").is_dir()
     # output folders get the usual permissions (not the 0700 of a temporary folder)
-    assert (out / "alpha" / "s1").stat().st_mode & 0o777 == 0o777 & ~B._UMASK
+    assert (out / "alpha" / "s1").stat().st_mode & 0o777 == 0o777 & ~fileio.UMASK
     s1 = json.loads((out / "alpha" / "s1" / "summary.json").read_text())
     assert s1["batch"]["params"]["rod_length_mm"] == 200.0
     assert s1["batch"]["params"]["bending_rigidity_J"] == 1e-4

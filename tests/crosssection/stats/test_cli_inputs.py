@@ -8,6 +8,7 @@ import pandas as pd
 import pytest
 
 from crosssection.cli import main
+from crosssection.core import fileio
 from crosssection.core.errors import ParameterError
 from crosssection.quality import QualityWarning
 from crosssection.stats import demo, report
@@ -269,9 +270,9 @@ def test_a_failed_swap_puts_the_old_report_back(tmp_path, monkeypatch):
             raise OSError(28, "No space left on device", str(dst))
         real_replace(src, dst)
 
-    monkeypatch.setattr(report.os, "replace", failing)
+    monkeypatch.setattr(fileio.os, "replace", failing)
     with pytest.raises(OSError):
-        report._swap_in(new, old)
+        fileio.swap_in_folder(new, old)
     assert (old / "report.html").read_text() == "old"
     assert sorted(p.name for p in tmp_path.iterdir()) == [".rep.partial-x", "rep"]
 
