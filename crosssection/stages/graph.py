@@ -27,8 +27,8 @@ from scipy.sparse.csgraph import depth_first_order
 
 from crosssection.core import polyline
 from crosssection.core.errors import ParameterError
-from crosssection.stages.junctions import (Junctions, find_junctions, fork_points,
-                                           merge_junctions)
+from crosssection.stages.junctions import (Junctions, fork_points, merge_junctions,
+                                           padded_junctions)
 from crosssection.stages.skeleton import nonzero_rc
 
 # node kinds of the traced paths (see _trace)
@@ -298,7 +298,7 @@ class _Padded(NamedTuple):
     bits: np.ndarray  # their 8-neighbourhood codes (bit k: neighbour k, clockwise from north)
     q1: np.ndarray  # their first neighbours clockwise from north (flat), where they have one
     q2: np.ndarray  # their second neighbours, where they have two
-    code: np.ndarray  # scratch array of :func:`_trace`, as large as img
+    code: np.ndarray  # int32 scratch array of :func:`_trace`, as large as img
 
 
 def _padded(skel) -> _Padded:
@@ -313,7 +313,9 @@ def _padded(skel) -> _Padded:
     -------
     _Padded
         Its scratch array is never cleared: the tracing writes and reads it on skeleton pixels
-        only (zeroing a 2000x2000 scan's 32 MB would take longer than the tracing).
+        only (zeroing a 2000x2000 scan's 16 MB would take longer than the tracing). It is
+        int32, which holds every label and pixel index: the first tracing touches most of its
+        pages, 1.9 ms against 3.5 ms for int64 on such a scan.
     """
     h, w = skel.shape
     img = np.zeros((h + 2, w + 2), np.uint8)
@@ -328,7 +330,7 @@ def _padded(skel) -> _Padded:
     for k in range(1, 8):
         bits |= nb[k] << np.uint8(k)
     return _Padded(img, sr, sc, sp, bits, sp + offs8[_NB_FIRST[bits]],
-                   sp + offs8[_NB_SECOND[bits]], np.empty(img.size, np.int64))
+                   sp + offs8[_NB_SECOND[bits]], np.empty(img.size, np.int32))
 
 
 def build_stack_graph(skel, junctions: Junctions, *, smooth_px: int = 5) -> StackGraph:
@@ -554,8 +556,11 @@ def stack_graph(skel, distance_px, *, merge_px: float = 2.0,
     n_merged : int
         Number of bridging stacks merged into junctions.
     """
-    junc = find_junctions(skel, merge_px=merge_px)
-    padded = _padded(np.asarray(skel, dtype=bool))  # every tracing below reads it
+    skel = np.asarray(skel, dtype=bool)
+    if skel.ndim != 2:
+        raise ParameterError(f"skeleton must be a 2-D array, got shape {skel.shape}")
+    padded = _padded(skel)  # the junctions and every tracing below read it
+    junc = padded_junctions(padded.img, padded.sp, _NB_COUNT[padded.bits], merge_px=merge_px)
     sg = _build_stack_graph(padded, junc, 5)
     merged = 0
     if merge_thick_crossings and len(junc):

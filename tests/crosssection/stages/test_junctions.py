@@ -7,7 +7,7 @@ import pytest
 
 from crosssection.stages.clean import clean_mask
 from crosssection.stages.graph import stack_graph
-from crosssection.stages.junctions import fork_points
+from crosssection.stages.junctions import find_junctions, fork_points, merge_junctions
 from crosssection.stages.skeleton import skeletonize_mask
 from crosssection.stages.threshold import threshold_rgb
 
@@ -159,3 +159,85 @@ def test_own_band_span_skips_only_the_crossing_of_a_thicker_band():
     # from the other end the thin band is its own all the way to the thick one
     first, last = _own_band_span([p[::-1] for p in paths], dist, h)
     assert first.tolist() == [0, 0, 0] and last.tolist() == [159, 199, 199]
+
+
+# ----------------------------------------------------------------------------- merging
+def _merge_reference(junc, groups, extra_pixels):
+    """:func:`merge_junctions` junction by junction: each merged junction's unique pixels,
+    renumbered in raster order of their first pixel (ties in order of the first junction),
+    written one after the other over a copy of the label image. Also returns the number of
+    such ties."""
+    parent = list(range(len(junc)))
+
+    def find(i):
+        while parent[i] != i:
+            i = parent[i]
+        return i
+
+    for a, b in groups:
+        ra, rb = find(a), find(b)
+        if ra != rb:
+            parent[ra] = rb
+    members = {}
+    for j, pix in enumerate(junc.pixels):
+        members.setdefault(find(j), []).append(pix)
+    for (a, _b), pix in zip(groups, extra_pixels):
+        pix = pix[junc.label_image[pix[:, 0], pix[:, 1]] == 0]
+        members[find(a)].append(pix)
+    clusters = [np.unique(np.concatenate(parts), axis=0) for parts in members.values()]
+    clusters.sort(key=lambda p: tuple(p[0]))
+    ties = sum(tuple(p[0]) == tuple(q[0]) for p, q in zip(clusters[:-1], clusters[1:]))
+    lab = junc.label_image.copy()
+    for j, pix in enumerate(clusters):
+        lab[pix[:, 0], pix[:, 1]] = j + 1
+    centres = np.array([p.mean(axis=0) for p in clusters]).reshape(-1, 2)
+    return clusters, centres, lab, ties
+
+
+def _random_skeleton(rng):
+    m = cv2.morphologyEx((rng.random((50, 60)) < 0.5).view(np.uint8), cv2.MORPH_CLOSE,
+                         np.ones((3, 3), np.uint8)).view(bool)
+    return skeletonize_mask(m, l_min_px=float(rng.choice([0, 3, 8])))
+
+
+def test_merge_junctions_matches_junction_by_junction_reference():
+    """Random merges whose extra pixels are shared between merged junctions, sometimes as
+    their first pixel (a tie in the numbering)."""
+    rng = np.random.default_rng(21)
+    n_ties = n_merges = 0
+    for _ in range(150):
+        skel = _random_skeleton(rng)
+        junc = find_junctions(skel)
+        k = len(junc)
+        if k < 4:
+            continue
+        groups = [tuple(int(i) for i in rng.integers(0, k, 2)) for _ in range(rng.integers(1, 5))]
+        pool = np.argwhere(skel)
+        extras = [pool[rng.integers(0, len(pool), rng.integers(0, 6))] for _ in groups]
+        if len(groups) >= 2 and rng.random() < 0.5:
+            shared = np.array([[0, 0]]) if rng.random() < 0.5 else extras[0][:2]
+            extras[0] = np.concatenate([shared, extras[0]])
+            extras[1] = np.concatenate([extras[1], shared])
+        merged = merge_junctions(junc, groups, extras)
+        pixels, centres, lab, ties = _merge_reference(junc, groups, extras)
+        assert len(merged) == len(pixels)
+        assert all(np.array_equal(a, b) for a, b in zip(merged.pixels, pixels))
+        assert np.array_equal(merged.centers_rc, centres)
+        assert np.array_equal(merged.label_image, lab)
+        n_ties += ties
+        n_merges += len(junc) > len(merged)
+    assert n_ties >= 5 and n_merges >= 50
+
+
+def test_stack_graph_finds_the_junctions_of_find_junctions():
+    rng = np.random.default_rng(22)
+    for _ in range(60):
+        skel = _random_skeleton(rng)
+        merge_px = float(rng.choice([0.0, 1.0, 2.0, 3.5]))
+        junc, _, _ = stack_graph(skel, np.ones(skel.shape, np.float32), merge_px=merge_px,
+                                 merge_thick_crossings=False)
+        ref = find_junctions(skel, merge_px=merge_px)
+        assert np.array_equal(junc.centers_rc, ref.centers_rc)
+        assert all(np.array_equal(a, b) for a, b in zip(junc.pixels, ref.pixels))
+        assert len(junc.pixels) == len(ref.pixels)
+        assert np.array_equal(junc.label_image, ref.label_image)
