@@ -24,8 +24,10 @@ Pillow reads. Conversions, documented choices:
 What is never read as valid data, each an ``ImageError`` naming the file and the cause:
 
 - a truncated or corrupt PNG: every chunk's CRC is checked (a single flipped bit anywhere
-  is caught), the file must end with ``IEND``, and the pixel data must fill exactly the rows
-  the header announces (libpng's checks, whose own messages are captured, not printed);
+  is caught), the file must end with ``IEND``, the deflate stream's Adler-32 must match, and
+  the pixel data must fill exactly the rows the header announces, each with a valid filter
+  type (libpng's checks, whose own messages are captured, not printed, or the same checks
+  of the 8-bit RGB path below);
 - a truncated TIFF or JPEG, or one the decoder reports as corrupt. Formats without a
   checksum over their pixels (raw TIFF strips, JPEG entropy data) cannot reveal a flipped
   bit inside the pixel data: such a file is read as the decoder sees it;
@@ -33,6 +35,10 @@ What is never read as valid data, each an ``ImageError`` naming the file and the
   every bit depth, checked from the header before any pixel is decoded;
 - a multi-page TIFF whose pages differ in size or pixel type (pages of one size: the first
   is read); images smaller than 16 px on a side; non-image files.
+
+A non-interlaced 8-bit RGB PNG (the usual scan) is inflated by libdeflate and its row filters
+undone by a compiled loop, the same pixels as libpng's: 39 ms against 73 ms for OpenCV's
+decode of a 2000 x 2000 scan. Every other PNG is decoded by libpng (OpenCV).
 
 Library messages (tifffile's log, libpng's stderr, Pillow's and numpy's warnings) never reach
 the user: they are captured while decoding, and what signals a corrupt file becomes the
@@ -53,6 +59,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
+from numba import njit
 
 from crosssection.core.errors import ImageError
 
@@ -227,6 +234,131 @@ def _png_header(data: bytes, chunks, path):
     return w, h, depth, colour
 
 
+@njit(cache=True)
+def _unfilter_rgb8(raw, out):  # pragma: no cover - numba
+    """Undo the PNG row filters of 8-bit RGB rows, writing the pixels into ``out``.
+
+    ``raw``: the inflated pixel data, ``h`` rows of a filter type byte and ``3 w`` bytes;
+    ``out``: the (h, 3 w) uint8 image. Returns -1, or the first row whose filter type is not
+    0..4 (the rows above it are written). 4 ms for a 2000 x 2000 scan: with libdeflate's
+    inflate (24 ms), which OpenCV cannot use, the decode takes 39 ms against 73 ms for
+    libpng's (zlib's inflate alone: 57 ms).
+    """
+    h, n = out.shape
+    stride = n + 1
+    zero = np.zeros(n, np.uint8)
+    for r in range(h):
+        kind = raw[r * stride]
+        src = raw[r * stride + 1:(r + 1) * stride]
+        cur = out[r]
+        prev = out[r - 1] if r > 0 else zero
+        if kind == 0:
+            for i in range(n):
+                cur[i] = src[i]
+        elif kind == 1:
+            for i in range(3):
+                cur[i] = src[i]
+            for i in range(3, n):
+                cur[i] = (src[i] + cur[i - 3]) & 0xFF
+        elif kind == 2:
+            for i in range(n):
+                cur[i] = (src[i] + prev[i]) & 0xFF
+        elif kind == 3:
+            for i in range(3):
+                cur[i] = (src[i] + (prev[i] >> 1)) & 0xFF
+            for i in range(3, n):
+                cur[i] = (src[i] + ((np.int32(cur[i - 3]) + prev[i]) >> 1)) & 0xFF
+        elif kind == 4:
+            # the first pixel has no left neighbour (a = c = 0): Paeth predicts b
+            for i in range(3):
+                cur[i] = (src[i] + prev[i]) & 0xFF
+            for i in range(3, n):
+                a = np.int32(cur[i - 3])
+                b = np.int32(prev[i])
+                c = np.int32(prev[i - 3])
+                pa = abs(b - c)
+                pb = abs(a - c)
+                pc = abs(a + b - 2 * c)
+                if pa <= pb and pa <= pc:
+                    pred = a
+                elif pb <= pc:
+                    pred = b
+                else:
+                    pred = c
+                cur[i] = (src[i] + pred) & 0xFF
+        else:
+            return r
+    return -1
+
+
+def _read_png_rgb8(data: bytes, chunks, w: int, h: int, path) -> np.ndarray | None:
+    """Decode a non-interlaced 8-bit RGB PNG: libdeflate inflates, :func:`_unfilter_rgb8`
+    undoes the row filters; the same pixels as libpng's.
+
+    libdeflate checks the stream and its Adler-32; the rows must fill exactly the ``h``
+    rows of ``w`` pixels. Returns None, to leave the file to libpng, when bytes follow the
+    end of the compressed stream (libpng rejects some, not others) or when the stream
+    declares a window smaller than the image data.
+    """
+    import imagecodecs
+
+    view = memoryview(data)
+    stream = b"".join(view[s + 8:e - 4] for k, s, e in chunks if k == b"IDAT")
+    size = h * (1 + 3 * w)
+    # libdeflate does not hold a stream to the window its header declares, libpng does: a
+    # stream that could reach further back than its window is left to libpng
+    if stream and stream[0] >> 4 < 7 and 256 << (stream[0] >> 4) < size:
+        return None
+    try:
+        raw = np.empty(size, np.uint8)
+        out = np.empty((h, w, 3), np.uint8)
+    except MemoryError:
+        raise ImageError("image too large to decode in memory", path) from None
+    try:
+        got = imagecodecs.deflate_decode(stream, out=raw)
+    except imagecodecs.DeflateError as exc:
+        if "INSUFFICIENT_SPACE" in str(exc):
+            raise ImageError(f"corrupt PNG pixel data (Too much image data: more than the "
+                             f"{size} bytes of {h} rows of {w} RGB pixels)", path) from None
+        raise ImageError(f"corrupt PNG pixel data ({_inflate_error(stream)})", path) from None
+    if len(got) != size:
+        raise ImageError(f"corrupt or truncated PNG pixel data (Not enough image data: "
+                         f"{len(got)} of the {size} bytes of {h} rows of {w} RGB pixels)",
+                         path)
+    if stream[-4:] != imagecodecs.deflate_adler32(raw).to_bytes(4, "big"):
+        return None  # the Adler-32 (checked) is not the last bytes: something follows it
+    bad = _unfilter_rgb8(raw, out.reshape(h, 3 * w))
+    if bad >= 0:
+        raise ImageError(f"corrupt PNG pixel data (invalid filter type "
+                         f"{raw[bad * (1 + 3 * w)]} of row {bad}, at most 4)", path)
+    return out
+
+
+def _inflate_error(stream) -> str:
+    """Why a zlib stream does not inflate, in zlib's words (libdeflate says only "bad data").
+
+    Inflated a megabyte at a time and thrown away: a corrupt stream may announce any size.
+    """
+    inflater = zlib.decompressobj()
+    rest = stream
+    try:
+        while True:
+            piece = inflater.decompress(rest, 1 << 20)
+            rest = inflater.unconsumed_tail
+            if inflater.eof or not (rest or piece):
+                break
+    except zlib.error as exc:
+        why = str(exc).split(": ", 1)[-1]
+        if why == "incorrect data check":
+            why = "its Adler-32 checksum does not match the inflated data"
+        elif len(stream) > 1 and stream[1] & 0x20:
+            why = "it asks for a preset dictionary, which PNG does not allow"
+        return f"invalid deflate stream: {why}"
+    if not inflater.eof:
+        return "truncated deflate stream: it ends before its last block"
+    return "invalid deflate stream"
+
+
 @contextmanager
 def _stderr_fd_captured():
     """Redirect file descriptor 2 while C code runs; yield a list that receives its text.
@@ -259,17 +391,24 @@ def _stderr_fd_captured():
 
 
 def _read_png(path: Path, data: bytes) -> np.ndarray:
-    """Check a PNG's structure and CRCs, then decode it with libpng (OpenCV) at native depth.
+    """Check a PNG's structure and CRCs, then decode it at native depth: a non-interlaced
+    8-bit RGB image with :func:`_read_png_rgb8`, any other with libpng (OpenCV).
 
     Pillow accepts a deflate stream that ends cleanly after a part of the rows (it fills the
-    rest with black); libpng rejects it, so libpng decodes. It is given only the critical
-    chunks (and a palette's transparency), which leaves it nothing benign to warn about:
-    whatever it still says means the pixel data do not match the header.
+    rest with black); libpng and the 8-bit RGB path reject it, so Pillow does not decode PNGs.
+    libpng is given only the critical chunks (and a palette's transparency), which leaves it
+    nothing benign to warn about: whatever it still says means the pixel data do not match
+    the header.
     """
     import cv2
 
     chunks = _png_chunks(data, path)
     w, h, depth, colour = _png_header(data, chunks, path)
+    interlace = data[chunks[0][1] + 20]
+    if colour == 2 and depth == 8 and interlace == 0:
+        arr = _read_png_rgb8(data, chunks, w, h, path)
+        if arr is not None:
+            return arr
     keep = _PNG_CRITICAL + ((b"tRNS",) if colour == 3 else ())
     if all(k in keep for k, _, _ in chunks) and chunks[-1][2] == len(data):
         minimal = data  # the common case: nothing to drop, no copy

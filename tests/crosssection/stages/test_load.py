@@ -2,6 +2,7 @@
 library message on stderr (checked at the file-descriptor level)."""
 from __future__ import annotations
 
+import io
 import struct
 import zlib
 
@@ -197,3 +198,187 @@ def test_png_named_tif_is_read_by_its_content(tmp_path):
     p = tmp_path / "really_png.tif"
     p.write_bytes(_png(_scan(14)))
     np.testing.assert_array_equal(load_image(p), _scan(14))
+
+
+# ----------------------------------------------------------------------------- 8-bit RGB PNG
+def _texture(h, w, seed):
+    """Noise, smooth ramps and flat runs: every Paeth branch and every filter gets used."""
+    rng = np.random.default_rng(seed)
+    y, x = np.mgrid[0:h, 0:w]
+    img = np.dstack([(x * 7 + y * 3) % 256, (x * y) % 251, (255 - y * 5) % 256]).astype(np.uint8)
+    img[h // 3:h // 2] = rng.integers(0, 256, (h // 2 - h // 3, w, 3), dtype=np.uint8)
+    img[h // 2:h // 2 + 4, : w // 2] = (40, 70, 190)
+    return img
+
+
+def _filtered_rows(img, kinds):
+    """The PNG byte stream (filter type byte + filtered row) of an 8-bit RGB image, row r
+    filtered with ``kinds[r]`` (0 None, 1 Sub, 2 Up, 3 Average, 4 Paeth; PNG specification)."""
+    h, w, _ = img.shape
+    x = img.reshape(h, 3 * w).astype(np.int32)
+    out = []
+    for r, kind in enumerate(kinds):
+        cur = x[r]
+        up = x[r - 1] if r else np.zeros_like(cur)
+        left = np.concatenate([np.zeros(3, np.int32), cur[:-3]])
+        upleft = np.concatenate([np.zeros(3, np.int32), up[:-3]])
+        if kind == 4:
+            p = left + up - upleft
+            pa, pb, pc = np.abs(p - left), np.abs(p - up), np.abs(p - upleft)
+            pred = np.where((pa <= pb) & (pa <= pc), left, np.where(pb <= pc, up, upleft))
+        else:
+            pred = [np.zeros_like(cur), left, up, (left + up) // 2][kind]
+        out.append(bytes([kind]) + ((cur - pred) % 256).astype(np.uint8).tobytes())
+    return b"".join(out)
+
+
+def _rgb8_png(img, stream, n_idat=1, ihdr=None):
+    """An 8-bit RGB PNG of ``img``'s size holding the zlib ``stream`` in ``n_idat`` chunks."""
+    h, w, _ = img.shape
+    ihdr = ihdr or struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0)
+    cuts = np.linspace(0, len(stream), n_idat + 1).astype(int)
+    idat = [(b"IDAT", stream[a:b]) for a, b in zip(cuts[:-1], cuts[1:])]
+    return _assemble([(b"IHDR", ihdr), *idat, (b"IEND", b"")])
+
+
+def _fast_path_only(monkeypatch):
+    """Make OpenCV's decoder fail, so that a result comes from the 8-bit RGB fast path."""
+    def no_opencv(*args, **kwargs):
+        raise AssertionError("decoded by OpenCV, not by the 8-bit RGB path")
+    monkeypatch.setattr(cv2, "imdecode", no_opencv)
+
+
+def _opencv(data):
+    return cv2.cvtColor(cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED),
+                        cv2.COLOR_BGR2RGB)
+
+
+def _encodings(img):
+    """8-bit RGB PNGs of ``img`` from Pillow, OpenCV and a hand-made filter per row."""
+    out = {}
+    for level in range(10):
+        buf = io.BytesIO()
+        Image.fromarray(img).save(buf, "PNG", compress_level=level)
+        out[f"pillow{level}"] = buf.getvalue()
+    buf = io.BytesIO()
+    Image.fromarray(img).save(buf, "PNG", optimize=True)
+    out["pillow_optimize"] = buf.getvalue()
+    bgr = np.ascontiguousarray(img[..., ::-1])
+    for name in ("DEFAULT", "FILTERED", "HUFFMAN_ONLY", "RLE", "FIXED"):
+        flag = getattr(cv2, f"IMWRITE_PNG_STRATEGY_{name}")
+        out[f"opencv_{name}"] = cv2.imencode(".png", bgr, [cv2.IMWRITE_PNG_STRATEGY, flag])[1]
+    for name in ("NONE", "SUB", "UP", "AVG", "PAETH", "ALL"):
+        name = "ALL_FILTERS" if name == "ALL" else f"FILTER_{name}"
+        flag = getattr(cv2, f"IMWRITE_PNG_{name}")
+        out[f"opencv_{name}"] = cv2.imencode(".png", bgr, [cv2.IMWRITE_PNG_FILTER, flag])[1]
+    kinds = np.arange(img.shape[0]) % 5
+    for level in (0, 9):
+        stream = zlib.compress(_filtered_rows(img, kinds), level)
+        out[f"row_filters_z{level}"] = _rgb8_png(img, stream)
+        out[f"row_filters_z{level}_7idat"] = _rgb8_png(img, stream, n_idat=7)
+    return {k: bytes(v) for k, v in out.items()}
+
+
+@pytest.mark.parametrize("h, w", [(16, 17), (37, 1001), (120, 64)])
+def test_rgb8_png_fast_path_reads_opencvs_pixels(tmp_path, monkeypatch, h, w):
+    img = _texture(h, w, seed=h)
+    cases = _encodings(img)
+    refs = {name: _opencv(data) for name, data in cases.items()}
+    _fast_path_only(monkeypatch)
+    for name, data in cases.items():
+        p = tmp_path / f"{name}.png"
+        p.write_bytes(data)
+        out = load_image(p)
+        assert out.dtype == np.uint8 and out.flags.c_contiguous, name
+        np.testing.assert_array_equal(out, refs[name], err_msg=name)
+        np.testing.assert_array_equal(out, img, err_msg=name)
+
+
+def test_rgb8_row_filters_each_used(tmp_path, monkeypatch):
+    """Rows of one filter type each, on random pixels: a wrong predictor changes pixels."""
+    img = np.random.default_rng(21).integers(0, 256, (40, 33, 3), dtype=np.uint8)
+    _fast_path_only(monkeypatch)
+    for kind in range(5):
+        p = tmp_path / f"filter{kind}.png"
+        p.write_bytes(_rgb8_png(img, zlib.compress(_filtered_rows(img, [kind] * 40))))
+        np.testing.assert_array_equal(load_image(p), img, err_msg=f"filter {kind}")
+
+
+def _corrupt_rgb8(kind):
+    img = _texture(24, 19, seed=3)
+    rows = _filtered_rows(img, np.arange(24) % 5)
+    stream = zlib.compress(rows)
+    if kind == "deflate":
+        stream = stream[:2] + b"\xff" * 8 + stream[10:]  # block type 3: reserved
+    elif kind == "truncated":
+        stream = stream[:-9]
+    elif kind == "adler":
+        stream = stream[:-4] + bytes([stream[-4] ^ 1]) + stream[-3:]
+    elif kind == "short":
+        stream = zlib.compress(rows[:-1])
+    elif kind == "long":
+        stream = zlib.compress(rows + rows[:58])  # one more row
+    elif kind == "filter":
+        row = 5 * (1 + 3 * 19)
+        stream = zlib.compress(rows[:row] + b"\x05" + rows[row + 1:])
+    elif kind == "filter_first_row":
+        stream = zlib.compress(b"\xff" + rows[1:])
+    elif kind == "dictionary":
+        stream = b"\x78\xbb" + stream[2:]
+    return _rgb8_png(img, stream, n_idat=2)
+
+
+@pytest.mark.parametrize("kind, cause", [
+    ("deflate", "invalid deflate stream"),
+    ("truncated", "truncated deflate stream"),
+    ("adler", "Adler-32 checksum does not match"),
+    ("short", "Not enough image data"),
+    ("long", "Too much image data"),
+    ("filter", "invalid filter type 5 of row 5"),
+    ("filter_first_row", "invalid filter type 255 of row 0"),
+    ("dictionary", "preset dictionary"),
+])
+def test_corrupt_rgb8_png_names_the_cause(tmp_path, capfd, monkeypatch, kind, cause):
+    p = tmp_path / f"{kind}.png"
+    p.write_bytes(_corrupt_rgb8(kind))
+    _fast_path_only(monkeypatch)
+    assert cause in _error(p, capfd)
+
+
+def _small_window(stream):
+    """The zlib stream with a 256-byte window declared (header check bits recomputed)."""
+    cmf = 0x08
+    return bytes([cmf, 0xC0 | (31 - ((cmf << 8) | 0xC0) % 31) % 31]) + stream[2:]
+
+
+@pytest.mark.parametrize("kind, cause", [("extra", "Extra compressed data"),
+                                         ("window", "invalid distance too far back")])
+def test_streams_libdeflate_would_accept_are_judged_by_libpng(tmp_path, capfd, kind, cause):
+    """Bytes after the end of the stream, or back-references beyond the declared window:
+    libdeflate reads both, libpng rejects them."""
+    img = np.repeat(_texture(1, 200, seed=4), 30, axis=0)
+    stream = zlib.compress(_filtered_rows(img, [0] * 30), 9)
+    stream = stream + b"garbage" if kind == "extra" else _small_window(stream)
+    p = tmp_path / f"{kind}.png"
+    p.write_bytes(_rgb8_png(img, stream))
+    assert cause in _error(p, capfd)
+
+
+def _adam7(img):
+    """The filter-0 byte stream of an interlaced (Adam7) 8-bit RGB image."""
+    passes = [(0, 0, 8, 8), (4, 0, 8, 8), (0, 4, 4, 8), (2, 0, 4, 4), (0, 2, 2, 4), (1, 0, 2, 2),
+              (0, 1, 1, 2)]
+    out = []
+    for x0, y0, dx, dy in passes:
+        sub = img[y0::dy, x0::dx]
+        if sub.size:
+            out += [b"\x00" + row.tobytes() for row in sub]
+    return b"".join(out)
+
+
+def test_interlaced_rgb8_png_is_read_by_libpng(tmp_path, monkeypatch):
+    img = _texture(21, 19, seed=5)
+    ihdr = struct.pack(">IIBBBBB", 19, 21, 8, 2, 0, 0, 1)
+    p = tmp_path / "adam7.png"
+    p.write_bytes(_rgb8_png(img, zlib.compress(_adam7(img)), ihdr=ihdr))
+    np.testing.assert_array_equal(load_image(p), img)
