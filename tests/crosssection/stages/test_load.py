@@ -38,7 +38,7 @@ def _error(path, capfd):
 def test_float_tiff_in_unit_range_is_read_as_uint16(tmp_path, capfd, dtype):
     img = _scan(1)
     p = tmp_path / "f.tif"
-    tifffile.imwrite(p, (img / 255.0).astype(dtype))
+    tifffile.imwrite(p, (img / 255.0).astype(dtype), photometric="rgb")
     out = load_image(p)
     assert capfd.readouterr().err == ""
     assert out.dtype == np.uint16
@@ -48,7 +48,7 @@ def test_float_tiff_in_unit_range_is_read_as_uint16(tmp_path, capfd, dtype):
 
 def test_float_tiff_outside_unit_range_names_the_cause(tmp_path, capfd):
     p = tmp_path / "f255.tif"
-    tifffile.imwrite(p, _scan(2).astype(np.float32))
+    tifffile.imwrite(p, _scan(2).astype(np.float32), photometric="rgb")
     assert "must lie in [0, 1]" in _error(p, capfd)
 
 
