@@ -309,3 +309,87 @@ def test_a_given_hole_a_little_off_is_replaced_by_the_hole_found(scene, radius_f
         kept = analyze(img, **off, **kw, hole_correction=False)
     assert kept.hole.radius_px == pytest.approx(off["hole_radius_mm"] * p["px_per_mm"])
     assert kept.summary["rod_length_mm"] < 0.99 * exact.summary["rod_length_mm"]
+
+
+def test_frame_mask_is_the_distance_test_on_every_pixel():
+    """The rows' runs, filled by the compiled loop, are the pixels within radius + margin,
+    with holes cut by the image's edges or lying partly outside it."""
+    rng = np.random.default_rng(2)
+    for _ in range(40):
+        h, w = (int(v) for v in rng.integers(5, 120, 2))
+        hole = Hole(rng.uniform(-20, 140, 2), float(rng.uniform(10, 90)), False)
+        margin = float(rng.choice([0.0, 2.0, 3.5]))
+        try:
+            got = frame_mask((h, w), hole, margin_px=margin)
+        except ParameterError:
+            continue  # the hole does not overlap the image
+        rr, cc = np.mgrid[:h, :w]
+        r0, c0 = hole.center_rc
+        want = (rr - r0) ** 2 + (cc - c0) ** 2 <= (hole.radius_px + margin) ** 2
+        assert got.dtype == bool and np.array_equal(got, want)
+
+
+def test_outermost_points_are_the_last_of_a_lexsort():
+    """Per angular bin the farthest point, the last in the points' order on ties (integer
+    coordinates make many), by bin: what sorting by (bin, distance) and taking each bin's
+    last gives."""
+    from crosssection.stages.hole import _outermost
+
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        pts = rng.integers(0, 40, (int(rng.integers(1, 400)), 2)).astype(np.float64)
+        c = rng.choice([20.0, 20.5], 2)
+        n_bins = int(rng.integers(1, 200))
+        d = pts - c
+        rad = np.hypot(d[:, 0], d[:, 1])
+        b = np.clip(((np.arctan2(d[:, 0], d[:, 1]) + np.pi) / (2 * np.pi) * n_bins)
+                    .astype(np.int64), 0, n_bins - 1)
+        order = np.lexsort((rad, b))
+        sel = order[np.r_[b[order][1:] != b[order][:-1], True]]
+        got_pts, got_rad = _outermost(pts, c, n_bins)
+        assert np.array_equal(got_pts, pts[sel]) and np.array_equal(got_rad, rad[sel])
+
+
+def test_ray_grid_is_the_numpy_expression():
+    from crosssection.stages.hole import _ray_grid
+
+    rng = np.random.default_rng(4)
+    for _ in range(50):
+        h, w = (int(v) for v in rng.integers(10, 3000, 2))
+        c0 = rng.uniform(-50, 3000, 2)
+        r0 = float(rng.uniform(1, 2000))
+        ang = np.linspace(-np.pi, np.pi, int(rng.integers(1, 800)), endpoint=False)
+        rad = np.arange(0.7 * r0, 1.2 * r0 + 10.0, float(rng.choice([1.0, 2.0])))
+        rr = c0[0] + np.sin(ang)[:, None] * rad[None, :]
+        cc = c0[1] + np.cos(ang)[:, None] * rad[None, :]
+        mr, mc, valid = _ray_grid(float(c0[0]), float(c0[1]), np.sin(ang), np.cos(ang), rad,
+                                  h, w)
+        assert mr.dtype == mc.dtype == np.float32
+        assert np.array_equal(mr, rr.astype(np.float32))
+        assert np.array_equal(mc, cc.astype(np.float32))
+        assert np.array_equal(valid, (rr >= 0) & (rr <= h - 1) & (cc >= 0) & (cc <= w - 1))
+
+
+def test_median_and_percentile_are_numpys():
+    """Bit for bit and in the same type, on few and many values, with and without ties."""
+    from crosssection.stages.hole import _median, _percentile
+
+    rng = np.random.default_rng(6)
+    for it in range(3000):
+        n = int(rng.integers(1, 60)) if it % 3 else int(rng.integers(60, 5000))
+        kind = it % 4
+        if kind == 0:    # the 3 x 3 means of 8-bit samples
+            x = (rng.integers(0, 2296, n) / 9.0).astype(np.float32)
+        elif kind == 1:  # many ties
+            x = rng.integers(0, 5, n).astype(np.float32) * np.float32(0.1)
+        elif kind == 2:
+            x = rng.normal(0.0, 100.0, n).astype(np.float32)
+        else:
+            x = rng.normal(0.0, 100.0, n)
+        m = _median(x.copy())
+        want = np.median(x)
+        assert type(m) is type(want) and m == want
+        for q in (80, 50, 0, 12.5, float(rng.uniform(0, 100))):
+            p = _percentile(x.copy(), q)
+            want = np.percentile(x, q)
+            assert type(p) is type(want) and p == want, (n, q)

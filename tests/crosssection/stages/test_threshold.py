@@ -286,3 +286,88 @@ def test_faint_blue_ink_keeps_the_faint_ink_advice():
     faded = np.clip(paper + 0.15 * (rgb - paper), 0, 255).astype(np.uint8)
     res = threshold_rgb(faded)
     assert not res.mask.any() and "faint ink" in res.note and "marks are" not in res.note
+
+
+def test_colour_features_are_the_channels():
+    """The compiled split gives blue, max(red, green) and their signed difference, for both
+    depths and for an image that is a strided view."""
+    from crosssection.stages.threshold import colour_features
+
+    rng = np.random.default_rng(7)
+    for dtype, dom in ((np.uint8, np.int16), (np.uint16, np.int32)):
+        top = np.iinfo(dtype).max
+        for shape in ((1, 1, 3), (37, 53, 3), (64, 90, 3)):
+            img = rng.integers(0, top + 1, shape, dtype=dtype)
+            img[0, 0] = (top, 0, 0)  # the extremes of the difference
+            img[-1, -1] = (0, 0, top)
+            for view in (img, img[::2, ::3]):
+                f = colour_features(view)
+                r, g, b = (view[..., i].astype(np.int64) for i in range(3))
+                assert f.blue.dtype == f.darkness.dtype == dtype and f.dominance.dtype == dom
+                assert np.array_equal(f.blue, b) and np.array_equal(f.darkness, np.maximum(r, g))
+                assert np.array_equal(f.dominance, b - np.maximum(r, g))
+
+
+def _hist_int(values):
+    """Counts of integer values within -256..256, bin ``v + 256``."""
+    return np.bincount(np.ravel(values).astype(np.intp) + 256, minlength=513)
+
+
+def _auto_levels_u8_plain(ds, ms, reg, ring_px):
+    """The levels from histograms of the pixels gathered by mask (what the counts of pairs
+    and of the ring replaced)."""
+    from crosssection.stages.threshold import (MIN_CONTRAST_U8, _best_levels, _median_hist,
+                                               _otsu_hist, _ring)
+
+    hist = _hist_int(ds if reg is None else ds[reg])
+    value = np.arange(513) - 256.0
+    best, best_score = None, MIN_CONTRAST_U8
+    t = -np.inf
+    for _ in range(2):
+        sub = np.where(value > t, hist, 0)
+        if sub.sum() < 20 or np.count_nonzero(sub) < 2:
+            break
+        t = _otsu_hist(sub)
+        prov = ds > t
+        if reg is not None:
+            prov &= reg
+        ring = _ring(prov, reg, ring_px)
+        if ring is None:
+            continue
+        ink = (_median_hist(np.where(value > t, hist, 0)), _median_hist(_hist_int(ms[prov])))
+        paper = (_median_hist(_hist_int(ds[ring])), _median_hist(_hist_int(ms[ring])))
+        best, best_score = _best_levels((ink, paper), best, best_score)
+    return best
+
+
+def test_auto_levels_from_counts_are_those_of_the_gathered_pixels():
+    from crosssection.stages.threshold import _auto_levels_u8, _pair_counts, _ring_counts
+
+    rng = np.random.default_rng(5)
+    n_levels = 0
+    for it in range(60):
+        h, w = (int(v) for v in rng.integers(4, 90, 2))
+        # ink lines on paper with noise, or plain noise over the whole range
+        b = rng.normal(235, 6, (h, w))
+        rg = rng.normal(240, 6, (h, w))
+        lines = rng.random((h, w)) < 0.02
+        lines = cv2.dilate(lines.view(np.uint8), np.ones((3, 3), np.uint8)).view(bool)
+        b[lines], rg[lines] = rng.normal(160, 10, lines.sum()), rng.normal(70, 10, lines.sum())
+        if it % 4 == 3:
+            b, rg = rng.uniform(0, 255, (2, h, w))
+        ms = np.clip(rg, 0, 255).astype(np.uint8)
+        ds = (np.clip(b, 0, 255).astype(np.int16) - ms).astype(np.int16)
+        reg = None if it % 2 else rng.random((h, w)) < 0.9
+        counts = _pair_counts(ds, ms, reg)
+        sel = np.ones((h, w), bool) if reg is None else reg
+        want = np.bincount((ds[sel].astype(np.int64) + 256) * 256 + ms[sel], minlength=513 * 256)
+        assert np.array_equal(counts.reshape(-1), want)
+        near, far = (rng.random((2, h, w)) < 0.5).astype(np.uint8)
+        ring = far.view(bool) & ~near.view(bool) & sel
+        hd, hm = _ring_counts(near, far, reg, ds, ms)
+        assert np.array_equal(hd, _hist_int(ds[ring])) and np.array_equal(hm, _hist_int(ms[ring]))
+        for ring_px in (1, 3):
+            got = _auto_levels_u8(ds, ms, reg, ring_px)
+            assert got == _auto_levels_u8_plain(ds, ms, reg, ring_px)
+            n_levels += got is not None
+    assert n_levels > 40  # most draws have an ink class
