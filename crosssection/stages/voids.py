@@ -22,9 +22,9 @@ Implementation (speed: 2000x2000 scan with 83 voids, 162 junctions: 0.30 s -> ~0
   ``regionprops.perimeter`` gives +4..5 % on disks and up to +7.6 % on oblique squares.
 - Shape ratio sqrt(s)/p (0.2821 for a disk).
 - ``n_edges``: junctions within ``touch_px`` of the void (paper: "the number of junction
-  points belonging to each void contour"), vectorised: the disk of offsets around every
-  junction centre is read from the label image at once, distinct (junction, void) pairs
-  counted.
+  points belonging to each void contour"): the distances from the junction centres to the
+  void's border pixels, in a compiled loop that skips the junctions far from the void's
+  bounding box.
 """
 from __future__ import annotations
 
@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 import pandas as pd
+from numba import njit
 
 from crosssection.core.schema import VOID_COLUMNS
 
@@ -43,16 +44,43 @@ _STEINER_D = 0.5  # px between boundary pixel centres and the region's edge
 
 def _closed_length(c, k):
     """Length of the closed polyline ``c`` (P, 2) after a periodic (2k+1)-point average."""
-    n = len(c)
-    k = min(k, (n - 1) // 2)
+    d = _closed_steps(np.ascontiguousarray(c, dtype=np.float64), min(k, (len(c) - 1) // 2))
+    return float(np.hypot(d[:, 0], d[:, 1]).sum())
+
+
+@njit(cache=True)
+def _closed_steps(c, k):  # pragma: no cover - numba
+    """Steps ``c[i + 1] - c[i]`` (the last back to the first) of the closed polyline ``c``
+    after a periodic ``(2k + 1)``-point average (none when ``k < 1``): running sums over
+    the contour extended by ``k`` points at each end, differences of those ``2k + 1``
+    apart divided by ``2k + 1``.
+
+    Compiled: :func:`_closed_length` takes 0.7 ms on the 83 voids of a dense 2000x2000
+    scan, against 1.4 ms with the same arithmetic in a dozen numpy calls per contour.
+    """
+    n = c.shape[0]
+    if n == 0:
+        return np.empty((0, 2))
     if k >= 1:
         w = 2 * k + 1
-        ext = np.concatenate([c[n - k:], c, c[:k]])
-        cs = np.cumsum(ext, axis=0)
-        cs = np.concatenate([np.zeros((1, 2)), cs])
-        c = (cs[w:w + n] - cs[:n]) / w
-    d = np.diff(c, axis=0, append=c[:1])
-    return float(np.hypot(d[:, 0], d[:, 1]).sum())
+        cs = np.zeros((n + 2 * k + 1, 2))
+        for i in range(n + 2 * k):
+            src = (i - k) % n
+            cs[i + 1, 0] = cs[i, 0] + c[src, 0]
+            cs[i + 1, 1] = cs[i, 1] + c[src, 1]
+        sm = np.empty((n, 2))
+        for i in range(n):
+            sm[i, 0] = (cs[w + i, 0] - cs[i, 0]) / w
+            sm[i, 1] = (cs[w + i, 1] - cs[i, 1]) / w
+    else:
+        sm = c
+    d = np.empty((n, 2))
+    for i in range(n - 1):
+        d[i, 0] = sm[i + 1, 0] - sm[i, 0]
+        d[i, 1] = sm[i + 1, 1] - sm[i, 1]
+    d[n - 1, 0] = sm[0, 0] - sm[n - 1, 0]
+    d[n - 1, 1] = sm[0, 1] - sm[n - 1, 1]
+    return d
 
 
 def _contours_length(cs, hier, smooth):
@@ -326,27 +354,53 @@ def _count_junctions(borders, junction_centers_rc, touch_px):
     """Number of distinct junctions within ``touch_px`` of each void.
 
     A void's pixel nearest to a point outside it has a 4-neighbour outside, i.e. it is a
-    border pixel: one KD-tree of all the voids' border pixels ``borders[j]`` (P, 2) answers
-    the ball queries around the junction centres (unbalanced tree: 2x faster to build here).
+    border pixel: the voids' border pixels ``borders[j]`` (P, 2) are the points to reach
+    (:func:`_junctions_near`).
     """
-    from itertools import chain
-
-    from scipy.spatial import cKDTree
-
     n = len(borders)
-    counts = np.zeros(n, dtype=np.int64)
     jc = np.asarray(junction_centers_rc, dtype=np.float64).reshape(-1, 2)
     if len(jc) == 0 or n == 0:
-        return counts
-    pts = np.concatenate(borders).astype(np.float64)
-    vid = np.repeat(np.arange(n), [len(b) for b in borders])
-    tree = cKDTree(pts, leafsize=32, balanced_tree=False, compact_nodes=False)
-    hits = tree.query_ball_point(jc, float(touch_px))
-    # distinct (junction, void) pairs at once (a np.unique per junction took half the count)
-    sizes = np.fromiter((len(h) for h in hits), np.int64, len(hits))
-    if sizes.sum() == 0:
-        return counts
-    flat = np.fromiter(chain.from_iterable(hits), np.int64, int(sizes.sum()))
-    pairs = np.unique(np.repeat(np.arange(len(hits), dtype=np.int64), sizes) * n + vid[flat])
-    counts += np.bincount(pairs % n, minlength=n)
+        return np.zeros(n, dtype=np.int64)
+    starts = np.zeros(n + 1, np.int64)
+    np.cumsum([len(b) for b in borders], out=starts[1:])
+    pts = np.concatenate(borders).astype(np.float64).reshape(-1, 2)
+    return _junctions_near(pts, starts, np.ascontiguousarray(jc), float(touch_px))
+
+
+@njit(cache=True)
+def _junctions_near(pts, starts, jc, r):  # pragma: no cover - numba
+    """Per void ``v`` (points ``pts[starts[v]:starts[v + 1]]``), the junction centres ``jc``
+    within ``r`` of one of its points: squared distance ``dr^2 + dc^2 <= r^2``, as a
+    KD-tree's ball query tests it.
+
+    The junctions beyond ``r + 1`` of a void's bounding box are skipped, the others tested
+    point by point until one is within reach. Compiled: 0.3 ms against 3 ms for a KD-tree
+    of the 48 000 border pixels of a dense 2000x2000 scan (83 voids, 162 junctions), most
+    of it spent building the tree.
+    """
+    n = starts.shape[0] - 1
+    counts = np.zeros(n, np.int64)
+    r2 = r * r
+    pad = r + 1.0
+    for v in range(n):
+        a, b = starts[v], starts[v + 1]
+        if b == a:
+            continue
+        lo0 = hi0 = pts[a, 0]
+        lo1 = hi1 = pts[a, 1]
+        for i in range(a + 1, b):
+            lo0 = min(lo0, pts[i, 0])
+            hi0 = max(hi0, pts[i, 0])
+            lo1 = min(lo1, pts[i, 1])
+            hi1 = max(hi1, pts[i, 1])
+        for j in range(jc.shape[0]):
+            q0, q1 = jc[j, 0], jc[j, 1]
+            if q0 < lo0 - pad or q0 > hi0 + pad or q1 < lo1 - pad or q1 > hi1 + pad:
+                continue
+            for i in range(a, b):
+                d0 = pts[i, 0] - q0
+                d1 = pts[i, 1] - q1
+                if d0 * d0 + d1 * d1 <= r2:
+                    counts[v] += 1
+                    break
     return counts

@@ -46,17 +46,61 @@ STEP_TRANSITION_WIDTHS = 3.0
 
 def _segment_medians(values, seg, n_seg) -> np.ndarray:
     """``np.median`` of the values of every segment id ``0 .. n_seg - 1`` (NaN when empty),
-    all at once: one lexicographic sort, then the middle element or the mean of the two
-    middle ones (what ``np.median`` returns, bit for bit)."""
-    lens = np.bincount(seg, minlength=n_seg)
+    all at once; ``seg`` is ascending (each segment one run of ``values``) and the values
+    finite (:func:`_run_medians`, whose selection compares them)."""
     offs = np.zeros(n_seg + 1, np.int64)
-    np.cumsum(lens, out=offs[1:])
-    srt = values[np.lexsort((values, seg))]
+    np.cumsum(np.bincount(seg, minlength=n_seg), out=offs[1:])
+    return _run_medians(np.ascontiguousarray(values, dtype=np.float64), offs)
+
+
+@njit(cache=True)
+def _run_medians(values, offs):  # pragma: no cover - numba
+    """Median of every run ``values[offs[k]:offs[k + 1]]`` (NaN when empty): its middle
+    element, or the mean of its two middle ones, as ``np.median`` returns them bit for bit.
+
+    By selection in a copy of each run (Hoare's quickselect: no greater value before the
+    middle one, no smaller after it). Compiled: 0.3 ms against 1.3 ms for one lexicographic
+    sort of the 28 000 samples of a dense 2000x2000 scan by segment and value; numba's own
+    ``np.median`` runs as fast but takes three times as long to compile.
+    """
+    n_seg = offs.shape[0] - 1
     out = np.full(n_seg, np.nan)
-    ok = lens > 0
-    lo = (offs[:-1] + (lens - 1) // 2)[ok]
-    hi = (offs[:-1] + lens // 2)[ok]
-    out[ok] = np.where(lens[ok] % 2 == 1, srt[lo], (srt[lo] + srt[hi]) / 2)
+    buf = np.empty(values.shape[0])
+    for k in range(n_seg):
+        a = offs[k]
+        n = offs[k + 1] - a
+        if n == 0:
+            continue
+        for i in range(n):
+            buf[i] = values[a + i]
+        mid = (n - 1) // 2
+        left, right = 0, n - 1
+        while left < right:
+            pivot = buf[(left + right) // 2]
+            i, j = left, right
+            while i <= j:
+                while buf[i] < pivot:
+                    i += 1
+                while buf[j] > pivot:
+                    j -= 1
+                if i <= j:
+                    buf[i], buf[j] = buf[j], buf[i]
+                    i += 1
+                    j -= 1
+            if mid <= j:
+                right = j
+            elif mid >= i:
+                left = i
+            else:
+                break
+        if n % 2 == 1:
+            out[k] = buf[mid]
+        else:
+            upper = buf[mid + 1]
+            for i in range(mid + 2, n):
+                if buf[i] < upper:
+                    upper = buf[i]
+            out[k] = (buf[mid] + upper) / 2
     return out
 
 
@@ -247,6 +291,26 @@ def path_width_profile_px(path_rc: np.ndarray, distance_px: np.ndarray, *,
     return prof
 
 
+@njit(cache=True)
+def _run_arc_lengths(pr, pc, offs):  # pragma: no cover - numba
+    """Arc length (px) of every pixel of the concatenated paths from its own path's start:
+    a running sum per path (not a difference of one global cumulative sum, which would
+    round differently at the quarter points of :func:`_stack_medians`), in ``np.cumsum``'s
+    order. Compiled: a loop over the paths calling ``np.cumsum`` took 0.5 ms on a dense
+    2000x2000 scan (244 stacks), this 0.05 ms.
+    """
+    s = np.empty(pr.shape[0])
+    for k in range(offs.shape[0] - 1):
+        acc = 0.0
+        for i in range(offs[k], offs[k + 1]):
+            if i > offs[k]:
+                dr = float(pr[i] - pr[i - 1])
+                dc = float(pc[i] - pc[i - 1])
+                acc += math.sqrt(dr * dr + dc * dc)
+            s[i] = acc
+    return s
+
+
 def _stack_medians(prof, pr, pc, offs, margin_abs, loop_u, loop_v, factor,
                    statistic="median"):
     """Per stack, the median (or mean) width away from its ends (:func:`stack_widths_px`).
@@ -257,31 +321,23 @@ def _stack_medians(prof, pr, pc, offs, margin_abs, loop_u, loop_v, factor,
     m = offs.shape[0] - 1
     lens = np.diff(offs)
     seg = np.repeat(np.arange(m), lens)
-    step = np.zeros(len(pr))
-    dr = np.diff(pr).astype(np.float64)
-    dc = np.diff(pc).astype(np.float64)
-    step[1:] = np.sqrt(dr * dr + dc * dc)
-    step[offs[:-1][lens > 0]] = 0.0
-    # arc length from each path's start, a running sum per path (not a difference of one
-    # global cumulative sum, which would round differently at the quarter points)
-    s = np.empty(len(pr))
-    for k in np.flatnonzero(lens):
-        np.cumsum(step[offs[k]:offs[k + 1]], out=s[offs[k]:offs[k + 1]])
+    s = _run_arc_lengths(pr, pc, offs)
     total = np.zeros(m)
     total[lens > 0] = s[offs[1:][lens > 0] - 1]
     tot = total[seg]
     central = (s >= 0.25 * tot) & (s <= 0.75 * tot)
-    w_central = _segment_medians(prof[central], seg[central], m)
-    w_all = _segment_medians(prof, seg, m)
-    w0 = np.where(np.bincount(seg[central], minlength=m) > 0, w_central, w_all)
+    has_central = np.bincount(seg[central], minlength=m) > 0
+    # a stack too short for a central half (two pixels, say) takes all its samples
+    short = ~has_central[seg]
+    w0 = np.where(has_central, _segment_medians(prof[central], seg[central], m),
+                  _segment_medians(prof[short], seg[short], m))
     margin = np.maximum(margin_abs, factor * w0)[seg]
     keep = np.ones(len(pr), np.bool_)
     keep &= loop_u[seg] | (s >= margin)
     keep &= loop_v[seg] | (s <= tot - margin)
     if statistic == "mean":
-        w0 = np.where(np.bincount(seg[central], minlength=m) > 0,
-                      _segment_means(prof[central], seg[central], m),
-                      _segment_means(prof, seg, m))
+        w0 = np.where(has_central, _segment_means(prof[central], seg[central], m),
+                      _segment_means(prof[short], seg[short], m))
         w_keep = _segment_means(prof[keep], seg[keep], m)
     else:
         w_keep = _segment_medians(prof[keep], seg[keep], m)
@@ -490,32 +546,75 @@ def _loop_cuts(path, x, w, **opts) -> list:
 def _step_candidates(lay, prof, offs, thickness_px, min_range, is_loop) -> np.ndarray:
     """Stacks whose layer profile, averaged over ``2 h`` and away from their ends, spans at
     least ``min_range`` layers: the only ones :func:`layer_steps` reads sample by sample
-    (all stacks at once; 1 ms on a dense 2000x2000 scan, against 15 ms for reading
-    every stack)."""
-    lens = np.diff(offs)
-    m = len(lens)
-    seg = np.repeat(np.arange(m), lens)
-    i = np.arange(len(lay)) - offs[:-1][seg]
-    n = lens[seg]
+    (all stacks at once, :func:`_profile_ranges`: 0.1 ms on a dense 2000x2000 scan, against
+    15 ms for reading every stack)."""
     r = max(int(round(thickness_px)), 2)
-    lo = offs[:-1][seg] + np.maximum(i - r, 0)
-    hi = offs[:-1][seg] + np.minimum(i + r, n - 1)
-    cs = np.concatenate([[0.0], np.cumsum(np.nan_to_num(lay))])
-    mean = (cs[hi + 1] - cs[lo]) / (hi - lo + 1)
-    # the ends' margins of layer_steps, in samples: a path step is 1 to sqrt(2) px long, so
-    # a sample that layer_steps reads is at least margin / sqrt(2) samples from its end
-    first = np.zeros(m)
-    last = np.zeros(m)
-    first[lens > 0] = np.maximum(2.0 * thickness_px, prof[offs[:-1][lens > 0]])
-    last[lens > 0] = np.maximum(2.0 * thickness_px, prof[offs[1:][lens > 0] - 1])
-    first[is_loop] = 0.0
-    last[is_loop] = 0.0
-    inner = (i >= first[seg] / np.sqrt(2.0)) & (i < n - last[seg] / np.sqrt(2.0))
-    top = np.full(m, -np.inf)
-    bottom = np.full(m, np.inf)
-    np.maximum.at(top, seg[inner], mean[inner])
-    np.minimum.at(bottom, seg[inner], mean[inner])
-    return np.flatnonzero(top - bottom >= min_range)
+    ranges = _profile_ranges(np.ascontiguousarray(lay, dtype=np.float64),
+                             np.ascontiguousarray(prof, dtype=np.float64),
+                             np.asarray(offs, np.int64), float(thickness_px), r,
+                             np.asarray(is_loop, np.bool_))
+    return np.flatnonzero(ranges >= min_range)
+
+
+@njit(cache=True)
+def _profile_ranges(lay, prof, offs, thickness_px, r, is_loop):  # pragma: no cover - numba
+    """Per path, max - min of its layer profile ``lay`` averaged over ``2 r + 1`` samples
+    (fewer at its ends), over the samples away from its ends (:func:`_step_candidates`);
+    ``-inf`` when none is.
+
+    The averages are differences of one running sum over all paths (``lay`` with NaN as 0
+    and infinities as the largest floats, as ``np.nan_to_num``); a sample is away from the
+    ends when at least ``max(2 h, w) / sqrt(2)`` samples from them (``w`` the width at that
+    end, a path step being 1 to sqrt(2) px; no margin on a closed loop). Compiled: the same
+    arithmetic in numpy, 25 calls on the 28 000 samples of a dense 2000x2000 scan, took
+    0.7 ms, this 0.1 ms.
+    """
+    big = 1.7976931348623157e308  # np.finfo(np.float64).max
+    n_all = lay.shape[0]
+    cs = np.empty(n_all + 1)
+    cs[0] = 0.0
+    for k in range(n_all):
+        x = lay[k]
+        if x != x:
+            x = 0.0
+        elif x == np.inf:
+            x = big
+        elif x == -np.inf:
+            x = -big
+        cs[k + 1] = x if k == 0 else cs[k] + x
+    sqrt2 = math.sqrt(2.0)
+    two_h = 2.0 * thickness_px
+    m = offs.shape[0] - 1
+    out = np.empty(m)
+    for s in range(m):
+        a = offs[s]
+        n = offs[s + 1] - a
+        top = -np.inf
+        bottom = np.inf
+        nan = False  # a NaN average makes the range NaN, as np.maximum would
+        if n > 0:
+            first = 0.0
+            last = 0.0
+            if not is_loop[s]:  # max(2 h, w), NaN if either is
+                first = prof[a] if (prof[a] != prof[a] or prof[a] > two_h) else two_h
+                w = prof[a + n - 1]
+                last = w if (w != w or w > two_h) else two_h
+            lo_i = first / sqrt2
+            hi_i = n - last / sqrt2
+            for i in range(n):
+                if not (i >= lo_i and i < hi_i):
+                    continue
+                lo = a + max(i - r, 0)
+                hi = a + min(i + r, n - 1)
+                mean = (cs[hi + 1] - cs[lo]) / (hi - lo + 1)
+                if mean != mean:
+                    nan = True
+                if mean > top:
+                    top = mean
+                if mean < bottom:
+                    bottom = mean
+        out[s] = np.nan if nan else top - bottom
+    return out
 
 
 def _level_runs(level, on, s, w, side_widths):

@@ -245,3 +245,58 @@ def test_voids_match_labelling_reference(seed):
     vl = void_labels(mask, hole=hole, s_min_px=s_min)
     assert vl.max() == len(ref)
     assert all(np.array_equal(vl == j + 1, lab == i) for j, i in enumerate(ref))
+
+
+def test_junction_count_equals_a_kd_tree_ball_query():
+    """The compiled count of junctions near each void's border equals the distinct
+    (junction, void) pairs of a KD-tree ball query (distance <= touch), on random borders
+    with junctions at exactly ``touch`` from border pixels and a hair either side."""
+    from scipy.spatial import cKDTree
+
+    from crosssection.stages.voids import _count_junctions
+
+    rng = np.random.default_rng(11)
+    for trial in range(300):
+        borders = [rng.integers(0, 80, (int(rng.integers(1, 60)), 2))
+                   for _ in range(int(rng.integers(1, 8)))]
+        touch = float(rng.choice([1.0, 2.5, 5.0, np.sqrt(50.0), 13.0]))
+        jc = rng.uniform(-10, 90, (int(rng.integers(1, 25)), 2))
+        if trial % 2:  # on the circle of radius touch around a border pixel, or just off it
+            p = borders[0][0].astype(float)
+            ang = rng.uniform(0, 2 * np.pi, 3)
+            ring = p + touch * np.column_stack([np.cos(ang), np.sin(ang)])
+            jc = np.vstack([jc, ring, np.nextafter(ring, ring + 1), p + [3.0, 4.0]])
+            touch = 5.0 if trial % 4 == 1 else touch
+        pts = np.concatenate(borders).astype(float)
+        vid = np.repeat(np.arange(len(borders)), [len(b) for b in borders])
+        hits = cKDTree(pts).query_ball_point(jc, touch)
+        want = np.zeros(len(borders), np.int64)
+        for v in {(j, int(vid[i])) for j, h in enumerate(hits) for i in h}:
+            want[v[1]] += 1
+        np.testing.assert_array_equal(_count_junctions(borders, jc, touch), want)
+    assert len(_count_junctions(borders, np.zeros((0, 2)), 5.0)) == len(borders)
+
+
+def test_closed_length_equals_the_numpy_smoothing():
+    """The compiled periodic sliding average and steps give the numpy arithmetic's length
+    bit for bit, for every half window (none, clipped to the contour)."""
+    from crosssection.stages.voids import _closed_length
+
+    def reference(c, k):
+        n = len(c)
+        k = min(k, (n - 1) // 2)
+        if k >= 1:
+            w = 2 * k + 1
+            cs = np.cumsum(np.concatenate([c[n - k:], c, c[:k]]), axis=0)
+            cs = np.concatenate([np.zeros((1, 2)), cs])
+            c = (cs[w:w + n] - cs[:n]) / w
+        d = np.diff(c, axis=0, append=c[:1])
+        return float(np.hypot(d[:, 0], d[:, 1]).sum())
+
+    rng = np.random.default_rng(12)
+    for trial in range(300):
+        c = rng.integers(0, 400, (int(rng.integers(3, 250)), 2)).astype(float)
+        if trial % 2:
+            c += rng.uniform(-1, 1, c.shape) * 10.0 ** rng.integers(-3, 4)
+        for k in (0, 1, 2, 5, 1000):
+            assert _closed_length(c, k) == reference(c, k)

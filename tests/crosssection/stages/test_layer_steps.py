@@ -212,3 +212,59 @@ def test_pipeline_reads_a_rolled_ring_by_its_two_parts():
     assert abs(res.summary["rod_length_mm"] / (rod_px / 50.0) - 1) < 0.03
     assert list(paper.stacks["kind"]) == ["loop"]
     assert abs(paper.summary["rod_length_mm"] / (rod_px / 50.0) - 1) > 0.1
+
+
+def _step_candidates_reference(lay, prof, offs, thickness_px, min_range, is_loop):
+    """The candidates of ``layer_steps`` in numpy: running means from one cumulative sum
+    over all paths, their range per path away from its ends."""
+    lens = np.diff(offs)
+    m = len(lens)
+    seg = np.repeat(np.arange(m), lens)
+    i = np.arange(len(lay)) - offs[:-1][seg]
+    n = lens[seg]
+    r = max(int(round(thickness_px)), 2)
+    lo = offs[:-1][seg] + np.maximum(i - r, 0)
+    hi = offs[:-1][seg] + np.minimum(i + r, n - 1)
+    cs = np.concatenate([[0.0], np.cumsum(np.nan_to_num(lay))])
+    mean = (cs[hi + 1] - cs[lo]) / (hi - lo + 1)
+    first = np.zeros(m)
+    last = np.zeros(m)
+    first[lens > 0] = np.maximum(2.0 * thickness_px, prof[offs[:-1][lens > 0]])
+    last[lens > 0] = np.maximum(2.0 * thickness_px, prof[offs[1:][lens > 0] - 1])
+    first[is_loop] = 0.0
+    last[is_loop] = 0.0
+    inner = (i >= first[seg] / np.sqrt(2.0)) & (i < n - last[seg] / np.sqrt(2.0))
+    top = np.full(m, -np.inf)
+    bottom = np.full(m, np.inf)
+    np.maximum.at(top, seg[inner], mean[inner])
+    np.minimum.at(bottom, seg[inner], mean[inner])
+    return np.flatnonzero(top - bottom >= min_range)
+
+
+def test_step_candidates_kernel_matches_numpy():
+    """The compiled ranges select the same stacks as the numpy arithmetic, on random
+    profiles with steps, loops, empty and short paths, missing or infinite layers and a
+    missing end width."""
+    from crosssection.stages.widths import _step_candidates
+
+    rng = np.random.default_rng(21)
+    found = 0
+    for trial in range(1000):
+        lens = rng.integers(0, 60, int(rng.integers(1, 15)))
+        lens[rng.random(len(lens)) < 0.2] = int(rng.integers(0, 3))
+        offs = np.concatenate([[0], np.cumsum(lens)]).astype(np.int64)
+        lay = np.round(rng.uniform(0.5, 5, offs[-1])) + rng.normal(0, 0.2, offs[-1])
+        prof = rng.uniform(2, 30, offs[-1])
+        if offs[-1] and trial % 5 == 0:
+            lay[rng.integers(offs[-1])] = rng.choice([np.nan, np.inf, -np.inf])
+        if offs[-1] and trial % 7 == 0:
+            prof[rng.integers(offs[-1])] = np.nan
+        is_loop = rng.random(len(lens)) < 0.3
+        h = float(rng.choice([1.0, 2.5, 5.0, 7.5]))
+        for min_range in (0.4, 1.5):
+            with np.errstate(invalid="ignore", over="ignore"):
+                want = _step_candidates_reference(lay, prof, offs, h, min_range, is_loop)
+            got = _step_candidates(lay, prof, offs, h, min_range, is_loop)
+            np.testing.assert_array_equal(got, want)
+            found += len(want)
+    assert found > 1000
