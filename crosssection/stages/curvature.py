@@ -1005,6 +1005,20 @@ def _walled_path(path_rc, trims, radius_px, dt):
 
 
 @njit(cache=True)
+def _first_at_least(s, v):  # pragma: no cover - numba
+    # np.searchsorted(s, v) (side "left") of an ascending s, by bisection: numba's own
+    # searchsorted takes 0.4 s to compile
+    lo, hi = 0, s.shape[0]
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if s[mid] < v:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@njit(cache=True)
 def _walled_kernel(p, z0, z1, radius_px, dt, tol, max_turn,
                    damp):  # pragma: no cover - numba
     # _walled_path in one numba call: per stack, its steps in Python cost about as much as
@@ -1015,11 +1029,11 @@ def _walled_kernel(p, z0, z1, radius_px, dt, tol, max_turn,
         s[i] = s[i - 1] + math.hypot(p[i, 0] - p[i - 1, 0], p[i, 1] - p[i - 1, 1])
     total = s[n - 1]
     if total >= z0 + z1 + 4.0:
-        a0 = np.searchsorted(s, z0) if z0 > 0 else 0
-        a1 = np.searchsorted(s, total - z1) - 1 if z1 > 0 else n - 1
+        a0 = _first_at_least(s, z0) if z0 > 0 else 0
+        a1 = _first_at_least(s, total - z1) - 1 if z1 > 0 else n - 1
         a1 = max(a1, a0)
     else:
-        a0 = np.searchsorted(s, 0.5 * total)
+        a0 = _first_at_least(s, 0.5 * total)
         a1 = a0
     k = max(3, int(round(2.0 * radius_px + 2.0)))
     max_ref = 2.0 * radius_px + 3.0
@@ -1049,7 +1063,10 @@ def _walled_kernel(p, z0, z1, radius_px, dt, tol, max_turn,
                                max_turn, damp)
         if oka and okb:
             m = min(pa.shape[0], pb.shape[0])
-            piece = 0.5 * (pa[:m] + pb[:m])
+            piece = np.empty((m, 2))
+            for i in range(m):
+                piece[i, 0] = 0.5 * (pa[i, 0] + pb[i, 0])
+                piece[i, 1] = 0.5 * (pa[i, 1] + pb[i, 1])
         elif oka:
             piece = pa.copy()
         elif okb:
@@ -1067,12 +1084,18 @@ def _walled_kernel(p, z0, z1, radius_px, dt, tol, max_turn,
     nh = piece0.shape[0] - 1 if f0 else a0
     nt = piece1.shape[0] - 1 if f1 else n - 1 - a1
     mid = a1 - a0 + 1
+    # element by element: numba compiles array-slice assignments with shape checks whose
+    # error paths took most of this kernel's 4 s of compilation
     out = np.empty((nh + mid + nt, 2))
     for i in range(nh):
-        out[i] = piece0[piece0.shape[0] - 1 - i] if f0 else p[i]
-    out[nh:nh + mid] = p[a0:a1 + 1]
+        for j in range(2):
+            out[i, j] = piece0[piece0.shape[0] - 1 - i, j] if f0 else p[i, j]
+    for i in range(mid):
+        for j in range(2):
+            out[nh + i, j] = p[a0 + i, j]
     for i in range(nt):
-        out[nh + mid + i] = piece1[i + 1] if f1 else p[a1 + 1 + i]
+        for j in range(2):
+            out[nh + mid + i, j] = piece1[i + 1, j] if f1 else p[a1 + 1 + i, j]
     return out, f0, f1
 
 
