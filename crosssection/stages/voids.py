@@ -44,43 +44,16 @@ _STEINER_D = 0.5  # px between boundary pixel centres and the region's edge
 
 def _closed_length(c, k):
     """Length of the closed polyline ``c`` (P, 2) after a periodic (2k+1)-point average."""
-    d = _closed_steps(np.ascontiguousarray(c, dtype=np.float64), min(k, (len(c) - 1) // 2))
-    return float(np.hypot(d[:, 0], d[:, 1]).sum())
-
-
-@njit(cache=True)
-def _closed_steps(c, k):  # pragma: no cover - numba
-    """Steps ``c[i + 1] - c[i]`` (the last back to the first) of the closed polyline ``c``
-    after a periodic ``(2k + 1)``-point average (none when ``k < 1``): running sums over
-    the contour extended by ``k`` points at each end, differences of those ``2k + 1``
-    apart divided by ``2k + 1``.
-
-    Compiled: :func:`_closed_length` takes 0.7 ms on the 83 voids of a dense 2000x2000
-    scan, against 1.4 ms with the same arithmetic in a dozen numpy calls per contour.
-    """
-    n = c.shape[0]
-    if n == 0:
-        return np.empty((0, 2))
+    n = len(c)
+    k = min(k, (n - 1) // 2)
     if k >= 1:
         w = 2 * k + 1
-        cs = np.zeros((n + 2 * k + 1, 2))
-        for i in range(n + 2 * k):
-            src = (i - k) % n
-            cs[i + 1, 0] = cs[i, 0] + c[src, 0]
-            cs[i + 1, 1] = cs[i, 1] + c[src, 1]
-        sm = np.empty((n, 2))
-        for i in range(n):
-            sm[i, 0] = (cs[w + i, 0] - cs[i, 0]) / w
-            sm[i, 1] = (cs[w + i, 1] - cs[i, 1]) / w
-    else:
-        sm = c
-    d = np.empty((n, 2))
-    for i in range(n - 1):
-        d[i, 0] = sm[i + 1, 0] - sm[i, 0]
-        d[i, 1] = sm[i + 1, 1] - sm[i, 1]
-    d[n - 1, 0] = sm[0, 0] - sm[n - 1, 0]
-    d[n - 1, 1] = sm[0, 1] - sm[n - 1, 1]
-    return d
+        ext = np.concatenate([c[n - k:], c, c[:k]])
+        cs = np.cumsum(ext, axis=0)
+        cs = np.concatenate([np.zeros((1, 2)), cs])
+        c = (cs[w:w + n] - cs[:n]) / w
+    d = np.diff(c, axis=0, append=c[:1])
+    return float(np.hypot(d[:, 0], d[:, 1]).sum())
 
 
 def _contours_length(cs, hier, smooth):

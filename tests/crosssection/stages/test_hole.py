@@ -313,7 +313,7 @@ def test_a_given_hole_a_little_off_is_replaced_by_the_hole_found(scene, radius_f
 
 
 def test_frame_mask_is_the_distance_test_on_every_pixel():
-    """The rows' runs, filled by the compiled loop, are the pixels within radius + margin,
+    """The rows' runs are the pixels within radius + margin,
     with holes cut by the image's edges or lying partly outside it."""
     rng = np.random.default_rng(2)
     for _ in range(40):
@@ -328,29 +328,6 @@ def test_frame_mask_is_the_distance_test_on_every_pixel():
         r0, c0 = hole.center_rc
         want = (rr - r0) ** 2 + (cc - c0) ** 2 <= (hole.radius_px + margin) ** 2
         assert got.dtype == bool and np.array_equal(got, want)
-
-
-def test_outermost_points_are_the_last_of_a_lexsort():
-    """Per angular bin the farthest point, the last in the points' order on ties (integer
-    coordinates make many), by bin: what sorting by (bin, distance) and taking each bin's
-    last gives."""
-    from crosssection.stages.hole import _outermost
-
-    rng = np.random.default_rng(3)
-    for _ in range(200):
-        pts = rng.integers(0, 40, (int(rng.integers(1, 400)), 2)).astype(np.float64)
-        c = rng.choice([20.0, 20.5], 2)
-        n_bins = int(rng.integers(1, 200))
-        d = pts - c
-        rad = np.hypot(d[:, 0], d[:, 1])
-        b = np.clip(((np.arctan2(d[:, 0], d[:, 1]) + np.pi) / (2 * np.pi) * n_bins)
-                    .astype(np.int64), 0, n_bins - 1)
-        order = np.lexsort((rad, b))
-        sel = order[np.r_[b[order][1:] != b[order][:-1], True]]
-        got_pts, got_rad = _outermost(pts, c, n_bins)
-        assert np.array_equal(got_pts, pts[sel]) and np.array_equal(got_rad, rad[sel])
-
-
 def test_ray_grid_is_the_numpy_expression():
     from crosssection.stages.hole import _ray_grid
 

@@ -275,28 +275,3 @@ def test_junction_count_equals_a_kd_tree_ball_query():
             want[v[1]] += 1
         np.testing.assert_array_equal(_count_junctions(borders, jc, touch), want)
     assert len(_count_junctions(borders, np.zeros((0, 2)), 5.0)) == len(borders)
-
-
-def test_closed_length_equals_the_numpy_smoothing():
-    """The compiled periodic sliding average and steps give the numpy arithmetic's length
-    bit for bit, for every half window (none, clipped to the contour)."""
-    from crosssection.stages.voids import _closed_length
-
-    def reference(c, k):
-        n = len(c)
-        k = min(k, (n - 1) // 2)
-        if k >= 1:
-            w = 2 * k + 1
-            cs = np.cumsum(np.concatenate([c[n - k:], c, c[:k]]), axis=0)
-            cs = np.concatenate([np.zeros((1, 2)), cs])
-            c = (cs[w:w + n] - cs[:n]) / w
-        d = np.diff(c, axis=0, append=c[:1])
-        return float(np.hypot(d[:, 0], d[:, 1]).sum())
-
-    rng = np.random.default_rng(12)
-    for trial in range(300):
-        c = rng.integers(0, 400, (int(rng.integers(3, 250)), 2)).astype(float)
-        if trial % 2:
-            c += rng.uniform(-1, 1, c.shape) * 10.0 ** rng.integers(-3, 4)
-        for k in (0, 1, 2, 5, 1000):
-            assert _closed_length(c, k) == reference(c, k)

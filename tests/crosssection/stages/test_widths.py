@@ -290,23 +290,3 @@ def test_segment_medians_are_numpy_medians_of_each_run():
         want = np.array([np.median(values[seg == k]) if n else np.nan
                          for k, n in enumerate(lens)])
         np.testing.assert_array_equal(got, want)
-
-
-def test_arc_lengths_are_running_sums_per_path():
-    """The compiled arc length restarts at 0 on every path and adds the steps in
-    ``np.cumsum``'s order (bit for bit), empty paths included."""
-    from crosssection.stages.widths import _run_arc_lengths
-
-    rng = np.random.default_rng(6)
-    for _ in range(100):
-        lens = rng.integers(0, 40, int(rng.integers(1, 12)))
-        offs = np.concatenate([[0], np.cumsum(lens)]).astype(np.int64)
-        pr = rng.integers(0, 2000, offs[-1]).astype(np.int64)
-        pc = rng.integers(0, 2000, offs[-1]).astype(np.int64)
-        want = np.empty(offs[-1])
-        for a, b in zip(offs[:-1], offs[1:]):
-            step = np.zeros(b - a)
-            step[1:] = np.sqrt(np.diff(pr[a:b]).astype(float) ** 2
-                               + np.diff(pc[a:b]).astype(float) ** 2)
-            want[a:b] = np.cumsum(step)
-        np.testing.assert_array_equal(_run_arc_lengths(pr, pc, offs), want)
