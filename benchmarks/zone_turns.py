@@ -67,15 +67,13 @@ def zone_turns(condition: str, seeds) -> tuple:
     import crosssection.stages.curvature as curvature
 
     turns = []
-    bound = curvature._bound_turn
+    bound = curvature._bound_turns
 
-    def spy(k, s, z0, z1, edge, limit):
-        turn = curvature._zone_turn(k, s, z0, z1, edge)
-        if turn is not None:
-            turns.append(turn)
-        return bound(k, s, z0, z1, edge, limit)
+    def spy(k, s, a, n, z0, z1, edge, limit):
+        turns.extend(curvature._zone_turns(k, s, a, n, z0, z1, edge)[1].tolist())
+        return bound(k, s, a, n, z0, z1, edge, limit)
 
-    curvature._bound_turn = spy
+    curvature._bound_turns = spy
     try:
         for seed in seeds:
             options = robust_sweep.scene_options(condition, seed)
@@ -89,7 +87,7 @@ def zone_turns(condition: str, seeds) -> tuple:
                                      hole_radius_mm=p["hole_radius_mm"],
                                      hole_center_px=tuple(p["hole_center_px"]))
     finally:
-        curvature._bound_turn = bound
+        curvature._bound_turns = bound
     t = np.asarray(turns)
     return len(t), int((t > curvature._ZONE_MAX_TURN).sum()), float(t.max(initial=0.0))
 

@@ -275,16 +275,16 @@ def _smooth_many(r, c, starts, lens, k, closed, proj, ox, oy):
     """:func:`_smooth_into` for many paths of half window ``k`` (flat ``r``, ``c``; path
     ``i`` is ``starts[i] .. starts[i] + lens[i]``), written into ``ox``, ``oy``."""
     if k < 1:
-        idx = np.concatenate([np.arange(s0, s0 + n0) for s0, n0 in zip(starts, lens)])
+        idx = _ranges(starts, starts + lens)
         ox[idx] = r[idx]
         oy[idx] = c[idx]
         return
     w = 2 * k + 1
-    seg = np.repeat(np.arange(len(starts)), lens)
-    pos = np.arange(len(seg)) - np.repeat(np.cumsum(lens) - lens, lens)  # index in its path
-    base = starts[seg]
-    nn = lens[seg]
     if closed:
+        seg = np.repeat(np.arange(len(starts)), lens)
+        pos = np.arange(len(seg)) - np.repeat(np.cumsum(lens) - lens, lens)  # index in its path
+        base = starts[seg]
+        nn = lens[seg]
         tgt = base + pos
         sx = np.zeros(len(seg))
         sy = np.zeros(len(seg))
@@ -295,35 +295,45 @@ def _smooth_many(r, c, starts, lens, k, closed, proj, ox, oy):
         ox[tgt] = sx / w
         oy[tgt] = sy / w
         return
-    mid = (pos >= k) & (pos < nn - k)
-    tgt = (base + pos)[mid]
-    sx = np.zeros(len(tgt))
-    sy = np.zeros(len(tgt))
-    for d in range(-k, k + 1):
-        sx = sx + r[tgt + d]
-        sy = sy + c[tgt + d]
-    ox[tgt] = sx / w
-    oy[tgt] = sy / w
-    ends = pos < k
-    e_start = (base + pos)[ends]       # i-th point from the start ...
-    e_end = (base + nn - 1 - pos)[ends]  # ... and from the end
-    e_i = pos[ends]
-    e_first = base[ends]
-    e_last = (base + nn - 1)[ends]
-    ax = np.zeros(len(e_i))
-    ay = np.zeros(len(e_i))
-    bx = np.zeros(len(e_i))
-    by = np.zeros(len(e_i))
+    tgt = _ranges(starts + k, starts + lens - k)
+    if 4 * len(tgt) > len(r):
+        # most points of the scan: shifted slices of the flat arrays, not gathers (the
+        # windows that cross from one path into the next are summed, not used)
+        s = np.zeros((2, len(r) - 2 * k))
+        xy = np.stack([r, c])
+        for d in range(-k, k + 1):
+            np.add(s, xy[:, k + d:len(r) - k + d], out=s)
+        np.divide(s, w, out=s)
+        keep = np.zeros(len(r) - 2 * k, np.bool_)
+        keep[tgt - k] = True
+        np.copyto(ox[k:len(r) - k], s[0], where=keep)
+        np.copyto(oy[k:len(r) - k], s[1], where=keep)
+    else:
+        sx = np.zeros(len(tgt))
+        sy = np.zeros(len(tgt))
+        for d in range(-k, k + 1):
+            sx = sx + r[tgt + d]
+            sy = sy + c[tgt + d]
+        ox[tgt] = sx / w
+        oy[tgt] = sy / w
+    # the i-th point (i < k) from the start and from the end of every path, all at once:
+    # (start x, start y, end x, end y) x i x path
+    last = starts + lens - 1
+    at = np.stack([starts, starts + len(r), last, last + len(r)])
+    step = np.array([[1], [1], [-1], [-1]])
+    rc = np.concatenate([r, c])
+    acc = np.zeros((4, k, len(starts)))
     for j in range(w):
-        pj = proj[e_i, j]
-        ax = ax + pj * r[e_first + j]
-        ay = ay + pj * c[e_first + j]
-        bx = bx + pj * r[e_last - j]
-        by = by + pj * c[e_last - j]
-    ox[e_start] = ax
-    oy[e_start] = ay
-    ox[e_end] = bx
-    oy[e_end] = by
+        acc = acc + proj[:k, j, None] * rc[at + step * j][:, None, :]
+    first = starts + np.arange(k)[:, None]
+    end = last - np.arange(k)[:, None]
+    ox[first], oy[first], ox[end], oy[end] = acc
+
+
+def _ranges(lo, hi):
+    """The indices ``lo[i]:hi[i]`` of all ranges, one range after the other."""
+    n = np.maximum(hi - lo, 0)
+    return np.arange(int(n.sum())) + np.repeat(lo - (np.cumsum(n) - n), n)
 
 
 def smoothed_lengths(points_rc, offsets, closed, *, window_px: int = 5) -> np.ndarray:
@@ -359,7 +369,8 @@ def smooth_paths(paths, *, window_px: int = 5, closed=False) -> list:
     """:func:`smooth` of many paths, vectorised over them (the same values, point by point).
 
     One call of :func:`smooth` per path costs about 0.1 ms of numpy overhead at an 11-point
-    window: 29 ms for the 246 stacks of a dense 2000x2000 scan against 3 ms here.
+    window: 29 ms for the 246 stacks of a dense 2000x2000 scan against 1 ms here. The paths
+    returned share one array.
 
     Parameters
     ----------
@@ -390,11 +401,13 @@ def smooth_paths(paths, *, window_px: int = 5, closed=False) -> list:
     ox, oy, n = _smooth_flat(r, c, offs, cl, half, _end_projectors(half))
     out = np.stack([ox, oy], axis=1)
     res = []
-    for i in range(m):
-        a, b = int(offs[i]), int(offs[i + 1])
-        if n[i] < 3 or min(half, (n[i] - 1) // 2) < 1:
+    bounds = offs.tolist()
+    for i, k in enumerate(n.tolist()):
+        a, b = bounds[i], bounds[i + 1]
+        if k < 3 or min(half, (k - 1) // 2) < 1:
             res.append(pts[i].copy())
             continue
-        o = out[a:a + n[i]]
-        res.append(np.vstack([o, o[:1]]) if n[i] != b - a else o.copy())
+        # the paths share the array of the smoothed points
+        o = out[a:a + k]
+        res.append(np.vstack([o, o[:1]]) if k != b - a else o)
     return res

@@ -24,7 +24,7 @@ fit on size 5 n_br h, after coordinates translation and rotation in the tangent 
    fitted; ``kappa = 2 a / (1 + b^2)^1.5``. The known leak of a circle's x^4 term into ``a``
    is removed (``circle_correction``: exact to O((kappa w)^2) on arcs). Near an open end the
    window keeps its length and is shifted inwards; the samples it serves hold its fit read at
-   its centre (:func:`_flat_shifted`). The window is capped at half the fitted length
+   its centre (:func:`_fitted_kappa`). The window is capped at half the fitted length
    (``max_window_frac``): a longer parabola cannot resolve an S-shaped stack.
 3. **Fork zones.** Near a junction the bands of the stacks meeting there overlap: the image
    holds no centreline of this stack, and the skeleton hooks into the medial-axis fork point.
@@ -124,7 +124,7 @@ kappa_m = |kappa_pm| (paper, section "Curvature of branches"), in 1/mm, trapezoi
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
@@ -205,183 +205,565 @@ def default_smooth_px(thickness_px: float) -> int:
     return 2 * k + 1
 
 
-def _trapezoid(y, x):
-    """``np.trapezoid(y, x)`` along the last axis, the same sums (its products, then numpy's
-    pairwise sum of each row), without its overhead (a third of a profile's cost)."""
-    return np.add.reduce((x[1:] - x[:-1]) * (y[..., 1:] + y[..., :-1]) / 2.0, axis=-1)
+def _pymax(a, b):
+    """Python's ``max(a, b)`` element by element: ``a`` unless ``b`` is larger (NaN kept)."""
+    return np.where(b > a, b, a)
 
 
-def _make_profile(s_px, kappa_px, rc, px_per_mm, closed, fit=(0, -1)) -> CurvatureProfile:
-    kappa = np.asarray(kappa_px, float) * float(px_per_mm)
-    s_mm = np.asarray(s_px, float) / float(px_per_mm)
-    n = len(s_mm)
-    length_mm = float(s_mm[-1] - s_mm[0]) if n > 1 else 0.0
-    if length_mm > 0:
-        # both integrals in one pass: a reduction along rows sums each row as a 1-D one
-        both = np.empty((2, n))
-        both[0] = kappa
-        np.abs(kappa, out=both[1])
-        ints = _trapezoid(both, s_mm)
-        kpm = float(ints[0] / length_mm)
-        kplus = float(ints[1] / length_mm)
-    else:
-        kpm = float(kappa.mean()) if len(kappa) else np.nan
-        kplus = float(np.abs(kappa).mean()) if len(kappa) else np.nan
-    return CurvatureProfile(s_mm=s_mm, kappa_per_mm=kappa, length_mm=length_mm, kappa_pm=kpm,
-                            kappa_plus=kplus, kappa_m=abs(kpm), closed=bool(closed),
-                            rc_px=np.asarray(rc, float), fit_start=int(fit[0]),
-                            fit_stop=int(len(s_mm) if fit[1] < 0 else fit[1]))
+def _pymin(a, b):
+    """Python's ``min(a, b)`` element by element: ``a`` unless ``b`` is smaller."""
+    return np.where(b < a, b, a)
 
 
-def _solve3(S0, S1, S2, S3, S4, T0, T1, T2):
-    """Least-squares parabolas: [[S4 S3 S2],[S3 S2 S1],[S2 S1 S0]] (a b c) = (T2 T1 T0).
-
-    Parameters
-    ----------
-    S0, S1, S2, S3, S4, T0, T1, T2 : ndarray (m,)
-        Window sums of every fit (:func:`_parabola_curvatures`).
+def _ranges(lo, hi):
+    """The indices ``lo[i]:hi[i]`` of all ranges, one range after the other.
 
     Returns
     -------
-    a, b : ndarray (m,)
-        Quadratic and linear coefficients; NaN where the system is singular (determinant
-        not above 1e-9 of ``S4 S2 S0``).
+    idx : ndarray (L,) int
+    pos, n : ndarray (M,) int
+        Each range's first position in ``idx``, and its length (0 where ``hi <= lo``).
     """
-    m1 = S2 * S0 - S1 * S1
-    m2 = S3 * S0 - S1 * S2
-    det = S4 * m1 - S3 * m2 + S2 * (S3 * S1 - S2 * S2)
-    deta = T2 * m1 - S3 * (T1 * S0 - S1 * T0) + S2 * (T1 * S1 - S2 * T0)
-    detb = S4 * (T1 * S0 - T0 * S1) - T2 * m2 + S2 * (S3 * T0 - T1 * S2)
-    singular = ~(np.abs(det) > 1e-9 * S4 * S2 * S0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        a = np.divide(deta, det, out=deta)
-        b = np.divide(detb, det, out=detb)
-    if singular.any():
-        a[singular] = np.nan
-        b[singular] = np.nan
-    return a, b
+    n = np.maximum(hi - lo, 0)
+    pos = np.zeros(len(n), np.int64)
+    np.cumsum(n[:-1], out=pos[1:])
+    return np.arange(int(n.sum())) + np.repeat(lo - pos, n), pos, n
 
 
-def _settle(c, i, lim, step, inside):
-    """Where the scan from ``i`` by ``step`` stops -- at the last index in a range, or at
-    ``lim`` -- found from an estimate ``c``.
+def _range_sums(x, lo, hi):
+    """``np.add.reduce(x[lo[i]:hi[i]])`` of every range, to the last bit (0.0 where empty).
 
-    The ranges are defined by the scans' own tests (``s[i] - s[k] <= 2`` is not
-    ``s[k] >= s[i] - 2`` in floating point), and the estimates of one search over all paths
-    are off by the rounding of each path's shift into a key range of its own: on a dense
-    2000x2000 scan they settle in one step or none. For a range that holds ``i`` and is
-    contiguous (increasing arc length) any estimate between ``i`` and ``lim`` settles; from
-    ``c = i`` this is the scan itself whatever the arc length.
-
-    Parameters
-    ----------
-    c, i, lim : ndarray (m,) int
-        Estimates, the scans' starts, and the last indices the scans may reach.
-    step : {-1, 1}
-        Direction of the scans.
-    inside : callable
-        ``inside(k)``: whether index ``k[r]`` is in the range of point ``r``.
-
-    Returns
-    -------
-    ndarray (m,) int
-        ``c``, settled in place.
+    ``np.add.reduceat`` sums each of its ranges by numpy's pairwise summation, but starting
+    from the range's first value where a reduction starts from 0.0: every range is gathered
+    behind a 0.0 of its own.
     """
-    while True:
-        more = c != lim
-        more &= inside(np.where(more, c + step, c))
-        if not more.any():
-            break
-        c += more if step > 0 else -more.view(np.int8)
-    while True:
-        back = c != i
-        back &= ~inside(c)
-        if not back.any():
-            return c
-        c -= back if step > 0 else -back.view(np.int8)
+    n = np.maximum(hi - lo, 0) + 1
+    if len(n) == 0 or len(x) == 0:
+        return np.zeros(len(n))
+    pos = np.zeros(len(n), np.int64)
+    np.cumsum(n[:-1], out=pos[1:])
+    idx = np.arange(int(n.sum())) + np.repeat(lo - 1 - pos, n)
+    idx[pos] = 0
+    vals = x[idx]
+    vals[pos] = 0.0
+    return np.add.reduceat(vals, pos)
 
 
-def _chord_end(i, lim, step, inside, estimate):
-    """:func:`_settle` for short scans: a few steps from ``i`` (a tangent chord of 2 px spans
-    at most two samples on the skeletons of a dense scan, where one search of all the points
-    takes 0.5 ms), the estimate ``estimate()`` settled when some scan goes farther."""
-    c = i.copy()
-    for _ in range(3):
-        more = c != lim
-        more &= inside(np.where(more, c + step, c))
-        if not more.any():
-            return c
-        c += more if step > 0 else -more.view(np.int8)
-    return _settle(estimate(), i, lim, step, inside)
+def _trapz_ranges(y, x, lo, hi):
+    """``np.trapezoid(y[lo[i]:hi[i]], x[lo[i]:hi[i]])`` of every range, to the last bit: its
+    products, then numpy's sum (:func:`_range_sums`)."""
+    return _range_sums((x[1:] - x[:-1]) * (y[1:] + y[:-1]) / 2.0, lo, hi - 1)
 
 
 @njit(cache=True)
-def _window_sums(X, Y, i, a0, m, tx, ty):  # pragma: no cover - numba
-    """Sums over every window of ``u, u^2 .. u^6, v, u v, u^2 v`` in its point's tangent frame.
+def _bisect(s, lo, hi, v, right):  # pragma: no cover - numba
+    """``np.searchsorted(s[lo[q]:hi[q]], v[q], side="right" if right[q] else "left")`` of
+    every query ``q``: numpy's bisection, step for step, and its order of floats (NaN after
+    everything). Compiled: the 2 800 searches of a dense 2000 x 2000 scan in 0.2 ms, against
+    1.1 us a query for a call of ``np.searchsorted`` each."""
+    out = np.empty(lo.shape[0], np.int64)
+    for q in range(lo.shape[0]):
+        i, j, x = lo[q], hi[q], v[q]
+        while i < j:
+            mid = i + ((j - i) >> 1)
+            y = s[mid]
+            if right[q]:
+                go = not (x < y or (y != y and x == x))
+            else:
+                go = y < x or (x != x and y == y)
+            if go:
+                i = mid + 1
+            else:
+                j = mid
+        out[q] = i - lo[q]
+    return out
 
-    Point by point, each window's samples added one after the other from its first, in the
-    point's own frame: running sums over a path in a common frame would subtract sums of u^6
-    grown over thousands of px. Compiled: 2-3 ms against 11-12 ms for the same sums by numpy
-    over blocks of gathered windows (the 633 000 window samples of a dense 2000x2000 scan).
 
-    Parameters
-    ----------
-    X, Y : ndarray (N,)
-        Coordinates of all points.
-    i, a0, m : ndarray (n,) int
-        The points, their windows' first points and lengths minus one.
-    tx, ty : ndarray (n,)
-        Unit tangents.
+def _searches(s, lo, hi, values, sides):
+    """``np.searchsorted(s[lo[i]:hi[i]], v[i], side)`` of every query ``v[i]`` of every
+    array ``v`` of ``values``, on its side of ``sides`` (``"l"`` or ``"r"`` each), in one
+    call of :func:`_bisect`.
 
     Returns
     -------
-    ndarray (9, n)
+    ndarray (len(values), len(lo)) int
     """
-    n = i.shape[0]
-    out = np.empty((9, n))
-    for p in range(n):
-        xp = X[i[p]]
-        yp = Y[i[p]]
-        ptx = tx[p]
-        pty = ty[p]
-        s0 = s1 = s2 = s3 = s4 = s5 = s6 = s7 = s8 = 0.0
-        for t in range(m[p] + 1):
-            j = a0[p] + t
-            dx = X[j] - xp
-            dy = Y[j] - yp
-            u = dx * ptx + dy * pty
-            v = dy * ptx - dx * pty
-            u2 = u * u
-            u4 = u2 * u2
-            if t == 0:
-                s0 = u
-                s1 = u2
-                s2 = u2 * u
-                s3 = u4
-                s4 = u4 * u
-                s5 = u4 * u2
-                s6 = v
-                s7 = u * v
-                s8 = u2 * v
-            else:
-                s0 += u
-                s1 += u2
-                s2 += u2 * u
-                s3 += u4
-                s4 += u4 * u
-                s5 += u4 * u2
-                s6 += v
-                s7 += u * v
-                s8 += u2 * v
-        out[0, p] = s0
-        out[1, p] = s1
-        out[2, p] = s2
-        out[3, p] = s3
-        out[4, p] = s4
-        out[5, p] = s5
-        out[6, p] = s6
-        out[7, p] = s7
-        out[8, p] = s8
+    k = len(values)
+    if len(lo) == 0:
+        return np.zeros((k, 0), np.int64)
+    return _bisect(s, np.tile(lo, k), np.tile(hi, k), np.concatenate(values).astype(np.float64),
+                   np.repeat(np.array([side == "r" for side in sides]), len(lo))).reshape(k, -1)
+
+
+def _profile_sums(s_px, kappa_px, offs, px_per_mm, fit_start, fit_stop, forks, walled_px,
+                  noise_coef, rel):
+    """The arrays and sums of many profiles (:func:`_profiles`), with the arithmetic of
+    one profile at a time.
+
+    With ``rel``, the relative uncertainty of ``int kappa^2 ds``: (the part of it not
+    measured on a free centreline + the noise floor ``noise_coef`` per mm of length) / the
+    integral. Not measured on a free centreline: the fork zones extrapolated (beyond the
+    fitted samples at a fork end; all of a stack fitted whole at a fork, whose fork zones
+    would cover it), and the ``walled_px`` of arc at each end followed along a merged band's
+    wall (its layers assumed to lie along it).
+
+    Returns
+    -------
+    s_mm, kappa : ndarray (N,)
+    sums : ndarray (M, 4)
+        Length (mm), mean signed and mean absolute curvature, and with ``rel`` the relative
+        uncertainty of ``int kappa^2 ds`` (NaN without).
+    """
+    s_mm = s_px / px_per_mm
+    kappa = kappa_px * px_per_mm
+    a, b = offs[:-1], offs[1:]
+    n = b - a
+    sums = np.full((len(n), 4), np.nan)
+    if len(s_mm) == 0:
+        sums[:, 0] = 0.0
+        return s_mm, kappa, sums
+    last = np.clip(b - 1, 0, len(s_mm) - 1)
+    length = np.where(n > 1, s_mm[last] - s_mm[np.minimum(a, last)], 0.0)
+    sums[:, 0] = length
+    ak = np.abs(kappa)
+    rows = (kappa, ak, kappa * kappa) if rel else (kappa, ak)
+    # the products of the trapezoid rule (np.trapezoid's) of kappa, |kappa| (and kappa^2),
+    # each profile's behind a 0.0 (in the place of the product that joins it to the previous
+    # profile): np.add.reduceat sums each profile's as numpy's reduction does, from 0.0
+    ds = s_mm[1:] - s_mm[:-1]
+    prods = np.zeros((len(rows), len(s_mm)))
+    for row, v in zip(prods, rows):
+        np.multiply(ds, v[1:] + v[:-1], out=row[1:])
+        np.divide(row[1:], 2.0, out=row[1:])
+    some = np.flatnonzero(a < len(s_mm))
+    prods[:, a[some]] = 0.0
+    trap = np.zeros((len(rows), len(n)))
+    trap[:, some] = np.add.reduceat(prods, a[some], axis=1)
+    on = np.flatnonzero(length > 0)
+    sums[on, 1] = trap[0, on] / length[on]
+    sums[on, 2] = trap[1, on] / length[on]
+    mean = np.flatnonzero(~(length > 0) & (n > 0))
+    sums[mean, 1] = _range_sums(kappa, a[mean], b[mean]) / n[mean]
+    sums[mean, 2] = _range_sums(ak, a[mean], b[mean]) / n[mean]
+    if not rel:
+        return s_mm, kappa, sums
+    r = np.flatnonzero(n >= 2)
+    a, b, n = a[r], b[r], n[r]
+    f0, f1 = forks[r, 0], forks[r, 1]
+    t0, t1 = fit_start[r], fit_stop[r]
+    q0, q1 = _searches(s_mm, a, b, [s_mm[a] + walled_px[r, 0] / px_per_mm,
+                                    s_mm[b - 1] - walled_px[r, 1] / px_per_mm], "rl")
+    z0 = np.maximum(np.where(f0, t0, 0), q0 - 1)
+    z1 = np.minimum(np.where(f1, t1, n), q1 + 1)
+    # fitted whole because its fork zones would cover it: every sample is a fork's
+    whole = (f0 | f1) & (t0 == 0) & (t1 == n)
+    part = (z1 - z0 > 1) & ~whole
+    fitted = np.zeros(len(r))
+    # (the products of samples z0:z1 at z0 + 1:z1)
+    fitted[part] = _range_sums(prods[2], (a + z0 + 1)[part], (a + z1)[part])
+    total = trap[2, r]
+    noise = noise_coef[r] * length[r]
+    sums[r, 3] = ((_pymax(total - fitted, 0.0) + noise)
+                  / _pymax(_pymax(total, noise), 1e-300))
+    return s_mm, kappa, sums
+
+
+def _zone_sides(s, k, offs, t0, t1, nb, closed, forks, known, thickness_px, px_per_mm,
+                window_px, max_window_frac, shifted):
+    """The set-up of :func:`_fill_fork_zones` for many stacks: the curvature clipped to the
+    bound, in place, and per side (0: the start, 1: the end) of every stack its trend's
+    samples ``lo:hi`` and its zone ``z0:z1`` (``side[:, :, 0:4]``), and whether the side
+    takes a trend (``side[:, :, 4]``).
+
+    Returns
+    -------
+    kmax, w : ndarray (M,)
+        The bound, 1/mm, and the window fitted, mm.
+    side : ndarray (2, M, 5) int
+    """
+    a, b = offs[:-1], offs[1:]
+    n = b - a
+    m = len(n)
+    kmax = 2.0 * px_per_mm / (nb * thickness_px)
+    kr = np.repeat(kmax, n)
+    k[:] = np.where(k < -kr, -kr, np.where(k > kr, kr, k))
+    w = np.zeros(m)
+    side = np.zeros((2, m, 5), np.int64)
+    # an unfitted stack (t1 == t0) has no trend to continue: _fill_unfitted_stacks fills it
+    act = np.flatnonzero(~closed & (n >= 3) & ((t0 > 0) | (t1 < n) | forks[:, 0] | forks[:, 1])
+                         & (t1 > t0))
+    if len(act) == 0:
+        return kmax, w, side
+    a, b, n, f0, f1 = a[act], b[act], n[act], t0[act], t1[act]
+    # the window fitted (_fitted_window_mm; a NaN window_px: 5 n_br h)
+    ww = (5.0 * nb[act] * thickness_px if window_px != window_px
+          else np.full(len(act), window_px)) / px_per_mm
+    if max_window_frac > 0:
+        ww = _pymin(ww, max_window_frac * (s[a + f1 - 1] - s[a + f0]))
+    w[act] = ww
+    # shifted fits within w/2 of the zone: the trend window starts beyond them
+    off = 0.5 * ww if shifted else np.zeros(len(act))
+    first = s[a + f0] + off
+    last = s[a + f1 - 1] - off
+    c0, c1, lo_end, hi_start = _searches(s, a, b, [first, last, first + ww, last - ww], "lrlr")
+    for e in range(2):
+        if e == 0:
+            lo, hi, z0, z1 = c0, np.minimum(np.maximum(lo_end, c0 + 3), f1), 0, c0
+        else:
+            lo, hi, z0, z1 = np.maximum(np.minimum(hi_start, c1 - 3), f0), c1, c1, n
+        lo, hi = np.maximum(lo, f0), np.minimum(hi, f1)
+        whole = (f0 == 0) if e == 0 else (f1 == n)
+        side[e, act, 0] = lo
+        side[e, act, 1] = hi
+        side[e, act, 2] = z0
+        side[e, act, 3] = z1
+        # a stack fitted whole (its zones would cover it) has measured fits at its ends,
+        # shifted onto one window's mean: they give way to a trend only where the scan's
+        # noise is known and the trend exceeds it
+        side[e, act, 4] = forks[act, e] & (hi - lo >= 3) & ~(whole & ~known[act])
+    return kmax, w, side
+
+
+def _arc_lengths(seg, a, n):
+    """The arc length of every point from its path's start (path ``i`` at ``a[i]:a[i] +
+    n[i]``, the step from point ``j`` to ``j + 1`` ``seg[j]``; a path's last entry of ``seg``
+    is not one of its steps): each path's ``np.cumsum`` of its steps after a 0.
+
+    One ``np.cumsum`` over all paths, each path's steps preceded by minus the previous path's
+    sum: ``x + (-x)`` is exactly 0.0, and that sum is ``np.bincount``'s, which adds its
+    weights in input order as the running sum does.
+    """
+    steps = seg.copy()
+    steps[(a + n - 1)[n > 0]] = 0.0
+    path = np.repeat(np.arange(len(n)), n)
+    sums = np.bincount(path, weights=steps, minlength=len(n))
+    if not np.isfinite(sums).all():
+        return np.concatenate([np.cumsum(np.r_[0.0, steps[i:i + k - 1]]) for i, k in zip(a, n)
+                               if k] + [np.zeros(0)])
+    run = np.cumsum(np.insert(steps, a, np.r_[0.0, -sums[:-1]]))
+    return run[np.arange(len(seg)) + path]
+
+
+def _fit_ranges(r, c, offs, closed, nb, trims, unfitted, thickness_px, window_px,
+                max_window_frac):
+    """Arc length and fitted samples of many smoothed centrelines (:func:`_paper_profiles`).
+
+    Returns
+    -------
+    s_px : ndarray (N,)
+        Arc length from each path's start.
+    total : ndarray (M,)
+        Length of each path (a closed one with its closing segment), px.
+    mode : ndarray (M,) int
+        0: nothing fitted (fewer than three points, or ``unfitted``), 1: a closed loop,
+        2: the open path's samples ``t0:t1``.
+    t0, t1 : ndarray (M,) int
+    half_w : ndarray (M,)
+        Half window of the fits, px.
+    """
+    a, b = offs[:-1], offs[1:]
+    n = b - a
+    size = len(r)
+    # seg[j] joins points j and j + 1 of a path, and a closed loop's last point to its first
+    seg = np.zeros(size)
+    seg[:-1] = np.hypot(r[1:] - r[:-1], c[1:] - c[:-1])
+    ring = closed & (n > 0)
+    first, last = a[ring], b[ring] - 1
+    seg[last] = np.hypot(r[first] - r[last], c[first] - c[last])
+    total = _range_sums(seg, a, a + np.where(ring, n, np.maximum(n - 1, 0)))
+    s_px = _arc_lengths(seg, a, n)
+    win = 5.0 * nb * thickness_px if window_px != window_px else np.full(len(n), window_px)
+    half_w = 0.5 * win
+    mode = np.zeros(len(n), np.int64)
+    t0 = np.zeros(len(n), np.int64)
+    t1 = n.copy()
+    fits = n >= 3
+    # no centreline of its own (stack_profiles): missing data, filled from its neighbours
+    t1[fits & unfitted & ~closed] = 0
+    # a closed loop is unrolled once on each side; a window never exceeds the loop
+    loop = fits & closed
+    mode[loop] = 1
+    half_w[loop] = _pymin(half_w[loop], 0.5 * total[loop])
+    op = np.flatnonzero(fits & ~closed & ~unfitted)
+    if len(op) == 0:
+        return s_px, total, mode, t0, t1, half_w
+    # the skeleton is distorted within about a stack width of a junction or a free end: the
+    # fits use the samples beyond the trims, the end samples take the curvature of the
+    # nearest fitted one
+    a, b = a[op], b[op]
+    floor = nb[op] * thickness_px
+    tr0, tr1 = _pymax(floor, trims[op, 0]), _pymax(floor, trims[op, 1])
+    f0, f1 = _searches(s_px, a, b, [tr0, s_px[b - 1] - tr1], "lr")
+    # (the span is read only where three samples or more are left)
+    span = s_px[a + np.maximum(f1 - 1, 0)] - s_px[np.minimum(a + f0, size - 1)]
+    whole = (f1 - f0 < 3) | (span < tr0 + tr1)
+    f0 = np.where(whole, 0, f0)
+    f1 = np.where(whole, b - a, f1)
+    if max_window_frac > 0:
+        half_w[op] = _pymin(half_w[op],
+                            0.5 * max_window_frac * (s_px[a + f1 - 1] - s_px[a + f0]))
+    t0[op], t1[op], mode[op] = f0, f1, 2
+    return s_px, total, mode, t0, t1, half_w
+
+
+def _fit_arrays(r, c, s_px, offs, total, mode, t0, t1):
+    """The entries of :func:`_fit_curvatures` for the paths :func:`_fit_ranges` fits: in a
+    right-handed frame (x = col, y = -row), an open path's samples ``t0:t1``, a closed one
+    unrolled once on each side (its points ``n .. 2 n - 1`` wanted).
+
+    Returns
+    -------
+    x, y, s : ndarray
+        Coordinates and arc length of the fitted paths, one after the other.
+    start, length, i0, count : ndarray (F,) int
+        Per fitted path: its first point and its length in ``x``, and the wanted points.
+    """
+    fitted = np.flatnonzero(mode != 0)
+    loop = mode[fitted] == 1
+    # pieces of the fitted paths: a loop's three turns, an open path's fitted part
+    reps = np.where(loop, 3, 1)
+    first = np.cumsum(reps) - reps
+    path = np.repeat(fitted, reps)
+    turn = np.arange(len(path)) - np.repeat(first, reps)
+    ring = mode[path] == 1
+    a = offs[path]
+    idx, pos, n = _ranges(np.where(ring, a, a + t0[path]),
+                          np.where(ring, offs[path + 1], a + t1[path]))
+    # a loop's arc length continued backwards over its first turn, forwards over its third
+    shift = np.where(ring & (turn != 1), np.where(turn == 0, -total[path], total[path]), 0.0)
+    count = np.where(loop, n[first], t1[fitted] - t0[fitted])
+    return (c[idx], -r[idx], s_px[idx] + np.repeat(shift, n), pos[first],
+            np.where(loop, 3 * count, count), np.where(loop, count, 0), count)
+
+
+def _fitted_kappa(s_px, total, offs, mode, t0, t1, half_w, shift, kin):
+    """Every sample's curvature from the fits (``kin``, the fitted paths' wanted points one
+    after the other): the fitted samples their fit, the others the nearest fitted one,
+    nothing fitted 0; a closed loop's first sample repeated at its end.
+
+    With ``shift``, the fits of the samples within ``half_w`` of an end of the fitted part
+    all fit the window next to that end, so they hold its fit read at its centre, the
+    nearest sample fitted on a window centred on it. Read again in the tangent frame of every
+    end sample, the same window gave a curvature that turns with the skeleton's last pixels:
+    where the skeleton hooks into a fork of merged ink, the end samples' frames turn with the
+    hook, and the parabola, fitted in a frame oblique to the window, bends with them. A
+    7-layer link between two forks of a compacted rod, blurred by 0.75 px, read 87 times the
+    ``int kappa^2 ds`` it read unblurred, at the curvature bound at its end
+    (docs/validation/README.md, "Shifted end windows").
+
+    Returns
+    -------
+    s, kappa : ndarray
+        Arc length (px) and curvature (1/px), path ``i`` at ``out[i]:out[i + 1]``.
+    out : ndarray (M + 1,) int
+    """
+    a, b = offs[:-1], offs[1:]
+    n = b - a
+    loop = mode == 1
+    out = offs.copy()
+    np.cumsum(loop, out=out[1:])
+    out[1:] += b  # a loop's closing sample added
+    moved = np.repeat(out[:-1] - a, n)  # from a sample's index in s_px to its index in s
+    s = np.empty(out[-1])
+    s[np.arange(len(s_px)) + moved] = s_px
+    s[out[1:][loop] - 1] = total[loop]
+    kappa = np.zeros(out[-1])
+    fitted = np.flatnonzero(mode != 0)
+    if len(fitted) == 0:
+        return s, kappa, out
+    # per fitted path: its fitted part f0:f1, where its fits start in kin, and the wanted
+    # points (relative to f0) whose own fit every sample takes, the nearest of them
+    f0 = np.where(loop, 0, t0)[fitted]
+    f1 = np.where(loop, n, t1)[fitted]
+    q = np.zeros(len(fitted), np.int64)
+    np.cumsum((f1 - f0)[:-1], out=q[1:])
+    lo = np.zeros(len(fitted), np.int64)
+    hi = f1 - f0 - 1
+    if shift:
+        # the fits centred on their own sample (_centred_fits of the fitted part)
+        op = np.flatnonzero(~loop[fitted])
+        p = fitted[op]
+        lo_p, hi_p = a[p] + t0[p], a[p] + t1[p]
+        c0, c1 = _searches(s_px, lo_p, hi_p, [s_px[lo_p] + half_w[p], s_px[hi_p - 1] - half_w[p]],
+                           "lr")
+        cut = c0 < c1
+        lo[op[cut]] = c0[cut]
+        hi[op[cut]] = c1[cut] - 1
+    idx, pos, cnt = _ranges(a[fitted], b[fitted])
+    j = idx - np.repeat(a[fitted], cnt)
+    f0r = np.repeat(f0, cnt)
+    src = np.minimum(np.maximum(np.minimum(np.maximum(j, f0r), np.repeat(f1 - 1, cnt)) - f0r,
+                                np.repeat(lo, cnt)), np.repeat(hi, cnt))
+    kappa[idx + moved[idx]] = kin[src + np.repeat(q, cnt)]
+    ends = out[1:][loop] - 1
+    kappa[ends] = kappa[out[:-1][loop]]
+    return s, kappa, out
+
+
+def _profiles(s_px, kappa_px, offs, px_per_mm, closed, rc, fit, *, forks=None, walled_px=None,
+              noise_coef=None, noise_var=None) -> list:
+    """Curvature profiles of many stacks from flat arrays (stack ``i`` at
+    ``offs[i]:offs[i + 1]``): arc length and curvature in mm, their means, and with ``forks``
+    the relative uncertainty of ``int kappa^2 ds`` (:func:`_profile_sums`).
+
+    Parameters
+    ----------
+    s_px, kappa_px : ndarray (N,)
+        Arc length (px) and curvature (1/px) of every sample.
+    offs : ndarray (M + 1,) int
+    px_per_mm : float
+    closed : sequence of bool
+    rc : sequence of (n, 2) arrays
+        Centreline of every stack.
+    fit : ndarray (M, 2) int
+        ``fit_start`` and ``fit_stop``.
+    forks : ndarray (M, 2) bool, optional
+        Fork ends; with them ``walled_px`` (M, 2) float, ``noise_coef`` (M,) (the noise floor
+        of ``int kappa^2 ds`` per mm of length) and ``noise_var`` (the profiles'
+        ``noise_var_per_mm2``).
+
+    Returns
+    -------
+    list of CurvatureProfile
+    """
+    m = len(offs) - 1
+    rel = forks is not None
+    if not rel:
+        forks = np.zeros((m, 2), np.bool_)
+        walled_px = np.zeros((m, 2))
+        noise_coef = np.zeros(m)
+    fit = np.asarray(fit, np.int64).reshape(m, 2)
+    s_mm, kappa, sums = _profile_sums(
+        np.asarray(s_px, float), np.asarray(kappa_px, float), np.asarray(offs, np.int64),
+        float(px_per_mm), fit[:, 0], fit[:, 1], np.asarray(forks, np.bool_).reshape(m, 2),
+        np.asarray(walled_px, float).reshape(m, 2), np.asarray(noise_coef, float), rel)
+    bounds = np.asarray(offs).tolist()
+    fit = fit.tolist()
+    out = []
+    for i, (length, kpm, kplus, r) in enumerate(sums.tolist()):
+        a, b = bounds[i], bounds[i + 1]
+        out.append(CurvatureProfile(
+            s_mm=s_mm[a:b], kappa_per_mm=kappa[a:b], length_mm=length, kappa_pm=kpm,
+            kappa_plus=kplus, kappa_m=abs(kpm), closed=bool(closed[i]),
+            rc_px=np.asarray(rc[i], float), fit_start=fit[i][0], fit_stop=fit[i][1],
+            energy_rel_uncertainty=r, noise_var_per_mm2=noise_var[i] if rel else 0.0))
+    return out
+
+
+@njit(cache=True)
+def _window_fits(X, Y, S, off, lens, half_w, i0, cnt, shift):  # pragma: no cover - numba
+    """The parabola of every wanted point of :func:`_fit_curvatures`, by the scans and sums
+    the fits are defined by.
+
+    The tangent from the chord between the farthest points within 2 px of arc on each side
+    (``s[i] - s[k] <= 2``, point after point from ``i``), the window the points within
+    ``half_w`` of arc, shifted inwards at an end keeping its length (``shift``); on a path
+    whose arc length never decreases the window's ends are found from the previous point's.
+    Then the sums over the window of ``u, u^2 .. u^6, v, u v, u^2 v`` in the point's tangent
+    frame, each window's samples added one after the other from its first in the point's own
+    frame (running sums over a path in a common frame would subtract sums of u^6 grown over
+    thousands of px), and the least-squares parabola ``v = a u^2 + b u + c`` from them
+    (Cramer's rule on [[S4 S3 S2],[S3 S2 S1],[S2 S1 S0]]).
+
+    Compiled: the fits of the 346 paths of a dense 2000 x 2000 scan (633 000 window samples)
+    in 4.5 ms, against 11 ms with the scans and the solutions by numpy around the same sums
+    compiled.
+
+    Returns
+    -------
+    ndarray (4, cnt.sum())
+        Per wanted point, path after path: the parabola's ``a`` and ``b``, and the
+        projections ``c2``, ``c1`` of ``u^4`` on the window (the same system for the
+        right-hand side ``S4, S5, S6``). NaN where the chord has zero length, the window
+        holds fewer than three points, or the system is singular (its determinant not above
+        1e-9 of ``S4 S2 S0``).
+    """
+    total = 0
+    for f in range(cnt.shape[0]):
+        total += cnt[f]
+    out = np.empty((4, total))
+    q = 0
+    for f in range(cnt.shape[0]):
+        st = off[f]
+        en = st + lens[f] - 1
+        ordered = True
+        for k in range(st, en):
+            if not S[k + 1] >= S[k]:
+                ordered = False
+                break
+        a0 = b0 = st + i0[f]
+        for i in range(st + i0[f], st + i0[f] + cnt[f]):
+            si = S[i]
+            # tangent from a central chord of about 2 px each side (b corrects the residual
+            # tilt)
+            lo = i
+            while lo != st and si - S[lo - 1] <= 2.0:
+                lo -= 1
+            hi = i
+            while hi != en and S[hi + 1] - si <= 2.0:
+                hi += 1
+            tx = X[hi] - X[lo]
+            ty = Y[hi] - Y[lo]
+            tn = math.sqrt(tx * tx + ty * ty)
+            s_lo = si - half_w[f]
+            s_hi = si + half_w[f]
+            if shift[f]:
+                if s_lo < S[st]:
+                    x = s_hi + (S[st] - s_lo)
+                    s_hi = x if x < S[en] else S[en]
+                    s_lo = S[st]
+                elif s_hi > S[en]:
+                    x = s_lo - (s_hi - S[en])
+                    s_lo = x if x > S[st] else S[st]
+                    s_hi = S[en]
+            if not ordered or i < a0:
+                a0 = i
+            if not ordered or i > b0:
+                b0 = i
+            while a0 != st and S[a0 - 1] >= s_lo:
+                a0 -= 1
+            while a0 != i and not S[a0] >= s_lo:
+                a0 += 1
+            while b0 != en and S[b0 + 1] <= s_hi:
+                b0 += 1
+            while b0 != i and not S[b0] <= s_hi:
+                b0 -= 1
+            a = b = c2 = c1 = np.nan
+            if tn != 0.0 and b0 - a0 >= 2:
+                tx = tx / tn
+                ty = ty / tn
+                # -0.0 + x is x: the sums start from their first sample
+                s1 = s2 = s3 = s4 = s5 = s6 = t0 = t1 = t2 = -0.0
+                for j in range(a0, b0 + 1):
+                    dx = X[j] - X[i]
+                    dy = Y[j] - Y[i]
+                    u = dx * tx + dy * ty
+                    v = dy * tx - dx * ty
+                    u2 = u * u
+                    u4 = u2 * u2
+                    s1 += u
+                    s2 += u2
+                    s3 += u2 * u
+                    s4 += u4
+                    s5 += u4 * u
+                    s6 += u4 * u2
+                    t0 += v
+                    t1 += u * v
+                    t2 += u2 * v
+                s0 = (b0 - a0) + 1.0
+                m1 = s2 * s0 - s1 * s1
+                m2 = s3 * s0 - s1 * s2
+                det = s4 * m1 - s3 * m2 + s2 * (s3 * s1 - s2 * s2)
+                if abs(det) > 1e-9 * s4 * s2 * s0:
+                    a = (t2 * m1 - s3 * (t1 * s0 - s1 * t0) + s2 * (t1 * s1 - s2 * t0)) / det
+                    b = (s4 * (t1 * s0 - t0 * s1) - t2 * m2 + s2 * (s3 * t0 - t1 * s2)) / det
+                    c2 = (s6 * m1 - s3 * (s5 * s0 - s1 * s4) + s2 * (s5 * s1 - s2 * s4)) / det
+                    c1 = (s4 * (s5 * s0 - s4 * s1) - s6 * m2 + s2 * (s3 * s4 - s5 * s2)) / det
+            out[0, q] = a
+            out[1, q] = b
+            out[2, q] = c2
+            out[3, q] = c1
+            q += 1
     return out
 
 
@@ -396,12 +778,8 @@ def _parabola_curvatures(fits):
     (module docstring). A point whose chord has zero length, whose window holds fewer than
     three points or whose fit is singular gets 0. Closed loops are unrolled by the caller.
 
-    Vectorised over the points of all paths (:func:`_window_sums`), with the arithmetic of a
-    loop over each point and its window, in the same order (the same curvature to the last
-    bit on a dense 2000x2000 scan). numpy has no fit over a moving window in a moving frame;
-    and the arrays must hold many paths: one call per path costs about 0.5 ms of numpy
-    overhead (120 ms for the 246 stacks of a dense 2000x2000 scan, against 20 ms in one
-    call).
+    All paths in one call of :func:`_fit_curvatures`: numpy has no fit over a moving window
+    in a moving frame, and its overhead per call is that of a whole path's fits.
 
     Parameters
     ----------
@@ -419,87 +797,63 @@ def _parabola_curvatures(fits):
     live = [k for k, f in enumerate(fits) if nw[k] > 0 and len(f[2])]
     if not live:
         return [np.zeros(max(c, 0)) for c in nw]
-    lens = np.array([len(fits[k][2]) for k in live])
+    lens = np.array([len(fits[k][2]) for k in live], np.int64)
     off = np.zeros(len(live), np.int64)
     np.cumsum(lens[:-1], out=off[1:])
     X = np.concatenate([fits[k][0] for k in live]).astype(float, copy=False)
     Y = np.concatenate([fits[k][1] for k in live]).astype(float, copy=False)
     S = np.concatenate([fits[k][2] for k in live]).astype(float, copy=False)
-    i0 = np.array([int(fits[k][4]) for k in live])
-    cnt = np.array([nw[k] for k in live])
-    g = np.repeat(np.arange(len(live)), cnt)
+    cnt = np.array([nw[k] for k in live], np.int64)
+    kappa = _fit_curvatures(
+        X, Y, S, off, lens, np.array([float(fits[k][3]) for k in live]),
+        np.array([int(fits[k][4]) for k in live], np.int64), cnt,
+        np.array([bool(fits[k][6]) for k in live]), np.array([bool(fits[k][7]) for k in live]))
     first = np.zeros(len(live), np.int64)
     np.cumsum(cnt[:-1], out=first[1:])
-    i = np.arange(cnt.sum()) + np.repeat(off + i0 - first, cnt)
-    st = off[g]
-    en = (off + lens - 1)[g]
+    out = [None] * len(fits)
+    for k_, a_, c_ in zip(live, first.tolist(), cnt.tolist()):
+        out[k_] = kappa[a_:a_ + c_]
+    return [np.zeros(max(c, 0)) if o is None else o for o, c in zip(out, nw)]
 
-    # estimates of the scans' ends from one sorted key over all paths, each path's arc length
-    # moved into a range of its own; _settle makes them exact on the path's own s
-    s_min = np.minimum.reduceat(S, off)
-    base = np.zeros(len(live))
-    np.cumsum((np.maximum.reduceat(S, off) - s_min + 1.0)[:-1], out=base[1:])
-    base -= s_min
-    key = np.maximum.accumulate(S + np.repeat(base, lens))
-    base_i = base[g]
-    falls = S[1:] < S[:-1]
-    falls[off[1:] - 1] = False
-    falls = np.flatnonzero(falls)
-    if falls.size:
-        # a path whose arc length decreases somewhere is scanned from each point
-        unordered = np.zeros(len(live), bool)
-        unordered[np.searchsorted(off, falls, side="right") - 1] = True
-        unordered = unordered[g]
 
-    def estimate(q, right):
-        c = np.searchsorted(key, q + base_i, side="right" if right else "left")
-        c = np.clip(c - 1, i, en) if right else np.clip(c, st, i)
-        if falls.size:
-            c[unordered] = i[unordered]
-        return c
+def _fit_curvatures(X, Y, S, off, lens, half_w, i0, cnt, correct, shift):
+    """:func:`_parabola_curvatures` of paths laid one after the other in flat arrays.
 
-    si = S[i]
-    # tangent from a central chord of about 2 px each side (b corrects the residual tilt)
-    lo = _chord_end(i, st, -1, lambda k: si - S.take(k) <= 2.0,
-                    lambda: estimate(si - 2.0, False))
-    hi = _chord_end(i, en, 1, lambda k: S.take(k) - si <= 2.0, lambda: estimate(si + 2.0, True))
-    tx = X.take(hi) - X.take(lo)
-    ty = Y.take(hi) - Y.take(lo)
-    tn = np.sqrt(tx * tx + ty * ty)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        tx /= tn
-        ty /= tn
-    half_w = np.array([float(fits[k][3]) for k in live]).repeat(cnt)
-    s_lo = si - half_w
-    s_hi = si + half_w
-    shift = np.array([bool(fits[k][7]) for k in live]).repeat(cnt)
-    if shift.any():
-        s0 = S.take(st)
-        s1 = S.take(en)
-        before = shift & (s_lo < s0)
-        after = shift & ~before & (s_hi > s1)
-        s_hi, s_lo = (np.where(before, np.minimum(s_hi + (s0 - s_lo), s1), s_hi),
-                      np.where(before, s0, s_lo))
-        s_lo, s_hi = (np.where(after, np.maximum(s_lo - (s_hi - s1), s0), s_lo),
-                      np.where(after, s1, s_hi))
-    a0 = _settle(estimate(s_lo, False), i, st, -1, lambda k: S.take(k) >= s_lo)
-    b0 = _settle(estimate(s_hi, True), i, en, 1, lambda k: S.take(k) <= s_hi)
-    m = b0 - a0
-    fit = np.flatnonzero((tn != 0.0) & (m >= 2))
+    The windows and the parabolas are compiled (:func:`_window_fits`); the curvature
+    ``2 a / (1 + b^2)^1.5`` is numpy's, whose power differs from the C library's (numba's) in
+    the last bit of about one value in twenty.
 
-    i, a0, m = i[fit], a0[fit], m[fit]
-    S1, S2, S3, S4, S5, S6, T0, T1, T2 = _window_sums(X, Y, i, a0, m, tx[fit], ty[fit])
-    S0 = m + 1.0
-    a, b = _solve3(S0, S1, S2, S3, S4, T0, T1, T2)
+    Parameters
+    ----------
+    X, Y, S : ndarray (N,)
+        Coordinates and arc length of all paths.
+    off, lens : ndarray (F,) int
+        Path ``f`` is ``off[f]:off[f] + lens[f]``.
+    half_w : ndarray (F,)
+    i0, cnt : ndarray (F,) int
+        The wanted points ``i0 .. i0 + cnt - 1`` of every path (``cnt`` >= 1).
+    correct, shift : ndarray (F,) bool
+
+    Returns
+    -------
+    ndarray (cnt.sum(),)
+        The curvature of the wanted points, path after path, 1/px.
+    """
+    if len(cnt) == 0:
+        return np.zeros(0)
+    a, b, c2, c1 = _window_fits(
+        np.asarray(X, np.float64), np.asarray(Y, np.float64), np.asarray(S, np.float64),
+        np.asarray(off, np.int64), np.asarray(lens, np.int64),
+        np.asarray(half_w, np.float64), np.asarray(i0, np.int64), np.asarray(cnt, np.int64),
+        np.asarray(shift, np.bool_))
     ok = np.isfinite(a)
     with np.errstate(invalid="ignore", over="ignore"):
         k = 2.0 * a / (1.0 + b * b) ** 1.5
-        correct = np.array([bool(fits[k_][6]) for k_ in live]).repeat(cnt).take(fit)
+        correct = np.repeat(correct, cnt)
         if correct.any():
             # A circle y = x^2/(2R) + x^4/(8R^3) + ... : the x^4 term leaks into the fitted a
             # and b by the projections (c2, c1) of x^4 on the window's samples. Remove it (two
             # fixed-point steps; exact to O((kappa X)^2)).
-            c2, c1 = _solve3(S0, S1, S2, S3, S4, S4, S5, S6)
             kc = k
             for _ in range(2):
                 k3 = kc * kc * kc / 8.0
@@ -507,101 +861,93 @@ def _parabola_curvatures(fits):
                 bt = b - c1 * k3
                 kc = 2.0 * at / (1.0 + bt * bt) ** 1.5
             k = np.where(correct, kc, k)
-    k[~ok] = 0.0  # a singular fit
-    kappa = np.zeros(len(g))
-    kappa[fit] = k
-    out = [None] * len(fits)
-    for k_, a_, c_ in zip(live, first.tolist(), cnt.tolist()):
-        out[k_] = kappa[a_:a_ + c_]
-    return [np.zeros(max(c, 0)) if o is None else o for o, c in zip(out, nw)]
+    k[~ok] = 0.0  # not fitted, or a singular fit
+    return k
 
 
-def _trim_indices(s, trims):
-    total = s[-1]
-    t0 = int(np.searchsorted(s, trims[0], side="left"))
-    t1 = int(np.searchsorted(s, total - trims[1], side="right"))
-    return t0, t1
+def _flat_paths(paths):
+    """Paths (n, 2) in flat arrays: ``(rows, cols, offs)``, path ``i`` at
+    ``offs[i]:offs[i + 1]``."""
+    lens = np.fromiter((len(p) for p in paths), np.int64, count=len(paths))
+    offs = np.zeros(len(paths) + 1, np.int64)
+    np.cumsum(lens, out=offs[1:])
+    flat = (np.concatenate([np.asarray(p, dtype=np.float64).reshape(-1, 2) for p in paths])
+            if offs[-1] else np.zeros((0, 2)))
+    return np.ascontiguousarray(flat[:, 0]), np.ascontiguousarray(flat[:, 1]), offs
 
 
-def _paper_job(p, *, closed, n_br, thickness_px, px_per_mm, smooth_px, trims, window_px,
-               circle_correction, ends, max_window_frac, unfitted=False, smoothed=None):
-    """Profile by the paper's parabolic window (module docstring), in two steps so that the
-    window fits of many stacks run in one call of :func:`_parabola_curvatures`.
+def _path_lengths(r, c, lo, hi):
+    """:func:`crosssection.core.polyline.length` of the paths ``lo[i]:hi[i]`` of the flat
+    points ``r``, ``c`` (:func:`_flat_paths`)."""
+    return _range_sums(np.hypot(r[1:] - r[:-1], c[1:] - c[:-1]), lo, hi - 1)
+
+
+def _paper_profiles(smoothed, closed, n_br, trims, unfitted, *, thickness_px, px_per_mm,
+                    window_px=None, circle_correction=True, ends="shift",
+                    max_window_frac=0.5) -> list:
+    """Profiles by the paper's parabolic window (module docstring) of many stacks, their
+    window fits in one call of :func:`_fit_curvatures`.
 
     An open path whose trims leave a fitted part shorter than the two trims together is
     fitted whole; with ``unfitted`` nothing of it is fitted (zero curvature, no fitted
     sample: ``fit_start == fit_stop == 0``), to be filled by :func:`_fill_unfitted_stacks`.
-    ``smoothed``, when given, is ``polyline.smooth(p, window_px=smooth_px, closed=closed)``
-    (computed for all stacks at once by :func:`stack_profiles`).
+    The window of an open path is capped at ``max_window_frac`` of its fitted part, that of
+    a closed loop at half the loop. The samples outside the fitted part take the curvature
+    of the nearest fitted one (the skeleton is distorted within about a stack width of a
+    junction or a free end).
+
+    All stacks at once, over their flat arrays (:func:`_fit_ranges`, :func:`_fit_arrays`,
+    :func:`_fitted_kappa`, :func:`_profile_sums`): around the fits, 3.5 ms against 11 ms one
+    stack at a time for the 346 paths of a dense 2000 x 2000 scan.
+
+    Parameters
+    ----------
+    smoothed : sequence of (n, 2) arrays
+        Every stack's smoothed centreline (row, col) px (:func:`_prepared_path`, then
+        :func:`crosssection.core.polyline.smooth`).
+    closed : sequence of bool
+    n_br : sequence of int
+        Layers of every stack (window ``5 n_br h``; trims at least ``n_br h``).
+    trims : sequence of (float or None, float or None)
+        Fork zone at the path start and end, px of arc (None: 0).
+    unfitted : sequence of bool
+        Stacks without a centreline of their own (:func:`stack_profiles`).
+    thickness_px, px_per_mm : float
+    window_px, circle_correction, ends, max_window_frac
+        As in :func:`stack_curvature`, for all stacks.
 
     Returns
     -------
-    fit : tuple or None
-        The stack's entry of :func:`_parabola_curvatures` (None: nothing to fit).
-    finish : callable
-        ``finish(kappa)``: the CurvatureProfile from the curvature of the fitted points
-        (ignored when ``fit`` is None).
+    list of CurvatureProfile
     """
-    n = len(p)
-    sm = (polyline.smooth(p, window_px=smooth_px, closed=closed) if smoothed is None
-          else smoothed)
-    d = np.diff(np.vstack([sm, sm[:1]]) if closed else sm, axis=0)
-    seg = np.hypot(d[:, 0], d[:, 1])
-    total_px = float(seg.sum())
-    s_px = np.concatenate([[0.0], np.cumsum(seg[:n - 1])]) if n > 1 else np.zeros(1)
-    if window_px is None:
-        window_px = 5.0 * max(1, int(n_br)) * float(thickness_px)
-    half_w = 0.5 * float(window_px)
-    x = sm[:, 1]
-    y = -sm[:, 0]
-    t0, t1 = 0, n
-    if n < 3:
-        fit = None
-    elif unfitted and not closed:
-        # no centreline of its own (stack_profiles): missing data, filled from its neighbours
-        t0 = t1 = 0
-        fit = None
-    elif closed:
-        # unroll the loop once on each side; a window never exceeds the loop
-        half_w = min(half_w, 0.5 * total_px)
-        s_ext = np.concatenate([s_px - total_px, s_px, s_px + total_px])
-        fit = (np.tile(x, 3), np.tile(y, 3), s_ext, half_w, n, 2 * n, bool(circle_correction),
-               False)
-    else:
-        # the skeleton is distorted within about a stack width of a junction or a free end:
-        # the fits use the samples beyond the trims, the end samples take the curvature of
-        # the nearest fitted one
-        floor = max(1, int(n_br)) * float(thickness_px)
-        tr = [max(floor, float(t or 0.0)) for t in trims]
-        t0, t1 = _trim_indices(s_px, tr)
-        if t1 - t0 < 3 or (s_px[t1 - 1] - s_px[t0]) < tr[0] + tr[1]:
-            t0, t1 = 0, n
-        if max_window_frac is not None and max_window_frac > 0:
-            half_w = min(half_w, 0.5 * float(max_window_frac) * (s_px[t1 - 1] - s_px[t0]))
-        fit = (x[t0:t1], y[t0:t1], s_px[t0:t1], half_w, 0, t1 - t0, bool(circle_correction),
-               ends == "shift")
-
-    def finish(kin):
-        s, rc = s_px, sm
-        if n < 3 or t1 == t0:
-            kappa_px = np.zeros(n)
-        elif closed:
-            kappa_px = kin
-        else:
-            kappa_px = np.empty(n)
-            if ends == "shift":
-                kin = _flat_shifted(kin, s_px[t0:t1], half_w)
-            kappa_px[t0:t1] = kin
-            kappa_px[:t0] = kin[0]
-            kappa_px[t1:] = kin[-1]
-        if closed and n >= 3:
-            s = np.append(s_px, total_px)
-            kappa_px = np.append(kappa_px, kappa_px[0])
-            rc = np.vstack([sm, sm[:1]])
-        return _make_profile(s, kappa_px, rc, px_per_mm, closed,
-                             (0, -1) if (closed or n < 3) else (t0, t1))
-
-    return fit, finish
+    m = len(smoothed)
+    if m == 0:
+        return []
+    pts = [np.asarray(p, dtype=np.float64).reshape(-1, 2) for p in smoothed]
+    r, c, offs = _flat_paths(pts)
+    lens = np.diff(offs)
+    cl = np.fromiter((bool(x) for x in closed), np.bool_, count=m)
+    nb = np.fromiter((max(1, int(x)) for x in n_br), np.int64, count=m)
+    tr = np.array([[float(t or 0.0) for t in pair] for pair in trims]).reshape(m, 2)
+    s_px, total, mode, t0, t1, half_w = _fit_ranges(
+        r, c, offs, cl, nb, tr, np.fromiter((bool(x) for x in unfitted), np.bool_, count=m),
+        float(thickness_px), np.nan if window_px is None else float(window_px),
+        0.0 if max_window_frac is None else float(max_window_frac))
+    X, Y, S, start, length, i0, count = _fit_arrays(r, c, s_px, offs, total, mode, t0, t1)
+    fitted = mode != 0
+    shift = ends == "shift"
+    kin = _fit_curvatures(X, Y, S, start, length, half_w[fitted], i0, count,
+                          np.full(len(count), bool(circle_correction)),
+                          (mode[fitted] == 2) & shift)
+    s, kappa, out = _fitted_kappa(s_px, total, offs, mode, t0, t1, half_w, shift, kin)
+    rc = [np.vstack([p, p[:1]]) if loop else p for p, loop in zip(pts, (mode == 1).tolist())]
+    profs = _profiles(s, kappa, out, px_per_mm, cl, rc,
+                      np.stack([t0, t1 + (mode == 1)], axis=1))
+    for i in np.flatnonzero(lens == 0).tolist():
+        z = np.zeros(0)
+        profs[i] = CurvatureProfile(z, z, 0.0, np.nan, np.nan, np.nan, bool(cl[i]),
+                                    np.zeros((0, 2)))
+    return profs
 
 
 def _prepared_path(path_rc, closed):
@@ -613,53 +959,6 @@ def _prepared_path(path_rc, closed):
     if closed and len(p) > 1 and np.all(p[0] == p[-1]):
         p = p[:-1]  # the repeated closing pixel would count twice
     return p, closed
-
-
-def _flat_shifted(kin, s, half_w):
-    """The fits of the samples within ``half_w`` of an end of the fitted part ``s`` (px):
-    they all fit the window next to that end, so they hold its fit read at its centre, the
-    nearest sample fitted on a window centred on it.
-
-    Read again in the tangent frame of every end sample, the same window gave a curvature
-    that turns with the skeleton's last pixels: where the skeleton hooks into a fork of merged
-    ink, the end samples' frames turn with the hook, and the parabola, fitted in a frame
-    oblique to the window, bends with them. A 7-layer link between two forks of a compacted
-    rod, blurred by 0.75 px, read 87 times the ``int kappa^2 ds`` it read unblurred, at the
-    curvature bound at its end (docs/validation/README.md, "Shifted end windows").
-    """
-    c0, c1 = _centred_fits(s, 0, len(s), half_w)
-    if c0 >= c1:
-        return kin
-    k = np.array(kin, dtype=float)
-    k[:c0] = k[c0]
-    k[c1:] = k[c1 - 1]
-    return k
-
-
-def _stack_job(path_rc, *, n_br, thickness_px, px_per_mm, closed, smooth_px, trim_px,
-               window_px, circle_correction, ends, max_window_frac, method, unfitted=False,
-               smoothed=None):
-    """:func:`stack_curvature` up to the window fits: ``(fit, finish, trims)`` as
-    :func:`_paper_job` (``unfitted`` and ``smoothed`` there; ``path_rc`` and ``closed`` then
-    as :func:`_prepared_path` returns them), and the fork zones (None for an empty path,
-    whose profile ``finish`` returns as it is)."""
-    # with ``smoothed`` the path comes prepared (preparing it twice could drop two points)
-    p, closed = _prepared_path(path_rc, closed) if smoothed is None else (path_rc, closed)
-    if len(p) == 0:
-        z = np.zeros(0)
-        empty = CurvatureProfile(z, z, 0.0, np.nan, np.nan, np.nan, closed, np.zeros((0, 2)))
-        return None, lambda _: empty, None
-    if smooth_px is None:
-        smooth_px = default_smooth_px(thickness_px)
-    if method not in ("missing", "paper"):
-        raise ParameterError(f"curvature method must be 'missing' or 'paper', got {method!r}")
-    trims = tuple(trim_px) if np.ndim(trim_px) else (trim_px, trim_px)
-    fit, finish = _paper_job(p, closed=closed, n_br=n_br, thickness_px=thickness_px,
-                             px_per_mm=px_per_mm, smooth_px=int(smooth_px), trims=trims,
-                             window_px=window_px, circle_correction=circle_correction,
-                             ends=ends, max_window_frac=max_window_frac,
-                             unfitted=unfitted, smoothed=smoothed)
-    return fit, finish, trims
 
 
 def stack_curvature(path_rc, *, n_br, thickness_px, px_per_mm, closed=None, smooth_px=None,
@@ -707,13 +1006,20 @@ def stack_curvature(path_rc, *, n_br, thickness_px, px_per_mm, closed=None, smoo
     -------
     CurvatureProfile
     """
-    fit, finish, trims = _stack_job(
-        path_rc, n_br=n_br, thickness_px=thickness_px, px_per_mm=px_per_mm, closed=closed,
-        smooth_px=smooth_px, trim_px=trim_px, window_px=window_px,
-        circle_correction=circle_correction, ends=ends, max_window_frac=max_window_frac,
-        method=method)
-    prof = finish(None if fit is None else _parabola_curvatures([fit])[0])
-    if trims is None or method == "paper":
+    p, closed = _prepared_path(path_rc, closed)
+    if len(p) == 0:
+        z = np.zeros(0)
+        return CurvatureProfile(z, z, 0.0, np.nan, np.nan, np.nan, closed, np.zeros((0, 2)))
+    if smooth_px is None:
+        smooth_px = default_smooth_px(thickness_px)
+    if method not in ("missing", "paper"):
+        raise ParameterError(f"curvature method must be 'missing' or 'paper', got {method!r}")
+    trims = tuple(trim_px) if np.ndim(trim_px) else (trim_px, trim_px)
+    prof = _paper_profiles(
+        [polyline.smooth(p, window_px=int(smooth_px), closed=closed)], [closed], [n_br], [trims],
+        [False], thickness_px=thickness_px, px_per_mm=px_per_mm, window_px=window_px,
+        circle_correction=circle_correction, ends=ends, max_window_frac=max_window_frac)[0]
+    if method == "paper":
         return prof
     # only junction ends are fork zones; a free end keeps the nearest fitted curvature
     forks = tuple(bool(t) and float(t) > 0 for t in trims)
@@ -1239,15 +1545,10 @@ def _contact_arcs(paths, at_node, radius, reach, gap_px: float = _CONTACT_GAP_PX
     # an end whose junction has no other end with a prefix has nothing to touch
     filled = (lens > 0).astype(np.int64)
     has_other = np.repeat(np.add.reduceat(filled, ends - sizes), sizes) - filled > 0
-    out = {}
-    for e, key in enumerate(keys):
-        p, ff = pre[e], int(first_far[e])
-        if len(p) < 2 or ff < 1 or not has_other[e]:
-            out[key] = 0.0
-            continue
-        seg = np.diff(p[:min(ff, len(p) - 1) + 1], axis=0)
-        out[key] = float(np.hypot(seg[:, 0], seg[:, 1]).sum())
-    return out
+    arc = _path_lengths(np.ascontiguousarray(flat[:, 0]), np.ascontiguousarray(flat[:, 1]),
+                        offs[:-1], offs[:-1] + np.minimum(first_far, lens - 1) + 1)
+    arc[(lens < 2) | (first_far < 1) | ~has_other] = 0.0
+    return dict(zip(keys, arc.tolist()))
 
 
 def stack_profiles(graph, n_br, distance_px, *, thickness_px: float, px_per_mm: float,
@@ -1299,50 +1600,52 @@ def stack_profiles(graph, n_br, distance_px, *, thickness_px: float, px_per_mm: 
     # the other bands there with the distance below which each touches it
     contact = _contact_arcs(graph.paths, at_node, radius, reach)
 
-    def junction_radius(sid, end):
-        # the inscribed ink radius at the junction of a stack end (0 at a free end)
-        node = graph.ends[sid][end]
-        if graph.node_kind[node] != "junction":
-            return 0.0
-        r, c = np.round(graph.node_rc[node]).astype(int)
-        return float(distance_px[min(max(r, 0), H - 1), min(max(c, 0), W - 1)])
+    # the inscribed ink radius at the junction of every stack end (0 at a free end)
+    ends = np.array(graph.ends, np.int64).reshape(-1, 2)
+    at_junction = np.array([[graph.node_kind[node] == "junction" for node in e]
+                            for e in graph.ends], bool).reshape(-1, 2)
+    r_j = np.zeros(ends.shape)
+    if at_junction.any():
+        rc = np.round(np.array([graph.node_rc[node] for node in ends[at_junction].tolist()],
+                               float).reshape(-1, 2)).astype(int)
+        r_j[at_junction] = distance_px[np.clip(rc[:, 0], 0, H - 1), np.clip(rc[:, 1], 0, W - 1)]
+    r_j = r_j.tolist()
 
     def fork_zone(sid, end, nb):
         # module docstring, step 3
-        if graph.node_kind[graph.ends[sid][end]] != "junction":
+        if not at_junction[sid, end]:
             return 0.0
-        return _fork_zone_px(nb * float(thickness_px), junction_radius(sid, end),
-                             contact[(sid, end)], sm)
+        return _fork_zone_px(nb * float(thickness_px), r_j[sid][end], contact[(sid, end)], sm)
 
     prepared = [_prepared_path(graph.paths[sid], graph.node_kind[graph.ends[sid][0]] == "loop")
                 for sid in range(graph.n_stacks)]
     raw = [p for p, _ in prepared]
     closed = [c for _, c in prepared]
+    # the skeleton's length (polyline.length; a path that is not a loop is prepared as it is)
+    r, c, offs = _flat_paths(raw)
+    skeleton_px = _path_lengths(r, c, offs[:-1], offs[1:]).tolist()
     smoothed = polyline.smooth_paths(raw, window_px=sm, closed=closed)
     dt32 = np.ascontiguousarray(distance_px, dtype=np.float32)
     if method != "paper":
         # the paper's centreline is the skeleton's; the others read it between the walls
         mid = _midlines(raw, smoothed, closed, radius, dt32, edge)
-        prepared = list(zip(mid, closed))
         smoothed = polyline.smooth_paths(mid, window_px=sm, closed=closed)
-    jobs, forks, walled = [], [], {}
+    nbs = [max(1, int(x)) for x in n_br]
+    all_trims, forks, lumps, walled = [], [], [], {}
     for sid in range(graph.n_stacks):
         u, v = graph.ends[sid]
-        nb = max(1, int(n_br[sid]))
+        nb = nbs[sid]
         trims = (fork_zone(sid, 0, nb), fork_zone(sid, 1, nb))
+        all_trims.append(trims)
         forks.append(tuple(t > 0 for t in trims))
         # a stack within its forks' hooks from end to end: its skeleton is the link between
         # medial-axis fork points, no centreline of its own (step 3). A junction blob wider
         # than the band (thick stacks meeting, at epsilon 19) holds longer such links.
-        hooks = max(2.0 * radius[sid], junction_radius(sid, 0) + junction_radius(sid, 1))
+        hooks = max(2.0 * radius[sid], r_j[sid][0] + r_j[sid][1])
         lump = (method != "paper" and any(forks[-1]) and graph.node_kind[u] != "loop"
-                and polyline.length(graph.paths[sid]) < _LUMP_WIDTHS * hooks)
-        jobs.append(_stack_job(
-            prepared[sid][0], n_br=nb, thickness_px=thickness_px, px_per_mm=px_per_mm,
-            closed=prepared[sid][1], smooth_px=sm, trim_px=trims,
-            window_px=None, circle_correction=True, ends="shift", max_window_frac=0.5,
-            method="paper", unfitted=lump, smoothed=smoothed[sid]))
-        if (method == "walls" and not prepared[sid][1] and any(forks[-1]) and not lump
+                and skeleton_px[sid] < _LUMP_WIDTHS * hooks)
+        lumps.append(lump)
+        if (method == "walls" and not closed[sid] and any(forks[-1]) and not lump
                 and radius[sid] >= _WALL_MIN_RADIUS_PX):
             path, followed = _walled_path(smoothed[sid], trims, radius[sid], dt32)
             if any(followed):
@@ -1353,16 +1656,12 @@ def stack_profiles(graph, n_br, distance_px, *, thickness_px: float, px_per_mm: 
     wsids = sorted(walled)
     wsmooth = polyline.smooth_paths([walled[sid][0] for sid in wsids], window_px=sm,
                                     closed=False) if wsids else []
-    for sid, wsm in zip(wsids, wsmooth):
-        path, trims, _ = walled[sid]
-        jobs.append(_stack_job(
-            path, n_br=max(1, int(n_br[sid])), thickness_px=thickness_px, px_per_mm=px_per_mm,
-            closed=False, smooth_px=sm, trim_px=trims, window_px=None, circle_correction=True,
-            ends="shift", max_window_frac=0.5, method="paper", smoothed=wsm))
     # the window fits of all stacks in one call (numpy's overhead per call is that of a
     # whole stack's fits)
-    kin = iter(_parabola_curvatures([fit for fit, _, _ in jobs if fit is not None]))
-    every = [finish(None if fit is None else next(kin)) for fit, finish, _ in jobs]
+    every = _paper_profiles(
+        list(smoothed) + list(wsmooth), closed + [False] * len(wsids),
+        nbs + [nbs[sid] for sid in wsids], all_trims + [walled[sid][1] for sid in wsids],
+        lumps + [False] * len(wsids), thickness_px=thickness_px, px_per_mm=px_per_mm)
     profiles = every[:graph.n_stacks]
     if method == "paper":
         return profiles
@@ -1373,11 +1672,10 @@ def stack_profiles(graph, n_br, distance_px, *, thickness_px: float, px_per_mm: 
     for sid, prof in zip(wsids, every[graph.n_stacks:]):
         profiles[sid] = prof
         forks[sid] = tuple(t > 0 for t in walled[sid][1])
-    profiles = [_fill_fork_zones(prof, max(1, int(n_br[sid])), thickness_px, px_per_mm,
-                                 forks[sid], noise_var_per_mm2=var[max(1, int(n_br[sid]))] or 0.0,
-                                 max_window_frac=0.5, shifted=True,
-                                 walled_px=walled[sid][2] if sid in walled else (0.0, 0.0))
-                for sid, prof in enumerate(profiles)]
+    profiles = _fill_fork_zones_many(
+        profiles, nbs, forks, [var[nb] or 0.0 for nb in nbs],
+        [walled[sid][2] if sid in walled else (0.0, 0.0) for sid in range(graph.n_stacks)],
+        thickness_px=thickness_px, px_per_mm=px_per_mm, max_window_frac=0.5, shifted=True)
     return _fill_unfitted_stacks(profiles, at_node, n_br, px_per_mm=px_per_mm,
                                  thickness_px=thickness_px)
 
@@ -1389,7 +1687,7 @@ def _unfitted(prof) -> bool:
 
 def _fitted_window_mm(s, t0, t1, window_px, px_per_mm, max_window_frac=0.5) -> float:
     """The window the fits of samples ``t0:t1`` used, mm: ``window_px``, capped by
-    :func:`_paper_job` at ``max_window_frac`` of the fitted length."""
+    :func:`_paper_profiles` at ``max_window_frac`` of the fitted length."""
     w = float(window_px) / px_per_mm
     if max_window_frac is not None and max_window_frac > 0:
         w = min(w, float(max_window_frac) * float(s[t1 - 1] - s[t0]))
@@ -1501,31 +1799,38 @@ def _fill_unfitted_stacks(profiles, at_node, n_br, *, px_per_mm, thickness_px):
                 filled[sid] = (end_k[0], end_k[-1], float(np.average(noise, weights=layers)))
         if not filled:
             break
+        s_px, k_px = [], []
         for sid, (k0, k1, v) in filled.items():
             kmax = 2.0 * px_per_mm / (nb[sid] * float(thickness_px))
             k0, k1 = float(np.clip(k0, -kmax, kmax)), float(np.clip(k1, -kmax, kmax))
-            prof = out[sid]
-            s = prof.s_mm
+            s = out[sid].s_mm
             frac = (s - s[0]) / (s[-1] - s[0]) if s[-1] > s[0] else np.zeros_like(s)
             k = k0 + (k1 - k0) * frac
-            new = _make_profile(s * px_per_mm, k / px_per_mm, prof.rc_px, px_per_mm, False,
-                                (0, 0))
-            out[sid] = replace(new, noise_var_per_mm2=v, energy_rel_uncertainty=_rel_uncertainty(
-                new, (True, True), v * new.length_mm))
+            s_px.append(s * px_per_mm)
+            k_px.append(k / px_per_mm)
             end_value[(sid, 0)] = (k0, v)
             end_value[(sid, 1)] = (k1, v)
+        sids = list(filled)
+        offs = np.zeros(len(sids) + 1, np.int64)
+        np.cumsum([len(s) for s in s_px], out=offs[1:])
+        noise = [filled[sid][2] for sid in sids]
+        new = _profiles(np.concatenate(s_px), np.concatenate(k_px), offs, px_per_mm,
+                        [False] * len(sids), [out[sid].rc_px for sid in sids],
+                        np.zeros((len(sids), 2), np.int64),
+                        forks=np.ones((len(sids), 2), np.bool_),
+                        walled_px=np.zeros((len(sids), 2)), noise_coef=np.array(noise, float),
+                        noise_var=noise)
+        for sid, prof in zip(sids, new):
+            out[sid] = prof
         todo -= set(filled)
     return out
 
 
-def _trend(s, k):
-    """Least-squares line k = b + a (s - s_mean): (a, b, s_mean)."""
-    sm = s.mean()
-    ds = s - sm
+def _slope(ds, dk):
+    """Slope ``a`` of the least-squares line ``k = b + a (s - s_mean)`` from the deviations
+    ``ds``, ``dk`` of ``s`` and ``k`` from their means (0 where ``s`` does not vary)."""
     den = float(ds @ ds)
-    km = k.mean()
-    a = float(ds @ (k - km)) / den if den > 0 else 0.0
-    return a, float(km), sm
+    return float(ds @ dk) / den if den > 0 else 0.0
 
 
 def _fill_fork_zones(prof, n_br, thickness_px, px_per_mm, forks=(True, True), noise_px=0.3,
@@ -1548,7 +1853,7 @@ def _fill_fork_zones(prof, n_br, thickness_px, px_per_mm, forks=(True, True), no
     tangential forks the visible arc of the zones, outside the merged bands, got 32 % of its
     true ``int kappa^2 ds``, 52 % now.) ``w`` is the window actually fitted: ``5 n_br h`` (or
     ``window_px``), capped at ``max_window_frac`` of the fitted length as in
-    :func:`_paper_job`. With the scan's curvature noise ``v`` known, the trend is continued
+    :func:`_paper_profiles`. With the scan's curvature noise ``v`` known, the trend is continued
     only where the data show one: the noise is correlated over about a window, and the slope
     of the trend over noise alone has a variance of ``c v / w^2``, ``c`` =
     :data:`_SLOPE_NOISE` (measured on noise-only stacks: 2.0-2.9, median 2.4); a slope within
@@ -1588,7 +1893,7 @@ def _fill_fork_zones(prof, n_br, thickness_px, px_per_mm, forks=(True, True), no
     Parameters
     ----------
     prof : CurvatureProfile
-        The window fits (:func:`_paper_job`): samples ``fit_start:fit_stop`` fitted, the
+        The window fits (:func:`_paper_profiles`): samples ``fit_start:fit_stop`` fitted, the
         others holding the nearest fitted curvature.
     n_br : int
         Layers of the stack (window ``5 n_br h``, bound ``2 / (n_br h)``).
@@ -1621,93 +1926,116 @@ def _fill_fork_zones(prof, n_br, thickness_px, px_per_mm, forks=(True, True), no
         Same samples and ``fit_start``/``fit_stop``; ``noise_var_per_mm2`` and
         ``energy_rel_uncertainty`` set.
     """
-    n = len(prof.s_mm)
-    t0, t1 = prof.fit_start, prof.fit_stop
-    nb = max(1, int(n_br))
-    w_px = 5.0 * nb * float(thickness_px)
-    s = prof.s_mm
-    kmax = 2.0 * px_per_mm / (nb * float(thickness_px))
-    k = np.clip(prof.kappa_per_mm, -kmax, kmax)
-    # an unfitted stack (t1 == t0) has no trend to continue: _fill_unfitted_stacks fills it
-    if not prof.closed and n >= 3 and (t0 > 0 or t1 < n or any(forks)) and t1 > t0:
-        w = _fitted_window_mm(s, t0, t1, w_px if window_px is None else float(window_px),
-                              px_per_mm, max_window_frac)
-        # shifted fits within w/2 of the zone: the trend window starts beyond them
-        off = 0.5 * w if shifted else 0.0
-        c0, c1 = _centred_fits(s, t0, t1, off)
-        lo_end = int(np.searchsorted(s, s[t0] + off + w))
-        hi_start = int(np.searchsorted(s, s[t1 - 1] - off - w, side="right"))
-        for side, (lo, hi, z0, z1, fork) in enumerate((
-                (c0, min(max(lo_end, c0 + 3), t1), 0, c0, forks[0]),
-                (max(min(hi_start, c1 - 3), t0), c1, c1, n, forks[1]))):
-            lo, hi = max(lo, t0), min(hi, t1)
-            whole = (t0 == 0) if side == 0 else (t1 == n)
-            # a stack fitted whole (its zones would cover it) has measured fits at its ends,
-            # shifted onto one window's mean: they give way to a trend only where the scan's
-            # noise is known and the trend exceeds it
-            if not fork or hi - lo < 3 or (whole and noise_var_per_mm2 is None):
-                continue
-            a, b, sm = _trend(s[lo:hi], k[lo:hi])
-            if (noise_var_per_mm2 is not None and a * a * w * w
-                    <= _TREND_DEVIATIONS ** 2 * _SLOPE_NOISE * noise_var_per_mm2):
-                # no trend beyond the noise: the zone keeps the nearest fitted curvature and
-                # the shifted fits their own
-                z0, z1 = (0, t0) if side == 0 else (t1, n)
-            else:
-                k[z0:z1] = np.clip(b + a * (s[z0:z1] - sm), -kmax, kmax)
-            _bound_turn(k, s, z0, z1, z1 if side == 0 else z0 - 1, max_turn)
-    out = _make_profile(s * px_per_mm, k / px_per_mm, prof.rc_px, px_per_mm, prof.closed,
-                        (t0, t1))
-    if noise_var_per_mm2 is not None:
-        v = float(noise_var_per_mm2)
-        noise = v * out.length_mm
-    else:
-        v = 0.0
-        noise = 720.0 * noise_px ** 2 / w_px ** 5 * px_per_mm ** 2 * out.length_mm
-    return replace(out, noise_var_per_mm2=v, energy_rel_uncertainty=_rel_uncertainty(
-        out, forks, noise, walled_mm=[w / px_per_mm for w in walled_px]))
+    return _fill_fork_zones_many(
+        [prof], [n_br], [forks], [noise_var_per_mm2], [walled_px], thickness_px=thickness_px,
+        px_per_mm=px_per_mm, noise_px=noise_px, max_window_frac=max_window_frac,
+        shifted=shifted, window_px=window_px, max_turn=max_turn)[0]
 
 
-def _zone_turn(k, s, z0, z1, edge) -> float | None:
-    """Total turn ``int |kappa| ds`` of the fork zone ``k[z0:z1]`` up to the fitted sample
-    ``edge`` next to it, radians (None for an empty zone)."""
-    if z1 <= z0 or not 0 <= edge < len(k):
-        return None
-    i, j = min(z0, edge), max(z1, edge + 1)
-    return float(_trapezoid(np.abs(k[i:j]), s[i:j]))
+def _fill_fork_zones_many(profs, n_br, forks, noise_var, walled_px, *, thickness_px, px_per_mm,
+                          noise_px=0.3, max_window_frac=0.5, shifted=True, window_px=None,
+                          max_turn=_ZONE_MAX_TURN) -> list:
+    """:func:`_fill_fork_zones` of many stacks, the same arithmetic on all of them at once.
 
+    Over the stacks' flat arrays (:func:`_zone_sides`, :func:`_bound_turns`,
+    :func:`_profile_sums`), but for the trends' dot products (numpy's BLAS, whose order of
+    summation a loop does not reproduce): 3 ms against 14 ms stack by stack for the 244
+    stacks of a dense 2000 x 2000 scan.
 
-def _bound_turn(k, s, z0, z1, edge, limit):
-    """Scale the fork zone ``k[z0:z1]`` in place so that its total turn
-    (:func:`_zone_turn`) is at most ``limit`` radians."""
-    turn = _zone_turn(k, s, z0, z1, edge)
-    if turn is None or turn <= limit:
-        return
-    # the edge sample's half of its interval is measured, not scaled
-    half = 0.5 * abs(float(k[edge])) * abs(float(s[edge] - s[edge + (1 if edge < z0 else -1)]))
-    k[z0:z1] *= max(limit - half, 0.0) / max(turn - half, 1e-300)
+    Parameters
+    ----------
+    profs : list of CurvatureProfile
+    n_br : sequence of int
+    forks : sequence of (bool, bool)
+    noise_var : sequence of float or None
+        ``noise_var_per_mm2`` of every stack.
+    walled_px : sequence of (float, float)
+    thickness_px, px_per_mm, noise_px, max_window_frac, shifted, window_px, max_turn
+        As in :func:`_fill_fork_zones`, for all stacks.
 
-
-def _rel_uncertainty(prof, forks, noise_int, walled_mm=(0.0, 0.0)):
-    """(part of int kappa^2 ds not measured on a free centreline + the noise floor
-    ``noise_int``) / the integral.
-
-    Not measured on a free centreline: the fork zones extrapolated, and the ``walled_mm`` of
-    arc at each end followed along a merged band's wall (its layers assumed to lie along it).
+    Returns
+    -------
+    list of CurvatureProfile
     """
-    k, s, n = prof.kappa_per_mm, prof.s_mm, len(prof.s_mm)
-    if n < 2:
-        return float("nan")
-    f = k * k
-    total = float(_trapezoid(f, s))
-    z0 = prof.fit_start if forks[0] else 0
-    z1 = prof.fit_stop if forks[1] else n
-    z0 = max(z0, int(np.searchsorted(s, s[0] + walled_mm[0], side="right")) - 1)
-    z1 = min(z1, int(np.searchsorted(s, s[-1] - walled_mm[1])) + 1)
-    # fitted whole because its fork zones would cover it: every sample is a fork's
-    whole = any(forks) and prof.fit_start == 0 and prof.fit_stop == n
-    fitted = float(_trapezoid(f[z0:z1], s[z0:z1])) if z1 - z0 > 1 and not whole else 0.0
-    return float((max(total - fitted, 0.0) + noise_int) / max(total, noise_int, 1e-300))
+    m = len(profs)
+    if m == 0:
+        return []
+    h, ppm = float(thickness_px), float(px_per_mm)
+    lens = np.fromiter((len(p.s_mm) for p in profs), np.int64, count=m)
+    offs = np.zeros(m + 1, np.int64)
+    np.cumsum(lens, out=offs[1:])
+    s = np.concatenate([np.asarray(p.s_mm, float) for p in profs])
+    k = np.concatenate([np.asarray(p.kappa_per_mm, float) for p in profs])
+    nb = np.fromiter((max(1, int(x)) for x in n_br), np.int64, count=m)
+    t0 = np.fromiter((p.fit_start for p in profs), np.int64, count=m)
+    t1 = np.fromiter((p.fit_stop for p in profs), np.int64, count=m)
+    closed = np.fromiter((p.closed for p in profs), np.bool_, count=m)
+    fk = np.array([[bool(f0), bool(f1)] for f0, f1 in forks], np.bool_).reshape(m, 2)
+    known = np.fromiter((v is not None for v in noise_var), np.bool_, count=m)
+    noise = np.fromiter((0.0 if v is None else float(v) for v in noise_var), float, count=m)
+    kmax, w, side = _zone_sides(
+        s, k, offs, t0, t1, nb, closed, fk, known, h, ppm,
+        np.nan if window_px is None else float(window_px),
+        0.0 if max_window_frac is None else float(max_window_frac), bool(shifted))
+    limit = _TREND_DEVIATIONS ** 2 * _SLOPE_NOISE
+    for e in (0, 1):
+        act = np.flatnonzero(side[e, :, 4])
+        if len(act) == 0:
+            continue
+        a, lo, hi = offs[act], side[e, act, 0], side[e, act, 1]
+        # the trend line k = km + slope (s - sm) over the samples lo:hi (numpy's means)
+        sm = _range_sums(s, a + lo, a + hi) / (hi - lo)
+        km = _range_sums(k, a + lo, a + hi) / (hi - lo)
+        idx, pos, cnt = _ranges(a + lo, a + hi)
+        ds = s[idx] - np.repeat(sm, cnt)
+        dk = k[idx] - np.repeat(km, cnt)
+        at = np.append(pos, len(idx)).tolist()
+        slope = np.array([_slope(ds[at[i]:at[i + 1]], dk[at[i]:at[i + 1]])
+                          for i in range(len(act))])
+        # no trend beyond the noise: the zone keeps the nearest fitted curvature and the
+        # shifted fits their own
+        quiet = known[act] & (slope * slope * w[act] * w[act] <= limit * noise[act])
+        z0 = np.where(quiet, 0 if e == 0 else t1[act], side[e, act, 2])
+        z1 = np.where(quiet, t0[act] if e == 0 else lens[act], side[e, act, 3])
+        go = ~quiet
+        idx, pos, cnt = _ranges((a + z0)[go], (a + z1)[go])
+        x = np.repeat(km[go], cnt) + np.repeat(slope[go], cnt) * (s[idx] - np.repeat(sm[go], cnt))
+        bound = np.repeat(kmax[act[go]], cnt)
+        k[idx] = np.where(x < -bound, -bound, np.where(x > bound, bound, x))
+        _bound_turns(k, s, a, lens[act], z0, z1, z1 if e == 0 else z0 - 1, max_turn)
+    # the noise floor of every stack's int kappa^2 ds, per mm of its length
+    coef = np.array([float(v) if v is not None else
+                     720.0 * noise_px ** 2 / (5.0 * b * h) ** 5 * px_per_mm ** 2
+                     for v, b in zip(noise_var, nb.tolist())])
+    fit = np.stack([t0, np.where(t1 < 0, lens, t1)], axis=1)
+    return _profiles(s * px_per_mm, k / px_per_mm, offs, ppm, closed, [p.rc_px for p in profs],
+                     fit, forks=fk, walled_px=np.asarray(walled_px, float).reshape(m, 2),
+                     noise_coef=coef,
+                     noise_var=[0.0 if v is None else float(v) for v in noise_var])
+
+
+def _zone_turns(k, s, a, n, z0, z1, edge):
+    """Total turns ``int |kappa| ds`` of the fork zones ``k[a + z0:a + z1]`` (of the stacks at
+    ``a:a + n``) up to the fitted sample ``a + edge`` next to each, radians: the indices of
+    the zones that have one (not empty, their edge on the stack) and their turns."""
+    on = np.flatnonzero((z1 > z0) & (edge >= 0) & (edge < n))
+    idx, pos, cnt = _ranges(a[on] + np.minimum(z0[on], edge[on]),
+                            a[on] + np.maximum(z1[on], edge[on] + 1))
+    return on, _trapz_ranges(np.abs(k[idx]), s[idx], pos, pos + cnt)
+
+
+def _bound_turns(k, s, a, n, z0, z1, edge, limit):
+    """Scale every fork zone ``k[a + z0:a + z1]`` (of the stack at ``a:a + n``) in place so
+    that its total turn (:func:`_zone_turns`) is at most ``limit`` radians (an empty zone, or
+    one without its edge, as it is)."""
+    on, turn = _zone_turns(k, s, a, n, z0, z1, edge)
+    a, z0, z1, edge = a[on], z0[on], z1[on], edge[on]
+    over = ~(turn <= limit)
+    e = (a + edge)[over]
+    # the edge sample's half of its interval is measured, not scaled
+    half = 0.5 * np.abs(k[e]) * np.abs(s[e] - s[e + np.where(edge[over] < z0[over], 1, -1)])
+    idx, pos, cnt = _ranges((a + z0)[over], (a + z1)[over])
+    k[idx] *= np.repeat(_pymax(limit - half, 0.0) / _pymax(turn[over] - half, 1e-300), cnt)
 
 
 def _lag_variance(prof, lag_mm):

@@ -365,28 +365,30 @@ def test_energy_uncertainty_counts_the_arc_followed_along_a_wall():
     # a zone followed along a merged band's wall is fitted, but not on a free centreline:
     # its share of int kappa^2 ds is the wall model's. Here all the bending lies in the
     # first millimetre, so following it there makes the whole integral the model's
-    from dataclasses import replace
-
-    from crosssection.stages.curvature import CurvatureProfile, _rel_uncertainty
+    from crosssection.stages.curvature import _profiles
 
     s = np.linspace(0.0, 5.0, 501)
     k = np.where(s < 1.0, 0.2, 0.0)
-    prof = CurvatureProfile(s_mm=s, kappa_per_mm=k, length_mm=5.0, kappa_pm=0.04,
-                            kappa_plus=0.04, kappa_m=0.04, fit_start=0, fit_stop=len(s))
+
+    def rel(forks, noise, walled_mm=(0.0, 0.0), fit_start=0):
+        # the profile at 1 px/mm, its noise floor given per mm of its 5 mm
+        prof = _profiles(s, k, np.array([0, len(s)]), 1.0, [False], [np.zeros((len(s), 2))],
+                         [(fit_start, len(s))], forks=np.array([forks]),
+                         walled_px=np.array([walled_mm], float),
+                         noise_coef=np.array([noise / 5.0]), noise_var=[0.0])[0]
+        return prof.energy_rel_uncertainty
+
     free = (False, False)
-    assert _rel_uncertainty(prof, free, 0.0) == 0.0
-    assert _rel_uncertainty(prof, free, 0.0, walled_mm=(0.0, 1.0)) == pytest.approx(0.0, abs=1e-9)
-    assert _rel_uncertainty(prof, free, 0.0, walled_mm=(1.0, 0.0)) == pytest.approx(1.0, abs=0.01)
-    half = _rel_uncertainty(prof, free, 0.0, walled_mm=(0.5, 0.0))
+    assert rel(free, 0.0) == 0.0
+    assert rel(free, 0.0, walled_mm=(0.0, 1.0)) == pytest.approx(0.0, abs=1e-9)
+    assert rel(free, 0.0, walled_mm=(1.0, 0.0)) == pytest.approx(1.0, abs=0.01)
+    half = rel(free, 0.0, walled_mm=(0.5, 0.0))
     assert half == pytest.approx(0.5, abs=0.01)
     # the removed noise floor adds its own share
-    assert (_rel_uncertainty(prof, free, 0.004, walled_mm=(0.5, 0.0))
-            == pytest.approx(half + 0.1, abs=0.01))
+    assert rel(free, 0.004, walled_mm=(0.5, 0.0)) == pytest.approx(half + 0.1, abs=0.01)
     # an extrapolated zone and a followed one overlapping count once
-    zoned = replace(prof, fit_start=50)
-    assert (_rel_uncertainty(zoned, (True, False), 0.0, walled_mm=(0.8, 0.0))
-            == pytest.approx(0.8, abs=0.01))
-
+    assert rel((True, False), 0.0, walled_mm=(0.8, 0.0), fit_start=50) == pytest.approx(
+        0.8, abs=0.01)
 
 
 def test_unknown_method_rejected():
@@ -485,8 +487,8 @@ def test_trend_slope_noise_model(h_px, sigma, monkeypatch):
     from crosssection.stages.curvature import _SLOPE_NOISE, noise_variance
 
     slopes, continued = [], []
-    orig = cv._trend
-    monkeypatch.setattr(cv, "_trend", lambda s, k: slopes.append(orig(s, k)) or slopes[-1])
+    orig = cv._slope
+    monkeypatch.setattr(cv, "_slope", lambda ds, dk: slopes.append(orig(ds, dk)) or slopes[-1])
     rng = np.random.default_rng(int(10 * h_px + 100 * sigma))
     ratios = []
     for nb in (1, 2, 3):
@@ -504,7 +506,7 @@ def test_trend_slope_noise_model(h_px, sigma, monkeypatch):
                            px_per_mm=10 * h_px)[nb]
         slopes.clear()
         fills = [stack_curvature(p, noise_var_per_mm2=v, **kw) for p in paths]
-        a = np.array([sl[0] for sl in slopes])
+        a = np.array(slopes)
         w = 5 * nb * h_px / (10 * h_px)
         ratios.append(np.mean(a * a) * w * w / v)
         for prof, paper in zip(fills, profs):  # a continued trend changes the zone
@@ -659,7 +661,7 @@ def test_lump_takes_its_neighbours_measured_curvature_not_their_continued_trend(
     trend continued beyond its centred fits (_fill_fork_zones); on compacted renders a
     13-layer lump 10 mm long took such a value and 12 times its earlier energy (epsilon 30,
     configuration 1: total energy +601 % -> +172 % when it takes the centred fit)."""
-    from crosssection.stages.curvature import _fill_unfitted_stacks, _make_profile
+    from crosssection.stages.curvature import _fill_unfitted_stacks, _profiles
 
     px = 50.0
     n = 200
@@ -667,8 +669,9 @@ def test_lump_takes_its_neighbours_measured_curvature_not_their_continued_trend(
     k_mm = np.full(n, 0.5)
     k_mm[n - 12:] = np.linspace(0.5, 3.0, 12)  # a trend continued over the last half window
     rc = np.stack([np.zeros(n), s_px], 1)
-    source = _make_profile(s_px, k_mm / px, rc, px, False, (0, n))
-    lump = _make_profile(np.arange(30.0), np.zeros(30), rc[:30], px, False, (0, 0))
+    source, lump = _profiles(np.r_[s_px, np.arange(30.0)], np.r_[k_mm / px, np.zeros(30)],
+                             np.array([0, n, n + 30]), px, [False, False], [rc, rc[:30]],
+                             [(0, n), (0, 0)])
     out = _fill_unfitted_stacks([source, lump], {7: [(0, 1), (1, 0)]}, np.array([1, 1]),
                                 px_per_mm=px, thickness_px=H)
     assert np.allclose(out[1].kappa_per_mm, 0.5)

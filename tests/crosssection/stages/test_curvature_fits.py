@@ -352,28 +352,49 @@ def test_batch_equals_one_path_at_a_time():
         _assert_matches_reference(fit, k)
 
 
-def test_window_sums_are_each_windows_sums():
-    """The window sums are those of a plain loop over each window's samples, in its point's
-    tangent frame (windows of one sample and of many, points anywhere in them)."""
+def test_window_parabolas_are_each_windows_solution():
+    """The compiled parabola of every window, and the projections of u^4 on it (the circle
+    correction's), are the solutions of a plain loop's sums over the window in its point's
+    tangent frame (windows shifted and not, of three samples and of many)."""
     rng = np.random.default_rng(12)
-    n_pts = 400
-    X = np.cumsum(rng.standard_normal(n_pts))
-    Y = np.cumsum(rng.standard_normal(n_pts))
-    m = rng.integers(0, 40, 300)
-    a0 = rng.integers(0, n_pts - m)
-    i = a0 + (rng.random(300) * (m + 1)).astype(np.int64)
-    ang = rng.random(300) * 2 * np.pi
-    tx, ty = np.cos(ang), np.sin(ang)
-    got = curvature._window_sums(X, Y, i, a0, m, tx, ty)
-    assert got.shape == (9, 300)
-    for p in range(300):
-        j = np.arange(a0[p], a0[p] + m[p] + 1)
-        dx, dy = X[j] - X[i[p]], Y[j] - Y[i[p]]
-        u = dx * tx[p] + dy * ty[p]
-        v = dy * tx[p] - dx * ty[p]
-        want = [u, u ** 2, u ** 3, u ** 4, u ** 5, u ** 6, v, u * v, u * u * v]
-        np.testing.assert_allclose(got[:, p], [w.sum() for w in want], rtol=1e-9,
-                                   atol=1e-9 * (1 + np.abs(u).max()) ** 6)
+    checked = 0
+    for _ in range(30):
+        x, y, s = _frame(_noisy_arc(rng))
+        n = len(s)
+        half_w = float(rng.uniform(1.0, 40.0))
+        shift = bool(rng.random() < 0.5)
+        a, b, c2, c1 = curvature._window_fits(
+            x, y, s, np.array([0]), np.array([n]), np.array([half_w]), np.array([0]),
+            np.array([n]), np.array([shift]))
+        for i in range(n):
+            lo, hi = i, i
+            while lo > 0 and s[i] - s[lo - 1] <= 2.0:
+                lo -= 1
+            while hi < n - 1 and s[hi + 1] - s[i] <= 2.0:
+                hi += 1
+            t = np.array([x[hi] - x[lo], y[hi] - y[lo]])
+            s_lo, s_hi = s[i] - half_w, s[i] + half_w
+            if shift and s_lo < s[0]:
+                s_lo, s_hi = s[0], min(s_hi + (s[0] - s_lo), s[-1])
+            elif shift and s_hi > s[-1]:
+                s_lo, s_hi = max(s_lo - (s_hi - s[-1]), s[0]), s[-1]
+            j = np.flatnonzero((s >= s_lo) & (s <= s_hi))
+            if not np.hypot(*t) or len(j) < 3:
+                assert np.isnan([a[i], b[i], c2[i], c1[i]]).all()
+                continue
+            t /= np.hypot(*t)
+            dx, dy = x[j] - x[i], y[j] - y[i]
+            u = dx * t[0] + dy * t[1]
+            v = dy * t[0] - dx * t[1]
+            S = [float(np.sum(u ** p)) for p in range(7)]
+            want = (_ref_solve3(*S[:5], np.sum(v), np.sum(u * v), np.sum(u * u * v))
+                    + _ref_solve3(*S[:5], *S[4:7]))
+            np.testing.assert_allclose([a[i], b[i]], want[:2], rtol=1e-7, atol=1e-12)
+            # c1 is a difference of terms of c2's size
+            np.testing.assert_allclose([c2[i], c1[i]], want[2:], rtol=1e-7,
+                                       atol=1e-9 * abs(want[2]))
+            checked += 1
+    assert checked > 1000
 
 
 @pytest.mark.parametrize("closed", [False, True])
@@ -381,14 +402,19 @@ def test_stack_curvature_fits_match_reference(monkeypatch, closed):
     """Through the stage: every fit that stack_curvature hands to the window fits (trimmed
     open paths, unrolled loops) gives the reference's curvature."""
     seen = []
-    real = curvature._parabola_curvatures
+    real = curvature._fit_curvatures
 
-    def spy(fits):
-        out = real(fits)
-        seen.extend(zip(fits, out))
+    def spy(X, Y, S, off, lens, half_w, i0, cnt, correct, shift):
+        out = real(X, Y, S, off, lens, half_w, i0, cnt, correct, shift)
+        first = np.concatenate([[0], np.cumsum(cnt)])
+        for f in range(len(cnt)):
+            path = slice(off[f], off[f] + lens[f])
+            fit = (X[path], Y[path], S[path], half_w[f], i0[f], i0[f] + cnt[f], correct[f],
+                   shift[f])
+            seen.append((fit, out[first[f]:first[f + 1]]))
         return out
 
-    monkeypatch.setattr(curvature, "_parabola_curvatures", spy)
+    monkeypatch.setattr(curvature, "_fit_curvatures", spy)
     rng = np.random.default_rng(21)
     for _ in range(4):
         R = rng.uniform(30, 200)
@@ -406,3 +432,110 @@ def test_stack_curvature_fits_match_reference(monkeypatch, closed):
     for fit, k in seen:
         assert fit[7] == (not closed)  # loops: no shifted windows; open paths: shifted
         _assert_matches_reference(fit, k)
+
+
+def test_range_sums_are_numpys_to_the_last_bit():
+    """The sums and trapezoids of many ranges at once are numpy's own of each range, bit for
+    bit (its pairwise summation: below 8, up to 128 and beyond, split into halves), empty and
+    overlapping ranges included."""
+    rng = np.random.default_rng(31)
+    n = 40000
+    a = rng.standard_normal(n) * 10.0 ** rng.uniform(-3, 3, n)
+    x = np.cumsum(rng.random(n))
+    width = np.r_[np.arange(0, 300), rng.integers(300, 8000, 60), [0, 0, 1]]
+    lo = rng.integers(0, n - width + 1)
+    hi = lo + width
+    got = curvature._range_sums(a, lo, hi)
+    trapz = curvature._trapz_ranges(a, x, lo, hi)
+    for i in range(len(lo)):
+        assert got[i] == np.add.reduce(a[lo[i]:hi[i]])
+        assert trapz[i] == (np.trapezoid(a[lo[i]:hi[i]], x[lo[i]:hi[i]]) if width[i] else 0.0)
+    # the zero numpy's sum starts from
+    zeros = curvature._range_sums(np.full(20, -0.0), np.array([0, 3]), np.array([20, 5]))
+    assert str(zeros.tolist()) == str([float(np.add.reduce(np.full(k, -0.0))) for k in (20, 2)])
+
+
+def test_arc_lengths_are_each_paths_running_sums():
+    """The arc lengths of many paths in one running sum are each path's own, bit for bit
+    (empty paths, paths of one point, a path whose steps are not finite)."""
+    rng = np.random.default_rng(32)
+    for bad in (False, True):
+        n = rng.integers(0, 400, 60)
+        n[::7] = 0
+        n[::11] = 1
+        a = np.r_[0, np.cumsum(n)[:-1]]
+        seg = rng.random(n.sum()) * 10.0 ** rng.uniform(-3, 3, n.sum())
+        if bad:
+            seg[a[5] + 2] = np.inf
+        got = curvature._arc_lengths(seg, a, n)
+        want = [np.r_[0.0, np.cumsum(seg[i:i + k - 1])] for i, k in zip(a, n) if k]
+        assert got.tobytes() == np.concatenate(want).tobytes()
+
+
+def test_searches_are_numpys_bisection():
+    """The compiled searches of many ranges are ``np.searchsorted``'s, on both sides, on
+    sorted ranges with ties and on unsorted ones with NaN (the same bisection)."""
+    rng = np.random.default_rng(33)
+    for sort in (True, False):
+        s = np.round(rng.uniform(0, 50, 3000), 1)
+        if sort:
+            s = np.sort(s)
+        else:
+            s[rng.integers(0, 3000, 50)] = np.nan
+        lo = rng.integers(0, 3000, 2000)
+        hi = np.minimum(lo + rng.integers(0, 300, 2000), 3000)
+        v = np.where(rng.random(2000) < 0.3, s[np.minimum(lo, 2999)],
+                     np.round(rng.uniform(-5, 55, 2000), 1))
+        v[::97] = np.nan
+        right = rng.random(2000) < 0.5
+        got = curvature._bisect(s, lo, hi, v, right)
+        for q in range(2000):
+            side = "right" if right[q] else "left"
+            assert got[q] == np.searchsorted(s[lo[q]:hi[q]], v[q], side=side)
+
+
+def test_fork_zones_of_many_stacks_are_each_stacks():
+    """Filled together, the stacks' fork zones are those each stack gets alone, bit for bit
+    (one flat array holds them all: nothing of one may reach another)."""
+    rng = np.random.default_rng(8)
+    profs, n_br, forks, noise = [], [], [], []
+    for i in range(12):
+        n = int(rng.integers(2, 300))
+        th = np.cumsum(rng.normal(0.0, 0.05, n))
+        xy = np.cumsum(np.c_[np.cos(th), np.sin(th)], axis=0) + 100.0
+        nb = int(rng.integers(1, 4))
+        trims = tuple(float(rng.choice([0.0, 15.0, 40.0])) for _ in range(2))
+        profs.append(stack_curvature(np.round(xy).astype(int), n_br=nb, thickness_px=4.0,
+                                     px_per_mm=40.0, trim_px=trims, method="paper"))
+        n_br.append(nb)
+        forks.append(tuple(t > 0 for t in trims))
+        noise.append([None, 0.0, float(rng.uniform(0, 0.05))][i % 3])
+    walled = [(float(rng.choice([0.0, 10.0])), 0.0) for _ in profs]
+    together = curvature._fill_fork_zones_many(profs, n_br, forks, noise, walled,
+                                               thickness_px=4.0, px_per_mm=40.0)
+    for p, nb, f, v, w, got in zip(profs, n_br, forks, noise, walled, together):
+        alone = curvature._fill_fork_zones(p, nb, 4.0, 40.0, f, noise_var_per_mm2=v,
+                                           walled_px=w)
+        assert got.kappa_per_mm.tobytes() == alone.kappa_per_mm.tobytes()
+        assert got.s_mm.tobytes() == alone.s_mm.tobytes()
+        for name in ("length_mm", "kappa_pm", "kappa_plus", "energy_rel_uncertainty",
+                     "noise_var_per_mm2", "fit_start", "fit_stop"):
+            assert str(getattr(got, name)) == str(getattr(alone, name)), name
+
+
+def test_smoothed_paths_together_are_each_paths():
+    """The centrelines smoothed all at once are ``polyline.smooth`` of each path, bit for
+    bit: open and closed, a repeated closing point, paths shorter than the window."""
+    rng = np.random.default_rng(9)
+    paths, closed = [], []
+    for i in range(60):
+        p = np.cumsum(rng.integers(-1, 2, (int(rng.integers(0, 40)), 2)), axis=0) + 50
+        if i % 5 == 0 and len(p) > 4:
+            p[-1] = p[0]
+        paths.append(p)
+        closed.append(bool(i % 3 == 0))
+    for window in (1, 3, 7, 11):
+        together = polyline.smooth_paths(paths, window_px=window, closed=closed)
+        for p, c, got in zip(paths, closed, together):
+            want = polyline.smooth(p, window_px=window, closed=c)
+            assert got.shape == want.shape and got.tobytes() == want.tobytes()
