@@ -1391,7 +1391,7 @@ def _walled_kernel(p, z0, z1, radius_px, dt, tol, max_turn,
     nt = piece1.shape[0] - 1 if f1 else n - 1 - a1
     mid = a1 - a0 + 1
     # element by element: numba compiles array-slice assignments with shape checks whose
-    # error paths took most of this kernel's 4 s of compilation
+    # error paths cost 3 s of compilation here (4.4 s with them, 1.5 s without)
     out = np.empty((nh + mid + nt, 2))
     for i in range(nh):
         for j in range(2):

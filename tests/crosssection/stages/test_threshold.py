@@ -314,8 +314,8 @@ def _hist_int(values):
 
 
 def _auto_levels_u8_plain(ds, ms, reg, ring_px):
-    """The levels from histograms of the pixels gathered by mask (what the counts of pairs
-    and of the ring replaced)."""
+    """The reference: the levels from histograms of the pixels gathered by mask, the ring's
+    pixels by its mask."""
     from crosssection.stages.threshold import (MIN_CONTRAST_U8, _best_levels, _median_hist,
                                                _otsu_hist, _ring)
 
