@@ -302,6 +302,11 @@ def _read_png_rgb8(data: bytes, chunks, w: int, h: int, path) -> np.ndarray | No
     """
     import imagecodecs
 
+    try:  # a build of imagecodecs without libdeflate leaves the file to libpng
+        if not imagecodecs.DEFLATE.available:
+            return None
+    except AttributeError:
+        return None
     view = memoryview(data)
     stream = b"".join(view[s + 8:e - 4] for k, s, e in chunks if k == b"IDAT")
     size = h * (1 + 3 * w)

@@ -382,3 +382,20 @@ def test_interlaced_rgb8_png_is_read_by_libpng(tmp_path, monkeypatch):
     p = tmp_path / "adam7.png"
     p.write_bytes(_rgb8_png(img, zlib.compress(_adam7(img)), ihdr=ihdr))
     np.testing.assert_array_equal(load_image(p), img)
+
+
+def test_rgb8_png_without_libdeflate_is_read_by_libpng(tmp_path, monkeypatch):
+    """A build of imagecodecs without libdeflate: the 8-bit RGB PNG goes to libpng."""
+    import types
+
+    import imagecodecs
+
+    img = _texture(23, 31, seed=6)
+    p = tmp_path / "scan.png"
+    Image.fromarray(img).save(p)
+    monkeypatch.setattr(imagecodecs, "DEFLATE", types.SimpleNamespace(available=False))
+    calls = []
+    imdecode = cv2.imdecode
+    monkeypatch.setattr(cv2, "imdecode", lambda *a, **k: calls.append(1) or imdecode(*a, **k))
+    np.testing.assert_array_equal(load_image(p), img)
+    assert calls == [1]
