@@ -28,17 +28,33 @@ __all__ = ["length", "mid_point", "smooth", "smooth_paths", "smoothed_lengths", 
            "concat_paths"]
 
 
-def concat_paths(paths) -> tuple[np.ndarray, np.ndarray]:
-    """Pixel paths in one array: ``(flat, offsets)``, path ``i`` being
-    ``flat[offsets[i]:offsets[i + 1]]`` ((N, 2) int64; ``(0, 2)`` when all are empty)."""
+def concat_paths(paths, dtype=np.int64) -> tuple[np.ndarray, np.ndarray]:
+    """Paths in one array: ``(flat, offsets)``, path ``i`` being
+    ``flat[offsets[i]:offsets[i + 1]]`` ((N, 2) of ``dtype``, pixels by default; ``(0, 2)``
+    when all are empty)."""
     lens = np.fromiter((len(p) for p in paths), dtype=np.int64, count=len(paths))
     offs = np.zeros(len(paths) + 1, dtype=np.int64)
     np.cumsum(lens, out=offs[1:])
     if offs[-1]:
-        flat = np.concatenate([np.asarray(p, dtype=np.int64).reshape(-1, 2) for p in paths])
+        flat = np.concatenate([np.asarray(p, dtype=dtype).reshape(-1, 2) for p in paths])
     else:
-        flat = np.zeros((0, 2), np.int64)
+        flat = np.zeros((0, 2), dtype)
     return flat, offs
+
+
+def ranges(lo, hi):
+    """The indices ``lo[i]:hi[i]`` of many ranges, one range after the other.
+
+    Returns
+    -------
+    idx : ndarray (L,) int
+    pos, n : ndarray (M,) int
+        Each range's first position in ``idx``, and its length (0 where ``hi <= lo``).
+    """
+    n = np.maximum(hi - lo, 0)
+    pos = np.zeros(len(n), np.int64)
+    np.cumsum(n[:-1], out=pos[1:])
+    return np.arange(int(n.sum())) + np.repeat(lo - pos, n), pos, n
 
 
 def _as_points(path_rc) -> np.ndarray:
@@ -275,7 +291,7 @@ def _smooth_many(r, c, starts, lens, k, closed, proj, ox, oy):
     """:func:`_smooth_into` for many paths of half window ``k`` (flat ``r``, ``c``; path
     ``i`` is ``starts[i] .. starts[i] + lens[i]``), written into ``ox``, ``oy``."""
     if k < 1:
-        idx = _ranges(starts, starts + lens)
+        idx = ranges(starts, starts + lens)[0]
         ox[idx] = r[idx]
         oy[idx] = c[idx]
         return
@@ -295,7 +311,7 @@ def _smooth_many(r, c, starts, lens, k, closed, proj, ox, oy):
         ox[tgt] = sx / w
         oy[tgt] = sy / w
         return
-    tgt = _ranges(starts + k, starts + lens - k)
+    tgt = ranges(starts + k, starts + lens - k)[0]
     if 4 * len(tgt) > len(r):
         # most points of the scan: shifted slices of the flat arrays, not gathers (the
         # windows that cross from one path into the next are summed, not used)
@@ -328,12 +344,6 @@ def _smooth_many(r, c, starts, lens, k, closed, proj, ox, oy):
     first = starts + np.arange(k)[:, None]
     end = last - np.arange(k)[:, None]
     ox[first], oy[first], ox[end], oy[end] = acc
-
-
-def _ranges(lo, hi):
-    """The indices ``lo[i]:hi[i]`` of all ranges, one range after the other."""
-    n = np.maximum(hi - lo, 0)
-    return np.arange(int(n.sum())) + np.repeat(lo - (np.cumsum(n) - n), n)
 
 
 def smoothed_lengths(points_rc, offsets, closed, *, window_px: int = 5) -> np.ndarray:

@@ -215,21 +215,6 @@ def _pymin(a, b):
     return np.where(b < a, b, a)
 
 
-def _ranges(lo, hi):
-    """The indices ``lo[i]:hi[i]`` of all ranges, one range after the other.
-
-    Returns
-    -------
-    idx : ndarray (L,) int
-    pos, n : ndarray (M,) int
-        Each range's first position in ``idx``, and its length (0 where ``hi <= lo``).
-    """
-    n = np.maximum(hi - lo, 0)
-    pos = np.zeros(len(n), np.int64)
-    np.cumsum(n[:-1], out=pos[1:])
-    return np.arange(int(n.sum())) + np.repeat(lo - pos, n), pos, n
-
-
 def _range_sums(x, lo, hi):
     """``np.add.reduce(x[lo[i]:hi[i]])`` of every range, to the last bit (0.0 where empty).
 
@@ -527,8 +512,8 @@ def _fit_arrays(r, c, s_px, offs, total, mode, t0, t1):
     turn = np.arange(len(path)) - np.repeat(first, reps)
     ring = mode[path] == 1
     a = offs[path]
-    idx, pos, n = _ranges(np.where(ring, a, a + t0[path]),
-                          np.where(ring, offs[path + 1], a + t1[path]))
+    idx, pos, n = polyline.ranges(np.where(ring, a, a + t0[path]),
+                                  np.where(ring, offs[path + 1], a + t1[path]))
     # a loop's arc length continued backwards over its first turn, forwards over its third
     shift = np.where(ring & (turn != 1), np.where(turn == 0, -total[path], total[path]), 0.0)
     count = np.where(loop, n[first], t1[fitted] - t0[fitted])
@@ -589,7 +574,7 @@ def _fitted_kappa(s_px, total, offs, mode, t0, t1, half_w, shift, kin):
         cut = c0 < c1
         lo[op[cut]] = c0[cut]
         hi[op[cut]] = c1[cut] - 1
-    idx, pos, cnt = _ranges(a[fitted], b[fitted])
+    idx, pos, cnt = polyline.ranges(a[fitted], b[fitted])
     j = idx - np.repeat(a[fitted], cnt)
     f0r = np.repeat(f0, cnt)
     src = np.minimum(np.maximum(np.minimum(np.maximum(j, f0r), np.repeat(f1 - 1, cnt)) - f0r,
@@ -868,11 +853,7 @@ def _fit_curvatures(X, Y, S, off, lens, half_w, i0, cnt, correct, shift):
 def _flat_paths(paths):
     """Paths (n, 2) in flat arrays: ``(rows, cols, offs)``, path ``i`` at
     ``offs[i]:offs[i + 1]``."""
-    lens = np.fromiter((len(p) for p in paths), np.int64, count=len(paths))
-    offs = np.zeros(len(paths) + 1, np.int64)
-    np.cumsum(lens, out=offs[1:])
-    flat = (np.concatenate([np.asarray(p, dtype=np.float64).reshape(-1, 2) for p in paths])
-            if offs[-1] else np.zeros((0, 2)))
+    flat, offs = polyline.concat_paths(paths, np.float64)
     return np.ascontiguousarray(flat[:, 0]), np.ascontiguousarray(flat[:, 1]), offs
 
 
@@ -1986,7 +1967,7 @@ def _fill_fork_zones_many(profs, n_br, forks, noise_var, walled_px, *, thickness
         # the trend line k = km + slope (s - sm) over the samples lo:hi (numpy's means)
         sm = _range_sums(s, a + lo, a + hi) / (hi - lo)
         km = _range_sums(k, a + lo, a + hi) / (hi - lo)
-        idx, pos, cnt = _ranges(a + lo, a + hi)
+        idx, pos, cnt = polyline.ranges(a + lo, a + hi)
         ds = s[idx] - np.repeat(sm, cnt)
         dk = k[idx] - np.repeat(km, cnt)
         at = np.append(pos, len(idx)).tolist()
@@ -1998,7 +1979,7 @@ def _fill_fork_zones_many(profs, n_br, forks, noise_var, walled_px, *, thickness
         z0 = np.where(quiet, 0 if e == 0 else t1[act], side[e, act, 2])
         z1 = np.where(quiet, t0[act] if e == 0 else lens[act], side[e, act, 3])
         go = ~quiet
-        idx, pos, cnt = _ranges((a + z0)[go], (a + z1)[go])
+        idx, pos, cnt = polyline.ranges((a + z0)[go], (a + z1)[go])
         x = np.repeat(km[go], cnt) + np.repeat(slope[go], cnt) * (s[idx] - np.repeat(sm[go], cnt))
         bound = np.repeat(kmax[act[go]], cnt)
         k[idx] = np.where(x < -bound, -bound, np.where(x > bound, bound, x))
@@ -2019,8 +2000,8 @@ def _zone_turns(k, s, a, n, z0, z1, edge):
     ``a:a + n``) up to the fitted sample ``a + edge`` next to each, radians: the indices of
     the zones that have one (not empty, their edge on the stack) and their turns."""
     on = np.flatnonzero((z1 > z0) & (edge >= 0) & (edge < n))
-    idx, pos, cnt = _ranges(a[on] + np.minimum(z0[on], edge[on]),
-                            a[on] + np.maximum(z1[on], edge[on] + 1))
+    idx, pos, cnt = polyline.ranges(a[on] + np.minimum(z0[on], edge[on]),
+                                    a[on] + np.maximum(z1[on], edge[on] + 1))
     return on, _trapz_ranges(np.abs(k[idx]), s[idx], pos, pos + cnt)
 
 
@@ -2034,7 +2015,7 @@ def _bound_turns(k, s, a, n, z0, z1, edge, limit):
     e = (a + edge)[over]
     # the edge sample's half of its interval is measured, not scaled
     half = 0.5 * np.abs(k[e]) * np.abs(s[e] - s[e + np.where(edge[over] < z0[over], 1, -1)])
-    idx, pos, cnt = _ranges((a + z0)[over], (a + z1)[over])
+    idx, pos, cnt = polyline.ranges((a + z0)[over], (a + z1)[over])
     k[idx] *= np.repeat(_pymax(limit - half, 0.0) / _pymax(turn[over] - half, 1e-300), cnt)
 
 

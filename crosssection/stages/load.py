@@ -204,7 +204,8 @@ def _png_chunks(data: bytes, path):
 
 
 def _png_header(data: bytes, chunks, path):
-    """Validate IHDR and the critical chunks; return (width, height, depth, colour type)."""
+    """Validate IHDR and the critical chunks; return (width, height, depth, colour type,
+    interlace method)."""
     ctype, start, end = chunks[0]
     if ctype != b"IHDR" or end - start != 25:
         raise ImageError("corrupt PNG: the first chunk is not a valid IHDR", path)
@@ -231,7 +232,7 @@ def _png_header(data: bytes, chunks, path):
     if colour in (0, 4):
         raise ImageError(f"grayscale image ({depth}-bit {name} PNG): an RGB scan of blue ink "
                          "is needed to threshold on colour", path)
-    return w, h, depth, colour
+    return w, h, depth, colour, interlace
 
 
 @njit(cache=True)
@@ -408,8 +409,7 @@ def _read_png(path: Path, data: bytes) -> np.ndarray:
     import cv2
 
     chunks = _png_chunks(data, path)
-    w, h, depth, colour = _png_header(data, chunks, path)
-    interlace = data[chunks[0][1] + 20]
+    w, h, depth, colour, interlace = _png_header(data, chunks, path)
     if colour == 2 and depth == 8 and interlace == 0:
         arr = _read_png_rgb8(data, chunks, w, h, path)
         if arr is not None:
