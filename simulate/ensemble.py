@@ -403,7 +403,8 @@ def _add_common(p, command):
     p.add_argument("--ftol", type=float, default=1e-4, help="Powell ftol (default 1e-4, scipy's)")
     p.add_argument("--xtol", type=float, default=1e-4, help="Powell xtol (default 1e-4, scipy's)")
     p.add_argument("--wall-radius", type=float, default=None,
-                   help="hard-wall disk radius in units of L (default: none)")
+                   help="hard-wall disk radius in units of L, above half a segment 1/(2N) "
+                        "(default: none)")
     p.add_argument("--contact-distance", type=float, default=None,
                    help="contact cut-off of the analysis (units of L; default contacts')")
     p.add_argument("--workers", type=int, default=1, help="local worker processes (default 1)")
@@ -467,6 +468,13 @@ def params_from_args(args) -> dict:
                   contact_distance=_finite("--contact-distance", args.contact_distance, low=0.0,
                                            low_open=True, allow_none=True),
                   parametrization=args.parametrization)
+    wall, half = params["wall_radius"], 0.5 / args.segments
+    if wall is not None and wall <= half:
+        # a segment is a straight chord 1/N long: a disk no wider holds it only as its
+        # diameter, and the next segment would have to run back over it
+        raise ParameterError(f"--wall-radius must be above half a segment 1/(2N) = {half:.3g} "
+                             f"(a disk no wider than one segment cannot hold the rod), got "
+                             f"{args.wall_radius!r}")
     if params["nematic_cutoff"] is not None and (args.command != "quench"
                                                  or args.method != "powell"):
         raise ParameterError("--nematic-cutoff applies to quench with --method powell")

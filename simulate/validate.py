@@ -23,7 +23,7 @@ import pandas as pd
 from crosssection._version import __version__
 from crosssection.core import schema
 from crosssection.core.errors import ConfigError, FoldstatError, ParameterError
-from crosssection.core.fileio import read_json_object, write_csv, write_json
+from crosssection.core.fileio import write_csv, write_json
 from crosssection.truth.scene import read_scene_params
 from crosssection.truth.scoring import analyze_scene_folder, score
 
@@ -82,39 +82,20 @@ def read_truth(truth_dir) -> tuple[dict, dict]:
         or missing value where the scoring needs a number. The message names the file.
     """
     truth_dir = Path(truth_dir)
+    summary, tables = schema.read_tables(truth_dir)
     path = truth_dir / "summary.json"
-    summary = read_json_object(path)
     for key in _SUMMARY_TOTALS:
         value = summary.get(key)
         if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))
                                   or not math.isfinite(value)):
             raise ConfigError(f"{key} must be a finite number or null, got {value!r}", path)
-    tables = {}
-    for name, required in schema.TABLES.items():
-        path = truth_dir / f"{name}.csv"
-        try:
-            df = pd.read_csv(path)
-        except FileNotFoundError:
-            raise ConfigError("file not found", path) from None
-        except pd.errors.EmptyDataError:
-            raise ConfigError("empty file (no header line)", path) from None
-        except OSError as exc:
-            raise ConfigError(f"cannot read ({exc.strerror or type(exc).__name__})",
-                              path) from None
-        except ValueError as exc:  # parser and decoding errors
-            raise ConfigError(f"malformed CSV ({type(exc).__name__})", path) from None
-        missing = [c for c in required if c not in df.columns]
-        if len(missing) == len(required):
-            raise ConfigError(f"not a {name} table (expected the header "
-                              f"{','.join(required)})", path)
-        if missing:
-            raise ConfigError(f"lacks column(s) {', '.join(missing)}", path)
+    for name, df in tables.items():
         for col in _NUMERIC_TRUTH[name]:
             values = pd.to_numeric(df[col], errors="coerce")
             if not np.isfinite(values.to_numpy(float)).all():
-                raise ConfigError(f"column {col} must hold finite numbers", path)
+                raise ConfigError(f"column {col} must hold finite numbers",
+                                  truth_dir / f"{name}.csv")
             df[col] = values
-        tables[name] = schema.check_table(name, df)
     return summary, tables
 
 

@@ -22,7 +22,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from crosssection.core.fileio import write_csv, write_json
+from crosssection.core.errors import ConfigError
+from crosssection.core.fileio import read_json_object, write_csv, write_json
 
 JUNCTION_COLUMNS = ["junction_id", "x_px", "y_px", "n_stacks"]
 STACK_COLUMNS = ["stack_id", "junction_a", "junction_b", "length_mm", "width_mm", "n_br",
@@ -91,11 +92,70 @@ def write_tables(out_dir, summary: dict, tables: dict[str, pd.DataFrame]) -> dic
     return paths
 
 
-def read_tables(folder) -> tuple[dict, dict[str, pd.DataFrame]]:
-    """Read ``summary.json`` and the four tables written by :func:`write_tables`."""
-    import json
+def read_table(path, name: str) -> pd.DataFrame:
+    """Read one CSV table written by :func:`write_tables`, checked against the schema.
 
+    Parameters
+    ----------
+    path : str or Path
+        The CSV file.
+    name : str
+        Its table in :data:`TABLES` (``"junctions"``, ``"stacks"``, ``"branches"``,
+        ``"voids"``).
+
+    Returns
+    -------
+    DataFrame
+        The table, its required columns first (:func:`check_table`).
+
+    Raises
+    ------
+    ConfigError
+        Naming ``path``: the file is missing, unreadable, empty or malformed, or lacks one of
+        the columns of ``TABLES[name]``.
+    """
+    required = TABLES[name]
+    try:
+        df = pd.read_csv(path)
+    except FileNotFoundError:
+        raise ConfigError("file not found", path) from None
+    except pd.errors.EmptyDataError:
+        raise ConfigError("empty file (no header line)", path) from None
+    except OSError as exc:
+        raise ConfigError(f"cannot read ({exc.strerror or type(exc).__name__})",
+                          path) from None
+    except ValueError as exc:  # parser and decoding errors
+        raise ConfigError(f"malformed CSV ({type(exc).__name__})", path) from None
+    missing = [c for c in required if c not in df.columns]
+    if len(missing) == len(required):
+        # no column of the schema: most likely another file under this name
+        raise ConfigError(f"not a {name} table (expected the header {','.join(required)})",
+                          path)
+    if missing:
+        raise ConfigError(f"lacks column(s) {', '.join(missing)}", path)
+    return check_table(name, df)
+
+
+def read_tables(folder) -> tuple[dict, dict[str, pd.DataFrame]]:
+    """Read ``summary.json`` and the four tables written by :func:`write_tables`.
+
+    Parameters
+    ----------
+    folder : str or Path
+        An ``analyze`` output folder or a scene's ``truth/`` folder.
+
+    Returns
+    -------
+    (summary, tables) : (dict, dict of DataFrame)
+        The summary, and each table of :data:`TABLES` with its required columns first.
+
+    Raises
+    ------
+    ConfigError
+        Naming the file: ``summary.json`` is missing, unreadable or not a JSON object, or a
+        table is missing, unreadable, malformed or lacks a column (:func:`read_table`).
+    """
     folder = Path(folder)
-    summary = json.loads((folder / "summary.json").read_text())
-    tables = {name: pd.read_csv(folder / f"{name}.csv") for name in TABLES}
+    summary = read_json_object(folder / "summary.json")
+    tables = {name: read_table(folder / f"{name}.csv", name) for name in TABLES}
     return summary, tables

@@ -2,7 +2,9 @@
 
 Each DIR is a batch output (every set folder inside becomes a set), a single ``analyze``
 output, or a simulation ensemble from ``python -m simulate quench`` (one set named after the
-folder, or after ``--name``).
+folder, or after ``--name``). Sets of the same name from different DIRs (two folders both
+named ``run``) are kept apart as ``run``, ``run#2``, ... (``#k``: the DIR's position); give
+``--name`` once per DIR to name them.
 
 REPORT_DIR is created, or replaced whole when it holds an earlier report: the new report is
 written beside it and swapped in at the end, so an interrupted run leaves it as it was.
@@ -17,6 +19,10 @@ from pathlib import Path
 
 from crosssection.core.errors import ParameterError
 
+#: most resamples ``--n-boot`` and ``--n-mc`` take: each one refits every family to every
+#: quantity of every set (about 0.3 s for one small set), so this many already runs for hours
+MAX_RESAMPLES = 100_000
+
 
 def add_subparser(subparsers) -> argparse.ArgumentParser:
     """Register the ``stats`` subcommand on an ``argparse`` subparsers object."""
@@ -29,12 +35,15 @@ def add_subparser(subparsers) -> argparse.ArgumentParser:
                    help="report folder (created, or replaced whole when it holds a "
                         "previous report)")
     p.add_argument("--name", action="append", default=None,
-                   help="set name for each DIR in order (repeat; default: the folder names)")
+                   help="set name for each DIR in order (repeat, once per DIR, each name "
+                        "different; default: the folder names, a repeated one as NAME#k)")
     p.add_argument("--seed", type=int, default=0, help="seed of bootstrap and GOF (default 0)")
     p.add_argument("--n-boot", type=int, default=200,
-                   help="bootstrap resamples for parameter intervals (default 200)")
+                   help="bootstrap resamples for parameter intervals, 0 (none) to "
+                        f"{MAX_RESAMPLES} (default 200)")
     p.add_argument("--n-mc", type=int, default=199,
-                   help="parametric-bootstrap samples of the GOF p-values (default 199)")
+                   help="parametric-bootstrap samples of the GOF p-values, at most "
+                        f"{MAX_RESAMPLES} (default 199)")
     p.add_argument("--fast", action="store_true",
                    help="quick look: 50 bootstrap resamples and 49 GOF samples (default: off)")
     p.add_argument("--no-gof", action="store_true",
@@ -55,18 +64,37 @@ def add_subparser(subparsers) -> argparse.ArgumentParser:
 def check_options(args) -> None:
     """Refuse absurd option values before any input is read.
 
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed ``stats`` options.
+
     Raises
     ------
     ParameterError
-        Naming the option: a count or seed below 0, ``--n-mc 0`` with p-values asked for,
-        a detection limit that is negative or not finite, or ``--name`` not given once per
-        DIR.
+        Naming the option: a count or seed below 0, a resample count above
+        :data:`MAX_RESAMPLES`, ``--n-mc 0`` with p-values asked for, a detection limit that
+        is negative or not finite, or ``--name`` not given once per DIR or giving one name
+        to two DIRs.
     """
     if args.name and len(args.name) != len(args.dirs):
         raise ParameterError(f"given {len(args.name)} times for {len(args.dirs)} DIRs", "--name")
+    if args.name:
+        seen = {}
+        for d, name in zip(args.dirs, args.name):
+            # the loader keeps the second apart as NAME#k, so a repeated name cannot pool two
+            # DIRs: it would only hide which set is which (one folder given twice is read
+            # once, whatever its names)
+            if name in seen and Path(seen[name]).resolve() != Path(d).resolve():
+                raise ParameterError(f"{name!r} given for both {seen[name]} and {d}: give "
+                                     "each DIR its own set name", "--name")
+            seen.setdefault(name, d)
     for flag, v in (("--seed", args.seed), ("--n-boot", args.n_boot), ("--n-mc", args.n_mc)):
         if v < 0:
             raise ParameterError(f"must be an integer >= 0, got {v}", flag)
+    for flag, v in (("--n-boot", args.n_boot), ("--n-mc", args.n_mc)):
+        if v > MAX_RESAMPLES:
+            raise ParameterError(f"must be at most {MAX_RESAMPLES}, got {v}", flag)
     if args.n_mc == 0 and not (args.no_gof or args.fast):
         # --fast replaces it with 49; without a resample there is no p-value to give
         raise ParameterError("0 resamples give no p-value: give an integer >= 1, or "

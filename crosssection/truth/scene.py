@@ -219,10 +219,7 @@ def read_scene(folder, *, image_name: str | None = None, image: bool = True) -> 
     truth = folder / "truth"
     if not (truth / "summary.json").exists():
         raise ConfigError("no truth/summary.json (not a scene folder)", folder)
-    try:
-        summary, tables = schema.read_tables(truth)
-    except (OSError, ValueError) as exc:
-        raise ConfigError(f"unreadable truth tables ({type(exc).__name__})", truth) from None
+    summary, tables = schema.read_tables(truth)
     cal_path = folder / "calibration.csv"
     calibration = Calibration.from_csv(cal_path) if cal_path.exists() else None
     rgb = None

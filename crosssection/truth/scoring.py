@@ -282,6 +282,13 @@ def score_folder(out_dir, scene_dir, *, match_px: float | None = None) -> dict:
     -------
     dict
         As :func:`score`.
+
+    Raises
+    ------
+    ConfigError
+        Naming the file: a missing or malformed table or ``summary.json`` in ``out_dir``
+        (:func:`crosssection.core.schema.read_tables`), or a malformed scene folder
+        (:func:`crosssection.truth.scene.read_scene`).
     """
     scene = read_scene(scene_dir, image=False)
     result = schema.read_tables(out_dir)

@@ -75,3 +75,27 @@ def test_an_error_names_the_option_the_user_gave(tmp_path, argv, says):
     r = subprocess.run([sys.executable, "-m", "simulate", *argv, "--n-configs", "1"],
                        capture_output=True, text=True, cwd=tmp_path)
     assert r.returncode == 2 and says in r.stderr and r.stderr.count("\n") == 1
+
+
+@pytest.mark.parametrize("command, radius", [("quench", "1e-6"), ("quench", "0.0125"),
+                                             ("anneal", "0.01")])
+def test_a_wall_too_small_for_one_segment_is_refused(tmp_path, command, radius):
+    """--segments 40: a segment is 1/40 long, so no disk of radius <= 1/80 holds the rod."""
+    out = tmp_path / "out"
+    r = subprocess.run([sys.executable, "-m", "simulate", command, "--n-configs", "1",
+                        "--segments", "40", "--wall-radius", radius, "--out", str(out)],
+                       capture_output=True, text=True)
+    assert r.returncode == 2
+    assert r.stderr == (f"error: {out}: --wall-radius must be above half a segment 1/(2N) = "
+                        f"0.0125 (a disk no wider than one segment cannot hold the rod), got "
+                        f"{float(radius)!r}\n")
+    assert not out.exists()
+
+
+def test_a_wall_just_wider_than_a_segment_is_taken_as_given():
+    from simulate.cli import build_parser
+    from simulate.ensemble import params_from_args
+
+    args = build_parser(["quench"]).parse_args(
+        ["quench", "--segments", "40", "--wall-radius", "0.0126", "--out", "o"])
+    assert params_from_args(args)["wall_radius"] == 0.0126

@@ -117,7 +117,18 @@ def test_corrupt_truth_table_fails_its_scene(scenes, tmp_path, capsys):
     assert (summary["n_scored"], summary["n_failed"]) == (0, 1)
 
 
+def test_missing_truth_table_fails_its_scene_naming_the_file(scenes, tmp_path, capsys):
+    folder, scene = scenes
+    (scene / "truth" / "branches.csv").unlink()
+    assert run(folder, tmp_path / "rep") == 3
+    err = capsys.readouterr().err
+    assert err.splitlines() == [f"warning: {scene}: not analysed: "
+                                f"{scene / 'truth' / 'branches.csv'}: file not found"]
+
+
 @pytest.mark.parametrize("file, content, cause", [
+    ("branches.csv", None, "file not found"),
+    ("summary.json", "{bad", "malformed JSON"),
     ("stacks.csv", "x\n", "not a stacks table"),
     ("junctions.csv", "junction_id,x_px\n0,1.0\n", "lacks column(s) y_px, n_stacks"),
     ("voids.csv", "", "empty file"),
@@ -128,7 +139,10 @@ def test_read_truth_checks_the_tables(rendered, tmp_path, file, content, cause):
     _, scene = rendered
     truth = tmp_path / "truth"
     shutil.copytree(scene / "truth", truth)
-    (truth / file).write_text(content)
+    if content is None:
+        (truth / file).unlink()
+    else:
+        (truth / file).write_text(content)
     with pytest.raises(ConfigError) as err:
         read_truth(truth)
     assert err.value.path == str(truth / file) and cause in err.value.cause

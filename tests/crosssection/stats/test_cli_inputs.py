@@ -7,11 +7,11 @@ import os
 import pandas as pd
 import pytest
 
-from crosssection.cli import main
+from crosssection.cli import build_parser, main
 from crosssection.core import fileio
 from crosssection.core.errors import ParameterError
 from crosssection.quality import QualityWarning
-from crosssection.stats import demo, report
+from crosssection.stats import cli, demo, report
 from crosssection.stats.data import load_any
 
 FAST = ["--n-boot", "0", "--no-gof", "--no-figures"]
@@ -102,6 +102,8 @@ def test_malformed_summary_is_one_error_line(batch, tmp_path, capfd, content, ca
     ("--seed", "-1", "must be an integer >= 0, got -1"),
     ("--n-boot", "-1", "must be an integer >= 0, got -1"),
     ("--n-mc", "-5", "must be an integer >= 0, got -5"),
+    ("--n-boot", "100001", "must be at most 100000, got 100001"),
+    ("--n-mc", "1000000000", "must be at most 100000, got 1000000000"),
     ("--l-min-mm", "-1", "must be a finite number >= 0 (0 = no limit), got -1"),
     ("--l-min-mm", "inf", "must be a finite number >= 0 (0 = no limit), got inf"),
     ("--s-min-mm2", "nan", "must be a finite number >= 0 (0 = no limit), got nan"),
@@ -112,6 +114,44 @@ def test_absurd_option_is_one_error_line_naming_it(batch, tmp_path, capfd, optio
     status, _, err = _stats(capfd, batch, "--out", tmp_path / "rep", *FAST, option, value)
     assert status == 2 and err == [f"error: {option}: {cause}"]
     assert not (tmp_path / "rep").exists()
+
+
+def test_the_resample_bound_is_said_in_the_help_and_accepted(capfd):
+    with pytest.raises(SystemExit):
+        main(["stats", "--help"])
+    help_text = " ".join(capfd.readouterr().out.split())
+    assert f"0 (none) to {cli.MAX_RESAMPLES} (default 200)" in help_text
+    assert f"at most {cli.MAX_RESAMPLES} (default 199)" in help_text
+    args = build_parser(["stats"]).parse_args(
+        ["stats", "d", "--out", "r", "--n-boot", str(cli.MAX_RESAMPLES),
+         "--n-mc", str(cli.MAX_RESAMPLES)])
+    cli.check_options(args)  # the bound itself is no absurd value
+
+
+def test_one_name_for_two_dirs_is_refused(batch, tmp_path, capfd):
+    sim = demo.write_demo_simulation(tmp_path / "sim", n_configs=4, seed=1)
+    status, out, err = _stats(capfd, batch, sim, "--out", tmp_path / "rep", *FAST,
+                              "--name", "X", "--name", "X")
+    assert status == 2 and out == []
+    assert err == [f"error: --name: 'X' given for both {batch} and {sim}: give each DIR its "
+                   "own set name"]
+    assert not (tmp_path / "rep").exists()
+    # one folder under two spellings is one set: read once, as without --name
+    status, _, err = _stats(capfd, sim, f"{sim}/", "--out", tmp_path / "rep", *FAST,
+                            "--name", "X", "--name", "X")
+    assert status == 0 and err == [f"warning: {sim}/: given twice (also as {sim}); "
+                                   "counted once"]
+
+
+def test_two_dirs_of_one_folder_name_are_kept_apart_as_documented(tmp_path, capfd):
+    a = demo.write_demo_simulation(tmp_path / "a" / "run", n_configs=6, seed=1)
+    b = demo.write_demo_simulation(tmp_path / "b" / "run", n_configs=6, seed=2)
+    status, _, err = _stats(capfd, a, b, "--out", tmp_path / "rep", *FAST)
+    assert status == 0 and err == []
+    assert set(pd.read_csv(tmp_path / "rep" / "macro.csv")["set"]) == {"run", "run#2"}
+    with pytest.raises(SystemExit):
+        main(["stats", "--help"])
+    assert "kept apart as ``run``, ``run#2``" in " ".join(capfd.readouterr().out.split())
 
 
 def test_zero_detection_limits_mean_none(batch, tmp_path, capfd):

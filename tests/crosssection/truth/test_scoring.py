@@ -1,9 +1,11 @@
 """The scorer: perfect on the truth itself, and each metric reacts to its own kind of error."""
 import copy
+import shutil
 
 import numpy as np
 import pytest
 
+from crosssection.core.errors import ConfigError
 from crosssection.truth.scoring import match_points, meets_targets, score, score_folder
 from crosssection.truth.network import make_scene
 from crosssection.truth.scene import write_scene
@@ -105,6 +107,42 @@ def test_score_folder(tmp_path):
     folder = write_scene(sc, tmp_path / "scene")
     s = score_folder(folder / "truth", folder)
     assert s["junction_f1"] == 1.0 and s["match_px"] == pytest.approx(15.0)
+
+
+@pytest.mark.parametrize("file, content, cause", [
+    ("branches.csv", None, "file not found"),
+    ("stacks.csv", "", "empty file (no header line)"),
+    ("stacks.csv", "x\n1\n", "not a stacks table (expected the header stack_id,"),
+    ("junctions.csv", "junction_id,x_px\n0,1.0\n", "lacks column(s) y_px, n_stacks"),
+    ("voids.csv", b"void_id,area_mm2\n\xff\xfe,1\n", "malformed CSV (UnicodeDecodeError)"),
+    ("summary.json", None, "file not found"),
+    ("summary.json", "{bad", "malformed JSON"),
+    ("summary.json", "[1, 2]", "must hold a JSON object"),
+])
+def test_score_folder_names_the_damaged_file_of_the_output(tmp_path, file, content, cause):
+    sc = make_scene(seed=9, n_stacks=25, max_layers=4)
+    folder = write_scene(sc, tmp_path / "scene")
+    out = tmp_path / "out"
+    shutil.copytree(folder / "truth", out)
+    if content is None:
+        (out / file).unlink()
+    elif isinstance(content, bytes):
+        (out / file).write_bytes(content)
+    else:
+        (out / file).write_text(content)
+    with pytest.raises(ConfigError) as err:
+        score_folder(out, folder)
+    assert err.value.path == str(out / file) and cause in err.value.cause
+
+
+def test_score_folder_names_the_damaged_table_of_the_truth(tmp_path):
+    sc = make_scene(seed=9, n_stacks=25, max_layers=4)
+    folder = write_scene(sc, tmp_path / "scene")
+    (folder / "truth" / "voids.csv").write_text("void_id,area_mm2\n0,1.0\n")
+    with pytest.raises(ConfigError) as err:
+        score_folder(folder / "truth", folder)
+    assert err.value.path == str(folder / "truth" / "voids.csv")
+    assert err.value.cause.startswith("lacks column(s) perimeter_mm, shape_ratio")
 
 
 def _line(p0, p1, n=200):
