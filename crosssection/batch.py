@@ -19,6 +19,10 @@ Design choices
 - Task ``i`` of the sorted image list gets seed ``spawn_seeds(seed, n)[i]``
   (``SeedSequence.spawn``); results do not depend on the number of workers or on the order of
   completion. The seed used is recorded in ``summary.json`` (``batch.seed``) and index.csv.
+- Local workers share numba's disk cache of compiled kernels. On an empty cache (a fresh
+  install) the first worker to compile does so for all; the others wait and load the kernels
+  (:func:`crosssection.core.parallel.compiling_in_turn`) instead of each compiling them
+  at the same time.
 - Atomic outputs: a task writes into a hidden staging folder ``.<stem>.partial-XXXX`` next to
   its output folder and renames it into place when complete. A killed worker leaves at most a
   staging folder, which the next run removes; an output folder is therefore always complete.
@@ -51,7 +55,7 @@ import traceback
 from collections import deque
 from concurrent.futures import FIRST_COMPLETED, wait
 from concurrent.futures.process import BrokenProcessPool
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import pandas as pd
@@ -61,7 +65,7 @@ from crosssection.core import schema
 from crosssection.core.errors import ConfigError, FoldstatError, ParameterError
 from crosssection.core.fileio import (PARTIAL_TAG, clear_stale_folders, staging_folder,
                                       swap_in_folder, write_csv, write_json)
-from crosssection.core.parallel import get_executor, spawn_seeds
+from crosssection.core.parallel import compiling_in_turn, get_executor, spawn_seeds
 from crosssection.params import (PARAM_NAMES, AnalysisParams, add_analysis_arguments,
                                  check_param, switched_off)
 from crosssection.quality import QualityWarning
@@ -94,6 +98,7 @@ class ImageTask:
     params_hash: str = ""
     figure: bool = True
     error: str | None = None
+    compile_lock: str | None = None  # shared by the local workers (compiling_in_turn)
 
 
 # --------------------------------------------------------------------------- discovery
@@ -383,7 +388,8 @@ def process_image(task: ImageTask) -> dict:
         with warnings.catch_warnings():
             # the flags are in the summary; the driver prints them once per image
             warnings.simplefilter("ignore", QualityWarning)
-            result = analyze(task.image, params)
+            with compiling_in_turn(task.compile_lock):
+                result = analyze(task.image, params)
         info = {"params_hash": task.params_hash, "image": task.rel, "set": task.set_name,
                 "seed": task.seed, "params": task.params, "version": __version__}
         if isinstance(getattr(result, "summary", None), dict):
@@ -513,6 +519,11 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
 
     rows: dict[str, dict] = {}
     todo = []
+    # local worker processes share one numba disk cache: on an empty one, the first to
+    # compile does so for all, the output folder being their lock (a cluster's workers do not
+    # share this disk, and threads must not wait inside numba's compiler)
+    local_pool = scheduler is None and (workers or os.cpu_count() or 1) > 1
+    lock = str(out.resolve()) if local_pool else None
     for t in tasks:
         if t.error:
             rows[t.rel] = _row(t, "failed", reason=t.error)
@@ -521,7 +532,7 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
         if done is not None:
             rows[t.rel] = done
         else:
-            todo.append(t)
+            todo.append(replace(t, compile_lock=lock))
 
     bar = tqdm(total=len(tasks), initial=len(rows), unit="img", desc="batch",
                disable=None if progress is None else not progress,

@@ -1,7 +1,8 @@
 """One code path for parallelism: a ``concurrent.futures`` executor.
 
 Local processes by default; a Dask distributed cluster when a scheduler address is given
-(``Client.get_executor()``). Batches and simulation ensembles both use :func:`get_executor`.
+(``Client.get_executor()``). Batches and simulation ensembles both use :func:`get_executor`;
+:func:`compiling_in_turn` keeps a pool's workers from compiling the same numba kernels at once.
 """
 from __future__ import annotations
 
@@ -122,6 +123,72 @@ def get_executor(workers: int | None = 1, scheduler: str | None = None):
         yield ex
 
 
+@contextmanager
+def compiling_in_turn(lock_path: str | None):
+    """Let one worker process at a time compile numba kernels, the others load them.
+
+    numba caches compiled kernels on disk, but workers that start on an empty cache would
+    each compile every kernel, all at the same time. Inside this block, a process that has to
+    compile (a cache miss) first takes an exclusive lock on ``lock_path`` and keeps it to the
+    end of the block. Another process that meets a kernel to compile meanwhile waits there,
+    then compiles that one kernel and loads from the cache the others the first compiled. A
+    process that finds every kernel in the cache never takes the lock: a warm cache costs
+    nothing.
+
+    Parameters
+    ----------
+    lock_path : str or None
+        File or folder the pool's workers share, locked with ``flock`` (which the system
+        releases when a process dies). None, or a platform without ``flock``, leaves the
+        block as it is.
+
+    Yields
+    ------
+    None
+
+    Notes
+    -----
+    For worker processes that run one task at a time: the wait happens inside numba's
+    compiler, whose lock is the process's, so threads of one process must not share it.
+    """
+    if lock_path is None:
+        yield
+        return
+    try:
+        import fcntl
+    except ImportError:  # no flock (Windows): each worker compiles what it needs
+        yield
+        return
+    from numba.core import event
+
+    taken = []  # the locked descriptor, or None when the lock could not be had
+
+    class _TakeTurn(event.Listener):
+        def on_start(self, ev):
+            if taken:
+                return
+            try:
+                fd = os.open(lock_path, os.O_RDONLY)
+            except OSError:  # gone: compiling twice beats failing the task
+                taken.append(None)
+                return
+            taken.append(fd)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX)
+            except OSError:  # a file system without locks: the same
+                pass
+
+        def on_end(self, ev):
+            pass
+
+    try:
+        with event.install_listener("numba:compile", _TakeTurn()):
+            yield
+    finally:
+        if taken and taken[0] is not None:
+            os.close(taken[0])  # releases the lock
+
+
 def spawn_seeds(seed: int | None, n: int) -> list[int]:
     """``n`` independent integer seeds derived from ``seed`` by ``SeedSequence.spawn``.
 
@@ -132,4 +199,4 @@ def spawn_seeds(seed: int | None, n: int) -> list[int]:
     return [int(c.generate_state(1, dtype=np.uint32)[0]) for c in children]
 
 
-__all__ = ["get_executor", "spawn_seeds", "ThreadPoolExecutor"]
+__all__ = ["get_executor", "compiling_in_turn", "spawn_seeds", "ThreadPoolExecutor"]

@@ -5,9 +5,12 @@ import numpy as np
 import pytest
 
 import crosssection
+from crosssection.core.calibration import Calibration
 
 PX_PER_MM = 50.0
 H_PX = 5.0
+#: the bands are drawn n h wide: that law is the scans' calibration
+CALIBRATION = Calibration.linear(H_PX / PX_PER_MM)
 
 
 def _split_band(R_px, seed, size=900):
@@ -48,6 +51,7 @@ def test_tangential_fork_energy(R_px, seed):
     rgb, k_true = _split_band(R_px, seed)
     size = rgb.shape[0]
     res = crosssection.analyze(rgb, px_per_mm=PX_PER_MM, thickness_mm=H_PX / PX_PER_MM,
+                               calibration=CALIBRATION,
                                hole_radius_mm=0.49 * size / PX_PER_MM,
                                hole_center_px=(size / 2, size / 2))
     st = res.stacks

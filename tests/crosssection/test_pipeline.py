@@ -16,8 +16,13 @@ import pytest
 from crosssection import analyze
 from crosssection.core import schema
 from crosssection.cli import main
+from crosssection.core.calibration import Calibration
 from crosssection.core.errors import AnalysisError, ParameterError
+from crosssection.quality import NetworkWarning
 from crosssection.truth.network import make_scene
+
+#: width law of the drawn scans at the default h (0.1 mm): their bands are n h wide
+DRAWN_CALIBRATION = Calibration.linear(0.1)
 
 
 @pytest.fixture
@@ -159,7 +164,8 @@ def test_ring_only_image_is_not_an_error():
     mask = np.zeros((300, 300), np.uint8)
     cv2.circle(mask, (150, 150), 100, 1, 6)
     img[mask > 0] = (40, 70, 190)
-    res = analyze(img)
+    with pytest.warns(NetworkWarning, match="no junction found"):
+        res = analyze(img, calibration=DRAWN_CALIBRATION)
     assert res.summary["n_junctions"] == 0
     assert res.summary["n_stacks"] == 1
     assert res.stacks["junction_a"].iloc[0] == -1
@@ -175,7 +181,9 @@ def test_thick_x_crossing_becomes_degree_4():
         d = 180 * np.array([np.cos(a), np.sin(a)])
         cv2.line(mask, tuple((200 - d).astype(int)), tuple((200 + d).astype(int)), 1, 30)
     img[mask > 0] = (40, 70, 190)
-    res = analyze(img, l_min_mm=0.5)
+    # the drawing has no hole: the one given holds the whole cross
+    res = analyze(img, l_min_mm=0.5, calibration=DRAWN_CALIBRATION, hole_radius_mm=3.9,
+                  hole_center_px=(200, 200))
     assert res.summary["n_junctions"] == 1
     assert res.junctions["n_stacks"].iloc[0] == 4
     assert abs(res.junctions["x_px"].iloc[0] - 200) < 6
@@ -329,15 +337,18 @@ def test_a_colourless_scan_says_so():
 
 def test_result_write_roundtrip(tmp_path):
     scene = make_scene(seed=44, n_stacks=20, max_layers=3)
-    res = analyze(scene.rgb, hole_radius_mm=scene.params["hole_radius_mm"],
-                  hole_center_px=scene.params["hole_center_px"], rod_length_mm=1000.0)
+    given = dict(hole_radius_mm=scene.params["hole_radius_mm"],
+                 hole_center_px=scene.params["hole_center_px"], calibration=scene.calibration)
+    # rod lengths the hole cannot hold (flagged); what is checked is the scaling by L
+    with pytest.warns(NetworkWarning, match="epsilon = .* is impossible for this hole"):
+        res = analyze(scene.rgb, **given, rod_length_mm=1000.0)
     res.write(tmp_path, figure=False)
     summary, tables = schema.read_tables(tmp_path)
     assert not (tmp_path / "overlay.png").exists()
     assert summary["rod_length_used_mm"] == 1000.0
     assert summary["rod_length_mm"] != 1000.0
     # energies scale with the L used: e = L int kappa^2 ds
-    res2 = analyze(scene.rgb, hole_radius_mm=scene.params["hole_radius_mm"],
-                   hole_center_px=scene.params["hole_center_px"], rod_length_mm=2000.0)
+    with pytest.warns(NetworkWarning, match="epsilon = .* is impossible for this hole"):
+        res2 = analyze(scene.rgb, **given, rod_length_mm=2000.0)
     assert math.isclose(res2.summary["total_energy"], 2 * summary["total_energy"], rel_tol=1e-9)
     assert len(tables["stacks"]) == summary["n_stacks"]

@@ -381,3 +381,10 @@ def test_a_network_counts_from_a_tenth_of_the_rod(shares, flagged):
     assert bool(flags) == flagged
     if flagged:
         assert flags[0].value == sum(x >= 0.1 for x in shares)
+
+
+def test_a_quality_warning_no_test_expects_fails_the_suite():
+    # pyproject.toml turns package warnings into errors, so that one a test does not capture
+    # is seen instead of drowning in the summary
+    with pytest.raises(quality.CalibrationWarning, match="uncaptured"):
+        warnings.warn("uncaptured", quality.CalibrationWarning)

@@ -71,6 +71,10 @@ def test_dask_executor_matches_inline(cluster):
     assert got == [_draw(s) for s in seeds]
 
 
+# process_image silences QualityWarning with warnings.catch_warnings, whose filters are the
+# process's: two tasks on the in-process cluster's two threads can restore each other's
+# filters, and a flag of these scans then reaches the test (the index records it either way)
+@pytest.mark.filterwarnings("ignore::crosssection.quality.QualityWarning")
 @pytest.mark.parametrize("seed", [4, 9])
 def test_batch_on_dask_equals_local_run(tmp_path, cluster, seed):
     inp = tmp_path / "in"
@@ -118,3 +122,95 @@ def test_dead_worker_is_replaced_and_its_image_recorded(tmp_path):
     assert "worker process died" in reason
     fails = pd.read_csv(tmp_path / "out" / "failures.csv")
     assert list(fails["image"]) == ["crash.png", "crash2.png"]
+
+
+#: the module of test_one_worker_compiles_and_the_other_loads: three numba kernels cached
+#: beside it, and the two workers (in a module of their own, which spawned processes import)
+TURN_KERNELS = '''
+import json
+import time
+
+from numba import njit
+
+from crosssection.core.parallel import compiling_in_turn
+
+
+@njit(cache=True)
+def first(x):
+    return x + 1
+
+
+@njit(cache=True)
+def shared(x):
+    return x * 2
+
+
+@njit(cache=True)
+def own(x):
+    return x - 3
+
+
+def _misses_and_hits(kernel):
+    return sum(kernel.stats.cache_misses.values()), sum(kernel.stats.cache_hits.values())
+
+
+def compiles_first(lock, holding, out):
+    with compiling_in_turn(lock):
+        first(1)              # a cache miss: the lock is taken and kept to the block's end
+        holding.set()
+        time.sleep(1.0)       # the other worker meets its own kernel meanwhile
+        shared(1)
+    with open(out, "w") as fh:
+        json.dump(_misses_and_hits(shared), fh)
+
+
+def comes_second(lock, holding, out):
+    holding.wait(60)
+    with compiling_in_turn(lock):
+        own(1)                # a cache miss: waits until the first worker's block ends
+        shared(1)             # compiled by the first worker: loaded from the cache
+    with open(out, "w") as fh:
+        json.dump(_misses_and_hits(shared), fh)
+'''
+
+
+def test_one_worker_compiles_and_the_other_loads(tmp_path, monkeypatch):
+    import importlib
+    import json
+    import multiprocessing as mp
+    import sys
+
+    (tmp_path / "turn_kernels.py").write_text(TURN_KERNELS)
+    monkeypatch.syspath_prepend(str(tmp_path))  # the spawned workers import it too
+    monkeypatch.delitem(sys.modules, "turn_kernels", raising=False)
+    kernels = importlib.import_module("turn_kernels")
+    ctx = mp.get_context("spawn")
+    holding = ctx.Event()
+    outs = [tmp_path / "first.json", tmp_path / "second.json"]
+    procs = [ctx.Process(target=kernels.compiles_first, args=(str(tmp_path), holding, outs[0])),
+             ctx.Process(target=kernels.comes_second, args=(str(tmp_path), holding, outs[1]))]
+    for p in procs:
+        p.start()
+    for p in procs:
+        p.join(120)
+    assert [p.exitcode for p in procs] == [0, 0]
+    assert json.loads(outs[0].read_text()) == [1, 0]   # compiled by the first worker
+    assert json.loads(outs[1].read_text()) == [0, 1]   # loaded by the second
+
+
+def _lock_of(task):
+    """Stand-in task: reports the compile lock it was given."""
+    return B._row(task, "ok", reason=task.compile_lock or "")
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_local_workers_share_the_output_folder_as_compile_lock(tmp_path, workers):
+    from PIL import Image
+
+    inp = tmp_path / "in"
+    inp.mkdir()
+    for name in ["a", "b", "c"]:
+        Image.fromarray(np.zeros((8, 8, 3), np.uint8)).save(inp / f"{name}.png")
+    idx = B.run_batch(inp, tmp_path / "out", workers=workers, progress=False, task_fn=_lock_of)
+    want = str((tmp_path / "out").resolve()) if workers > 1 else ""
+    assert list(idx["reason"].fillna("")) == [want] * 3

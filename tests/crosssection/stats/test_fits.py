@@ -4,6 +4,7 @@ import pytest
 from scipy import integrate
 
 from crosssection.core.errors import ParameterError
+from crosssection.quality import QualityWarning
 from crosssection.stats import fits as F
 from crosssection.stats import families as FM
 from crosssection.stats.families import FAMILIES
@@ -171,7 +172,9 @@ def test_truncated_gof_detects_wrong_law():
 def test_fit_all_table_and_drops():
     rng = np.random.default_rng(4)
     x = np.concatenate([rng.exponential(1.0, 300), [np.nan]])
-    s = F.fit_all(x, truncation=0.1, seed=0, n_boot=20, n_mc=19)
+    with pytest.warns(QualityWarning, match=r"1 of 301 observations left out of the fit: "
+                                            r"1 not finite"):
+        s = F.fit_all(x, truncation=0.1, seed=0, n_boot=20, n_mc=19)
     assert s.n_dropped == 1 + int(np.sum(x[:-1] < 0.1))
     t = s.table
     assert set(t["family"]) == set(F.PAPER_FAMILIES)
@@ -180,7 +183,9 @@ def test_fit_all_table_and_drops():
     assert (t.loc[t["family"] == "bose_einstein", "k"] == 2).all()  # beta + x_hi with a cut
     # positive laws do not apply to non-positive data
     y = rng.normal(0.0, 1.0, 200)
-    s2 = F.fit_all(y, seed=0, n_boot=0, gof=False)
+    with pytest.warns(QualityWarning, match=r"laws of x > 0 were not fitted .*"
+                                            r"gaussian is selected"):
+        s2 = F.fit_all(y, seed=0, n_boot=0, gof=False)
     assert s2.best == "gaussian" and not s2.results["gamma"].ok
 
 
