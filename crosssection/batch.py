@@ -43,7 +43,6 @@ Design choices
 from __future__ import annotations
 
 import argparse
-import warnings
 import hashlib
 import json
 import math
@@ -68,7 +67,6 @@ from crosssection.core.fileio import (PARTIAL_TAG, clear_stale_folders, staging_
 from crosssection.core.parallel import compiling_in_turn, get_executor, spawn_seeds
 from crosssection.params import (PARAM_NAMES, AnalysisParams, add_analysis_arguments,
                                  check_param, switched_off)
-from crosssection.quality import QualityWarning
 from crosssection.setconfig import (DEFAULT_PARAMS, DEFAULT_SET_NAME, SET_FILE, SetConfig, check_params,
                         failed_set, load_set_config)
 
@@ -385,11 +383,9 @@ def process_image(task: ImageTask) -> dict:
 
         clear_stale_folders(final)
         params = AnalysisParams.from_mapping(task.params, path=task.image)
-        with warnings.catch_warnings():
+        with compiling_in_turn(task.compile_lock):
             # the flags are in the summary; the driver prints them once per image
-            warnings.simplefilter("ignore", QualityWarning)
-            with compiling_in_turn(task.compile_lock):
-                result = analyze(task.image, params)
+            result = analyze(task.image, params, warn=False)
         info = {"params_hash": task.params_hash, "image": task.rel, "set": task.set_name,
                 "seed": task.seed, "params": task.params, "version": __version__}
         if isinstance(getattr(result, "summary", None), dict):

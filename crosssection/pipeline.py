@@ -337,7 +337,8 @@ def _calibration(p: AnalysisParams):
     return cal
 
 
-def analyze(image, params: AnalysisParams | None = None, **overrides) -> AnalysisResult:
+def analyze(image, params: AnalysisParams | None = None, *, warn: bool = True,
+            **overrides) -> AnalysisResult:
     """Analyse one scan of a cut cross-section (paper, "Image analysis procedure").
 
     Parameters
@@ -346,6 +347,11 @@ def analyze(image, params: AnalysisParams | None = None, **overrides) -> Analysi
         Image file (PNG, TIFF 8/16-bit, JPEG) or an (H, W, 3) RGB array.
     params : AnalysisParams or dict, optional
         Parameters (default: :class:`~crosssection.params.AnalysisParams` defaults).
+    warn : bool
+        Issue a warning per failed quality check (default). False leaves them in the result
+        only (``result.quality``, ``summary["quality"]``): for callers that report the flags
+        themselves, without ``warnings.catch_warnings``, whose filters are shared by all the
+        threads of a process.
     **overrides
         Fields of :class:`~crosssection.params.AnalysisParams` overriding ``params``, e.g.
         ``px_per_mm=50, thickness_mm=0.1, calibration="cal.csv", hole_radius_mm=20``.
@@ -363,18 +369,18 @@ def analyze(image, params: AnalysisParams | None = None, **overrides) -> Analysi
     -----
     QualityWarning
         One warning (of a subclass naming the check) per failed quality check
-        (:mod:`crosssection.quality`).
+        (:mod:`crosssection.quality`), unless ``warn`` is False.
     """
     path_hint = str(image) if isinstance(image, (str, Path)) else None
     try:
-        return _analyze(image, params, overrides)
+        return _analyze(image, params, overrides, warn=warn)
     except FoldstatError as exc:
         if exc.path is None and path_hint is not None:
             raise type(exc)(exc.cause, path_hint) from None
         raise
 
 
-def _analyze(image, params, overrides) -> AnalysisResult:
+def _analyze(image, params, overrides, *, warn: bool = True) -> AnalysisResult:
     t_start = time.perf_counter()
     timer = StageTimer()
     p = _resolve_params(params, overrides, str(image) if isinstance(image, (str, Path)) else None)
@@ -425,7 +431,7 @@ def _analyze(image, params, overrides) -> AnalysisResult:
                                 n_br=n_br, fixed_by_width=lin.fixed_by_width, regions=regions,
                                 profiles=profiles, stack_energy=stack_energy)
         junctions = tb.junction_table(pre.junctions, sg, packs, n_br, lin)
-    return _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, voids,
+    return _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, voids, warn,
                    rod_mm, L, timer, t_start)
 
 
@@ -453,8 +459,8 @@ def _network_shares(lin, stacks) -> list[float]:
             for info in lin.components]
 
 
-def _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, voids, rod_mm, L,
-            timer, t_start) -> AnalysisResult:
+def _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, voids, warn,
+            rod_mm, L, timer, t_start) -> AnalysisResult:
     """Summary, quality checks and warnings: the :class:`AnalysisResult` built in one place."""
     from crosssection.core import schema
 
@@ -477,7 +483,7 @@ def _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, void
     summary["quality"] = quality.quality_block(flags)
     summary["warnings"] = notes + [f.message for f in flags]
     where = pre.path or "<array>"
-    for f in flags:
+    for f in flags if warn else ():
         # user -> analyze -> _analyze -> _result: the warning points at the user's call
         _warnings.warn(f"{where}: {f.message}", f.category, stacklevel=4)
     return AnalysisResult(

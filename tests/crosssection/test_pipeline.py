@@ -174,6 +174,18 @@ def test_ring_only_image_is_not_an_error():
     assert abs(L - 2 * math.pi * 100 / 50) / (2 * math.pi * 100 / 50) < 0.02
 
 
+def test_warn_false_keeps_the_flags_in_the_result_only():
+    img = np.full((300, 300, 3), 245, np.uint8)
+    mask = np.zeros((300, 300), np.uint8)
+    cv2.circle(mask, (150, 150), 100, 1, 6)
+    img[mask > 0] = (40, 70, 190)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        res = analyze(img, calibration=DRAWN_CALIBRATION, warn=False)
+    assert "no_junction" in res.summary["quality"]["codes"]
+    assert any(f.code == "no_junction" for f in res.quality)
+
+
 def test_thick_x_crossing_becomes_degree_4():
     img = np.full((400, 400, 3), 245, np.uint8)
     mask = np.zeros((400, 400), np.uint8)

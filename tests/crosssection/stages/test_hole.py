@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from crosssection.core.errors import ParameterError
+from crosssection.quality import FrameWarning
 from crosssection.stages.hole import Hole, check_hole, find_hole, frame_mask, trim_margin
 from crosssection.stages.threshold import threshold_rgb
 from crosssection.truth.backdrop import apply_backdrop
@@ -193,7 +194,8 @@ def test_a_blue_plate_outside_a_given_hole_never_enters(scene):
               calibration=sc.calibration, hole_radius_mm=p["hole_radius_mm"],
               hole_center_px=tuple(p["hole_center_px"]), layer_steps=False)
     plain = analyze(base, **kw)
-    with pytest.warns(Warning):  # most of the scan's ink-coloured pixels lie outside
+    # most of the scan's ink-coloured pixels lie outside
+    with pytest.warns(FrameWarning, match="of the ink lies outside the hole"):
         plated = analyze(img, **kw)
     assert plated.summary["n_loops"] == plain.summary["n_loops"]
     assert abs(plated.summary["rod_length_mm"] / plain.summary["rod_length_mm"] - 1) < 0.01
