@@ -67,8 +67,8 @@ from crosssection.core.fileio import (PARTIAL_TAG, clear_stale_folders, staging_
 from crosssection.core.parallel import compiling_in_turn, get_executor, spawn_seeds
 from crosssection.params import (PARAM_NAMES, AnalysisParams, add_analysis_arguments,
                                  check_param, switched_off)
-from crosssection.setconfig import (DEFAULT_PARAMS, DEFAULT_SET_NAME, SET_FILE, SetConfig, check_params,
-                        failed_set, load_set_config)
+from crosssection.setconfig import (DEFAULT_PARAMS, DEFAULT_SET_NAME, SET_FILE, SetConfig,
+                                    check_params, failed_set, load_set_config)
 
 IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg")
 SUMMARY_NUMBERS = ["n_junctions", "n_stacks", "n_branches", "n_voids", "mean_branches_per_stack",

@@ -322,9 +322,13 @@ def typical_options(rng: np.random.Generator) -> dict:
         ``px_per_mm`` 50) and ``backdrop`` (of
         :func:`crosssection.truth.backdrop.apply_backdrop`, ``plate`` included).
     """
+    # these ranges are the validated ones a render is checked against: one source
+    from simulate.render import VALIDATED_BLUR_PX, VALIDATED_JPEG_QUALITY, VALIDATED_NOISE_SIGMA
+
     opts = dict(n_stacks=int(rng.integers(20, 151)), max_layers=int(rng.choice([3, 6, 9, 12])),
-                noise_sigma=float(rng.uniform(0, 10)), blur_px=float(rng.uniform(0, 1.5)),
-                jpeg_quality=[None, 75, 90][int(rng.integers(3))],
+                noise_sigma=float(rng.uniform(0, VALIDATED_NOISE_SIGMA)),
+                blur_px=float(rng.uniform(0, VALIDATED_BLUR_PX)),
+                jpeg_quality=[None, VALIDATED_JPEG_QUALITY, 90][int(rng.integers(3))],
                 specks=int(rng.integers(0, 20)), smears=int(rng.integers(0, 5)),
                 pinholes=int(rng.integers(0, 10)), px_per_mm=50.0)
     backdrop = dict(plate=PLATES[int(rng.integers(len(PLATES)))],

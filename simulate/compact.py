@@ -52,7 +52,7 @@ Protocol
   ``ftol * 2 ds / R^3`` and no spring is compressed by half its range, within
   :attr:`CompactParams.hold_iter` iterations (springs left stiff by the compaction soften
   after :data:`HOLD_PATIENCE` of them, see :func:`_compress`); a hold ending at that cap
-  unconverged keeps its rod and warns (``RuntimeWarning``), and configs.csv records its force
+  unconverged keeps its rod and warns (:class:`HoldWarning`), and configs.csv records its force
   over that scale and its iterations (``n_force``, ``n_hold_iterations``).
 * The final rod is checked: every pair of non-adjacent segments at least h apart, every node
   within ``R - h/2``, length 1 within 1e-3; a configuration failing a check is an error
@@ -95,6 +95,15 @@ import pandas as pd
 from numba import njit
 
 from crosssection.core.errors import AnalysisError, ParameterError
+from crosssection.quality import QualityWarning
+
+from simulate.noise import NOISE
+
+
+class HoldWarning(QualityWarning, RuntimeWarning):
+    """The final hold of a compaction ended at its iteration cap unrelaxed: the rod passes its
+    checks, with node forces or spring compressions above the tolerance (configs.csv
+    ``n_force``, ``n_compression``)."""
 
 #: thickness over hole radius of the default rod (experiments: h/R = 0.003-0.011, Table 1)
 H_OVER_R = 0.005
@@ -610,7 +619,7 @@ class CompactParams:
     epsilon: float
     n_segments: int = 2000
     thickness: float | None = None
-    noise: float = 750.0
+    noise: float = NOISE
     rate: float = 6.25e-5
     max_iter: int = 2_000_000
     hold_iter: int = 500_000
@@ -784,7 +793,7 @@ def compact_rod(params: CompactParams, rng) -> CompactResult:
 
     Warns
     -----
-    RuntimeWarning
+    HoldWarning
         If the final hold ends at ``params.hold_iter`` iterations with a node force above
         ``ftol`` or a spring compressed beyond half its range: the rod passes the checks but
         is not relaxed to the tolerance (``stats["force"]`` says by how much).
@@ -857,7 +866,7 @@ def compact_rod(params: CompactParams, rng) -> CompactResult:
                       f"largest node force {stats['force']:.3g} x 2 ds/R^3 (ftol "
                       f"{params.ftol:g}), spring compression {stats['compression']:.3g} of its "
                       "range (0.5); the rod passes its checks but is not relaxed",
-                      RuntimeWarning, stacklevel=2)
+                      HoldWarning, stacklevel=2)
     return CompactResult(xy=xy, xy0=xy0, wall_radius=r_end, thickness=h_end,
                          energy_bending=float(bending_energy(xy)), min_distance=min_dist,
                          max_radius=max_radius, length=length, stats=stats, wall_s=wall_s)
@@ -950,7 +959,7 @@ def run_config(config_id: int, seed: int, params: dict, out: str) -> int:
     with warnings.catch_warnings():
         # an unconverged hold is in configs.csv (n_force): the command reports it as one
         # warning line, a worker's own warning would print a traceback-style line
-        warnings.simplefilter("ignore", RuntimeWarning)
+        warnings.simplefilter("ignore", HoldWarning)
         res = compact_rod(p, np.random.default_rng(seed))
     row = {"config_id": config_id, "seed": seed, "epsilon": p.epsilon,
            "wall_radius": res.wall_radius, "thickness": res.thickness,
@@ -1090,16 +1099,17 @@ def add_subparser(sub):
                        description=__doc__.split("\n\n")[0])
     p.add_argument("--epsilon", type=float, required=True,
                    help="compaction rate L/(2 pi R) reached (experiments: 8-19)")
-    p.add_argument("--segments", type=int, default=2000,
-                   help="number of segments N of the rod of length L (default 2000)")
+    p.add_argument("--segments", type=int, default=CompactParams.n_segments,
+                   help="number of segments N of the rod of length L (default "
+                        f"{CompactParams.n_segments})")
     p.add_argument("--thickness", type=float, default=None,
                    help="rod thickness h in units of L (default 0.005 R = 0.005/(2 pi eps))")
     p.add_argument("--n-configs", type=int, default=10,
                    help="number of configurations K (default 10)")
     p.add_argument("--seed", type=int, default=0, help="ensemble seed (default 0)")
-    p.add_argument("--noise", type=float, default=750.0,
+    p.add_argument("--noise", type=float, default=CompactParams.noise,
                    help="curvature noise D of the initial shapes at 300 segments (default "
-                        "750, the paper's)")
+                        f"{CompactParams.noise:g}, the paper's)")
     p.add_argument("--contact-distance", type=float, default=None,
                    help="contact cut-off of the analysis in units of L (default 3 h)")
     p.add_argument("--wall-rate", type=float, default=CompactParams.rate,
@@ -1108,8 +1118,9 @@ def add_subparser(sub):
                         "iteration, which binds above h/(8R) = 6.25e-4 at the default "
                         "thickness: only smaller rates change the compaction; the ensemble "
                         "statistics converge at the default")
-    p.add_argument("--max-iter", type=int, default=2_000_000,
-                   help="iterations allowed to each level of the compaction (default 2e6)")
+    p.add_argument("--max-iter", type=int, default=CompactParams.max_iter,
+                   help="iterations allowed to each level of the compaction (default "
+                        f"{CompactParams.max_iter:,})")
     p.add_argument("--workers", type=int, default=1, help="local worker processes (default 1)")
     p.add_argument("--scheduler", default=None,
                    help="Dask scheduler address, e.g. tcp://host:8786 (default: local workers)")
@@ -1120,6 +1131,6 @@ def add_subparser(sub):
     p.set_defaults(func=run, command="compact")
 
 
-__all__ = ["CompactParams", "CompactResult", "compact_rod", "default_thickness", "levels",
-           "initial_rod", "min_segment_distance", "check_params", "run_config",
+__all__ = ["CompactParams", "CompactResult", "HoldWarning", "compact_rod", "default_thickness",
+           "levels", "initial_rod", "min_segment_distance", "check_params", "run_config",
            "params_from_args", "add_subparser", "CONFIG_COLUMNS"]

@@ -46,6 +46,10 @@ from crosssection.core.errors import ConfigError, ParameterError
 from crosssection.core.fileio import write_csv, write_json, write_npz
 from crosssection.core.parallel import get_executor, spawn_seeds
 
+from simulate.noise import N_SEGMENTS, NOISE
+from simulate.optimize import (FTOL, LAM_START, MAXITER, N_RUNS, NEMATIC_RUNS, NEMATIC_U, RAMPS,
+                               STAGES, XTOL)
+
 CONFIG_COLUMNS = ["config_id", "seed", "rg", "epsilon", "epsilon_sqrt2", "energy_total",
                   "energy_bending", "energy_confinement", "n_stacks", "n_branches",
                   "n_junctions", "n_voids", "method", "wall_s"]
@@ -53,6 +57,10 @@ BRANCH_COLUMNS = ["config_id", "branch_id", "length", "kappa_plus", "kappa_pm",
                   "energy_bending", "energy_confinement", "energy", "stack_id"]
 STACK_COLUMNS = ["config_id", "stack_id", "n_br", "length"]
 VOID_COLUMNS = ["config_id", "area", "perimeter", "shape_ratio", "n_edges"]
+
+#: Minimisers of each command, the default first: annealing ramps Lambda through Powell runs
+#: or L-BFGS quenches (:func:`simulate.optimize.anneal`), never scipy's Powell
+METHODS = {"quench": ("powell", "lbfgs", "scipy-powell"), "anneal": ("powell", "lbfgs")}
 
 # parameters that define the physics: a re-run into the same folder must agree on them
 _PHYSICS_KEYS = ("command", "n_segments", "lam", "noise", "seed", "method", "n_runs",
@@ -98,9 +106,7 @@ def minimize_config(xy0, params: dict, seed: int):
         return optimize.lbfgs_quench(xy0, params["lam"], seed=seed,
                                      wall_radius=params["wall_radius"])
     if params["method"] == "scipy-powell":
-        return optimize.scipy_protocol(xy0, params["lam"], seed=seed, n_runs=params["n_runs"],
-                                       maxiter=params["maxiter"], ftol=params["ftol"],
-                                       xtol=params["xtol"])
+        return optimize.scipy_protocol(xy0, params["lam"], **common)
     raise ParameterError(f"unknown method {params['method']!r}")
 
 
@@ -378,30 +384,33 @@ def _add_common(p, command):
     p.add_argument("--lambda", dest="lam", type=float, default=7e5,
                    help="confinement Lambda, dimensionless (target Lambda for anneal; "
                         "default 7e5, the paper's)")
-    p.add_argument("--noise", type=float, default=750.0,
-                   help="initial noise D, dimensionless (default 750, the paper's)")
-    p.add_argument("--segments", type=int, default=300,
-                   help="number of segments N of the rod of length L (default 300)")
+    p.add_argument("--noise", type=float, default=NOISE,
+                   help=f"initial noise D, dimensionless (default {NOISE:g}, the paper's)")
+    p.add_argument("--segments", type=int, default=N_SEGMENTS,
+                   help=f"number of segments N of the rod of length L (default {N_SEGMENTS})")
     p.add_argument("--seed", type=int, default=0, help="ensemble seed (default 0)")
-    p.add_argument("--method", choices=["powell", "lbfgs", "scipy-powell"], default="powell",
-                   help="minimiser (default powell = the paper's protocol)")
-    p.add_argument("--runs", type=int, default=10,
-                   help="Powell runs per configuration (default 10)")
-    p.add_argument("--maxiter", type=int, default=30,
-                   help="iterations per Powell run (default 30)")
+    p.add_argument("--method", choices=METHODS[command], default=METHODS[command][0],
+                   help=f"minimiser (default {METHODS[command][0]} = the paper's protocol)")
+    p.add_argument("--runs", type=int, default=N_RUNS,
+                   help=f"Powell runs per configuration (default {N_RUNS})")
+    p.add_argument("--maxiter", type=int, default=MAXITER,
+                   help=f"iterations per Powell run (default {MAXITER})")
     p.add_argument("--parametrization", choices=["tangent", "bend"], default=None,
                    help="Powell search coordinates (default: tangent for quench = the "
                         "prototype's statistics; bend for anneal = winds into the spiral)")
-    p.add_argument("--nematic-runs", type=str, default="1,2",
+    nematic = ",".join(map(str, NEMATIC_RUNS))
+    p.add_argument("--nematic-runs", type=str, default=nematic,
                    help="comma-separated Powell runs (0-based) with the nematic term "
-                        "(default 1,2)")
-    p.add_argument("--u", type=float, default=100.0,
-                   help="nematic strength u, dimensionless, 50-150 (default 100)")
+                        f"(default {nematic})")
+    p.add_argument("--u", type=float, default=NEMATIC_U,
+                   help=f"nematic strength u, dimensionless, 50-150 (default {NEMATIC_U:g})")
     p.add_argument("--nematic-cutoff", type=float, default=None,
                    help="distance within which two segments touch for the nematic term, in "
                         "units of L (quench with --method powell; default one segment, 1/N)")
-    p.add_argument("--ftol", type=float, default=1e-4, help="Powell ftol (default 1e-4, scipy's)")
-    p.add_argument("--xtol", type=float, default=1e-4, help="Powell xtol (default 1e-4, scipy's)")
+    p.add_argument("--ftol", type=float, default=FTOL,
+                   help=f"Powell ftol (default {FTOL:g}, scipy's)")
+    p.add_argument("--xtol", type=float, default=XTOL,
+                   help=f"Powell xtol (default {XTOL:g}, scipy's)")
     p.add_argument("--wall-radius", type=float, default=None,
                    help="hard-wall disk radius in units of L, above half a segment 1/(2N) "
                         "(default: none)")
@@ -415,11 +424,12 @@ def _add_common(p, command):
     p.add_argument("--out", required=True,
                    help="output folder (created; a re-run with the same parameters resumes)")
     if command == "anneal":
-        p.add_argument("--lambda-start", dest="lam_start", type=float, default=1e3,
-                       help="initial Lambda of the ramp (default 1e3)")
-        p.add_argument("--stages", type=int, default=24, help="number of Lambda stages (default 24)")
-        p.add_argument("--ramp", choices=["geometric", "linear"], default="geometric",
-                       help="Lambda schedule (default geometric)")
+        p.add_argument("--lambda-start", dest="lam_start", type=float, default=LAM_START,
+                       help=f"initial Lambda of the ramp (default {LAM_START:g})")
+        p.add_argument("--stages", type=int, default=STAGES,
+                       help=f"number of Lambda stages (default {STAGES})")
+        p.add_argument("--ramp", choices=RAMPS, default=RAMPS[0],
+                       help=f"Lambda schedule (default {RAMPS[0]})")
     p.set_defaults(func=run, command=command)
 
 

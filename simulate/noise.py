@@ -28,6 +28,11 @@ from crosssection.core.errors import ParameterError
 from simulate.geometry import center_of_mass, positions
 from simulate.intersect import has_intersection_grid
 
+#: The paper's initial shapes: N = 300 segments and the noise D = 750, the largest without
+#: self-intersection at that resolution (module docstring).
+N_SEGMENTS = 300
+NOISE = 750.0
+
 
 def angle_increments(n_segments: int, noise: float, rng) -> np.ndarray:
     """The N-1 angle steps ``sqrt(2 D) ds xi_i`` between consecutive segments."""
@@ -56,7 +61,7 @@ def initial_theta(n_segments: int, noise: float, rng) -> np.ndarray:
     return theta
 
 
-def initial_shape(n_segments: int = 300, noise: float = 750.0, *, seed=None,
+def initial_shape(n_segments: int = N_SEGMENTS, noise: float = NOISE, *, seed=None,
                   max_tries: int = 10000) -> np.ndarray:
     """A random, self-avoiding, centred initial shape.
 

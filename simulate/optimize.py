@@ -59,6 +59,22 @@ from simulate.geometry import angles, positions
 from simulate.intersect import has_intersection_grid
 from simulate.powell import powell_run
 
+#: Defaults of the paper's protocol, for the functions here and the ``quench`` / ``anneal``
+#: options: Powell runs per configuration, iterations per run (~30 in the prototype), the runs
+#: (0-based) with the nematic term, its strength u (paper: 50-150) and scipy's Powell
+#: tolerances.
+N_RUNS = 10
+MAXITER = 30
+NEMATIC_RUNS = (1, 2)
+NEMATIC_U = 100.0
+FTOL = 1e-4
+XTOL = 1e-4
+#: Defaults of :func:`anneal`: first Lambda of the ramp and number of Lambda stages.
+LAM_START = 1e3
+STAGES = 24
+#: Lambda schedules of :func:`anneal`; the first is the default.
+RAMPS = ("geometric", "linear")
+
 
 @dataclass
 class QuenchResult:
@@ -114,9 +130,10 @@ _STAT_NAMES = ("evaluations", "line_searches", "admissibility_checks", "iteratio
                "collision_tests", "clearance_skips")
 
 
-def powell_protocol(xy0, lam: float, *, seed=None, n_runs: int = 10, maxiter: int = 30,
-                    nematic_runs=(1, 2), u: float = 100.0, contact_cutoff: float | None = None,
-                    min_separation: int = 10, xtol: float = 1e-4, ftol: float = 1e-4,
+def powell_protocol(xy0, lam: float, *, seed=None, n_runs: int = N_RUNS,
+                    maxiter: int = MAXITER, nematic_runs=NEMATIC_RUNS, u: float = NEMATIC_U,
+                    contact_cutoff: float | None = None, min_separation: int = 10,
+                    xtol: float = XTOL, ftol: float = FTOL,
                     wall_radius: float | None = None, first_identity: bool = False,
                     parametrization: str = "tangent") -> QuenchResult:
     """The paper's minimisation: ``n_runs`` Powell runs with direction resets.
@@ -307,10 +324,10 @@ def lbfgs_quench(xy0, lam: float, *, seed=None, barrier: float = 0.1,
     return out
 
 
-def anneal(xy0, lam: float, *, lam_start: float = 1e3, stages: int = 24,
-           ramp: str = "geometric", method: str = "powell", seed=None, n_runs: int = 10,
-           maxiter: int = 30, nematic_runs=(1, 2), u: float = 100.0, ftol: float = 1e-4,
-           xtol: float = 1e-4, wall_radius: float | None = None,
+def anneal(xy0, lam: float, *, lam_start: float = LAM_START, stages: int = STAGES,
+           ramp: str = RAMPS[0], method: str = "powell", seed=None, n_runs: int = N_RUNS,
+           maxiter: int = MAXITER, nematic_runs=NEMATIC_RUNS, u: float = NEMATIC_U,
+           ftol: float = FTOL, xtol: float = XTOL, wall_radius: float | None = None,
            runs_per_stage: int = 2, parametrization: str = "bend") -> QuenchResult:
     """Annealing: Lambda ramped from ``lam_start`` to ``lam`` in ``stages`` stages.
 
@@ -383,10 +400,10 @@ def anneal(xy0, lam: float, *, lam_start: float = 1e3, stages: int = 24,
     return _result(xy, lam, f"anneal-{method}", t0, stats, history)
 
 
-def scipy_powell(xy0, lam: float, *, maxiter: int = 30, direc=None, xtol: float = 1e-4,
-                 ftol: float = 1e-4, hard_core: bool = True, parametrization: str = "tangent",
+def scipy_powell(xy0, lam: float, *, maxiter: int = MAXITER, direc=None, xtol: float = XTOL,
+                 ftol: float = FTOL, hard_core: bool = True, parametrization: str = "tangent",
                  u: float = 0.0, contact_cutoff: float | None = None,
-                 min_separation: int = 10):
+                 min_separation: int = 10, wall_radius: float | None = None):
     """Reference: one ``scipy.optimize.minimize(method="Powell")`` run on the same energy.
 
     Parameters
@@ -404,6 +421,9 @@ def scipy_powell(xy0, lam: float, *, maxiter: int = 30, direc=None, xtol: float 
     u, contact_cutoff, min_separation
         Nematic term (``u = 0``: none); its contact list is recomputed at every evaluation
         (the numba engine keeps it fixed during an iteration).
+    wall_radius : float, optional
+        Hard-wall disk radius (centred at the origin): a trial with a node beyond it gets the
+        energy 1e30, as the hard core's, so the wall binds as in :func:`powell_protocol`.
 
     Returns
     -------
@@ -418,11 +438,14 @@ def scipy_powell(xy0, lam: float, *, maxiter: int = 30, direc=None, xtol: float 
     cutoff = 1.0 / n if contact_cutoff is None else float(contact_cutoff)
     count = [0]
     tangent = parametrization == "tangent"
+    wall2 = None if wall_radius is None else float(wall_radius) ** 2
 
     def f(p):
         count[0] += 1
         xy = positions(p[:n] if tangent else np.cumsum(p[:n]), p[n:])
         if hard_core and has_intersection_grid(xy):
+            return 1e30
+        if wall2 is not None and np.max(np.einsum("ij,ij->i", xy, xy)) > wall2:
             return 1e30
         e = bending_energy(xy) + confinement_energy(xy, lam)
         if u > 0:
@@ -445,22 +468,40 @@ def scipy_powell(xy0, lam: float, *, maxiter: int = 30, direc=None, xtol: float 
     return out
 
 
-def scipy_protocol(xy0, lam: float, *, seed=None, n_runs: int = 10, maxiter: int = 30,
-                   nematic_runs=(1, 2), u: float = 100.0, ftol: float = 1e-4,
-                   xtol: float = 1e-4, parametrization: str = "tangent") -> QuenchResult:
+def scipy_protocol(xy0, lam: float, *, seed=None, n_runs: int = N_RUNS, maxiter: int = MAXITER,
+                   nematic_runs=NEMATIC_RUNS, u: float = NEMATIC_U, ftol: float = FTOL,
+                   xtol: float = XTOL, parametrization: str = "tangent",
+                   wall_radius: float | None = None) -> QuenchResult:
     """The paper's protocol with scipy's Powell (the prototype's way; slow reference).
 
     Same runs, direction resets (random signed permutations of the coordinate directions) and
     nematic runs as :func:`powell_protocol`, each run a :func:`scipy_powell` call.
 
+    Parameters
+    ----------
+    xy0 : (N+1, 2) array
+        Self-avoiding start, inside the wall when there is one.
+    lam : float
+        Confinement Lambda.
+    seed, n_runs, maxiter, nematic_runs, u, ftol, xtol, parametrization, wall_radius
+        As in :func:`powell_protocol`.
+
     Returns
     -------
     QuenchResult
         ``history`` holds (wall seconds, energy) after every run.
+
+    Raises
+    ------
+    ParameterError
+        The start leaves the hard-wall disk: every trial would be rejected and the rod would
+        stay where it is, outside.
     """
     t0 = time.perf_counter()
     rng = np.random.default_rng(seed)
     xy = np.asarray(xy0, dtype=np.float64)
+    if wall_radius is not None and np.max(np.hypot(xy[:, 0], xy[:, 1])) > wall_radius:
+        raise ParameterError("the initial configuration leaves the hard-wall disk")
     m = xy.shape[0] + 1
     history = []
     evals = 0
@@ -470,7 +511,8 @@ def scipy_protocol(xy0, lam: float, *, seed=None, n_runs: int = 10, maxiter: int
         perm = rng.permutation(m)  # same draws, same order as powell_protocol
         direc[np.arange(m), perm] = rng.choice([-1.0, 1.0], size=m)
         r = scipy_powell(xy, lam, maxiter=maxiter, direc=direc, xtol=xtol, ftol=ftol,
-                         parametrization=parametrization, u=u if run in nem else 0.0)
+                         parametrization=parametrization, u=u if run in nem else 0.0,
+                         wall_radius=wall_radius)
         xy = r.xy
         evals += r.stats["evaluations"]
         history.append((time.perf_counter() - t0, r.energy_total))

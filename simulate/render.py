@@ -35,7 +35,10 @@ ranges of the typical scans the pipeline is validated on (:func:`simulate.atlas.
 ``benchmarks/robust_sweep.py``: noise 0-10, blur 0-1.5 px, JPEG 75/90/none, 0-20 specks,
 0-5 smears, 0-10 pinholes, illumination gradient 0-15 %, colour cast 0-6 %, a plate with a
 0 or 2 px rim): see :data:`SCAN_DEFECTS`. ``clean`` draws ink, paper and receding surfaces
-only (:data:`CLEAN`); any single defect can be set either way.
+only (:data:`CLEAN`); any single defect can be set either way. A render beyond those ranges
+(a sheet thinner in pixels, or blur, noise or JPEG compression stronger than the typical
+scans': :data:`VALIDATED_SHEET_PX` and the other ``VALIDATED_`` limits) is drawn with a
+:class:`ScanRangeWarning`: the analysis is not validated there.
 
 Lines and energy. The rod is a chain of straight segments; its energy is that of the smooth
 sheet it discretises (:func:`smooth_line`). A stack's band is drawn along the smooth curve
@@ -147,6 +150,7 @@ import pandas as pd
 from crosssection.core import polyline, schema
 from crosssection.core.calibration import Calibration
 from crosssection.core.errors import ConfigError, ParameterError
+from crosssection.quality import QualityWarning
 from crosssection.truth import degrade, ink
 from crosssection.truth.backdrop import PLATE_NAMES, apply_backdrop, plate_rgb
 from crosssection.truth.scene import Scene, write_scene
@@ -156,7 +160,14 @@ from simulate.contacts import RodAnalysis, analyze_rod
 from simulate.geometry import checked_rod
 
 __all__ = ["render_configuration", "render_directory", "add_subparser", "smooth_line",
-           "passes_calibration", "SCAN_DEFECTS", "CLEAN", "DRAW", "JOIN"]
+           "passes_calibration", "ScanRangeWarning", "SCAN_DEFECTS", "CLEAN", "DRAW", "JOIN",
+           "PX_PER_MM", "THICKNESS_MM", "VALIDATED_SHEET_PX", "VALIDATED_BLUR_PX",
+           "VALIDATED_NOISE_SIGMA", "VALIDATED_JPEG_QUALITY"]
+
+#: Scan resolution and sheet thickness h of a render: the paper's sheet at the typical scans'
+#: resolution (h = 5 px).
+PX_PER_MM = 50.0
+THICKNESS_MM = 0.1
 
 #: Scan defects of a render unless ``clean`` (module docstring): the middle of the typical
 #: scans' ranges. Blur, noise and JPEG are applied last, after the plate
@@ -165,6 +176,15 @@ __all__ = ["render_configuration", "render_directory", "add_subparser", "smooth_
 SCAN_DEFECTS = {"noise_sigma": 5.0, "blur_px": 0.75, "jpeg_quality": 90, "smears": 2,
                 "specks": 10, "pinholes": 5, "plate": "grey", "rim_px": 2.0,
                 "illumination": 0.075, "cast": 0.03}
+#: Ranges of the typical scans the image analysis is validated on
+#: (:func:`simulate.atlas.typical_options`, ``benchmarks/robust_sweep.py``): a sheet at least
+#: this many px thick (``px_per_mm * thickness_mm``; 25 px/mm at h = 0.1 mm), Gaussian blur
+#: sigma at most this many px, noise sigma at most this many grey levels, a JPEG round trip at
+#: this quality or above. A render beyond them is drawn, with a :class:`ScanRangeWarning`.
+VALIDATED_SHEET_PX = 2.5
+VALIDATED_BLUR_PX = 1.5
+VALIDATED_NOISE_SIGMA = 10.0
+VALIDATED_JPEG_QUALITY = 75
 #: The clean drawing: no defect, white paper around the hole.
 CLEAN = {"noise_sigma": 0.0, "blur_px": 0.0, "jpeg_quality": None, "smears": 0, "specks": 0,
          "pinholes": 0, "plate": None, "rim_px": 0.0, "illumination": 0.0, "cast": 0.0}
@@ -205,6 +225,46 @@ PASS_OVERLAP_PX = 1.0
 MAX_SCENE_PX = 10_000 * 10_000
 #: Thinnest sheet drawn, px (the analysis' own limit, ``crosssection.params``).
 MIN_SHEET_PX = 1.0
+
+
+class ScanRangeWarning(QualityWarning):
+    """A render's resolution or scan defects lie beyond the ranges the image analysis is
+    validated on (:data:`VALIDATED_SHEET_PX` and the other ``VALIDATED_`` limits): scores of
+    its scenes say how the analysis fares there, not how it fares on the typical scans."""
+
+
+def _beyond_validated(defects: dict, sheet_px: float, name=str) -> str | None:
+    """What of a render lies beyond the validated ranges, in one phrase, or None.
+
+    Parameters
+    ----------
+    defects : dict
+        The scan defects as :func:`_defects` resolves them.
+    sheet_px : float
+        Sheet thickness in the image, ``px_per_mm * thickness_mm``.
+    name : callable
+        Shows a keyword (the API's) as the caller names it (the CLI's options).
+
+    Returns
+    -------
+    str or None
+    """
+    out = []
+    if sheet_px < VALIDATED_SHEET_PX:
+        out.append(f"a sheet {sheet_px:.3g} px thick ({name('px_per_mm')} x "
+                   f"{name('thickness_mm')}) is below {VALIDATED_SHEET_PX:g} px")
+    if defects["blur_px"] > VALIDATED_BLUR_PX:
+        out.append(f"{name('blur_px')} {defects['blur_px']:g} is above "
+                   f"{VALIDATED_BLUR_PX:g} px")
+    if defects["noise_sigma"] > VALIDATED_NOISE_SIGMA:
+        out.append(f"{name('noise_sigma')} {defects['noise_sigma']:g} is above "
+                   f"{VALIDATED_NOISE_SIGMA:g} grey levels")
+    q = defects["jpeg_quality"]
+    if q is not None and q < VALIDATED_JPEG_QUALITY:
+        out.append(f"{name('jpeg_quality')} {q} is below {VALIDATED_JPEG_QUALITY}")
+    if not out:
+        return None
+    return ("scans beyond the range the image analysis is validated on: " + "; ".join(out))
 
 
 def passes_calibration(stroke_mm: float, pitch_mm: float, n_max: int = 60) -> Calibration:
@@ -1240,7 +1300,7 @@ def _summary(analysis, frame, tables, ink_mask, *, px_per_mm):
 
 
 def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float = 7e5,
-                         px_per_mm: float = 50.0, thickness_mm: float = 0.1,
+                         px_per_mm: float = PX_PER_MM, thickness_mm: float = THICKNESS_MM,
                          rod_length_mm: float | None = None,
                          rod_thickness: float | None = None,
                          wall_radius: float | None = None, wall_center_xy=(0.0, 0.0),
@@ -1360,6 +1420,10 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
     crosssection.quality.ResolutionWarning
         ``max_size_px`` is not kept: the rod length was capped to it (passes just beyond delta
         may touch), or the margins alone exceed it (the image is larger).
+    ScanRangeWarning
+        The sheet is thinner in the image, or the blur, noise or JPEG compression stronger,
+        than on the scans the image analysis is validated on (:data:`VALIDATED_SHEET_PX`
+        and the other ``VALIDATED_`` limits).
     """
     xy = _checked_rod(xy)
     if analysis is not None and not isinstance(analysis, RodAnalysis):
@@ -1424,6 +1488,9 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
              "smears": smears, "specks": specks, "pinholes": pinholes, "plate": plate,
              "rim_px": rim_px, "illumination": illumination, "cast": cast}
     d = _defects(clean, given, frame.hole_px is not None)
+    beyond = _beyond_validated(d, px_per_mm * thickness_mm)
+    if beyond:
+        warnings.warn(beyond, ScanRangeWarning, stacklevel=2)
     rng = np.random.default_rng(seed)
     st = analysis.stacks
     segment_px = frame.scale / (len(xy) - 1)
@@ -1528,12 +1595,14 @@ def _check_seed(seed) -> None:
         raise ParameterError(f"seed must be a whole number >= 0, got {seed!r}")
 
 
-def _check_options(kwargs: dict) -> None:
+def _check_options(kwargs: dict) -> dict:
     """Check the scan options of :func:`render_directory` before any configuration is
-    analysed (a bad value fails at once, not after the first analysis)."""
+    analysed (a bad value fails at once, not after the first analysis); return the scan
+    defects they give (:func:`_defects`)."""
     given = {k: kwargs[k] for k in _DEFECT_NAMES if k in kwargs}
     has_hole = kwargs.get("hole_radius_mm", None) is not None
-    _defects(bool(kwargs.get("clean", False)), given, has_hole or "plate" not in given)
+    defects = _defects(bool(kwargs.get("clean", False)), given,
+                       has_hole or "plate" not in given)
     if kwargs.get("smooth", "all") not in SMOOTH:
         raise ParameterError(f"smooth must be one of {SMOOTH}, got {kwargs['smooth']!r}")
     if kwargs.get("draw", "bands") not in DRAW:
@@ -1550,6 +1619,7 @@ def _check_options(kwargs: dict) -> None:
         raise ParameterError(f"hole_radius_mm must be a finite number > 0, 'auto' or None, "
                              f"got {h!r}")
     _check_seed(kwargs.get("seed", 0))
+    return defects
 
 
 def _rods_path(sim_dir: Path) -> Path:
@@ -1715,6 +1785,14 @@ def render_directory(sim_dir, out_dir, *, configs=None, progress: bool | None = 
     ConfigError
         ``sim_dir`` is not a readable simulation folder, or ``out_dir`` holds scenes of
         another render (or of one that recorded no parameters).
+
+    Warns
+    -----
+    ScanRangeWarning
+        Once per call, naming ``out_dir``, when the options lie beyond the ranges the image
+        analysis is validated on (the scenes' own warnings are silenced).
+    crosssection.quality.QualityWarning
+        ``sim_dir`` has no params.json.
     """
     return _render_directory(sim_dir, out_dir, configs=configs, progress=progress,
                              kwargs=kwargs)
@@ -1727,9 +1805,8 @@ def _render_directory(sim_dir, out_dir, *, configs=None, limit=None, progress=Fa
     from tqdm import tqdm
 
     from crosssection.core.fileio import write_json
-    from crosssection.quality import QualityWarning
 
-    _check_options(kwargs)
+    defects = _check_options(kwargs)
     if not str(out_dir).strip():
         # Path("") is the current folder
         raise ParameterError("empty path: give the output folder", name("out_dir"))
@@ -1780,6 +1857,11 @@ def _render_directory(sim_dir, out_dir, *, configs=None, limit=None, progress=Fa
             # drawn with no wall at the gap's scale, which is silently wrong for a compaction
             warnings.warn(f"{pj}: missing: the rods are drawn as a quench's (no wall, default "
                           f"scale, lambda {lam:g})", QualityWarning, stacklevel=3)
+        beyond = _beyond_validated(defects, kwargs.get("px_per_mm", PX_PER_MM)
+                                   * kwargs.get("thickness_mm", THICKNESS_MM), name)
+        if beyond:
+            # once for the run: every scene has the same options (per scene it is silenced)
+            warnings.warn(f"{out_dir}: {beyond}", ScanRangeWarning, stacklevel=3)
         base_seed = int(kwargs.pop("seed", 0))
         # disable=None is tqdm's "only on a terminal"
         with tqdm(keys, desc="render", unit="config",
@@ -1823,10 +1905,12 @@ def add_subparser(sub) -> None:
                    help="folder of the scene folders (created; its render.json records the "
                         "parameters: a re-run with the same ones resumes, skipping finished "
                         "scenes)")
-    p.add_argument("--px-per-mm", type=float, default=50.0,
-                   help="scan resolution in px/mm (default 50)")
-    p.add_argument("--thickness-mm", type=float, default=0.1,
-                   help="sheet thickness h in mm (default 0.1)")
+    p.add_argument("--px-per-mm", type=float, default=PX_PER_MM,
+                   help=f"scan resolution in px/mm (default {PX_PER_MM:g}; a sheet under "
+                        f"{VALIDATED_SHEET_PX:g} px, --px-per-mm x --thickness-mm, is beyond "
+                        "the validated range: a warning)")
+    p.add_argument("--thickness-mm", type=float, default=THICKNESS_MM,
+                   help=f"sheet thickness h in mm (default {THICKNESS_MM:g})")
     p.add_argument("--rod-length-mm", type=float, default=None,
                    help="rod length L in mm (default: thickness-mm over the rod's thickness "
                         "for a compaction, else the smallest keeping a visible gap between "
@@ -1837,12 +1921,14 @@ def add_subparser(sub) -> None:
     d = SCAN_DEFECTS
     p.add_argument("--noise", type=float, default=None,
                    help=f"Gaussian noise sigma in grey levels (default {d['noise_sigma']:g}, "
-                        "0 with --clean)")
+                        f"0 with --clean; above {VALIDATED_NOISE_SIGMA:g}: a warning)")
     p.add_argument("--blur", type=float, default=None,
-                   help=f"Gaussian blur sigma in px (default {d['blur_px']:g}, 0 with --clean)")
+                   help=f"Gaussian blur sigma in px (default {d['blur_px']:g}, 0 with --clean; "
+                        f"above {VALIDATED_BLUR_PX:g}: a warning)")
     p.add_argument("--jpeg", type=_jpeg_arg, default=None,
                    help=f"JPEG quality 1-100 of a round trip, or 'none' (default "
-                        f"{d['jpeg_quality']}, none with --clean)")
+                        f"{d['jpeg_quality']}, none with --clean; below "
+                        f"{VALIDATED_JPEG_QUALITY}: a warning)")
     p.add_argument("--smears", type=int, default=None,
                    help=f"number of light-blue smears, rejected by the threshold (default "
                         f"{d['smears']}, 0 with --clean)")

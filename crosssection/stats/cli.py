@@ -18,7 +18,12 @@ import warnings
 from pathlib import Path
 
 from crosssection.core.errors import ParameterError
+from crosssection.stats.data import L_MIN_MM, S_MIN_MM2
+from crosssection.stats.fits import N_BOOT, N_MC
 
+#: resamples of ``--fast``, a quick look: bootstrap draws and goodness-of-fit samples
+FAST_N_BOOT = 50
+FAST_N_MC = 49
 #: most resamples ``--n-boot`` and ``--n-mc`` take: each one refits every family to every
 #: quantity of every set (about 0.3 s for one small set), so this many already runs for hours
 MAX_RESAMPLES = 100_000
@@ -38,20 +43,23 @@ def add_subparser(subparsers) -> argparse.ArgumentParser:
                    help="set name for each DIR in order (repeat, once per DIR, each name "
                         "different; default: the folder names, a repeated one as NAME#k)")
     p.add_argument("--seed", type=int, default=0, help="seed of bootstrap and GOF (default 0)")
-    p.add_argument("--n-boot", type=int, default=200,
+    p.add_argument("--n-boot", type=int, default=N_BOOT,
                    help="bootstrap resamples for parameter intervals, 0 (none) to "
-                        f"{MAX_RESAMPLES} (default 200)")
-    p.add_argument("--n-mc", type=int, default=199,
+                        f"{MAX_RESAMPLES} (default {N_BOOT})")
+    p.add_argument("--n-mc", type=int, default=N_MC,
                    help="parametric-bootstrap samples of the GOF p-values, at most "
-                        f"{MAX_RESAMPLES} (default 199)")
+                        f"{MAX_RESAMPLES} (default {N_MC})")
     p.add_argument("--fast", action="store_true",
-                   help="quick look: 50 bootstrap resamples and 49 GOF samples (default: off)")
+                   help=f"quick look: {FAST_N_BOOT} bootstrap resamples and {FAST_N_MC} GOF "
+                        "samples (default: off)")
     p.add_argument("--no-gof", action="store_true",
                    help="skip goodness-of-fit p-values (default: computed)")
-    p.add_argument("--l-min-mm", type=float, default=1.0,
-                   help="branch detection limit of images in mm (default 1; 0 = none)")
-    p.add_argument("--s-min-mm2", type=float, default=1.0,
-                   help="void detection limit of images in mm^2 (default (10h)^2 = 1; 0 = none)")
+    p.add_argument("--l-min-mm", type=float, default=L_MIN_MM,
+                   help=f"branch detection limit of images in mm (default {L_MIN_MM:g}; "
+                        "0 = none)")
+    p.add_argument("--s-min-mm2", type=float, default=S_MIN_MM2,
+                   help=f"void detection limit of images in mm^2 (default (10h)^2 = "
+                        f"{S_MIN_MM2:g}; 0 = none)")
     p.add_argument("--no-figures", action="store_true",
                    help="tables only, no PNG figures (default: figures drawn)")
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
@@ -96,7 +104,7 @@ def check_options(args) -> None:
         if v > MAX_RESAMPLES:
             raise ParameterError(f"must be at most {MAX_RESAMPLES}, got {v}", flag)
     if args.n_mc == 0 and not (args.no_gof or args.fast):
-        # --fast replaces it with 49; without a resample there is no p-value to give
+        # --fast replaces it; without a resample there is no p-value to give
         raise ParameterError("0 resamples give no p-value: give an integer >= 1, or "
                              "--no-gof", "--n-mc")
     for flag, v in (("--l-min-mm", args.l_min_mm), ("--s-min-mm2", args.s_min_mm2)):
@@ -137,7 +145,7 @@ def _run(args) -> int:
     check_report_dir(args.out, args.dirs)  # before the work, not after it
     ens = load_inputs(args.dirs, names=args.name, l_min_mm=args.l_min_mm or None,
                       s_min_mm2=args.s_min_mm2 or None)
-    n_boot, n_mc = (50, 49) if args.fast else (args.n_boot, args.n_mc)
+    n_boot, n_mc = (FAST_N_BOOT, FAST_N_MC) if args.fast else (args.n_boot, args.n_mc)
     opts = StatsOptions(seed=args.seed, n_boot=n_boot, n_mc=n_mc, gof=not args.no_gof)
     paths = write_report(ens, args.out, opts=opts, inputs=args.dirs,
                          figures=not args.no_figures, progress=args.progress)

@@ -43,6 +43,7 @@ import numpy as np
 import pandas as pd
 
 from crosssection.core.errors import ConfigError, ParameterError
+from crosssection.params import AnalysisParams
 from crosssection.quality import QualityWarning
 
 CONFIG_COLS = ["set", "config_id", "N_l", "N_br", "n_voids", "epsilon", "E", "rod_length_mm",
@@ -51,6 +52,10 @@ BRANCH_COLS = ["set", "config_id", "length_L", "kappa_m_L", "kappa_plus_L", "e",
                "n_br", "l_min_L"]
 STACK_COLS = ["set", "config_id", "n_br", "length_L", "region"]
 VOID_COLS = ["set", "config_id", "area_L2", "perimeter_L", "shape_ratio", "n_edges", "s_min_L2"]
+#: Default detection limits of image data: the analysis' own (paper: branches shorter than
+#: l_min = 1 mm pruned, voids below s_min = (10 h)^2 = 1 mm^2 filled at h = 0.1 mm)
+L_MIN_MM = AnalysisParams().l_min_mm
+S_MIN_MM2 = AnalysisParams().s_min_used_mm2
 SIM_REGION = "none"  # simulations have no wall: no bulk/periphery split (paper, "Two sub-systems")
 TEXT_COLS = {"set", "config_id", "region", "source", "quality"}
 
@@ -349,7 +354,8 @@ def load_simulation(folder, *, set_name=None) -> Ensemble:
 
 
 def load_image_output(folder, *, set_name: str, config_id: str | None = None,
-                      l_min_mm: float | None = 1.0, s_min_mm2: float | None = 1.0) -> Ensemble:
+                      l_min_mm: float | None = L_MIN_MM,
+                      s_min_mm2: float | None = S_MIN_MM2) -> Ensemble:
     """Read one ``analyze`` output folder and normalise it by its rod length L.
 
     Parameters
@@ -544,7 +550,7 @@ def _check_finished(folder: Path, n_found: int) -> None:
                   f"{n_found}{of} images are done and used", QualityWarning, stacklevel=3)
 
 
-def load_batch(folder, *, l_min_mm=1.0, s_min_mm2=1.0) -> Ensemble:
+def load_batch(folder, *, l_min_mm=L_MIN_MM, s_min_mm2=S_MIN_MM2) -> Ensemble:
     """Read every per-image folder of a batch output.
 
     The set of an image folder is its first path component under ``folder``; an image folder
@@ -586,7 +592,7 @@ def load_batch(folder, *, l_min_mm=1.0, s_min_mm2=1.0) -> Ensemble:
     return Ensemble.concat(parts)
 
 
-def load_any(folder, *, set_name=None, l_min_mm=1.0, s_min_mm2=1.0) -> Ensemble:
+def load_any(folder, *, set_name=None, l_min_mm=L_MIN_MM, s_min_mm2=S_MIN_MM2) -> Ensemble:
     """Load any supported folder (see :func:`detect_kind`).
 
     Parameters
@@ -627,7 +633,7 @@ def load_any(folder, *, set_name=None, l_min_mm=1.0, s_min_mm2=1.0) -> Ensemble:
     return ens
 
 
-def load_inputs(folders, *, names=None, l_min_mm=1.0, s_min_mm2=1.0) -> Ensemble:
+def load_inputs(folders, *, names=None, l_min_mm=L_MIN_MM, s_min_mm2=S_MIN_MM2) -> Ensemble:
     """Load several folders (``foldstat stats DIR...``) into one ensemble, each counted once.
 
     A folder given twice (under any spelling of its path) is read once, and an image output

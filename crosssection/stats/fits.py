@@ -67,6 +67,10 @@ PAPER_FAMILIES = ("exponential", "gamma", "lognormal", "gaussian", "bose_einstei
 MAX_PARAMS = max(len(f.param_names) for f in FAMILIES.values())
 #: counts start at 1: the discretised law lives on [COUNT_MIN - 1/2, inf)
 COUNT_MIN = 1
+#: Default resamples: bootstrap draws of the parameter intervals, and parametric-bootstrap
+#: samples of a goodness-of-fit p-value (199: a p-value is then a multiple of 1/200)
+N_BOOT = 200
+N_MC = 199
 
 
 def _seedseq(seed) -> np.random.SeedSequence:
@@ -477,8 +481,8 @@ def _checked_sample(x, truncation, *, n_boot, n_mc, gof, ci_level, seed):
     return _finite(x, _as_cuts(truncation, x.size))
 
 
-def fit_family(x, family: str, *, truncation=None, n_boot: int = 200, seed=0,
-               gof: bool = True, n_mc: int = 199, ci_level: float = 0.95,
+def fit_family(x, family: str, *, truncation=None, n_boot: int = N_BOOT, seed=0,
+               gof: bool = True, n_mc: int = N_MC, ci_level: float = 0.95,
                discrete: bool = False) -> FitResult:
     """Maximum-likelihood fit of one family, with bootstrap intervals and a GOF p-value.
 
@@ -563,7 +567,7 @@ def fit_family(x, family: str, *, truncation=None, n_boot: int = 200, seed=0,
                    boot=draws)
 
 
-def bootstrap_draws(x, family: str, *, truncation=None, n_boot: int = 200, seed=0,
+def bootstrap_draws(x, family: str, *, truncation=None, n_boot: int = N_BOOT, seed=0,
                     discrete: bool = False) -> np.ndarray:
     """Bootstrap replicates of every parameter of a family (refits of resampled data).
 
@@ -648,7 +652,7 @@ def _percentile_ci(draws, names, level) -> dict:
     return out
 
 
-def bootstrap_ci(x, family: str, *, truncation=None, n_boot: int = 200, seed=0,
+def bootstrap_ci(x, family: str, *, truncation=None, n_boot: int = N_BOOT, seed=0,
                  level: float = 0.95, discrete: bool = False) -> dict:
     """Percentile bootstrap intervals of every parameter of a family.
 
@@ -682,7 +686,7 @@ def bootstrap_ci(x, family: str, *, truncation=None, n_boot: int = 200, seed=0,
     return _percentile_ci(draws, _family(family).param_names, level)
 
 
-def goodness_of_fit(x, family: str, params: dict, *, truncation=None, n_mc: int = 199,
+def goodness_of_fit(x, family: str, params: dict, *, truncation=None, n_mc: int = N_MC,
                     seed=0) -> GoodnessOfFit:
     """Anderson-Darling goodness of fit with a p-value that accounts for fitted parameters.
 
@@ -825,8 +829,8 @@ def select_model(results: dict, *, delta: float = DELTA_BIC_SIMPLER) -> str | No
     return min(cands, key=lambda r: (r.k, r.bic)).family
 
 
-def fit_all(x, families=PAPER_FAMILIES, *, truncation=None, seed=0, n_boot: int = 200,
-            gof: bool = True, n_mc: int = 199, select_from=None,
+def fit_all(x, families=PAPER_FAMILIES, *, truncation=None, seed=0, n_boot: int = N_BOOT,
+            gof: bool = True, n_mc: int = N_MC, select_from=None,
             ci_level: float = 0.95, discrete: bool = False) -> FitSummary:
     """Fit several families to one sample and select the simplest supported law.
 

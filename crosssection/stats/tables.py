@@ -104,9 +104,9 @@ class StatsOptions:
     """
 
     seed: int = 0
-    n_boot: int = 200
+    n_boot: int = F.N_BOOT
     gof: bool = True
-    n_mc: int = 199
+    n_mc: int = F.N_MC
     quantities: tuple = tuple(QUANTITIES)
     min_n: int = 5
 

@@ -229,7 +229,7 @@ def test_a_ring_lining_the_wall_end_to_end_does_not_stall_the_wall():
 
 def test_an_unconverged_final_hold_warns_with_its_force(rod):
     """A final hold that runs out of iterations keeps its rod (it passes the checks) but says
-    so: a RuntimeWarning with the force over its tolerance, and the stats that configs.csv
+    so: a HoldWarning with the force over its tolerance, and the stats that configs.csv
     records (``n_hold_iterations``, ``n_force``). A converged hold does not warn."""
     p, r = rod
     assert r.stats["force"] < p.ftol and r.stats["hold_iterations"] < p.hold_iter
@@ -237,7 +237,8 @@ def test_an_unconverged_final_hold_warns_with_its_force(rod):
         warnings.simplefilter("error")
         compact.compact_rod(p, np.random.default_rng(3))
     short = dataclasses.replace(p, hold_iter=1)
-    with pytest.warns(RuntimeWarning, match=r"final hold unconverged after 1 iterations.*force"):
+    with pytest.warns(compact.HoldWarning,
+                      match=r"final hold unconverged after 1 iterations.*force"):
         cut = compact.compact_rod(short, np.random.default_rng(3))
     assert cut.stats["hold_iterations"] == 1 and cut.stats["force"] >= p.ftol
     assert cut.min_distance >= cut.thickness
@@ -262,7 +263,7 @@ def test_a_long_hold_on_stiff_springs_softens_them_and_converges():
     n = 256
     p = compact.CompactParams(epsilon=4.0, n_segments=n, hold_iter=1)
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
+        warnings.simplefilter("ignore", compact.HoldWarning)
         start = compact.compact_rod(p, np.random.default_rng(3))
     big_r, h = start.wall_radius, start.thickness
     ftol = 2.0 / n / big_r ** 3

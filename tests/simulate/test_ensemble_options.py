@@ -99,3 +99,90 @@ def test_a_wall_just_wider_than_a_segment_is_taken_as_given():
     args = build_parser(["quench"]).parse_args(
         ["quench", "--segments", "40", "--wall-radius", "0.0126", "--out", "o"])
     assert params_from_args(args)["wall_radius"] == 0.0126
+
+
+def _quench_params(**kw):
+    """The parameters :func:`simulate.ensemble.minimize_config` reads, for a short quench."""
+    return {**dict(command="quench", method="powell", lam=20.0, n_runs=3, maxiter=4,
+                   nematic_runs=[1], u=100.0, ftol=1e-4, xtol=1e-4, wall_radius=None,
+                   parametrization=None, nematic_cutoff=None), **kw}
+
+
+@pytest.mark.parametrize("method", ["powell", "scipy-powell"])
+def test_a_quench_keeps_every_node_within_the_wall(method):
+    """A weak confinement lets the rod unfold beyond a wall that barely holds the start: with
+    --wall-radius every minimiser of quench keeps the rod inside it."""
+    from simulate.ensemble import minimize_config
+    from simulate.intersect import has_intersection
+
+    xy0 = initial_shape(40, 750.0, seed=2)
+    wall = 1.001 * np.max(np.hypot(*xy0.T))
+    free = minimize_config(xy0, _quench_params(method=method), seed=2)
+    held = minimize_config(xy0, _quench_params(method=method, wall_radius=wall), seed=2)
+    assert np.max(np.hypot(*free.xy.T)) > wall
+    assert np.max(np.hypot(*held.xy.T)) <= wall
+    assert not has_intersection(held.xy, "brute")
+    assert held.energy_total < bending_energy(xy0) + confinement_energy(xy0, 20.0)
+
+
+def test_scipy_powell_takes_the_protocol_options_of_quench():
+    """--u, --nematic-runs and --parametrization reach scipy's Powell as they reach powell's."""
+    from simulate.ensemble import minimize_config
+
+    xy0 = initial_shape(40, 750.0, seed=4)
+    base = minimize_config(xy0, _quench_params(method="scipy-powell", lam=2e4), seed=1)
+    for change in ({"u": 0.0}, {"nematic_runs": []}, {"parametrization": "bend"}):
+        other = minimize_config(xy0, _quench_params(method="scipy-powell", lam=2e4, **change),
+                                seed=1)
+        assert not np.allclose(other.xy, base.xy), change
+
+
+def test_scipy_powell_refuses_a_start_outside_the_wall():
+    from crosssection.core.errors import ParameterError
+    from simulate.optimize import scipy_protocol
+
+    xy0 = initial_shape(20, 300.0, seed=1)
+    with pytest.raises(ParameterError, match="leaves the hard-wall disk"):
+        scipy_protocol(xy0, 1e3, n_runs=1, maxiter=1,
+                       wall_radius=0.9 * np.max(np.hypot(*xy0.T)))
+
+
+def test_anneal_refuses_scipy_powell_before_writing(tmp_path):
+    """anneal ramps Lambda through powell or lbfgs only: scipy-powell is one line naming the
+    command and the option, not a failure of every configuration."""
+    out = tmp_path / "out"
+    r = subprocess.run([sys.executable, "-m", "simulate", "anneal", "--method", "scipy-powell",
+                        "--n-configs", "1", "--segments", "40", "--out", str(out)],
+                       capture_output=True, text=True)
+    assert r.returncode == 2
+    assert r.stderr.count("\n") == 1 and "Traceback" not in r.stderr
+    assert r.stderr.startswith("error: python -m simulate anneal: argument --method: "
+                               "invalid choice: 'scipy-powell'")
+    assert not out.exists()
+
+
+def test_the_options_defaults_are_those_of_the_functions_they_reach():
+    """One source: quench's, anneal's and compact's defaults are the minimisers', the initial
+    shape's and the compaction's own."""
+    import inspect
+
+    from simulate.cli import build_parser
+    from simulate.compact import CompactParams
+    from simulate.ensemble import params_from_args
+
+    def defaults(fn, *names):
+        sig = inspect.signature(fn).parameters
+        return tuple(sig[k].default for k in names)
+
+    q = params_from_args(build_parser(["quench"]).parse_args(["quench", "--out", "o"]))
+    assert (q["n_runs"], q["maxiter"], tuple(q["nematic_runs"]), q["u"], q["ftol"],
+            q["xtol"]) == defaults(powell_protocol, "n_runs", "maxiter", "nematic_runs", "u",
+                                   "ftol", "xtol")
+    assert (q["n_segments"], q["noise"]) == defaults(initial_shape, "n_segments", "noise")
+    a = params_from_args(build_parser(["anneal"]).parse_args(["anneal", "--out", "o"]))
+    assert (a["lam_start"], a["stages"], a["ramp"]) == defaults(anneal, "lam_start", "stages",
+                                                                "ramp")
+    c = build_parser(["compact"]).parse_args(["compact", "--epsilon", "8", "--out", "o"])
+    assert (c.segments, c.noise, c.max_iter, c.wall_rate) == (
+        CompactParams.n_segments, CompactParams.noise, CompactParams.max_iter,
+        CompactParams.rate)

@@ -56,7 +56,7 @@ def test_plot_configuration_draws_rod_and_stacks(sim):
 def test_render_progress_only_when_asked_off_a_terminal(sim, tmp_path, capfd, flag, bar):
     out = tmp_path / "scenes"
     assert console.main(["render", str(sim), "--out", str(out), "--limit", "1",
-                         "--px-per-mm", "20", *flag]) == 0
+                         "--px-per-mm", "25", *flag]) == 0
     err = capfd.readouterr().err
     assert ("render" in err and "config" in err) == bar
     if not bar:

@@ -13,8 +13,9 @@ from simulate import render
 from simulate.cli import main
 from simulate.render import render_configuration, render_directory
 
-#: small clean scans: a scene of the quench below is about 200 x 230 px
-FAST = ["--px-per-mm", "10", "--clean"]
+#: small clean scans at the validated range's coarsest resolution (h = 2.5 px), so that a
+#: render says nothing unless something is wrong
+FAST = ["--px-per-mm", "25", "--clean"]
 
 
 @pytest.fixture(scope="module")
@@ -148,7 +149,7 @@ def test_a_rerun_resumes_only_with_the_same_parameters_and_source(sim, tmp_path,
     record = json.loads((out / "render.json").read_text())
     assert record["version"] == __version__
     assert record["source"] == str(sim.resolve())
-    assert record["params"]["seed"] == 1 and record["params"]["px_per_mm"] == 10.0
+    assert record["params"]["seed"] == 1 and record["params"]["px_per_mm"] == 25.0
     assert record["params"]["clean"] is True and record["source_params"]["seed"] == 1
     first = (out / "config_00000" / "image.png").read_bytes()
 
@@ -158,8 +159,8 @@ def test_a_rerun_resumes_only_with_the_same_parameters_and_source(sim, tmp_path,
                                                                    "config_00001"]
 
     for flags, named in ((["--seed", "2", *FAST], "--seed"),
-                         (["--seed", "1", "--px-per-mm", "12", "--clean"], "--px-per-mm"),
-                         (["--seed", "1", "--px-per-mm", "10"], "--clean"),
+                         (["--seed", "1", "--px-per-mm", "30", "--clean"], "--px-per-mm"),
+                         (["--seed", "1", "--px-per-mm", "25"], "--clean"),
                          (["--seed", "1", *FAST, "--draw", "passes"], "--draw")):
         status, err = _render(capsys, sim, "--out", out, *flags)
         assert status == 2, flags
@@ -213,3 +214,82 @@ def test_a_missing_params_json_is_a_warning(sim, tmp_path, capsys):
                                "as a quench's (no wall, default scale")
     # with its params.json the same render says nothing
     assert _render(capsys, sim, "--out", tmp_path / "t", "--limit", "1", *FAST) == (0, "")
+
+
+def test_the_default_render_says_nothing(sim, tmp_path, capsys):
+    """The defaults lie within the ranges the image analysis is validated on."""
+    import warnings
+
+    assert _render(capsys, sim, "--out", tmp_path / "s", "--limit", "1") == (0, "")
+    xy = np.load(sim / "rods.npz")["config_00000"]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        render_configuration(xy)
+        render_directory(sim, tmp_path / "api", configs=["config_00000"])
+    assert [w for w in caught if issubclass(w.category, render.ScanRangeWarning)] == []
+
+
+@pytest.mark.parametrize("flags, says", [
+    (["--px-per-mm", "20"], "a sheet 2 px thick (--px-per-mm x --thickness-mm) is below 2.5 px"),
+    (["--thickness-mm", "0.04"], "a sheet 2 px thick (--px-per-mm x --thickness-mm) is below "
+                                 "2.5 px"),
+    (["--blur", "2"], "--blur 2 is above 1.5 px"),
+    (["--noise", "12"], "--noise 12 is above 10 grey levels"),
+    (["--jpeg", "60"], "--jpeg 60 is below 75"),
+])
+def test_an_option_beyond_the_validated_range_is_one_warning_per_run(sim, tmp_path, capsys,
+                                                                    flags, says):
+    out = tmp_path / "s"
+    status, err = _render(capsys, sim, "--out", out, *flags)
+    assert status == 0
+    assert err == (f"warning: {out}: scans beyond the range the image analysis is validated "
+                   f"on: {says}\n")
+    assert len([p for p in out.iterdir() if p.is_dir()]) == 2  # two scenes, one line
+
+
+def test_every_option_beyond_the_range_is_named_in_the_one_line(sim, tmp_path, capsys):
+    out = tmp_path / "s"
+    status, err = _render(capsys, sim, "--out", out, "--px-per-mm", "20", "--blur", "2",
+                          "--noise", "12", "--jpeg", "60")
+    assert status == 0 and len(err.splitlines()) == 1
+    assert err == (f"warning: {out}: scans beyond the range the image analysis is validated "
+                   "on: a sheet 2 px thick (--px-per-mm x --thickness-mm) is below 2.5 px; "
+                   "--blur 2 is above 1.5 px; --noise 12 is above 10 grey levels; --jpeg 60 is "
+                   "below 75\n")
+
+
+def test_the_validated_limits_themselves_say_nothing(sim, tmp_path, capsys):
+    assert _render(capsys, sim, "--out", tmp_path / "s", "--limit", "1", "--px-per-mm", "25",
+                   "--blur", "1.5", "--noise", "10", "--jpeg", "75") == (0, "")
+    assert _render(capsys, sim, "--out", tmp_path / "t", "--limit", "1",
+                   "--jpeg", "none") == (0, "")
+
+
+def test_the_api_warns_with_its_own_category(sim, tmp_path):
+    import warnings
+
+    from crosssection.quality import QualityWarning
+
+    xy = np.load(sim / "rods.npz")["config_00000"]
+    with pytest.warns(render.ScanRangeWarning, match=r"blur_px 2 is above 1\.5 px"):
+        render_configuration(xy, blur_px=2.0, clean=True)
+    assert issubclass(render.ScanRangeWarning, QualityWarning)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        render_directory(sim, tmp_path / "s", px_per_mm=20.0, clean=True)
+    mine = [str(w.message) for w in caught if issubclass(w.category, render.ScanRangeWarning)]
+    assert mine == [f"{tmp_path / 's'}: scans beyond the range the image analysis is validated "
+                    "on: a sheet 2 px thick (px_per_mm x thickness_mm) is below 2.5 px"]
+
+
+def test_the_scale_defaults_are_those_of_render_configuration():
+    import inspect
+
+    from simulate.cli import build_parser
+
+    sig = inspect.signature(render_configuration).parameters
+    args = build_parser(["render"]).parse_args(["render", "d", "--out", "s"])
+    assert args.px_per_mm == sig["px_per_mm"].default
+    assert args.thickness_mm == sig["thickness_mm"].default
+    # the defaults lie within the validated range: a sheet of at least VALIDATED_SHEET_PX
+    assert args.px_per_mm * args.thickness_mm >= render.VALIDATED_SHEET_PX

@@ -14,6 +14,9 @@ from simulate.render import CLEAN, SCAN_DEFECTS, render_configuration, render_di
 from simulate.shapes import resample, spiral, transform
 
 PX_PER_MM = 20.0  # h = 2 px: small images, fast tests
+# below the validated sheet thickness on purpose (these tests check the drawing, not the
+# analysis of it): the warning saying so is tested with the render command line
+pytestmark = pytest.mark.filterwarnings("ignore::simulate.render.ScanRangeWarning")
 
 
 @pytest.fixture(scope="module")

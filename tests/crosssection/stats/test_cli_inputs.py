@@ -12,7 +12,8 @@ from crosssection.core import fileio
 from crosssection.core.errors import ParameterError
 from crosssection.quality import QualityWarning
 from crosssection.stats import cli, demo, report
-from crosssection.stats.data import load_any
+from crosssection.stats.data import load_any, load_inputs
+from crosssection.stats.tables import StatsOptions
 
 FAST = ["--n-boot", "0", "--no-gof", "--no-figures"]
 
@@ -120,12 +121,52 @@ def test_the_resample_bound_is_said_in_the_help_and_accepted(capfd):
     with pytest.raises(SystemExit):
         main(["stats", "--help"])
     help_text = " ".join(capfd.readouterr().out.split())
-    assert f"0 (none) to {cli.MAX_RESAMPLES} (default 200)" in help_text
-    assert f"at most {cli.MAX_RESAMPLES} (default 199)" in help_text
+    opts = StatsOptions()
+    assert f"0 (none) to {cli.MAX_RESAMPLES} (default {opts.n_boot})" in help_text
+    assert f"at most {cli.MAX_RESAMPLES} (default {opts.n_mc})" in help_text
     args = build_parser(["stats"]).parse_args(
         ["stats", "d", "--out", "r", "--n-boot", str(cli.MAX_RESAMPLES),
          "--n-mc", str(cli.MAX_RESAMPLES)])
     cli.check_options(args)  # the bound itself is no absurd value
+
+
+def test_the_defaults_are_those_of_the_statistics_and_the_loader(capfd):
+    """One source: the options' defaults, and the help saying them, are StatsOptions' and
+    load_inputs'."""
+    import inspect
+
+    opts = StatsOptions()
+    limits = inspect.signature(load_inputs).parameters
+    args = build_parser(["stats"]).parse_args(["stats", "d", "--out", "r"])
+    assert (args.seed, args.n_boot, args.n_mc) == (opts.seed, opts.n_boot, opts.n_mc)
+    assert args.l_min_mm == limits["l_min_mm"].default > 0
+    assert args.s_min_mm2 == limits["s_min_mm2"].default > 0
+    with pytest.raises(SystemExit):
+        main(["stats", "--help"])
+    help_text = " ".join(capfd.readouterr().out.split())
+    assert f"(default {limits['l_min_mm'].default:g}; 0 = none)" in help_text
+    assert f"(default (10h)^2 = {limits['s_min_mm2'].default:g}; 0 = none)" in help_text
+    assert (f"quick look: {cli.FAST_N_BOOT} bootstrap resamples and {cli.FAST_N_MC} GOF "
+            "samples") in help_text
+
+
+@pytest.mark.parametrize("flags, fast", [([], False), (["--fast"], True)])
+def test_fast_runs_the_resamples_its_help_says(batch, tmp_path, capfd, monkeypatch, flags,
+                                               fast):
+    seen = {}
+
+    def fake_report(ens, out, *, opts, **kwargs):
+        seen["opts"] = opts
+        return []
+
+    monkeypatch.setattr(report, "write_report", fake_report)
+    status, _, err = _stats(capfd, batch, "--out", tmp_path / "rep", "--no-figures", *flags)
+    assert status == 0 and err == []
+    want = (cli.FAST_N_BOOT, cli.FAST_N_MC) if fast else (StatsOptions().n_boot,
+                                                          StatsOptions().n_mc)
+    assert (seen["opts"].n_boot, seen["opts"].n_mc) == want
+    # a quick look: fewer resamples than the default run
+    assert cli.FAST_N_BOOT < StatsOptions().n_boot and cli.FAST_N_MC < StatsOptions().n_mc
 
 
 def test_one_name_for_two_dirs_is_refused(batch, tmp_path, capfd):
