@@ -388,10 +388,14 @@ def quench_rod(seed: int, *, n_segments: int = 300, n_runs: int = 10, maxiter: i
     from simulate.ensemble import minimize_config
     from simulate.noise import initial_shape
 
-    params = dict(command="quench", n_runs=n_runs, maxiter=maxiter, nematic_runs=[1, 2],
-                  u=100.0, ftol=1e-4, xtol=1e-4, wall_radius=None, lam=7e5, method="powell",
-                  parametrization=None)
-    xy0 = initial_shape(n_segments, 750.0, seed=np.random.default_rng(seed))
+    from simulate.energy import LAMBDA
+    from simulate.noise import NOISE
+    from simulate.optimize import FTOL, NEMATIC_RUNS, NEMATIC_U, XTOL
+
+    params = dict(command="quench", n_runs=n_runs, maxiter=maxiter,
+                  nematic_runs=list(NEMATIC_RUNS), u=NEMATIC_U, ftol=FTOL, xtol=XTOL,
+                  wall_radius=None, lam=LAMBDA, method="powell", parametrization=None)
+    xy0 = initial_shape(n_segments, NOISE, seed=np.random.default_rng(seed))
     return minimize_config(xy0, params, seed).xy
 
 
@@ -446,6 +450,7 @@ def make_rod(index: int, seed: int, config: AtlasConfig, xy=None) -> Rod:
     """Quench rod ``index`` (or take the given node positions ``xy``) and fix its scan scale
     (a worker task)."""
     from simulate.contacts import analyze_rod
+    from simulate.energy import LAMBDA
 
     if xy is None:
         xy = quench_rod(seed, n_segments=config.rod_segments, n_runs=config.rod_runs,
@@ -453,7 +458,7 @@ def make_rod(index: int, seed: int, config: AtlasConfig, xy=None) -> Rod:
     xy = np.asarray(xy, float)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        analysis = analyze_rod(xy, lam=7e5)
+        analysis = analyze_rod(xy, lam=LAMBDA)
     ref = render_rod(xy, seed, analysis, px_per_mm=50.0, thickness_mm=THICKNESS_MM,
                      hole_radius_mm="auto")
     return Rod(index, seed, xy, analysis, float(ref.params["rod_length_mm"]))

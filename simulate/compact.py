@@ -97,7 +97,7 @@ from numba import njit
 from crosssection.core.errors import AnalysisError, ParameterError
 from crosssection.quality import QualityWarning
 
-from simulate.noise import NOISE
+from simulate.noise import N_SEGMENTS, NOISE
 
 
 class HoldWarning(QualityWarning, RuntimeWarning):
@@ -720,10 +720,10 @@ def initial_rod(n_segments: int, noise: float, clearance: float, rng, *,
     from simulate.intersect import close_pairs
     from simulate.noise import initial_shape
 
-    s_ref = (np.arange(300) + 0.5) / 300
+    s_ref = (np.arange(N_SEGMENTS) + 0.5) / N_SEGMENTS
     s_new = (np.arange(n_segments) + 0.5) / n_segments
     for _ in range(max_tries):
-        theta, _ = angles(initial_shape(300, noise, seed=rng))
+        theta, _ = angles(initial_shape(N_SEGMENTS, noise, seed=rng))
         xy = positions(np.interp(s_new, s_ref, theta))
         xy -= center_of_mass(xy)
         if len(close_pairs(xy, clearance, 2)) == 0:

@@ -25,6 +25,9 @@ from numba import njit
 from simulate.geometry import positions, trapezoid_weights
 from simulate.intersect import _grid_fill, _grid_setup
 
+#: The paper's confinement Lambda (section "Numerical simulations"), the simulator's default.
+LAMBDA = 7e5
+
 
 def _second_differences(xy):
     xy = np.asarray(xy, dtype=np.float64)
@@ -293,5 +296,5 @@ def contact_barrier(xy, *, sigma: float, eps: float, min_separation: int = 3):
     return float(e), grad, int(npairs)
 
 
-__all__ = ["contact_barrier", "bending_energy", "confinement_energy", "node_curvature",
-           "total_energy", "energy_and_gradient", "nematic_energy"]
+__all__ = ["LAMBDA", "contact_barrier", "bending_energy", "confinement_energy",
+           "node_curvature", "total_energy", "energy_and_gradient", "nematic_energy"]

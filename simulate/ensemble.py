@@ -46,6 +46,7 @@ from crosssection.core.errors import ConfigError, ParameterError
 from crosssection.core.fileio import write_csv, write_json, write_npz
 from crosssection.core.parallel import get_executor, spawn_seeds
 
+from simulate.energy import LAMBDA
 from simulate.noise import N_SEGMENTS, NOISE
 from simulate.optimize import (FTOL, LAM_START, MAXITER, N_RUNS, NEMATIC_RUNS, NEMATIC_U, RAMPS,
                                STAGES, XTOL)
@@ -381,9 +382,9 @@ def report_failures(tables: dict, out) -> int:
 def _add_common(p, command):
     p.add_argument("--n-configs", type=int, default=250,
                    help="number of configurations K (default 250)")
-    p.add_argument("--lambda", dest="lam", type=float, default=7e5,
+    p.add_argument("--lambda", dest="lam", type=float, default=LAMBDA,
                    help="confinement Lambda, dimensionless (target Lambda for anneal; "
-                        "default 7e5, the paper's)")
+                        f"default {LAMBDA:g}, the paper's)")
     p.add_argument("--noise", type=float, default=NOISE,
                    help=f"initial noise D, dimensionless (default {NOISE:g}, the paper's)")
     p.add_argument("--segments", type=int, default=N_SEGMENTS,

@@ -24,6 +24,7 @@ import numpy as np
 import pandas as pd
 
 from crosssection.core.errors import ConfigError, ParameterError
+from simulate.energy import LAMBDA
 from simulate.geometry import checked_rod
 
 __all__ = ["SimulationEnsemble", "load_ensemble", "plot_configuration", "ConfigurationNotFound"]
@@ -147,7 +148,8 @@ class SimulationEnsemble:
         """
         wall = self.params.get("wall_radius")
         return plot_configuration(
-            self.rod(config), ax=ax, stacks=stacks, lam=float(self.params.get("lam", 7e5)),
+            self.rod(config), ax=ax, stacks=stacks,
+            lam=float(self.params.get("lam", LAMBDA)),
             contact_distance=self.params.get("contact_distance"),
             wall_radius=float(wall) if wall else None, title=self._key(config))
 
@@ -209,7 +211,7 @@ def load_ensemble(folder) -> SimulationEnsemble:
     return SimulationEnsemble(folder, **tables, params=params, keys=keys)
 
 
-def plot_configuration(xy, *, ax=None, stacks: bool = True, lam: float = 7e5,
+def plot_configuration(xy, *, ax=None, stacks: bool = True, lam: float = LAMBDA,
                        contact_distance: float | None = None, wall_radius: float | None = None,
                        title: str | None = None):
     """Draw a rod configuration; optionally its stacks coloured by number of branches.

@@ -157,6 +157,7 @@ from crosssection.truth.scene import Scene, write_scene
 from crosssection.truth.voids import truth_voids
 
 from simulate.contacts import RodAnalysis, analyze_rod
+from simulate.energy import LAMBDA
 from simulate.geometry import checked_rod
 
 __all__ = ["render_configuration", "render_directory", "add_subparser", "smooth_line",
@@ -1299,7 +1300,7 @@ def _summary(analysis, frame, tables, ink_mask, *, px_per_mm):
     }
 
 
-def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float = 7e5,
+def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float = LAMBDA,
                          px_per_mm: float = PX_PER_MM, thickness_mm: float = THICKNESS_MM,
                          rod_length_mm: float | None = None,
                          rod_thickness: float | None = None,
@@ -1749,8 +1750,8 @@ def render_directory(sim_dir, out_dir, *, configs=None, progress: bool | None = 
                      **kwargs) -> list[Path]:
     """Render every configuration of ``sim_dir/rods.npz`` into ``out_dir/<key>/``.
 
-    ``sim_dir/params.json`` gives ``lambda`` (default 7e5; 0 for a compaction, whose hard wall
-    stores no energy) and optionally ``contact_distance``; a compaction's ``thickness`` and
+    ``sim_dir/params.json`` gives ``lambda`` (default :data:`simulate.energy.LAMBDA`; 0 for
+    a compaction, whose hard wall stores no energy) and optionally ``contact_distance``; a compaction's ``thickness`` and
     ``wall_radius`` (units of L) set the scale and, unless ``hole_radius_mm`` is given, the
     hole (module docstring). Without params.json the rods are drawn as a quench's (a
     :class:`~crosssection.quality.QualityWarning` says so).
@@ -1816,7 +1817,7 @@ def _render_directory(sim_dir, out_dir, *, configs=None, limit=None, progress=Fa
         raise ParameterError(f"{out_dir} is the simulation folder being rendered: the scenes "
                              "go to another folder", name("out_dir"))
     user_kwargs = dict(kwargs)
-    lam = 7e5
+    lam = LAMBDA
     delta = None
     p = None
     pj = sim_dir / "params.json"
