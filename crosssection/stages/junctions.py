@@ -53,6 +53,18 @@ class Junctions:
 _NB_DR = np.array([-1, -1, -1, 0, 0, 1, 1, 1])
 _NB_DC = np.array([-1, 0, 1, -1, 1, -1, 0, 1])
 
+#: Farthest a junction of nearly parallel stacks (a tangential fork) moves from the
+#: skeleton's fork toward their centreline intersection, in sheet thicknesses h: it is
+#: placed where the bands separate, within 3 h of the medial-axis fork. The tangents of
+#: branches that bend apart beyond a thick trunk's blob meet inside the trunk, where no
+#: image shows them apart (docs/validation/README.md, "Junctions where the bands separate").
+FORK_REACH_H = 3.0
+#: Lines count as nearly parallel when the mean squared sine of their angles to the common
+#: direction (the smallest eigenvalue of the sum of their normal projectors, per line) is
+#: below this: within about 18 degrees. A T (a sheet leaving a trunk at a right angle) has
+#: 1/3: its lines meet where the centrelines do, and the skeleton's fork lies off that point.
+PARALLEL_SPREAD = 0.1
+
 
 def _junction_labels(img, flat, n_nb, merge_px):
     """Label junction clusters of the padded uint8 skeleton ``img``.
@@ -386,7 +398,8 @@ def _end_lines(pr, pc, offs, sids, rev, c0r, c0c, skip, fit):
 
 def fork_points(centers_rc, radius_px, end_paths, end_junction, *, thickness_px: float,
                 skip_factor: float = 0.7, fit_h: float = 2.0, prior_weight: float = 0.05,
-                max_shift_factor: float = 1.0, skip_px=None) -> np.ndarray:
+                max_shift_factor: float = 1.0, reach_h: float = FORK_REACH_H,
+                skip_px=None) -> np.ndarray:
     """Junction positions where the centrelines of the stacks meeting there intersect.
 
     The skeleton of thick bands forks where the medial axis does, which is not where the
@@ -428,6 +441,10 @@ def fork_points(centers_rc, radius_px, end_paths, end_junction, *, thickness_px:
     max_shift_factor : float
         A solution farther than ``max_shift_factor * radius + h`` from the skeleton centre
         is rejected (the junction stays on the skeleton).
+    reach_h : float
+        Where the lines are nearly parallel (:data:`PARALLEL_SPREAD`), an accepted solution
+        is moved from the skeleton centre toward the intersection by at most ``reach_h`` h
+        (:data:`FORK_REACH_H`).
     skip_px : (Q,) float array, optional
         Per stack end, a distance from the centre within which its path is ignored too
         (where a thin stack crosses a thicker band;
@@ -476,7 +493,13 @@ def fork_points(centers_rc, radius_px, end_paths, end_junction, *, thickness_px:
     radius = np.asarray(radius_px, float)
     shift = np.hypot(*(sol - centers).T)
     good = (n_lines >= 2) & (shift <= max_shift_factor * radius + thickness_px)
-    out[good] = sol[good]
+    # lines nearly parallel (a tangential fork): their meeting point along them is where
+    # the bands' tangents, not the bands, converge
+    lines_only = a_mat - prior[:, None, None] * np.eye(2)[None]
+    spread = np.linalg.eigvalsh(lines_only)[:, 0] / np.maximum(n_lines, 1)
+    reach = np.where(spread < PARALLEL_SPREAD,
+                     np.minimum(1.0, reach_h * thickness_px / np.maximum(shift, 1e-12)), 1.0)
+    out[good] = centers[good] + (sol - centers)[good] * reach[good, None]
     return out
 
 

@@ -7,7 +7,8 @@ import pytest
 
 from crosssection.stages.clean import clean_mask
 from crosssection.stages.graph import stack_graph
-from crosssection.stages.junctions import find_junctions, fork_points, merge_junctions
+from crosssection.stages.junctions import (FORK_REACH_H, find_junctions, fork_points,
+                                           merge_junctions)
 from crosssection.stages.skeleton import skeletonize_mask
 from crosssection.stages.threshold import threshold_rgb
 
@@ -71,6 +72,35 @@ def test_fork_points_lines_and_fallbacks():
     out = fork_points(np.array([[46.0, 47.0]]), np.array([4.0]), paths[:1], [0],
                       thickness_px=2.0)
     np.testing.assert_allclose(out[0], [46.0, 47.0])
+
+
+def _line_path(start_rc, angle, n=60):
+    a = np.radians(angle)
+    return np.column_stack([np.round(start_rc[0] + np.arange(n) * np.sin(a)),
+                            np.round(start_rc[1] + np.arange(n) * np.cos(a))]).astype(int)
+
+
+def test_fork_points_tangential_fork_moves_at_most_reach():
+    # two branches leaving a trunk 15 degrees either side of it, their tangents meeting 60 px
+    # back along the trunk from the skeleton's fork: the junction moves toward that point
+    # by FORK_REACH_H h, not the 28 px the least squares would take it
+    h, fork = 5.0, np.array([100.0, 100.0])
+    meet = fork - [0.0, 60.0]
+    paths = [_line_path(meet + 75.0 / np.cos(np.radians(a))
+                        * np.array([np.sin(np.radians(a)), np.cos(np.radians(a))]), a)
+             for a in (15.0, -15.0)]
+    paths.append(_line_path(fork - [0.0, 10.0], 180.0))  # the trunk
+    out = fork_points(fork[None], np.array([40.0]), paths, [0, 0, 0], thickness_px=h)
+    np.testing.assert_allclose(out[0], fork - [0.0, FORK_REACH_H * h], atol=0.1)
+    free = fork_points(fork[None], np.array([40.0]), paths, [0, 0, 0], thickness_px=h,
+                       reach_h=np.inf)
+    assert np.hypot(*(free[0] - fork)) > 25.0
+    # lines meeting at a right angle (a T) move it the whole way, beyond FORK_REACH_H h
+    t_paths = [_line_path([100, 130], 0.0), _line_path([100, 68], 180.0),
+               _line_path([70, 80], -90.0)]
+    out = fork_points(fork[None], np.array([40.0]), t_paths, [0, 0, 0], thickness_px=h)
+    assert np.hypot(*(out[0] - [100.0, 80.0])) < 3.0  # the prior keeps it 2.6 px short
+    assert np.hypot(*(out[0] - fork)) > FORK_REACH_H * h + 2.0
 
 
 @pytest.fixture(scope="module")
