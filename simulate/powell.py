@@ -28,7 +28,8 @@ theta_0``) and the start point, made fast by the structure of the rod:
   smallest distance found so far plus one segment length (it cannot lower the minimum), and
   measure a segment met in several grid cells once, so they are the same numbers as the plain
   minimum at 0.65x the CPU time of the whole minimisation (N = 300, 20 starts; same
-  trajectories and counters);
+  trajectories and counters), and one call measures every tail segment (0.73x again: a call
+  per segment spent most of its time counting references to its buffers);
 * general directions (Powell's extrapolated ones) cost O(N) per trial and use the full grid test;
 * the nematic self-contact term ``u sin^2 alpha`` (pairs of segments closer than a cut-off) uses
   the contact list of the configuration at the start of each Powell iteration, kept fixed during
@@ -39,11 +40,14 @@ Inadmissible trials get the energy ``BIG`` (1e30), "a very large number" as in t
 trial is inadmissible when two non-adjacent segments come closer than ``MARGIN`` (1e-9 L).
 
 The state shared by the kernels has named fields: :class:`Rod` (the configuration of the run)
-and :class:`Scratch` (reused buffers, the lazily built hard-core test, the counters) are
-mutable numba ``structref`` records, passed by reference so that a call does not copy or
-reference-count each of their arrays; :class:`Line` (the move of one line search and its step-0
-constants) and :class:`Model` (energy parameters and constraints) are small named tuples
-passed by value.
+and :class:`Scratch` (reused buffers, the lazily built hard-core test, the direction of a
+general line search, the nematic contact list, the counters) are mutable numba ``structref``
+records, passed by reference so that a call does not copy or reference-count each of their
+arrays; :class:`Line` (the move of one line search and its step-0 constants, scalars only) and
+:class:`Model` (energy parameters and constraints) are small named tuples passed by value.
+Every array or record passed to a compiled function costs an atomic reference-count increment
+and decrement per call, so the kernels called per trial take these two records and scalars
+alone, and the loops over tail segments (clearances, collision tests) run inside one call.
 """
 from __future__ import annotations
 
@@ -144,8 +148,9 @@ class Line(NamedTuple):
         ``sin 2(theta_a - theta_b)``.
     cos_k, sin_k : float
         ``cos theta_k``, ``sin theta_k`` (``TANGENT``).
-    direction : (N+2,) float64
-        The direction in parameter space (``GENERAL``; empty for coordinate moves).
+
+    The direction of a ``GENERAL`` line is held in ``Scratch.direction``: a line of scalars
+    alone is passed to the kernels of every trial without reference counting.
     """
 
     mode: int
@@ -163,7 +168,6 @@ class Line(NamedTuple):
     nem_sin: float
     cos_k: float
     sin_k: float
-    direction: np.ndarray
 
 
 @structref.register
@@ -208,8 +212,10 @@ class Scratch(structref.StructRefProxy):
     seen : (N + 1,) int64
         Per segment, the last clearance query that met it (a segment in several cells is
         measured once per query); ``seen[N]`` counts the queries.
-    no_direction : (0,) float64
-        The ``direction`` of coordinate lines.
+    direction : (N+2,) float64
+        The direction in parameter space of the current ``GENERAL`` line search.
+    pairs : (P, 2) int64
+        The nematic contact list of the current Powell iteration (empty without the term).
     stats : (6,) int64
         Counters (see :func:`powell_run`).
     """
@@ -217,7 +223,7 @@ class Scratch(structref.StructRefProxy):
 
 _SCRATCH_FIELDS = ["p_trial", "xy_trial", "theta_trial", "reach", "clear2", "ready", "safe",
                    "grid_origin", "grid_cell", "grid_shape", "grid_start", "grid_items",
-                   "grid_range", "seen", "no_direction", "stats"]
+                   "grid_range", "seen", "direction", "pairs", "stats"]
 structref.define_proxy(Scratch, _ScratchType, _SCRATCH_FIELDS)
 
 
@@ -315,7 +321,8 @@ def _new_scratch(n, stats):
                    np.empty(n), np.zeros(1, np.bool_), np.zeros(1), np.empty(2), np.empty(1),
                    np.empty(2, np.int64), np.empty(_GRID_CELLS, np.int64),
                    np.empty(4 * n + 4, np.int64), np.empty((n, 4), np.int64),
-                   np.full(n + 1, -1, np.int64), np.empty(0), stats)
+                   np.full(n + 1, -1, np.int64), np.empty(n + 2), np.empty((0, 2), np.int64),
+                   stats)
 
 
 @njit(cache=True)
@@ -424,80 +431,149 @@ def _store_head_grid(xy, k, n, scratch):
 
 
 @njit(cache=True)
-def _seg_vs_head(ax, ay, bx, by, j, xy, xmin, ymin, h, nx, ny, start, items, pad, seen):
-    """``min(d2, pad^2)``, ``d2`` the smallest squared distance (0 = touching) of segment a-b
-    (index j) to the head segments whose cells meet its bbox grown by ``pad``; returns early
-    with 0 on contact.
+def _head_clearances(xy, k, n, pad, scratch):
+    """``clear2[j] = min(d2_j, pad^2)`` for the tail segments ``j = k .. n-1``, ``d2_j`` the
+    smallest squared distance (0 = touching) of segment ``j`` to the head segments whose cells
+    (the grid in ``scratch``) meet its bbox grown by ``pad``.
 
     A head segment is skipped, without its exact distance, when the distance of the two
     midpoints less one segment length (with slack) already exceeds the smallest distance
     found so far (or ``pad``): it cannot lower the result, which is therefore the same as
-    the minimum over every candidate, capped at ``pad^2``.
+    the minimum over every candidate, capped at ``pad^2``. A segment met in several cells is
+    measured once per query (``seen``). All segments are handled in one call so that the
+    buffers are bound once, not once per segment.
     """
-    x0 = int(math.floor((min(ax, bx) - pad - xmin) / h))
-    x1 = int(math.floor((max(ax, bx) + pad - xmin) / h))
-    y0 = int(math.floor((min(ay, by) - pad - ymin) / h))
-    y1 = int(math.floor((max(ay, by) + pad - ymin) / h))
+    xmin = scratch.grid_origin[0]
+    ymin = scratch.grid_origin[1]
+    h = scratch.grid_cell[0]
+    nx = scratch.grid_shape[0]
+    ny = scratch.grid_shape[1]
+    start = scratch.grid_start
+    items = scratch.grid_items
+    seen = scratch.seen
+    out = scratch.clear2
+    last = seen.shape[0] - 1
     cap = pad * pad
-    best = cap
-    if x1 < 0 or y1 < 0 or x0 > nx - 1 or y0 > ny - 1:
-        return best
     reach = _seg_reach(xy)
-    mx = 0.5 * (ax + bx)
-    my = 0.5 * (ay + by)
-    thr = pad * (1.0 + _REL) + reach
-    thr2 = thr * thr
-    qid = seen[seen.shape[0] - 1] + 1
-    seen[seen.shape[0] - 1] = qid
-    for cx in range(max(x0, 0), min(x1, nx - 1) + 1):
-        for cy in range(max(y0, 0), min(y1, ny - 1) + 1):
-            c = cx * ny + cy
-            for q in range(start[c], start[c + 1]):
-                i = items[q]
-                if i == j - 1 or seen[i] == qid:
-                    continue
-                seen[i] = qid
-                ex = 0.5 * (xy[i, 0] + xy[i + 1, 0]) - mx
-                ey = 0.5 * (xy[i, 1] + xy[i + 1, 1]) - my
-                if ex * ex + ey * ey > thr2:
-                    continue
-                d2 = seg_dist2(xy[i, 0], xy[i, 1], xy[i + 1, 0], xy[i + 1, 1], ax, ay, bx, by)
-                if d2 < best:
-                    best = d2
-                    if best == 0.0:
-                        return 0.0
-                    thr = math.sqrt(best) * (1.0 + _REL) + reach
-                    thr2 = thr * thr
-    return best
+    for j in range(k, n):
+        ax = xy[j, 0]
+        ay = xy[j, 1]
+        bx = xy[j + 1, 0]
+        by = xy[j + 1, 1]
+        out[j] = cap
+        x0 = int(math.floor((min(ax, bx) - pad - xmin) / h))
+        x1 = int(math.floor((max(ax, bx) + pad - xmin) / h))
+        y0 = int(math.floor((min(ay, by) - pad - ymin) / h))
+        y1 = int(math.floor((max(ay, by) + pad - ymin) / h))
+        if x1 < 0 or y1 < 0 or x0 > nx - 1 or y0 > ny - 1:
+            continue
+        best = cap
+        mx = 0.5 * (ax + bx)
+        my = 0.5 * (ay + by)
+        thr = pad * (1.0 + _REL) + reach
+        thr2 = thr * thr
+        qid = seen[last] + 1
+        seen[last] = qid
+        for cx in range(max(x0, 0), min(x1, nx - 1) + 1):
+            for cy in range(max(y0, 0), min(y1, ny - 1) + 1):
+                c = cx * ny + cy
+                for q in range(start[c], start[c + 1]):
+                    i = items[q]
+                    if i == j - 1 or seen[i] == qid:
+                        continue
+                    seen[i] = qid
+                    ex = 0.5 * (xy[i, 0] + xy[i + 1, 0]) - mx
+                    ey = 0.5 * (xy[i, 1] + xy[i + 1, 1]) - my
+                    if ex * ex + ey * ey > thr2:
+                        continue
+                    d2 = seg_dist2(xy[i, 0], xy[i, 1], xy[i + 1, 0], xy[i + 1, 1], ax, ay, bx,
+                                   by)
+                    if d2 < best:
+                        best = d2
+                        if best == 0.0:
+                            break  # touching: nothing is closer
+                        thr = math.sqrt(best) * (1.0 + _REL) + reach
+                        thr2 = thr * thr
+                if best == 0.0:
+                    break
+            if best == 0.0:
+                break
+        out[j] = best
 
 
 @njit(cache=True)
-def _seg_hits_head(ax, ay, bx, by, j, xy, xmin, ymin, h, nx, ny, start, items):
-    """Does segment a-b (index j) come closer than ``MARGIN`` to a head segment?"""
-    x0 = int(math.floor((min(ax, bx) - MARGIN - xmin) / h))
-    x1 = int(math.floor((max(ax, bx) + MARGIN - xmin) / h))
-    y0 = int(math.floor((min(ay, by) - MARGIN - ymin) / h))
-    y1 = int(math.floor((max(ay, by) + MARGIN - ymin) / h))
-    if x1 < 0 or y1 < 0 or x0 > nx - 1 or y0 > ny - 1:
-        return False
-    mx = 0.5 * (ax + bx)
-    my = 0.5 * (ay + by)
+def _tail_hits(xy, k, n, scratch, bend, c, s, chord, vx, vy, v2, kx1, ky1):
+    """Explicit collision test of a coordinate trial: does a moved tail segment ``j >= k``
+    come closer than ``MARGIN`` to a head segment (or, ``TANGENT``, ``j >= k + 2`` to the
+    turned segment ``k``)?
+
+    ``BEND`` (``bend``): the tail turns by ``(c, s) = (cos x, sin x)`` about node ``k`` and
+    segment ``j`` moves by at most ``chord`` times its reach. ``TANGENT``: segment ``k`` ends
+    at ``(kx1, ky1)``, the tail translates by ``(vx, vy)``, ``v2 = |v|^2``. A segment whose
+    clearance exceeds its move is skipped; the others are tested against the head segments
+    of the grid cells its bbox (grown by ``MARGIN``) meets, skipping those whose midpoints are
+    too far apart (as in :func:`_head_clearances`). One call tests every segment, so that the
+    buffers are bound once per trial.
+    """
+    xmin = scratch.grid_origin[0]
+    ymin = scratch.grid_origin[1]
+    h = scratch.grid_cell[0]
+    nx = scratch.grid_shape[0]
+    ny = scratch.grid_shape[1]
+    start = scratch.grid_start
+    items = scratch.grid_items
+    clear2 = scratch.clear2
+    reach = scratch.reach
+    rkx = xy[k, 0]
+    rky = xy[k, 1]
     thr = MARGIN * (1.0 + _REL) + _seg_reach(xy)
     thr2 = thr * thr
-    for cx in range(max(x0, 0), min(x1, nx - 1) + 1):
-        for cy in range(max(y0, 0), min(y1, ny - 1) + 1):
-            c = cx * ny + cy
-            for q in range(start[c], start[c + 1]):
-                i = items[q]
-                if i == j - 1:
-                    continue
-                ex = 0.5 * (xy[i, 0] + xy[i + 1, 0]) - mx
-                ey = 0.5 * (xy[i, 1] + xy[i + 1, 1]) - my
-                if ex * ex + ey * ey > thr2:
-                    continue
-                if seg_dist2(xy[i, 0], xy[i, 1], xy[i + 1, 0], xy[i + 1, 1], ax, ay, bx,
-                             by) < _M2:
-                    return True
+    for j in range(k, n):
+        if bend:
+            if chord * chord * reach[j] * reach[j] < clear2[j]:
+                continue
+            dx = xy[j, 0] - rkx
+            dy = xy[j, 1] - rky
+            ax = rkx + c * dx - s * dy
+            ay = rky + s * dx + c * dy
+            dx = xy[j + 1, 0] - rkx
+            dy = xy[j + 1, 1] - rky
+            bx = rkx + c * dx - s * dy
+            by = rky + s * dx + c * dy
+        else:
+            if v2 < clear2[j]:
+                continue
+            if j == k:
+                ax, ay, bx, by = rkx, rky, kx1, ky1
+            else:
+                ax = xy[j, 0] + vx
+                ay = xy[j, 1] + vy
+                bx = xy[j + 1, 0] + vx
+                by = xy[j + 1, 1] + vy
+        if k >= 1:
+            x0 = int(math.floor((min(ax, bx) - MARGIN - xmin) / h))
+            x1 = int(math.floor((max(ax, bx) + MARGIN - xmin) / h))
+            y0 = int(math.floor((min(ay, by) - MARGIN - ymin) / h))
+            y1 = int(math.floor((max(ay, by) + MARGIN - ymin) / h))
+            if not (x1 < 0 or y1 < 0 or x0 > nx - 1 or y0 > ny - 1):
+                mx = 0.5 * (ax + bx)
+                my = 0.5 * (ay + by)
+                for cx in range(max(x0, 0), min(x1, nx - 1) + 1):
+                    for cy in range(max(y0, 0), min(y1, ny - 1) + 1):
+                        cell = cx * ny + cy
+                        for q in range(start[cell], start[cell + 1]):
+                            i = items[q]
+                            if i == j - 1:
+                                continue
+                            ex = 0.5 * (xy[i, 0] + xy[i + 1, 0]) - mx
+                            ey = 0.5 * (xy[i, 1] + xy[i + 1, 1]) - my
+                            if ex * ex + ey * ey > thr2:
+                                continue
+                            if seg_dist2(xy[i, 0], xy[i, 1], xy[i + 1, 0], xy[i + 1, 1], ax,
+                                         ay, bx, by) < _M2:
+                                return True
+        if not bend and j >= k + 2 and seg_dist2(rkx, rky, kx1, ky1, ax, ay, bx, by) < _M2:
+            return True
     return False
 
 
@@ -506,24 +582,19 @@ def _prepare_bend(line, xy, scratch, n):
     """Head grid, per-tail-segment reach r_j and clearance c_j (capped), safe chord."""
     k = line.k
     h = _store_head_grid(xy, k, n, scratch)
+    pad = h
+    _head_clearances(xy, k, n, pad, scratch)
     rkx = xy[k, 0]
     rky = xy[k, 1]
     safe = math.inf
-    pad = h
-    xmin, ymin = scratch.grid_origin[0], scratch.grid_origin[1]
-    nx, ny = scratch.grid_shape[0], scratch.grid_shape[1]
-    start, items = scratch.grid_start, scratch.grid_items
+    reach = scratch.reach
+    clear2 = scratch.clear2
     for j in range(k, n):
-        ax = xy[j, 0]
-        ay = xy[j, 1]
-        bx = xy[j + 1, 0]
-        by = xy[j + 1, 1]
-        r = max(math.hypot(ax - rkx, ay - rky), math.hypot(bx - rkx, by - rky))
-        scratch.reach[j] = r
-        c2 = _seg_vs_head(ax, ay, bx, by, j, xy, xmin, ymin, h, nx, ny, start, items, pad,
-                          scratch.seen)
-        c = max(math.sqrt(min(c2, pad * pad)) - MARGIN, 0.0)
-        scratch.clear2[j] = c * c
+        r = max(math.hypot(xy[j, 0] - rkx, xy[j, 1] - rky),
+                math.hypot(xy[j + 1, 0] - rkx, xy[j + 1, 1] - rky))
+        reach[j] = r
+        c = max(math.sqrt(min(clear2[j], pad * pad)) - MARGIN, 0.0)
+        clear2[j] = c * c
         if r > 0.0:
             safe = min(safe, c / r)
     scratch.ready[0] = True
@@ -539,11 +610,10 @@ def _prepare_tangent(line, xy, scratch, n):
     h = 1.0 / n
     if k >= 1:
         h = _store_head_grid(xy, k, n, scratch)
+        _head_clearances(xy, k, n, h, scratch)
     pad = h
+    clear2 = scratch.clear2
     safe = math.inf
-    xmin, ymin = scratch.grid_origin[0], scratch.grid_origin[1]
-    nx, ny = scratch.grid_shape[0], scratch.grid_shape[1]
-    start, items = scratch.grid_start, scratch.grid_items
     kx0 = xy[k, 0]
     ky0 = xy[k, 1]
     kx1 = xy[k + 1, 0]
@@ -553,15 +623,14 @@ def _prepare_tangent(line, xy, scratch, n):
     thr = pad * (1.0 + _REL) + _seg_reach(xy)
     thr2 = thr * thr
     for j in range(k, n):
-        ax = xy[j, 0]
-        ay = xy[j, 1]
-        bx = xy[j + 1, 0]
-        by = xy[j + 1, 1]
         c2 = pad * pad
         if k >= 1:
-            c2 = min(c2, _seg_vs_head(ax, ay, bx, by, j, xy, xmin, ymin, h, nx, ny, start,
-                                      items, pad, scratch.seen))
+            c2 = min(c2, clear2[j])
         if j >= k + 2:
+            ax = xy[j, 0]
+            ay = xy[j, 1]
+            bx = xy[j + 1, 0]
+            by = xy[j + 1, 1]
             # segments whose midpoints are farther apart than pad + one segment length
             # (with slack) are farther apart than pad >= sqrt(c2): the min is unchanged
             ex = 0.5 * (ax + bx) - kmx
@@ -569,7 +638,7 @@ def _prepare_tangent(line, xy, scratch, n):
             if ex * ex + ey * ey <= thr2:
                 c2 = min(c2, seg_dist2(kx0, ky0, kx1, ky1, ax, ay, bx, by))
         c = max(math.sqrt(c2) - MARGIN, 0.0)
-        scratch.clear2[j] = c * c
+        clear2[j] = c * c
         safe = min(safe, c)
     scratch.ready[0] = True
     scratch.safe[0] = safe
@@ -656,29 +725,9 @@ def _admissible_tangent(a, line, xy, wall2, scratch, n):
         scratch.stats[5] += 1
         return True
     scratch.stats[4] += 1
-    xmin, ymin, h = scratch.grid_origin[0], scratch.grid_origin[1], scratch.grid_cell[0]
-    nx, ny = scratch.grid_shape[0], scratch.grid_shape[1]
-    start, items, clear2 = scratch.grid_start, scratch.grid_items, scratch.clear2
-    kx0 = xy[k, 0]
-    ky0 = xy[k, 1]
-    kx1 = kx0 + ds * tx
-    ky1 = ky0 + ds * ty
-    for j in range(k, n):
-        if v2 < clear2[j]:
-            continue
-        if j == k:
-            ax, ay, bx, by = kx0, ky0, kx1, ky1
-        else:
-            ax = xy[j, 0] + vx
-            ay = xy[j, 1] + vy
-            bx = xy[j + 1, 0] + vx
-            by = xy[j + 1, 1] + vy
-        if k >= 1 and _seg_hits_head(ax, ay, bx, by, j, xy, xmin, ymin, h, nx, ny, start,
-                                     items):
-            return False
-        if j >= k + 2 and seg_dist2(kx0, ky0, kx1, ky1, ax, ay, bx, by) < _M2:
-            return False
-    return True
+    kx1 = xy[k, 0] + ds * tx
+    ky1 = xy[k, 1] + ds * ty
+    return not _tail_hits(xy, k, n, scratch, False, 1.0, 0.0, 0.0, vx, vy, v2, kx1, ky1)
 
 
 @njit(cache=True)
@@ -706,24 +755,7 @@ def _admissible_bend(a, line, xy, wall2, scratch, n):
         scratch.stats[5] += 1
         return True
     scratch.stats[4] += 1
-    xmin, ymin, h = scratch.grid_origin[0], scratch.grid_origin[1], scratch.grid_cell[0]
-    nx, ny = scratch.grid_shape[0], scratch.grid_shape[1]
-    start, items = scratch.grid_start, scratch.grid_items
-    reach, clear2 = scratch.reach, scratch.clear2
-    for j in range(k, n):
-        if chord * chord * reach[j] * reach[j] < clear2[j]:
-            continue
-        dx = xy[j, 0] - rkx
-        dy = xy[j, 1] - rky
-        ax = rkx + c * dx - s * dy
-        ay = rky + s * dx + c * dy
-        dx = xy[j + 1, 0] - rkx
-        dy = xy[j + 1, 1] - rky
-        bx = rkx + c * dx - s * dy
-        by = rky + s * dx + c * dy
-        if _seg_hits_head(ax, ay, bx, by, j, xy, xmin, ymin, h, nx, ny, start, items):
-            return False
-    return True
+    return not _tail_hits(xy, k, n, scratch, True, c, s, chord, 0.0, 0.0, 0.0, 0.0, 0.0)
 
 
 @njit(cache=True)
@@ -754,13 +786,14 @@ def _admissible(a, line, rod, scratch, wall2):
 
 
 @njit(cache=True)
-def _ev(a, thresh, line, rod, scratch, model, pairs):
+def _ev(a, thresh, line, rod, scratch, model):
     """Energy of the trial at step ``a``, ``BIG`` if it is inadmissible; trials above
     ``thresh`` (the line search's best so far) cannot be accepted and skip the hard-core test."""
     scratch.stats[0] += 1
     if line.mode == GENERAL:
-        f = _energy_general(a, line.direction, rod.p, rod.w, scratch.p_trial, scratch.xy_trial,
-                            scratch.theta_trial, model.lam, model.u, pairs)
+        f = _energy_general(a, scratch.direction, rod.p, rod.w, scratch.p_trial,
+                            scratch.xy_trial, scratch.theta_trial, model.lam, model.u,
+                            scratch.pairs)
     else:
         f = _energy_coordinate(a, line, rod.theta.shape[0], model.lam, model.u)
     if f <= thresh and model.hard_core:
@@ -771,19 +804,19 @@ def _ev(a, thresh, line, rod, scratch, model, pairs):
 
 # ----------------------------------------------------------------------------- line search
 @njit(cache=True)
-def _bracket(line, rod, scratch, model, pairs):
+def _bracket(line, rod, scratch, model):
     """scipy's ``bracket`` from ``xa = 0``, ``xb = 1`` (``grow_limit = 110``, at most 1000
     steps). Returns ``(xa, xb, xc, fa, fb, fc, ok)``; ``ok`` is false when it gave up."""
     f0 = line.f0
     xa = 0.0
     xb = 1.0
     fa = f0
-    fb = _ev(xb, f0, line, rod, scratch, model, pairs)
+    fb = _ev(xb, f0, line, rod, scratch, model)
     if fa < fb:
         xa, xb = xb, xa
         fa, fb = fb, fa
     xc = xb + _GOLD * (xb - xa)
-    fc = _ev(xc, f0, line, rod, scratch, model, pairs)
+    fc = _ev(xc, f0, line, rod, scratch, model)
     it = 0
     while fc < fb:
         tmp1 = (xb - xa) * (fb - fc)
@@ -799,28 +832,28 @@ def _bracket(line, rod, scratch, model, pairs):
             return xa, xb, xc, fa, fb, fc, False
         it += 1
         if (wv - xc) * (xb - wv) > 0.0:
-            fw = _ev(wv, f0, line, rod, scratch, model, pairs)
+            fw = _ev(wv, f0, line, rod, scratch, model)
             if fw < fc:
                 return xb, wv, xc, fb, fw, fc, True
             elif fw > fb:
                 return xa, xb, wv, fa, fb, fw, True
             wv = xc + _GOLD * (xc - xb)
-            fw = _ev(wv, f0, line, rod, scratch, model, pairs)
+            fw = _ev(wv, f0, line, rod, scratch, model)
         elif (wv - wlim) * (wlim - xc) >= 0.0:
             wv = wlim
-            fw = _ev(wv, f0, line, rod, scratch, model, pairs)
+            fw = _ev(wv, f0, line, rod, scratch, model)
         elif (wv - wlim) * (xc - wv) > 0.0:
-            fw = _ev(wv, f0, line, rod, scratch, model, pairs)
+            fw = _ev(wv, f0, line, rod, scratch, model)
             if fw < fc:
                 xb = xc
                 xc = wv
                 wv = xc + _GOLD * (xc - xb)
                 fb = fc
                 fc = fw
-                fw = _ev(wv, f0, line, rod, scratch, model, pairs)
+                fw = _ev(wv, f0, line, rod, scratch, model)
         else:
             wv = xc + _GOLD * (xc - xb)
-            fw = _ev(wv, f0, line, rod, scratch, model, pairs)
+            fw = _ev(wv, f0, line, rod, scratch, model)
         xa = xb
         xb = xc
         xc = wv
@@ -831,7 +864,7 @@ def _bracket(line, rod, scratch, model, pairs):
 
 
 @njit(cache=True)
-def _brent(xa, xb, xc, fb, tol, line, rod, scratch, model, pairs):
+def _brent(xa, xb, xc, fb, tol, line, rod, scratch, model):
     """scipy's ``Brent`` minimisation in the bracket ``xa, xb, xc`` (at most 500 steps).
     Returns ``(x_min, f_min)``."""
     x = xb
@@ -893,7 +926,7 @@ def _brent(xa, xb, xc, fb, tol, line, rod, scratch, model, pairs):
                 uu = x - tol1
         else:
             uu = x + rat
-        fu = _ev(uu, fx, line, rod, scratch, model, pairs)
+        fu = _ev(uu, fx, line, rod, scratch, model)
         if fu > fx:
             if uu < x:
                 a = uu
@@ -923,7 +956,7 @@ def _brent(xa, xb, xc, fb, tol, line, rod, scratch, model, pairs):
 
 
 @njit(cache=True)
-def _line_search(tol, line, rod, scratch, model, pairs):
+def _line_search(tol, line, rod, scratch, model):
     """scipy's ``bracket`` (xa=0, xb=1, grow_limit=110) then ``Brent`` (tol, maxiter 500).
 
     Returns (alpha_min, f_min). Trials are checked for admissibility only when they could
@@ -931,7 +964,7 @@ def _line_search(tol, line, rod, scratch, model, pairs):
     """
     scratch.ready[0] = False
     scratch.safe[0] = 0.0
-    xa, xb, xc, fa, fb, fc, ok = _bracket(line, rod, scratch, model, pairs)
+    xa, xb, xc, fa, fb, fc, ok = _bracket(line, rod, scratch, model)
     cond1 = (fb < fc and fb <= fa) or (fb < fa and fb <= fc)
     cond2 = (xa < xb < xc) or (xc < xb < xa)
     cond3 = math.isfinite(xa) and math.isfinite(xb) and math.isfinite(xc)
@@ -942,7 +975,7 @@ def _line_search(tol, line, rod, scratch, model, pairs):
         if fc < fa:
             return xc, fc
         return xa, fa
-    return _brent(xa, xb, xc, fb, tol, line, rod, scratch, model, pairs)
+    return _brent(xa, xb, xc, fb, tol, line, rod, scratch, model)
 
 
 # ----------------------------------------------------------------------------- Powell
@@ -969,22 +1002,22 @@ def _nematic_sums(theta, pairs, k, tangent):
 
 
 @njit(cache=True)
-def _tangent_line(k, sign, fval, rod, scratch, model, pairs):
+def _tangent_line(k, sign, fval, rod, scratch, model):
     n = rod.theta.shape[0]
     phi_k = rod.p[k]
     phi_k1 = rod.p[k + 1] if k < n - 1 else 0.0
     nc = 0.0
     ns = 0.0
     if model.u > 0.0:
-        nc, ns = _nematic_sums(rod.theta, pairs, k, True)
+        nc, ns = _nematic_sums(rod.theta, scratch.pairs, k, True)
     return Line(TANGENT, k, sign, fval, rod.tail_wx[k + 1], rod.tail_wy[k + 1],
                 rod.tail_w[k + 1], phi_k, phi_k1, 2.0 - 2.0 * math.cos(phi_k),
                 2.0 - 2.0 * math.cos(phi_k1), nc, ns, math.cos(rod.theta[k]),
-                math.sin(rod.theta[k]), scratch.no_direction)
+                math.sin(rod.theta[k]))
 
 
 @njit(cache=True)
-def _bend_line(k, sign, fval, rod, scratch, model, pairs):
+def _bend_line(k, sign, fval, rod, scratch, model):
     rkx = rod.xy[k, 0]
     rky = rod.xy[k, 1]
     w1 = rod.tail_w[k + 1]
@@ -993,23 +1026,26 @@ def _bend_line(k, sign, fval, rod, scratch, model, pairs):
     nc = 0.0
     ns = 0.0
     if model.u > 0.0:
-        nc, ns = _nematic_sums(rod.theta, pairs, k, False)
+        nc, ns = _nematic_sums(rod.theta, scratch.pairs, k, False)
     phi_k = rod.p[k]
     return Line(BEND, k, sign, fval, rkx * vx + rky * vy, rky * vx - rkx * vy, 0.0, phi_k, 0.0,
-                2.0 - 2.0 * math.cos(phi_k), 0.0, nc, ns, 0.0, 0.0, scratch.no_direction)
+                2.0 - 2.0 * math.cos(phi_k), 0.0, nc, ns, 0.0, 0.0)
 
 
 @njit(cache=True)
 def _shift_line(axis, sign, fval, rod, scratch):
     moment = rod.tail_wx[0] if axis == 0 else rod.tail_wy[0]
     return Line(SHIFT, axis, sign, fval, moment, 0.0, rod.tail_w[0], 0.0, 0.0, 0.0, 0.0, 0.0,
-                0.0, 0.0, 0.0, scratch.no_direction)
+                0.0, 0.0, 0.0)
 
 
 @njit(cache=True)
-def _general_line(direction, fval):
-    return Line(GENERAL, -1, 1.0, fval, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
-                direction)
+def _general_line(direction, fval, scratch):
+    """A line along ``direction``, copied to ``scratch.direction``."""
+    d = scratch.direction
+    for i in range(d.shape[0]):
+        d[i] = direction[i]
+    return Line(GENERAL, -1, 1.0, fval, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 
 
 @njit(cache=True)
@@ -1063,25 +1099,26 @@ def _move_shift(line, x, rod):
 
 
 @njit(cache=True)
-def _search_slot(slot, kind, sgn, dirs, fval, tol, tangent, rod, scratch, model, pairs):
+def _search_slot(slot, kind, sgn, dirs, fval, tol, tangent, rod, scratch, model):
     """Line search along direction slot ``slot`` from energy ``fval``; moves the rod to the
     minimum. Returns the energy there."""
     n = rod.theta.shape[0]
     kk = kind[slot]
     if 0 <= kk < n:
         if tangent:
-            line = _tangent_line(kk, sgn[slot], fval, rod, scratch, model, pairs)
+            line = _tangent_line(kk, sgn[slot], fval, rod, scratch, model)
         else:
-            line = _bend_line(kk, sgn[slot], fval, rod, scratch, model, pairs)
+            line = _bend_line(kk, sgn[slot], fval, rod, scratch, model)
     elif kk >= n:
         line = _shift_line(kk - n, sgn[slot], fval, rod, scratch)
     else:
-        line = _general_line(dirs[slot], fval)
-    amin, fnew = _line_search(tol, line, rod, scratch, model, pairs)
+        line = _general_line(dirs[slot], fval, scratch)
+    amin, fnew = _line_search(tol, line, rod, scratch, model)
     if amin != 0.0:
         if line.mode == GENERAL:
+            d = scratch.direction
             for i in range(rod.p.shape[0]):
-                rod.p[i] += amin * line.direction[i]
+                rod.p[i] += amin * d[i]
             _sync(rod)
         else:
             x = line.sign * amin
@@ -1096,7 +1133,7 @@ def _search_slot(slot, kind, sgn, dirs, fval, tol, tangent, rod, scratch, model,
 
 @njit(cache=True)
 def _update_directions(fx, fval, delta, bigind, x1, d1, kind, sgn, dirs, tol, rod, scratch,
-                       model, pairs):
+                       model):
     """Powell's extrapolation and direction-set update, as scipy: if the extrapolated point
     ``2 p - x1`` is lower and the test on ``delta`` (largest single-slot decrease) passes,
     search along ``p - x1`` and let it replace slot ``bigind``. Returns the energy."""
@@ -1104,8 +1141,8 @@ def _update_directions(fx, fval, delta, bigind, x1, d1, kind, sgn, dirs, tol, ro
     for i in range(m):
         d1[i] = rod.p[i] - x1[i]
         x1[i] = rod.p[i]
-    line = _general_line(d1, fval)
-    fx2 = _ev(1.0, fx, line, rod, scratch, model, pairs)
+    line = _general_line(d1, fval, scratch)
+    fx2 = _ev(1.0, fx, line, rod, scratch, model)
     if not fx > fx2:
         return fval
     t = 2.0 * (fx + fx2 - 2.0 * fval)
@@ -1116,7 +1153,7 @@ def _update_directions(fx, fval, delta, bigind, x1, d1, kind, sgn, dirs, tol, ro
     if not t < 0.0:
         return fval
     scratch.stats[1] += 1
-    amin, fnew = _line_search(tol, line, rod, scratch, model, pairs)
+    amin, fnew = _line_search(tol, line, rod, scratch, model)
     if amin != 0.0:
         for i in range(m):
             rod.p[i] += amin * d1[i]
@@ -1186,10 +1223,9 @@ def powell_run(p, lam, kind, sgn, dirs, maxiter, xtol, ftol, u, cutoff, min_sepa
     tol = xtol * 100.0
     x1 = p.copy()
     d1 = np.empty(m)
-    pairs = np.empty((0, 2), np.int64)
     if u > 0.0:
-        pairs = close_pairs(rod.xy, cutoff, min_separation)
-    fval = _rod_energy(rod, model, pairs)
+        scratch.pairs = close_pairs(rod.xy, cutoff, min_separation)
+    fval = _rod_energy(rod, model, scratch.pairs)
     it = 0
     while True:
         fx = fval
@@ -1197,8 +1233,7 @@ def powell_run(p, lam, kind, sgn, dirs, maxiter, xtol, ftol, u, cutoff, min_sepa
         delta = 0.0
         for slot in range(m):
             stats[1] += 1
-            fnew = _search_slot(slot, kind, sgn, dirs, fval, tol, tangent, rod, scratch, model,
-                                pairs)
+            fnew = _search_slot(slot, kind, sgn, dirs, fval, tol, tangent, rod, scratch, model)
             if (fval - fnew) > delta:
                 delta = fval - fnew
                 bigind = slot
@@ -1206,13 +1241,13 @@ def powell_run(p, lam, kind, sgn, dirs, maxiter, xtol, ftol, u, cutoff, min_sepa
         it += 1
         stats[3] += 1
         _sync(rod)
-        fval = _rod_energy(rod, model, pairs)
+        fval = _rod_energy(rod, model, scratch.pairs)
         bnd = ftol * (abs(fx) + abs(fval)) + 1e-20
         if 2.0 * (fx - fval) <= bnd or it >= maxiter:
             break
         fval = _update_directions(fx, fval, delta, bigind, x1, d1, kind, sgn, dirs, tol, rod,
-                                  scratch, model, pairs)
+                                  scratch, model)
         if u > 0.0:
-            pairs = close_pairs(rod.xy, cutoff, min_separation)
-            fval = _rod_energy(rod, model, pairs)
+            scratch.pairs = close_pairs(rod.xy, cutoff, min_separation)
+            fval = _rod_energy(rod, model, scratch.pairs)
     return fval

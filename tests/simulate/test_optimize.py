@@ -273,31 +273,107 @@ def _head_grid(xy, k, hcell):
 
 
 def test_head_grid_in_scratch_and_bounded_clearance_match_the_plain_ones():
-    """The allocation-free head grid equals the reference grid, and the clearance query with
-    its midpoint bound and per-query de-duplication returns the capped brute-force minimum."""
+    """The allocation-free head grid equals the reference grid, and the clearance queries of
+    all tail segments (one call), with their midpoint bound and per-query de-duplication,
+    return the capped brute-force minima."""
     from numba import njit
 
     from simulate.intersect import seg_dist2
-    from simulate.powell import _new_scratch, _seg_vs_head, _store_head_grid
+    from simulate.powell import _head_clearances, _new_scratch, _store_head_grid
 
     @njit
     def buffers(scratch):
-        return scratch.grid_start, scratch.grid_items, scratch.seen
+        return scratch.grid_start, scratch.grid_items, scratch.clear2
 
     rng = np.random.default_rng(4)
     n = 120
     xy = initial_shape(n, 300.0, seed=rng) * 0.3  # crowded: many neighbours per cell
     scratch = _new_scratch(n, np.zeros(6, np.int64))
+    capped = 0
     for k in (1, 7, 60, 119):
         xmin, ymin, h, nx, ny, start, items = _head_grid(xy, k, 1.0 / n)
         assert _store_head_grid(xy, k, n, scratch) == h
-        grid_start, grid_items, seen = buffers(scratch)
+        grid_start, grid_items, clear2 = buffers(scratch)
         assert np.array_equal(grid_start[:nx * ny + 1], start)
         assert np.array_equal(grid_items[:items.size], items)
+        clear2[:] = -1.0
+        _head_clearances(xy, k, n, h, scratch)
+        assert np.all(clear2[:k] == -1.0)  # the head's own entries are left alone
         for j in range(k, n):
             a, b = xy[j], xy[j + 1]
-            got = _seg_vs_head(a[0], a[1], b[0], b[1], j, xy, xmin, ymin, h, nx, ny, start,
-                               items, h, seen)
             brute = min([seg_dist2(*xy[i], *xy[i + 1], *a, *b) for i in range(k) if i != j - 1]
                         + [h * h])
-            assert got == brute
+            assert clear2[j] == brute
+            capped += brute == h * h
+    assert 0 < capped < sum(n - k for k in (1, 7, 60, 119))  # both kinds of segments occur
+
+
+@pytest.mark.parametrize("tangent", [True, False])
+def test_collision_test_of_coordinate_trials_matches_brute_force(tangent):
+    """On a quenched (jammed) rod, the explicit test of a coordinate trial -- clearance skips,
+    head grid, midpoint bound, every tail segment in one call -- rejects exactly the trials
+    that bring a moved tail segment within MARGIN of a head segment (or, for a tangent move,
+    of the turned segment k)."""
+    import math
+    from pathlib import Path
+
+    from numba import njit
+
+    from simulate.intersect import seg_dist2
+    from simulate.powell import (MARGIN, Model, _admissible, _bend_line, _new_rod,
+                                 _new_scratch, _tangent_line)
+
+    @njit
+    def trial(k, a, tangent, rod, scratch, model):
+        if tangent:
+            line = _tangent_line(k, 1.0, 0.0, rod, scratch, model)
+        else:
+            line = _bend_line(k, 1.0, 0.0, rod, scratch, model)
+        scratch.ready[0] = False  # a new line search
+        return _admissible(a, line, rod, scratch, model.wall2), rod.xy, rod.theta
+
+    @njit
+    def hits(xy, moved, k, tangent, m2):
+        n = xy.shape[0] - 1
+        for j in range(k, n):
+            ax, ay, bx, by = moved[j, 0], moved[j, 1], moved[j + 1, 0], moved[j + 1, 1]
+            if j == k and tangent:
+                bx, by = moved[n + 1, 0], moved[n + 1, 1]  # the turned segment's own end
+            for i in range(k):
+                if i != j - 1 and seg_dist2(xy[i, 0], xy[i, 1], xy[i + 1, 0], xy[i + 1, 1],
+                                            ax, ay, bx, by) < m2:
+                    return True
+            if tangent and j >= k + 2 and seg_dist2(moved[k, 0], moved[k, 1], moved[n + 1, 0],
+                                                    moved[n + 1, 1], ax, ay, bx, by) < m2:
+                return True
+        return False
+
+    xy0 = np.load(Path(__file__).parent / "data" / "quench_rod_5.npy")
+    n = xy0.shape[0] - 1
+    rod = _new_rod(to_params(xy0))
+    scratch = _new_scratch(n, np.zeros(6, np.int64))
+    model = Model(7e5, 0.0, np.inf, True)
+    steps = [s * t for s in (-1.0, 1.0)
+             for t in ((1e-3, 1e-2, 3e-2, 0.1, 0.3) if tangent else (1e-6, 1e-5, 1e-4, 1e-3))]
+    got, want = [], []
+    for k in range(1, n - 1, 9):
+        for a in steps:
+            ok, xy, theta = trial(k, a, tangent, rod, scratch, model)
+            # the trial's positions, as the kernels form them; row n+1: end of turned segment k
+            moved = np.vstack([xy, xy[-1:]])
+            if tangent:
+                ds = 1.0 / n
+                ck, sk = math.cos(theta[k]), math.sin(theta[k])
+                c, s = math.cos(a), math.sin(a)
+                tx, ty = ck * c - sk * s, sk * c + ck * s
+                moved[k + 1:n + 1] += (ds * tx - ds * ck, ds * ty - ds * sk)
+                moved[n + 1] = (xy[k, 0] + ds * tx, xy[k, 1] + ds * ty)
+            else:
+                c, s = math.cos(a), math.sin(a)
+                d = xy[k:] - xy[k]
+                moved[k:n + 1, 0] = xy[k, 0] + c * d[:, 0] - s * d[:, 1]
+                moved[k:n + 1, 1] = xy[k, 1] + s * d[:, 0] + c * d[:, 1]
+            got.append(ok)
+            want.append(not hits(xy, moved, k, tangent, MARGIN * MARGIN))
+    assert got == want
+    assert 20 < sum(got) < len(got) - 20  # both outcomes are exercised
