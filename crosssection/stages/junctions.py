@@ -486,6 +486,9 @@ def fork_points(centers_rc, radius_px, end_paths, end_junction, *, thickness_px:
     n_lines = np.bincount(end_junction[ok], minlength=k)
     np.add.at(a_mat, end_junction[ok], proj[ok])
     np.add.at(b_vec, end_junction[ok], np.einsum("qij,qj->qi", proj[ok], mean[ok]))
+    # lines nearly parallel (a tangential fork): their meeting point along them is where
+    # the bands' tangents, not the bands, converge
+    spread = np.linalg.eigvalsh(a_mat)[:, 0] / np.maximum(n_lines, 1)
     prior = prior_weight * np.maximum(n_lines, 1)
     a_mat += prior[:, None, None] * np.eye(2)[None]
     b_vec += prior[:, None] * centers
@@ -493,10 +496,6 @@ def fork_points(centers_rc, radius_px, end_paths, end_junction, *, thickness_px:
     radius = np.asarray(radius_px, float)
     shift = np.hypot(*(sol - centers).T)
     good = (n_lines >= 2) & (shift <= max_shift_factor * radius + thickness_px)
-    # lines nearly parallel (a tangential fork): their meeting point along them is where
-    # the bands' tangents, not the bands, converge
-    lines_only = a_mat - prior[:, None, None] * np.eye(2)[None]
-    spread = np.linalg.eigvalsh(lines_only)[:, 0] / np.maximum(n_lines, 1)
     reach = np.where(spread < PARALLEL_SPREAD,
                      np.minimum(1.0, reach_h * thickness_px / np.maximum(shift, 1e-12)), 1.0)
     out[good] = centers[good] + (sol - centers)[good] * reach[good, None]
