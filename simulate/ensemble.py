@@ -35,6 +35,7 @@ import argparse
 import json
 import math
 import time
+import warnings
 from concurrent.futures import BrokenExecutor, as_completed
 from pathlib import Path
 
@@ -45,6 +46,7 @@ from crosssection._version import __version__
 from crosssection.core.errors import ConfigError, ParameterError
 from crosssection.core.fileio import write_csv, write_json, write_npz
 from crosssection.core.parallel import get_executor, spawn_seeds
+from crosssection.quality import QualityWarning
 
 from simulate.energy import LAMBDA
 from simulate.noise import N_SEGMENTS, NOISE
@@ -63,10 +65,45 @@ VOID_COLUMNS = ["config_id", "area", "perimeter", "shape_ratio", "n_edges"]
 #: or L-BFGS quenches (:func:`simulate.optimize.anneal`), never scipy's Powell
 METHODS = {"quench": ("powell", "lbfgs", "scipy-powell"), "anneal": ("powell", "lbfgs")}
 
+#: The minimisers' own options and, per command, the methods that use them: given with another
+#: method an option would be recorded and change nothing, so it is refused
+#: (:func:`params_from_args`). L-BFGS-B has its own schedule; scipy's Powell protocol takes no
+#: nematic cut-off (:func:`simulate.optimize.scipy_protocol`).
+_POWELL = {"quench": ("powell", "scipy-powell"), "anneal": ("powell",)}
+METHOD_OPTIONS = {"--runs": _POWELL, "--maxiter": _POWELL, "--nematic-runs": _POWELL,
+                  "--u": _POWELL, "--ftol": _POWELL, "--xtol": _POWELL,
+                  "--parametrization": _POWELL, "--nematic-cutoff": {"quench": ("powell",)}}
+# the run parameters these options set (None in params.json where the method does not use them)
+_POWELL_KEYS = ("n_runs", "maxiter", "nematic_runs", "u", "ftol", "xtol")
+
+#: Nodes of start shapes drawn to check a --wall-radius before a run (:func:`wall_check`): the
+#: whole of the paper's ensemble (250 x 301, about 20 ms); a larger ensemble or a finer rod is
+#: checked on its first configurations only (at least :data:`_WALL_CHECK_MIN`), which keeps
+#: the check well under a second (0.07 s per start at N = 100000)
+_WALL_CHECK_NODES = 100_000
+_WALL_CHECK_MIN = 4
+
+
+class WallStartWarning(QualityWarning):
+    """Some start shapes leave the static hard wall (``--wall-radius``): their configurations
+    fail, the others run (:func:`wall_check`)."""
+
+
 # parameters that define the physics: a re-run into the same folder must agree on them
 _PHYSICS_KEYS = ("command", "n_segments", "lam", "noise", "seed", "method", "n_runs",
                  "maxiter", "nematic_runs", "u", "nematic_cutoff", "ftol", "xtol", "wall_radius",
                  "contact_distance", "lam_start", "stages", "ramp", "parametrization")
+
+
+def _physics_keys(params: dict) -> tuple:
+    """The parameters a re-run of a quench or anneal must agree on: the Powell protocol's only
+    for a method that uses them (whatever a folder of another method recorded of them, they
+    changed nothing)."""
+    command = params.get("command")
+    if command in _POWELL and params.get("method") not in _POWELL[command]:
+        drop = set(_POWELL_KEYS) | {"parametrization", "nematic_cutoff"}
+        return tuple(k for k in _PHYSICS_KEYS if k not in drop)
+    return _PHYSICS_KEYS
 
 
 def part_path(out, config_id: int) -> Path:
@@ -81,7 +118,9 @@ def minimize_config(xy0, params: dict, seed: int):
     ----------
     xy0 : (N+1, 2) array
     params : dict
-        Run parameters (see :func:`run_ensemble`).
+        Run parameters (see :func:`run_ensemble`); ``method`` "lbfgs" reads none of the
+        Powell protocol's (``n_runs``, ``maxiter``, ``nematic_runs``, ``u``, ``ftol``,
+        ``xtol``, ``parametrization``).
     seed : int
         Seed of the minimiser's random choices (direction resets).
 
@@ -91,24 +130,56 @@ def minimize_config(xy0, params: dict, seed: int):
     """
     from simulate import optimize
 
+    lam, wall = params["lam"], params["wall_radius"]
+    if params["method"] == "lbfgs":
+        # L-BFGS-B has its own schedule: the Powell protocol's parameters do not reach it
+        if params["command"] == "anneal":
+            return optimize.anneal(xy0, lam, lam_start=params["lam_start"],
+                                   stages=params["stages"], ramp=params["ramp"], method="lbfgs",
+                                   seed=seed, wall_radius=wall)
+        return optimize.lbfgs_quench(xy0, lam, seed=seed, wall_radius=wall)
     common = dict(seed=seed, n_runs=params["n_runs"], maxiter=params["maxiter"],
                   nematic_runs=tuple(params["nematic_runs"]), u=params["u"],
-                  ftol=params["ftol"], xtol=params["xtol"], wall_radius=params["wall_radius"],
+                  ftol=params["ftol"], xtol=params["xtol"], wall_radius=wall,
                   parametrization=params.get("parametrization") or
                   ("bend" if params["command"] == "anneal" else "tangent"))
     if params["command"] == "anneal":
-        return optimize.anneal(xy0, params["lam"], lam_start=params["lam_start"],
+        return optimize.anneal(xy0, lam, lam_start=params["lam_start"],
                                stages=params["stages"], ramp=params["ramp"],
                                method=params["method"], **common)
     if params["method"] == "powell":
-        return optimize.powell_protocol(xy0, params["lam"],
-                                        contact_cutoff=params.get("nematic_cutoff"), **common)
-    if params["method"] == "lbfgs":
-        return optimize.lbfgs_quench(xy0, params["lam"], seed=seed,
-                                     wall_radius=params["wall_radius"])
+        return optimize.powell_protocol(xy0, lam, contact_cutoff=params.get("nematic_cutoff"),
+                                        **common)
     if params["method"] == "scipy-powell":
-        return optimize.scipy_protocol(xy0, params["lam"], **common)
+        return optimize.scipy_protocol(xy0, lam, **common)
     raise ParameterError(f"unknown method {params['method']!r}")
+
+
+def _streams(seed: int):
+    """The two independent streams of one configuration's seed: its start shape's and its
+    minimiser's."""
+    return np.random.SeedSequence(seed).spawn(2)
+
+
+def start_shape(seed: int, n_segments: int, noise: float) -> np.ndarray:
+    """The start shape of the configuration whose seed is ``seed``.
+
+    Parameters
+    ----------
+    seed : int
+        The configuration's seed (``spawn_seeds(ensemble seed, K)[i]`` for configuration i).
+    n_segments : int
+    noise : float
+        Noise amplitude D.
+
+    Returns
+    -------
+    (N+1, 2) array
+        As :func:`simulate.noise.initial_shape`, centre of mass at the origin.
+    """
+    from simulate.noise import initial_shape
+
+    return initial_shape(n_segments, noise, seed=np.random.default_rng(_streams(seed)[0]))
 
 
 def run_config(config_id: int, seed: int, params: dict, out: str) -> int:
@@ -120,11 +191,9 @@ def run_config(config_id: int, seed: int, params: dict, out: str) -> int:
         ``config_id`` (the part file holds the results).
     """
     from simulate.contacts import analyze_rod
-    from simulate.noise import initial_shape
 
-    shape_ss, opt_ss = np.random.SeedSequence(seed).spawn(2)
-    xy0 = initial_shape(params["n_segments"], params["noise"], seed=np.random.default_rng(shape_ss))
-    opt_seed = int(opt_ss.generate_state(1, dtype=np.uint32)[0])
+    xy0 = start_shape(seed, params["n_segments"], params["noise"])
+    opt_seed = int(_streams(seed)[1].generate_state(1, dtype=np.uint32)[0])
     t0 = time.perf_counter()
     res = minimize_config(xy0, params, opt_seed)
     wall_s = time.perf_counter() - t0
@@ -280,9 +349,11 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
     params : dict
         ``command`` ("quench" or "anneal"), ``n_configs``, ``n_segments``, ``lam``, ``noise``,
         ``seed``, ``method``, ``n_runs``, ``maxiter``, ``nematic_runs``, ``u``, ``ftol``,
-        ``xtol``, ``wall_radius``, ``contact_distance``, optionally ``nematic_cutoff`` (quench
-        with Powell: the distance within which segments touch for the nematic term, units of
-        L; absent or None: one segment), and for anneal ``lam_start``, ``stages``, ``ramp``.
+        ``xtol`` (the Powell protocol's: None for lbfgs, which does not use them, nor does a
+        re-run of lbfgs compare them), ``wall_radius``, ``contact_distance``, optionally
+        ``nematic_cutoff`` (quench with Powell: the distance within which segments touch for
+        the nematic term, units of L; absent or None: one segment), and for anneal
+        ``lam_start``, ``stages``, ``ramp``.
     out : path
         Output folder.
     workers : int
@@ -315,7 +386,7 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
             old = json.loads(pfile.read_text())
         except (OSError, json.JSONDecodeError) as exc:
             raise ConfigError(f"unreadable params.json ({exc})", path=pfile) from None
-        diff = [k for k in (_PHYSICS_KEYS if physics_keys is None else physics_keys)
+        diff = [k for k in (_physics_keys(params) if physics_keys is None else physics_keys)
                 if json.dumps(old.get(k)) != json.dumps(params.get(k))]
         if diff:
             raise ConfigError("output folder holds a different ensemble (parameters differ: "
@@ -392,29 +463,35 @@ def _add_common(p, command):
     p.add_argument("--seed", type=int, default=0, help="ensemble seed (default 0)")
     p.add_argument("--method", choices=METHODS[command], default=METHODS[command][0],
                    help=f"minimiser (default {METHODS[command][0]} = the paper's protocol)")
-    p.add_argument("--runs", type=int, default=N_RUNS,
-                   help=f"Powell runs per configuration (default {N_RUNS})")
-    p.add_argument("--maxiter", type=int, default=MAXITER,
-                   help=f"iterations per Powell run (default {MAXITER})")
+    # the Powell protocol's options default to None, resolved to the protocol's defaults in
+    # params_from_args: so a method that does not use them can tell the ones the user gave
+    powell = "with --method " + " or ".join(_POWELL[command])
+    p.add_argument("--runs", type=int, default=None,
+                   help=f"Powell runs per configuration (default {N_RUNS}; {powell})")
+    p.add_argument("--maxiter", type=int, default=None,
+                   help=f"iterations per Powell run (default {MAXITER}; {powell})")
     p.add_argument("--parametrization", choices=["tangent", "bend"], default=None,
                    help="Powell search coordinates (default: tangent for quench = the "
-                        "prototype's statistics; bend for anneal = winds into the spiral)")
+                        "prototype's statistics; bend for anneal = winds into the spiral; "
+                        f"{powell})")
     nematic = ",".join(map(str, NEMATIC_RUNS))
-    p.add_argument("--nematic-runs", type=str, default=nematic,
+    p.add_argument("--nematic-runs", type=str, default=None,
                    help="comma-separated Powell runs (0-based) with the nematic term "
-                        f"(default {nematic})")
-    p.add_argument("--u", type=float, default=NEMATIC_U,
-                   help=f"nematic strength u, dimensionless, 50-150 (default {NEMATIC_U:g})")
+                        f"(default {nematic}; {powell})")
+    p.add_argument("--u", type=float, default=None,
+                   help=f"nematic strength u, dimensionless, 50-150 (default {NEMATIC_U:g}; "
+                        f"{powell})")
     p.add_argument("--nematic-cutoff", type=float, default=None,
                    help="distance within which two segments touch for the nematic term, in "
                         "units of L (quench with --method powell; default one segment, 1/N)")
-    p.add_argument("--ftol", type=float, default=FTOL,
-                   help=f"Powell ftol (default {FTOL:g}, scipy's)")
-    p.add_argument("--xtol", type=float, default=XTOL,
-                   help=f"Powell xtol (default {XTOL:g}, scipy's)")
+    p.add_argument("--ftol", type=float, default=None,
+                   help=f"Powell ftol (default {FTOL:g}, scipy's; {powell})")
+    p.add_argument("--xtol", type=float, default=None,
+                   help=f"Powell xtol (default {XTOL:g}, scipy's; {powell})")
     p.add_argument("--wall-radius", type=float, default=None,
-                   help="hard-wall disk radius in units of L, above half a segment 1/(2N) "
-                        "(default: none)")
+                   help="hard-wall disk radius in units of L, above half a segment 1/(2N); "
+                        "the wall stops the rod but does not compress it, so a start shape "
+                        "must fit inside (default: none)")
     p.add_argument("--contact-distance", type=float, default=None,
                    help="contact cut-off of the analysis (units of L; default contacts')")
     p.add_argument("--workers", type=int, default=1, help="local worker processes (default 1)")
@@ -445,40 +522,72 @@ def _finite(name, value, *, low=None, low_open=False, allow_none=False):
     return v
 
 
+def _unused_options(args) -> list:
+    """The minimiser options (:data:`METHOD_OPTIONS`) given on the command line that the
+    chosen method does not use, in the table's order."""
+    return [opt for opt, users in METHOD_OPTIONS.items()
+            if getattr(args, opt[2:].replace("-", "_")) is not None
+            and args.method not in users.get(args.command, ())]
+
+
+def _unused_error(args, unused) -> ParameterError:
+    """The error naming the options ``unused`` and the methods that take them."""
+    def users(command):
+        return [m for m in METHODS[command]
+                if any(m in METHOD_OPTIONS[o].get(command, ()) for o in unused)]
+
+    where = (f"--method {' or '.join(users(args.command))}" if users(args.command) else
+             " and ".join(f"{c} --method {' or '.join(users(c))}" for c in METHODS if users(c)))
+    one = len(unused) == 1
+    return ParameterError(f"{', '.join(unused)} {'has' if one else 'have'} no effect on "
+                          f"{args.command} --method {args.method}: "
+                          f"{'it is an option' if one else 'they are options'} of {where}")
+
+
 def params_from_args(args) -> dict:
     """The parameter dict of :func:`run_ensemble` from parsed CLI arguments, every value
-    checked (finite, in range, whole where it must be) before anything is written."""
-    try:
-        nem = [int(x) for x in str(args.nematic_runs).split(",") if x.strip()]
-    except ValueError:
-        raise ParameterError(f"--nematic-runs must be integers, got {args.nematic_runs!r}")
+    checked (finite, in range, whole where it must be) before anything is written.
+
+    The Powell protocol's options (:data:`METHOD_OPTIONS`, None when not given) are resolved
+    to their defaults for the methods that use them and recorded as None for the others; a
+    method refuses those it does not use when they are given.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        Parsed ``quench`` or ``anneal`` arguments.
+
+    Returns
+    -------
+    dict
+
+    Raises
+    ------
+    ParameterError
+        An absurd value, or an option the chosen method does not use (one line naming it).
+    """
+    unused = _unused_options(args)
+    if unused:
+        raise _unused_error(args, unused)
     for name, v, low in (("--n-configs", args.n_configs, 1), ("--segments", args.segments, 3),
-                         ("--runs", args.runs, 1), ("--maxiter", args.maxiter, 1),
                          ("--seed", args.seed, 0), ("--workers", args.workers, 1)):
         if v < low:
             raise ParameterError(f"{name} must be >= {low}, got {v}")
     if args.segments > 100_000 or args.n_configs > 10_000_000:
         raise ParameterError("--segments must be <= 100000 and --n-configs <= 10000000")
-    if any(k < 0 or k >= args.runs - 1 for k in nem):
-        runs = (f"runs 0..{args.runs - 2} of the --runs {args.runs}" if args.runs > 1 else
-                f"no run: --runs {args.runs} has only the last")
-        raise ParameterError(f"--nematic-runs must name {runs}: the nematic term must not be "
-                             f"used in the last run (paper), got {args.nematic_runs!r} "
-                             "(--nematic-runs '' for none)")
     params = dict(command=args.command, n_configs=args.n_configs, n_segments=args.segments,
                   lam=_finite("--lambda", args.lam, low=0.0),
                   noise=_finite("--noise", args.noise, low=0.0), seed=args.seed,
-                  method=args.method, n_runs=args.runs, maxiter=args.maxiter,
-                  nematic_runs=nem, u=_finite("--u", args.u, low=0.0),
+                  method=args.method,
                   nematic_cutoff=_finite("--nematic-cutoff", args.nematic_cutoff, low=0.0,
                                          low_open=True, allow_none=True),
-                  ftol=_finite("--ftol", args.ftol, low=0.0, low_open=True),
-                  xtol=_finite("--xtol", args.xtol, low=0.0, low_open=True),
                   wall_radius=_finite("--wall-radius", args.wall_radius, low=0.0, low_open=True,
                                       allow_none=True),
                   contact_distance=_finite("--contact-distance", args.contact_distance, low=0.0,
                                            low_open=True, allow_none=True),
-                  parametrization=args.parametrization)
+                  parametrization=args.parametrization, **dict.fromkeys(_POWELL_KEYS))
+    if args.method in _POWELL[args.command]:
+        params.update(_powell_params(args))
     wall, half = params["wall_radius"], 0.5 / args.segments
     if wall is not None and wall <= half:
         # a segment is a straight chord 1/N long: a disk no wider holds it only as its
@@ -486,9 +595,6 @@ def params_from_args(args) -> dict:
         raise ParameterError(f"--wall-radius must be above half a segment 1/(2N) = {half:.3g} "
                              f"(a disk no wider than one segment cannot hold the rod), got "
                              f"{args.wall_radius!r}")
-    if params["nematic_cutoff"] is not None and (args.command != "quench"
-                                                 or args.method != "powell"):
-        raise ParameterError("--nematic-cutoff applies to quench with --method powell")
     if args.command == "anneal":
         if args.stages < 1:
             raise ParameterError(f"--stages must be >= 1, got {args.stages}")
@@ -501,10 +607,90 @@ def params_from_args(args) -> dict:
     return params
 
 
+def _powell_params(args) -> dict:
+    """The Powell protocol's run parameters (``n_runs``, ``maxiter``, ``nematic_runs``,
+    ``u``, ``ftol``, ``xtol``) from ``args``, each option not given at its default."""
+    def given(value, default):
+        return default if value is None else value
+
+    runs, maxiter = given(args.runs, N_RUNS), given(args.maxiter, MAXITER)
+    nematic = given(args.nematic_runs, ",".join(map(str, NEMATIC_RUNS)))
+    try:
+        nem = [int(x) for x in str(nematic).split(",") if x.strip()]
+    except ValueError:
+        raise ParameterError(f"--nematic-runs must be integers, got {nematic!r}") from None
+    for name, v in (("--runs", runs), ("--maxiter", maxiter)):
+        if v < 1:
+            raise ParameterError(f"{name} must be >= 1, got {v}")
+    if any(k < 0 or k >= runs - 1 for k in nem):
+        which = (f"runs 0..{runs - 2} of the --runs {runs}" if runs > 1 else
+                 f"no run: --runs {runs} has only the last")
+        raise ParameterError(f"--nematic-runs must name {which}: the nematic term must not be "
+                             f"used in the last run (paper), got {nematic!r} "
+                             "(--nematic-runs '' for none)")
+    return dict(n_runs=runs, maxiter=maxiter, nematic_runs=nem,
+                u=_finite("--u", given(args.u, NEMATIC_U), low=0.0),
+                ftol=_finite("--ftol", given(args.ftol, FTOL), low=0.0, low_open=True),
+                xtol=_finite("--xtol", given(args.xtol, XTOL), low=0.0, low_open=True))
+
+
 def check_out(out) -> None:
     """Refuse an empty ``--out`` (it would write into the current folder)."""
     if not str(out).strip():
         raise ParameterError("empty path: give the output folder", "--out")
+
+
+def _round_up(x: float, digits: int = 3) -> str:
+    """``x`` rounded up to ``digits`` significant digits: a radius that holds what ``x`` does."""
+    step = 10.0 ** (math.floor(math.log10(x)) - digits + 1)
+    return f"{math.ceil(x / step) * step:.{digits}g}"
+
+
+def wall_check(params: dict) -> str | None:
+    """Check the start shapes against the static hard wall ``params["wall_radius"]``.
+
+    A start that leaves the wall makes its configuration fail (the wall stops the rod, it
+    does not compress it: :func:`simulate.optimize.powell_protocol`). The start shapes of the
+    first configurations are drawn as :func:`run_config` draws them: all of them when they
+    hold at most :data:`_WALL_CHECK_NODES` nodes together (the paper's ensemble), else the
+    first ones within that budget (at least :data:`_WALL_CHECK_MIN`), so the check stays well
+    under a second.
+
+    Parameters
+    ----------
+    params : dict
+        Run parameters (see :func:`run_ensemble`).
+
+    Returns
+    -------
+    str or None
+        The warning when some of the drawn starts do not fit (their configurations will fail,
+        the others run); None when all fit or there is no wall.
+
+    Raises
+    ------
+    ParameterError
+        None of the drawn starts fits: the message gives the smallest radius that holds one.
+    """
+    if params.get("wall_radius") is None:
+        return None
+    wall = float(params["wall_radius"])
+    n, nodes = int(params["n_configs"]), int(params["n_segments"]) + 1
+    k = min(n, max(_WALL_CHECK_MIN, _WALL_CHECK_NODES // nodes))
+    radii = np.array([np.max(np.hypot(*start_shape(s, params["n_segments"], params["noise"]).T))
+                      for s in spawn_seeds(params["seed"], k)])
+    starts = f"{k} start shapes" if k == n else f"first {k} start shapes (of {n})"
+    outside = int(np.count_nonzero(radii > wall))
+    if outside == k:
+        raise ParameterError(f"--wall-radius {wall!r} holds none of the {starts}: the hard wall "
+                             f"stops the rod but does not compress it, a start must fit "
+                             f"inside; the smallest radius that holds one is "
+                             f"{_round_up(radii.min())}, half of them fit within "
+                             f"{_round_up(float(np.median(radii)))}")
+    if outside:
+        return (f"--wall-radius {wall!r}: {outside} of the {starts} leave the hard-wall disk, "
+                f"their configurations will fail (all fit within {_round_up(radii.max())})")
+    return None
 
 
 def run(args) -> int:
@@ -512,8 +698,11 @@ def run(args) -> int:
     check_out(args.out)
     try:
         params = params_from_args(args)
+        doubt = wall_check(params)
     except ParameterError as exc:
         raise ParameterError(exc.cause, args.out) from None
+    if doubt:
+        warnings.warn(f"{args.out}: {doubt}", WallStartWarning, stacklevel=2)
     tables = run_ensemble(params, args.out, workers=args.workers, scheduler=args.scheduler,
                           progress=args.progress)
     c = tables["configs"]
@@ -535,6 +724,7 @@ def add_subparser(sub):
 
 
 __all__ = ["run_ensemble", "report_failures", "run_config", "assemble", "minimize_config",
-           "add_subparser", "check_out",
+           "add_subparser", "check_out", "start_shape", "wall_check", "WallStartWarning",
+           "METHOD_OPTIONS",
            "analysis_records", "write_part",
            "CONFIG_COLUMNS", "BRANCH_COLUMNS", "VOID_COLUMNS"]

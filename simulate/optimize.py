@@ -246,7 +246,8 @@ def lbfgs_quench(xy0, lam: float, *, seed=None, barrier: float = 0.1,
     maxiter : int
         L-BFGS-B iterations per start.
     wall_radius : float, optional
-        Hard-wall disk; trials outside get the energy 1e30.
+        Hard-wall disk (centred at the origin), holding the start; trials outside are
+        rejected.
     restarts : int
         Maximum L-BFGS-B restarts after an abnormal line-search stop.
     gtol : float
@@ -257,6 +258,11 @@ def lbfgs_quench(xy0, lam: float, *, seed=None, barrier: float = 0.1,
     QuenchResult
         ``stats`` holds evaluations, iterations, restarts, rejected (crossing) trials and the
         final barrier energy.
+
+    Raises
+    ------
+    ParameterError
+        The start intersects itself or leaves the hard-wall disk.
     """
     from scipy.optimize import minimize
 
@@ -266,6 +272,9 @@ def lbfgs_quench(xy0, lam: float, *, seed=None, barrier: float = 0.1,
     xy0 = np.asarray(xy0, dtype=np.float64)
     if has_intersection_grid(np.ascontiguousarray(xy0)):
         raise ParameterError("the initial configuration intersects itself")
+    if wall_radius is not None and np.max(np.hypot(xy0[:, 0], xy0[:, 1])) > wall_radius:
+        # every trial would be rejected and the start returned, outside the wall
+        raise ParameterError("the initial configuration leaves the hard-wall disk")
     n = xy0.shape[0] - 1
     ds = 1.0 / n
     sigma = 0.4 * ds if barrier_range is None else float(barrier_range)

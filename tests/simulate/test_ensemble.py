@@ -8,8 +8,10 @@ import pytest
 from crosssection.core.errors import ConfigError
 from simulate import ensemble
 
-ARGS = ["--n-configs", "3", "--segments", "60", "--lambda", "2e4", "--noise", "300",
-        "--runs", "2", "--maxiter", "3", "--nematic-runs", "0", "--no-progress"]
+BASE = ["--n-configs", "3", "--segments", "60", "--lambda", "2e4", "--noise", "300",
+        "--no-progress"]
+# a short Powell protocol (lbfgs takes none of these options)
+ARGS = [*BASE, "--runs", "2", "--maxiter", "3", "--nematic-runs", "0"]
 
 
 def _run(argv):
@@ -102,12 +104,16 @@ def test_refuses_different_parameters(first, tmp_path):
         _run(["quench", *ARGS, "--seed", "99", "--out", str(out)])
 
 
-@pytest.mark.parametrize("command,extra", [("quench", ["--method", "lbfgs"]),
-                                           ("quench", ["--parametrization", "bend"]),
-                                           ("anneal", ["--stages", "3", "--lambda-start", "500"])])
-def test_other_methods(command, extra, first, tmp_path):
+@pytest.mark.parametrize("command,argv", [("quench", [*BASE, "--method", "lbfgs"]),
+                                          ("quench", [*ARGS, "--parametrization", "bend"]),
+                                          ("anneal", [*ARGS, "--stages", "3",
+                                                      "--lambda-start", "500"]),
+                                          ("anneal", [*BASE, "--stages", "2",
+                                                      "--lambda-start", "500",
+                                                      "--method", "lbfgs"])])
+def test_other_methods(command, argv, first, tmp_path):
     out = tmp_path / "m"
-    assert _run([command, *ARGS, "--seed", "11", *extra, "--out", str(out)]) == 0
+    assert _run([command, *argv, "--seed", "11", "--out", str(out)]) == 0
     c = pd.read_csv(out / "configs.csv")
     rods = np.load(out / "rods.npz")
     from simulate.intersect import has_intersection
@@ -118,6 +124,29 @@ def test_other_methods(command, extra, first, tmp_path):
     assert not np.allclose(c.energy_total, _configs(first).energy_total)
     params = json.loads((out / "params.json").read_text())
     assert params["command"] == command
+    # the record holds what the minimiser used: L-BFGS-B takes no Powell parameter
+    powell = {k: params[k] for k in ("n_runs", "maxiter", "nematic_runs", "u", "ftol", "xtol")}
+    if "lbfgs" in argv:
+        assert set(powell.values()) == {None}
+    else:
+        assert powell == dict(n_runs=2, maxiter=3, nematic_runs=[0], u=100.0, ftol=1e-4,
+                              xtol=1e-4)
+
+
+def test_a_folder_of_lbfgs_resumes_whatever_it_recorded_of_powell(first, tmp_path):
+    """L-BFGS-B's rods do not depend on the Powell protocol's parameters: a folder that
+    recorded them (None or values) is the same ensemble."""
+    out = tmp_path / "l"
+    argv = ["quench", *BASE, "--method", "lbfgs", "--seed", "11", "--out", str(out)]
+    assert _run(argv) == 0
+    pfile = out / "params.json"
+    params = json.loads(pfile.read_text())
+    pfile.write_text(json.dumps({**params, "n_runs": 10, "maxiter": 30, "u": 100.0}))
+    stamp = (out / "parts" / "config_00000.npz").stat().st_mtime_ns
+    assert _run(argv) == 0
+    assert (out / "parts" / "config_00000.npz").stat().st_mtime_ns == stamp  # resumed
+    with pytest.raises(ConfigError, match="seed"):
+        _run([*argv[:-4], "--seed", "12", "--out", str(out)])
 
 
 def test_cli_quench_stderr_holds_no_progress_bar_when_not_a_terminal(tmp_path):

@@ -186,3 +186,137 @@ def test_the_options_defaults_are_those_of_the_functions_they_reach():
     assert (c.segments, c.noise, c.max_iter, c.wall_rate) == (
         CompactParams.n_segments, CompactParams.noise, CompactParams.max_iter,
         CompactParams.rate)
+
+
+@pytest.mark.parametrize("argv, named, where", [
+    (["quench", "--method", "lbfgs", "--maxiter", "100"], "--maxiter",
+     "it is an option of --method powell or scipy-powell"),
+    # given at its default value, an option is still given: it would still do nothing
+    (["quench", "--method", "lbfgs", "--runs", "10"], "--runs", None),
+    (["quench", "--method", "lbfgs", "--nematic-runs", ""], "--nematic-runs", None),
+    (["quench", "--method", "lbfgs", "--u", "50"], "--u", None),
+    (["quench", "--method", "lbfgs", "--ftol", "1e-3"], "--ftol", None),
+    (["quench", "--method", "lbfgs", "--xtol", "1e-3"], "--xtol", None),
+    (["quench", "--method", "lbfgs", "--parametrization", "bend"], "--parametrization", None),
+    (["quench", "--method", "lbfgs", "--maxiter", "5", "--u", "50"], "--maxiter, --u", None),
+    (["quench", "--method", "scipy-powell", "--nematic-cutoff", "0.05"], "--nematic-cutoff",
+     "it is an option of --method powell"),
+    (["anneal", "--method", "lbfgs", "--runs", "3"], "--runs",
+     "it is an option of --method powell"),
+    (["anneal", "--method", "lbfgs", "--parametrization", "tangent"], "--parametrization",
+     None),
+    (["anneal", "--nematic-cutoff", "0.05"], "--nematic-cutoff",
+     "it is an option of quench --method powell"),
+])
+def test_an_option_the_method_does_not_use_is_refused(tmp_path, capsys, argv, named, where):
+    """Accepted, it would be recorded in params.json and change nothing."""
+    from simulate.cli import main
+
+    out = tmp_path / "out"
+    method = argv[argv.index("--method") + 1] if "--method" in argv else "powell"
+    status = main([*argv, "--n-configs", "1", "--segments", "40", "--no-progress",
+                   "--out", str(out)])
+    err = capsys.readouterr().err
+    assert status == 2 and err.count("\n") == 1, err
+    verb = "has" if "," not in named else "have"
+    assert err.startswith(f"error: {out}: {named} {verb} no effect on {argv[0]} --method "
+                          f"{method}: "), err
+    assert where is None or err.endswith(f"{where}\n"), err
+    assert not out.exists()
+
+
+def test_the_help_shows_the_defaults_the_protocol_options_resolve_to():
+    """The Powell options are None until resolved (so lbfgs can tell the given ones): their
+    help still gives the values the protocol runs with."""
+    from simulate.cli import build_parser
+    from simulate.optimize import FTOL, MAXITER, N_RUNS, NEMATIC_U, XTOL
+
+    sub = build_parser(["quench"])._subparsers._group_actions[0].choices["quench"]
+    text = " ".join(sub.format_help().split())
+    for default in (f"(default {N_RUNS};", f"(default {MAXITER};", "(default 1,2;",
+                    f"(default {NEMATIC_U:g};", f"(default {FTOL:g}, scipy's;",
+                    f"(default {XTOL:g}, scipy's;"):
+        assert default in text, default
+
+
+def _start_radii(n_configs, n_segments, noise, seed):
+    """Largest node distance from the origin of every configuration's start shape."""
+    from crosssection.core.parallel import spawn_seeds
+    from simulate.ensemble import start_shape
+
+    return np.array([np.max(np.hypot(*start_shape(s, n_segments, noise).T))
+                     for s in spawn_seeds(seed, n_configs)])
+
+
+@pytest.mark.parametrize("method", ["powell", "lbfgs"])
+def test_a_wall_that_holds_no_start_is_refused_before_any_configuration_runs(tmp_path, capsys,
+                                                                             method):
+    from simulate.cli import main
+
+    radii = _start_radii(3, 40, 750.0, 5)
+    wall = float(0.9 * radii.min())
+    out = tmp_path / "out"
+    status = main(["quench", "--method", method, "--n-configs", "3", "--segments", "40",
+                   "--seed", "5", "--wall-radius", repr(wall), "--no-progress",
+                   "--out", str(out)])
+    err = capsys.readouterr().err
+    assert status == 2 and err.count("\n") == 1, err
+    assert err.startswith(f"error: {out}: --wall-radius {wall!r} holds none of the 3 start "
+                          "shapes"), err
+    # the radius it names holds one start, and is the smallest to 3 digits
+    smallest = float(err.split("the smallest radius that holds one is ")[1].split(",")[0])
+    assert radii.min() <= smallest <= radii.min() * 1.01
+    assert not out.exists()
+
+
+def test_a_wall_that_holds_some_starts_warns_and_runs_those(tmp_path, capsys):
+    import pandas as pd
+
+    from simulate.cli import main
+
+    radii = _start_radii(4, 40, 750.0, 5)
+    wall = float(np.sort(radii)[1:3].mean())  # two starts fit, two do not
+    out = tmp_path / "out"
+    status = main(["quench", "--n-configs", "4", "--segments", "40", "--seed", "5",
+                   "--runs", "1", "--nematic-runs", "", "--maxiter", "1",
+                   "--wall-radius", repr(wall), "--no-progress", "--out", str(out)])
+    lines = capsys.readouterr().err.splitlines()
+    assert status == 3
+    said = [line for line in lines if "start shapes" in line]
+    assert len(said) == 1 and said[0].startswith(
+        f"warning: {out}: --wall-radius {wall!r}: 2 of the 4 start shapes leave the hard-wall "
+        "disk, their configurations will fail (all fit within "), lines
+    holds_all = float(said[0].rsplit(" ", 1)[1].rstrip(")"))
+    assert radii.max() <= holds_all <= radii.max() * 1.01
+    assert sum("failed: ParameterError" in line for line in lines) == 2 == len(lines) - 1
+    failed = pd.read_csv(out / "failures.csv")
+    assert sorted(failed.config_id) == sorted(np.flatnonzero(radii > wall))
+    # the check drew the starts the configurations run from
+    from simulate.ensemble import part_path
+
+    for i in np.flatnonzero(radii <= wall):
+        with np.load(part_path(out, i)) as z:
+            assert np.max(np.hypot(*z["xy0"].T)) == radii[i]
+
+
+def test_the_wall_check_draws_the_first_starts_of_a_large_ensemble():
+    """Every start of the paper's ensemble is checked; of a larger one, the first ones."""
+    from simulate.ensemble import wall_check
+
+    paper = dict(n_configs=250, n_segments=300, noise=750.0, seed=1, wall_radius=0.45)
+    msg = wall_check(paper)
+    assert msg.startswith("--wall-radius 0.45: ") and " of the 250 start shapes " in msg
+    big = wall_check({**paper, "n_configs": 10**6})
+    assert f" of the first {100_000 // 301} start shapes (of 1000000) " in big
+    assert wall_check({**paper, "wall_radius": 1.0}) is None
+    assert wall_check({**paper, "wall_radius": None}) is None
+
+
+def test_lbfgs_refuses_a_start_outside_the_wall():
+    """Every trial would be rejected: the start would come back, outside the wall."""
+    from crosssection.core.errors import ParameterError
+    from simulate.optimize import lbfgs_quench
+
+    xy0 = initial_shape(20, 300.0, seed=1)
+    with pytest.raises(ParameterError, match="leaves the hard-wall disk"):
+        lbfgs_quench(xy0, 1e3, wall_radius=0.9 * np.max(np.hypot(*xy0.T)))
