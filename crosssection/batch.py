@@ -27,9 +27,23 @@ Design choices
   its output folder and renames it into place when complete. A killed worker leaves at most a
   staging folder, which the next run removes; an output folder is therefore always complete.
   ``summary.json`` carries ``batch.params_hash``; an image whose folder holds a summary with
-  the same hash (and ``overlay.png`` when figures are wanted) is skipped on a re-run.
+  the same hash, its four tables readable with their schema's columns (their header lines
+  are read) and ``overlay.png`` when figures are wanted is skipped on a re-run.
 - The parameters hash covers the resolved analysis parameters, the SHA-256 of the image and
-  of the calibration file, and the package version: changing any of them redoes the image.
+  of the calibration file, and the package version: changing any of them redoes the image,
+  which replaces its earlier results. A re-run that redoes images for this reason says so
+  in one ``warning:`` line naming what differs (the parameters, the package version, or the
+  files' content); a re-run with the same options is silent.
+- ``OUT_DIR`` belongs to one input folder: it must be new, empty, or hold an earlier batch of
+  the same ``INPUT_DIR`` (which the batch resumes). The batch of another input folder, or
+  files that no batch wrote, are refused before anything is written, as is a ``--scheduler``
+  that cannot be reached. ``OUT_DIR`` may lie inside ``INPUT_DIR``.
+- Symbolic links: a link to an image is analysed like a file, named by the link's own path
+  in ``INPUT_DIR`` (its set, its ``[images]`` table and its output folder are those of
+  where the link lies, not of its target); a broken link is a failed image. A link to a
+  folder is not searched, and is named in a ``warning:`` line: it may lead back into its
+  own tree, to scans the batch already holds, or out of ``INPUT_DIR``; run a batch on its
+  target, or link its scans one by one.
 - Failures never stop the batch: a corrupt or non-RGB image, an analysis error, a bad
   ``set.toml`` or a missing calibration fail only the images concerned, each with a one-line
   reason in ``failures.csv``. A worker process that dies (crash, out-of-memory kill) is
@@ -54,6 +68,7 @@ import traceback
 from collections import deque
 from concurrent.futures import FIRST_COMPLETED, wait
 from concurrent.futures.process import BrokenProcessPool
+from contextlib import ExitStack
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -61,9 +76,9 @@ import pandas as pd
 
 from crosssection._version import __version__
 from crosssection.core import schema
-from crosssection.core.errors import ConfigError, FoldstatError, ParameterError
-from crosssection.core.fileio import (PARTIAL_TAG, clear_stale_folders, staging_folder,
-                                      swap_in_folder, write_csv, write_json)
+from crosssection.core.errors import ConfigError, FoldstatError, ImageError, ParameterError
+from crosssection.core.fileio import (PARTIAL_TAG, clear_stale_folders, read_json_object,
+                                      staging_folder, swap_in_folder, write_csv, write_json)
 from crosssection.core.parallel import compiling_in_turn, get_executor, spawn_seeds
 from crosssection.params import (PARAM_NAMES, AnalysisParams, add_analysis_arguments,
                                  check_param, switched_off)
@@ -114,6 +129,10 @@ def find_images(input_dir, *, exclude=()) -> list[Path]:
     """Image files under ``input_dir`` (recursive, sorted; hidden files and folders skipped,
     and foldstat's output folders, :func:`is_output_folder`).
 
+    A symbolic link to an image is an image, named by its own path (a broken one is listed
+    too: the batch records it as a failed image). A symbolic link to a folder is not searched
+    (:func:`_walk_scans` says why).
+
     Parameters
     ----------
     input_dir : str or Path
@@ -124,18 +143,51 @@ def find_images(input_dir, *, exclude=()) -> list[Path]:
     -------
     list of Path
     """
+    return _walk_scans(input_dir, exclude=exclude)[0]
+
+
+def _walk_scans(input_dir, *, exclude=()) -> tuple[list[Path], list[Path]]:
+    """:func:`find_images`, and the symbolic links to folders met on the way.
+
+    Linked folders are not followed: one may lead back into its own tree (a loop), to scans
+    the batch already holds (each analysed twice, under two names) or out of the input
+    folder, which the batch's output would then no longer describe. The batch names them in
+    a warning; a linked folder's scans are analysed as a batch of their own, or linked one
+    by one.
+
+    Returns
+    -------
+    images : list of Path
+        Sorted by their path relative to ``input_dir``.
+    linked_folders : list of Path
+        Sorted.
+    """
     root = Path(input_dir).resolve()
     excluded = [Path(e).resolve() for e in exclude]
-    found = []
+    found, linked = [], []
     for dirpath, dirnames, filenames in os.walk(root):
         here = Path(dirpath)
-        dirnames[:] = sorted(d for d in dirnames if not d.startswith(".")
-                             and (here / d).resolve() not in excluded
-                             and not is_output_folder(here / d))
+        keep = []
+        for d in sorted(dirnames):
+            if d.startswith(".") or (here / d).resolve() in excluded:
+                continue
+            if (here / d).is_symlink():
+                linked.append(here / d)
+            elif not is_output_folder(here / d):
+                keep.append(d)
+        dirnames[:] = keep
         for fn in filenames:
             if not fn.startswith(".") and fn.lower().endswith(IMAGE_SUFFIXES):
                 found.append(here / fn)
-    return sorted(found, key=lambda p: p.relative_to(root).as_posix())
+    return sorted(found, key=lambda p: p.relative_to(root).as_posix()), sorted(linked)
+
+
+def _broken_link(image: Path) -> str | None:
+    """The one-line reason of an image that is a symbolic link to nothing, else None."""
+    if image.is_symlink() and not image.exists():
+        return ImageError(f"symbolic link to {os.readlink(image)}, which cannot be found",
+                          image).one_line()
+    return None
 
 
 def _sha256(path, chunk=1 << 20) -> str:
@@ -252,7 +304,7 @@ def plan_batch(input_dir, out_dir, *, cli_params: dict | None = None, seed: int 
     given = check_params(cli_params or {}, Path.cwd() / "command line",
                          origin="--calibration")
     defaults.update(given)
-    images = find_images(root, exclude=[out])
+    images, linked_folders = _walk_scans(root, exclude=[out])
     if not images:
         raise ConfigError(f"no image ({', '.join(IMAGE_SUFFIXES)}) found", root)
 
@@ -283,10 +335,10 @@ def plan_batch(input_dir, out_dir, *, cli_params: dict | None = None, seed: int 
         cfg = set_of(img.parent)
         rel = img.relative_to(root).as_posix()
         out_rel = f"{_set_folder(cfg.name)}/{_safe_component(img.stem)}"
-        params = {} if cfg.error else cfg.params_for(img)
+        params = {} if cfg.error else _params_in_set(cfg, img)
         tasks.append(ImageTask(image=str(img), rel=rel, set_name=cfg.name, out_dir="",
                                out_rel=out_rel, params=params, seed=task_seed,
-                               figure=figure, error=cfg.error))
+                               figure=figure, error=cfg.error or _broken_link(img)))
     _unique_out_rels(tasks)
     for t in tasks:
         t.out_dir = str(out / t.out_rel)
@@ -296,13 +348,37 @@ def plan_batch(input_dir, out_dir, *, cli_params: dict | None = None, seed: int 
             except FoldstatError as exc:
                 t.error = exc.one_line()
                 continue
+            try:
+                image_sha = _sha256(t.image)
+            except OSError as exc:
+                t.error = ImageError(f"cannot read ({exc.strerror or type(exc).__name__})",
+                                     t.image).one_line()
+                continue
             # the analysis is deterministic: the seed is recorded, not hashed, so adding
             # images (which shifts the spawned seeds) does not redo those already complete
-            t.params_hash = params_hash(resolved, _sha256(t.image))
-    if any(t.set_name == DEFAULT_SET_NAME and t.error is None for t in tasks):
-        sets.setdefault("<no set.toml>", default_set)
+            t.params_hash = params_hash(resolved, image_sha)
     default_set.warnings.extend(_unused_calibrations(tasks))
+    default_set.warnings.extend(
+        f"{d}: a symbolic link to a folder, not searched: run a batch on the folder it "
+        f"links to, or link its scans one by one" for d in linked_folders)
+    # the batch's own warnings (not any set's) ride with the default set, listed even when
+    # no scan lies outside a set
+    if default_set.warnings or any(t.set_name == DEFAULT_SET_NAME and t.error is None
+                                   for t in tasks):
+        sets.setdefault("<no set.toml>", default_set)
     return tasks, sets
+
+
+def _params_in_set(cfg: SetConfig, image: Path) -> dict:
+    """Parameters of one scan of a set: the set's, updated by the override table of the
+    scan's path in the set folder.
+
+    The path is taken as it is, links not followed (unlike :meth:`SetConfig.params_for`):
+    a linked scan belongs to the folder holding the link and is named by it, wherever its
+    target lies.
+    """
+    rel = image.relative_to(cfg.folder).as_posix()
+    return {**cfg.params, **cfg.overrides.get(rel, {})}
 
 
 def loose_calibration(image, calibration) -> Path | None:
@@ -410,25 +486,90 @@ def process_image(task: ImageTask) -> dict:
             shutil.rmtree(staging, ignore_errors=True)
 
 
-def completed_row(task: ImageTask) -> dict | None:
-    """The index row of an image already done with the same parameters hash, else None."""
-    final = Path(task.out_dir)
+def _recorded_info(task: ImageTask) -> dict | None:
+    """The ``summary.json`` of the image's output folder when it holds a ``batch`` record,
+    else None (no folder, no summary, an unreadable one, or one ``analyze`` wrote)."""
     try:
-        summary = json.loads((final / "summary.json").read_text())
+        summary = json.loads((Path(task.out_dir) / "summary.json").read_text())
     except (OSError, ValueError):
         return None
-    info = summary.get("batch") or {}
+    if not isinstance(summary, dict) or not isinstance(summary.get("batch"), dict):
+        return None
+    return summary
+
+
+def _table_readable(path: Path, name: str) -> bool:
+    """Whether ``path`` is a CSV file whose header holds the columns of table ``name``
+    (the header line only: a re-run checks every image's tables)."""
+    try:
+        schema.check_table(name, pd.read_csv(path, nrows=0))
+    except (OSError, ValueError):  # missing, unreadable, empty, malformed, wrong columns
+        return False
+    return True
+
+
+def completed_row(task: ImageTask) -> dict | None:
+    """The index row of an image already done with the same parameters hash, else None.
+
+    Done means: its ``summary.json`` records this hash, ``overlay.png`` is there when figures
+    are wanted, and every table of :data:`crosssection.core.schema.TABLES` is readable with
+    its schema's columns (a table deleted, emptied or overwritten since, by hand or by a disk
+    that filled up, has the image redone rather than ``stats`` refuse the batch).
+    """
+    summary = _recorded_info(task)
+    if summary is None:
+        return None
+    final = Path(task.out_dir)
+    info = summary["batch"]
     if info.get("params_hash") != task.params_hash:
         return None
     if task.figure and not (final / "overlay.png").is_file():
         return None
-    # a table deleted or emptied since (by hand, or a disk that filled up) is redone
-    if any(not (final / f"{name}.csv").is_file() or (final / f"{name}.csv").stat().st_size == 0
-           for name in schema.TABLES):
+    if not all(_table_readable(final / f"{name}.csv", name) for name in schema.TABLES):
         return None
     row = _row(task, "skipped", summary, wall_s=info.get("wall_s", math.nan))
     row["seed"] = info.get("seed", task.seed)  # the seed the image was analysed with
     return row
+
+
+def _resolved_params(params) -> dict | None:
+    """``params`` with every default filled in (:meth:`AnalysisParams.to_dict`), so that a
+    value given and the same value by default compare equal; None if they are not valid
+    (a record written by another version)."""
+    try:
+        return AnalysisParams.from_mapping(params or {}).to_dict()
+    except (FoldstatError, TypeError, ValueError):
+        return None
+
+
+def changed_inputs(task: ImageTask) -> list[str]:
+    """What differs between the image's recorded analysis and the one the task would run.
+
+    Parameters
+    ----------
+    task : ImageTask
+
+    Returns
+    -------
+    list of str
+        The names of the analysis parameters that differ, ``"package version"``, or, when
+        neither does, ``"image or calibration file content"``; empty when the output folder
+        records no analysis, or one with the task's parameters hash.
+    """
+    summary = _recorded_info(task)
+    if summary is None or task.error:
+        return []
+    info = summary["batch"]
+    if not info.get("params_hash") or info["params_hash"] == task.params_hash:
+        return []
+    before, after = _resolved_params(info.get("params")), _resolved_params(task.params)
+    if before is None or after is None:
+        before, after = info.get("params") or {}, task.params
+    changed = [k for k in dict.fromkeys([*after, *before])
+               if before.get(k) != after.get(k)]
+    if info.get("version") != __version__:
+        changed.append("package version")
+    return changed or ["image or calibration file content"]
 
 
 # --------------------------------------------------------------------------- driver
@@ -453,6 +594,47 @@ def _executor_slots(ex, workers: int) -> int:
         except Exception:  # noqa: BLE001
             return 64
     return max(1, 2 * workers)
+
+
+def check_out_dir(input_dir, out_dir) -> None:
+    """Refuse an output folder that a batch of ``input_dir`` must not write into.
+
+    ``out_dir`` may be missing (it is created), empty, or hold an earlier batch of the same
+    input folder (which the batch resumes). It may lie inside the input folder.
+
+    Parameters
+    ----------
+    input_dir, out_dir : str or Path
+
+    Raises
+    ------
+    ParameterError
+        Naming ``out_dir``: it holds the batch of another input folder (whose outputs the
+        new batch would mix with its own and leave out of its index), or files that are no
+        batch's (a folder of scans, a report, a simulation).
+    ConfigError
+        Its ``batch.json`` cannot be read.
+    """
+    out = Path(out_dir)
+    if not out.is_dir():
+        return  # created (a file in the way is named when it is)
+    record = out / "batch.json"
+    if record.is_file():
+        recorded = read_json_object(record).get("input_dir")
+        if recorded is not None and Path(recorded) != Path(input_dir).resolve():
+            raise ParameterError(f"holds the batch of another input folder ({recorded}): "
+                                 "give another --out", out)
+        return
+    names = sorted(p.name for p in out.iterdir())
+    if names:
+        # a file browser's own files do not make a folder someone else's
+        from crosssection.stats.report import BROWSER_FILES
+
+        names = [n for n in names if n not in BROWSER_FILES]
+    if names:
+        raise ParameterError(f"neither empty nor a batch's output (it holds {names[0]}): give "
+                             "a new or empty --out, or the one of an earlier batch of this "
+                             "input", out)
 
 
 def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | None = None,
@@ -490,31 +672,20 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
     ------
     ConfigError
         The input folder does not exist or holds no image.
+    ParameterError
+        ``out_dir`` holds another input folder's batch or files no batch wrote
+        (:func:`check_out_dir`), or the Dask scheduler cannot be reached. Nothing is
+        written then.
     """
     from tqdm.auto import tqdm
 
     t_start = time.time()
     out = Path(out_dir)
     tasks, sets = plan_batch(input_dir, out, cli_params=cli_params, seed=seed, figure=figure)
-    out.mkdir(parents=True, exist_ok=True)
-    meta = {
-        "package": "foldstat", "version": __version__, "python": sys.version.split()[0],
-        "input_dir": str(Path(input_dir).resolve()), "out_dir": str(out.resolve()),
-        "workers": workers, "scheduler": scheduler, "seed": seed, "figure": figure,
-        "force": force, "cli_params": cli_params or {},
-        "sets": {k: {"name": s.name, "folder": str(s.folder),
-                     "source": None if s.source is None else str(s.source),
-                     "params": s.params, "overrides": s.overrides, "error": s.error,
-                     "warnings": s.warnings} for k, s in sets.items()},
-        "n_images": len(tasks), "started": time.strftime("%Y-%m-%dT%H:%M:%S"),
-    }
-    for s in sets.values():
-        for w in s.warnings:
-            print(f"warning: {w}", file=sys.stderr)
-    write_json(out / "batch.json", meta)
+    check_out_dir(input_dir, out)
 
     rows: dict[str, dict] = {}
-    todo = []
+    todo, redone = [], {}
     # local worker processes share one numba disk cache: on an empty one, the first to
     # compile does so for all, the output folder being their lock (a cluster's workers do not
     # share this disk, and threads must not wait inside numba's compiler)
@@ -527,8 +698,23 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
         done = None if force else completed_row(t)
         if done is not None:
             rows[t.rel] = done
-        else:
-            todo.append(replace(t, compile_lock=lock))
+            continue
+        todo.append(replace(t, compile_lock=lock))
+        if not force:
+            for what in changed_inputs(t):
+                redone.setdefault(what, set()).add(t.rel)
+
+    # the executor before any write: a scheduler that cannot be reached is refused with
+    # nothing left behind (an empty batch would read as a finished one)
+    pool = ExitStack()
+    ex = pool.enter_context(get_executor(workers, scheduler))
+    try:
+        meta = _start(out, input_dir, tasks, sets, redone, {
+            "workers": workers, "scheduler": scheduler, "seed": seed, "figure": figure,
+            "force": force, "cli_params": cli_params or {}})
+    except BaseException:
+        pool.close()
+        raise
 
     bar = tqdm(total=len(tasks), initial=len(rows), unit="img", desc="batch",
                disable=None if progress is None else not progress,
@@ -538,7 +724,10 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
     queue, suspects = deque(todo), deque()
     try:
         while queue or suspects:
-            with get_executor(workers, scheduler) as ex:
+            if ex is None:  # the previous pool broke
+                pool = ExitStack()
+                ex = pool.enter_context(get_executor(workers, scheduler))
+            with pool:
                 slots = _executor_slots(ex, workers or os.cpu_count() or 1)
                 inflight, broken = {}, False
                 while True:
@@ -580,7 +769,9 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
                     if time.monotonic() - last_write > INDEX_EVERY_S:
                         _write_tables(out, rows, tasks)
                         last_write = time.monotonic()
+            ex = None
     finally:
+        pool.close()  # the first pool, when no image was left to analyse
         bar.close()
         index = _write_tables(out, rows, tasks)
         counts = index["status"].value_counts().to_dict()
@@ -590,6 +781,51 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
                     complete=len(index) == len(tasks))
         write_json(out / "batch.json", meta)
     return index
+
+
+def _start(out: Path, input_dir, tasks, sets, redone: dict, options: dict) -> dict:
+    """Create ``out``, print the batch's warnings and write its ``batch.json``.
+
+    Parameters
+    ----------
+    out : Path
+    input_dir : str or Path
+    tasks : list of ImageTask
+    sets : dict
+        As returned by :func:`plan_batch`.
+    redone : dict
+        What differs from the recorded analysis (:func:`changed_inputs`) -> the images
+        concerned.
+    options : dict
+        The options of :func:`run_batch` the record keeps (workers, scheduler, seed, figure,
+        force, cli_params).
+
+    Returns
+    -------
+    dict
+        The record written.
+    """
+    out.mkdir(parents=True, exist_ok=True)
+    meta = {
+        "package": "foldstat", "version": __version__, "python": sys.version.split()[0],
+        "input_dir": str(Path(input_dir).resolve()), "out_dir": str(out.resolve()),
+        **options,
+        "sets": {k: {"name": s.name, "folder": str(s.folder),
+                     "source": None if s.source is None else str(s.source),
+                     "params": s.params, "overrides": s.overrides, "error": s.error,
+                     "warnings": s.warnings} for k, s in sets.items()},
+        "n_images": len(tasks), "started": time.strftime("%Y-%m-%dT%H:%M:%S"),
+    }
+    for s in sets.values():
+        for w in s.warnings:
+            print(f"warning: {w}", file=sys.stderr)
+    if redone:
+        n = len(set().union(*redone.values()))
+        print(f"warning: {out}: {n} image{'s' if n > 1 else ''} analysed again: "
+              f"{'their' if n > 1 else 'its'} parameters differ from the recorded ones "
+              f"({', '.join(redone)}); the earlier results are replaced", file=sys.stderr)
+    write_json(out / "batch.json", meta)
+    return meta
 
 
 # --------------------------------------------------------------------------- CLI
@@ -602,11 +838,14 @@ def add_subparser(sub):
         description="Analyse every image (png, tif, tiff, jpg, jpeg; recursive) under "
                     "INPUT_DIR into OUT_DIR/<set>/<image stem>/. A folder with a set.toml is "
                     "a set; finished images are skipped on a re-run; bad images are listed in "
-                    "OUT_DIR/failures.csv and the batch goes on.")
+                    "OUT_DIR/failures.csv and the batch goes on. A symbolic link to a scan is "
+                    "analysed under its own name; a link to a folder is not searched (a "
+                    "warning names it).")
     p.add_argument("input_dir", metavar="INPUT_DIR",
                    help="folder of scans (searched recursively; a folder with set.toml is a set)")
     p.add_argument("--out", required=True, metavar="OUT_DIR",
-                   help="output folder (created; finished images are skipped on a re-run)")
+                   help="output folder: new, empty, or an earlier batch of the same INPUT_DIR "
+                        "(finished images are skipped on a re-run)")
     p.add_argument("--workers", type=int, default=None,
                    help="local worker processes (default: all cores; 1 runs inline)")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
@@ -665,5 +904,5 @@ def run(args) -> int:
     return EXIT_SOME_FAILED if n_failed else 0
 
 
-__all__ = ["run_batch", "plan_batch", "process_image", "completed_row", "find_images",
-           "params_hash", "ImageTask", "add_subparser", "run"]
+__all__ = ["run_batch", "plan_batch", "process_image", "completed_row", "changed_inputs",
+           "check_out_dir", "find_images", "params_hash", "ImageTask", "add_subparser", "run"]

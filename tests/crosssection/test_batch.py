@@ -311,7 +311,13 @@ def test_scans_whose_names_merge_get_their_own_folders(tmp_path):
     assert {t.rel: t.out_rel for t in tasks}["c.png"] == "default/c"
 
 
-def test_resume_redoes_a_scan_whose_table_is_missing_or_empty(tmp_path):
+@pytest.mark.parametrize("broken", ["", "garbage\n", "id\n1\n", "\xff\xfe\x00bad",
+                                    "stack_id,junction_a\n1,2\n", None])
+def test_resume_redoes_a_scan_whose_table_is_missing_empty_or_corrupt(tmp_path, broken):
+    """A table emptied, overwritten or deleted since the image was done: the re-run redoes
+    the image (stats would refuse the whole batch for one unreadable table)."""
+    from crosssection.core.schema import TABLES
+
     inp = tmp_path / "in"
     inp.mkdir()
     (inp / "a.png").write_bytes(b"\x89PNG")
@@ -320,12 +326,13 @@ def test_resume_redoes_a_scan_whose_table_is_missing_or_empty(tmp_path):
     folder.mkdir(parents=True)
     (folder / "summary.json").write_text(json.dumps({"batch": {"params_hash":
                                                                task.params_hash}}))
-    for name in ("junctions", "stacks", "branches", "voids"):
-        (folder / f"{name}.csv").write_text("id\n")
+    for name, columns in TABLES.items():
+        (folder / f"{name}.csv").write_text(",".join(columns + ["extra"]) + "\n")
     assert B.completed_row(task)["status"] == "skipped"
-    (folder / "branches.csv").write_text("")
-    assert B.completed_row(task) is None
-    (folder / "branches.csv").unlink()
+    if broken is None:
+        (folder / "stacks.csv").unlink()
+    else:
+        (folder / "stacks.csv").write_bytes(broken.encode("latin-1"))
     assert B.completed_row(task) is None
 
 
