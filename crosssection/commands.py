@@ -7,7 +7,14 @@ and ``overlay.png`` into DIR. The analysis options are generated from
 
 ``python -m crosssection steps IMAGE [analysis options] --out DIR`` writes the step images of
 paper Fig. 2: ``step1_raw.png``, ``step2_threshold.png``, ``step3_clean.png``,
-``step4_skeleton.png`` and ``steps.png`` (the four side by side).
+``step4_skeleton.png`` and ``steps.png`` (the four side by side), and ``steps.json``: the
+parameters, the package version and the input file they were made with.
+
+A run leaves DIR describing itself alone: the files of the command that this run does not
+write (``overlay.png`` under ``--no-figure``, the step images without ``--steps``,
+``steps.png`` under ``steps --no-figure``) are removed from DIR once the new outputs are
+written. Only those names are: nothing else in DIR is touched, and a run that fails leaves
+the previous outputs whole.
 """
 from __future__ import annotations
 
@@ -15,7 +22,90 @@ import math
 import warnings
 from pathlib import Path
 
+from crosssection.core.errors import OutputError, ParameterError, output_error
 from crosssection.params import AnalysisParams, add_analysis_arguments
+
+#: the step images of paper Fig. 2, and the figure of the four side by side
+#: (:func:`crosssection.result.write_step_images`)
+STEP_IMAGES = ("step1_raw.png", "step2_threshold.png", "step3_clean.png",
+               "step4_skeleton.png")
+STEPS_FIGURE = "steps.png"
+#: the record of a ``steps`` run: parameters, version, input file
+STEPS_RECORD = "steps.json"
+OVERLAY = "overlay.png"
+#: per command, the files of its output folder that a run writes or not by its options;
+#: ``analyze`` describes the step images it writes in summary.json, so a steps.json there
+#: would describe others
+OPTIONAL_OUTPUTS = {
+    "analyze": (OVERLAY, *STEP_IMAGES, STEPS_FIGURE, STEPS_RECORD),
+    "steps": (STEPS_FIGURE,),
+}
+
+
+def check_out(path, name: str = "--out") -> None:
+    """Refuse an empty output path (``Path("")`` is the current folder, which would take the
+    outputs).
+
+    Parameters
+    ----------
+    path : str or Path
+        The output folder given.
+    name : str
+        The option or parameter that gave it (named in the error).
+
+    Raises
+    ------
+    ParameterError
+        ``path`` is empty or blank.
+    """
+    if not str(path).strip():
+        raise ParameterError("empty path: give the output folder", name)
+
+
+def remove_stale(out_dir, command: str, written) -> list[Path]:
+    """Remove the files of ``command`` in ``out_dir`` that this run did not write.
+
+    Parameters
+    ----------
+    out_dir : str or Path
+        The output folder.
+    command : str
+        ``"analyze"`` or ``"steps"`` (a key of :data:`OPTIONAL_OUTPUTS`).
+    written : iterable of Path
+        The files this run wrote.
+
+    Returns
+    -------
+    list of Path
+        The files removed (only names of :data:`OPTIONAL_OUTPUTS`; folders are left).
+
+    Raises
+    ------
+    OutputError
+        A file cannot be removed.
+    """
+    out = Path(out_dir)
+    kept = {Path(p).name for p in written}
+    removed = []
+    for name in OPTIONAL_OUTPUTS[command]:
+        path = out / name
+        if name in kept or not (path.is_file() or path.is_symlink()):
+            continue
+        try:
+            path.unlink()
+        except FileNotFoundError:
+            continue
+        except OSError as exc:
+            raise output_error(exc, path) from None
+        removed.append(path)
+    return removed
+
+
+def _removed_note(removed) -> str:
+    if not removed:
+        return ""
+    return (f" (removed {len(removed)} file(s) of an earlier run: "
+            f"{', '.join(p.name for p in removed)})")
 
 
 def add_subparser(subparsers) -> None:
@@ -26,7 +116,9 @@ def add_subparser(subparsers) -> None:
                     "procedure') and write summary.json, junctions.csv, stacks.csv, "
                     "branches.csv, voids.csv and overlay.png.")
     pa.add_argument("image", help="scan (PNG, TIFF 8/16-bit, JPEG)")
-    pa.add_argument("--out", required=True, help="output folder (created)")
+    pa.add_argument("--out", required=True,
+                    help="output folder (created; the outputs of an earlier analyze there "
+                         "that this run does not write are removed)")
     pa.add_argument("--no-figure", action="store_true", help="do not draw overlay.png")
     pa.add_argument("--steps", action="store_true",
                     help="also save the step images of paper Fig. 2")
@@ -35,9 +127,12 @@ def add_subparser(subparsers) -> None:
     ps = subparsers.add_parser(
         "steps", help="save the image-processing steps of one scan (paper Fig. 2)",
         description="Save the raw scan, the thresholded and cleaned masks and the skeleton "
-                    "with its junctions as PNG images (paper Fig. 2).")
+                    "with its junctions as PNG images (paper Fig. 2), and steps.json: the "
+                    "parameters, version and input file they were made with.")
     ps.add_argument("image", help="scan (PNG, TIFF 8/16-bit, JPEG)")
-    ps.add_argument("--out", required=True, help="output folder (created)")
+    ps.add_argument("--out", required=True,
+                    help="output folder (created; a steps.png of an earlier run there is "
+                         "removed under --no-figure)")
     ps.add_argument("--no-figure", action="store_true",
                     help="only the four single images, not the combined steps.png")
     add_analysis_arguments(ps)
@@ -48,6 +143,7 @@ def run(args) -> int:
     """``analyze``: run the pipeline and write the output folder."""
     from crosssection.pipeline import analyze
 
+    check_out(args.out)
     params = AnalysisParams.from_cli_args(args, path=args.image)
     note = set_not_read(args.image, params)
     if note:
@@ -55,26 +151,78 @@ def run(args) -> int:
 
         warnings.warn(note, QualityWarning, stacklevel=2)
     result = analyze(args.image, params)
-    result.write(Path(args.out), figure=not args.no_figure, steps=args.steps)
+    out = Path(args.out).expanduser()
+    written = result.write(out, figure=not args.no_figure, steps=args.steps)
+    removed = remove_stale(out, "analyze", written.values())
     s = result.summary
     print(f"{args.image}: {s['n_junctions']} junctions, {s['n_stacks']} stacks, "
           f"{s['n_branches']} branches, {s['n_voids']} voids, L = {s['rod_length_mm']:.1f} mm"
-          f" -> {args.out}")
+          f" -> {args.out}{_removed_note(removed)}")
     return 0
 
 
 def run_steps(args) -> int:
-    """``steps``: stages 1-6 only, then the step images."""
+    """``steps``: stages 1-6 only, then the step images and their record ``steps.json``."""
+    from crosssection.core.fileio import write_json
     from crosssection.figures import step_titles
     from crosssection.pipeline import preprocess, write_step_images
 
-    pre = preprocess(args.image, AnalysisParams.from_cli_args(args, path=args.image))
-    paths = write_step_images(args.out, pre.rgb, pre.threshold.mask, pre.mask_clean,
-                              pre.skeleton, pre.junctions.centers_rc,
-                              figure=not args.no_figure,
-                              titles=step_titles(pre.threshold.as_summary()))
-    print(f"{args.image}: {len(paths)} step images -> {args.out}")
+    check_out(args.out)
+    params = AnalysisParams.from_cli_args(args, path=args.image)
+    pre = preprocess(args.image, params)
+    out = Path(args.out).expanduser()
+    try:
+        paths = write_step_images(out, pre.rgb, pre.threshold.mask, pre.mask_clean,
+                                  pre.skeleton, pre.junctions.centers_rc,
+                                  figure=not args.no_figure,
+                                  titles=step_titles(pre.threshold.as_summary()))
+        # written last, as summary.json is: its presence marks the images complete
+        record = write_json(out / STEPS_RECORD, steps_record(pre, params, paths.values()))
+    except OutputError:
+        raise
+    except OSError as exc:
+        raise output_error(exc, out) from None
+    removed = remove_stale(out, "steps", [*paths.values(), record])
+    print(f"{args.image}: {len(paths)} step images -> {args.out}{_removed_note(removed)}")
     return 0
+
+
+def steps_record(pre, params: AnalysisParams, written) -> dict:
+    """``steps.json``: what the step images of one scan were made with.
+
+    Parameters
+    ----------
+    pre : crosssection.pipeline.Preprocessed
+        Stages 1-6 of the scan.
+    params : AnalysisParams
+        The parameters used.
+    written : iterable of Path
+        The step images written.
+
+    Returns
+    -------
+    dict
+        ``command``, ``version``, ``image`` (path, size, dtype), ``parameters`` (as in
+        summary.json, with the ``s_min_mm2`` and ``tangent_mm`` used), ``thresholds``,
+        ``hole``, ``warnings`` and ``outputs`` (the file names).
+    """
+    from crosssection._version import __version__
+
+    h, w = pre.rgb.shape[:2]
+    return {
+        "command": "steps",
+        "version": __version__,
+        "image": {"path": pre.path, "height_px": int(h), "width_px": int(w),
+                  "dtype": str(pre.rgb.dtype)},
+        "parameters": {**params.to_dict(), "s_min_mm2": params.s_min_used_mm2,
+                       "tangent_mm": params.tangent_used_mm},
+        "thresholds": pre.threshold.as_summary(),
+        "hole": {**pre.hole.as_summary(), "fitted": bool(pre.hole.fitted),
+                 "radius_mm": float(params.scale.to_mm(pre.hole.radius_px)),
+                 "confidence": pre.hole_confidence},
+        "warnings": list(pre.warnings),
+        "outputs": sorted(Path(p).name for p in written),
+    }
 
 
 def _shown(path: Path) -> Path:

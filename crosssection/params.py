@@ -360,13 +360,18 @@ def _number(name, value, *, minimum=0.0, allow_equal=False, integer=False):
     if isinstance(value, bool) or not isinstance(value, (int, float)) and \
             not hasattr(value, "__float__"):
         raise ParameterError(f"{name} must be a number, got {value!r}")
+    bound = (f" {'>=' if allow_equal else '>'} {minimum:g}" if math.isfinite(minimum)
+             else "")
     try:
         v = float(value)
     except (TypeError, ValueError):
         raise ParameterError(f"{name} must be a number, got {value!r}") from None
+    except OverflowError:
+        # an int (or Fraction) beyond the float range: its repr may run to any length
+        raise ParameterError(f"{name} must be a finite number{bound}, got a number beyond "
+                             "the floating-point range") from None
     if not math.isfinite(v) or v < minimum or (v == minimum and not allow_equal):
-        op = ">=" if allow_equal else ">"
-        raise ParameterError(f"{name} must be a finite number {op} {minimum:g}, got {value!r}")
+        raise ParameterError(f"{name} must be a finite number{bound}, got {value!r}")
     if integer:
         if v != int(v):
             raise ParameterError(f"{name} must be a whole number, got {value!r}")

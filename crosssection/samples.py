@@ -13,10 +13,11 @@ checkout (editable install) reads ``sample_images/`` next to the package.
 from __future__ import annotations
 
 import argparse
+import os
 import shutil
 from pathlib import Path
 
-from crosssection.core.errors import ConfigError
+from crosssection.core.errors import ConfigError, OutputError, ParameterError, output_error
 
 __all__ = ["samples_path", "copy_samples", "add_subparser"]
 
@@ -49,7 +50,7 @@ def copy_samples(dest, *, overwrite: bool = False) -> list[Path]:
     Parameters
     ----------
     dest : str or Path
-        Created if needed.
+        A folder, created if needed.
     overwrite : bool
         Replace files already in ``dest``; otherwise an existing file is an error and nothing
         is copied.
@@ -61,20 +62,34 @@ def copy_samples(dest, *, overwrite: bool = False) -> list[Path]:
 
     Raises
     ------
+    ParameterError
+        ``dest`` is not a path, or an empty one (the current folder would take the files).
     ConfigError
         A file to write exists (and not ``overwrite``), or the samples are missing.
+    OutputError
+        ``dest`` is a file, or a file or folder cannot be written there.
     """
+    if not isinstance(dest, (str, os.PathLike)):
+        raise ParameterError(f"dest must be a folder path, got {type(dest).__name__}")
+    if not str(dest).strip():
+        raise ParameterError("empty path: give the folder to copy the samples into", "dest")
     src = samples_path()
-    dest = Path(dest)
+    dest = Path(dest).expanduser()
+    if dest.exists() and not dest.is_dir():
+        raise OutputError("is a file, not a folder: give a folder to copy the samples into",
+                          dest)
     files = sorted(p for p in src.rglob("*") if p.is_file() and "__pycache__" not in p.parts)
     targets = [dest / p.relative_to(src) for p in files]
     if not overwrite:
         for t in targets:
             if t.exists():
                 raise ConfigError("exists already (use --force to overwrite)", t)
-    for p, t in zip(files, targets):
-        t.parent.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(p, t)
+    try:
+        for p, t in zip(files, targets):
+            t.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(p, t)
+    except OSError as exc:
+        raise output_error(exc, dest) from None
     return targets
 
 
@@ -92,8 +107,10 @@ def add_subparser(sub) -> argparse.ArgumentParser:
 
 def run(args) -> int:
     """Copy the samples and say what to run next."""
+    if not str(args.dest).strip():
+        raise ParameterError("empty path: give the folder to copy the samples into", "DIR")
     written = copy_samples(args.dest, overwrite=args.force)
-    scans = [p for p in written if p.parent == Path(args.dest)
+    scans = [p for p in written if p.parent == Path(args.dest).expanduser()
              and p.suffix in (".png", ".jpg", ".tif")]
     print(f"{len(scans)} sample scans and their truth -> {args.dest} "
           f"(next: foldstat batch {args.dest} --out batch/)")

@@ -36,7 +36,7 @@ class Calibration:
     Attributes
     ----------
     n_layers, width_mm : tuple of float
-        The table, strictly increasing in both columns.
+        The table, strictly increasing in both columns; ``n_layers`` whole numbers.
     source : str or None
         File the table was read from (named in errors).
     """
@@ -56,6 +56,13 @@ class Calibration:
             raise ConfigError("calibration contains non-numeric or missing values", where)
         if np.any(n <= 0) or np.any(w <= 0):
             raise ConfigError("calibration n_layers and width_mm must be positive", where)
+        # a stack holds whole layers, so a calibration measures whole counts: a fraction is a
+        # typing error or a shifted column (widths under n_layers)
+        frac = np.flatnonzero(n != np.round(n))
+        if len(frac):
+            i = int(frac[0])
+            raise ConfigError(f"calibration n_layers = {n[i]:g} (row {i + 1} of the table, below "
+                              "its header) is not a whole number of layers", where)
         if np.any(np.diff(n) <= 0) or np.any(np.diff(w) <= 0):
             raise ConfigError("calibration must be strictly increasing in n_layers and width_mm",
                               where)
@@ -87,7 +94,8 @@ class Calibration:
         Raises
         ------
         ConfigError
-            Missing columns, non-numeric, non-positive or non-increasing values.
+            Missing columns, non-numeric, non-positive or non-increasing values, or a
+            fractional ``n_layers``.
         """
         cols = {str(c).strip().lower(): c for c in table.columns}
         missing = [c for c in ("n_layers", "width_mm") if c not in cols]
@@ -105,8 +113,8 @@ class Calibration:
         Raises
         ------
         ConfigError
-            Missing file, missing columns, non-numeric, non-positive or non-increasing values;
-            the message names the file.
+            Missing file, missing columns, non-numeric, non-positive or non-increasing values,
+            or a fractional ``n_layers`` (its row named); the message names the file.
         """
         path = Path(path)
         try:
@@ -205,8 +213,7 @@ class Calibration:
             ``width_mm`` rounded to :data:`WIDTH_DECIMALS`.
         """
         if n_max is None:
-            n = np.asarray(self.n_layers, dtype=float)
-            n = n.astype(int) if np.all(n == np.round(n)) else n
+            n = np.asarray(self.n_layers, dtype=float).astype(int)
             w = np.asarray(self.width_mm, dtype=float)
         else:
             n = np.arange(1, int(n_max) + 1)

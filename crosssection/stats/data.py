@@ -241,6 +241,17 @@ def _analysis_summaries(folder: Path, *, hidden: bool = False):
             yield summ
 
 
+def _validation_report(folder: Path) -> ConfigError | None:
+    """The error for the report folder of ``simulate validate`` (``scores.csv`` beside its
+    ``summary.json`` of means over scenes), which holds a summary.json but no analysis; None
+    for any other folder."""
+    if not ((folder / "scores.csv").is_file() and (folder / "summary.json").is_file()):
+        return None
+    return ConfigError("is a validation report (scores.csv, summary.json of simulate "
+                       "validate), not an analysis output: give stats the analyze or batch "
+                       "outputs, or read the report's scores.csv", folder)
+
+
 def _not_an_output(folder: Path) -> ConfigError:
     """The error for a folder holding no foldstat output, saying what it holds instead
     when that is scans or generated scenes (a common mix-up: the input of ``batch``)."""
@@ -274,14 +285,17 @@ def detect_kind(folder) -> str:
     ParameterError
         ``folder`` is not a path.
     ConfigError
-        When the folder holds none of them (a folder of scans, or of generated scenes, is
-        named as such).
+        When the folder holds none of them (a folder of scans, of generated scenes, or a
+        validation report, is named as such).
     """
     folder = _folder(folder)
     if not folder.is_dir():
         raise ConfigError("not a folder", folder)
     if (folder / "configs.csv").is_file():
         return "simulation"
+    report = _validation_report(folder)
+    if report is not None:
+        raise report
     if (folder / "summary.json").is_file():
         return "image"
     if ((folder / "index.csv").is_file() or (folder / "batch.json").is_file()
@@ -379,7 +393,7 @@ def load_image_output(folder, *, set_name: str, config_id: str | None = None,
         ``folder`` is not a path, a name not a string, or a detection limit not a finite
         number >= 0.
     ConfigError
-        A file is missing or malformed.
+        A file is missing or malformed, or the folder is a validation report.
     """
     folder = _folder(folder)
     _set_name(set_name, required=True)
@@ -387,6 +401,9 @@ def load_image_output(folder, *, set_name: str, config_id: str | None = None,
     _limit(l_min_mm, "l_min_mm")
     _limit(s_min_mm2, "s_min_mm2")
     cid = config_id or folder.name
+    report = _validation_report(folder)
+    if report is not None:
+        raise report
     summary = _read_summary(folder / "summary.json")
     L = summary.get("rod_length_mm")
     if L is None or not np.isfinite(L) or L <= 0:

@@ -1,4 +1,6 @@
-"""``analyze`` names the set.toml or calibration.csv it does not read (only ``batch`` does)."""
+"""``analyze`` names the set.toml or calibration.csv it does not read (only ``batch`` does);
+``analyze`` and ``steps`` refuse an empty ``--out`` and leave their output folder describing
+the last run alone."""
 from __future__ import annotations
 
 import shutil
@@ -6,8 +8,10 @@ import shutil
 import pytest
 
 import crosssection.cli
-from crosssection.commands import set_not_read
+from crosssection.commands import (OPTIONAL_OUTPUTS, OVERLAY, STEP_IMAGES, STEPS_FIGURE,
+                                   STEPS_RECORD, remove_stale, set_not_read)
 from crosssection.params import AnalysisParams
+from crosssection.quality import QualityWarning
 from crosssection.samples import samples_path
 
 SCAN = "scan_01_sparse.png"
@@ -62,3 +66,94 @@ def test_the_cli_prints_it_as_one_warning_line(set_folder, capsys):
                                   "--no-figure", "--calibration",
                                   str(set_folder / "calibration.csv")]) == 0
     assert "set.toml" not in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------- the output folder
+
+
+@pytest.fixture(scope="module")
+def small_scan(tmp_path_factory):
+    """A generated scan of 20 stacks (399 px), written as PNG."""
+    from crosssection.truth.network import make_scene
+    from crosssection.truth.scene import write_image
+
+    path = tmp_path_factory.mktemp("scan") / "scan.png"
+    write_image(make_scene(seed=21, n_stacks=20, max_layers=3).rgb, path)
+    return path
+
+
+@pytest.mark.parametrize("command", ["analyze", "steps"])
+@pytest.mark.parametrize("out", ["", "  "])
+def test_an_empty_out_is_refused_and_nothing_is_written(small_scan, tmp_path, monkeypatch,
+                                                         capsys, command, out):
+    monkeypatch.chdir(tmp_path)
+    assert crosssection.cli.main([command, str(small_scan), "--out", out]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["error: --out: empty path: give the output folder"]
+    assert list(tmp_path.iterdir()) == []
+
+
+def _names(folder):
+    return sorted(p.name for p in folder.iterdir())
+
+
+def test_a_rerun_removes_the_outputs_it_does_not_write(small_scan, tmp_path, capsys):
+    out = tmp_path / "out"
+    main = crosssection.cli.main
+    assert main(["steps", str(small_scan), "--out", str(out)]) == 0
+    assert (out / STEPS_RECORD).is_file()
+    # the user's own files, even of names close to the outputs', stay
+    (out / "notes.txt").write_text("mine")
+    (out / "overlay.png.orig").write_text("mine")
+    assert main(["analyze", str(small_scan), "--out", str(out), "--steps"]) == 0
+    tables = {"summary.json", "junctions.csv", "stacks.csv", "branches.csv", "voids.csv"}
+    # the step images are analyze's now: the steps.json of the earlier run no longer
+    # describes them
+    assert set(_names(out)) == tables | {OVERLAY, *STEP_IMAGES, STEPS_FIGURE, "notes.txt",
+                                         "overlay.png.orig"}
+    capsys.readouterr()
+    assert main(["analyze", str(small_scan), "--out", str(out), "--no-figure"]) == 0
+    assert set(_names(out)) == tables | {"notes.txt", "overlay.png.orig"}
+    assert "removed 6 file(s) of an earlier run" in capsys.readouterr().out
+
+
+def test_steps_records_what_it_was_made_with(small_scan, tmp_path):
+    import json
+
+    from crosssection._version import __version__
+
+    out = tmp_path / "steps"
+    main = crosssection.cli.main
+    assert main(["steps", str(small_scan), "--out", str(out), "--px-per-mm", "50"]) == 0
+    record = json.loads((out / STEPS_RECORD).read_text())
+    assert record["command"] == "steps" and record["version"] == __version__
+    assert record["image"]["path"] == str(small_scan)
+    assert record["image"]["height_px"] == record["image"]["width_px"] == 399
+    assert record["parameters"]["px_per_mm"] == 50.0
+    assert record["parameters"]["thickness_mm"] == AnalysisParams().thickness_mm
+    assert record["outputs"] == sorted([*STEP_IMAGES, STEPS_FIGURE])
+    assert _names(out) == sorted([*STEP_IMAGES, STEPS_FIGURE, STEPS_RECORD])  # no temp file
+    # without the figure, the steps.png of the earlier run goes and the record says so
+    assert main(["steps", str(small_scan), "--out", str(out), "--no-figure"]) == 0
+    assert _names(out) == sorted([*STEP_IMAGES, STEPS_RECORD])
+    assert json.loads((out / STEPS_RECORD).read_text())["outputs"] == sorted(STEP_IMAGES)
+
+
+def test_the_optional_outputs_are_the_names_the_writers_use(small_scan, tmp_path):
+    from crosssection.pipeline import analyze
+
+    with pytest.warns(QualityWarning):  # no calibration
+        res = analyze(small_scan)
+    written = {p.name for p in res.write(tmp_path, figure=True, steps=True).values()}
+    assert set(OPTIONAL_OUTPUTS["analyze"]) - {STEPS_RECORD} <= written
+    steps = {p.name for p in res.write_steps(tmp_path / "s").values()}
+    assert steps == {*STEP_IMAGES, STEPS_FIGURE} and set(OPTIONAL_OUTPUTS["steps"]) <= steps
+
+
+def test_remove_stale_leaves_folders_and_other_names(tmp_path):
+    (tmp_path / OVERLAY).mkdir()
+    (tmp_path / STEPS_FIGURE).write_text("old")
+    (tmp_path / "summary.json").write_text("{}")
+    removed = remove_stale(tmp_path, "analyze", [tmp_path / "summary.json"])
+    assert removed == [tmp_path / STEPS_FIGURE]
+    assert _names(tmp_path) == sorted([OVERLAY, "summary.json"])

@@ -71,6 +71,18 @@ def test_a_hole_too_small_for_a_rod_is_a_parameter_error(scan):
         cs.analyze(scan, **KW, hole_radius_mm=0.01, hole_center_px=(200.0, 200.0))
 
 
+@pytest.mark.parametrize("name, value", [("px_per_mm", 10 ** 400), ("px_per_mm", -10 ** 400),
+                                         ("smooth_px", 10 ** 400),
+                                         ("hole_center_px", (10 ** 400, 5.0))],
+                         ids=["px_per_mm", "negative", "smooth_px", "hole_center_px"])
+def test_a_number_beyond_the_float_range_is_a_parameter_error(scan, name, value):
+    with pytest.raises(ParameterError) as err:
+        cs.analyze(scan, **{**KW, name: value})
+    msg = err.value.one_line()
+    assert msg.startswith(name) and msg.endswith("got a number beyond the floating-point range")
+    assert len(msg) < 120 and "-inf" not in msg  # not the number's 400 digits
+
+
 def test_params_given_as_text_is_a_parameter_error(scan):
     with pytest.raises(ParameterError, match="AnalysisParams or a dict"):
         cs.analyze(scan, "px_per_mm=50")

@@ -9,6 +9,7 @@ import pytest
 import crosssection.cli
 import simulate.cli
 from crosssection import console
+from crosssection.core.errors import FoldstatError, ParameterError
 from crosssection.samples import copy_samples, samples_path
 
 
@@ -135,3 +136,35 @@ def test_python_m_crosssection_analyze_does_not_import_stats_or_simulator():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout.strip()
     assert out == "[]"
+
+
+def test_samples_into_a_file_or_an_empty_path_is_one_line(tmp_path, capsys, monkeypatch):
+    a_file = tmp_path / "set.toml"
+    a_file.write_text("x")
+    assert console.main(["samples", str(a_file)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"error: {a_file}: is a file, not a folder: give a folder to copy the "
+                   "samples into"]
+    with pytest.raises(FoldstatError, match="is a file, not a folder"):
+        copy_samples(a_file)
+    monkeypatch.chdir(tmp_path)
+    assert console.main(["samples", ""]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["error: DIR: empty path: give the folder to copy the samples into"]
+    with pytest.raises(ParameterError, match="empty path"):
+        copy_samples("")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["set.toml"]
+
+
+def test_python_m_crosssection_offers_samples(tmp_path, capsys):
+    from crosssection.__main__ import build_parser, main
+
+    names = set(_subparsers(build_parser(["--help"])).choices)
+    assert names == {*crosssection.cli.SUBCOMMANDS, "samples"}
+    assert build_parser(["samples"]).prog == crosssection.cli.build_parser(["analyze"]).prog
+    assert main(["samples", str(tmp_path / "in_process")]) == 0
+    assert (tmp_path / "in_process" / "set.toml").is_file()
+    run = subprocess.run([sys.executable, "-m", "crosssection", "samples", str(tmp_path / "s")],
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0 and run.stderr == "", run.stderr
+    assert (tmp_path / "s" / "set.toml").is_file() and "5 sample scans" in run.stdout

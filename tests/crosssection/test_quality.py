@@ -75,6 +75,44 @@ def test_implausible_epsilon_is_flagged(scene):
     assert "packing" in res.summary["quality"]["codes"]
 
 
+def test_a_given_rod_length_far_from_the_measured_one_is_flagged(scene):
+    # 1 mm for a rod of about 87 mm: no packing nor ink check sees it, epsilon is 0.03
+    res, caught = _analyze(scene.rgb, **_given(scene, rod_length_mm=1.0))
+    assert "rod_length" in res.summary["quality"]["codes"]
+    flag = next(f for f in res.quality if f.code == "rod_length")
+    assert flag.value == pytest.approx(1.0 / res.summary["rod_length_mm"])
+    assert flag.limit == 1 / quality.ROD_LENGTH_FACTOR
+    assert any(w.category is quality.NetworkWarning and "rod length given, L = 1 mm" in
+               str(w.message) for w in caught)
+
+
+def test_the_true_rod_length_given_is_not_flagged(scene):
+    res, caught = _analyze(scene.rgb, **_given(scene, rod_length_mm=scene.params["rod_length_mm"]))
+    assert res.summary["quality"]["ok"] and caught == []
+    # nor on a scan cut through the hole, which measures only a part of the rod
+    rgb, centre = _cut_left(scene, 0.3)
+    res, _ = _analyze(rgb, **_given(scene, hole_center_px=centre,
+                                    rod_length_mm=scene.params["rod_length_mm"]))
+    assert res.summary["rod_length_mm"] < 0.95 * scene.params["rod_length_mm"]
+    assert res.summary["quality"]["codes"] == ["hole_cut"]
+
+
+@pytest.mark.parametrize("ratio, flagged", [(0.49, True), (0.51, False), (1.0, False),
+                                            (1.99, False), (2.01, True), (25.4, True)])
+def test_a_given_rod_length_may_differ_by_a_factor_two(ratio, flagged):
+    from types import SimpleNamespace
+
+    from crosssection.params import AnalysisParams
+
+    params = AnalysisParams(px_per_mm=50.0, thickness_mm=0.1, rod_length_mm=100.0 * ratio)
+    hole = SimpleNamespace(radius_px=50.0 * 200)  # a hole far too large for packing
+    flags = quality._rod_checks(params, hole, 100.0 * ratio, 100.0, 0.0)
+    assert [f.code for f in flags] == (["rod_length"] if flagged else [])
+    # measured only (no L given): the L used is the measured one, nothing to compare
+    unset = AnalysisParams(px_per_mm=50.0, thickness_mm=0.1)
+    assert quality._rod_checks(unset, hole, 100.0, 100.0 * ratio, 0.0) == []
+
+
 def test_wrong_scale_is_flagged_by_the_ink_area(scene):
     # a calibration twice too narrow doubles every layer count: L h no longer matches the ink
     cal = scene.calibration.to_frame()

@@ -187,6 +187,29 @@ def test_from_csv_ok_and_errors(tmp_path):
     assert "missing.csv" in ei.value.one_line()
 
 
+def test_fractional_layer_counts_are_refused_naming_the_row(tmp_path):
+    p = tmp_path / "half.csv"
+    p.write_text("# measured on the test sheet\nn_layers,width_mm\n1,0.14\n1.5,0.2\n2,0.26\n")
+    with pytest.raises(ConfigError) as ei:
+        Calibration.from_csv(p)
+    assert ei.value.one_line() == (f"{p}: calibration n_layers = 1.5 (row 2 of the table, "
+                                   "below its header) is not a whole number of layers")
+    with pytest.raises(ConfigError, match="row 1 of the table"):
+        Calibration((0.5, 1, 2), (0.05, 0.1, 0.2))
+
+
+def test_the_cli_refuses_fractional_layer_counts_in_one_line(tmp_path, capsys):
+    from crosssection.cli import main
+    from crosssection.samples import samples_path
+
+    cal = tmp_path / "cal.csv"
+    cal.write_text("n_layers,width_mm\n1,0.14\n1.5,0.2\n2,0.26\n3,0.37\n")
+    assert main(["analyze", str(samples_path() / "scan_05_16bit.tif"), "--calibration",
+                 str(cal), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"error: {cal}: ") and "row 2" in err[0]
+
+
 def test_single_row_is_proportional():
     cal = Calibration((1,), (0.12,))
     np.testing.assert_allclose(cal.layers([0.06, 0.24]), [0.5, 2.0])

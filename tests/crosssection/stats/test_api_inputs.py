@@ -16,7 +16,8 @@ from crosssection.quality import QualityWarning
 from crosssection.stats import (Ensemble, StatsOptions, bootstrap_ci, cli, compute_stats, demo,
                                 detect_kind, fit_all, fit_family, goodness_of_fit, load_any,
                                 load_report, plot_pdf, select_model, truncation_bias)
-from crosssection.stats.data import BRANCH_COLS, load_inputs
+from crosssection.cli import main as cli_main
+from crosssection.stats.data import BRANCH_COLS, load_image_output, load_inputs
 from crosssection.stats.fits import bootstrap_draws
 
 G = stats.gamma(0.5, scale=2).rvs(200, random_state=1)
@@ -371,6 +372,23 @@ def test_a_folder_of_scans_is_not_a_batch(tmp_path):
     assert load_any(b).sets == ["s1"]
     (b / "index.csv").unlink()  # found by its summaries alone
     assert sorted(load_any(b).configs["config_id"]) == ["img000", "img001"]
+
+
+def test_a_validation_report_is_named_as_such(sample_dir, tmp_path, capsys):
+    from simulate.validate import validate_scenes
+
+    report = tmp_path / "V"
+    with warnings.catch_warnings():  # the scans' own quality is not what is tested
+        warnings.simplefilter("ignore")
+        validate_scenes(sample_dir / "scenes", report, progress=False)
+    assert (report / "scores.csv").is_file() and (report / "summary.json").is_file()
+    for load in (load_any, lambda f: load_image_output(f, set_name="v")):
+        with pytest.raises(ConfigError) as err:
+            load(report)
+        assert err.value.one_line().startswith(f"{report}: is a validation report")
+    assert cli_main(["stats", str(report), "--out", str(tmp_path / "r")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "is a validation report" in err[0] and "rod_length" not in err[0]
 
 
 def test_the_sample_scans_are_not_a_batch(sample_dir):
