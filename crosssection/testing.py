@@ -271,8 +271,14 @@ def _check_positive(name: str, value) -> None:
     """Refuse ``value`` unless it is a finite number > 0."""
     from crosssection.core.errors import ParameterError
 
-    if not (isinstance(value, numbers.Real) and not isinstance(value, bool)
-            and math.isfinite(value) and value > 0):
+    if not isinstance(value, numbers.Real) or isinstance(value, bool):
+        raise ParameterError(f"{name} must be a finite number > 0, got {value!r}")
+    try:
+        ok = math.isfinite(value) and value > 0
+    except OverflowError:  # an int beyond the float range: its repr may run to any length
+        raise ParameterError(f"{name} must be a finite number > 0, got a number beyond the "
+                             "floating-point range") from None
+    if not ok:
         raise ParameterError(f"{name} must be a finite number > 0, got {value!r}")
 
 

@@ -45,6 +45,8 @@ def test_generated_scan_refuses_bad_arguments(args, message):
     ({"px_per_mm": 0}, "px_per_mm must be a finite number > 0, got 0"),
     ({"px_per_mm": "50"}, "px_per_mm must be a finite number > 0, got '50'"),
     ({"px_per_mm": float("nan")}, "px_per_mm must be a finite number > 0, got nan"),
+    ({"px_per_mm": 10 ** 400}, "px_per_mm must be a finite number > 0, got a number beyond "
+                               "the floating-point range"),
     ({"n_stacks": 0}, "n_stacks must be a whole number in 10-300, got 0"),
     ({"n_stacks": -5}, "n_stacks must be a whole number in 10-300, got -5"),
     ({"n_stacks": 1000}, "n_stacks must be a whole number in 10-300, got 1000"),
