@@ -8,12 +8,20 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import signal
 import sys
+import threading
 import warnings
+from contextlib import contextmanager
 
 from crosssection._version import __version__
 from crosssection.core.errors import FoldstatError
 from crosssection.quality import QualityWarning
+
+#: exit status of a command stopped by SIGINT (Ctrl-C), and by SIGTERM (128 + signal number, as
+#: a shell reports a process killed by the signal)
+INTERRUPTED = 130
+TERMINATED = 128 + int(signal.SIGTERM)
 
 # subcommand -> module providing add_subparser(subparsers)
 SUBCOMMANDS = {
@@ -53,16 +61,63 @@ def make_parser(prog: str, description: str, subcommands: dict,
     return parser
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM received while a command runs (:func:`sigterm_as_interrupt`).
+
+    A ``KeyboardInterrupt``, so that whatever stops cleanly on Ctrl-C (a pool's workers
+    terminated, atomic writes left whole, a batch's index written) stops the same way when a
+    job runner or ``kill`` ends the command.
+    """
+
+
+@contextmanager
+def sigterm_as_interrupt():
+    """Raise :class:`Terminated` in the main thread on SIGTERM inside the block.
+
+    The handler is the command line's, not the library's: it is installed here, only in the
+    main thread (the only one that may set handlers), and the previous handler is put back on
+    leaving, so that calling ``main(argv)`` in a process leaves its signal handling as it was.
+
+    Yields
+    ------
+    list
+        The signal numbers received (empty unless SIGTERM arrived).
+    """
+    received = []
+    if threading.current_thread() is not threading.main_thread():
+        yield received
+        return
+
+    def handler(signum, frame):
+        received.append(signum)
+        raise Terminated()
+
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield received
+    finally:
+        # None: a handler set outside Python, which cannot be put back; the default is closest
+        signal.signal(signal.SIGTERM, signal.SIG_DFL if previous is None else previous)
+
+
 def run_parsed(parser: argparse.ArgumentParser, argv=None) -> int:
     """Parse ``argv`` and run the chosen subcommand.
 
     Returns the exit status: 0 success, 2 bad input (one line naming the file and the cause),
-    3 a batch finished with some images failed, 130 interrupted (re-running resumes; stats leaves its report as it was),
-    1 unexpected error (one line, never a traceback). Quality warnings are printed as
-    ``warning: FILE: ...`` lines on stderr.
+    3 a batch finished with some images failed, 130 interrupted (SIGINT) and 143 terminated
+    (SIGTERM) (re-running resumes; stats leaves its report as it was), 1 unexpected error
+    (one line, never a traceback). Quality warnings are printed as ``warning: FILE: ...``
+    lines on stderr.
     """
-    args = parser.parse_args(argv)
+    with sigterm_as_interrupt() as received:
+        status = _run_parsed(parser, argv)
+        # a command that reports its own interrupt (stats) returns INTERRUPTED
+        return TERMINATED if received and status == INTERRUPTED else status
+
+
+def _run_parsed(parser: argparse.ArgumentParser, argv=None) -> int:
     try:
+        args = parser.parse_args(argv)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             status = int(args.func(args) or 0)
@@ -79,9 +134,12 @@ def run_parsed(parser: argparse.ArgumentParser, argv=None) -> int:
             why = f"{why}: a file is in the way of a folder (give another --out)"
         print(f"error: {where}: {why}", file=sys.stderr)
         return 2
+    except Terminated:
+        print("error: terminated (re-run the same command to resume)", file=sys.stderr)
+        return TERMINATED
     except KeyboardInterrupt:
         print("error: interrupted (re-run the same command to resume)", file=sys.stderr)
-        return 130
+        return INTERRUPTED
     except Exception as exc:  # noqa: BLE001 - last resort: one line, never a traceback
         print(f"error: unexpected {type(exc).__name__}: {' '.join(str(exc).split())}",
               file=sys.stderr)

@@ -1127,7 +1127,8 @@ def add_subparser(sub):
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
                    help="progress bar on stderr (default: only when stderr is a terminal)")
     p.add_argument("--out", required=True,
-                   help="output folder (created; a re-run with the same parameters resumes)")
+                   help="output folder (created; a re-run with the same parameters resumes; "
+                        "a folder holding other files is refused)")
     p.set_defaults(func=run, command="compact")
 
 

@@ -32,11 +32,15 @@ total energy 31 (paper 61), branch energy 0.62 (0.31), branch length 1.26 (0.4).
 from __future__ import annotations
 
 import argparse
+import errno
 import json
 import math
+import os
+import re
 import time
 import warnings
 from concurrent.futures import BrokenExecutor, as_completed
+from contextlib import nullcontext
 from pathlib import Path
 
 import numpy as np
@@ -44,7 +48,7 @@ import pandas as pd
 
 from crosssection._version import __version__
 from crosssection.core.errors import ConfigError, ParameterError
-from crosssection.core.fileio import write_csv, write_json, write_npz
+from crosssection.core.fileio import BROWSER_FILES, write_csv, write_json, write_npz
 from crosssection.core.parallel import get_executor, spawn_seeds
 from crosssection.quality import QualityWarning
 
@@ -321,6 +325,73 @@ def assemble(out, n_configs: int, columns=None, failed=None) -> dict:
     return {"configs": configs, "branches": branches, "voids": voids, "stacks": stacks}
 
 
+#: The files of an ensemble's output folder (:func:`run_ensemble`, :func:`assemble`), beside
+#: its ``parts/`` folder of ``config_XXXXX.npz`` files
+OUTPUT_FILES = frozenset({"params.json", "configs.csv", "branches.csv", "voids.csv",
+                          "stacks.csv", "rods.npz", "failures.csv"})
+#: a part file, or the leftover temporary file of its atomic write
+_PART_NAME = re.compile(r"config_\d{5,}\.npz|\.config_\d{5,}\.npz\..+")
+
+
+def _own_file(name: str, own) -> bool:
+    """Whether ``name`` is one of ``own`` or the leftover temporary file of an atomic write of
+    one (``.<name>.<random><suffix>``, :func:`crosssection.core.fileio.atomic_path`)."""
+    return name in own or (name.startswith(".") and
+                           any(name.startswith(f".{k}.") for k in own))
+
+
+def _foreign_entry(folder: Path) -> str | None:
+    """The first entry of ``folder`` that no ensemble writes, or None."""
+    for p in sorted(folder.iterdir()):
+        name = p.name
+        if name in BROWSER_FILES:
+            continue
+        if name == "parts" and p.is_dir() and not p.is_symlink():
+            for f in sorted(p.iterdir()):
+                if f.name in BROWSER_FILES:
+                    continue
+                if not (f.is_file() and _PART_NAME.fullmatch(f.name)):
+                    return f"parts/{f.name}"
+            continue
+        if p.is_file() and _own_file(name, OUTPUT_FILES):
+            continue
+        return name
+    return None
+
+
+def check_out_folder(out, command: str) -> None:
+    """Refuse an output folder that holds anything but an ensemble's files.
+
+    ``out`` may be missing (it is created), empty, or hold an earlier run's output, which a
+    re-run with the same parameters resumes (:func:`run_ensemble` compares them). Files of
+    another kind (a batch's index, scans) would end up beside the ensemble's tables, and
+    ``stats`` reading the folder would take it for an ensemble and ignore the rest.
+
+    Parameters
+    ----------
+    out : path
+    command : str
+        The command writing the folder (named in the message).
+
+    Raises
+    ------
+    FileExistsError
+        ``out`` is a file.
+    ParameterError
+        ``out`` holds an entry no ensemble writes (naming it).
+    """
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise FileExistsError(errno.EEXIST, os.strerror(errno.EEXIST), str(out))
+    if not out.is_dir():
+        return
+    foreign = _foreign_entry(out)
+    if foreign is not None:
+        raise ParameterError(f"holds {foreign}, which is no part of a {command} output: give "
+                             f"a new folder, an empty one or one an earlier {command} wrote",
+                             out)
+
+
 def library_versions() -> dict:
     """Versions of the numerical libraries a configuration depends on.
 
@@ -376,10 +447,18 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
     dict of DataFrames (see :func:`assemble`), and ``"failed"``: DataFrame config_id, seed,
     error of the configurations whose task raised (also in ``failures.csv``); the others are
     all computed and written.
+
+    Raises
+    ------
+    ParameterError
+        ``out`` holds files no ensemble writes (:func:`check_out_folder`), or the executor
+        cannot be had (``workers``, an unreachable ``scheduler``): nothing is written then.
+    ConfigError
+        ``out`` holds a different ensemble (its params.json differs on ``physics_keys``).
     """
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     params = {k: params.get(k) for k in sorted(params)}
+    check_out_folder(out, params["command"])
     pfile = out / "params.json"
     if pfile.exists():
         try:
@@ -392,22 +471,25 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
             raise ConfigError("output folder holds a different ensemble (parameters differ: "
                               + ", ".join(diff) + "); use another --out", path=out)
     n = int(params["n_configs"])
-    # the tables hold the first n configurations: so does the record (parts of a larger
-    # earlier run stay on disk, and a re-run that asks for them again reuses them)
-    write_json(pfile, {**params, "version": __version__, "libraries": library_versions()})
     seeds = spawn_seeds(params["seed"], n)
     todo = [i for i in range(n) if not _part_ok(part_path(out, i), i, seeds[i])]
     task = run_config if task is None else task
-    bar = None
-    if progress is not False:
-        from tqdm import tqdm
-
-        bar = tqdm(total=n, initial=n - len(todo), unit="config", desc=params["command"],
-                   disable=None if progress is None else not progress)
     failed = {}
-    try:
-        if todo:
-            with get_executor(workers, scheduler) as ex:
+    # nothing is written before the executor exists: a refused --scheduler or --workers
+    # leaves no folder behind
+    with get_executor(workers, scheduler) if todo else nullcontext() as ex:
+        out.mkdir(parents=True, exist_ok=True)
+        # the tables hold the first n configurations: so does the record (parts of a larger
+        # earlier run stay on disk, and a re-run that asks for them again reuses them)
+        write_json(pfile, {**params, "version": __version__, "libraries": library_versions()})
+        bar = None
+        if progress is not False:
+            from tqdm import tqdm
+
+            bar = tqdm(total=n, initial=n - len(todo), unit="config", desc=params["command"],
+                       disable=None if progress is None else not progress)
+        try:
+            if todo:
                 if workers == 1 and not scheduler:
                     # inline executor runs at submit: submit one by one so the bar moves
                     done = ((i, ex.submit(task, i, seeds[i], params, str(out))) for i in todo)
@@ -423,9 +505,9 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
                         failed[i] = (int(seeds[i]), f"{type(exc).__name__}: {exc}")
                     if bar is not None:
                         bar.update(1)
-    finally:
-        if bar is not None:
-            bar.close()
+        finally:
+            if bar is not None:
+                bar.close()
     fail = pd.DataFrame([{"config_id": i, "seed": s, "error": e}
                          for i, (s, e) in sorted(failed.items())],
                         columns=["config_id", "seed", "error"])
@@ -500,7 +582,8 @@ def _add_common(p, command):
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
                    help="progress bar on stderr (default: only when stderr is a terminal)")
     p.add_argument("--out", required=True,
-                   help="output folder (created; a re-run with the same parameters resumes)")
+                   help="output folder (created; a re-run with the same parameters resumes; "
+                        "a folder holding other files is refused)")
     if command == "anneal":
         p.add_argument("--lambda-start", dest="lam_start", type=float, default=LAM_START,
                        help=f"initial Lambda of the ramp (default {LAM_START:g})")
@@ -724,7 +807,8 @@ def add_subparser(sub):
 
 
 __all__ = ["run_ensemble", "report_failures", "run_config", "assemble", "minimize_config",
-           "add_subparser", "check_out", "start_shape", "wall_check", "WallStartWarning",
+           "add_subparser", "check_out", "check_out_folder", "start_shape", "wall_check",
+           "WallStartWarning", "OUTPUT_FILES",
            "METHOD_OPTIONS",
            "analysis_records", "write_part",
            "CONFIG_COLUMNS", "BRANCH_COLUMNS", "VOID_COLUMNS"]

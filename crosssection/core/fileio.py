@@ -27,6 +27,9 @@ UMASK = _current_umask()
 #: written, ``.<name>.old-*`` the previous output on its way out
 PARTIAL_TAG = ".partial-"
 OLD_TAG = ".old-"
+#: files that file browsers leave in the folders they show: no output folder counts them as
+#: content of its own or of another's
+BROWSER_FILES = frozenset({".DS_Store", "Thumbs.db", "desktop.ini"})
 
 
 @contextmanager
@@ -48,17 +51,35 @@ def atomic_path(path, suffix=None):
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix or path.suffix or ".tmp",
-                               dir=path.parent)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.",
+                                   suffix=suffix or path.suffix or ".tmp", dir=path.parent)
+    except OSError as exc:  # names the temporary file it could not create
+        raise _renamed(exc, path) from None
     os.close(fd)
     tmp = Path(tmp)
-    os.chmod(tmp, 0o666 & ~UMASK)  # mkstemp creates 0600; outputs get the usual mode
     try:
+        os.chmod(tmp, 0o666 & ~UMASK)  # mkstemp creates 0600; outputs get the usual mode
         yield tmp
         os.replace(tmp, path)
+    except OSError as exc:
+        named = {os.fsdecode(n) for n in (exc.filename, exc.filename2)
+                 if isinstance(n, (str, bytes, os.PathLike))}
+        if str(tmp) not in named:
+            raise  # about another file: the writer's own error
+        raise _renamed(exc, path) from None
     finally:
         if tmp.exists():
             tmp.unlink()
+
+
+def _renamed(exc: OSError, path: Path) -> OSError:
+    """``exc`` naming ``path`` instead of the hidden temporary file of its atomic write: the
+    user asked for ``path`` and never sees the other."""
+    try:
+        return type(exc)(exc.errno, exc.strerror or str(exc), str(path))
+    except TypeError:  # a subclass with its own signature: the name matters less than the type
+        return exc
 
 
 def _json_default(obj):

@@ -75,6 +75,71 @@ def _init_worker(parent_pid: int):
         pass
 
 
+#: Seconds a terminated worker gets to exit before it is killed, and the pool's manager thread
+#: to notice it
+STOP_GRACE_S = 3.0
+
+
+def stop_pool(ex: ProcessPoolExecutor, known=(), grace: float = STOP_GRACE_S) -> None:
+    """Stop a process pool at once: cancel its queued tasks and terminate its workers.
+
+    ``shutdown(wait=True)`` (what leaving a ``with`` block does) lets every task in flight
+    finish, and the interpreter's exit waits for the pool's manager thread as well: an
+    interrupted batch would go on for as long as its running tasks take. Here the queued
+    tasks are cancelled, the workers get SIGTERM (then SIGKILL after ``grace`` seconds), and
+    the manager thread, which sees them die, is given ``grace`` seconds to finish.
+
+    Parameters
+    ----------
+    ex : ProcessPoolExecutor
+    known : iterable of multiprocessing.Process
+        Child processes that existed before the pool: left alone when the pool does not
+        expose its workers (``ex._processes``, the only handle CPython offers), in which case
+        every other live child started through ``multiprocessing`` is taken for a worker.
+    grace : float
+        Seconds to wait for the workers to exit, and again for the manager thread.
+    """
+    import multiprocessing as mp
+    import time
+    from multiprocessing.connection import wait as ready
+
+    procs = getattr(ex, "_processes", None)
+    if isinstance(procs, dict):
+        procs = list(procs.values())
+    else:
+        known = set(known)
+        procs = [p for p in mp.active_children() if p not in known]
+    manager = getattr(ex, "_executor_manager_thread", None)
+    try:
+        ex.shutdown(wait=False, cancel_futures=True)
+    finally:
+        alive = {}
+        for p in procs:
+            try:
+                p.terminate()
+                alive[p.sentinel] = p
+            except (OSError, ValueError, AttributeError):  # gone, closed or never started
+                pass
+        # a process's sentinel is ready once it has exited, whoever reaps it (the pool's
+        # manager thread joins its workers too)
+        deadline = time.monotonic() + grace
+        while alive and time.monotonic() < deadline:
+            for s in ready(list(alive), max(0.0, deadline - time.monotonic())):
+                alive.pop(s, None)
+        for p in alive.values():
+            try:
+                p.kill()
+            except (OSError, ValueError, AttributeError):
+                pass
+        for p in procs:
+            try:
+                p.join(1.0)
+            except (OSError, ValueError, AttributeError, AssertionError):
+                pass
+        if manager is not None and hasattr(manager, "join"):
+            manager.join(grace)
+
+
 @contextmanager
 def get_executor(workers: int | None = 1, scheduler: str | None = None):
     """Yield a ``concurrent.futures.Executor``.
@@ -90,6 +155,13 @@ def get_executor(workers: int | None = 1, scheduler: str | None = None):
     Yields
     ------
     concurrent.futures.Executor
+
+    Notes
+    -----
+    Leaving the block normally waits for the submitted tasks. Leaving it by an exception (an
+    interrupt included) does not: local workers are terminated and queued tasks cancelled
+    (:func:`stop_pool`), a cluster's queued tasks are cancelled, so that an interrupted
+    command exits at once and its re-run resumes from what was written.
     """
     if scheduler:
         from distributed import Client
@@ -104,6 +176,9 @@ def get_executor(workers: int | None = 1, scheduler: str | None = None):
         try:
             yield client.get_executor(pure=False)
         finally:
+            # closing the client releases its futures: on an interrupt the scheduler cancels
+            # the tasks no client wants any more (a task already running in a worker thread
+            # ends on its own)
             client.close()
         return
     if workers is None:
@@ -118,9 +193,18 @@ def get_executor(workers: int | None = 1, scheduler: str | None = None):
     import multiprocessing as mp
 
     # 'spawn' keeps workers free of the parent's threads (numba, BLAS) and matches Dask.
-    with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"),
-                             initializer=_init_worker, initargs=(os.getpid(),)) as ex:
+    before = set(mp.active_children())
+    ex = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"),
+                             initializer=_init_worker, initargs=(os.getpid(),))
+    try:
         yield ex
+    except BaseException:
+        # an interrupt (SIGINT, or SIGTERM raised as one by the command line) or a failure:
+        # waiting for the tasks in flight would take as long as they do, so they are stopped,
+        # the re-run redoing them
+        stop_pool(ex, known=before)
+        raise
+    ex.shutdown(wait=True)
 
 
 @contextmanager
@@ -199,4 +283,4 @@ def spawn_seeds(seed: int | None, n: int) -> list[int]:
     return [int(c.generate_state(1, dtype=np.uint32)[0]) for c in children]
 
 
-__all__ = ["get_executor", "compiling_in_turn", "spawn_seeds", "ThreadPoolExecutor"]
+__all__ = ["get_executor", "stop_pool", "compiling_in_turn", "spawn_seeds", "ThreadPoolExecutor"]

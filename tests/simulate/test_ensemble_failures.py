@@ -13,8 +13,9 @@ from simulate.ensemble import report_failures, run_ensemble, write_part
 
 
 def _task(config_id, seed, params, out):
-    """A stand-in configuration: fails while OUT/fail_<id> exists, else writes a small rod."""
-    if (Path(out) / f"fail_{config_id}").exists():
+    """A stand-in configuration: fails while fail_<id> exists beside OUT (the output folder
+    holds nothing but the ensemble's files), else writes a small rod and ran_<id> there."""
+    if (Path(out).parent / f"fail_{config_id}").exists():
         raise FloatingPointError(f"diverged at step {config_id}")
     xy = np.column_stack([np.linspace(0, 1, 5), np.full(5, 0.1 * config_id)])
     row = {"config_id": config_id, "seed": seed, "epsilon": 2.0, "energy_total": 10.0 + config_id,
@@ -23,7 +24,7 @@ def _task(config_id, seed, params, out):
     branches = [{"branch_id": 0, "length": 0.5, "kappa_plus": 1.0, "kappa_pm": 0.5,
                  "energy_bending": 2.0, "energy": 2.0}]
     voids = [{"area": 0.01, "perimeter": 0.4, "shape_ratio": 0.25, "n_edges": 3}]
-    (Path(out) / f"ran_{config_id}").write_text("x")
+    (Path(out).parent / f"ran_{config_id}").write_text("x")
     write_part(out, config_id, row, xy, xy, branches, voids)
     return config_id
 
@@ -35,7 +36,7 @@ PARAMS = {"command": "quench", "n_configs": 4, "seed": 3}
 def test_a_failed_configuration_is_recorded_and_the_others_finish(tmp_path, workers):
     out = tmp_path / "ens"
     out.mkdir()
-    (out / "fail_1").write_text("")
+    (tmp_path / "fail_1").write_text("")
     tables = run_ensemble(PARAMS, out, workers=workers, task=_task, progress=False)
     assert tables["failed"]["config_id"].tolist() == [1]
     assert "FloatingPointError: diverged at step 1" in tables["failed"]["error"].iloc[0]
@@ -51,13 +52,13 @@ def test_a_failed_configuration_is_recorded_and_the_others_finish(tmp_path, work
 def test_a_rerun_tries_the_failed_configuration_again_and_only_it(tmp_path):
     out = tmp_path / "ens"
     out.mkdir()
-    (out / "fail_2").write_text("")
+    (tmp_path / "fail_2").write_text("")
     run_ensemble(PARAMS, out, task=_task, progress=False)
-    for f in out.glob("ran_*"):
+    for f in tmp_path.glob("ran_*"):
         f.unlink()
-    (out / "fail_2").unlink()
+    (tmp_path / "fail_2").unlink()
     tables = run_ensemble(PARAMS, out, task=_task, progress=False)
-    assert sorted(p.name for p in out.glob("ran_*")) == ["ran_2"]
+    assert sorted(p.name for p in tmp_path.glob("ran_*")) == ["ran_2"]
     assert len(tables["failed"]) == 0 and len(pd.read_csv(out / "failures.csv")) == 0
     cfg = pd.read_csv(out / "configs.csv")
     assert "error" not in cfg.columns or cfg["error"].isna().all()
@@ -66,20 +67,20 @@ def test_a_rerun_tries_the_failed_configuration_again_and_only_it(tmp_path):
 def test_failures_are_warning_lines_and_exit_status_3(tmp_path, capsys):
     out = tmp_path / "ens"
     out.mkdir()
-    (out / "fail_0").write_text("")
+    (tmp_path / "fail_0").write_text("")
     tables = run_ensemble(PARAMS, out, task=_task, progress=False)
     assert report_failures(tables, out) == 3
     err = capsys.readouterr().err.splitlines()
     assert err == [f"warning: {out}: configuration 0 (seed {tables['failed']['seed'][0]}) "
                    "failed: FloatingPointError: diverged at step 0"]
-    (out / "fail_0").unlink()
+    (tmp_path / "fail_0").unlink()
     assert report_failures(run_ensemble(PARAMS, out, task=_task, progress=False), out) == 0
 
 
 def test_statistics_leave_failed_configurations_out_with_a_warning(tmp_path):
     out = tmp_path / "ens"
     out.mkdir()
-    (out / "fail_3").write_text("")
+    (tmp_path / "fail_3").write_text("")
     run_ensemble(PARAMS, out, task=_task, progress=False)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")

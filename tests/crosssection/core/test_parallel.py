@@ -52,6 +52,46 @@ def test_process_pool_matches_inline_and_uses_other_processes():
             pass
 
 
+def _mark_and_sleep(marks):
+    """A long task that first leaves the id of its worker process in the folder ``marks``."""
+    import time
+    from pathlib import Path
+
+    Path(marks, str(os.getpid())).touch()
+    time.sleep(60)
+
+
+def _wait_for(check, seconds=60.0):
+    import time
+
+    end = time.monotonic() + seconds
+    while not check():
+        assert time.monotonic() < end, "timed out"
+        time.sleep(0.02)
+
+
+@pytest.mark.parametrize("handle", [True, False])
+def test_an_interrupt_stops_the_pool_at_once(tmp_path, handle):
+    """Leaving the block by an interrupt terminates the workers and ends every task, without
+    waiting for the running ones (a minute each here); ``handle=False``: a pool that does not
+    expose its worker processes (a private attribute of CPython's)."""
+    import time
+
+    t0 = time.monotonic()
+    with pytest.raises(KeyboardInterrupt):
+        with get_executor(2) as ex:
+            futures = [ex.submit(_mark_and_sleep, str(tmp_path)) for _ in range(4)]
+            _wait_for(lambda: len(list(tmp_path.iterdir())) == 2)
+            if not handle:
+                del ex._processes
+            raise KeyboardInterrupt
+    assert time.monotonic() - t0 < 20  # a hang check: the tasks would take 2 minutes
+    assert all(f.done() for f in futures)
+    for pid in (int(p.name) for p in tmp_path.iterdir()):
+        with pytest.raises(ProcessLookupError):  # terminated and reaped
+            os.kill(pid, 0)
+
+
 @pytest.fixture(scope="module")
 def cluster():
     distributed = pytest.importorskip("distributed")
@@ -69,6 +109,17 @@ def test_dask_executor_matches_inline(cluster):
     with get_executor(scheduler=cluster.scheduler_address) as ex:
         got = [f.result() for f in [ex.submit(_draw, s) for s in seeds]]
     assert got == [_draw(s) for s in seeds]
+
+
+def test_an_interrupt_cancels_the_tasks_queued_on_a_cluster(cluster):
+    import time
+
+    with pytest.raises(KeyboardInterrupt):
+        with get_executor(scheduler=cluster.scheduler_address) as ex:
+            futures = [ex.submit(time.sleep, 0.5) for _ in range(8)]  # 2 threads: 2 s of work
+            raise KeyboardInterrupt
+    _wait_for(lambda: all(f.done() for f in futures), 10)
+    assert sum(f.cancelled() for f in futures) >= 6
 
 
 # the in-process cluster runs two tasks on two threads of this process: the flags of these

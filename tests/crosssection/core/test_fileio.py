@@ -1,0 +1,48 @@
+"""Atomic writes: an output that cannot be written is named as the user gave it, never by the
+hidden temporary file it is written through."""
+from __future__ import annotations
+
+import errno
+
+import pandas as pd
+import pytest
+
+from crosssection.core import fileio
+
+
+@pytest.mark.parametrize("write", [
+    lambda p: fileio.write_csv(p, pd.DataFrame({"a": [1]})),
+    lambda p: fileio.write_json(p, {"a": 1}),
+    lambda p: fileio.write_text(p, "a"),
+    lambda p: fileio.write_npz(p, a=[1]),
+])
+def test_a_folder_in_the_way_names_the_output(tmp_path, write):
+    target = tmp_path / "stacks.csv"
+    target.mkdir()
+    with pytest.raises(IsADirectoryError) as info:
+        write(target)
+    assert info.value.filename == str(target) and info.value.filename2 is None
+    assert info.value.errno == errno.EISDIR
+    assert [p.name for p in tmp_path.iterdir()] == ["stacks.csv"]  # no temporary file left
+
+
+def test_an_error_about_another_file_is_left_as_it_is(tmp_path):
+    with pytest.raises(FileNotFoundError) as info:
+        with fileio.atomic_path(tmp_path / "out.csv"):
+            open(tmp_path / "missing.csv")
+    assert info.value.filename == str(tmp_path / "missing.csv")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_the_command_line_names_the_output(tmp_path, capsys):
+    from crosssection.cli import main
+    from crosssection.testing import drawn_scan, write_png
+
+    scan = tmp_path / "scan.png"
+    write_png(scan, drawn_scan(2))
+    out = tmp_path / "inway"
+    (out / "stacks.csv").mkdir(parents=True)
+    assert main(["analyze", str(scan), "--out", str(out), "--px-per-mm", "50",
+                 "--thickness-mm", "0.1", "--no-figure"]) == 2
+    err = capsys.readouterr().err
+    assert err == f"error: {out / 'stacks.csv'}: cannot write (Is a directory)\n"

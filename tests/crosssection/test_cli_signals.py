@@ -1,0 +1,103 @@
+"""An interrupted or terminated command line stops at once: one ``error:`` line, exit status
+130 (SIGINT) or 143 (SIGTERM), no worker process left behind, and a re-run resumes.
+
+The signal goes to the command's process alone, as ``kill PID``, ``timeout -s INT`` and job
+runners send it (Ctrl-C in a terminal reaches the workers as well).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import signal
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from crosssection.cli import INTERRUPTED, TERMINATED, Terminated, run_parsed
+
+#: a batch whose images each take a minute: the command line of crosssection, its analysis
+#: replaced (in the spawned workers too, which import this script as their main module)
+SLOW_BATCH = '''
+import os
+import sys
+import time
+from pathlib import Path
+
+
+def slow(task):
+    Path(os.environ["MARKS"], str(os.getpid())).touch()  # this worker is at work
+    time.sleep(60)
+
+
+if __name__ == "__main__":
+    from crosssection import batch
+    from crosssection.cli import main
+
+    batch.process_image = slow
+    sys.exit(main(sys.argv[1:]))
+'''
+
+
+@pytest.mark.parametrize("sig, status, word", [(signal.SIGINT, 130, "interrupted"),
+                                               (signal.SIGTERM, 143, "terminated")])
+def test_a_signalled_batch_stops_its_workers_and_exits_at_once(tmp_path, signalled_run, sig,
+                                                               status, word):
+    from PIL import Image
+
+    inp, marks = tmp_path / "in", tmp_path / "marks"
+    inp.mkdir()
+    marks.mkdir()
+    for i in range(6):
+        Image.fromarray(np.zeros((8, 8, 3), np.uint8)).save(inp / f"a{i}.png")
+    script = tmp_path / "slow_batch.py"
+    script.write_text(SLOW_BATCH)
+    out = tmp_path / "out"
+    r = signalled_run([script, "batch", inp, "--out", out, "--workers", "2", "--no-progress"],
+                      sig, lambda pid: len(list(marks.iterdir())) == 2,
+                      env={"MARKS": str(marks)})
+    assert r.returncode == status
+    assert r.stderr == f"error: {word} (re-run the same command to resume)\n"
+    workers = {int(p.name) for p in marks.iterdir()}
+    assert workers <= set(r.children)
+    assert r.left == []
+    # the batch's records are written as on Ctrl-C (nothing was done: no image listed)
+    assert pd.read_csv(out / "index.csv").empty
+    assert json.loads((out / "batch.json").read_text())["complete"] is False
+
+
+def _parser(func):
+    p = argparse.ArgumentParser()
+    p.set_defaults(func=func)
+    return p
+
+
+def test_sigterm_is_an_interrupt_while_a_command_runs_and_the_handler_is_put_back(capsys):
+    before = signal.getsignal(signal.SIGTERM)
+    seen = []
+
+    def command(args):
+        handler = signal.getsignal(signal.SIGTERM)
+        seen.append(handler)
+        handler(signal.SIGTERM, None)  # what the signal does
+
+    assert run_parsed(_parser(command), []) == TERMINATED
+    assert seen and seen[0] is not before
+    assert signal.getsignal(signal.SIGTERM) is before
+    assert capsys.readouterr().err == "error: terminated (re-run the same command to resume)\n"
+
+
+def test_a_command_reporting_its_own_interrupt_exits_143_on_sigterm(capsys):
+    def command(args):  # as stats does: its own line, status 130
+        try:
+            signal.getsignal(signal.SIGTERM)(signal.SIGTERM, None)
+        except KeyboardInterrupt:
+            return INTERRUPTED
+
+    assert run_parsed(_parser(command), []) == TERMINATED
+    assert run_parsed(_parser(lambda args: INTERRUPTED), []) == INTERRUPTED
+
+
+def test_terminated_stops_what_an_interrupt_stops():
+    assert issubclass(Terminated, KeyboardInterrupt)
+    assert not issubclass(Terminated, Exception)  # per-task `except Exception` lets it through
