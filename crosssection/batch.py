@@ -77,8 +77,9 @@ import pandas as pd
 from crosssection._version import __version__
 from crosssection.core import schema
 from crosssection.core.errors import ConfigError, FoldstatError, ImageError, ParameterError
-from crosssection.core.fileio import (PARTIAL_TAG, clear_stale_folders, read_json_object,
-                                      staging_folder, swap_in_folder, write_csv, write_json)
+from crosssection.core.fileio import (BROWSER_FILES, PARTIAL_TAG, check_out,
+                                      clear_stale_folders, read_json_object, staging_folder,
+                                      swap_in_folder, write_csv, write_json)
 from crosssection.core.parallel import compiling_in_turn, get_executor, spawn_seeds
 from crosssection.params import (PARAM_NAMES, AnalysisParams, add_analysis_arguments,
                                  check_param, switched_off)
@@ -628,8 +629,6 @@ def check_out_dir(input_dir, out_dir) -> None:
     names = sorted(p.name for p in out.iterdir())
     if names:
         # a file browser's own files do not make a folder someone else's
-        from crosssection.stats.report import BROWSER_FILES
-
         names = [n for n in names if n not in BROWSER_FILES]
     if names:
         raise ParameterError(f"neither empty nor a batch's output (it holds {names[0]}): give "
@@ -853,9 +852,10 @@ def add_subparser(sub):
     p.add_argument("--seed", type=int, default=0, help="base seed of the per-image seeds")
     p.add_argument("--no-figure", action="store_true", help="skip overlay.png")
     p.add_argument("--force", action="store_true", help="redo images already complete")
-    p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
-                   help="progress bar on stderr (default: only when stderr is a terminal)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar (= --no-progress)")
+    bar = p.add_mutually_exclusive_group()
+    bar.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
+                     help="progress bar on stderr (default: only when stderr is a terminal)")
+    bar.add_argument("--quiet", action="store_true", help="no progress bar (= --no-progress)")
     add_analysis_arguments(p)
     p.set_defaults(func=run)
     return p
@@ -864,6 +864,7 @@ def add_subparser(sub):
 def run(args) -> int:
     """Entry point of ``python -m crosssection batch``; returns the exit status (0 all images
     done, 3 finished with some images failed, 2 bad arguments)."""
+    check_out(args.out)
     if args.workers is not None and args.workers < 1:
         raise ParameterError(f"must be >= 1, got {args.workers}", "--workers")
     if args.seed is not None and args.seed < 0:

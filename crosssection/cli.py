@@ -29,6 +29,7 @@ SUBCOMMANDS = {
     "steps": "crosssection.commands",
     "batch": "crosssection.batch",
     "stats": "crosssection.stats.cli",
+    "samples": "crosssection.samples",
 }
 
 
@@ -162,7 +163,8 @@ def build_parser(argv=None) -> argparse.ArgumentParser:
     return make_parser(
         "python -m crosssection",
         "Analyse scans of folded-sheet cross-sections into junctions, stacks, branches and "
-        "voids; batch them; compute ensemble statistics.", SUBCOMMANDS, argv)
+        "voids; batch them; compute ensemble statistics; copy the sample scans.", SUBCOMMANDS,
+        argv)
 
 
 def main(argv=None) -> int:

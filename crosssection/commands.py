@@ -22,7 +22,8 @@ import math
 import warnings
 from pathlib import Path
 
-from crosssection.core.errors import OutputError, ParameterError, output_error
+from crosssection.core.errors import OutputError, output_error
+from crosssection.core.fileio import check_out
 from crosssection.params import AnalysisParams, add_analysis_arguments
 
 #: the step images of paper Fig. 2, and the figure of the four side by side
@@ -40,26 +41,6 @@ OPTIONAL_OUTPUTS = {
     "analyze": (OVERLAY, *STEP_IMAGES, STEPS_FIGURE, STEPS_RECORD),
     "steps": (STEPS_FIGURE,),
 }
-
-
-def check_out(path, name: str = "--out") -> None:
-    """Refuse an empty output path (``Path("")`` is the current folder, which would take the
-    outputs).
-
-    Parameters
-    ----------
-    path : str or Path
-        The output folder given.
-    name : str
-        The option or parameter that gave it (named in the error).
-
-    Raises
-    ------
-    ParameterError
-        ``path`` is empty or blank.
-    """
-    if not str(path).strip():
-        raise ParameterError("empty path: give the output folder", name)
 
 
 def remove_stale(out_dir, command: str, written) -> list[Path]:

@@ -36,6 +36,7 @@ exit status:
   3    a batch, an ensemble or a validation finished but some images, configurations or
        scenes failed (listed in OUT_DIR/failures.csv; a re-run tries them again)
   130  interrupted (re-run the same command to resume; stats leaves its report as it was)
+  143  terminated by SIGTERM (as 130)
   1    a bug (one line on stderr, never a traceback)
 Doubtful results are printed as 'warning: FILE: ...' lines on stderr."""
 

@@ -18,6 +18,7 @@ import shutil
 from pathlib import Path
 
 from crosssection.core.errors import ConfigError, OutputError, ParameterError, output_error
+from crosssection.core.fileio import check_out
 
 __all__ = ["samples_path", "copy_samples", "add_subparser"]
 
@@ -107,8 +108,7 @@ def add_subparser(sub) -> argparse.ArgumentParser:
 
 def run(args) -> int:
     """Copy the samples and say what to run next."""
-    if not str(args.dest).strip():
-        raise ParameterError("empty path: give the folder to copy the samples into", "DIR")
+    check_out(args.dest, "DIR")
     written = copy_samples(args.dest, overwrite=args.force)
     scans = [p for p in written if p.parent == Path(args.dest).expanduser()
              and p.suffix in (".png", ".jpg", ".tif")]

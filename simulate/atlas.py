@@ -1680,6 +1680,9 @@ def add_subparser(sub) -> None:
 
 
 def _run(args) -> int:
+    from crosssection.core.fileio import check_out
+
+    check_out(args.out)
     if args.workers < 1:
         raise ParameterError(f"--workers must be >= 1, got {args.workers}")
     if args.seed < 0:

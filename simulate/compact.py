@@ -1067,7 +1067,8 @@ def params_from_args(args) -> dict:
 
 def run(args) -> int:
     """Entry point of ``compact``."""
-    from simulate.ensemble import check_out, report_failures, run_ensemble
+    from crosssection.core.fileio import check_out
+    from simulate.ensemble import report_failures, run_ensemble
 
     check_out(args.out)
     try:

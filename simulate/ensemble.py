@@ -48,7 +48,7 @@ import pandas as pd
 
 from crosssection._version import __version__
 from crosssection.core.errors import ConfigError, ParameterError
-from crosssection.core.fileio import BROWSER_FILES, write_csv, write_json, write_npz
+from crosssection.core.fileio import BROWSER_FILES, check_out, write_csv, write_json, write_npz
 from crosssection.core.parallel import get_executor, spawn_seeds
 from crosssection.quality import QualityWarning
 
@@ -715,12 +715,6 @@ def _powell_params(args) -> dict:
                 u=_finite("--u", given(args.u, NEMATIC_U), low=0.0),
                 ftol=_finite("--ftol", given(args.ftol, FTOL), low=0.0, low_open=True),
                 xtol=_finite("--xtol", given(args.xtol, XTOL), low=0.0, low_open=True))
-
-
-def check_out(out) -> None:
-    """Refuse an empty ``--out`` (it would write into the current folder)."""
-    if not str(out).strip():
-        raise ParameterError("empty path: give the output folder", "--out")
 
 
 def _round_up(x: float, digits: int = 3) -> str:

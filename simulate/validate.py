@@ -254,6 +254,9 @@ def add_subparser(sub) -> None:
 def _run(args) -> int:
     """Entry point of ``validate``; returns the exit status (0 every scene scored, 3 some
     failed, each named in one ``warning:`` line on stderr)."""
+    from crosssection.core.fileio import check_out
+
+    check_out(args.out)
     _check_match_px(args.match_px, "--match-px")
     df, failures = _validate(args.scenes, args.out, match_px=args.match_px,
                              progress=args.progress)

@@ -73,6 +73,28 @@ def atomic_path(path, suffix=None):
             tmp.unlink()
 
 
+def check_out(path, name: str = "--out") -> None:
+    """Refuse an empty output path: ``Path("")`` is the current folder, which would take the
+    outputs (every command's ``--out``).
+
+    Parameters
+    ----------
+    path : str or Path
+        The output folder given.
+    name : str
+        The option or parameter that gave it (named in the error).
+
+    Raises
+    ------
+    ParameterError
+        ``path`` is empty or blank.
+    """
+    if not str(path).strip():
+        from crosssection.core.errors import ParameterError
+
+        raise ParameterError("empty path: give the output folder", name)
+
+
 def _renamed(exc: OSError, path: Path) -> OSError:
     """``exc`` naming ``path`` instead of the hidden temporary file of its atomic write: the
     user asked for ``path`` and never sees the other."""

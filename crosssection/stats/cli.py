@@ -18,6 +18,7 @@ import warnings
 from pathlib import Path
 
 from crosssection.core.errors import ParameterError
+from crosssection.core.fileio import check_out
 from crosssection.stats.data import L_MIN_MM, S_MIN_MM2
 from crosssection.stats.fits import N_BOOT, N_MC
 
@@ -97,6 +98,7 @@ def check_options(args) -> None:
                 raise ParameterError(f"{name!r} given for both {seen[name]} and {d}: give "
                                      "each DIR its own set name", "--name")
             seen.setdefault(name, d)
+    check_out(args.out)
     for flag, v in (("--seed", args.seed), ("--n-boot", args.n_boot), ("--n-mc", args.n_mc)):
         if v < 0:
             raise ParameterError(f"must be an integer >= 0, got {v}", flag)
@@ -124,10 +126,13 @@ def run(args) -> int:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             status = _run(args)
-    except KeyboardInterrupt:
-        print(f"error: {args.out}: interrupted; the report folder was left as it was "
+    except KeyboardInterrupt as exc:
+        from crosssection.cli import INTERRUPTED, TERMINATED, Terminated
+
+        how = "terminated" if isinstance(exc, Terminated) else "interrupted"
+        print(f"error: {args.out}: {how}; the report folder was left as it was "
               "(re-run the command to write it)", file=sys.stderr)
-        return 130
+        return TERMINATED if isinstance(exc, Terminated) else INTERRUPTED
     for w in caught:  # hand them on to the command line, which prints ours as lines
         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     return status

@@ -23,8 +23,9 @@ import pandas as pd
 
 from crosssection._version import __version__
 from crosssection.core.errors import ParameterError
-from crosssection.core.fileio import (clear_stale_folders, save_figure, staging_folder,
-                                      swap_in_folder, write_csv, write_json, write_text)
+from crosssection.core.fileio import (BROWSER_FILES, clear_stale_folders, save_figure,
+                                      staging_folder, swap_in_folder, write_csv, write_json,
+                                      write_text)
 from crosssection.stats import fits as F
 from crosssection.stats.families import FAMILIES
 from crosssection.stats.data import REPORT_TABLES, Ensemble
@@ -528,8 +529,6 @@ REPORT_FILES = frozenset(
     {f"{n}.csv" for n in REPORT_TABLES}
     | {f"{n}.md" for n in ("macro", "micro", "fits", "relations", "dof", "truncation")}
     | {"stats.json", "report.html", "figures"})
-#: files that file browsers leave in the folders they show
-BROWSER_FILES = frozenset({".DS_Store", "Thumbs.db", "desktop.ini"})
 
 
 def _foreign_entry(folder: Path) -> str | None:

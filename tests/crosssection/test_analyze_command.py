@@ -4,6 +4,8 @@ the last run alone."""
 from __future__ import annotations
 
 import shutil
+import subprocess
+import sys
 
 import pytest
 
@@ -91,6 +93,23 @@ def test_an_empty_out_is_refused_and_nothing_is_written(small_scan, tmp_path, mo
     err = capsys.readouterr().err.strip().splitlines()
     assert err == ["error: --out: empty path: give the output folder"]
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("command", [["crosssection", "batch", "IN"],
+                                     ["crosssection", "stats", "IN"],
+                                     ["simulate", "validate", "IN"]])
+def test_every_command_refuses_an_empty_out(tmp_path, command):
+    """An empty --out is the current folder: every command refuses it before reading."""
+    inp = tmp_path / "in"
+    inp.mkdir()
+    work = tmp_path / "work"
+    work.mkdir()
+    argv = [str(inp) if a == "IN" else a for a in command]
+    run = subprocess.run([sys.executable, "-m", *argv, "--out", ""], cwd=work,
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 2
+    assert run.stderr.splitlines() == ["error: --out: empty path: give the output folder"]
+    assert list(work.iterdir()) == []
 
 
 def _names(folder):

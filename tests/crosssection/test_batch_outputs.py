@@ -10,6 +10,8 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import subprocess
+import sys
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -251,3 +253,13 @@ def test_a_copied_batch_resumes(tmp_path, capsys):
     status, err = _batch(capsys, inp, tmp_path / "copy")
     assert status == 0 and _notices(err) == []
     assert (pd.read_csv(tmp_path / "copy" / "index.csv")["status"] == "skipped").all()
+
+
+def test_progress_and_quiet_are_not_given_together(tmp_path):
+    """--quiet is --no-progress: given with --progress the command line contradicts itself."""
+    run = subprocess.run([sys.executable, "-m", "crosssection", "batch", str(tmp_path),
+                          "--out", str(tmp_path / "out"), "--progress", "--quiet"],
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 2 and len(run.stderr.splitlines()) == 1
+    assert "--quiet: not allowed with argument --progress" in run.stderr
+    assert not (tmp_path / "out").exists()

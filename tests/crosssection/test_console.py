@@ -18,7 +18,8 @@ def _subparsers(parser):
 
 
 def test_every_registered_subcommand_is_listed_with_a_one_line_help(capsys):
-    expected = [*crosssection.cli.SUBCOMMANDS, *simulate.cli.SUBCOMMANDS, "samples"]
+    expected = list(dict.fromkeys([*crosssection.cli.SUBCOMMANDS, *simulate.cli.SUBCOMMANDS,
+                                   "samples"]))
     with pytest.raises(SystemExit) as exc:
         console.main(["--help"])
     assert exc.value.code == 0
@@ -27,7 +28,7 @@ def test_every_registered_subcommand_is_listed_with_a_one_line_help(capsys):
     assert list(listed) == expected
     for name in expected:
         assert listed[name].strip() and f"    {name}" in out
-    for code in ("0 ", "2 ", "3 ", "130"):  # the exit status table in the epilog
+    for code in ("0 ", "2 ", "3 ", "130", "143"):  # the exit status table in the epilog
         assert f"\n  {code}" in out
     assert "unavailable" not in out
 
@@ -150,18 +151,17 @@ def test_samples_into_a_file_or_an_empty_path_is_one_line(tmp_path, capsys, monk
     monkeypatch.chdir(tmp_path)
     assert console.main(["samples", ""]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err == ["error: DIR: empty path: give the folder to copy the samples into"]
+    assert err == ["error: DIR: empty path: give the output folder"]
     with pytest.raises(ParameterError, match="empty path"):
         copy_samples("")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["set.toml"]
 
 
 def test_python_m_crosssection_offers_samples(tmp_path, capsys):
-    from crosssection.__main__ import build_parser, main
+    from crosssection.cli import build_parser, main
 
     names = set(_subparsers(build_parser(["--help"])).choices)
-    assert names == {*crosssection.cli.SUBCOMMANDS, "samples"}
-    assert build_parser(["samples"]).prog == crosssection.cli.build_parser(["analyze"]).prog
+    assert "samples" in names and names == set(crosssection.cli.SUBCOMMANDS)
     assert main(["samples", str(tmp_path / "in_process")]) == 0
     assert (tmp_path / "in_process" / "set.toml").is_file()
     run = subprocess.run([sys.executable, "-m", "crosssection", "samples", str(tmp_path / "s")],
