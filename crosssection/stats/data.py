@@ -345,14 +345,16 @@ def load_simulation(folder, *, set_name=None) -> Ensemble:
         "set": name, "config_id": cfg["config_id"].astype(str), "N_l": cfg["n_stacks"],
         "N_br": cfg["n_branches"], "n_voids": cfg["n_voids"], "epsilon": cfg["epsilon"],
         "E": cfg["energy_total"], "rod_length_mm": np.nan, "source": str(folder)})
-    n_br = br["n_br"] if "n_br" in br.columns else np.nan
+    st = None
+    if (folder / "stacks.csv").is_file():  # optional: per-stack branch counts
+        st = _read_csv(folder / "stacks.csv", ["config_id", "n_br"], numeric=["n_br", "length"])
+    n_br = br["n_br"] if "n_br" in br.columns else _stack_counts(br, st)
     branches = pd.DataFrame({
         "set": name, "config_id": br["config_id"].astype(str), "length_L": br["length"],
         "kappa_m_L": br["kappa_pm"].abs(), "kappa_plus_L": br["kappa_plus"],
         "e": br["energy"], "region": br["region"] if "region" in br.columns else SIM_REGION,
         "n_br": n_br, "l_min_L": np.nan})
-    if (folder / "stacks.csv").is_file():  # optional: per-stack branch counts
-        st = _read_csv(folder / "stacks.csv", ["config_id", "n_br"], numeric=["n_br", "length"])
+    if st is not None:
         stacks = pd.DataFrame({"set": name, "config_id": st["config_id"].astype(str),
                                "n_br": st["n_br"],
                                "length_L": st["length"] if "length" in st else np.nan,
@@ -365,6 +367,16 @@ def load_simulation(folder, *, set_name=None) -> Ensemble:
         "shape_ratio": vo["shape_ratio"], "n_edges": vo["n_edges"], "s_min_L2": np.nan})
     return Ensemble(configs.reindex(columns=CONFIG_COLS), branches.reindex(columns=BRANCH_COLS),
                     stacks.reindex(columns=STACK_COLS), voids.reindex(columns=VOID_COLS))
+
+
+def _stack_counts(br: pd.DataFrame, st: pd.DataFrame | None):
+    """Each branch's ``n_br``, the count of its stack (``stack_id`` within its configuration
+    in ``stacks.csv``); NaN where the tables do not say (no stacks.csv, no stack_id)."""
+    if st is None or "stack_id" not in br.columns or "stack_id" not in st.columns:
+        return np.nan
+    key = ["config_id", "stack_id"]
+    counts = st[key + ["n_br"]].astype({"config_id": str}).drop_duplicates(key)
+    return br[key].astype({"config_id": str}).merge(counts, on=key, how="left")["n_br"].to_numpy()
 
 
 def load_image_output(folder, *, set_name: str, config_id: str | None = None,

@@ -44,8 +44,10 @@ LABELS = {
     "length_L": r"branch length $\ell/L$ (rod length L)",
     "kappa_m_L": r"mean branch curvature $|\kappa_m| L$ (dimensionless)",
     "kappa_plus_L": r"mean absolute branch curvature $\kappa_+ L$ (dimensionless)",
-    "e": r"branch bending energy $e = L\int\kappa^2\,ds$ (dimensionless)",
-    "E": r"total bending energy of a configuration $E$ (dimensionless)",
+    # a scan's e is its bending energy; a simulated branch's adds its confinement energy
+    # (paper, Eq. of the energy over a domain Omega): the Methods paragraph says which
+    "e": r"branch energy $e$ (dimensionless)",
+    "E": r"total energy of a configuration $E$ (dimensionless)",
     "n_br": r"number of branches per stack $n_{br}$",
     "area_L2": r"void area $s/L^2$ (dimensionless)",
     "shape_ratio": r"void shape ratio $\sqrt{s}/p$ (dimensionless)",
@@ -54,7 +56,7 @@ LABELS = {
 WORDS = {
     "length_L": "branch length l/L", "kappa_m_L": "mean branch curvature |κ_m| L",
     "kappa_plus_L": "mean absolute branch curvature κ₊ L",
-    "e": "branch bending energy e", "E": "total energy E of a configuration",
+    "e": "branch energy e", "E": "total energy E of a configuration",
     "n_br": "number of branches per stack n_br", "area_L2": "void area s/L²",
     "shape_ratio": "void shape ratio √s/p",
 }
@@ -470,7 +472,7 @@ def e_vs_nbr_figure(ens: Ensemble, colors=None):
                         alpha=1 if reg is None else 0.6,
                         label=f"{s}: {REGION_WORDS[reg or 'all']}")
     ax.set(xlabel="number of branches in the stack $n_{br}$",
-           ylabel=r"mean branch bending energy $\langle e\rangle$ (dimensionless)",
+           ylabel=r"mean branch energy $\langle e\rangle$ (dimensionless)",
            title=r"mean branch energy against $n_{br}$ (mean $\pm$ standard error)")
     ax.xaxis.get_major_locator().set_params(integer=True)
     ax.legend(fontsize=7, frameon=False, loc="upper left", bbox_to_anchor=(1.01, 1.0))
@@ -667,14 +669,14 @@ def _write_files(res: StatsResult, ens: Ensemble, out: Path, *, opts: StatsOptio
                  "void size against branch length", through_origin=True, paper_slope=1.1,
                  colors=colors)),
             ("E_vs_Nbr.png", "Total energy against the number of branches",
-             "Each point is one configuration: its total bending energy against its number of "
+             "Each point is one configuration: its total energy against its number of "
              "branches; the legend gives the Pearson correlation per set (paper: 0.75).",
              lambda: _scatter_fig(res, "N_br", "E",
                                   "number of branches per configuration $N_{br}$",
-                                  "total bending energy $E$ (dimensionless)",
+                                  "total energy $E$ (dimensionless)",
                                   "total energy against number of branches", colors=colors)),
             ("e_vs_nbr.png", "Branch energy against the size of its stack",
-             "Mean bending energy of a branch against the number of branches of its stack, "
+             "Mean energy of a branch against the number of branches of its stack, "
              "with standard errors, for the whole system (solid), bulk (dotted) and periphery "
              "(dashed).", lambda: e_vs_nbr_figure(ens, colors)),
         ]
@@ -869,7 +871,9 @@ def _methods(meta, opts: StatsOptions) -> str:
         "rod into branches, branches in contact between the same junctions form a stack of "
         "n<sub>br</sub> branches, and the enclosed empty regions are voids. Per branch we "
         "measure its length l, mean curvature κ<sub>m</sub>, mean absolute curvature "
-        "κ<sub>+</sub> and bending energy e = L∫κ²ds (images: κ from parabolic fits over "
+        "κ<sub>+</sub> and energy e: for scans the bending energy e = L∫κ²ds, for simulated "
+        "rods the branch's bending energy plus its confinement energy, as in the paper's "
+        "simulations (images: κ from parabolic fits over "
         "5 n<sub>br</sub> h along the smoothed skeleton, as in the paper; near junctions, where "
         "a band is still merged with its neighbours, κ is read along the merged band's outer "
         "wall where a layer lies along it and otherwise continued from the nearest fitted "

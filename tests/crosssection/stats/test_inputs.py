@@ -79,3 +79,30 @@ def test_a_scans_model_share_is_read_with_it(tmp_path):
     summary["total_energy_rel_uncertainty"] = 0.42
     write_tables(tmp_path / "scan", summary, tables)
     assert load_any(tmp_path / "scan").configs["E_model_share"].tolist() == [0.42]
+
+
+def test_a_simulations_branches_take_their_stacks_counts(tmp_path):
+    """``simulate quench`` writes n_br per stack (stacks.csv) and stack_id per branch: every
+    branch gets its stack's count, so the figures of e against n_br hold simulations too."""
+    from crosssection.stats.data import load_simulation
+
+    sim = demo.write_demo_simulation(tmp_path / "sim", n_configs=2, seed=1)
+    br = pd.read_csv(sim / "branches.csv")
+    # stacks of 1, 2 and 3 branches, numbered within each configuration
+    counts = {}
+    for cid, group in br.groupby("config_id"):
+        sizes = np.resize([1, 2, 3], len(group))
+        stack_of = np.repeat(np.arange(len(group)), sizes)[:len(group)]
+        br.loc[group.index, "stack_id"] = stack_of
+        for sid in np.unique(stack_of):
+            counts[(cid, sid)] = int(np.count_nonzero(stack_of == sid))
+    br["stack_id"] = br["stack_id"].astype(int)
+    br.to_csv(sim / "branches.csv", index=False)
+    pd.DataFrame([{"config_id": c, "stack_id": s, "n_br": n, "length": 0.01}
+                  for (c, s), n in counts.items()]).to_csv(sim / "stacks.csv", index=False)
+    ens = load_simulation(sim)
+    want = [counts[(c, s)] for c, s in zip(br["config_id"], br["stack_id"])]
+    assert ens.branches["n_br"].to_numpy().tolist() == want
+    # without stacks.csv nothing says the counts
+    (sim / "stacks.csv").unlink()
+    assert load_simulation(sim).branches["n_br"].isna().all()
