@@ -224,7 +224,8 @@ class AnalysisParams:
         if c is None:
             return "linear n*h"
         if isinstance(c, (str, Path)):
-            return str(c)
+            # read from wherever the output is: a path relative to the caller's folder is not
+            return str(Path(c).expanduser().absolute())
         # a table given in memory is recorded whole: the width law is part of the result
         import numpy as np
 

@@ -122,3 +122,18 @@ def test_a_calibration_table_given_in_memory_is_recorded_whole(scan):
         warnings.simplefilter("ignore")
         res = cs.analyze(scan, **KW, calibration=cal)
     assert res.summary["calibration"].endswith("(1, 0.11), (2, 0.205), (3, 0.3)")
+
+
+def test_a_calibration_file_given_relative_is_recorded_absolute(scan, tmp_path, monkeypatch):
+    """summary.json is read from elsewhere than the caller's folder: the path it records must
+    lead to the file from anywhere."""
+    import pandas as pd
+
+    pd.DataFrame({"n_layers": [1, 2, 3], "width_mm": [0.11, 0.205, 0.3]}).to_csv(
+        tmp_path / "cal.csv", index=False)
+    monkeypatch.chdir(tmp_path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = cs.analyze(scan, **KW, calibration="cal.csv")
+    assert res.summary["calibration"] == str(tmp_path / "cal.csv")
+    assert res.summary["parameters"]["calibration"] == str(tmp_path / "cal.csv")
