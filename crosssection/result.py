@@ -218,7 +218,10 @@ class AnalysisResult:
         Parameters
         ----------
         out_dir : str or Path
-            Created if needed. Files are written atomically; ``summary.json`` last.
+            Created if needed. Files are written atomically; ``summary.json`` last. Nothing
+            else in the folder is touched: an ``overlay.png`` or step images of an earlier
+            write stay when this one does not write them (``foldstat analyze`` removes them,
+            :func:`crosssection.commands.remove_stale`).
         figure : bool
             Also write ``overlay.png`` (paper Figs. 1c and 9a).
         steps : bool
