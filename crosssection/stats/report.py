@@ -654,7 +654,7 @@ def _write_files(res: StatsResult, ens: Ensemble, out: Path, *, opts: StatsOptio
                 name = f"pdf_{q}.png"
                 paths[name] = save_figure(fig, fdir / name)
                 figs.append((f"Distribution of the {WORDS[q]}", f"figures/{name}",
-                             _pdf_caption(q)))
+                             _pdf_caption(q) + _left_out(res, ens, q, opts.min_n)))
         scatter = [
             ("network_Nbr_vs_Nl.png", "Branches and stacks per configuration (Eqs. (12)-(15))",
              "Each point is one configuration; solid lines are Eqs. (12)-(13) with the set's mean "
@@ -734,6 +734,17 @@ def _pdf_caption(q: str) -> str:
             f"band, one colour per set, one row per sub-system, linear (left) and logarithmic "
             f"(right) scales" + ("; dotted: detection limit, below which the fit is truncated."
                                  if QUANTITIES[q][3] else "."))
+
+
+def _left_out(res: StatsResult, ens: Ensemble, q: str, min_n: int) -> str:
+    """The sentence naming the sets a distribution figure leaves out (no fit: fewer than
+    ``min_n`` positive values, or all equal), or ""."""
+    missing = [s for s in ens.sets
+               if not any(k[0] == s and k[2] == q for k in res.summaries)]
+    if not missing:
+        return ""
+    return (f" Not drawn (fewer than {min_n} positive values, or all equal): "
+            f"{', '.join(missing)}.")
 
 
 #: report column -> heading in words with units (lengths in units of the rod length L)

@@ -73,3 +73,19 @@ def test_names_and_duplicate_sets(tmp_path):
     _run([str(a), str(b), "--out", str(tmp_path / "r2"), "--name", "quench", "--name", "anneal",
           "--fast", "--no-gof", "--no-figures"])
     assert set(pd.read_csv(tmp_path / "r2" / "macro.csv")["set"]) == {"quench", "anneal"}
+
+
+def test_a_set_too_small_to_fit_is_named_under_the_figure(tmp_path):
+    """A set whose values are too few to fit is absent from that distribution's figure, and
+    its caption says so rather than leaving the reader to wonder."""
+    b = demo.write_demo_batch(tmp_path / "batch", n_images=6, seed=2)
+    s = demo.write_demo_simulation(tmp_path / "few", n_configs=3, seed=2)
+    out = tmp_path / "rep"
+    assert _run([str(b), str(s), "--out", str(out), "--fast"]) == 0
+    html = (out / "report.html").read_text()
+    # three configurations give three total energies: fewer than the 5 a fit needs
+    assert "Not drawn (fewer than 5 positive values, or all equal): few." in html
+    # its branches are many and draw it; it has no stacks.csv, so no n_br to draw either
+    assert html.count("Not drawn") == 2
+    e_part = html.split("Distribution of the branch energy e")[1].split("<h3")[0]
+    assert "Not drawn" not in e_part
