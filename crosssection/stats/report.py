@@ -29,7 +29,7 @@ from crosssection.core.fileio import (BROWSER_FILES, clear_stale_folders, save_f
 from crosssection.stats import fits as F
 from crosssection.stats.families import FAMILIES
 from crosssection.stats.data import REPORT_TABLES, Ensemble
-from crosssection.stats.tables import (COUNT_QUANTITIES, EQ1_CONST, PAPER_DOF, PAPER_MACRO,
+from crosssection.stats.tables import (COUNT_QUANTITIES, EQ12_CONST, PAPER_DOF, PAPER_MACRO,
                                        PAPER_MICRO, QUANTITIES, StatsOptions, StatsResult,
                                        compute_stats, regions_of, to_markdown)
 
@@ -388,7 +388,7 @@ def network_figure(res: StatsResult, colors=None):
         rel = res.relations[res.relations["set"] == s].set_index("relation")["fitted"]
         nbr = res.macro.query("set == @s and region == 'all'")["n_br"].iloc[0]
         if not np.isfinite(nbr):  # no per-stack counts (simulations): the Eq. (14) fitted slope
-            nbr = rel.get("eq3_slope", np.nan)
+            nbr = rel.get("eq14_slope", np.nan)
         axes[0].plot(g["N_l"], g["N_br"], "o", color=c, ms=4, alpha=0.8,
                      label=f"{s}: configurations")
         axes[1].plot(g["N_l"], g["n_br_bar"], "o", color=c, ms=4, alpha=0.8,
@@ -397,9 +397,9 @@ def network_figure(res: StatsResult, colors=None):
         ratio = _nanmean(g["sqrt_s_bar"] / g["l_bar"])  # NaN for scans without voids
         eps = _nanmean(g["epsilon"])
         if np.isfinite(ratio) and np.isfinite(eps):
-            eq1 = EQ1_CONST * eps * ratio * np.sqrt(nl)  # Eq. (12) with set means
-            axes[0].plot(nl, eq1, "-", color=c, label=f"{s}: Eq. (12) with the set means")
-            axes[1].plot(nl, eq1 / nl, "-", color=c, label=f"{s}: Eq. (13)")
+            eq12 = EQ12_CONST * eps * ratio * np.sqrt(nl)  # Eq. (12) with set means
+            axes[0].plot(nl, eq12, "-", color=c, label=f"{s}: Eq. (12) with the set means")
+            axes[1].plot(nl, eq12 / nl, "-", color=c, label=f"{s}: Eq. (13)")
         if np.isfinite(nbr):
             axes[0].plot(nl, nbr * nl, "--", color=c,
                          label=f"{s}: Eq. (14), <n_br> = {nbr:.2g}")
@@ -768,12 +768,12 @@ COLUMN_NAMES = {
     "mean_minus_cut": "<x> - <cut> (= μ for the exponential)", "rejected": "why rejected",
 }
 RELATION_WORDS = {
-    "eq1_const": "Eq. (12) constant C in N_br = C ε (√s̄/l̄) √N_l (expected 2√(π/3))",
+    "eq12_const": "Eq. (12) constant C in N_br = C ε (√s̄/l̄) √N_l (expected 2√(π/3))",
     "slope_sqrt_s_vs_l": "slope of √s̄ against l̄ (paper 1.1)",
-    "eq1_eps_sqrtNl": "K in N_br = K ε √N_l (expected C × slope)",
-    "eq3_slope": "Eq. (14) slope of N_br against N_l (expected <n_br>)",
-    "eq4_fluct": "Eq. (15) mean relative deviation of n̄_br from <n_br>",
-    "eq5": "Eq. (16) <n_br>√<N_l>/ε (paper 2.2√(π/3))",
+    "eq12_eps_sqrtNl": "K in N_br = K ε √N_l (expected C × slope)",
+    "eq14_slope": "Eq. (14) slope of N_br against N_l (expected <n_br>)",
+    "eq15_fluct": "Eq. (15) mean relative deviation of n̄_br from <n_br>",
+    "eq16": "Eq. (16) <n_br>√<N_l>/ε (paper 2.2√(π/3))",
     "n_br_exp_mu": "mean of the exponential (geometric) law of n_br (expected <n_br>)",
     "E_vs_Nbr_e": "<E> against <N_br><e>",
 }

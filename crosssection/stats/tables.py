@@ -32,8 +32,8 @@ from crosssection.stats import fits as F
 from crosssection.stats.data import SIM_REGION, Ensemble
 
 # Eq. (12): N_br = (2 sqrt(pi)/sqrt(3)) eps (sqrt(s)/l) sqrt(N_l)
-EQ1_CONST = 2 * np.sqrt(np.pi) / np.sqrt(3)
-EQ5_PAPER = 2.2 * np.sqrt(np.pi / 3)  # Eq. (16)
+EQ12_CONST = 2 * np.sqrt(np.pi) / np.sqrt(3)
+EQ16_PAPER = 2.2 * np.sqrt(np.pi / 3)  # Eq. (16)
 PAPER_SLOPE_S_L = 1.1  # Fig. topolo_macro b
 PAPER_CORR = {"l_vs_inv_kappa_m": 0.45, "e_vs_l_kappa_m2": 0.6, "E_vs_N_br": 0.75}
 
@@ -180,7 +180,7 @@ def per_config_table(ens: Ensemble) -> pd.DataFrame:
     c = c.join(lb, on=key).join(eb, on=key).join(sb, on=key)
     c["n_br_bar"] = c["N_br"] / c["N_l"].where(c["N_l"] > 0)
     c["sqrt_s_bar"] = np.sqrt(c["s_bar"])
-    c["eq1_x"] = c["epsilon"] * c["sqrt_s_bar"] / c["l_bar"] * np.sqrt(c["N_l"])
+    c["eq12_x"] = c["epsilon"] * c["sqrt_s_bar"] / c["l_bar"] * np.sqrt(c["N_l"])
     return c
 
 
@@ -404,12 +404,12 @@ def relations_table(ens: Ensemble, per_cfg: pd.DataFrame, summaries: dict) -> pd
 
     Rows (relation, fitted, expected):
 
-    - ``eq1_const``: C in N_br = C eps (sqrt(s_bar)/l_bar) sqrt(N_l), expected 2 sqrt(pi/3);
+    - ``eq12_const``: C in N_br = C eps (sqrt(s_bar)/l_bar) sqrt(N_l), expected 2 sqrt(pi/3);
     - ``slope_sqrt_s_vs_l``: sqrt(s_bar) = a l_bar through the origin, paper 1.1;
-    - ``eq1_eps_sqrtNl``: K in N_br = K eps sqrt(N_l), expected 2 sqrt(pi/3) x slope;
-    - ``eq3_slope``: N_br = a N_l through the origin, expected <n_br>;
-    - ``eq4_fluct``: <n_br_bar/<n_br> - 1> (paper: a few percent);
-    - ``eq5``: <n_br> sqrt(<N_l>)/<eps>, paper 2.2 sqrt(pi/3);
+    - ``eq12_eps_sqrtNl``: K in N_br = K eps sqrt(N_l), expected 2 sqrt(pi/3) x slope;
+    - ``eq14_slope``: N_br = a N_l through the origin, expected <n_br>;
+    - ``eq15_fluct``: <n_br_bar/<n_br> - 1> (paper: a few percent);
+    - ``eq16``: <n_br> sqrt(<N_l>)/<eps>, paper 2.2 sqrt(pi/3);
     - ``n_br_exp_mu``: mean of the exponential law of n_br (fitted as counts: the geometric
       law's mean, = <n_br> at the maximum of the likelihood), with the selected family;
     - ``E_vs_Nbr_e``: <E> against <N_br><e> (paper, simulations).
@@ -419,12 +419,12 @@ def relations_table(ens: Ensemble, per_cfg: pd.DataFrame, summaries: dict) -> pd
         pc = per_cfg[per_cfg["set"] == s]
         e = ens.subset(s)
         nbr_mean = _mean(e.stacks["n_br"])
-        c1, r1, n1 = slope_through_origin(pc["eq1_x"], pc["N_br"])
+        c1, r1, n1 = slope_through_origin(pc["eq12_x"], pc["N_br"])
         a, ra, na = slope_through_origin(pc["l_bar"], pc["sqrt_s_bar"])
         k, rk, nk = slope_through_origin(pc["epsilon"] * np.sqrt(pc["N_l"]), pc["N_br"])
         a3, r3, n3 = slope_through_origin(pc["N_l"], pc["N_br"])
         fl = _mean(pc["n_br_bar"] / nbr_mean - 1) if np.isfinite(nbr_mean) else np.nan
-        eq5 = nbr_mean * np.sqrt(_mean(pc["N_l"])) / _mean(pc["epsilon"])
+        eq16 = nbr_mean * np.sqrt(_mean(pc["N_l"])) / _mean(pc["epsilon"])
         nsum = summaries.get((s, "all", "n_br"))
         mu = nsum.results["exponential"].params["mu"] if nsum else np.nan
         ci = nsum.results["exponential"].ci.get("mu", (np.nan, np.nan)) if nsum else (np.nan,) * 2
@@ -433,18 +433,18 @@ def relations_table(ens: Ensemble, per_cfg: pd.DataFrame, summaries: dict) -> pd
             # whose mean 1/(1 - exp(-1/mu)) (support k >= 1) is the number to compare
             mu, ci = _geometric_mean(mu), tuple(_geometric_mean(v) for v in ci)
         rows += [
-            {"set": s, "relation": "eq1_const", "fitted": c1, "expected": EQ1_CONST,
+            {"set": s, "relation": "eq12_const", "fitted": c1, "expected": EQ12_CONST,
              "r2": r1, "n": n1, "note": "N_br = C eps sqrt(s_bar)/l_bar sqrt(N_l)"},
             {"set": s, "relation": "slope_sqrt_s_vs_l", "fitted": a, "expected": PAPER_SLOPE_S_L,
              "r2": ra, "n": na, "note": "sqrt(s_bar) = a l_bar (paper 1.1)"},
-            {"set": s, "relation": "eq1_eps_sqrtNl", "fitted": k,
-             "expected": EQ1_CONST * a if np.isfinite(a) else np.nan, "r2": rk, "n": nk,
+            {"set": s, "relation": "eq12_eps_sqrtNl", "fitted": k,
+             "expected": EQ12_CONST * a if np.isfinite(a) else np.nan, "r2": rk, "n": nk,
              "note": "N_br = K eps sqrt(N_l); expected C*a"},
-            {"set": s, "relation": "eq3_slope", "fitted": a3, "expected": nbr_mean, "r2": r3,
+            {"set": s, "relation": "eq14_slope", "fitted": a3, "expected": nbr_mean, "r2": r3,
              "n": n3, "note": "N_br = <n_br> N_l"},
-            {"set": s, "relation": "eq4_fluct", "fitted": fl, "expected": 0.0, "r2": np.nan,
+            {"set": s, "relation": "eq15_fluct", "fitted": fl, "expected": 0.0, "r2": np.nan,
              "n": int(pc["n_br_bar"].notna().sum()), "note": "<n_br_bar/<n_br> - 1>"},
-            {"set": s, "relation": "eq5", "fitted": eq5, "expected": EQ5_PAPER, "r2": np.nan,
+            {"set": s, "relation": "eq16", "fitted": eq16, "expected": EQ16_PAPER, "r2": np.nan,
              "n": len(pc), "note": "<n_br> sqrt(<N_l>)/<eps> (paper 2.2 sqrt(pi/3))"},
             {"set": s, "relation": "n_br_exp_mu", "fitted": mu, "expected": nbr_mean,
              "r2": np.nan, "n": len(e.stacks),

@@ -14,8 +14,8 @@ from crosssection.stats.tables import StatsOptions, StatsResult, compute_stats, 
 # column and heading codes of the CSV tables that must not reach the page as headings
 RAW_NAMES = ("n_br_mean", "p1_name", "p1_lo", "p2_hi", "delta_bic", "p_text", "s_L2",
              "sqrt_s_over_p", "l_L", "kappa_m_L", "E_tilde", "alpha_E_over_alpha_e",
-             "pearson_r", "spearman_r", "naive_bias_rel", "mean_minus_cut", "eq1_const",
-             "eq3_slope", "n_br_exp_mu", "n_branches", "tab_macro", "tab_micro", "tab_res")
+             "pearson_r", "spearman_r", "naive_bias_rel", "mean_minus_cut", "eq12_const",
+             "eq14_slope", "n_br_exp_mu", "n_branches", "tab_macro", "tab_micro", "tab_res")
 
 
 def _ensemble(sets, rng, n_stacks=250):

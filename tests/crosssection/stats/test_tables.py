@@ -152,16 +152,16 @@ def test_relations_recover_constants(seed, slope, nbr):
     pc = T.per_config_table(ens)
     rel = T.relations_table(ens, pc, {}).set_index("relation")
     assert rel.loc["slope_sqrt_s_vs_l", "fitted"] == pytest.approx(slope, rel=1e-9)
-    assert rel.loc["eq3_slope", "fitted"] == pytest.approx(nbr, rel=1e-9)
-    assert rel.loc["eq3_slope", "expected"] == pytest.approx(nbr)
-    assert rel.loc["eq4_fluct", "fitted"] == pytest.approx(0.0, abs=1e-12)
+    assert rel.loc["eq14_slope", "fitted"] == pytest.approx(nbr, rel=1e-9)
+    assert rel.loc["eq14_slope", "expected"] == pytest.approx(nbr)
+    assert rel.loc["eq15_fluct", "fitted"] == pytest.approx(0.0, abs=1e-12)
     want5 = nbr * np.sqrt(pc["N_l"].mean()) / pc["epsilon"].mean()
-    assert rel.loc["eq5", "fitted"] == pytest.approx(want5)
+    assert rel.loc["eq16", "fitted"] == pytest.approx(want5)
     # Eq. (12) with data built from it: N_br = C eps sqrt(s)/l sqrt(N_l)
     pc2 = pc.copy()
-    pc2["N_br"] = T.EQ1_CONST * pc2["eq1_x"]
-    c, r2, _ = T.slope_through_origin(pc2["eq1_x"], pc2["N_br"])
-    assert c == pytest.approx(T.EQ1_CONST) and r2 == pytest.approx(1.0)
+    pc2["N_br"] = T.EQ12_CONST * pc2["eq12_x"]
+    c, r2, _ = T.slope_through_origin(pc2["eq12_x"], pc2["N_br"])
+    assert c == pytest.approx(T.EQ12_CONST) and r2 == pytest.approx(1.0)
 
 
 def test_correlations_and_micro_gamma_fits():
@@ -206,7 +206,7 @@ def test_demo_batch_tables_bulk_periphery_and_truncation(tmp_path):
     assert tr["truncated_lo"] == pytest.approx(exp["p1_lo"])
     # N_br = sum of n_br over stacks, so Eq. (14) holds exactly per configuration
     rel = res.relations.set_index("relation")
-    assert rel.loc["eq3_slope", "r2"] == pytest.approx(1.0, abs=0.2)
+    assert rel.loc["eq14_slope", "r2"] == pytest.approx(1.0, abs=0.2)
 
 
 def test_to_markdown():
