@@ -445,8 +445,8 @@ def _check_calibration(value):
         return str(value)
     if hasattr(value, "layers") or hasattr(value, "to_frame") or hasattr(value, "columns"):
         return value
-    raise ParameterError(f"calibration must be a CSV path or a Calibration, got "
-                         f"{type(value).__name__}")
+    raise ParameterError(f"calibration must be a CSV path, a Calibration or a table with "
+                         f"columns n_layers and width_mm, got {type(value).__name__}")
 
 
 def add_analysis_arguments(parser, *, exclude=()) -> None:

@@ -575,7 +575,8 @@ def _add_common(p, command):
                         "the wall stops the rod but does not compress it, so a start shape "
                         "must fit inside (default: none)")
     p.add_argument("--contact-distance", type=float, default=None,
-                   help="contact cut-off of the analysis (units of L; default contacts')")
+                   help="contact cut-off of the analysis, in units of L (default half a segment, "
+                        "1/(2N))")
     p.add_argument("--workers", type=int, default=1, help="local worker processes (default 1)")
     p.add_argument("--scheduler", default=None,
                    help="Dask scheduler address, e.g. tcp://host:8786 (default: local workers)")

@@ -430,7 +430,8 @@ class FitSummary:
     table : pandas.DataFrame
         One row per family (see :func:`summary_table`).
     n_dropped : int
-        Observations below the cut (or non-finite) that were discarded.
+        Observations discarded: non-finite ones, and those below the cut (a detection
+        limit: below it nothing is seen, so the fit is truncated there).
     """
 
     results: dict
