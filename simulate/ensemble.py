@@ -802,7 +802,7 @@ def add_subparser(sub):
 
 
 __all__ = ["run_ensemble", "report_failures", "run_config", "assemble", "minimize_config",
-           "add_subparser", "check_out", "check_out_folder", "start_shape", "wall_check",
+           "add_subparser", "check_out_folder", "start_shape", "wall_check",
            "WallStartWarning", "OUTPUT_FILES",
            "METHOD_OPTIONS",
            "analysis_records", "write_part",
