@@ -390,20 +390,20 @@ def network_figure(res: StatsResult, colors=None):
         if not np.isfinite(nbr):  # no per-stack counts (simulations): the Eq. (14) fitted slope
             nbr = rel.get("eq14_slope", np.nan)
         axes[0].plot(g["N_l"], g["N_br"], "o", color=c, ms=4, alpha=0.8,
-                     label=f"{s}: configurations")
+                     label=f"{s}: configurations (both panels)")
         axes[1].plot(g["N_l"], g["n_br_bar"], "o", color=c, ms=4, alpha=0.8,
-                     label=f"{s}: configurations")
+                     label=f"{s}: configurations (both panels)")
         nl = np.linspace(max(1, g["N_l"].min() * 0.8), g["N_l"].max() * 1.2, 100)
         ratio = _nanmean(g["sqrt_s_bar"] / g["l_bar"])  # NaN for scans without voids
         eps = _nanmean(g["epsilon"])
         if np.isfinite(ratio) and np.isfinite(eps):
             eq12 = EQ12_CONST * eps * ratio * np.sqrt(nl)  # Eq. (12) with set means
-            axes[0].plot(nl, eq12, "-", color=c, label=f"{s}: Eq. (12) with the set means")
-            axes[1].plot(nl, eq12 / nl, "-", color=c, label=f"{s}: Eq. (13)")
+            axes[0].plot(nl, eq12, "-", color=c, label=f"{s}: Eq. (12) with the set means (left)")
+            axes[1].plot(nl, eq12 / nl, "-", color=c, label=f"{s}: Eq. (13) (right)")
         if np.isfinite(nbr):
             axes[0].plot(nl, nbr * nl, "--", color=c,
-                         label=f"{s}: Eq. (14), <n_br> = {nbr:.2g}")
-            axes[1].axhline(nbr, ls="--", color=c, label=f"{s}: Eq. (15), <n_br> = {nbr:.2g}")
+                         label=f"{s}: Eq. (14), <n_br> = {nbr:.2g} (left)")
+            axes[1].axhline(nbr, ls="--", color=c, label=f"{s}: Eq. (15), <n_br> = {nbr:.2g} (right)")
     axes[0].set(xlabel="number of stacks per configuration $N_l$",
                 ylabel="number of branches per configuration $N_{br}$",
                 title="branches against stacks")
