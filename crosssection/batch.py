@@ -65,6 +65,7 @@ import shutil
 import sys
 import time
 import traceback
+import warnings
 from collections import deque
 from concurrent.futures import FIRST_COMPLETED, wait
 from concurrent.futures.process import BrokenProcessPool
@@ -83,6 +84,7 @@ from crosssection.core.fileio import (BROWSER_FILES, PARTIAL_TAG, check_out,
 from crosssection.core.parallel import compiling_in_turn, get_executor, spawn_seeds
 from crosssection.params import (PARAM_NAMES, AnalysisParams, add_analysis_arguments,
                                  check_param, switched_off)
+from crosssection.quality import QualityWarning
 from crosssection.setconfig import (DEFAULT_PARAMS, DEFAULT_SET_NAME, SET_FILE, SetConfig,
                                     check_params, failed_set, load_set_config)
 
@@ -576,6 +578,14 @@ def changed_inputs(task: ImageTask) -> list[str]:
 # --------------------------------------------------------------------------- driver
 
 
+class BatchWarning(QualityWarning):
+    """A doubt about the batch as a whole, raised before its images are analysed: a set's
+    ``set.toml`` or ``calibration.csv`` values that are not used, a linked folder not
+    searched, images analysed again because their parameters changed (the command line
+    prints each as a ``warning:`` line)."""
+
+
+
 def _write_tables(out: Path, rows: dict, tasks: list[ImageTask]):
     ordered = [rows[t.rel] for t in tasks if t.rel in rows]
     index = pd.DataFrame(ordered, columns=INDEX_COLUMNS)
@@ -817,12 +827,13 @@ def _start(out: Path, input_dir, tasks, sets, redone: dict, options: dict) -> di
     }
     for s in sets.values():
         for w in s.warnings:
-            print(f"warning: {w}", file=sys.stderr)
+            warnings.warn(w, BatchWarning, stacklevel=3)
     if redone:
         n = len(set().union(*redone.values()))
-        print(f"warning: {out}: {n} image{'s' if n > 1 else ''} analysed again: "
-              f"{'their' if n > 1 else 'its'} parameters differ from the recorded ones "
-              f"({', '.join(redone)}); the earlier results are replaced", file=sys.stderr)
+        warnings.warn(f"{out}: {n} image{'s' if n > 1 else ''} analysed again: "
+                      f"{'their' if n > 1 else 'its'} parameters differ from the recorded ones "
+                      f"({', '.join(redone)}); the earlier results are replaced", BatchWarning,
+                      stacklevel=3)
     write_json(out / "batch.json", meta)
     return meta
 
@@ -905,5 +916,5 @@ def run(args) -> int:
     return EXIT_SOME_FAILED if n_failed else 0
 
 
-__all__ = ["run_batch", "plan_batch", "process_image", "completed_row", "changed_inputs",
-           "check_out_dir", "find_images", "params_hash", "ImageTask", "add_subparser", "run"]
+__all__ = ["run_batch", "BatchWarning", "plan_batch", "process_image", "completed_row",
+           "changed_inputs", "check_out_dir", "find_images", "params_hash", "ImageTask", "add_subparser", "run"]

@@ -228,7 +228,13 @@ def test_resume_redoes_only_missing_images(tmp_path):
     for p, text in tables.items():
         assert p.read_text() == text, p
     # changed parameters redo the affected images only
-    third = B.run_batch(inp, out, workers=1, progress=False, cli_params={"px_per_mm": 40})
+    with pytest.warns(B.BatchWarning) as caught:
+        third = B.run_batch(inp, out, workers=1, progress=False, cli_params={"px_per_mm": 40})
+    said = [str(w.message) for w in caught]
+    # the set's own scale replaces the command line's; only the image outside it is redone
+    assert any("which replaces --px-per-mm 40.0" in m for m in said)
+    assert any("1 image analysed again: its parameters differ from the recorded ones "
+               "(px_per_mm)" in m for m in said)
     st3 = dict(zip(third["image"], third["status"]))
     assert st3["loose.png"] == "ok" and st3["setA/s0.png"] == "skipped"
 
@@ -265,7 +271,8 @@ def test_cli_exit_status(tmp_path, capsys):
     expect = make_tree(inp, seed=7)
     args = parser.parse_args(["batch", str(inp), "--out", str(out), "--workers", "1",
                               "--no-figure", "--quiet", "--px-per-mm", "48"])
-    assert args.func(args) == B.EXIT_SOME_FAILED  # finished, some images failed
+    with pytest.warns(B.BatchWarning, match="which replaces --px-per-mm 48.0"):
+        assert args.func(args) == B.EXIT_SOME_FAILED  # finished, some images failed
     line = capsys.readouterr().out.strip().splitlines()[-1]
     assert f"{len(expect['failed'])} failed" in line
     assert not list(out.rglob("overlay.png"))
