@@ -1927,7 +1927,7 @@ def add_subparser(sub) -> None:
                    help=f"Gaussian blur sigma in px (default {d['blur_px']:g}, 0 with --clean; "
                         f"above {VALIDATED_BLUR_PX:g}: a warning)")
     p.add_argument("--jpeg", type=_jpeg_arg, default=None,
-                   help=f"JPEG quality 1-100 of a round trip, or 'none' (default "
+                   help=f"JPEG quality 1-100 of a round trip, or 0 or 'none' (default "
                         f"{d['jpeg_quality']}, none with --clean; below "
                         f"{VALIDATED_JPEG_QUALITY}: a warning)")
     p.add_argument("--smears", type=int, default=None,
@@ -1976,15 +1976,16 @@ def add_subparser(sub) -> None:
 
 
 def _jpeg_arg(text):
-    if str(text).lower() in ("none", "off"):
+    # 0 is none, as for render_configuration's jpeg_quality
+    if str(text).strip().lower() in ("none", "off", "0"):
         return "none"
     try:
         q = int(text)
     except ValueError:
-        q = 0
+        q = -1
     if not 1 <= q <= 100:
-        raise argparse.ArgumentTypeError(f"expected a whole number 1-100 or 'none', got "
-                                         f"{text!r}")
+        raise argparse.ArgumentTypeError(f"expected a whole number 1-100, or 0 or 'none' for "
+                                         f"no JPEG, got {text!r}")
     return q
 
 

@@ -263,6 +263,11 @@ def test_the_validated_limits_themselves_say_nothing(sim, tmp_path, capsys):
                    "--blur", "1.5", "--noise", "10", "--jpeg", "75") == (0, "")
     assert _render(capsys, sim, "--out", tmp_path / "t", "--limit", "1",
                    "--jpeg", "none") == (0, "")
+    # 0 is no JPEG, as the API's jpeg_quality=0: the same bytes as 'none'
+    assert _render(capsys, sim, "--out", tmp_path / "u", "--limit", "1",
+                   "--jpeg", "0") == (0, "")
+    scans = [sorted(tmp_path.glob(f"{d}/*/image.png")) for d in ("t", "u")]
+    assert scans[0] and [p.read_bytes() for p in scans[0]] == [p.read_bytes() for p in scans[1]]
 
 
 def test_the_api_warns_with_its_own_category(sim, tmp_path):
