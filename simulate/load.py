@@ -270,6 +270,13 @@ def plot_configuration(xy, *, ax=None, stacks: bool = True, lam: float = LAMBDA,
                                 colors=[cmap((n - 1) / (top - 1)) for n in n_br],
                                 linewidths=1.0 + 1.2 * n_br, alpha=0.75, zorder=2)
             ax.add_collection(lc)
+            from matplotlib.cm import ScalarMappable
+            from matplotlib.colors import Normalize
+
+            # the colours read as counts: the same map and range as the lines'
+            bar = ax.figure.colorbar(ScalarMappable(Normalize(1, top), cmap), ax=ax,
+                                     shrink=0.8, ticks=range(1, top + 1))
+            bar.set_label("branches per stack $n_{br}$")
         text += (f": {an.n_stacks} stacks, {an.n_branches} branches, "
                  f"{an.n_junctions} junctions (line width and colour: n_br)")
     if wall_radius:

@@ -47,6 +47,9 @@ def test_plot_configuration_draws_rod_and_stacks(sim):
     n_stacks = int(ens.configs["n_stacks"].iloc[0])
     assert len(ax.collections[0].get_segments()) == n_stacks
     assert f"{n_stacks} stacks" in ax.get_title()
+    # the colours read as counts: a colour bar of whole n_br from 1
+    bar = fig.axes[1]
+    assert "n_{br}" in bar.get_ylabel() and bar.get_yticks()[0] == 1
     bare = Figure().add_subplot()
     assert plot_configuration(ens.rod(0), ax=bare, stacks=False, wall_radius=0.2) is bare.figure
     assert not bare.collections and len(bare.patches) == 1
