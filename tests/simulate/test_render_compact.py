@@ -151,7 +151,7 @@ def test_short_links_are_smoothed():
     (["--noise", "-1"], "--noise"),
     (["--blur", "nan"], "--blur"),
     (["--jpeg", "101"], "--jpeg"),
-    (["--jpeg", "0"], "--jpeg"),
+    (["--jpeg", "-1"], "--jpeg"),
     (["--jpeg", "high"], "--jpeg"),
     (["--smears", "-2"], "--smears"),
     (["--plate", "purple"], "plate"),
