@@ -72,8 +72,7 @@ def copy_samples(dest, *, overwrite: bool = False) -> list[Path]:
     """
     if not isinstance(dest, (str, os.PathLike)):
         raise ParameterError(f"dest must be a folder path, got {type(dest).__name__}")
-    if not str(dest).strip():
-        raise ParameterError("empty path: give the folder to copy the samples into", "dest")
+    check_out(dest, "dest")
     src = samples_path()
     dest = Path(dest).expanduser()
     if dest.exists() and not dest.is_dir():

@@ -195,8 +195,7 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
         None when nothing was fitted.
     """
     count = quantity in COUNT_QUANTITIES
-    sets = [s for s in (sets or ens.sets)
-            if any(k[0] == s and k[2] == quantity for k in res.summaries)]
+    sets = _fitted_sets(res, quantity, sets or ens.sets)
     if not sets:
         return None
     colors = colors or set_colors(ens.sets)
@@ -736,11 +735,16 @@ def _pdf_caption(q: str) -> str:
                                  if QUANTITIES[q][3] else "."))
 
 
+def _fitted_sets(res: StatsResult, q: str, sets) -> list:
+    """The sets among ``sets`` with a fit of quantity ``q`` in some sub-system."""
+    return [s for s in sets if any(k[0] == s and k[2] == q for k in res.summaries)]
+
+
 def _left_out(res: StatsResult, ens: Ensemble, q: str, min_n: int) -> str:
     """The sentence naming the sets a distribution figure leaves out (no fit: fewer than
     ``min_n`` positive values, or all equal), or ""."""
-    missing = [s for s in ens.sets
-               if not any(k[0] == s and k[2] == q for k in res.summaries)]
+    fitted = _fitted_sets(res, q, ens.sets)
+    missing = [s for s in ens.sets if s not in fitted]
     if not missing:
         return ""
     return (f" Not drawn (fewer than {min_n} positive values, or all equal): "
