@@ -20,13 +20,39 @@ PERIPHERY_COLOR = "#d7191c"
 OTHER_COLOR = "#2b83ba"
 
 
-def _figure(shape, ncols=1, nrows=1, inches=10.0):
+def _figure_width_in(shape, ncols=1, nrows=1, inches=10.0) -> float:
+    h, w = shape[:2]
+    return max(3.0, w * ncols * inches / max(h * nrows, w * ncols))
+
+
+def _figure(shape, ncols=1, nrows=1, inches=10.0, header_in=0.6):
     from matplotlib.figure import Figure  # no pyplot: no GUI backend, thread-safe
 
     h, w = shape[:2]
     scale = inches / max(h * nrows, w * ncols)
-    fig = Figure(figsize=(max(3.0, w * ncols * scale), max(3.0, h * nrows * scale + 0.6)))
+    fig = Figure(figsize=(_figure_width_in(shape, ncols, nrows, inches),
+                          max(3.0, h * nrows * scale + header_in)))
     return fig
+
+
+# Header of the overlay: the title's lines above the legend's rows, so that neither covers the
+# other whatever the scan's aspect (a tall scan makes a narrow figure). Widths in inches at
+# the header's font sizes (10 pt title, 8 pt legend), measured on matplotlib's DejaVu Sans.
+_TITLE_CHAR_IN = 0.085
+_LEGEND_ITEM_IN = 1.25
+_LINE_IN = 0.22
+
+
+def _overlay_header(text: str, n_items: int, width_in: float) -> tuple[str, int, float]:
+    """The title wrapped to the figure's width, the legend's columns, and the header's
+    height (inches)."""
+    import textwrap
+
+    title = textwrap.fill(text, max(20, int((width_in - 0.2) / _TITLE_CHAR_IN)))
+    ncol = max(1, min(n_items, int((width_in - 0.2) / _LEGEND_ITEM_IN)))
+    rows = -(-n_items // ncol)
+    height = (title.count("\n") + 1 + rows) * _LINE_IN + 0.15
+    return title, ncol, height
 
 
 def dim_image(rgb, amount=0.55) -> np.ndarray:
@@ -79,8 +105,14 @@ def overlay_figure(rgb, result=None, *, junctions_df=None, stacks_df=None, paths
     from matplotlib.lines import Line2D
 
     img = np.asarray(rgb)
-    fig = _figure(img.shape)
-    ax = fig.add_axes([0, 0, 1, 1 - 0.6 / fig.get_figheight()])
+    # the counts in the title are known after drawing: the header is sized for the longest
+    # counts a scan can have
+    n_items = 4 if len(_step_points(result)) else 3
+    head = title or "stacks: width and label = n_br"
+    wide = f"{head}   (00000 junctions, 00000 stacks, 000000 branches)"
+    _, _, header_in = _overlay_header(wide, n_items, _figure_width_in(img.shape))
+    fig = _figure(img.shape, header_in=header_in)
+    ax = fig.add_axes([0, 0, 1, 1 - header_in / fig.get_figheight()])
     n_j, m, n_br_total = draw_overlay(
         ax, img, result, junctions_df=junctions_df, stacks_df=stacks_df, paths=paths,
         hole=hole, thickness_px=thickness_px, label_min_px=label_min_px,
@@ -91,11 +123,16 @@ def overlay_figure(rgb, result=None, *, junctions_df=None, stacks_df=None, paths
     if len(_step_points(result)):
         handles.append(Line2D([], [], marker="D", mfc="white", mec="black", ls="none",
                               label="layer step"))
-    head = title or "stacks: width and label = n_br"
-    fig.suptitle(f"{head}   ({n_j} junctions, {m} stacks, {n_br_total} branches)",
-                 fontsize=10, y=0.995, x=0.01, ha="left")
-    fig.legend(handles=handles, loc="upper right", ncol=len(handles), fontsize=8,
-               frameon=False)
+    text, ncol, _ = _overlay_header(
+        f"{head}   ({n_j} junctions, {m} stacks, {n_br_total} branches)", len(handles),
+        fig.get_figwidth())
+    height = fig.get_figheight()
+    fig.suptitle(text, fontsize=10, x=0.1 / fig.get_figwidth(), y=1 - 0.05 / height,
+                 ha="left", va="top")
+    below = (text.count("\n") + 1) * _LINE_IN + 0.08
+    fig.legend(handles=handles, loc="upper left", ncol=ncol, fontsize=8, frameon=False,
+               bbox_to_anchor=(0.05 / fig.get_figwidth(), 1 - below / height),
+               borderaxespad=0.0, handlelength=1.8, columnspacing=1.2)
     return fig
 
 

@@ -110,3 +110,26 @@ def test_steps_figure_names_the_threshold_used(method):
     else:
         assert title.startswith("threshold (auto): B \u2212 max(R, G) \u2265 ")
         assert f"{t['cut']:.1f}".rstrip("0").rstrip(".") in title
+
+
+@pytest.mark.parametrize("shape", [(400, 400), (1300, 300), (300, 1300), (2000, 760)])
+def test_overlay_title_and_legend_stay_clear_of_each_other_and_the_scan(shape):
+    # a tall scan makes a narrow figure: the title and the legend must neither cover each
+    # other nor the scan, nor leave the figure
+    rgb, stacks, junctions, paths = _network(5, m=30, size=min(shape))
+    rgb = np.full(shape + (3,), 245, np.uint8)
+    fig = overlay_figure(rgb, junctions_df=junctions, stacks_df=stacks, paths=paths,
+                         title="a long title naming the scan and the settings it used")
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    fig.draw(renderer)
+    title = fig._suptitle.get_window_extent(renderer)
+    legend = fig.legends[0].get_window_extent(renderer)
+    scan = fig.axes[0].get_window_extent(renderer)
+    frame = fig.bbox
+    assert not title.overlaps(legend)
+    assert not title.overlaps(scan) and not legend.overlaps(scan)
+    for box in (title, legend):
+        assert box.x0 >= frame.x0 - 1 and box.x1 <= frame.x1 + 1
+        assert box.y0 >= frame.y0 - 1 and box.y1 <= frame.y1 + 1
