@@ -797,8 +797,10 @@ def _rod_end_cuts(analysis, frame, lines_px, widths_px):
     along the line rather than by projecting the rod end onto it: a band that bends back
     (a teardrop loop closing on itself) can pass closer to the rod end than the part of the
     line the pass runs along, and the pass lengths then sum to the rod exactly. A cut within
-    one band width of an end of the line is the band's end: no cut. A closed line (a loop
-    stack) has no end to measure from and is left whole.
+    one band width of an end of the line is the band's end: no cut. On a closed line (a loop
+    stack whose two ends are one junction: a teardrop whose neck holds the rod end) both ends
+    are the pass's junction; the pass runs along the side of the loop nearer its own samples
+    (:func:`_closed_line_side`).
 
     Returns
     -------
@@ -818,8 +820,6 @@ def _rod_end_cuts(analysis, frame, lines_px, widths_px):
         if n < 2 or len(line) < 2:
             continue
         u_len = polyline.length(line)
-        if np.hypot(*(line[0] - line[-1])) < 1e-6 * max(u_len, 1.0):
-            continue
         k_far = min(int(np.searchsorted(analysis.samples_s, float(br[far_col].iloc[b]))),
                     len(analysis.samples_s) - 1)
         far = frame.to_px(analysis.samples_xy[k_far])
@@ -828,12 +828,34 @@ def _rod_end_cuts(analysis, frame, lines_px, widths_px):
         # end (passes chained at most delta apart); otherwise it is not a pass to cut
         if min(d0, d1) > n * analysis.contact_distance * frame.scale + float(widths_px[sid]):
             continue
-        before = bool(d0 <= d1)
         length = float(br["length"].iloc[b]) * frame.scale
+        if np.hypot(*(line[0] - line[-1])) < 1e-6 * max(u_len, 1.0):
+            s0, s1 = (float(br[c].iloc[b]) for c in ("s_start", "s_end"))
+            inside = (analysis.samples_s >= s0) & (analysis.samples_s <= s1)
+            before = _closed_line_side(line, frame.to_px(analysis.samples_xy[inside]), length)
+        else:
+            before = bool(d0 <= d1)
         u = length if before else u_len - length
         if float(widths_px[sid]) < u < u_len - float(widths_px[sid]):
             cuts.setdefault(sid, []).append((u, before))
     return cuts
+
+
+def _closed_line_side(line, pass_px, length_px: float) -> bool:
+    """Whether a pass of ``length_px`` starting at the junction of a closed line runs along
+    its start (True) rather than its end: the side whose first ``length_px`` of arc lies
+    nearer the pass's own samples ``pass_px`` (mean distance). Near the junction both sides
+    are within a band's width of the pass, so its samples are compared over its whole
+    length, not at its rod end alone."""
+    u = _arc_px(line)
+    sides = []
+    for a, b in ((0.0, length_px), (u[-1] - length_px, u[-1])):
+        keep = (u >= a) & (u <= b)
+        ends = np.c_[np.interp([a, b], u, line[:, 0]), np.interp([a, b], u, line[:, 1])]
+        piece = np.concatenate([ends[:1], line[keep], ends[1:]])
+        sides.append(float(np.mean(_distance_to_line(pass_px, piece))) if len(pass_px)
+                     else np.inf)
+    return bool(sides[0] <= sides[1])
 
 
 def _layer_pieces(line, n, cuts):

@@ -138,3 +138,44 @@ def test_free_ends_at_a_band_end_leave_the_band_whole():
     st = sc.tables["stacks"]
     lengths = [np.hypot(*np.diff(p, axis=0).T).sum() / PX_PER_MM for p in sc.paths_rc]
     assert st["length_mm"].to_numpy() == pytest.approx(lengths)
+
+
+@pytest.mark.parametrize("side", ["start", "end"])
+def test_rod_end_in_a_loop_stack_is_cut_on_its_own_side(side):
+    """A teardrop loop whose two ends are one junction, with the rod's first pass lying along
+    one of its sides from the junction: the band is cut where that pass ends, on that side
+    (drawn two layers thick round the whole loop, its truth counted the loop twice)."""
+    from types import SimpleNamespace
+
+    import pandas as pd
+
+    from simulate.render import _rod_end_cuts
+
+    # the loop (px): up the right side from the junction at the origin, round the top, down
+    # the left side back to the junction
+    t = np.linspace(0.0, 1.0, 400)
+    right = np.c_[40 * np.sin(np.pi * t), -300 * t]
+    a = np.linspace(0, np.pi, 200)
+    top = np.c_[40 * np.cos(a), -300 - 40 * np.sin(a)]
+    left = np.c_[-40 * np.sin(np.pi * t[::-1]), -300 * t[::-1]]
+    loop = np.concatenate([right, top, left])
+    if side == "end":
+        loop = loop[::-1]
+    # the rod's first pass: 4 px outside the right side, from 120 px up to the junction
+    u = np.r_[0.0, np.cumsum(np.hypot(*np.diff(right, axis=0).T))]
+    k = np.flatnonzero(u <= 120.0)
+    pass_px = right[k[::-1]] + np.array([4.0, 0.0])
+    s = np.linspace(0.0, 1.0, len(pass_px))
+    scale = 1000.0  # px per unit of rod length
+    length = float(u[k[-1]]) / scale
+    analysis = SimpleNamespace(
+        branches=pd.DataFrame({"stack_id": [0, 1], "length": [length, 1.0 - length],
+                               "s_start": [0.0, length], "s_end": [length, 1.0]}),
+        stacks=pd.DataFrame({"n_br": [2, 1]}),
+        samples_s=s * length, samples_xy=pass_px / scale, contact_distance=0.002)
+    frame = SimpleNamespace(scale=scale, to_px=lambda p: np.asarray(p) * scale)
+    cuts = _rod_end_cuts(analysis, frame, [loop, right[:2]], np.array([12.0, 6.0]))
+    u_len = float(np.hypot(*np.diff(loop, axis=0).T).sum())
+    (cut, before), = cuts[0]
+    assert before == (side == "start")
+    assert cut == pytest.approx(u[k[-1]] if before else u_len - u[k[-1]], abs=1e-6)
