@@ -88,7 +88,7 @@ from crosssection.quality import QualityWarning
 from crosssection.setconfig import (DEFAULT_PARAMS, DEFAULT_SET_NAME, SET_FILE, SetConfig,
                                     check_params, failed_set, load_set_config)
 
-IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg")
+IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp", ".webp")
 SUMMARY_NUMBERS = ["n_junctions", "n_stacks", "n_branches", "n_voids", "mean_branches_per_stack",
                    "rod_length_mm", "epsilon", "total_energy", "total_energy_rel_uncertainty"]
 INDEX_COLUMNS = (["image", "set", "status", "output"] + SUMMARY_NUMBERS
@@ -845,7 +845,8 @@ def add_subparser(sub):
     """Register the ``batch`` subcommand on an ``argparse`` subparsers object."""
     p = sub.add_parser(
         "batch", help="analyse every image under a folder, in parallel, resumable",
-        description="Analyse every image (png, tif, tiff, jpg, jpeg; recursive) under "
+        description=f"Analyse every image ({', '.join(x[1:] for x in IMAGE_SUFFIXES)}; "
+                    "recursive) under "
                     "INPUT_DIR into OUT_DIR/<set>/<image stem>/. A folder with a set.toml is "
                     "a set; finished images are skipped on a re-run; bad images are listed in "
                     "OUT_DIR/failures.csv and the batch goes on. A symbolic link to a scan is "

@@ -379,3 +379,18 @@ def test_cli_batch_absurd_options_name_the_option(tmp_path, option, named):
     assert r.returncode == 2
     assert r.stderr.count("\n") == 1 and r.stderr.startswith(f"error: {named}: ")
     assert not (tmp_path / "out").exists()
+
+
+def test_every_format_analyze_reads_is_a_scan_of_a_batch(tmp_path):
+    # a BMP or WebP scan is analysed by `analyze`; a batch must not pass it over in silence
+    from PIL import Image
+
+    inp = tmp_path / "in"
+    inp.mkdir()
+    rgb = draw_scan(3)
+    for suffix in B.IMAGE_SUFFIXES:
+        kind = {".webp": dict(lossless=True)}.get(suffix, {})
+        Image.fromarray(rgb).save(inp / f"scan{suffix.replace('.', '_')}{suffix}", **kind)
+    tasks, _ = B.plan_batch(inp, tmp_path / "out", seed=0)
+    assert sorted(Path(t.rel).suffix for t in tasks) == sorted(B.IMAGE_SUFFIXES)
+    assert {".bmp", ".webp"} <= set(B.IMAGE_SUFFIXES)
