@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["overlay_figure", "draw_overlay", "steps_figure", "threshold_title",
+__all__ = ["overlay_figure", "draw_overlay", "overlay_window", "steps_figure", "threshold_title",
            "step_titles", "curvature_figure", "widths_figure", "dim_image"]
 
 BULK_COLOR = "#1a9641"
@@ -66,6 +66,27 @@ def dim_image(rgb, amount=0.55) -> np.ndarray:
     return f * (1 - amount) + amount
 
 
+# The overlay shows the hole and this much of its radius around it: a page scanned at 1200 dpi
+# holds a hole of a few hundred pixels in thousands, drawn whole it is unreadable.
+HOLE_VIEW_MARGIN = 0.08
+
+
+def overlay_window(shape, hole=None) -> tuple[int, int, int, int]:
+    """The part of the scan an overlay shows, ``(row0, row1, col0, col1)`` (end exclusive):
+    the hole's square widened by :data:`HOLE_VIEW_MARGIN` of its radius, within the scan; the
+    whole scan when no hole is known."""
+    h, w = shape[:2]
+    if hole is None or not np.isfinite(getattr(hole, "radius_px", np.nan)):
+        return 0, h, 0, w
+    r = float(hole.radius_px) * (1.0 + HOLE_VIEW_MARGIN)
+    (cr, cc) = (float(x) for x in hole.center_rc)
+    r0, r1 = max(0, int(np.floor(cr - r))), min(h, int(np.ceil(cr + r)) + 1)
+    c0, c1 = max(0, int(np.floor(cc - r))), min(w, int(np.ceil(cc + r)) + 1)
+    if r1 - r0 < 2 or c1 - c0 < 2:
+        return 0, h, 0, w
+    return r0, r1, c0, c1
+
+
 def _get(result, name, default=None):
     return getattr(result, name, default) if result is not None else default
 
@@ -89,7 +110,8 @@ def overlay_figure(rgb, result=None, *, junctions_df=None, stacks_df=None, paths
     paths : list of (P, 2) arrays
         Pixel paths (row, col) in the order of ``stacks_df`` rows.
     hole : Hole, optional
-        Drawn as a dashed circle.
+        Drawn as a dashed circle; the figure shows the hole and a margin of
+        :data:`HOLE_VIEW_MARGIN` of its radius (:func:`overlay_window`), not the whole page.
     thickness_px : float
         Sheet thickness in px: a stack of n_br branches is drawn ``n_br * thickness_px`` wide.
     title : str, optional
@@ -105,13 +127,15 @@ def overlay_figure(rgb, result=None, *, junctions_df=None, stacks_df=None, paths
     from matplotlib.lines import Line2D
 
     img = np.asarray(rgb)
+    r0, r1, c0, c1 = overlay_window(img.shape, hole if hole is not None else _get(result, "hole"))
+    view = (r1 - r0, c1 - c0)
     # the counts in the title are known after drawing: the header is sized for the longest
     # counts a scan can have
     n_items = 4 if len(_step_points(result)) else 3
     head = title or "stacks: width and label = n_br"
     wide = f"{head}   (00000 junctions, 00000 stacks, 000000 branches)"
-    _, _, header_in = _overlay_header(wide, n_items, _figure_width_in(img.shape))
-    fig = _figure(img.shape, header_in=header_in)
+    _, _, header_in = _overlay_header(wide, n_items, _figure_width_in(view))
+    fig = _figure(view, header_in=header_in)
     ax = fig.add_axes([0, 0, 1, 1 - header_in / fig.get_figheight()])
     n_j, m, n_br_total = draw_overlay(
         ax, img, result, junctions_df=junctions_df, stacks_df=stacks_df, paths=paths,
@@ -164,13 +188,15 @@ def draw_overlay(ax, rgb, result=None, *, junctions_df=None, stacks_df=None, pat
     hole = hole if hole is not None else _get(result, "hole")
     paths = list(paths or [])
     img = np.asarray(rgb)
-    H, W = img.shape[:2]
-    ax.imshow(dim_image(img), interpolation="antialiased")
-    ax.set_xlim(-0.5, W - 0.5)
-    ax.set_ylim(H - 0.5, -0.5)
+    r0, r1, c0, c1 = overlay_window(img.shape, hole)
+    # the hole's part of the scan, drawn in the scan's own pixel coordinates
+    ax.imshow(dim_image(img[r0:r1, c0:c1]), interpolation="antialiased",
+              extent=(c0 - 0.5, c1 - 0.5, r1 - 0.5, r0 - 0.5))
+    ax.set_xlim(c0 - 0.5, c1 - 0.5)
+    ax.set_ylim(r1 - 0.5, r0 - 0.5)
     ax.set_axis_off()
     # line widths are in points: one image pixel is this many points at the axes' size
-    pt_per_px = ax.get_position().width * ax.figure.get_figwidth() * 72.0 / W
+    pt_per_px = ax.get_position().width * ax.figure.get_figwidth() * 72.0 / (c1 - c0)
 
     m = len(paths)
     n_br = np.ones(m, dtype=float)
@@ -208,7 +234,7 @@ def draw_overlay(ax, rgb, result=None, *, junctions_df=None, stacks_df=None, pat
         if not (np.isfinite(x) and np.isfinite(y)):
             continue
         ax.text(x, y, str(int(n_br[i])), fontsize=fontsize, ha="center", va="center",
-                color="black", fontweight="bold")
+                color="black", fontweight="bold", clip_on=True)
 
     if junctions_df is not None and len(junctions_df):
         ax.scatter(junctions_df["x_px"], junctions_df["y_px"],

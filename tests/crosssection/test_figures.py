@@ -7,7 +7,8 @@ import pytest
 from PIL import Image
 
 from crosssection.core.fileio import save_figure
-from crosssection.figures import BULK_COLOR, PERIPHERY_COLOR, overlay_figure, steps_figure
+from crosssection.figures import (BULK_COLOR, PERIPHERY_COLOR, overlay_figure, overlay_window,
+                                  steps_figure)
 from crosssection.stages.hole import Hole
 
 
@@ -133,3 +134,34 @@ def test_overlay_title_and_legend_stay_clear_of_each_other_and_the_scan(shape):
     for box in (title, legend):
         assert box.x0 >= frame.x0 - 1 and box.x1 <= frame.x1 + 1
         assert box.y0 >= frame.y0 - 1 and box.y1 <= frame.y1 + 1
+
+
+def test_overlay_frames_the_hole_of_a_page_scan():
+    # a hole of 80 px on a 1500-px page: the overlay shows the hole, in the scan's own
+    # coordinates, and the stacks are drawn as wide as on a scan cropped to the hole
+    rgb, stacks, junctions, paths = _network(6, m=10, size=160)
+    page = np.full((1500, 1200, 3), 245, np.uint8)
+    offset = np.array([900, 300])
+    page[900:1060, 300:460] = rgb
+    moved = [p + offset for p in paths]
+    stacks = stacks.assign(mid_x_px=stacks.mid_x_px + 300, mid_y_px=stacks.mid_y_px + 900)
+    junctions = junctions.assign(x_px=junctions.x_px + 300, y_px=junctions.y_px + 900)
+    hole = Hole(np.array([980.0, 380.0]), 80.0, False)
+    fig = overlay_figure(page, junctions_df=junctions, stacks_df=stacks, paths=moved, hole=hole)
+    ax = fig.axes[0]
+    x0, x1 = sorted(ax.get_xlim())
+    y0, y1 = sorted(ax.get_ylim())
+    r = 80.0 * 1.08
+    assert x0 == pytest.approx(380 - r, abs=1.5) and x1 == pytest.approx(380 + r, abs=1.5)
+    assert y0 == pytest.approx(980 - r, abs=1.5) and y1 == pytest.approx(980 + r, abs=1.5)
+    r0, r1, c0, c1 = overlay_window(page.shape, hole)
+    alone = overlay_figure(page[r0:r1, c0:c1],
+                           junctions_df=junctions.assign(x_px=junctions.x_px - c0,
+                                                         y_px=junctions.y_px - r0),
+                           stacks_df=stacks, paths=[p - [r0, c0] for p in moved])
+    lw_page = np.asarray(ax.collections[0].get_linewidths())
+    lw_alone = np.asarray(alone.axes[0].collections[0].get_linewidths())
+    assert lw_page == pytest.approx(lw_alone, rel=0.05)
+    # without a hole the whole page is shown
+    whole = overlay_figure(page, junctions_df=junctions, stacks_df=stacks, paths=moved)
+    assert sorted(whole.axes[0].get_xlim()) == pytest.approx([-0.5, 1199.5])
