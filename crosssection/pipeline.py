@@ -459,6 +459,16 @@ def _network_shares(lin, stacks) -> list[float]:
             for info in lin.components]
 
 
+def _border_pixels(mask) -> np.ndarray:
+    """(row, col) of the pixels set on the outermost rows and columns of a mask, (K, 2)."""
+    m = np.asarray(mask, bool)
+    h, w = m.shape
+    edge = np.zeros_like(m)
+    edge[[0, -1], :] = True
+    edge[:, [0, -1]] = True
+    return np.argwhere(m & edge)
+
+
 def _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, voids, warn,
             rod_mm, L, timer, t_start) -> AnalysisResult:
     """Summary, quality checks and warnings: the :class:`AnalysisResult` built in one place."""
@@ -472,7 +482,8 @@ def _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, void
         rod_length_mm=L, rod_measured_mm=rod_mm, ink_area_in_hole_mm2=ink_area_mm2,
         calibration_max_width_mm=_max_width_mm(cal, p), junctions=junctions,
         image_shape=pre.rgb.shape, file_px_per_mm=pre.file_px_per_mm,
-        file_pages=pre.file_pages, network_shares=_network_shares(lin, stacks))
+        file_pages=pre.file_pages, network_shares=_network_shares(lin, stacks),
+        border_ink_rc=_border_pixels(pre.mask_clean))
     notes = list(pre.warnings) + [f"linear system: {f}" for f in lin.flags
                                   if not str(f).startswith("disconnected")]
     summary = tb.summary(pre=pre, params=p, linear_system=lin, junctions=junctions,

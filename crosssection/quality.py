@@ -19,7 +19,8 @@ ink_outside_hole         ink pixels outside the hole / all ink pixels         > 
 hole_crossed             fraction of a given hole's circle beyond which ink   > 1 %, where the
                          goes on (the circle cuts the wall band); the hole    hole found near it
                          found in the scan replaces it                        frames the ink
-hole_cut                 area of the hole outside the scan / the hole's area  > 0.5 %
+hole_cut                 area of the hole outside the scan / the hole's area; > 0.5 %, or
+                         ink on the scan's border over 1 px inside the hole   >= h px
 no_junction              junctions found                                      none
 junction_degree          largest junction degree (paper: degree 4 ~ 1 %)      > 6
 networks                 separate networks of ink each holding at least 10 %  > 1
@@ -75,7 +76,13 @@ wall band lines the whole hole), and the counts, lengths and epsilon are those o
 hole, given or found, is known beyond the image (a found hole is fitted to the wall's arc
 that the scan holds; one found with low confidence is not checked, ``hole_fitted`` says it
 already); the limit, 0.5 % of its area, is a segment about 16 px deep on a hole of
-400 px radius, and a hole reaching a pixel beyond the border stays below 0.01 %.
+400 px radius, and a hole reaching a pixel beyond the border stays below 0.01 %. A shallower
+cut still loses what it crosses: the wall band lies along the hole's edge, so a border that
+cuts into the hole cuts the band first (a sample scan cropped 12 px into its hole of 380 px,
+0.3 % of its area, lost a wall junction and 2 % of L). Ink on the scan's outermost pixels
+lying more than a pixel inside the hole's edge, as many pixels as one sheet is thick, is the
+network running off the scan, and is flagged whatever the area; a hole that only touches the
+border holds its wall band's ink there at its edge and is not.
 
 The ``low_resolution`` check: at h < 3 px one pixel of width is a third of a layer or more,
 and the bending energy rests on windows of a few pixels. On the robust sweep's scans at 25
@@ -232,6 +239,17 @@ def hole_outside_fraction(shape, center_rc, radius_px, n: int = 4096) -> float:
 HOLE_CUT_LIMIT = 0.005
 
 
+def _ink_cut_by_border(border_ink_rc, hole, depth_px: float = 1.0) -> int:
+    """Ink pixels on the scan's border lying more than ``depth_px`` inside the hole: there the
+    hole, and the wall band along its edge, go on beyond the border. A hole that only touches
+    the border holds its band's ink there at its edge, and loses nothing."""
+    if border_ink_rc is None or not len(border_ink_rc):
+        return 0
+    rc = np.asarray(border_ink_rc, float)
+    d = np.hypot(rc[:, 0] - hole.center_rc[0], rc[:, 1] - hole.center_rc[1])
+    return int(np.count_nonzero(d < float(hole.radius_px) - depth_px))
+
+
 def _crossed_check(params, hole) -> list[QualityFlag]:
     """The ``hole_crossed`` check: a given hole beyond which the rod's ink goes on, where the
     hole found in the scan frames it."""
@@ -263,7 +281,7 @@ def _crossed_check(params, hole) -> list[QualityFlag]:
 def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stacks,
            rod_length_mm, rod_measured_mm, ink_area_in_hole_mm2, calibration_max_width_mm,
            junctions, image_shape=None, file_px_per_mm=None,
-           file_pages=1, network_shares=None) -> list[QualityFlag]:
+           file_pages=1, network_shares=None, border_ink_rc=None) -> list[QualityFlag]:
     """Run every check of the module table on one analysis.
 
     Parameters
@@ -301,6 +319,9 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
     network_shares : sequence of float, optional
         Each connected network's share of the measured rod (``sum n_br l``): the
         ``networks`` check (not made without it).
+    border_ink_rc : (K, 2) array, optional
+        (row, col) of the cleaned ink pixels on the scan's outermost rows and columns: the
+        ``hole_cut`` check.
 
     Returns
     -------
@@ -343,6 +364,12 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
                                      "the scan: a scan cropped through the hole misses the "
                                      "stacks beyond its border (or the hole is wrong)",
                                      cut, HOLE_CUT_LIMIT))
+        ink_on_border_px = _ink_cut_by_border(border_ink_rc, hole)
+        if cut <= HOLE_CUT_LIMIT and ink_on_border_px >= max(h_px, 2.0):
+            flags.append(QualityFlag("hole_cut", f"{ink_on_border_px} ink pixels inside the "
+                                     "hole lie on the scan's border: the network runs off the "
+                                     "scan (cropped through the hole?) and misses what lies "
+                                     "beyond", ink_on_border_px, max(h_px, 2.0)))
     if not len(degrees):
         flags.append(QualityFlag("no_junction", "no junction found: every stack is a closed "
                                  "loop or a free segment, while a folded sheet's cross-section "

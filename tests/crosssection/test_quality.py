@@ -324,6 +324,20 @@ def test_a_hole_cut_by_the_scan_border_is_flagged(scene):
     assert "hole_cut" in res.summary["quality"]["codes"]
 
 
+def test_a_shallow_cut_through_the_wall_band_is_flagged(scene):
+    # a border 3 % of the radius into the hole (0.3 % of its area, below the area limit)
+    # cuts the wall band: the ink running off the scan raises the flag
+    rgb, centre = _cut_left(scene, 0.03)
+    p = scene.params
+    r = p["hole_radius_mm"] * p["px_per_mm"]
+    assert quality.hole_outside_fraction(rgb.shape, (centre[1], centre[0]), r) \
+        < quality.HOLE_CUT_LIMIT
+    res, caught = _analyze(rgb, **_given(scene, hole_center_px=centre))
+    flag = next(f for f in res.quality if f.code == "hole_cut")
+    assert "border" in flag.message and flag.value >= p["thickness_mm"] * p["px_per_mm"]
+    assert any(w.category is quality.FrameWarning for w in caught)
+
+
 def test_a_hole_touching_the_border_is_not_flagged(scene):
     rgb, centre = _cut_left(scene, 0.0)
     res, _ = _analyze(rgb, **_given(scene, hole_center_px=centre))
