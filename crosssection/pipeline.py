@@ -40,7 +40,7 @@ from crosssection.result import AnalysisResult, write_step_images
 from crosssection.stages import curvature, hole as hole_stage, voids as void_stage
 from crosssection.stages.clean import clean_mask
 from crosssection.stages.graph import split_stacks, stack_graph
-from crosssection.stages.load import as_rgb, load_image, recorded_header
+from crosssection.stages.load import as_rgb, exif_orientation, load_image, recorded_header
 from crosssection.stages.packs import compute_packs
 from crosssection.stages.skeleton import skeletonize_mask
 from crosssection.stages.threshold import (BRIDGE_MAX_H_PX, bridge_broken_lines, passes_at,
@@ -87,6 +87,7 @@ class Preprocessed:
     merged_links: int
     file_px_per_mm: float | None = None
     file_pages: int = 1
+    exif_orientation: int = 1
     #: The threshold's feature (``blue - max(red, green)``) whose cut places the walls to a
     #: fraction of a pixel (None with the fixed thresholds, which cut several features).
     edge_feature: np.ndarray | None = None
@@ -235,6 +236,7 @@ def _preprocess(image, p: AnalysisParams, timer) -> Preprocessed:
         rgb, path = _read(image)
         file_px_per_mm, file_pages = (recorded_header(path) if path is not None
                                       else (None, 1))
+        orientation = exif_orientation(path) if path is not None else 1
     p.check_image(rgb.shape, path)
     thr, hole, outside, dominance = _threshold_in_frame(rgb, p, path, timer)
     confidence = None if p.hole_given else hole.confidence
@@ -268,7 +270,7 @@ def _preprocess(image, p: AnalysisParams, timer) -> Preprocessed:
                         junctions=junc, graph=sg, distance_px=dist, path=path,
                         s_min_px=s_min_px, speck_px=speck_px, l_min_px=l_min_px,
                         warnings=notes, merged_links=merged, file_px_per_mm=file_px_per_mm,
-                        file_pages=file_pages,
+                        file_pages=file_pages, exif_orientation=orientation,
                         edge_feature=dominance if thr.dominance_min is not None else None)
 
 

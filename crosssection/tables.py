@@ -281,6 +281,9 @@ def summary(*, pre, params, linear_system, junctions, stacks, branches, voids, r
         "n_layer_steps": int(sum(1 for k in pre.graph.node_kind.values() if k == "step")),
         "file_px_per_mm": pre.file_px_per_mm,
         "file_pages": pre.file_pages,
+        # 1: stored as displayed; else the EXIF orientation applied, so that every coordinate
+        # is in the frame a viewer shows
+        "exif_orientation": pre.exif_orientation,
         "thresholds": pre.threshold.as_summary(),
         "cleaning": {"s_min_px": pre.s_min_px, "speck_px": pre.speck_px,
                      "foreground_fraction": float(pre.mask_clean.mean()),

@@ -539,11 +539,9 @@ def _wall_points(rgb, ink_mask, c0, r0, n_rays, *, far=False):
     mr, mc, valid = _ray_grid(float(c0[0]), float(c0[1]), np.sin(ang), np.cos(ang), rad, H, W)
     # sample the scan on the rays, then smooth over 3 x 3 (ray, radius) samples: the same
     # denoising as blurring the scan first, on a few hundred thousand samples instead of all
-    col = cv2.remap(np.ascontiguousarray(rgb), mc, mr, cv2.INTER_LINEAR,
-                    borderMode=cv2.BORDER_REPLICATE).astype(np.float32)
+    col = _remap(np.ascontiguousarray(rgb), mc, mr, cv2.INTER_LINEAR).astype(np.float32)
     col = cv2.blur(col, (3, 3))
-    ink = cv2.remap(ink_mask.view(np.uint8), mc, mr, cv2.INTER_NEAREST,
-                    borderMode=cv2.BORDER_REPLICATE) > 0
+    ink = _remap(ink_mask.view(np.uint8), mc, mr, cv2.INTER_NEAREST) > 0
     inner = (rad <= 0.95 * r0)[None, :] & valid & ~ink
     if far:
         # each ray's outer fifth between the envelope and the scan's border
@@ -607,6 +605,65 @@ def _wall_points(rgb, ink_mask, c0, r0, n_rays, *, far=False):
     return np.concatenate(pts)
 
 
+#: ``cv2.remap`` takes images and maps of fewer than this many rows and columns.
+_REMAP_MAX = 32767
+
+
+def _remap(src, map_c, map_r, interpolation, *, limit: int = _REMAP_MAX):
+    """``cv2.remap(src, map_c, map_r, interpolation, borderMode=BORDER_REPLICATE)`` for maps
+    and images of any size.
+
+    OpenCV rejects a map or an image of ``limit`` rows or columns or more (a scan 40 000 px
+    long, or rays longer than that). Such a sampling is done block by block: each block of
+    the maps reads the part of the image its samples cover (clipped to the image, plus a
+    pixel for the interpolation), with the same values, since a replicated border of that
+    part is the image's own wherever a sample falls outside it. A block whose part is still
+    too large is split in two along its longer side.
+
+    Parameters
+    ----------
+    src : (H, W[, C]) array
+    map_c, map_r : (n, m) float32 arrays
+        Columns and rows of the samples in ``src``.
+    interpolation : int
+        ``cv2.INTER_LINEAR`` or ``cv2.INTER_NEAREST``.
+    limit : int
+        The largest side OpenCV takes, plus one.
+
+    Returns
+    -------
+    (n, m[, C]) array of ``src``'s dtype
+    """
+    import cv2
+
+    H, W = src.shape[:2]
+    n, m = map_c.shape
+    if max(H, W, n, m) < limit:
+        return cv2.remap(src, map_c, map_r, interpolation, borderMode=cv2.BORDER_REPLICATE)
+    out = np.empty((n, m) + src.shape[2:], src.dtype)
+    step = max(limit // 2, 1)
+    blocks = [(i, min(i + step, n), j, min(j + step, m))
+              for i in range(0, n, step) for j in range(0, m, step)]
+    while blocks:
+        i0, i1, j0, j1 = blocks.pop()
+        bc, br = map_c[i0:i1, j0:j1], map_r[i0:i1, j0:j1]
+        # the image part the samples cover (the maps are finite: rays of a finite circle)
+        c_lo, c_hi = np.clip([np.floor(bc.min()), np.floor(bc.max()) + 1], 0, W - 1).astype(int)
+        r_lo, r_hi = np.clip([np.floor(br.min()), np.floor(br.max()) + 1], 0, H - 1).astype(int)
+        if max(c_hi - c_lo + 1, r_hi - r_lo + 1) >= limit:
+            if i1 - i0 >= j1 - j0:
+                k = (i0 + i1) // 2
+                blocks += [(i0, k, j0, j1), (k, i1, j0, j1)]
+            else:
+                k = (j0 + j1) // 2
+                blocks += [(i0, i1, j0, k), (i0, i1, k, j1)]
+            continue
+        part = np.ascontiguousarray(src[r_lo:r_hi + 1, c_lo:c_hi + 1])
+        out[i0:i1, j0:j1] = cv2.remap(part, bc - np.float32(c_lo), br - np.float32(r_lo),
+                                      interpolation, borderMode=cv2.BORDER_REPLICATE)
+    return out
+
+
 @njit(cache=True)
 def _ray_grid(r0, c0, sin, cos, rad, h, w):  # pragma: no cover - numba
     """Sample positions ``r0 + sin * rad`` (rows) and ``c0 + cos * rad`` (columns) of rays
@@ -660,16 +717,33 @@ def _percentile(x, q):
     return hi - d * (1 - g) if g >= 0.5 else lo + d * g
 
 
+def _can_be_hole(shape, center_rc, radius_px) -> bool:
+    """Whether a candidate circle can be the hole of a scan of ``shape``: :func:`check_hole`'s
+    rule (a positive finite radius, a diameter at most twice the scan's largest side, a circle
+    overlapping the image).
+
+    A brightness ramp across a scan without plate reads as a nearly straight "edge", whose
+    circle fit lies far off the scan (a centre 10^6 px away): its rays would hold more
+    samples than the image, and no such circle frames the rod.
+    """
+    try:
+        check_hole(shape, center_rc, radius_px)
+    except ParameterError:
+        return False
+    return True
+
+
 def _wall_circle(rgb, ink, c0, r0):
     """The plate's edge read on rays from the circle (``c0``, ``r0``) and fitted:
-    ``(centre, radius, confidence)``, or None when fewer than a fifth of the rays cross it.
+    ``(centre, radius, confidence)``, or None when fewer than a fifth of the rays cross it,
+    or when the circle cannot be the hole (:func:`_can_be_hole`).
 
     One ray per ~2.5 degrees at most: 720 wall points fit a circle to a tenth of a pixel, and
     the cost of the ray sampling grows with their number."""
-    if not r0 > 0:
+    c0 = np.asarray(c0, float)
+    if not _can_be_hole(ink.shape, c0, r0):
         return None
     n = int(np.clip(np.pi * r0, 90, 720))
-    c0 = np.asarray(c0, float)
     pts = _wall_points(np.asarray(rgb), ink, c0, float(r0), n)
     if len(pts) < 0.2 * n:
         return None
@@ -839,7 +913,10 @@ def find_hole(rgb, ink_mask, *, min_confidence: float = 0.5, path=None) -> Hole:
     # a render of a free rod). The edge is looked for out to the scan's border, then read
     # again on rays from the circle found there, which cross it square.
     n_far = int(np.clip(np.pi * env.radius_px, 90, _FAR_RAYS))
-    far = _wall_points(np.asarray(rgb), ink, env.center_rc, env.radius_px, n_far, far=True)
+    far = (_wall_points(np.asarray(rgb), ink, env.center_rc, env.radius_px, n_far, far=True)
+           if _can_be_hole(ink.shape, env.center_rc, env.radius_px) else np.zeros((0, 2)))
+    # (the circle through points on a brightness ramp may lie far off the scan:
+    # _wall_circle rejects it as a candidate)
     fit = (_wall_circle(rgb, ink, *_circle_fit(far, *kasa_fit(far))[:2])
            if len(far) >= 0.1 * n_far else None)
     if fit is not None:

@@ -135,6 +135,25 @@ def _scale(rgb) -> float:
     raise ParameterError(f"threshold needs a uint8 or uint16 RGB image, got {rgb.dtype}")
 
 
+#: An image whose brightest value lies below this fraction of its type's range holds data of
+#: fewer bits (12-bit scanner data in a 16-bit file reach 4095 of 65535), darker than every
+#: default cut expects: an empty mask then says so (:func:`_range_note`).
+NARROW_RANGE_FRACTION = 0.25
+
+
+def _range_note(rgb, reg) -> str:
+    """Why an empty mask may be the data's fault, not the ink's: the image (within the region
+    ``reg``, or all of it) reaches only a small part of its type's range; else ``""``."""
+    vmax = 255 if rgb.dtype == np.uint8 else 65535
+    hi = int(rgb.max() if reg is None else rgb[reg].max(initial=0))
+    if hi >= NARROW_RANGE_FRACTION * vmax:
+        return ""
+    guess = (f"{max(int(hi).bit_length(), 1)}-bit data?" if rgb.dtype == np.uint16
+             else "an underexposed scan?")
+    return (f"the image's values reach only {hi} of {vmax} ({guess}): rescale it to the "
+            f"full range of its type; ")
+
+
 def _check_value(name, value, vmax):
     try:
         v = float(value)
@@ -531,7 +550,8 @@ def threshold_rgb(rgb, *, method: str = "auto", region=None, blue_min=None,
         rg = RG_MAX_U8 * scale if rg is None else rg
         mask = _bounds(np.ones(rgb.shape[:2], bool), bm, rg)
         return ThresholdResult(mask, float(bm), float(rg), "fixed", None, scale,
-                               region_fraction=reg_frac, n_outside=n_out[0])
+                               region_fraction=reg_frac, n_outside=n_out[0],
+                               note="" if mask.any() else _range_note(rgb, reg).rstrip("; "))
     if method == "otsu":
         rg = RG_MAX_U8 * scale if rg is None else rg
         dd = d if reg is None else d[reg]
@@ -541,7 +561,8 @@ def threshold_rgb(rgb, *, method: str = "auto", region=None, blue_min=None,
             t = max(_otsu_u8(dd / scale) * scale, 1.0)
         mask = _bounds(_at_least(d, t), None, rg)
         return ThresholdResult(mask, None, float(rg), "otsu", t, scale, region_fraction=reg_frac,
-                               n_outside=n_out[0])
+                               n_outside=n_out[0],
+                               note="" if mask.any() else _range_note(rgb, reg).rstrip("; "))
     levels = _auto_levels(d, m, reg, scale, features)
     if levels is None:
         note = _marks_of_another_colour(rgb, reg, scale) or (
@@ -550,7 +571,7 @@ def threshold_rgb(rgb, *, method: str = "auto", region=None, blue_min=None,
             "--rg-max R")
         return ThresholdResult(np.zeros(rgb.shape[:2], bool), bm, rg, "auto", None, scale,
                                region_fraction=reg_frac,
-                               note="no blue-dominant class: " + note)
+                               note=_range_note(rgb, reg) + "no blue-dominant class: " + note)
     ink, paper = levels
     d_cut = 0.5 * (ink[0] + paper[0]) * scale
     m_cut = 0.5 * (ink[1] + paper[1]) * scale

@@ -373,3 +373,39 @@ def test_median_and_percentile_are_numpys():
             p = _percentile(x.copy(), q)
             want = np.percentile(x, q)
             assert type(p) is type(want) and p == want, (n, q)
+
+
+def test_a_lighting_ramp_is_no_plate_edge():
+    """The bundled medium scan under the generator's uneven illumination (+-25 %, no plate):
+    the far search reads the ramp as a nearly straight edge, whose circle lies 10^6 px off
+    the scan; it is no candidate (sampling its rays overran OpenCV's remap), and the hole is
+    the one found without the ramp."""
+    from crosssection.samples import samples_path
+    from crosssection.stages.load import load_image
+
+    rgb = load_image(samples_path() / "scan_02_medium.png")
+    plain = find_hole(rgb, threshold_rgb(rgb).mask)
+    img = apply_backdrop(rgb, ink_mask=threshold_rgb(rgb).mask, hole_center_rc=plain.center_rc,
+                         hole_radius_px=plain.radius_px, rng=np.random.default_rng(0),
+                         plate=None, illumination=0.25)
+    hole = find_hole(img, threshold_rgb(img).mask)
+    assert np.hypot(*(hole.center_rc - plain.center_rc)) < 1.0
+    assert abs(hole.radius_px - plain.radius_px) < 1.0
+    assert hole.confidence > 0.95 and "envelope" in hole.reason
+
+
+def test_remap_in_blocks_is_opencvs():
+    """Maps and images beyond OpenCV's size limit are sampled block by block: the same values
+    (checked here with a small limit)."""
+    import cv2
+
+    from crosssection.stages.hole import _ray_grid, _remap
+
+    src = np.random.default_rng(0).integers(0, 256, (300, 500, 3), dtype=np.uint8)
+    ang = np.linspace(-np.pi, np.pi, 90, endpoint=False)
+    mr, mc, _ = _ray_grid(150.3, 240.7, np.sin(ang), np.cos(ang), np.arange(0.0, 700.0), 300,
+                          500)
+    for interp in (cv2.INTER_LINEAR, cv2.INTER_NEAREST):
+        want = cv2.remap(src, mc, mr, interp, borderMode=cv2.BORDER_REPLICATE)
+        for limit in (7, 64, 200):
+            assert np.array_equal(_remap(src, mc, mr, interp, limit=limit), want)

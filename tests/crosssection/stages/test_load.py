@@ -399,3 +399,70 @@ def test_rgb8_png_without_libdeflate_is_read_by_libpng(tmp_path, monkeypatch):
     monkeypatch.setattr(cv2, "imdecode", lambda *a, **k: calls.append(1) or imdecode(*a, **k))
     np.testing.assert_array_equal(load_image(p), img)
     assert calls == [1]
+
+
+_TO_STORED = {2: "FLIP_LEFT_RIGHT", 3: "ROTATE_180", 4: "FLIP_TOP_BOTTOM", 5: "TRANSPOSE",
+              6: "ROTATE_90", 7: "TRANSVERSE", 8: "ROTATE_270"}
+
+
+def _saved_oriented(rgb, orientation, path, **kw):
+    """``rgb`` (the displayed frame) stored turned, with the EXIF orientation that turns it
+    back."""
+    from PIL import Image
+
+    im = Image.fromarray(rgb)
+    if orientation != 1:
+        im = im.transpose(getattr(Image.Transpose, _TO_STORED[orientation]))
+    exif = Image.Exif()
+    exif[274] = orientation
+    im.save(path, exif=exif.tobytes(), **kw)
+    return path
+
+
+@pytest.mark.parametrize("orientation", range(1, 9))
+def test_exif_orientation_is_applied_on_every_path(tmp_path, orientation):
+    """PNG (eXIf chunk, 8-bit fast path and libpng), TIFF and JPEG: the pixels come back in the
+    displayed frame, as Pillow's exif_transpose gives them, and the value is reported."""
+    from PIL import Image, ImageOps
+
+    from crosssection.stages.load import exif_orientation, load_image
+
+    rng = np.random.default_rng(orientation)
+    shown = rng.integers(0, 256, (40, 64, 3), dtype=np.uint8)
+    for name, kw, exact in (("a.png", {}, True), ("a.tif", {}, True),
+                            ("a.jpg", {"quality": 95}, False)):
+        path = _saved_oriented(shown, orientation, tmp_path / name, **kw)
+        got = load_image(path)
+        with Image.open(path) as im:
+            want = np.asarray(ImageOps.exif_transpose(im).convert("RGB"))
+        assert exif_orientation(path) == orientation
+        assert got.shape == shown.shape and np.array_equal(got, want)
+        if exact:
+            assert np.array_equal(got, shown)
+    # a palette PNG goes through libpng
+    path = tmp_path / "p.png"
+    with Image.open(_saved_oriented(shown, orientation, tmp_path / "q.png")) as im:
+        im.convert("P").save(path, exif=im.getexif().tobytes())
+    with Image.open(path) as im:
+        want = np.asarray(ImageOps.exif_transpose(im).convert("RGB"))
+    assert np.array_equal(load_image(path), want) and want.shape == shown.shape
+
+
+@pytest.mark.parametrize("orientation", [1, 3, 6, 7])
+def test_a_scan_stored_turned_gives_the_same_analysis(tmp_path, orientation):
+    """The same scan saved with an EXIF orientation: the same junctions, at the same
+    coordinates of the displayed frame."""
+    import crosssection
+    from crosssection.truth.network import make_scene
+
+    sc = make_scene(seed=21, n_stacks=25, max_layers=5)
+    path = _saved_oriented(sc.rgb, orientation, tmp_path / "scan.png")
+    res = crosssection.analyze(str(path), px_per_mm=sc.params["px_per_mm"], warn=False)
+    ref = crosssection.analyze(sc.rgb, px_per_mm=sc.params["px_per_mm"], warn=False)
+    assert res.summary["n_junctions"] == ref.summary["n_junctions"] > 0
+    a = res.junctions[["x_px", "y_px"]].sort_values(["x_px", "y_px"]).to_numpy()
+    b = ref.junctions[["x_px", "y_px"]].sort_values(["x_px", "y_px"]).to_numpy()
+    assert np.allclose(a, b, atol=0.5)
+    # the summary says which frame the coordinates are in
+    assert res.summary["exif_orientation"] == orientation
+    assert ref.summary["exif_orientation"] == 1

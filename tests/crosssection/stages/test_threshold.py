@@ -371,3 +371,22 @@ def test_auto_levels_from_counts_are_those_of_the_gathered_pixels():
             assert got == _auto_levels_u8_plain(ds, ms, reg, ring_px)
             n_levels += got is not None
     assert n_levels > 40  # most draws have an ink class
+
+
+@pytest.mark.parametrize("method", ["auto", "fixed"])
+def test_an_empty_mask_of_12_bit_data_in_16_bits_says_so(method):
+    """12-bit scanner data stored in 16 bits (values 0..4095 of 65535) pass no default cut: the
+    empty mask's note names the data's range, not only the ink; full-range 16-bit data do not
+    get that note."""
+    import crosssection
+    from crosssection.core.errors import AnalysisError
+
+    sc = make_scene(seed=3, **KW)
+    rgb16 = sc.rgb.astype(np.uint16) * 257
+    twelve = (rgb16 >> 4).astype(np.uint16)
+    thr = threshold_rgb(twelve, method=method)
+    assert not thr.mask.any()
+    assert f"reach only {int(twelve.max())} of 65535 (12-bit data?)" in thr.note
+    with pytest.raises(AnalysisError, match=r"reach only \d+ of 65535 \(12-bit data\?\)"):
+        crosssection.analyze(twelve, px_per_mm=sc.params["px_per_mm"], threshold_method=method)
+    assert "reach only" not in threshold_rgb(rgb16, method=method).note
