@@ -702,6 +702,11 @@ def exif_orientation(path) -> int:
     from PIL import Image
 
     try:
+        with open(path, "rb") as fh:
+            if fh.read(8) == _PNG_SIGNATURE:
+                # Pillow looks for a PNG's eXIf chunk by decoding the whole image (it may follow
+                # the pixel data): walking the chunk lengths reads no pixel
+                return _png_orientation_unchecked(fh)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # e.g. Pillow's DecompressionBombWarning
             with Image.open(path) as im:
@@ -709,6 +714,22 @@ def exif_orientation(path) -> int:
     except Exception:  # noqa: BLE001 - metadata is advisory: any failure means none
         return 1
     return value if value in _ORIENT else 1
+
+
+def _png_orientation_unchecked(fh) -> int:
+    """The orientation of the ``eXIf`` chunk of the PNG ``fh`` (read past its signature),
+    seeking over every other chunk; 1 without one. CRCs are not checked: :func:`load_image`
+    checks them when it reads the pixels."""
+    while True:
+        head = fh.read(8)
+        if len(head) < 8:
+            return 1
+        length, ctype = struct.unpack(">I4s", head)
+        if ctype == b"eXIf":
+            return _orientation_of_exif(fh.read(length))
+        if ctype == b"IEND":
+            return 1
+        fh.seek(length + 4, 1)
 
 
 def load_image(path) -> np.ndarray:
