@@ -1068,7 +1068,7 @@ def params_from_args(args) -> dict:
 def run(args) -> int:
     """Entry point of ``compact``."""
     from crosssection.core.fileio import check_out
-    from simulate.ensemble import report_failures, run_ensemble
+    from simulate.ensemble import report_failures, run_ensemble, summary_head
 
     check_out(args.out)
     try:
@@ -1078,8 +1078,11 @@ def run(args) -> int:
     tables = run_ensemble(params, args.out, workers=args.workers, scheduler=args.scheduler,
                           progress=args.progress, task=run_config,
                           columns=CONFIG_COLUMNS, physics_keys=_PHYSICS_KEYS)
-    c = tables["configs"]
-    print(f"{len(c)} configurations -> {args.out}: epsilon {params['epsilon']:g} (R = "
+    head, c = summary_head(tables, args.out)
+    if c.empty:
+        print(head)
+        return report_failures(tables, args.out)
+    print(f"{head}: epsilon {params['epsilon']:g} (R = "
           f"{params['wall_radius']:.5f}, h = {params['thickness']:.3g}), <E> = "
           f"{c.energy_total.mean():.4g}, <N_l> = {c.n_stacks.mean():.1f}, <N_br> = "
           f"{c.n_branches.mean():.1f}, {c.wall_s.mean():.1f} s per configuration")

@@ -23,7 +23,9 @@ Definitions (paper sections "Simulations vs experiments", "Tiling", "Curvature o
 - *Junctions* are where the runs of two or more different stacks meet (they change the set of
   passes in contact); free rod ends, fold caps and loop cuts are not junctions.
 - *Branches* are the rod pieces between consecutive stack boundaries along the rod (junctions,
-  free ends, fold apices): each belongs to exactly one stack.
+  free ends, fold apices): each belongs to exactly one stack. Their energies add up to the
+  rod's; their mean curvatures are NaN on a branch shorter than one segment, which the
+  discrete rod does not resolve.
 - *Voids* are the bounded components of the plane minus the rod thickened to width delta
   (contacts merged), rasterised at ``delta/6`` per pixel; their area and perimeter are measured
   on sub-pixel contours and corrected by the Steiner formula back to the rod centre line.
@@ -76,6 +78,8 @@ class RodAnalysis:
         ``stack_id, junction_a, junction_b, length, n_br, passes``;
         ``branch_id, stack_id, length, kappa_plus, kappa_pm, energy_bending,
         energy_confinement, energy, s_start, s_end``; ``area, perimeter, shape_ratio, n_edges``.
+        A branch shorter than one segment has NaN curvatures (below the rod's resolution) and
+        the bending energy of the nodes it holds, possibly none (see :func:`_branch_table`).
     contact_distance : float
         The cut-off delta used.
     stack_lines : list of (P, 2) arrays
@@ -538,8 +542,24 @@ def _junction_table(topo):
 
 
 def _branch_table(xy, lam, topo, smp, r2):
-    """One row per run: length, curvatures and energies (nodal bending weights, exact
-    trapezoid confinement)."""
+    """One row per run: length, curvatures and energies.
+
+    The discrete rod's curvature lives on its nodes, each standing for one segment ``ds`` of
+    rod (:func:`simulate.energy.node_curvature`). A branch takes the nodes in
+    ``[s_start, s_end)`` (the last branch its end node too):
+
+    * ``energy_bending`` is the sum of their ``kappa^2 ds``, so the branches' bending energies
+      add up to the rod's exactly (:func:`simulate.energy.bending_energy`); a branch that holds
+      no node (one lying within a segment) stores none of the discrete rod's bending energy:
+      0 is its value, not a missing one. ``energy_confinement`` integrates the trapezoid
+      rule's linear interpolant of ``Lambda R^2`` over the branch exactly (the branches add up
+      to the rod's as well); ``energy`` is their sum.
+    * ``kappa_plus = sum |kappa| ds / length`` and ``kappa_pm = sum kappa ds / length`` are
+      mean curvatures over the branch, measured only on a branch at least one segment long:
+      a shorter one is below the rod's resolution, and holds no node (no curvature of its
+      own: the turning of the rod there is at the nodes of the branches beside it) or one,
+      which the mean would weigh by ``ds / length > 1``. Both are NaN there.
+    """
     n = xy.shape[0] - 1
     ds = 1.0 / n
     s, k_total, runs = smp.s, len(smp.s), topo.runs
@@ -555,8 +575,11 @@ def _branch_table(xy, lam, topo, smp, r2):
         ec = float(lam * _trapezoid_piece(r2, n, s0, s1))
         length = s1 - s0
         kap = kappa[in_br]
-        kp = float(np.sum(np.abs(kap)) * ds / length) if length > 0 else 0.0
-        kpm = float(np.sum(kap) * ds / length) if length > 0 else 0.0
+        # the sample arclengths are k / (N sub): a branch one segment long may come out a
+        # rounding error short of ds
+        resolved = length >= ds * (1.0 - 1e-9)
+        kp = float(np.sum(np.abs(kap)) * ds / length) if resolved else np.nan
+        kpm = float(np.sum(kap) * ds / length) if resolved else np.nan
         brows.append({"branch_id": i, "stack_id": int(topo.run_stack[i]), "length": length,
                       "kappa_plus": kp, "kappa_pm": kpm, "energy_bending": eb,
                       "energy_confinement": ec, "energy": eb + ec, "s_start": s0, "s_end": s1})

@@ -27,6 +27,13 @@ from simulate.intersect import _grid_fill, _grid_setup
 
 #: The paper's confinement Lambda (section "Numerical simulations"), the simulator's default.
 LAMBDA = 7e5
+#: Largest Lambda the quench and anneal accept. Measured (3 quenches each, N = 100 and 300,
+#: Lambda 7e5 to 1e20, docs/validation/simulator/README.md "Largest Lambda"): from about 1e8
+#: Rg stops shrinking and the bending energy stays at its largest, the rod jammed at the
+#: scale of a segment, and Lambda only scales the confinement energy; the bending energy
+#: falls below Powell's relative tolerance (ftol 1e-4) of the total near 1e11 (N = 100) and
+#: between 1e12 and 1e13 (N = 300), beyond which the minimiser no longer relaxes it.
+LAMBDA_MAX = 1e10
 
 
 def _second_differences(xy):

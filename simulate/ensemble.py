@@ -8,11 +8,13 @@
   radius read as sqrt(2) Rg), energy_total, energy_bending, energy_confinement, n_stacks,
   n_branches, n_junctions, n_voids, method, wall_s, plus minimiser counters;
 * ``DIR/branches.csv`` -- config_id, branch_id, length, kappa_plus, kappa_pm, energy_bending,
-  energy_confinement, energy (from :func:`simulate.contacts.analyze_rod`);
+  energy_confinement, energy (from :func:`simulate.contacts.analyze_rod`; the curvatures are
+  empty (NaN) on a branch shorter than one segment, which the discrete rod does not resolve);
 * ``DIR/voids.csv`` -- config_id, area, perimeter, shape_ratio, n_edges;
 * ``DIR/stacks.csv`` -- config_id, stack_id, n_br, length (for rho(n_br) and paper Eqs. (14)-(15));
 * ``DIR/rods.npz`` -- node positions of every configuration, key ``config_XXXXX``;
-* ``DIR/params.json`` -- all parameters and the package version;
+* ``DIR/params.json`` -- all parameters, every default the run used written out
+  (:func:`resolve_defaults`), and the package version;
 * ``DIR/failures.csv`` -- config_id, seed, error: one line per configuration whose computation
   raised (its row of configs.csv has the ``error`` and no results; the others go on). A
   re-run tries the failed configurations again.
@@ -52,10 +54,10 @@ from crosssection.core.fileio import BROWSER_FILES, check_out, write_csv, write_
 from crosssection.core.parallel import get_executor, spawn_seeds
 from crosssection.quality import QualityWarning
 
-from simulate.energy import LAMBDA
+from simulate.energy import LAMBDA, LAMBDA_MAX
 from simulate.noise import N_SEGMENTS, NOISE
 from simulate.optimize import (FTOL, LAM_START, MAXITER, N_RUNS, NEMATIC_RUNS, NEMATIC_U, RAMPS,
-                               STAGES, XTOL)
+                               STAGES, XTOL, default_contact_cutoff)
 
 CONFIG_COLUMNS = ["config_id", "seed", "rg", "epsilon", "epsilon_sqrt2", "energy_total",
                   "energy_bending", "energy_confinement", "n_stacks", "n_branches",
@@ -79,6 +81,11 @@ METHOD_OPTIONS = {"--runs": _POWELL, "--maxiter": _POWELL, "--nematic-runs": _PO
                   "--parametrization": _POWELL, "--nematic-cutoff": {"quench": ("powell",)}}
 # the run parameters these options set (None in params.json where the method does not use them)
 _POWELL_KEYS = ("n_runs", "maxiter", "nematic_runs", "u", "ftol", "xtol")
+
+#: Powell search coordinates of each command without --parametrization: tangent angles for
+#: quench (they reproduce the prototype's statistics), bend angles for anneal (the ramp winds
+#: the rod into the spiral)
+PARAMETRIZATION = {"quench": "tangent", "anneal": "bend"}
 
 #: Nodes of start shapes drawn to check a --wall-radius before a run (:func:`wall_check`): the
 #: whole of the paper's ensemble (250 x 301, about 20 ms); a larger ensemble or a finer rod is
@@ -108,6 +115,45 @@ def _physics_keys(params: dict) -> tuple:
         drop = set(_POWELL_KEYS) | {"parametrization", "nematic_cutoff"}
         return tuple(k for k in _PHYSICS_KEYS if k not in drop)
     return _PHYSICS_KEYS
+
+
+def resolve_defaults(params: dict) -> dict:
+    """``params`` of a quench or anneal with every default the run uses written out.
+
+    ``contact_distance`` None becomes the analysis's default (half a segment,
+    :func:`simulate.contacts.default_contact_distance`); for the methods that use them,
+    ``parametrization`` None becomes the command's (:data:`PARAMETRIZATION`) and the Powell
+    quench's ``nematic_cutoff`` None one segment
+    (:func:`simulate.optimize.default_contact_cutoff`). A record holding the values stays the
+    same ensemble if a default changes, and a record that holds None (an older folder)
+    compares equal to one holding the values it stood for. Parameters of other commands
+    (compact) are returned unchanged.
+
+    Parameters
+    ----------
+    params : dict
+        Run parameters (see :func:`run_ensemble`), or a params.json read back.
+
+    Returns
+    -------
+    dict
+        A new dict.
+    """
+    from simulate.contacts import default_contact_distance
+
+    out = dict(params)
+    command, method = out.get("command"), out.get("method")
+    if command not in _POWELL or out.get("n_segments") is None:
+        return out
+    n = int(out["n_segments"])
+    if out.get("contact_distance") is None:
+        out["contact_distance"] = default_contact_distance(n)
+    if method in _POWELL[command] and out.get("parametrization") is None:
+        out["parametrization"] = PARAMETRIZATION[command]
+    if (method in METHOD_OPTIONS["--nematic-cutoff"].get(command, ())
+            and out.get("nematic_cutoff") is None):
+        out["nematic_cutoff"] = default_contact_cutoff(n)
+    return out
 
 
 def part_path(out, config_id: int) -> Path:
@@ -146,7 +192,7 @@ def minimize_config(xy0, params: dict, seed: int):
                   nematic_runs=tuple(params["nematic_runs"]), u=params["u"],
                   ftol=params["ftol"], xtol=params["xtol"], wall_radius=wall,
                   parametrization=params.get("parametrization") or
-                  ("bend" if params["command"] == "anneal" else "tangent"))
+                  PARAMETRIZATION[params["command"]])
     if params["command"] == "anneal":
         return optimize.anneal(xy0, lam, lam_start=params["lam_start"],
                                stages=params["stages"], ramp=params["ramp"],
@@ -422,9 +468,10 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
         ``seed``, ``method``, ``n_runs``, ``maxiter``, ``nematic_runs``, ``u``, ``ftol``,
         ``xtol`` (the Powell protocol's: None for lbfgs, which does not use them, nor does a
         re-run of lbfgs compare them), ``wall_radius``, ``contact_distance``, optionally
-        ``nematic_cutoff`` (quench with Powell: the distance within which segments touch for
-        the nematic term, units of L; absent or None: one segment), and for anneal
-        ``lam_start``, ``stages``, ``ramp``.
+        ``parametrization`` and ``nematic_cutoff`` (quench with Powell: the distance within
+        which segments touch for the nematic term, units of L), and for anneal
+        ``lam_start``, ``stages``, ``ramp``. None stands for a default, written out in
+        params.json (:func:`resolve_defaults`).
     out : path
         Output folder.
     workers : int
@@ -457,6 +504,7 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
         ``out`` holds a different ensemble (its params.json differs on ``physics_keys``).
     """
     out = Path(out)
+    params = resolve_defaults(params)
     params = {k: params.get(k) for k in sorted(params)}
     check_out_folder(out, params["command"])
     pfile = out / "params.json"
@@ -465,6 +513,8 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
             old = json.loads(pfile.read_text())
         except (OSError, json.JSONDecodeError) as exc:
             raise ConfigError(f"unreadable params.json ({exc})", path=pfile) from None
+        # a folder that recorded None for a default is compared with the value it stood for
+        old = resolve_defaults(old) if isinstance(old, dict) else {}
         diff = [k for k in (_physics_keys(params) if physics_keys is None else physics_keys)
                 if json.dumps(old.get(k)) != json.dumps(params.get(k))]
         if diff:
@@ -521,6 +571,35 @@ def _with_extras(df: pd.DataFrame, columns) -> pd.DataFrame:
     return df.reindex(columns=list(columns) + [c for c in df.columns if c not in columns])
 
 
+def summary_head(tables: dict, out) -> tuple[str, pd.DataFrame]:
+    """The head of a command's summary line and the configurations that succeeded.
+
+    Parameters
+    ----------
+    tables : dict
+        As returned by :func:`run_ensemble`.
+    out : path
+        The output folder, as given.
+
+    Returns
+    -------
+    head : str
+        ``"K configurations -> OUT"``, followed by how many failed when some did, or by
+        the statement that none succeeded: then there is nothing to average and the caller
+        prints ``head`` alone.
+    done : DataFrame
+        The rows of configs.csv of the configurations that succeeded (possibly none).
+    """
+    c, failed = tables["configs"], tables["failed"]
+    done = c[~c["config_id"].isin(failed["config_id"])]
+    head = f"{len(c)} configurations -> {out}"
+    if done.empty and len(c):
+        head += f": none succeeded, no results (errors in {Path(out) / 'failures.csv'})"
+    elif len(failed):
+        head += f" ({len(failed)} failed)"
+    return head, done
+
+
 def report_failures(tables: dict, out) -> int:
     """Print one ``warning: OUT: ...`` line on stderr per failed configuration; return the
     exit status of the command: 3 when some configurations failed, else 0."""
@@ -537,7 +616,8 @@ def _add_common(p, command):
                    help="number of configurations K (default 250)")
     p.add_argument("--lambda", dest="lam", type=float, default=LAMBDA,
                    help="confinement Lambda, dimensionless (target Lambda for anneal; "
-                        f"default {LAMBDA:g}, the paper's)")
+                        f"default {LAMBDA:g}, the paper's; at most {LAMBDA_MAX:g}, above "
+                        "which the rod is jammed)")
     p.add_argument("--noise", type=float, default=NOISE,
                    help=f"initial noise D, dimensionless (default {NOISE:g}, the paper's)")
     p.add_argument("--segments", type=int, default=N_SEGMENTS,
@@ -634,7 +714,8 @@ def params_from_args(args) -> dict:
 
     The Powell protocol's options (:data:`METHOD_OPTIONS`, None when not given) are resolved
     to their defaults for the methods that use them and recorded as None for the others; a
-    method refuses those it does not use when they are given.
+    method refuses those it does not use when they are given. ``--contact-distance`` is
+    resolved too (:func:`resolve_defaults`).
 
     Parameters
     ----------
@@ -659,8 +740,13 @@ def params_from_args(args) -> dict:
             raise ParameterError(f"{name} must be >= {low}, got {v}")
     if args.segments > 100_000 or args.n_configs > 10_000_000:
         raise ParameterError("--segments must be <= 100000 and --n-configs <= 10000000")
+    lam = _finite("--lambda", args.lam, low=0.0)
+    if lam > LAMBDA_MAX:
+        raise ParameterError(f"--lambda must be <= {LAMBDA_MAX:g} (the paper's is {LAMBDA:g}): "
+                             "above, the rod is jammed and the bending energy drowns in the "
+                             f"confinement, got {args.lam:g}")
     params = dict(command=args.command, n_configs=args.n_configs, n_segments=args.segments,
-                  lam=_finite("--lambda", args.lam, low=0.0),
+                  lam=lam,
                   noise=_finite("--noise", args.noise, low=0.0), seed=args.seed,
                   method=args.method,
                   nematic_cutoff=_finite("--nematic-cutoff", args.nematic_cutoff, low=0.0,
@@ -688,7 +774,7 @@ def params_from_args(args) -> dict:
         if params["lam_start"] > params["lam"]:
             raise ParameterError(f"--lambda-start {args.lam_start:g} is above --lambda "
                                  f"{args.lam:g}: the ramp compacts the rod toward --lambda")
-    return params
+    return resolve_defaults(params)
 
 
 def _powell_params(args) -> dict:
@@ -783,10 +869,13 @@ def run(args) -> int:
         warnings.warn(f"{args.out}: {doubt}", WallStartWarning, stacklevel=2)
     tables = run_ensemble(params, args.out, workers=args.workers, scheduler=args.scheduler,
                           progress=args.progress)
-    c = tables["configs"]
-    print(f"{len(c)} configurations -> {args.out}: <E> = {c.energy_total.mean():.1f} "
-          f"(bending {c.energy_bending.mean():.1f}, confinement "
-          f"{c.energy_confinement.mean():.1f}), <Rg> = {c.rg.mean():.4f}")
+    head, c = summary_head(tables, args.out)
+    if c.empty:
+        print(head)
+    else:
+        print(f"{head}: <E> = {c.energy_total.mean():.1f} "
+              f"(bending {c.energy_bending.mean():.1f}, confinement "
+              f"{c.energy_confinement.mean():.1f}), <Rg> = {c.rg.mean():.4f}")
     return report_failures(tables, args.out)
 
 
@@ -805,5 +894,6 @@ __all__ = ["run_ensemble", "report_failures", "run_config", "assemble", "minimiz
            "add_subparser", "check_out_folder", "start_shape", "wall_check",
            "WallStartWarning", "OUTPUT_FILES",
            "METHOD_OPTIONS",
-           "analysis_records", "write_part",
+           "analysis_records", "write_part", "resolve_defaults", "PARAMETRIZATION",
+           "summary_head",
            "CONFIG_COLUMNS", "BRANCH_COLUMNS", "VOID_COLUMNS"]

@@ -221,7 +221,8 @@ def plot_configuration(xy, *, ax=None, stacks: bool = True, lam: float = LAMBDA,
     xy : (N+1, 2) array
         Node positions (units of L).
     ax : matplotlib axes, optional
-        Draw into it; default a new figure (no pyplot).
+        Draw into it; default a new 5.5 x 5.5 in figure (no pyplot) with constrained layout,
+        which keeps the title and the labels inside it.
     stacks : bool
         Run :func:`simulate.contacts.analyze_rod` and draw every stack's mean line with a
         width and colour growing with its n_br.
@@ -250,7 +251,9 @@ def plot_configuration(xy, *, ax=None, stacks: bool = True, lam: float = LAMBDA,
     if ax is None:
         from matplotlib.figure import Figure
 
-        fig = Figure(figsize=(5.5, 5.5))
+        # constrained layout keeps the title, the axis labels and the colour bar's label
+        # inside the figure whatever their length
+        fig = Figure(figsize=(5.5, 5.5), layout="constrained")
         ax = fig.add_subplot()
     ax.plot(xy[:, 0], xy[:, 1], "-", color="0.35", lw=0.7, zorder=1)
     ax.plot(*xy[0], "o", ms=4, color="black", zorder=3)
@@ -277,8 +280,9 @@ def plot_configuration(xy, *, ax=None, stacks: bool = True, lam: float = LAMBDA,
             bar = ax.figure.colorbar(ScalarMappable(Normalize(1, top), cmap), ax=ax,
                                      shrink=0.8, ticks=range(1, top + 1))
             bar.set_label("branches per stack $n_{br}$")
+        # two lines: one would be wider than the axes of the default figure
         text += (f": {an.n_stacks} stacks, {an.n_branches} branches, "
-                 f"{an.n_junctions} junctions (line width and colour: n_br)")
+                 f"{an.n_junctions} junctions\n(line width and colour: n_br)")
     if wall_radius:
         ax.add_patch(Circle(tuple(xy.mean(axis=0)), wall_radius, fill=False, ls="--",
                             color="0.4"))

@@ -76,6 +76,21 @@ STAGES = 24
 RAMPS = ("geometric", "linear")
 
 
+def default_contact_cutoff(n_segments: int) -> float:
+    """Default contact distance of the nematic term: one segment length, ``1 / N`` (units of L).
+
+    Parameters
+    ----------
+    n_segments : int
+        Number of segments N of the rod.
+
+    Returns
+    -------
+    float
+    """
+    return 1.0 / int(n_segments)
+
+
 @dataclass
 class QuenchResult:
     """Outcome of one minimisation.
@@ -190,7 +205,7 @@ def powell_protocol(xy0, lam: float, *, seed=None, n_runs: int = N_RUNS,
     rng = np.random.default_rng(seed)
     m = n + 2
     p = to_params(xy0)
-    cutoff = 1.0 / n if contact_cutoff is None else float(contact_cutoff)
+    cutoff = default_contact_cutoff(n) if contact_cutoff is None else float(contact_cutoff)
     wall = np.inf if wall_radius is None else float(wall_radius)
     stats = np.zeros(6, np.int64)
     dirs = np.zeros((m, m))
@@ -444,7 +459,7 @@ def scipy_powell(xy0, lam: float, *, maxiter: int = MAXITER, direc=None, xtol: f
 
     t0 = time.perf_counter()
     n = np.asarray(xy0).shape[0] - 1
-    cutoff = 1.0 / n if contact_cutoff is None else float(contact_cutoff)
+    cutoff = default_contact_cutoff(n) if contact_cutoff is None else float(contact_cutoff)
     count = [0]
     tangent = parametrization == "tangent"
     wall2 = None if wall_radius is None else float(wall_radius) ** 2
@@ -529,5 +544,5 @@ def scipy_protocol(xy0, lam: float, *, seed=None, n_runs: int = N_RUNS, maxiter:
 
 
 __all__ = ["QuenchResult", "powell_protocol", "lbfgs_quench", "anneal", "scipy_powell",
-           "scipy_protocol",
+           "scipy_protocol", "default_contact_cutoff",
            "to_params", "from_params"]

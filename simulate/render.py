@@ -1694,14 +1694,26 @@ def _render_record(sim_dir: Path, source_params: dict | None, kwargs: dict) -> d
     # an option left at None and the same defect given explicitly draw the same scans
     params.update(_defects(bool(params["clean"]),
                            {k: params[k] for k in _DEFECT_NAMES}, True))
-    source = None if source_params is None else {
-        k: v for k, v in source_params.items() if k not in _SOURCE_IGNORED}
+    source = _source_record(source_params)
     # the scan options as given (None: the default), so that a difference of clean is
     # reported as such rather than as every defect it changes
     given = {k: kwargs.get(k) for k in ("clean", *_DEFECT_NAMES)}
     return json.loads(json.dumps({"command": "render", "params": params, "given": given,
                                   "source": str(sim_dir.resolve()), "source_params": source,
                                   "version": __version__}, default=_jsonable))
+
+
+def _source_record(source_params: dict | None) -> dict | None:
+    """The source ensemble's parameters as render.json records and compares them: every
+    default written out (:func:`simulate.ensemble.resolve_defaults`: an ensemble folder that
+    recorded None for a default and the same folder resumed, which writes the value out, are
+    one source), without :data:`_SOURCE_IGNORED`."""
+    if not isinstance(source_params, dict):
+        return None
+    from simulate.ensemble import resolve_defaults
+
+    return json.loads(json.dumps({k: v for k, v in resolve_defaults(source_params).items()
+                                  if k not in _SOURCE_IGNORED}, default=_jsonable))
 
 
 def _holds_scenes(out_dir: Path) -> bool:
@@ -1760,7 +1772,7 @@ def _claim_out(out_dir: Path, record: dict, name=str) -> bool:
     diff = [name(k) for k in keys]
     if old.get("source") != record["source"]:
         diff.append(f"source folder (was {old.get('source')})")
-    elif old.get("source_params") != record["source_params"]:
+    elif _source_record(old.get("source_params")) != record["source_params"]:
         diff.append("source ensemble (its params.json)")
     if diff:
         raise ConfigError("output folder holds scenes of another render (parameters differ: "

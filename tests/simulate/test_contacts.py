@@ -283,3 +283,35 @@ def test_many_short_separations_do_not_split_a_band():
     inner = (line[:, 0] > 0.02) & (line[:, 0] < arm - 0.02)
     assert inner.sum() > 1000
     assert np.abs(line[inner, 1]).max() < delta
+
+
+def test_a_branch_shorter_than_a_segment_has_no_curvature_but_its_energy():
+    """A branch within one segment (no node of its own) or shorter than one segment gets NaN
+    curvatures; its bending energy is the discrete rod's at the nodes it holds (0 without
+    any), so the branches' energies still add up to the rod's."""
+    from types import SimpleNamespace
+
+    from simulate.contacts import _branch_table
+    from simulate.energy import bending_energy
+
+    n, sub = 10, 3
+    theta = np.linspace(0.0, 2.0, n)  # a rod turning at every node
+    xy = np.vstack([[0.0, 0.0], np.cumsum(np.column_stack([np.cos(theta), np.sin(theta)]) / n,
+                                          axis=0)])
+    s = np.arange(n * sub + 1) / (n * sub)
+    # sample runs: [0, 1/3), [1/3 + 1/30, 1/3 + 2/30) within segment 3, then
+    # [0.4, 0.4 + 2/30) holding node 4 only, then one long branch
+    runs = [(0, 10), (10, 11), (11, 12), (12, 14), (14, 31)]
+    topo = SimpleNamespace(runs=runs, run_stack=np.arange(len(runs)))
+    smp = SimpleNamespace(s=s)
+    b = _branch_table(xy, LAM, topo, smp, (xy ** 2).sum(1))
+    short = b["length"] < 1.0 / n - 1e-12
+    assert short.tolist() == [False, True, True, True, False]
+    assert b.loc[short, ["kappa_plus", "kappa_pm"]].isna().all().all()
+    assert np.isfinite(b.loc[~short, ["kappa_plus", "kappa_pm"]]).all().all()
+    assert (b.loc[~short, "kappa_plus"] > 0).all()
+    # runs 1 and 2 lie within segment 3 (no node), run 3 holds node 4
+    assert b.loc[[1, 2], "energy_bending"].tolist() == [0.0, 0.0]
+    assert b.loc[3, "energy_bending"] > 0
+    assert b["energy_bending"].sum() == pytest.approx(bending_energy(xy), rel=1e-12)
+    assert np.isfinite(b["energy"]).all() and (b["energy_confinement"] > 0).all()

@@ -65,3 +65,25 @@ def test_render_progress_only_when_asked_off_a_terminal(sim, tmp_path, capfd, fl
     if not bar:
         assert err == ""
     assert (out / "config_00000" / "truth" / "summary.json").is_file()
+
+
+def test_plot_keeps_title_labels_and_colour_bar_inside_the_figure(sim):
+    """At the default size the title (with its counts), both axis labels and the colour
+    bar's label lie inside the figure, as drawn by savefig."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    ens = load_ensemble(sim)
+    for config in (0, 1):
+        fig = ens.plot(config)
+        renderer = FigureCanvasAgg(fig).get_renderer()
+        fig.draw(renderer)
+        ax, bar = fig.axes
+        texts = {"title": ax.title, "x label": ax.xaxis.label, "y label": ax.yaxis.label,
+                 "colour bar label": bar.yaxis.label}
+        assert "stacks" in ax.get_title() and bar.get_ylabel()
+        page = fig.bbox
+        for name, text in texts.items():
+            box = text.get_window_extent(renderer)
+            assert box.width > 0, name
+            assert (box.x0 >= page.x0 and box.x1 <= page.x1 and box.y0 >= page.y0
+                    and box.y1 <= page.y1), (name, box, page)

@@ -188,6 +188,23 @@ def test_a_changed_source_ensemble_is_refused(sim, tmp_path, capsys):
     assert not (out / "config_00001").exists()
 
 
+def test_an_ensemble_recording_its_defaults_as_null_is_the_same_source(sim, tmp_path, capsys):
+    # an older ensemble folder recorded None for its defaults; resumed, it writes them out:
+    # the scenes rendered from it before resume, and the other way round
+    src = tmp_path / "sim"
+    shutil.copytree(sim, src)
+    p = json.loads((src / "params.json").read_text())
+    assert p["contact_distance"] is not None and p["parametrization"] == "tangent"
+    nulls = {**p, "contact_distance": None, "parametrization": None, "nematic_cutoff": None}
+    for first, then in ((nulls, p), (p, nulls)):
+        out = tmp_path / f"scenes_{first is p}"
+        (src / "params.json").write_text(json.dumps(first))
+        assert _render(capsys, src, "--out", out, "--limit", "1", *FAST)[0] == 0
+        (src / "params.json").write_text(json.dumps(then))
+        assert _render(capsys, src, "--out", out, *FAST)[0] == 0
+        assert (out / "config_00001" / "image.png").exists()
+
+
 def test_scenes_without_a_record_are_refused(sim, tmp_path, capsys):
     out = tmp_path / "scenes"
     assert _render(capsys, sim, "--out", out, "--limit", "1", *FAST)[0] == 0

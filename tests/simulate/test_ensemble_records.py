@@ -1,0 +1,170 @@
+"""What quench, anneal and compact record and report: the defaults written out in
+params.json (and an older record holding None resumed), the bound on --lambda, the summary
+line of a run in which no configuration succeeded."""
+import argparse
+import json
+import re
+import subprocess
+import sys
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from crosssection.core.errors import ConfigError, ParameterError
+from simulate import ensemble
+from simulate.cli import main as simulate_main
+from simulate.contacts import default_contact_distance
+from simulate.energy import LAMBDA_MAX
+from simulate.optimize import default_contact_cutoff
+
+N = 40
+BASE = ["--n-configs", "1", "--segments", str(N), "--lambda", "2e4", "--noise", "300",
+        "--seed", "4", "--no-progress"]
+POWELL = [*BASE, "--runs", "2", "--maxiter", "2", "--nematic-runs", "0"]
+
+
+def _parse(argv):
+    p = argparse.ArgumentParser()
+    sub = p.add_subparsers(dest="command", required=True)
+    ensemble.add_subparser(sub)
+    return p.parse_args(argv)
+
+
+def _run(argv):
+    a = _parse(argv)
+    return a.func(a)
+
+
+def _params(folder):
+    return json.loads((folder / "params.json").read_text())
+
+
+@pytest.mark.parametrize("command,argv,parametrization,cutoff", [
+    ("quench", POWELL, "tangent", default_contact_cutoff(N)),
+    ("quench", [*POWELL, "--method", "scipy-powell"], "tangent", None),
+    ("quench", [*BASE, "--method", "lbfgs"], None, None),
+    ("anneal", [*POWELL, "--stages", "2", "--lambda-start", "500"], "bend", None),
+])
+def test_params_json_records_the_defaults_the_run_used(command, argv, parametrization, cutoff,
+                                                       tmp_path):
+    out = tmp_path / "e"
+    assert _run([command, *argv, "--out", str(out)]) == 0
+    params = _params(out)
+    assert params["contact_distance"] == default_contact_distance(N) == 0.5 / N
+    # only the methods that use them hold the Powell search coordinates and the nematic cut-off
+    assert params["parametrization"] == parametrization
+    assert params["nematic_cutoff"] == cutoff
+
+
+def test_an_explicit_default_gives_the_same_record():
+    implicit = ensemble.params_from_args(_parse(["quench", *POWELL, "--out", "x"]))
+    explicit = ensemble.params_from_args(_parse(
+        ["quench", *POWELL, "--parametrization", "tangent", "--contact-distance", repr(0.5 / N),
+         "--nematic-cutoff", repr(1 / N), "--out", "x"]))
+    assert implicit == explicit
+
+
+def test_resolve_defaults_leaves_given_values_and_other_commands_alone():
+    given = dict(command="quench", method="powell", n_segments=N, contact_distance=0.01,
+                 parametrization="bend", nematic_cutoff=0.2)
+    assert ensemble.resolve_defaults(given) == given
+    compact = dict(command="compact", n_segments=N, contact_distance=None)
+    assert ensemble.resolve_defaults(compact) == compact
+    anneal = ensemble.resolve_defaults(dict(command="anneal", method="powell", n_segments=N))
+    assert anneal["parametrization"] == "bend" and "nematic_cutoff" not in anneal
+
+
+@pytest.mark.parametrize("command,argv", [
+    ("quench", POWELL), ("anneal", [*POWELL, "--stages", "2", "--lambda-start", "500"])])
+def test_a_folder_that_recorded_none_for_the_defaults_resumes(command, argv, tmp_path):
+    """A params.json holding None for the defaults is the ensemble of the values they stood
+    for: a re-run resumes it (nothing recomputed) and writes the values out."""
+    out = tmp_path / "old"
+    assert _run([command, *argv, "--out", str(out)]) == 0
+    pfile = out / "params.json"
+    resolved = _params(out)
+    old = {**resolved, "contact_distance": None, "parametrization": None}
+    if command == "quench":
+        old["nematic_cutoff"] = None
+    pfile.write_text(json.dumps(old))
+    part = out / "parts" / "config_00000.npz"
+    stamp = part.stat().st_mtime_ns
+    assert _run([command, *argv, "--out", str(out)]) == 0
+    assert part.stat().st_mtime_ns == stamp  # resumed, not recomputed
+    assert _params(out) == resolved
+    # None stands for the default, not for anything: another value is another ensemble
+    pfile.write_text(json.dumps(old))
+    other = "tangent" if command == "anneal" else "bend"
+    with pytest.raises(ConfigError, match="parametrization"):
+        _run([command, *argv, "--parametrization", other, "--out", str(out)])
+    with pytest.raises(ConfigError, match="contact_distance"):
+        _run([command, *argv, "--contact-distance", "0.001", "--out", str(out)])
+
+
+@pytest.mark.parametrize("lam", ["1e30", repr(LAMBDA_MAX * 1.01), "inf"])
+def test_lambda_above_the_bound_is_refused_in_one_line(lam, tmp_path):
+    out = tmp_path / "never"
+    r = subprocess.run([sys.executable, "-m", "simulate", "quench", "--lambda", lam,
+                        "--out", str(out)], capture_output=True, text=True)
+    assert r.returncode == 2
+    err = r.stderr.strip().splitlines()
+    assert len(err) == 1 and "--lambda" in err[0] and str(out) in err[0]
+    assert r.stdout == "" and not out.exists()
+
+
+def test_lambda_bound_is_inclusive_and_documented():
+    for command in ("quench", "anneal"):
+        params = ensemble.params_from_args(_parse([command, "--lambda", repr(LAMBDA_MAX),
+                                                   "--out", "x"]))
+        assert params["lam"] == LAMBDA_MAX
+    with pytest.raises(ParameterError, match=re.escape(f"<= {LAMBDA_MAX:g}") + ".*got 1e\\+11"):
+        ensemble.params_from_args(_parse(["anneal", "--lambda", "1e11", "--out", "x"]))
+    help_text = subprocess.run([sys.executable, "-m", "simulate", "quench", "--help"],
+                               capture_output=True, text=True).stdout
+    assert f"at most {LAMBDA_MAX:g}" in " ".join(help_text.split())
+
+
+def _tables(n, failed_ids):
+    configs = pd.DataFrame({"config_id": range(n), "energy_total": np.arange(n, dtype=float),
+                            "energy_bending": 1.0, "energy_confinement": 0.0, "rg": 0.1})
+    configs.loc[list(failed_ids), ["energy_total", "rg"]] = np.nan
+    failed = pd.DataFrame({"config_id": list(failed_ids), "seed": 0, "error": "E: x"})
+    return {"configs": configs, "failed": failed}
+
+
+def test_summary_head_counts_the_failed_and_says_when_none_succeeded():
+    head, done = ensemble.summary_head(_tables(3, []), "o")
+    assert head == "3 configurations -> o" and len(done) == 3
+    head, done = ensemble.summary_head(_tables(3, [1]), "o")
+    assert head == "3 configurations -> o (1 failed)"
+    assert done.config_id.tolist() == [0, 2] and done.energy_total.mean() == 1.0
+    head, done = ensemble.summary_head(_tables(2, [0, 1]), "o")
+    assert done.empty and "none succeeded" in head and "nan" not in head
+
+
+def test_quench_in_which_every_configuration_failed_says_so(tmp_path, monkeypatch, capsys):
+    def failing(*a, **k):
+        raise FloatingPointError("diverged")
+
+    monkeypatch.setattr(ensemble, "run_config", failing)
+    out = tmp_path / "q"
+    assert _run(["quench", *POWELL, "--n-configs", "2", "--out", str(out)]) == 3
+    cap = capsys.readouterr()
+    assert cap.out.strip() == (f"2 configurations -> {out}: none succeeded, no results "
+                               f"(errors in {out / 'failures.csv'})")
+    assert "nan" not in cap.out
+    assert len(cap.err.strip().splitlines()) == 2  # one warning line per configuration
+
+
+def test_compact_in_which_every_configuration_failed_says_so(tmp_path, capsys):
+    """--max-iter 1 stops the wall long before its radius: every configuration fails, the
+    summary says so (no averages of nothing) and the exit status is quench's, 3."""
+    out = tmp_path / "c"
+    argv = ["compact", "--epsilon", "1", "--segments", "32", "--n-configs", "2", "--max-iter",
+            "1", "--no-progress", "--out", str(out)]
+    assert simulate_main(argv) == 3
+    cap = capsys.readouterr()
+    assert "none succeeded" in cap.out and "nan" not in cap.out
+    err = cap.err.strip().splitlines()
+    assert len(err) == 2 and all(e.startswith(f"warning: {out}: configuration ") for e in err)
