@@ -277,13 +277,24 @@ class AnalysisParams:
 
     @classmethod
     def from_toml(cls, path, *, table: str | None = None) -> "AnalysisParams":
-        """Parameters from a TOML file (top level, or one of its tables)."""
+        """Parameters from a TOML file (top level, or one of its tables).
+
+        Its tables (a set.toml's ``[images."..."]``) and a set's ``name`` are not parameters
+        and are passed over; any other key must be a parameter: a misspelt one is an error,
+        not a default silently used.
+
+        Raises
+        ------
+        ParameterError
+            An unknown key (its name, the file) or a value out of range.
+        """
         path = Path(path)
         data = read_toml(path)
         if table is not None:
             data = data.get(table, {})
-        return cls.from_mapping({k: v for k, v in data.items() if k in PARAM_NAMES}, path=path,
-                                relative_to=path)
+        return cls.from_mapping({k: v for k, v in data.items()
+                                 if not isinstance(v, dict) and k not in SET_META_KEYS},
+                                path=path, relative_to=path)
 
     @classmethod
     def from_cli_args(cls, args, *, path=None) -> "AnalysisParams":
@@ -349,6 +360,11 @@ class AnalysisParams:
 
 
 PARAM_NAMES = tuple(f.name for f in fields(AnalysisParams))
+
+
+#: Keys of a set.toml that name the set rather than set a parameter
+#: (:mod:`crosssection.setconfig`)
+SET_META_KEYS = ("name",)
 
 
 def _reject_unknown(values: dict) -> None:

@@ -27,12 +27,12 @@ from pathlib import Path
 
 from crosssection.core.errors import ConfigError, ParameterError
 from crosssection.core.fileio import read_toml
-from crosssection.params import PARAM_NAMES, check_param
+from crosssection.params import PARAM_NAMES, SET_META_KEYS, check_param
 
 SET_FILE = "set.toml"
 
 #: keys describing the set rather than one analysis; never passed to the analysis as-is
-META_KEYS = ("name",)
+META_KEYS = SET_META_KEYS
 PARAM_KEYS = PARAM_NAMES
 ALLOWED_KEYS = META_KEYS + PARAM_KEYS + ("images",)
 

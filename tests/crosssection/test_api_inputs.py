@@ -137,3 +137,18 @@ def test_a_calibration_file_given_relative_is_recorded_absolute(scan, tmp_path, 
         res = cs.analyze(scan, **KW, calibration="cal.csv")
     assert res.summary["calibration"] == str(tmp_path / "cal.csv")
     assert res.summary["parameters"]["calibration"] == str(tmp_path / "cal.csv")
+
+
+def test_a_parameter_file_with_a_misspelt_key_is_refused(tmp_path):
+    # a misspelt key read as "not a parameter" would analyse every scan at the default scale
+    from crosssection import AnalysisParams
+    from crosssection.core.errors import ParameterError
+
+    typo = tmp_path / "typo.toml"
+    typo.write_text("px_per_m = 25\nthickness_mm = 0.2\n")
+    with pytest.raises(ParameterError, match="px_per_m'") as info:
+        AnalysisParams.from_toml(typo)
+    assert "typo.toml" in str(info.value)
+    good = tmp_path / "set.toml"
+    good.write_text('name = "a"\npx_per_mm = 25\n[images."x.png"]\nhole_radius_mm = 5\n')
+    assert AnalysisParams.from_toml(good).px_per_mm == 25
