@@ -10,14 +10,15 @@ folder back; ``plot_pdf(folder_or_ensemble, "e")`` draws a density with its fitt
 from crosssection.stats.data import (Ensemble, Report, detect_kind, load_any, load_batch,
                                      load_image_output, load_report, load_simulation)
 from crosssection.stats.families import FAMILIES, Family, register
-from crosssection.stats.fits import (PAPER_FAMILIES, FitResult, FitSummary, GoodnessOfFit, bootstrap_ci,
+from crosssection.stats.fits import (PAPER_FAMILIES, FitResult, FitSummary, GoodnessOfFit,
+                                     SmallSampleWarning, bootstrap_ci,
                                      fit_all, fit_family, goodness_of_fit, select_model,
                                      truncation_bias)
 from crosssection.stats.tables import StatsOptions, StatsResult, compute_stats
 
 __all__ = ["Ensemble", "Report", "load_report", "plot_pdf", "detect_kind", "load_any",
            "load_batch", "load_image_output", "load_simulation", "FAMILIES", "Family", "register", "PAPER_FAMILIES", "FitResult",
-           "FitSummary", "GoodnessOfFit", "bootstrap_ci", "fit_all",
+           "FitSummary", "GoodnessOfFit", "SmallSampleWarning", "bootstrap_ci", "fit_all",
            "fit_family", "goodness_of_fit", "select_model", "truncation_bias", "StatsOptions",
            "StatsResult", "compute_stats"]
 

@@ -2,9 +2,10 @@
 
 Each DIR is a batch output (every set folder inside becomes a set), a single ``analyze``
 output, or a simulation ensemble from ``python -m simulate quench`` (one set named after the
-folder, or after ``--name``). Sets of the same name from different DIRs (two folders both
-named ``run``) are kept apart as ``run``, ``run#2``, ... (``#k``: the DIR's position); give
-``--name`` once per DIR to name them.
+folder, or after ``--name``). ``--name exp`` for a batch of several sets ``A``, ``B`` names
+them ``exp/A``, ``exp/B`` (a batch of one set: ``exp``); sets are never pooled. Sets of the
+same name from different DIRs (two folders both named ``run``) are kept apart as ``run``,
+``run#2``, ... (``#k``: the DIR's position); give ``--name`` once per DIR to name them.
 
 REPORT_DIR is created, or replaced whole when it holds an earlier report: the new report is
 written beside it and swapped in at the end, so an interrupted run leaves it as it was.
@@ -20,7 +21,7 @@ from pathlib import Path
 from crosssection.core.errors import ParameterError
 from crosssection.core.fileio import check_out
 from crosssection.stats.data import L_MIN_MM, S_MIN_MM2
-from crosssection.stats.fits import N_BOOT, N_MC
+from crosssection.stats.fits import N_BOOT, N_BOOT_MIN, N_MC
 
 #: resamples of ``--fast``, a quick look: bootstrap draws and goodness-of-fit samples
 FAST_N_BOOT = 50
@@ -42,17 +43,21 @@ def add_subparser(subparsers) -> argparse.ArgumentParser:
                         "previous report)")
     p.add_argument("--name", action="append", default=None,
                    help="set name for each DIR in order (repeat, once per DIR, each name "
-                        "different; default: the folder names, a repeated one as NAME#k)")
+                        "different; default: the folder names, a repeated one as NAME#k); "
+                        "the sets A, B of a batch DIR become NAME/A, NAME/B")
     p.add_argument("--seed", type=int, default=0, help="seed of bootstrap and GOF (default 0)")
-    p.add_argument("--n-boot", type=int, default=N_BOOT,
+    # None: not given, so that --fast can tell a default from an explicit value
+    p.add_argument("--n-boot", type=int, default=None,
                    help="bootstrap resamples for parameter intervals, 0 (none) to "
-                        f"{MAX_RESAMPLES} (default {N_BOOT})")
-    p.add_argument("--n-mc", type=int, default=N_MC,
+                        f"{MAX_RESAMPLES} (default {N_BOOT}); fewer than {N_BOOT_MIN} give "
+                        "a warning: a 95 %% interval's ends are then the extreme draws")
+    p.add_argument("--n-mc", type=int, default=None,
                    help="parametric-bootstrap samples of the GOF p-values, at most "
                         f"{MAX_RESAMPLES} (default {N_MC})")
     p.add_argument("--fast", action="store_true",
                    help=f"quick look: {FAST_N_BOOT} bootstrap resamples and {FAST_N_MC} GOF "
-                        "samples (default: off)")
+                        "samples, unless --n-boot or --n-mc is given, which wins "
+                        "(default: off)")
     p.add_argument("--no-gof", action="store_true",
                    help="skip goodness-of-fit p-values (default: computed)")
     p.add_argument("--l-min-mm", type=float, default=L_MIN_MM,
@@ -68,6 +73,25 @@ def add_subparser(subparsers) -> argparse.ArgumentParser:
                         "stderr is a terminal)")
     p.set_defaults(func=run)
     return p
+
+
+def resamples(args) -> tuple[int, int]:
+    """``(n_boot, n_mc)`` of the run: a value given on the command line, else that of
+    ``--fast`` when given, else the default.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed ``stats`` options (``n_boot`` and ``n_mc`` None when not given).
+
+    Returns
+    -------
+    (int, int)
+    """
+    fast = getattr(args, "fast", False)
+    n_boot = args.n_boot if args.n_boot is not None else FAST_N_BOOT if fast else N_BOOT
+    n_mc = args.n_mc if args.n_mc is not None else FAST_N_MC if fast else N_MC
+    return n_boot, n_mc
 
 
 def check_options(args) -> None:
@@ -99,14 +123,15 @@ def check_options(args) -> None:
                                      "each DIR its own set name", "--name")
             seen.setdefault(name, d)
     check_out(args.out)
-    for flag, v in (("--seed", args.seed), ("--n-boot", args.n_boot), ("--n-mc", args.n_mc)):
+    n_boot, n_mc = resamples(args)
+    for flag, v in (("--seed", args.seed), ("--n-boot", n_boot), ("--n-mc", n_mc)):
         if v < 0:
             raise ParameterError(f"must be an integer >= 0, got {v}", flag)
-    for flag, v in (("--n-boot", args.n_boot), ("--n-mc", args.n_mc)):
+    for flag, v in (("--n-boot", n_boot), ("--n-mc", n_mc)):
         if v > MAX_RESAMPLES:
             raise ParameterError(f"must be at most {MAX_RESAMPLES}, got {v}", flag)
-    if args.n_mc == 0 and not (args.no_gof or args.fast):
-        # --fast replaces it; without a resample there is no p-value to give
+    if n_mc == 0 and not args.no_gof:
+        # without a resample there is no p-value to give
         raise ParameterError("0 resamples give no p-value: give an integer >= 1, or "
                              "--no-gof", "--n-mc")
     for flag, v in (("--l-min-mm", args.l_min_mm), ("--s-min-mm2", args.s_min_mm2)):
@@ -150,7 +175,7 @@ def _run(args) -> int:
     check_report_dir(args.out, args.dirs)  # before the work, not after it
     ens = load_inputs(args.dirs, names=args.name, l_min_mm=args.l_min_mm or None,
                       s_min_mm2=args.s_min_mm2 or None)
-    n_boot, n_mc = (FAST_N_BOOT, FAST_N_MC) if args.fast else (args.n_boot, args.n_mc)
+    n_boot, n_mc = resamples(args)
     opts = StatsOptions(seed=args.seed, n_boot=n_boot, n_mc=n_mc, gof=not args.no_gof)
     paths = write_report(ens, args.out, opts=opts, inputs=args.dirs,
                          figures=not args.no_figures, progress=args.progress)

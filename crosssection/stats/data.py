@@ -11,16 +11,22 @@ Three kinds of input folders are detected automatically:
   scene (beside its ``params.json``, :mod:`crosssection.truth.scene`) holds the same tables
   but is no analysis; a folder of scans is refused (``foldstat batch`` reads those).
 
-Image lengths are in mm (schema.py) and are normalised by each image's rod length
-L = ``summary["rod_length_mm"]`` (paper, section "Experimental set-up": lengths become
-independent of the cut position once divided by L); areas by L^2; curvatures times L.
+Image lengths are in mm (schema.py) and are normalised by each image's rod length L
+(paper, section "Experimental set-up": lengths become independent of the cut position once
+divided by L); areas by L^2; curvatures times L. L is the one the analysis used for its
+energies e = L int kappa^2 ds, E and epsilon: ``summary["rod_length_used_mm"]`` (the
+``--rod-length-mm`` given to ``analyze``, else the measured ``sum n_br l``), or
+``summary["rod_length_mm"]`` (measured) in outputs that do not record it, so that every
+quantity of a scan is in units of the same L.
 
 Common representation (:class:`Ensemble`):
 
-- ``configs``: set, config_id, N_l, N_br, n_voids, epsilon, E, rod_length_mm, source,
+- ``configs``: set, config_id, N_l, N_br, n_voids, epsilon, E, rod_length_mm (the L of the
+  normalisation, in mm; NaN for simulations), source,
   quality (the image analysis' quality warning codes joined by ";", "" when none; NaN for
   simulations), E_model_share (the analysis' ``total_energy_rel_uncertainty``: the share of E
-  not measured on a free centreline; NaN for simulations)
+  not measured on a free centreline; NaN for simulations), input (the folder given to
+  :func:`load_inputs` it was read from, as given; NaN from the other loaders)
 - ``branches``: set, config_id, length_L, kappa_m_L, kappa_plus_L, e, region, n_br (of the
   branch's stack, NaN if unknown), l_min_L (detection limit in units of L, NaN if none)
 - ``stacks``: set, config_id, n_br, length_L, region
@@ -47,7 +53,7 @@ from crosssection.params import AnalysisParams
 from crosssection.quality import QualityWarning
 
 CONFIG_COLS = ["set", "config_id", "N_l", "N_br", "n_voids", "epsilon", "E", "rod_length_mm",
-               "source", "quality", "E_model_share"]
+               "source", "quality", "E_model_share", "input"]
 BRANCH_COLS = ["set", "config_id", "length_L", "kappa_m_L", "kappa_plus_L", "e", "region",
                "n_br", "l_min_L"]
 STACK_COLS = ["set", "config_id", "n_br", "length_L", "region"]
@@ -57,7 +63,7 @@ VOID_COLS = ["set", "config_id", "area_L2", "perimeter_L", "shape_ratio", "n_edg
 L_MIN_MM = AnalysisParams().l_min_mm
 S_MIN_MM2 = AnalysisParams().s_min_used_mm2
 SIM_REGION = "none"  # simulations have no wall: no bulk/periphery split (paper, "Two sub-systems")
-TEXT_COLS = {"set", "config_id", "region", "source", "quality"}
+TEXT_COLS = {"set", "config_id", "region", "source", "quality", "input"}
 
 
 def _folder(folder, name: str = "folder") -> Path:
@@ -186,7 +192,8 @@ def _numbers(col: pd.Series, name: str, path: Path) -> pd.Series:
 
 
 #: summary.json entries read as numbers (null stands for unknown)
-SUMMARY_NUMBERS = ("rod_length_mm", "n_stacks", "n_branches", "n_voids", "epsilon",
+SUMMARY_NUMBERS = ("rod_length_mm", "rod_length_used_mm", "n_stacks", "n_branches", "n_voids",
+                   "epsilon",
                    "total_energy", "total_energy_rel_uncertainty")
 
 
@@ -379,10 +386,34 @@ def _stack_counts(br: pd.DataFrame, st: pd.DataFrame | None):
     return br[key].astype({"config_id": str}).merge(counts, on=key, how="left")["n_br"].to_numpy()
 
 
+def _rod_length(summary: dict, path: Path) -> float:
+    """The rod length L (mm) that the analysis used for the scan's e, E and epsilon: its
+    ``rod_length_used_mm`` (a given ``--rod-length-mm`` differs from the measured
+    ``rod_length_mm``), or ``rod_length_mm`` where the summary does not record it.
+    Normalising lengths by another L than the energies would mix two units in one scan.
+
+    Raises
+    ------
+    ConfigError
+        Neither entry is a positive number.
+    """
+    for key in ("rod_length_used_mm", "rod_length_mm"):
+        L = summary.get(key)
+        if L is not None:
+            if not (np.isfinite(L) and L > 0):
+                raise ConfigError(f"{key} is {L!r}, not a positive length", path)
+            return float(L)
+    raise ConfigError("summary.json has no positive rod_length_mm", path)
+
+
 def load_image_output(folder, *, set_name: str, config_id: str | None = None,
                       l_min_mm: float | None = L_MIN_MM,
                       s_min_mm2: float | None = S_MIN_MM2) -> Ensemble:
     """Read one ``analyze`` output folder and normalise it by its rod length L.
+
+    L is the rod length the analysis used for its energies and epsilon
+    (``rod_length_used_mm`` of ``summary.json``: a given ``--rod-length-mm``, else the
+    measured one), so that lengths, curvatures, areas, e, E and epsilon share one L.
 
     Parameters
     ----------
@@ -417,10 +448,7 @@ def load_image_output(folder, *, set_name: str, config_id: str | None = None,
     if report is not None:
         raise report
     summary = _read_summary(folder / "summary.json")
-    L = summary.get("rod_length_mm")
-    if L is None or not np.isfinite(L) or L <= 0:
-        raise ConfigError("summary.json has no positive rod_length_mm", folder / "summary.json")
-    L = float(L)
+    L = _rod_length(summary, folder / "summary.json")
     br = _read_csv(folder / "branches.csv", ["stack_id", "length_mm", "kappa_plus", "kappa_m",
                                              "energy", "region"],
                    numeric=["stack_id", "length_mm", "kappa_plus", "kappa_m", "energy"])
@@ -628,7 +656,9 @@ def load_any(folder, *, set_name=None, l_min_mm=L_MIN_MM, s_min_mm2=S_MIN_MM2) -
     ----------
     folder : path
     set_name : str, optional
-        Overrides the set name (all sets of a batch are then merged under it).
+        Overrides the set name: the name of the one set of a simulation, an analyze output
+        or a batch of one set; a batch of several sets keeps them apart as
+        ``set_name/<set>`` (sets ``A`` and ``B`` given ``exp`` become ``exp/A``, ``exp/B``).
     l_min_mm, s_min_mm2 : float or None
         Image detection limits, in mm and mm^2: None or a finite number >= 0 (0 = none).
 
@@ -657,8 +687,12 @@ def load_any(folder, *, set_name=None, l_min_mm=L_MIN_MM, s_min_mm2=S_MIN_MM2) -
                                  l_min_mm=l_min_mm, s_min_mm2=s_min_mm2)
     ens = load_batch(folder, l_min_mm=l_min_mm, s_min_mm2=s_min_mm2)
     if set_name:
+        sets = ens.sets
+        # the sets of a batch are different experiments: a name labels them, never pools them
+        rename = ({sets[0]: set_name} if len(sets) == 1 else
+                  {s: f"{set_name}/{s}" for s in sets})
         for df in (ens.configs, ens.branches, ens.stacks, ens.voids):
-            df["set"] = set_name
+            df["set"] = df["set"].map(rename)
     return ens
 
 
@@ -682,6 +716,7 @@ def load_inputs(folders, *, names=None, l_min_mm=L_MIN_MM, s_min_mm2=S_MIN_MM2) 
     Returns
     -------
     Ensemble
+        Its ``configs`` name in ``input`` the folder each configuration was read from.
 
     Raises
     ------
@@ -721,6 +756,7 @@ def load_inputs(folders, *, names=None, l_min_mm=L_MIN_MM, s_min_mm2=S_MIN_MM2) 
                     df.loc[df["set"] == s, "set"] = new
                 s = new
             seen_sets.add(s)
+        ens.configs["input"] = str(d)
         parts.append(ens)
     return Ensemble.concat(parts)
 

@@ -29,9 +29,10 @@ from crosssection.core.fileio import (BROWSER_FILES, clear_stale_folders, save_f
 from crosssection.stats import fits as F
 from crosssection.stats.families import FAMILIES
 from crosssection.stats.data import REPORT_TABLES, Ensemble
-from crosssection.stats.tables import (COUNT_QUANTITIES, EQ12_CONST, PAPER_DOF, PAPER_MACRO,
-                                       PAPER_MICRO, QUANTITIES, StatsOptions, StatsResult,
-                                       compute_stats, regions_of, to_markdown)
+from crosssection.stats.tables import (COUNT_QUANTITIES, EQ12_CONST, N_RELATION_MIN, PAPER_DOF,
+                                       PAPER_MACRO, PAPER_MICRO, QUANTITIES, SLOPE_RELATIONS,
+                                       StatsOptions, StatsResult, compute_stats, regions_of,
+                                       small_sample_note, to_markdown)
 
 # Okabe-Ito colours (distinguishable with the common colour-vision deficiencies), in the
 # order of the sets; the set's index in the ensemble fixes its colour in every figure.
@@ -204,7 +205,9 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
     fig, axes = _subplots(len(regs), 2, figsize=(12.5, 0.4 + 3.6 * len(regs)))
     label = LABELS.get(quantity, quantity)
     for row, reg in zip(axes, regs):
-        ymin_log, ymax_lin, x_min = np.inf, 0.0, np.inf
+        # axis limits follow the points and the fitted laws; a bootstrap band of a small
+        # sample can span many decades and is clipped to them
+        ymin_log, ymax_log, ymax_lin, x_min = np.inf, 0.0, 0.0, np.inf
         for s in sets:
             summ = res.summaries.get((s, reg, quantity))
             if summ is None:
@@ -242,6 +245,7 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
                     lo = np.minimum(err, 0.95 * h)
                     yerr = np.vstack([lo[k], err[k]])
                     ymin_log = min(ymin_log, float(np.min(h[k])) * 0.3)
+                    ymax_log = max(ymax_log, float(np.max(h[k] + err[k])))
                 else:
                     yerr = err[k]
                     ymax_lin = max(ymax_lin, float(np.max(h[k] + err[k])))
@@ -261,17 +265,21 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
                 if count:  # the law's parameters are those of the continuous law: say its mean
                     kk = np.arange(1, 10 * int(x.max()) + 100)
                     text += f", mean {float(np.sum(kk * best.pmf(kk))):.3g}"
-                ax.plot(grid, _curve(best, best.params, grid, cut, count),
-                        "s--" if count else "-", ms=4 if count else 0, mfc="none",
+                law = _curve(best, best.params, grid, cut, count)
+                ax.plot(grid, law, "s--" if count else "-", ms=4 if count else 0, mfc="none",
                         color=c, lw=1.6, label=f"{s}: {text}", gid=f"law:{s}:{reg}")
+                shown = np.asarray(law, float)
+                shown = shown[np.isfinite(shown) & (shown > 0)]
+                if logscale and shown.size:
+                    ymax_log = max(ymax_log, float(shown.max()))
                 if cut is not None:
                     ax.axvline(cut, color=c, ls=":", lw=1,
                                label=f"{s}: detection limit" if logscale else None)
         for ax, logscale in zip(row, (False, True)):
             if logscale:
                 ax.set_yscale("log")
-                if np.isfinite(ymin_log):
-                    ax.set_ylim(bottom=ymin_log)
+                if np.isfinite(ymin_log) and ymax_log > ymin_log:
+                    ax.set_ylim(ymin_log, 3 * ymax_log)
             elif ymax_lin > 0:
                 # a Gamma law with alpha < 1 diverges at 0: scale the axis to the data
                 ax.set_ylim(0, 1.15 * ymax_lin)
@@ -461,7 +469,10 @@ def e_vs_nbr_figure(ens: Ensemble, colors=None):
         if g.empty:
             continue
         c = colors[s]
-        for reg, ls in (("bulk", ":"), ("periphery", "--"), (None, "-")):
+        # the whole system first: where one sub-system holds every stack of a size (the
+        # largest stacks are all at the wall) its curve coincides with the whole system's
+        # and must be drawn over it, not hidden under it
+        for reg, ls in ((None, "-"), ("bulk", ":"), ("periphery", "--")):
             gg = g if reg is None else g[g["region"] == reg]
             if gg.empty:
                 continue
@@ -677,7 +688,9 @@ def _write_files(res: StatsResult, ens: Ensemble, out: Path, *, opts: StatsOptio
             ("e_vs_nbr.png", "Branch energy against the size of its stack",
              "Mean energy of a branch against the number of branches of its stack, "
              "with standard errors, for the whole system (solid), bulk (dotted) and periphery "
-             "(dashed).", lambda: e_vs_nbr_figure(ens, colors)),
+             "(dashed), drawn over the whole system where they coincide with it. The branches "
+             "of one stack share its energy, so a point resting on a single stack has no error "
+             "bar.", lambda: e_vs_nbr_figure(ens, colors)),
         ]
         for name, title, caption, make in scatter:
             fig = make()
@@ -687,6 +700,8 @@ def _write_files(res: StatsResult, ens: Ensemble, out: Path, *, opts: StatsOptio
 
     stats_json = {
         "package": "foldstat", "version": __version__, "inputs": [str(i) for i in inputs],
+        "sets_of_inputs": input_sets(ens),
+        "detection_limits": detection_limits(ens),
         "options": {k: (list(v) if isinstance(v, tuple) else v)
                     for k, v in vars(opts).items()},
         "model_selection": f"min BIC; a family with fewer parameters within "
@@ -713,9 +728,72 @@ def _write_files(res: StatsResult, ens: Ensemble, out: Path, *, opts: StatsOptio
             "dof": res.dof[res.dof["set"] == s].to_dict("records"),
             "fits": sel}
     paths["stats.json"] = write_json(out / "stats.json", stats_json)
+    absent = _not_drawn(res, ens, opts.quantities, opts.min_n) if figures else ""
     paths["report.html"] = write_text(out / "report.html",
-                                      _html(res, figs, stats_json, ens, opts))
+                                      _html(res, figs, stats_json, ens, opts, absent))
     return paths
+
+
+def _limit_used(values_L, L) -> float | list | None:
+    """The detection limit in mm (mm^2 for areas: pass L^2) of the scans' observations, from
+    each one's limit in units of L: one number when all share it, the distinct numbers
+    otherwise, None when no observation carries one (simulations, or limit 0)."""
+    v = np.asarray(values_L, float) * np.asarray(L, float)
+    v = np.unique(np.round(v[np.isfinite(v)], 12))  # x/L*L is x to rounding
+    if v.size == 0:
+        return None
+    return float(v[0]) if v.size == 1 else [float(x) for x in v]
+
+
+def detection_limits(ens: Ensemble) -> dict:
+    """The detection limits the fits of ``ens`` are truncated at, in mm and mm^2.
+
+    Parameters
+    ----------
+    ens : Ensemble
+
+    Returns
+    -------
+    dict
+        ``{"l_min_mm": ..., "s_min_mm2": ...}``, each a number (one for every scan), a list
+        (scans read with different limits) or None (no limit: simulations, or limit 0).
+    """
+    L = ens.configs.set_index(["set", "config_id"])["rod_length_mm"]
+
+    def rod(df):
+        return L.reindex(pd.MultiIndex.from_frame(df[["set", "config_id"]])).to_numpy(float)
+
+    return {"l_min_mm": _limit_used(ens.branches["l_min_L"], rod(ens.branches)),
+            "s_min_mm2": _limit_used(ens.voids["s_min_L2"], rod(ens.voids) ** 2)}
+
+
+def input_sets(ens: Ensemble) -> dict:
+    """Input folder -> the names of the sets read from it (``input`` of
+    :func:`~crosssection.stats.data.load_inputs`); {} when the ensemble does not record it."""
+    c = ens.configs
+    if "input" not in c.columns:
+        return {}
+    c = c[c["input"].notna()]
+    return {str(d): list(dict.fromkeys(g["set"])) for d, g in c.groupby("input", sort=False)}
+
+
+def _limits_text(limits: dict) -> str:
+    """How the methods paragraph names the detection limits used."""
+    def one(v, unit):
+        if v is None:
+            return "none"
+        if isinstance(v, list):
+            return ", ".join(f"{x:g}" for x in v) + f" {unit} (scans read with different limits)"
+        return f"{v:g} {unit}"
+    return (f"l_min = {one(limits.get('l_min_mm'), 'mm')}, "
+            f"s_min = {one(limits.get('s_min_mm2'), 'mm²')}")
+
+
+def _inputs_text(meta) -> str:
+    """The input folders, each with the sets read from it when recorded."""
+    sets = meta.get("sets_of_inputs") or {}
+    return ", ".join(f"{d} (set{'s' if len(sets[d]) > 1 else ''} {', '.join(sets[d])})"
+                     if sets.get(d) else d for d in meta["inputs"])
 
 
 def _safe(name: str) -> str:
@@ -742,13 +820,29 @@ def _fitted_sets(res: StatsResult, q: str, sets) -> list:
 
 def _left_out(res: StatsResult, ens: Ensemble, q: str, min_n: int) -> str:
     """The sentence naming the sets a distribution figure leaves out (no fit: fewer than
-    ``min_n`` positive values, or all equal), or ""."""
+    ``min_n`` positive values, or all equal), whole or from one of its sub-system rows, or
+    ""."""
     fitted = _fitted_sets(res, q, ens.sets)
     missing = [s for s in ens.sets if s not in fitted]
-    if not missing:
+    # rows drawn for some set, missing for another that is drawn in other rows
+    rows = [r for r in ("all", "bulk", "periphery")
+            if any((s, r, q) in res.summaries for s in fitted)]
+    partial = [f"{s} ({REGION_WORDS.get(r, r)})" for s in fitted for r in rows
+               if (s, r, q) not in res.summaries and r in regions_of(ens.subset(s))]
+    if not (missing or partial):
         return ""
     return (f" Not drawn (fewer than {min_n} positive values, or all equal): "
-            f"{', '.join(missing)}.")
+            f"{', '.join(missing + partial)}.")
+
+
+def _not_drawn(res: StatsResult, ens: Ensemble, quantities, min_n: int) -> str:
+    """The paragraph naming the distribution figures absent from the report (no set has
+    {min_n} positive values of the quantity that are not all equal), or ""."""
+    absent = [q for q in quantities if not _fitted_sets(res, q, ens.sets)]
+    if not absent:
+        return ""
+    return ("Not drawn (fewer than {} positive values, or all equal, in every set): the "
+            "distribution of the {}.".format(min_n, ", of the ".join(WORDS[q] for q in absent)))
 
 
 #: report column -> heading in words with units (lengths in units of the rod length L)
@@ -833,8 +927,10 @@ def _selected_table(res: StatsResult) -> pd.DataFrame:
             ps.append(f"{nm} = {r.params[nm]:.3g}{ci}")
         others = sorted((o.bic - r.bic, f) for f, o in summ.results.items()
                         if o.selectable and f != r.family)
+        small = small_sample_note(r.n, F.N_SELECT_MIN, "samples model selection needs")
         rows.append({
-            "set": s, "region": reg, "quantity": q, "n": r.n,
+            "set": s, "region": reg, "quantity": q,
+            "n": f"{small}: indicative only" if small else r.n,
             "selected law": FAMILIES[r.family].title + (" (fitted as counts)" if r.discrete
                                                          else "")
             + (" (truncated at the detection limit)" if r.truncated else ""),
@@ -843,6 +939,19 @@ def _selected_table(res: StatsResult) -> pd.DataFrame:
                 f"{FAMILIES[others[0][1]].title}, {others[0][0]:+.1f}" if others else ""),
             "goodness of fit": r.p_text() or "not computed"})
     return pd.DataFrame(rows)
+
+
+def _relations_shown(rel: pd.DataFrame) -> pd.DataFrame:
+    """The relations table with the sample size of a relation fitted on too few
+    configurations spelled out beside it."""
+    if rel.empty:
+        return rel
+    rel = rel.copy()
+    notes = [small_sample_note(n, N_RELATION_MIN, "configurations a fitted relation needs")
+             if r in SLOPE_RELATIONS and np.isfinite(f) else ""
+             for r, n, f in zip(rel["relation"], rel["n"], rel["fitted"])]
+    rel["n"] = [f"{t}: indicative only" if t else n for t, n in zip(notes, rel["n"])]
+    return rel
 
 
 def _quality_rows(ens: Ensemble) -> pd.DataFrame:
@@ -901,8 +1010,10 @@ def _methods(meta, opts: StatsOptions) -> str:
         "distributions in the folding of elastic structures\", each distribution is fitted by "
         "maximum likelihood with the exponential, Gamma, log-normal and Gaussian laws (and "
         "Bose-Einstein or a cut-off power law where the paper uses them); below the detection "
-        "limits that each scan's analysis records (branches shorter than l_min, voids smaller "
-        "than s_min; paper: 1 mm and 1 mm²) nothing is seen, so those fits are truncated there. The number of branches per stack is an integer and is "
+        "limits (branches shorter than l_min, voids smaller than s_min) nothing is seen, so "
+        "the fits of the scans' lengths and areas are truncated there: here "
+        f"{_limits_text(meta.get('detection_limits', {}))} (paper: 1 mm and 1 mm²; "
+        "simulations have none). The number of branches per stack is an integer and is "
         "fitted as counts (the law integrated over [k-½, k+½]). Model selection: the law of "
         "lowest BIC, except that a law with fewer parameters within ΔBIC &lt; "
         f"{F.DELTA_BIC_SIMPLER:g} of the minimum is preferred (the simplest law the data "
@@ -912,7 +1023,7 @@ def _methods(meta, opts: StatsOptions) -> str:
 
 
 def _html(res: StatsResult, figs, meta, ens: Ensemble | None = None,
-          opts: StatsOptions | None = None) -> str:
+          opts: StatsOptions | None = None, not_drawn: str = "") -> str:
     opts = opts or StatsOptions()
     rej = (res.fits[res.fits["rejected"].fillna("").astype(str) != ""]
            if "rejected" in res.fits.columns else res.fits.iloc[:0])
@@ -927,7 +1038,7 @@ def _html(res: StatsResult, figs, meta, ens: Ensemble | None = None,
         "figcaption{font-size:14px;color:#333}.warn{color:#a00}</style></head><body>",
         "<h1>Folding statistics</h1>",
         f"<p>foldstat {html.escape(meta['version'])}; inputs: "
-        f"{html.escape(', '.join(meta['inputs']))}; seed {meta['options']['seed']}.</p>",
+        f"{html.escape(_inputs_text(meta))}; seed {meta['options']['seed']}.</p>",
         _methods(meta, opts),
     ]
     if ens is not None:
@@ -963,7 +1074,8 @@ def _html(res: StatsResult, figs, meta, ens: Ensemble | None = None,
         "paper compares it with the number of stacks &lt;N<sub>l</sub>&gt;. The paper's "
         "values below ours.</p>",
         _html_table(_with_paper(res.dof, PAPER_DOF)),
-        "<h2>Stacking relations (paper Eqs. (12)-(16))</h2>", _html_table(res.relations),
+        "<h2>Stacking relations (paper Eqs. (12)-(16))</h2>",
+        _html_table(_relations_shown(res.relations)),
         "<h2>Correlations</h2>", _html_table(res.correlations),
         "<h2>Selected laws</h2>",
         _html_table(_selected_table(res)) if res.summaries else "<p>none</p>",
@@ -974,6 +1086,8 @@ def _html(res: StatsResult, figs, meta, ens: Ensemble | None = None,
         parts += ["<h2>Detection limits: naive against truncation-aware fits</h2>",
                   _html_table(res.truncation)]
     parts.append("<h2>Figures</h2>")
+    if not_drawn:
+        parts.append(f"<p>{html.escape(not_drawn)}</p>")
     for title, rel, caption in figs:
         parts.append(f"<figure id='{html.escape(Path(rel).stem)}'><h3>{html.escape(title)}"
                      f"</h3><a href='{rel}'><img src='{rel}' alt='{html.escape(title)}'></a>"

@@ -75,6 +75,45 @@ QUANTITIES = {
 COUNT_QUANTITIES = {"n_br"}
 POSITIVE_QUANTITIES = {"length_L", "kappa_m_L", "kappa_plus_L", "e", "E", "n_br", "area_L2",
                        "shape_ratio"}
+#: Fewest configurations for a relation of Eqs. (12)-(16) fitted across configurations: a line
+#: through the origin passes exactly through one point, and R^2 of two to four points says
+#: little about the relation
+N_RELATION_MIN = 5
+#: the relations fitted across configurations (a slope or ratio per set)
+SLOPE_RELATIONS = ("eq12_const", "slope_sqrt_s_vs_l", "eq12_eps_sqrtNl", "eq14_slope")
+
+
+def small_sample_note(n, minimum: int, what: str) -> str:
+    """The words that follow a sample size below its minimum, as the report prints them
+    ("n = 6: below the 50 samples model selection needs"); "" when ``n`` is enough."""
+    if not (np.isfinite(n) and n < minimum):
+        return ""
+    return f"n = {int(n)}: below the {minimum} {what}"
+
+
+def _warn_small_samples(summaries: dict, relations: pd.DataFrame) -> None:
+    """One :class:`~crosssection.stats.fits.SmallSampleWarning` per set naming the quantities
+    whose law was selected on fewer than :data:`~crosssection.stats.fits.N_SELECT_MIN`
+    values and the relations fitted on fewer than :data:`N_RELATION_MIN` configurations."""
+    small = {}
+    for (s, reg, q), summ in summaries.items():
+        r = summ.results.get(summ.best) if summ.best else None
+        if r is not None and r.n < F.N_SELECT_MIN:
+            where = q if reg in ("all", SIM_REGION) else f"{q} ({reg})"
+            small.setdefault(s, [[], []])[0].append(f"{where} n = {r.n}")
+    for row in relations.itertuples(index=False):
+        if row.relation in SLOPE_RELATIONS and row.n < N_RELATION_MIN and np.isfinite(row.fitted):
+            small.setdefault(row.set, [[], []])[1].append(f"{row.relation} n = {row.n}")
+    for s, (laws, rels) in small.items():
+        parts = []
+        if laws:
+            parts.append(f"laws selected on fewer than the {F.N_SELECT_MIN} samples model "
+                         f"selection needs ({', '.join(laws)})")
+        if rels:
+            parts.append(f"relations fitted on fewer than {N_RELATION_MIN} configurations "
+                         f"({', '.join(rels)})")
+        warnings.warn(f"set {s}: {'; '.join(parts)}: indicative only", F.SmallSampleWarning,
+                      stacklevel=3)
 
 
 @dataclass
@@ -298,6 +337,10 @@ def compute_stats(ens: Ensemble, opts: StatsOptions | None = None, *,
     Returns
     -------
     StatsResult
+        A law selected on fewer than :data:`~crosssection.stats.fits.N_SELECT_MIN` values,
+        and a relation fitted on fewer than :data:`N_RELATION_MIN` configurations, are kept
+        and named in one :class:`~crosssection.stats.fits.SmallSampleWarning` per set; an
+        ``n_boot`` from 1 to :data:`~crosssection.stats.fits.N_BOOT_MIN` - 1 gives one too.
 
     Raises
     ------
@@ -311,6 +354,11 @@ def compute_stats(ens: Ensemble, opts: StatsOptions | None = None, *,
         raise ParameterError(f"opts must be a StatsOptions, got {type(opts).__name__}")
     opts = opts or StatsOptions()
     opts.check()
+    if 0 < opts.n_boot < F.N_BOOT_MIN:
+        warnings.warn(f"n_boot {opts.n_boot}: fewer than the {F.N_BOOT_MIN} bootstrap "
+                      "resamples a 95 % percentile interval needs (its ends are then the "
+                      "extreme draws): the intervals are indicative only",
+                      F.SmallSampleWarning, stacklevel=2)
     per_cfg = per_config_table(ens)
     macro = macro_table(ens)
     fit_rows, trunc_rows, summaries = [], [], {}
@@ -369,6 +417,7 @@ def compute_stats(ens: Ensemble, opts: StatsOptions | None = None, *,
     micro = pd.DataFrame(micro_rows)
     dof = pd.DataFrame(dof_rows)
     relations = relations_table(ens, per_cfg, summaries)
+    _warn_small_samples(summaries, relations)
     correlations = correlations_table(ens)
     return StatsResult(macro, micro, dof, fits_df, trunc_df, relations, correlations, per_cfg,
                        summaries)

@@ -18,12 +18,15 @@ from crosssection.stats.tables import StatsOptions
 FAST = ["--n-boot", "0", "--no-gof", "--no-figures"]
 
 
-def _stats(capfd, *argv):
-    """Run ``stats``; return (status, stdout lines, stderr lines)."""
+def _stats(capfd, *argv, small=False):
+    """Run ``stats``; return (status, stdout lines, stderr lines): without the small-sample
+    warning line of these small sets (see conftest.py) unless ``small``."""
     capfd.readouterr()
     status = main(["stats", *map(str, argv)])
     out, err = capfd.readouterr()
-    return status, out.splitlines(), err.splitlines()
+    err = [ln for ln in err.splitlines()
+           if small or not (ln.startswith("warning: set ") and ln.endswith("indicative only"))]
+    return status, out.splitlines(), err
 
 
 def _batch(root, n_images=3, complete=True):
@@ -138,7 +141,8 @@ def test_the_defaults_are_those_of_the_statistics_and_the_loader(capfd):
     opts = StatsOptions()
     limits = inspect.signature(load_inputs).parameters
     args = build_parser(["stats"]).parse_args(["stats", "d", "--out", "r"])
-    assert (args.seed, args.n_boot, args.n_mc) == (opts.seed, opts.n_boot, opts.n_mc)
+    # --n-boot and --n-mc are None when not given (so that --fast can tell them apart)
+    assert (args.seed, *cli.resamples(args)) == (opts.seed, opts.n_boot, opts.n_mc)
     assert args.l_min_mm == limits["l_min_mm"].default > 0
     assert args.s_min_mm2 == limits["s_min_mm2"].default > 0
     with pytest.raises(SystemExit):
@@ -148,6 +152,34 @@ def test_the_defaults_are_those_of_the_statistics_and_the_loader(capfd):
     assert f"(default (10h)^2 = {limits['s_min_mm2'].default:g}; 0 = none)" in help_text
     assert (f"quick look: {cli.FAST_N_BOOT} bootstrap resamples and {cli.FAST_N_MC} GOF "
             "samples") in help_text
+
+
+@pytest.mark.parametrize("flags, want", [
+    (["--n-boot", "70", "--fast"], (70, cli.FAST_N_MC)),  # an explicit value wins
+    (["--fast", "--n-mc", "19"], (cli.FAST_N_BOOT, 19)),
+    (["--n-boot", "70", "--n-mc", "19"], (70, 19))])
+def test_explicit_resamples_win_over_fast(batch, tmp_path, capfd, monkeypatch, flags, want):
+    seen = {}
+    monkeypatch.setattr(report, "write_report",
+                        lambda ens, out, *, opts, **kw: seen.setdefault("opts", opts) and [])
+    status, _, err = _stats(capfd, batch, "--out", tmp_path / "rep", "--no-figures", *flags)
+    assert status == 0 and err == []
+    assert (seen["opts"].n_boot, seen["opts"].n_mc) == want
+
+
+def test_too_few_bootstrap_resamples_give_a_warning(batch, tmp_path, capfd):
+    from crosssection.stats.fits import N_BOOT_MIN
+
+    status, _, err = _stats(capfd, batch, "--out", tmp_path / "rep", "--no-figures",
+                            "--no-gof", "--n-boot", "1")
+    assert status == 0
+    assert err == [f"warning: n_boot 1: fewer than the {N_BOOT_MIN} bootstrap resamples a "
+                   "95 % percentile interval needs (its ends are then the extreme draws): the "
+                   "intervals are indicative only"]
+    assert json.loads((tmp_path / "rep" / "stats.json").read_text())["options"]["n_boot"] == 1
+    status, _, err = _stats(capfd, batch, "--out", tmp_path / "rep", "--no-figures",
+                            "--no-gof", "--n-boot", str(N_BOOT_MIN))
+    assert status == 0 and err == []
 
 
 @pytest.mark.parametrize("flags, fast", [([], False), (["--fast"], True)])
@@ -199,6 +231,23 @@ def test_zero_detection_limits_mean_none(batch, tmp_path, capfd):
     status, _, err = _stats(capfd, batch, "--out", tmp_path / "rep", "--l-min-mm", "0",
                             "--s-min-mm2", "0", *FAST)
     assert status == 0 and err == []
+    meta = json.loads((tmp_path / "rep" / "stats.json").read_text())
+    assert meta["detection_limits"] == {"l_min_mm": None, "s_min_mm2": None}
+    assert "l_min = none, s_min = none" in (tmp_path / "rep" / "report.html").read_text()
+
+
+def test_report_records_the_limits_and_the_sets_of_each_dir(batch, tmp_path, capfd):
+    sim = demo.write_demo_simulation(tmp_path / "sim", n_configs=4, seed=1)
+    status, _, err = _stats(capfd, batch, sim, "--out", tmp_path / "rep", "--l-min-mm", "2",
+                            "--s-min-mm2", "1.5", *FAST, "--name", "exp", "--name", "simu")
+    assert status == 0 and err == []
+    meta = json.loads((tmp_path / "rep" / "stats.json").read_text())
+    assert meta["detection_limits"] == {"l_min_mm": 2.0, "s_min_mm2": 1.5}
+    assert meta["sets_of_inputs"] == {str(batch): ["exp"], str(sim): ["simu"]}
+    page = (tmp_path / "rep" / "report.html").read_text()
+    assert "here l_min = 2 mm, s_min = 1.5 mm²" in page
+    assert "each scan's analysis records" not in page
+    assert f"{batch} (set exp), {sim} (set simu)" in page
 
 
 # ------------------------------------------------------- doubtful inputs: one warning, used
@@ -438,3 +487,21 @@ def test_write_report_returns_the_final_paths(tmp_path):
                                 opts=StatsOptions(n_boot=0, gof=False))
     assert all(p.parent == tmp_path / "rep" and p.is_file() for p in paths.values())
     assert all(p.name in report.REPORT_FILES for p in paths.values())
+
+
+def test_name_of_a_batch_of_several_sets_keeps_them_apart(tmp_path, capfd):
+    b = demo.write_demo_batch(tmp_path / "b2", n_images=2, seed=4,
+                              sets={"A": {"n_stacks": 10}, "B": {"n_stacks": 12}})
+    sim = demo.write_demo_simulation(tmp_path / "sim", n_configs=4, seed=1)
+    status, _, err = _stats(capfd, b, sim, "--out", tmp_path / "rep", *FAST,
+                            "--name", "exp", "--name", "simu")
+    assert status == 0 and err == []
+    sets = pd.read_csv(tmp_path / "rep" / "per_config.csv")["set"]
+    assert list(dict.fromkeys(sets)) == ["exp/A", "exp/B", "simu"]
+    # a batch of one set takes the name itself
+    one = demo.write_demo_batch(tmp_path / "b1", n_images=2, seed=4, sets={"A": {}})
+    assert load_any(one, set_name="exp").sets == ["exp"]
+    assert load_any(b, set_name="exp").sets == ["exp/A", "exp/B"]
+    with pytest.raises(SystemExit):
+        main(["stats", "--help"])
+    assert "NAME/A, NAME/B" in " ".join(capfd.readouterr().out.split())

@@ -93,5 +93,5 @@ def test_progress_only_when_asked_off_a_terminal(sim, tmp_path, capfd, flag, bar
                  "--no-figures", *flag]) == 0
     err = capfd.readouterr().err
     assert ("stats fits" in err) == bar
-    if not bar:
-        assert err == ""
+    if not bar:  # nothing but the small-sample warning of this small set
+        assert [ln for ln in err.splitlines() if not ln.endswith("indicative only")] == []

@@ -89,3 +89,84 @@ def test_a_set_too_small_to_fit_is_named_under_the_figure(tmp_path):
     assert html.count("Not drawn") == 2
     e_part = html.split("Distribution of the branch energy e")[1].split("<h3")[0]
     assert "Not drawn" not in e_part
+
+
+def test_small_samples_are_named_in_a_warning_and_in_the_report(tmp_path, capfd):
+    import warnings
+
+    from crosssection.cli import main
+    from crosssection.stats import SmallSampleWarning, compute_stats, load_any
+    from crosssection.stats.fits import N_SELECT_MIN
+    from crosssection.stats.tables import N_RELATION_MIN, StatsOptions
+
+    sim = demo.write_demo_simulation(tmp_path / "tiny", n_configs=N_RELATION_MIN - 1, seed=1)
+    with pytest.warns(SmallSampleWarning) as rec:
+        compute_stats(load_any(sim), StatsOptions(n_boot=0, gof=False))
+    msg = " ".join(str(w.message) for w in rec if w.category is SmallSampleWarning)
+    assert msg.startswith("set tiny: ")
+    assert f"fewer than the {N_SELECT_MIN} samples model selection needs" in msg
+    n_voids = len(load_any(sim).voids)
+    assert n_voids < N_SELECT_MIN and f"area_L2 n = {n_voids}" in msg
+    assert f"eq14_slope n = {N_RELATION_MIN - 1}" in msg
+    # a set large enough for every selection and relation gives none
+    big = demo.write_demo_simulation(tmp_path / "big", n_configs=N_SELECT_MIN, seed=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", SmallSampleWarning)
+        compute_stats(load_any(big), StatsOptions(n_boot=0, gof=False,
+                                                  quantities=("E", "e", "length_L")))
+    # the command line: one warning line, and the report says it beside the numbers
+    capfd.readouterr()
+    assert main(["stats", str(sim), "--out", str(tmp_path / "r"), "--n-boot", "0", "--no-gof",
+                 "--no-figures"]) == 0
+    err = capfd.readouterr().err.splitlines()
+    assert len([ln for ln in err if ln.startswith("warning: set tiny: ")]) == 1
+    page = (tmp_path / "r" / "report.html").read_text()
+    n = N_RELATION_MIN - 1
+    assert f"n = {n_voids}: below the {N_SELECT_MIN} samples model selection needs" in page
+    assert f"n = {n}: below the {N_RELATION_MIN} configurations a fitted relation needs" in page
+    # the numbers are still given
+    assert len(pd.read_csv(tmp_path / "r" / "relations.csv").dropna(subset=["fitted"])) > 0
+
+
+def test_absent_figures_and_rows_are_named_and_log_axes_follow_the_data(tmp_path,
+                                                                         monkeypatch):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import numpy as np
+
+    from crosssection.stats import compute_stats, load_any
+    from crosssection.stats.report import _left_out, pdf_figure
+    from crosssection.stats.tables import StatsOptions
+
+    # one simulation of 3 configurations: 3 total energies, too few for any fit of E
+    s = demo.write_demo_simulation(tmp_path / "few", n_configs=3, seed=2)
+    out = tmp_path / "rep"
+    assert _run([str(s), "--out", str(out), "--n-boot", "0", "--no-gof"]) == 0
+    assert not (out / "figures" / "pdf_E.png").exists()
+    assert ("Not drawn (fewer than 5 positive values, or all equal, in every set): the "
+            "distribution of the total energy" in (out / "report.html").read_text())
+    # a set with 6 periphery branches: absent from that row of the figure and named
+    b = demo.write_demo_batch(tmp_path / "b", n_images=2, seed=2,
+                              sets={"A": {"n_stacks": 30}, "B": {"n_stacks": 30}})
+    ens = load_any(b)
+    per = ens.branches.index[(ens.branches["set"] == "B")
+                             & (ens.branches["region"] == "periphery")]
+    ens.branches.loc[per[4:], "region"] = "bulk"  # B keeps 4 periphery branches
+    res = compute_stats(ens, StatsOptions(n_boot=20, gof=False, quantities=("length_L",)))
+    assert ("B", "periphery", "length_L") not in res.summaries
+    assert "Not drawn (fewer than 5 positive values, or all equal): B (periphery" in \
+        _left_out(res, ens, "length_L", 5)
+    # the log panels' y-range is that of the points and the laws, not of the bands: a band
+    # exploding to 1e15 times the law (a small sample's bootstrap) is clipped
+    from crosssection.stats import report as R
+
+    band = R._band
+    monkeypatch.setattr(R, "_band", lambda *a, **k: (lambda b: None if b is None else
+                                                     (b[0], b[1] * 1e15))(band(*a, **k)))
+    fig = pdf_figure(res, ens, "length_L")
+    for ax in fig.axes[1::2]:
+        ys = [np.max(np.asarray(ln.get_ydata(), float)) for ln in ax.lines
+              if str(ln.get_gid()).startswith(("law:", "points:"))]
+        top = max(ys)
+        assert ax.get_ylim()[1] <= 3.5 * top

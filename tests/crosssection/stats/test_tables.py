@@ -15,7 +15,7 @@ FAST = T.StatsOptions(seed=0, n_boot=0, gof=False)
 
 
 def _image(folder, *, L, lengths_mm, kappa_m, energy, regions, stack_of, n_br, areas_mm2,
-           ratios, epsilon=10.0):
+           ratios, epsilon=10.0, L_used=None):
     nst = len(n_br)
     stacks = pd.DataFrame({"stack_id": range(nst), "junction_a": -1, "junction_b": -1,
                            "length_mm": 5.0, "width_mm": 0.1, "n_br": n_br,
@@ -33,6 +33,8 @@ def _image(folder, *, L, lengths_mm, kappa_m, energy, regions, stack_of, n_br, a
     summary = {"n_junctions": 0, "n_stacks": nst, "n_branches": nb, "n_voids": len(areas_mm2),
                "mean_branches_per_stack": nb / nst, "rod_length_mm": L, "epsilon": epsilon,
                "total_energy": float(np.sum(energy)), "hole": None, "timings_s": {}}
+    if L_used is not None:  # analyze --rod-length-mm: e, E and epsilon use the given L
+        summary.update(rod_length_used_mm=L_used, rod_length_given=True)
     write_tables(folder, summary, {"stacks": stacks, "branches": branches, "voids": voids})
 
 
@@ -59,6 +61,39 @@ def test_image_units_are_normalised_by_rod_length(tmp_path):
     assert m.loc["all", "sqrt_s_over_p"] == pytest.approx(0.19)
     assert m.loc["all", "l_L"] == pytest.approx(0.02)
     assert m.loc["bulk", "N_br"] == 2 and m.loc["periphery", "l_L"] == pytest.approx(0.03)
+
+
+def test_given_rod_length_normalises_every_quantity(tmp_path):
+    # measured L = 500 mm, analysed with --rod-length-mm 1000: the energies and epsilon of the
+    # summary use 1000, so lengths, curvatures and areas must as well
+    _image(tmp_path / "img", L=500.0, L_used=1000.0, lengths_mm=[10.0, 20.0],
+           kappa_m=[0.5, 0.25], energy=[5.0, 6.0], regions=["bulk", "bulk"], stack_of=[0, 0],
+           n_br=[2], areas_mm2=[4.0], ratios=[0.2], epsilon=1000.0 / (2 * np.pi * 20.0))
+    ens = D.load_any(tmp_path / "img", l_min_mm=1.0, s_min_mm2=1.0)
+    np.testing.assert_allclose(ens.branches["length_L"], [0.01, 0.02])
+    np.testing.assert_allclose(ens.branches["kappa_m_L"], [500.0, 250.0])
+    np.testing.assert_allclose(ens.branches["kappa_plus_L"], [500.0, 250.0])
+    np.testing.assert_allclose(ens.branches["l_min_L"], 1e-3)
+    np.testing.assert_allclose(ens.stacks["length_L"], [5e-3])
+    np.testing.assert_allclose(ens.voids["area_L2"], [4e-6])
+    np.testing.assert_allclose(ens.voids["perimeter_L"], [1e-2])
+    np.testing.assert_allclose(ens.voids["s_min_L2"], 1e-6)
+    np.testing.assert_allclose(ens.voids["shape_ratio"], [0.2])  # dimensionless
+    cfg = ens.configs.iloc[0]
+    assert cfg["rod_length_mm"] == 1000.0
+    # the energies and epsilon are taken as the analysis wrote them (in units of the same L)
+    np.testing.assert_allclose(ens.branches["e"], [5.0, 6.0])
+    assert cfg["E"] == pytest.approx(11.0)
+    assert cfg["epsilon"] == pytest.approx(1000.0 / (2 * np.pi * 20.0))
+
+
+@pytest.mark.parametrize("bad", [0.0, -5.0])
+def test_rod_length_used_must_be_positive(tmp_path, bad):
+    _image(tmp_path / "img", L=500.0, L_used=bad, lengths_mm=[10.0], kappa_m=[0.5],
+           energy=[5.0], regions=["bulk"], stack_of=[0], n_br=[1], areas_mm2=[4.0],
+           ratios=[0.2])
+    with pytest.raises(ConfigError, match="rod_length_used_mm"):
+        D.load_any(tmp_path / "img")
 
 
 def test_simulation_ensemble_is_read_in_units_of_L(tmp_path):
