@@ -113,7 +113,8 @@ def write_image(rgb: np.ndarray, path) -> Path:
 
 
 def write_scene(scene: Scene, folder, *, image_name: str = "image.png") -> Path:
-    """Write a scene folder: the image, ``params.json``, ``calibration.csv``, ``truth/``.
+    """Write a scene folder: the image, ``params.json`` (the scene's parameters and the
+    package version), ``calibration.csv``, ``truth/``.
 
     Parameters
     ----------
@@ -139,7 +140,11 @@ def write_scene(scene: Scene, folder, *, image_name: str = "image.png") -> Path:
     stacks = scene.tables["stacks"]
     n_rows = max(MIN_CALIBRATION_ROWS, int(stacks["n_br"].max()) + 3 if len(stacks) else 0)
     scene.calibration.to_csv(folder / "calibration.csv", n_rows)
-    write_json(folder / "params.json", scene.params)
+    from crosssection._version import __version__
+
+    # the generator's parameters and the version that drew the scene: its truth is that
+    # version's
+    write_json(folder / "params.json", {**scene.params, "version": __version__})
     schema.write_tables(folder / "truth", scene.summary, scene.tables)
     return folder
 

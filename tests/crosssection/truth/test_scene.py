@@ -23,7 +23,10 @@ def test_scene_folder_round_trip(scene_folder):
     folder, scene = scene_folder
     back = read_scene(folder)
     assert np.array_equal(back.rgb, scene.rgb)
-    assert back.params == json.loads(json.dumps(scene.params))
+    from crosssection._version import __version__
+
+    # the parameters, and the version that drew the scene
+    assert back.params == {**json.loads(json.dumps(scene.params)), "version": __version__}
     assert back.summary["n_stacks"] == scene.summary["n_stacks"]
     for name, table in scene.tables.items():
         assert list(back.tables[name].columns[:len(table.columns)]) == list(table.columns)
