@@ -65,10 +65,21 @@ class ScanScale:
         Scan resolution (the paper's scans: 50 px/mm).
     thickness_mm : float
         Sheet thickness h (the paper's polyester: 0.1 mm).
+
+    Raises
+    ------
+    ParameterError
+        A value that is not a positive number in the range ``AnalysisParams`` accepts.
     """
 
     px_per_mm: float = 50.0
     thickness_mm: float = 0.1
+
+    def __post_init__(self):
+        # the same checks as AnalysisParams': a string or a negative scale would convert
+        # without an error ("50" * 2 is "5050")
+        for name in ("px_per_mm", "thickness_mm"):
+            object.__setattr__(self, name, float(check_param(name, getattr(self, name))))
 
     @property
     def thickness_px(self) -> float:

@@ -814,6 +814,12 @@ class Report:
     meta: dict
     folder: Path
 
+    def __repr__(self) -> str:
+        sets = sorted({str(x) for x in self.macro.get("set", pd.Series(dtype=str))})
+        return (f"Report({self.folder}: {len(sets)} set(s) {', '.join(sets)}; "
+                f"{len(self.per_config)} configurations, {len(self.selected())} selected laws, "
+                f"foldstat {self.meta.get('version', 'n/a')})")
+
     def selected(self) -> pd.DataFrame:
         """The selected law of every set, region and quantity (rows of ``fits``)."""
         if self.fits.empty or "selected" not in self.fits.columns:

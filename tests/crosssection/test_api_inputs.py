@@ -152,3 +152,11 @@ def test_a_parameter_file_with_a_misspelt_key_is_refused(tmp_path):
     good = tmp_path / "set.toml"
     good.write_text('name = "a"\npx_per_mm = 25\n[images."x.png"]\nhole_radius_mm = 5\n')
     assert AnalysisParams.from_toml(good).px_per_mm == 25
+
+
+@pytest.mark.parametrize("px_per_mm, thickness_mm", [("50", 0.1), (-1, 0.1), (50, 0),
+                                                      (float("nan"), 0.1), (50, True)])
+def test_a_scan_scale_refuses_what_analysis_parameters_refuse(px_per_mm, thickness_mm):
+    with pytest.raises(ParameterError):
+        cs.ScanScale(px_per_mm, thickness_mm)
+    assert cs.ScanScale(25, 0.2).to_px(2) == 50.0

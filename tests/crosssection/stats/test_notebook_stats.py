@@ -46,6 +46,10 @@ def test_report_folder_reads_back(sim, tmp_path, capfd):
     sel = rep.selected()
     assert len(sel) and sel["selected"].all()
     assert len(sel) == len(sel.drop_duplicates(["set", "region", "quantity"]))
+    # a notebook cell's value: one line naming the sets, not every table
+    text = repr(rep)
+    assert "\n" not in text and len(text) < 300 and "sim" in text
+    assert f"{len(sel)} selected laws" in text
     with pytest.raises(ConfigError, match="stats.json"):
         load_report(sim)
 
