@@ -27,23 +27,38 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 from scipy.optimize import linear_sum_assignment
 from scipy.spatial.distance import cdist
 
 from crosssection.core import schema
+from crosssection.core.errors import ParameterError
 from crosssection.truth.scene import read_scene, read_scene_params
 
 TABLE_NAMES = ("junctions", "stacks", "branches", "voids")
 
 
-def _as_pair(obj):
-    """(summary, tables) from a pair, an AnalysisResult-like object or a folder path."""
+def _as_pair(obj, name: str = "result"):
+    """(summary, tables) from a pair, an AnalysisResult-like object, a scene or a folder path;
+    ``ParameterError`` naming the argument for anything else."""
     if isinstance(obj, (str, Path)):
         return schema.read_tables(obj)
     if isinstance(obj, tuple) and len(obj) == 2:
-        return obj[0], obj[1]
-    summary = getattr(obj, "summary")
-    tables = {name: getattr(obj, name) for name in TABLE_NAMES}
+        summary, tables = obj
+    else:
+        summary = getattr(obj, "summary", None)
+        # an AnalysisResult holds its tables as attributes, a Scene in its ``tables``
+        held = getattr(obj, "tables", None)
+        tables = (held if isinstance(held, dict) else
+                  {t: getattr(obj, t, None) for t in TABLE_NAMES})
+    missing = [t for t in TABLE_NAMES
+               if not isinstance(tables, dict) or not isinstance(tables.get(t), pd.DataFrame)]
+    if not isinstance(summary, dict) or missing:
+        raise ParameterError(
+            f"{name} must be an analysis result, a (summary, tables) pair or a folder path, "
+            f"got {type(obj).__name__}"
+            + (f" without the table(s) {', '.join(missing)}" if missing and
+               isinstance(summary, dict) else ""))
     return summary, tables
 
 
@@ -152,7 +167,7 @@ def score(result, truth, *, match_px: float | None = None, px_per_mm: float = 50
 
     Parameters
     ----------
-    result, truth : (summary, tables) pair, AnalysisResult-like object or folder path
+    result, truth : (summary, tables) pair, AnalysisResult-like object, scene or folder path
         ``tables`` holds the four schema DataFrames.
     match_px : float, optional
         Junction matching radius in pixels; default 3 h (``3 * thickness_mm * px_per_mm``).
@@ -171,8 +186,8 @@ def score(result, truth, *, match_px: float | None = None, px_per_mm: float = 50
         ``void_total_area_rel_error``, ``total_energy_rel_error``, plus the raw counts.
         Relative errors are signed ((out - truth) / truth).
     """
-    rs, rt = _as_pair(result)
-    ts, tt = _as_pair(truth)
+    rs, rt = _as_pair(result, "result")
+    ts, tt = _as_pair(truth, "truth")
     if match_px is None:
         match_px = 3.0 * thickness_mm * px_per_mm
     out = {"match_px": float(match_px)}

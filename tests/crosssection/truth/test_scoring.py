@@ -169,3 +169,17 @@ def test_medial_fork_points_where_the_bands_separate():
     far = np.array([[20.0, 20.0]])
     out = medial_fork_points(paths, [30, 16, 16], [(-1, 7)] * 3, [7], far, (300, 300))
     np.testing.assert_allclose(out, far)
+
+
+@pytest.mark.parametrize("bad", [42, None, ({}, {}), ("summary", {})])
+def test_score_names_a_wrong_argument(bad):
+    from crosssection.core.errors import ParameterError
+    from crosssection.truth.network import make_scene
+    from crosssection.truth.scoring import score
+
+    sc = make_scene(seed=1, n_stacks=20, max_layers=2)
+    with pytest.raises(ParameterError, match="^truth must be"):
+        score(sc, bad)
+    with pytest.raises(ParameterError, match="^result must be"):
+        score(bad, sc)
+    assert score(sc, sc)["junction_f1"] == 1.0
