@@ -411,6 +411,11 @@ def _number(name, value, *, minimum=0.0, allow_equal=False, integer=False):
 _POSITIVE = ("px_per_mm", "thickness_mm", "hole_radius_mm", "rod_length_mm", "kappa_c_per_mm",
              "tangent_mm", "bending_rigidity_J")
 _NON_NEGATIVE = ("s_min_mm2", "l_min_mm", "merge_px", "blue_min", "rg_max", "sliver_width_h")
+#: Upper bounds of values that no scan reaches, beyond which the arithmetic overflows or the
+#: numbers printed are meaningless: 10 km of sheet; a curvature of a 0.1 um radius, a thousand
+#: times below any sheet's thickness.
+_BEYOND = {"rod_length_mm": (1e7, "mm of sheet (10 km)"),
+           "kappa_c_per_mm": (1e4, "1/mm (a radius of 0.1 um)")}
 
 
 def check_param(name: str, value):
@@ -422,7 +427,11 @@ def check_param(name: str, value):
             raise ParameterError(f"{name} is required")
         return None
     if name in _POSITIVE:
-        return _number(name, value)
+        v = _number(name, value)
+        if name in _BEYOND and v > _BEYOND[name][0]:
+            top, what = _BEYOND[name]
+            raise ParameterError(f"{name} = {v:g} is beyond any scan (at most {top:g} {what})")
+        return v
     if name in _NON_NEGATIVE:
         v = _number(name, value, allow_equal=True)
         if name == "merge_px" and v > 50:
