@@ -40,10 +40,23 @@ import pandas as pd
 from numba import njit
 from scipy.spatial import cKDTree
 
+from crosssection.core.errors import ParameterError
 from crosssection.core.unionfind import group_labels
+from simulate.checks import check_real
 from simulate.energy import bending_energy, confinement_energy, node_curvature
+from simulate.geometry import checked_rod
 
-__all__ = ["RodAnalysis", "analyze_rod", "default_contact_distance", "resample_rod"]
+__all__ = ["RodAnalysis", "analyze_rod", "default_contact_distance", "resample_rod",
+           "MIN_CONTACT_DISTANCE", "MAX_SAMPLES"]
+
+#: Smallest contact cut-off delta :func:`analyze_rod` takes, in segment lengths 1/N. The rod is
+#: resampled at ``min(1/N, delta) / 3``, i.e. ``ceil(3 / (N delta))`` samples per segment, and
+#: the contact search and the run analysis loop over every sample: at 0.01 segment that is 300
+#: samples per segment (N = 300: 9e4 samples, a few seconds), already a hundredth of the
+#: rod's own resolution; below it the sample count grows without bound (MemoryError).
+MIN_CONTACT_DISTANCE = 0.01
+#: Most samples :func:`resample_rod` makes (1.6e8 bytes of positions).
+MAX_SAMPLES = 10_000_000
 
 
 def default_contact_distance(n_segments: int) -> float:
@@ -123,13 +136,29 @@ def resample_rod(xy, spacing: float) -> tuple[np.ndarray, np.ndarray, int]:
     xy : (N+1, 2) array
         Node positions; segments of equal length 1/N.
     spacing : float
-        Largest allowed sample spacing (units of L).
+        Largest allowed sample spacing (units of L), > 0; at most :data:`MAX_SAMPLES` samples.
 
     Returns
     -------
     s : (K,) arclengths, pts : (K, 2) positions, sub : int samples per segment.
+
+    Raises
+    ------
+    ParameterError
+        ``xy`` is not an (N+1, 2) array of finite numbers with N >= 1, or ``spacing`` is not
+        a finite number > 0 or asks for more than :data:`MAX_SAMPLES` samples.
     """
-    xy = np.asarray(xy, dtype=np.float64)
+    xy = checked_rod(xy, min_segments=1)
+    spacing = check_real("spacing", spacing, low=0.0, low_open=True)
+    n = xy.shape[0] - 1
+    if n * np.ceil((1.0 / n) / spacing) + 1 > MAX_SAMPLES:
+        raise ParameterError(f"spacing must give at most {MAX_SAMPLES} samples, got {spacing!r} "
+                             f"for N = {n} segments")
+    return _resample(xy, spacing)
+
+
+def _resample(xy, spacing):
+    """:func:`resample_rod` without the checks (``xy`` a float (N+1, 2) array)."""
     n = xy.shape[0] - 1
     sub = max(1, int(np.ceil((1.0 / n) / spacing)))
     t = np.arange(sub) / sub
@@ -264,27 +293,52 @@ def analyze_rod(xy, *, lam: float, contact_distance: float | None = None,
     Parameters
     ----------
     xy : (N+1, 2) float array
-        Node positions of the rod (units of L, N equal segments of length 1/N).
+        Node positions of the rod (units of L, N >= 2 equal segments of length 1/N), finite.
     lam : float
-        Dimensionless confinement Lambda (for the confinement energies).
+        Dimensionless confinement Lambda (for the confinement energies), finite and >= 0.
     contact_distance : float, optional
         Contact cut-off delta (units of L); default :func:`default_contact_distance` = 0.5/N.
+        At least :data:`MIN_CONTACT_DISTANCE` segment lengths (``0.01 / N``: the rod is
+        resampled at ``min(1/N, delta) / 3``, so smaller cut-offs multiply the samples without
+        bound) and below 1, the rod length (a contact needs the rod to leave the disk of radius
+        delta and come back, an arclength above delta).
     min_run : float, optional
         Contact runs shorter than this arclength are merged into their neighbour
         (default 3 delta: the disk of radius delta blurs multiplicity changes over ~2 delta).
+        At least 0 (no merging) and below 1, the rod length (every run would be merged).
     void_px : float, optional
-        Pixel size (units of L) of the void rasterisation (default delta/6).
+        Pixel size (units of L) of the void rasterisation (default delta/6); above 0 and at
+        most delta, the width of the thickened rod (coarser pixels let the voids leak into each
+        other through it).
 
     Returns
     -------
     RodAnalysis
+
+    Raises
+    ------
+    ParameterError
+        An argument out of the ranges above, naming it (with a hint when ``xy`` looks
+        transposed).
     """
-    xy = np.asarray(xy, dtype=np.float64)
-    if xy.ndim != 2 or xy.shape[1] != 2 or xy.shape[0] < 3:
-        raise ValueError(f"xy must be (N+1, 2) with N >= 2, got {xy.shape}")
+    xy = checked_rod(xy, min_segments=2)
     n = xy.shape[0] - 1
-    delta = float(contact_distance) if contact_distance is not None else default_contact_distance(n)
-    min_run = 3.0 * delta if min_run is None else float(min_run)
+    lam = check_real("lam", lam, low=0.0)
+    if contact_distance is None:
+        delta = default_contact_distance(n)
+    else:
+        delta = check_real("contact_distance", contact_distance,
+                           low=MIN_CONTACT_DISTANCE / n, high=1.0, high_open=True,
+                           why=f"from {MIN_CONTACT_DISTANCE:g} of a segment length 1/N = "
+                               f"{1.0 / n:.3g} up to the rod length 1")
+    if min_run is None:
+        min_run = 3.0 * delta
+    else:
+        min_run = check_real("min_run", min_run, low=0.0, high=1.0, high_open=True,
+                             why="an arclength shorter than the rod")
+    if void_px is not None:
+        void_px = check_real("void_px", void_px, low=0.0, low_open=True, high=delta,
+                             why=f"a pixel no wider than the contact distance {delta:.3g}")
 
     whole = _whole_rod(xy, lam)
     smp = _sample_contacts(xy, delta, min_run)
@@ -349,7 +403,7 @@ class _Samples(NamedTuple):
 
 def _sample_contacts(xy, delta, min_run) -> _Samples:
     ds = 1.0 / (xy.shape[0] - 1)
-    s, pts, sub = resample_rod(xy, min(ds, delta) / 3.0)
+    s, pts, sub = _resample(xy, min(ds, delta) / 3.0)
     h = s[1] - s[0]
     partners = _partner_lists(pts, delta, int(np.floor(delta / h)))
     same_pass = int(np.ceil(2.0 * delta / h)) + 1
@@ -738,7 +792,7 @@ def _voids(xy, delta, j_xy, void_px=None, max_px=4000):
     # up to half a pixel, which biases contour perimeters by ~1%)
     near = np.argwhere(dist < half + 3)
     if len(near):
-        _, dense, _ = resample_rod(xy, px / 4)
+        _, dense, _ = _resample(xy, px / 4)
         dnear, _ = cKDTree((dense - lo) / px).query(near[:, ::-1].astype(float))
         dist[near[:, 0], near[:, 1]] = dnear
     free = dist > half

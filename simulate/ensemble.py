@@ -54,6 +54,7 @@ from crosssection.core.fileio import BROWSER_FILES, check_out, write_csv, write_
 from crosssection.core.parallel import get_executor, spawn_seeds
 from crosssection.quality import QualityWarning
 
+from simulate.contacts import MIN_CONTACT_DISTANCE
 from simulate.energy import LAMBDA, LAMBDA_MAX
 from simulate.noise import N_SEGMENTS, NOISE
 from simulate.optimize import (FTOL, LAM_START, MAXITER, N_RUNS, NEMATIC_RUNS, NEMATIC_U, RAMPS,
@@ -655,8 +656,8 @@ def _add_common(p, command):
                         "the wall stops the rod but does not compress it, so a start shape "
                         "must fit inside (default: none)")
     p.add_argument("--contact-distance", type=float, default=None,
-                   help="contact cut-off of the analysis, in units of L (default half a segment, "
-                        "1/(2N))")
+                   help="contact cut-off of the analysis, in units of L, from "
+                        f"{MIN_CONTACT_DISTANCE:g}/N to below 1 (default half a segment, 1/(2N))")
     p.add_argument("--workers", type=int, default=1, help="local worker processes (default 1)")
     p.add_argument("--scheduler", default=None,
                    help="Dask scheduler address, e.g. tcp://host:8786 (default: local workers)")
@@ -758,6 +759,14 @@ def params_from_args(args) -> dict:
                   parametrization=args.parametrization, **dict.fromkeys(_POWELL_KEYS))
     if args.method in _POWELL[args.command]:
         params.update(_powell_params(args))
+    cd = params["contact_distance"]
+    if cd is not None and not MIN_CONTACT_DISTANCE / args.segments <= cd < 1.0:
+        # the analysis' own range (simulate.contacts.analyze_rod): refused here, before a
+        # minimisation whose every analysis would fail on it
+        raise ParameterError(f"--contact-distance must be from {MIN_CONTACT_DISTANCE:g} of a "
+                             f"segment ({MIN_CONTACT_DISTANCE / args.segments:.3g} at "
+                             f"--segments {args.segments}) up to below the rod length 1, "
+                             f"got {cd:g}")
     wall, half = params["wall_radius"], 0.5 / args.segments
     if wall is not None and wall <= half:
         # a segment is a straight chord 1/N long: a disk no wider holds it only as its

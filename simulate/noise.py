@@ -25,6 +25,7 @@ import numpy as np
 
 from crosssection.core.errors import ParameterError
 
+from simulate.checks import check_real, check_seed, check_whole
 from simulate.geometry import center_of_mass, positions
 from simulate.intersect import has_intersection_grid
 
@@ -34,8 +35,45 @@ N_SEGMENTS = 300
 NOISE = 750.0
 
 
+def _checked_shape_args(n_segments, noise, *, low: int = 1) -> tuple[int, float]:
+    """``n_segments`` (a whole number >= ``low``) and ``noise`` (finite, >= 0), checked."""
+    return (check_whole("n_segments", n_segments, low=low),
+            check_real("noise", noise, low=0.0))
+
+
+def _checked_rng(rng) -> np.random.Generator:
+    """``rng`` if it is a numpy Generator, else a ParameterError naming it."""
+    if not isinstance(rng, np.random.Generator):
+        raise ParameterError(f"rng must be a numpy.random.Generator (np.random.default_rng"
+                             f"(seed)), got {type(rng).__name__}")
+    return rng
+
+
 def angle_increments(n_segments: int, noise: float, rng) -> np.ndarray:
-    """The N-1 angle steps ``sqrt(2 D) ds xi_i`` between consecutive segments."""
+    """The N-1 angle steps ``sqrt(2 D) ds xi_i`` between consecutive segments.
+
+    Parameters
+    ----------
+    n_segments : int
+        Number of segments N, a whole number >= 1.
+    noise : float
+        Noise amplitude D, finite and >= 0.
+    rng : numpy.random.Generator
+
+    Returns
+    -------
+    (N-1,) array
+
+    Raises
+    ------
+    ParameterError
+        An argument out of range, naming it.
+    """
+    n_segments, noise = _checked_shape_args(n_segments, noise)
+    return _increments(n_segments, noise, _checked_rng(rng))
+
+
+def _increments(n_segments, noise, rng):
     ds = 1.0 / n_segments
     return np.sqrt(2.0 * noise) * ds * rng.standard_normal(n_segments - 1)
 
@@ -46,18 +84,30 @@ def initial_theta(n_segments: int, noise: float, rng) -> np.ndarray:
     Parameters
     ----------
     n_segments : int
+        Number of segments N, a whole number >= 1.
     noise : float
-        Noise amplitude D.
+        Noise amplitude D, finite and >= 0.
     rng : numpy.random.Generator
 
     Returns
     -------
     (N,) array
+
+    Raises
+    ------
+    ParameterError
+        An argument out of range, naming it.
     """
+    n_segments, noise = _checked_shape_args(n_segments, noise)
+    return _theta(n_segments, noise, _checked_rng(rng))
+
+
+def _theta(n_segments, noise, rng):
+    """:func:`initial_theta` of checked arguments."""
     theta0 = rng.uniform(0.0, 2.0 * np.pi)
     theta = np.empty(n_segments)
     theta[0] = theta0
-    theta[1:] = theta0 + np.cumsum(angle_increments(n_segments, noise, rng))
+    theta[1:] = theta0 + np.cumsum(_increments(n_segments, noise, rng))
     return theta
 
 
@@ -68,12 +118,12 @@ def initial_shape(n_segments: int = N_SEGMENTS, noise: float = NOISE, *, seed=No
     Parameters
     ----------
     n_segments : int
-        Number of segments N.
+        Number of segments N, a whole number >= 2.
     noise : float
-        Noise amplitude D (paper: 750).
-    seed : int or numpy.random.Generator, optional
+        Noise amplitude D (paper: 750), finite and >= 0.
+    seed : int, numpy.random.SeedSequence or numpy.random.Generator, optional
     max_tries : int
-        Redraws allowed before giving up.
+        Redraws allowed before giving up, >= 1.
 
     Returns
     -------
@@ -83,13 +133,14 @@ def initial_shape(n_segments: int = N_SEGMENTS, noise: float = NOISE, *, seed=No
     Raises
     ------
     ParameterError
-        If no self-avoiding shape is found in ``max_tries`` draws (noise far too large).
+        An argument out of range (naming it), or no self-avoiding shape is found in
+        ``max_tries`` draws (noise far too large).
     """
-    if n_segments < 2 or noise < 0:
-        raise ParameterError(f"need n_segments >= 2 and noise >= 0, got {n_segments}, {noise}")
-    rng = np.random.default_rng(seed)
+    n_segments, noise = _checked_shape_args(n_segments, noise, low=2)
+    max_tries = check_whole("max_tries", max_tries, low=1)
+    rng = np.random.default_rng(check_seed(seed))
     for _ in range(max_tries):
-        xy = positions(initial_theta(n_segments, noise, rng))
+        xy = positions(_theta(n_segments, noise, rng))
         if not has_intersection_grid(xy):
             return xy - center_of_mass(xy)
     raise ParameterError(f"no self-avoiding shape in {max_tries} draws at noise D={noise}, "
@@ -103,19 +154,28 @@ def intersection_rate(noise: float, *, n_segments: int = 300, n_samples: int = 2
     Parameters
     ----------
     noise : float
-        Noise amplitude D.
+        Noise amplitude D, finite and >= 0.
     n_segments : int
+        A whole number >= 2.
     n_samples : int
-    seed : int, optional
+        Draws, >= 1.
+    seed : int, numpy.random.SeedSequence or numpy.random.Generator, optional
 
     Returns
     -------
     float in [0, 1]
+
+    Raises
+    ------
+    ParameterError
+        An argument out of range, naming it.
     """
-    rng = np.random.default_rng(seed)
+    n_segments, noise = _checked_shape_args(n_segments, noise, low=2)
+    n_samples = check_whole("n_samples", n_samples, low=1)
+    rng = np.random.default_rng(check_seed(seed))
     hits = 0
     for _ in range(n_samples):
-        hits += bool(has_intersection_grid(positions(initial_theta(n_segments, noise, rng))))
+        hits += bool(has_intersection_grid(positions(_theta(n_segments, noise, rng))))
     return hits / n_samples
 
 
@@ -127,13 +187,15 @@ def largest_noise(*, n_segments: int = 300, threshold: float = 0.01,
     Parameters
     ----------
     n_segments : int
+        A whole number >= 2.
     threshold : float
-        Acceptable fraction of self-intersecting draws.
+        Acceptable fraction of self-intersecting draws, in [0, 1].
     noises : sequence of float
-        Candidate D values (increasing).
+        Candidate D values (increasing), finite and >= 0.
     n_samples : int
-        Draws per D.
-    seed : int, optional
+        Draws per D, >= 1.
+    seed : int or numpy.random.SeedSequence, optional
+        Spawns one seed per D (a Generator cannot be spawned from).
 
     Returns
     -------
@@ -141,8 +203,21 @@ def largest_noise(*, n_segments: int = 300, threshold: float = 0.01,
         Largest D with rate < threshold (None if none qualifies).
     rates : dict
         ``{D: rate}`` for every candidate.
+
+    Raises
+    ------
+    ParameterError
+        An argument out of range, naming it (before any draw).
     """
-    ss = np.random.SeedSequence(seed)
+    check_whole("n_segments", n_segments, low=2)
+    check_real("threshold", threshold, low=0.0, high=1.0)
+    check_whole("n_samples", n_samples, low=1)
+    try:
+        noises = [check_real("noises", d, low=0.0) for d in noises]
+    except TypeError:
+        raise ParameterError(f"noises must be a sequence of numbers >= 0, got "
+                             f"{type(noises).__name__}") from None
+    ss = np.random.SeedSequence(check_seed(seed, generator=False))
     rates = {}
     for d, child in zip(noises, ss.spawn(len(noises))):
         rates[float(d)] = intersection_rate(d, n_segments=n_segments, n_samples=n_samples,

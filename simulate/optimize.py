@@ -47,6 +47,7 @@ All functions take and return node positions ``xy`` (N+1, 2) in units of L.
 """
 from __future__ import annotations
 
+import reprlib
 import time
 from dataclasses import dataclass, field
 
@@ -54,8 +55,9 @@ import numpy as np
 
 from crosssection.core.errors import ParameterError
 
+from simulate.checks import check_real, check_seed, check_whole
 from simulate.energy import bending_energy, confinement_energy
-from simulate.geometry import angles, positions
+from simulate.geometry import angles, checked_rod, positions
 from simulate.intersect import has_intersection_grid
 from simulate.powell import powell_run
 
@@ -87,8 +89,13 @@ def default_contact_cutoff(n_segments: int) -> float:
     Returns
     -------
     float
+
+    Raises
+    ------
+    ParameterError
+        ``n_segments`` is not a whole number >= 1.
     """
-    return 1.0 / int(n_segments)
+    return 1.0 / check_whole("n_segments", n_segments, low=1)
 
 
 @dataclass
@@ -121,14 +128,58 @@ class QuenchResult:
 
 
 def to_params(xy) -> np.ndarray:
-    """Powell parameters (bend angles, start point) of a polyline, shape (N+2,)."""
-    theta, start = angles(xy)
+    """Powell parameters (bend angles, start point) of a polyline, shape (N+2,).
+
+    Parameters
+    ----------
+    xy : (N+1, 2) array
+        Node positions, finite, N >= 1.
+
+    Returns
+    -------
+    (N+2,) float64 array
+
+    Raises
+    ------
+    ParameterError
+        ``xy`` is not an (N+1, 2) array of finite numbers (with a hint when transposed).
+    """
+    theta, start = angles(checked_rod(xy, min_segments=1))
     return np.concatenate([[theta[0]], np.diff(theta), start])
 
 
 def from_params(p) -> np.ndarray:
-    """Node positions (N+1, 2) from Powell parameters (bend angles, start point)."""
-    p = np.asarray(p, dtype=np.float64)
+    """Node positions (N+1, 2) from Powell parameters (bend angles, start point).
+
+    Parameters
+    ----------
+    p : (N+2,) array
+        Bend angles (the first is the first tangent angle), then node 0; finite, N >= 1.
+
+    Returns
+    -------
+    (N+1, 2) float64 array
+
+    Raises
+    ------
+    ParameterError
+        ``p`` is not a flat array of at least 3 finite numbers.
+    """
+    need = "p must be a flat array of N+2 >= 3 finite numbers"
+    try:
+        p = np.asarray(p, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ParameterError(f"{need}, got {reprlib.repr(p)}") from None
+    if p.ndim != 1 or p.size < 3:
+        raise ParameterError(f"{need}, got shape {p.shape}")
+    bad = int(np.count_nonzero(~np.isfinite(p)))
+    if bad:
+        raise ParameterError(f"{need}, got {bad} non-finite value(s)")
+    return _from_params(p)
+
+
+def _from_params(p) -> np.ndarray:
+    """:func:`from_params` of a checked float array."""
     n = p.size - 2
     return positions(np.cumsum(p[:n]), p[n:])
 
@@ -139,6 +190,49 @@ def _result(xy, lam, method, t0, stats, history):
     return QuenchResult(xy=xy, energy_total=eb + ec, energy_bending=eb, energy_confinement=ec,
                         method=method, wall_s=time.perf_counter() - t0, stats=stats,
                         history=history)
+
+
+def _checked_start(xy0, lam) -> tuple[np.ndarray, float]:
+    """The start ``xy0`` and ``lam`` of a minimisation, checked: an (N+1, 2) array of finite
+    numbers with N >= 2 and a finite Lambda >= 0 (a negative one pushes the rod to infinity)."""
+    try:
+        xy0 = checked_rod(xy0, min_segments=2)
+    except ParameterError as exc:
+        # the shared check names the argument xy; here it is called xy0
+        raise ParameterError("xy0" + exc.cause[len("xy"):].replace("xy.T", "xy0.T")) from None
+    return xy0, check_real("lam", lam, low=0.0)
+
+
+def _check_powell_options(*, maxiter, xtol, ftol, u, contact_cutoff, min_separation,
+                          wall_radius, parametrization) -> None:
+    """Refuse absurd options of a Powell run, naming the first one (``contact_cutoff`` and
+    ``wall_radius`` may be None)."""
+    check_whole("maxiter", maxiter, low=1)
+    check_real("xtol", xtol, low=0.0, low_open=True)
+    check_real("ftol", ftol, low=0.0, low_open=True)
+    check_real("u", u, low=0.0)
+    check_whole("min_separation", min_separation, low=1)
+    if contact_cutoff is not None:
+        check_real("contact_cutoff", contact_cutoff, low=0.0, low_open=True)
+    if wall_radius is not None:
+        check_real("wall_radius", wall_radius, low=0.0, low_open=True)
+    if parametrization not in ("bend", "tangent"):
+        raise ParameterError(f"parametrization must be 'bend' or 'tangent', got "
+                             f"{parametrization!r}")
+
+
+def _check_runs(n_runs, nematic_runs) -> tuple[int, set]:
+    """``n_runs`` (a whole number >= 0) and the set of ``nematic_runs`` (whole numbers of
+    runs before the last)."""
+    n_runs = check_whole("n_runs", n_runs, low=0)
+    try:
+        nem = {check_whole("nematic_runs", r, low=0) for r in nematic_runs}
+    except TypeError:
+        raise ParameterError(f"nematic_runs must be a sequence of run numbers, got "
+                             f"{reprlib.repr(nematic_runs)}") from None
+    if n_runs > 0 and (n_runs - 1) in nem:
+        raise ParameterError("the nematic term must not be used in the last run (paper)")
+    return n_runs, nem
 
 
 _STAT_NAMES = ("evaluations", "line_searches", "admissibility_checks", "iterations",
@@ -156,15 +250,16 @@ def powell_protocol(xy0, lam: float, *, seed=None, n_runs: int = N_RUNS,
     Parameters
     ----------
     xy0 : (N+1, 2) array
-        Self-avoiding start (e.g. :func:`simulate.noise.initial_shape`).
+        Self-avoiding start of finite nodes, N >= 2 (e.g.
+        :func:`simulate.noise.initial_shape`).
     lam : float
-        Confinement Lambda (switched on at once: a quench).
-    seed : int, optional
+        Confinement Lambda, finite and >= 0 (switched on at once: a quench).
+    seed : int, numpy.random.SeedSequence or numpy.random.Generator, optional
         Seeds the direction resets.
     n_runs : int
-        Powell runs (paper: 10).
+        Powell runs (paper: 10), >= 0.
     maxiter : int
-        Iterations per run (~30 in the prototype).
+        Iterations per run (~30 in the prototype), >= 1.
     nematic_runs : sequence of int
         Runs (0-based) that include the nematic term ``u sin^2 alpha``; never put the last run
         here (paper: 2 early runs out of 10).
@@ -190,19 +285,25 @@ def powell_protocol(xy0, lam: float, *, seed=None, n_runs: int = N_RUNS,
     Returns
     -------
     QuenchResult
+
+    Raises
+    ------
+    ParameterError
+        An argument out of range (naming it), a start that intersects itself or leaves the
+        hard-wall disk, or the nematic term in the last run.
     """
-    if parametrization not in ("bend", "tangent"):
-        raise ParameterError(f"unknown parametrization {parametrization!r}")
     t0 = time.perf_counter()
-    xy0 = np.asarray(xy0, dtype=np.float64)
+    xy0, lam = _checked_start(xy0, lam)
+    n_runs, nem = _check_runs(n_runs, nematic_runs)
+    _check_powell_options(maxiter=maxiter, xtol=xtol, ftol=ftol, u=u,
+                          contact_cutoff=contact_cutoff, min_separation=min_separation,
+                          wall_radius=wall_radius, parametrization=parametrization)
+    rng = np.random.default_rng(check_seed(seed))
     n = xy0.shape[0] - 1
     if has_intersection_grid(np.ascontiguousarray(xy0)):
         raise ParameterError("the initial configuration intersects itself")
     if wall_radius is not None and np.max(np.hypot(xy0[:, 0], xy0[:, 1])) > wall_radius:
         raise ParameterError("the initial configuration leaves the hard-wall disk")
-    if n_runs > 0 and (n_runs - 1) in set(nematic_runs):
-        raise ParameterError("the nematic term must not be used in the last run (paper)")
-    rng = np.random.default_rng(seed)
     m = n + 2
     p = to_params(xy0)
     cutoff = default_contact_cutoff(n) if contact_cutoff is None else float(contact_cutoff)
@@ -210,7 +311,6 @@ def powell_protocol(xy0, lam: float, *, seed=None, n_runs: int = N_RUNS,
     stats = np.zeros(6, np.int64)
     dirs = np.zeros((m, m))
     history = []
-    nem = set(int(r) for r in nematic_runs)
     for run in range(n_runs):
         if run == 0 and first_identity:
             kind = np.arange(m, dtype=np.int64)
@@ -221,10 +321,10 @@ def powell_protocol(xy0, lam: float, *, seed=None, n_runs: int = N_RUNS,
         powell_run(p, float(lam), kind, sgn, dirs, int(maxiter), float(xtol), float(ftol),
                    float(u) if run in nem else 0.0, cutoff, int(min_separation), wall, stats,
                    True, parametrization == "tangent")
-        xy = from_params(p)
+        xy = _from_params(p)
         history.append((time.perf_counter() - t0,
                         bending_energy(xy) + confinement_energy(xy, lam)))
-    xy = from_params(p)
+    xy = _from_params(p)
     return _result(xy, lam, "powell", t0, dict(zip(_STAT_NAMES, map(int, stats))), history)
 
 
@@ -277,14 +377,26 @@ def lbfgs_quench(xy0, lam: float, *, seed=None, barrier: float = 0.1,
     Raises
     ------
     ParameterError
-        The start intersects itself or leaves the hard-wall disk.
+        An argument out of range (naming it: ``xy0`` not an (N+1, 2) array of finite numbers
+        with N >= 2, ``lam`` negative, a count below 1, ...), or the start intersects itself
+        or leaves the hard-wall disk.
     """
     from scipy.optimize import minimize
 
     from simulate.energy import contact_barrier, energy_and_gradient
 
     t0 = time.perf_counter()
-    xy0 = np.asarray(xy0, dtype=np.float64)
+    xy0, lam = _checked_start(xy0, lam)
+    check_seed(seed)
+    check_real("barrier", barrier, low=0.0)
+    if barrier_range is not None:
+        check_real("barrier_range", barrier_range, low=0.0, low_open=True)
+    check_whole("min_separation", min_separation, low=1)
+    check_whole("maxiter", maxiter, low=1)
+    check_whole("restarts", restarts, low=1)
+    check_real("gtol", gtol, low=0.0, low_open=True)
+    if wall_radius is not None:
+        check_real("wall_radius", wall_radius, low=0.0, low_open=True)
     if has_intersection_grid(np.ascontiguousarray(xy0)):
         raise ParameterError("the initial configuration intersects itself")
     if wall_radius is not None and np.max(np.hypot(xy0[:, 0], xy0[:, 1])) > wall_radius:
@@ -370,30 +482,55 @@ def anneal(xy0, lam: float, *, lam_start: float = LAM_START, stages: int = STAGE
     Parameters
     ----------
     xy0 : (N+1, 2) array
+        Self-avoiding start of finite nodes, N >= 2.
     lam : float
-        Target Lambda.
+        Target Lambda, finite and >= 0 (> 0 for the geometric ramp).
     lam_start : float
-        First Lambda of the ramp.
+        First Lambda of the ramp, finite and > 0.
     stages : int
         Number of Lambda values (>= 1), the last being ``lam``.
     ramp : {"geometric", "linear"}
     method : {"powell", "lbfgs"}
-    seed, n_runs, maxiter, nematic_runs, u, ftol, xtol, wall_radius
+    seed : int or numpy.random.SeedSequence, optional
+        Spawns one seed per stage (a Generator cannot be spawned from).
+    n_runs, maxiter, nematic_runs, u, ftol, xtol, wall_radius
         As in :func:`powell_protocol`.
     parametrization : {"bend", "tangent"}
         Powell coordinates; ``"bend"`` (default) rotates whole tails and winds the spiral.
     runs_per_stage : int
-        Powell runs at each intermediate stage.
+        Powell runs at each intermediate stage, >= 1.
 
     Returns
     -------
     QuenchResult
         ``history`` holds (wall seconds, energy at the stage's Lambda) per stage.
+
+    Raises
+    ------
+    ParameterError
+        An argument out of range (naming it), checked before the first stage, or a start
+        that intersects itself or leaves the hard-wall disk.
     """
     t0 = time.perf_counter()
-    if stages < 1:
-        raise ParameterError(f"stages must be >= 1, got {stages}")
+    # every option is checked before the first stage: the last stage comes minutes later
+    xy, lam = _checked_start(xy0, lam)
+    lam_start = check_real("lam_start", lam_start, low=0.0, low_open=True)
+    stages = check_whole("stages", stages, low=1)
+    check_whole("runs_per_stage", runs_per_stage, low=1)
+    check_seed(seed, generator=False)
+    if method not in ("powell", "lbfgs"):
+        raise ParameterError(f"method must be 'powell' or 'lbfgs', got {method!r}")
+    if method == "powell":
+        _check_runs(n_runs, nematic_runs)
+        _check_powell_options(maxiter=maxiter, xtol=xtol, ftol=ftol, u=u, contact_cutoff=None,
+                              min_separation=1, wall_radius=wall_radius,
+                              parametrization=parametrization)
+    elif wall_radius is not None:
+        check_real("wall_radius", wall_radius, low=0.0, low_open=True)
     if ramp == "geometric":
+        if lam == 0:
+            raise ParameterError("lam must be > 0 for the geometric ramp (ramp='linear' "
+                                 "reaches 0), got 0")
         lams = np.geomspace(min(lam_start, lam), lam, stages)
     elif ramp == "linear":
         lams = np.linspace(min(lam_start, lam), lam, stages)
@@ -402,7 +539,6 @@ def anneal(xy0, lam: float, *, lam_start: float = LAM_START, stages: int = STAGE
     # the last stage is the target: with one stage, numpy's ramp holds only its start
     lams[-1] = lam
     ss = np.random.SeedSequence(seed)
-    xy = np.asarray(xy0, dtype=np.float64)
     history = []
     stats = {}
     for s, (lam_s, child) in enumerate(zip(lams, ss.spawn(stages))):
@@ -413,10 +549,8 @@ def anneal(xy0, lam: float, *, lam_start: float = LAM_START, stages: int = STAGE
                                 nematic_runs=nematic_runs if last else (), u=u, ftol=ftol,
                                 xtol=xtol, wall_radius=wall_radius,
                                 parametrization=parametrization)
-        elif method == "lbfgs":
-            r = lbfgs_quench(xy, float(lam_s), wall_radius=wall_radius)
         else:
-            raise ParameterError(f"unknown method {method!r}")
+            r = lbfgs_quench(xy, float(lam_s), wall_radius=wall_radius)
         xy = r.xy
         for k, v in r.stats.items():
             stats[k] = stats.get(k, 0) + v
@@ -452,13 +586,22 @@ def scipy_powell(xy0, lam: float, *, maxiter: int = MAXITER, direc=None, xtol: f
     Returns
     -------
     QuenchResult
+
+    Raises
+    ------
+    ParameterError
+        An argument out of range, naming it (as :func:`powell_protocol`).
     """
     from scipy.optimize import minimize
 
     from simulate.energy import nematic_energy
 
     t0 = time.perf_counter()
-    n = np.asarray(xy0).shape[0] - 1
+    xy0, lam = _checked_start(xy0, lam)
+    _check_powell_options(maxiter=maxiter, xtol=xtol, ftol=ftol, u=u,
+                          contact_cutoff=contact_cutoff, min_separation=min_separation,
+                          wall_radius=wall_radius, parametrization=parametrization)
+    n = xy0.shape[0] - 1
     cutoff = default_contact_cutoff(n) if contact_cutoff is None else float(contact_cutoff)
     count = [0]
     tangent = parametrization == "tangent"
@@ -518,18 +661,22 @@ def scipy_protocol(xy0, lam: float, *, seed=None, n_runs: int = N_RUNS, maxiter:
     Raises
     ------
     ParameterError
-        The start leaves the hard-wall disk: every trial would be rejected and the rod would
-        stay where it is, outside.
+        An argument out of range, naming it (as :func:`powell_protocol`), or the start leaves
+        the hard-wall disk: every trial would be rejected and the rod would stay where it is,
+        outside.
     """
     t0 = time.perf_counter()
-    rng = np.random.default_rng(seed)
-    xy = np.asarray(xy0, dtype=np.float64)
+    xy, lam = _checked_start(xy0, lam)
+    _, nem = _check_runs(n_runs, nematic_runs)
+    _check_powell_options(maxiter=maxiter, xtol=xtol, ftol=ftol, u=u, contact_cutoff=None,
+                          min_separation=1, wall_radius=wall_radius,
+                          parametrization=parametrization)
+    rng = np.random.default_rng(check_seed(seed))
     if wall_radius is not None and np.max(np.hypot(xy[:, 0], xy[:, 1])) > wall_radius:
         raise ParameterError("the initial configuration leaves the hard-wall disk")
     m = xy.shape[0] + 1
     history = []
     evals = 0
-    nem = set(int(r) for r in nematic_runs)
     for run in range(n_runs):
         direc = np.zeros((m, m))
         perm = rng.permutation(m)  # same draws, same order as powell_protocol

@@ -29,6 +29,9 @@ def test_one_stage_anneal_is_a_quench_at_the_target_lambda():
 @pytest.mark.parametrize("argv, named", [
     (["anneal", "--lambda-start", "1e9"], "--lambda-start"),
     (["quench", "--scheduler", "nowhere"], "--scheduler"),
+    # below the analysis' range: every configuration's analysis would fail on it
+    (["quench", "--contact-distance", "1e-9"], "--contact-distance"),
+    (["anneal", "--contact-distance", "1"], "--contact-distance"),
 ])
 def test_absurd_simulation_options_are_one_line(tmp_path, argv, named):
     out = tmp_path / "out"
