@@ -514,8 +514,9 @@ def fit_family(x, family: str, *, truncation=None, n_boot: int = N_BOOT, seed=0,
         observation; >= 0 for the laws of x > 0 (> 0 for Bose-Einstein and the power law).
     n_boot : int
         Bootstrap resamples for the percentile intervals (0: no intervals).
-    seed : int or numpy.random.SeedSequence
-        Seed of every random choice (bootstrap, goodness of fit).
+    seed : int, numpy.random.SeedSequence or None
+        Seed of every random choice (bootstrap, goodness of fit); default 0. None draws
+        fresh entropy, as numpy does: intervals and p-values then differ from call to call.
     gof : bool
         Compute the goodness-of-fit p-value.
     n_mc : int
