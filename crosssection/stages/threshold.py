@@ -80,7 +80,9 @@ class ThresholdResult:
     note : str
         Why the mask is empty, when it is.
     n_outside : int
-        Pixels outside ``region`` that pass the same cut: ink (or plate) the frame left out.
+        Pixels outside ``region`` that pass the same cut: ink (or plate) the frame left out;
+        when they exceed :data:`OUTSIDE_NOISE_CHECK` of the ink inside, those in structures
+        at least 3 px wide only (:func:`_structured_px`).
     bridged_px : int
         Pixels of the threads that join thin lines broken by the cut
         (:func:`bridge_broken_lines`).
@@ -541,8 +543,12 @@ def threshold_rgb(rgb, *, method: str = "auto", region=None, blue_min=None,
             mask &= m <= int(np.floor(rgmax))
         if reg is not None:
             n_all = np.count_nonzero(mask)
+            out = mask & ~reg
             mask &= reg
-            n_out[0] = n_all - np.count_nonzero(mask)
+            n_in = np.count_nonzero(mask)
+            n_out[0] = n_all - n_in
+            if n_out[0] > OUTSIDE_NOISE_CHECK * n_in:
+                n_out[0] = _structured_px(out)
         return mask
 
     if method == "fixed":
@@ -580,6 +586,21 @@ def threshold_rgb(rgb, *, method: str = "auto", region=None, blue_min=None,
     return ThresholdResult(mask, bm, float(rg_used), "auto", float(d_cut), scale,
                            tuple(v * scale for v in ink), tuple(v * scale for v in paper),
                            reg_frac, n_outside=n_out[0])
+
+
+#: Share of the ink inside the region above which the pixels passing the cut outside it are
+#: told from noise (:func:`_structured_px`): below it no quality check can fire on them.
+OUTSIDE_NOISE_CHECK = 0.01
+
+
+def _structured_px(mask) -> int:
+    """Pixels of ``mask`` in structures at least 3 px wide (a 3 x 3 erosion's count): a
+    band of ink, not the scattered pixels that a plate close to the cut's colour puts through
+    it with the scan's noise (a bluish plate: 1 899 separate specks of 1-4 px, 5.4 % of the
+    ink, none left after the erosion, while a band of 7 px keeps 5/7 of its pixels)."""
+    import cv2
+
+    return int(np.count_nonzero(cv2.erode(mask.view(np.uint8), np.ones((3, 3), np.uint8))))
 
 
 #: Least difference (uint8 units) between the darkest channel of the paper and of a class of
