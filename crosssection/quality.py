@@ -346,7 +346,9 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
     if h_px < LOW_RESOLUTION_H_PX:
         flags.append(QualityFlag("low_resolution", f"sheet thickness is {h_px:.2f} px "
                                  f"(< {LOW_RESOLUTION_H_PX:g} px): layer counts from widths and "
-                                 "bending energies are unreliable", h_px, LOW_RESOLUTION_H_PX))
+                                 "bending energies are unreliable (check px_per_mm and "
+                                 "thickness_mm; scan at a resolution that makes h 3 px or more)",
+                                 h_px, LOW_RESOLUTION_H_PX))
     if hole_confidence is not None and hole_confidence < 0.5:
         flags.append(QualityFlag("hole_fitted", f"hole found with low confidence "
                                  f"{hole_confidence:.2f}: pass hole_radius_mm and "
@@ -360,16 +362,19 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
     if image_shape is not None and not (hole_confidence is not None and hole_confidence < 0.5):
         cut = hole_outside_fraction(image_shape, hole.center_rc, hole.radius_px)
         if cut > HOLE_CUT_LIMIT:
+            why = ("the hole given reaches beyond the scan: check hole_radius_mm and "
+                   "hole_center_px, or scan the whole hole" if params.hole_given else
+                   "a scan cropped through the hole misses the stacks beyond its border: "
+                   "scan the whole hole")
             flags.append(QualityFlag("hole_cut", f"{100 * cut:.1f} % of the hole lies outside "
-                                     "the scan: a scan cropped through the hole misses the "
-                                     "stacks beyond its border (or the hole is wrong)",
-                                     cut, HOLE_CUT_LIMIT))
+                                     f"the scan: {why}", cut, HOLE_CUT_LIMIT))
         ink_on_border_px = _ink_cut_by_border(border_ink_rc, hole)
         if cut <= HOLE_CUT_LIMIT and ink_on_border_px >= max(h_px, 2.0):
             flags.append(QualityFlag("hole_cut", f"{ink_on_border_px} ink pixels inside the "
                                      "hole lie on the scan's border: the network runs off the "
                                      "scan (cropped through the hole?) and misses what lies "
-                                     "beyond", ink_on_border_px, max(h_px, 2.0)))
+                                     "beyond: scan the whole hole", ink_on_border_px,
+                                     max(h_px, 2.0)))
     if not len(degrees):
         flags.append(QualityFlag("no_junction", "no junction found: every stack is a closed "
                                  "loop or a free segment, while a folded sheet's cross-section "
@@ -377,7 +382,9 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
                                  0, 1))
     if len(degrees) and int(np.max(degrees)) > 6:
         flags.append(QualityFlag("junction_degree", f"a junction of degree {int(np.max(degrees))} "
-                                 "(> 6): bands merged by the threshold or the cleaning",
+                                 "(> 6): bands merged by the threshold or the cleaning (look "
+                                 "at the step images of `steps`; check the threshold and "
+                                 "s_min_mm2)",
                                  int(np.max(degrees)), 6))
     if network_shares is not None:
         flags += _network_check(network_shares)
@@ -422,7 +429,8 @@ def _lattice_check(stacks, h_px: float = 5.0) -> list[QualityFlag]:
         return []
     return [QualityFlag("layer_lattice", f"stack widths sit {median:.2f} layer from whole "
                         "layer counts (median): check px_per_mm, thickness_mm and the "
-                        "calibration", median, limit)]
+                        "calibration, or the scan is blurred (widths read on soft edges)",
+                        median, limit)]
 
 
 def _linear_system_checks(junctions) -> list[QualityFlag]:
@@ -433,10 +441,13 @@ def _linear_system_checks(junctions) -> list[QualityFlag]:
     moved = int(junctions["repartitioned"].astype(bool).sum())
     if _frac(bad, n_j) > 0.10:
         return [QualityFlag("linear_system", f"{bad} of {n_j} junctions violate layer "
-                            "conservation with the final counts", _frac(bad, n_j), 0.10)]
+                            "conservation with the final counts: the widths and the junctions "
+                            "disagree (check the calibration; junctions.csv marks them)",
+                            _frac(bad, n_j), 0.10)]
     if _frac(moved, n_j) > 0.25:
         return [QualityFlag("linear_system", f"{moved} of {n_j} junctions were repartitioned "
-                            "by the widths against the skeleton's packs",
+                            "by the widths against the skeleton's packs (check the calibration; "
+                            "junctions.csv marks them)",
                             _frac(moved, n_j), 0.25)]
     return []
 
@@ -470,7 +481,8 @@ def _rod_checks(params, hole, rod_length_mm, rod_measured_mm,
         if packing > 1.0:
             eps = rod_length_mm / (2 * math.pi * r_mm)
             flags.append(QualityFlag("packing", f"epsilon = {eps:.1f} is impossible for this "
-                                     f"hole: the rod would cover {100 * packing:.0f} % of it",
+                                     f"hole: the rod would cover {100 * packing:.0f} % of it "
+                                     "(check rod_length_mm, the hole and px_per_mm)",
                                      packing, 1.0))
     if params.rod_length_mm is not None and rod_measured_mm > 0:
         ratio = rod_length_mm / rod_measured_mm
@@ -487,7 +499,8 @@ def _rod_checks(params, hole, rod_length_mm, rod_measured_mm,
         if not 0.4 <= ratio <= 2.5:
             flags.append(QualityFlag("epsilon_ink", f"rod length L = {rod_measured_mm:.0f} mm "
                                      f"covers {ratio:.2f}x the ink area (L h / ink area outside "
-                                     "[0.4, 2.5]): layer counts or threshold are off",
+                                     "[0.4, 2.5]): layer counts or threshold are off (check "
+                                     "the calibration, px_per_mm and the threshold)",
                                      ratio, 2.5 if ratio > 1 else 0.4))
     return flags
 
@@ -501,20 +514,23 @@ def _stack_checks(params, stacks, calibration_max_width_mm) -> list[QualityFlag]
     specks = int((free & (stacks["length_mm"] < 2 * params.l_min_mm)).sum())
     if _frac(specks, m) > 0.05:
         flags.append(QualityFlag("specks", f"{specks} of {m} stacks are short isolated pieces "
-                                 "(specks surviving the cleaning?)", _frac(specks, m), 0.05))
+                                 "(specks surviving the cleaning?): they are counted as stacks; "
+                                 "clean the scan or check the threshold", _frac(specks, m), 0.05))
     # one rod's cross-section is a connected curve: a closed ring that touches none of the
     # other stacks is not a part of it (a ring stain, or a speck whose hole exceeds s_min)
     loops = int((stacks["kind"] == "loop").sum())
     if loops and m > loops:
         flags.append(QualityFlag("loops", f"{loops} closed loop(s) of ink touching no other "
-                                 "stack (ring stains or holed specks surviving the cleaning?)",
+                                 "stack (ring stains or holed specks surviving the cleaning?): "
+                                 "they are counted as stacks; clean the scan",
                                  loops, 0))
     if calibration_max_width_mm:
         wide = int((stacks["width_mm"] > 1.05 * calibration_max_width_mm).sum())
         if _frac(wide, m) > 0.05:
             flags.append(QualityFlag("widths_out_of_range", f"{wide} of {m} stacks are wider "
                                      f"than the calibration's widest entry "
-                                     f"({calibration_max_width_mm:g} mm)", _frac(wide, m),
+                                     f"({calibration_max_width_mm:g} mm): their counts are "
+                                     "extrapolated; extend the calibration", _frac(wide, m),
                                      0.05))
     return flags
 

@@ -338,6 +338,8 @@ def test_a_hole_cut_by_the_scan_border_is_flagged(scene):
     assert "hole_cut" in res.summary["quality"]["codes"]
     flag = next(f for f in res.quality if f.code == "hole_cut")
     assert 0.02 < flag.value < 0.04 and flag.limit == quality.HOLE_CUT_LIMIT  # segment: 2.7 %
+    # a given hole may be wrong rather than the scan cropped: the message says both
+    assert "hole given" in flag.message and "hole_radius_mm" in flag.message
     assert any(w.category is quality.FrameWarning and "outside the scan" in str(w.message)
                for w in caught)
     # found rather than given, the hole is fitted to the wall's arc and still flagged
@@ -345,6 +347,8 @@ def test_a_hole_cut_by_the_scan_border_is_flagged(scene):
     kw.pop("hole_radius_mm"), kw.pop("hole_center_px")
     res, _ = _analyze(rgb, **kw)
     assert "hole_cut" in res.summary["quality"]["codes"]
+    flag = next(f for f in res.quality if f.code == "hole_cut")
+    assert "cropped through the hole" in flag.message and "hole given" not in flag.message
 
 
 def test_a_shallow_cut_through_the_wall_band_is_flagged(scene):
