@@ -140,6 +140,12 @@ def stop_pool(ex: ProcessPoolExecutor, known=(), grace: float = STOP_GRACE_S) ->
             manager.join(grace)
 
 
+#: Seconds to wait for a Dask scheduler's answer before the address is refused (Dask's own
+#: default, 30 s, keeps a mistyped address waiting; a reachable scheduler, even through a
+#: tunnel, answers within a second or two).
+SCHEDULER_TIMEOUT_S = 10
+
+
 @contextmanager
 def get_executor(workers: int | None = 1, scheduler: str | None = None):
     """Yield a ``concurrent.futures.Executor``.
@@ -150,7 +156,8 @@ def get_executor(workers: int | None = 1, scheduler: str | None = None):
         Number of local worker processes; 1 runs inline, ``None`` uses ``os.cpu_count()``.
     scheduler : str, optional
         Address of a Dask distributed scheduler (``tcp://host:port``); when given, tasks go to
-        that cluster through ``Client.get_executor()`` and ``workers`` is ignored.
+        that cluster through ``Client.get_executor()`` and ``workers`` is ignored. One that
+        does not answer within :data:`SCHEDULER_TIMEOUT_S` is a ``ParameterError``.
 
     Yields
     ------
@@ -167,7 +174,7 @@ def get_executor(workers: int | None = 1, scheduler: str | None = None):
         from distributed import Client
 
         try:
-            client = Client(scheduler)
+            client = Client(scheduler, timeout=SCHEDULER_TIMEOUT_S)
         except (ValueError, OSError, TimeoutError) as exc:
             from crosssection.core.errors import ParameterError
 
