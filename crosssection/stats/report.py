@@ -927,6 +927,14 @@ def _selected_table(res: StatsResult) -> pd.DataFrame:
             ps.append(f"{nm} = {r.params[nm]:.3g}{ci}")
         others = sorted((o.bic - r.bic, f) for f, o in summ.results.items()
                         if o.selectable and f != r.family)
+        # a degenerate fit may reach a lower BIC (its shape parameters run off to a limit
+        # law); it is never selected, but a reader must not think the selected law fits best
+        aside = sorted((o.bic - r.bic, f) for f, o in summ.results.items()
+                       if not o.selectable and np.isfinite(o.bic) and o.bic < r.bic)
+        runner = (f"{FAMILIES[others[0][1]].title}, {others[0][0]:+.1f}" if others else "")
+        if aside:
+            runner += ("; " if runner else "") + "lower, set aside as degenerate (see Degenerate fits): " + ", ".join(
+                f"{FAMILIES[f].title}, {d:+.1f}" for d, f in aside)
         small = small_sample_note(r.n, F.N_SELECT_MIN, "samples model selection needs")
         rows.append({
             "set": s, "region": reg, "quantity": q,
@@ -935,8 +943,7 @@ def _selected_table(res: StatsResult) -> pd.DataFrame:
                                                          else "")
             + (" (truncated at the detection limit)" if r.truncated else ""),
             "parameters [95 % bootstrap interval]": "; ".join(ps),
-            "runner-up law, BIC − BIC(selected)": (
-                f"{FAMILIES[others[0][1]].title}, {others[0][0]:+.1f}" if others else ""),
+            "runner-up law, BIC − BIC(selected)": runner,
             "goodness of fit": r.p_text() or "not computed"})
     return pd.DataFrame(rows)
 

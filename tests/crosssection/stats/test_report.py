@@ -2,6 +2,7 @@
 import argparse
 import json
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -170,3 +171,20 @@ def test_absent_figures_and_rows_are_named_and_log_axes_follow_the_data(tmp_path
               if str(ln.get_gid()).startswith(("law:", "points:"))]
         top = max(ys)
         assert ax.get_ylim()[1] <= 3.5 * top
+
+
+def test_a_degenerate_law_with_a_lower_bic_is_named_beside_the_selected_one():
+    # log-uniform data: the Bose-Einstein fit runs off to a 1/x law (degenerate, never
+    # selected) with a BIC far below the selected law's; the table must not hide it
+    from types import SimpleNamespace
+
+    from crosssection.stats.fits import fit_all
+    from crosssection.stats.report import _selected_table
+
+    x = np.exp(np.random.default_rng(0).uniform(0.0, np.log(1000.0), 300))
+    s = fit_all(x, n_boot=0, gof=False, seed=0)
+    assert not s.results["bose_einstein"].selectable
+    assert s.results["bose_einstein"].bic < s.results[s.best].bic - 50
+    row = _selected_table(SimpleNamespace(summaries={("A", "all", "e"): s})).iloc[0]
+    text = row["runner-up law, BIC − BIC(selected)"]
+    assert "set aside as degenerate" in text and "Bose-Einstein" in text
