@@ -15,12 +15,13 @@ scale_mismatch           px_per_mm used / the resolution the file records     of
                          (a scanner's: 100 dpi or more)
 low_resolution           sheet thickness h in pixels                          h < 3 px
 hole_fitted              hole found in the scan, with its confidence          confidence < 0.5
-ink_outside_hole         ink pixels outside the hole / all ink pixels         > 2 %
+ink_outside_hole         ink pixels outside the hole (in pieces of 20 px or   > 2 %
+                         more: not a plate's noise) / all ink pixels
 hole_crossed             fraction of a given hole's circle beyond which ink   > 1 %, where the
                          goes on (the circle cuts the wall band); the hole    hole found near it
                          found in the scan replaces it                        frames the ink
 hole_cut                 area of the hole outside the scan / the hole's area; > 0.5 %, or
-                         ink on the scan's border over 1 px inside the hole   >= h px
+                         ink on the border where the hole overhangs it by h   >= h px
 no_junction              junctions found                                      none
 junction_degree          largest junction degree (paper: degree 4 ~ 1 %)      > 6
 networks                 separate networks of ink each holding at least 10 %  > 1
@@ -80,9 +81,11 @@ already); the limit, 0.5 % of its area, is a segment about 16 px deep on a hole 
 cut still loses what it crosses: the wall band lies along the hole's edge, so a border that
 cuts into the hole cuts the band first (a sample scan cropped 12 px into its hole of 380 px,
 0.3 % of its area, lost a wall junction and 2 % of L). Ink on the scan's outermost pixels
-lying more than a pixel inside the hole's edge, as many pixels as one sheet is thick, is the
-network running off the scan, and is flagged whatever the area; a hole that only touches the
-border holds its wall band's ink there at its edge and is not.
+where the hole goes on more than one sheet thickness h beyond the scan's edge, as many pixels
+as h, is the network running off the scan with at least a layer of its wall band, and is
+flagged whatever the area; a hole reaching up to h beyond the edge (a hole found or given a
+pixel or two off) holds its band's ink there and is not (the sample scan cropped 2 px into its
+hole: the same 38 junctions and L).
 
 The ``low_resolution`` check: at h < 3 px one pixel of width is a third of a layer or more,
 and the bending energy rests on windows of a few pixels. On the robust sweep's scans at 25
@@ -239,15 +242,16 @@ def hole_outside_fraction(shape, center_rc, radius_px, n: int = 4096) -> float:
 HOLE_CUT_LIMIT = 0.005
 
 
-def _ink_cut_by_border(border_ink_rc, hole, depth_px: float = 1.0) -> int:
-    """Ink pixels on the scan's border lying more than ``depth_px`` inside the hole: there the
-    hole, and the wall band along its edge, go on beyond the border. A hole that only touches
-    the border holds its band's ink there at its edge, and loses nothing."""
+def _ink_cut_by_border(border_ink_rc, hole, overhang_px: float) -> int:
+    """Ink pixels on the scan's border where the hole goes on more than ``overhang_px``
+    beyond the scan's edge (half a pixel beyond the border pixels' centres): there the wall
+    band along the hole's edge is cut. A hole that reaches a pixel or two beyond the edge
+    holds its band's ink there at its edge, and loses less than a layer."""
     if border_ink_rc is None or not len(border_ink_rc):
         return 0
     rc = np.asarray(border_ink_rc, float)
     d = np.hypot(rc[:, 0] - hole.center_rc[0], rc[:, 1] - hole.center_rc[1])
-    return int(np.count_nonzero(d < float(hole.radius_px) - depth_px))
+    return int(np.count_nonzero(d < float(hole.radius_px) - 0.5 - overhang_px))
 
 
 def _crossed_check(params, hole) -> list[QualityFlag]:
@@ -368,7 +372,8 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
                    "scan the whole hole")
             flags.append(QualityFlag("hole_cut", f"{100 * cut:.1f} % of the hole lies outside "
                                      f"the scan: {why}", cut, HOLE_CUT_LIMIT))
-        ink_on_border_px = _ink_cut_by_border(border_ink_rc, hole)
+        # a sheet's thickness of the band cut off: a layer lost
+        ink_on_border_px = _ink_cut_by_border(border_ink_rc, hole, overhang_px=h_px)
         if cut <= HOLE_CUT_LIMIT and ink_on_border_px >= max(h_px, 2.0):
             flags.append(QualityFlag("hole_cut", f"{ink_on_border_px} ink pixels inside the "
                                      "hole lie on the scan's border: the network runs off the "

@@ -97,6 +97,7 @@ from numba import njit
 from crosssection.core.errors import AnalysisError, ParameterError
 from crosssection.quality import QualityWarning
 
+from simulate.contacts import MIN_CONTACT_DISTANCE
 from simulate.noise import N_SEGMENTS, NOISE
 
 
@@ -1059,6 +1060,13 @@ def params_from_args(args) -> dict:
         raise ParameterError(f"--contact-distance must be a finite number between the "
                              f"thickness {h:.3g} and half the wall radius "
                              f"{0.5 * p.wall_radius:.3g}, got {args.contact_distance!r}")
+    if delta < MIN_CONTACT_DISTANCE:
+        # the contact analysis' own bound: refused here, before a compaction whose every
+        # analysis would fail on it
+        what = ("--contact-distance" if args.contact_distance is not None else
+                f"the contact distance {CONTACT_DISTANCE:g} h of --thickness {h:.3g}")
+        raise ParameterError(f"{what} must be at least {MIN_CONTACT_DISTANCE:g} (the contact "
+                             f"analysis resamples the rod at a third of it), got {delta:.3g}")
     params = {k: v for k, v in asdict(p).items()}
     params.update(command="compact", n_configs=int(args.n_configs), seed=int(args.seed),
                   thickness=h, wall_radius=p.wall_radius, contact_distance=delta)

@@ -49,12 +49,12 @@ from simulate.geometry import checked_rod
 __all__ = ["RodAnalysis", "analyze_rod", "default_contact_distance", "resample_rod",
            "MIN_CONTACT_DISTANCE", "MAX_SAMPLES"]
 
-#: Smallest contact cut-off delta :func:`analyze_rod` takes, in segment lengths 1/N. The rod is
-#: resampled at ``min(1/N, delta) / 3``, i.e. ``ceil(3 / (N delta))`` samples per segment, and
-#: the contact search and the run analysis loop over every sample: at 0.01 segment that is 300
-#: samples per segment (N = 300: 9e4 samples, a few seconds), already a hundredth of the
-#: rod's own resolution; below it the sample count grows without bound (MemoryError).
-MIN_CONTACT_DISTANCE = 0.01
+#: Smallest contact cut-off delta :func:`analyze_rod` takes, in units of the rod length L. The
+#: rod is resampled at ``min(1/N, delta) / 3``: about ``3 / delta`` samples whatever N, which
+#: the contact search and the run analysis loop over, so the bound is on delta itself (3e5
+#: samples here). A compaction's cut-off is 3 h, and the experiments' h is 2.6e-5 L or more;
+#: below this bound the sample count grows without bound (1e-9: a 45 GiB allocation).
+MIN_CONTACT_DISTANCE = 1e-5
 #: Most samples :func:`resample_rod` makes (1.6e8 bytes of positions).
 MAX_SAMPLES = 10_000_000
 
@@ -298,10 +298,10 @@ def analyze_rod(xy, *, lam: float, contact_distance: float | None = None,
         Dimensionless confinement Lambda (for the confinement energies), finite and >= 0.
     contact_distance : float, optional
         Contact cut-off delta (units of L); default :func:`default_contact_distance` = 0.5/N.
-        At least :data:`MIN_CONTACT_DISTANCE` segment lengths (``0.01 / N``: the rod is
-        resampled at ``min(1/N, delta) / 3``, so smaller cut-offs multiply the samples without
-        bound) and below 1, the rod length (a contact needs the rod to leave the disk of radius
-        delta and come back, an arclength above delta).
+        At least :data:`MIN_CONTACT_DISTANCE` (the rod is resampled at
+        ``min(1/N, delta) / 3``, about ``3 / delta`` samples, so smaller cut-offs multiply the
+        samples without bound) and below 1, the rod length (a contact needs the rod to leave
+        the disk of radius delta and come back, an arclength above delta).
     min_run : float, optional
         Contact runs shorter than this arclength are merged into their neighbour
         (default 3 delta: the disk of radius delta blurs multiplicity changes over ~2 delta).
@@ -328,9 +328,8 @@ def analyze_rod(xy, *, lam: float, contact_distance: float | None = None,
         delta = default_contact_distance(n)
     else:
         delta = check_real("contact_distance", contact_distance,
-                           low=MIN_CONTACT_DISTANCE / n, high=1.0, high_open=True,
-                           why=f"from {MIN_CONTACT_DISTANCE:g} of a segment length 1/N = "
-                               f"{1.0 / n:.3g} up to the rod length 1")
+                           low=MIN_CONTACT_DISTANCE, high=1.0, high_open=True,
+                           why="units of the rod length L; about 3 / contact_distance samples")
     if min_run is None:
         min_run = 3.0 * delta
     else:

@@ -657,7 +657,7 @@ def _add_common(p, command):
                         "must fit inside (default: none)")
     p.add_argument("--contact-distance", type=float, default=None,
                    help="contact cut-off of the analysis, in units of L, from "
-                        f"{MIN_CONTACT_DISTANCE:g}/N to below 1 (default half a segment, 1/(2N))")
+                        f"{MIN_CONTACT_DISTANCE:g} to below 1 (default half a segment, 1/(2N))")
     p.add_argument("--workers", type=int, default=1, help="local worker processes (default 1)")
     p.add_argument("--scheduler", default=None,
                    help="Dask scheduler address, e.g. tcp://host:8786 (default: local workers)")
@@ -760,13 +760,11 @@ def params_from_args(args) -> dict:
     if args.method in _POWELL[args.command]:
         params.update(_powell_params(args))
     cd = params["contact_distance"]
-    if cd is not None and not MIN_CONTACT_DISTANCE / args.segments <= cd < 1.0:
+    if cd is not None and not MIN_CONTACT_DISTANCE <= cd < 1.0:
         # the analysis' own range (simulate.contacts.analyze_rod): refused here, before a
         # minimisation whose every analysis would fail on it
-        raise ParameterError(f"--contact-distance must be from {MIN_CONTACT_DISTANCE:g} of a "
-                             f"segment ({MIN_CONTACT_DISTANCE / args.segments:.3g} at "
-                             f"--segments {args.segments}) up to below the rod length 1, "
-                             f"got {cd:g}")
+        raise ParameterError(f"--contact-distance must be from {MIN_CONTACT_DISTANCE:g} up to "
+                             f"below the rod length 1, got {cd:g}")
     wall, half = params["wall_radius"], 0.5 / args.segments
     if wall is not None and wall <= half:
         # a segment is a straight chord 1/N long: a disk no wider holds it only as its

@@ -217,7 +217,8 @@ def largest_noise(*, n_segments: int = 300, threshold: float = 0.01,
     except TypeError:
         raise ParameterError(f"noises must be a sequence of numbers >= 0, got "
                              f"{type(noises).__name__}") from None
-    ss = np.random.SeedSequence(check_seed(seed, generator=False))
+    seed = check_seed(seed, generator=False)
+    ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
     rates = {}
     for d, child in zip(noises, ss.spawn(len(noises))):
         rates[float(d)] = intersection_rate(d, n_segments=n_segments, n_samples=n_samples,

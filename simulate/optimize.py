@@ -538,7 +538,7 @@ def anneal(xy0, lam: float, *, lam_start: float = LAM_START, stages: int = STAGE
         raise ParameterError(f"unknown ramp {ramp!r}")
     # the last stage is the target: with one stage, numpy's ramp holds only its start
     lams[-1] = lam
-    ss = np.random.SeedSequence(seed)
+    ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
     history = []
     stats = {}
     for s, (lam_s, child) in enumerate(zip(lams, ss.spawn(stages))):

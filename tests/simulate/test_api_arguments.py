@@ -62,13 +62,12 @@ def test_check_seed_takes_what_numpy_generators_take():
 
 # --- simulate.contacts -----------------------------------------------------------------------
 
-@pytest.mark.parametrize("value", [-1, 0, 1e-9, MIN_CONTACT_DISTANCE / N * 0.99, 1.0, 10.0,
+@pytest.mark.parametrize("value", [-1, 0, 1e-9, MIN_CONTACT_DISTANCE * 0.99, 1.0, 10.0,
                                    math.nan, math.inf, "x", True])
 def test_analyze_rod_refuses_a_contact_distance_out_of_range(value):
     with pytest.raises(ParameterError, match=r"^contact_distance must be a finite number "
-                                             r">= 0\.000166\d* and < 1 \(from 0\.01 of a "
-                                             r"segment length 1/N = 0\.0167 up to the rod "
-                                             r"length 1\), got "):
+                                             r">= 1e-05 and < 1 \(units of the rod length L; "
+                                             r"about 3 / contact_distance samples\), got "):
         analyze_rod(XY, lam=LAM, contact_distance=value)
 
 
@@ -77,9 +76,9 @@ def test_analyze_rod_takes_contact_distances_of_any_numeric_type_at_the_bounds()
     same = analyze_rod(XY, lam=int(LAM), contact_distance=np.float32(0.5) / np.float32(N))
     assert abs(same.contact_distance - 0.5 / N) < 1e-9
     assert (same.n_stacks, same.n_branches) == (ref.n_stacks, ref.n_branches)
-    # the smallest cut-off accepted: a hundredth of a segment, 300 samples per segment
-    small = analyze_rod(XY, lam=LAM, contact_distance=MIN_CONTACT_DISTANCE / N)
-    assert len(small.samples_s) == N * 300 + 1
+    # the smallest cut-off accepted: about 3 / delta samples whatever N
+    small = analyze_rod(XY, lam=LAM, contact_distance=MIN_CONTACT_DISTANCE)
+    assert len(small.samples_s) == N * int(np.ceil(3.0 / (N * MIN_CONTACT_DISTANCE))) + 1
 
 
 @pytest.mark.parametrize("name, value, cause", [
@@ -274,3 +273,17 @@ def test_noise_helpers_refuse_absurd_arguments():
         largest_noise(noises=["a"])
     with pytest.raises(ParameterError, match="SeedSequence, got Generator"):
         largest_noise(seed=rng)
+
+
+def test_functions_that_spawn_seeds_take_a_seed_sequence():
+    # their docstrings promise a SeedSequence; it spawns the same children as its entropy
+    from simulate.noise import initial_shape, largest_noise
+    from simulate.optimize import anneal
+
+    xy = initial_shape(40, seed=3)
+    kw = dict(stages=1, n_runs=1, maxiter=1, nematic_runs=())
+    a = anneal(xy, 7e5, seed=np.random.SeedSequence(1), **kw)
+    b = anneal(xy, 7e5, seed=1, **kw)
+    assert np.array_equal(a.xy, b.xy)
+    kw = dict(n_segments=40, noises=(100, 500), n_samples=50)
+    assert largest_noise(seed=np.random.SeedSequence(2), **kw) == largest_noise(seed=2, **kw)
