@@ -933,8 +933,9 @@ def _selected_table(res: StatsResult) -> pd.DataFrame:
                        if not o.selectable and np.isfinite(o.bic) and o.bic < r.bic)
         runner = (f"{FAMILIES[others[0][1]].title}, {others[0][0]:+.1f}" if others else "")
         if aside:
-            runner += ("; " if runner else "") + "lower, set aside as degenerate (see Degenerate fits): " + ", ".join(
-                f"{FAMILIES[f].title}, {d:+.1f}" for d, f in aside)
+            lower = ", ".join(f"{FAMILIES[f].title}, {d:+.1f}" for d, f in aside)
+            runner += (("; " if runner else "")
+                       + f"lower, set aside as degenerate (see Degenerate fits): {lower}")
         small = small_sample_note(r.n, F.N_SELECT_MIN, "samples model selection needs")
         rows.append({
             "set": s, "region": reg, "quantity": q,
