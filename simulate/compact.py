@@ -1076,7 +1076,8 @@ def params_from_args(args) -> dict:
 def run(args) -> int:
     """Entry point of ``compact``."""
     from crosssection.core.fileio import check_out
-    from simulate.ensemble import report_failures, run_ensemble, summary_head
+    from simulate.ensemble import (CoarseRodWarning, coarse_rod_doubt, report_failures,
+                                   run_ensemble, summary_head)
 
     check_out(args.out)
     try:
@@ -1094,6 +1095,9 @@ def run(args) -> int:
           f"{params['wall_radius']:.5f}, h = {params['thickness']:.3g}), <E> = "
           f"{c.energy_total.mean():.4g}, <N_l> = {c.n_stacks.mean():.1f}, <N_br> = "
           f"{c.n_branches.mean():.1f}, {c.wall_s.mean():.1f} s per configuration")
+    coarse = coarse_rod_doubt(tables, params["n_segments"])
+    if coarse:
+        warnings.warn(f"{args.out}: {coarse}", CoarseRodWarning, stacklevel=2)
     if "n_force" in c:
         # a warning in a worker process is easily lost: count the unconverged holds here too
         loose = int(((c.n_force >= params["ftol"]) | (c.n_compression >= 0.5)).sum())

@@ -168,3 +168,15 @@ def test_compact_in_which_every_configuration_failed_says_so(tmp_path, capsys):
     assert "none succeeded" in cap.out and "nan" not in cap.out
     err = cap.err.strip().splitlines()
     assert len(err) == 2 and all(e.startswith(f"warning: {out}: configuration ") for e in err)
+
+
+def test_a_default_quench_is_not_too_coarse_for_its_stacks():
+    # the paper's N = 300: no branch shorter than a segment, no warning
+    import pandas as pd
+
+    from simulate.ensemble import coarse_rod_doubt
+
+    short = pd.DataFrame({"length": [0.5 / 300] * 3 + [0.02] * 7})
+    assert coarse_rod_doubt({"branches": short}, 300) is not None  # 30 % > 25 %
+    long = pd.DataFrame({"length": [0.5 / 300] * 2 + [0.02] * 8})
+    assert coarse_rod_doubt({"branches": long}, 300) is None
