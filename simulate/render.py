@@ -365,6 +365,14 @@ def _frame(xy, analysis, cal, *, px_per_mm, thickness_mm, rod_length_mm, hole_ra
     elif hole_radius_mm is not None and wall_radius is not None:
         hole_center_l = np.asarray(wall_center_xy, float)
     hole_px = None if hole_radius_mm is None else hole_radius_mm * px_per_mm
+    if hole_px is not None and not hole_is_wall:
+        # the hole holds the cut: a rod reaching beyond it is no scan of one
+        reach_mm = float(np.hypot(*(xy - hole_center_l).T).max()) * rod_length_mm
+        if reach_mm > hole_radius_mm:
+            raise ParameterError(f"{hole_radius_mm:.4g} mm is smaller than "
+                                 f"the rod, which reaches {reach_mm:.4g} mm from the hole's "
+                                 "centre: the hole must hold it ('auto' fits one)",
+                                 "hole_radius_mm")
     if hole_px is not None:
         c_off = (hole_center_l - lo) * scale
         far = (xy.max(axis=0) - hole_center_l) * scale
@@ -1973,8 +1981,9 @@ def add_subparser(sub) -> None:
     p.add_argument("--pinholes", type=int, default=None,
                    help=f"number of paper-coloured pinholes in wide bands (default "
                         f"{d['pinholes']}, 0 with --clean)")
-    p.add_argument("--plate", default=None,
-                   help=f"plate around the hole: {', '.join(PLATE_NAMES)} or none (default "
+    p.add_argument("--plate", default=None, type=_plate_arg,
+                   help=f"plate around the hole: {', '.join(PLATE_NAMES)}, an RGB triple R,G,B "
+                        "(0-255) or none (default "
                         f"{d['plate']} with a {d['rim_px']:g} px dark rim, none with --clean)")
     p.add_argument("--illumination", type=float, default=None,
                    help=f"largest relative deviation of an illumination gradient (default "
@@ -2037,6 +2046,7 @@ def _cli_names(message: str) -> str:
     """``message`` with the API's keyword names replaced by the CLI's options."""
     import re
 
+    message = message.replace("or None", "or 'none'")  # the CLI's spelling of no value
     return re.sub(r"\b(" + "|".join(_OPTION) + r")\b", lambda m: _OPTION[m.group(1)], message)
 
 
@@ -2050,6 +2060,18 @@ def _cli_error(exc: ParameterError) -> ParameterError:
     if where is None and lead:
         where, cause = lead.groups()
     return ParameterError(cause, where)
+
+
+def _plate_arg(text):
+    """``--plate``: a name, ``none``, or ``R,G,B`` (0-255) as a tuple of three numbers."""
+    parts = str(text).split(",")
+    if len(parts) == 1:
+        return text
+    try:
+        return tuple(float(v) for v in parts)
+    except ValueError:
+        raise ParameterError(f"an RGB triple is three numbers R,G,B (0-255), got {text!r}",
+                             "--plate") from None
 
 
 def _hole_arg(text):

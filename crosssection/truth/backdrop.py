@@ -42,12 +42,14 @@ def plate_rgb(plate, rng) -> np.ndarray:
             hsv = np.array([[[hue / 2.0, rng.uniform(150, 230), rng.uniform(140, 220)]]], np.uint8)
             return cv2.cvtColor(hsv, cv2.COLOR_HSV2RGB)[0, 0].astype(np.float64)
         if plate not in PLATES:
-            raise ParameterError(f"plate must be one of {PLATE_NAMES} or an RGB triple, "
-                                 f"got {plate!r}")
+            raise ParameterError(f"plate must be one of {PLATE_NAMES}, an RGB triple "
+                                 f"(uint8 scale) or None (no plate), got {plate!r}")
         return np.array(PLATES[plate], np.float64)
     col = np.asarray(plate, np.float64).reshape(-1)
     if col.size != 3:
         raise ParameterError(f"plate RGB must have 3 values, got {plate!r}")
+    if not (np.all(np.isfinite(col)) and col.min() >= 0.0 and col.max() <= 255.0):
+        raise ParameterError(f"plate RGB values must lie in 0-255 (uint8 scale), got {plate!r}")
     return col
 
 

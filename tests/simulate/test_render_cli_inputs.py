@@ -4,6 +4,7 @@ import json
 import shutil
 
 import numpy as np
+from PIL import Image
 import pytest
 
 from crosssection._version import __version__
@@ -315,3 +316,24 @@ def test_the_scale_defaults_are_those_of_render_configuration():
     assert args.thickness_mm == sig["thickness_mm"].default
     # the defaults lie within the validated range: a sheet of at least VALIDATED_SHEET_PX
     assert args.px_per_mm * args.thickness_mm >= render.VALIDATED_SHEET_PX
+
+
+def test_a_hole_smaller_than_the_rod_is_refused(sim, tmp_path, capsys):
+    # the hole holds the cut: a scene whose ink lies on the plate is no scan of one
+    out = tmp_path / "scenes"
+    status, err = _render(capsys, sim, "--out", out, "--hole", "0.5", *FAST)
+    assert status == 2 and "smaller than the rod" in _one_error(err) and "--hole" in err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("plate, ok", [("200,120,60", True), ("10,20", False),
+                                       ("300,20,1", False), ("a,b,c", False)])
+def test_a_plate_is_given_on_the_command_line_as_a_triple(sim, tmp_path, capsys, plate, ok):
+    out = tmp_path / "scenes"
+    status, err = _render(capsys, sim, "--out", out, "--plate", plate, "--limit", "1", *FAST)
+    if ok:
+        assert status == 0
+        img = np.asarray(Image.open(out / "config_00000" / "image.png").convert("RGB"))
+        assert np.abs(img[2, 2].astype(int) - (200, 120, 60)).max() <= 12  # the corner: plate
+    else:
+        assert status == 2 and "--plate" in _one_error(err)
