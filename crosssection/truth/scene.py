@@ -68,7 +68,20 @@ class Scene:
     ink_mask: np.ndarray | None = field(default=None, repr=False)
 
 
-def write_image(rgb: np.ndarray, path) -> Path:
+def _png_with_resolution(data: bytes, px_per_mm: float) -> bytes:
+    """A PNG's bytes with a ``pHYs`` chunk (pixels per metre) after its ``IHDR``, as a
+    scanner records its resolution."""
+    import struct
+    import zlib
+
+    ppm = int(round(px_per_mm * 1000.0))
+    body = b"pHYs" + struct.pack(">IIB", ppm, ppm, 1)
+    chunk = struct.pack(">I", 9) + body + struct.pack(">I", zlib.crc32(body) & 0xFFFFFFFF)
+    end_ihdr = 8 + 8 + 13 + 4  # signature, IHDR's length and type, its data, its CRC
+    return data[:end_ihdr] + chunk + data[end_ihdr:]
+
+
+def write_image(rgb: np.ndarray, path, *, px_per_mm: float | None = None) -> Path:
     """Write an RGB array atomically (PNG/JPEG via OpenCV, TIFF via tifffile, 8 or 16 bit).
 
     Parameters
@@ -77,6 +90,10 @@ def write_image(rgb: np.ndarray, path) -> Path:
     path : str or Path
         ``.png`` (default for unknown suffixes), ``.jpg``/``.jpeg`` (quality 90) or
         ``.tif``/``.tiff`` (zlib).
+    px_per_mm : float, optional
+        The scan's resolution, recorded in the file as a scanner records it (PNG ``pHYs``,
+        TIFF resolution tags; not in JPEG, whose OpenCV encoder writes no density), so that
+        an analysis at another scale says so (``crosssection.quality``, ``scale_mismatch``).
 
     Returns
     -------
@@ -99,12 +116,21 @@ def write_image(rgb: np.ndarray, path) -> Path:
             if suffix in (".tif", ".tiff"):
                 import tifffile
 
-                tifffile.imwrite(tmp, rgb, photometric="rgb", compression="zlib")
+                res = {} if px_per_mm is None else dict(
+                    resolution=(10.0 * px_per_mm, 10.0 * px_per_mm), resolutionunit="CENTIMETER")
+                tifffile.imwrite(tmp, rgb, photometric="rgb", compression="zlib", **res)
                 ok = True
+            elif suffix in (".jpg", ".jpeg"):
+                ok = cv2.imwrite(str(tmp), np.ascontiguousarray(rgb[..., ::-1]),
+                                 [cv2.IMWRITE_JPEG_QUALITY, 90])
             else:
-                flags = ([cv2.IMWRITE_JPEG_QUALITY, 90] if suffix in (".jpg", ".jpeg")
-                         else [cv2.IMWRITE_PNG_COMPRESSION, 9])
-                ok = cv2.imwrite(str(tmp), np.ascontiguousarray(rgb[..., ::-1]), flags)
+                ok, buf = cv2.imencode(".png", np.ascontiguousarray(rgb[..., ::-1]),
+                                       [cv2.IMWRITE_PNG_COMPRESSION, 9])
+                if ok:
+                    data = buf.tobytes()
+                    if px_per_mm is not None:
+                        data = _png_with_resolution(data, px_per_mm)
+                    Path(tmp).write_bytes(data)
         except (OSError, ValueError, cv2.error) as exc:
             raise ImageError(f"cannot write image ({type(exc).__name__})", path) from None
         if not ok:
@@ -136,7 +162,7 @@ def write_scene(scene: Scene, folder, *, image_name: str = "image.png") -> Path:
     """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    write_image(scene.rgb, folder / image_name)
+    write_image(scene.rgb, folder / image_name, px_per_mm=scene.params.get("px_per_mm"))
     stacks = scene.tables["stacks"]
     n_rows = max(MIN_CALIBRATION_ROWS, int(stacks["n_br"].max()) + 3 if len(stacks) else 0)
     scene.calibration.to_csv(folder / "calibration.csv", n_rows)

@@ -152,3 +152,17 @@ def test_truth_voids_definition():
     assert v["perimeter_mm"] == pytest.approx((4 * (side - 1) + np.pi) / 50)
     assert v["n_edges"] == 1  # one stack, one junction at both of its ends
     assert holed.enclosed[60, 60] and not holed.enclosed[5, 5] and not holed.enclosed[60, 150]
+
+
+@pytest.mark.parametrize("suffix", [".png", ".tif"])
+def test_a_scene_image_records_its_resolution_as_a_scanner_does(tmp_path, suffix):
+    # an analysis at another scale than the scene's then says so (scale_mismatch)
+    from crosssection.stages.load import load_image, recorded_header
+    from crosssection.truth.scene import write_image
+
+    rgb = (np.random.default_rng(0).random((40, 50, 3)) * 255).astype(np.uint8)
+    path = write_image(rgb, tmp_path / f"scan{suffix}", px_per_mm=25.0)
+    px_per_mm, pages = recorded_header(path)
+    assert px_per_mm == pytest.approx(25.0, rel=1e-6) and pages == 1
+    assert np.array_equal(load_image(path), rgb)
+    assert recorded_header(write_image(rgb, tmp_path / f"bare{suffix}"))[0] is None
