@@ -485,3 +485,19 @@ def test_a_quality_warning_no_test_expects_fails_the_suite():
     # is seen instead of drowning in the summary
     with pytest.raises(quality.CalibrationWarning, match="uncaptured"):
         warnings.warn("uncaptured", quality.CalibrationWarning)
+
+
+def test_a_long_stack_whose_count_its_width_contradicts_is_flagged():
+    # a stack four widths long or more reads its width away from the forks: a count a layer
+    # from it is the junctions and the widths disagreeing (a render's rod read 6.7 % long)
+    import pandas as pd
+
+    stacks = pd.DataFrame({"stack_id": [0, 1, 2], "n_br": [4, 2, 3],
+                           "layers_est": [3.08, 2.1, 1.9], "length_mm": [5.0, 5.0, 0.5],
+                           "width_mm": [0.5, 0.27, 0.4]})
+    (flag,) = quality._count_width_check(stacks)
+    assert flag.code == "count_width" and flag.value == 1 and "stack 0: n_br 4" in flag.message
+    assert quality.CATEGORIES["count_width"] is quality.LinearSystemWarning
+    # within 0.75 layer, or a stack too short for its width to be read: no flag
+    ok = stacks.assign(layers_est=[3.3, 2.1, 1.9])
+    assert quality._count_width_check(ok) == []
