@@ -516,10 +516,11 @@ def _rod_checks(params, hole, rod_length_mm, rod_measured_mm,
 
 #: Layers between a stack's final count and the count its own width reads beyond which they
 #: disagree (``count_width``). Measured on stacks at least four widths long (their width read
-#: away from the forks): at most 0.16 layer on 38 network-generator scenes and 0.45 on 24
-#: independent-generator scenes (1-20 layers, 25-50 px/mm), all with exact counts; 0.75 and
-#: more on 3 of 16 quench renders (junction F1 0.82-0.92, energy +24 / +9 / -42 %) and on a
-#: render whose rod length read +6.7 %.
+#: away from the forks; ``python benchmarks/count_width_check.py``): at most 0.39 layer on 16
+#: network-generator scenes (typical, thick dense, 25 px/mm, tangential) and 0.45 on 24
+#: independent-generator scenes (1-20 layers, 25-50 px/mm), all with exact counts or
+#: nearly; 0.98-1.12 on 3 of 16 quench renders (junction F1 0.82-0.92, energy +24 / +9 /
+#: -42 %), and on two renders whose rod length read +6.7 and +5.1 %.
 COUNT_WIDTH_LIMIT = 0.75
 
 
