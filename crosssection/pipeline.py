@@ -464,7 +464,6 @@ def _network_shares(lin, stacks) -> list[float]:
 def _border_pixels(mask) -> np.ndarray:
     """(row, col) of the pixels set on the outermost rows and columns of a mask, (K, 2)."""
     m = np.asarray(mask, bool)
-    h, w = m.shape
     edge = np.zeros_like(m)
     edge[[0, -1], :] = True
     edge[:, [0, -1]] = True

@@ -23,7 +23,8 @@ def _short(value) -> str:
 
 
 def check_real(name: str, value, *, low: float | None = None, high: float | None = None,
-               low_open: bool = False, high_open: bool = False, why: str = "") -> float:
+               low_open: bool = False, high_open: bool = False, why: str = "",
+               also: str = "") -> float:
     """``value`` as a float if it is a finite real number in the given range.
 
     Parameters
@@ -38,6 +39,8 @@ def check_real(name: str, value, *, low: float | None = None, high: float | None
         Whether the bound itself is excluded.
     why : str
         Why the range is what it is, appended to the message.
+    also : str
+        The other values the argument takes, named after the range (checked by the caller).
 
     Returns
     -------
@@ -60,7 +63,8 @@ def check_real(name: str, value, *, low: float | None = None, high: float | None
             rng.append(f"{'>' if low_open else '>='} {low:g}")
         if high is not None:
             rng.append(f"{'<' if high_open else '<='} {high:g}")
-        what = "a finite number" + (" " + " and ".join(rng) if rng else "")
+        what = ("a finite number" + (" " + " and ".join(rng) if rng else "")
+                + (f", {also}" if also else ""))
         raise ParameterError(f"{name} must be {what}{f' ({why})' if why else ''}, "
                              f"got {_short(value)}")
     return float(value)

@@ -137,7 +137,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import numbers
 import warnings
 import zipfile
 from dataclasses import dataclass
@@ -156,6 +155,7 @@ from crosssection.truth.backdrop import PLATE_NAMES, apply_backdrop, plate_rgb
 from crosssection.truth.scene import Scene, write_scene
 from crosssection.truth.voids import truth_voids
 
+from simulate.checks import check_real
 from simulate.contacts import RodAnalysis, analyze_rod
 from simulate.energy import LAMBDA
 from simulate.geometry import checked_rod
@@ -1465,17 +1465,18 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
         raise ParameterError(f"smooth must be one of {SMOOTH}, got {smooth!r}")
     for name, v in (("px_per_mm", px_per_mm), ("thickness_mm", thickness_mm),
                     ("max_size_px", max_size_px)):
-        _check_real(name, v, positive=True)
+        check_real(name, v, low=0.0, low_open=True)
     for name, v in (("margin_mm", margin_mm), ("gap_px", gap_px)):
-        _check_real(name, v, positive=False)
+        check_real(name, v, low=0.0)
     if analysis is None:
         # only the analysis computed here reads them
-        _check_real("lam", lam, positive=False)
+        check_real("lam", lam, low=0.0)
         if contact_distance is not None:
-            _check_real("contact_distance", contact_distance, positive=True)
+            check_real("contact_distance", contact_distance, low=0.0, low_open=True)
     if not (hole_radius_mm is None or isinstance(hole_radius_mm, str)
             and hole_radius_mm == "auto"):
-        _check_real("hole_radius_mm", hole_radius_mm, positive=True, also="'auto' or None")
+        check_real("hole_radius_mm", hole_radius_mm, low=0.0, low_open=True,
+                   also="'auto' or None")
     if wall_radius is not None and not _is_point(wall_center_xy):
         raise ParameterError(f"wall_center_xy must be two finite numbers (x, y), got "
                              f"{wall_center_xy!r}")
@@ -1487,7 +1488,7 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
     for name, v in (("rod_thickness", rod_thickness), ("wall_radius", wall_radius),
                     ("rod_length_mm", rod_length_mm)):
         if v is not None:
-            _check_real(name, v, positive=True)
+            check_real(name, v, low=0.0, low_open=True)
     if calibration is not None and not isinstance(calibration, Calibration):
         raise ParameterError(f"calibration must be a Calibration, got {type(calibration).__name__}")
     if draw not in DRAW:
@@ -1599,16 +1600,6 @@ def _checked_rod(xy) -> np.ndarray:
     """``xy`` as an (N+1, 2) float array of finite numbers with N >= 2 (the contact analysis
     needs two segments), else a :class:`ParameterError` naming ``xy``."""
     return checked_rod(xy, min_segments=2)
-
-
-def _check_real(name: str, v, *, positive: bool, also: str = "") -> None:
-    """Refuse ``v`` unless it is a finite real number, > 0 (``positive``) or >= 0; ``also``
-    names the other values the option takes. A bool is refused: True would be read as 1."""
-    ok = (isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v)
-          and (v > 0 if positive else v >= 0))
-    if not ok:
-        what = f"a finite number {'>' if positive else '>='} 0" + (f", {also}" if also else "")
-        raise ParameterError(f"{name} must be {what}, got {v!r}")
 
 
 def _is_point(p) -> bool:

@@ -542,13 +542,12 @@ def threshold_rgb(rgb, *, method: str = "auto", region=None, blue_min=None,
         if rgmax is not None:
             mask &= m <= int(np.floor(rgmax))
         if reg is not None:
-            n_all = np.count_nonzero(mask)
-            out = mask & ~reg
-            mask &= reg
-            n_in = np.count_nonzero(mask)
-            n_out[0] = n_all - n_in
+            inside = mask & reg
+            n_in = np.count_nonzero(inside)
+            n_out[0] = np.count_nonzero(mask) - n_in
             if n_out[0] > OUTSIDE_NOISE_CHECK * n_in:
-                n_out[0] = _structured_px(out)
+                n_out[0] = _structured_px(mask & ~reg)
+            mask = inside
         return mask
 
     if method == "fixed":
