@@ -367,3 +367,39 @@ def test_result_write_roundtrip(tmp_path):
         res2 = analyze(scene.rgb, **given, rod_length_mm=2000.0)
     assert math.isclose(res2.summary["total_energy"], 2 * summary["total_energy"], rel_tol=1e-9)
     assert len(tables["stacks"]) == summary["n_stacks"]
+
+
+@pytest.mark.parametrize("axes_px", [(30, 12), (25, 14), (22, 10)])
+def test_an_isolated_blob_pruned_below_l_min_is_dropped(axes_px):
+    """A fat smear in a void keeps its area and extent through the cleaning but its skeleton
+    is pruned to a stub shorter than l_min: it holds no measurable branch. Counted as a stack
+    its parabola through a few pixels read up to 70 % of this scan's energy."""
+
+
+    from crosssection.truth.network import make_scene
+
+    sc = make_scene(seed=21, n_stacks=30, max_layers=4)
+    p = sc.params
+    kw = dict(px_per_mm=p["px_per_mm"], thickness_mm=p["thickness_mm"],
+              calibration=sc.calibration, hole_radius_mm=p["hole_radius_mm"],
+              hole_center_px=tuple(p["hole_center_px"]))
+    ink = (sc.rgb[..., 2].astype(int) - sc.rgb[..., :2].max(-1)) > 40
+    cx, cy = p["hole_center_px"]
+    r = p["hole_radius_mm"] * p["px_per_mm"]
+    yy, xx = np.indices(ink.shape)
+    room = (~ink).astype(np.uint8)
+    room[(yy - cy) ** 2 + (xx - cx) ** 2 > (0.9 * r) ** 2] = 0
+    d = cv2.distanceTransform(room, cv2.DIST_L2, 5)
+    y, x = np.unravel_index(np.argmax(d), d.shape)
+    assert d[y, x] > 2 * axes_px[0]  # the blob lies in a void, touching nothing
+    rgb = sc.rgb.copy()
+    cv2.ellipse(rgb, (int(x), int(y)), axes_px, 30, 0, 360, (40, 70, 190), -1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        clean = analyze(sc.rgb, **kw)
+        res = analyze(rgb, **kw)
+    assert res.summary["n_stacks"] == clean.summary["n_stacks"]
+    assert res.summary["total_energy"] == pytest.approx(clean.summary["total_energy"])
+    assert res.summary["rod_length_mm"] == pytest.approx(clean.summary["rod_length_mm"])
+    assert any("isolated piece" in w for w in res.summary["warnings"])
+    assert not any("isolated piece" in w for w in clean.summary["warnings"])
