@@ -150,7 +150,9 @@ class AnalysisParams:
         "skimage (skimage.morphology.skeletonize); both followed by the same removal of "
         "redundant pixels and spur pruning", choices=SKELETON_METHODS))
     l_min_mm: float = field(default=1.0, metadata=_opt(
-        "shortest branch detected; shorter skeleton spurs are pruned (paper: 1 mm)", "mm"))
+        "detection limit (paper: 1 mm): skeleton spurs ending free and isolated pieces of ink "
+        "shorter than this are removed; stacks between two junctions are kept whatever their "
+        "length", "mm"))
     kappa_c_per_mm: float | None = field(default=None, metadata=_opt(
         "plastic curvature threshold of the bending energy (default: none)", "1/mm"))
     width_statistic: str = field(default="median", metadata=_opt(
@@ -413,9 +415,11 @@ _POSITIVE = ("px_per_mm", "thickness_mm", "hole_radius_mm", "rod_length_mm", "ka
 _NON_NEGATIVE = ("s_min_mm2", "l_min_mm", "merge_px", "blue_min", "rg_max", "sliver_width_h")
 #: Upper bounds of values that no scan reaches, beyond which the arithmetic overflows or the
 #: numbers printed are meaningless: 10 km of sheet; a curvature of a 0.1 um radius, a thousand
-#: times below any sheet's thickness.
+#: times below any sheet's thickness; a tangent fit 10 m long (the fit is cut at the stack's
+#: own length, and the length in pixels must stay an integer the kernels can hold).
 _BEYOND = {"rod_length_mm": (1e7, "mm of sheet (10 km)"),
-           "kappa_c_per_mm": (1e4, "1/mm (a radius of 0.1 um)")}
+           "kappa_c_per_mm": (1e4, "1/mm (a radius of 0.1 um)"),
+           "tangent_mm": (1e4, "mm (10 m)")}
 
 
 def check_param(name: str, value):

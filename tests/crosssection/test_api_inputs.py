@@ -162,7 +162,7 @@ def test_a_scan_scale_refuses_what_analysis_parameters_refuse(px_per_mm, thickne
     assert cs.ScanScale(25, 0.2).to_px(2) == 50.0
 
 
-@pytest.mark.parametrize("name", ["rod_length_mm", "kappa_c_per_mm"])
+@pytest.mark.parametrize("name", ["rod_length_mm", "kappa_c_per_mm", "tangent_mm"])
 def test_values_beyond_any_scan_are_refused_before_they_overflow(name):
     with pytest.raises(ParameterError, match=f"^{name} = 1e\\+300 is beyond any scan"):
         cs.AnalysisParams(**{name: 1e300})
