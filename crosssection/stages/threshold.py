@@ -608,25 +608,61 @@ def _structured_px(mask) -> int:
     return int(area[area >= OUTSIDE_MIN_PIECE_PX].sum())
 
 
-#: Least difference (uint8 units) between the darkest channel of the paper and of a class of
-#: marks for :func:`_marks_of_another_colour` to name them: a pen's line on paper differs by
-#: 150 or more, a faded blue ink by less than the automatic cut's own contrast.
+#: Least difference (uint8 units) in the larger of red and green between the paper and a class
+#: of marks for :func:`_marks_of_another_colour` to name them: a pen's line on paper differs
+#: by 150 or more, a faded blue ink by less than the automatic cut's own contrast.
 OTHER_MARKS_CONTRAST_U8 = 60.0
-#: Marks whose channels spread less than this (uint8 units) are neutral (black or grey).
+#: Marks whose channels spread less than this (uint8 units), and less than
+#: :data:`NEUTRAL_SATURATION` of their brightest channel, are neutral (black or grey): a dark
+#: purple (48, 23, 62) spreads 39 levels, 63 % of its blue.
 NEUTRAL_SPREAD_U8 = 40.0
+NEUTRAL_SATURATION = 0.35
 _HUES = ((15, "red"), (45, "orange or brown"), (70, "yellow"), (165, "green"), (195, "cyan"),
          (255, "blue"), (335, "purple"), (360, "red"))
+
+
+#: Least share of the pixels of a class between the marks and the paper for it to be a plate
+#: framing the paper: a blurred line's edge pixels, also between the two, are a few per cent.
+PLATE_CLASS_SHARE = 0.1
+
+
+def _three_classes(px, rg):
+    """Marks, plate and paper (median colours) when ``rg``, the larger of red and green of
+    the pixels ``px``, splits into three classes (Otsu's method, three classes) whose darkest
+    holds at most half the pixels and lies :data:`OTHER_MARKS_CONTRAST_U8` below a middle
+    class of :data:`PLATE_CLASS_SHARE` or more; ``(None, None, None)`` otherwise."""
+    from skimage.filters import threshold_multiotsu
+
+    if np.ptp(rg) == 0:
+        return None, None, None
+    try:
+        lo, hi = threshold_multiotsu(rg, classes=3)
+    except ValueError:  # fewer than three grey levels
+        return None, None, None
+    c0, c2 = rg <= lo, rg > hi
+    c1 = ~c0 & ~c2
+    n = len(rg)
+    if not (0 < np.count_nonzero(c0) <= 0.5 * n and np.count_nonzero(c1) >= PLATE_CLASS_SHARE * n
+            and np.count_nonzero(c2)):
+        return None, None, None
+    ink, plate, paper = (np.median(px[c], axis=0) for c in (c0, c1, c2))
+    if plate[:2].max() - ink[:2].max() < OTHER_MARKS_CONTRAST_U8:
+        return None, None, None
+    return ink, plate, paper
 
 
 def _marks_of_another_colour(rgb, reg, scale) -> str:
     """Why a scan without a blue-dominant class holds no blue ink, when it holds dark marks.
 
-    The darkest channel of each pixel is split by Otsu's method (a sample of about 250 000
-    pixels of ``reg``); a dark class of at most half the pixels, darker than the paper by
-    :data:`OTHER_MARKS_CONTRAST_U8`, is named by its median colour. Neutral marks (a black or
-    grey pen, a photocopy) can still be cut by the paper's rule with the blue bound removed,
-    and the note says with which bound; marks of a blue hue are left to the faint-ink advice.
-    Returns ``""`` when there is no such class.
+    The larger of red and green of each pixel, the feature the paper's rule cuts, is split
+    by Otsu's method (a sample of about 250 000 pixels of ``reg``) into three classes when
+    they are marks, a plate framing the paper and the paper (:func:`_three_classes`), into
+    two otherwise; a darkest class of at most half the pixels, darker than the paper by
+    :data:`OTHER_MARKS_CONTRAST_U8`, is named by its median colour. Such marks (a black or
+    grey pen, a photocopy, a purple or red ink) can be cut by the paper's rule with the blue
+    bound removed, and the note says with which bound: halfway to the nearest class, so that
+    neither the paper nor a plate passes it. Marks of a blue hue are left to the faint-ink
+    advice. Returns ``""`` when there is no such class.
     """
     import colorsys
 
@@ -637,26 +673,31 @@ def _marks_of_another_colour(rgb, reg, scale) -> str:
     px = px.reshape(-1, 3).astype(np.float32) / scale
     if len(px) < 20:
         return ""
-    low = px.min(axis=1)
-    dark = low <= _otsu_u8(low)
-    if not 0 < np.count_nonzero(dark) <= 0.5 * len(px):
-        return ""
-    ink, paper = np.median(px[dark], axis=0), np.median(px[~dark], axis=0)
-    if paper.min() - ink.min() < OTHER_MARKS_CONTRAST_U8:
+    rg = px[:, :2].max(axis=1)
+    ink, nearest, paper = _three_classes(px, rg)
+    if ink is None:
+        dark = rg <= _otsu_u8(rg)
+        if not 0 < np.count_nonzero(dark) <= 0.5 * len(px):
+            return ""
+        ink, paper = np.median(px[dark], axis=0), np.median(px[~dark], axis=0)
+        nearest = paper
+    if paper[:2].max() - ink[:2].max() < OTHER_MARKS_CONTRAST_U8:
         return ""
     colours = (f"(median RGB ({ink[0]:.0f}, {ink[1]:.0f}, {ink[2]:.0f}) on paper "
                f"({paper[0]:.0f}, {paper[1]:.0f}, {paper[2]:.0f}))")
-    if ink.max() - ink.min() < NEUTRAL_SPREAD_U8:
-        rg_cut = 0.5 * (ink[:2].max() + paper[:2].max())
-        return (f"the scan's dark marks are black or grey {colours}, not blue ink; to read them "
-                f"with the paper's rule without its blue bound: --threshold-method fixed "
-                f"--blue-min 0 --rg-max {rg_cut * scale:.0f}")
+    rg_cut = 0.5 * (ink[:2].max() + nearest[:2].max())
+    recipe = ("; to read them with the paper's rule without its blue bound: --threshold-method "
+              f"fixed --blue-min 0 --rg-max {rg_cut * scale:.0f}")
+    spread = float(ink.max() - ink.min())
+    # a dark colour spreads its channels little in grey levels, not in proportion
+    if spread < NEUTRAL_SPREAD_U8 and spread < NEUTRAL_SATURATION * max(float(ink.max()), 1.0):
+        return f"the scan's dark marks are black or grey {colours}, not blue ink" + recipe
     hue = 360.0 * colorsys.rgb_to_hsv(*(ink / 255.0))[0]
     name = next(n for h, n in _HUES if hue < h)
     if name == "blue":
         return ""
     return (f"the scan's dark marks are {name} {colours}, not blue ink: the threshold is the "
-            f"paper's rule for a cut inked in blue")
+            f"paper's rule for a cut inked in blue" + recipe)
 
 
 #: Thin lines are looked for below this sheet thickness, px: a single sheet is then narrower

@@ -261,22 +261,42 @@ def _recoloured(sc, ink_rgb):
 
 @pytest.mark.parametrize("ink_rgb, colour", [((35, 35, 40), "black or grey"),
                                              ((150, 35, 45), "red"),
-                                             ((40, 120, 50), "green")])
+                                             ((40, 120, 50), "green"),
+                                             ((48, 23, 62), "purple")])
 def test_marks_of_another_colour_are_named(ink_rgb, colour):
     """A scan drawn with a pen of another colour fails the blue rule, and the note says what
-    the marks are rather than calling them faint; black marks get a cut that reads them."""
+    the marks are rather than calling them faint, with a cut that reads them (all these
+    marks are darker in red and green than the paper)."""
     sc = make_scene(seed=13, receding_fraction=0.0, **KW)
     truth = threshold_rgb(sc.rgb).mask
     res = threshold_rgb(_recoloured(sc, ink_rgb))
     assert not res.mask.any()
     assert f"marks are {colour}" in res.note and "faint" not in res.note
-    if colour == "black or grey":
-        cut = int(res.note.rsplit("--rg-max ", 1)[1])
-        fixed = threshold_rgb(_recoloured(sc, ink_rgb), method="fixed", blue_min=0, rg_max=cut)
-        iou = np.count_nonzero(fixed.mask & truth) / np.count_nonzero(fixed.mask | truth)
-        assert iou > 0.9
-    else:
-        assert "--blue-min 0" not in res.note
+    cut = int(res.note.rsplit("--rg-max ", 1)[1])
+    fixed = threshold_rgb(_recoloured(sc, ink_rgb), method="fixed", blue_min=0, rg_max=cut)
+    iou = np.count_nonzero(fixed.mask & truth) / np.count_nonzero(fixed.mask | truth)
+    assert iou > 0.9
+
+
+@pytest.mark.parametrize("plate", ["grey", "brown", (250, 250, 250)])
+def test_black_marks_framed_by_a_plate_get_a_cut_that_leaves_the_plate_out(plate):
+    """Black marks on paper inside a grey plate: the darker of two classes holds the plate
+    too, so the marks are told from three classes and the cut lies halfway to the plate."""
+    from crosssection.truth.backdrop import apply_backdrop
+
+    sc = make_scene(seed=13, receding_fraction=0.0, **KW)
+    truth = threshold_rgb(sc.rgb).mask
+    p = sc.params
+    black = _recoloured(sc, (28, 28, 31))
+    rgb = apply_backdrop(black, ink_mask=truth, hole_center_rc=p["hole_center_px"][::-1],
+                         hole_radius_px=p["hole_radius_mm"] * p["px_per_mm"],
+                         rng=np.random.default_rng(1), plate=plate, rim_px=0.0)
+    res = threshold_rgb(rgb)
+    assert not res.mask.any() and "marks are black or grey" in res.note
+    cut = int(res.note.rsplit("--rg-max ", 1)[1])
+    fixed = threshold_rgb(rgb, method="fixed", blue_min=0, rg_max=cut).mask
+    assert np.count_nonzero(fixed & ~truth) < 0.05 * np.count_nonzero(truth)
+    assert np.count_nonzero(fixed & truth) > 0.9 * np.count_nonzero(truth)
 
 
 def test_faint_blue_ink_keeps_the_faint_ink_advice():
