@@ -331,8 +331,17 @@ class AnalysisParams:
         return out
 
     # ------------------------------------------------------------------ per image
-    def check_image(self, shape, path=None) -> None:
+    def check_image(self, shape, path=None, *, file_px_per_mm=None) -> None:
         """Errors for parameters absurd against the scan's size (``shape`` = (H, W, ...)).
+
+        Parameters
+        ----------
+        shape : tuple
+        path : str or Path, optional
+            Named in the error.
+        file_px_per_mm : float, optional
+            The resolution the file records; named in the error when ``px_per_mm`` differs
+            from it (every check here is a size in mm read at ``px_per_mm``).
 
         Raises
         ------
@@ -341,35 +350,39 @@ class AnalysisParams:
             more than twice the scan's size.
         """
         h, w = int(shape[0]), int(shape[1])
+        hint = ""
+        if file_px_per_mm and abs(self.px_per_mm / file_px_per_mm - 1.0) > 0.02:
+            hint = (f" (px_per_mm = {self.px_per_mm:g}, but the file records "
+                    f"{25.4 * file_px_per_mm:.0f} dpi = {file_px_per_mm:.2f} px/mm)")
         s_min_px = self.scale.area_to_px2(self.s_min_used_mm2)
         l_min_px = self.scale.to_px(self.l_min_mm)
         if s_min_px >= h * w:
             raise ParameterError(f"s_min = {self.s_min_used_mm2:g} mm^2 = {s_min_px:.0f} px is "
-                                 f"not smaller than the image ({w}x{h} px)", path)
+                                 f"not smaller than the image ({w}x{h} px)" + hint, path)
         if self.thickness_px >= min(h, w) / 2:
             raise ParameterError(f"sheet thickness {self.thickness_mm:g} mm = "
                                  f"{self.thickness_px:.1f} px is not small against the image "
-                                 f"({w}x{h} px); check px_per_mm and thickness_mm", path)
+                                 f"({w}x{h} px); check px_per_mm and thickness_mm" + hint, path)
         if l_min_px >= max(h, w):
             raise ParameterError(f"l_min = {self.l_min_mm:g} mm = {l_min_px:.0f} px exceeds the "
-                                 f"image size ({w}x{h} px)", path)
+                                 f"image size ({w}x{h} px)" + hint, path)
         if self.hole_radius_mm is not None:
             r_px = self.scale.to_px(self.hole_radius_mm)
             if 2 * r_px > 2 * max(h, w):
                 raise ParameterError(f"hole radius {self.hole_radius_mm:g} mm = {r_px:.0f} px: "
                                      f"the hole is more than twice the scan ({w}x{h} px); "
-                                     "check hole_radius_mm and px_per_mm", path)
+                                     "check hole_radius_mm and px_per_mm" + hint, path)
             if r_px < MIN_HOLE_SHEETS * self.thickness_px:
                 raise ParameterError(f"hole radius {self.hole_radius_mm:g} mm = {r_px:.1g} px: "
                                      f"narrower than {MIN_HOLE_SHEETS:g} sheet thicknesses "
                                      f"({self.thickness_mm:g} mm), no rod fits in it; check "
-                                     "hole_radius_mm and px_per_mm", path)
+                                     "hole_radius_mm and px_per_mm" + hint, path)
             if self.hole_center_px is not None:
                 x, y = self.hole_center_px
                 if not (-r_px < x < w + r_px and -r_px < y < h + r_px):
                     raise ParameterError(f"hole centre ({x:g}, {y:g}) px with radius "
-                                         f"{r_px:.0f} px does not meet the scan ({w}x{h} px)",
-                                         path)
+                                         f"{r_px:.0f} px does not meet the scan ({w}x{h} px)"
+                                         + hint, path)
 
 
 PARAM_NAMES = tuple(f.name for f in fields(AnalysisParams))

@@ -237,7 +237,7 @@ def _preprocess(image, p: AnalysisParams, timer) -> Preprocessed:
         file_px_per_mm, file_pages = (recorded_header(path) if path is not None
                                       else (None, 1))
         orientation = exif_orientation(path) if path is not None else 1
-    p.check_image(rgb.shape, path)
+    p.check_image(rgb.shape, path, file_px_per_mm=file_px_per_mm)
     thr, hole, outside, dominance = _threshold_in_frame(rgb, p, path, timer)
     confidence = None if p.hole_given else hole.confidence
     s_min_px = p.scale.area_to_px2(p.s_min_used_mm2)

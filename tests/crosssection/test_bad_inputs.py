@@ -133,3 +133,19 @@ def test_an_output_folder_blocked_by_a_file_is_one_line(out, tmp_path, capsys):
     assert status == 2
     assert len(err) == 1 and err[0].startswith(f"error: {tmp_path / out}: ")
     assert "a file is in the way of a folder" in err[0]
+
+
+@pytest.mark.parametrize("dpi, named", [(254, True), (1270, False)])
+def test_a_size_refused_at_the_default_scale_names_the_file_resolution(dpi, named, tmp_path,
+                                                                       capsys):
+    """A small scan at 10 px/mm with its true hole given in mm: at the default 50 px/mm the
+    hole is more than twice the scan. The error names the resolution the file records
+    when the scale used is not it."""
+    p = tmp_path / "small.png"
+    Image.fromarray(_good_rgb(3, size=150)).save(p, dpi=(dpi, dpi))
+    status = main(["analyze", str(p), "--hole-radius-mm", "6.4", "--hole-center-px", "75",
+                   "75", "--no-figure", "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert status == 2 and len(err.strip().splitlines()) == 1
+    assert "more than twice the scan" in err
+    assert ("the file records 254 dpi = 10.00 px/mm" in err) is named
