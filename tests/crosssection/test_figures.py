@@ -7,8 +7,8 @@ import pytest
 from PIL import Image
 
 from crosssection.core.fileio import save_figure
-from crosssection.figures import (BULK_COLOR, PERIPHERY_COLOR, overlay_figure, overlay_window,
-                                  steps_figure)
+from crosssection.figures import (BULK_COLOR, PANEL_MAX_PX, PERIPHERY_COLOR, overlay_figure,
+                                  overlay_window, panel_image, steps_figure)
 from crosssection.stages.hole import Hole
 
 
@@ -165,3 +165,29 @@ def test_overlay_frames_the_hole_of_a_page_scan():
     # without a hole the whole page is shown
     whole = overlay_figure(page, junctions_df=junctions, stacks_df=stacks, paths=moved)
     assert sorted(whole.axes[0].get_xlim()) == pytest.approx([-0.5, 1199.5])
+
+
+def test_a_large_scan_is_drawn_shrunk_in_its_own_coordinates():
+    """A 5000-px scan is handed to matplotlib at most PANEL_MAX_PX on a side (whole, it is
+    resampled in float64 copies: 1.24 GB peak for a 4000-px scan's analysis), placed over
+    the same pixel coordinates; a one-pixel line of a mask stays visible."""
+    big = np.full((5000, 2500, 3), 245, np.uint8)
+    big[:, 1000:1003] = (40, 70, 190)
+    small = panel_image(big)
+    assert small.shape == (PANEL_MAX_PX, PANEL_MAX_PX // 2, 3) and small.dtype == np.uint8
+    assert small[:, 480].min() < 160  # the line, averaged with the paper around it
+    line = np.zeros((5000, 5000), bool)
+    line[:, 2500] = True
+    shrunk = panel_image(line)
+    assert shrunk.shape == (PANEL_MAX_PX, PANEL_MAX_PX) and shrunk.max() > 0.4
+    assert panel_image(big[:100, :2000]).shape == (100, 2000, 3)  # small enough: as it is
+    fig = overlay_figure(big, paths=[np.array([[10, 1001], [4990, 1001]])], stacks_df=None)
+    im = fig.axes[0].get_images()[0]
+    assert max(im.get_array().shape[:2]) <= PANEL_MAX_PX
+    assert im.get_extent() == pytest.approx([-0.5, 2499.5, 4999.5, -0.5])
+    steps = steps_figure(big, line[:, :2500], line[:, :2500], line[:, :2500],
+                         np.zeros((0, 2)))
+    for ax in steps.axes:
+        im = ax.get_images()[0]
+        assert max(im.get_array().shape[:2]) <= PANEL_MAX_PX
+        assert im.get_extent() == pytest.approx([-0.5, 2499.5, 4999.5, -0.5])
