@@ -273,8 +273,8 @@ def _preprocess(image, p: AnalysisParams, timer) -> Preprocessed:
                                            thickness_px=p.thickness_px)
     if sg.n_stacks == 0:
         raise AnalysisError("the skeleton has no stack (only isolated points)", path)
-    notes = [] if len(junc) else ["no junction found: every stack is a closed loop or a free "
-                                  "segment"]
+    notes = [] if len(junc) else ["no junction found: every stack is a closed loop or a band "
+                                  "between two ends (on the wall or free)"]
     if short:
         notes.append(f"{len(short)} isolated piece(s) of ink whose skeleton is shorter than "
                      "l_min dropped (specks: no branch of the detection limit's length)")
