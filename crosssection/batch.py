@@ -4,8 +4,10 @@
 
 Layout of ``OUT_DIR``::
 
-    index.csv          one row per image: set, status (ok / failed / skipped), output folder,
-                       summary numbers (n_junctions ... total_energy, wall_s), reason
+    index.csv          one row per image: set, status (ok / failed / skipped), output folder
+                       (empty for a failed image), summary numbers (n_junctions ...
+                       total_energy, with the rod length and hole radius that make its
+                       epsilon), wall_s, reason
     failures.csv       image, set, reason   (one line per failed image)
     batch.json         parameters, sets, package version, counts
     <set>/<stem>/      the ``analyze`` layout: summary.json, junctions.csv, stacks.csv,
@@ -16,9 +18,21 @@ Design choices
 - One code path for parallelism: :func:`crosssection.core.parallel.get_executor` (local processes,
   or a Dask cluster with ``--scheduler``). Tasks receive paths and parameters, write their own
   outputs and return a small dict (never arrays), so memory stays at about one image per worker.
-- Task ``i`` of the sorted image list gets seed ``spawn_seeds(seed, n)[i]``
-  (``SeedSequence.spawn``); results do not depend on the number of workers or on the order of
-  completion. The seed used is recorded in ``summary.json`` (``batch.seed``) and index.csv.
+- The analysis draws no random numbers: its results depend neither on ``--seed`` nor on the
+  number of workers or the order of completion. Each image is still given a seed
+  (:func:`image_seed`, from the base seed and the image's path in ``INPUT_DIR``, so adding or
+  removing other scans does not change it), recorded in ``summary.json`` (``batch.seed``) and
+  index.csv for an analysis that would draw some; it is not part of the parameters hash.
+- Sets: a folder holding ``set.toml`` is a set, named by its ``name`` or, without one, by its
+  path under ``INPUT_DIR`` (``eps8/day1``), so two experiments' ``day1/`` folders stay two
+  sets. Two folders that declare one ``name`` are one set when their parameters are the same
+  (a set split over several folders) and are refused, before anything is written, when they
+  differ: their scans would be pooled as one set by ``stats``.
+- Output folders keep their names: a scan whose folder index.csv records keeps that folder
+  on a re-run, so a scan of the same stem added elsewhere in the set is named by its path
+  rather than the two being renamed (and the first analysed again). Output folders that no
+  scan of the batch names any more (a set renamed, a scan moved or deleted) are named in one
+  ``warning:`` line and left where they are.
 - Local workers share numba's disk cache of compiled kernels. On an empty cache (a fresh
   install) the first worker to compile does so for all; the others wait and load the kernels
   (:func:`crosssection.core.parallel.compiling_in_turn`) instead of each compiling them
@@ -28,12 +42,16 @@ Design choices
   staging folder, which the next run removes; an output folder is therefore always complete.
   ``summary.json`` carries ``batch.params_hash``; an image whose folder holds a summary with
   the same hash, its four tables readable with their schema's columns (their header lines
-  are read) and ``overlay.png`` when figures are wanted is skipped on a re-run.
-- The parameters hash covers the resolved analysis parameters, the SHA-256 of the image and
-  of the calibration file, and the package version: changing any of them redoes the image,
-  which replaces its earlier results. A re-run that redoes images for this reason says so
-  in one ``warning:`` line naming what differs (the parameters, the package version, or the
-  files' content); a re-run with the same options is silent.
+  are read) and ``overlay.png`` when figures are wanted is skipped on a re-run. Each image
+  analysed again over an earlier result is named in a ``warning:`` line with the reason (its
+  parameters, the package version, the files' content, a table or the overlay lost).
+- The parameters hash covers the effective analysis parameters (:func:`effective_params`:
+  every default filled in, derived ones such as ``s_min`` computed), the SHA-256 of the
+  image and of the calibration file, and the package version: changing any of them redoes
+  the image, which replaces its earlier results; a re-run with the same options is silent.
+  ``summary.json`` records the image's and the calibration's SHA-256, their paths as given
+  and resolved, and the calibration's widths (``batch.inputs``), so that an output names
+  what it was computed from.
 - ``OUT_DIR`` belongs to one input folder: it must be new, empty, or hold an earlier batch of
   the same ``INPUT_DIR`` (which the batch resumes). The batch of another input folder, or
   files that no batch wrote, are refused before anything is written, as is a ``--scheduler``
@@ -81,7 +99,7 @@ from crosssection.core.errors import ConfigError, FoldstatError, ImageError, Par
 from crosssection.core.fileio import (BROWSER_FILES, PARTIAL_TAG, check_out,
                                       clear_stale_folders, read_json_object, staging_folder,
                                       swap_in_folder, write_csv, write_json)
-from crosssection.core.parallel import compiling_in_turn, get_executor, spawn_seeds
+from crosssection.core.parallel import compiling_in_turn, get_executor
 from crosssection.params import (PARAM_NAMES, AnalysisParams, add_analysis_arguments,
                                  check_param, switched_off)
 from crosssection.quality import QualityWarning
@@ -89,8 +107,11 @@ from crosssection.setconfig import (DEFAULT_PARAMS, DEFAULT_SET_NAME, SET_FILE, 
                                     check_params, failed_set, load_set_config)
 
 IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp", ".webp")
+#: ``rod_length_used_mm`` and ``hole_radius_mm`` beside ``epsilon``: epsilon = L / (2 pi R)
+#: with the L used (a given ``--rod-length-mm``, else the measured ``rod_length_mm``)
 SUMMARY_NUMBERS = ["n_junctions", "n_stacks", "n_branches", "n_voids", "mean_branches_per_stack",
-                   "rod_length_mm", "epsilon", "total_energy", "total_energy_rel_uncertainty"]
+                   "rod_length_mm", "rod_length_used_mm", "hole_radius_mm", "epsilon",
+                   "total_energy", "total_energy_rel_uncertainty"]
 INDEX_COLUMNS = (["image", "set", "status", "output"] + SUMMARY_NUMBERS
                  + ["quality", "wall_s", "seed", "params_hash", "peak_rss_mb", "reason"])
 FAILURE_COLUMNS = ["image", "set", "reason"]
@@ -109,9 +130,11 @@ class ImageTask:
     set_name: str
     out_dir: str          # absolute output folder OUT_DIR/<set>/<stem>
     out_rel: str          # relative to OUT_DIR
+    given: str = ""       # the image's path as the user named it (INPUT_DIR as given / rel)
     params: dict = field(default_factory=dict)
     seed: int = 0
     params_hash: str = ""
+    image_sha: str = ""
     figure: bool = True
     error: str | None = None
     compile_lock: str | None = None  # shared by the local workers (compiling_in_turn)
@@ -201,14 +224,54 @@ def _sha256(path, chunk=1 << 20) -> str:
     return h.hexdigest()
 
 
+def effective_params(params: dict) -> dict:
+    """The parameters an analysis runs with: every default filled in, the derived ones
+    (``s_min_mm2``, ``tangent_mm``) computed, a calibration file replaced by its SHA-256.
+
+    Two ways of asking for one analysis (a value given or left to its default, a calibration
+    file moved or copied) give one result.
+
+    Parameters
+    ----------
+    params : dict
+        Analysis parameters as given (a set's, the command line's).
+
+    Returns
+    -------
+    dict
+
+    Raises
+    ------
+    FoldstatError
+        The parameters are not valid.
+    """
+    p = AnalysisParams.from_mapping(params)
+    out = p.to_dict()
+    out["s_min_mm2"] = p.s_min_used_mm2
+    out["tangent_mm"] = p.tangent_used_mm
+    cal = params.get("calibration")
+    if isinstance(cal, (str, Path)) and Path(cal).is_file():
+        out["calibration"] = _sha256(cal)
+    # 12 digits: 3 h computed (0.30000000000000004) and 0.3 given are one value
+    return {k: _rounded(v) for k, v in out.items()}
+
+
+def _rounded(value):
+    if isinstance(value, float):
+        return float(f"{value:.12g}")
+    if isinstance(value, list):
+        return [_rounded(v) for v in value]
+    return value
+
+
 def params_hash(params: dict, image_sha: str, *, seed=None) -> str:
     """Hash of everything that determines an image's results.
 
     Parameters
     ----------
     params : dict
-        Resolved analysis parameters (a calibration path is replaced by its content hash, so
-        moving a set folder does not redo it).
+        Analysis parameters: hashed as :func:`effective_params` resolves them, so that the
+        hash follows the analysis run, not the way its options were given.
     image_sha : str
         SHA-256 of the image file.
     seed : int, optional
@@ -219,13 +282,34 @@ def params_hash(params: dict, image_sha: str, *, seed=None) -> str:
     str
         16 hex digits.
     """
-    p = dict(params)
-    if p.get("calibration"):
-        cal = Path(p["calibration"])
-        p["calibration"] = _sha256(cal) if cal.is_file() else str(cal)
-    payload = {"params": p, "image": image_sha, "version": __version__, "seed": seed}
+    payload = {"params": effective_params(params), "image": image_sha, "version": __version__,
+               "seed": seed}
     blob = json.dumps(payload, sort_keys=True, default=str).encode()
     return hashlib.sha256(blob).hexdigest()[:16]
+
+
+def image_seed(seed: int | None, rel: str) -> int:
+    """The seed of one image: derived from the base ``seed`` and the image's path ``rel`` in
+    the input folder (``SeedSequence``), so that it stays the same when other scans are
+    added, removed or renamed.
+
+    Parameters
+    ----------
+    seed : int or None
+        Base seed (None: fresh entropy).
+    rel : str
+        The image's path relative to the input folder (posix).
+
+    Returns
+    -------
+    int
+        A 32-bit seed.
+    """
+    import numpy as np
+
+    base = np.random.SeedSequence(seed).entropy
+    key = int.from_bytes(hashlib.sha256(rel.encode()).digest()[:8], "little")
+    return int(np.random.SeedSequence([base, key]).generate_state(1, dtype=np.uint32)[0])
 
 
 #: the batch's own files at the top of OUT_DIR: no set folder may take these names
@@ -241,30 +325,46 @@ def _safe_component(text: str) -> str:
     return "".join(c if (c.isalnum() or c in "-_+") else "_" for c in text)
 
 
-def _collisions(tasks) -> list[list[int]]:
-    """Groups of tasks whose output folders would be one (compared case-blind: a.png and
-    A.png share a folder on macOS and Windows)."""
-    groups: dict[str, list[int]] = {}
-    for i, t in enumerate(tasks):
-        groups.setdefault(t.out_rel.lower(), []).append(i)
-    return [idx for idx in groups.values() if len(idx) > 1]
+def _clashing(names: list[str], taken: list[str]) -> list[bool]:
+    """Per name of ``names``: whether it is one folder with another name of ``names`` or of
+    ``taken``, or holds one (compared case-blind: a.png and A.png share a folder on macOS and
+    Windows; the folder of a scan ``b`` of a set ``a`` holds the scans of a set ``a/b``)."""
+    low = [n.lower() for n in names]
+    counts: dict[str, int] = {}
+    for n in low + [t.lower() for t in taken]:
+        counts[n] = counts.get(n, 0) + 1
+    parents = {"/".join(n.split("/")[:k]) for n in counts for k in range(1, n.count("/") + 1)}
+    return [counts[n] > 1 or n in parents for n in low]
 
 
-def _unique_out_rels(tasks) -> None:
+def _unique_out_rels(tasks, kept: dict[str, str] | None = None) -> None:
     """Give every task its own output folder, in place.
 
-    A scan's folder is its stem; two scans of one set with one stem (a.png and a.tif, or
-    sub/a.png) are named by their paths, and names that the safe characters still merge
-    ("a b.png" and "a_b.png") get a hash of the path as well.
+    A scan keeps the folder ``kept`` records for it (an earlier run's index.csv), when that
+    is a folder of its set. Otherwise its folder is its stem; two scans of one set with one
+    stem (a.png and a.tif, or sub/a.png), or a stem whose folder another scan keeps, are named
+    by their paths, and names that the safe characters still merge ("a b.png" and
+    "a_b.png") get a hash of the path as well.
     """
-    for idx in _collisions(tasks):
-        for i in idx:
-            t = tasks[i]
-            t.out_rel = f"{_set_folder(t.set_name)}/{_safe_component(t.rel.replace('/', '__'))}"
-    for idx in _collisions(tasks):
-        for i in idx:
-            t = tasks[i]
-            t.out_rel += "-" + hashlib.sha256(t.rel.encode()).hexdigest()[:8]
+    kept = kept or {}
+    pinned, free = [], []
+    for t in tasks:
+        k = kept.get(t.rel, "")
+        head, _, leaf = k.rpartition("/")
+        if (head == _set_folder(t.set_name) and leaf and _safe_component(leaf) == leaf
+                and k.lower() not in {p.out_rel.lower() for p in pinned}):
+            t.out_rel = k
+            pinned.append(t)
+        else:
+            free.append(t)
+    taken = [t.out_rel for t in pinned]
+    for rename in (lambda t: f"{_set_folder(t.set_name)}/"
+                             f"{_safe_component(t.rel.replace('/', '__'))}",
+                   lambda t: t.out_rel + "-" + hashlib.sha256(t.rel.encode()).hexdigest()[:8]):
+        clash = _clashing([t.out_rel for t in free], taken)
+        for t, c in zip(free, clash):
+            if c:
+                t.out_rel = rename(t)
 
 
 CALIBRATION_FILE = "calibration.csv"
@@ -281,7 +381,7 @@ def plan_batch(input_dir, out_dir, *, cli_params: dict | None = None, seed: int 
         Parameters from the command line: used for images outside any set and where a
         ``set.toml`` is silent.
     seed : int, optional
-        Base seed; task ``i`` gets ``spawn_seeds(seed, n)[i]``.
+        Base seed; each image gets :func:`image_seed` of it and its path.
     figure : bool
         Whether tasks draw ``overlay.png``.
 
@@ -295,9 +395,11 @@ def plan_batch(input_dir, out_dir, *, cli_params: dict | None = None, seed: int 
     Raises
     ------
     ConfigError
-        ``input_dir`` is not a folder, or holds no image.
+        ``input_dir`` is not a folder, or holds no image; two set folders declare one
+        ``name`` with different parameters (:func:`check_set_names`).
     """
-    root = Path(input_dir)
+    given_root = Path(input_dir)
+    root = given_root
     if not root.is_dir():
         raise ConfigError("not a folder (batch reads a folder of scans; analyze reads one "
                           "scan)" if root.exists() else "input folder does not exist", root)
@@ -323,43 +425,45 @@ def plan_batch(input_dir, out_dir, *, cli_params: dict | None = None, seed: int 
             toml = cand / SET_FILE
             if toml.is_file():
                 try:
-                    sets[key] = load_set_config(toml, defaults=defaults, given=given)
+                    sets[key] = load_set_config(toml, defaults=defaults, given=given,
+                                                root=root)
                 except FoldstatError as exc:
-                    sets[key] = failed_set(toml, exc.one_line())
+                    sets[key] = failed_set(toml, exc.one_line(), root=root)
                 return sets[key]
             if cand == root:
                 break
         return default_set
 
-    seeds = spawn_seeds(seed, len(images))
-
     tasks = []
-    for img, task_seed in zip(images, seeds):
+    for img in images:
         cfg = set_of(img.parent)
         rel = img.relative_to(root).as_posix()
         out_rel = f"{_set_folder(cfg.name)}/{_safe_component(img.stem)}"
         params = {} if cfg.error else _params_in_set(cfg, img)
         tasks.append(ImageTask(image=str(img), rel=rel, set_name=cfg.name, out_dir="",
-                               out_rel=out_rel, params=params, seed=task_seed,
-                               figure=figure, error=cfg.error or _broken_link(img)))
-    _unique_out_rels(tasks)
+                               out_rel=out_rel, given=str(given_root / rel), params=params,
+                               seed=image_seed(seed, rel), figure=figure,
+                               error=cfg.error or _broken_link(img)))
+    # the scans outside any set first: a set file taking their name is the one named
+    check_set_names(([default_set] if any(t.set_name == DEFAULT_SET_NAME and not t.error
+                                          for t in tasks) else []) + [*sets.values()], root)
+    _unique_out_rels(tasks, recorded_outputs(out))
     for t in tasks:
         t.out_dir = str(out / t.out_rel)
         if t.error is None:
             try:
-                resolved = AnalysisParams.from_mapping(t.params, path=t.image).to_dict()
+                AnalysisParams.from_mapping(t.params, path=t.image)
             except FoldstatError as exc:
                 t.error = exc.one_line()
                 continue
             try:
-                image_sha = _sha256(t.image)
+                t.image_sha = _sha256(t.image)
             except OSError as exc:
                 t.error = ImageError(f"cannot read ({exc.strerror or type(exc).__name__})",
                                      t.image).one_line()
                 continue
-            # the analysis is deterministic: the seed is recorded, not hashed, so adding
-            # images (which shifts the spawned seeds) does not redo those already complete
-            t.params_hash = params_hash(resolved, image_sha)
+            # the analysis draws no random numbers: the seed is recorded, not hashed
+            t.params_hash = params_hash(t.params, t.image_sha)
     default_set.warnings.extend(_unused_calibrations(tasks))
     default_set.warnings.extend(
         f"{d}: a symbolic link to a folder, not searched: run a batch on the folder it "
@@ -370,6 +474,64 @@ def plan_batch(input_dir, out_dir, *, cli_params: dict | None = None, seed: int 
                                    for t in tasks):
         sets.setdefault("<no set.toml>", default_set)
     return tasks, sets
+
+
+def check_set_names(sets, root) -> None:
+    """Refuse two sets of one name whose parameters differ.
+
+    A set is named by its folder's path unless its ``set.toml`` gives a ``name``; two folders
+    giving one name are one set when their effective parameters (:func:`effective_params`)
+    are the same, a set split over several folders. When they differ, their scans would be
+    pooled as one set although they were not analysed alike.
+
+    Parameters
+    ----------
+    sets : iterable of SetConfig
+        The sets of the batch (those that failed to load are left out).
+    root : Path
+        The input folder: named when the scans outside any set (set "default") are the
+        ones that clash.
+
+    Raises
+    ------
+    ConfigError
+        Naming the second ``set.toml`` of the name, the first and what differs.
+    """
+    first: dict[str, tuple[SetConfig, dict]] = {}
+    for cfg in sets:
+        if cfg.error:
+            continue
+        try:
+            eff = effective_params(cfg.params)
+        except FoldstatError:
+            continue  # its scans fail, each with the reason
+        if cfg.name not in first:
+            first[cfg.name] = (cfg, eff)
+            continue
+        other, eff0 = first[cfg.name]
+        differ = [k for k in dict.fromkeys([*eff0, *eff]) if eff0.get(k) != eff.get(k)]
+        if not differ:
+            continue
+        # the values the set files give, before those derived from them (s_min from h)
+        given = [k for k in differ if other.params.get(k) != cfg.params.get(k)]
+        first_set = ("the scans outside any set" if other.source is None
+                     else str(other.source))
+        raise ConfigError(f"set name {cfg.name!r} is also that of {first_set}, whose "
+                          f"parameters differ ({', '.join(given or differ)}): give each set "
+                          "its own name (sets are never pooled)",
+                          cfg.source if cfg.source is not None else root)
+
+
+def recorded_outputs(out_dir) -> dict[str, str]:
+    """Image (relative path) -> output folder, as the ``index.csv`` of an earlier batch in
+    ``out_dir`` records them (empty when there is none, or it cannot be read: the folders
+    are then named afresh)."""
+    try:
+        index = pd.read_csv(Path(out_dir) / "index.csv", dtype=str, keep_default_na=False,
+                            usecols=["image", "output"])
+    except (OSError, ValueError):
+        return {}
+    return {i: o for i, o in zip(index["image"], index["output"]) if i and o}
 
 
 def _params_in_set(cfg: SetConfig, image: Path) -> dict:
@@ -410,9 +572,14 @@ def _unused_calibrations(tasks) -> list[str]:
 def _row(task: ImageTask, status: str, summary: dict | None = None, reason: str = "",
          wall_s: float = math.nan) -> dict:
     summary = summary or {}
-    row = {"image": task.rel, "set": task.set_name, "status": status, "output": task.out_rel}
+    # a failed image has no output folder (an earlier one, if any, is not its result)
+    row = {"image": task.rel, "set": task.set_name, "status": status,
+           "output": "" if status == "failed" else task.out_rel}
+    hole = summary.get("hole")
+    numbers = {**summary, "hole_radius_mm": hole.get("radius_mm") if isinstance(hole, dict)
+               else None}
     for k in SUMMARY_NUMBERS:
-        v = summary.get(k)
+        v = numbers.get(k)
         row[k] = math.nan if v is None else v
     quality = summary.get("quality") or {}
     row.update(quality=";".join(quality.get("codes", [])), wall_s=wall_s, seed=task.seed,
@@ -466,7 +633,8 @@ def process_image(task: ImageTask) -> dict:
             # the flags are in the summary; the driver prints them once per image
             result = analyze(task.image, params, warn=False)
         info = {"params_hash": task.params_hash, "image": task.rel, "set": task.set_name,
-                "seed": task.seed, "params": task.params, "version": __version__}
+                "seed": task.seed, "params": task.params, "version": __version__,
+                "inputs": input_record(task)}
         if isinstance(getattr(result, "summary", None), dict):
             result.summary["batch"] = dict(info)
         staging = staging_folder(final)
@@ -487,6 +655,34 @@ def process_image(task: ImageTask) -> dict:
     finally:
         if staging is not None:
             shutil.rmtree(staging, ignore_errors=True)
+
+
+def input_record(task: ImageTask) -> dict:
+    """What an image's results were computed from: the scan and the calibration file, each
+    by its path as given, its path resolved (absolute, links followed) and its SHA-256, and
+    the calibration's widths (a few rows).
+
+    Parameters
+    ----------
+    task : ImageTask
+
+    Returns
+    -------
+    dict
+        ``{"image": {...}, "calibration": {...} or None}``.
+    """
+    image = {"path": task.given or task.image, "resolved": os.path.realpath(task.image),
+             "sha256": task.image_sha or _sha256(task.image)}
+    cal = task.params.get("calibration")
+    calibration = None
+    if isinstance(cal, str) and cal:
+        calibration = {"path": cal, "resolved": os.path.realpath(cal), "sha256": _sha256(cal)}
+        try:
+            widths = pd.read_csv(cal)
+            calibration["widths"] = {c: widths[c].tolist() for c in ("n_layers", "width_mm")}
+        except (OSError, ValueError, KeyError):
+            calibration["widths"] = None  # checked when the set was read; changed since
+    return {"image": image, "calibration": calibration}
 
 
 def _recorded_info(task: ImageTask) -> dict | None:
@@ -575,14 +771,71 @@ def changed_inputs(task: ImageTask) -> list[str]:
     return changed or ["image or calibration file content"]
 
 
+def redo_reason(task: ImageTask) -> str | None:
+    """Why an image whose output folder records an analysis is analysed again, or None.
+
+    Parameters
+    ----------
+    task : ImageTask
+
+    Returns
+    -------
+    str or None
+        What differs (:func:`changed_inputs`), else what the folder lacks (a table missing
+        or unreadable, ``overlay.png`` when figures are wanted); None when the folder records
+        no analysis (a new scan) or is complete with the task's parameters hash.
+    """
+    if task.error or _recorded_info(task) is None:
+        return None
+    changed = changed_inputs(task)
+    if changed:
+        params = [c for c in changed if c not in ("package version",
+                                                  "image or calibration file content")]
+        why = []
+        if params:
+            why.append(f"its parameters differ from the recorded ones ({', '.join(params)})")
+        if "package version" in changed:
+            why.append("another package version analysed it")
+        if "image or calibration file content" in changed:
+            why.append("its recorded parameters hash differs (the image or calibration file "
+                       "changed)")
+        return "; ".join(why)
+    final = Path(task.out_dir)
+    lost = [f"{name}.csv" for name in schema.TABLES
+            if not _table_readable(final / f"{name}.csv", name)]
+    if lost:
+        return (f"{', '.join(lost)} in {final} {'is' if len(lost) == 1 else 'are'} missing or "
+                "unreadable")
+    if task.figure and not (final / "overlay.png").is_file():
+        return f"overlay.png in {final} is missing"
+    return None
+
+
+def stale_outputs(out_dir, tasks) -> list[str]:
+    """Output folders under ``out_dir`` (holding a ``summary.json``) that no task writes: left
+    by a scan since moved, renamed or deleted, or a set renamed. Posix paths relative to
+    ``out_dir``, sorted; hidden folders (staging) are not counted."""
+    out = Path(out_dir)
+    if not out.is_dir():
+        return []
+    mine = {t.out_rel.lower() for t in tasks}
+    found = []
+    for summary in out.rglob("summary.json"):
+        rel = summary.parent.relative_to(out)
+        if rel.parts and not any(p.startswith(".") for p in rel.parts) \
+                and rel.as_posix().lower() not in mine:
+            found.append(rel.as_posix())
+    return sorted(found)
+
+
 # --------------------------------------------------------------------------- driver
 
 
 class BatchWarning(QualityWarning):
     """A doubt about the batch as a whole, raised before its images are analysed: a set's
     ``set.toml`` or ``calibration.csv`` values that are not used, a linked folder not
-    searched, images analysed again because their parameters changed (the command line
-    prints each as a ``warning:`` line)."""
+    searched, an image analysed again over a recorded result (and why), output folders no
+    scan names any more (the command line prints each as a ``warning:`` line)."""
 
 
 
@@ -659,7 +912,8 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
     scheduler : str, optional
         Dask scheduler address; tasks run on that cluster.
     seed : int, optional
-        Base seed of the per-image seeds.
+        Base seed of the per-image seeds (:func:`image_seed`); recorded only, the analysis
+        drawing no random numbers.
     figure : bool
         Draw ``overlay.png`` for each image.
     cli_params : dict, optional
@@ -693,8 +947,10 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
     tasks, sets = plan_batch(input_dir, out, cli_params=cli_params, seed=seed, figure=figure)
     check_out_dir(input_dir, out)
 
+    stale = stale_outputs(out, tasks)
+
     rows: dict[str, dict] = {}
-    todo, redone = [], {}
+    todo, redone = [], []
     # local worker processes share one numba disk cache: on an empty one, the first to
     # compile does so for all, the output folder being their lock (a cluster's workers do not
     # share this disk, and threads must not wait inside numba's compiler)
@@ -709,16 +965,16 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
             rows[t.rel] = done
             continue
         todo.append(replace(t, compile_lock=lock))
-        if not force:
-            for what in changed_inputs(t):
-                redone.setdefault(what, set()).add(t.rel)
+        why = None if force else redo_reason(t)
+        if why:
+            redone.append((t.given or t.image, why))
 
     # the executor before any write: a scheduler that cannot be reached is refused with
     # nothing left behind (an empty batch would read as a finished one)
     pool = ExitStack()
     ex = pool.enter_context(get_executor(workers, scheduler))
     try:
-        meta = _start(out, input_dir, tasks, sets, redone, {
+        meta = _start(out, input_dir, tasks, sets, redone, stale, {
             "workers": workers, "scheduler": scheduler, "seed": seed, "figure": figure,
             "force": force, "cli_params": cli_params or {}})
     except BaseException:
@@ -731,6 +987,7 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
     last_write = time.monotonic()
     fn = task_fn or process_image
     queue, suspects = deque(todo), deque()
+    interrupted = False
     try:
         while queue or suspects:
             if ex is None:  # the previous pool broke
@@ -779,6 +1036,11 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
                         _write_tables(out, rows, tasks)
                         last_write = time.monotonic()
             ex = None
+    except KeyboardInterrupt:
+        # an interrupt landing once every image is done stops nothing: the batch is complete
+        if len(rows) < len(tasks):
+            interrupted = True
+            raise
     finally:
         pool.close()  # the first pool, when no image was left to analyse
         bar.close()
@@ -787,12 +1049,13 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
         meta.update(finished=time.strftime("%Y-%m-%dT%H:%M:%S"),
                     elapsed_s=time.time() - t_start,
                     counts={k: int(counts.get(k, 0)) for k in ("ok", "skipped", "failed")},
-                    complete=len(index) == len(tasks))
+                    complete=len(index) == len(tasks), interrupted=interrupted)
         write_json(out / "batch.json", meta)
     return index
 
 
-def _start(out: Path, input_dir, tasks, sets, redone: dict, options: dict) -> dict:
+def _start(out: Path, input_dir, tasks, sets, redone: list, stale: list,
+           options: dict) -> dict:
     """Create ``out``, print the batch's warnings and write its ``batch.json``.
 
     Parameters
@@ -802,9 +1065,10 @@ def _start(out: Path, input_dir, tasks, sets, redone: dict, options: dict) -> di
     tasks : list of ImageTask
     sets : dict
         As returned by :func:`plan_batch`.
-    redone : dict
-        What differs from the recorded analysis (:func:`changed_inputs`) -> the images
-        concerned.
+    redone : list of (str, str)
+        The images analysed again over a recorded analysis, and why (:func:`redo_reason`).
+    stale : list of str
+        Output folders no scan writes (:func:`stale_outputs`).
     options : dict
         The options of :func:`run_batch` the record keeps (workers, scheduler, seed, figure,
         force, cli_params).
@@ -823,16 +1087,22 @@ def _start(out: Path, input_dir, tasks, sets, redone: dict, options: dict) -> di
                      "source": None if s.source is None else str(s.source),
                      "params": s.params, "overrides": s.overrides, "error": s.error,
                      "warnings": s.warnings} for k, s in sets.items()},
-        "n_images": len(tasks), "started": time.strftime("%Y-%m-%dT%H:%M:%S"),
+        "n_images": len(tasks), "stale_outputs": stale,
+        "started": time.strftime("%Y-%m-%dT%H:%M:%S"),
     }
     for s in sets.values():
         for w in s.warnings:
             warnings.warn(w, BatchWarning, stacklevel=3)
-    if redone:
-        n = len(set().union(*redone.values()))
-        warnings.warn(f"{out}: {n} image{'s' if n > 1 else ''} analysed again: "
-                      f"{'their' if n > 1 else 'its'} parameters differ from the recorded ones "
-                      f"({', '.join(redone)}); the earlier results are replaced", BatchWarning,
+    for image, why in redone:
+        warnings.warn(f"{image}: analysed again: {why}; its earlier results are replaced",
+                      BatchWarning, stacklevel=3)
+    if stale:
+        n = len(stale)
+        shown = ", ".join(stale[:5]) + (f" and {n - 5} more" if n > 5 else "")
+        they = "they are left as they are and stay" if n > 1 else "it is left as it is and stays"
+        warnings.warn(f"{out}: {n} output folder{'s' if n > 1 else ''} no longer match"
+                      f"{'' if n > 1 else 'es'} any scan: {shown} (a scan moved, renamed or "
+                      f"deleted, or a set renamed); {they} out of index.csv", BatchWarning,
                       stacklevel=3)
     write_json(out / "batch.json", meta)
     return meta
@@ -861,7 +1131,11 @@ def add_subparser(sub):
                    help="local worker processes (default: all cores; 1 runs inline)")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="Dask scheduler address, e.g. tcp://127.0.0.1:8786")
-    p.add_argument("--seed", type=int, default=0, help="base seed of the per-image seeds")
+    p.add_argument("--seed", type=int, default=0,
+                   help="base seed of the per-image seeds recorded in index.csv and "
+                        "summary.json (each from this seed and the scan's path in INPUT_DIR). "
+                        "The analysis draws no random numbers: its results do not depend on "
+                        "it")
     p.add_argument("--no-figure", action="store_true", help="skip overlay.png")
     p.add_argument("--force", action="store_true", help="redo images already complete")
     bar = p.add_mutually_exclusive_group()
@@ -918,4 +1192,6 @@ def run(args) -> int:
 
 
 __all__ = ["run_batch", "BatchWarning", "plan_batch", "process_image", "completed_row",
-           "changed_inputs", "check_out_dir", "find_images", "params_hash", "ImageTask", "add_subparser", "run"]
+           "changed_inputs", "redo_reason", "stale_outputs", "check_set_names",
+           "recorded_outputs", "effective_params", "image_seed", "input_record",
+           "check_out_dir", "find_images", "params_hash", "ImageTask", "add_subparser", "run"]

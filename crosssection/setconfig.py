@@ -15,6 +15,12 @@ folder with its own ``set.toml``) belongs to it. Example::
     [images."scan_03.png"]               # per-image overrides (path relative to the set folder)
     hole_radius_mm = 19.5
 
+``name`` is optional: a set is named by its folder's path under the batch's input folder
+(``eps8/day1``), which no other set has. Two folders may declare one ``name`` only when their
+parameters are the same: their scans are then one set (a set split over several folders);
+a batch refuses two folders of one name whose parameters differ, whose scans would
+otherwise be pooled as one set.
+
 Unknown keys are errors (a typo such as ``px_per_m`` would otherwise silently fall back to a
 default and bias every length of the set). Values are checked for type and sign; the calibration
 file must exist and hold the columns ``n_layers,width_mm``.
@@ -50,7 +56,8 @@ class SetConfig:
     Attributes
     ----------
     name : str
-        Output sub-folder name (``OUT_DIR/<name>/``).
+        Output sub-folder name (``OUT_DIR/<name>/``): the ``name`` of ``set.toml``, else the
+        set folder's path under the input folder (posix, possibly nested).
     folder : Path
         The folder holding ``set.toml`` (or the input root for images outside any set).
     params : dict
@@ -169,8 +176,45 @@ def check_params(params: dict, path=None, where: str = "", origin=None) -> dict:
             for k, v in params.items() if v is not None}
 
 
+def default_set_name(folder, root=None) -> str:
+    """The name of a set whose ``set.toml`` gives none: its folder's path under ``root``
+    (posix; unique among the sets of one input folder, unlike the folder's own name, which
+    two experiments' ``day1/`` folders share), or the folder's name when it is ``root`` or
+    ``root`` is not given.
+
+    Parameters
+    ----------
+    folder : str or Path
+        The set folder.
+    root : str or Path, optional
+        The input folder of the batch.
+
+    Returns
+    -------
+    str
+    """
+    folder = Path(folder)
+    if root is not None:
+        try:
+            rel = folder.relative_to(Path(root)).as_posix()
+        except ValueError:
+            rel = "."
+        if rel != ".":
+            return rel
+    return folder.name
+
+
+def _check_name(name, toml_path) -> str:
+    parts = name.split("/") if isinstance(name, str) else [name]
+    if not all(isinstance(p, str) and _SAFE_NAME.match(p) and p not in (".", "..")
+               for p in parts):
+        raise ConfigError(f"name must be a plain folder name (letters, digits, . _ + -), "
+                          f"got {name!r}", toml_path)
+    return name
+
+
 def load_set_config(toml_path, *, defaults: dict | None = None,
-                    given: dict | None = None) -> SetConfig:
+                    given: dict | None = None, root=None) -> SetConfig:
     """Read and validate a ``set.toml``.
 
     Parameters
@@ -182,6 +226,9 @@ def load_set_config(toml_path, *, defaults: dict | None = None,
     given : dict, optional
         The values given on the command line: one the set's file replaces is named in a
         warning.
+    root : str or Path, optional
+        The input folder of the batch: a set without ``name`` is named by its folder's path
+        under it (:func:`default_set_name`).
 
     Returns
     -------
@@ -196,10 +243,13 @@ def load_set_config(toml_path, *, defaults: dict | None = None,
     toml_path = Path(toml_path)
     data = read_toml(toml_path)
     folder = toml_path.parent
-    name = data.get("name", folder.name)
-    if not isinstance(name, str) or not _SAFE_NAME.match(name) or name in (".", ".."):
-        raise ConfigError(f"name must be a plain folder name (letters, digits, . _ + -), "
-                          f"got {name!r}", toml_path)
+    if "name" in data:
+        name = data["name"]
+        if not isinstance(name, str) or not _SAFE_NAME.match(name) or name in (".", ".."):
+            raise ConfigError(f"name must be a plain folder name (letters, digits, . _ + -), "
+                              f"got {name!r}", toml_path)
+    else:
+        name = _check_name(default_set_name(folder, root), toml_path)
     images = data.get("images", {})
     if not isinstance(images, dict) or any(not isinstance(v, dict) for v in images.values()):
         raise ConfigError("[images] must hold one table per image, e.g. "
@@ -228,14 +278,18 @@ def load_set_config(toml_path, *, defaults: dict | None = None,
                      source=toml_path, warnings=warnings)
 
 
-def failed_set(toml_path, error: str) -> SetConfig:
-    """A placeholder set whose images all fail with ``error`` (named after its folder)."""
+def failed_set(toml_path, error: str, root=None) -> SetConfig:
+    """A placeholder set whose images all fail with ``error`` (named after its folder,
+    :func:`default_set_name`)."""
     toml_path = Path(toml_path)
-    name = toml_path.parent.name
-    if not _SAFE_NAME.match(name or ""):
+    name = default_set_name(toml_path.parent, root)
+    try:
+        _check_name(name, toml_path)
+    except ConfigError:
         name = "invalid_set"
     return SetConfig(name=name, folder=toml_path.parent, source=toml_path, error=error)
 
 
-__all__ = ["SetConfig", "load_set_config", "check_params", "check_calibration", "failed_set",
+__all__ = ["SetConfig", "load_set_config", "default_set_name", "check_params",
+           "check_calibration", "failed_set",
            "SET_FILE", "DEFAULT_PARAMS", "DEFAULT_SET_NAME", "PARAM_KEYS", "ALLOWED_KEYS"]

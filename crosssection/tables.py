@@ -20,6 +20,7 @@ import numpy as np
 import pandas as pd
 
 from crosssection.core import schema
+from crosssection.core.errors import ParameterError
 from crosssection.linsys.equations import candidate_partitions, pack_row
 from crosssection.stages import branches as br
 
@@ -329,8 +330,34 @@ def network_graph(junctions: pd.DataFrame, stacks: pd.DataFrame,
         closed loop without junction is a self-loop on a node ``"loop<stack_id>"``
         (``kind="loop"``). Each stack is one edge, keyed by its ``stack_id``, with the stack
         table's columns as attributes (two stacks between the same junctions are two edges).
+
+    Raises
+    ------
+    ParameterError
+        Naming the table, the column and the row: a column missing, an id that is blank or
+        not a whole number, a ``junction_id`` or ``stack_id`` given twice, a stack end at a
+        junction the junction table lacks, a branch of a stack the stack table lacks.
     """
     import networkx as nx
+
+    _whole_ids(junctions, "junctions", ["junction_id"], unique="junction_id")
+    _whole_ids(stacks, "stacks", ["stack_id", "junction_a", "junction_b"], unique="stack_id")
+    known = set(junctions["junction_id"].astype(np.int64).tolist())
+    for col in ("junction_a", "junction_b"):
+        ids = stacks[col].astype(np.int64).to_numpy()
+        bad = np.flatnonzero((ids >= 0) & ~np.isin(ids, list(known)))
+        if len(bad):
+            raise ParameterError(f"column {col!r}, row {_row_label(bad[0])}: junction "
+                                 f"{ids[bad[0]]} is not in the junctions table", "stacks table")
+    if branches is not None:
+        _whole_ids(branches, "branches", ["stack_id"])
+        if "energy" not in branches.columns:
+            raise ParameterError("lacks the column 'energy'", "branches table")
+        sids = branches["stack_id"].astype(np.int64).to_numpy()
+        bad = np.flatnonzero(~np.isin(sids, stacks["stack_id"].astype(np.int64).to_numpy()))
+        if len(bad):
+            raise ParameterError(f"column 'stack_id', row {_row_label(bad[0])}: stack "
+                                 f"{sids[bad[0]]} is not in the stacks table", "branches table")
 
     graph = nx.MultiGraph()
     for row in junctions.to_dict("records"):
@@ -354,3 +381,36 @@ def network_graph(junctions: pd.DataFrame, stacks: pd.DataFrame,
             attrs["energy"] = float(energy.get(sid, 0.0))
         graph.add_edge(u, v, key=sid, **attrs)
     return graph
+
+
+def _row_label(i: int) -> str:
+    """Row ``i`` (0-based position) of a table as a user finds it: its number among the
+    data rows of the CSV, counted from 1."""
+    return str(int(i) + 1)
+
+
+def _whole_ids(table: pd.DataFrame, name: str, columns, unique: str | None = None) -> None:
+    """Check that ``table`` (called ``name`` in messages) holds ``columns``, each a whole
+    number in every row, and that ``unique`` repeats no value.
+
+    Raises
+    ------
+    ParameterError
+        Naming the table, the column and the (1-based) data row.
+    """
+    where = f"{name} table"
+    for col in columns:
+        if col not in table.columns:
+            raise ParameterError(f"lacks the column {col!r} (it has: "
+                                 f"{', '.join(map(str, table.columns)) or 'none'})", where)
+        values = pd.to_numeric(table[col], errors="coerce").to_numpy(float)
+        bad = np.flatnonzero(~np.isfinite(values) | (values != np.round(values)))
+        if len(bad):
+            raise ParameterError(f"column {col!r}, row {_row_label(bad[0])}: "
+                                 f"{table[col].iloc[bad[0]]!r} is not a whole number", where)
+    if unique is not None:
+        ids = table[unique].astype(np.int64)
+        dup = np.flatnonzero(ids.duplicated().to_numpy())
+        if len(dup):
+            raise ParameterError(f"column {unique!r}, row {_row_label(dup[0])}: "
+                                 f"{int(ids.iloc[dup[0]])} is given twice", where)

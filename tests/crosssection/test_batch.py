@@ -66,6 +66,21 @@ def test_set_toml_errors_are_clear(tmp_path, text, word):
     assert word in msg and "set.toml" in msg and "\n" not in msg
 
 
+def test_a_set_without_name_is_named_by_its_path_in_the_input(tmp_path):
+    folder = tmp_path / "eps8" / "day1"
+    folder.mkdir(parents=True)
+    (folder / "set.toml").write_text("thickness_mm = 0.1\n")
+    assert load_set_config(folder / "set.toml", root=tmp_path).name == "eps8/day1"
+    assert load_set_config(folder / "set.toml").name == "day1"  # no input folder: its own
+    (tmp_path / "set.toml").write_text("")
+    assert load_set_config(tmp_path / "set.toml", root=tmp_path).name == tmp_path.name
+    bad = tmp_path / "my set"
+    bad.mkdir()
+    (bad / "set.toml").write_text("")
+    with pytest.raises(ConfigError, match="plain folder name"):
+        load_set_config(bad / "set.toml", root=tmp_path)
+
+
 def test_calibration_columns_checked(tmp_path):
     (tmp_path / "cal.csv").write_text("layers,w\n1,0.1\n")
     (tmp_path / "set.toml").write_text('calibration = "cal.csv"\n')
@@ -233,8 +248,10 @@ def test_resume_redoes_only_missing_images(tmp_path):
     said = [str(w.message) for w in caught]
     # the set's own scale replaces the command line's; only the image outside it is redone
     assert any("which replaces --px-per-mm 40.0" in m for m in said)
-    assert any("1 image analysed again: its parameters differ from the recorded ones "
-               "(px_per_mm)" in m for m in said)
+    again = [m for m in said if "analysed again" in m]
+    assert again == [f"{(inp / 'loose.png').resolve()}: analysed again: its parameters "
+                     "differ from the recorded ones (px_per_mm); its earlier results are "
+                     "replaced"]
     st3 = dict(zip(third["image"], third["status"]))
     assert st3["loose.png"] == "ok" and st3["setA/s0.png"] == "skipped"
 

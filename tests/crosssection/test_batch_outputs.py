@@ -20,7 +20,7 @@ import pytest
 
 from crosssection import batch as B
 from crosssection.cli import main
-from crosssection.core.errors import ParameterError
+from crosssection.core.errors import ConfigError, ParameterError
 from crosssection.testing import drawn_scan, write_png
 
 SCALE = ["--px-per-mm", "50", "--thickness-mm", "0.1"]
@@ -194,9 +194,11 @@ def test_a_rerun_with_other_options_says_which_images_it_redoes(tmp_path, capsys
     # another value of an option: the images it concerns are redone, and the batch says so
     status, err = _batch(capsys, inp, out, "--l-min-mm", "2")
     assert status == 0
+    # one line per scan, naming it and what differs
     again = [line for line in err if "analysed again" in line]
-    assert len(again) == 1 and again[0].startswith(f"warning: {out}: 2 images analysed again")
-    assert "(l_min_mm)" in again[0]
+    assert again == [f"warning: {inp / name}: analysed again: its parameters differ from the "
+                     "recorded ones (l_min_mm); its earlier results are replaced"
+                     for name in ("s0.png", "s1.png")]
     index = pd.read_csv(out / "index.csv")
     assert dict(zip(index["image"], index["status"])) == {
         "fixed/s0.png": "skipped", "s0.png": "ok", "s1.png": "ok"}
@@ -238,6 +240,10 @@ def test_a_rerun_redoes_a_scan_whose_table_is_corrupt(tmp_path, capsys):
     (out / "default" / "s1" / "stacks.csv").write_text("garbage\n")
     status, err = _batch(capsys, inp, out)
     assert status == 0, err
+    # the scan redone is named, with the table that made it so
+    assert _notices(err) == [f"warning: {inp / 's1.png'}: analysed again: stacks.csv in "
+                             f"{(out / 'default' / 's1').resolve()} is missing or unreadable; "
+                             "its earlier results are replaced"]
     index = pd.read_csv(out / "index.csv")
     assert dict(zip(index["image"], index["status"])) == {"s0.png": "skipped", "s1.png": "ok"}
     assert (out / "default" / "s1" / "stacks.csv").read_text() == good
@@ -263,3 +269,210 @@ def test_progress_and_quiet_are_not_given_together(tmp_path):
     assert run.returncode == 2 and len(run.stderr.splitlines()) == 1
     assert "--quiet: not allowed with argument --progress" in run.stderr
     assert not (tmp_path / "out").exists()
+
+
+# ----------------------------------------------------------------------------- set names
+
+
+def _set(folder: Path, text: str, *scans: str) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "set.toml").write_text(text)
+    for name in scans:
+        (folder / name).write_bytes(b"\x89PNG")
+    return folder
+
+
+def test_set_folders_of_one_name_in_two_experiments_stay_two_sets(tmp_path):
+    inp = tmp_path / "in"
+    _set(inp / "eps8" / "day1", "thickness_mm = 0.1\n", "scan_01.png")
+    _set(inp / "eps14" / "day1", "thickness_mm = 0.1\n", "scan_01.png")
+    tasks, sets = B.plan_batch(inp, tmp_path / "out")
+    by = {t.rel: t for t in tasks}
+    assert by["eps8/day1/scan_01.png"].set_name == "eps8/day1"
+    assert by["eps14/day1/scan_01.png"].set_name == "eps14/day1"
+    assert by["eps8/day1/scan_01.png"].out_rel == "eps8/day1/scan_01"
+    assert by["eps14/day1/scan_01.png"].out_rel == "eps14/day1/scan_01"
+
+
+def test_two_sets_naming_themselves_alike_with_other_parameters_are_refused(tmp_path, capsys):
+    inp, out = tmp_path / "in", tmp_path / "out"
+    _set(inp / "s", 'name = "bad"\nthickness_mm = 0.1\n', "a.png")
+    _set(inp / "t", 'name = "bad"\nthickness_mm = 0.08\n', "a.png")
+    status, err = _batch(capsys, inp, out)
+    assert status == 2 and len(err) == 1
+    assert err[0].startswith(f"error: {(inp / 't' / 'set.toml').resolve()}: set name 'bad'")
+    assert str((inp / "s" / "set.toml").resolve()) in err[0] and "(thickness_mm)" in err[0]
+    assert not out.exists()  # refused before anything is written
+
+
+def test_two_sets_naming_themselves_alike_with_one_set_of_parameters_are_one_set(tmp_path):
+    inp = tmp_path / "in"
+    _set(inp / "s", 'name = "run"\nthickness_mm = 0.1\n', "a.png")
+    _set(inp / "t", 'name = "run"\nthickness_mm = 0.1\n', "a.png", "b.png")
+    tasks, _ = B.plan_batch(inp, tmp_path / "out")
+    assert {t.set_name for t in tasks} == {"run"}
+    outs = {t.rel: t.out_rel for t in tasks}
+    assert len(set(outs.values())) == 3 and outs["t/b.png"] == "run/b"
+
+
+def test_a_set_named_default_with_other_parameters_than_the_loose_scans_is_refused(tmp_path):
+    inp = tmp_path / "in"
+    (inp / "loose.png").parent.mkdir(parents=True)
+    (inp / "loose.png").write_bytes(b"\x89PNG")
+    _set(inp / "x", 'name = "default"\nthickness_mm = 0.2\n', "a.png")
+    with pytest.raises(ConfigError, match=r"x/set.toml: set name .default. is also that of "
+                       "the scans outside any set"):
+        B.plan_batch(inp, tmp_path / "out", cli_params={"thickness_mm": 0.1})
+
+
+# ----------------------------------------------------------------------------- folder names
+
+
+def _summary_only(task):
+    """A stand-in for the analysis that leaves a recorded output folder."""
+    folder = Path(task.out_dir)
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "summary.json").write_text(json.dumps({"batch": {
+        "params_hash": task.params_hash, "params": task.params}}))
+    return B._row(task, "ok")
+
+
+def test_a_scan_keeps_its_folder_when_one_of_the_same_stem_appears(tmp_path):
+    inp, out = tmp_path / "in", tmp_path / "out"
+    _set(inp / "epsB", 'name = "B"\n', "scan_03.png")
+    B.run_batch(inp, out, workers=1, progress=False, figure=False, task_fn=_quick)
+    (inp / "epsB" / "day2").mkdir()
+    (inp / "epsB" / "day2" / "scan_03.jpeg").write_bytes(b"\xff\xd8")
+    tasks, _ = B.plan_batch(inp, out, figure=False)
+    outs = {t.rel: t.out_rel for t in tasks}
+    assert outs == {"epsB/scan_03.png": "B/scan_03", "epsB/day2/scan_03.jpeg":
+                    "B/epsB__day2__scan_03_jpeg"}
+    # a fresh batch names both by their paths
+    fresh = {t.rel: t.out_rel for t in B.plan_batch(inp, tmp_path / "new", figure=False)[0]}
+    assert fresh["epsB/scan_03.png"] == "B/epsB__scan_03_png"
+
+
+def test_output_folders_no_scan_names_any_more_are_named_once(tmp_path, capsys):
+    inp, out = tmp_path / "in", tmp_path / "out"
+    _set(inp / "setA", 'name = "alpha"\n', "a.png", "b.png")
+    B.run_batch(inp, out, workers=1, progress=False, figure=False, task_fn=_summary_only)
+    (inp / "setA" / "set.toml").write_text('name = "beta"\n')  # the set renamed
+    with pytest.warns(B.BatchWarning) as caught:
+        B.run_batch(inp, out, workers=1, progress=False, figure=False, task_fn=_summary_only)
+    said = [str(w.message) for w in caught]
+    assert len(said) == 1 and said[0].startswith(
+        f"{out}: 2 output folders no longer match any scan: alpha/a, alpha/b (")
+    assert (out / "alpha" / "a" / "summary.json").is_file()  # left where they are
+    (inp / "setA" / "b.png").unlink()  # a scan deleted
+    with pytest.warns(B.BatchWarning, match="3 output folders no longer match any scan: "
+                      "alpha/a, alpha/b, beta/b"):
+        B.run_batch(inp, out, workers=1, progress=False, figure=False, task_fn=_summary_only,
+                    force=True)
+    assert json.loads((out / "batch.json").read_text())["stale_outputs"] == [
+        "alpha/a", "alpha/b", "beta/b"]
+
+
+# ----------------------------------------------------------------------------- index and records
+
+
+def test_a_failed_scan_has_no_output_folder_in_the_index(tmp_path):
+    inp, out = tmp_path / "in", tmp_path / "out"
+    _scans(inp)
+    (inp / "corrupt.png").write_bytes(b"\x89PNG garbage")
+    index = B.run_batch(inp, out, workers=1, progress=False, figure=False,
+                        cli_params={"px_per_mm": 50, "thickness_mm": 0.1})
+    rows = pd.read_csv(out / "index.csv", keep_default_na=False).set_index("image")
+    assert rows.loc["corrupt.png", "status"] == "failed" and rows.loc["corrupt.png", "output"] == ""
+    assert rows.loc["s0.png", "output"] == "default/s0" and (out / "default" / "s0").is_dir()
+    assert len(index) == 2
+    # each row says how its epsilon is made: L used / (2 pi R)
+    import math
+
+    row = rows.loc["s0.png"]
+    assert {"rod_length_mm", "rod_length_used_mm", "hole_radius_mm"} <= set(rows.columns)
+    assert float(row["epsilon"]) == pytest.approx(
+        float(row["rod_length_used_mm"]) / (2 * math.pi * float(row["hole_radius_mm"])))
+    # the summary names its inputs: the scan's path as given and resolved, and its SHA-256
+    import hashlib
+
+    inputs = json.loads((out / "default" / "s0" / "summary.json").read_text())["batch"]["inputs"]
+    assert inputs["image"]["path"] == str(inp / "s0.png")
+    assert inputs["image"]["resolved"] == str((inp / "s0.png").resolve())
+    assert inputs["image"]["sha256"] == hashlib.sha256((inp / "s0.png").read_bytes()).hexdigest()
+    assert inputs["calibration"] is None
+
+
+def test_the_summary_records_the_calibration_it_used(tmp_path):
+    import hashlib
+
+    inp = tmp_path / "in"
+    folder = _set(inp / "setA", 'calibration = "cal.csv"\n', "a.png")
+    (folder / "cal.csv").write_text("n_layers,width_mm\n1,0.1\n2,0.25\n")
+    (task,), _ = B.plan_batch(inp, tmp_path / "out")
+    cal = B.input_record(task)["calibration"]
+    assert cal["sha256"] == hashlib.sha256((folder / "cal.csv").read_bytes()).hexdigest()
+    assert cal["widths"] == {"n_layers": [1, 2], "width_mm": [0.1, 0.25]}
+    assert cal["resolved"] == str((folder / "cal.csv").resolve())
+
+
+def test_the_parameters_hash_follows_the_effective_parameters(tmp_path):
+    inp = tmp_path / "in"
+    _scans(inp)
+    plain = B.plan_batch(inp, tmp_path / "out", cli_params={"thickness_mm": 0.1})[0][0]
+    # (10 h)^2 and 3 h are the defaults of s_min and the tangent length: one analysis
+    spelled = B.plan_batch(inp, tmp_path / "out", cli_params={
+        "thickness_mm": 0.1, "s_min_mm2": 1.0, "tangent_mm": 0.3, "px_per_mm": 50.0})[0][0]
+    assert spelled.params_hash == plain.params_hash
+    other = B.plan_batch(inp, tmp_path / "out", cli_params={"thickness_mm": 0.1,
+                                                            "s_min_mm2": 2.0})[0][0]
+    assert other.params_hash != plain.params_hash
+    # one calibration, wherever its file lies
+    for name in ("a", "b"):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "cal.csv").write_text("n_layers,width_mm\n1,0.1\n")
+    h = [B.plan_batch(inp, tmp_path / "out", cli_params={
+        "calibration": str(tmp_path / name / "cal.csv")})[0][0].params_hash for name in "ab"]
+    assert h[0] == h[1] != plain.params_hash
+
+
+def test_an_image_seed_follows_its_path_not_its_place_in_the_list(tmp_path, capsys):
+    inp = tmp_path / "in"
+    _set(inp / "x", "", "m.png")
+    before = {t.rel: t.seed for t in B.plan_batch(inp, tmp_path / "out")[0]}
+    (inp / "x" / "a.png").write_bytes(b"\x89PNG")  # sorts first
+    after = {t.rel: t.seed for t in B.plan_batch(inp, tmp_path / "out")[0]}
+    assert after["x/m.png"] == before["x/m.png"] != after["x/a.png"]
+    assert B.plan_batch(inp, tmp_path / "out", seed=1)[0][0].seed != after["x/a.png"]
+    # --help says the analysis does not use it
+    with pytest.raises(SystemExit):
+        main(["batch", "--help"])
+    assert "draws no random numbers" in " ".join(capsys.readouterr().out.split())
+
+
+# ----------------------------------------------------------------------------- interrupts
+
+
+@pytest.mark.parametrize("n_scans, complete", [(1, True), (3, False)])
+def test_an_interrupt_after_the_last_image_finishes_the_batch(tmp_path, monkeypatch, n_scans,
+                                                              complete):
+    inp, out = tmp_path / "in", tmp_path / "out"
+    _set(inp / "x", "", *[f"s{i}.png" for i in range(n_scans)])
+    real = B._write_tables
+    calls = {"n": 0}
+
+    def interrupted_once(*args):
+        calls["n"] += 1
+        if calls["n"] == 1:  # the interrupt lands after the first rows (two slots)
+            raise KeyboardInterrupt
+        return real(*args)
+
+    monkeypatch.setattr(B, "INDEX_EVERY_S", -1.0)
+    monkeypatch.setattr(B, "_write_tables", interrupted_once)
+    if complete:
+        index = B.run_batch(inp, out, workers=1, progress=False, task_fn=_quick)
+        assert (index["status"] == "ok").all()
+    else:
+        with pytest.raises(KeyboardInterrupt):
+            B.run_batch(inp, out, workers=1, progress=False, task_fn=_quick)
+    meta = json.loads((out / "batch.json").read_text())
+    assert meta["complete"] is complete and meta["interrupted"] is not complete
