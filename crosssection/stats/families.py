@@ -18,8 +18,8 @@ name                   parameters              density
 
 Every family is a stateless class (one instance each) carrying its parameter names, support,
 MLE (plain and truncated at per-observation detection limits ``c``), density, probability
-integral transform, sampler, degeneracy check and the number of parameters counted in
-AIC/BIC. Adding a family is adding one ``@register``-ed class.
+integral transform, sampler, parameter domain, degeneracy check and the number of parameters
+counted in AIC/BIC. Adding a family is adding one ``@register``-ed class.
 
 Bose-Einstein (paper, "Bose-Einstein condensation and annealing"): the form diverges like
 1/(beta x) at 0 and is not normalisable on (0, inf); it is normalised on the observed range
@@ -44,6 +44,11 @@ from scipy import optimize, special, stats
 FAMILIES: dict = {}
 FAR = 10.0  # "far outside the data": in standard deviations
 FAR_RANGES = 5.0  # ... or in ranges of the data
+#: Coefficient of variation (standard deviation over the magnitude of the mean) at or below
+#: which a sample counts as constant and a law as a spike. The shape families see the spread
+#: through cv^2 (ln <x> - <ln x> ~ cv^2 / 2), which rounding resolves only for cv^2 >> machine
+#: epsilon: at this cv the shape keeps about four digits, below it fits return noise or fail.
+SPREAD_RTOL = 1e-6
 
 
 def register(cls):
@@ -51,6 +56,23 @@ def register(cls):
     fam = cls()
     FAMILIES[fam.name] = fam
     return cls
+
+
+def no_spread(x) -> bool:
+    """Whether the observations ``x`` are constant: their coefficient of variation is at
+    most :data:`SPREAD_RTOL` (computed on ``x`` scaled to order one, see
+    :func:`binary_exponent`, so that the variance neither overflows nor underflows)."""
+    xs = np.ldexp(np.asarray(x, float), -binary_exponent(x))
+    return bool(np.std(xs) <= SPREAD_RTOL * abs(np.mean(xs)))
+
+
+def binary_exponent(x) -> int:
+    """The exponent e of the power of two 2^e just above the largest magnitude of ``x``
+    (0 when there is none, or it is 0 or not finite): ``np.ldexp(x, -e)`` is of order one
+    and exact, so a computation that squares the data neither overflows nor underflows and
+    returns the same digits once scaled back with ``np.ldexp(..., e)``."""
+    m = float(np.max(np.abs(x))) if np.size(x) else 0.0
+    return int(np.frexp(m)[1]) if np.isfinite(m) else 0
 
 
 # ------------------------------------------------------------------ special functions
@@ -189,8 +211,11 @@ def be_ppf(u, beta, lo, hi):
 def _trunc_nll(fam, theta, x, cu, cn):
     """Negative truncated log-likelihood; cuts given as unique values ``cu`` with counts ``cn``
     (images share one cut each, so this evaluates the survival a few times only)."""
-    with np.errstate(all="ignore"):
-        ll = np.sum(fam.logpdf_theta(theta, x)) - np.sum(cn * fam.logsf_theta(theta, cu))
+    try:
+        with np.errstate(all="ignore"):
+            ll = np.sum(fam.logpdf_theta(theta, x)) - np.sum(cn * fam.logsf_theta(theta, cu))
+    except OverflowError:  # the scalar incomplete Gamma of far-off parameters
+        return 1e300
     return -ll if np.isfinite(ll) else 1e300
 
 
@@ -269,8 +294,6 @@ class Family:
         Which of ``free_names`` are positive (optimised on a log scale).
     positive : bool
         Support in x > 0 (non-positive observations make the family inapplicable).
-    needs_spread : bool
-        Whether identical observations leave a parameter undetermined.
     normalisable_at_zero : bool
         Whether the law can be normalised down to x = 0, so that a detection limit of 0 is
         no limit (False: a cut must be > 0).
@@ -282,7 +305,6 @@ class Family:
     free_names: tuple = ()
     log_params: tuple = ()
     positive = True
-    needs_spread = True
     normalisable_at_zero = True
 
     def k(self, truncated: bool) -> int:
@@ -322,6 +344,28 @@ class Family:
         """Why a fit must not be reported as a law of the data ("" when it may)."""
         return ""
 
+    def positive_names(self) -> tuple:
+        """The parameters that must be > 0."""
+        return tuple(n for n, pos in zip(self.free_names, self.log_params) if pos)
+
+    def domain(self, params: dict) -> str:
+        """Why finite ``params`` lie outside the family's domain ("" when they do not).
+
+        Parameters
+        ----------
+        params : dict
+            Every parameter of the family (``param_names``), as floats.
+
+        Returns
+        -------
+        str
+            The reason, naming the parameter as ``params['name']``.
+        """
+        for k in self.positive_names():
+            if not params[k] > 0:
+                return f"params[{k!r}] must be > 0, got {params[k]:.4g}"
+        return ""
+
 
 class ParametricFamily(Family):
     """A family fitted by :func:`fit_truncated_numeric` above a detection limit."""
@@ -357,10 +401,40 @@ class ScipyFamily(ParametricFamily):
 
     rv = None
     known = {"loc": 0.0}
+    #: the parameter that sets the relative width of the law (None: the width is fixed)
+    width_name = None
+    #: whether the untruncated fit squares the data (a variance), which overflows or
+    #: underflows at extreme scales unless the data are scaled first
+    squares_data = False
 
     def frozen(self, params: dict):
         """The ``scipy.stats`` frozen distribution."""
         raise NotImplementedError
+
+    def std(self, params: dict) -> float:
+        """Standard deviation of the untruncated law, written so that it neither overflows
+        nor underflows where the law's scale does not (``scipy.stats`` squares the scale)."""
+        raise NotImplementedError
+
+    def cv(self, params: dict) -> float:
+        """Coefficient of variation (standard deviation over the magnitude of the mean) of
+        the untruncated law; inf for a mean of 0."""
+        raise NotImplementedError
+
+    def domain(self, params):
+        """Also out of the domain: a law narrower than :data:`SPREAD_RTOL` of its mean, a
+        spike no sample with a spread comes from and no refit resolves."""
+        why = super().domain(params)
+        if why or self.width_name is None:
+            return why
+        with np.errstate(all="ignore"):
+            cv = float(self.cv(params))
+        if not cv > SPREAD_RTOL:
+            k = self.width_name
+            return (f"params[{k!r}] = {params[k]:.4g} makes the law a spike: its standard "
+                    f"deviation is {cv:.3g} of its mean, at or below the {SPREAD_RTOL:g} "
+                    f"under which a sample counts as constant")
+        return ""
 
     def fit(self, x, c=None, theta0=None):
         if c is None:
@@ -398,11 +472,16 @@ class Exponential(ScipyFamily):
     param_names = ("mu",)
     free_names = ("mu",)
     log_params = (True,)
-    needs_spread = False
     rv = stats.expon
 
     def frozen(self, params):
         return stats.expon(scale=params["mu"])
+
+    def std(self, params):
+        return params["mu"]
+
+    def cv(self, params):
+        return 1.0
 
     def naive_theta(self, x):
         return (float(np.mean(x)),)
@@ -434,9 +513,16 @@ class Gamma(ScipyFamily):
     free_names = ("alpha", "chi")
     log_params = (True, True)
     rv = stats.gamma
+    width_name = "alpha"  # coefficient of variation 1/sqrt(alpha)
 
     def frozen(self, params):
         return stats.gamma(params["alpha"], scale=params["chi"])
+
+    def std(self, params):
+        return math.sqrt(params["alpha"]) * params["chi"]
+
+    def cv(self, params):
+        return 1.0 / math.sqrt(params["alpha"])
 
     def naive_theta(self, x):
         a, _, scale = stats.gamma.fit(x, floc=0)
@@ -485,9 +571,17 @@ class LogNormal(ScipyFamily):
     free_names = ("mu", "sigma")
     log_params = (False, True)
     rv = stats.lognorm
+    width_name = "sigma"
 
     def frozen(self, params):
         return stats.lognorm(params["sigma"], scale=np.exp(params["mu"]))
+
+    def std(self, params):
+        s2 = params["sigma"] ** 2
+        return float(np.exp(params["mu"] + 0.5 * s2 + 0.5 * np.log(np.expm1(s2))))
+
+    def cv(self, params):
+        return float(np.sqrt(np.expm1(params["sigma"] ** 2)))
 
     def naive_theta(self, x):
         s, _, scale = stats.lognorm.fit(x, floc=0)
@@ -539,13 +633,23 @@ class Gaussian(ScipyFamily):
     positive = False
     rv = stats.norm
     known = {}
+    width_name = "sigma"
+    squares_data = True
 
     def frozen(self, params):
         return stats.norm(params["mu"], params["sigma"])
 
+    def std(self, params):
+        return params["sigma"]
+
+    def cv(self, params):
+        return params["sigma"] / abs(params["mu"]) if params["mu"] else math.inf
+
     def naive_theta(self, x):
-        m, s = stats.norm.fit(x)
-        return (m, s)
+        # the variance squares the data (squares_data): fitted on x / 2^e, of order one
+        e = binary_exponent(x)
+        m, s = stats.norm.fit(np.ldexp(x, -e))
+        return (float(np.ldexp(m, e)), float(np.ldexp(s, e)))
 
     def logpdf_theta(self, theta, x):
         mu, sg = theta
@@ -610,6 +714,16 @@ class BoseEinstein(Family):
         return {"alpha": float(np.exp(-be_log_norm(beta, lo, hi))), "beta": beta,
                 "x_lo": lo, "x_hi": hi}
 
+    def positive_names(self):
+        return ("alpha", "beta", "x_lo", "x_hi")
+
+    def domain(self, params):
+        why = super().domain(params)
+        if not why and not params["x_lo"] < params["x_hi"]:
+            why = (f"params['x_lo'] must be below params['x_hi'] "
+                   f"({params['x_hi']:.4g}), got {params['x_lo']:.4g}")
+        return why
+
     def pdf(self, params, x):
         return np.exp(be_logpdf(np.asarray(x, float), params["beta"], params["x_lo"],
                                 params["x_hi"]))
@@ -667,6 +781,9 @@ class PowerLawCutoff(ParametricFamily):
 
     def second_start(self, z0, xs):
         return np.array([2.0, np.log(10.0 * np.max(xs))])
+
+    def positive_names(self):
+        return ("chi", "x_min")
 
     def _cuts(self, x, c):
         return np.full(np.shape(x), float(np.min(x))) if c is None else np.asarray(c, float)

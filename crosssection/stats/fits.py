@@ -14,8 +14,19 @@ different l_min/L).
 
 Degenerate fits: a fit whose parameters sit at a bound of their domain or far outside the data
 (a Gaussian whose mean lies hundreds of standard deviations below the cut, a Bose-Einstein law
-with beta x << 1 everywhere) describes no law of the data; it keeps its row, with the reason in
-``rejected``, but is never selected and carries no interval nor p-value.
+with beta x << 1 everywhere), or whose law is a spike the data cannot resolve (narrower than
+1/FAR of the data's spread; for counts, narrower than one count, so that any narrower law
+splitting its mass alike between two neighbouring counts fits as well), describes no law of
+the data; it keeps its row, with the reason in ``rejected``, but is never selected and carries
+no interval nor p-value. A numerical fit that fails (the data span hundreds of decades) is
+rejected so too.
+
+Zero spread: a sample whose standard deviation is at most ``SPREAD_RTOL`` (1e-6) of the
+magnitude of its mean is constant for every family (no law of a continuous variable puts all
+its mass at one point, and the shape parameters drown in rounding): each family keeps its row
+with ``ok`` False and the note "zero spread", and the functions that return bare numbers
+raise a ParameterError. A law as narrow (``Family.domain``) is rejected, and refused by
+:func:`goodness_of_fit`.
 
 Model selection: the min-BIC family among the non-degenerate fits, except that a family with
 fewer parameters whose BIC is within ``DELTA_BIC_SIMPLER`` = 2 of the minimum is preferred
@@ -60,7 +71,7 @@ from scipy import optimize, stats
 
 from crosssection.core.errors import ParameterError
 from crosssection.quality import QualityWarning
-from crosssection.stats.families import FAMILIES
+from crosssection.stats.families import FAMILIES, FAR, binary_exponent, no_spread
 
 DELTA_BIC_SIMPLER = 2.0
 PAPER_FAMILIES = ("exponential", "gamma", "lognormal", "gaussian", "bose_einstein")
@@ -79,6 +90,12 @@ N_SELECT_MIN = 50
 #: 2.5 % and 97.5 % ends are the extreme draws themselves or interpolate between them (one
 #: draw gives a zero-width interval that need not hold the estimate)
 N_BOOT_MIN = 40
+#: Standard deviation of one count (a uniform law over [k - 1/2, k + 1/2]): the width of a law
+#: fitted to counts that is narrower is not resolved by them
+COUNT_SD = 1.0 / np.sqrt(12.0)
+#: What a numerical fit raises when it fails on far-off data or parameters (scipy's
+#: ``FitDataError`` is a ValueError; ``math`` raises OverflowError)
+_FIT_ERRORS = (ValueError, FloatingPointError, RuntimeError, OverflowError, ZeroDivisionError)
 
 
 class SmallSampleWarning(QualityWarning):
@@ -419,9 +436,12 @@ def _gof_counts(x, fam, params, n_mc, rng) -> "GoodnessOfFit":
     for i in range(n_mc):
         # rounding a draw of the law truncated at 1/2 is a draw of the discretised law
         xs = np.round(fam.sample(params, x.size, cut, rng))
-        if not np.all(np.isfinite(xs)) or np.ptp(xs) <= 0:
+        if not np.all(np.isfinite(xs)) or no_spread(xs):
             continue
-        th, _ = _fit_counts(fam, xs, theta_hat)
+        try:
+            th, _ = _fit_counts(fam, xs, theta_hat)
+        except _FIT_ERRORS:
+            continue
         kb, cb = np.unique(xs, return_counts=True)
         null[i] = _g_statistic(count_pmf(fam.name, fam.params(th, xs), kb), kb, cb)
     null = null[np.isfinite(null)]
@@ -480,7 +500,7 @@ def _applicability(fam, x, c, k) -> str:
             return f"needs a truncation {bound} ({int(np.sum(low))} cuts are not)"
     if c is not None and np.any(x < c):
         raise ParameterError("observations below the truncation cut; drop them first")
-    if fam.needs_spread and np.ptp(x) <= 0:
+    if no_spread(x):
         return "zero spread"
     return ""
 
@@ -559,14 +579,24 @@ def fit_family(x, family: str, *, truncation=None, n_boot: int = N_BOOT, seed=0,
                          note=why, discrete=discrete)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        theta, ll = _fit_counts(fam, x) if discrete else fam.fit(x, c)
+        try:
+            theta, ll = _fit_counts(fam, x) if discrete else fam.fit(x, c)
+        except _FIT_ERRORS as exc:
+            return FitResult(family, {p: float("nan") for p in fam.param_names},
+                             float("nan"), float("nan"), float("nan"), n, k,
+                             truncated=truncated, discrete=discrete,
+                             rejected=f"the fit failed ({type(exc).__name__}: "
+                                      f"{' '.join(str(exc).split())})")
         params = fam.params(theta, x, c)
         res = FitResult(family, params, float(ll), float(2 * k - 2 * ll),
                         float(k * np.log(n) - 2 * ll), n, k, truncated=truncated,
                         discrete=discrete)
         if not all(np.isfinite(v) for v in params.values()):
             return replace(res, rejected="the fit did not converge (non-finite parameter)")
-        rejected = fam.degeneracy(params, x, c)
+        # a law outside the domain (a spike narrower than any sample with a spread) cannot
+        # be tested either
+        rejected = (fam.domain(params) or fam.degeneracy(params, x, c)
+                    or _spike(fam, params, x, discrete))
         if rejected:
             return replace(res, rejected=rejected)
         s_boot, s_gof = _seedseq(seed).spawn(2)
@@ -581,6 +611,52 @@ def fit_family(x, family: str, *, truncation=None, n_boot: int = N_BOOT, seed=0,
             g = goodness_of_fit(x, family, params, truncation=c, n_mc=n_mc, seed=s_gof)
     return replace(res, ci=ci, pvalue=g.pvalue, statistic=g.statistic, n_mc=g.n_mc,
                    boot=draws)
+
+
+def _spike(fam, params, x, discrete: bool) -> str:
+    """Why the fitted law is a spike the data cannot resolve ("" when it is not).
+
+    Only the families with a width parameter (``width_name``) can shrink to a spike. Fitted
+    to counts, a law narrower than one count (standard deviation below :data:`COUNT_SD`)
+    only places the boundary between two neighbouring counts: any narrower law splitting
+    its mass alike fits as well, so its width is undetermined (the likelihood climbs
+    towards width 0). Fitted to continuous values, a law narrower than 1/FAR of the
+    sample's standard deviation leaves most observations in its far tails.
+
+    Parameters
+    ----------
+    fam : Family
+    params : dict
+        The fitted parameters.
+    x : numpy.ndarray
+        The observations fitted.
+    discrete : bool
+        Whether ``x`` were fitted as counts.
+
+    Returns
+    -------
+    str
+    """
+    name = getattr(fam, "width_name", None)
+    if name is None:
+        return ""
+    with np.errstate(all="ignore"):
+        sd = float(fam.std(params))
+    if not np.isfinite(sd):
+        return ""
+    if discrete:
+        if sd < COUNT_SD:
+            return (f"{name} = {params[name]:.3g} makes the law a spike: its standard "
+                    f"deviation {sd:.3g} is below the {COUNT_SD:.3g} of one count, so the "
+                    f"counts do not resolve its width (a narrower law splitting its mass "
+                    f"alike between neighbouring counts fits as well)")
+        return ""
+    e = binary_exponent(x)
+    sd_x = float(np.ldexp(np.std(np.ldexp(x, -e)), e))
+    if sd < sd_x / FAR:
+        return (f"{name} = {params[name]:.3g} makes the law a spike: its standard "
+                f"deviation {sd:.3g} is below 1/{FAR:g} of that of the data ({sd_x:.3g})")
+    return ""
 
 
 def bootstrap_draws(x, family: str, *, truncation=None, n_boot: int = N_BOOT, seed=0,
@@ -622,16 +698,22 @@ def bootstrap_draws(x, family: str, *, truncation=None, n_boot: int = N_BOOT, se
     names = fam.param_names
     draws = np.full((n_boot, len(names)), np.nan)
     # warm start of the numerical refits
-    theta_hat = _fit_counts(fam, x)[0] if discrete else fam.fit(x, c)[0]
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            theta_hat = _fit_counts(fam, x)[0] if discrete else fam.fit(x, c)[0]
+    except _FIT_ERRORS as exc:
+        raise ParameterError(f"cannot fit {fam.name} to x: the fit failed "
+                             f"({type(exc).__name__}: {' '.join(str(exc).split())})") from None
     for b in range(n_boot):
         idx = rng.integers(0, x.size, x.size)
         xb = x[idx]
         cb = None if c is None else c[idx]
-        if np.ptp(xb) <= 0:
+        if no_spread(xb):
             continue
         try:
             th, _ = _fit_counts(fam, xb, theta_hat) if discrete else fam.fit(xb, cb, theta_hat)
-        except (ValueError, FloatingPointError, RuntimeError):
+        except _FIT_ERRORS:
             continue
         p = fam.params(th, xb, cb)
         draws[b] = [p[nm] for nm in names]
@@ -735,9 +817,11 @@ def goodness_of_fit(x, family: str, params: dict, *, truncation=None, n_mc: int 
     Raises
     ------
     ParameterError
-        ``params`` lacks a parameter of the family, names one it does not have or holds a
-        value that is not a finite number; the family cannot be fitted to ``x``; or another
-        bad argument (as for :func:`fit_family`).
+        ``params`` lacks a parameter of the family, names one it does not have, holds a
+        value that is not a finite number or lies outside the family's domain (a scale
+        <= 0, a law narrower than the spread any sample needs: ``Family.domain``); the
+        family cannot be fitted to ``x``; or another bad argument (as for
+        :func:`fit_family`).
     """
     fam = _family(family)
     x = _observations(x)
@@ -748,22 +832,35 @@ def goodness_of_fit(x, family: str, params: dict, *, truncation=None, n_mc: int 
     _require_applicable(fam, x, c, False)
     params = _checked_params(fam, params)
     rng = np.random.default_rng(seed)
-    if c is None and getattr(fam, "rv", None) is not None and _is_mle(fam, params, x):
-        res = stats.goodness_of_fit(fam.rv, x, known_params=fam.known, statistic="ad",
-                                    n_mc_samples=n_mc, random_state=rng)
-        return GoodnessOfFit(float(res.statistic), float(res.pvalue), n_mc)
-    stat0 = anderson_darling(fam.pit(params, x, c))
-    theta_hat = fam.theta(params)
-    null = np.full(n_mc, np.nan)
-    for i in range(n_mc):
-        xs = fam.sample(params, x.size, c, rng)
-        if not np.all(np.isfinite(xs)):
-            continue
-        try:
-            th, _ = fam.fit(xs, c, theta_hat)
-        except (ValueError, FloatingPointError, RuntimeError):
-            continue
-        null[i] = anderson_darling(fam.pit(fam.params(th, xs, c), xs, c))
+    # far-off parameters overflow in the samplers and refits: those resamples are skipped,
+    # and the p-value says on how many it rests (n_mc)
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        if c is None and getattr(fam, "rv", None) is not None and _is_mle(fam, params, x):
+            # scipy refits x itself; a family whose fit squares the data is tested on
+            # x / 2^e (exact, and the statistic of the standardised sample is the same)
+            xs = np.ldexp(x, -binary_exponent(x)) if fam.squares_data else x
+            try:
+                res = stats.goodness_of_fit(fam.rv, xs, known_params=fam.known,
+                                            statistic="ad", n_mc_samples=n_mc,
+                                            random_state=rng)
+                return GoodnessOfFit(float(res.statistic), float(res.pvalue), n_mc)
+            except _FIT_ERRORS:
+                # a resample scipy cannot refit (values hundreds of decades apart) stops
+                # its loop: the procedure below skips such resamples instead
+                pass
+        stat0 = anderson_darling(fam.pit(params, x, c))
+        theta_hat = fam.theta(params)
+        null = np.full(n_mc, np.nan)
+        for i in range(n_mc):
+            xs = fam.sample(params, x.size, c, rng)
+            if not np.all(np.isfinite(xs)) or no_spread(xs):
+                continue
+            try:
+                th, _ = fam.fit(xs, c, theta_hat)
+            except _FIT_ERRORS:
+                continue
+            null[i] = anderson_darling(fam.pit(fam.params(th, xs, c), xs, c))
     null = null[np.isfinite(null)]
     if null.size == 0:
         return GoodnessOfFit(stat0, float("nan"), 0)
@@ -772,7 +869,8 @@ def goodness_of_fit(x, family: str, params: dict, *, truncation=None, n_mc: int 
 
 
 def _checked_params(fam, params) -> dict:
-    """``params`` as a dict of floats over exactly the family's parameter names."""
+    """``params`` as a dict of floats over exactly the family's parameter names, inside the
+    family's domain (``Family.domain``)."""
     if not isinstance(params, Mapping):
         raise ParameterError(f"params must be a dict of the parameters of {fam.name} "
                              f"{fam.param_names}, got {_short(params)}")
@@ -790,6 +888,9 @@ def _checked_params(fam, params) -> dict:
                 or not np.isfinite(v)):
             raise ParameterError(f"params[{k!r}] must be a finite number, got {_short(v)}")
         out[k] = float(v)
+    why = fam.domain(out)
+    if why:
+        raise ParameterError(f"{why} ({fam.name})")
     return out
 
 

@@ -30,6 +30,7 @@ from crosssection.core.errors import ParameterError
 from crosssection.quality import QualityWarning
 from crosssection.stats import fits as F
 from crosssection.stats.data import SIM_REGION, Ensemble
+from crosssection.stats.families import SPREAD_RTOL, binary_exponent, no_spread
 
 # Eq. (12): N_br = (2 sqrt(pi)/sqrt(3)) eps (sqrt(s)/l) sqrt(N_l)
 EQ12_CONST = 2 * np.sqrt(np.pi) / np.sqrt(3)
@@ -277,7 +278,9 @@ def fit_quantity(ens: Ensemble, quantity: str, region: str, opts: StatsOptions, 
     Values that are not finite, and values <= 0 of the quantities fitted with laws of
     x > 0 (all of :data:`POSITIVE_QUANTITIES`), are left out, counted in the third element
     and, for the whole system (region ``"all"``; a sub-system's are among them), told in one
-    :class:`~crosssection.quality.QualityWarning`.
+    :class:`~crosssection.quality.QualityWarning`. Values that are all equal (zero spread,
+    :func:`~crosssection.stats.families.no_spread`) have no law: nothing is fitted, and one
+    QualityWarning names the set, region and quantity.
 
     Returns
     -------
@@ -288,7 +291,16 @@ def fit_quantity(ens: Ensemble, quantity: str, region: str, opts: StatsOptions, 
     if region == "all":
         _warn_left_out(ens, quantity, df[col], quantity in POSITIVE_QUANTITIES)
     x, keep = _clean(df[col], quantity in POSITIVE_QUANTITIES)
-    if x.size < opts.min_n or np.ptp(x) <= 0:
+    if x.size < opts.min_n:
+        return None, None, int((~keep).sum())
+    if no_spread(x):
+        # no law of a continuous variable puts all its mass at one value: every family
+        # would only say "zero spread", and the quantity would leave the fits unnoticed
+        where = f"set {', '.join(map(str, ens.sets))}: " if len(ens.sets) else ""
+        reg = "" if region in ("all", SIM_REGION) else f" ({region})"
+        warnings.warn(f"{where}{quantity}{reg}: zero spread (all {x.size} values equal "
+                      f"{float(np.mean(x)):.4g} to a relative {SPREAD_RTOL:g}): no law "
+                      f"fitted", QualityWarning, stacklevel=3)
         return None, None, int((~keep).sum())
     cuts = None
     if tcol is not None:
@@ -319,6 +331,33 @@ def _gamma_params(summ):
     return p["alpha"], p["chi"]
 
 
+def set_seed(seed: int | None, name: str) -> int | None:
+    """The seed of one set's bootstrap and goodness of fit, from the run's ``seed`` and the
+    set's name alone: a set's intervals then do not depend on which other sets are computed
+    with it, nor in which order.
+
+    Parameters
+    ----------
+    seed : int or None
+        The run's seed (None: fresh entropy, and None is returned).
+    name : str
+        The set's name; a stable hash of it (SHA-256, not Python's salted ``hash``) enters
+        ``numpy.random.SeedSequence([seed, hash])``.
+
+    Returns
+    -------
+    int or None
+        An integer in [0, 2**63).
+    """
+    import hashlib
+
+    if seed is None:
+        return None
+    digest = int.from_bytes(hashlib.sha256(str(name).encode("utf-8")).digest()[:8], "little")
+    state = np.random.SeedSequence([int(seed), digest]).generate_state(1, np.uint64)[0]
+    return int(state >> np.uint64(1))
+
+
 def compute_stats(ens: Ensemble, opts: StatsOptions | None = None, *,
                   progress: bool | None = False) -> StatsResult:
     """Every table of the report.
@@ -337,6 +376,8 @@ def compute_stats(ens: Ensemble, opts: StatsOptions | None = None, *,
     Returns
     -------
     StatsResult
+        Each set's fits draw from their own stream (:func:`set_seed` of ``opts.seed`` and
+        the set's name), so a set's intervals are the same computed alone or with others.
         A law selected on fewer than :data:`~crosssection.stats.fits.N_SELECT_MIN` values,
         and a relation fitted on fewer than :data:`N_RELATION_MIN` configurations, are kept
         and named in one :class:`~crosssection.stats.fits.SmallSampleWarning` per set; an
@@ -362,11 +403,14 @@ def compute_stats(ens: Ensemble, opts: StatsOptions | None = None, *,
     per_cfg = per_config_table(ens)
     macro = macro_table(ens)
     fit_rows, trunc_rows, summaries = [], [], {}
-    jobs = [(s, reg, q) for s in ens.sets for reg in regions_of(ens.subset(s))
-            for q in opts.quantities
-            if not (reg != "all" and QUANTITIES[q][0] in ("configs", "voids"))]
-    seeds = np.random.SeedSequence(opts.seed).spawn(len(jobs))
     subsets = {s: ens.subset(s) for s in ens.sets}
+    jobs, seeds = [], []
+    for s in ens.sets:
+        own = [(s, reg, q) for reg in regions_of(subsets[s]) for q in opts.quantities
+               if not (reg != "all" and QUANTITIES[q][0] in ("configs", "voids"))]
+        jobs += own
+        # each set its own stream: its intervals do not depend on the other sets
+        seeds += np.random.SeedSequence(set_seed(opts.seed, s)).spawn(len(own))
     from tqdm import tqdm
 
     # disable=None is tqdm's "only on a terminal"
@@ -423,23 +467,45 @@ def compute_stats(ens: Ensemble, opts: StatsOptions | None = None, *,
                        summaries)
 
 
-def slope_through_origin(x, y):
+def slope_through_origin(x, y, what: str = "slope"):
     """Least-squares slope of y = a x and R^2 = 1 - SS_res/SS_tot about the mean of y (negative
     when the line through the origin does worse than the mean), ignoring non-finite pairs.
+
+    x and y are each scaled by a power of two to order one first (exact), so that their
+    products and squares neither overflow nor underflow.
+
+    Parameters
+    ----------
+    x, y : array_like
+    what : str
+        The relation's name in the warning below.
 
     Returns
     -------
     (a, r2, n)
+        ``a`` is NaN, with a :class:`~crosssection.quality.QualityWarning` naming ``what``,
+        when the slope exceeds the floating-point range.
     """
     x, y = np.asarray(x, float), np.asarray(y, float)
     k = np.isfinite(x) & np.isfinite(y)
     x, y = x[k], y[k]
     if x.size == 0 or not np.any(x):
         return np.nan, np.nan, int(x.size)
-    a = float(np.sum(x * y) / np.sum(x * x))
-    ss_res = float(np.sum((y - a * x) ** 2))
-    ss_tot = float(np.sum((y - y.mean()) ** 2))
-    return a, (1 - ss_res / ss_tot) if ss_tot > 0 else np.nan, int(x.size)
+    ex, ey = binary_exponent(x), binary_exponent(y)
+    xs, ys = np.ldexp(x, -ex), np.ldexp(y, -ey)
+    a_s = float(np.sum(xs * ys) / np.sum(xs * xs))
+    ss_res = float(np.sum((ys - a_s * xs) ** 2))
+    ss_tot = float(np.sum((ys - ys.mean()) ** 2))
+    r2 = (1 - ss_res / ss_tot) if ss_tot > 0 else np.nan
+    with np.errstate(over="ignore", under="ignore"):
+        a = float(np.ldexp(a_s, ey - ex))
+    if not np.isfinite(a) or (a == 0 and a_s != 0):
+        warnings.warn(f"{what}: the slope {a_s:.4g} x 2^{ey - ex} lies outside the "
+                      f"floating-point range (x and y differ by hundreds of decades): left "
+                      f"undefined",
+                      QualityWarning, stacklevel=2)
+        return np.nan, r2, int(x.size)
+    return a, r2, int(x.size)
 
 
 def _geometric_mean(mu):
@@ -468,10 +534,12 @@ def relations_table(ens: Ensemble, per_cfg: pd.DataFrame, summaries: dict) -> pd
         pc = per_cfg[per_cfg["set"] == s]
         e = ens.subset(s)
         nbr_mean = _mean(e.stacks["n_br"])
-        c1, r1, n1 = slope_through_origin(pc["eq12_x"], pc["N_br"])
-        a, ra, na = slope_through_origin(pc["l_bar"], pc["sqrt_s_bar"])
-        k, rk, nk = slope_through_origin(pc["epsilon"] * np.sqrt(pc["N_l"]), pc["N_br"])
-        a3, r3, n3 = slope_through_origin(pc["N_l"], pc["N_br"])
+        c1, r1, n1 = slope_through_origin(pc["eq12_x"], pc["N_br"], f"set {s}: eq12_const")
+        a, ra, na = slope_through_origin(pc["l_bar"], pc["sqrt_s_bar"],
+                                         f"set {s}: slope_sqrt_s_vs_l")
+        k, rk, nk = slope_through_origin(pc["epsilon"] * np.sqrt(pc["N_l"]), pc["N_br"],
+                                         f"set {s}: eq12_eps_sqrtNl")
+        a3, r3, n3 = slope_through_origin(pc["N_l"], pc["N_br"], f"set {s}: eq14_slope")
         fl = _mean(pc["n_br_bar"] / nbr_mean - 1) if np.isfinite(nbr_mean) else np.nan
         eq16 = nbr_mean * np.sqrt(_mean(pc["N_l"])) / _mean(pc["epsilon"])
         nsum = summaries.get((s, "all", "n_br"))
