@@ -20,7 +20,7 @@ from pathlib import Path
 
 from crosssection.core.errors import ParameterError
 from crosssection.core.fileio import check_out
-from crosssection.stats.data import L_MIN_MM, S_MIN_MM2
+from crosssection.stats.data import RECORDED
 from crosssection.stats.fits import N_BOOT, N_BOOT_MIN, N_MC
 
 #: resamples of ``--fast``, a quick look: bootstrap draws and goodness-of-fit samples
@@ -60,12 +60,15 @@ def add_subparser(subparsers) -> argparse.ArgumentParser:
                         "(default: off)")
     p.add_argument("--no-gof", action="store_true",
                    help="skip goodness-of-fit p-values (default: computed)")
-    p.add_argument("--l-min-mm", type=float, default=L_MIN_MM,
-                   help=f"branch detection limit of images in mm (default {L_MIN_MM:g}; "
-                        "0 = none)")
-    p.add_argument("--s-min-mm2", type=float, default=S_MIN_MM2,
-                   help=f"void detection limit of images in mm^2 (default (10h)^2 = "
-                        f"{S_MIN_MM2:g}; 0 = none)")
+    # None: not given, so that each scan keeps the limit its analysis used
+    p.add_argument("--l-min-mm", type=float, default=None,
+                   help="branch detection limit of images in mm, for every scan (default: "
+                        "the l_min each scan was analysed with, from its summary.json; "
+                        "0 = none; below the analysis' own it gives a warning)")
+    p.add_argument("--s-min-mm2", type=float, default=None,
+                   help="void detection limit of images in mm^2, for every scan (default: "
+                        "the s_min each scan was analysed with, from its summary.json; "
+                        "0 = none; below the analysis' own it gives a warning)")
     p.add_argument("--no-figures", action="store_true",
                    help="tables only, no PNG figures (default: figures drawn)")
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
@@ -135,7 +138,7 @@ def check_options(args) -> None:
         raise ParameterError("0 resamples give no p-value: give an integer >= 1, or "
                              "--no-gof", "--n-mc")
     for flag, v in (("--l-min-mm", args.l_min_mm), ("--s-min-mm2", args.s_min_mm2)):
-        if not (math.isfinite(v) and v >= 0):
+        if v is not None and not (math.isfinite(v) and v >= 0):
             raise ParameterError(f"must be a finite number >= 0 (0 = no limit), got {v:g}",
                                  flag)
 
@@ -173,12 +176,16 @@ def _run(args) -> int:
 
     check_options(args)
     check_report_dir(args.out, args.dirs)  # before the work, not after it
-    ens = load_inputs(args.dirs, names=args.name, l_min_mm=args.l_min_mm or None,
-                      s_min_mm2=args.s_min_mm2 or None)
+    ens = load_inputs(args.dirs, names=args.name,
+                      l_min_mm=RECORDED if args.l_min_mm is None else args.l_min_mm,
+                      s_min_mm2=RECORDED if args.s_min_mm2 is None else args.s_min_mm2)
     n_boot, n_mc = resamples(args)
     opts = StatsOptions(seed=args.seed, n_boot=n_boot, n_mc=n_mc, gof=not args.no_gof)
+    given = {k: v for k, v in (("l_min_mm", args.l_min_mm), ("s_min_mm2", args.s_min_mm2))
+             if v is not None}
     paths = write_report(ens, args.out, opts=opts, inputs=args.dirs,
-                         figures=not args.no_figures, progress=args.progress)
+                         figures=not args.no_figures, progress=args.progress,
+                         limits_given=given)
     print(f"stats: {len(ens.sets)} set(s), {len(ens.configs)} configurations, "
           f"{len(ens.branches)} branches -> {Path(args.out) / 'report.html'} "
           f"({len(paths)} files)")

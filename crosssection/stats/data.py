@@ -26,9 +26,23 @@ Common representation (:class:`Ensemble`):
   quality (the image analysis' quality warning codes joined by ";", "" when none; NaN for
   simulations), E_model_share (the analysis' ``total_energy_rel_uncertainty``: the share of E
   not measured on a free centreline; NaN for simulations), input (the folder given to
-  :func:`load_inputs` it was read from, as given; NaN from the other loaders)
+  :func:`load_inputs` it was read from, as given; NaN from the other loaders),
+  l_min_mm_analysis and s_min_mm2_analysis (the detection limits the scan's analysis pruned
+  and filled at, from its summary.json; NaN for simulations), analysis (JSON text
+  ``{"version": ..., "parameters": {...}}``: what made the configuration, from the
+  analysis' summary.json or the simulation's params.json; NaN when unknown), batch_note (why
+  the configuration's batch is incomplete, "" when it finished or is no batch)
 - ``branches``: set, config_id, length_L, kappa_m_L, kappa_plus_L, e, region, n_br (of the
   branch's stack, NaN if unknown), l_min_L (detection limit in units of L, NaN if none)
+
+Detection limits: by default an image's are those its analysis used (``l_min_mm`` and
+``s_min_mm2`` of the parameters in its summary.json), since below them the analysis pruned
+branches and filled voids; a limit given explicitly wins (:data:`RECORDED` is the default
+that reads them). Simulations have none.
+
+:class:`Ensemble` checks its tables on construction: a missing column or an identifier
+column of another type than text is a ParameterError naming the table and the column
+(integer identifiers, as simulations write them, are turned into text).
 - ``stacks``: set, config_id, n_br, length_L, region
 - ``voids``: set, config_id, area_L2, perimeter_L, shape_ratio, n_edges, s_min_L2
 """
@@ -53,7 +67,11 @@ from crosssection.params import AnalysisParams
 from crosssection.quality import QualityWarning
 
 CONFIG_COLS = ["set", "config_id", "N_l", "N_br", "n_voids", "epsilon", "E", "rod_length_mm",
-               "source", "quality", "E_model_share", "input"]
+               "source", "quality", "E_model_share", "input", "l_min_mm_analysis",
+               "s_min_mm2_analysis", "analysis", "batch_note"]
+#: configs columns that a hand-built ensemble may leave out (NaN: unknown)
+OPTIONAL_CONFIG_COLS = ("rod_length_mm", "source", "quality", "E_model_share", "input",
+                        "l_min_mm_analysis", "s_min_mm2_analysis", "analysis", "batch_note")
 BRANCH_COLS = ["set", "config_id", "length_L", "kappa_m_L", "kappa_plus_L", "e", "region",
                "n_br", "l_min_L"]
 STACK_COLS = ["set", "config_id", "n_br", "length_L", "region"]
@@ -62,8 +80,28 @@ VOID_COLS = ["set", "config_id", "area_L2", "perimeter_L", "shape_ratio", "n_edg
 #: l_min = 1 mm pruned, voids below s_min = (10 h)^2 = 1 mm^2 filled at h = 0.1 mm)
 L_MIN_MM = AnalysisParams().l_min_mm
 S_MIN_MM2 = AnalysisParams().s_min_used_mm2
+#: default of the loaders' ``l_min_mm`` and ``s_min_mm2``: the limits each scan's analysis
+#: recorded in its summary.json
+RECORDED = "recorded"
 SIM_REGION = "none"  # simulations have no wall: no bulk/periphery split (paper, "Two sub-systems")
-TEXT_COLS = {"set", "config_id", "region", "source", "quality", "input"}
+TEXT_COLS = {"set", "config_id", "region", "source", "quality", "input", "analysis",
+             "batch_note"}
+ID_COLS = ("set", "config_id")
+
+
+class DetectionLimitWarning(QualityWarning):
+    """A detection limit given to the statistics lies below the one the analysis of the
+    scans used: the values between the two are missing from the data, not rare, and the
+    fits truncated at the lower limit are biased."""
+
+
+class FlaggedScanWarning(QualityWarning):
+    """A scan whose analysis raised quality flags (``quality.ok`` false in its
+    summary.json) enters the statistics."""
+
+
+class IncompleteBatchWarning(QualityWarning):
+    """A batch output that did not finish: its statistics are those of the images done."""
 
 
 def _folder(folder, name: str = "folder") -> Path:
@@ -79,13 +117,13 @@ def _folder(folder, name: str = "folder") -> Path:
 
 
 def _limit(value, name: str):
-    """A detection limit: None, or a finite number >= 0 (0 = none)."""
-    if value is None:
-        return None
+    """A detection limit: :data:`RECORDED`, None, or a finite number >= 0 (0 = none)."""
+    if value is None or (isinstance(value, str) and value == RECORDED):
+        return value
     if (isinstance(value, (bool, np.bool_)) or not isinstance(value, Real)
             or not (math.isfinite(value) and value >= 0)):
-        raise ParameterError(f"{name} must be None or a finite number >= 0 (0 = no limit), "
-                             f"got {reprlib.repr(value)}")
+        raise ParameterError(f"{name} must be None or a finite number >= 0 (0 = no limit) "
+                             f"or {RECORDED!r}, got {reprlib.repr(value)}")
     return value
 
 
@@ -141,10 +179,51 @@ class Ensemble:
                         cat("stacks", STACK_COLS), cat("voids", VOID_COLS))
 
     def __post_init__(self):
-        self.configs = _numeric(self.configs, CONFIG_COLS)
-        self.branches = _numeric(self.branches, BRANCH_COLS)
-        self.stacks = _numeric(self.stacks, STACK_COLS)
-        self.voids = _numeric(self.voids, VOID_COLS)
+        self.configs = _numeric(_checked_table(self.configs, "configs", CONFIG_COLS,
+                                               OPTIONAL_CONFIG_COLS), CONFIG_COLS)
+        self.branches = _numeric(_checked_table(self.branches, "branches", BRANCH_COLS),
+                                 BRANCH_COLS)
+        self.stacks = _numeric(_checked_table(self.stacks, "stacks", STACK_COLS), STACK_COLS)
+        self.voids = _numeric(_checked_table(self.voids, "voids", VOID_COLS), VOID_COLS)
+
+
+def _checked_table(df, table: str, cols, optional=()) -> pd.DataFrame:
+    """``df`` as a table of :class:`Ensemble`: every column of ``cols`` present (those of
+    ``optional`` added as unknown), the identifiers as text.
+
+    A table without any column (``pd.DataFrame()``) is an empty one. Integer identifiers (as
+    the simulations' CSV files hold them) become text, so that tables join on them.
+
+    Raises
+    ------
+    ParameterError
+        ``df`` is no DataFrame, lacks a column, or holds identifiers that are neither text
+        nor integers.
+    """
+    if not isinstance(df, pd.DataFrame):
+        raise ParameterError(f"Ensemble.{table} must be a pandas DataFrame, got "
+                             f"{type(df).__name__}")
+    if df.empty and len(df.columns) == 0:
+        return pd.DataFrame({c: pd.Series(dtype=object if c in TEXT_COLS else float)
+                             for c in cols})
+    missing = [c for c in cols if c not in df.columns and c not in optional]
+    if missing:
+        raise ParameterError(f"Ensemble.{table} lacks column(s) {missing} (columns "
+                             f"{list(cols)}; see crosssection.stats.data)")
+    df = df.reindex(columns=list(df.columns) + [c for c in cols if c not in df.columns])
+    for c in ID_COLS:
+        col = df[c]
+        if col.dtype.kind in "iu":
+            df[c] = col.astype(str)
+        elif col.dtype.kind == "f" and col.dropna().map(float.is_integer).all():
+            # an integer column with a missing value reads as floats: 3.0 is the id "3"
+            df[c] = col.map(lambda v: v if pd.isna(v) else str(int(v)))
+        elif col.dtype.kind not in "OSUT" or not all(
+                isinstance(v, str) for v in col.dropna()):
+            bad = next((v for v in col.dropna() if not isinstance(v, str)), None)
+            raise ParameterError(f"Ensemble.{table} column {c!r} must hold text or integer "
+                                 f"identifiers, got {col.dtype} ({reprlib.repr(bad)})")
+    return df
 
 
 def _read_csv(path: Path, required, *, numeric=(), nonempty: bool = False) -> pd.DataFrame:
@@ -351,7 +430,8 @@ def load_simulation(folder, *, set_name=None) -> Ensemble:
     configs = pd.DataFrame({
         "set": name, "config_id": cfg["config_id"].astype(str), "N_l": cfg["n_stacks"],
         "N_br": cfg["n_branches"], "n_voids": cfg["n_voids"], "epsilon": cfg["epsilon"],
-        "E": cfg["energy_total"], "rod_length_mm": np.nan, "source": str(folder)})
+        "E": cfg["energy_total"], "rod_length_mm": np.nan, "source": str(folder),
+        "analysis": _simulation_provenance(folder), "batch_note": ""})
     st = None
     if (folder / "stacks.csv").is_file():  # optional: per-stack branch counts
         st = _read_csv(folder / "stacks.csv", ["config_id", "n_br"], numeric=["n_br", "length"])
@@ -374,6 +454,24 @@ def load_simulation(folder, *, set_name=None) -> Ensemble:
         "shape_ratio": vo["shape_ratio"], "n_edges": vo["n_edges"], "s_min_L2": np.nan})
     return Ensemble(configs.reindex(columns=CONFIG_COLS), branches.reindex(columns=BRANCH_COLS),
                     stacks.reindex(columns=STACK_COLS), voids.reindex(columns=VOID_COLS))
+
+
+def _simulation_provenance(folder: Path):
+    """The ``analysis`` cell of a simulation's configurations: the version and parameters
+    of its ``params.json`` (NaN when it has none or cannot be read)."""
+    try:
+        params = json.loads((folder / "params.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return np.nan
+    if not isinstance(params, dict):
+        return np.nan
+    params = dict(params)
+    version = params.pop("version", None)
+    libraries = params.pop("libraries", None)
+    text = json.loads(_provenance(version, params))
+    if isinstance(libraries, dict):
+        text["libraries"] = libraries
+    return json.dumps(text, sort_keys=True, default=str)
 
 
 def _stack_counts(br: pd.DataFrame, st: pd.DataFrame | None):
@@ -406,9 +504,35 @@ def _rod_length(summary: dict, path: Path) -> float:
     raise ConfigError("summary.json has no positive rod_length_mm", path)
 
 
+def _recorded_limits(summary: dict) -> tuple[float | None, float | None]:
+    """``(l_min_mm, s_min_mm2)`` the analysis of a scan used, from the parameters its
+    summary.json records, None for one it does not record (s_min unset is (10 h)^2 of the
+    recorded thickness h, as the analysis takes it)."""
+    params = summary.get("parameters")
+    params = params if isinstance(params, dict) else {}
+
+    def number(key):
+        v = params.get(key)
+        ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+        return float(v) if ok and v >= 0 else None
+
+    s_min = number("s_min_mm2")
+    if s_min is None and "s_min_mm2" in params and number("thickness_mm"):
+        s_min = (10.0 * number("thickness_mm")) ** 2
+    return number("l_min_mm"), s_min
+
+
+def _provenance(version, parameters) -> str:
+    """The ``analysis`` cell: JSON text of what made a configuration."""
+    return json.dumps({"version": version if isinstance(version, str) else None,
+                       "parameters": parameters if isinstance(parameters, dict) else {}},
+                      sort_keys=True, default=str)
+
+
 def load_image_output(folder, *, set_name: str, config_id: str | None = None,
-                      l_min_mm: float | None = L_MIN_MM,
-                      s_min_mm2: float | None = S_MIN_MM2) -> Ensemble:
+                      l_min_mm: float | str | None = RECORDED,
+                      s_min_mm2: float | str | None = RECORDED,
+                      warn: bool = True) -> Ensemble:
     """Read one ``analyze`` output folder and normalise it by its rod length L.
 
     L is the rod length the analysis used for its energies and epsilon
@@ -422,9 +546,15 @@ def load_image_output(folder, *, set_name: str, config_id: str | None = None,
     set_name : str
     config_id : str, optional
         Defaults to the folder name.
-    l_min_mm, s_min_mm2 : float or None
-        Detection limits (paper: l_min = 1 mm, s_min = (10 h)^2 = 1 mm^2 for h = 0.1 mm),
-        recorded per observation in units of L / L^2; None or 0: none.
+    l_min_mm, s_min_mm2 : float, None or :data:`RECORDED`
+        Detection limits in mm and mm^2, recorded per observation in units of L / L^2:
+        :data:`RECORDED` (default) those the scan's analysis used (its summary.json; the
+        analysis' defaults, l_min = 1 mm and s_min = 1 mm^2, where it records none); a
+        number wins over them; None or 0: none.
+    warn : bool
+        Give the warnings about this scan alone (a :class:`FlaggedScanWarning` when its
+        analysis flagged it, a :class:`DetectionLimitWarning` for a limit given below the
+        analysis' own); :func:`load_batch` gives them once per set instead.
 
     Returns
     -------
@@ -462,13 +592,24 @@ def load_image_output(folder, *, set_name: str, config_id: str | None = None,
         _check_count(folder / table, len(df), summary.get(key), what)
     n_stacks = summary.get("n_stacks", len(st))
     n_br_map = dict(zip(st["stack_id"], st["n_br"]))
+    rec_l, rec_s = _recorded_limits(summary)
+    # a summary that does not record its limits (written by other tools) gets the
+    # analysis' defaults, and no recorded limit to compare a given one with
+    if l_min_mm == RECORDED:
+        l_min_mm = L_MIN_MM if rec_l is None else rec_l
+    if s_min_mm2 == RECORDED:
+        s_min_mm2 = S_MIN_MM2 if rec_s is None else rec_s
     configs = pd.DataFrame([{
         "set": set_name, "config_id": str(cid), "N_l": n_stacks,
         "N_br": summary.get("n_branches", len(br)), "n_voids": summary.get("n_voids", len(vo)),
         "epsilon": summary.get("epsilon", np.nan), "E": summary.get("total_energy", np.nan),
         "rod_length_mm": L, "source": str(folder),
         "quality": ";".join((summary.get("quality") or {}).get("codes", [])),
-        "E_model_share": summary.get("total_energy_rel_uncertainty", np.nan)}])
+        "E_model_share": summary.get("total_energy_rel_uncertainty", np.nan),
+        "l_min_mm_analysis": np.nan if rec_l is None else rec_l,
+        "s_min_mm2_analysis": np.nan if rec_s is None else rec_s,
+        "analysis": _provenance(summary.get("version"), summary.get("parameters")),
+        "batch_note": ""}])
     branches = pd.DataFrame({
         "set": set_name, "config_id": str(cid), "length_L": br["length_mm"] / L,
         "kappa_m_L": br["kappa_m"] * L, "kappa_plus_L": br["kappa_plus"] * L,
@@ -481,8 +622,76 @@ def load_image_output(folder, *, set_name: str, config_id: str | None = None,
         "set": set_name, "config_id": str(cid), "area_L2": vo["area_mm2"] / L ** 2,
         "perimeter_L": vo["perimeter_mm"] / L, "shape_ratio": vo["shape_ratio"],
         "n_edges": vo["n_edges"], "s_min_L2": (s_min_mm2 / L ** 2) if s_min_mm2 else np.nan})
-    return Ensemble(configs.reindex(columns=CONFIG_COLS), branches.reindex(columns=BRANCH_COLS),
-                    stacks.reindex(columns=STACK_COLS), voids.reindex(columns=VOID_COLS))
+    ens = Ensemble(configs.reindex(columns=CONFIG_COLS), branches.reindex(columns=BRANCH_COLS),
+                   stacks.reindex(columns=STACK_COLS), voids.reindex(columns=VOID_COLS))
+    if warn:
+        warn_flagged(ens, stacklevel=3)
+        warn_limits_below(ens, folder, stacklevel=3)
+    return ens
+
+
+#: flagged scans of one set named one per line up to this many, beyond it in one line
+MAX_FLAGGED_LINES = 5
+
+
+def warn_flagged(ens: Ensemble, *, stacklevel: int = 2) -> None:
+    """One :class:`FlaggedScanWarning` per scan of ``ens`` whose analysis flagged it
+    (``summary.json: flagged by the analysis: codes``), or one per set listing them when a
+    set holds more than :data:`MAX_FLAGGED_LINES`; the report names the same scans."""
+    c = ens.configs
+    q = c["quality"].astype(object).where(c["quality"].notna(), "").astype(str)
+    bad = c[q != ""].assign(quality=q[q != ""])
+    for s, g in bad.groupby("set", sort=False):
+        files = [Path(str(src)) / "summary.json" if isinstance(src, str) and src else cid
+                 for src, cid in zip(g["source"], g["config_id"])]
+        codes = [v.replace(";", ", ") for v in g["quality"]]
+        if len(g) <= MAX_FLAGGED_LINES:
+            for f, cds in zip(files, codes):
+                warnings.warn(f"{f}: flagged by the analysis: {cds}", FlaggedScanWarning,
+                              stacklevel=stacklevel + 1)
+        else:
+            listed = "; ".join(f"{cid} ({cds})" for cid, cds in zip(g["config_id"], codes))
+            warnings.warn(f"set {s}: {len(g)} of {int((c['set'] == s).sum())} scans flagged by "
+                          f"the analysis: {listed}", FlaggedScanWarning,
+                          stacklevel=stacklevel + 1)
+
+
+def warn_limits_below(ens: Ensemble, where, *, stacklevel: int = 2) -> None:
+    """One :class:`DetectionLimitWarning` per set and limit of ``ens`` whose scans are
+    truncated below the limit their analysis used (a limit given to the loaders, or 0):
+    the fits then treat the missing values between the two as rare ones and are biased."""
+    key = ["set", "config_id"]
+    for table, col, rec, name, unit, power in (
+            ("branches", "l_min_L", "l_min_mm_analysis", "l_min", "mm", 1),
+            ("voids", "s_min_L2", "s_min_mm2_analysis", "s_min", "mm^2", 2)):
+        c = ens.configs
+        rec_v = c[rec].to_numpy(float)
+        if not np.isfinite(rec_v).any():  # simulations: no limit recorded
+            continue
+        df = getattr(ens, table)
+        # the limit each scan's observations carry, in mm (mm^2), back from units of L
+        first = df.groupby(key, sort=False)[col].first()
+        idx = pd.MultiIndex.from_frame(c[key].astype(str))
+        has_rows = np.asarray(idx.isin(first.index), bool)
+        used = (first.reindex(idx).to_numpy(float)
+                * c["rod_length_mm"].to_numpy(float) ** power)
+        # no limit (NaN) counts as 0; 1e-9 absorbs the rounding of x / L * L
+        low = has_rows & np.isfinite(rec_v) & (np.nan_to_num(used) < rec_v * (1 - 1e-9))
+        for s in dict.fromkeys(c.loc[low, "set"]):
+            k = low & (c["set"] == s).to_numpy()
+            given = np.unique(np.round(np.nan_to_num(used[k]), 9))
+            warnings.warn(
+                f"{where}: {name} = {_values(given)} {unit} given for set {s} is below the "
+                f"{_values(np.unique(rec_v[k]))} {unit} its analysis used ({int(k.sum())} "
+                f"scan(s)): the values in between were removed by the analysis, not unseen "
+                f"by chance, so the truncated fits are biased; give at least the analysis' "
+                f"limit, or leave the option out to use it", DetectionLimitWarning,
+                stacklevel=stacklevel + 1)
+
+
+def _values(v) -> str:
+    v = [f"{x:g}" for x in v]
+    return v[0] if len(v) == 1 else f"{v[0]}-{v[-1]}"
 
 
 def _check_count(path: Path, rows: int, counted, what: str) -> None:
@@ -586,28 +795,37 @@ def _batch_image_folders(folder: Path):
     return out
 
 
-def _check_finished(folder: Path, n_found: int) -> None:
+def _check_finished(folder: Path, n_found: int) -> str:
     """Warn when the batch's ``batch.json`` does not mark it complete: an interrupted (or
-    still running) batch lacks images, and its statistics are those of the images done."""
+    still running) batch lacks images, and its statistics are those of the images done.
+
+    Returns
+    -------
+    str
+        What the warning says after the file name (the report records it), "" when the
+        batch finished or has no ``batch.json``.
+    """
     path = folder / "batch.json"
     if not path.is_file():  # not written by ``batch`` (copied or generated folders)
-        return
+        return ""
     try:
         meta = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError) as exc:  # JSON and Unicode decoding errors are ValueErrors
-        warnings.warn(f"{path}: unreadable ({type(exc).__name__}), so whether the batch "
-                      f"finished is unknown; its {n_found} finished image(s) are used",
-                      QualityWarning, stacklevel=3)
-        return
+        note = (f"unreadable ({type(exc).__name__}), so whether the batch finished is "
+                f"unknown; its {n_found} finished image(s) are used")
+        warnings.warn(f"{path}: {note}", IncompleteBatchWarning, stacklevel=3)
+        return note
     if isinstance(meta, dict) and meta.get("complete") is True:
-        return
+        return ""
     n = meta.get("n_images") if isinstance(meta, dict) else None
     of = f" of its {n}" if isinstance(n, int) and not isinstance(n, bool) else ""
-    warnings.warn(f"{path}: the batch did not finish (interrupted, or still running): only "
-                  f"{n_found}{of} images are done and used", QualityWarning, stacklevel=3)
+    note = (f"the batch did not finish (interrupted, or still running): only {n_found}{of} "
+            "images are done and used")
+    warnings.warn(f"{path}: {note}", IncompleteBatchWarning, stacklevel=3)
+    return note
 
 
-def load_batch(folder, *, l_min_mm=L_MIN_MM, s_min_mm2=S_MIN_MM2) -> Ensemble:
+def load_batch(folder, *, l_min_mm=RECORDED, s_min_mm2=RECORDED) -> Ensemble:
     """Read every per-image folder of a batch output.
 
     The set of an image folder is its first path component under ``folder``; an image folder
@@ -616,17 +834,20 @@ def load_batch(folder, *, l_min_mm=L_MIN_MM, s_min_mm2=S_MIN_MM2) -> Ensemble:
     Doubtful inputs that are still used give a :class:`~crosssection.quality.QualityWarning`
     naming the file: a ``batch.json`` that does not mark the batch complete, a line of
     ``index.csv`` that cannot be parsed, a table shorter or longer than its ``summary.json``
-    says.
+    says, scans the analysis flagged (one :class:`FlaggedScanWarning` per scan, or per set
+    when many) and a detection limit given below the analysis' own (one
+    :class:`DetectionLimitWarning` per set).
 
     Parameters
     ----------
     folder : path
-    l_min_mm, s_min_mm2 : float or None
+    l_min_mm, s_min_mm2 : float, None or :data:`RECORDED`
         Detection limits (see :func:`load_image_output`).
 
     Returns
     -------
     Ensemble
+        An unfinished batch says so in the ``batch_note`` of its configurations.
 
     Raises
     ------
@@ -642,14 +863,18 @@ def load_batch(folder, *, l_min_mm=L_MIN_MM, s_min_mm2=S_MIN_MM2) -> Ensemble:
     found = _batch_image_folders(folder)
     for set_name, cid, img in found:
         parts.append(load_image_output(img, set_name=set_name, config_id=cid,
-                                       l_min_mm=l_min_mm, s_min_mm2=s_min_mm2))
+                                       l_min_mm=l_min_mm, s_min_mm2=s_min_mm2, warn=False))
     if not parts:
         raise ConfigError("batch output holds no finished image (no */summary.json)", folder)
-    _check_finished(folder, len(found))
-    return Ensemble.concat(parts)
+    note = _check_finished(folder, len(found))
+    ens = Ensemble.concat(parts)
+    ens.configs["batch_note"] = f"{folder / 'batch.json'}: {note}" if note else ""
+    warn_flagged(ens, stacklevel=2)
+    warn_limits_below(ens, folder, stacklevel=2)
+    return ens
 
 
-def load_any(folder, *, set_name=None, l_min_mm=L_MIN_MM, s_min_mm2=S_MIN_MM2) -> Ensemble:
+def load_any(folder, *, set_name=None, l_min_mm=RECORDED, s_min_mm2=RECORDED) -> Ensemble:
     """Load any supported folder (see :func:`detect_kind`).
 
     Parameters
@@ -659,8 +884,11 @@ def load_any(folder, *, set_name=None, l_min_mm=L_MIN_MM, s_min_mm2=S_MIN_MM2) -
         Overrides the set name: the name of the one set of a simulation, an analyze output
         or a batch of one set; a batch of several sets keeps them apart as
         ``set_name/<set>`` (sets ``A`` and ``B`` given ``exp`` become ``exp/A``, ``exp/B``).
-    l_min_mm, s_min_mm2 : float or None
-        Image detection limits, in mm and mm^2: None or a finite number >= 0 (0 = none).
+    l_min_mm, s_min_mm2 : float, None or :data:`RECORDED`
+        Image detection limits, in mm and mm^2: :data:`RECORDED` (default) those each
+        scan's analysis used, else None or a finite number >= 0 (0 = none), which wins (a
+        :class:`DetectionLimitWarning` when it is below the analysis' own). Simulations
+        have none.
 
     Returns
     -------
@@ -696,7 +924,7 @@ def load_any(folder, *, set_name=None, l_min_mm=L_MIN_MM, s_min_mm2=S_MIN_MM2) -
     return ens
 
 
-def load_inputs(folders, *, names=None, l_min_mm=L_MIN_MM, s_min_mm2=S_MIN_MM2) -> Ensemble:
+def load_inputs(folders, *, names=None, l_min_mm=RECORDED, s_min_mm2=RECORDED) -> Ensemble:
     """Load several folders (``foldstat stats DIR...``) into one ensemble, each counted once.
 
     A folder given twice (under any spelling of its path) is read once, and an image output
@@ -710,8 +938,8 @@ def load_inputs(folders, *, names=None, l_min_mm=L_MIN_MM, s_min_mm2=S_MIN_MM2) 
     folders : path or sequence of path
     names : sequence of str, optional
         Set name of each folder (see :func:`load_any`).
-    l_min_mm, s_min_mm2 : float or None
-        Image detection limits.
+    l_min_mm, s_min_mm2 : float, None or :data:`RECORDED`
+        Image detection limits (see :func:`load_any`).
 
     Returns
     -------

@@ -12,9 +12,11 @@ from __future__ import annotations
 
 import errno
 import html
+import json
 import os
 import shutil
 import textwrap
+import warnings
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -32,7 +34,7 @@ from crosssection.stats.data import REPORT_TABLES, Ensemble
 from crosssection.stats.tables import (COUNT_QUANTITIES, EQ12_CONST, N_RELATION_MIN, PAPER_DOF,
                                        PAPER_MACRO, PAPER_MICRO, QUANTITIES, SLOPE_RELATIONS,
                                        StatsOptions, StatsResult, compute_stats, regions_of,
-                                       small_sample_note, to_markdown)
+                                       set_seed, small_sample_note, to_markdown)
 
 # Okabe-Ito colours (distinguishable with the common colour-vision deficiencies), in the
 # order of the sets; the set's index in the ensemble fixes its colour in every figure.
@@ -155,20 +157,25 @@ def _band(r: F.FitResult, xs, cut, count: bool, level=BAND_LEVEL):
 
 
 def _sample(ens: Ensemble, set_name, reg, quantity, summ):
-    """The fitted values of one set and region, and the mean detection limit (or None)."""
+    """The fitted values of one set and region, the mean detection limit (or None) and the
+    range (smallest, largest) of the per-scan limits (or None).
+
+    The mean renormalises the drawn law above one cut; the range is what is drawn as the
+    detection limit, since the scans' limits (each in units of its own L) differ."""
     table, col, _, tcol, _ = QUANTITIES[quantity]
     df = getattr(ens.subset(set_name), table)
     if reg != "all" and "region" in df.columns:
         df = df[df["region"].astype(str) == reg]
     x = np.asarray(df[col], float)
     ok = np.isfinite(x) & (x > 0)
-    cut = None
+    cut = span = None
     r0 = next(iter(summ.results.values()))
     if tcol is not None and r0.truncated:
         c = np.asarray(df[tcol], float)
         cut = float(np.nanmean(c[ok]))
+        span = (float(np.nanmin(c[ok])), float(np.nanmax(c[ok])))
         ok &= x >= c
-    return x[ok], cut
+    return x[ok], cut, span
 
 
 def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors=None):
@@ -212,7 +219,7 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
             summ = res.summaries.get((s, reg, quantity))
             if summ is None:
                 continue
-            x, cut = _sample(ens, s, reg, quantity, summ)
+            x, cut, span = _sample(ens, s, reg, quantity, summ)
             if x.size == 0:
                 continue
             x_min = min(x_min, float(x.min()))
@@ -272,8 +279,18 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
                 shown = shown[np.isfinite(shown) & (shown > 0)]
                 if logscale and shown.size:
                     ymax_log = max(ymax_log, float(shown.max()))
-                if cut is not None:
-                    ax.axvline(cut, color=c, ls=":", lw=1,
+                if span is not None and span[1] > span[0] * (1 + 1e-9):
+                    # scans of one set carry different limits (each in units of its own L):
+                    # the band spans them, the line is the largest, below which some scan
+                    # saw nothing
+                    ax.axvspan(span[0], span[1], color=c, alpha=0.08, lw=0,
+                               gid=f"limits:{s}:{reg}")
+                    ax.axvline(span[1], color=c, ls=":", lw=1, gid=f"limit:{s}:{reg}",
+                               label=(f"{s}: detection limits {span[0]:.2g}-{span[1]:.2g} "
+                                      "(per scan, shaded; dotted: largest)")
+                               if logscale else None)
+                elif span is not None:
+                    ax.axvline(span[1], color=c, ls=":", lw=1, gid=f"limit:{s}:{reg}",
                                label=f"{s}: detection limit" if logscale else None)
         for ax, logscale in zip(row, (False, True)):
             if logscale:
@@ -477,6 +494,9 @@ def e_vs_nbr_figure(ens: Ensemble, colors=None):
             if gg.empty:
                 continue
             st = gg.groupby("n_br")["e"].agg(["mean", "sem", "size"])
+            # every integer in the range: a stack size without branches is a gap (NaN),
+            # where the line breaks instead of joining its neighbours across it
+            st = st.reindex(np.arange(int(st.index.min()), int(st.index.max()) + 1))
             ax.errorbar(st.index, st["mean"], yerr=st["sem"].fillna(0), fmt="o" + ls, color=c,
                         ms=4 if reg is None else 2, lw=1, capsize=2,
                         alpha=1 if reg is None else 0.6,
@@ -490,7 +510,8 @@ def e_vs_nbr_figure(ens: Ensemble, colors=None):
 
 
 def write_report(ens: Ensemble, out_dir, *, opts: StatsOptions | None = None,
-                 inputs=(), figures: bool = True, progress: bool | None = False) -> dict:
+                 inputs=(), figures: bool = True, progress: bool | None = False,
+                 limits_given: dict | None = None) -> dict:
     """Compute every statistic of ``ens`` and write the report folder.
 
     The folder appears whole: it is written into a hidden sibling folder, which then takes
@@ -508,12 +529,16 @@ def write_report(ens: Ensemble, out_dir, *, opts: StatsOptions | None = None,
         replaced when it holds a previous report (see :func:`check_report_dir`).
     opts : StatsOptions, optional
     inputs : sequence of str
-        Input folders, recorded in stats.json; ``out_dir`` must not be nor hold one.
+        Input folders, recorded (resolved) in stats.json; ``out_dir`` must not be nor hold
+        one.
     figures : bool
         Draw the PNG figures.
     progress : bool or None
         tqdm bars on stderr over the fits and the figures; None shows them only when stderr
         is a terminal.
+    limits_given : dict, optional
+        The detection limits given explicitly (``l_min_mm``, ``s_min_mm2``), recorded as
+        such; the others are those the scans' analyses used.
 
     Returns
     -------
@@ -530,9 +555,10 @@ def write_report(ens: Ensemble, out_dir, *, opts: StatsOptions | None = None,
     out = Path(out_dir)
     check_report_dir(out, inputs)
     res = compute_stats(ens, opts, progress=progress)
+    seeds = {s: set_seed(opts.seed, s) for s in ens.sets}
     with _staged_folder(out) as stage:
         paths = _write_files(res, ens, stage, opts=opts, inputs=inputs, figures=figures,
-                             progress=progress)
+                             progress=progress, seeds=seeds, limits_given=limits_given or {})
     return {k: out / p.relative_to(stage) for k, p in paths.items()}
 
 
@@ -639,7 +665,8 @@ def _staged_folder(out: Path):
 
 
 def _write_files(res: StatsResult, ens: Ensemble, out: Path, *, opts: StatsOptions, inputs,
-                 figures: bool, progress: bool | None) -> dict:
+                 figures: bool, progress: bool | None, seeds: dict | None = None,
+                 limits_given: dict | None = None) -> dict:
     """Write the report's files into the folder ``out``; return name -> path."""
     from tqdm import tqdm
 
@@ -650,7 +677,10 @@ def _write_files(res: StatsResult, ens: Ensemble, out: Path, *, opts: StatsOptio
         paths[f"{name}.csv"] = write_csv(out / f"{name}.csv", df)
         paths[f"{name}.md"] = write_text(out / f"{name}.md", to_markdown(df))
     paths["correlations.csv"] = write_csv(out / "correlations.csv", res.correlations)
-    paths["per_config.csv"] = write_csv(out / "per_config.csv", res.per_config)
+    # what made each configuration is in stats.json, per set, not a JSON text per row
+    paths["per_config.csv"] = write_csv(out / "per_config.csv",
+                                        res.per_config.drop(columns=["analysis"],
+                                                            errors="ignore"))
 
     figs = []  # (title, relative path, one-sentence caption)
     if figures:
@@ -688,7 +718,8 @@ def _write_files(res: StatsResult, ens: Ensemble, out: Path, *, opts: StatsOptio
             ("e_vs_nbr.png", "Branch energy against the size of its stack",
              "Mean energy of a branch against the number of branches of its stack, "
              "with standard errors, for the whole system (solid), bulk (dotted) and periphery "
-             "(dashed), drawn over the whole system where they coincide with it. The branches "
+             "(dashed), drawn over the whole system where they coincide with it; a stack size "
+             "no branch has leaves a gap in the line. The branches "
              "of one stack share its energy, so a point resting on a single stack has no error "
              "bar.", lambda: e_vs_nbr_figure(ens, colors)),
         ]
@@ -699,9 +730,12 @@ def _write_files(res: StatsResult, ens: Ensemble, out: Path, *, opts: StatsOptio
                 figs.append((title, f"figures/{name}", caption))
 
     stats_json = {
-        "package": "foldstat", "version": __version__, "inputs": [str(i) for i in inputs],
-        "sets_of_inputs": input_sets(ens),
+        "package": "foldstat", "version": __version__,
+        "inputs": [_resolved(i) for i in inputs],
+        "sets_of_inputs": {_resolved(d): v for d, v in input_sets(ens).items()},
         "detection_limits": detection_limits(ens),
+        "detection_limits_given": dict(limits_given or {}),
+        "incomplete_batches": incomplete_batches(ens),
         "options": {k: (list(v) if isinstance(v, tuple) else v)
                     for k, v in vars(opts).items()},
         "model_selection": f"min BIC; a family with fewer parameters within "
@@ -726,7 +760,10 @@ def _write_files(res: StatsResult, ens: Ensemble, out: Path, *, opts: StatsOptio
             "relations": res.relations[res.relations["set"] == s].to_dict("records"),
             "correlations": res.correlations[res.correlations["set"] == s].to_dict("records"),
             "dof": res.dof[res.dof["set"] == s].to_dict("records"),
-            "fits": sel}
+            "fits": sel,
+            "seed": (seeds or {}).get(s, opts.seed),
+            "detection_limits": detection_limits(ens.subset(s)),
+            "made_by": provenance(ens.subset(s))}
     paths["stats.json"] = write_json(out / "stats.json", stats_json)
     absent = _not_drawn(res, ens, opts.quantities, opts.min_n) if figures else ""
     paths["report.html"] = write_text(out / "report.html",
@@ -767,6 +804,58 @@ def detection_limits(ens: Ensemble) -> dict:
             "s_min_mm2": _limit_used(ens.voids["s_min_L2"], rod(ens.voids) ** 2)}
 
 
+def _resolved(path) -> str:
+    """``path`` absolute and resolved: a report is read from elsewhere than it was run."""
+    return str(Path(path).resolve())
+
+
+def incomplete_batches(ens: Ensemble) -> list:
+    """What the loader said of every unfinished batch of ``ens`` (``batch_note``), once each."""
+    notes = ens.configs.get("batch_note", pd.Series(dtype=object))
+    return list(dict.fromkeys(str(n) for n in notes.dropna() if str(n)))
+
+
+def provenance(ens: Ensemble) -> dict:
+    """What made the configurations of ``ens``: their package versions, the analysis (or
+    simulation) parameters they share and those that differ between them.
+
+    Returns
+    -------
+    dict
+        ``{"versions": [...], "parameters": {name: value}, "parameters_differing":
+        {name: [values]}, "n_unknown": n}`` (n: configurations that record nothing).
+    """
+    records, unknown = [], 0
+    for text in ens.configs.get("analysis", pd.Series(dtype=object)):
+        try:
+            rec = json.loads(text) if isinstance(text, str) else None
+        except ValueError:
+            rec = None
+        if not isinstance(rec, dict):
+            unknown += 1
+            continue
+        records.append(rec)
+    versions = sorted({str(r.get("version")) for r in records if r.get("version")})
+    libs = {}
+    for r in records:
+        for k, v in (r.get("libraries") or {}).items():
+            libs.setdefault(k, set()).add(str(v))
+    names = list(dict.fromkeys(k for r in records for k in (r.get("parameters") or {})))
+    same, differ = {}, {}
+    for k in names:
+        vals = list(dict.fromkeys(json.dumps((r.get("parameters") or {}).get(k),
+                                             sort_keys=True, default=str) for r in records))
+        if len(vals) == 1:
+            same[k] = json.loads(vals[0])
+        else:
+            differ[k] = [json.loads(v) for v in vals]
+    out = {"versions": versions, "parameters": same, "parameters_differing": differ,
+           "n_unknown": unknown}
+    if libs:
+        out["libraries"] = {k: sorted(v) for k, v in libs.items()}
+    return out
+
+
 def input_sets(ens: Ensemble) -> dict:
     """Input folder -> the names of the sets read from it (``input`` of
     :func:`~crosssection.stats.data.load_inputs`); {} when the ensemble does not record it."""
@@ -796,6 +885,38 @@ def _inputs_text(meta) -> str:
                      if sets.get(d) else d for d in meta["inputs"])
 
 
+def _seeds_text(meta) -> str:
+    return "; ".join(f"{s}: {v.get('seed')}" for s, v in (meta.get("sets") or {}).items())
+
+
+def _per_set_text(meta) -> str:
+    """The paragraph giving, per set, its detection limits and what made its data."""
+    given = meta.get("detection_limits_given") or {}
+    how = (f"given to stats ({', '.join(f'{k} = {v:g}' for k, v in given.items())}) where "
+           "named, the others as each scan was analysed" if given else
+           "as each scan was analysed, from its summary.json; where a set's scans differ, each "
+           "scan's values are truncated at its own limit")
+    items = []
+    for s, v in (meta.get("sets") or {}).items():
+        made = v.get("made_by") or {}
+        words = [_limits_text(v.get("detection_limits") or {})]
+        if made.get("versions"):
+            words.append("made by version " + ", ".join(made["versions"]))
+        differ = made.get("parameters_differing") or {}
+        if differ:
+            words.append("parameters differing between its configurations: " + "; ".join(
+                f"{k} ({', '.join(json.dumps(x) for x in vals)})" for k, vals in differ.items()))
+        elif made.get("parameters"):
+            words.append("one set of parameters for all its configurations")
+        if made.get("n_unknown"):
+            words.append(f"{made['n_unknown']} configuration(s) record no parameters")
+        items.append(f"<li>{html.escape(s)}: {html.escape('; '.join(words))}</li>")
+    if not items:
+        return ""
+    return (f"<p>Per set, the detection limits ({html.escape(how)}) and what made the data "
+            "(all parameters are in stats.json):</p><ul>" + "".join(items) + "</ul>")
+
+
 def _safe(name: str) -> str:
     return "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in str(name))
 
@@ -809,7 +930,9 @@ def _pdf_caption(q: str) -> str:
     return (f"Probability density of the {WORDS[q]} (points, counting error bars "
             f"sqrt(count)/(n bin width)) with the selected law (line) and its 95 % bootstrap "
             f"band, one colour per set, one row per sub-system, linear (left) and logarithmic "
-            f"(right) scales" + ("; dotted: detection limit, below which the fit is truncated."
+            f"(right) scales" + ("; dotted: detection limit, below which the fit is truncated "
+                                 "(where a set's scans differ, their range shaded and the "
+                                 "largest dotted)."
                                  if QUANTITIES[q][3] else "."))
 
 
@@ -962,6 +1085,44 @@ def _relations_shown(rel: pd.DataFrame) -> pd.DataFrame:
     return rel
 
 
+#: the Gamma fits behind the columns of the micro and dof tables: column -> (quantity,
+#: sub-system, None for the row's own)
+GAMMA_COLUMNS = {"alpha_e": (("e", None),), "chi_e": (("e", None),),
+                 "alpha_E": (("E", "all"),), "chi_E": (("E", "all"),),
+                 "alpha_E_over_alpha_e": (("E", "all"), ("e", "all"))}
+
+
+def _gamma_n(res: StatsResult, s, reg, q) -> float:
+    """Values of the Gamma fit of quantity ``q`` in set ``s`` and sub-system ``reg``."""
+    summ = res.summaries.get((s, reg, q))
+    r = summ.results.get("gamma") if summ is not None else None
+    return float(r.n) if r is not None else np.nan
+
+
+def _small_fits_marked(df: pd.DataFrame, res: StatsResult) -> pd.DataFrame:
+    """``df`` (the micro or dof table) with every value taken from a Gamma fit on fewer
+    values than model selection needs marked "indicative only", as the other tables mark
+    them."""
+    if df.empty or "set" not in df.columns:
+        return df
+    df = df.copy()
+    for col, sources in GAMMA_COLUMNS.items():
+        if col not in df.columns:
+            continue
+        cells = []
+        for _, row in df.iterrows():
+            v = row[col]
+            reg = row.get("region", "all")
+            notes = [small_sample_note(_gamma_n(res, row["set"], r or reg, q), F.N_SELECT_MIN,
+                                       f"samples model selection needs ({q})")
+                     for q, r in sources]
+            notes = [n for n in notes if n]
+            cells.append(f"{v:.3g} ({'; '.join(notes)}: indicative only)"
+                         if notes and isinstance(v, (int, float)) and np.isfinite(v) else v)
+        df[col] = pd.Series(cells, index=df.index, dtype=object)
+    return df
+
+
 def _quality_rows(ens: Ensemble) -> pd.DataFrame:
     """Configurations whose image analysis raised quality warnings."""
     c = ens.configs
@@ -1046,9 +1207,13 @@ def _html(res: StatsResult, figs, meta, ens: Ensemble | None = None,
         "figcaption{font-size:14px;color:#333}.warn{color:#a00}</style></head><body>",
         "<h1>Folding statistics</h1>",
         f"<p>foldstat {html.escape(meta['version'])}; inputs: "
-        f"{html.escape(_inputs_text(meta))}; seed {meta['options']['seed']}.</p>",
-        _methods(meta, opts),
+        f"{html.escape(_inputs_text(meta))}; seed {meta['options']['seed']} (each set draws "
+        "from its own stream, derived from the seed and the set's name: "
+        f"{html.escape(_seeds_text(meta))}).</p>",
     ]
+    for note in meta.get("incomplete_batches") or ():
+        parts.append(f"<p class='warn'><b>Incomplete input:</b> {html.escape(note)}.</p>")
+    parts += [_methods(meta, opts), _per_set_text(meta)]
     if ens is not None:
         qual = _quality_rows(ens)
         if len(qual):
@@ -1075,13 +1240,13 @@ def _html(res: StatsResult, figs, meta, ens: Ensemble | None = None,
         "<h2>Averages per set: curvature and energy</h2><p>Means, and the shape α and scale χ "
         "of the Gamma law fitted to the branch energies e and to the total energies E; the "
         "paper's values below ours.</p>",
-        _html_table(_with_paper(res.micro, PAPER_MICRO)),
+        _html_table(_with_paper(_small_fits_marked(res.micro, res), PAPER_MICRO)),
         "<h2>Are branches the independent units? α_E/α_e against the number of stacks</h2>"
         "<p>A sum of m independent Gamma variables of shape α_e has shape m α_e, so "
         "α_E/α_e counts the effectively independent energy units of a configuration; the "
         "paper compares it with the number of stacks &lt;N<sub>l</sub>&gt;. The paper's "
         "values below ours.</p>",
-        _html_table(_with_paper(res.dof, PAPER_DOF)),
+        _html_table(_with_paper(_small_fits_marked(res.dof, res), PAPER_DOF)),
         "<h2>Stacking relations (paper Eqs. (12)-(16))</h2>",
         _html_table(_relations_shown(res.relations)),
         "<h2>Correlations</h2>", _html_table(res.correlations),

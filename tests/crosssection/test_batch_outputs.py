@@ -229,6 +229,8 @@ def test_what_a_redone_image_changed_is_named(tmp_path):
     assert B.changed_inputs(task) == ["image or calibration file content"]
 
 
+# the sample scans carry no calibration, so their analysis flags them
+@pytest.mark.filterwarnings("ignore::crosssection.stats.data.FlaggedScanWarning")
 def test_a_rerun_redoes_a_scan_whose_table_is_corrupt(tmp_path, capsys):
     """The corrupt table is redone, and the batch reads as a whole again."""
     from crosssection.stats.data import load_batch

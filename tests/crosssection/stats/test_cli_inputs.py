@@ -12,7 +12,7 @@ from crosssection.core import fileio
 from crosssection.core.errors import ParameterError
 from crosssection.quality import QualityWarning
 from crosssection.stats import cli, demo, report
-from crosssection.stats.data import load_any, load_inputs
+from crosssection.stats.data import RECORDED, load_any, load_inputs
 from crosssection.stats.tables import StatsOptions
 
 FAST = ["--n-boot", "0", "--no-gof", "--no-figures"]
@@ -143,13 +143,14 @@ def test_the_defaults_are_those_of_the_statistics_and_the_loader(capfd):
     args = build_parser(["stats"]).parse_args(["stats", "d", "--out", "r"])
     # --n-boot and --n-mc are None when not given (so that --fast can tell them apart)
     assert (args.seed, *cli.resamples(args)) == (opts.seed, opts.n_boot, opts.n_mc)
-    assert args.l_min_mm == limits["l_min_mm"].default > 0
-    assert args.s_min_mm2 == limits["s_min_mm2"].default > 0
+    # not given: each scan keeps the limits its analysis used, the loader's default
+    assert args.l_min_mm is None and limits["l_min_mm"].default == RECORDED
+    assert args.s_min_mm2 is None and limits["s_min_mm2"].default == RECORDED
     with pytest.raises(SystemExit):
         main(["stats", "--help"])
     help_text = " ".join(capfd.readouterr().out.split())
-    assert f"(default {limits['l_min_mm'].default:g}; 0 = none)" in help_text
-    assert f"(default (10h)^2 = {limits['s_min_mm2'].default:g}; 0 = none)" in help_text
+    assert "(default: the l_min each scan was analysed with" in help_text
+    assert "(default: the s_min each scan was analysed with" in help_text
     assert (f"quick look: {cli.FAST_N_BOOT} bootstrap resamples and {cli.FAST_N_MC} GOF "
             "samples") in help_text
 

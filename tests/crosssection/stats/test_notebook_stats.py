@@ -9,7 +9,7 @@ from matplotlib.figure import Figure
 
 from crosssection.core.errors import ConfigError
 from crosssection.stats import Ensemble, cli, demo, load_any, load_report, plot_pdf
-from crosssection.stats.data import STACK_COLS, VOID_COLS
+from crosssection.stats.data import BRANCH_COLS, CONFIG_COLS, STACK_COLS, VOID_COLS
 from crosssection.stats.fits import PAPER_FAMILIES, fit_all
 
 
@@ -76,10 +76,11 @@ def test_batch_folder_loads_into_dataframes_and_plots(batch):
 def test_plot_pdf_draws_the_fitted_density():
     rng = np.random.default_rng(0)
     x = rng.gamma(2.0, 0.5, 400)
-    ens = Ensemble.concat([Ensemble(
-        pd.DataFrame({"set": ["g"], "config_id": ["0"]}),
-        pd.DataFrame({"set": "g", "config_id": "0", "length_L": x, "region": "none"}),
-        pd.DataFrame(columns=STACK_COLS), pd.DataFrame(columns=VOID_COLS))])
+    ens = Ensemble(
+        pd.DataFrame({"set": ["g"], "config_id": ["0"]}).reindex(columns=CONFIG_COLS),
+        pd.DataFrame({"set": "g", "config_id": "0", "length_L": x,
+                      "region": "none"}).reindex(columns=BRANCH_COLS),
+        pd.DataFrame(columns=STACK_COLS), pd.DataFrame(columns=VOID_COLS))
     fig = plot_pdf(ens, "length_L")
     curve = next(ln for ln in fig.axes[0].lines if ln.get_gid() == "law:g:all")
     xs, ys = curve.get_xdata(), curve.get_ydata()

@@ -7,7 +7,7 @@ import pytest
 from matplotlib.collections import LineCollection, PolyCollection
 
 from crosssection.stats import Ensemble, demo, load_any
-from crosssection.stats.data import BRANCH_COLS, STACK_COLS, VOID_COLS
+from crosssection.stats.data import BRANCH_COLS, CONFIG_COLS, STACK_COLS, VOID_COLS
 from crosssection.stats.report import (_html, e_vs_nbr_figure, pdf_figure, set_colors)
 from crosssection.stats.tables import StatsOptions, StatsResult, compute_stats, fit_quantity
 
@@ -31,7 +31,7 @@ def _ensemble(sets, rng, n_stacks=250):
         branches.append(pd.DataFrame({
             "set": s, "config_id": "0", "length_L": rng.gamma(2.0, 0.01, n),
             "e": rng.gamma(0.5, 300.0, n), "n_br": np.repeat(nbr, nbr), "region": "none"}))
-    return Ensemble(pd.concat(configs, ignore_index=True),
+    return Ensemble(pd.concat(configs, ignore_index=True).reindex(columns=CONFIG_COLS),
                     pd.concat(branches, ignore_index=True).reindex(columns=BRANCH_COLS),
                     pd.concat(stacks, ignore_index=True).reindex(columns=STACK_COLS),
                     pd.DataFrame(columns=VOID_COLS))
