@@ -29,6 +29,18 @@ Definitions (paper sections "Simulations vs experiments", "Tiling", "Curvature o
 - *Voids* are the bounded components of the plane minus the rod thickened to width delta
   (contacts merged), rasterised at ``delta/6`` per pixel; their area and perimeter are measured
   on sub-pixel contours and corrected by the Steiner formula back to the rod centre line.
+
+Turning, mirroring or shifting the rod leaves every decision unchanged: the void raster lies
+in the rod's principal frame, on a pixel lattice about its centre of mass. Ties of the run
+analysis are broken by quantities that do not depend on which rod end is node 0 (length,
+multiplicity, distance from the rod's middle). What still depends on the numbering: a spiral
+stack is cut at the normal of its first sample (its branch count may differ by one or two
+between the two numberings), a run split in the middle lands on the middle sample on one
+side (one sample ``h``), and the passes of a contact cluster are listed in sample order
+(taking the nearest first moved the stack lines of compacted rods, whose renders' junction
+joins then crossed the paper). A rod whose two principal moments are equal has no frame of its
+own, and a void whose free part is about a pixel wide is found or missed with the rod's
+sub-pixel position: a perturbed rod (not a rigidly moved one) may gain or lose it.
 """
 from __future__ import annotations
 
@@ -255,12 +267,15 @@ def _smooth_short_runs(mult, min_len):
     """Give runs shorter than ``min_len`` samples the multiplicity of their longer neighbour,
     the shortest first, until none is left (every merge removes at least one run)."""
     mult = mult.copy()
+    k_total = mult.size
     for _ in range(len(_runs(mult))):
         runs = _runs(mult)
         if len(runs) < 2:
             break
-        lengths = [b - a for a, b in runs]
-        order = np.argsort(lengths)
+        # ties broken by what does not depend on which rod end is sample 0: the lower
+        # multiplicity first, then the run nearer the middle of the rod
+        order = sorted(range(len(runs)), key=lambda i: (
+            runs[i][1] - runs[i][0], mult[runs[i][0]], abs(runs[i][0] + runs[i][1] - k_total)))
         changed = False
         for i in order:
             a, b = runs[i]
@@ -269,7 +284,8 @@ def _smooth_short_runs(mult, min_len):
             left = runs[i - 1] if i > 0 else None
             right = runs[i + 1] if i + 1 < len(runs) else None
             cand = [r for r in (left, right) if r is not None]
-            best = max(cand, key=lambda r: r[1] - r[0])
+            # equal lengths: the higher multiplicity (equal ones give the same result)
+            best = max(cand, key=lambda r: (r[1] - r[0], mult[r[0]]))
             mult[a:b] = mult[best[0]]
             changed = True
             break  # recompute runs after each merge (keeps it simple and order independent)
@@ -466,7 +482,7 @@ def _split_fold_caps(runs, cls, smp, delta):
         for i in range(1, len(runs) - 1):
             a, b = runs[i]
             if (b - a) * smp.h < cap_max and cls[i - 1] == cls[i + 1] and cls[i] != cls[i - 1] \
-                    and mult[runs[i - 1][0]] > mult[a]:
+                    and min(mult[runs[i - 1][0]], mult[runs[i + 1][0]]) > mult[a]:
                 mid = (a + b) // 2
                 runs[i - 1][1] = mid
                 runs[i + 1][0] = mid
@@ -487,11 +503,11 @@ def _cut_loops(runs, cls, smp):
             groups.setdefault(c, []).append(i)
         cut_points = []
         for c, members in groups.items():
-            a0 = runs[members[0]][0]
             m_mode = int(np.bincount(
                 smp.mult[np.r_[tuple(slice(*runs[i]) for i in members)]]).argmax())
             if len(members) >= m_mode:
                 continue
+            a0 = runs[members[0]][0]
             k0 = a0 + min(same_pass, (runs[members[0]][1] - a0) // 2)
             cut_points.extend(q for q in smp.clusters[k0] if run_id[q] in members)
         cut_points = sorted(set(cut_points))
@@ -776,10 +792,18 @@ def _voids(xy, delta, j_xy, void_px=None, max_px=4000):
     from skimage import measure
 
     cols = ["area", "perimeter", "shape_ratio", "n_edges", "centroid_x", "centroid_y"]
-    lo = xy.min(axis=0) - 2 * delta
-    hi = xy.max(axis=0) + 2 * delta
+    # raster in the rod's own frame, so that a turned, mirrored, shifted or reversed rod
+    # meets the same pixels: a void whose free part is a few pixels wide is then found or
+    # missed alike in every copy
+    origin, axes = _principal_frame(xy)
+    xy = (xy - origin) @ axes
+    j_xy = (np.asarray(j_xy, float).reshape(-1, 2) - origin) @ axes
     px = delta / 6.0 if void_px is None else float(void_px)
-    px = max(px, float(np.max(hi - lo)) / max_px)
+    px = max(px, float(np.max(np.ptp(xy, axis=0) + 4 * delta)) / max_px)
+    # pixel centres on the lattice px Z^2 about the centre of mass: mirroring an axis maps
+    # it onto itself
+    lo = np.floor((xy.min(axis=0) - 2 * delta) / px) * px
+    hi = xy.max(axis=0) + 2 * delta
     shape = (int(np.ceil((hi[1] - lo[1]) / px)) + 3, int(np.ceil((hi[0] - lo[0]) / px)) + 3)
     canvas = np.full(shape, 255, np.uint8)
     shift = 4
@@ -834,7 +858,27 @@ def _voids(xy, delta, j_xy, void_px=None, max_px=4000):
                 rr, cc = int(round(jy)) - r0, int(round(jx)) - c0
                 if 0 <= rr < dd.shape[0] and 0 <= cc < dd.shape[1] and dd[rr, cc] <= reach:
                     n_edges += 1
+        centroid = origin + axes @ (lo + np.array([cx, cy]) * px)
         rows.append({"area": area, "perimeter": per, "shape_ratio": np.sqrt(area) / per,
-                     "n_edges": n_edges, "centroid_x": lo[0] + cx * px,
-                     "centroid_y": lo[1] + cy * px})
+                     "n_edges": n_edges, "centroid_x": float(centroid[0]),
+                     "centroid_y": float(centroid[1])})
     return pd.DataFrame(rows, columns=cols)
+
+
+def _principal_frame(xy):
+    """Centre of mass and principal axes (columns) of the rod's nodes.
+
+    Each axis points to where the rod's third moment along it is positive, so a rotated,
+    mirrored or shifted copy of the rod (or the same nodes in reverse order) has the same
+    coordinates in its frame up to rounding. Only a rod whose two axes have equal moments
+    (or whose third moment along an axis vanishes) leaves the frame undetermined.
+    """
+    n = xy.shape[0] - 1
+    w = np.full(n + 1, 1.0 / n)
+    w[[0, -1]] *= 0.5
+    origin = w @ xy
+    d = xy - origin
+    _, axes = np.linalg.eigh((d * w[:, None]).T @ d)
+    skew = w @ (d @ axes) ** 3
+    axes = axes * np.where(skew < 0, -1.0, 1.0)
+    return origin, axes

@@ -22,7 +22,8 @@ import math
 import numpy as np
 from numba import njit
 
-from simulate.geometry import positions, trapezoid_weights
+from simulate.checks import check_real
+from simulate.geometry import _trapezoid_weights, checked_rod, positions
 from simulate.intersect import _grid_fill, _grid_setup
 
 #: The paper's confinement Lambda (section "Numerical simulations"), the simulator's default.
@@ -54,8 +55,13 @@ def bending_energy(xy) -> float:
     float
         ``sum_i |R_{i+1} - 2R_i + R_{i-1}|^2 / ds^3`` over interior nodes. An arc of radius
         ``r`` gives ``(1 - 1/N) / r^2`` (N-1 interior nodes), i.e. ``1/r^2`` up to O(1/N).
+    Raises
+    ------
+    ParameterError
+        ``xy`` is not an (N+1, 2) array of finite numbers with N >= 1 (see
+        :func:`simulate.geometry.checked_rod`), naming the argument.
     """
-    xy = np.asarray(xy, dtype=np.float64)
+    xy = checked_rod(xy)
     n = xy.shape[0] - 1
     if n < 2:
         return 0.0
@@ -77,8 +83,13 @@ def node_curvature(xy) -> np.ndarray:
     Returns
     -------
     (N+1,) float64 array
+    Raises
+    ------
+    ParameterError
+        ``xy`` is not an (N+1, 2) array of finite numbers with N >= 1 (see
+        :func:`simulate.geometry.checked_rod`), naming the argument.
     """
-    xy = np.asarray(xy, dtype=np.float64)
+    xy = checked_rod(xy)
     n = xy.shape[0] - 1
     kappa = np.zeros(n + 1)
     if n < 2:
@@ -104,9 +115,16 @@ def confinement_energy(xy, lam: float) -> float:
     -------
     float
         A straight rod centred at the origin gives ``Lambda/12`` (+ O(1/N^2)).
+    Raises
+    ------
+    ParameterError
+        ``xy`` is not an (N+1, 2) array of finite numbers with N >= 1 (see
+        :func:`simulate.geometry.checked_rod`) or ``lam`` is not a finite number >= 0,
+        naming the argument.
     """
-    xy = np.asarray(xy, dtype=np.float64)
-    w = trapezoid_weights(xy.shape[0] - 1)
+    xy = checked_rod(xy)
+    lam = check_real("lam", lam, low=0.0)
+    w = _trapezoid_weights(xy.shape[0] - 1)
     return float(lam * (w @ np.einsum("ij,ij->i", xy, xy)))
 
 
@@ -128,9 +146,17 @@ def total_energy(xy, lam: float, *, wall_radius: float | None = None,
     Returns
     -------
     float
+    Raises
+    ------
+    ParameterError
+        ``xy`` is not an (N+1, 2) array of finite numbers with N >= 1 (see
+        :func:`simulate.geometry.checked_rod`), ``lam`` is not a finite number >= 0 or
+        ``wall_radius`` not one > 0, naming the argument.
     """
-    xy = np.asarray(xy, dtype=np.float64)
+    xy = checked_rod(xy)
+    lam = check_real("lam", lam, low=0.0)
     if wall_radius is not None:
+        wall_radius = check_real("wall_radius", wall_radius, low=0.0, low_open=True)
         if np.max(np.einsum("ij,ij->i", xy, xy)) > wall_radius * wall_radius:
             return float("inf")
     if hard_core:
@@ -168,7 +194,7 @@ def energy_and_gradient(theta, start, lam: float) -> tuple[float, np.ndarray]:
     n = theta.size
     ds = 1.0 / n
     xy = positions(theta, start)
-    w = trapezoid_weights(n)
+    w = _trapezoid_weights(n)
     dth = np.diff(theta)
     e_b = n * np.sum(2.0 - 2.0 * np.cos(dth))
     e_c = lam * (w @ np.einsum("ij,ij->i", xy, xy))
@@ -204,10 +230,15 @@ def nematic_energy(xy, *, u: float, cutoff: float, min_separation: int = 6) -> f
     Returns
     -------
     float
+    Raises
+    ------
+    ParameterError
+        ``xy`` is not an (N+1, 2) array of finite numbers with N >= 1 (see
+        :func:`simulate.geometry.checked_rod`), naming the argument.
     """
     from simulate.intersect import close_pairs
 
-    xy = np.asarray(xy, dtype=np.float64)
+    xy = checked_rod(xy)
     pairs = close_pairs(xy, cutoff, min_separation)
     if pairs.shape[0] == 0:
         return 0.0
@@ -296,8 +327,13 @@ def contact_barrier(xy, *, sigma: float, eps: float, min_separation: int = 3):
         dE/d(node positions).
     n_pairs : int
         Pairs within range.
+    Raises
+    ------
+    ParameterError
+        ``xy`` is not an (N+1, 2) array of finite numbers with N >= 1 (see
+        :func:`simulate.geometry.checked_rod`), naming the argument.
     """
-    xy = np.ascontiguousarray(xy, dtype=np.float64)
+    xy = np.ascontiguousarray(checked_rod(xy), dtype=np.float64)
     grad = np.empty_like(xy)
     e, npairs = _barrier_kernel(xy, float(sigma), float(eps), int(min_separation), grad)
     return float(e), grad, int(npairs)

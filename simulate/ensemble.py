@@ -680,7 +680,9 @@ def _add_common(p, command):
     nematic = ",".join(map(str, NEMATIC_RUNS))
     p.add_argument("--nematic-runs", type=str, default=None,
                    help="comma-separated Powell runs (0-based) with the nematic term "
-                        f"(default {nematic}; {powell})")
+                        f"(default {nematic}, the paper's, which needs --runs "
+                        f"{max(NEMATIC_RUNS) + 2} or more: it is never cut down to fit fewer "
+                        f"runs; {powell})")
     p.add_argument("--u", type=float, default=None,
                    help=f"nematic strength u, dimensionless, 50-150 (default {NEMATIC_U:g}; "
                         f"{powell})")
@@ -842,6 +844,14 @@ def _powell_params(args) -> dict:
     if any(k < 0 or k >= runs - 1 for k in nem):
         which = (f"runs 0..{runs - 2} of the --runs {runs}" if runs > 1 else
                  f"no run: --runs {runs} has only the last")
+        if args.nematic_runs is None:
+            # the default is the paper's protocol for its runs; it is not cut down to fit
+            # fewer runs, which would silently drop the nematic term from the protocol
+            fits = "--nematic-runs 0 or " if runs > 1 else ""
+            raise ParameterError(f"--runs {runs}: the default --nematic-runs {nematic!r} (the "
+                                 f"paper's, for {N_RUNS} runs) does not fit it: the nematic "
+                                 f"term must never be in the last run (paper); give {fits}"
+                                 "--nematic-runs '' for none")
         raise ParameterError(f"--nematic-runs must name {which}: the nematic term must not be "
                              f"used in the last run (paper), got {nematic!r} "
                              "(--nematic-runs '' for none)")

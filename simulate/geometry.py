@@ -7,6 +7,8 @@ Positions are the ``N + 1`` nodes ``xy`` (N+1, 2).
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
@@ -49,6 +51,7 @@ def angles(xy) -> tuple[np.ndarray, np.ndarray]:
     Parameters
     ----------
     xy : (N+1, 2) array
+        Node positions, finite, N >= 1.
 
     Returns
     -------
@@ -56,8 +59,13 @@ def angles(xy) -> tuple[np.ndarray, np.ndarray]:
         Unwrapped tangent angles (consecutive differences in (-pi, pi]).
     start : (2,) array
         ``xy[0]``.
+
+    Raises
+    ------
+    ParameterError
+        ``xy`` is not such an array (see :func:`checked_rod`).
     """
-    xy = np.asarray(xy, dtype=np.float64)
+    xy = checked_rod(xy)
     d = np.diff(xy, axis=0)
     theta = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
     return theta, xy[0].copy()
@@ -66,11 +74,28 @@ def angles(xy) -> tuple[np.ndarray, np.ndarray]:
 def trapezoid_weights(n_segments: int) -> np.ndarray:
     """Trapezoid weights of the N+1 nodes for integrals ``int f ds`` over the rod.
 
+    Parameters
+    ----------
+    n_segments : int
+        Number of segments N, a whole number >= 1.
+
     Returns
     -------
     (N+1,) array
         ``ds`` at interior nodes, ``ds/2`` at both ends; sums to 1.
+
+    Raises
+    ------
+    ParameterError
+        ``n_segments`` is not a whole number >= 1.
     """
+    from simulate.checks import check_whole
+
+    return _trapezoid_weights(check_whole("n_segments", n_segments, low=1))
+
+
+def _trapezoid_weights(n_segments):
+    """:func:`trapezoid_weights` without the check."""
     w = np.full(n_segments + 1, 1.0 / n_segments)
     w[0] *= 0.5
     w[-1] *= 0.5
@@ -81,16 +106,45 @@ def center_of_mass(xy) -> np.ndarray:
     """Centre of mass of the rod (trapezoid rule along the arclength), shape (2,).
 
     This is the translation that minimises the confinement energy ``Lambda int R^2 ds``.
+
+    Parameters
+    ----------
+    xy : (N+1, 2) array
+        Node positions, finite, N >= 1.
+
+    Returns
+    -------
+    (2,) float64 array
+
+    Raises
+    ------
+    ParameterError
+        ``xy`` is not such an array (see :func:`checked_rod`).
     """
-    xy = np.asarray(xy, dtype=np.float64)
-    w = trapezoid_weights(xy.shape[0] - 1)
+    xy = checked_rod(xy)
+    w = _trapezoid_weights(xy.shape[0] - 1)
     return w @ xy
 
 
 def radius_of_gyration(xy) -> float:
-    """``Rg = sqrt(int R^2 ds)`` about the origin (paper Eq. (11), L = 1)."""
-    xy = np.asarray(xy, dtype=np.float64)
-    w = trapezoid_weights(xy.shape[0] - 1)
+    """``Rg = sqrt(int R^2 ds)`` about the origin (paper Eq. (11), L = 1).
+
+    Parameters
+    ----------
+    xy : (N+1, 2) array
+        Node positions, finite, N >= 1.
+
+    Returns
+    -------
+    float
+
+    Raises
+    ------
+    ParameterError
+        ``xy`` is not such an array (see :func:`checked_rod`).
+    """
+    xy = checked_rod(xy)
+    w = _trapezoid_weights(xy.shape[0] - 1)
     return float(np.sqrt(w @ np.einsum("ij,ij->i", xy, xy)))
 
 
@@ -101,11 +155,33 @@ __all__ = ["positions", "angles", "trapezoid_weights", "center_of_mass", "radius
 def checked_rod(xy, *, min_segments: int = 1) -> np.ndarray:
     """``xy`` as an (N+1, 2) float array of finite numbers with ``N >= min_segments``.
 
+    The check of the public functions taking a rod, once per call: a float64 array of the
+    right shape costs one dot product (the minimisers call some of these functions in their loops).
+
+    Parameters
+    ----------
+    xy : array-like
+        What the caller passed as the rod's node positions.
+    min_segments : int
+        Fewest segments N accepted.
+
+    Returns
+    -------
+    (N+1, 2) float64 array
+        ``xy`` itself when it is one already.
+
     Raises
     ------
     ParameterError
         Naming ``xy``, its shape (with a hint when it looks transposed) and the cause.
     """
+    if (type(xy) is np.ndarray and xy.dtype == np.float64 and xy.ndim == 2
+            and xy.shape[1] == 2 and xy.shape[0] > min_segments
+            and math.isfinite(np.dot(xy.ravel(), xy.ravel()))):
+        # the usual rod, accepted for the cost of one dot product (finite only if every
+        # coordinate is); the path below explains what is wrong, or accepts coordinates so
+        # large that their squares overflow
+        return xy
     import reprlib
 
     from crosssection.core.errors import ParameterError

@@ -120,3 +120,41 @@ def test_contact_barrier_gradient_and_range(seed):
     # a node (almost) on another segment: the barrier diverges
     xy[30] = 0.5 * (xy[5] + xy[6]) + [0.0, 1e-12]
     assert contact_barrier(xy, sigma=sigma, eps=0.3)[0] > 1e15
+
+
+@pytest.mark.parametrize("xy, says", [
+    (np.zeros((1, 2)), "got shape (1, 2)"),
+    (np.zeros((0, 2)), "got shape (0, 2)"),
+    (np.zeros((2, 301)), "transposed? pass xy.T"),
+    (np.zeros(10), "got shape (10,)"),
+    (np.array([[0.0, 0.0], [np.nan, 1.0]]), "1 non-finite coordinate(s)"),
+])
+def test_a_rod_that_is_not_an_n_plus_1_by_2_array_is_named(xy, says):
+    """One node, no node, transposed, 1-D or NaN: a ParameterError naming xy, never a
+    ZeroDivisionError, an IndexError, a numba error or a silent 0."""
+    from crosssection.core.errors import ParameterError
+    from simulate.energy import contact_barrier, nematic_energy
+
+    calls = [bending_energy, node_curvature, center_of_mass, radius_of_gyration, angles,
+             lambda x: confinement_energy(x, 7e5), lambda x: total_energy(x, 7e5),
+             lambda x: nematic_energy(x, u=100.0, cutoff=0.01),
+             lambda x: contact_barrier(x, sigma=0.01, eps=1.0)]
+    for call in calls:
+        with pytest.raises(ParameterError, match=r"^xy must be an \(N\+1, 2\) array") as e:
+            call(xy)
+        assert says in str(e.value)
+
+
+def test_energy_arguments_are_checked():
+    from crosssection.core.errors import ParameterError
+    from simulate.geometry import trapezoid_weights
+
+    xy = np.array([[0.0, 0.0], [0.5, 0.0], [1.0, 0.0]])
+    with pytest.raises(ParameterError, match="^lam must be"):
+        confinement_energy(xy, float("nan"))
+    with pytest.raises(ParameterError, match="^wall_radius must be"):
+        total_energy(xy, 1.0, wall_radius=-1.0)
+    with pytest.raises(ParameterError, match="^n_segments must be"):
+        trapezoid_weights(0)
+    # a list of nodes is a rod as well
+    assert confinement_energy(xy.tolist(), 12.0) == pytest.approx(confinement_energy(xy, 12.0))

@@ -70,7 +70,12 @@ def test_a_smaller_rerun_records_the_configurations_its_tables_hold(tmp_path):
 
 
 @pytest.mark.parametrize("argv, says", [
-    (["quench", "--runs", "1", "--out", "q"], "--runs 1 has only the last"),
+    (["quench", "--runs", "1", "--out", "q"],
+     "--runs 1: the default --nematic-runs '1,2' (the paper's, for 10 runs) does not fit it"),
+    (["quench", "--runs", "2", "--out", "q"], "give --nematic-runs 0 or --nematic-runs ''"),
+    (["quench", "--runs", "3", "--out", "q"], "the default --nematic-runs '1,2'"),
+    (["quench", "--runs", "1", "--nematic-runs", "0", "--out", "q"],
+     "--runs 1 has only the last"),
     (["compact", "--epsilon", "0.01", "--segments", "200", "--out", "c"],
      "the thickness that epsilon 0.01 implies"),
 ])
@@ -237,7 +242,8 @@ def test_the_help_shows_the_defaults_the_protocol_options_resolve_to():
 
     sub = build_parser(["quench"])._subparsers._group_actions[0].choices["quench"]
     text = " ".join(sub.format_help().split())
-    for default in (f"(default {N_RUNS};", f"(default {MAXITER};", "(default 1,2;",
+    for default in (f"(default {N_RUNS};", f"(default {MAXITER};",
+                    "(default 1,2, the paper's, which needs --runs 4 or more",
                     f"(default {NEMATIC_U:g};", f"(default {FTOL:g}, scipy's;",
                     f"(default {XTOL:g}, scipy's;"):
         assert default in text, default
