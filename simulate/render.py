@@ -126,8 +126,16 @@ passes part (the tip of the paper wedge between them), about half the trunk's wi
 the skeleton fork an image analysis finds there: with junctions matched within 3 h the mode
 scores poorly on junctions for that reason, not for want of forks
 (docs/validation/compact.md). A stack's truth line is its mean line, which can cover only part
-of its passes; its mid point, length and band width are the analysis', as in the bands
-drawing.
+of its passes, and its mid point is that line's; its length is the mean length of its passes
+(the analysis'), each drawn at its own length, so that ``sum(n_br x length_mm)`` is the rod.
+
+Truth checks. Every scene checks its truth against its drawing (:class:`TruthWarning`, also
+listed as ``truth_warnings`` in its summary): a truth junction farther from the ink than the
+scoring's match radius (3 h) or the widest band there is moved onto the ink of its stacks
+(:func:`_junctions_onto_ink`; a loop stack's junction point, the mean of run ends lying far
+apart, can sit on the paper); the bands of a junction that do not touch (the hook rules left
+the rod cut there, :func:`_disconnected_junctions`); a truth whose stacks hold a rod
+``sum(n_br x length_mm)`` more than :data:`TRUTH_LENGTH_TOLERANCE` away from the rod's length.
 
 Coordinates: column = x, row = y (no flip), so the image is the mirror image of a plot with y
 up; signed curvatures therefore compare in absolute value.
@@ -161,7 +169,8 @@ from simulate.energy import LAMBDA
 from simulate.geometry import checked_rod
 
 __all__ = ["render_configuration", "render_directory", "add_subparser", "smooth_line",
-           "passes_calibration", "ScanRangeWarning", "SCAN_DEFECTS", "CLEAN", "DRAW", "JOIN",
+           "passes_calibration", "ScanRangeWarning", "TruthWarning", "SCAN_DEFECTS", "CLEAN",
+           "DRAW", "JOIN",
            "PX_PER_MM", "THICKNESS_MM", "VALIDATED_SHEET_PX", "VALIDATED_BLUR_PX",
            "VALIDATED_NOISE_SIGMA", "VALIDATED_JPEG_QUALITY"]
 
@@ -221,6 +230,16 @@ PASS_SMOOTH = 0.0
 #: ``draw="passes"``: adjacent pressed passes overlap by this much so that the rasterised
 #: strokes leave no paper line between them.
 PASS_OVERLAP_PX = 1.0
+#: Truth self-check: largest relative difference between the rod the truth's stacks hold
+#: (``sum(n_br x length_mm)``) and the rod's length before a scene is flagged
+#: (:class:`TruthWarning`). The bands drawing holds 1.001-1.11 L on quenched rods of 120-200
+#: segments and 1.02-1.16 L on compacted rods (module docstring, "Joining bands to
+#: junctions"); the passes drawing the rod exactly.
+TRUTH_LENGTH_TOLERANCE = 0.2
+#: Truth self-check: a truth junction farther than this many sheet thicknesses h from the
+#: drawn ink is moved onto it (:func:`_junctions_onto_ink`): the scoring matches junctions
+#: within 3 h (:func:`crosssection.truth.scoring.score`).
+JUNCTION_INK_H = 3.0
 #: Largest scene drawn, in pixels (10 000 x 10 000): the drawing holds several float images
 #: of this size (a 1e8 px scene needs several GB); the defaults give about 2500 x 2500 px.
 MAX_SCENE_PX = 10_000 * 10_000
@@ -266,6 +285,138 @@ def _beyond_validated(defects: dict, sheet_px: float, name=str) -> str | None:
     if not out:
         return None
     return ("scans beyond the range the image analysis is validated on: " + "; ".join(out))
+
+
+class TruthWarning(QualityWarning):
+    """A scene's truth disagrees with its own drawing (a junction off the ink, junction bands
+    that do not touch, a drawn rod of another length than the rod's): scores of that scene
+    measure the render as much as the image analysis. The scene's ``truth/summary.json``
+    lists the same messages (``truth_warnings``)."""
+
+
+def _stack_components(labels, comp, n_stacks: int) -> np.ndarray:
+    """The ink component (of ``comp``, 0: none) holding most of every stack's labelled ink
+    (``labels``: ``k + 1`` on stack ``k``); 0 for a stack without labelled ink."""
+    on = (labels > 0) & (comp > 0)
+    n_comp = int(comp.max()) + 1
+    counts = np.bincount((labels[on].astype(np.int64) - 1) * n_comp + comp[on],
+                         minlength=n_stacks * n_comp).reshape(n_stacks, n_comp)
+    main = counts.argmax(axis=1)
+    return np.where(counts.max(axis=1) > 0, main, 0)
+
+
+def _junction_stacks(stacks: pd.DataFrame) -> dict:
+    """Junction id -> the stacks with an end there."""
+    out = {}
+    for sid, a, b in stacks[["stack_id", "junction_a", "junction_b"]].to_numpy(int):
+        for j in {int(a), int(b)} - {-1}:
+            out.setdefault(j, []).append(int(sid))
+    return out
+
+
+def _disconnected_junctions(stacks: pd.DataFrame, labels, ink_mask) -> list[int]:
+    """The junctions whose stacks' drawn bands do not touch: their inks lie in different
+    connected components of ``ink_mask`` (8-connected), so that an image analysis reads two
+    networks where the truth has one."""
+    n, comp = cv2.connectedComponents(ink_mask.astype(np.uint8), connectivity=8)
+    if n <= 2 or not len(stacks):
+        return []
+    main = _stack_components(labels, comp, len(stacks))
+    out = []
+    for j, sids in sorted(_junction_stacks(stacks).items()):
+        seen = {int(main[sid]) for sid in sids} - {0}
+        if len(seen) > 1:
+            out.append(j)
+    return out
+
+
+def _junctions_onto_ink(junctions: pd.DataFrame, stacks: pd.DataFrame, labels, ink_mask,
+                        limit_px: float, *, px_per_mm: float) -> tuple[pd.DataFrame, list[str]]:
+    """Truth junctions farther than ``limit_px`` from the drawn ink moved onto it.
+
+    A junction point is the mean of the run ends meeting there
+    (:func:`simulate.contacts.analyze_rod`); when those ends lie far apart (a loop stack
+    whose ends are one junction) it can lie on the paper, where no skeleton fork can be
+    matched to it. Such a point is moved to the nearest ink of its stacks (of any ink when
+    none of theirs is drawn), or to the nearest pixel where the inks of two of its stacks
+    touch when that lies at most two ``limit_px`` farther.
+
+    Parameters
+    ----------
+    junctions, stacks : DataFrame
+        Truth tables (pixels).
+    labels : (H, W) int array
+        ``k + 1`` on the ink of stack ``k``.
+    ink_mask : (H, W) bool array
+    limit_px : float
+        Largest distance of a junction from the ink (the scoring's junction match radius),
+        or the width of the widest band there when larger: a junction point lies at a band's
+        side (module docstring, "Joining bands to junctions").
+    px_per_mm : float
+        Scale of the stacks' ``width_mm``.
+
+    Returns
+    -------
+    junctions : DataFrame
+        A copy, the moved junctions at their new points.
+    messages : list of str
+        One per moved junction: where it was, how far from the ink, how far it moved.
+    """
+    if not len(junctions) or not ink_mask.any():
+        return junctions, []
+    h_px, w_px = ink_mask.shape
+
+    def distance_to(mask):
+        return cv2.distanceTransform(np.where(mask, 0, 255).astype(np.uint8), cv2.DIST_L2,
+                                     cv2.DIST_MASK_PRECISE)
+
+    def nearest(mask, x, y):
+        rr, cc = np.nonzero(mask)
+        k = int(np.argmin((cc - x) ** 2 + (rr - y) ** 2))
+        return float(cc[k]), float(rr[k])
+
+    d_ink = distance_to(ink_mask)
+    by_junction = _junction_stacks(stacks)
+    out = junctions.copy()
+    messages = []
+    for i, row in junctions.iterrows():
+        x, y = float(row.x_px), float(row.y_px)
+        c = int(np.clip(round(x), 0, w_px - 1))
+        r = int(np.clip(round(y), 0, h_px - 1))
+        off = float(d_ink[r, c]) if (c, r) == (round(x), round(y)) else math.inf
+        sids = by_junction.get(int(row.junction_id), [])
+        widest = float(stacks["width_mm"].to_numpy()[sids].max()) * px_per_mm if sids else 0.0
+        if off <= max(limit_px, widest):
+            continue
+        own = [labels == sid + 1 for sid in sids]
+        own = [m for m in own if m.any()]
+        nx, ny = nearest(np.any(own, axis=0) if own else ink_mask, x, y)
+        if len(own) >= 2:
+            meet = (np.sum([distance_to(m) <= 1.5 for m in own], axis=0) >= 2) & ink_mask
+            if meet.any():
+                mx, my = nearest(meet, x, y)
+                # a meeting of its stacks near their nearest ink, not one across the scan
+                if math.hypot(mx - x, my - y) <= math.hypot(nx - x, ny - y) + 2 * limit_px:
+                    nx, ny = mx, my
+        out.loc[i, ["x_px", "y_px"]] = [nx, ny]
+        messages.append(f"junction {int(row.junction_id)} ({int(row.n_stacks)} stacks) lay "
+                        f"{off:.0f} px from the drawn ink (at ({x:.0f}, {y:.0f}) px): moved "
+                        f"{math.hypot(nx - x, ny - y):.0f} px onto the ink of its stacks")
+    return out, messages
+
+
+def _rod_drawn_check(stacks: pd.DataFrame, rod_length_mm: float) -> str | None:
+    """A message when the truth's rod, ``sum(n_br x length_mm)`` of its stacks, differs from
+    the rod's length by more than :data:`TRUTH_LENGTH_TOLERANCE`, else None."""
+    if not len(stacks) or not rod_length_mm > 0:
+        return None
+    drawn = float((stacks["n_br"] * stacks["length_mm"]).sum())
+    rel = drawn / rod_length_mm - 1.0
+    if abs(rel) <= TRUTH_LENGTH_TOLERANCE:
+        return None
+    return (f"the truth's stacks hold {drawn:.4g} mm of rod (sum of n_br x length_mm), the rod "
+            f"is {rod_length_mm:.4g} mm ({100 * rel:+.0f} %, more than "
+            f"{100 * TRUTH_LENGTH_TOLERANCE:g} %): the truth's stack lengths are not the rod's")
 
 
 def passes_calibration(stroke_mm: float, pitch_mm: float, n_max: int = 60) -> Calibration:
@@ -975,6 +1126,19 @@ def _draw_bands(lines_px, n_br, widths_px, shape, steps=None):
     return coverage, labels
 
 
+def _draw_stacks(analysis, frame, lines_px, n_br, widths_px, cal, px_per_mm):
+    """The bands drawing of the stacks' lines: coverage and labels (:func:`_draw_bands`),
+    the drawn length of the passes of every band that narrows at a rod end and its pieces
+    (module docstring, "Rod ends")."""
+    pieces = {sid: _layer_pieces(lines_px[sid], int(n_br[sid]), cuts)
+              for sid, cuts in _rod_end_cuts(analysis, frame, lines_px, widths_px).items()}
+    layer_px = {sid: sum(c * polyline.length(q) for q, c in pp) for sid, pp in pieces.items()}
+    steps = {sid: [(q, float(cal.width(c)) * px_per_mm) for q, c in pp]
+             for sid, pp in pieces.items()}
+    coverage, labels = _draw_bands(lines_px, n_br, widths_px, frame.shape, steps)
+    return coverage, labels, layer_px, steps
+
+
 def _press_stack(curve, normals, members, pitch_px, reach_px, sub=4):
     """Displacements that press the passes of one stack together, cross-section by
     cross-section.
@@ -1536,25 +1700,33 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
     else:
         lines_px = _stack_lines(analysis, frame, widths_px, segment_px=segment_px,
                                 smooth=smooth)
+    truth_warnings = []
     if draw == "passes":
         curve, branch_of, _ = _pass_curves(
             xy, analysis, frame, segment_px=segment_px, pitch_px=pitch_px, stroke_px=stroke_px,
             taper_px=pass_taper * stroke_px, smooth_px=pass_smooth * segment_px)
         junctions_px = _pass_junctions_px(analysis, frame, stroke_px)
-        layer_px = None
+        # every pass is drawn at its own length: a stack's is the mean of its passes' (the
+        # analysis'), not its mean line's, which runs between junction points that can lie
+        # far from where its passes end
+        layer_px = {sid: float(row.n_br * row.length * frame.scale)
+                    for sid, row in st.iterrows()}
         coverage, labels = _draw_passes(curve, branch_of,
                                         analysis.branches["stack_id"].to_numpy(int), stroke_px,
                                         frame.shape)
     else:
         junctions_px = None
-        # a band holding a rod end narrows there (module docstring, "Rod ends")
-        pieces = {sid: _layer_pieces(lines_px[sid], int(n_br[sid]), cuts)
-                  for sid, cuts in _rod_end_cuts(analysis, frame, lines_px, widths_px).items()}
-        layer_px = {sid: sum(c * polyline.length(q) for q, c in pp)
-                    for sid, pp in pieces.items()}
-        steps = {sid: [(q, float(cal.width(c)) * px_per_mm) for q, c in pp]
-                 for sid, pp in pieces.items()}
-        coverage, labels = _draw_bands(lines_px, n_br, widths_px, frame.shape, steps)
+        coverage, labels, layer_px, _ = _draw_stacks(analysis, frame, lines_px, n_br,
+                                                         widths_px, cal, px_per_mm)
+        # joining every band to its junction point would connect them, but across the paper
+        # to a point none of its passes reaches (bending the drawn lines tens of times as much
+        # as the rod, and lengthening the truth's rod): the scene says so instead
+        cut = _disconnected_junctions(st, labels, coverage >= 0.5)
+        if cut:
+            truth_warnings.append(
+                f"the bands of junction{'s' if len(cut) > 1 else ''} "
+                f"{', '.join(str(j) for j in cut)} do not touch: the drawn rod is cut where "
+                "the truth holds it together")
     ink_mask = coverage >= 0.5
     voids = truth_voids(ink_mask, hole_center_xy=frame.hole_xy, hole_radius_px=frame.hole_px,
                         s_min_px=(10 * thickness_mm * px_per_mm) ** 2, px_per_mm=px_per_mm,
@@ -1567,7 +1739,17 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
     tables = _truth_tables(analysis, frame, lines_px, cal, voids.table, px_per_mm=px_per_mm,
                            thickness_mm=thickness_mm, junctions_px=junctions_px,
                            layer_px=layer_px)
+    tables["junctions"], moved = _junctions_onto_ink(
+        tables["junctions"], tables["stacks"], labels, ink_mask,
+        JUNCTION_INK_H * thickness_mm * px_per_mm, px_per_mm=px_per_mm)
+    truth_warnings += moved
+    rod_drawn = _rod_drawn_check(tables["stacks"], frame.rod_length_mm)
+    if rod_drawn:
+        truth_warnings.append(rod_drawn)
+    for message in truth_warnings:
+        warnings.warn(message, TruthWarning, stacklevel=2)
     summary = _summary(analysis, frame, tables, ink_mask, px_per_mm=px_per_mm)
+    summary["truth_warnings"] = truth_warnings
     params = {"px_per_mm": float(px_per_mm), "thickness_mm": float(thickness_mm),
               "hole_radius_mm": frame.hole_radius_mm,
               "hole_center_px": None if frame.hole_xy is None else
@@ -1598,8 +1780,17 @@ _SOURCE_IGNORED = ("n_configs", "version", "libraries")
 
 def _checked_rod(xy) -> np.ndarray:
     """``xy`` as an (N+1, 2) float array of finite numbers with N >= 2 (the contact analysis
-    needs two segments), else a :class:`ParameterError` naming ``xy``."""
-    return checked_rod(xy, min_segments=2)
+    needs two segments) and a rod of non-zero length, else a :class:`ParameterError` naming
+    ``xy`` or the rod's length.
+
+    A rod whose nodes all coincide has no scale: its image would be a blank scan of the
+    margins alone, with truth tables of a rod that is not drawn.
+    """
+    arr = checked_rod(xy, min_segments=2)
+    check_real("rod length", float(np.sum(np.hypot(*np.diff(arr, axis=0).T))), low=0.0,
+               low_open=True, why="the sum of the segments of xy; a rod whose nodes all "
+               "coincide has nothing to draw")
+    return arr
 
 
 def _is_point(p) -> bool:
@@ -1677,6 +1868,21 @@ def _jsonable(obj):
     if isinstance(obj, np.ndarray):
         return obj.tolist()
     return repr(obj)
+
+
+def _used_kwargs(kwargs: dict, lam: float, delta) -> dict:
+    """The keywords of :func:`render_configuration` a directory render draws its scenes with:
+    ``kwargs`` (the caller's with the compaction's wall and scale, :func:`_render_directory`)
+    and the source's ``lam`` and ``contact_distance``, which the contact analysis of every
+    scene takes (None: the analysis' default for the rod's N).
+
+    A compaction's rod length is ``thickness_mm / rod_thickness`` unless given (one scale for
+    every scene); without a thickness it depends on each rod (its scene's params.json)."""
+    used = {**kwargs, "lam": float(lam), "contact_distance": delta}
+    if used.get("rod_length_mm") is None and used.get("rod_thickness") is not None:
+        used["rod_length_mm"] = (float(used.get("thickness_mm", THICKNESS_MM))
+                                 / float(used["rod_thickness"]))
+    return used
 
 
 def _render_record(sim_dir: Path, source_params: dict | None, kwargs: dict) -> dict:
@@ -1849,7 +2055,6 @@ def _render_directory(sim_dir, out_dir, *, configs=None, limit=None, progress=Fa
     if out_dir.resolve() == sim_dir.resolve():
         raise ParameterError(f"{out_dir} is the simulation folder being rendered: the scenes "
                              "go to another folder", name("out_dir"))
-    user_kwargs = dict(kwargs)
     lam = LAMBDA
     delta = None
     p = None
@@ -1883,7 +2088,10 @@ def _render_directory(sim_dir, out_dir, *, configs=None, limit=None, progress=Fa
                                                            if k in set(configs)]
         if limit is not None:
             keys = keys[:limit]
-        record = _render_record(sim_dir, p, user_kwargs)
+        # an ensemble that recorded None for its default delta analyses with that default
+        record = _render_record(sim_dir, p, _used_kwargs(
+            kwargs, lam, delta if delta is not None
+            else (_source_record(p) or {}).get("contact_distance")))
         # a resumed render keeps the record of the render that made the folder's scenes
         recorded = _claim_out(out_dir, record, name)
         if p is None:
@@ -1914,10 +2122,18 @@ def _render_directory(sim_dir, out_dir, *, configs=None, limit=None, progress=Fa
                                       "with N >= 3", rods_path)
                 if not np.isfinite(xy).all():
                     raise ConfigError(f"array {key!r} has non-finite coordinates", rods_path)
+                if not np.any(np.diff(xy, axis=0)):
+                    raise ConfigError(f"array {key!r} is a rod of zero length (its nodes all "
+                                      "coincide)", rods_path)
                 an = analyze_rod(xy, lam=lam, contact_distance=delta)
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore")
+                with warnings.catch_warnings(record=True) as caught:
+                    warnings.simplefilter("always")
                     scene = render_configuration(xy, an, seed=base_seed + i, **kwargs)
+                for w in caught:
+                    # the scan range is the run's (warned once above); a truth check is the
+                    # scene's own
+                    if issubclass(w.category, TruthWarning):
+                        warnings.warn(f"{folder}: {w.message}", TruthWarning, stacklevel=3)
                 if not recorded:
                     # before the first scene: a folder never holds scenes without their record
                     write_json(out_dir / RENDER_RECORD, record)

@@ -13,6 +13,9 @@ from simulate.contacts import analyze_rod
 from simulate.render import render_configuration
 from simulate.shapes import double_loop, hairpin, resample, spiral, transform
 
+#: the truth checks of these scenes (test_render_truth.py) are not what is tested here
+pytestmark = pytest.mark.filterwarnings("ignore::simulate.render.TruthWarning")
+
 LAM = 7e5
 DELTA = 0.5 / 300
 

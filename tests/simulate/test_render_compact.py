@@ -16,7 +16,9 @@ from simulate.shapes import resample, spiral, transform
 PX_PER_MM = 20.0  # h = 2 px: small images, fast tests
 # below the validated sheet thickness on purpose (these tests check the drawing, not the
 # analysis of it): the warning saying so is tested with the render command line
-pytestmark = pytest.mark.filterwarnings("ignore::simulate.render.ScanRangeWarning")
+pytestmark = [pytest.mark.filterwarnings("ignore::simulate.render.ScanRangeWarning"),
+              # the truth checks (test_render_truth.py) are not what is tested here
+              pytest.mark.filterwarnings("ignore::simulate.render.TruthWarning")]
 
 
 @pytest.fixture(scope="module")

@@ -14,6 +14,9 @@ from simulate.contacts import analyze_rod
 from simulate.render import render_configuration
 from simulate.shapes import hairpin, lines, resample
 
+#: the truth checks of these scenes (test_render_truth.py) are not what is tested here
+pytestmark = pytest.mark.filterwarnings("ignore::simulate.render.TruthWarning")
+
 N = 300
 DELTA = 0.5 / N
 ROD_MM = 60.0  # h = 0.1 mm = 5 px at 50 px/mm

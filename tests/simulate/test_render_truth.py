@@ -1,0 +1,175 @@
+"""The truth of a render agrees with its drawing and with the rod: junctions on the ink, the
+bands a junction holds together touching, the rod's length in the stacks, and render.json
+recording what the scenes were drawn with."""
+import json
+import warnings
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pandas as pd
+import pytest
+
+from crosssection.core.errors import ParameterError
+from crosssection.quality import QualityWarning
+from simulate.cli import main
+from simulate.contacts import analyze_rod
+from simulate.shapes import hairpin, resample
+from simulate.render import (JUNCTION_INK_H, TRUTH_LENGTH_TOLERANCE, TruthWarning,
+                             _disconnected_junctions, _junctions_onto_ink, _rod_drawn_check,
+                             render_configuration, render_directory)
+
+DATA = Path(__file__).parent / "data"
+H_PX = 5.0  # the default sheet: 0.1 mm at 50 px/mm
+
+
+def _ink_distance(sc):
+    return cv2.distanceTransform(np.where(sc.ink_mask, 0, 255).astype(np.uint8), cv2.DIST_L2,
+                                 cv2.DIST_MASK_PRECISE)
+
+
+def _render(xy, **kw):
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        sc = render_configuration(xy, clean=True, **kw)
+    return sc, [str(w.message) for w in caught if issubclass(w.category, TruthWarning)]
+
+
+def test_a_rod_of_zero_length_is_refused():
+    with pytest.raises(ParameterError, match=r"rod length must be a finite number > 0.*xy"):
+        render_configuration(np.zeros((101, 2)), clean=True)
+    # one node off the others is a rod
+    xy = np.zeros((101, 2))
+    xy[50:, 0] = 1.0
+    render_configuration(xy, clean=True)
+
+
+def test_a_rods_file_holding_a_zero_length_rod_exits_2_naming_it(tmp_path, capsys):
+    sim = tmp_path / "sim"
+    sim.mkdir()
+    np.savez(sim / "rods.npz", config_00000=np.zeros((101, 2)))
+    (sim / "params.json").write_text(json.dumps({"command": "quench", "lam": 3e4}))
+    assert main(["render", str(sim), "--out", str(tmp_path / "s")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "rods.npz" in err[0] and "zero length" in err[0]
+
+
+def test_passes_truth_holds_the_rod_and_its_junctions_lie_on_the_ink():
+    """An annealed rod of 80 segments with a loop stack, whose junction point (the mean of run
+    ends far apart) can lie on the paper: every truth junction is on the ink (moved there,
+    and said, when it is not), and every stack is as long as its passes, so the stacks hold
+    the rod."""
+    xy = np.load(DATA / "anneal_rod_loop_junction.npy")
+    sc, said = _render(xy, draw="passes", lam=5e4)
+    d = _ink_distance(sc)
+    for x, y in sc.tables["junctions"][["x_px", "y_px"]].to_numpy():
+        assert d[int(round(y)), int(round(x))] <= JUNCTION_INK_H * H_PX
+    assert sc.summary["truth_warnings"] == said
+    st = sc.tables["stacks"]
+    an = analyze_rod(xy, lam=5e4)
+    np.testing.assert_allclose(st["length_mm"], an.stacks["length"] * sc.summary["rod_length_mm"])
+    assert (st["n_br"] * st["length_mm"]).sum() == pytest.approx(sc.summary["rod_length_mm"],
+                                                                 rel=1e-9)
+
+
+def test_a_junction_on_the_paper_is_moved_where_its_stacks_meet():
+    """Two bands meeting at (20, 10) and a third apart; the junction point of the three lies
+    on the paper 30 px away: it goes to where two of its stacks' inks touch, and one message
+    says how far it lay and moved."""
+    stacks = pd.DataFrame({"stack_id": [0, 1, 2], "junction_a": [0, 0, 0],
+                           "junction_b": [-1, -1, -1], "n_br": [1, 1, 1],
+                           "width_mm": [0.1, 0.1, 0.1]})
+    junctions = pd.DataFrame({"junction_id": [0], "x_px": [20.0], "y_px": [40.0],
+                              "n_stacks": [3]})
+    labels = np.zeros((60, 60), np.int32)
+    labels[8:12, 2:20] = 1
+    labels[8:12, 20:40] = 2
+    labels[30:34, 50:58] = 3
+    moved, said = _junctions_onto_ink(junctions, stacks, labels, labels > 0, 15.0,
+                                      px_per_mm=50.0)
+    x, y = moved.loc[0, ["x_px", "y_px"]]
+    assert abs(x - 19.5) <= 1.5 and 8 <= y <= 12
+    assert len(said) == 1 and said[0].startswith("junction 0 (3 stacks) lay 29 px")
+    near, none = _junctions_onto_ink(junctions.assign(y_px=14.0), stacks, labels, labels > 0,
+                                     15.0, px_per_mm=50.0)
+    assert none == [] and near.equals(junctions.assign(y_px=14.0))
+
+
+def test_a_render_without_a_defect_of_its_truth_says_nothing():
+    n = 300
+    xy = resample(hairpin(0.25 * 0.5 / n, arm=0.3), n)
+    sc, said = _render(xy, draw="passes", rod_length_mm=60.0)
+    assert said == [] and sc.summary["truth_warnings"] == []
+
+
+def test_bands_a_junction_holds_together_that_do_not_touch_are_flagged():
+    """A quenched rod of 60 segments: joined by the hook rules, the tip of its four-layer
+    stack stops 30 px short of the arm that continues it (two networks for the analysis)."""
+    xy = np.load(DATA / "quench_rod_cut_join.npy")
+    sc, said = _render(xy, lam=3e4, seed=2)
+    n, _ = cv2.connectedComponents(sc.ink_mask.astype(np.uint8), connectivity=8)
+    assert n - 1 == 2
+    assert any("do not touch: the drawn rod is cut" in m for m in said)
+    assert said == sc.summary["truth_warnings"]
+
+
+def test_disconnected_junctions_are_those_whose_bands_do_not_touch():
+    stacks = pd.DataFrame({"stack_id": [0, 1, 2], "junction_a": [-1, 0, 0],
+                           "junction_b": [0, 1, -1], "n_br": [1, 1, 1]})
+    labels = np.zeros((20, 40), np.int32)
+    labels[5:8, 2:12] = 1
+    labels[5:8, 12:20] = 2  # touches stack 0
+    labels[5:8, 30:38] = 3  # a gap of paper from both
+    assert _disconnected_junctions(stacks, labels, labels > 0) == [0]
+    labels[5:8, 20:30] = 3
+    assert _disconnected_junctions(stacks, labels, labels > 0) == []
+
+
+def test_a_truth_holding_another_rod_length_is_flagged():
+    stacks = pd.DataFrame({"n_br": [1, 3], "length_mm": [10.0, 30.0]})
+    assert _rod_drawn_check(stacks, 100.0) is None
+    over = 100.0 / (1 + TRUTH_LENGTH_TOLERANCE) * 0.99
+    assert "+21 %" in _rod_drawn_check(stacks, over)
+    assert issubclass(TruthWarning, QualityWarning)
+
+
+def _sim(tmp_path, xy, params):
+    sim = tmp_path / "sim"
+    sim.mkdir()
+    np.savez(sim / "rods.npz", config_00000=xy)
+    (sim / "params.json").write_text(json.dumps(params))
+    return sim
+
+
+def test_cli_names_the_scene_of_a_truth_warning(tmp_path, capsys):
+    sim = _sim(tmp_path, np.load(DATA / "quench_rod_cut_join.npy"),
+               {"command": "quench", "lam": 3e4})
+    out = tmp_path / "s"
+    assert main(["render", str(sim), "--out", str(out), "--clean", "--seed", "2"]) == 0
+    err = [ln for ln in capsys.readouterr().err.strip().splitlines() if "do not touch" in ln]
+    assert len(err) == 1
+    assert err[0].startswith(f"warning: {out / 'config_00000'}: the bands of junction")
+    summary = json.loads((out / "config_00000" / "truth" / "summary.json").read_text())
+    assert any("do not touch" in m for m in summary["truth_warnings"])
+
+
+@pytest.mark.filterwarnings("ignore::simulate.render.TruthWarning")
+def test_render_json_records_the_sources_lambda_and_delta(tmp_path):
+    sim = _sim(tmp_path, np.load(DATA / "quench_rod_5.npy"),
+               {"command": "quench", "lam": 3e4, "contact_distance": 0.002})
+    render_directory(sim, tmp_path / "s", clean=True)
+    p = json.loads((tmp_path / "s" / "render.json").read_text())["params"]
+    assert p["lam"] == 3e4 and p["contact_distance"] == 0.002
+    assert p["rod_length_mm"] is None  # a quench's depends on each rod: its scene's params
+
+
+@pytest.mark.filterwarnings("ignore::simulate.render.TruthWarning")
+def test_render_json_records_the_compactions_wall_and_scale(tmp_path):
+    xy = np.load(DATA / "quench_rod_5.npy")
+    sim = _sim(tmp_path, xy, {"command": "compact", "thickness": 2e-3, "wall_radius": 0.1})
+    render_directory(sim, tmp_path / "s", clean=True)
+    p = json.loads((tmp_path / "s" / "render.json").read_text())["params"]
+    scene = json.loads((tmp_path / "s" / "config_00000" / "params.json").read_text())
+    assert p["lam"] == 0.0
+    assert p["rod_thickness"] == 2e-3 and p["wall_radius"] == 0.1
+    assert p["rod_length_mm"] == pytest.approx(scene["rod_length_mm"]) == pytest.approx(50.0)
