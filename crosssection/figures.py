@@ -10,6 +10,8 @@ mid point when they are long enough to carry a label.
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 __all__ = ["overlay_figure", "draw_overlay", "overlay_window", "steps_figure", "threshold_title",
@@ -167,7 +169,8 @@ def overlay_figure(rgb, result=None, *, junctions_df=None, stacks_df=None, paths
     # the counts in the title are known after drawing: the header is sized for the longest
     # counts a scan can have
     n_items = 4 if len(_step_points(result)) else 3
-    head = title or "stacks: width and label = n_br"
+    path = _get(result, "path")
+    head = title or ((f"{Path(path).name}: " if path else "") + "stacks: width and label = n_br")
     wide = f"{head}   (00000 junctions, 00000 stacks, 000000 branches)"
     _, _, header_in = _overlay_header(wide, n_items, _figure_width_in(view))
     fig = _figure(view, header_in=header_in)
@@ -182,6 +185,9 @@ def overlay_figure(rgb, result=None, *, junctions_df=None, stacks_df=None, paths
     if len(_step_points(result)):
         handles.append(Line2D([], [], marker="D", mfc="white", mec="black", ls="none",
                               label="layer step"))
+    px_per_mm = getattr(_get(result, "params"), "px_per_mm", None)
+    if px_per_mm:
+        _scale_bar(ax, float(px_per_mm), view[1])
     text, ncol, _ = _overlay_header(
         f"{head}   ({n_j} junctions, {m} stacks, {n_br_total} branches)", len(handles),
         fig.get_figwidth())
@@ -193,6 +199,21 @@ def overlay_figure(rgb, result=None, *, junctions_df=None, stacks_df=None, paths
                bbox_to_anchor=(0.05 / fig.get_figwidth(), 1 - below / height),
                borderaxespad=0.0, handlelength=1.8, columnspacing=1.2)
     return fig
+
+
+def _scale_bar(ax, px_per_mm: float, width_px: float) -> None:
+    """A bar of a round length in mm (about a fifth of the view's width) in the lower left
+    corner of ``ax``, labelled with its length."""
+    from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
+
+    target_mm = 0.2 * width_px / px_per_mm
+    nice = [m * 10.0 ** k for k in range(-2, 4) for m in (1, 2, 5)]
+    mm = max([v for v in nice if v <= target_mm] or [nice[0]])
+    label = f"{mm:g} mm"
+    ax.add_artist(AnchoredSizeBar(ax.transData, mm * px_per_mm, label, "lower left",
+                                  pad=0.4, borderpad=0.5, sep=3, frameon=False,
+                                  size_vertical=max(1.0, 0.004 * width_px), color="black",
+                                  fontproperties={"size": 8}))
 
 
 def _step_points(result) -> np.ndarray:

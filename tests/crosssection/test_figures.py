@@ -191,3 +191,25 @@ def test_a_large_scan_is_drawn_shrunk_in_its_own_coordinates():
         im = ax.get_images()[0]
         assert max(im.get_array().shape[:2]) <= PANEL_MAX_PX
         assert im.get_extent() == pytest.approx([-0.5, 2499.5, 4999.5, -0.5])
+
+
+def test_the_overlay_of_a_result_names_its_scan_and_draws_a_scale_bar():
+    from pathlib import Path
+
+    from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
+
+    from crosssection import analyze
+
+    scan = Path(__file__).resolve().parents[2] / "sample_images" / "scan_01_sparse.png"
+    res = analyze(scan, calibration=scan.parent / "calibration.csv", warn=False)
+    fig = overlay_figure(res.rgb, res)
+    assert fig._suptitle.get_text().startswith("scan_01_sparse.png: stacks")
+    bars = [a for a in fig.axes[0].artists if isinstance(a, AnchoredSizeBar)]
+    assert len(bars) == 1
+    label = bars[0].txt_label.get_text()
+    mm = float(label.split()[0])
+    # a round length of about a fifth of the view, at the scan's scale
+    r0, r1, c0, c1 = overlay_window(res.rgb.shape, res.hole)
+    assert label.endswith(" mm") and 0.08 <= mm * res.params.px_per_mm / (c1 - c0) <= 0.2
+    assert res.path is not None and overlay_figure(res.rgb)._suptitle.get_text().startswith(
+        "stacks")
