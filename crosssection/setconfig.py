@@ -180,7 +180,7 @@ def default_set_name(folder, root=None) -> str:
     """The name of a set whose ``set.toml`` gives none: its folder's path under ``root``
     (posix; unique among the sets of one input folder, unlike the folder's own name, which
     two experiments' ``day1/`` folders share), or the folder's name when it is ``root`` or
-    ``root`` is not given.
+    ``root`` is not given; characters a set name does not take become ``_``.
 
     Parameters
     ----------
@@ -194,22 +194,35 @@ def default_set_name(folder, root=None) -> str:
     str
     """
     folder = Path(folder)
+    parts = [folder.name]
     if root is not None:
         try:
-            rel = folder.relative_to(Path(root)).as_posix()
+            rel = folder.relative_to(Path(root))
         except ValueError:
-            rel = "."
-        if rel != ".":
-            return rel
-    return folder.name
+            rel = Path(".")
+        if rel.parts:
+            parts = list(rel.parts)
+    return "/".join(_safe_part(q) for q in parts)
+
+
+def _safe_part(text: str) -> str:
+    """A folder name made of the characters a set name takes (others become ``_``; a name
+    must start with a letter or a digit): ``exp A`` -> ``exp_A``."""
+    safe = re.sub(r"[^A-Za-z0-9._+-]", "_", text)
+    safe = re.sub(r"^[^A-Za-z0-9]+", "", safe)
+    return safe or "set"
 
 
 def _check_name(name, toml_path) -> str:
+    """``name`` when it is a set name: folder names of letters, digits and ``. _ + -``,
+    starting with a letter or a digit, joined by ``/`` (``eps8/day1``, as a set is named by
+    its path), else a ConfigError naming ``toml_path``."""
     parts = name.split("/") if isinstance(name, str) else [name]
     if not all(isinstance(p, str) and _SAFE_NAME.match(p) and p not in (".", "..")
                for p in parts):
-        raise ConfigError(f"name must be a plain folder name (letters, digits, . _ + -), "
-                          f"got {name!r}", toml_path)
+        raise ConfigError(f"name must be folder names (letters, digits, . _ + -, each "
+                          f"starting with a letter or a digit) joined by '/', got {name!r}",
+                          toml_path)
     return name
 
 
@@ -244,10 +257,7 @@ def load_set_config(toml_path, *, defaults: dict | None = None,
     data = read_toml(toml_path)
     folder = toml_path.parent
     if "name" in data:
-        name = data["name"]
-        if not isinstance(name, str) or not _SAFE_NAME.match(name) or name in (".", ".."):
-            raise ConfigError(f"name must be a plain folder name (letters, digits, . _ + -), "
-                              f"got {name!r}", toml_path)
+        name = _check_name(data["name"], toml_path)
     else:
         name = _check_name(default_set_name(folder, root), toml_path)
     images = data.get("images", {})

@@ -661,8 +661,10 @@ def _marks_of_another_colour(rgb, reg, scale) -> str:
     :data:`OTHER_MARKS_CONTRAST_U8`, is named by its median colour. Such marks (a black or
     grey pen, a photocopy, a purple or red ink) can be cut by the paper's rule with the blue
     bound removed, and the note says with which bound: halfway to the nearest class, so that
-    neither the paper nor a plate passes it. Marks of a blue hue are left to the faint-ink
-    advice. Returns ``""`` when there is no such class.
+    neither the paper nor a plate passes it. A darkest class along most of the scan's edge
+    is a plate or background, not marks: the note says so (marks lighter in red and green
+    than a grey plate, such as a red ink, cannot be cut apart from it). Marks of a blue hue
+    are left to the faint-ink advice. Returns ``""`` when there is no such class.
     """
     import colorsys
 
@@ -686,6 +688,16 @@ def _marks_of_another_colour(rgb, reg, scale) -> str:
     colours = (f"(median RGB ({ink[0]:.0f}, {ink[1]:.0f}, {ink[2]:.0f}) on paper "
                f"({paper[0]:.0f}, {paper[1]:.0f}, {paper[2]:.0f}))")
     rg_cut = 0.5 * (ink[:2].max() + nearest[:2].max())
+    if reg is None:
+        # marks lie inside the hole: a darkest class along most of the scan's edge is a
+        # plate or background (darker in red and green than red or green marks on paper)
+        sub = rgb[::step, ::step]
+        edge = np.concatenate([sub[0], sub[-1], sub[1:-1, 0], sub[1:-1, -1]])
+        if np.mean(edge[:, :2].max(axis=1) / scale <= rg_cut) > 0.5:
+            return (f"the scan's darkest pixels (median RGB ({ink[0]:.0f}, {ink[1]:.0f}, "
+                    f"{ink[2]:.0f})) frame it: a plate or background, not marks, and no cut "
+                    "on red and green tells marks from it; give the hole (--hole-radius-mm, "
+                    "--hole-center-px) or crop the scan to it")
     recipe = ("; to read them with the paper's rule without its blue bound: --threshold-method "
               f"fixed --blue-min 0 --rg-max {rg_cut * scale:.0f}")
     spread = float(ink.max() - ink.min())

@@ -683,8 +683,9 @@ def warn_limits_below(ens: Ensemble, where, *, stacklevel: int = 2) -> None:
             warnings.warn(
                 f"{where}: {name} = {_values(given)} {unit} given for set {s} is below the "
                 f"{_values(np.unique(rec_v[k]))} {unit} its analysis used ({int(k.sum())} "
-                f"scan(s)): the values in between were removed by the analysis, not unseen "
-                f"by chance, so the truncated fits are biased; give at least the analysis' "
+                f"scan(s)): below that limit the analysis removed branches ending free and "
+                f"filled voids, so the values in between are missing, not rare, and the "
+                f"truncated fits are biased; give at least the analysis' "
                 f"limit, or leave the option out to use it", DetectionLimitWarning,
                 stacklevel=stacklevel + 1)
 
@@ -761,8 +762,10 @@ def _batch_image_folders(folder: Path):
 
     ``index.csv`` (columns set, status, output) is used when present: rows with status ``ok``
     or ``skipped`` (done in an earlier run) whose folder holds a summary. Otherwise every
-    ``summary.json`` below ``folder`` counts, except in hidden folders (the batch's
-    ``.<stem>.partial-*`` staging folders of interrupted runs) and generated scenes' truth.
+    ``summary.json`` below ``folder`` counts, in the set its ``batch.set`` records (else its
+    first path component), except in hidden folders (the batch's ``.<stem>.partial-*``
+    staging folders of interrupted runs), generated scenes' truth and the folders
+    ``batch.json`` lists as stale. A scan's ``config_id`` is its folder's name.
     """
     index = folder / "index.csv"
     if index.is_file():
@@ -776,23 +779,52 @@ def _batch_image_folders(folder: Path):
             if not (img / "summary.json").is_file():
                 lost.append(output)
                 continue
-            cid = "/".join(Path(output).parts[1:]) or Path(output).name
-            out.append((row["set"] or Path(output).parts[0], cid, img))
+            # a scan's folder is one name inside its set's folder, however deep that is
+            out.append((row["set"] or Path(output).parts[0], Path(output).name, img))
         if lost:
             warnings.warn(f"{index}: {len(lost)} image(s) listed as done have no summary.json "
                           f"({_listed(lost, 3)}) and are left out", QualityWarning,
                           stacklevel=2)
         if out:
             return out
+    stale = _stale_outputs(folder)
     out = []
     for summ in sorted(_analysis_summaries(folder)):
         img = summ.parent
         rel = img.relative_to(folder)
-        if len(rel.parts) >= 2:
+        if rel.as_posix() in stale:
+            continue
+        # the set a batch recorded in the scan's summary (a nested set's name is a path)
+        recorded = _recorded_set(summ)
+        if recorded:
+            out.append((recorded, rel.name, img))
+        elif len(rel.parts) >= 2:
             out.append((rel.parts[0], "/".join(rel.parts[1:]), img))
         else:
             out.append((folder.resolve().name, rel.parts[0], img))
     return out
+
+
+def _recorded_set(summary_path: Path) -> str | None:
+    """The set ``batch`` recorded in a scan's summary.json (``batch.set``), None without."""
+    try:
+        summary = json.loads(summary_path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    info = summary.get("batch") if isinstance(summary, dict) else None
+    name = info.get("set") if isinstance(info, dict) else None
+    return name if isinstance(name, str) and name else None
+
+
+def _stale_outputs(folder: Path) -> set[str]:
+    """The output folders a batch's ``batch.json`` names as no scan's any more (left from
+    an earlier run whose sets or scans moved)."""
+    try:
+        meta = json.loads((folder / "batch.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return set()
+    stale = meta.get("stale_outputs") if isinstance(meta, dict) else None
+    return {str(s).strip("/") for s in stale} if isinstance(stale, list) else set()
 
 
 def _check_finished(folder: Path, n_found: int) -> str:
@@ -828,7 +860,8 @@ def _check_finished(folder: Path, n_found: int) -> str:
 def load_batch(folder, *, l_min_mm=RECORDED, s_min_mm2=RECORDED) -> Ensemble:
     """Read every per-image folder of a batch output.
 
-    The set of an image folder is its first path component under ``folder``; an image folder
+    The set of an image folder is the one ``index.csv`` (or, without it, its summary's
+    ``batch.set``) records, else its first path component under ``folder``; an image folder
     directly under ``folder`` belongs to the set named after ``folder``. Folders without a
     ``summary.json`` (unfinished or failed images, see ``failures.csv``) are skipped.
     Doubtful inputs that are still used give a :class:`~crosssection.quality.QualityWarning`

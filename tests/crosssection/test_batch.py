@@ -74,11 +74,16 @@ def test_a_set_without_name_is_named_by_its_path_in_the_input(tmp_path):
     assert load_set_config(folder / "set.toml").name == "day1"  # no input folder: its own
     (tmp_path / "set.toml").write_text("")
     assert load_set_config(tmp_path / "set.toml", root=tmp_path).name == tmp_path.name
-    bad = tmp_path / "my set"
-    bad.mkdir()
-    (bad / "set.toml").write_text("")
-    with pytest.raises(ConfigError, match="plain folder name"):
-        load_set_config(bad / "set.toml", root=tmp_path)
+    # a folder name a set name does not take is made one; a name given is checked
+    spaced = tmp_path / "exp A" / ".day 1"
+    spaced.mkdir(parents=True)
+    (spaced / "set.toml").write_text("")
+    assert load_set_config(spaced / "set.toml", root=tmp_path).name == "exp_A/day_1"
+    (spaced / "set.toml").write_text('name = "eps8/day1"\n')
+    assert load_set_config(spaced / "set.toml", root=tmp_path).name == "eps8/day1"
+    (spaced / "set.toml").write_text('name = "my set"\n')
+    with pytest.raises(ConfigError, match="folder names"):
+        load_set_config(spaced / "set.toml", root=tmp_path)
 
 
 def test_calibration_columns_checked(tmp_path):

@@ -410,3 +410,21 @@ def test_an_empty_mask_of_12_bit_data_in_16_bits_says_so(method):
     with pytest.raises(AnalysisError, match=r"reach only \d+ of 65535 \(12-bit data\?\)"):
         crosssection.analyze(twelve, px_per_mm=sc.params["px_per_mm"], threshold_method=method)
     assert "reach only" not in threshold_rgb(rgb16, method=method).note
+
+
+def test_a_plate_darker_than_red_marks_is_named_as_a_plate_not_as_marks():
+    """Red ink is lighter in red and green than a grey plate: the darkest class is the
+    plate, which frames the scan; the note says so and gives no cut (one would read the
+    plate as ink)."""
+    from crosssection.truth.backdrop import apply_backdrop
+
+    sc = make_scene(seed=13, receding_fraction=0.0, **KW)
+    truth = threshold_rgb(sc.rgb).mask
+    p = sc.params
+    rgb = apply_backdrop(_recoloured(sc, (150, 35, 45)), ink_mask=truth,
+                         hole_center_rc=p["hole_center_px"][::-1],
+                         hole_radius_px=p["hole_radius_mm"] * p["px_per_mm"],
+                         rng=np.random.default_rng(1), plate="grey", rim_px=0.0)
+    res = threshold_rgb(rgb)
+    assert not res.mask.any()
+    assert "frame it: a plate or background" in res.note and "--rg-max" not in res.note

@@ -208,3 +208,33 @@ def test_pdf_figure_draws_the_range_of_per_scan_limits(analysed):
     assert any(p.get_gid() == "limits:s1:all" for p in ax.patches)
     assert any("detection limits" in t.get_text() and "largest" in t.get_text()
                for t in ax.get_legend().get_texts())
+
+
+@pytest.mark.filterwarnings("ignore::crosssection.quality.QualityWarning")
+def test_nested_sets_are_read_by_their_recorded_names_with_or_without_the_index(tmp_path):
+    """Two experiments' day1/ folders are the sets eps8/day1 and eps12/day1; a scan's
+    config_id is its folder's name. Without index.csv the sets come from the summaries'
+    batch.set, and a folder the batch lists as stale is left out."""
+    import shutil
+    from pathlib import Path
+
+    from crosssection.stats.data import load_batch
+
+    samples = Path(__file__).resolve().parents[3] / "sample_images"
+    for exp, scan in (("eps8", "scan_01_sparse.png"), ("eps12", "scan_05_16bit.tif")):
+        d = tmp_path / "in" / exp / "day1"
+        d.mkdir(parents=True)
+        shutil.copy(samples / scan, d / scan)
+        (d / "set.toml").write_text("thickness_mm = 0.1\n")
+    out = tmp_path / "out"
+    assert main(["batch", str(tmp_path / "in"), "--out", str(out), "--no-figure",
+                 "--workers", "1"]) == 0
+    want = [("eps12/day1", "scan_05_16bit"), ("eps8/day1", "scan_01_sparse")]
+    ens = load_batch(out)
+    assert sorted(zip(ens.configs["set"], ens.configs["config_id"])) == want
+    (out / "index.csv").unlink()
+    shutil.copytree(out / "eps8" / "day1" / "scan_01_sparse", out / "eps8" / "old")
+    meta = json.loads((out / "batch.json").read_text())
+    (out / "batch.json").write_text(json.dumps({**meta, "stale_outputs": ["eps8/old"]}))
+    ens = load_batch(out)
+    assert sorted(zip(ens.configs["set"], ens.configs["config_id"])) == want
