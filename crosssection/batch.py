@@ -31,7 +31,7 @@ Design choices
 - Output folders keep their names: a scan whose folder index.csv records keeps that folder
   on a re-run, so a scan of the same stem added elsewhere in the set is named by its path
   rather than the two being renamed (and the first analysed again). Output folders that no
-  scan of the batch names any more (a set renamed, a scan moved or deleted) are named in one
+  scan of the batch names (a set renamed, a scan moved or deleted) are named in one
   ``warning:`` line and left where they are.
 - Local workers share numba's disk cache of compiled kernels. On an empty cache (a fresh
   install) the first worker to compile does so for all; the others wait and load the kernels
@@ -834,8 +834,8 @@ def stale_outputs(out_dir, tasks) -> list[str]:
 class BatchWarning(QualityWarning):
     """A doubt about the batch as a whole, raised before its images are analysed: a set's
     ``set.toml`` or ``calibration.csv`` values that are not used, a linked folder not
-    searched, an image analysed again over a recorded result (and why), output folders no
-    scan names any more (the command line prints each as a ``warning:`` line)."""
+    searched, an image analysed again over a recorded result (and why), output folders that
+    no scan names (the command line prints each as a ``warning:`` line)."""
 
 
 
@@ -1100,10 +1100,10 @@ def _start(out: Path, input_dir, tasks, sets, redone: list, stale: list,
         n = len(stale)
         shown = ", ".join(stale[:5]) + (f" and {n - 5} more" if n > 5 else "")
         they = "they are left as they are and stay" if n > 1 else "it is left as it is and stays"
-        warnings.warn(f"{out}: {n} output folder{'s' if n > 1 else ''} no longer match"
-                      f"{'' if n > 1 else 'es'} any scan: {shown} (a scan moved, renamed or "
-                      f"deleted, or a set renamed); {they} out of index.csv", BatchWarning,
-                      stacklevel=3)
+        warnings.warn(f"{out}: {n} output folder{'s' if n > 1 else ''} match"
+                      f"{'' if n > 1 else 'es'} no scan of this batch: {shown} (a scan "
+                      f"moved, renamed or deleted, or a set renamed); {they} out of "
+                      "index.csv", BatchWarning, stacklevel=3)
     write_json(out / "batch.json", meta)
     return meta
 

@@ -37,8 +37,8 @@ multiplicity, distance from the rod's middle). What still depends on the numberi
 stack is cut at the normal of its first sample (its branch count may differ by one or two
 between the two numberings), a run split in the middle lands on the middle sample on one
 side (one sample ``h``), and the passes of a contact cluster are listed in sample order
-(taking the nearest first moved the stack lines of compacted rods, whose renders' junction
-joins then crossed the paper). A rod whose two principal moments are equal has no frame of its
+(taking the nearest first moves the stack lines of compacted rods, whose renders' junction
+joins then cross the paper). A rod whose two principal moments are equal has no frame of its
 own, and a void whose free part is about a pixel wide is found or missed with the rod's
 sub-pixel position: a perturbed rod (not a rigidly moved one) may gain or lose it.
 """

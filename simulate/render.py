@@ -1928,6 +1928,19 @@ def _holds_scenes(out_dir: Path) -> bool:
         for p in out_dir.iterdir())
 
 
+#: Keywords whose values a directory render takes from its source ensemble (its params.json,
+#: compared on its own): a record that left them at their defaults (None, or the API's
+#: lambda) describes the same render.
+_FROM_SOURCE = ("lam", "contact_distance", "rod_thickness", "wall_radius")
+
+
+def _follows_source(key: str, recorded) -> bool:
+    """Whether a difference in ``key`` between two records of one source is no difference:
+    the keywords taken from the source, and a compaction's rod length recorded unset (it
+    follows from the source's thickness)."""
+    return key in _FROM_SOURCE or (key == "rod_length_mm" and recorded is None)
+
+
 def _claim_out(out_dir: Path, record: dict, name=str) -> bool:
     """Refuse an output folder whose scenes were rendered otherwise.
 
@@ -1969,7 +1982,8 @@ def _claim_out(out_dir: Path, record: dict, name=str) -> bool:
     if not isinstance(old, dict) or not isinstance(old.get("params"), dict):
         raise ConfigError("malformed (expected a JSON object with params)", path)
     new = record["params"]
-    keys = [k for k in sorted(set(old["params"]) | set(new)) if old["params"].get(k) != new.get(k)]
+    keys = [k for k in sorted(set(old["params"]) | set(new)) if old["params"].get(k) != new.get(k)
+            and not _follows_source(k, old["params"].get(k))]
     if "clean" in keys:
         # a defect left at its default changes with clean: clean is the difference
         was, now = old.get("given") or {}, record["given"]

@@ -817,8 +817,8 @@ def _recorded_set(summary_path: Path) -> str | None:
 
 
 def _stale_outputs(folder: Path) -> set[str]:
-    """The output folders a batch's ``batch.json`` names as no scan's any more (left from
-    an earlier run whose sets or scans moved)."""
+    """The output folders a batch's ``batch.json`` names as no scan's (left from an earlier
+    run whose sets or scans moved)."""
     try:
         meta = json.loads((folder / "batch.json").read_text(encoding="utf-8"))
     except (OSError, ValueError):

@@ -363,10 +363,10 @@ def test_output_folders_no_scan_names_any_more_are_named_once(tmp_path, capsys):
         B.run_batch(inp, out, workers=1, progress=False, figure=False, task_fn=_summary_only)
     said = [str(w.message) for w in caught]
     assert len(said) == 1 and said[0].startswith(
-        f"{out}: 2 output folders no longer match any scan: alpha/a, alpha/b (")
+        f"{out}: 2 output folders match no scan of this batch: alpha/a, alpha/b (")
     assert (out / "alpha" / "a" / "summary.json").is_file()  # left where they are
     (inp / "setA" / "b.png").unlink()  # a scan deleted
-    with pytest.warns(B.BatchWarning, match="3 output folders no longer match any scan: "
+    with pytest.warns(B.BatchWarning, match="3 output folders match no scan of this batch: "
                       "alpha/a, alpha/b, beta/b"):
         B.run_batch(inp, out, workers=1, progress=False, figure=False, task_fn=_summary_only,
                     force=True)

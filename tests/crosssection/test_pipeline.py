@@ -373,9 +373,7 @@ def test_result_write_roundtrip(tmp_path):
 def test_an_isolated_blob_pruned_below_l_min_is_dropped(axes_px):
     """A fat smear in a void keeps its area and extent through the cleaning but its skeleton
     is pruned to a stub shorter than l_min: it holds no measurable branch. Counted as a stack
-    its parabola through a few pixels read up to 70 % of this scan's energy."""
-
-
+    its parabola through a few pixels reads up to 70 % of this scan's energy."""
     from crosssection.truth.network import make_scene
 
     sc = make_scene(seed=21, n_stacks=30, max_layers=4)

@@ -173,3 +173,25 @@ def test_render_json_records_the_compactions_wall_and_scale(tmp_path):
     assert p["lam"] == 0.0
     assert p["rod_thickness"] == 2e-3 and p["wall_radius"] == 0.1
     assert p["rod_length_mm"] == pytest.approx(scene["rod_length_mm"]) == pytest.approx(50.0)
+
+
+@pytest.mark.filterwarnings("ignore::simulate.render.TruthWarning")
+def test_a_render_recorded_with_the_sources_values_unset_resumes(tmp_path):
+    """A render.json that recorded lambda at the API's default and delta unset (the values
+    come from the source's params.json, compared on their own) is the same render."""
+    xy = np.load(DATA / "quench_rod_5.npy")
+    sim = tmp_path / "sim"
+    sim.mkdir()
+    np.savez(sim / "rods.npz", config_00000=xy, config_00001=xy[::-1].copy())
+    (sim / "params.json").write_text(json.dumps({"command": "quench", "lam": 3e4}))
+    out = tmp_path / "s"
+    render_directory(sim, out, clean=True, configs=["config_00000"])
+    rec = json.loads((out / "render.json").read_text())
+    rec["params"].update(lam=7e5, contact_distance=None, rod_length_mm=None)
+    (out / "render.json").write_text(json.dumps(rec))
+    render_directory(sim, out, clean=True)
+    assert sorted(p.name for p in out.glob("config_*")) == ["config_00000", "config_00001"]
+    rec["params"].update(px_per_mm=40.0)
+    (out / "render.json").write_text(json.dumps(rec))
+    with pytest.raises(Exception, match="px-per-mm|px_per_mm"):
+        render_directory(sim, out, clean=True)
