@@ -55,6 +55,7 @@ def bending_energy(xy) -> float:
     float
         ``sum_i |R_{i+1} - 2R_i + R_{i-1}|^2 / ds^3`` over interior nodes. An arc of radius
         ``r`` gives ``(1 - 1/N) / r^2`` (N-1 interior nodes), i.e. ``1/r^2`` up to O(1/N).
+
     Raises
     ------
     ParameterError
@@ -83,6 +84,7 @@ def node_curvature(xy) -> np.ndarray:
     Returns
     -------
     (N+1,) float64 array
+
     Raises
     ------
     ParameterError
@@ -115,6 +117,7 @@ def confinement_energy(xy, lam: float) -> float:
     -------
     float
         A straight rod centred at the origin gives ``Lambda/12`` (+ O(1/N^2)).
+
     Raises
     ------
     ParameterError
@@ -146,6 +149,7 @@ def total_energy(xy, lam: float, *, wall_radius: float | None = None,
     Returns
     -------
     float
+
     Raises
     ------
     ParameterError
@@ -230,6 +234,7 @@ def nematic_energy(xy, *, u: float, cutoff: float, min_separation: int = 6) -> f
     Returns
     -------
     float
+
     Raises
     ------
     ParameterError
@@ -327,6 +332,7 @@ def contact_barrier(xy, *, sigma: float, eps: float, min_separation: int = 3):
         dE/d(node positions).
     n_pairs : int
         Pairs within range.
+
     Raises
     ------
     ParameterError
