@@ -429,7 +429,8 @@ def curvature_figure(profiles, stacks_df=None, *, ax=None, max_stacks=8):
     return ax.figure
 
 
-def widths_figure(stacks_df, calibration=None, *, ax=None):
+def widths_figure(stacks_df, calibration=None, *, ax=None,
+                  calibration_label: str = "calibration w(n)"):
     """Measured stack widths against their layer counts, with the calibration law.
 
     Parameters
@@ -440,6 +441,9 @@ def widths_figure(stacks_df, calibration=None, *, ax=None):
         Its ``width(n)`` is drawn as the line the widths are read against.
     ax : matplotlib axes, optional
         Draw into it instead of a new figure.
+    calibration_label : str
+        The line's legend entry (an analysis without a calibration reads widths against
+        ``w = n h``, which is no calibration).
 
     Returns
     -------
@@ -466,7 +470,7 @@ def widths_figure(stacks_df, calibration=None, *, ax=None):
         n_max = int(np.nanmax(n)) if np.isfinite(n).any() else 1
     if calibration is not None:
         ns = np.arange(1, max(n_max, 1) + 2)
-        ax.plot(ns, calibration.width(ns), "-", color="black", lw=1, label="calibration w(n)")
+        ax.plot(ns, calibration.width(ns), "-", color="black", lw=1, label=calibration_label)
     ax.set_xlabel(r"layers $n_{br}$")
     ax.set_ylabel("stack width [mm]")
     ax.set_title("stack widths and the calibration they are read against", fontsize=10)

@@ -186,7 +186,10 @@ class AnalysisResult:
             from crosssection.pipeline import _calibration
 
             cal = _calibration(self.params) if self.params is not None else None
-            return F.widths_figure(self.stacks, cal, ax=ax)
+            given = self.params is not None and self.params.calibration is not None
+            return F.widths_figure(self.stacks, cal, ax=ax,
+                                   calibration_label="calibration w(n)" if given else
+                                   "no calibration: w = n h")
         raise ParameterError(f"kind must be one of 'overlay', 'steps', 'curvature', 'widths', "
                              f"got {kind!r}")
 

@@ -70,3 +70,17 @@ def test_plot_into_given_axes(result):
         result.plot("steps", ax=axes[0, 0])
     with pytest.raises(ParameterError, match="kind"):
         result.plot("histogram")
+
+
+def test_the_widths_plot_names_its_line_by_whether_a_calibration_was_given(result):
+    """Without a calibration the widths are read against w = n h, which the legend does not
+    call a calibration."""
+    import dataclasses
+
+    def legend(res):
+        return [t.get_text() for t in res.plot("widths").axes[0].get_legend().get_texts()]
+
+    assert "calibration w(n)" in legend(result)
+    bare = type(result)(**{**vars(result),
+                           "params": dataclasses.replace(result.params, calibration=None)})
+    assert "no calibration: w = n h" in legend(bare) and "calibration w(n)" not in legend(bare)
