@@ -78,8 +78,8 @@ on the lattice: it is seen only as h below 3 px when the true h is below 6 px.
 The ``hole_cut`` check: a scan cropped through the hole loses the stacks beyond its border (the
 wall band lines the whole hole), and the counts, lengths and epsilon are those of a part. The
 hole, given or found, is known beyond the image (a found hole is fitted to the wall's arc
-that the scan holds; one found with low confidence is not checked, ``hole_fitted`` says it
-already); the limit, 0.5 % of its area, is a segment about 16 px deep on a hole of
+that the scan holds; the area of one found with low confidence is not checked, its misfit
+alone can reach beyond the scan, but the ink running off the scan inside it is); the limit, 0.5 % of its area, is a segment about 16 px deep on a hole of
 400 px radius, and a hole reaching a pixel beyond the border stays below 0.01 %. A shallower
 cut still loses what it crosses: the wall band lies along the hole's edge, so a border that
 cuts into the hole cuts the band first (a sample scan cropped 12 px into its hole of 380 px,
@@ -357,18 +357,22 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
                                  "bending energies are unreliable (check px_per_mm and "
                                  "thickness_mm; scan at a resolution that makes h 3 px or more)",
                                  h_px, LOW_RESOLUTION_H_PX))
-    if hole_confidence is not None and hole_confidence < 0.5:
+    low_confidence = hole_confidence is not None and hole_confidence < 0.5
+    if low_confidence:
         flags.append(QualityFlag("hole_fitted", f"hole found with low confidence "
                                  f"{hole_confidence:.2f}: pass hole_radius_mm and "
-                                 "hole_center_px", hole_confidence, 0.5))
+                                 "hole_center_px (when the scan holds the whole hole)",
+                                 hole_confidence, 0.5))
     flags += _crossed_check(params, hole)
     if ink_outside_fraction > 0.02:
         flags.append(QualityFlag("ink_outside_hole", f"{100 * ink_outside_fraction:.1f} % of the "
                                  "ink lies outside the hole (ignored): check the hole and the "
                                  "threshold", ink_outside_fraction, 0.02))
-    # a hole found with low confidence may be cut by nothing but its own misfit
-    if image_shape is not None and not (hole_confidence is not None and hole_confidence < 0.5):
-        cut = hole_outside_fraction(image_shape, hole.center_rc, hole.radius_px)
+    if image_shape is not None:
+        # a hole found with low confidence may be cut by nothing but its own misfit: only
+        # the ink running off the scan inside it tells a crop then
+        cut = (0.0 if low_confidence else
+               hole_outside_fraction(image_shape, hole.center_rc, hole.radius_px))
         if cut > HOLE_CUT_LIMIT:
             why = ("the hole given reaches beyond the scan: check hole_radius_mm and "
                    "hole_center_px, or scan the whole hole" if params.hole_given else

@@ -463,7 +463,8 @@ def trim_margin(mask, hole, *, margin_px: float = FRAME_MARGIN_PX) -> tuple[np.n
     hi = np.sqrt(np.maximum(R ** 2 - dr2, 0.0))
     lo_a = np.maximum(np.ceil(c0 - ho), 0).astype(np.int64)
     lo_b = np.minimum(np.floor(c0 - hi), W - 1).astype(np.int64)
-    hi_a = np.maximum(np.ceil(c0 + hi), lo_b + 1).astype(np.int64)
+    # a hole centred left of the scan: the right run starts at column 0 at the latest
+    hi_a = np.maximum(np.maximum(np.ceil(c0 + hi), lo_b + 1), 0).astype(np.int64)
     hi_b = np.minimum(np.floor(c0 + ho), W - 1).astype(np.int64)
     rr, cc = [], []
     for a, b in ((lo_a, lo_b), (hi_a, hi_b)):

@@ -354,6 +354,22 @@ def test_a_hole_cut_by_the_scan_border_is_flagged(scene):
     assert "cropped through the hole" in flag.message and "hole given" not in flag.message
 
 
+@pytest.mark.parametrize("depth", [1.3, 1.6])
+def test_a_scan_of_less_than_half_the_hole_is_flagged_cut_though_its_hole_fit_is_doubtful(
+        scene, depth):
+    """Cropped 1.3 or 1.6 radii in (the hole's centre off the scan), the scan holds less
+    than half the hole: the hole is found with low confidence, whose area cannot tell a crop
+    from a misfit, but the network running off the scan inside it does."""
+    rgb, _ = _cut_left(scene, depth)
+    kw = _given(scene)
+    kw.pop("hole_radius_mm"), kw.pop("hole_center_px")
+    res, _ = _analyze(rgb, **kw)
+    codes = res.summary["quality"]["codes"]
+    assert "hole_fitted" in codes and "hole_cut" in codes
+    flag = next(f for f in res.quality if f.code == "hole_fitted")
+    assert "when the scan holds the whole hole" in flag.message
+
+
 def test_a_shallow_cut_through_the_wall_band_is_flagged(scene):
     # a border 3 % of the radius into the hole (0.3 % of its area, below the area limit)
     # cuts the wall band: the ink running off the scan raises the flag
