@@ -10,11 +10,13 @@ paper Fig. 2: ``step1_raw.png``, ``step2_threshold.png``, ``step3_clean.png``,
 ``step4_skeleton.png`` and ``steps.png`` (the four side by side), and ``steps.json``: the
 parameters, the package version and the input file they were made with.
 
-A run leaves DIR describing itself alone: the files of the command that this run does not
-write (``overlay.png`` under ``--no-figure``, the step images without ``--steps``,
-``steps.png`` under ``steps --no-figure``) are removed from DIR once the new outputs are
-written. Only those names are: nothing else in DIR is touched, and a run that fails leaves
-the previous outputs whole.
+A run leaves DIR describing itself alone: when DIR holds the record of an earlier run
+(``summary.json`` or ``steps.json``), the files of the command that this run does not write
+(``overlay.png`` under ``--no-figure``, the step images without ``--steps``, ``steps.png``
+under ``steps --no-figure``) are removed from DIR once the new outputs are written. Only those
+names are: nothing else in DIR is touched, a folder with no such record keeps its files (they
+are the user's), and a run that fails leaves the previous outputs whole. DIR may not be the
+scan's own folder: a batch of that folder would read the outputs as scans.
 """
 from __future__ import annotations
 
@@ -41,6 +43,37 @@ OPTIONAL_OUTPUTS = {
     "analyze": (OVERLAY, *STEP_IMAGES, STEPS_FIGURE, STEPS_RECORD),
     "steps": (STEPS_FIGURE,),
 }
+
+
+#: the records that mark a folder as the output of an earlier run of either command
+RUN_RECORDS = ("summary.json", STEPS_RECORD)
+
+
+def earlier_run(out_dir) -> bool:
+    """Whether ``out_dir`` holds the record of an earlier ``analyze`` or ``steps`` run."""
+    out = Path(out_dir).expanduser()
+    return any((out / name).is_file() for name in RUN_RECORDS)
+
+
+def check_not_beside(image, out_dir) -> None:
+    """Refuse an output folder that is the scan's own folder.
+
+    Raises
+    ------
+    ParameterError
+        ``out_dir`` is the folder holding ``image``: the outputs (PNG images among them)
+        would lie beside the scan, and a batch of that folder would read them as scans.
+    """
+    from crosssection.core.errors import ParameterError
+
+    try:
+        same = Path(out_dir).expanduser().resolve() == Path(image).expanduser().resolve().parent
+    except OSError:
+        return
+    if same:
+        raise ParameterError(f"{out_dir} is the scan's own folder: its images would lie "
+                             "beside the scan, where a batch reads them as scans; give another "
+                             "folder", "--out")
 
 
 def remove_stale(out_dir, command: str, written) -> list[Path]:
@@ -125,6 +158,7 @@ def run(args) -> int:
     from crosssection.pipeline import analyze
 
     check_out(args.out)
+    check_not_beside(args.image, args.out)
     params = AnalysisParams.from_cli_args(args, path=args.image)
     note = set_not_read(args.image, params)
     if note:
@@ -133,8 +167,9 @@ def run(args) -> int:
         warnings.warn(note, QualityWarning, stacklevel=2)
     result = analyze(args.image, params)
     out = Path(args.out).expanduser()
+    earlier = earlier_run(out)
     written = result.write(out, figure=not args.no_figure, steps=args.steps)
-    removed = remove_stale(out, "analyze", written.values())
+    removed = remove_stale(out, "analyze", written.values()) if earlier else []
     s = result.summary
     print(f"{args.image}: {s['n_junctions']} junctions, {s['n_stacks']} stacks, "
           f"{s['n_branches']} branches, {s['n_voids']} voids, L = {s['rod_length_mm']:.1f} mm"
@@ -149,9 +184,11 @@ def run_steps(args) -> int:
     from crosssection.pipeline import preprocess, write_step_images
 
     check_out(args.out)
+    check_not_beside(args.image, args.out)
     params = AnalysisParams.from_cli_args(args, path=args.image)
     pre = preprocess(args.image, params)
     out = Path(args.out).expanduser()
+    earlier = earlier_run(out)
     try:
         paths = write_step_images(out, pre.rgb, pre.threshold.mask, pre.mask_clean,
                                   pre.skeleton, pre.junctions.centers_rc,
@@ -163,7 +200,7 @@ def run_steps(args) -> int:
         raise
     except OSError as exc:
         raise output_error(exc, out) from None
-    removed = remove_stale(out, "steps", [*paths.values(), record])
+    removed = remove_stale(out, "steps", [*paths.values(), record]) if earlier else []
     print(f"{args.image}: {len(paths)} step images -> {args.out}{_removed_note(removed)}")
     return 0
 

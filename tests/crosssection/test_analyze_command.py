@@ -6,6 +6,7 @@ from __future__ import annotations
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -176,3 +177,34 @@ def test_remove_stale_leaves_folders_and_other_names(tmp_path):
     removed = remove_stale(tmp_path, "analyze", [tmp_path / "summary.json"])
     assert removed == [tmp_path / STEPS_FIGURE]
     assert _names(tmp_path) == sorted([OVERLAY, "summary.json"])
+
+
+@pytest.mark.parametrize("command", ["analyze", "steps"])
+def test_a_folder_with_no_earlier_run_keeps_the_users_files(command, tmp_path, capsys):
+    """A user's own overlay.png or steps.png in a folder no analysis wrote is not an
+    output of an earlier run: --no-figure leaves it."""
+    from PIL import Image
+
+    from crosssection.cli import main
+
+    scan = Path(__file__).resolve().parents[2] / "sample_images" / "scan_01_sparse.png"
+    out = tmp_path / "mine"
+    out.mkdir()
+    Image.new("RGB", (4, 4)).save(out / "overlay.png")
+    Image.new("RGB", (4, 4)).save(out / "steps.png")
+    assert main([command, str(scan), "--no-figure", "--out", str(out)]) == 0
+    assert (out / "overlay.png").is_file() and (out / "steps.png").is_file()
+    assert "removed" not in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("command", ["analyze", "steps"])
+def test_the_scans_own_folder_is_refused_as_output(command, tmp_path, capsys):
+    from crosssection.cli import main
+
+    scan = tmp_path / "s.png"
+    scan.write_bytes((Path(__file__).resolve().parents[2] / "sample_images"
+                      / "scan_01_sparse.png").read_bytes())
+    assert main([command, str(scan), "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "the scan's own folder" in err[0] and "--out" in err[0]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.png"]
