@@ -167,6 +167,17 @@ def build_parser(argv=None) -> argparse.ArgumentParser:
         argv)
 
 
+def started(build, argv=None) -> int:
+    """Build the parser (``build(argv)``, which imports the subcommands' modules) and run the
+    command; an interrupt while the modules load is one line too, exit 130."""
+    try:
+        parser = build(argv)
+    except KeyboardInterrupt:
+        print("error: interrupted before the command started", file=sys.stderr)
+        return INTERRUPTED
+    return run_parsed(parser, argv)
+
+
 def main(argv=None) -> int:
     """Run the ``crosssection`` CLI; return the exit status."""
-    return run_parsed(build_parser(argv), argv)
+    return started(build_parser, argv)

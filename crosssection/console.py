@@ -282,13 +282,16 @@ def main(argv=None) -> int:
         return 2  # pragma: no cover - parse_args exits above
     try:
         importlib.import_module(commands[name])
+    except KeyboardInterrupt:
+        print("error: interrupted before the command started", file=sys.stderr)
+        return 130
     except Exception as exc:  # noqa: BLE001 - a broken module: one line, never a traceback
         print(f"error: foldstat {name}: unavailable ({commands[name]}: {_reason(exc)})",
               file=sys.stderr)
         return 1
-    from crosssection.cli import run_parsed
+    from crosssection.cli import started
 
-    return run_parsed(build_parser(argv), argv)
+    return started(build_parser, argv)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import argparse
 
-from crosssection.cli import make_parser, run_parsed
+from crosssection.cli import make_parser, started
 
 SUBCOMMANDS = {
     "quench": "simulate.ensemble",
@@ -25,4 +25,4 @@ def build_parser(argv=None) -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     """Run the ``simulate`` CLI; return the exit status."""
-    return run_parsed(build_parser(argv), argv)
+    return started(build_parser, argv)

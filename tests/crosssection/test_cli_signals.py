@@ -101,3 +101,39 @@ def test_a_command_reporting_its_own_interrupt_exits_143_on_sigterm(capsys):
 def test_terminated_stops_what_an_interrupt_stops():
     assert issubclass(Terminated, KeyboardInterrupt)
     assert not issubclass(Terminated, Exception)  # per-task `except Exception` lets it through
+
+
+def test_an_interrupt_while_the_modules_load_is_one_line(capsys):
+    """Ctrl-C before the command runs (the subcommands' modules still importing, numba
+    compiling at import) is one line and exit 130, as once it runs."""
+    from crosssection.cli import started
+
+    def build(argv):
+        raise KeyboardInterrupt
+
+    assert started(build, ["batch"]) == 130
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["error: interrupted before the command started"]
+
+
+@pytest.mark.parametrize("package", ["crosssection", "simulate"])
+def test_an_interrupt_while_python_m_imports_is_one_line(package):
+    """``python -m PACKAGE`` interrupted while it imports its CLI: the __main__ module turns
+    the KeyboardInterrupt into the one line (the import is made to raise it here)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    code = ("import builtins, runpy\n"
+            "_imp = builtins.__import__\n"
+            "def _raise(name, *a, **k):\n"
+            f"    if name == '{package}.cli':\n"
+            "        raise KeyboardInterrupt\n"
+            "    return _imp(name, *a, **k)\n"
+            "builtins.__import__ = _raise\n"
+            f"runpy.run_module('{package}', run_name='__main__')\n")
+    repo = Path(__file__).resolve().parents[2]
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          cwd=repo, timeout=120)
+    assert proc.returncode == 130
+    assert proc.stderr.strip().splitlines() == ["error: interrupted before the command started"]
