@@ -930,6 +930,7 @@ def run_atlas(out, config: AtlasConfig | None = None, *, seed: int = 1, workers:
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise ParameterError("the report folder is a file", out)
+    _check_report_folder(out)
     t_start = time.perf_counter()
     rod_jobs, tasks = plan(config, int(seed), scene_sweeps)
     given = _read_rods(rods, rod_jobs) if rods is not None else {}
@@ -1630,7 +1631,7 @@ def _stage_reading(df) -> str:
 
 def _index(command, tables, failures, charts, readings, elapsed) -> str:
     took = "" if elapsed is None else f" ({elapsed / 60:.1f} min)"
-    lines = ["# Validation atlas", "",
+    lines = [ATLAS_TITLE, "",
              f"Command: `{command}`{took}. Scenes with exact truth from "
              "the network generator and from simulator rods (quenched, or compacted by a "
              "shrinking wall) rendered as scans, "
@@ -1677,6 +1678,36 @@ def add_subparser(sub) -> None:
                         "of quenching them again: the quench is chaotic, so another build of "
                         "numba or numpy gives other rods from the same seeds")
     p.set_defaults(func=_run)
+
+
+#: The first line of an atlas' ``index.md``: a folder holding it is a report this command wrote
+ATLAS_TITLE = "# Validation atlas"
+
+
+def _check_report_folder(out: Path) -> None:
+    """Refuse a folder that holds files and no atlas' ``index.md``: a run replaces the
+    report's files (index.md, the sweeps' tables and charts, failures.csv, rods.npz), which
+    would overwrite the user's own files of those names.
+
+    Raises
+    ------
+    ParameterError
+        Naming the folder and one of its entries.
+    """
+    if not out.is_dir():
+        return
+    entries = sorted(p.name for p in out.iterdir())
+    if not entries:
+        return
+    index = out / "index.md"
+    try:
+        ours = index.is_file() and index.read_text(encoding="utf-8").startswith(ATLAS_TITLE)
+    except (OSError, UnicodeDecodeError):
+        ours = False
+    if not ours:
+        raise ParameterError(f"holds {entries[0]}, and no atlas report: a run replaces the "
+                             "report's files there; give a new folder, an empty one or one an "
+                             "earlier benchmark wrote", out)
 
 
 def _run(args) -> int:

@@ -242,3 +242,18 @@ def test_report_folder_is_a_file(tmp_path, capsys):
     assert main(["benchmark", "--out", str(f), "--quick"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "file" in err[0]
+
+
+def test_a_folder_of_the_users_files_is_refused_as_the_report(tmp_path):
+    """A run replaces the report's files: a folder holding the user's own index.md (or any
+    file) and no atlas report is refused before anything runs; an earlier report's is not."""
+    own = tmp_path / "notes"
+    own.mkdir()
+    (own / "index.md").write_text("my notes\n")
+    with pytest.raises(atlas.ParameterError, match="holds index.md, and no atlas report"):
+        atlas.run_atlas(own, atlas.AtlasConfig.tiny(), seed=3, workers=1, sweeps=["noise"])
+    assert (own / "index.md").read_text() == "my notes\n"
+    report = tmp_path / "report"
+    report.mkdir()
+    (report / "index.md").write_text(atlas.ATLAS_TITLE + "\n\nan earlier run\n")
+    atlas._check_report_folder(report)  # an earlier report: no error
