@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shlex
 import shutil
 from pathlib import Path
 
@@ -112,5 +113,5 @@ def run(args) -> int:
     scans = [p for p in written if p.parent == Path(args.dest).expanduser()
              and p.suffix in (".png", ".jpg", ".tif")]
     print(f"{len(scans)} sample scans and their truth -> {args.dest} "
-          f"(next: foldstat batch {args.dest} --out batch/)")
+          f"(next: foldstat batch {shlex.quote(str(args.dest))} --out batch/)")
     return 0

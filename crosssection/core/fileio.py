@@ -95,6 +95,39 @@ def check_out(path, name: str = "--out") -> None:
         raise ParameterError("empty path: give the output folder", name)
 
 
+def check_writable(path) -> None:
+    """Refuse, before any work, an output folder that cannot be written: a file is written
+    and removed in it, or in its nearest existing parent when it does not exist yet (nothing
+    is created). Minutes of fitting or a sweep are then not lost to a folder found read-only
+    at the end.
+
+    Parameters
+    ----------
+    path : str or Path
+        The output folder.
+
+    Raises
+    ------
+    OutputError
+        Naming the folder (or the parent) and the cause.
+    """
+    import tempfile
+
+    from crosssection.core.errors import output_error
+
+    folder = Path(path).expanduser()
+    probe = folder
+    while not probe.exists() and probe.parent != probe:
+        probe = probe.parent
+    if not probe.is_dir():
+        return  # a file in the way: the command names it when it makes the folder
+    try:
+        with tempfile.NamedTemporaryFile(dir=probe, prefix=".foldstat-probe-"):
+            pass
+    except OSError as exc:
+        raise output_error(exc, probe) from None
+
+
 def _renamed(exc: OSError, path: Path) -> OSError:
     """``exc`` naming ``path`` instead of the hidden temporary file of its atomic write: the
     user asked for ``path`` and never sees the other."""

@@ -208,3 +208,27 @@ def test_the_scans_own_folder_is_refused_as_output(command, tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "the scan's own folder" in err[0] and "--out" in err[0]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s.png"]
+
+
+def test_an_output_folder_that_cannot_be_written_is_refused_before_the_analysis(tmp_path,
+                                                                               capsys,
+                                                                               monkeypatch):
+    """The probe file cannot be made (a read-only folder): one line naming the folder, exit
+    2, and the analysis never runs."""
+    import tempfile
+
+    import crosssection.pipeline
+    from crosssection.cli import main
+
+    ran = []
+    monkeypatch.setattr(crosssection.pipeline, "analyze", lambda *a, **k: ran.append(1))
+
+    def refuse(*args, **kwargs):
+        raise PermissionError(13, "Permission denied", str(kwargs.get("dir")))
+
+    monkeypatch.setattr(tempfile, "NamedTemporaryFile", refuse)
+    scan = Path(__file__).resolve().parents[2] / "sample_images" / "scan_01_sparse.png"
+    assert main(["analyze", str(scan), "--out", str(tmp_path / "new" / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(tmp_path) in err[0] and "Permission denied" in err[0]
+    assert ran == [] and not (tmp_path / "new").exists()
