@@ -125,7 +125,8 @@ def check_writable(path) -> None:
         with tempfile.NamedTemporaryFile(dir=probe, prefix=".foldstat-probe-"):
             pass
     except OSError as exc:
-        raise output_error(exc, probe) from None
+        # named by the folder: the probe's hidden name means nothing to the user
+        raise output_error(OSError(exc.errno, exc.strerror), probe) from None
 
 
 def _renamed(exc: OSError, path: Path) -> OSError:
