@@ -17,7 +17,9 @@ Degenerate fits: a fit whose parameters sit at a bound of their domain or far ou
 with beta x << 1 everywhere), or whose law is a spike the data cannot resolve (narrower than
 1/FAR of the data's spread; for counts, narrower than one count, so that any narrower law
 splitting its mass alike between two neighbouring counts fits as well), describes no law of
-the data; it keeps its row, with the reason in ``rejected``, but is never selected and carries
+the data (fitted to counts, a Gaussian whose mean lies below the smallest count: only the
+decreasing flank of the bell is seen, the geometric law in disguise, see :func:`_count_tail`);
+it keeps its row, with the reason in ``rejected``, but is never selected and carries
 no interval nor p-value. A numerical fit that fails (the data span hundreds of decades) is
 rejected so too.
 
@@ -84,7 +86,9 @@ N_BOOT = 200
 N_MC = 199
 #: Fewest observations on which model selection picks the true law in 90 % of samples
 #: drawn from the paper's Gamma and exponential laws (docs/validation/atlas/fits: 50 to
-#: 100; 500 for a truncated log-normal): a law selected on fewer is indicative only
+#: 100; 500 for a truncated log-normal): a law selected on fewer is indicative only. The
+#: 95 % percentile intervals under-cover below about 100 values (85-90 % at n = 30-50,
+#: docs/validation/README.md, "Do the fits' own intervals hold?"), also above this threshold
 N_SELECT_MIN = 50
 #: Fewest bootstrap resamples for a 95 % percentile interval: with fewer than 40 draws its
 #: 2.5 % and 97.5 % ends are the extreme draws themselves or interpolate between them (one
@@ -102,6 +106,33 @@ class SmallSampleWarning(QualityWarning):
     """A fit, a model selection or a relation rests on fewer observations than it needs
     (:data:`N_SELECT_MIN`; :data:`crosssection.stats.tables.N_RELATION_MIN`): its numbers
     are given, but are indicative only."""
+
+
+def few_boot_text(n_boot: int) -> str:
+    """What is said of an ``n_boot`` below :data:`N_BOOT_MIN` ("" for 0 or enough)."""
+    if not 0 < n_boot < N_BOOT_MIN:
+        return ""
+    return (f"n_boot {n_boot}: fewer than the {N_BOOT_MIN} bootstrap resamples a 95 % "
+            "percentile interval needs (its ends are then the extreme draws): the "
+            "intervals are indicative only")
+
+
+def _warn_few_boot(n_boot: int, *, stacklevel: int) -> None:
+    """One SmallSampleWarning for an ``n_boot`` from 1 to :data:`N_BOOT_MIN` - 1."""
+    text = few_boot_text(n_boot)
+    if text:
+        warnings.warn(text, SmallSampleWarning, stacklevel=stacklevel + 1)
+
+
+def _warn_few_values(n: int, best, *, stacklevel: int) -> None:
+    """One SmallSampleWarning when a model selection rests on fewer than
+    :data:`N_SELECT_MIN` observations."""
+    if n >= N_SELECT_MIN:
+        return
+    chosen = f"the law selected ({best})" if best else "no law was selected; the fits"
+    warnings.warn(f"x: {n} values, fewer than the {N_SELECT_MIN} samples model selection "
+                  f"needs: {chosen} {'is' if best else 'are'} indicative only",
+                  SmallSampleWarning, stacklevel=stacklevel + 1)
 
 
 def _seedseq(seed) -> np.random.SeedSequence:
@@ -563,7 +594,22 @@ def fit_family(x, family: str, *, truncation=None, n_boot: int = N_BOOT, seed=0,
         finite or has another length than ``x``, an observation lies below its cut, or an
         option is absurd (negative ``n_boot``, ``n_mc`` < 1 with ``gof``, ``ci_level``
         outside (0, 1), a seed numpy cannot use).
+
+    Warns
+    -----
+    SmallSampleWarning
+        ``n_boot`` from 1 to :data:`N_BOOT_MIN` - 1: the intervals are indicative only.
     """
+    _count(n_boot, "n_boot")
+    _warn_few_boot(n_boot, stacklevel=2)
+    return _fit_one(x, family, truncation=truncation, n_boot=n_boot, seed=seed, gof=gof,
+                    n_mc=n_mc, ci_level=ci_level, discrete=discrete)
+
+
+def _fit_one(x, family: str, *, truncation, n_boot, seed, gof, n_mc, ci_level,
+             discrete) -> FitResult:
+    """:func:`fit_family` without its warning on ``n_boot`` (:func:`fit_all` gives it once
+    for all its families)."""
     fam = _family(family)
     x, c, _ = _checked_sample(x, truncation, n_boot=n_boot, n_mc=n_mc, gof=gof,
                               ci_level=ci_level, seed=seed)
@@ -596,7 +642,8 @@ def fit_family(x, family: str, *, truncation=None, n_boot: int = N_BOOT, seed=0,
         # a law outside the domain (a spike narrower than any sample with a spread) cannot
         # be tested either
         rejected = (fam.domain(params) or fam.degeneracy(params, x, c)
-                    or _spike(fam, params, x, discrete))
+                    or _spike(fam, params, x, discrete)
+                    or (_count_tail(fam, params) if discrete else ""))
         if rejected:
             return replace(res, rejected=rejected)
         s_boot, s_gof = _seedseq(seed).spawn(2)
@@ -611,6 +658,35 @@ def fit_family(x, family: str, *, truncation=None, n_boot: int = N_BOOT, seed=0,
             g = goodness_of_fit(x, family, params, truncation=c, n_mc=n_mc, seed=s_gof)
     return replace(res, ci=ci, pvalue=g.pvalue, statistic=g.statistic, n_mc=g.n_mc,
                    boot=draws)
+
+
+def _count_tail(fam, params) -> str:
+    """Why a law fitted to counts is only the far side of a bell ("" when it is not).
+
+    A Gaussian whose mean lies below the smallest count :data:`COUNT_MIN` decreases over
+    every count: the counts see one flank of the bell, never its centre, and its mean and
+    width trade off along a ridge of the likelihood that runs to mean -> -inf, where the law
+    over the counts is the geometric one (the bootstrap follows it: intervals of the mean
+    reach thousands of counts below zero). It is the count case of the continuous rule of
+    :func:`crosssection.stats.families._outside` (an exponential in disguise), which for
+    counts would measure the distance from a boundary, COUNT_MIN - 1/2, that is not an
+    observation.
+
+    Parameters
+    ----------
+    fam : Family
+    params : dict
+        The parameters fitted to counts.
+
+    Returns
+    -------
+    str
+    """
+    if fam.positive or "mu" not in params or params["mu"] >= COUNT_MIN:
+        return ""
+    return (f"mu = {params['mu']:.4g} lies below the smallest count {COUNT_MIN}: only the "
+            f"decreasing flank of the bell is fitted, an exponential (geometric law) in "
+            f"disguise")
 
 
 def _spike(fam, params, x, discrete: bool) -> str:
@@ -777,8 +853,17 @@ def bootstrap_ci(x, family: str, *, truncation=None, n_boot: int = N_BOOT, seed=
     ------
     ParameterError
         As :func:`bootstrap_draws`, or ``level`` outside (0, 1).
+
+    Warns
+    -----
+    SmallSampleWarning
+        ``n_boot`` from 1 to :data:`N_BOOT_MIN` - 1: a percentile interval of so few draws
+        has the extreme draws as its ends (one draw gives a zero-width interval that need
+        not hold the estimate).
     """
     _level(level, "level")
+    _count(n_boot, "n_boot")
+    _warn_few_boot(n_boot, stacklevel=2)
     draws = bootstrap_draws(x, family, truncation=truncation, n_boot=n_boot, seed=seed,
                             discrete=discrete)
     return _percentile_ci(draws, _family(family).param_names, level)
@@ -980,7 +1065,25 @@ def fit_all(x, families=PAPER_FAMILIES, *, truncation=None, seed=0, n_boot: int 
     ------
     ParameterError
         As :func:`fit_family`, or ``select_from`` names a family not in ``families``.
+
+    Warns
+    -----
+    SmallSampleWarning
+        Fewer than :data:`N_SELECT_MIN` observations left to fit (model selection picks
+        the true law in 90 % of samples only from about that many: the law selected is
+        indicative only), and, once for all the families, ``n_boot`` from 1 to
+        :data:`N_BOOT_MIN` - 1.
     """
+    return _fit_all(x, families, truncation=truncation, seed=seed, n_boot=n_boot, gof=gof,
+                    n_mc=n_mc, select_from=select_from, ci_level=ci_level,
+                    discrete=discrete, warn_small=True, stacklevel=2)
+
+
+def _fit_all(x, families, *, truncation, seed, n_boot, gof, n_mc, select_from, ci_level,
+             discrete, warn_small: bool, stacklevel: int) -> FitSummary:
+    """:func:`fit_all`; ``warn_small`` False leaves the small-sample warnings to the caller
+    (:func:`crosssection.stats.tables.compute_stats` gives one per set, not one per fit).
+    ``stacklevel`` counts the frames from here to the user's call."""
     families = _family_names(families)
     select = families
     if select_from:  # None or empty: every family fitted
@@ -996,16 +1099,19 @@ def fit_all(x, families=PAPER_FAMILIES, *, truncation=None, seed=0, n_boot: int 
         n_dropped += int(x.size - keep.sum())
         x, c = x[keep], c[keep]
     seeds = _seedseq(seed).spawn(len(families))
-    results = {f: fit_family(x, f, truncation=c, n_boot=n_boot, seed=s, gof=gof, n_mc=n_mc,
-                             ci_level=ci_level, discrete=discrete)
+    results = {f: _fit_one(x, f, truncation=c, n_boot=n_boot, seed=s, gof=gof, n_mc=n_mc,
+                           ci_level=ci_level, discrete=discrete)
                for f, s in zip(families, seeds)}
     sel = {f: results[f] for f in select}
     best = select_model(sel)
-    _warn_positive_left_out(results, best)
+    _warn_positive_left_out(results, best, stacklevel=stacklevel + 1)
+    if warn_small:
+        _warn_few_boot(n_boot, stacklevel=stacklevel + 1)
+        _warn_few_values(x.size, best, stacklevel=stacklevel + 1)
     return FitSummary(results, best, summary_table(results, best), n_dropped)
 
 
-def _warn_positive_left_out(results: dict, best) -> None:
+def _warn_positive_left_out(results: dict, best, *, stacklevel: int) -> None:
     """One warning naming the laws of x > 0 that did not apply because of the values or the
     cuts (not because of the sample size): the law selected is then one of the others, a
     Gaussian for a single negative value among thousands, and only the table's notes
@@ -1020,7 +1126,7 @@ def _warn_positive_left_out(results: dict, best) -> None:
     chosen = (f"{best} is selected among the others" if best
               else "no other law was selected")
     warnings.warn(f"x: the laws of x > 0 were not fitted ({causes}); {chosen}",
-                  QualityWarning, stacklevel=3)
+                  QualityWarning, stacklevel=stacklevel + 1)
 
 
 def summary_table(results: dict, best: str | None) -> pd.DataFrame:

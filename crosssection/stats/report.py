@@ -247,7 +247,9 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
                             else np.linspace(edges[0], edges[-1], 300))
                 h = cnt / (n * width)
                 err = np.sqrt(cnt) / (n * width)
-                k = cnt > 0
+                # an empty bin is a measured zero: drawn on the linear panel (a small sample
+                # has many), left out only where a log axis cannot show it
+                k = cnt > 0 if logscale else np.ones(cnt.size, bool)
                 if logscale:  # a bar reaching 0 cannot be drawn on a log axis: stop it short
                     lo = np.minimum(err, 0.95 * h)
                     yerr = np.vstack([lo[k], err[k]])
@@ -256,8 +258,10 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
                 else:
                     yerr = err[k]
                     ymax_lin = max(ymax_lin, float(np.max(h[k] + err[k])))
+                data_label = (f"{s}: data (n = {n})" if n >= F.N_SELECT_MIN else
+                              f"{s}: data, indicative only (n = {n} < {F.N_SELECT_MIN})")
                 ax.errorbar(mids[k], h[k], yerr=yerr, fmt="o", ms=4, color=c, lw=1,
-                            capsize=2, label=f"{s}: data (n = {n})", gid=f"points:{s}:{reg}")
+                            capsize=2, label=data_label, gid=f"points:{s}:{reg}")
                 if best is None:
                     continue
                 band = _band(best, grid, cut, count)
@@ -279,6 +283,10 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
                 shown = shown[np.isfinite(shown) & (shown > 0)]
                 if logscale and shown.size:
                     ymax_log = max(ymax_log, float(shown.max()))
+                    # the law below the points stays in view, down to a thousandth of its
+                    # peak (its far tails would stretch the axis over many decades)
+                    ymin_log = min(ymin_log, 0.5 * max(float(shown.min()),
+                                                       1e-3 * float(shown.max())))
                 if span is not None and span[1] > span[0] * (1 + 1e-9):
                     # scans of one set carry different limits (each in units of its own L):
                     # the band spans them, the line is the largest, below which some scan
@@ -369,6 +377,12 @@ def plot_pdf(source, quantity: str = "e", *, set_name: str | None = None, seed: 
         ValueError); a bad seed, or a source that is neither an ensemble nor a path.
     ConfigError
         The folder cannot be read (:func:`crosssection.stats.data.load_any`).
+
+    Warns
+    -----
+    SmallSampleWarning
+        A law selected on fewer than :data:`~crosssection.stats.fits.N_SELECT_MIN` values
+        (its data are labelled "indicative only" in the figure).
     """
     from crosssection.stats.data import load_any
     from crosssection.stats.tables import fit_quantity
@@ -396,6 +410,13 @@ def plot_pdf(source, quantity: str = "e", *, set_name: str | None = None, seed: 
     if not summaries:
         raise PlotPdfError(f"{', '.join(map(str, sets))}: too few positive values of "
                            f"{quantity} to fit (at least {opts.min_n})")
+    small = [f"{s}{'' if reg == 'all' else f' ({reg})'} n = {summ.results[summ.best].n}"
+             for (s, reg, _), summ in summaries.items()
+             if summ.best and summ.results[summ.best].n < F.N_SELECT_MIN]
+    if small:
+        warnings.warn(f"{quantity}: laws selected on fewer than the {F.N_SELECT_MIN} samples "
+                      f"model selection needs ({', '.join(small)}): indicative only",
+                      F.SmallSampleWarning, stacklevel=2)
     empty = pd.DataFrame()
     fits_only = StatsResult(empty, empty, empty, empty, empty, empty, empty, empty, summaries)
     return pdf_figure(fits_only, ens, quantity, sets=sets)
@@ -1075,9 +1096,10 @@ def _selected_table(res: StatsResult) -> pd.DataFrame:
 def _relations_shown(rel: pd.DataFrame) -> pd.DataFrame:
     """The relations table with the sample size of a relation fitted on too few
     configurations spelled out beside it."""
+    # the page says "indicative only" beside the number: the CSV's boolean column is not shown
+    rel = rel.drop(columns=["indicative"], errors="ignore")
     if rel.empty:
         return rel
-    rel = rel.copy()
     notes = [small_sample_note(n, N_RELATION_MIN, "configurations a fitted relation needs")
              if r in SLOPE_RELATIONS and np.isfinite(f) else ""
              for r, n, f in zip(rel["relation"], rel["n"], rel["fitted"])]
@@ -1103,9 +1125,10 @@ def _small_fits_marked(df: pd.DataFrame, res: StatsResult) -> pd.DataFrame:
     """``df`` (the micro or dof table) with every value taken from a Gamma fit on fewer
     values than model selection needs marked "indicative only", as the other tables mark
     them."""
+    # the page says "indicative only" beside the number: the CSV's boolean column is not shown
+    df = df.drop(columns=["indicative"], errors="ignore")
     if df.empty or "set" not in df.columns:
         return df
-    df = df.copy()
     for col, sources in GAMMA_COLUMNS.items():
         if col not in df.columns:
             continue

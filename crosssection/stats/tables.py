@@ -92,28 +92,35 @@ def small_sample_note(n, minimum: int, what: str) -> str:
     return f"n = {int(n)}: below the {minimum} {what}"
 
 
-def _warn_small_samples(summaries: dict, relations: pd.DataFrame) -> None:
+def _warn_small_samples(summaries: dict, relations: pd.DataFrame, too_few: dict,
+                        min_n: int) -> None:
     """One :class:`~crosssection.stats.fits.SmallSampleWarning` per set naming the quantities
     whose law was selected on fewer than :data:`~crosssection.stats.fits.N_SELECT_MIN`
-    values and the relations fitted on fewer than :data:`N_RELATION_MIN` configurations."""
-    small = {}
+    values, the relations fitted on fewer than :data:`N_RELATION_MIN` configurations and
+    the quantities not fitted at all for having fewer than ``min_n`` values (``too_few``:
+    set -> ["E n = 3", ...])."""
+    small = {s: [[], [], items] for s, items in too_few.items()}
     for (s, reg, q), summ in summaries.items():
         r = summ.results.get(summ.best) if summ.best else None
         if r is not None and r.n < F.N_SELECT_MIN:
             where = q if reg in ("all", SIM_REGION) else f"{q} ({reg})"
-            small.setdefault(s, [[], []])[0].append(f"{where} n = {r.n}")
+            small.setdefault(s, [[], [], []])[0].append(f"{where} n = {r.n}")
     for row in relations.itertuples(index=False):
         if row.relation in SLOPE_RELATIONS and row.n < N_RELATION_MIN and np.isfinite(row.fitted):
-            small.setdefault(row.set, [[], []])[1].append(f"{row.relation} n = {row.n}")
-    for s, (laws, rels) in small.items():
+            small.setdefault(row.set, [[], [], []])[1].append(f"{row.relation} n = {row.n}")
+    for s, (laws, rels, unfitted) in small.items():
         parts = []
+        if unfitted:
+            parts.append(f"not fitted, fewer than the {min_n} values a fit needs (min_n): "
+                         f"{', '.join(unfitted)}")
         if laws:
             parts.append(f"laws selected on fewer than the {F.N_SELECT_MIN} samples model "
                          f"selection needs ({', '.join(laws)})")
         if rels:
             parts.append(f"relations fitted on fewer than {N_RELATION_MIN} configurations "
                          f"({', '.join(rels)})")
-        warnings.warn(f"set {s}: {'; '.join(parts)}: indicative only", F.SmallSampleWarning,
+        tail = ": indicative only" if laws or rels else ""
+        warnings.warn(f"set {s}: {'; '.join(parts)}{tail}", F.SmallSampleWarning,
                       stacklevel=3)
 
 
@@ -307,8 +314,11 @@ def fit_quantity(ens: Ensemble, quantity: str, region: str, opts: StatsOptions, 
         c = np.asarray(df[tcol], float)[keep]
         if np.all(np.isfinite(c)):
             cuts = c
-    summ = F.fit_all(x, fams, truncation=cuts, seed=seed, n_boot=opts.n_boot, gof=opts.gof,
-                     n_mc=opts.n_mc, discrete=quantity in COUNT_QUANTITIES)
+    # the small-sample warnings are given by the callers, once per set (compute_stats) or
+    # per figure (plot_pdf), not once per fit
+    summ = F._fit_all(x, fams, truncation=cuts, seed=seed, n_boot=opts.n_boot, gof=opts.gof,
+                      n_mc=opts.n_mc, select_from=None, ci_level=0.95,
+                      discrete=quantity in COUNT_QUANTITIES, warn_small=False, stacklevel=3)
     bias = None
     # with every value below its cut, nothing is left to compare the fits on
     if cuts is not None and np.any(x >= cuts):
@@ -322,6 +332,29 @@ def fit_quantity(ens: Ensemble, quantity: str, region: str, opts: StatsOptions, 
             if r is not None and r.ci and row["param"] in r.ci:
                 bias.loc[i, ["truncated_lo", "truncated_hi"]] = r.ci[row["param"]]
     return summ, bias, int((~keep).sum())
+
+
+def _n_fittable(ens: Ensemble, quantity: str, region: str) -> int:
+    """How many values of ``quantity`` in ``region`` a fit would use (finite, and > 0 for
+    the laws of x > 0), as :func:`fit_quantity` counts them."""
+    table, col, *_ = QUANTITIES[quantity]
+    x, _ = _clean(_in_region(getattr(ens, table), region)[col],
+                  quantity in POSITIVE_QUANTITIES)
+    return int(x.size)
+
+
+def fits_columns() -> list:
+    """The columns of :attr:`StatsResult.fits`, also when nothing was fitted."""
+    return ["set", "region", "quantity", *F.summary_table({}, None).columns, "n_dropped",
+            "indicative"]
+
+
+def _gamma_small(summ) -> bool:
+    """Whether the Gamma parameters taken from ``summ`` (see :func:`_gamma_params`) rest on
+    fewer than :data:`~crosssection.stats.fits.N_SELECT_MIN` values."""
+    if summ is None or "gamma" not in summ.results or not summ.results["gamma"].selectable:
+        return False
+    return summ.results["gamma"].n < F.N_SELECT_MIN
 
 
 def _gamma_params(summ):
@@ -381,7 +414,11 @@ def compute_stats(ens: Ensemble, opts: StatsOptions | None = None, *,
         A law selected on fewer than :data:`~crosssection.stats.fits.N_SELECT_MIN` values,
         and a relation fitted on fewer than :data:`N_RELATION_MIN` configurations, are kept
         and named in one :class:`~crosssection.stats.fits.SmallSampleWarning` per set; an
-        ``n_boot`` from 1 to :data:`~crosssection.stats.fits.N_BOOT_MIN` - 1 gives one too.
+        ``n_boot`` from 1 to :data:`~crosssection.stats.fits.N_BOOT_MIN` - 1 gives one too,
+        and so do the quantities left unfitted for having fewer than ``opts.min_n`` values
+        (one per set, naming them). The ``indicative`` column of ``fits``, ``micro`` and
+        ``relations`` marks the rows resting on fewer values or configurations than those
+        minima; ``fits`` keeps its columns when nothing was fitted.
 
     Raises
     ------
@@ -395,14 +432,11 @@ def compute_stats(ens: Ensemble, opts: StatsOptions | None = None, *,
         raise ParameterError(f"opts must be a StatsOptions, got {type(opts).__name__}")
     opts = opts or StatsOptions()
     opts.check()
-    if 0 < opts.n_boot < F.N_BOOT_MIN:
-        warnings.warn(f"n_boot {opts.n_boot}: fewer than the {F.N_BOOT_MIN} bootstrap "
-                      "resamples a 95 % percentile interval needs (its ends are then the "
-                      "extreme draws): the intervals are indicative only",
-                      F.SmallSampleWarning, stacklevel=2)
+    if F.few_boot_text(opts.n_boot):
+        warnings.warn(F.few_boot_text(opts.n_boot), F.SmallSampleWarning, stacklevel=2)
     per_cfg = per_config_table(ens)
     macro = macro_table(ens)
-    fit_rows, trunc_rows, summaries = [], [], {}
+    fit_rows, trunc_rows, summaries, too_few = [], [], {}, {}
     subsets = {s: ens.subset(s) for s in ens.sets}
     jobs, seeds = [], []
     for s in ens.sets:
@@ -422,6 +456,10 @@ def compute_stats(ens: Ensemble, opts: StatsOptions | None = None, *,
             summ, bias, ndrop = fit_quantity(subsets[s], q, reg, opts, sd)
             bar.update(1)
             if summ is None:
+                n_q = _n_fittable(subsets[s], q, reg)
+                if n_q < opts.min_n:  # else all values equal, told by fit_quantity
+                    where = q if reg in ("all", SIM_REGION) else f"{q} ({reg})"
+                    too_few.setdefault(s, []).append(f"{where} n = {n_q}")
                 continue
             summaries[(s, reg, q)] = summ
             t = summ.table.copy()
@@ -429,6 +467,7 @@ def compute_stats(ens: Ensemble, opts: StatsOptions | None = None, *,
             t.insert(0, "region", reg)
             t.insert(0, "set", s)
             t["n_dropped"] = summ.n_dropped + ndrop
+            t["indicative"] = t["n"] < F.N_SELECT_MIN
             fit_rows.append(t)
             if bias is not None:
                 bias.insert(0, "quantity", q)
@@ -437,7 +476,9 @@ def compute_stats(ens: Ensemble, opts: StatsOptions | None = None, *,
                 trunc_rows.append(bias)
     finally:
         bar.close()
-    fits_df = pd.concat(fit_rows, ignore_index=True) if fit_rows else pd.DataFrame()
+    # with nothing fitted the table keeps its columns: res.fits[res.fits.selected] works
+    fits_df = (pd.concat(fit_rows, ignore_index=True) if fit_rows
+               else pd.DataFrame(columns=fits_columns()))
     trunc_df = pd.concat(trunc_rows, ignore_index=True) if trunc_rows else pd.DataFrame()
 
     micro_rows, dof_rows = [], []
@@ -453,7 +494,10 @@ def compute_stats(ens: Ensemble, opts: StatsOptions | None = None, *,
                 "E_tilde": _mean(e.configs["E"]) if reg == "all" else np.nan,
                 "e": _mean(br["e"]), "alpha_e": ae, "chi_e": ce,
                 "alpha_E": aE if reg == "all" else np.nan,
-                "chi_E": cE if reg == "all" else np.nan})
+                "chi_E": cE if reg == "all" else np.nan,
+                "indicative": (_gamma_small(summaries.get((s, reg, "e")))
+                               or (reg == "all" and _gamma_small(summaries.get((s, "all",
+                                                                               "E")))))})
         ae, _ = _gamma_params(summaries.get((s, "all", "e")))
         dof_rows.append({"set": s, "N_l": _mean(e.configs["N_l"]),
                          "N_br": _mean(e.configs["N_br"]), "alpha_E": aE, "alpha_e": ae,
@@ -461,7 +505,11 @@ def compute_stats(ens: Ensemble, opts: StatsOptions | None = None, *,
     micro = pd.DataFrame(micro_rows)
     dof = pd.DataFrame(dof_rows)
     relations = relations_table(ens, per_cfg, summaries)
-    _warn_small_samples(summaries, relations)
+    relations["indicative"] = (relations["relation"].isin(SLOPE_RELATIONS)
+                               & (relations["n"] < N_RELATION_MIN)
+                               & np.isfinite(relations["fitted"].astype(float))
+                               if not relations.empty else pd.Series(dtype=bool))
+    _warn_small_samples(summaries, relations, too_few, opts.min_n)
     correlations = correlations_table(ens)
     return StatsResult(macro, micro, dof, fits_df, trunc_df, relations, correlations, per_cfg,
                        summaries)

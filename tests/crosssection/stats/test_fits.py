@@ -194,3 +194,58 @@ def test_seeded_results_are_reproducible():
     a = F.fit_family(x, "gamma", n_boot=30, n_mc=19, seed=42)
     b = F.fit_family(x, "gamma", n_boot=30, n_mc=19, seed=42)
     assert a.ci == b.ci and a.pvalue == b.pvalue
+
+
+def test_fit_all_on_small_samples_warns_once_naming_the_law():
+    import warnings
+
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        summ = F.fit_all([0.1, 0.2, 0.35], n_boot=10, n_mc=9)
+    small = [str(w.message) for w in rec if w.category is F.SmallSampleWarning]
+    # one for the selection on 3 values, one for the 10 resamples (not one per family)
+    assert len(small) == 2, small
+    assert any(f"3 values, fewer than the {F.N_SELECT_MIN} samples" in m
+               and f"({summ.best}) is indicative only" in m for m in small)
+    assert any(m.startswith("n_boot 10: fewer than the 40") for m in small)
+    assert all(w.filename == __file__ for w in rec if w.category is F.SmallSampleWarning)
+
+
+def test_fit_all_on_enough_values_gives_no_small_samples_warning():
+    import warnings
+
+    x = np.random.default_rng(0).exponential(1.0, F.N_SELECT_MIN)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", F.SmallSampleWarning)
+        F.fit_all(x, ("exponential", "gamma"), n_boot=F.N_BOOT_MIN, gof=False)
+        F.bootstrap_ci(x, "gamma", n_boot=0)
+        F.fit_family(x, "gamma", n_boot=0, gof=False)
+
+
+@pytest.mark.parametrize("call", [
+    lambda x: F.bootstrap_ci(x, "gamma", n_boot=1),
+    lambda x: F.fit_family(x, "gamma", n_boot=F.N_BOOT_MIN - 1, gof=False),
+])
+def test_few_bootstrap_resamples_small_samples_warning(call):
+    x = np.random.default_rng(0).gamma(2.5, 0.004, 30)
+    with pytest.warns(F.SmallSampleWarning, match=r"n_boot \d+: fewer than the 40 bootstrap"):
+        call(x)
+
+
+@pytest.mark.parametrize("counts", [
+    {1: 98, 2: 60, 3: 17, 4: 6},  # a Gaussian fit puts mu near 0.5
+    {1: 151, 2: 89, 3: 33, 4: 12, 5: 4, 7: 1, 9: 1},  # ... and near -6
+])
+def test_count_gaussian_with_its_mean_below_every_count_is_rejected(counts):
+    x = np.repeat(list(counts), list(counts.values())).astype(float)
+    r = F.fit_family(x, "gaussian", n_boot=0, gof=False, discrete=True)
+    assert r.params["mu"] < F.COUNT_MIN
+    assert "below the smallest count" in r.rejected and not r.selectable
+    summ = F.fit_all(x, ("exponential", "gaussian"), n_boot=0, gof=False, discrete=True)
+    assert summ.best == "exponential"
+
+
+def test_count_gaussian_around_a_typical_count_is_kept():
+    x = 1.0 + np.random.default_rng(3).poisson(6.0, 300)
+    r = F.fit_family(x, "gaussian", n_boot=0, gof=False, discrete=True)
+    assert r.params["mu"] > F.COUNT_MIN and r.rejected == ""

@@ -232,3 +232,32 @@ def test_axis_labels_never_split_a_parenthesis():
         for line in _wrap_label(label, 36).splitlines():
             assert line.count("(") == line.count(")"), line
     assert _wrap_label("a (b c) d", 3) == "a\n(b c)\nd"
+
+
+def test_figures_of_small_samples_show_empty_bins_the_law_and_are_marked():
+    from crosssection.stats import SmallSampleWarning, plot_pdf
+    from crosssection.stats.fits import N_SELECT_MIN
+
+    rng = np.random.default_rng(4)
+    ens = _ensemble(["a"], rng, n_stacks=4)
+    # six well-spread values: most of the 24 bins are empty
+    ens.branches = ens.branches.iloc[:6].assign(e=[3540.0, 3620.0, 3790.0, 4390.0, 4550.0,
+                                                   5490.0])
+    with pytest.warns(SmallSampleWarning, match=r"e: laws selected on fewer than the "
+                      rf"{N_SELECT_MIN} samples model selection needs \(a n = 6\)"):
+        fig = plot_pdf(ens, "e")
+    lin, log = fig.axes[0], fig.axes[1]
+    pts = _line(lin, "points:a:all")
+    assert len(pts.get_xdata()) == 24 and (pts.get_ydata() == 0).sum() >= 18
+    assert len(_line(log, "points:a:all").get_xdata()) <= 6  # a log axis shows no zero
+    legend = [t.get_text() for t in log.get_legend().get_texts()]
+    assert any(t.startswith("a: data, indicative only (n = 6") for t in legend), legend
+    # the fitted law (well below the points' densities here) stays inside the log panel
+    law = _line(log, "law:a:all").get_ydata()
+    lo, hi = log.get_ylim()
+    assert lo <= np.nanmin(law) and np.nanmax(law) <= hi
+    # a large sample is not marked
+    ens = _ensemble(["a"], rng)
+    fig = pdf_figure(_fits(ens, ("e",), n_boot=0), ens, "e")
+    legend = [t.get_text() for t in fig.axes[1].get_legend().get_texts()]
+    assert "a: data (n = " in legend[0] and not any("indicative" in t for t in legend)

@@ -249,3 +249,59 @@ def test_to_markdown():
     lines = md.strip().splitlines()
     assert lines[0] == "| a | b |" and lines[1] == "|---|---|"
     assert lines[2] == "| 1.235 | x\\|y |" and lines[3] == "|  | z |"
+
+
+def test_small_samples_not_fitted_are_named_and_rows_marked_indicative(tmp_path):
+    from crosssection.stats import SmallSampleWarning
+    from crosssection.stats.fits import N_SELECT_MIN
+    from crosssection.stats.report import write_report
+
+    sim = demo.write_demo_simulation(tmp_path / "tiny", n_configs=T.N_RELATION_MIN - 1, seed=1)
+    ens = D.load_any(sim)
+    opts = T.StatsOptions(n_boot=0, gof=False, quantities=("E", "e", "area_L2"))
+    with pytest.warns(SmallSampleWarning) as rec:
+        res = T.compute_stats(ens, opts)
+    msgs = [str(w.message) for w in rec if w.category is SmallSampleWarning]
+    assert len(msgs) == 1, msgs  # one per set, whatever it names
+    assert (f"not fitted, fewer than the {opts.min_n} values a fit needs (min_n): "
+            f"E n = {T.N_RELATION_MIN - 1}") in msgs[0]
+    assert "E" not in set(res.fits["quantity"])
+    # fits: the voids (a few per configuration) are below N_SELECT_MIN, the branches not
+    n_by_q = res.fits.groupby("quantity")["n"].first()
+    assert n_by_q["area_L2"] < N_SELECT_MIN <= n_by_q["e"]
+    ind = res.fits.groupby("quantity")["indicative"].agg(["min", "max"])
+    assert ind.loc["area_L2"].tolist() == [True, True]
+    assert ind.loc["e"].tolist() == [False, False]
+    rel = res.relations.set_index("relation")
+    assert rel.loc["eq14_slope", "indicative"] and not rel.loc["eq16", "indicative"]
+    assert res.micro["indicative"].dtype == bool
+    # the columns are written and read back
+    with pytest.warns(SmallSampleWarning):
+        write_report(ens, tmp_path / "r", opts=opts, figures=False)
+    rep = D.load_report(tmp_path / "r")
+    for name in ("fits", "micro", "relations"):
+        back, ours = getattr(rep, name), getattr(res, name)
+        assert back["indicative"].dtype == bool
+        assert back["indicative"].tolist() == ours["indicative"].tolist()
+
+
+def test_micro_marks_gamma_parameters_of_few_values_indicative(tmp_path):
+    sim = demo.write_demo_simulation(tmp_path / "tiny", n_configs=8, seed=1)
+    res = T.compute_stats(D.load_any(sim), T.StatsOptions(
+        n_boot=0, gof=False, quantities=("E", "e")))
+    mic = res.micro.set_index("region").loc["all"]
+    # alpha_E rests on the 8 configurations' energies
+    assert np.isfinite(mic["alpha_E"]) and mic["indicative"]
+    big = demo.write_demo_simulation(tmp_path / "big", n_configs=60, seed=1)
+    res = T.compute_stats(D.load_any(big), T.StatsOptions(
+        n_boot=0, gof=False, quantities=("E", "e")))
+    assert not res.micro["indicative"].any()
+
+
+def test_nothing_fitted_keeps_the_fits_columns(tmp_path):
+    sim = demo.write_demo_simulation(tmp_path / "tiny", n_configs=3, seed=1)
+    res = T.compute_stats(D.load_any(sim), T.StatsOptions(n_boot=0, gof=False,
+                                                          min_n=10**6))
+    assert res.fits.empty and list(res.fits.columns) == T.fits_columns()
+    assert {"selected", "family", "indicative"} <= set(res.fits.columns)
+    assert res.fits[res.fits["selected"].astype(bool)].empty
