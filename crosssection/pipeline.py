@@ -39,7 +39,7 @@ from crosssection.params import AnalysisParams
 from crosssection.result import AnalysisResult, write_step_images
 from crosssection.stages import curvature, hole as hole_stage, voids as void_stage
 from crosssection.stages.clean import clean_mask
-from crosssection.stages.graph import split_stacks, stack_graph
+from crosssection.stages.graph import split_stacks, stack_graph, without_stacks
 from crosssection.stages.load import as_rgb, exif_orientation, load_image, recorded_header
 from crosssection.stages.packs import compute_packs
 from crosssection.stages.skeleton import skeletonize_mask
@@ -267,10 +267,8 @@ def _preprocess(image, p: AnalysisParams, timer) -> Preprocessed:
     short = short if len(short) < sg.n_stacks else []
     if short:
         with timer("graph"):
-            skel, mask, dist = _drop_pieces(sg, short, skel, mask, dist)
-            junc, sg, merged = stack_graph(skel, dist, merge_px=p.merge_px,
-                                           merge_thick_crossings=p.merge_thick_crossings,
-                                           thickness_px=p.thickness_px)
+            _drop_pieces(sg, short, skel, mask, dist)
+            sg = without_stacks(sg, short)
     if sg.n_stacks == 0:
         raise AnalysisError("the skeleton has no stack (only isolated points)", path)
     notes = [] if len(junc) else ["no junction found: every stack is a closed loop or a band "
@@ -303,19 +301,18 @@ def _isolated_short_pieces(sg, l_min_px) -> list[int]:
             if kind[u] == "end" and kind[v] == "end" and sg.length_px[sid] < l_min_px]
 
 
-def _drop_pieces(sg, stacks, skel, mask, dist):
-    """Skeleton, mask and distance map without the ink pieces of ``stacks`` (each its own
-    connected piece of ink: a stack with two free ends is all the skeleton of its piece).
-    The inputs are not modified."""
-    skel, mask, dist = skel.copy(), mask.copy(), dist.copy()
+def _drop_pieces(sg, stacks, skel, mask, dist) -> None:
+    """Remove the ink pieces of ``stacks`` from the skeleton, the mask and the distance map,
+    in place (the arrays this analysis made): each is its own connected piece of ink, a stack
+    with two free ends being all the skeleton of its piece."""
     for sid in stacks:
         path = sg.paths[sid]
         skel[path[:, 0], path[:, 1]] = False
         r, c = (int(v) for v in path[0])
-        # the piece's 8-connected ink, as the skeleton's connectivity
-        cv2.floodFill(mask.view(np.uint8), None, (c, r), 0, flags=8)
-    dist[~mask] = 0.0
-    return skel, mask, dist
+        # the piece's 8-connected ink, as the skeleton's connectivity; its box bounds the rest
+        _, _, _, (x, y, w, h) = cv2.floodFill(mask.view(np.uint8), None, (c, r), 0, flags=8)
+        box = (slice(y, y + h), slice(x, x + w))
+        dist[box][~mask[box]] = 0.0
 
 
 def _check_fraction(thr, path, rgb=None):

@@ -496,6 +496,37 @@ def split_stacks(sg: StackGraph, cuts: dict, *, smooth_px: int = 5) -> StackGrap
                       length_px=lengths)
 
 
+def without_stacks(sg: StackGraph, stacks) -> StackGraph:
+    """The graph without the stacks ``stacks`` whose two ends are free (nodes of kind
+    ``"end"``, which go with them); the other stacks keep their order, renumbered from 0.
+    ``sg`` is not modified. Junctions are untouched: such a stack meets none.
+
+    Parameters
+    ----------
+    sg : StackGraph
+    stacks : iterable of int
+        Stack ids, each with two ``"end"`` nodes.
+
+    Returns
+    -------
+    StackGraph
+    """
+    drop = set(int(s) for s in stacks)
+    keep = [sid for sid in range(sg.n_stacks) if sid not in drop]
+    gone = {n for sid in drop for n in sg.ends[sid]}
+    if any(sg.node_kind[n] != "end" for n in gone):
+        raise ValueError("only stacks with two free ends can be dropped")
+    g = nx.MultiGraph()
+    node_rc = {n: rc for n, rc in sg.node_rc.items() if n not in gone}
+    node_kind = {n: k for n, k in sg.node_kind.items() if n not in gone}
+    g.add_nodes_from(node_rc)
+    ends = [sg.ends[sid] for sid in keep]
+    g.add_edges_from((u, v, k, {"stack_id": k}) for k, (u, v) in enumerate(ends))
+    return StackGraph(graph=g, node_rc=node_rc, node_kind=node_kind,
+                      paths=[sg.paths[sid] for sid in keep], ends=ends,
+                      length_px=np.asarray(sg.length_px, dtype=float)[keep])
+
+
 def short_junction_links(sg: StackGraph, radius_px) -> list[int]:
     """Stacks joining two junctions whose inscribed ink disks overlap.
 

@@ -451,3 +451,34 @@ def test_junctions_of_another_skeleton_are_refused():
     lab[4, 1] = 1
     with pytest.raises(ParameterError, match="do not match the skeleton"):
         gr.build_stack_graph(skel, Junctions(junc.centers_rc, junc.pixels, lab))
+
+
+def test_without_stacks_drops_free_pieces_and_renumbers_the_rest():
+    """Two isolated segments and a Y: dropping one segment leaves the others in their order,
+    renumbered, with their end nodes; a stack meeting a junction cannot be dropped."""
+    from crosssection.stages.graph import build_stack_graph, without_stacks
+    from crosssection.stages.junctions import find_junctions
+
+    skel = np.zeros((40, 60), bool)
+    skel[5, 5:25] = True
+    skel[30, 5:25] = True
+    skel[10:30, 45] = True
+    skel[10, 35:45] = True
+    skel[10, 46:56] = True
+    sg = build_stack_graph(skel, find_junctions(skel))
+    free = [sid for sid, (u, v) in enumerate(sg.ends)
+            if sg.node_kind[u] == "end" and sg.node_kind[v] == "end"]
+    assert len(free) == 2
+    out = without_stacks(sg, free[:1])
+    assert out.n_stacks == sg.n_stacks - 1
+    kept = [sid for sid in range(sg.n_stacks) if sid != free[0]]
+    for k, sid in enumerate(kept):
+        assert np.array_equal(out.paths[k], sg.paths[sid]) and out.ends[k] == sg.ends[sid]
+        assert out.length_px[k] == sg.length_px[sid]
+    assert sorted(d["stack_id"] for *_, d in out.graph.edges(data=True)) == list(range(len(kept)))
+    assert all(n in out.node_kind for e in out.ends for n in e)
+    assert not set(sg.ends[free[0]]) & set(out.node_kind)
+    junction_stack = next(sid for sid, (u, v) in enumerate(sg.ends)
+                          if "junction" in (sg.node_kind[u], sg.node_kind[v]))
+    with pytest.raises(ValueError):
+        without_stacks(sg, [junction_stack])
