@@ -38,7 +38,10 @@ ranges of the typical scans the pipeline is validated on (:func:`simulate.atlas.
 only (:data:`CLEAN`); any single defect can be set either way. A render beyond those ranges
 (a sheet thinner in pixels, or blur, noise or JPEG compression stronger than the typical
 scans': :data:`VALIDATED_SHEET_PX` and the other ``VALIDATED_`` limits) is drawn with a
-:class:`ScanRangeWarning`: the analysis is not validated there.
+:class:`ScanRangeWarning`: the analysis is not validated there. So is a rod of fewer segments
+than the renders' truth is validated from (:data:`VALIDATED_COMPACT_SEGMENTS` on a compaction,
+:data:`VALIDATED_QUENCH_SEGMENTS` on a quench): on coarser compactions the drawn bands, and
+with them the truth's stacks, hold another rod than the rod's.
 
 Lines and energy. The rod is a chain of straight segments; its energy is that of the smooth
 sheet it discretises (:func:`smooth_line`). A stack's band is drawn along the smooth curve
@@ -135,7 +138,12 @@ scoring's match radius (3 h) or the widest band there is moved onto the ink of i
 (:func:`_junctions_onto_ink`; a loop stack's junction point, the mean of run ends lying far
 apart, can sit on the paper); the bands of a junction that do not touch (the hook rules left
 the rod cut there, :func:`_disconnected_junctions`); a truth whose stacks hold a rod
-``sum(n_br x length_mm)`` more than :data:`TRUTH_LENGTH_TOLERANCE` away from the rod's length.
+``sum(n_br x length_mm)`` more than :data:`TRUTH_LENGTH_TOLERANCE` away from the rod's length;
+a truth stack of length 0; pieces the truth holds apart whose bands touch in the drawing
+(:func:`_touching_pieces`: passes closer than delta over a contact shorter than the contact
+analysis' shortest run, such as a rod end brushing the rod, are no stack and are drawn at their
+distance). ``gap_guaranteed`` in a scene's params.json promises that passes farther apart than
+delta show a gap (the scale, above) and that no such pieces touch; it is false otherwise.
 
 Coordinates: column = x, row = y (no flip), so the image is the mirror image of a plot with y
 up; signed curvatures therefore compare in absolute value.
@@ -172,7 +180,8 @@ __all__ = ["render_configuration", "render_directory", "add_subparser", "smooth_
            "passes_calibration", "ScanRangeWarning", "TruthWarning", "SCAN_DEFECTS", "CLEAN",
            "DRAW", "JOIN",
            "PX_PER_MM", "THICKNESS_MM", "VALIDATED_SHEET_PX", "VALIDATED_BLUR_PX",
-           "VALIDATED_NOISE_SIGMA", "VALIDATED_JPEG_QUALITY"]
+           "VALIDATED_NOISE_SIGMA", "VALIDATED_JPEG_QUALITY", "VALIDATED_COMPACT_SEGMENTS",
+           "VALIDATED_QUENCH_SEGMENTS", "SCALE_TOLERANCE"]
 
 #: Scan resolution and sheet thickness h of a render: the paper's sheet at the typical scans'
 #: resolution (h = 5 px).
@@ -195,6 +204,13 @@ VALIDATED_SHEET_PX = 2.5
 VALIDATED_BLUR_PX = 1.5
 VALIDATED_NOISE_SIGMA = 10.0
 VALIDATED_JPEG_QUALITY = 75
+#: Fewest rod segments a render's truth is validated from: compactions are rendered and scored
+#: at 2000 segments (docs/validation/compact.md), quenches at 300 (the robust sweep). At
+#: 400-800 segments compaction renders have truth rods 36 % longer than the rod, stacks of
+#: zero length and energy errors of +65 to +300 %. A rod with fewer is drawn, with a
+#: :class:`ScanRangeWarning`.
+VALIDATED_COMPACT_SEGMENTS = 2000
+VALIDATED_QUENCH_SEGMENTS = 300
 #: The clean drawing: no defect, white paper around the hole.
 CLEAN = {"noise_sigma": 0.0, "blur_px": 0.0, "jpeg_quality": None, "smears": 0, "specks": 0,
          "pinholes": 0, "plate": None, "rim_px": 0.0, "illumination": 0.0, "cast": 0.0}
@@ -240,6 +256,11 @@ TRUTH_LENGTH_TOLERANCE = 0.2
 #: drawn ink is moved onto it (:func:`_junctions_onto_ink`): the scoring matches junctions
 #: within 3 h (:func:`crosssection.truth.scoring.score`).
 JUNCTION_INK_H = 3.0
+#: Largest relative difference between a given rod length and the one a compaction's thickness
+#: sets (``thickness_mm / rod_thickness``): beyond it the bands would be drawn thicker or
+#: thinner than the rod the compaction packed (a pass ``thickness_mm`` wide on a rod
+#: ``rod_thickness`` thick), so the rod would overlap itself or show gaps it does not have.
+SCALE_TOLERANCE = 0.01
 #: Largest scene drawn, in pixels (10 000 x 10 000): the drawing holds several float images
 #: of this size (a 1e8 px scene needs several GB); the defaults give about 2500 x 2500 px.
 MAX_SCENE_PX = 10_000 * 10_000
@@ -285,6 +306,19 @@ def _beyond_validated(defects: dict, sheet_px: float, name=str) -> str | None:
     if not out:
         return None
     return ("scans beyond the range the image analysis is validated on: " + "; ".join(out))
+
+
+def _rod_beyond_validated(n_segments: int, compaction: bool) -> str | None:
+    """A phrase when a rod of ``n_segments`` has fewer segments than its renders' truth is
+    validated from (:data:`VALIDATED_COMPACT_SEGMENTS`, :data:`VALIDATED_QUENCH_SEGMENTS`),
+    else None."""
+    least = VALIDATED_COMPACT_SEGMENTS if compaction else VALIDATED_QUENCH_SEGMENTS
+    if n_segments >= least:
+        return None
+    kind = "compaction" if compaction else "quench"
+    return (f"the render's truth is validated from {least} segments on a {kind}'s rod, this "
+            f"one has {n_segments}: its truth's stacks may hold another rod length than the "
+            "rod's, with stacks of zero length, and its energy errors are not the analysis'")
 
 
 class TruthWarning(QualityWarning):
@@ -417,6 +451,139 @@ def _rod_drawn_check(stacks: pd.DataFrame, rod_length_mm: float) -> str | None:
     return (f"the truth's stacks hold {drawn:.4g} mm of rod (sum of n_br x length_mm), the rod "
             f"is {rod_length_mm:.4g} mm ({100 * rel:+.0f} %, more than "
             f"{100 * TRUTH_LENGTH_TOLERANCE:g} %): the truth's stack lengths are not the rod's")
+
+
+def _zero_length_check(stacks: pd.DataFrame) -> str | None:
+    """A message when a truth stack has no length (its branches are then no rod), else
+    None."""
+    if not len(stacks):
+        return None
+    empty = stacks[~(stacks["length_mm"] > 0)]
+    if not len(empty):
+        return None
+    shown = ", ".join(f"{int(r.stack_id)} (n_br {int(r.n_br)})" for r in empty.itertuples())
+    return (f"truth stack{'s' if len(empty) > 1 else ''} {shown} "
+            f"{'have' if len(empty) > 1 else 'has'} length 0: branches without rod, which "
+            "no image shows")
+
+
+def _resampled(line: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
+    """Points of ``line`` (x, y px) at most ``step`` apart along it, and their arc lengths."""
+    seg = np.hypot(*np.diff(line, axis=0).T)
+    arc = np.concatenate([[0.0], np.cumsum(seg)])
+    if arc[-1] <= 0:
+        return line[:1].astype(float), np.zeros(1)
+    s = np.linspace(0.0, arc[-1], int(np.ceil(arc[-1] / step)) + 1)
+    return np.column_stack([np.interp(s, arc, line[:, 0]), np.interp(s, arc, line[:, 1])]), s
+
+
+def _touching_pieces(stacks: pd.DataFrame, lines_px, widths_px, gap_px: float) -> list[tuple]:
+    """Where the drawn bands of pieces the truth holds apart come closer than ``gap_px``.
+
+    Two bands touch when their lines come closer than half their widths plus ``gap_px``
+    (less paper than the smallest visible gap). Pieces the truth holds apart: two stacks
+    whose junctions are neither shared nor linked by one stack (bands of one junction
+    cluster meet there), and two parts of a one-pass stack more than three of its widths
+    apart along it, both away from its ends at junctions (where its line is hooked into the
+    junction point and may curl over its own ink; the line of a band of several passes ending
+    in a fold runs out to the fold and back over itself). The contact
+    analysis leaves apart passes closer than delta whose contact is shorter than its
+    shortest run (a rod end brushing the rod): drawn at their distance they touch.
+
+    Parameters
+    ----------
+    stacks : DataFrame
+        The analysis' stacks (``junction_a``, ``junction_b``, ``n_br``).
+    lines_px : list of ndarray
+        The drawn line of every stack, (x, y) px.
+    widths_px : array
+        Every stack's band width, px.
+    gap_px : float
+        Smallest visible gap, px.
+
+    Returns
+    -------
+    list of (int, int, float, float)
+        ``(stack_a, stack_b, x_px, y_px)`` per touching pair (``a == b``: a stack touching
+        itself), at the closest point of ``a``'s line.
+    """
+    from scipy.spatial import cKDTree
+
+    if not len(stacks):
+        return []
+    ends = stacks[["junction_a", "junction_b"]].to_numpy(int)
+    junctions = [set(map(int, e)) - {-1} for e in ends]
+    # junctions linked by one stack: its two ends
+    linked = {}
+    for js in junctions:
+        for j in js:
+            linked.setdefault(j, set()).update(js)
+    near = [set().union(*(linked[j] for j in js)) if js else set() for js in junctions]
+    pts, owner, arc = [], [], []
+    for k, line in enumerate(lines_px):
+        line = np.asarray(line, float)
+        if len(line) < 1:
+            continue
+        p, s = _resampled(line, step=1.0)
+        pts.append(p)
+        owner.append(np.full(len(p), k))
+        arc.append(s)
+    if not pts:
+        return []
+    pts, owner, arc = np.concatenate(pts), np.concatenate(owner), np.concatenate(arc)
+    widths_px = np.asarray(widths_px, float)
+    reach = float(widths_px.max()) + gap_px
+    pairs = cKDTree(pts).query_pairs(reach, output_type="ndarray")
+    if not len(pairs):
+        return []
+    i, j = pairs[:, 0], pairs[:, 1]
+    a, b = owner[i], owner[j]
+    touch = (np.hypot(*(pts[i] - pts[j]).T) < 0.5 * (widths_px[a] + widths_px[b]) + gap_px)
+    i, j, a, b = i[touch], j[touch], a[touch], b[touch]
+    same = a == b
+    far = np.abs(arc[i] - arc[j]) > 3.0 * (widths_px[a] + gap_px)
+    length = np.zeros(len(lines_px))
+    np.maximum.at(length, owner, arc)
+    # a band's line is hooked into its junction points (start: junction_a, end: junction_b)
+    # and can curl there over its own ink: no piece apart
+    end_zone = 3.0 * (reach + gap_px)
+
+    def at_junction(idx, k):
+        return (((arc[idx] < end_zone) & (ends[k, 0] >= 0))
+                | ((arc[idx] > length[k] - end_zone) & (ends[k, 1] >= 0)))
+
+    # a band of several passes ending in a fold is drawn along a line that runs out to the
+    # fold and back over itself: only a single pass touching itself is pieces apart
+    single = stacks["n_br"].to_numpy(int) == 1
+    self_touch = same & single[a] & far & ~at_junction(i, a) & ~at_junction(j, a)
+    # stacks near each other in the junction graph (a stack is near itself), once per pair
+    n = len(lines_px)
+    codes, inverse = np.unique(a.astype(np.int64) * n + b, return_inverse=True)
+    related = np.array([c // n == c % n or bool(junctions[c // n] & near[c % n])
+                        for c in codes], bool)
+    hit = self_touch | ~related[inverse.ravel()]
+    out, seen = [], set()
+    for n in np.flatnonzero(hit):
+        key = (int(min(a[n], b[n])), int(max(a[n], b[n])))
+        if key in seen:
+            continue
+        seen.add(key)
+        x, y = pts[i[n]]
+        out.append((key[0], key[1], float(x), float(y)))
+    return out
+
+
+def _touching_message(touching: list[tuple], stack_ids) -> str:
+    """The truth warning of :func:`_touching_pieces`' pairs."""
+    shown = []
+    for a, b, x, y in touching[:5]:
+        sa, sb = int(stack_ids[a]), int(stack_ids[b])
+        what = f"stack {sa} touches itself" if a == b else f"stacks {sa} and {sb} touch"
+        shown.append(f"{what} at ({x:.0f}, {y:.0f}) px")
+    more = f" and {len(touching) - 5} more" if len(touching) > 5 else ""
+    return ("pieces the truth holds apart touch in the drawing (" + "; ".join(shown) + more
+            + "): passes closer than the contact distance that the contact analysis leaves "
+            "apart are drawn without a gap, and an image analysis joins them")
 
 
 def passes_calibration(stroke_mm: float, pitch_mm: float, n_max: int = 60) -> Calibration:
@@ -1607,8 +1774,9 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
     Raises
     ------
     ParameterError
-        An absurd option, or a scene that would exceed :data:`MAX_SCENE_PX` pixels (checked
-        before anything is drawn).
+        An absurd option, a scene that would exceed :data:`MAX_SCENE_PX` pixels (checked
+        before anything is drawn), or a ``rod_length_mm`` that contradicts ``rod_thickness``
+        (``thickness_mm / rod_length_mm`` off by more than :data:`SCALE_TOLERANCE`).
 
     Warns
     -----
@@ -1618,7 +1786,12 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
     ScanRangeWarning
         The sheet is thinner in the image, or the blur, noise or JPEG compression stronger,
         than on the scans the image analysis is validated on (:data:`VALIDATED_SHEET_PX`
-        and the other ``VALIDATED_`` limits).
+        and the other ``VALIDATED_`` limits), or the rod has fewer segments than the renders'
+        truth is validated from (:data:`VALIDATED_COMPACT_SEGMENTS` with ``rod_thickness``,
+        else :data:`VALIDATED_QUENCH_SEGMENTS`).
+    TruthWarning
+        The truth disagrees with the drawing (module docstring, "Truth checks"); the
+        messages are also the summary's ``truth_warnings``.
     """
     xy = _checked_rod(xy)
     if analysis is not None and not isinstance(analysis, RodAnalysis):
@@ -1653,6 +1826,7 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
                     ("rod_length_mm", rod_length_mm)):
         if v is not None:
             check_real(name, v, low=0.0, low_open=True)
+    _check_scale(rod_length_mm, thickness_mm, rod_thickness)
     if calibration is not None and not isinstance(calibration, Calibration):
         raise ParameterError(f"calibration must be a Calibration, got {type(calibration).__name__}")
     if draw not in DRAW:
@@ -1687,6 +1861,9 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
     beyond = _beyond_validated(d, px_per_mm * thickness_mm)
     if beyond:
         warnings.warn(beyond, ScanRangeWarning, stacklevel=2)
+    short = _rod_beyond_validated(len(xy) - 1, rod_thickness is not None)
+    if short:
+        warnings.warn(short, ScanRangeWarning, stacklevel=2)
     rng = np.random.default_rng(seed)
     st = analysis.stacks
     segment_px = frame.scale / (len(xy) - 1)
@@ -1701,6 +1878,7 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
         lines_px = _stack_lines(analysis, frame, widths_px, segment_px=segment_px,
                                 smooth=smooth)
     truth_warnings = []
+    touching = []
     if draw == "passes":
         curve, branch_of, _ = _pass_curves(
             xy, analysis, frame, segment_px=segment_px, pitch_px=pitch_px, stroke_px=stroke_px,
@@ -1727,6 +1905,9 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
                 f"the bands of junction{'s' if len(cut) > 1 else ''} "
                 f"{', '.join(str(j) for j in cut)} do not touch: the drawn rod is cut where "
                 "the truth holds it together")
+        touching = _touching_pieces(st, lines_px, widths_px, gap_px)
+        if touching:
+            truth_warnings.append(_touching_message(touching, st["stack_id"].to_numpy(int)))
     ink_mask = coverage >= 0.5
     voids = truth_voids(ink_mask, hole_center_xy=frame.hole_xy, hole_radius_px=frame.hole_px,
                         s_min_px=(10 * thickness_mm * px_per_mm) ** 2, px_per_mm=px_per_mm,
@@ -1746,6 +1927,9 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
     rod_drawn = _rod_drawn_check(tables["stacks"], frame.rod_length_mm)
     if rod_drawn:
         truth_warnings.append(rod_drawn)
+    empty = _zero_length_check(tables["stacks"])
+    if empty:
+        truth_warnings.append(empty)
     for message in truth_warnings:
         warnings.warn(message, TruthWarning, stacklevel=2)
     summary = _summary(analysis, frame, tables, ink_mask, px_per_mm=px_per_mm)
@@ -1755,7 +1939,9 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
               "hole_center_px": None if frame.hole_xy is None else
               [float(frame.hole_xy[0]), float(frame.hole_xy[1])],
               "seed": int(seed), "rod_length_mm": float(frame.rod_length_mm),
-              "contact_distance": analysis.contact_distance, "gap_guaranteed": bool(frame.gap_ok),
+              "contact_distance": analysis.contact_distance,
+              # passes beyond delta show a gap, and no pieces the truth holds apart touch
+              "gap_guaranteed": bool(frame.gap_ok and not touching),
               "rod_thickness": rod_thickness, "wall_radius": wall_radius, "clean": bool(clean),
               **{k: (v if not isinstance(v, np.ndarray) else v.tolist()) for k, v in d.items()},
               "smooth": smooth, "draw": draw, **({"join": join} if draw == "bands" else {}),
@@ -1791,6 +1977,39 @@ def _checked_rod(xy) -> np.ndarray:
                low_open=True, why="the sum of the segments of xy; a rod whose nodes all "
                "coincide has nothing to draw")
     return arr
+
+
+def _check_scale(rod_length_mm, thickness_mm, rod_thickness, where=None) -> None:
+    """Refuse a rod length that contradicts a compaction's thickness.
+
+    Parameters
+    ----------
+    rod_length_mm : float or None
+        The rod length asked for (None: the one the thickness sets).
+    thickness_mm : float
+        Sheet thickness h of the scan.
+    rod_thickness : float or None
+        The compaction's rod thickness, units of L (None: a rod without thickness).
+    where : str, optional
+        Where the rod thickness comes from, for the message (default: ``rod_thickness``).
+
+    Raises
+    ------
+    ParameterError
+        ``thickness_mm / rod_length_mm`` differs from ``rod_thickness`` by more than
+        :data:`SCALE_TOLERANCE`: the passes would be drawn thicker or thinner than the rod.
+    """
+    if rod_length_mm is None or rod_thickness is None:
+        return
+    drawn = thickness_mm / rod_length_mm
+    if abs(drawn / rod_thickness - 1.0) <= SCALE_TOLERANCE:
+        return
+    raise ParameterError(
+        f"{rod_length_mm:g} with thickness_mm {thickness_mm:g} draws passes {drawn:.4g} L "
+        f"thick, but {where or 'rod_thickness'} is {rod_thickness:.4g} L "
+        f"({drawn / rod_thickness:.3g} times): the drawn rod would not be the compacted one; "
+        f"leave rod_length_mm out (it is thickness_mm / {rod_thickness:.4g} = "
+        f"{thickness_mm / rod_thickness:.4g} mm) or change thickness_mm", "rod_length_mm")
 
 
 def _is_point(p) -> bool:
@@ -2035,7 +2254,8 @@ def render_directory(sim_dir, out_dir, *, configs=None, progress: bool | None = 
     Raises
     ------
     ParameterError
-        An absurd option or output folder, or a scene over :data:`MAX_SCENE_PX` pixels.
+        An absurd option or output folder, a scene over :data:`MAX_SCENE_PX` pixels, or a
+        ``rod_length_mm`` that contradicts the compaction's thickness.
     ConfigError
         ``sim_dir`` is not a readable simulation folder, or ``out_dir`` holds scenes of
         another render (or of one that recorded no parameters).
@@ -2044,7 +2264,10 @@ def render_directory(sim_dir, out_dir, *, configs=None, progress: bool | None = 
     -----
     ScanRangeWarning
         Once per call, naming ``out_dir``, when the options lie beyond the ranges the image
-        analysis is validated on (the scenes' own warnings are silenced).
+        analysis is validated on, and once per segment count below the one the renders' truth
+        is validated from (the scenes' own warnings are silenced).
+    TruthWarning
+        Per scene whose truth disagrees with its drawing, naming the scene folder.
     crosssection.quality.QualityWarning
         ``sim_dir`` has no params.json.
     """
@@ -2090,6 +2313,8 @@ def _render_directory(sim_dir, out_dir, *, configs=None, limit=None, progress=Fa
             # the wall is the hole unless the caller draws another (or none)
             kwargs = {**wall, "hole_radius_mm": "auto", **kwargs}
             lam = 0.0
+            _check_scale(kwargs.get("rod_length_mm"), kwargs.get("thickness_mm", THICKNESS_MM),
+                         kwargs["rod_thickness"], f"the thickness of {pj}")
         try:
             lam = float(p.get("lambda", p.get("lam", lam)))
         except (TypeError, ValueError):
@@ -2119,6 +2344,7 @@ def _render_directory(sim_dir, out_dir, *, configs=None, limit=None, progress=Fa
             # once for the run: every scene has the same options (per scene it is silenced)
             warnings.warn(f"{out_dir}: {beyond}", ScanRangeWarning, stacklevel=3)
         base_seed = int(kwargs.pop("seed", 0))
+        short_seen = set()
         # disable=None is tqdm's "only on a terminal"
         with tqdm(keys, desc="render", unit="config",
                   disable=None if progress is None else not progress) as bar:
@@ -2143,9 +2369,15 @@ def _render_directory(sim_dir, out_dir, *, configs=None, limit=None, progress=Fa
                 with warnings.catch_warnings(record=True) as caught:
                     warnings.simplefilter("always")
                     scene = render_configuration(xy, an, seed=base_seed + i, **kwargs)
+                short = _rod_beyond_validated(len(xy) - 1,
+                                              kwargs.get("rod_thickness") is not None)
+                if short and short not in short_seen:
+                    # once per segment count (an ensemble's rods share theirs), not per scene
+                    short_seen.add(short)
+                    warnings.warn(f"{out_dir}: {short}", ScanRangeWarning, stacklevel=3)
                 for w in caught:
-                    # the scan range is the run's (warned once above); a truth check is the
-                    # scene's own
+                    # the scan and rod ranges are the run's (warned once); a truth check is
+                    # the scene's own
                     if issubclass(w.category, TruthWarning):
                         warnings.warn(f"{folder}: {w.message}", TruthWarning, stacklevel=3)
                 if not recorded:

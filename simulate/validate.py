@@ -8,13 +8,21 @@ folder of SCENES (``image.png``, ``params.json``, ``calibration.csv``, ``truth/`
 package version) and ``REPORT/failures.csv`` (one line per scene that could not be analysed or
 scored: the run goes on). Every subfolder of SCENES is taken for a scene, so that one whose
 ``truth/`` is missing is listed as failed rather than lost.
+
+A scene whose render flagged its truth (``truth_warnings`` in ``truth/summary.json``: the truth
+disagrees with its own drawing, :class:`simulate.render.TruthWarning`) is scored, counted in the
+``truth_warnings`` column of ``scores.csv`` and warned about, but left out of the summary's
+``mean`` and ``mean_abs``: its scores measure the render as much as the analysis.
+``mean_all`` and ``mean_abs_all`` are the means over every scored scene.
 """
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -27,7 +35,7 @@ from crosssection.core.fileio import write_csv, write_json
 from crosssection.truth.scene import read_scene_params
 from crosssection.truth.scoring import analyze_scene_folder, score
 
-__all__ = ["validate_scenes", "score_scene", "read_truth", "add_subparser"]
+__all__ = ["validate_scenes", "score_scene", "read_truth", "truth_warnings", "add_subparser"]
 
 # the headline scores, first in scores.csv (crosssection.truth.scoring names)
 KEY_COLUMNS = ["scene", "rod_length_rel_error", "n_branches_rel_error", "junction_precision",
@@ -96,7 +104,27 @@ def read_truth(truth_dir) -> tuple[dict, dict]:
                 raise ConfigError(f"column {col} must hold finite numbers",
                                   truth_dir / f"{name}.csv")
             df[col] = values
+    warned = summary.get("truth_warnings")
+    if warned is not None and not (isinstance(warned, list)
+                                   and all(isinstance(m, str) for m in warned)):
+        raise ConfigError(f"truth_warnings must be a list of messages, got {warned!r}", path)
     return summary, tables
+
+
+def truth_warnings(summary: dict) -> list[str]:
+    """The messages with which a scene's render flagged its truth.
+
+    Parameters
+    ----------
+    summary : dict
+        A truth ``summary.json`` as :func:`read_truth` returns it.
+
+    Returns
+    -------
+    list of str
+        Its ``truth_warnings`` (empty when the render flagged nothing or recorded no check).
+    """
+    return list(summary.get("truth_warnings") or [])
 
 
 def score_scene(scene_dir, *, match_px: float | None = None) -> dict:
@@ -112,7 +140,9 @@ def score_scene(scene_dir, *, match_px: float | None = None) -> dict:
     Returns
     -------
     dict
-        The scores of :func:`crosssection.truth.scoring.score` plus ``scene`` and ``analyze_s``.
+        The scores of :func:`crosssection.truth.scoring.score` plus ``scene``, ``analyze_s``
+        and ``truth_warnings``, the number of messages with which the render flagged the
+        scene's truth (:func:`truth_warnings`).
 
     Raises
     ------
@@ -136,6 +166,7 @@ def score_scene(scene_dir, *, match_px: float | None = None) -> dict:
     out.update(score(pair, truth, match_px=match_px, px_per_mm=params["px_per_mm"],
                      thickness_mm=params["thickness_mm"]))
     out["analyze_s"] = dt
+    out["truth_warnings"] = len(truth_warnings(truth[0]))
     return out
 
 
@@ -146,10 +177,28 @@ def _scene_folders(scenes_dir: Path, out_dir: Path) -> list[Path]:
                   if p.is_dir() and not p.name.startswith(".") and p.resolve() != out)
 
 
-def _one_line(exc: BaseException) -> str:
-    if isinstance(exc, FoldstatError):
-        return exc.one_line()
-    return f"{type(exc).__name__}: {' '.join(str(exc).split())}"
+def _one_line(exc: BaseException, scene: Path) -> str:
+    """The cause of a failed scene in one line, a file named relative to the scene folder
+    (which the failure line names already)."""
+    if not isinstance(exc, FoldstatError):
+        return f"{type(exc).__name__}: {' '.join(str(exc).split())}"
+    cause = " ".join(exc.cause.split())
+    if exc.path is None:
+        return cause
+    where = Path(exc.path)
+    if where == scene:
+        return cause
+    if where.is_relative_to(scene):
+        return f"{where.relative_to(scene)}: {cause}"
+    return exc.one_line()
+
+
+def _means(df: pd.DataFrame) -> tuple[dict, dict]:
+    """Mean of every numeric column of ``df``, and mean absolute value of its errors."""
+    numeric = df.select_dtypes(include=[np.number, "bool"]) if len(df) else pd.DataFrame()
+    return ({c: float(numeric[c].astype(float).mean()) for c in numeric.columns},
+            {c: float(numeric[c].astype(float).abs().mean())
+             for c in numeric.columns if c.endswith("error")})
 
 
 def validate_scenes(scenes_dir, out_dir, *, match_px: float | None = None,
@@ -184,12 +233,21 @@ def validate_scenes(scenes_dir, out_dir, *, match_px: float | None = None,
         ``scenes_dir`` is not a folder or no subfolder of it has a ``truth/summary.json``.
     OSError
         ``out_dir`` cannot be created or written.
+
+    Warns
+    -----
+    simulate.render.TruthWarning
+        Once per scored scene whose render flagged its truth (``truth_warnings`` in its
+        ``truth/summary.json``): it is scored but left out of the summary's ``mean`` and
+        ``mean_abs`` (``mean_all`` and ``mean_abs_all`` hold it).
     """
     return _validate(scenes_dir, out_dir, match_px=match_px, progress=progress)[0]
 
 
 def _validate(scenes_dir, out_dir, *, match_px, progress) -> tuple[pd.DataFrame, list]:
     """:func:`validate_scenes`, returning the failures (dicts ``scene``, ``error``) too."""
+    from simulate.render import TruthWarning
+
     _check_match_px(match_px, "match_px")
     scenes_dir, out_dir = Path(scenes_dir), Path(out_dir)
     if not scenes_dir.exists():
@@ -210,23 +268,33 @@ def _validate(scenes_dir, out_dir, *, match_px, progress) -> tuple[pd.DataFrame,
         try:
             rows.append(score_scene(scene, match_px=match_px))
         except Exception as exc:  # noqa: BLE001 - one line per failed scene, never a crash
-            failures.append({"scene": scene.name, "error": _one_line(exc)})
+            failures.append({"scene": scene.name, "error": _one_line(exc, scene)})
+            continue
+        if rows[-1]["truth_warnings"]:
+            # the messages: score_scene returns numbers only (and has checked the file)
+            messages = truth_warnings(json.loads((scene / "truth" / "summary.json").read_text()))
+            warnings.warn(f"{scene}: its truth is flagged by its render: "
+                          f"{'; '.join(messages)} (scored, left out of the means)",
+                          TruthWarning, stacklevel=3)
     df = pd.DataFrame(rows)
     if len(df):
         df = df[[c for c in KEY_COLUMNS if c in df.columns]
                 + [c for c in df.columns if c not in KEY_COLUMNS]]
     write_csv(out_dir / "scores.csv", df)
     write_csv(out_dir / "failures.csv", pd.DataFrame(failures, columns=["scene", "error"]))
-    numeric = df.select_dtypes(include=[np.number, "bool"]) if len(df) else pd.DataFrame()
+    flagged = df["scene"][df["truth_warnings"] > 0].tolist() if len(df) else []
+    mean, mean_abs = _means(df[df["truth_warnings"] == 0] if len(df) else df)
+    mean_all, mean_abs_all = _means(df)
     summary = {"package": "foldstat", "version": __version__,
                "scenes_dir": str(scenes_dir.resolve()),
                # null match_px: each scene's own 3 h (the scorer's default)
                "options": {"match_px": None if match_px is None else float(match_px)},
                "n_scenes": len(scenes), "n_scored": len(df), "n_failed": len(failures),
                "failed": [f["scene"] for f in failures],
-               "mean": {c: float(numeric[c].astype(float).mean()) for c in numeric.columns},
-               "mean_abs": {c: float(numeric[c].astype(float).abs().mean())
-                            for c in numeric.columns if c.endswith("error")}}
+               # a truth its render flagged measures the render as much as the analysis
+               "n_flagged": len(flagged), "flagged": flagged,
+               "mean": mean, "mean_abs": mean_abs,
+               "mean_all": mean_all, "mean_abs_all": mean_abs_all}
     write_json(out_dir / "summary.json", summary)
     return df, failures
 
@@ -239,7 +307,11 @@ def add_subparser(sub) -> None:
                     "REPORT/scores.csv, summary.json, failures.csv. A scene that cannot be "
                     "analysed or scored (a subfolder without truth/ included) is listed in "
                     "REPORT/failures.csv and on stderr as 'warning: SCENE: not analysed: "
-                    "REASON'; the run goes on and exits with status 3.")
+                    "REASON'; the run goes on and exits with status 3. A scene whose render "
+                    "flagged its truth (truth_warnings in its truth/summary.json) is scored, "
+                    "named in a 'warning: SCENE: its truth is flagged by its render' line and "
+                    "left out of summary.json's mean and mean_abs (mean_all and mean_abs_all "
+                    "keep it).")
     p.add_argument("scenes", metavar="SCENES",
                    help="folder of scene folders (from render), each with its truth/")
     p.add_argument("--out", required=True, metavar="REPORT",
@@ -263,6 +335,9 @@ def _run(args) -> int:
     for f in failures:
         print(f"warning: {Path(args.scenes) / f['scene']}: not analysed: {f['error']}",
               file=sys.stderr)
-    print(f"{len(df)} scenes scored, {len(failures)} failed; report in {args.out}"
+    n_flagged = int((df["truth_warnings"] > 0).sum()) if len(df) else 0
+    flagged = (f" ({n_flagged} with a truth flagged by its render, left out of the means)"
+               if n_flagged else "")
+    print(f"{len(df)} scenes scored{flagged}, {len(failures)} failed; report in {args.out}"
           + (f" (see {Path(args.out) / 'failures.csv'})" if len(failures) else ""))
     return EXIT_SOME_FAILED if len(failures) else 0

@@ -14,7 +14,10 @@ from simulate.render import render_configuration
 from simulate.shapes import double_loop, hairpin, resample, spiral, transform
 
 #: the truth checks of these scenes (test_render_truth.py) are not what is tested here
-pytestmark = pytest.mark.filterwarnings("ignore::simulate.render.TruthWarning")
+# short rods, below the segment count the renders' truth is validated from, on purpose
+pytestmark = [pytest.mark.filterwarnings("ignore::simulate.render.TruthWarning"),
+              pytest.mark.filterwarnings("ignore:.*the render's truth is validated from:"
+                                         "simulate.render.ScanRangeWarning")]
 
 LAM = 7e5
 DELTA = 0.5 / 300

@@ -15,7 +15,10 @@ from simulate.render import render_configuration
 from simulate.shapes import hairpin, lines, resample
 
 #: the truth checks of these scenes (test_render_truth.py) are not what is tested here
-pytestmark = pytest.mark.filterwarnings("ignore::simulate.render.TruthWarning")
+# short rods, below the segment count the renders' truth is validated from, on purpose
+pytestmark = [pytest.mark.filterwarnings("ignore::simulate.render.TruthWarning"),
+              pytest.mark.filterwarnings("ignore:.*the render's truth is validated from:"
+                                         "simulate.render.ScanRangeWarning")]
 
 N = 300
 DELTA = 0.5 / N

@@ -19,6 +19,10 @@ from simulate.render import (JUNCTION_INK_H, TRUTH_LENGTH_TOLERANCE, TruthWarnin
                              _disconnected_junctions, _junctions_onto_ink, _rod_drawn_check,
                              render_configuration, render_directory)
 
+# short rods, below the segment count the renders' truth is validated from, on purpose
+pytestmark = pytest.mark.filterwarnings(
+    "ignore:.*the render's truth is validated from:simulate.render.ScanRangeWarning")
+
 DATA = Path(__file__).parent / "data"
 H_PX = 5.0  # the default sheet: 0.1 mm at 50 px/mm
 

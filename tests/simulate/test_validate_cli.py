@@ -1,6 +1,8 @@
 """The ``validate`` command: option checks, failed scenes, truth tables, the report's record."""
 import json
 import shutil
+import warnings
+from pathlib import Path
 
 import pandas as pd
 import pytest
@@ -93,8 +95,11 @@ def test_scene_without_truth_is_failed_not_skipped(scenes, tmp_path, capsys):
     shutil.rmtree(bare / "truth")
     assert run(folder, tmp_path / "rep") == 3
     lines = not_analysed(capsys.readouterr().err)
-    assert lines == [f"warning: {bare}: not analysed: {bare}: no truth/summary.json "
+    # the scene folder named once: the line starts with it
+    assert lines == [f"warning: {bare}: not analysed: no truth/summary.json "
                      f"(not a scene folder)"]
+    failures = pd.read_csv(tmp_path / "rep" / "failures.csv")
+    assert failures["error"].tolist() == ["no truth/summary.json (not a scene folder)"]
     summary = json.loads((tmp_path / "rep" / "summary.json").read_text())
     assert (summary["n_scenes"], summary["n_scored"], summary["n_failed"]) == (2, 1, 1)
 
@@ -123,7 +128,7 @@ def test_missing_truth_table_fails_its_scene_naming_the_file(scenes, tmp_path, c
     assert run(folder, tmp_path / "rep") == 3
     err = capsys.readouterr().err
     assert err.splitlines() == [f"warning: {scene}: not analysed: "
-                                f"{scene / 'truth' / 'branches.csv'}: file not found"]
+                                f"{Path('truth') / 'branches.csv'}: file not found"]
 
 
 @pytest.mark.parametrize("file, content, cause", [
@@ -193,3 +198,76 @@ def test_the_bundled_samples_validate(tmp_path):
     copy_samples(tmp_path / "samples")
     scores = validate_scenes(tmp_path / "samples" / "scenes", tmp_path / "v")
     assert len(scores) == 5 and (scores["n_br_exact_length_fraction"] > 0.95).all()
+
+
+def _flag(scene, messages, rod_factor=1.0):
+    """Record ``messages`` as the render's truth warnings of ``scene`` (and scale its truth's
+    rod length, so that its scores differ from an unflagged copy's)."""
+    path = scene / "truth" / "summary.json"
+    summary = json.loads(path.read_text())
+    summary["truth_warnings"] = messages
+    summary["rod_length_mm"] *= rod_factor
+    path.write_text(json.dumps(summary))
+
+
+def test_a_truth_flagged_by_its_render_is_warned_counted_and_left_out_of_the_means(
+        scenes, tmp_path, capsys):
+    folder, scene = scenes
+    _flag(scene, [])
+    flagged = folder / "config_99999"
+    shutil.copytree(scene, flagged)
+    _flag(flagged, ["the truth's stacks hold 682.2 mm of rod", "junction 0 lay 210 px away"],
+          rod_factor=2.0)
+    assert run(folder, tmp_path / "rep") == 0
+    out, err = capsys.readouterr()
+    assert "2 scenes scored (1 with a truth flagged by its render, left out of the means)" in out
+    lines = [line for line in err.splitlines() if "flagged by its render" in line]
+    assert lines == [f"warning: {flagged}: its truth is flagged by its render: the truth's "
+                     "stacks hold 682.2 mm of rod; junction 0 lay 210 px away (scored, left "
+                     "out of the means)"]
+    scores = pd.read_csv(tmp_path / "rep" / "scores.csv").set_index("scene")
+    assert scores["truth_warnings"].to_dict() == {scene.name: 0, flagged.name: 2}
+    summary = json.loads((tmp_path / "rep" / "summary.json").read_text())
+    assert summary["n_flagged"] == 1 and summary["flagged"] == [flagged.name]
+    key = "rod_length_rel_error"
+    assert scores.loc[flagged.name, key] != pytest.approx(scores.loc[scene.name, key])
+    assert summary["mean"][key] == pytest.approx(scores.loc[scene.name, key])
+    assert summary["mean_all"][key] == pytest.approx(scores[key].mean())
+    assert summary["mean_abs_all"][key] == pytest.approx(scores[key].abs().mean())
+
+
+def test_the_api_warns_a_flagged_truth(scenes, tmp_path):
+    from simulate.render import TruthWarning
+
+    folder, scene = scenes
+    _flag(scene, ["the bands of junction 3 do not touch"])
+    with warnings.catch_warnings(record=True) as caught:
+        # the scan's own quality warnings too: only the truth's matter here
+        warnings.simplefilter("always")
+        scores = validate_scenes(folder, tmp_path / "rep")
+    assert [str(w.message) for w in caught if w.category is TruthWarning] == [
+        f"{scene}: its truth is flagged by its render: the bands of junction 3 do not touch "
+        "(scored, left out of the means)"]
+    assert scores["truth_warnings"].tolist() == [1]
+    summary = json.loads((tmp_path / "rep" / "summary.json").read_text())
+    # every scene flagged: no mean of the unflagged ones, the means of all kept
+    assert summary["mean"] == {} and summary["n_flagged"] == 1
+    assert "rod_length_rel_error" in summary["mean_all"]
+
+
+def test_unflagged_scenes_have_a_zero_count_and_equal_means(scenes, tmp_path):
+    folder, scene = scenes
+    _flag(scene, [])
+    assert run(folder, tmp_path / "rep") == 0
+    scores = pd.read_csv(tmp_path / "rep" / "scores.csv")
+    assert scores["truth_warnings"].tolist() == [0]
+    summary = json.loads((tmp_path / "rep" / "summary.json").read_text())
+    assert summary["n_flagged"] == 0 and summary["mean"] == summary["mean_all"]
+
+
+def test_malformed_truth_warnings_fail_the_scene(scenes, tmp_path, capsys):
+    folder, scene = scenes
+    _flag(scene, "not a list")
+    assert run(folder, tmp_path / "rep") == 3
+    lines = not_analysed(capsys.readouterr().err)
+    assert len(lines) == 1 and "truth_warnings must be a list of messages" in lines[0]
