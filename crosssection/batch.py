@@ -66,7 +66,9 @@ Design choices
   ``set.toml`` or a missing calibration fail only the images concerned, each with a one-line
   reason in ``failures.csv``. A worker process that dies (crash, out-of-memory kill) is
   replaced; the images that were in flight are re-run one at a time, and the one whose worker
-  dies alone is recorded as failed.
+  dies alone is recorded as failed. A Dask cluster that goes away stops the batch (one
+  ``error:`` line): the images it had are left out of the index, neither done nor failed, and
+  a re-run analyses them.
 - A calibration is used only when a ``set.toml`` or ``--calibration`` names it. A
   ``calibration.csv`` lying beside scans that are analysed without one is named in a
   ``warning:`` line (and in batch.json): every such scan would otherwise read its layer counts
@@ -99,7 +101,7 @@ from crosssection.core.errors import ConfigError, FoldstatError, ImageError, Par
 from crosssection.core.fileio import (BROWSER_FILES, PARTIAL_TAG, check_out,
                                       clear_stale_folders, read_json_object, staging_folder,
                                       swap_in_folder, write_csv, write_json)
-from crosssection.core.parallel import compiling_in_turn, get_executor
+from crosssection.core.parallel import ClusterLostError, compiling_in_turn, get_executor
 from crosssection.params import (PARAM_NAMES, AnalysisParams, add_analysis_arguments,
                                  check_param, switched_off)
 from crosssection.quality import QualityWarning
@@ -901,7 +903,8 @@ def check_out_dir(input_dir, out_dir) -> None:
 
 def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | None = None,
               seed: int | None = 0, figure: bool = True, cli_params: dict | None = None,
-              force: bool = False, progress: bool | None = None, task_fn=None) -> pd.DataFrame:
+              force: bool = False, progress: bool | None = None, task_fn=None,
+              on_wait=None) -> pd.DataFrame:
     """Analyse every image under ``input_dir`` into ``out_dir`` (see module docstring).
 
     Parameters
@@ -925,6 +928,9 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
         so that logs and pipes get nothing but warnings and errors.
     task_fn : callable, optional
         Replaces :func:`process_image` (a module-level function, for tests).
+    on_wait : callable, optional
+        Told, in one line, that a cluster has no worker yet (see
+        :func:`~crosssection.core.parallel.get_executor`).
 
     Returns
     -------
@@ -939,6 +945,9 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
         ``out_dir`` holds another input folder's batch or files no batch wrote
         (:func:`check_out_dir`), or the Dask scheduler cannot be reached. Nothing is
         written then.
+    ClusterLostError
+        The Dask cluster went away during the batch. The images it had are left out of the
+        index (neither done nor failed): a re-run analyses them.
     """
     from tqdm.auto import tqdm
 
@@ -972,7 +981,7 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
     # the executor before any write: a scheduler that cannot be reached is refused with
     # nothing left behind (an empty batch would read as a finished one)
     pool = ExitStack()
-    ex = pool.enter_context(get_executor(workers, scheduler))
+    ex = pool.enter_context(get_executor(workers, scheduler, on_wait=on_wait))
     try:
         meta = _start(out, input_dir, tasks, sets, redone, stale, {
             "workers": workers, "scheduler": scheduler, "seed": seed, "figure": figure,
@@ -992,7 +1001,7 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
         while queue or suspects:
             if ex is None:  # the previous pool broke
                 pool = ExitStack()
-                ex = pool.enter_context(get_executor(workers, scheduler))
+                ex = pool.enter_context(get_executor(workers, scheduler, on_wait=on_wait))
             with pool:
                 slots = _executor_slots(ex, workers or os.cpu_count() or 1)
                 inflight, broken = {}, False
@@ -1016,10 +1025,15 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
                     if not inflight:
                         break
                     done, _ = wait(list(inflight), return_when=FIRST_COMPLETED)
+                    lost = None
                     for fut in done:
                         t, alone = inflight.pop(fut)
                         try:
                             row = fut.result()
+                        except ClusterLostError as exc:
+                            # not the image's failure: left out of the index, for the re-run
+                            lost = exc
+                            continue
                         except BrokenProcessPool:
                             # a worker process died (killed, out of memory, crash)
                             broken = True
@@ -1032,11 +1046,13 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
                             row = _row(t, "failed", reason=_one_line(exc))
                         rows[t.rel] = row
                         bar.update(1)
+                    if lost is not None:
+                        raise lost
                     if time.monotonic() - last_write > INDEX_EVERY_S:
                         _write_tables(out, rows, tasks)
                         last_write = time.monotonic()
             ex = None
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, ClusterLostError):
         # an interrupt landing once every image is done stops nothing: the batch is complete
         if len(rows) < len(tasks):
             interrupted = True
@@ -1175,7 +1191,8 @@ def run(args) -> int:
     index = run_batch(args.input_dir, args.out, workers=workers, scheduler=args.scheduler,
                       seed=args.seed, figure=not args.no_figure, cli_params=cli_params,
                       force=args.force,
-                      progress=False if args.quiet else args.progress)
+                      progress=False if args.quiet else args.progress,
+                      on_wait=lambda message: print(f"warning: {message}", file=sys.stderr))
     n = index["status"].value_counts()
     n_failed = int(n.get("failed", 0))
     for _, row in index[index["status"] == "failed"].iterrows():

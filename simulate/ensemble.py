@@ -17,7 +17,9 @@
   (:func:`resolve_defaults`), and the package version;
 * ``DIR/failures.csv`` -- config_id, seed, error: one line per configuration whose computation
   raised (its row of configs.csv has the ``error`` and no results; the others go on). A
-  re-run tries the failed configurations again.
+  re-run tries the failed configurations again. A Dask cluster that goes away stops the
+  ensemble instead (one ``error:`` line): its configurations are not recorded and no table is
+  written; the re-run computes them.
 
 Configuration ``i`` always uses the seed ``spawn_seeds(seed, K)[i]``, so results do not depend
 on the number of workers. Every finished configuration is written atomically to
@@ -39,6 +41,7 @@ import json
 import math
 import os
 import re
+import sys
 import time
 import warnings
 from concurrent.futures import BrokenExecutor, as_completed
@@ -51,7 +54,7 @@ import pandas as pd
 from crosssection._version import __version__
 from crosssection.core.errors import ConfigError, ParameterError
 from crosssection.core.fileio import BROWSER_FILES, check_out, write_csv, write_json, write_npz
-from crosssection.core.parallel import get_executor, spawn_seeds
+from crosssection.core.parallel import ClusterLostError, get_executor, spawn_seeds
 from crosssection.quality import QualityWarning
 
 from simulate.contacts import MIN_CONTACT_DISTANCE
@@ -499,7 +502,8 @@ def library_versions() -> dict:
 
 
 def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None = None,
-                 progress: bool | None = None, task=None, columns=None, physics_keys=None) -> dict:
+                 progress: bool | None = None, task=None, columns=None, physics_keys=None,
+                 on_wait=None) -> dict:
     """Run (or resume) an ensemble and write its tables.
 
     Parameters
@@ -529,6 +533,9 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
         Leading columns of configs.csv (see :func:`assemble`).
     physics_keys : tuple of str, optional
         Parameters a re-run into the same folder must agree on (default: quench's).
+    on_wait : callable, optional
+        Told, in one line, that a cluster has no worker yet (see
+        :func:`~crosssection.core.parallel.get_executor`).
 
     Returns
     -------
@@ -543,6 +550,9 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
         cannot be had (``workers``, an unreachable ``scheduler``): nothing is written then.
     ConfigError
         ``out`` holds a different ensemble (its params.json differs on ``physics_keys``).
+    ClusterLostError
+        The Dask cluster went away: the configurations it had are not recorded, nor are
+        the tables written (the part files of the finished ones stay, for the re-run).
     """
     out = Path(out)
     params = resolve_defaults(params)
@@ -568,7 +578,7 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
     failed = {}
     # nothing is written before the executor exists: a refused --scheduler or --workers
     # leaves no folder behind
-    with get_executor(workers, scheduler) if todo else nullcontext() as ex:
+    with get_executor(workers, scheduler, on_wait=on_wait) if todo else nullcontext() as ex:
         out.mkdir(parents=True, exist_ok=True)
         # the tables hold the first n configurations: so does the record (parts of a larger
         # earlier run stay on disk, and a re-run that asks for them again reuses them)
@@ -590,8 +600,8 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
                 for i, fut in done:
                     try:
                         fut.result()
-                    except BrokenExecutor:
-                        raise  # a dead pool, not this configuration: stop, a re-run resumes
+                    except (BrokenExecutor, ClusterLostError):
+                        raise  # a dead pool or cluster, not this configuration: a re-run resumes
                     except Exception as exc:  # noqa: BLE001 - recorded, the ensemble goes on
                         failed[i] = (int(seeds[i]), f"{type(exc).__name__}: {exc}")
                     if bar is not None:
@@ -925,7 +935,8 @@ def run(args) -> int:
     if doubt:
         warnings.warn(f"{args.out}: {doubt}", WallStartWarning, stacklevel=2)
     tables = run_ensemble(params, args.out, workers=args.workers, scheduler=args.scheduler,
-                          progress=args.progress)
+                          progress=args.progress,
+                          on_wait=lambda message: print(f"warning: {message}", file=sys.stderr))
     head, c = summary_head(tables, args.out)
     if c.empty:
         print(head)

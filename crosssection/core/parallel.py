@@ -6,11 +6,17 @@ Local processes by default; a Dask distributed cluster when a scheduler address 
 """
 from __future__ import annotations
 
+import logging
 import os
+import threading
+import time
+import warnings
 from concurrent.futures import Executor, ProcessPoolExecutor, ThreadPoolExecutor
 from contextlib import contextmanager
 
 import numpy as np
+
+from crosssection.core.errors import FoldstatError, ParameterError
 
 
 class _InlineExecutor(Executor):
@@ -142,12 +148,261 @@ def stop_pool(ex: ProcessPoolExecutor, known=(), grace: float = STOP_GRACE_S) ->
 
 #: Seconds to wait for a Dask scheduler's answer before the address is refused (Dask's own
 #: default, 30 s, keeps a mistyped address waiting; a reachable scheduler, even through a
-#: tunnel, answers within a second or two).
+#: tunnel, answers within a second or two); also how long a cluster may go without any worker
+#: before a warning says that the command is waiting for one.
 SCHEDULER_TIMEOUT_S = 10
+
+#: Loggers of the Dask client's machinery, quieted below CRITICAL while a client runs: a lost
+#: scheduler or an interrupt makes them print tracebacks of the client's event loop, which
+#: the user is told in one line instead.
+CLIENT_LOGGERS = ("distributed", "tornado", "asyncio")
+
+
+class ClusterLostError(FoldstatError):
+    """The Dask cluster went away (its scheduler stopped, or the connection to it broke)
+    before every task was done: the tasks it had are neither results nor failures."""
+
+
+class ClusterWarning(UserWarning):
+    """The Dask cluster has no worker: the command waits for one."""
 
 
 @contextmanager
-def get_executor(workers: int | None = 1, scheduler: str | None = None):
+def quiet_loggers(names=CLIENT_LOGGERS, level: int = logging.CRITICAL):
+    """Raise the loggers ``names``, and every logger below them, to ``level`` in the block.
+
+    Loggers below ``names`` are set one by one: Dask gives some of them levels of their own,
+    which a parent's level would not override. Their levels are put back on leaving.
+
+    Parameters
+    ----------
+    names : iterable of str
+        Top-level logger names.
+    level : int
+        Least level let through.
+
+    Yields
+    ------
+    None
+    """
+    names = tuple(names)
+    chosen = [logging.getLogger(n) for n in names]
+    chosen += [lg for key, lg in list(logging.Logger.manager.loggerDict.items())
+               if isinstance(lg, logging.Logger) and key.split(".")[0] in names]
+    saved = {lg: lg.level for lg in chosen}
+    for lg in saved:
+        lg.setLevel(max(level, lg.level))
+    try:
+        yield
+    finally:
+        for lg, old in saved.items():
+            lg.setLevel(old)
+
+
+def _probe_scheduler(address: str, timeout: float) -> None:
+    """Return once a Dask scheduler has answered the handshake at ``address``, else raise.
+
+    ``distributed.Client`` bounds the TCP connection by its ``timeout`` but not the handshake
+    that follows: a service that accepts the connection and stays silent (a web server)
+    keeps it waiting forever, and one that greets first (SSH) has its greeting read as a
+    message length. Here the whole handshake has ``timeout`` seconds, in a thread of its own
+    so that a running event loop (a notebook's) does not stand in the way.
+
+    Parameters
+    ----------
+    address : str
+        The scheduler's address (``tcp://host:port``, or another Dask scheme).
+    timeout : float
+        Seconds for the connection, and one more for the handshake.
+
+    Raises
+    ------
+    TimeoutError
+        The connection was made but nothing answered the handshake in time (``timeout``
+        plus one second: Dask's own limit on the connection comes first).
+    Exception
+        Whatever the connection raised (``OSError``: unreachable; ``ValueError``: a
+        malformed address; ``MemoryError`` and others: a reply that is not Dask's).
+    """
+    import asyncio
+
+    from distributed.comm import connect
+    from distributed.security import Security
+
+    args = Security().get_connection_args("client")
+
+    async def handshake():
+        # Dask's own limit covers the connection (and its retries, which end in an OSError
+        # naming the cause); a second later, the handshake is given up
+        comm = await asyncio.wait_for(connect(address, timeout=timeout, **args), timeout + 1)
+        await comm.close()
+
+    outcome = []
+
+    def probe():
+        try:
+            asyncio.run(handshake())
+            outcome.append(None)
+        except BaseException as exc:  # noqa: BLE001 - raised in the caller's thread
+            outcome.append(exc)
+
+    # a daemon thread: an interrupt of the caller neither waits for the probe nor for it at exit
+    thread = threading.Thread(target=probe, name="scheduler-probe", daemon=True)
+    thread.start()
+    thread.join(timeout + 5)
+    if not outcome:
+        raise TimeoutError
+    if outcome[0] is not None:
+        raise outcome[0]
+
+
+def _why_no_scheduler(exc: BaseException) -> str:
+    """One line on why ``exc`` means no usable scheduler."""
+    if type(exc) is TimeoutError:  # the probe's own limit (Dask's are OSErrors)
+        return "the connection was accepted, but no Dask handshake came back"
+    if isinstance(exc, OSError):
+        # Dask's "timed out" wraps the cause (refused, unknown host) in connector reprs
+        root = exc
+        while isinstance(root.__cause__, OSError):
+            root = root.__cause__
+        if root is not exc and getattr(root, "strerror", None):
+            return root.strerror
+        return " ".join(str(exc).split()) or type(exc).__name__
+    if isinstance(exc, ValueError):
+        return " ".join(str(exc).split()) or "malformed address"
+    return "what answered there does not speak Dask's protocol"
+
+
+class _ClusterExecutor(Executor):
+    """A Dask client's executor whose tasks end in :class:`ClusterLostError` when the cluster
+    goes away.
+
+    Dask cancels the futures of a client that loses its scheduler: a cancelled task would
+    read as one the caller had cancelled, or (as an exception) as a failure of the task
+    itself. Cancellations after :meth:`close` are the caller's and stay cancellations.
+    """
+
+    def __init__(self, client, where: str):
+        self._client = client  # read for the cluster's size (crosssection.batch)
+        self._inner = client.get_executor(pure=False)
+        self._where = where
+        self._closing = False
+
+    def lost(self) -> ClusterLostError:
+        """The error of a task the cluster lost."""
+        return ClusterLostError("the Dask cluster was lost (its scheduler stopped answering) "
+                                "before every task was done; re-run the same command to "
+                                "resume", self._where)
+
+    def submit(self, fn, /, *args, **kwargs):
+        from concurrent.futures import Future, InvalidStateError
+
+        if self._client.status != "running":
+            raise self.lost()
+        inner = self._inner.submit(fn, *args, **kwargs)
+        outer = Future()  # left pending until done, so that the caller may cancel it
+
+        def forward(f):
+            try:
+                if f.cancelled():
+                    if self._closing:
+                        outer.cancel()
+                    else:
+                        outer.set_exception(self.lost())
+                elif f.exception() is not None:
+                    outer.set_exception(f.exception())
+                else:
+                    outer.set_result(f.result())
+            except InvalidStateError:  # cancelled by the caller meanwhile
+                pass
+
+        def back(f):
+            if f.cancelled():
+                inner.cancel()
+
+        outer.add_done_callback(back)
+        inner.add_done_callback(forward)
+        return outer
+
+    def close(self) -> None:
+        """Mark the cancellations to come as the caller's (the client is about to close)."""
+        self._closing = True
+
+    def shutdown(self, wait=True, *, cancel_futures=False):
+        self._closing = True
+        self._inner.shutdown(wait=wait)
+
+
+def _watch_workers(client, stop, joined, on_wait, grace: float) -> None:
+    """Set ``joined`` once the cluster has a worker; call ``on_wait`` once if it has none
+    after ``grace`` seconds. Returns when ``stop`` is set or the client fails."""
+    deadline = time.monotonic() + grace
+    warned = False
+    while not stop.is_set():
+        if _has_workers(client, grace):
+            joined.set()
+            return
+        if not warned and time.monotonic() >= deadline and not stop.is_set():
+            warned = True
+            on_wait()
+        stop.wait(0.5)
+
+
+def _has_workers(client, timeout: float) -> bool:
+    """Whether the cluster has a worker; True when that cannot be learnt within ``timeout``
+    seconds (a closing or lost client, whose tasks tell what became of them)."""
+    try:
+        return bool(client.nthreads(callback_timeout=timeout))
+    except Exception:  # noqa: BLE001
+        return True
+
+
+def _warn(message: str) -> None:
+    warnings.warn(message, ClusterWarning, stacklevel=2)
+
+
+@contextmanager
+def _cluster_executor(address: str, on_wait=None):
+    """The executor of a Dask cluster (see :func:`get_executor`)."""
+    import distributed  # its loggers are configured on import, before they are quieted
+
+    where = f"--scheduler {address}"
+    notify = _warn if on_wait is None else on_wait
+    with quiet_loggers():
+        try:
+            _probe_scheduler(address, SCHEDULER_TIMEOUT_S)
+            client = distributed.Client(address, timeout=SCHEDULER_TIMEOUT_S)
+        except Exception as exc:  # noqa: BLE001 - whatever answered is no usable scheduler
+            raise ParameterError(f"no Dask scheduler answered within {SCHEDULER_TIMEOUT_S} s "
+                                 f"({_why_no_scheduler(exc)})", where) from None
+        ex = _ClusterExecutor(client, where)
+        stop, joined = threading.Event(), threading.Event()
+        watcher = threading.Thread(
+            target=_watch_workers, name="cluster-workers", daemon=True,
+            args=(client, stop, joined, lambda: notify(f"{where}: no worker has joined; "
+                                                       "waiting"), SCHEDULER_TIMEOUT_S))
+        watcher.start()
+        try:
+            yield ex
+        except KeyboardInterrupt:
+            if not joined.is_set() and not _has_workers(client, 1.0):
+                notify(f"{where}: no worker had joined: nothing ran")
+            raise
+        finally:
+            stop.set()
+            ex.close()
+            # closing the client releases its futures: on an interrupt the scheduler cancels
+            # the tasks no client wants any more (a task already running in a worker thread
+            # ends on its own)
+            try:
+                client.close(timeout=SCHEDULER_TIMEOUT_S)
+            except Exception:  # noqa: BLE001 - a lost scheduler: nothing left to release
+                pass
+            watcher.join(1.0)  # a daemon: one stuck on a lost scheduler is left behind
+
+
+@contextmanager
+def get_executor(workers: int | None = 1, scheduler: str | None = None, *, on_wait=None):
     """Yield a ``concurrent.futures.Executor``.
 
     Parameters
@@ -157,42 +412,36 @@ def get_executor(workers: int | None = 1, scheduler: str | None = None):
     scheduler : str, optional
         Address of a Dask distributed scheduler (``tcp://host:port``); when given, tasks go to
         that cluster through ``Client.get_executor()`` and ``workers`` is ignored. One that
-        does not answer within :data:`SCHEDULER_TIMEOUT_S` is a ``ParameterError``.
+        does not answer within :data:`SCHEDULER_TIMEOUT_S` (unreachable, or a service that is
+        not Dask's) is a ``ParameterError`` naming ``--scheduler ADDRESS``.
+    on_wait : callable, optional
+        Called with a one-line message (``"--scheduler ADDRESS: ..."``) when the cluster has
+        had no worker for :data:`SCHEDULER_TIMEOUT_S` (the tasks wait for one), and when the
+        block is interrupted before any worker joined (nothing ran). Default: a
+        :class:`ClusterWarning`.
 
     Yields
     ------
     concurrent.futures.Executor
+        On a cluster, the futures of tasks lost with it raise :class:`ClusterLostError`, and
+        so does ``submit`` once it is lost.
 
     Notes
     -----
     Leaving the block normally waits for the submitted tasks. Leaving it by an exception (an
     interrupt included) does not: local workers are terminated and queued tasks cancelled
     (:func:`stop_pool`), a cluster's queued tasks are cancelled, so that an interrupted
-    command exits at once and its re-run resumes from what was written.
+    command exits at once and its re-run resumes from what was written. While a cluster's
+    client runs, the loggers of Dask and its event loop (:data:`CLIENT_LOGGERS`) let only
+    CRITICAL records through.
     """
     if scheduler:
-        from distributed import Client
-
-        try:
-            client = Client(scheduler, timeout=SCHEDULER_TIMEOUT_S)
-        except (ValueError, OSError, TimeoutError) as exc:
-            from crosssection.core.errors import ParameterError
-
-            raise ParameterError(f"no Dask scheduler reached at {scheduler!r}: "
-                                 f"{' '.join(str(exc).split())}", "--scheduler") from None
-        try:
-            yield client.get_executor(pure=False)
-        finally:
-            # closing the client releases its futures: on an interrupt the scheduler cancels
-            # the tasks no client wants any more (a task already running in a worker thread
-            # ends on its own)
-            client.close()
+        with _cluster_executor(scheduler, on_wait) as ex:
+            yield ex
         return
     if workers is None:
         workers = os.cpu_count() or 1
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
-        from crosssection.core.errors import ParameterError
-
         raise ParameterError(f"workers must be a whole number >= 1, got {workers!r}")
     if workers == 1:
         yield _InlineExecutor()
@@ -290,4 +539,6 @@ def spawn_seeds(seed: int | None, n: int) -> list[int]:
     return [int(c.generate_state(1, dtype=np.uint32)[0]) for c in children]
 
 
-__all__ = ["get_executor", "stop_pool", "compiling_in_turn", "spawn_seeds", "ThreadPoolExecutor"]
+__all__ = ["get_executor", "ClusterLostError", "ClusterWarning", "quiet_loggers",
+           "SCHEDULER_TIMEOUT_S", "stop_pool", "compiling_in_turn", "spawn_seeds",
+           "ThreadPoolExecutor"]

@@ -156,8 +156,8 @@ def test_out_empty_or_inside_the_input_is_used_and_resumed(tmp_path):
 
 
 @contextmanager
-def _unreachable(workers=1, scheduler=None):
-    raise ParameterError(f"no Dask scheduler reached at {scheduler!r}", "--scheduler")
+def _unreachable(workers=1, scheduler=None, *, on_wait=None):
+    raise ParameterError("no Dask scheduler answered", f"--scheduler {scheduler}")
     yield  # pragma: no cover
 
 
@@ -171,7 +171,8 @@ def test_an_unreachable_scheduler_writes_nothing(tmp_path, capsys, monkeypatch, 
     before = _snapshot(out) if earlier else None
     monkeypatch.setattr(B, "get_executor", _unreachable)
     status, err = _batch(capsys, inp, out, "--scheduler", "tcp://127.0.0.1:1")
-    assert status == 2 and len(err) == 1 and err[0].startswith("error: --scheduler: ")
+    assert status == 2 and len(err) == 1
+    assert err[0].startswith("error: --scheduler tcp://127.0.0.1:1: ")
     if earlier:
         assert _snapshot(out) == before
     else:

@@ -267,19 +267,17 @@ def test_local_workers_share_the_output_folder_as_compile_lock(tmp_path, workers
 
 def test_an_unreachable_scheduler_is_given_up_after_the_timeout(monkeypatch):
     # Dask waits 30 s by default on a mistyped address; the package gives it its own limit
-    import distributed
-
     from crosssection.core import parallel
     from crosssection.core.errors import ParameterError
 
     seen = {}
 
-    def refusing(address, **kw):
-        seen.update(kw, address=address)
-        raise OSError(f"Timed out trying to connect to {address} after {kw.get('timeout')} s")
+    def refusing(address, timeout):
+        seen.update(timeout=timeout, address=address)
+        raise OSError(f"Timed out trying to connect to {address} after {timeout} s")
 
-    monkeypatch.setattr(distributed, "Client", refusing)
-    with pytest.raises(ParameterError, match="no Dask scheduler reached"):
+    monkeypatch.setattr(parallel, "_probe_scheduler", refusing)
+    with pytest.raises(ParameterError, match="no Dask scheduler answered within"):
         with parallel.get_executor(scheduler="tcp://127.0.0.1:9"):
             pass
     assert seen == {"address": "tcp://127.0.0.1:9", "timeout": parallel.SCHEDULER_TIMEOUT_S}
