@@ -392,7 +392,7 @@ def _cluster_executor(address: str, on_wait=None):
             stop.set()
             ex.close()
             # closing the client releases its futures: on an interrupt the scheduler cancels
-            # the tasks no client wants any more (a task already running in a worker thread
+            # the tasks no client wants (a task already running in a worker thread
             # ends on its own)
             try:
                 client.close(timeout=SCHEDULER_TIMEOUT_S)

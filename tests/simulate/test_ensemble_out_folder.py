@@ -36,8 +36,10 @@ def test_an_unreachable_scheduler_leaves_nothing_behind(tmp_path, capsys, monkey
     status = simulate_main([*argv, "--scheduler", "tcp://127.0.0.1:1", "--out", str(out)])
     assert status == 2
     err = capsys.readouterr().err
-    assert err == ("error: --scheduler tcp://127.0.0.1:1: no Dask scheduler answered within "
-                   "1 s (Connection refused)\n")
+    # the cause is the refusal, or Dask's own time limit on a loaded machine
+    assert err.startswith("error: --scheduler tcp://127.0.0.1:1: no Dask scheduler answered "
+                          "within 1 s (")
+    assert len(err.splitlines()) == 1
     assert (list(out.iterdir()) == []) if exists else not out.exists()
 
 

@@ -60,7 +60,9 @@ def test_render_progress_only_when_asked_off_a_terminal(sim, tmp_path, capfd, fl
     out = tmp_path / "scenes"
     assert console.main(["render", str(sim), "--out", str(out), "--limit", "1",
                          "--px-per-mm", "25", *flag]) == 0
-    err = capfd.readouterr().err
+    # the warning lines (this small rod is below the render's validated segment count) aside
+    err = "\n".join(ln for ln in capfd.readouterr().err.splitlines()
+                    if not ln.startswith("warning: "))
     assert ("render" in err and "config" in err) == bar
     if not bar:
         assert err == ""
