@@ -25,7 +25,7 @@ import warnings
 from pathlib import Path
 
 from crosssection.core.errors import OutputError, output_error
-from crosssection.core.fileio import check_out, check_writable
+from crosssection.core.fileio import check_out
 from crosssection.params import AnalysisParams, add_analysis_arguments
 
 #: the step images of paper Fig. 2, and the figure of the four side by side
@@ -159,7 +159,6 @@ def run(args) -> int:
 
     check_out(args.out)
     check_not_beside(args.image, args.out)
-    check_writable(args.out)
     params = AnalysisParams.from_cli_args(args, path=args.image)
     note = set_not_read(args.image, params)
     if note:
@@ -186,7 +185,6 @@ def run_steps(args) -> int:
 
     check_out(args.out)
     check_not_beside(args.image, args.out)
-    check_writable(args.out)
     params = AnalysisParams.from_cli_args(args, path=args.image)
     pre = preprocess(args.image, params)
     out = Path(args.out).expanduser()

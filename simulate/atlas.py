@@ -1711,10 +1711,9 @@ def _check_report_folder(out: Path) -> None:
 
 
 def _run(args) -> int:
-    from crosssection.core.fileio import check_out, check_writable
+    from crosssection.core.fileio import check_out
 
     check_out(args.out)
-    check_writable(args.out)
     if args.workers < 1:
         raise ParameterError(f"--workers must be >= 1, got {args.workers}")
     if args.seed < 0:

@@ -74,8 +74,9 @@ def atomic_path(path, suffix=None):
 
 
 def check_out(path, name: str = "--out") -> None:
-    """Refuse an empty output path: ``Path("")`` is the current folder, which would take the
-    outputs (every command's ``--out``).
+    """Refuse, before any work, an output path that cannot take the outputs (every
+    command's ``--out``): an empty one (``Path("")`` is the current folder) or a folder that
+    cannot be written (:func:`check_writable`).
 
     Parameters
     ----------
@@ -88,11 +89,14 @@ def check_out(path, name: str = "--out") -> None:
     ------
     ParameterError
         ``path`` is empty or blank.
+    OutputError
+        The folder, or its nearest existing parent, cannot be written.
     """
     if not str(path).strip():
         from crosssection.core.errors import ParameterError
 
         raise ParameterError("empty path: give the output folder", name)
+    check_writable(path)
 
 
 def check_writable(path) -> None:
