@@ -98,10 +98,11 @@ import pandas as pd
 from crosssection._version import __version__
 from crosssection.core import schema
 from crosssection.core.errors import ConfigError, FoldstatError, ImageError, ParameterError
-from crosssection.core.fileio import (BROWSER_FILES, PARTIAL_TAG, check_out,
+from crosssection.core.fileio import (BROWSER_FILES, check_out,
                                       clear_stale_folders, read_json_object, staging_folder,
                                       swap_in_folder, write_csv, write_json)
-from crosssection.core.parallel import ClusterLostError, compiling_in_turn, get_executor
+from crosssection.core.parallel import (ClusterLostError, capped_workers, compiling_in_turn,
+                                        get_executor)
 from crosssection.params import (PARAM_NAMES, AnalysisParams, add_analysis_arguments,
                                  check_param, switched_off)
 from crosssection.quality import QualityWarning
@@ -1181,13 +1182,9 @@ def run(args) -> int:
     cli_params = {k: v for k, v in AnalysisParams.from_cli_args(args).to_dict().items()
                   if getattr(args, k, None) is not None}
     cli_params.update(switched_off(args))
-    workers = args.workers
-    n_cpu = os.cpu_count() or 1
-    if workers is not None and workers > n_cpu and args.scheduler is None:
-        # each worker holds one scan's analysis (about 0.5 GB for a 2000 x 2000 scan)
-        print(f"warning: --workers {workers}: this machine has {n_cpu} CPUs; {n_cpu} workers "
-              f"are used", file=sys.stderr)
-        workers = n_cpu
+    workers, lowered = capped_workers(args.workers, args.scheduler)
+    if lowered:
+        print(f"warning: {lowered}", file=sys.stderr)
     index = run_batch(args.input_dir, args.out, workers=workers, scheduler=args.scheduler,
                       seed=args.seed, figure=not args.no_figure, cli_params=cli_params,
                       force=args.force,

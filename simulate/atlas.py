@@ -1712,14 +1712,18 @@ def _check_report_folder(out: Path) -> None:
 
 def _run(args) -> int:
     from crosssection.core.fileio import check_out
+    from crosssection.core.parallel import capped_workers
 
     check_out(args.out)
     if args.workers < 1:
         raise ParameterError(f"--workers must be >= 1, got {args.workers}")
     if args.seed < 0:
         raise ParameterError(f"--seed must be >= 0, got {args.seed}")
+    workers, lowered = capped_workers(args.workers)
+    if lowered:
+        print(f"warning: {lowered}", file=sys.stderr)
     config = AtlasConfig.quick() if args.quick else AtlasConfig.full()
-    res = run_atlas(args.out, config, seed=args.seed, workers=args.workers,
+    res = run_atlas(args.out, config, seed=args.seed, workers=workers,
                     sweeps=args.sweeps, progress=sys.stderr.isatty(), rods=args.rods)
     n = sum(len(t) for t in res["tables"].values())
     print(f"{n} analyses in {res['elapsed_s']:.0f} s; {len(res['charts'])} charts, index in "

@@ -1076,6 +1076,7 @@ def params_from_args(args) -> dict:
 def run(args) -> int:
     """Entry point of ``compact``."""
     from crosssection.core.fileio import check_out
+    from crosssection.core.parallel import capped_workers
     from simulate.ensemble import (CoarseRodWarning, coarse_rod_doubt, report_failures,
                                    run_ensemble, summary_head)
 
@@ -1084,9 +1085,13 @@ def run(args) -> int:
         params = params_from_args(args)
     except ParameterError as exc:
         raise ParameterError(exc.cause, args.out) from None
-    tables = run_ensemble(params, args.out, workers=args.workers, scheduler=args.scheduler,
+    workers, lowered = capped_workers(args.workers, args.scheduler)
+    if lowered:
+        print(f"warning: {lowered}", file=sys.stderr)
+    tables = run_ensemble(params, args.out, workers=workers, scheduler=args.scheduler,
                           progress=args.progress, task=run_config,
-                          columns=CONFIG_COLUMNS, physics_keys=_PHYSICS_KEYS)
+                          columns=CONFIG_COLUMNS, physics_keys=_PHYSICS_KEYS,
+                          on_wait=lambda message: print(f"warning: {message}", file=sys.stderr))
     head, c = summary_head(tables, args.out)
     if c.empty:
         print(head)

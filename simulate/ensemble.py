@@ -54,7 +54,8 @@ import pandas as pd
 from crosssection._version import __version__
 from crosssection.core.errors import ConfigError, ParameterError
 from crosssection.core.fileio import BROWSER_FILES, check_out, write_csv, write_json, write_npz
-from crosssection.core.parallel import ClusterLostError, get_executor, spawn_seeds
+from crosssection.core.parallel import (ClusterLostError, capped_workers, get_executor,
+                                        spawn_seeds)
 from crosssection.quality import QualityWarning
 
 from simulate.contacts import MIN_CONTACT_DISTANCE
@@ -934,7 +935,10 @@ def run(args) -> int:
         raise ParameterError(exc.cause, args.out) from None
     if doubt:
         warnings.warn(f"{args.out}: {doubt}", WallStartWarning, stacklevel=2)
-    tables = run_ensemble(params, args.out, workers=args.workers, scheduler=args.scheduler,
+    workers, lowered = capped_workers(args.workers, args.scheduler)
+    if lowered:
+        print(f"warning: {lowered}", file=sys.stderr)
+    tables = run_ensemble(params, args.out, workers=workers, scheduler=args.scheduler,
                           progress=args.progress,
                           on_wait=lambda message: print(f"warning: {message}", file=sys.stderr))
     head, c = summary_head(tables, args.out)

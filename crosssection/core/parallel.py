@@ -401,6 +401,32 @@ def _cluster_executor(address: str, on_wait=None):
             watcher.join(1.0)  # a daemon: one stuck on a lost scheduler is left behind
 
 
+def capped_workers(workers: int | None, scheduler: str | None = None) -> tuple[int | None, str | None]:
+    """Local worker processes capped at the machine's CPUs.
+
+    Parameters
+    ----------
+    workers : int or None
+        Workers asked for (``None``: one per CPU).
+    scheduler : str, optional
+        A Dask scheduler's address: its cluster sets the parallelism, nothing is capped.
+
+    Returns
+    -------
+    workers : int or None
+        ``min(workers, os.cpu_count())`` for local processes, else ``workers``.
+    message : str or None
+        One line for the command's ``warning:`` output when the count was lowered: each
+        worker holds one task's memory (about 0.5 GB for a 2000 x 2000 scan or a compaction),
+        and more processes than CPUs only share the same cores.
+    """
+    n_cpu = os.cpu_count() or 1
+    if scheduler or workers is None or workers <= n_cpu:
+        return workers, None
+    return n_cpu, (f"--workers {workers}: this machine has {n_cpu} CPUs; {n_cpu} workers "
+                   "are used")
+
+
 @contextmanager
 def get_executor(workers: int | None = 1, scheduler: str | None = None, *, on_wait=None):
     """Yield a ``concurrent.futures.Executor``.

@@ -2,6 +2,7 @@
 naming the option, and what is accepted does what it says."""
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 
@@ -330,3 +331,17 @@ def test_lbfgs_refuses_a_start_outside_the_wall():
     xy0 = initial_shape(20, 300.0, seed=1)
     with pytest.raises(ParameterError, match="leaves the hard-wall disk"):
         lbfgs_quench(xy0, 1e3, wall_radius=0.9 * np.max(np.hypot(*xy0.T)))
+
+
+@pytest.mark.parametrize("command, extra", [
+    ("quench", ["--segments", "40"]),
+    ("compact", ["--epsilon", "2", "--segments", "60"]),
+])
+def test_more_workers_than_cpus_are_capped_in_one_warning_line(tmp_path, command, extra):
+    asked = 4 * (os.cpu_count() or 1)
+    r = subprocess.run([sys.executable, "-m", "simulate", command, *extra, "--n-configs", "1",
+                        "--workers", str(asked), "--no-progress", "--out", str(tmp_path / "o")],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    lines = [ln for ln in r.stderr.splitlines() if f"--workers {asked}" in ln]
+    assert len(lines) == 1 and lines[0].startswith("warning: ")

@@ -282,3 +282,15 @@ def test_an_unreachable_scheduler_is_given_up_after_the_timeout(monkeypatch):
             pass
     assert seen == {"address": "tcp://127.0.0.1:9", "timeout": parallel.SCHEDULER_TIMEOUT_S}
     assert 0 < parallel.SCHEDULER_TIMEOUT_S <= 15
+
+
+def test_local_workers_are_capped_at_the_cpus_and_said(monkeypatch):
+    from crosssection.core.parallel import capped_workers
+
+    monkeypatch.setattr(os, "cpu_count", lambda: 4)
+    assert capped_workers(2) == (2, None)
+    assert capped_workers(None) == (None, None)
+    n, message = capped_workers(1000)
+    assert n == 4 and "--workers 1000" in message and "4 CPUs" in message
+    # a cluster sets its own parallelism
+    assert capped_workers(1000, "tcp://127.0.0.1:8786") == (1000, None)
