@@ -1158,6 +1158,10 @@ def summary_table(results: dict, best: str | None) -> pd.DataFrame:
     return pd.DataFrame(rows).reindex(columns=cols)
 
 
+TRUNCATION_COLUMNS = ("family", "param", "naive", "truncated", "truncated_lo", "truncated_hi",
+                      "naive_bias_rel", "n", "cut_mean", "mean_minus_cut")
+
+
 def truncation_bias(x, truncation, families=("exponential", "gamma", "lognormal"), *,
                     n_boot: int = 0, seed=0) -> pd.DataFrame:
     """Naive against truncation-aware fits of the same sample, side by side.
@@ -1217,4 +1221,4 @@ def truncation_bias(x, truncation, families=("exponential", "gamma", "lognormal"
                          "cut_mean": float(np.mean(c)),
                          "mean_minus_cut": (float(np.mean(x) - np.mean(c))
                                             if f == "exponential" else np.nan)})
-    return pd.DataFrame(rows)
+    return pd.DataFrame(rows, columns=list(TRUNCATION_COLUMNS))

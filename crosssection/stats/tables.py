@@ -416,9 +416,9 @@ def compute_stats(ens: Ensemble, opts: StatsOptions | None = None, *,
         and named in one :class:`~crosssection.stats.fits.SmallSampleWarning` per set; an
         ``n_boot`` from 1 to :data:`~crosssection.stats.fits.N_BOOT_MIN` - 1 gives one too,
         and so do the quantities left unfitted for having fewer than ``opts.min_n`` values
-        (one per set, naming them). The ``indicative`` column of ``fits``, ``micro`` and
+        (one per set, naming them). The ``indicative`` column of ``fits``, ``micro``, ``dof`` and
         ``relations`` marks the rows resting on fewer values or configurations than those
-        minima; ``fits`` keeps its columns when nothing was fitted.
+        minima; ``fits`` and ``truncation`` keep their columns when nothing was fitted.
 
     Raises
     ------
@@ -479,7 +479,9 @@ def compute_stats(ens: Ensemble, opts: StatsOptions | None = None, *,
     # with nothing fitted the table keeps its columns: res.fits[res.fits.selected] works
     fits_df = (pd.concat(fit_rows, ignore_index=True) if fit_rows
                else pd.DataFrame(columns=fits_columns()))
-    trunc_df = pd.concat(trunc_rows, ignore_index=True) if trunc_rows else pd.DataFrame()
+    trunc_df = (pd.concat(trunc_rows, ignore_index=True) if trunc_rows
+                else pd.DataFrame(columns=["set", "region", "quantity",
+                                           *F.TRUNCATION_COLUMNS]))
 
     micro_rows, dof_rows = [], []
     for s in ens.sets:
@@ -501,7 +503,9 @@ def compute_stats(ens: Ensemble, opts: StatsOptions | None = None, *,
         ae, _ = _gamma_params(summaries.get((s, "all", "e")))
         dof_rows.append({"set": s, "N_l": _mean(e.configs["N_l"]),
                          "N_br": _mean(e.configs["N_br"]), "alpha_E": aE, "alpha_e": ae,
-                         "alpha_E_over_alpha_e": aE / ae if ae else np.nan})
+                         "alpha_E_over_alpha_e": aE / ae if ae else np.nan,
+                         "indicative": (_gamma_small(summaries.get((s, "all", "E")))
+                                        or _gamma_small(summaries.get((s, "all", "e"))))})
     micro = pd.DataFrame(micro_rows)
     dof = pd.DataFrame(dof_rows)
     relations = relations_table(ens, per_cfg, summaries)

@@ -185,6 +185,19 @@ def test_dof_and_micro_tables_mark_gamma_fits_on_few_values(analysed):
     assert "indicative only" in str(dof.loc[0, "alpha_E_over_alpha_e"])
     micro = report._small_fits_marked(res.micro, res)
     assert "indicative only" in str(micro.loc[0, "alpha_E"])
+    # the CSV says it in its own column, as fits, micro and relations do
+    assert res.dof["indicative"].tolist() == [True]
+    big = compute_stats(ens, StatsOptions(n_boot=0, gof=False, min_n=3, quantities=("length_L",)))
+    assert big.dof["indicative"].tolist() == [False]  # no Gamma of e or E behind it
+
+
+def test_truncation_keeps_its_columns_when_nothing_was_fitted(analysed):
+    from crosssection.stats.fits import TRUNCATION_COLUMNS
+
+    res = compute_stats(load_any(analysed),
+                        StatsOptions(n_boot=0, gof=False, min_n=10**6))
+    assert res.truncation.empty
+    assert list(res.truncation.columns) == ["set", "region", "quantity", *TRUNCATION_COLUMNS]
 
 
 def test_e_vs_nbr_breaks_the_line_at_missing_stack_sizes():
