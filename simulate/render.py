@@ -94,9 +94,10 @@ of its passes, which is the line's length for every band whose passes all run it
 length (the contact analysis' own stack length is the mean of its branches'), so that
 ``sum(n_br * length_mm)`` is the rod drawn (1.003-1.012 L on the robust sweep's renders,
 against 1.13 and 1.28 at two of them with the band drawn at n over its whole length;
-docs/validation/compact.md, "A rod end inside a band"). An image analysis that
-reads one layer count per band (its median width) reads n - 1 on a band that is mostly
-narrow, and is scored wrong there. A fold inside a band (the same merge, a pass folding back
+docs/validation/compact.md, "A rod end inside a band"). The image analysis cuts such a
+band at its layer step into two stacks; the truth's ``layer_pieces`` table holds the bands as
+drawn, such a band as its pieces of one pass count (:data:`crosssection.truth.scene.LAYER_PIECES`),
+against which :func:`crosssection.truth.scoring.score` matches the analysis' stacks. A fold inside a band (the same merge, a pass folding back
 within the band) is not cut: that band is drawn at its larger count over its whole length.
 
 Calibration. The generators' nonlinear law ``w(n) = h (n + 0.4 sqrt(n))``
@@ -168,7 +169,7 @@ from crosssection.core.errors import ConfigError, ParameterError
 from crosssection.quality import QualityWarning
 from crosssection.truth import degrade, ink
 from crosssection.truth.backdrop import PLATE_NAMES, apply_backdrop, plate_rgb
-from crosssection.truth.scene import Scene, write_scene
+from crosssection.truth.scene import LAYER_PIECE_COLUMNS, LAYER_PIECES, Scene, write_scene
 from crosssection.truth.voids import truth_voids
 
 from simulate.checks import check_real
@@ -1295,15 +1296,15 @@ def _draw_bands(lines_px, n_br, widths_px, shape, steps=None):
 
 def _draw_stacks(analysis, frame, lines_px, n_br, widths_px, cal, px_per_mm):
     """The bands drawing of the stacks' lines: coverage and labels (:func:`_draw_bands`),
-    the drawn length of the passes of every band that narrows at a rod end and its pieces
-    (module docstring, "Rod ends")."""
+    the drawn length of the passes of every band that narrows at a rod end, and its pieces
+    with their pass counts (:func:`_layer_pieces`; module docstring, "Rod ends")."""
     pieces = {sid: _layer_pieces(lines_px[sid], int(n_br[sid]), cuts)
               for sid, cuts in _rod_end_cuts(analysis, frame, lines_px, widths_px).items()}
     layer_px = {sid: sum(c * polyline.length(q) for q, c in pp) for sid, pp in pieces.items()}
     steps = {sid: [(q, float(cal.width(c)) * px_per_mm) for q, c in pp]
              for sid, pp in pieces.items()}
     coverage, labels = _draw_bands(lines_px, n_br, widths_px, frame.shape, steps)
-    return coverage, labels, layer_px, steps
+    return coverage, labels, layer_px, pieces
 
 
 def _press_stack(curve, normals, members, pitch_px, reach_px, sub=4):
@@ -1603,6 +1604,36 @@ def _stack_table(st, lines_px, frame, cal, *, px_per_mm, thickness_mm, layer_px=
     return pd.DataFrame(rows, columns=schema.STACK_COLUMNS)
 
 
+def _layer_piece_table(stacks: pd.DataFrame, pieces: dict, px_per_mm: float) -> pd.DataFrame:
+    """The truth's stacks as the bands are drawn: a band narrowing at a rod end as its
+    pieces of constant pass count (:func:`_layer_pieces`), every other stack as it is.
+
+    An image shows such a band as two runs of different widths and the analysis reads them
+    as two stacks cut at the layer step (``kind`` ``step``); the contact analysis' stack
+    holds both under one count. :func:`crosssection.truth.scoring.score` matches the
+    analysis' stacks against these rows.
+
+    Returns
+    -------
+    DataFrame
+        Columns stack_id (the truth stack the piece belongs to), n_br (passes present along
+        the piece), length_mm, mid_x_px, mid_y_px.
+    """
+    rows = []
+    for _, row in stacks.iterrows():
+        sid = int(row.stack_id)
+        if sid not in pieces:
+            rows.append({"stack_id": sid, "n_br": int(row.n_br), "length_mm": row.length_mm,
+                         "mid_x_px": row.mid_x_px, "mid_y_px": row.mid_y_px})
+            continue
+        for line, n in pieces[sid]:
+            mid = polyline.mid_point(line[:, ::-1])
+            rows.append({"stack_id": sid, "n_br": int(n),
+                         "length_mm": polyline.length(line) / px_per_mm,
+                         "mid_x_px": float(mid[1]), "mid_y_px": float(mid[0])})
+    return pd.DataFrame(rows, columns=list(LAYER_PIECE_COLUMNS))
+
+
 def _truth_tables(analysis, frame, lines_px, cal, voids, *, px_per_mm, thickness_mm,
                   junctions_px=None, layer_px=None):
     """The four truth tables (crosssection.core.schema), lengths in mm, curvatures in 1/mm;
@@ -1879,6 +1910,7 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
                                 smooth=smooth)
     truth_warnings = []
     touching = []
+    pieces = {}
     if draw == "passes":
         curve, branch_of, _ = _pass_curves(
             xy, analysis, frame, segment_px=segment_px, pitch_px=pitch_px, stroke_px=stroke_px,
@@ -1894,8 +1926,8 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
                                         frame.shape)
     else:
         junctions_px = None
-        coverage, labels, layer_px, _ = _draw_stacks(analysis, frame, lines_px, n_br,
-                                                         widths_px, cal, px_per_mm)
+        coverage, labels, layer_px, pieces = _draw_stacks(analysis, frame, lines_px, n_br,
+                                                          widths_px, cal, px_per_mm)
         # joining every band to its junction point would connect them, but across the paper
         # to a point none of its passes reaches (bending the drawn lines tens of times as much
         # as the rod, and lengthening the truth's rod): the scene says so instead
@@ -1930,10 +1962,13 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
     empty = _zero_length_check(tables["stacks"])
     if empty:
         truth_warnings.append(empty)
+    tables[LAYER_PIECES] = _layer_piece_table(tables["stacks"], pieces, px_per_mm)
     for message in truth_warnings:
         warnings.warn(message, TruthWarning, stacklevel=2)
     summary = _summary(analysis, frame, tables, ink_mask, px_per_mm=px_per_mm)
-    summary["truth_warnings"] = truth_warnings
+    # a rod coarser than the truth is validated from: warned above as a range, and recorded
+    # with the scene so that validate names it and leaves its scores out of the means
+    summary["truth_warnings"] = truth_warnings + ([short] if short else [])
     params = {"px_per_mm": float(px_per_mm), "thickness_mm": float(thickness_mm),
               "hole_radius_mm": frame.hole_radius_mm,
               "hole_center_px": None if frame.hole_xy is None else

@@ -32,7 +32,7 @@ from crosssection._version import __version__
 from crosssection.core import schema
 from crosssection.core.errors import ConfigError, FoldstatError, ParameterError
 from crosssection.core.fileio import write_csv, write_json
-from crosssection.truth.scene import read_scene_params
+from crosssection.truth.scene import LAYER_PIECES, read_scene_params, read_truth_tables
 from crosssection.truth.scoring import analyze_scene_folder, score
 
 __all__ = ["validate_scenes", "score_scene", "read_truth", "truth_warnings", "add_subparser"]
@@ -52,6 +52,7 @@ _NUMERIC_TRUTH = {
     "stacks": ["length_mm", "n_br", "mid_x_px", "mid_y_px"],
     "branches": ["energy"],
     "voids": ["area_mm2", "centroid_x_px", "centroid_y_px"],
+    LAYER_PIECES: ["length_mm", "n_br", "mid_x_px", "mid_y_px"],
 }
 # truth totals that score() prefers to the tables' sums when present
 _SUMMARY_TOTALS = ["rod_length_mm", "n_branches", "total_energy"]
@@ -74,7 +75,8 @@ def read_truth(truth_dir) -> tuple[dict, dict]:
     Parameters
     ----------
     truth_dir : str or Path
-        Holds ``summary.json`` and the four tables of :data:`crosssection.core.schema.TABLES`.
+        Holds ``summary.json`` and the four tables of :data:`crosssection.core.schema.TABLES`
+        (and a render's ``layer_pieces.csv``, :data:`crosssection.truth.scene.LAYER_PIECES`).
 
     Returns
     -------
@@ -90,7 +92,7 @@ def read_truth(truth_dir) -> tuple[dict, dict]:
         or missing value where the scoring needs a number. The message names the file.
     """
     truth_dir = Path(truth_dir)
-    summary, tables = schema.read_tables(truth_dir)
+    summary, tables = read_truth_tables(truth_dir)
     path = truth_dir / "summary.json"
     for key in _SUMMARY_TOTALS:
         value = summary.get(key)

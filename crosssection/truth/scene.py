@@ -23,12 +23,18 @@ import numpy as np
 from crosssection.core import schema
 from crosssection.core.calibration import Calibration
 from crosssection.core.errors import ConfigError, ImageError
-from crosssection.core.fileio import atomic_path, read_json_object, write_json
+from crosssection.core.fileio import atomic_path, read_json_object, write_csv, write_json
 
 __all__ = ["Scene", "write_scene", "read_scene", "read_scene_params", "write_image"]
 
 #: Fewest rows of a written ``calibration.csv`` (more when the scene has thicker stacks).
 MIN_CALIBRATION_ROWS = 12
+#: An optional truth table: the stacks as the bands are drawn, a band that narrows where a
+#: layer ends inside it (a rendered rod end) as its pieces of one layer count, which the
+#: analysis reads as stacks cut at a layer step (written by ``simulate.render``, scored by
+#: :func:`crosssection.truth.scoring.score` in place of ``stacks`` when present).
+LAYER_PIECES = "layer_pieces"
+LAYER_PIECE_COLUMNS = ("stack_id", "n_br", "length_mm", "mid_x_px", "mid_y_px")
 
 
 @dataclass(frozen=True)
@@ -171,6 +177,11 @@ def write_scene(scene: Scene, folder, *, image_name: str = "image.png") -> Path:
     # the generator's parameters and the version that drew the scene: its truth is that
     # version's
     write_json(folder / "params.json", {**scene.params, "version": __version__})
+    pieces = scene.tables.get(LAYER_PIECES)
+    if pieces is not None:
+        # before the tables: their summary.json marks a complete truth folder
+        (folder / "truth").mkdir(parents=True, exist_ok=True)
+        write_csv(folder / "truth" / f"{LAYER_PIECES}.csv", pieces)
     schema.write_tables(folder / "truth", scene.summary, scene.tables)
     return folder
 
@@ -219,6 +230,41 @@ def read_scene_params(folder) -> dict:
     return params
 
 
+def read_truth_tables(truth_dir) -> tuple[dict, dict]:
+    """A scene's ``truth/`` folder: ``summary.json``, the four schema tables
+    (:func:`crosssection.core.schema.read_tables`) and the optional :data:`LAYER_PIECES`.
+
+    Parameters
+    ----------
+    truth_dir : str or Path
+
+    Returns
+    -------
+    (summary, tables) : (dict, dict of DataFrame)
+
+    Raises
+    ------
+    ConfigError
+        Naming the file: as :func:`~crosssection.core.schema.read_tables`, or a
+        ``layer_pieces.csv`` that is unreadable or lacks a column.
+    """
+    import pandas as pd
+
+    truth_dir = Path(truth_dir)
+    summary, tables = schema.read_tables(truth_dir)
+    path = truth_dir / f"{LAYER_PIECES}.csv"
+    if path.exists():
+        try:
+            df = pd.read_csv(path)
+        except (OSError, ValueError) as exc:
+            raise ConfigError(f"unreadable table ({exc})", path) from None
+        missing = [c for c in LAYER_PIECE_COLUMNS if c not in df.columns]
+        if missing:
+            raise ConfigError(f"lacks column(s) {missing}", path)
+        tables[LAYER_PIECES] = df
+    return summary, tables
+
+
 def read_scene(folder, *, image_name: str | None = None, image: bool = True) -> Scene:
     """Read a scene folder written by :func:`write_scene`.
 
@@ -234,7 +280,8 @@ def read_scene(folder, *, image_name: str | None = None, image: bool = True) -> 
     -------
     Scene
         Without ``paths_rc``, ``packs`` and ``ink_mask`` (not stored in the folder);
-        ``calibration`` is None when the folder has no ``calibration.csv``.
+        ``calibration`` is None when the folder has no ``calibration.csv``; ``tables``
+        holds :data:`LAYER_PIECES` when ``truth/`` has it.
 
     Raises
     ------
@@ -250,7 +297,7 @@ def read_scene(folder, *, image_name: str | None = None, image: bool = True) -> 
     truth = folder / "truth"
     if not (truth / "summary.json").exists():
         raise ConfigError("no truth/summary.json (not a scene folder)", folder)
-    summary, tables = schema.read_tables(truth)
+    summary, tables = read_truth_tables(truth)
     cal_path = folder / "calibration.csv"
     calibration = Calibration.from_csv(cal_path) if cal_path.exists() else None
     rgb = None

@@ -33,7 +33,7 @@ from scipy.spatial.distance import cdist
 
 from crosssection.core import schema
 from crosssection.core.errors import ParameterError
-from crosssection.truth.scene import read_scene, read_scene_params
+from crosssection.truth.scene import LAYER_PIECES, read_scene, read_scene_params
 
 TABLE_NAMES = ("junctions", "stacks", "branches", "voids")
 
@@ -184,7 +184,9 @@ def score(result, truth, *, match_px: float | None = None, px_per_mm: float = 50
         ``n_br_mean_abs_error``, ``n_voids_rel_error``,
         ``void_match_fraction``, ``void_area_median_rel_error``, ``void_area_mean_rel_error``,
         ``void_total_area_rel_error``, ``total_energy_rel_error``, plus the raw counts.
-        Relative errors are signed ((out - truth) / truth).
+        Relative errors are signed ((out - truth) / truth). The branch and stack counts and
+        the stack and n_br scores take the truth's ``layer_pieces`` table for its stacks when
+        it has one (a render's bands as drawn, :data:`crosssection.truth.scene.LAYER_PIECES`).
     """
     rs, rt = _as_pair(result, "result")
     ts, tt = _as_pair(truth, "truth")
@@ -206,9 +208,15 @@ def score(result, truth, *, match_px: float | None = None, px_per_mm: float = 50
     out["rod_length_mm_truth"] = L_true
     out["rod_length_rel_error"] = _rel(L_out, L_true)
     nb_out = total(rs, rt, "n_branches", ("stacks", "n_br"))
-    nb_true = total(ts, tt, "n_branches", ("stacks", "n_br"))
+    # counts, stacks and n_br against the bands as drawn where the truth has them: a band
+    # narrowing where a layer ends inside it is two stacks of the analysis, cut at the step
+    pieces = tt.get(LAYER_PIECES)
+    drawn = pieces if isinstance(pieces, pd.DataFrame) and len(pieces) else None
+    nb_true = (float(drawn["n_br"].sum()) if drawn is not None
+               else total(ts, tt, "n_branches", ("stacks", "n_br")))
     out["n_branches_rel_error"] = _rel(nb_out, nb_true)
-    out["n_stacks_rel_error"] = _rel(len(rt["stacks"]), len(tt["stacks"]))
+    out["n_stacks_rel_error"] = _rel(len(rt["stacks"]),
+                                     len(drawn if drawn is not None else tt["stacks"]))
     out["n_junctions_rel_error"] = _rel(len(rt["junctions"]), len(tt["junctions"]))
 
     # junctions
@@ -226,7 +234,7 @@ def score(result, truth, *, match_px: float | None = None, px_per_mm: float = 50
         out["junction_median_offset_px"] = float(np.median(d))
 
     # stacks and n_br
-    so, st = rt["stacks"], tt["stacks"]
+    so, st = rt["stacks"], (drawn if drawn is not None else tt["stacks"])
     if len(st):
         lim = np.maximum(match_px, 0.25 * st["length_mm"].to_numpy(float) * px_per_mm)
         r, c = match_points(so[["mid_x_px", "mid_y_px"]].to_numpy(float),

@@ -168,7 +168,14 @@ def test_read_truth_reads_an_intact_folder(rendered):
     _, scene = rendered
     summary, tables = read_truth(scene / "truth")
     assert summary["n_stacks"] == len(tables["stacks"])
-    assert set(tables) == {"junctions", "stacks", "branches", "voids"}
+    assert set(tables) == {"junctions", "stacks", "branches", "voids", "layer_pieces"}
+    # a band without a layer ending inside it is its own piece
+    pieces = tables["layer_pieces"]
+    assert set(pieces["stack_id"]) == set(tables["stacks"]["stack_id"])
+    whole = pieces.groupby("stack_id").size() == 1
+    assert whole.sum() >= 1
+    one = tables["stacks"].set_index("stack_id").loc[whole[whole].index, "n_br"]
+    assert (pieces.set_index("stack_id").loc[one.index, "n_br"] == one).all()
 
 
 def test_summary_records_version_options_and_input(scenes, tmp_path):
