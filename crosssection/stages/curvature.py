@@ -111,7 +111,8 @@ layer's path.
 ``CurvatureProfile.energy_rel_uncertainty``: the share of ``int kappa^2 ds`` not measured on a
 free centreline (the fork zones extrapolated, or followed along a merged band's wall; all of it
 for a stack fitted whole inside its fork zones) plus the removed noise floor, relative to the
-stack's ``int kappa^2 ds``. It ranks the stacks' errors, it does not bound them: a stack whose
+stack's ``int kappa^2 ds``, at most 1 (a gentle stack whose removed floor exceeds what is left of
+its energy rests on the floor entirely). It ranks the stacks' errors, it does not bound them: a stack whose
 share is at most 0.5 is read within a factor 1.5 for 79-100 % of the true energy of such
 stacks, one above 0.5 for 0-86 % (four generators; ``benchmarks/stack_energy_errors.py``).
 
@@ -631,7 +632,8 @@ def _profiles(s_px, kappa_px, offs, px_per_mm, closed, rc, fit, *, forks=None, w
             s_mm=s_mm[a:b], kappa_per_mm=kappa[a:b], length_mm=length, kappa_pm=kpm,
             kappa_plus=kplus, kappa_m=abs(kpm), closed=bool(closed[i]),
             rc_px=np.asarray(rc[i], float), fit_start=fit[i][0], fit_stop=fit[i][1],
-            energy_rel_uncertainty=r, noise_var_per_mm2=noise_var[i] if rel else 0.0))
+            # a share: the removed noise floor can exceed what is left of a gentle stack
+            energy_rel_uncertainty=min(r, 1.0), noise_var_per_mm2=noise_var[i] if rel else 0.0))
     return out
 
 
