@@ -156,6 +156,7 @@ def add_subparser(subparsers) -> None:
 def run(args) -> int:
     """``analyze``: run the pipeline and write the output folder."""
     from crosssection.pipeline import analyze
+    from crosssection.result import rod_length_text
 
     check_out(args.out)
     check_not_beside(args.image, args.out)
@@ -172,7 +173,7 @@ def run(args) -> int:
     removed = remove_stale(out, "analyze", written.values()) if earlier else []
     s = result.summary
     print(f"{args.image}: {s['n_junctions']} junctions, {s['n_stacks']} stacks, "
-          f"{s['n_branches']} branches, {s['n_voids']} voids, L = {s['rod_length_mm']:.1f} mm"
+          f"{s['n_branches']} branches, {s['n_voids']} voids, {rod_length_text(s)}"
           f" -> {args.out}{_removed_note(removed)}")
     return 0
 

@@ -15,6 +15,17 @@ from crosssection.core.errors import ImageError, OutputError, ParameterError, ou
 __all__ = ["AnalysisResult", "write_step_images"]
 
 
+def rod_length_text(summary: dict) -> str:
+    """``L = 287.9 mm`` for a one-line report of an analysis, and ``L = 287.9 mm measured,
+    320.0 mm given`` when the rod length given (``rod_length_used_mm``, the L of epsilon and
+    the energies) is another."""
+    measured = summary["rod_length_mm"]
+    used = summary.get("rod_length_used_mm")
+    if used is None or f"{used:.1f}" == f"{measured:.1f}":
+        return f"L = {measured:.1f} mm"
+    return f"L = {measured:.1f} mm measured, {used:.1f} mm given"
+
+
 @dataclass(repr=False)
 class AnalysisResult:
     """Everything ``analyze`` computed for one scan.
@@ -72,7 +83,7 @@ class AnalysisResult:
         eps = s.get("epsilon")
         head = (f"AnalysisResult({self.path or 'array'}: {s['n_junctions']} junctions, "
                 f"{s['n_stacks']} stacks, {s['n_branches']} branches, {s['n_voids']} voids, "
-                f"L = {s['rod_length_mm']:.1f} mm"
+                f"{rod_length_text(s)}"
                 + (f", epsilon = {eps:.2f}" if eps is not None else ""))
         codes = [f.code for f in self.quality]
         return head + (f", warnings: {', '.join(codes)})" if codes else ")")

@@ -232,3 +232,14 @@ def test_an_output_folder_that_cannot_be_written_is_refused_before_the_analysis(
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and str(tmp_path) in err[0] and "Permission denied" in err[0]
     assert ran == [] and not (tmp_path / "new").exists()
+
+
+def test_a_given_rod_length_is_printed_beside_the_measured_one():
+    from crosssection.result import rod_length_text
+
+    assert rod_length_text({"rod_length_mm": 287.94, "rod_length_used_mm": 287.94}) == \
+        "L = 287.9 mm"
+    assert rod_length_text({"rod_length_mm": 287.94}) == "L = 287.9 mm"
+    # epsilon and the energies use the given one: the line says which is which
+    assert rod_length_text({"rod_length_mm": 287.94, "rod_length_used_mm": 320.0}) == \
+        "L = 287.9 mm measured, 320.0 mm given"
