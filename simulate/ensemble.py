@@ -401,6 +401,13 @@ def assemble(out, n_configs: int, columns=None, failed=None) -> dict:
         srows += [{"config_id": i, **v} for v in meta.get("stacks", [])]
         rods[f"config_{i:05d}"] = xy
     configs = pd.DataFrame(rows)
+    if failed and len(configs):
+        # a failed row's empty cells would turn the counts into floats (10.0 branches)
+        done = [r for r in rows if "error" not in r]
+        for c in configs.columns:
+            if done and all(isinstance(r.get(c), (int, np.integer)) and not isinstance(
+                    r.get(c), bool) for r in done):
+                configs[c] = configs[c].astype("Int64")
     columns = list(CONFIG_COLUMNS if columns is None else columns)
     extra = [c for c in configs.columns if c not in columns]
     configs = configs.reindex(columns=columns + extra)

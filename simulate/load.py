@@ -70,7 +70,14 @@ class SimulationEnsemble:
     keys: list = field(default_factory=list)
 
     def __repr__(self) -> str:
-        return (f"SimulationEnsemble({self.folder}: {len(self.configs)} configurations, "
+        failed = 0
+        if "error" in self.configs.columns:
+            err = self.configs["error"]
+            failed = int((err.notna() & (err.astype(str).str.strip() != "")).sum())
+        n = len(self.configs) - failed
+        return (f"SimulationEnsemble({self.folder}: {n} configurations"
+                + (f" ({failed} failed: their rows of configs hold the error)" if failed else "")
+                + ", "
                 f"{len(self.branches)} branches, {len(self.voids)} voids, "
                 f"lambda = {self.params.get('lam', 'n/a')})")
 

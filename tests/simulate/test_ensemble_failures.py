@@ -47,6 +47,16 @@ def test_a_failed_configuration_is_recorded_and_the_others_finish(tmp_path, work
     assert np.isnan(cfg.loc[1, "energy_total"]) and cfg.loc[2, "energy_total"] == 12.0
     with np.load(out / "rods.npz") as z:
         assert sorted(z.files) == ["config_00000", "config_00002", "config_00003"]
+    # the counts of the others stay whole numbers in the file (not 10.0), the failed row empty
+    lines = (out / "configs.csv").read_text().splitlines()
+    header = lines[0].split(",")
+    for c in ("n_stacks", "n_branches"):
+        k = header.index(c)
+        assert [ln.split(",")[k] for ln in lines[1:]] == [
+            str(int(v)) if i != 1 else "" for i, v in enumerate(cfg[c].fillna(0))]
+    from simulate.load import load_ensemble
+
+    assert "3 configurations (1 failed" in repr(load_ensemble(out))
 
 
 def test_a_rerun_tries_the_failed_configuration_again_and_only_it(tmp_path):
