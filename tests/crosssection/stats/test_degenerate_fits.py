@@ -161,6 +161,20 @@ def test_continuous_spike_is_degenerate():
     assert F._spike(FAMILIES["exponential"], {"mu": 1e-9}, x, True) == ""  # no width
 
 
+def test_one_far_value_makes_no_broad_law_a_spike():
+    rng = np.random.default_rng(3)
+    y = np.append(rng.lognormal(0.0, 1.5, 299), 1e5)  # a void far larger than the others
+    summ = _quiet(F.fit_all, y, n_boot=0, gof=False)
+    assert summ.results["lognormal"].rejected == ""
+    assert summ.best == "lognormal"
+    x = np.append(rng.exponential(1.0, 299), 1e3)
+    summ = _quiet(F.fit_all, x, n_boot=0, gof=False)
+    assert not any("spike" in r.rejected for r in summ.results.values())
+    # a narrow law under most of the data is still one
+    z = np.append(rng.normal(10.0, 1.0, 299), 1e3)
+    assert "spike" in F._spike(FAMILIES["gaussian"], {"mu": 10.0, "sigma": 0.01}, z, False)
+
+
 # ------------------------------------------------------------------ tables
 def _ensemble(e):
     rng = np.random.default_rng(0)

@@ -1,4 +1,6 @@
 """Maximum-likelihood fits, bootstrap intervals, goodness of fit, model selection, truncation."""
+import warnings
+
 import numpy as np
 import pytest
 from scipy import integrate
@@ -122,6 +124,21 @@ def test_truncation_aware_fit_removes_naive_bias(family, truth, cut):
         # naive estimate lies outside the truncation-aware interval and is farther from truth
         assert not (row["truncated_lo"] <= row["naive"] <= row["truncated_hi"])
         assert abs(row["naive"] - t) > 3 * abs(row["truncated"] - t)
+        assert row["rejected"] == "" and np.isfinite(row["naive_bias_rel"])
+
+
+def test_truncation_bias_gives_no_bias_against_a_rejected_fit():
+    # truncated log-normal areas: the truncated Gamma runs to alpha -> 0 (rejected)
+    rng = np.random.default_rng(11)
+    a = rng.lognormal(np.log(2e-5), 1.5, 4000)
+    a = a[a >= 1e-5][:800]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        tb = F.truncation_bias(a, 1e-5, n_boot=0).set_index(["family", "param"])
+    gamma = tb.loc["gamma"]
+    assert (gamma["rejected"] != "").all() and gamma["naive_bias_rel"].isna().all()
+    assert (tb.loc["lognormal", "rejected"] == "").all()
+    assert np.isfinite(tb.loc["lognormal", "naive_bias_rel"]).all()
 
 
 def test_per_observation_cuts():
