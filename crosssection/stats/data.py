@@ -92,7 +92,8 @@ ID_COLS = ("set", "config_id")
 class DetectionLimitWarning(QualityWarning):
     """A detection limit given to the statistics lies below the one the analysis of the
     scans used: the values between the two are missing from the data, not rare, and the
-    fits truncated at the lower limit are biased."""
+    fits truncated at the lower limit are biased; or a limit given for a simulation, whose
+    lengths have no scale in mm, is not applied to it."""
 
 
 class FlaggedScanWarning(QualityWarning):
@@ -921,7 +922,8 @@ def load_any(folder, *, set_name=None, l_min_mm=RECORDED, s_min_mm2=RECORDED) ->
         Image detection limits, in mm and mm^2: :data:`RECORDED` (default) those each
         scan's analysis used, else None or a finite number >= 0 (0 = none), which wins (a
         :class:`DetectionLimitWarning` when it is below the analysis' own). Simulations
-        have none.
+        have none (a limit given is not applied to them, with a
+        :class:`DetectionLimitWarning`).
 
     Returns
     -------
@@ -942,6 +944,13 @@ def load_any(folder, *, set_name=None, l_min_mm=RECORDED, s_min_mm2=RECORDED) ->
     _limit(s_min_mm2, "s_min_mm2")
     kind = detect_kind(folder)
     if kind == "simulation":
+        given = [f"{k} = {v:g}" for k, v in (("l_min_mm", l_min_mm), ("s_min_mm2", s_min_mm2))
+                 if v is not RECORDED and v]
+        if given:
+            warnings.warn(f"{folder}: a simulation's lengths are in units of its rod length, "
+                          f"with no scale in mm: the image detection limits "
+                          f"({', '.join(given)}) are not applied to it",
+                          DetectionLimitWarning, stacklevel=2)
         return load_simulation(folder, set_name=set_name)
     if kind == "image":
         return load_image_output(folder, set_name=set_name or Path(folder).resolve().name,

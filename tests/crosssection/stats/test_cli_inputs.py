@@ -506,3 +506,21 @@ def test_name_of_a_batch_of_several_sets_keeps_them_apart(tmp_path, capfd):
     with pytest.raises(SystemExit):
         main(["stats", "--help"])
     assert "NAME/A, NAME/B" in " ".join(capfd.readouterr().out.split())
+
+
+def test_image_limits_given_for_a_simulation_are_said_not_applied(tmp_path):
+    import warnings
+
+    from crosssection.stats.data import DetectionLimitWarning
+
+    sim = demo.write_demo_simulation(tmp_path / "sim", n_configs=3, seed=1)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        ens = load_any(sim, l_min_mm=1.0)
+    said = [str(w.message) for w in caught if w.category is DetectionLimitWarning]
+    assert len(said) == 1 and "l_min_mm = 1" in said[0] and "not applied" in said[0]
+    assert ens.branches["l_min_L"].isna().all()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DetectionLimitWarning)
+        load_any(sim)  # the recorded limits (none): nothing to say
+        load_any(sim, l_min_mm=0)
