@@ -67,6 +67,11 @@ REGION_WORDS = {"all": "whole system", "bulk": "bulk (no wall contact)",
                 "periphery": "periphery (touching the wall)"}
 
 
+#: A BIC difference below which the selection between two laws is not decided by the data
+#: ("not worth more than a bare mention", Kass & Raftery 1995, J. Am. Stat. Assoc. 90, 773)
+BIC_UNDECIDED = 2.0
+
+
 def _wrap_label(text: str, width: int) -> str:
     """``textwrap.fill`` that never breaks inside ``$...$`` (a split formula is printed raw)
     nor inside parentheses (a unit such as "(rod length L)" is not left with "L)" alone on
@@ -1076,6 +1081,10 @@ def _selected_table(res: StatsResult) -> pd.DataFrame:
         aside = sorted((o.bic - r.bic, f) for f, o in summ.results.items()
                        if not o.selectable and np.isfinite(o.bic) and o.bic < r.bic)
         runner = (f"{FAMILIES[others[0][1]].title}, {others[0][0]:+.1f}" if others else "")
+        if others and others[0][0] < BIC_UNDECIDED:
+            # e.g. a Gamma law of shape 15-60 (the paper's E) against a Gaussian: 250
+            # configurations select the true one 44-71 % of the time
+            runner += f" (below {BIC_UNDECIDED:g}: the data do not tell the two laws apart)"
         if aside:
             lower = ", ".join(f"{FAMILIES[f].title}, {d:+.1f}" for d, f in aside)
             runner += (("; " if runner else "")
