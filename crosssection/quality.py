@@ -73,7 +73,10 @@ scene in 10 at blur 1.5 px (h = 3, 4, 5 and 6 px; counts exact on those), 1-3 at
 (exact n_br 0.51 in the median) and on every scene analysed without its calibration. At h < 3 px
 (``low_resolution``) right widths scatter as much as wrong ones (up to 0.24 on 14 scans at 25
 px/mm) and the check is not made. A ``px_per_mm`` half the true one doubles every count, back
-on the lattice: it is seen only as h below 3 px when the true h is below 6 px.
+on the lattice: it is seen only as h below 3 px when the true h is below 6 px. Widths near
+whole counts that are not the final ones (9.2, 5.2 and 4.2 layers read as 10, 6 and 5: a rod
+end inside a wall band, 0.6 mm from a junction, too near it to be cut as a layer step) are the
+counts' error, not the scale's, and the message says so.
 
 The ``hole_cut`` check: a scan cropped through the hole loses the stacks beyond its border (the
 wall band lines the whole hole), and the counts, lengths and epsilon are those of a part. The
@@ -440,6 +443,18 @@ def _lattice_check(stacks, h_px: float = 5.0) -> list[QualityFlag]:
     limit = lattice_limit(h_px)
     if median <= limit:
         return []
+    # widths on whole counts that are not the final ones: the counts are off, not the scale
+    est = stacks["layers_est"].to_numpy(float)[ok]
+    whole = np.abs(est - np.rint(est))
+    by_whole = np.argsort(whole)
+    cum_whole = np.cumsum(w[by_whole])
+    median_whole = float(whole[by_whole][np.searchsorted(cum_whole, 0.5 * cum_whole[-1])])
+    if median_whole <= limit:
+        return [QualityFlag("layer_lattice", f"stack widths sit {median:.2f} layer from the "
+                            "final layer counts (median) though near whole counts: the counts "
+                            "are off, not the widths (a layer ending inside a band near a "
+                            "junction, a rod end or a fold that is not cut, shifts the stacks "
+                            "around it by one layer); check the overlay", median, limit)]
     return [QualityFlag("layer_lattice", f"stack widths sit {median:.2f} layer from whole "
                         "layer counts (median): check px_per_mm, thickness_mm and the "
                         "calibration, or the scan is blurred (widths read on soft edges)",
@@ -543,7 +558,9 @@ def _count_width_check(stacks) -> list[QualityFlag]:
                         f"their own width reads ({sid}n_br {int(worst['n_br'])} against "
                         f"{float(worst['layers_est']):.2f} layers from the width): the junctions "
                         "and the widths disagree there (check the overlay and the "
-                        "calibration)", k, 0)]
+                        "calibration; a layer ending inside a band near a junction, a rod end "
+                        "or a fold that is not cut, shifts the stacks around it by one layer)",
+                        k, 0)]
 
 
 def _stack_checks(params, stacks, calibration_max_width_mm) -> list[QualityFlag]:

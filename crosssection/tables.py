@@ -272,7 +272,11 @@ def summary(*, pre, params, linear_system, junctions, stacks, branches, voids, r
         "total_energy": total_energy,
         "total_energy_rel_uncertainty": _energy_rel_uncertainty(stacks),
         "hole": {**pre.hole.as_summary(), "fitted": bool(pre.hole.fitted),
-                 "radius_mm": float(radius_mm), "confidence": pre.hole_confidence},
+                 "radius_mm": float(radius_mm), "confidence": pre.hole_confidence,
+                 # a plate's edge, or the ink's envelope (a rod that does not reach the wall
+                 # reads a smaller hole and a larger epsilon there)
+                 "found_by": (pre.hole.reason or "found in the scan") if pre.hole.fitted
+                 else "given"},
         "timings_s": {k: round(v, 6) for k, v in timings.items()},
         "total_time_s": round(total_time_s, 6),
         "n_junctions_by_degree": {str(int(d)): int(c) for d, c in

@@ -55,6 +55,7 @@ def test_cli_analyze_contract(scene_dir, tmp_path):
         assert key in summary
     for key in schema.HOLE_KEYS:
         assert key in summary["hole"]
+    assert summary["hole"]["found_by"] == "given"
     assert set(summary["timings_s"]) >= {"load", "threshold", "hole", "clean", "skeleton",
                                          "graph", "widths", "linear_system", "curvature"}
     for name, cols in schema.TABLES.items():
@@ -401,3 +402,16 @@ def test_an_isolated_blob_pruned_below_l_min_is_dropped(axes_px):
     assert res.summary["rod_length_mm"] == pytest.approx(clean.summary["rod_length_mm"])
     assert any("isolated piece" in w for w in res.summary["warnings"])
     assert not any("isolated piece" in w for w in clean.summary["warnings"])
+
+
+def test_the_summary_says_how_the_hole_was_found(sample_dir):
+    import warnings
+
+    import crosssection
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = crosssection.analyze(str(sample_dir / "scan_01_sparse.png"),
+                                   calibration=str(sample_dir / "calibration.csv"))
+    # no plate on this scan: the wall is the ink's envelope, which a reader must be told
+    assert "ink envelope" in res.summary["hole"]["found_by"]

@@ -163,6 +163,20 @@ def test_a_wrong_scale_is_flagged_by_the_layer_lattice(scene, factor):
     assert quality._lattice_check(right.stacks) == []
 
 
+def test_widths_on_whole_counts_but_not_the_final_ones_blame_the_counts():
+    import pandas as pd
+
+    # a ring of stacks a layer above their widths (a rod end inside the band not cut)
+    stacks = pd.DataFrame({"layers_est": [9.1, 5.1, 4.05, 1.05, 2.03, 1.0, 3.1, 2.0],
+                           "n_br": [10, 6, 5, 1, 2, 1, 3, 2],
+                           "length_mm": [20.0, 12.0, 10.0, 5.0, 5.0, 4.0, 3.0, 3.0]})
+    (flag,) = quality._lattice_check(stacks)
+    assert "the counts are off, not the widths" in flag.message
+    # widths between whole counts: the scale, h or the calibration
+    (flag,) = quality._lattice_check(stacks.assign(layers_est=stacks["n_br"] * 1.4))
+    assert "check px_per_mm" in flag.message
+
+
 def test_the_layer_lattice_is_not_read_at_low_resolution():
     # at h < 3 px right widths scatter as much as a wrong scale's: low_resolution speaks instead
     sc = make_scene(seed=4, n_stacks=20, max_layers=3, px_per_mm=25.0)
