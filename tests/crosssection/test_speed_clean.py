@@ -155,3 +155,19 @@ def test_slivers_same_by_borders_and_by_labelling(seed, monkeypatch):
         kept_any += int((~got & ~clean_mask(m, s_min_px=kw["s_min_px"], speck_px=30.0,
                                              min_extent_px=20.0)).any())
     assert kept_any > 3, kept_any
+
+
+def test_a_texture_of_pixels_is_labelled_not_traced():
+    # a checkerboard of ink and paper inside a disk: its border hierarchy grows faster than
+    # the square of its ~10^5 borders (seconds), the labelling takes milliseconds
+    n = 600
+    yy, xx = np.indices((n, n))
+    m = ((yy + xx) % 2 == 0) & (np.hypot(yy - n / 2, xx - n / 2) < 0.45 * n)
+    assert cl._pixel_texture(m)
+    got = clean_mask(m, s_min_px=2500.0, speck_px=40.0)
+    assert np.array_equal(got, _by_labelling(m, 2500.0, 40.0, 0.0))
+    # bands, however many, are traced: two transitions per row across each
+    bands = np.zeros((n, n), bool)
+    for c in range(10, n - 10, 12):
+        bands[10:-10, c:c + 5] = True
+    assert not cl._pixel_texture(bands)
