@@ -98,7 +98,7 @@ import pandas as pd
 from crosssection._version import __version__
 from crosssection.core import schema
 from crosssection.core.errors import ConfigError, FoldstatError, ImageError, ParameterError
-from crosssection.core.fileio import (BROWSER_FILES, check_out,
+from crosssection.core.fileio import (BROWSER_FILES, check_out, missing_file_reason,
                                       clear_stale_folders, read_json_object, staging_folder,
                                       swap_in_folder, write_csv, write_json)
 from crosssection.core.parallel import (ClusterLostError, capped_workers, compiling_in_turn,
@@ -214,8 +214,7 @@ def _walk_scans(input_dir, *, exclude=()) -> tuple[list[Path], list[Path]]:
 def _broken_link(image: Path) -> str | None:
     """The one-line reason of an image that is a symbolic link to nothing, else None."""
     if image.is_symlink() and not image.exists():
-        return ImageError(f"symbolic link to {os.readlink(image)}, which cannot be found",
-                          image).one_line()
+        return ImageError(missing_file_reason(image), image).one_line()
     return None
 
 

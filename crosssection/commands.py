@@ -68,7 +68,7 @@ def check_not_beside(image, out_dir) -> None:
 
     try:
         same = Path(out_dir).expanduser().resolve() == Path(image).expanduser().resolve().parent
-    except OSError:
+    except (OSError, RuntimeError):  # a loop of symbolic links: the loader names it
         return
     if same:
         raise ParameterError(f"{out_dir} is the scan's own folder: its images would lie "
@@ -287,7 +287,11 @@ def set_not_read(image, params: AnalysisParams) -> str | None:
     from crosssection.setconfig import SET_FILE, load_set_config
 
     image = Path(image)
-    for folder in image.resolve().parents:
+    try:
+        parents = image.resolve().parents
+    except (OSError, RuntimeError):  # a loop of symbolic links: the loader names it
+        return None
+    for folder in parents:
         toml = folder / SET_FILE
         if not toml.is_file():
             continue

@@ -287,3 +287,20 @@ def swap_in_folder(stage, final) -> None:
         # the new folder is complete and in place: what is left of the old one is a hidden
         # folder that the next run removes (clear_stale_folders), not a failure
         pass
+
+
+def missing_file_reason(path) -> str:
+    """Why ``path``, which does not exist, cannot be read: ``"file not found"``, a symbolic
+    link to nothing (naming its target), or a loop of symbolic links."""
+    import errno
+
+    path = Path(path)
+    try:
+        os.stat(path)
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            return "a loop of symbolic links (it leads back to itself)"
+    if path.is_symlink():
+        return f"symbolic link to {os.readlink(path)}, which cannot be found"
+    return "file not found"
+

@@ -755,7 +755,9 @@ def load_image(path) -> np.ndarray:
     """
     path = Path(path).expanduser()
     if not path.exists():
-        raise ImageError("file not found", path)
+        from crosssection.core.fileio import missing_file_reason
+
+        raise ImageError(missing_file_reason(path), path)
     if path.is_dir():
         raise ImageError("is a directory, not an image file", path)
     try:

@@ -92,6 +92,25 @@ def test_linked_scans_are_analysed_under_their_own_names(tmp_path, capsys):
 
 
 @pytest.mark.skipif(not hasattr(os, "symlink"), reason="needs symbolic links")
+def test_a_loop_of_links_is_bad_input_named_as_such(tmp_path, capsys):
+    from crosssection.cli import main
+
+    inp = tmp_path / "in"
+    inp.mkdir()
+    (inp / "a.png").symlink_to("b.png")
+    (inp / "b.png").symlink_to("a.png")
+    for command in ("analyze", "steps"):
+        status = main([command, str(inp / "a.png"), "--out", str(tmp_path / command)])
+        err = capsys.readouterr().err.strip().splitlines()
+        assert status == 2 and len(err) == 1, (command, err)
+        assert "a.png" in err[0] and "loop of symbolic links" in err[0]
+    status, err = _batch(capsys, inp, tmp_path / "out")
+    assert status == B.EXIT_SOME_FAILED
+    reasons = pd.read_csv(tmp_path / "out" / "failures.csv")["reason"]
+    assert reasons.str.contains("loop of symbolic links").all() and len(reasons) == 2
+
+
+@pytest.mark.skipif(not hasattr(os, "symlink"), reason="needs symbolic links")
 def test_an_unreadable_scan_fails_alone_in_the_plan(tmp_path):
     inp = _scans(tmp_path / "in")
     (inp / "loop.png").symlink_to(inp / "loop.png")  # a link to itself: no target
