@@ -237,6 +237,18 @@ def _preprocess(image, p: AnalysisParams, timer) -> Preprocessed:
         file_px_per_mm, file_pages = (recorded_header(path) if path is not None
                                       else (None, 1))
         orientation = exif_orientation(path) if path is not None else 1
+    try:
+        return _preprocess_read(rgb, path, file_px_per_mm, file_pages, orientation, p, timer)
+    except FoldstatError as exc:
+        if file_pages <= 1:
+            raise
+        # a blank first page (a scanner's preview, a cover sheet) fails as an empty scan
+        raise type(exc)(f"{exc.cause} (the file holds {file_pages} images and only the first "
+                        "is read: save each scan as its own file)", exc.path) from None
+
+
+def _preprocess_read(rgb, path, file_px_per_mm, file_pages, orientation, p: AnalysisParams,
+                     timer) -> Preprocessed:
     p.check_image(rgb.shape, path, file_px_per_mm=file_px_per_mm)
     thr, hole, outside, dominance = _threshold_in_frame(rgb, p, path, timer)
     confidence = None if p.hole_given else hole.confidence

@@ -149,3 +149,15 @@ def test_a_size_refused_at_the_default_scale_names_the_file_resolution(dpi, name
     assert status == 2 and len(err.strip().splitlines()) == 1
     assert "more than twice the scan" in err
     assert ("the file records 254 dpi = 10.00 px/mm" in err) is named
+
+
+def test_a_blank_first_page_names_the_other_pages(tmp_path, capsys):
+    import tifffile
+
+    scan = _good_rgb(1)
+    path = tmp_path / "two.tif"
+    tifffile.imwrite(path, np.stack([np.full_like(scan, 245), scan]), photometric="rgb")
+    assert main(["analyze", str(path), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(path) in err[0]
+    assert "the file holds 2 images and only the first is read" in err[0]
