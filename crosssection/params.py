@@ -357,8 +357,10 @@ class AnalysisParams:
         s_min_px = self.scale.area_to_px2(self.s_min_used_mm2)
         l_min_px = self.scale.to_px(self.l_min_mm)
         if s_min_px >= h * w:
-            raise ParameterError(f"s_min = {self.s_min_used_mm2:g} mm^2 = {s_min_px:.0f} px is "
-                                 f"not smaller than the image ({w}x{h} px)" + hint, path)
+            raise ParameterError(f"s_min = {self.s_min_used_mm2:g} mm^2 = {s_min_px:.0f} px at "
+                                 f"px_per_mm = {self.px_per_mm:g} is not smaller than the "
+                                 f"image ({w}x{h} px): check px_per_mm and s_min_mm2" + hint,
+                                 path)
         if self.thickness_px >= min(h, w) / 2:
             raise ParameterError(f"sheet thickness {self.thickness_mm:g} mm = "
                                  f"{self.thickness_px:.1f} px is not small against the image "

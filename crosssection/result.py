@@ -19,11 +19,14 @@ def rod_length_text(summary: dict) -> str:
     """``L = 287.9 mm`` for a one-line report of an analysis, and ``L = 287.9 mm measured,
     320.0 mm given`` when the rod length given (``rod_length_used_mm``, the L of epsilon and
     the energies) is another."""
+    def mm(v):
+        return f"{v:.1f}" if v >= 1 else f"{v:.3g}"
+
     measured = summary["rod_length_mm"]
     used = summary.get("rod_length_used_mm")
-    if used is None or f"{used:.1f}" == f"{measured:.1f}":
-        return f"L = {measured:.1f} mm"
-    return f"L = {measured:.1f} mm measured, {used:.1f} mm given"
+    if used is None or mm(used) == mm(measured):
+        return f"L = {mm(measured)} mm"
+    return f"L = {mm(measured)} mm measured, {mm(used)} mm given"
 
 
 @dataclass(repr=False)

@@ -243,3 +243,5 @@ def test_a_given_rod_length_is_printed_beside_the_measured_one():
     # epsilon and the energies use the given one: the line says which is which
     assert rod_length_text({"rod_length_mm": 287.94, "rod_length_used_mm": 320.0}) == \
         "L = 287.9 mm measured, 320.0 mm given"
+    assert rod_length_text({"rod_length_mm": 287.94, "rod_length_used_mm": 1e-6}) == \
+        "L = 287.9 mm measured, 1e-06 mm given"
