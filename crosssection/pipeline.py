@@ -331,15 +331,27 @@ def _check_fraction(thr, path, rgb=None):
     frac = np.count_nonzero(thr.mask) / thr.mask.size
     if frac == 0:
         why = getattr(thr, "note", "") or "not a blue-ink scan, or adjust the threshold"
+        blue = _blue_share(rgb) if rgb is not None else 0.0
         if rgb is not None and _achromatic(rgb):
             why = ("the image has no colour (red, green and blue equal to within 2 levels on "
                    "99.9 % of the pixels): a grayscale scan saved as RGB, or no ink at all? "
                    "scan in colour")
+        elif blue > 0.95:
+            why = (f"{100 * blue:.0f} % of the image is ink-coloured (blue above red and "
+                   "green): no paper around the ink to set the cut against (all-ink image?)")
         raise AnalysisError(f"empty mask: no pixel passes the {thr.method} threshold: {why}",
                             path)
     if frac > 0.95:
         raise AnalysisError(f"{100 * frac:.0f} % of the image passes the threshold: no "
                             "background to separate stacks (all-ink image?)", path)
+
+
+def _blue_share(rgb) -> float:
+    """Share of the pixels (every fourth row and column) whose blue exceeds both red and
+    green by a tenth of the image's range: ink-coloured."""
+    a = np.asarray(rgb)[::4, ::4].astype(np.float32)
+    margin = 0.1 * (65535.0 if np.asarray(rgb).dtype == np.uint16 else 255.0)
+    return float(np.mean(a[..., 2] - np.maximum(a[..., 0], a[..., 1]) > margin))
 
 
 def _achromatic(rgb) -> bool:

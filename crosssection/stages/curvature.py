@@ -2118,12 +2118,34 @@ def noise_variance(profiles, n_br, *, thickness_px: float, px_per_mm: float,
     sm = default_smooth_px(thickness_px) if smooth_px is None else int(smooth_px)
     nbs = sorted({max(1, int(x)) for x in n_br})
     window = {nb: 5.0 * nb * float(thickness_px) for nb in nbs}
+    measured = _measured_noise(profiles, n_br, nbs, window, sm, px_per_mm, min_pairs,
+                               loops=False)
+    if not measured:
+        # a scan of closed loops only (rings, a rolled sheet): their stretches are the only
+        # measure of its noise (a lone ring of radius 8 mm read +27 % without it)
+        measured = _measured_noise(profiles, n_br, nbs, window, sm, px_per_mm, min_pairs,
+                                   loops=True)
+    out = {}
+    for nb in nbs:
+        if nb in measured:
+            out[nb] = measured[nb]
+        elif measured:
+            ref = min(measured, key=lambda m: abs(m - nb))
+            out[nb] = measured[ref] * (window[ref] / window[nb]) ** 5
+        else:
+            out[nb] = unmeasured
+    return out
+
+
+def _measured_noise(profiles, n_br, nbs, window, sm, px_per_mm, min_pairs, *, loops):
+    """The windows' pooled noise estimates of :func:`noise_variance` (n_br -> v), from the
+    open stacks, or from the closed loops as well (``loops``)."""
     measured = {}
     for nb in nbs:
         lag = (window[nb] + sm) / float(px_per_mm)
         per_stack, weights = [], []
         for prof, n in zip(profiles, n_br):
-            if max(1, int(n)) != nb or prof.closed:
+            if max(1, int(n)) != nb or (prof.closed and not loops):
                 continue
             lags = [_lag_variance(prof, m * lag) for m in (1.0, 2.0, 3.0)]
             if any(x is None for x in lags):
@@ -2137,13 +2159,4 @@ def noise_variance(profiles, n_br, *, thickness_px: float, px_per_mm: float,
         v, w = _without_outliers(np.asarray(per_stack, float), np.asarray(weights, float))
         if w.sum() >= min_pairs:
             measured[nb] = max(float(v @ w) / float(w.sum()), 0.0)
-    out = {}
-    for nb in nbs:
-        if nb in measured:
-            out[nb] = measured[nb]
-        elif measured:
-            ref = min(measured, key=lambda m: abs(m - nb))
-            out[nb] = measured[ref] * (window[ref] / window[nb]) ** 5
-        else:
-            out[nb] = unmeasured
-    return out
+    return measured

@@ -161,3 +161,11 @@ def test_a_blank_first_page_names_the_other_pages(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and str(path) in err[0]
     assert "the file holds 2 images and only the first is read" in err[0]
+
+
+def test_an_all_ink_image_is_told_as_such(tmp_path, capsys):
+    path = tmp_path / "ink.png"
+    Image.fromarray(np.full((200, 200, 3), (36, 66, 181), np.uint8)).save(path)
+    assert main(["analyze", str(path), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "100 % of the image is ink-coloured" in err[0]

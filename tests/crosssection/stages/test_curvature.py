@@ -952,3 +952,26 @@ def test_smoothing_window_is_about_two_thicknesses_never_wider(h_px):
     assert 2 * h_px - 1 < w <= 2 * h_px + 1
     # a scale read from a file's DPI lands a hair below its nominal value
     assert default_smooth_px(h_px * (1 - 1e-12)) == w
+
+
+def test_a_scan_of_rings_alone_measures_its_noise_on_them():
+    """No open stack: the fit noise is measured on the closed loops, not taken as 0 (a lone
+    ring of radius 8 mm read its 4 pi^2 at +27 % before)."""
+    import math
+    import warnings
+
+    import crosssection
+
+    n = 900
+    yy, xx = np.mgrid[0:n, 0:n]
+    r = np.hypot(xx - 450.3, yy - 449.7)
+    rgb = np.empty((n, n, 3), np.uint8)
+    rgb[:] = (246, 245, 240)
+    rgb[(r > 397.5) & (r <= 402.5)] = (36, 66, 181)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = crosssection.analyze(rgb, px_per_mm=50)
+    prof = res.profiles[0]
+    assert prof.closed and prof.noise_var_per_mm2 > 0
+    assert res.summary["total_energy"] / (4 * math.pi ** 2) - 1 < 0.15
+    assert res.summary["total_energy_rel_uncertainty"] > 0
