@@ -621,7 +621,7 @@ def index_numbers(index):
 
 def partial_outputs(out: Path) -> list[Path]:
     """Leftovers of interrupted writes under a batch output (staging folders, temp files)."""
-    from crosssection import batch as B
+    from crosssection.core.fileio import PARTIAL_TAG
 
-    return [p for p in out.rglob("*") if B.PARTIAL_TAG in p.name or p.name.endswith(".tmp")
+    return [p for p in out.rglob("*") if PARTIAL_TAG in p.name or p.name.endswith(".tmp")
             or (p.name.startswith(".") and p.is_file())]

@@ -229,7 +229,7 @@ def test_resume_redoes_only_missing_images(tmp_path):
     # lose one output folder; a killed worker left a staging folder and a temp file
     victim = out / first.set_index("image").loc["setA/s1.png", "output"]
     shutil.rmtree(victim)
-    stale = victim.parent / f".{victim.name}{B.PARTIAL_TAG}dead"
+    stale = victim.parent / f".{victim.name}{fileio.PARTIAL_TAG}dead"
     stale.mkdir()
     (stale / "junctions.csv").write_text("junction_id,x_px\n1,")
     (victim.parent / ".index.csv.tmpjunk.tmp").write_text("half")
