@@ -357,9 +357,11 @@ class AnalysisParams:
         s_min_px = self.scale.area_to_px2(self.s_min_used_mm2)
         l_min_px = self.scale.to_px(self.l_min_mm)
         if s_min_px >= h * w:
+            given = ("s_min_mm2" if self.s_min_mm2 is not None
+                     else "thickness_mm (s_min = (10 h)^2)")
             raise ParameterError(f"s_min = {self.s_min_used_mm2:g} mm^2 = {s_min_px:.0f} px at "
                                  f"px_per_mm = {self.px_per_mm:g} is not smaller than the "
-                                 f"image ({w}x{h} px): check px_per_mm and s_min_mm2" + hint,
+                                 f"image ({w}x{h} px): check px_per_mm and {given}" + hint,
                                  path)
         if self.thickness_px >= min(h, w) / 2:
             raise ParameterError(f"sheet thickness {self.thickness_mm:g} mm = "

@@ -239,7 +239,7 @@ def _preprocess(image, p: AnalysisParams, timer) -> Preprocessed:
         orientation = exif_orientation(path) if path is not None else 1
     try:
         return _preprocess_read(rgb, path, file_px_per_mm, file_pages, orientation, p, timer)
-    except FoldstatError as exc:
+    except AnalysisError as exc:
         if file_pages <= 1:
             raise
         # a blank first page (a scanner's preview, a cover sheet) fails as an empty scan

@@ -428,7 +428,9 @@ def lattice_limit(h_px: float) -> float:
 
 
 def _lattice_check(stacks, h_px: float = 5.0) -> list[QualityFlag]:
-    """Widths that do not sit on whole layer counts: a wrong scale, h or calibration."""
+    """Widths that do not sit on the final layer counts: between whole counts, a wrong
+    scale, h or calibration; on whole counts that are not the final ones, wrong counts (the
+    message tells the two apart)."""
     if "layers_est" not in stacks or len(stacks) < LATTICE_MIN_STACKS:
         return []
     off = np.abs(stacks["layers_est"].to_numpy(float) - stacks["n_br"].to_numpy(float))

@@ -229,6 +229,18 @@ def _energy_rel_uncertainty(stacks: pd.DataFrame) -> float | None:
     return float(np.nansum(e * np.minimum(u, 1.0)) / total)
 
 
+def _hole_found_by(hole, params) -> str:
+    """How the hole of ``summary.json`` was set: given, its radius given and its centre
+    fitted to the ink, or found in the scan (a plate's edge or the ink's envelope, the
+    hole stage's reason)."""
+    if not hole.fitted:
+        return "given"
+    if (params.hole_radius_mm is not None and params.hole_center_px is None
+            and not hole.replaced):
+        return "radius given, centre fitted to the ink"
+    return hole.reason or "found in the scan"
+
+
 def summary(*, pre, params, linear_system, junctions, stacks, branches, voids, rod_measured_mm,
             rod_used_mm, calibration_source, timings, total_time_s, version) -> dict:
     """The ``summary.json`` of one analysis (``schema.SUMMARY_KEYS`` first, then the
@@ -275,8 +287,7 @@ def summary(*, pre, params, linear_system, junctions, stacks, branches, voids, r
                  "radius_mm": float(radius_mm), "confidence": pre.hole_confidence,
                  # a plate's edge, or the ink's envelope (a rod that does not reach the wall
                  # reads a smaller hole and a larger epsilon there)
-                 "found_by": (pre.hole.reason or "found in the scan") if pre.hole.fitted
-                 else "given"},
+                 "found_by": _hole_found_by(pre.hole, params)},
         "timings_s": {k: round(v, 6) for k, v in timings.items()},
         "total_time_s": round(total_time_s, 6),
         "n_junctions_by_degree": {str(int(d)): int(c) for d, c in

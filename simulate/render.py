@@ -1966,9 +1966,10 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
     for message in truth_warnings:
         warnings.warn(message, TruthWarning, stacklevel=2)
     summary = _summary(analysis, frame, tables, ink_mask, px_per_mm=px_per_mm)
+    summary["truth_warnings"] = truth_warnings
     # a rod coarser than the truth is validated from: warned above as a range, and recorded
-    # with the scene so that validate names it and leaves its scores out of the means
-    summary["truth_warnings"] = truth_warnings + ([short] if short else [])
+    # with the scene so that validate names it (its truth is not known to be wrong)
+    summary["truth_range"] = short
     params = {"px_per_mm": float(px_per_mm), "thickness_mm": float(thickness_mm),
               "hole_radius_mm": frame.hole_radius_mm,
               "hole_center_px": None if frame.hole_xy is None else

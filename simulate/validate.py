@@ -13,7 +13,10 @@ A scene whose render flagged its truth (``truth_warnings`` in ``truth/summary.js
 disagrees with its own drawing, :class:`simulate.render.TruthWarning`) is scored, counted in the
 ``truth_warnings`` column of ``scores.csv`` and warned about, but left out of the summary's
 ``mean`` and ``mean_abs``: its scores measure the render as much as the analysis.
-``mean_all`` and ``mean_abs_all`` are the means over every scored scene.
+``mean_all`` and ``mean_abs_all`` are the means over every scored scene. Scenes of a rod
+coarser than the render's truth is validated from (``truth_range`` in ``truth/summary.json``)
+are scored and kept in the means, and named in ``summary.json`` (``beyond_validated``) and in
+one warning per such range.
 """
 from __future__ import annotations
 
@@ -242,13 +245,17 @@ def validate_scenes(scenes_dir, out_dir, *, match_px: float | None = None,
         Once per scored scene whose render flagged its truth (``truth_warnings`` in its
         ``truth/summary.json``): it is scored but left out of the summary's ``mean`` and
         ``mean_abs`` (``mean_all`` and ``mean_abs_all`` hold it).
+    simulate.render.ScanRangeWarning
+        Once per ``truth_range`` of the scenes' renders (a rod coarser than the truth is
+        validated from), naming how many scenes it holds (``beyond_validated`` in
+        ``summary.json``).
     """
     return _validate(scenes_dir, out_dir, match_px=match_px, progress=progress)[0]
 
 
 def _validate(scenes_dir, out_dir, *, match_px, progress) -> tuple[pd.DataFrame, list]:
     """:func:`validate_scenes`, returning the failures (dicts ``scene``, ``error``) too."""
-    from simulate.render import TruthWarning
+    from simulate.render import ScanRangeWarning, TruthWarning
 
     _check_match_px(match_px, "match_px")
     scenes_dir, out_dir = Path(scenes_dir), Path(out_dir)
@@ -261,7 +268,7 @@ def _validate(scenes_dir, out_dir, *, match_px, progress) -> tuple[pd.DataFrame,
         raise ConfigError("no scene folders (with truth/summary.json) inside", scenes_dir)
     # before the analyses: an unusable --out should not cost the whole run
     out_dir.mkdir(parents=True, exist_ok=True)
-    rows, failures = [], []
+    rows, failures, ranges = [], [], {}
     from tqdm import tqdm
 
     it = tqdm(scenes, desc="validate", unit="scene",
@@ -272,12 +279,18 @@ def _validate(scenes_dir, out_dir, *, match_px, progress) -> tuple[pd.DataFrame,
         except Exception as exc:  # noqa: BLE001 - one line per failed scene, never a crash
             failures.append({"scene": scene.name, "error": _one_line(exc, scene)})
             continue
+        # the messages: score_scene returns numbers only (and has checked the file)
+        truth = json.loads((scene / "truth" / "summary.json").read_text())
         if rows[-1]["truth_warnings"]:
-            # the messages: score_scene returns numbers only (and has checked the file)
-            messages = truth_warnings(json.loads((scene / "truth" / "summary.json").read_text()))
             warnings.warn(f"{scene}: its truth is flagged by its render: "
-                          f"{'; '.join(messages)} (scored, left out of the means)",
+                          f"{'; '.join(truth_warnings(truth))} (scored, left out of the means)",
                           TruthWarning, stacklevel=3)
+        if isinstance(truth.get("truth_range"), str):
+            ranges.setdefault(truth["truth_range"], []).append(scene.name)
+    for message, names in ranges.items():
+        # once per range (an ensemble's rods share their segment count), not per scene
+        warnings.warn(f"{scenes_dir}: {len(names)} scene(s): {message}", ScanRangeWarning,
+                      stacklevel=3)
     df = pd.DataFrame(rows)
     if len(df):
         df = df[[c for c in KEY_COLUMNS if c in df.columns]
@@ -295,6 +308,8 @@ def _validate(scenes_dir, out_dir, *, match_px, progress) -> tuple[pd.DataFrame,
                "failed": [f["scene"] for f in failures],
                # a truth its render flagged measures the render as much as the analysis
                "n_flagged": len(flagged), "flagged": flagged,
+               # rods coarser than the render's truth is validated from: scored, in the means
+               "beyond_validated": sorted(n for names in ranges.values() for n in names),
                "mean": mean, "mean_abs": mean_abs,
                "mean_all": mean_all, "mean_abs_all": mean_abs_all}
     write_json(out_dir / "summary.json", summary)

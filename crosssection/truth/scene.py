@@ -25,7 +25,8 @@ from crosssection.core.calibration import Calibration
 from crosssection.core.errors import ConfigError, ImageError
 from crosssection.core.fileio import atomic_path, read_json_object, write_csv, write_json
 
-__all__ = ["Scene", "write_scene", "read_scene", "read_scene_params", "write_image"]
+__all__ = ["Scene", "write_scene", "read_scene", "read_scene_params", "read_truth_tables",
+           "write_image", "LAYER_PIECES", "LAYER_PIECE_COLUMNS"]
 
 #: Fewest rows of a written ``calibration.csv`` (more when the scene has thicker stacks).
 MIN_CALIBRATION_ROWS = 12
@@ -178,10 +179,13 @@ def write_scene(scene: Scene, folder, *, image_name: str = "image.png") -> Path:
     # version's
     write_json(folder / "params.json", {**scene.params, "version": __version__})
     pieces = scene.tables.get(LAYER_PIECES)
+    (folder / "truth").mkdir(parents=True, exist_ok=True)
     if pieces is not None:
         # before the tables: their summary.json marks a complete truth folder
-        (folder / "truth").mkdir(parents=True, exist_ok=True)
         write_csv(folder / "truth" / f"{LAYER_PIECES}.csv", pieces)
+    else:
+        # an earlier scene's pieces would be scored against this one's truth
+        (folder / "truth" / f"{LAYER_PIECES}.csv").unlink(missing_ok=True)
     schema.write_tables(folder / "truth", scene.summary, scene.tables)
     return folder
 

@@ -415,3 +415,9 @@ def test_the_summary_says_how_the_hole_was_found(sample_dir):
                                    calibration=str(sample_dir / "calibration.csv"))
     # no plate on this scan: the wall is the ink's envelope, which a reader must be told
     assert "ink envelope" in res.summary["hole"]["found_by"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = crosssection.analyze(str(sample_dir / "scan_01_sparse.png"),
+                                   calibration=str(sample_dir / "calibration.csv"),
+                                   hole_radius_mm=res.summary["hole"]["radius_mm"])
+    assert res.summary["hole"]["found_by"] == "radius given, centre fitted to the ink"

@@ -278,3 +278,22 @@ def test_malformed_truth_warnings_fail_the_scene(scenes, tmp_path, capsys):
     assert run(folder, tmp_path / "rep") == 3
     lines = not_analysed(capsys.readouterr().err)
     assert len(lines) == 1 and "truth_warnings must be a list of messages" in lines[0]
+
+
+
+def test_scenes_of_a_coarse_rod_are_named_once_and_kept_in_the_means(scenes, tmp_path):
+    from simulate.render import ScanRangeWarning
+
+    folder, scene = scenes
+    _flag(scene, [])
+    truth = json.loads((scene / "truth" / "summary.json").read_text())
+    # the fixture's rod has 100 segments, below the 300 a quench's render truth is validated at
+    assert "validated from 300 segments" in truth["truth_range"]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        validate_scenes(folder, tmp_path / "rep")
+    said = [str(w.message) for w in caught if w.category is ScanRangeWarning]
+    assert said == [f"{folder}: 1 scene(s): {truth['truth_range']}"]
+    summary = json.loads((tmp_path / "rep" / "summary.json").read_text())
+    assert summary["beyond_validated"] == [scene.name]
+    assert summary["n_flagged"] == 0 and summary["mean"] == summary["mean_all"] != {}

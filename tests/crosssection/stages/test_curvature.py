@@ -955,8 +955,8 @@ def test_smoothing_window_is_about_two_thicknesses_never_wider(h_px):
 
 
 def test_a_scan_of_rings_alone_measures_its_noise_on_them():
-    """No open stack: the fit noise is measured on the closed loops, not taken as 0 (a lone
-    ring of radius 8 mm read its 4 pi^2 at +27 % before)."""
+    """No open stack: the fit noise is measured on the closed loops (taken as 0, a lone ring
+    of radius 8 mm reads its 4 pi^2 at +27 %)."""
     import math
     import warnings
 

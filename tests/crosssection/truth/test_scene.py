@@ -39,6 +39,22 @@ def test_scene_folder_round_trip(scene_folder):
     assert no_image.rgb is None and no_image.summary == back.summary
 
 
+def test_layer_pieces_round_trip_and_leave_with_a_scene_without_them(scene_folder, tmp_path):
+    import dataclasses
+
+    from crosssection.truth.scene import LAYER_PIECES
+
+    _, scene = scene_folder
+    st = scene.tables["stacks"]
+    pieces = st[["stack_id", "n_br", "length_mm", "mid_x_px", "mid_y_px"]]
+    with_pieces = dataclasses.replace(scene, tables={**scene.tables, LAYER_PIECES: pieces})
+    folder = write_scene(with_pieces, tmp_path / "s")
+    assert read_scene(folder, image=False).tables[LAYER_PIECES].equals(pieces)
+    # a scene without pieces written over it: the earlier pieces must not be scored
+    write_scene(scene, folder)
+    assert LAYER_PIECES not in read_scene(folder, image=False).tables
+
+
 def test_write_scene_refuses_an_unwritable_image(scene_folder, tmp_path):
     _, scene = scene_folder
     for rgb in (np.zeros((8, 8, 3), np.float64) + 0.5, np.zeros((0, 8, 3), np.uint8),
