@@ -925,7 +925,12 @@ def _per_set_text(meta) -> str:
     items = []
     for s, v in (meta.get("sets") or {}).items():
         made = v.get("made_by") or {}
-        words = [_limits_text(v.get("detection_limits") or {})]
+        limits = v.get("detection_limits") or {}
+        words = [_limits_text(limits)]
+        if (any(given.values()) and limits.get("l_min_mm") is None
+                and limits.get("s_min_mm2") is None):
+            # a simulation: its lengths are in units of its rod length, with no mm scale
+            words[0] += " (the limits given are not applied: no scale in mm)"
         if made.get("versions"):
             words.append("made by version " + ", ".join(made["versions"]))
         differ = made.get("parameters_differing") or {}

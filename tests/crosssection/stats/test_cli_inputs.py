@@ -250,6 +250,9 @@ def test_report_records_the_limits_and_the_sets_of_each_dir(batch, tmp_path, cap
     assert "here l_min = 2 mm, s_min = 1.5 mm²" in page
     assert "each scan's analysis records" not in page
     assert f"{batch} (set exp), {sim} (set simu)" in page
+    # the page says it of the simulation's set, not of the scans'
+    assert page.count("the limits given are not applied") == 1
+    assert "simu: l_min = none, s_min = none (the limits given are not applied" in page
 
 
 # ------------------------------------------------------- doubtful inputs: one warning, used
