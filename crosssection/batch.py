@@ -38,13 +38,19 @@ Design choices
   (:func:`crosssection.core.parallel.compiling_in_turn`) instead of each compiling them
   at the same time.
 - Atomic outputs: a task writes into a hidden staging folder ``.<stem>.partial-XXXX`` next to
-  its output folder and renames it into place when complete. A killed worker leaves at most a
-  staging folder, which the next run removes; an output folder is therefore always complete.
+  its output folder and renames it into place when complete. A killed run leaves at most
+  staging folders and the temporary files of the batch's records, which the next run removes
+  (those beside a scan it skips included); an output folder is therefore always complete.
   ``summary.json`` carries ``batch.params_hash``; an image whose folder holds a summary with
   the same hash, its four tables readable with their schema's columns (their header lines
-  are read) and ``overlay.png`` when figures are wanted is skipped on a re-run. Each image
-  analysed again over an earlier result is named in a ``warning:`` line with the reason (its
-  parameters, the package version, the files' content, a table or the overlay lost).
+  are read) and holding the rows the summary counts (their lines are counted), and a whole
+  ``overlay.png`` when figures are wanted is skipped on a re-run. Each image analysed again
+  over an earlier result is named in a ``warning:`` line with the reason (its parameters,
+  the package version, the files' content, its summary, a table or the overlay lost or cut
+  short).
+- One batch at a time writes into ``OUT_DIR``: it holds a lock (``flock`` on
+  ``OUT_DIR/.batch.lock``, released by the system when the process dies, so that a batch
+  killed does not block its re-run), and a second batch is refused in one line.
 - The parameters hash covers the effective analysis parameters (:func:`effective_params`:
   every default filled in, derived ones such as ``s_min`` computed), the SHA-256 of the
   image and of the calibration file, and the package version: changing any of them redoes
@@ -66,9 +72,16 @@ Design choices
   ``set.toml`` or a missing calibration fail only the images concerned, each with a one-line
   reason in ``failures.csv``. A worker process that dies (crash, out-of-memory kill) is
   replaced; the images that were in flight are re-run one at a time, and the one whose worker
-  dies alone is recorded as failed. A Dask cluster that goes away stops the batch (one
-  ``error:`` line): the images it had are left out of the index, neither done nor failed, and
-  a re-run analyses them.
+  dies alone is recorded as failed. A scan whose output cannot be written (a full disk) fails
+  with the file named in its output folder. A Dask cluster that goes away stops the batch
+  (one ``error:`` line): the images it had are left out of the index, neither done nor
+  failed, and a re-run analyses them. So do the batch's own records (index.csv,
+  failures.csv, batch.json) that cannot be written, naming the file: the scans done are in
+  their folders, and the re-run resumes from them.
+- An interrupt (Ctrl-C, SIGTERM) stops the batch; the scan it landed in is left out of the
+  index, for the re-run, even when the analysis caught the interrupt and failed with
+  another error in its place (matplotlib does while it draws): the command line tells the
+  batch that it was sent one (``run_batch(signalled=...)``).
 - A calibration is used only when a ``set.toml`` or ``--calibration`` names it. A
   ``calibration.csv`` lying beside scans that are analysed without one is named in a
   ``warning:`` line (and in batch.json): every such scan would otherwise read its layer counts
@@ -78,9 +91,11 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+import io
 import json
 import math
 import os
+import re
 import shutil
 import sys
 import time
@@ -89,7 +104,7 @@ import warnings
 from collections import deque
 from concurrent.futures import FIRST_COMPLETED, wait
 from concurrent.futures.process import BrokenProcessPool
-from contextlib import ExitStack
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -97,10 +112,12 @@ import pandas as pd
 
 from crosssection._version import __version__
 from crosssection.core import schema
-from crosssection.core.errors import ConfigError, FoldstatError, ImageError, ParameterError
-from crosssection.core.fileio import (BROWSER_FILES, check_out, missing_file_reason,
-                                      clear_stale_folders, read_json_object, staging_folder,
-                                      swap_in_folder, write_csv, write_json)
+from crosssection.core.errors import (ConfigError, FoldstatError, ImageError, OutputError,
+                                      ParameterError)
+from crosssection.core.fileio import (BROWSER_FILES, PARTIAL_TAG, check_out, clear_stale_folders,
+                                      is_working_folder, missing_file_reason, read_json_object,
+                                      staging_folder, swap_in_folder, temporary_files,
+                                      write_csv, write_json)
 from crosssection.core.parallel import (ClusterLostError, capped_workers, compiling_in_turn,
                                         get_executor)
 from crosssection.params import (PARAM_NAMES, AnalysisParams, add_analysis_arguments,
@@ -600,6 +617,12 @@ def _peak_rss_mb() -> float:
         return math.nan
 
 
+def _cannot_write(exc: OSError, path) -> OutputError:
+    """``exc``, raised while writing ``path``, as one line naming the file and the cause."""
+    why = exc.strerror or " ".join(str(exc).split()) or type(exc).__name__
+    return OutputError(f"cannot write ({why})", exc.filename or path)
+
+
 def _one_line(exc: BaseException) -> str:
     if isinstance(exc, FoldstatError):
         return exc.one_line()
@@ -639,21 +662,30 @@ def process_image(task: ImageTask) -> dict:
                 "inputs": input_record(task)}
         if isinstance(getattr(result, "summary", None), dict):
             result.summary["batch"] = dict(info)
-        staging = staging_folder(final)
-        result.write(staging, figure=task.figure)
-        summary_path = staging / "summary.json"
-        summary = json.loads(summary_path.read_text())
-        info["wall_s"] = time.perf_counter() - t0
-        summary["batch"] = info
-        write_json(summary_path, summary)
-        # the complete folder takes the place of an old one (other parameters)
-        swap_in_folder(staging, final)
+        try:
+            staging = staging_folder(final)
+            result.write(staging, figure=task.figure)
+            summary_path = staging / "summary.json"
+            summary = json.loads(summary_path.read_text())
+            info["wall_s"] = time.perf_counter() - t0
+            summary["batch"] = info
+            write_json(summary_path, summary)
+            # the complete folder takes the place of an old one (other parameters)
+            swap_in_folder(staging, final)
+        except OutputError:
+            raise
+        except OSError as exc:  # a full disk, no permission: one line naming the file
+            raise _cannot_write(exc, final) from None
         staging = None
         row = _row(task, "ok", summary, wall_s=info["wall_s"])
         row["peak_rss_mb"] = _peak_rss_mb()
         return row
     except Exception as exc:  # noqa: BLE001 - a bad image is recorded, the batch goes on
-        return _row(task, "failed", reason=_one_line(exc), wall_s=time.perf_counter() - t0)
+        # a file that could not be written is named where it was to go: the hidden staging
+        # folder is removed below and means nothing to the user
+        reason = re.sub(re.escape(str(final.parent / f".{final.name}{PARTIAL_TAG}"))
+                        + r"[a-z0-9_]*", lambda m: str(final), _one_line(exc))
+        return _row(task, "failed", reason=reason, wall_s=time.perf_counter() - t0)
     finally:
         if staging is not None:
             shutil.rmtree(staging, ignore_errors=True)
@@ -699,23 +731,95 @@ def _recorded_info(task: ImageTask) -> dict | None:
     return summary
 
 
-def _table_readable(path: Path, name: str) -> bool:
-    """Whether ``path`` is a CSV file whose header holds the columns of table ``name``
-    (the header line only: a re-run checks every image's tables)."""
+#: the count ``summary.json`` keeps of the rows of each table (n_branches = sum n_br, which
+#: branches.csv has a row each of)
+TABLE_COUNTS = {"junctions": "n_junctions", "stacks": "n_stacks", "branches": "n_branches",
+                "voids": "n_voids"}
+
+
+def _table_damage(path: Path, name: str, counted) -> str | None:
+    """What a re-run finds wrong with table ``name`` at ``path``, or None when it is whole.
+
+    Its header line is parsed and its lines counted, no more: a re-run checks every table
+    of every scan.
+
+    Parameters
+    ----------
+    path : Path
+    name : str
+        Its table in :data:`crosssection.core.schema.TABLES`.
+    counted : int or None
+        Its rows as ``summary.json`` counts them (:data:`TABLE_COUNTS`); None: not checked.
+
+    Returns
+    -------
+    str or None
+        ``"lost"`` (missing, unreadable, empty, malformed or lacking its schema's columns),
+        or how it was cut short: fewer whole lines than ``counted`` rows, or a last line
+        without its end (a copy or a disk that stopped mid-file), as
+        ``"28 of the 57 rows summary.json counts, its last line cut off"``.
+    """
     try:
-        schema.check_table(name, pd.read_csv(path, nrows=0))
-    except (OSError, ValueError):  # missing, unreadable, empty, malformed, wrong columns
-        return False
-    return True
+        data = path.read_bytes()
+        schema.check_table(name, pd.read_csv(io.BytesIO(data), nrows=0))
+    except (OSError, ValueError):
+        return "lost"
+    rows = data.count(b"\n") - 1  # whole lines below the header
+    cut = []
+    if isinstance(counted, int) and not isinstance(counted, bool) and rows < counted:
+        cut.append(f"{rows} of the {counted} rows summary.json counts")
+    if not data.endswith(b"\n"):
+        cut.append("its last line cut off")
+    return ", ".join(cut) or None
+
+
+def _damaged_tables(final: Path, summary: dict) -> tuple[list[str], list[str]]:
+    """The tables of the output folder ``final`` lost and cut short (:func:`_table_damage`).
+
+    Returns
+    -------
+    lost : list of str
+        File names (``stacks.csv``).
+    cut : list of (str, str)
+        File name and how it was cut (``28 of the 57 rows summary.json counts``).
+    """
+    lost, cut = [], []
+    for name in schema.TABLES:
+        damage = _table_damage(final / f"{name}.csv", name, summary.get(TABLE_COUNTS[name]))
+        if damage == "lost":
+            lost.append(f"{name}.csv")
+        elif damage:
+            cut.append((f"{name}.csv", damage))
+    return lost, cut
+
+
+#: the last bytes of every whole PNG file: its IEND chunk (length 0, type, CRC)
+PNG_END = b"\x00\x00\x00\x00IEND\xaeB`\x82"
+
+
+def _overlay_damage(final: Path) -> str | None:
+    """``"missing"`` or ``"cut short"`` (it lacks the PNG's closing chunk) for the
+    ``overlay.png`` of the output folder ``final``, None when it is whole (its last bytes
+    only are read)."""
+    try:
+        with open(final / "overlay.png", "rb") as fh:
+            fh.seek(0, os.SEEK_END)
+            fh.seek(max(fh.tell() - len(PNG_END), 0))
+            end = fh.read()
+    except OSError:
+        return "missing"
+    return None if end == PNG_END else "cut short"
 
 
 def completed_row(task: ImageTask) -> dict | None:
     """The index row of an image already done with the same parameters hash, else None.
 
-    Done means: its ``summary.json`` records this hash, ``overlay.png`` is there when figures
-    are wanted, and every table of :data:`crosssection.core.schema.TABLES` is readable with
-    its schema's columns (a table deleted, emptied or overwritten since, by hand or by a disk
-    that filled up, has the image redone rather than ``stats`` refuse the batch).
+    Done means: its ``summary.json`` records this hash, ``overlay.png`` is there and whole
+    when figures are wanted, and every table of :data:`crosssection.core.schema.TABLES` is
+    readable with its schema's columns and holds the rows the summary counts (a table
+    deleted, emptied, cut short or overwritten since, by hand, by a copy or by a disk that
+    filled up, has the image redone rather than ``stats`` refuse the batch or count what is
+    left).
     """
     summary = _recorded_info(task)
     if summary is None:
@@ -724,9 +828,9 @@ def completed_row(task: ImageTask) -> dict | None:
     info = summary["batch"]
     if info.get("params_hash") != task.params_hash:
         return None
-    if task.figure and not (final / "overlay.png").is_file():
+    if task.figure and _overlay_damage(final) is not None:
         return None
-    if not all(_table_readable(final / f"{name}.csv", name) for name in schema.TABLES):
+    if any(_damaged_tables(final, summary)):
         return None
     row = _row(task, "skipped", summary, wall_s=info.get("wall_s", math.nan))
     row["seed"] = info.get("seed", task.seed)  # the seed the image was analysed with
@@ -783,12 +887,17 @@ def redo_reason(task: ImageTask) -> str | None:
     Returns
     -------
     str or None
-        What differs (:func:`changed_inputs`), else what the folder lacks (a table missing
-        or unreadable, ``overlay.png`` when figures are wanted); None when the folder records
-        no analysis (a new scan) or is complete with the task's parameters hash.
+        What differs (:func:`changed_inputs`), else what the folder lacks (its
+        ``summary.json`` unreadable or missing, a table missing, unreadable or cut short,
+        ``overlay.png`` missing or cut short when figures are wanted); None when there is no
+        output folder (a new scan) or it is complete with the task's parameters hash.
     """
-    if task.error or _recorded_info(task) is None:
+    if task.error:
         return None
+    final = Path(task.out_dir)
+    summary = _recorded_info(task)
+    if summary is None:
+        return _summary_damage(final)
     changed = changed_inputs(task)
     if changed:
         params = [c for c in changed if c not in ("package version",
@@ -802,14 +911,30 @@ def redo_reason(task: ImageTask) -> str | None:
             why.append("its recorded parameters hash differs (the image or calibration file "
                        "changed)")
         return "; ".join(why)
-    final = Path(task.out_dir)
-    lost = [f"{name}.csv" for name in schema.TABLES
-            if not _table_readable(final / f"{name}.csv", name)]
-    if lost:
-        return (f"{', '.join(lost)} in {final} {'is' if len(lost) == 1 else 'are'} missing or "
-                "unreadable")
-    if task.figure and not (final / "overlay.png").is_file():
-        return f"overlay.png in {final} is missing"
+    lost, cut = _damaged_tables(final, summary)
+    why = [f"{', '.join(lost)} in {final} {'is' if len(lost) == 1 else 'are'} missing or "
+           "unreadable"] if lost else []
+    why += [f"{name} in {final} is cut short ({how})" for name, how in cut]
+    if why:
+        return "; ".join(why)
+    if task.figure and (damage := _overlay_damage(final)) is not None:
+        return f"overlay.png in {final} is {damage}"
+    return None
+
+
+def _summary_damage(final: Path) -> str | None:
+    """Why the output folder ``final``, which records no batch analysis, is analysed again:
+    its ``summary.json`` unreadable (cut short, overwritten), written by another command, or
+    missing beside the rest of the folder; None when there is no folder (a new scan)."""
+    path = final / "summary.json"
+    if path.is_file():
+        try:
+            json.loads(path.read_text())
+        except (OSError, ValueError):
+            return f"summary.json in {final} is unreadable (cut short or overwritten)"
+        return f"summary.json in {final} records no analysis of a batch"
+    if final.is_dir():
+        return f"summary.json in {final} is missing"
     return None
 
 
@@ -841,15 +966,129 @@ class BatchWarning(QualityWarning):
 
 
 
+def _write_record(path: Path, write, data) -> None:
+    """Write one of the batch's own records (``write(path, data)``).
+
+    Raises
+    ------
+    OutputError
+        Naming ``path`` and the cause (a full disk): the batch cannot go on without its
+        records, and a re-run resumes from the images' folders.
+    """
+    try:
+        write(path, data)
+    except OSError as exc:
+        why = exc.strerror or " ".join(str(exc).split()) or type(exc).__name__
+        raise OutputError(f"cannot write ({why}); the batch stops: re-run the same command "
+                          "to resume", path) from None
+
+
 def _write_tables(out: Path, rows: dict, tasks: list[ImageTask]):
     ordered = [rows[t.rel] for t in tasks if t.rel in rows]
     index = pd.DataFrame(ordered, columns=INDEX_COLUMNS)
     for c in ("n_junctions", "n_stacks", "n_branches", "n_voids", "seed"):
         index[c] = pd.to_numeric(index[c], errors="coerce").astype("Int64")  # ints, blank if none
-    write_csv(out / "index.csv", index)
+    _write_record(out / "index.csv", write_csv, index)
     failed = index[index["status"] == "failed"][FAILURE_COLUMNS]
-    write_csv(out / "failures.csv", failed)
+    _write_record(out / "failures.csv", write_csv, failed)
     return index
+
+
+#: the file a running batch locks in OUT_DIR (holding its process id), removed when it ends
+LOCK_FILE = ".batch.lock"
+
+
+@contextmanager
+def batch_lock(out: Path):
+    """Hold an exclusive lock on the output folder ``out`` while a batch writes into it.
+
+    Two batches writing into one folder would each remove the other's staging folders as a
+    killed run's, and each write an index of its own. The lock is ``flock`` on
+    :data:`LOCK_FILE`, which the system releases when the process dies: a batch killed
+    (``kill -9``, out of memory) leaves a file that locks nothing, and its re-run goes on. A
+    file system without locks (some network disks), or a platform without ``flock``, runs
+    the batch unlocked.
+
+    Parameters
+    ----------
+    out : Path
+        The output folder (existing).
+
+    Raises
+    ------
+    ParameterError
+        Another batch holds the lock (named by its process id).
+    OutputError
+        The lock file cannot be created.
+    """
+    try:
+        import fcntl
+    except ImportError:
+        yield
+        return
+    path = out / LOCK_FILE
+    while True:
+        try:
+            fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
+        except OSError as exc:
+            raise _cannot_write(exc, path) from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.read(fd, 32).decode("ascii", "replace").strip()
+            os.close(fd)
+            raise ParameterError("another batch is writing into it"
+                                 + (f" (pid {holder})" if holder.isdigit() else "")
+                                 + ": wait for it to end, or give another --out", out) from None
+        except OSError:
+            break  # no locks on this file system
+        # a batch that ends removes the file it locked: a lock taken on that file, now
+        # nameless, would lock nothing, so the file is opened afresh
+        try:
+            if os.fstat(fd).st_ino == os.stat(path).st_ino:
+                break
+        except OSError:
+            pass
+        os.close(fd)
+    try:
+        os.ftruncate(fd, 0)
+        os.write(fd, f"{os.getpid()}\n".encode())
+    except OSError:
+        pass  # only a second batch's message names the process id
+    try:
+        yield
+    finally:
+        try:
+            os.unlink(path)  # before the lock is released (see above)
+        except OSError:
+            pass
+        os.close(fd)
+
+
+def clear_leftovers(out: Path, tasks) -> None:
+    """Remove what killed runs left in the output folder ``out``: the temporary files of the
+    batch's records (:data:`RESERVED_NAMES`) and the staging folders beside the scans'
+    output folders, those of scans skipped as done included (a ``--force`` run killed while
+    it redid one). Called with the batch's lock held (:func:`batch_lock`): no other batch is
+    writing them.
+
+    Parameters
+    ----------
+    out : Path
+    tasks : list of ImageTask
+    """
+    found = temporary_files(out, RESERVED_NAMES)
+    for parent in sorted({Path(t.out_dir).parent for t in tasks}):
+        if parent.is_dir():
+            found.extend(p for p in parent.iterdir() if is_working_folder(p.name))
+    for p in found:
+        try:
+            if p.is_dir() and not p.is_symlink():
+                shutil.rmtree(p, ignore_errors=True)
+            else:
+                p.unlink(missing_ok=True)
+        except OSError:
+            pass  # tried again by the next run
 
 
 def _executor_slots(ex, workers: int) -> int:
@@ -866,7 +1105,9 @@ def check_out_dir(input_dir, out_dir) -> None:
     """Refuse an output folder that a batch of ``input_dir`` must not write into.
 
     ``out_dir`` may be missing (it is created), empty, or hold an earlier batch of the same
-    input folder (which the batch resumes). It may lie inside the input folder.
+    input folder (which the batch resumes). It may lie inside the input folder. The files a
+    batch killed before its first record left (its lock file, the temporary file of a
+    record) count as nothing.
 
     Parameters
     ----------
@@ -893,8 +1134,10 @@ def check_out_dir(input_dir, out_dir) -> None:
         return
     names = sorted(p.name for p in out.iterdir())
     if names:
-        # a file browser's own files do not make a folder someone else's
-        names = [n for n in names if n not in BROWSER_FILES]
+        # a file browser's own files, or what a batch killed before its first record left,
+        # do not make a folder someone else's
+        own = {LOCK_FILE, *(p.name for p in temporary_files(out, RESERVED_NAMES))}
+        names = [n for n in names if n not in BROWSER_FILES and n not in own]
     if names:
         raise ParameterError(f"neither empty nor a batch's output (it holds {names[0]}): give "
                              "a new or empty --out, or the one of an earlier batch of this "
@@ -904,7 +1147,7 @@ def check_out_dir(input_dir, out_dir) -> None:
 def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | None = None,
               seed: int | None = 0, figure: bool = True, cli_params: dict | None = None,
               force: bool = False, progress: bool | None = None, task_fn=None,
-              on_wait=None) -> pd.DataFrame:
+              on_wait=None, signalled=None) -> pd.DataFrame:
     """Analyse every image under ``input_dir`` into ``out_dir`` (see module docstring).
 
     Parameters
@@ -931,6 +1174,12 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
     on_wait : callable, optional
         Told, in one line, that a cluster has no worker yet (see
         :func:`~crosssection.core.parallel.get_executor`).
+    signalled : callable, optional
+        Returns the interrupt the process was sent (an exception to raise), or None
+        (:func:`crosssection.cli.interrupt_received`). Once it returns one, the batch stops
+        with it, and a scan that failed meanwhile is left out of the index, for the re-run:
+        code inside the analysis may catch an interrupt and raise another error in its place
+        (matplotlib does while it draws) or swallow it.
 
     Returns
     -------
@@ -943,8 +1192,12 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
         The input folder does not exist or holds no image.
     ParameterError
         ``out_dir`` holds another input folder's batch or files no batch wrote
-        (:func:`check_out_dir`), or the Dask scheduler cannot be reached. Nothing is
-        written then.
+        (:func:`check_out_dir`), another batch is writing into it (:func:`batch_lock`), or
+        the Dask scheduler cannot be reached. Nothing is written then.
+    OutputError
+        The batch's own records (``index.csv``, ``failures.csv``, ``batch.json``) cannot be
+        written (a full disk): the batch stops, naming the file. The images done so far are
+        in their folders, and a re-run resumes from them.
     ClusterLostError
         The Dask cluster went away during the batch. The images it had are left out of the
         index (neither done nor failed): a re-run analyses them.
@@ -956,39 +1209,46 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
     tasks, sets = plan_batch(input_dir, out, cli_params=cli_params, seed=seed, figure=figure)
     check_out_dir(input_dir, out)
 
-    stale = stale_outputs(out, tasks)
-
-    rows: dict[str, dict] = {}
-    todo, redone = [], []
-    # local worker processes share one numba disk cache: on an empty one, the first to
-    # compile does so for all, the output folder being their lock (a cluster's workers do not
-    # share this disk, and threads must not wait inside numba's compiler)
-    local_pool = scheduler is None and (workers or os.cpu_count() or 1) > 1
-    lock = str(out.resolve()) if local_pool else None
-    for t in tasks:
-        if t.error:
-            rows[t.rel] = _row(t, "failed", reason=t.error)
-            continue
-        done = None if force else completed_row(t)
-        if done is not None:
-            rows[t.rel] = done
-            continue
-        todo.append(replace(t, compile_lock=lock))
-        why = None if force else redo_reason(t)
-        if why:
-            redone.append((t.given or t.image, why))
-
     # the executor before any write: a scheduler that cannot be reached is refused with
     # nothing left behind (an empty batch would read as a finished one)
     pool = ExitStack()
     ex = pool.enter_context(get_executor(workers, scheduler, on_wait=on_wait))
+    held = ExitStack()  # the batch's lock on out, to the end of the run
     try:
+        out.mkdir(parents=True, exist_ok=True)
+        held.enter_context(batch_lock(out))
+        # this batch alone writes into out now: what killed runs left there can go
+        clear_leftovers(out, tasks)
+        stale = stale_outputs(out, tasks)
+        rows: dict[str, dict] = {}
+        todo, redone = [], []
+        # local worker processes share one numba disk cache: on an empty one, the first to
+        # compile does so for all, the output folder being their lock (a cluster's workers do
+        # not share this disk, and threads must not wait inside numba's compiler)
+        local_pool = scheduler is None and (workers or os.cpu_count() or 1) > 1
+        lock = str(out.resolve()) if local_pool else None
+        for t in tasks:
+            if t.error:
+                rows[t.rel] = _row(t, "failed", reason=t.error)
+                continue
+            done = None if force else completed_row(t)
+            if done is not None:
+                rows[t.rel] = done
+                continue
+            todo.append(replace(t, compile_lock=lock))
+            why = None if force else redo_reason(t)
+            if why:
+                redone.append((t.given or t.image, why))
         meta = _start(out, input_dir, tasks, sets, redone, stale, {
             "workers": workers, "scheduler": scheduler, "seed": seed, "figure": figure,
             "force": force, "cli_params": cli_params or {}})
     except BaseException:
+        held.close()
         pool.close()
         raise
+
+    def interrupt():
+        return signalled() if signalled is not None else None
 
     bar = tqdm(total=len(tasks), initial=len(rows), unit="img", desc="batch",
                disable=None if progress is None else not progress,
@@ -996,7 +1256,7 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
     last_write = time.monotonic()
     fn = task_fn or process_image
     queue, suspects = deque(todo), deque()
-    interrupted = False
+    interrupted, stopped = False, False
     try:
         while queue or suspects:
             if ex is None:  # the previous pool broke
@@ -1007,8 +1267,11 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
                 inflight, broken = {}, False
                 while True:
                     # suspects (in flight when a worker died) run alone, so that a death
-                    # names its image for sure; the others fill the free slots
-                    while not broken:
+                    # names its image for sure; the others fill the free slots, until an
+                    # interrupt (the inline executor runs a task as it is submitted: the
+                    # next would start although the interrupt was swallowed)
+                    stop = interrupt()
+                    while not broken and stop is None:
                         if suspects:
                             if inflight:
                                 break
@@ -1022,7 +1285,10 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
                         except (BrokenProcessPool, RuntimeError):
                             (suspects if alone else queue).appendleft(t)
                             broken = True
+                        stop = interrupt()
                     if not inflight:
+                        if stop is not None:
+                            raise stop
                         break
                     done, _ = wait(list(inflight), return_when=FIRST_COMPLETED)
                     lost = None
@@ -1044,10 +1310,17 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
                                        reason="worker process died while analysing this image")
                         except Exception as exc:  # noqa: BLE001 - lost task (cluster error)
                             row = _row(t, "failed", reason=_one_line(exc))
+                        if row["status"] == "failed" and interrupt() is not None:
+                            # the interrupt, caught inside the analysis and raised as another
+                            # error: not the image's failure, left for the re-run
+                            continue
                         rows[t.rel] = row
                         bar.update(1)
                     if lost is not None:
                         raise lost
+                    stop = interrupt()
+                    if stop is not None:  # an interrupt that the analysis swallowed
+                        raise stop
                     if time.monotonic() - last_write > INDEX_EVERY_S:
                         _write_tables(out, rows, tasks)
                         last_write = time.monotonic()
@@ -1055,18 +1328,29 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
     except (KeyboardInterrupt, ClusterLostError):
         # an interrupt landing once every image is done stops nothing: the batch is complete
         if len(rows) < len(tasks):
-            interrupted = True
+            interrupted = stopped = True
             raise
+    except BaseException:
+        stopped = True
+        raise
     finally:
         pool.close()  # the first pool, when no image was left to analyse
         bar.close()
-        index = _write_tables(out, rows, tasks)
-        counts = index["status"].value_counts().to_dict()
-        meta.update(finished=time.strftime("%Y-%m-%dT%H:%M:%S"),
-                    elapsed_s=time.time() - t_start,
-                    counts={k: int(counts.get(k, 0)) for k in ("ok", "skipped", "failed")},
-                    complete=len(index) == len(tasks), interrupted=interrupted)
-        write_json(out / "batch.json", meta)
+        try:
+            index = _write_tables(out, rows, tasks)
+            counts = index["status"].value_counts().to_dict()
+            meta.update(finished=time.strftime("%Y-%m-%dT%H:%M:%S"),
+                        elapsed_s=time.time() - t_start,
+                        counts={k: int(counts.get(k, 0)) for k in ("ok", "skipped", "failed")},
+                        complete=len(index) == len(tasks), interrupted=interrupted)
+            _write_record(out / "batch.json", write_json, meta)
+        except OutputError:
+            # a batch that stops for another reason (an interrupt, the same full disk) is
+            # told by that reason: these records are written where they can be
+            if not stopped:
+                raise
+        finally:
+            held.close()
     return index
 
 
@@ -1120,7 +1404,7 @@ def _start(out: Path, input_dir, tasks, sets, redone: list, stale: list,
                       f"{'' if n > 1 else 'es'} no scan of this batch: {shown} (a scan "
                       f"moved, renamed or deleted, or a set renamed); {they} out of "
                       "index.csv", BatchWarning, stacklevel=3)
-    write_json(out / "batch.json", meta)
+    _write_record(out / "batch.json", write_json, meta)
     return meta
 
 
@@ -1184,11 +1468,14 @@ def run(args) -> int:
     workers, lowered = capped_workers(args.workers, args.scheduler)
     if lowered:
         print(f"warning: {lowered}", file=sys.stderr)
+    from crosssection.cli import interrupt_received
+
     index = run_batch(args.input_dir, args.out, workers=workers, scheduler=args.scheduler,
                       seed=args.seed, figure=not args.no_figure, cli_params=cli_params,
                       force=args.force,
                       progress=False if args.quiet else args.progress,
-                      on_wait=lambda message: print(f"warning: {message}", file=sys.stderr))
+                      on_wait=lambda message: print(f"warning: {message}", file=sys.stderr),
+                      signalled=interrupt_received)
     n = index["status"].value_counts()
     n_failed = int(n.get("failed", 0))
     for _, row in index[index["status"] == "failed"].iterrows():
@@ -1207,4 +1494,5 @@ def run(args) -> int:
 __all__ = ["run_batch", "BatchWarning", "plan_batch", "process_image", "completed_row",
            "changed_inputs", "redo_reason", "stale_outputs", "check_set_names",
            "recorded_outputs", "effective_params", "image_seed", "input_record",
-           "check_out_dir", "find_images", "params_hash", "ImageTask", "add_subparser", "run"]
+           "check_out_dir", "find_images", "params_hash", "ImageTask", "add_subparser", "run",
+           "batch_lock", "clear_leftovers"]

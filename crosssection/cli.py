@@ -63,7 +63,7 @@ def make_parser(prog: str, description: str, subcommands: dict,
 
 
 class Terminated(KeyboardInterrupt):
-    """SIGTERM received while a command runs (:func:`sigterm_as_interrupt`).
+    """SIGTERM received while a command runs (:func:`signals_as_interrupts`).
 
     A ``KeyboardInterrupt``, so that whatever stops cleanly on Ctrl-C (a pool's workers
     terminated, atomic writes left whole, a batch's index written) stops the same way when a
@@ -71,34 +71,73 @@ class Terminated(KeyboardInterrupt):
     """
 
 
-@contextmanager
-def sigterm_as_interrupt():
-    """Raise :class:`Terminated` in the main thread on SIGTERM inside the block.
+#: the signals received by each command running (innermost last): :func:`interrupt_received`
+_RUNNING: list[list[int]] = []
 
-    The handler is the command line's, not the library's: it is installed here, only in the
-    main thread (the only one that may set handlers), and the previous handler is put back on
-    leaving, so that calling ``main(argv)`` in a process leaves its signal handling as it was.
+
+@contextmanager
+def signals_as_interrupts():
+    """Raise :class:`Terminated` in the main thread on SIGTERM inside the block, and record
+    SIGINT as well as SIGTERM (:func:`interrupt_received`).
+
+    SIGINT raises ``KeyboardInterrupt`` as Python's own handler does; it is recorded so that
+    an interrupt that the code running caught and turned into another error (matplotlib
+    does while it draws) or swallowed (one raised inside a garbage collector's callback) is
+    still known. A SIGINT that is ignored (a background job) or handled by the caller is
+    left as it is.
+
+    The handlers are the command line's, not the library's: they are installed here, only
+    in the main thread (the only one that may set handlers), and the previous ones are put
+    back on leaving, so that calling ``main(argv)`` in a process leaves its signal handling
+    as it was.
 
     Yields
     ------
     list
-        The signal numbers received (empty unless SIGTERM arrived).
+        The signal numbers received (empty unless SIGINT or SIGTERM arrived).
     """
     received = []
     if threading.current_thread() is not threading.main_thread():
         yield received
         return
 
-    def handler(signum, frame):
+    def on_term(signum, frame):
         received.append(signum)
         raise Terminated()
 
-    previous = signal.signal(signal.SIGTERM, handler)
+    def on_int(signum, frame):
+        received.append(signum)
+        raise KeyboardInterrupt
+
+    previous = {signal.SIGTERM: signal.signal(signal.SIGTERM, on_term)}
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        previous[signal.SIGINT] = signal.signal(signal.SIGINT, on_int)
+    _RUNNING.append(received)
     try:
         yield received
     finally:
-        # None: a handler set outside Python, which cannot be put back; the default is closest
-        signal.signal(signal.SIGTERM, signal.SIG_DFL if previous is None else previous)
+        del _RUNNING[next(i for i, r in enumerate(_RUNNING) if r is received)]
+        for signum, handler in previous.items():
+            # None: a handler set outside Python, which cannot be put back; the default is
+            # closest
+            signal.signal(signum, signal.SIG_DFL if handler is None else handler)
+
+
+def interrupt_received() -> KeyboardInterrupt | None:
+    """The interrupt the running command was sent, or None.
+
+    Returns
+    -------
+    KeyboardInterrupt or None
+        :class:`Terminated` after a SIGTERM, ``KeyboardInterrupt`` after a SIGINT, None
+        before either (or outside :func:`signals_as_interrupts`). A new exception at each
+        call, to be raised by a caller that found the interrupt caught by the code it ran.
+    """
+    # a command run inside another leaves SIGINT to the outer one's handler
+    received = [signum for signals in _RUNNING for signum in signals]
+    if signal.SIGTERM in received:
+        return Terminated()
+    return KeyboardInterrupt() if received else None
 
 
 def run_parsed(parser: argparse.ArgumentParser, argv=None) -> int:
@@ -110,10 +149,11 @@ def run_parsed(parser: argparse.ArgumentParser, argv=None) -> int:
     (one line, never a traceback). Quality warnings are printed as ``warning: FILE: ...``
     lines on stderr.
     """
-    with sigterm_as_interrupt() as received:
+    with signals_as_interrupts() as received:
         status = _run_parsed(parser, argv)
         # a command that reports its own interrupt (stats) returns INTERRUPTED
-        return TERMINATED if received and status == INTERRUPTED else status
+        return (TERMINATED if signal.SIGTERM in received and status == INTERRUPTED
+                else status)
 
 
 def _run_parsed(parser: argparse.ArgumentParser, argv=None) -> int:

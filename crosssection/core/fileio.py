@@ -4,6 +4,7 @@ A re-run never sees a half-written file: either the old one or the complete new 
 """
 from __future__ import annotations
 
+import errno
 import json
 import os
 import shutil
@@ -30,6 +31,10 @@ OLD_TAG = ".old-"
 #: files that file browsers leave in the folders they show: no output folder counts them as
 #: content of its own or of another's
 BROWSER_FILES = frozenset({".DS_Store", "Thumbs.db", "desktop.ini"})
+#: errors of a write that name no file (a full disk or quota, a disk failing): raised inside
+#: :func:`atomic_path`, they are the temporary file's
+_WRITE_ERRNOS = frozenset(e for e in (errno.ENOSPC, getattr(errno, "EDQUOT", None),
+                                      errno.EFBIG, errno.EIO) if e is not None)
 
 
 @contextmanager
@@ -65,7 +70,7 @@ def atomic_path(path, suffix=None):
     except OSError as exc:
         named = {os.fsdecode(n) for n in (exc.filename, exc.filename2)
                  if isinstance(n, (str, bytes, os.PathLike))}
-        if str(tmp) not in named:
+        if str(tmp) not in named and (named or exc.errno not in _WRITE_ERRNOS):
             raise  # about another file: the writer's own error
         raise _renamed(exc, path) from None
     finally:
@@ -263,6 +268,37 @@ def clear_stale_folders(final) -> None:
                     shutil.rmtree(p, ignore_errors=True)
                 else:
                     p.unlink(missing_ok=True)
+
+
+def temporary_files(folder, names) -> list[Path]:
+    """The temporary files that :func:`atomic_path` writes of ``names`` in ``folder``
+    (``.<name>.XXXX<suffix>``): only a process killed while writing one leaves it behind.
+
+    Parameters
+    ----------
+    folder : str or Path
+    names : iterable of str
+        File names (``index.csv``).
+
+    Returns
+    -------
+    list of Path
+        Sorted; empty when ``folder`` does not exist.
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        return []
+    found = set()
+    for name in names:
+        suffix = Path(name).suffix or ".tmp"
+        found.update(p for p in folder.glob(f".{name}.*{suffix}") if p.is_file())
+    return sorted(found)
+
+
+def is_working_folder(name: str) -> bool:
+    """Whether ``name`` is one of the hidden working folders of :func:`staging_folder` and
+    :func:`swap_in_folder` (``.<name>.partial-*``, ``.<name>.old-*``)."""
+    return name.startswith(".") and (PARTIAL_TAG in name or OLD_TAG in name)
 
 
 def swap_in_folder(stage, final) -> None:

@@ -102,7 +102,8 @@ class FlaggedScanWarning(QualityWarning):
 
 
 class IncompleteBatchWarning(QualityWarning):
-    """A batch output that did not finish: its statistics are those of the images done."""
+    """A batch output that did not finish, or that could not analyse some of its images
+    (``failures.csv``): its statistics are those of the images done."""
 
 
 def _folder(folder, name: str = "folder") -> Path:
@@ -858,6 +859,29 @@ def _check_finished(folder: Path, n_found: int) -> str:
     return note
 
 
+def _check_failures(folder: Path) -> None:
+    """Warn when the batch's ``failures.csv`` lists images: the batch could not analyse
+    them, and the statistics leave them out (a re-run of the batch tries them again)."""
+    path = folder / "failures.csv"
+    try:
+        rows = list(csv.reader(io.StringIO(path.read_text(encoding="utf-8"), newline="")))
+    except (OSError, UnicodeDecodeError, csv.Error):
+        return  # none, or unreadable: index.csv already says which images are done
+    n = sum(1 for row in rows[1:] if any(cell.strip() for cell in row))
+    if not n:
+        return
+    try:
+        total = json.loads((folder / "batch.json").read_text(encoding="utf-8"))["n_images"]
+    except (OSError, ValueError, TypeError, KeyError):
+        total = None
+    of = (f" of {total}" if isinstance(total, int) and not isinstance(total, bool)
+          and total >= n else "")
+    one = n == 1
+    warnings.warn(f"{path}: {n}{of} images {'was' if one else 'were'} not analysed and "
+                  f"{'is' if one else 'are'} not in the statistics", IncompleteBatchWarning,
+                  stacklevel=3)
+
+
 def load_batch(folder, *, l_min_mm=RECORDED, s_min_mm2=RECORDED) -> Ensemble:
     """Read every per-image folder of a batch output.
 
@@ -866,7 +890,8 @@ def load_batch(folder, *, l_min_mm=RECORDED, s_min_mm2=RECORDED) -> Ensemble:
     directly under ``folder`` belongs to the set named after ``folder``. Folders without a
     ``summary.json`` (unfinished or failed images, see ``failures.csv``) are skipped.
     Doubtful inputs that are still used give a :class:`~crosssection.quality.QualityWarning`
-    naming the file: a ``batch.json`` that does not mark the batch complete, a line of
+    naming the file: a ``batch.json`` that does not mark the batch complete, images that
+    ``failures.csv`` lists (the batch could not analyse them), a line of
     ``index.csv`` that cannot be parsed, a table shorter or longer than its ``summary.json``
     says, scans the analysis flagged (one :class:`FlaggedScanWarning` per scan, or per set
     when many) and a detection limit given below the analysis' own (one
@@ -901,6 +926,7 @@ def load_batch(folder, *, l_min_mm=RECORDED, s_min_mm2=RECORDED) -> Ensemble:
     if not parts:
         raise ConfigError("batch output holds no finished image (no */summary.json)", folder)
     note = _check_finished(folder, len(found))
+    _check_failures(folder)
     ens = Ensemble.concat(parts)
     ens.configs["batch_note"] = f"{folder / 'batch.json'}: {note}" if note else ""
     warn_flagged(ens, stacklevel=2)

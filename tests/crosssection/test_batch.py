@@ -416,3 +416,69 @@ def test_every_format_analyze_reads_is_a_scan_of_a_batch(tmp_path):
     tasks, _ = B.plan_batch(inp, tmp_path / "out", seed=0)
     assert sorted(Path(t.rel).suffix for t in tasks) == sorted(B.IMAGE_SUFFIXES)
     assert {".bmp", ".webp"} <= set(B.IMAGE_SUFFIXES)
+
+
+def _recorded_folder(tmp_path, rows: int = 4):
+    """A planned scan whose output folder looks complete: a summary counting ``rows`` rows of
+    every table, and the four tables holding them (the analysis is not run)."""
+    from crosssection.core.schema import TABLES
+
+    inp = tmp_path / "in"
+    inp.mkdir()
+    (inp / "a.png").write_bytes(b"\x89PNG")
+    (task,), _ = B.plan_batch(inp, tmp_path / "out", figure=False)
+    folder = Path(task.out_dir)
+    folder.mkdir(parents=True)
+    (folder / "summary.json").write_text(json.dumps({
+        "n_junctions": rows, "n_stacks": rows, "n_branches": rows, "n_voids": rows,
+        "batch": {"params_hash": task.params_hash}}))
+    for name, columns in TABLES.items():
+        lines = [",".join(columns)] + [",".join(["1"] * len(columns))] * rows
+        (folder / f"{name}.csv").write_text("\n".join(lines) + "\n")
+    return task, folder
+
+
+@pytest.mark.parametrize("cut, said", [
+    (lambda text: text[:text.index("\n") + 1], "0 of the 4 rows summary.json counts"),
+    (lambda text: text[:-2], "3 of the 4 rows summary.json counts, its last line cut off"),
+    (lambda text: text[:text.index("\n", text.index("\n") + 1) + 3],
+     "1 of the 4 rows summary.json counts, its last line cut off")])
+def test_resume_redoes_a_scan_whose_table_was_cut_short(tmp_path, cut, said):
+    """A table whose header is whole but whose rows were cut (a copy or a full disk that
+    stopped mid-file) is redone, and the reason names it; its lines are counted against the
+    summary's counts."""
+    task, folder = _recorded_folder(tmp_path)
+    assert B.completed_row(task)["status"] == "skipped" and B.redo_reason(task) is None
+    table = folder / "voids.csv"
+    table.write_text(cut(table.read_text()))
+    assert B.completed_row(task) is None
+    assert B.redo_reason(task) == f"voids.csv in {folder} is cut short ({said})"
+
+
+def test_resume_redoes_a_scan_whose_summary_was_cut_short_and_says_so(tmp_path):
+    task, folder = _recorded_folder(tmp_path)
+    text = (folder / "summary.json").read_text()
+    (folder / "summary.json").write_text(text[:len(text) // 2])
+    assert B.completed_row(task) is None
+    assert B.redo_reason(task) == (f"summary.json in {folder} is unreadable (cut short or "
+                                   "overwritten)")
+    (folder / "summary.json").unlink()
+    assert B.redo_reason(task) == f"summary.json in {folder} is missing"
+    shutil.rmtree(folder)
+    assert B.redo_reason(task) is None  # a scan never analysed
+
+
+def test_resume_redoes_a_scan_whose_overlay_was_cut_short(tmp_path):
+    task, folder = _recorded_folder(tmp_path)
+    from dataclasses import replace
+
+    from crosssection.testing import drawn_scan
+
+    task = replace(task, figure=True)
+
+    save_png(folder / "overlay.png", drawn_scan(1)[:40, :40])
+    assert B.completed_row(task) is not None
+    data = (folder / "overlay.png").read_bytes()
+    (folder / "overlay.png").write_bytes(data[:len(data) // 2])
+    assert B.completed_row(task) is None
+    assert B.redo_reason(task) == f"overlay.png in {folder} is cut short"

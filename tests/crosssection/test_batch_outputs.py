@@ -498,3 +498,118 @@ def test_an_interrupt_after_the_last_image_finishes_the_batch(tmp_path, monkeypa
             B.run_batch(inp, out, workers=1, progress=False, task_fn=_quick)
     meta = json.loads((out / "batch.json").read_text())
     assert meta["complete"] is complete and meta["interrupted"] is not complete
+
+
+# ----------------------------------------------------------------------------- full disk, leftovers
+
+
+def test_a_batch_whose_records_cannot_be_written_stops_naming_the_file(tmp_path, capsys,
+                                                                       monkeypatch):
+    """A disk that fills up under index.csv stops the batch in one line naming the file (not
+    "output"); the scans done are in their folders, and the re-run resumes from them."""
+    import errno
+
+    from crosssection.core import fileio
+
+    inp, out = _scans(tmp_path / "in", n=2), tmp_path / "out"
+    real = B.write_csv
+
+    def full(path, df):
+        if Path(path).name == "index.csv":
+            with fileio.atomic_path(path):
+                raise OSError(errno.ENOSPC, "No space left on device")  # as a write raises it
+        return real(path, df)
+
+    monkeypatch.setattr(B, "INDEX_EVERY_S", -1.0)
+    monkeypatch.setattr(B, "write_csv", full)
+    status, err = _batch(capsys, inp, out)
+    assert status == 2
+    assert err == [f"error: {out / 'index.csv'}: cannot write (No space left on device); the "
+                   "batch stops: re-run the same command to resume"]
+    assert json.loads((out / "batch.json").read_text()).get("complete") is not True
+    monkeypatch.setattr(B, "write_csv", real)  # room again
+    status, err = _batch(capsys, inp, out)
+    assert status == 0 and _notices(err) == []
+    assert set(pd.read_csv(out / "index.csv")["status"]) == {"skipped"}
+
+
+def test_a_scan_that_cannot_be_written_is_named_by_its_output_folder(tmp_path, capsys,
+                                                                     monkeypatch):
+    """A scan whose table cannot be written fails naming the table in its output folder, not
+    in the hidden staging folder it was written into (which is gone)."""
+    import errno
+
+    inp, out = _scans(tmp_path / "in"), tmp_path / "out"
+    real = pd.DataFrame.to_csv
+
+    def full(self, path=None, *args, **kwargs):
+        if B.PARTIAL_TAG in str(path):
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(self, path, *args, **kwargs)
+
+    monkeypatch.setattr(pd.DataFrame, "to_csv", full)
+    status, err = _batch(capsys, inp, out)
+    assert status == 3
+    folder = (out / "default" / "s0").resolve()
+    assert _notices(err)[0] == (f"warning: {inp / 's0.png'}: not analysed: "
+                                f"{folder / 'junctions.csv'}: cannot write (No space left on "
+                                "device)")
+    assert B.PARTIAL_TAG not in (out / "failures.csv").read_text()
+
+
+def test_a_rerun_removes_what_killed_runs_left(tmp_path, capsys):
+    """Staging folders (beside a scan the re-run skips as done, left by a killed --force
+    run) and the temporary files of the batch's records are removed; such files alone do
+    not make a folder someone else's."""
+    from crosssection.testing import partial_outputs
+
+    inp, out = _scans(tmp_path / "in"), tmp_path / "out"
+    assert _batch(capsys, inp, out)[0] == 0
+    staging = out / "default" / f".s0{B.PARTIAL_TAG}x1y2z3ab"
+    staging.mkdir()
+    (staging / ".overlay.png.k3j2l1ab.png").write_bytes(b"\x89PNG")
+    for name in (".index.csv.abcd1234.csv", ".failures.csv.abcd1234.csv",
+                 ".batch.json.k3j2l1ab.json"):
+        (out / name).write_text("half")
+    status, err = _batch(capsys, inp, out)
+    assert status == 0 and _notices(err) == []
+    assert pd.read_csv(out / "index.csv")["status"].tolist() == ["skipped"]
+    assert partial_outputs(out) == []
+    # a batch killed before it wrote its first record
+    fresh = tmp_path / "fresh"
+    fresh.mkdir()
+    (fresh / ".batch.json.k3j2l1ab.json").write_text("{")
+    B.run_batch(inp, fresh, workers=1, progress=False, figure=False, task_fn=_quick)
+    assert partial_outputs(fresh) == []
+
+
+def test_a_second_batch_into_the_same_folder_is_refused(tmp_path, capsys):
+    """While a batch writes into OUT_DIR, another is refused before it writes anything; the
+    lock file left by a killed batch locks nothing."""
+    inp, out = _scans(tmp_path / "in"), tmp_path / "out"
+    out.mkdir()
+    with B.batch_lock(out):
+        status, err = _batch(capsys, inp, out)
+        assert status == 2
+        assert err == [f"error: {out}: another batch is writing into it (pid {os.getpid()}): "
+                       "wait for it to end, or give another --out"]
+        assert [p.name for p in out.iterdir()] == [B.LOCK_FILE]
+    assert list(out.iterdir()) == []  # the lock file goes with the batch
+    (out / B.LOCK_FILE).write_text("4194303\n")  # a batch killed with SIGKILL
+    status, err = _batch(capsys, inp, out)
+    assert status == 0 and _notices(err) == []
+    assert not (out / B.LOCK_FILE).exists()
+
+
+@pytest.mark.filterwarnings("ignore::crosssection.stats.data.FlaggedScanWarning")
+def test_stats_names_the_images_a_batch_could_not_analyse(tmp_path, capsys):
+    from crosssection.stats.data import IncompleteBatchWarning, load_batch
+
+    inp, out = _scans(tmp_path / "in"), tmp_path / "out"
+    (inp / "corrupt.png").write_bytes(b"\x89PNG garbage")
+    assert _batch(capsys, inp, out)[0] == B.EXIT_SOME_FAILED
+    with pytest.warns(IncompleteBatchWarning) as caught:
+        load_batch(out)
+    said = [str(w.message) for w in caught if w.category is IncompleteBatchWarning]
+    assert said == [f"{out / 'failures.csv'}: 1 of 2 images was not analysed and is not in "
+                    "the statistics"]

@@ -137,3 +137,44 @@ def test_an_interrupt_while_python_m_imports_is_one_line(package):
                           cwd=repo, timeout=120)
     assert proc.returncode == 130
     assert proc.stderr.strip().splitlines() == ["error: interrupted before the command started"]
+
+
+@pytest.mark.parametrize("swallowed", [False, True])
+@pytest.mark.parametrize("sig, status, word", [(signal.SIGINT, 130, "interrupted"),
+                                               (signal.SIGTERM, 143, "terminated")])
+def test_an_interrupt_the_analysis_catches_still_stops_the_batch(tmp_path, monkeypatch, capsys,
+                                                                 sig, status, word, swallowed):
+    """An interrupt that lands in a scan run inline and that the analysis catches (matplotlib
+    raises another error in its place while it draws; one raised in a garbage collector's
+    callback is swallowed) stops the batch all the same, and that scan is not recorded as
+    failed: the re-run analyses it."""
+    from PIL import Image
+
+    from crosssection import batch
+    from crosssection.cli import main
+
+    inp, out = tmp_path / "in", tmp_path / "out"
+    inp.mkdir()
+    for i in range(3):
+        Image.fromarray(np.zeros((8, 8, 3), np.uint8)).save(inp / f"a{i}.png")
+    ran = []
+
+    def caught(task):
+        ran.append(task.rel)
+        try:
+            signal.raise_signal(sig)
+        except KeyboardInterrupt:
+            if swallowed:
+                return batch._row(task, "ok")
+            return batch._row(task, "failed", reason="unexpected ValueError: Invalid bounding "
+                                                     "box (at backend_agg.py:196)")
+        return batch._row(task, "ok")
+
+    monkeypatch.setattr(batch, "process_image", caught)
+    assert main(["batch", str(inp), "--out", str(out), "--workers", "1", "--quiet"]) == status
+    assert capsys.readouterr().err == f"error: {word} (re-run the same command to resume)\n"
+    assert ran == ["a0.png"]  # no scan started after the interrupt
+    assert pd.read_csv(out / "failures.csv").empty
+    index = pd.read_csv(out / "index.csv")
+    assert index["image"].tolist() == (["a0.png"] if swallowed else [])
+    assert json.loads((out / "batch.json").read_text())["interrupted"] is True

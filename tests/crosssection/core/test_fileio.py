@@ -46,3 +46,30 @@ def test_the_command_line_names_the_output(tmp_path, capsys):
                  "--thickness-mm", "0.1", "--no-figure"]) == 2
     err = capsys.readouterr().err
     assert err == f"error: {out / 'stacks.csv'}: cannot write (Is a directory)\n"
+
+
+@pytest.mark.parametrize("code", [errno.ENOSPC, errno.EIO])
+def test_a_full_disk_names_the_output(tmp_path, code):
+    """A write that fails for lack of room raises an error naming no file (from the write or
+    the close of the temporary file): it is the output's."""
+    target = tmp_path / "index.csv"
+    with pytest.raises(OSError) as info:
+        with fileio.atomic_path(target):
+            raise OSError(code, "No space left on device")
+    assert info.value.errno == code and info.value.filename == str(target)
+    assert list(tmp_path.iterdir()) == []
+    # any other error naming no file is the writer's own, left as it is
+    with pytest.raises(OSError) as info:
+        with fileio.atomic_path(target):
+            raise OSError(errno.EINVAL, "Invalid argument")
+    assert info.value.filename is None
+
+
+def test_the_temporary_files_of_atomic_writes_are_found(tmp_path):
+    (tmp_path / ".index.csv.ab12cd34.csv").write_text("half")
+    (tmp_path / ".batch.json.k3j2l1ab.json").write_text("{")
+    (tmp_path / ".index.csv.ab12cd34.json").write_text("not one")
+    (tmp_path / "index.csv").write_text("whole")
+    assert [p.name for p in fileio.temporary_files(tmp_path, ["index.csv", "batch.json"])] == [
+        ".batch.json.k3j2l1ab.json", ".index.csv.ab12cd34.csv"]
+    assert fileio.temporary_files(tmp_path / "none", ["index.csv"]) == []
