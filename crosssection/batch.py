@@ -966,6 +966,12 @@ class BatchWarning(QualityWarning):
 
 
 
+def _warning_line(text: str) -> None:
+    """``warning: text`` on stderr as one line (a file name holding a line break
+    included), as the command line prints the analysis' warnings."""
+    print(f"warning: {' '.join(text.split())}", file=sys.stderr)
+
+
 def _write_record(path: Path, write, data) -> None:
     """Write one of the batch's own records (``write(path, data)``).
 
@@ -1479,12 +1485,16 @@ def run(args) -> int:
     n = index["status"].value_counts()
     n_failed = int(n.get("failed", 0))
     for _, row in index[index["status"] == "failed"].iterrows():
-        print(f"warning: {Path(args.input_dir) / row['image']}: not analysed: {row['reason']}",
-              file=sys.stderr)
+        shown = Path(args.input_dir) / row["image"]
+        reason = str(row["reason"])
+        # the reason names the scan by its full path: said once, at the start of the line
+        full = f"{(Path(args.input_dir) / row['image']).absolute()}: "
+        reason = reason[len(full):] if reason.startswith(full) else reason
+        _warning_line(f"{shown}: not analysed: {reason}")
     for _, row in index[index["quality"].fillna("") != ""].iterrows():
-        print(f"warning: {Path(args.input_dir) / row['image']}: doubtful results "
-              f"({row['quality'].replace(';', ', ')}; see "
-              f"{Path(args.out) / row['output'] / 'summary.json'})", file=sys.stderr)
+        _warning_line(f"{Path(args.input_dir) / row['image']}: doubtful results "
+                      f"({row['quality'].replace(';', ', ')}; see "
+                      f"{Path(args.out) / row['output'] / 'summary.json'})")
     print(f"batch: {len(index)} images: {int(n.get('ok', 0))} done, "
           f"{int(n.get('skipped', 0))} skipped, {n_failed} failed"
           + (f" (see {Path(args.out) / 'failures.csv'})" if n_failed else ""))

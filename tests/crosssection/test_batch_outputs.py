@@ -613,3 +613,14 @@ def test_stats_names_the_images_a_batch_could_not_analyse(tmp_path, capsys):
     said = [str(w.message) for w in caught if w.category is IncompleteBatchWarning]
     assert said == [f"{out / 'failures.csv'}: 1 of 2 images was not analysed and is not in "
                     "the statistics"]
+
+
+def test_warning_lines_stay_one_line_and_name_the_scan_once(tmp_path, capsys):
+    inp = _scans(tmp_path / "in", n=1)
+    (inp / "s0.png").rename(inp / "new\nline.png")
+    (inp / "bad.png").write_bytes(b"x")
+    status, err = _batch(capsys, inp, tmp_path / "out")
+    assert status == B.EXIT_SOME_FAILED
+    assert all(line.startswith("warning: ") for line in err), err
+    (bad,) = [line for line in err if "bad.png" in line]
+    assert bad.count("bad.png") == 1 and ": not analysed: not an image file" in bad
