@@ -859,17 +859,23 @@ def _check_finished(folder: Path, n_found: int) -> str:
     return note
 
 
-def _check_failures(folder: Path) -> None:
+def _check_failures(folder: Path) -> str:
     """Warn when the batch's ``failures.csv`` lists images: the batch could not analyse
-    them, and the statistics leave them out (a re-run of the batch tries them again)."""
+    them, and the statistics leave them out (a re-run of the batch tries them again).
+
+    Returns
+    -------
+    str
+        The ``failures.csv: ...`` sentence the report records, "" when none failed.
+    """
     path = folder / "failures.csv"
     try:
         rows = list(csv.reader(io.StringIO(path.read_text(encoding="utf-8"), newline="")))
     except (OSError, UnicodeDecodeError, csv.Error):
-        return  # none, or unreadable: index.csv already says which images are done
+        return ""  # none, or unreadable: index.csv already says which images are done
     n = sum(1 for row in rows[1:] if any(cell.strip() for cell in row))
     if not n:
-        return
+        return ""
     try:
         total = json.loads((folder / "batch.json").read_text(encoding="utf-8"))["n_images"]
     except (OSError, ValueError, TypeError, KeyError):
@@ -877,9 +883,10 @@ def _check_failures(folder: Path) -> None:
     of = (f" of {total}" if isinstance(total, int) and not isinstance(total, bool)
           and total >= n else "")
     one = n == 1
-    warnings.warn(f"{path}: {n}{of} images {'was' if one else 'were'} not analysed and "
-                  f"{'is' if one else 'are'} not in the statistics", IncompleteBatchWarning,
-                  stacklevel=3)
+    text = (f"{path}: {n}{of} images {'was' if one else 'were'} not analysed and "
+            f"{'is' if one else 'are'} not in the statistics")
+    warnings.warn(text, IncompleteBatchWarning, stacklevel=3)
+    return text
 
 
 def load_batch(folder, *, l_min_mm=RECORDED, s_min_mm2=RECORDED) -> Ensemble:
@@ -906,7 +913,8 @@ def load_batch(folder, *, l_min_mm=RECORDED, s_min_mm2=RECORDED) -> Ensemble:
     Returns
     -------
     Ensemble
-        An unfinished batch says so in the ``batch_note`` of its configurations.
+        An unfinished batch, and one whose ``failures.csv`` lists images, say so in the
+        ``batch_note`` of its configurations (the report names them).
 
     Raises
     ------
@@ -926,9 +934,10 @@ def load_batch(folder, *, l_min_mm=RECORDED, s_min_mm2=RECORDED) -> Ensemble:
     if not parts:
         raise ConfigError("batch output holds no finished image (no */summary.json)", folder)
     note = _check_finished(folder, len(found))
-    _check_failures(folder)
+    failed = _check_failures(folder)
     ens = Ensemble.concat(parts)
-    ens.configs["batch_note"] = f"{folder / 'batch.json'}: {note}" if note else ""
+    ens.configs["batch_note"] = "; ".join(
+        ([f"{folder / 'batch.json'}: {note}"] if note else []) + ([failed] if failed else []))
     warn_flagged(ens, stacklevel=2)
     warn_limits_below(ens, folder, stacklevel=2)
     return ens

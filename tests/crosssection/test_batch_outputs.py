@@ -609,10 +609,14 @@ def test_stats_names_the_images_a_batch_could_not_analyse(tmp_path, capsys):
     (inp / "corrupt.png").write_bytes(b"\x89PNG garbage")
     assert _batch(capsys, inp, out)[0] == B.EXIT_SOME_FAILED
     with pytest.warns(IncompleteBatchWarning) as caught:
-        load_batch(out)
+        ens = load_batch(out)
     said = [str(w.message) for w in caught if w.category is IncompleteBatchWarning]
     assert said == [f"{out / 'failures.csv'}: 1 of 2 images was not analysed and is not in "
                     "the statistics"]
+    # the report says it too, beside the unfinished batches
+    from crosssection.stats.report import incomplete_batches
+
+    assert incomplete_batches(ens) == said
 
 
 def test_warning_lines_stay_one_line_and_name_the_scan_once(tmp_path, capsys):
