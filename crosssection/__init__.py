@@ -26,6 +26,9 @@ _LAZY = {
     "OutputError": "crosssection.core.errors",
 }
 
+#: submodules the README names as ``crosssection.<name>.<function>``, imported on first use
+_SUBMODULES = ("samples", "stats", "tables", "testing", "truth")
+
 __all__ = ["__version__", *_LAZY]
 
 
@@ -34,6 +37,8 @@ def __getattr__(name):
         value = getattr(importlib.import_module(_LAZY[name]), name)
         globals()[name] = value
         return value
+    if name in _SUBMODULES:
+        return importlib.import_module(f"crosssection.{name}")
     raise AttributeError(f"module 'crosssection' has no attribute {name!r}")
 
 

@@ -1785,8 +1785,11 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
     gap_px : float
         Smallest visible gap between passes farther apart than delta.
     max_size_px : int
-        Largest image side when ``rod_length_mm`` is chosen here from the gap: a soft cap
-        (a warning when it cannot be kept; the hard limit is :data:`MAX_SCENE_PX`).
+        Largest side of the rod's drawing when ``rod_length_mm`` is chosen here from the gap:
+        a soft cap (a warning when it cannot be kept; the hard limit is
+        :data:`MAX_SCENE_PX`). The hole around the rod and its margins widen the image
+        beyond it (a default render of a quench at the paper's parameters: 3022 x 2080 px
+        under the default 2500).
     hole_radius_mm : float, "auto" or None
         Draw a hard-wall disk of this radius centred on the wall's centre, or without a wall on
         the rod's centre of mass (stacks touching it are "periphery"); ``"auto"``: the wall,

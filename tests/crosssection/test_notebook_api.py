@@ -84,3 +84,17 @@ def test_the_widths_plot_names_its_line_by_whether_a_calibration_was_given(resul
     bare = type(result)(**{**vars(result),
                            "params": dataclasses.replace(result.params, calibration=None)})
     assert "no calibration: w = n h" in legend(bare) and "calibration w(n)" not in legend(bare)
+
+
+def test_the_submodules_the_readme_names_load_on_first_use():
+    import subprocess
+    import sys
+
+    # a fresh interpreter: earlier tests have imported the submodules already
+    code = ("import crosssection; "
+            "print(crosssection.samples.copy_samples.__name__, "
+            "crosssection.tables.network_graph.__name__)")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split() == ["copy_samples", "network_graph"]
