@@ -73,6 +73,11 @@ def dim_image(rgb, amount=0.55) -> np.ndarray:
 HOLE_VIEW_MARGIN = 0.08
 
 
+#: File stems that say nothing of the scan (a scene folder's image.png): the overlay's title
+#: names the folder too
+GENERIC_STEMS = frozenset({"image", "scan", "img"})
+
+
 def overlay_window(shape, hole=None) -> tuple[int, int, int, int]:
     """The part of the scan an overlay shows, ``(row0, row1, col0, col1)`` (end exclusive):
     the hole's square widened by :data:`HOLE_VIEW_MARGIN` of its radius, within the scan; the
@@ -168,9 +173,13 @@ def overlay_figure(rgb, result=None, *, junctions_df=None, stacks_df=None, paths
     view = (r1 - r0, c1 - c0)
     # the counts in the title are known after drawing: the header is sized for the longest
     # counts a scan can have
-    n_items = 4 if len(_step_points(result)) else 3
+    n_items = 6 if len(_step_points(result)) else 5
     path = _get(result, "path")
-    head = title or ((f"{Path(path).name}: " if path else "") + "stacks: width and label = n_br")
+    # a scan named generically (image.png of a scene folder) is named with its folder
+    shown = (f"{Path(path).parent.name}/{Path(path).name}"
+             if path and Path(path).stem.lower() in GENERIC_STEMS and Path(path).parent.name
+             else Path(path).name if path else "")
+    head = title or ((f"{shown}: " if shown else "") + "stacks: width and label = n_br")
     wide = f"{head}   (00000 junctions, 00000 stacks, 000000 branches)"
     _, _, header_in = _overlay_header(wide, n_items, _figure_width_in(view))
     fig = _figure(view, header_in=header_in)
@@ -179,12 +188,19 @@ def overlay_figure(rgb, result=None, *, junctions_df=None, stacks_df=None, paths
         ax, img, result, junctions_df=junctions_df, stacks_df=stacks_df, paths=paths,
         hole=hole, thickness_px=thickness_px, label_min_px=label_min_px,
         max_labels=max_labels)
-    handles = [Line2D([], [], color=BULK_COLOR, lw=3, label="bulk"),
-               Line2D([], [], color=PERIPHERY_COLOR, lw=3, label="periphery"),
-               Line2D([], [], marker="o", mfc="none", mec="black", ls="none", label="junction")]
+    st = stacks_df if stacks_df is not None else _get(result, "stacks")
+    regions = set(st["region"]) if st is not None and "region" in st else {"bulk", "periphery"}
+    # only what the figure shows: a scan without a periphery stack has no red in it
+    handles = [Line2D([], [], color=c, lw=3, label=r)
+               for r, c in (("bulk", BULK_COLOR), ("periphery", PERIPHERY_COLOR))
+               if r in regions]
+    handles.append(Line2D([], [], marker="o", mfc="none", mec="black", ls="none",
+                          label="junction"))
     if len(_step_points(result)):
         handles.append(Line2D([], [], marker="D", mfc="white", mec="black", ls="none",
                               label="layer step"))
+    if (hole if hole is not None else _get(result, "hole")) is not None:
+        handles.append(Line2D([], [], color="0.25", ls="--", lw=1.2, label="hole"))
     px_per_mm = getattr(_get(result, "params"), "px_per_mm", None)
     if px_per_mm:
         _scale_bar(ax, float(px_per_mm), view[1])

@@ -213,3 +213,23 @@ def test_the_overlay_of_a_result_names_its_scan_and_draws_a_scale_bar():
     assert label.endswith(" mm") and 0.08 <= mm * res.params.px_per_mm / (c1 - c0) <= 0.2
     assert res.path is not None and overlay_figure(res.rgb)._suptitle.get_text().startswith(
         "stacks")
+
+
+def test_the_legend_holds_what_the_overlay_draws_and_a_generic_name_its_folder(tmp_path):
+    import shutil
+    from pathlib import Path
+
+    from crosssection import analyze
+
+    scan = Path(__file__).resolve().parents[2] / "sample_images" / "scan_01_sparse.png"
+    (tmp_path / "scene_7").mkdir()
+    copy = shutil.copy(scan, tmp_path / "scene_7" / "image.png")
+    res = analyze(copy, calibration=scan.parent / "calibration.csv", warn=False)
+    fig = overlay_figure(res.rgb, res)
+    labels = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert "hole" in labels and "junction" in labels
+    assert ("periphery" in labels) == ("periphery" in set(res.stacks["region"]))
+    assert fig._suptitle.get_text().startswith("scene_7/image.png: stacks")
+    bulk_only = res.stacks.assign(region="bulk")
+    fig = overlay_figure(res.rgb, res, stacks_df=bulk_only)
+    assert "periphery" not in [t.get_text() for t in fig.legends[0].get_texts()]
