@@ -35,7 +35,8 @@ def add_subparser(subparsers) -> argparse.ArgumentParser:
     """Register the ``stats`` subcommand on an ``argparse`` subparsers object."""
     p = subparsers.add_parser(
         "stats", help="ensemble statistics, fits and report of batch outputs or simulations",
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+        description=__doc__.replace("``", ""),  # the docstring's markup is not for a terminal
+        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("dirs", nargs="+", metavar="DIR",
                    help="batch output, analyze output or simulation ensemble folder")
     p.add_argument("--out", required=True, metavar="REPORT_DIR",

@@ -225,7 +225,7 @@ def test_two_dirs_of_one_folder_name_are_kept_apart_as_documented(tmp_path, capf
     assert set(pd.read_csv(tmp_path / "rep" / "macro.csv")["set"]) == {"run", "run#2"}
     with pytest.raises(SystemExit):
         main(["stats", "--help"])
-    assert "kept apart as ``run``, ``run#2``" in " ".join(capfd.readouterr().out.split())
+    assert "kept apart as run, run#2" in " ".join(capfd.readouterr().out.split())
 
 
 def test_zero_detection_limits_mean_none(batch, tmp_path, capfd):
