@@ -1033,9 +1033,14 @@ def batch_lock(out: Path):
         yield
         return
     path = out / LOCK_FILE
+    if path.is_symlink():
+        # writing the process id through it would overwrite a file that is not the batch's
+        raise ParameterError(f"{LOCK_FILE} is a symbolic link (to {os.readlink(path)}), not "
+                             "the batch's lock file: remove it", out)
     while True:
         try:
-            fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
+            # O_NOFOLLOW: a link put there between the check above and this call
+            fd = os.open(path, os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0), 0o666)
         except OSError as exc:
             raise _cannot_write(exc, path) from None
         try:
@@ -1047,7 +1052,11 @@ def batch_lock(out: Path):
                                  + (f" (pid {holder})" if holder.isdigit() else "")
                                  + ": wait for it to end, or give another --out", out) from None
         except OSError:
-            break  # no locks on this file system
+            # no locks on this file system (a network disk without a lock service)
+            warnings.warn(f"{out}: its file system takes no lock: a second batch into it "
+                          "would not be refused (run one batch at a time there)",
+                          BatchWarning, stacklevel=3)
+            break
         # a batch that ends removes the file it locked: a lock taken on that file, now
         # nameless, would lock nothing, so the file is opened afresh
         try:

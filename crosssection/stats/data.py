@@ -873,9 +873,13 @@ def _check_failures(folder: Path) -> str:
         rows = list(csv.reader(io.StringIO(path.read_text(encoding="utf-8"), newline="")))
     except (OSError, UnicodeDecodeError, csv.Error):
         return ""  # none, or unreadable: index.csv already says which images are done
-    n = sum(1 for row in rows[1:] if any(cell.strip() for cell in row))
+    listed = [row for row in rows[1:] if any(cell.strip() for cell in row)]
+    n = len(listed)
     if not n:
         return ""
+    col = rows[0].index("image") if rows and "image" in rows[0] else None
+    names = [row[col] for row in listed if col is not None and col < len(row)]
+    shown = (f" ({', '.join(names[:5])}{', ...' if len(names) > 5 else ''})" if names else "")
     try:
         total = json.loads((folder / "batch.json").read_text(encoding="utf-8"))["n_images"]
     except (OSError, ValueError, TypeError, KeyError):
@@ -883,7 +887,7 @@ def _check_failures(folder: Path) -> str:
     of = (f" of {total}" if isinstance(total, int) and not isinstance(total, bool)
           and total >= n else "")
     one = n == 1
-    text = (f"{path}: {n}{of} images {'was' if one else 'were'} not analysed and "
+    text = (f"{path}: {n}{of} images{shown} {'was' if one else 'were'} not analysed and "
             f"{'is' if one else 'are'} not in the statistics")
     warnings.warn(text, IncompleteBatchWarning, stacklevel=3)
     return text

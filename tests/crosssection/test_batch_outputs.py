@@ -611,8 +611,8 @@ def test_stats_names_the_images_a_batch_could_not_analyse(tmp_path, capsys):
     with pytest.warns(IncompleteBatchWarning) as caught:
         ens = load_batch(out)
     said = [str(w.message) for w in caught if w.category is IncompleteBatchWarning]
-    assert said == [f"{out / 'failures.csv'}: 1 of 2 images was not analysed and is not in "
-                    "the statistics"]
+    assert said == [f"{out / 'failures.csv'}: 1 of 2 images (corrupt.png) was not analysed "
+                    "and is not in the statistics"]
     # the report says it too, beside the unfinished batches
     from crosssection.stats.report import incomplete_batches
 
@@ -628,3 +628,15 @@ def test_warning_lines_stay_one_line_and_name_the_scan_once(tmp_path, capsys):
     assert all(line.startswith("warning: ") for line in err), err
     (bad,) = [line for line in err if "bad.png" in line]
     assert bad.count("bad.png") == 1 and ": not analysed: not an image file" in bad
+
+
+@pytest.mark.skipif(not hasattr(os, "symlink"), reason="needs symbolic links")
+def test_a_lock_file_that_is_a_link_is_refused_and_its_target_left_alone(tmp_path, capsys):
+    inp, out = _scans(tmp_path / "in"), tmp_path / "out"
+    out.mkdir()
+    precious = tmp_path / "precious.txt"
+    precious.write_text("a user's data\n")
+    (out / B.LOCK_FILE).symlink_to(precious)
+    status, err = _batch(capsys, inp, out)
+    assert status == 2 and len(err) == 1 and "symbolic link" in err[0]
+    assert precious.read_text() == "a user's data\n"
