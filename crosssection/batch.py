@@ -1409,8 +1409,9 @@ def _start(out: Path, input_dir, tasks, sets, redone: list, stale: list,
         for w in s.warnings:
             warnings.warn(w, BatchWarning, stacklevel=3)
     for image, why in redone:
-        warnings.warn(f"{image}: analysed again: {why}; its earlier results are replaced",
-                      BatchWarning, stacklevel=3)
+        # the old folder stays until the new analysis is written: a failed redo keeps it
+        warnings.warn(f"{image}: analysed again: {why}; its earlier results are replaced if "
+                      "it succeeds", BatchWarning, stacklevel=3)
     if stale:
         n = len(stale)
         shown = ", ".join(stale[:5]) + (f" and {n - 5} more" if n > 5 else "")

@@ -217,7 +217,7 @@ def test_a_rerun_with_other_options_says_which_images_it_redoes(tmp_path, capsys
     # one line per scan, naming it and what differs
     again = [line for line in err if "analysed again" in line]
     assert again == [f"warning: {inp / name}: analysed again: its parameters differ from the "
-                     "recorded ones (l_min_mm); its earlier results are replaced"
+                     "recorded ones (l_min_mm); its earlier results are replaced if it succeeds"
                      for name in ("s0.png", "s1.png")]
     index = pd.read_csv(out / "index.csv")
     assert dict(zip(index["image"], index["status"])) == {
@@ -265,7 +265,7 @@ def test_a_rerun_redoes_a_scan_whose_table_is_corrupt(tmp_path, capsys):
     # the scan redone is named, with the table that made it so
     assert _notices(err) == [f"warning: {inp / 's1.png'}: analysed again: stacks.csv in "
                              f"{(out / 'default' / 's1').resolve()} is missing or unreadable; "
-                             "its earlier results are replaced"]
+                             "its earlier results are replaced if it succeeds"]
     index = pd.read_csv(out / "index.csv")
     assert dict(zip(index["image"], index["status"])) == {"s0.png": "skipped", "s1.png": "ok"}
     assert (out / "default" / "s1" / "stacks.csv").read_text() == good
