@@ -113,7 +113,7 @@ import pandas as pd
 from crosssection._version import __version__
 from crosssection.core import schema
 from crosssection.core.errors import (ConfigError, FoldstatError, ImageError, OutputError,
-                                      ParameterError)
+                                      ParameterError, output_error)
 from crosssection.core.fileio import (BROWSER_FILES, PARTIAL_TAG, check_out, clear_stale_folders,
                                       is_working_folder, missing_file_reason, read_json_object,
                                       staging_folder, swap_in_folder, temporary_files,
@@ -617,12 +617,6 @@ def _peak_rss_mb() -> float:
         return math.nan
 
 
-def _cannot_write(exc: OSError, path) -> OutputError:
-    """``exc``, raised while writing ``path``, as one line naming the file and the cause."""
-    why = exc.strerror or " ".join(str(exc).split()) or type(exc).__name__
-    return OutputError(f"cannot write ({why})", exc.filename or path)
-
-
 def _one_line(exc: BaseException) -> str:
     if isinstance(exc, FoldstatError):
         return exc.one_line()
@@ -675,7 +669,7 @@ def process_image(task: ImageTask) -> dict:
         except OutputError:
             raise
         except OSError as exc:  # a full disk, no permission: one line naming the file
-            raise _cannot_write(exc, final) from None
+            raise output_error(exc, final) from None
         staging = None
         row = _row(task, "ok", summary, wall_s=info["wall_s"])
         row["peak_rss_mb"] = _peak_rss_mb()
@@ -984,9 +978,10 @@ def _write_record(path: Path, write, data) -> None:
     try:
         write(path, data)
     except OSError as exc:
-        why = exc.strerror or " ".join(str(exc).split()) or type(exc).__name__
-        raise OutputError(f"cannot write ({why}); the batch stops: re-run the same command "
-                          "to resume", path) from None
+        # the atomic writes name the file already (OutputError); other errors get named here
+        err = exc if isinstance(exc, OutputError) else output_error(exc, path)
+        raise OutputError(f"{err.cause}; the batch stops: re-run the same command to resume",
+                          err.path or path) from None
 
 
 def _write_tables(out: Path, rows: dict, tasks: list[ImageTask]):
@@ -1042,7 +1037,7 @@ def batch_lock(out: Path):
             # O_NOFOLLOW: a link put there between the check above and this call
             fd = os.open(path, os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0), 0o666)
         except OSError as exc:
-            raise _cannot_write(exc, path) from None
+            raise output_error(exc, path) from None
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:

@@ -47,7 +47,7 @@ class OutputError(FoldstatError, OSError):
 
 def output_error(exc: OSError, path) -> OutputError:
     """``exc`` as an :class:`OutputError` naming ``path`` and the cause in one line."""
-    why = exc.strerror or type(exc).__name__
+    why = exc.strerror or " ".join(str(exc).split()) or type(exc).__name__
     if isinstance(exc, (FileExistsError, NotADirectoryError)):
         why = f"{why}: a file is in the way of a folder"
     return OutputError(f"cannot write ({why})", exc.filename or path)
