@@ -56,8 +56,9 @@ Design choices
   image and of the calibration file, and the package version: changing any of them redoes
   the image, which replaces its earlier results; a re-run with the same options is silent.
   ``summary.json`` records the image's and the calibration's SHA-256, their paths as given
-  and resolved, and the calibration's widths (``batch.inputs``), so that an output names
-  what it was computed from.
+  and resolved, and the calibration's widths (``inputs``, the record ``analyze`` writes,
+  with the scan's path as the batch was given it; the same in ``batch.inputs``), so that an
+  output names what it was computed from.
 - ``OUT_DIR`` belongs to one input folder: it must be new, empty, or hold an earlier batch of
   the same ``INPUT_DIR`` (which the batch resumes). The batch of another input folder, or
   files that no batch wrote, are refused before anything is written, as is a ``--scheduler``
@@ -111,7 +112,7 @@ from pathlib import Path
 import pandas as pd
 
 from crosssection._version import __version__
-from crosssection.core import schema
+from crosssection.core import provenance, schema
 from crosssection.core.errors import (ConfigError, FoldstatError, ImageError, OutputError,
                                       ParameterError, output_error)
 from crosssection.core.fileio import (BROWSER_FILES, PARTIAL_TAG, check_out, clear_stale_folders,
@@ -235,14 +236,6 @@ def _broken_link(image: Path) -> str | None:
     return None
 
 
-def _sha256(path, chunk=1 << 20) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        while block := fh.read(chunk):
-            h.update(block)
-    return h.hexdigest()
-
-
 def effective_params(params: dict) -> dict:
     """The parameters an analysis runs with: every default filled in, the derived ones
     (``s_min_mm2``, ``tangent_mm``) computed, a calibration file replaced by its SHA-256.
@@ -270,7 +263,7 @@ def effective_params(params: dict) -> dict:
     out["tangent_mm"] = p.tangent_used_mm
     cal = params.get("calibration")
     if isinstance(cal, (str, Path)) and Path(cal).is_file():
-        out["calibration"] = _sha256(cal)
+        out["calibration"] = provenance.file_sha256(cal)
     # 12 digits: 3 h computed (0.30000000000000004) and 0.3 given are one value
     return {k: _rounded(v) for k, v in out.items()}
 
@@ -476,7 +469,7 @@ def plan_batch(input_dir, out_dir, *, cli_params: dict | None = None, seed: int 
                 t.error = exc.one_line()
                 continue
             try:
-                t.image_sha = _sha256(t.image)
+                t.image_sha = provenance.file_sha256(t.image)
             except OSError as exc:
                 t.error = ImageError(f"cannot read ({exc.strerror or type(exc).__name__})",
                                      t.image).one_line()
@@ -655,6 +648,8 @@ def process_image(task: ImageTask) -> dict:
                 "seed": task.seed, "params": task.params, "version": __version__,
                 "inputs": input_record(task)}
         if isinstance(getattr(result, "summary", None), dict):
+            # the scan named as the batch was given it, as batch.inputs does
+            result.summary["inputs"] = info["inputs"]
             result.summary["batch"] = dict(info)
         try:
             staging = staging_folder(final)
@@ -688,7 +683,8 @@ def process_image(task: ImageTask) -> dict:
 def input_record(task: ImageTask) -> dict:
     """What an image's results were computed from: the scan and the calibration file, each
     by its path as given, its path resolved (absolute, links followed) and its SHA-256, and
-    the calibration's widths (a few rows).
+    the calibration's widths (:func:`crosssection.core.provenance.input_record`, the record
+    ``analyze`` writes, with the scan's path as the batch was given it).
 
     Parameters
     ----------
@@ -699,18 +695,10 @@ def input_record(task: ImageTask) -> dict:
     dict
         ``{"image": {...}, "calibration": {...} or None}``.
     """
-    image = {"path": task.given or task.image, "resolved": os.path.realpath(task.image),
-             "sha256": task.image_sha or _sha256(task.image)}
     cal = task.params.get("calibration")
-    calibration = None
-    if isinstance(cal, str) and cal:
-        calibration = {"path": cal, "resolved": os.path.realpath(cal), "sha256": _sha256(cal)}
-        try:
-            widths = pd.read_csv(cal)
-            calibration["widths"] = {c: widths[c].tolist() for c in ("n_layers", "width_mm")}
-        except (OSError, ValueError, KeyError):
-            calibration["widths"] = None  # checked when the set was read; changed since
-    return {"image": image, "calibration": calibration}
+    return provenance.input_record(task.image, cal if cal else None,
+                                   given=task.given or task.image,
+                                   image_sha256=task.image_sha or None)
 
 
 def _recorded_info(task: ImageTask) -> dict | None:
@@ -1349,7 +1337,7 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
         try:
             index = _write_tables(out, rows, tasks)
             counts = index["status"].value_counts().to_dict()
-            meta.update(finished=time.strftime("%Y-%m-%dT%H:%M:%S"),
+            meta.update(finished=provenance.timestamp(),
                         elapsed_s=time.time() - t_start,
                         counts={k: int(counts.get(k, 0)) for k in ("ok", "skipped", "failed")},
                         complete=len(index) == len(tasks), interrupted=interrupted)
@@ -1398,7 +1386,7 @@ def _start(out: Path, input_dir, tasks, sets, redone: list, stale: list,
                      "params": s.params, "overrides": s.overrides, "error": s.error,
                      "warnings": s.warnings} for k, s in sets.items()},
         "n_images": len(tasks), "stale_outputs": stale,
-        "started": time.strftime("%Y-%m-%dT%H:%M:%S"),
+        "started": provenance.timestamp(),
     }
     for s in sets.values():
         for w in s.warnings:

@@ -15,8 +15,10 @@ A run leaves DIR describing itself alone: when DIR holds the record of an earlie
 (``overlay.png`` under ``--no-figure``, the step images without ``--steps``, ``steps.png``
 under ``steps --no-figure``) are removed from DIR once the new outputs are written. Only those
 names are: nothing else in DIR is touched, a folder with no such record keeps its files (they
-are the user's), and a run that fails leaves the previous outputs whole. DIR may not be the
-scan's own folder: a batch of that folder would read the outputs as scans.
+are the user's), and a run that fails leaves the previous outputs whole. Every file is written
+to a hidden temporary file and renamed; those that a run killed while writing left in DIR
+(``.overlay.png.XXXX.png``) are removed when the next run starts (:func:`clear_temporary`).
+DIR may not be the scan's own folder: a batch of that folder would read the outputs as scans.
 """
 from __future__ import annotations
 
@@ -24,8 +26,9 @@ import math
 import warnings
 from pathlib import Path
 
+from crosssection.core import schema
 from crosssection.core.errors import OutputError, output_error
-from crosssection.core.fileio import check_out
+from crosssection.core.fileio import check_out, temporary_files
 from crosssection.params import AnalysisParams, add_analysis_arguments
 
 #: the step images of paper Fig. 2, and the figure of the four side by side
@@ -47,6 +50,46 @@ OPTIONAL_OUTPUTS = {
 
 #: the records that mark a folder as the output of an earlier run of either command
 RUN_RECORDS = ("summary.json", STEPS_RECORD)
+#: per command, every file it may write into its output folder
+OWN_FILES = {
+    "analyze": ("summary.json", *(f"{name}.csv" for name in schema.TABLES),
+                *OPTIONAL_OUTPUTS["analyze"]),
+    "steps": (*STEP_IMAGES, STEPS_FIGURE, STEPS_RECORD),
+}
+
+
+def clear_temporary(out_dir, command: str) -> list[Path]:
+    """Remove the temporary files that a run of ``command`` killed while writing left in
+    ``out_dir`` (``.overlay.png.XXXX.png``: every file is written to one and renamed,
+    :func:`crosssection.core.fileio.atomic_path`). No run removes them otherwise, and they
+    are hidden. Only the temporary names of :data:`OWN_FILES` are taken.
+
+    Parameters
+    ----------
+    out_dir : str or Path
+    command : str
+        ``"analyze"`` or ``"steps"``.
+
+    Returns
+    -------
+    list of Path
+        The files removed (none when ``out_dir`` does not exist).
+
+    Raises
+    ------
+    OutputError
+        A file cannot be removed.
+    """
+    removed = []
+    for path in temporary_files(Path(out_dir).expanduser(), OWN_FILES[command]):
+        try:
+            path.unlink()
+        except FileNotFoundError:
+            continue
+        except OSError as exc:
+            raise output_error(exc, path) from None
+        removed.append(path)
+    return removed
 
 
 def earlier_run(out_dir) -> bool:
@@ -160,6 +203,7 @@ def run(args) -> int:
 
     check_out(args.out)
     check_not_beside(args.image, args.out)
+    clear_temporary(args.out, "analyze")
     params = AnalysisParams.from_cli_args(args, path=args.image)
     note = set_not_read(args.image, params)
     if note:
@@ -186,6 +230,7 @@ def run_steps(args) -> int:
 
     check_out(args.out)
     check_not_beside(args.image, args.out)
+    clear_temporary(args.out, "steps")
     params = AnalysisParams.from_cli_args(args, path=args.image)
     pre = preprocess(args.image, params)
     out = Path(args.out).expanduser()
@@ -221,20 +266,26 @@ def steps_record(pre, params: AnalysisParams, written) -> dict:
     Returns
     -------
     dict
-        ``command``, ``version``, ``image`` (path, size, dtype), ``parameters`` (as in
-        summary.json, with the ``s_min_mm2`` and ``tangent_mm`` used), ``thresholds``,
-        ``hole``, ``warnings`` and ``outputs`` (the file names).
+        ``command``, ``version``, ``libraries`` (versions of the numerical libraries),
+        ``image`` (path, absolute with links followed, size, dtype), ``inputs`` (the scan
+        and the calibration by path and SHA-256, as in summary.json), ``parameters`` (as in
+        summary.json, with the ``s_min_mm2``, ``tangent_mm`` and ``smooth_px`` used),
+        ``thresholds``, ``hole``, ``warnings`` and ``outputs`` (the file names).
     """
     from crosssection._version import __version__
+    from crosssection.core.provenance import input_record, library_versions, resolved_path
+    from crosssection.tables import recorded_parameters
 
     h, w = pre.rgb.shape[:2]
     return {
         "command": "steps",
         "version": __version__,
-        "image": {"path": pre.path, "height_px": int(h), "width_px": int(w),
-                  "dtype": str(pre.rgb.dtype)},
-        "parameters": {**params.to_dict(), "s_min_mm2": params.s_min_used_mm2,
-                       "tangent_mm": params.tangent_used_mm},
+        "libraries": library_versions(),
+        "image": {"path": None if pre.path is None else resolved_path(pre.path),
+                  "height_px": int(h), "width_px": int(w), "dtype": str(pre.rgb.dtype)},
+        "inputs": input_record(pre.path if pre.path is not None else pre.rgb,
+                               params.calibration),
+        "parameters": recorded_parameters(params),
         "thresholds": pre.threshold.as_summary(),
         "hole": {**pre.hole.as_summary(), "fitted": bool(pre.hole.fitted),
                  "radius_mm": float(params.scale.to_mm(pre.hole.radius_px)),

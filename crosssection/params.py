@@ -19,6 +19,7 @@ from pathlib import Path
 
 from crosssection.core.errors import FoldstatError, ParameterError
 from crosssection.core.fileio import read_toml
+from crosssection.core.provenance import resolved_path
 
 __all__ = ["ScanScale", "AnalysisParams", "add_analysis_arguments", "check_param", "PARAM_NAMES",
            "THRESHOLD_METHODS", "CURVATURE_METHODS", "SKELETON_METHODS", "WIDTH_STATISTICS",
@@ -115,7 +116,13 @@ class AnalysisParams:
 
     Lengths are in mm, areas in mm^2, pixel positions as (x, y) = (column, row). ``None``
     means "derived" (from the scan, the sheet thickness, or measured); the value used is
-    recorded in ``summary.json``.
+    recorded in ``summary.json``, whose ``parameters`` give this class back the same analysis
+    (``AnalysisParams(**summary["parameters"])``).
+
+    ``calibration`` is a CSV path, a :class:`~crosssection.core.calibration.Calibration`, a
+    DataFrame with columns ``n_layers`` and ``width_mm``, or ``[[n_layers, width_mm], ...]``
+    pairs (the form ``summary.json`` records a table given in memory in, at full precision;
+    turned into a ``Calibration``).
     """
 
     px_per_mm: float = field(default=50.0, metadata=_opt("scan resolution", "px/mm"))
@@ -232,25 +239,43 @@ class AnalysisParams:
         return self.hole_radius_mm is not None
 
     def calibration_source(self) -> str:
-        """How the calibration was given (path, object type, or the default law)."""
+        """How the calibration was given, for messages: the default law, the file (absolute,
+        links followed), or the object type with its table (rounded)."""
         c = self.calibration
         if c is None:
             return "linear n*h"
         if isinstance(c, (str, Path)):
-            # read from wherever the output is: a path relative to the caller's folder is not
-            return str(Path(c).expanduser().absolute())
-        # a table given in memory is recorded whole: the width law is part of the result
-        import numpy as np
-
+            return resolved_path(c)
         try:
-            if hasattr(c, "n_layers") and hasattr(c, "width_mm"):
-                pairs = zip(np.ravel(c.n_layers), np.ravel(c.width_mm))
-            else:
-                pairs = zip(c["n_layers"], c["width_mm"])
-            law = ", ".join(f"({float(n):g}, {float(w):g})" for n, w in pairs)
-        except (KeyError, TypeError, ValueError):
+            table = self._calibration_table()
+        except FoldstatError:
             return type(c).__name__
+        law = ", ".join(f"({float(n):g}, {float(w):g})"
+                        for n, w in zip(table.n_layers, table.width_mm))
         return f"{type(c).__name__} (n_layers, width_mm): {law}"
+
+    def calibration_record(self):
+        """The calibration as ``summary.json`` records it, in a form this class accepts back:
+        None for the default law, the file's path (absolute, links followed: the output is
+        read from other folders than the caller's), or a table given in memory as
+        ``[[n_layers, width_mm], ...]`` pairs at full precision (the width law is part of the
+        result: ``AnalysisParams(**summary["parameters"])`` analyses with the same table).
+        A table that cannot be read is recorded by its type's name."""
+        c = self.calibration
+        if c is None:
+            return None
+        if isinstance(c, (str, Path)):
+            return resolved_path(c)
+        try:
+            table = self._calibration_table()
+        except FoldstatError:
+            return type(c).__name__
+        return [[int(n), float(w)] for n, w in zip(table.n_layers, table.width_mm)]
+
+    def _calibration_table(self):
+        from crosssection.core.calibration import Calibration
+
+        return Calibration.of(self.calibration)
 
     # ------------------------------------------------------------------ constructors
     def replace(self, **changes) -> "AnalysisParams":
@@ -324,7 +349,7 @@ class AnalysisParams:
         for f in fields(self):
             v = getattr(self, f.name)
             if f.name == "calibration":
-                v = None if v is None else self.calibration_source()
+                v = self.calibration_record()
             elif isinstance(v, tuple):
                 v = list(v)
             out[f.name] = v
@@ -502,8 +527,18 @@ def _check_calibration(value):
         return str(value)
     if hasattr(value, "layers") or hasattr(value, "to_frame") or hasattr(value, "columns"):
         return value
-    raise ParameterError(f"calibration must be a CSV path, a Calibration or a table with "
-                         f"columns n_layers and width_mm, got {type(value).__name__}")
+    if isinstance(value, (list, tuple, dict)) or hasattr(value, "__array__"):
+        # the form summary.json records a table given in memory in
+        # (AnalysisParams.calibration_record), or the columns of a table
+        from crosssection.core.calibration import Calibration
+
+        try:
+            return Calibration.of(value)
+        except FoldstatError as exc:
+            raise ParameterError(exc.cause) from None
+    raise ParameterError(f"calibration must be a CSV path, a Calibration, a table with "
+                         f"columns n_layers and width_mm or [[n_layers, width_mm], ...] "
+                         f"pairs, got {type(value).__name__}")
 
 
 def add_analysis_arguments(parser, *, exclude=()) -> None:

@@ -34,6 +34,7 @@ from crosssection import quality
 from crosssection import tables as tb
 from crosssection._version import __version__
 from crosssection.core.errors import AnalysisError, FoldstatError, ImageError, ParameterError
+from crosssection.core.provenance import input_record, library_versions, sha256_in_background
 from crosssection.linsys import solve_branch_counts
 from crosssection.params import AnalysisParams
 from crosssection.result import AnalysisResult, write_step_images
@@ -381,19 +382,11 @@ def _check_clean(mask, speck_px, path):
 def _calibration(p: AnalysisParams):
     """The width law of the parameters: a CSV path, a Calibration, a table or the default
     n h (flagged by the quality checks)."""
-    import pandas as pd
-
     from crosssection.core.calibration import Calibration
 
-    cal = p.calibration
-    if cal is None:
+    if p.calibration is None:
         return Calibration.linear(p.thickness_mm, n_max=50)
-    if isinstance(cal, (str, Path)):
-        cal = Calibration.from_csv(cal)
-    elif not isinstance(cal, (Calibration, pd.DataFrame)) and hasattr(cal, "to_frame"):
-        cal = cal.to_frame()
-    if isinstance(cal, pd.DataFrame):
-        cal = Calibration.from_frame(cal)
+    cal = Calibration.of(p.calibration)
     # a cut stack of one layer is about one sheet thick (the paper's calibration: 1.1-1.4 h);
     # a width law off by a factor of 10 is a unit or column error, not a calibration
     w1 = float(np.asarray(cal.width(1.0)).reshape(-1)[0])
@@ -452,7 +445,11 @@ def _analyze(image, params, overrides, *, warn: bool = True) -> AnalysisResult:
     timer = StageTimer()
     p = _resolve_params(params, overrides, str(image) if isinstance(image, (str, Path)) else None)
     cal = _calibration(p)  # a bad calibration file fails before any image work
+    # hashed while it is analysed: the record names the content the results come from
+    sha256 = sha256_in_background(image) if isinstance(image, (str, Path)) else None
     pre = _preprocess(image, p, timer)
+    inputs = input_record(image, p.calibration, image_sha256=sha256() if sha256 else None,
+                          table=cal if p.calibration is not None else None)
     sg, h_px, scale = pre.graph, p.thickness_px, p.scale
     with timer("widths"):
         # layers ending inside a band leave no junction: the band is cut where its width steps
@@ -499,7 +496,7 @@ def _analyze(image, params, overrides, *, warn: bool = True) -> AnalysisResult:
                                 profiles=profiles, stack_energy=stack_energy)
         junctions = tb.junction_table(pre.junctions, sg, packs, n_br, lin)
     return _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, voids, warn,
-                   rod_mm, L, timer, t_start)
+                   rod_mm, L, timer, t_start, inputs)
 
 
 def _touch_px(sg, width_px, h_px) -> float:
@@ -536,7 +533,7 @@ def _border_pixels(mask) -> np.ndarray:
 
 
 def _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, voids, warn,
-            rod_mm, L, timer, t_start) -> AnalysisResult:
+            rod_mm, L, timer, t_start, inputs=None) -> AnalysisResult:
     """Summary, quality checks and warnings: the :class:`AnalysisResult` built in one place."""
     from crosssection.core import schema
 
@@ -554,9 +551,11 @@ def _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, void
                                   if not str(f).startswith("disconnected")]
     summary = tb.summary(pre=pre, params=p, linear_system=lin, junctions=junctions,
                          stacks=stacks, branches=branches, voids=voids, rod_measured_mm=rod_mm,
-                         rod_used_mm=L, calibration_source=p.calibration_source(),
+                         rod_used_mm=L,
+                         calibration_source=("linear n*h" if p.calibration is None
+                                             else p.calibration_record()),
                          timings=timer.t, total_time_s=time.perf_counter() - t_start,
-                         version=__version__)
+                         version=__version__, inputs=inputs, libraries=library_versions())
     summary["quality"] = quality.quality_block(flags)
     summary["warnings"] = notes + [f.message for f in flags]
     where = pre.path or "<array>"

@@ -21,6 +21,7 @@ import pandas as pd
 
 from crosssection.core import schema
 from crosssection.core.errors import ParameterError
+from crosssection.core.provenance import resolved_path
 from crosssection.linsys.equations import candidate_partitions, pack_row
 from crosssection.stages import branches as br
 
@@ -241,8 +242,31 @@ def _hole_found_by(hole, params) -> str:
     return hole.reason or "found in the scan"
 
 
+def recorded_parameters(params) -> dict:
+    """The parameters as an output records them (``summary.json``, ``steps.json``):
+    :meth:`AnalysisParams.to_dict` with the values derived by default resolved to those used
+    (``s_min_mm2``, ``tangent_mm``, ``smooth_px``), so that the record reads without the
+    rules that derive them and gives ``AnalysisParams`` the same analysis back.
+
+    Parameters
+    ----------
+    params : AnalysisParams
+
+    Returns
+    -------
+    dict
+    """
+    from crosssection.stages.curvature import default_smooth_px
+
+    smooth = (params.smooth_px if params.smooth_px is not None
+              else default_smooth_px(params.thickness_px))
+    return {**params.to_dict(), "s_min_mm2": params.s_min_used_mm2,
+            "tangent_mm": params.tangent_used_mm, "smooth_px": int(smooth)}
+
+
 def summary(*, pre, params, linear_system, junctions, stacks, branches, voids, rod_measured_mm,
-            rod_used_mm, calibration_source, timings, total_time_s, version) -> dict:
+            rod_used_mm, calibration_source, timings, total_time_s, version, inputs=None,
+            libraries=None) -> dict:
     """The ``summary.json`` of one analysis (``schema.SUMMARY_KEYS`` first, then the
     thresholds, cleaning, skeleton and linear-system diagnostics, parameters and image).
 
@@ -255,11 +279,18 @@ def summary(*, pre, params, linear_system, junctions, stacks, branches, voids, r
     junctions, stacks, branches, voids : DataFrame
     rod_measured_mm, rod_used_mm : float
         ``sum n_br l`` and the L used (given or measured).
-    calibration_source : str
+    calibration_source : str or list
+        ``"linear n*h"``, the calibration file (absolute, links followed) or the table given
+        in memory as ``[[n_layers, width_mm], ...]`` (:meth:`AnalysisParams.calibration_record`).
     timings : dict
         Stage name -> seconds.
     total_time_s : float
     version : str
+    inputs : dict, optional
+        What the analysis read (:func:`crosssection.core.provenance.input_record`).
+    libraries : dict, optional
+        Versions of the numerical libraries
+        (:func:`crosssection.core.provenance.library_versions`).
 
     Returns
     -------
@@ -308,11 +339,13 @@ def summary(*, pre, params, linear_system, junctions, stacks, branches, voids, r
                      "merged_crossing_links": int(pre.merged_links)},
         "linear_system": linear_system.summary() if hasattr(linear_system, "summary") else {},
         "calibration": calibration_source,
-        "parameters": {**params.to_dict(), "s_min_mm2": params.s_min_used_mm2,
-                       "tangent_mm": params.tangent_used_mm},
+        "parameters": recorded_parameters(params),
         "version": version,
-        "image": {"path": pre.path, "height_px": int(h), "width_px": int(w),
-                  "dtype": str(pre.rgb.dtype)},
+        "libraries": libraries,
+        # absolute, links followed, as every path recorded (crosssection.core.provenance)
+        "image": {"path": None if pre.path is None else resolved_path(pre.path),
+                  "height_px": int(h), "width_px": int(w), "dtype": str(pre.rgb.dtype)},
+        "inputs": inputs,
     }
     if params.bending_rigidity_J is not None and rod_used_mm > 0:
         out["total_energy_J"] = total_energy * params.bending_rigidity_J / (2.0 * rod_used_mm

@@ -498,15 +498,9 @@ def library_versions() -> dict:
     their last bits, after which the run ends on another rod. Recorded in ``params.json``
     beside the package version.
     """
-    from importlib.metadata import PackageNotFoundError, version
+    from crosssection.core.provenance import library_versions as versions
 
-    out = {}
-    for name in ("numpy", "scipy", "numba", "llvmlite"):
-        try:
-            out[name] = version(name)
-        except PackageNotFoundError:
-            out[name] = None
-    return out
+    return versions(("numpy", "scipy", "numba", "llvmlite"))
 
 
 def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None = None,

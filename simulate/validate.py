@@ -4,10 +4,11 @@
 folder of SCENES (``image.png``, ``params.json``, ``calibration.csv``, ``truth/``; written by
 ``python -m simulate render``), scores it against the truth with
 ``crosssection.truth.scoring.score`` and writes ``REPORT/scores.csv`` (one row per scene),
-``REPORT/summary.json`` (means over the scored scenes, the options, the input folder and the
-package version) and ``REPORT/failures.csv`` (one line per scene that could not be analysed or
-scored: the run goes on). Every subfolder of SCENES is taken for a scene, so that one whose
-``truth/`` is missing is listed as failed rather than lost.
+``REPORT/summary.json`` (means over the scored scenes, the options with the ``match_px``
+used, the input folder and the package version) and ``REPORT/failures.csv`` (one line per
+scene that could not be analysed or scored: the run goes on). Every subfolder of SCENES is
+taken for a scene, so that one whose ``truth/`` is missing is listed as failed rather than
+lost.
 
 A scene whose render flagged its truth (``truth_warnings`` in ``truth/summary.json``: the truth
 disagrees with its own drawing, :class:`simulate.render.TruthWarning`) is scored, counted in the
@@ -221,7 +222,9 @@ def validate_scenes(scenes_dir, out_dir, *, match_px: float | None = None,
     out_dir : str or Path
         Report folder, created first: ``scores.csv``, ``summary.json``, ``failures.csv``.
     match_px : float, optional
-        Junction matching radius in pixels, finite and > 0 (default: 3 h of each scene).
+        Junction matching radius in pixels, finite and > 0 (default: 3 h of each scene);
+        ``summary.json`` records the one used as ``options.match_px`` (by default the
+        scenes' 3 h, or ``{scene: match_px}`` when their scales differ).
     progress : bool, optional
         A progress bar on stderr (None: only when stderr is a terminal).
 
@@ -302,8 +305,7 @@ def _validate(scenes_dir, out_dir, *, match_px, progress) -> tuple[pd.DataFrame,
     mean_all, mean_abs_all = _means(df)
     summary = {"package": "foldstat", "version": __version__,
                "scenes_dir": str(scenes_dir.resolve()),
-               # null match_px: each scene's own 3 h (the scorer's default)
-               "options": {"match_px": None if match_px is None else float(match_px)},
+               "options": {"match_px": _match_px_used(df, match_px)},
                "n_scenes": len(scenes), "n_scored": len(df), "n_failed": len(failures),
                "failed": [f["scene"] for f in failures],
                # a truth its render flagged measures the render as much as the analysis
@@ -314,6 +316,20 @@ def _validate(scenes_dir, out_dir, *, match_px, progress) -> tuple[pd.DataFrame,
                "mean_all": mean_all, "mean_abs_all": mean_abs_all}
     write_json(out_dir / "summary.json", summary)
     return df, failures
+
+
+def _match_px_used(df: pd.DataFrame, match_px: float | None):
+    """The junction matching radius the scores used (``summary.json`` ``options.match_px``):
+    the one given; by default each scene's own 3 h, one number when the scenes share it (the
+    usual case: one scale and thickness), else ``{scene: match_px}``; None when no scene was
+    scored."""
+    if match_px is not None:
+        return float(match_px)
+    if not len(df) or "match_px" not in df.columns:
+        return None
+    used = {str(k): float(v) for k, v in zip(df["scene"], df["match_px"])}
+    values = set(used.values())
+    return values.pop() if len(values) == 1 else used
 
 
 def add_subparser(sub) -> None:

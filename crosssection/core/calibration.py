@@ -126,6 +126,50 @@ class Calibration:
         return cls.from_frame(table, source=path)
 
     @classmethod
+    def of(cls, value) -> "Calibration":
+        """The calibration a parameter value stands for.
+
+        Parameters
+        ----------
+        value : str, Path, Calibration, DataFrame, sequence of pairs or mapping
+            A CSV path; a Calibration; a table with columns ``n_layers`` and ``width_mm`` (a
+            DataFrame, or an object with ``to_frame()``); ``[[n_layers, width_mm], ...]``
+            pairs (a list or an (N, 2) array: the form ``summary.json`` records a table
+            given in memory in); or ``{"n_layers": [...], "width_mm": [...]}``.
+
+        Raises
+        ------
+        ConfigError
+            A value of none of these forms, or a table :meth:`from_frame` refuses.
+        """
+        if isinstance(value, cls):
+            return value
+        if isinstance(value, (str, Path)):
+            return cls.from_csv(value)
+        if not isinstance(value, pd.DataFrame) and hasattr(value, "to_frame"):
+            value = value.to_frame()
+        if isinstance(value, pd.DataFrame):
+            return cls.from_frame(value)
+        if isinstance(value, dict):
+            try:
+                return cls.from_frame(pd.DataFrame(value))
+            except ValueError:  # columns of different lengths, scalars
+                raise ConfigError("calibration n_layers and width_mm must be lists of the "
+                                  "same length") from None
+        if isinstance(value, (list, tuple, np.ndarray)):
+            try:
+                pairs = np.asarray(value, dtype=float)
+            except (TypeError, ValueError):
+                pairs = None
+            if pairs is None or pairs.ndim != 2 or pairs.shape[1] != 2:
+                raise ConfigError("calibration pairs must be [[n_layers, width_mm], ...] "
+                                  "numbers")
+            return cls(tuple(pairs[:, 0]), tuple(pairs[:, 1]))
+        raise ConfigError(f"calibration must be a CSV path, a Calibration, a table with columns "
+                          f"n_layers and width_mm or [[n_layers, width_mm], ...] pairs, got "
+                          f"{type(value).__name__}")
+
+    @classmethod
     def linear(cls, thickness_mm: float, n_max: int = 50) -> "Calibration":
         """The law ``width = n h`` for ``n = 1..n_max`` (no thickening by the cut)."""
         n = cls._layer_grid(thickness_mm, n_max)

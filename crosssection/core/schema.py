@@ -34,6 +34,13 @@ VOID_COLUMNS = ["void_id", "area_mm2", "perimeter_mm", "shape_ratio", "n_edges",
                 "centroid_x_px", "centroid_y_px"]
 SUMMARY_KEYS = ["n_junctions", "n_stacks", "n_branches", "n_voids", "mean_branches_per_stack",
                 "rod_length_mm", "epsilon", "total_energy", "hole", "timings_s"]
+#: Keys with which an analysis' ``summary.json`` (not a truth's) records what it was computed
+#: from (:func:`crosssection.tables.summary`): the parameters used (derived defaults
+#: resolved, accepted back by ``AnalysisParams``), the package and library versions, the
+#: scan (path absolute with links followed, size, dtype) and ``inputs`` (scan and calibration
+#: by path as given, path resolved and SHA-256, the calibration's widths:
+#: :func:`crosssection.core.provenance.input_record`).
+PROVENANCE_KEYS = ["parameters", "calibration", "version", "libraries", "image", "inputs"]
 HOLE_KEYS = ["center_x_px", "center_y_px", "radius_px"]
 
 TABLES = {

@@ -46,7 +46,14 @@ def add_subparser(subparsers) -> argparse.ArgumentParser:
                    help="set name for each DIR in order (repeat, once per DIR, each name "
                         "different; default: the folder names, a repeated one as NAME#k); "
                         "the sets A, B of a batch DIR become NAME/A, NAME/B")
-    p.add_argument("--seed", type=int, default=0, help="seed of bootstrap and GOF (default 0)")
+    p.add_argument("--seed", type=int, default=0,
+                   help="seed of bootstrap and GOF (default 0). Each set draws from its own "
+                        "stream, derived from this seed and the set's name (stats.json "
+                        "records it per set, sets.NAME.seed): a set's intervals and p-values "
+                        "do not depend on the other sets, but the same data under another "
+                        "set name (another folder name or --name) gives other ones; to "
+                        "reproduce a report give the same --seed and the same set names "
+                        "(--name)")
     # None: not given, so that --fast can tell a default from an explicit value
     p.add_argument("--n-boot", type=int, default=None,
                    help="bootstrap resamples for parameter intervals, 0 (none) to "

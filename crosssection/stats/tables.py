@@ -131,7 +131,11 @@ class StatsOptions:
     Attributes
     ----------
     seed : int or None
-        An integer >= 0 (None: fresh entropy, a different result every run).
+        An integer >= 0 (None: fresh entropy, a different result every run). Each set draws
+        from its own stream, :func:`set_seed` of this seed and the set's name: the same data
+        under another set name gives other intervals and p-values, so reproducing a result
+        takes the same seed and the same set names (``load_any(..., set_name=...)``, ``stats
+        --name``); ``stats.json`` records each set's derived seed (``sets.NAME.seed``).
     n_boot : int
         Bootstrap resamples of the parameter intervals (0: none).
     gof : bool
@@ -410,7 +414,8 @@ def compute_stats(ens: Ensemble, opts: StatsOptions | None = None, *,
     -------
     StatsResult
         Each set's fits draw from their own stream (:func:`set_seed` of ``opts.seed`` and
-        the set's name), so a set's intervals are the same computed alone or with others.
+        the set's name), so a set's intervals are the same computed alone or with others,
+        and differ under another set name (renaming a set, or its folder, draws anew).
         A law selected on fewer than :data:`~crosssection.stats.fits.N_SELECT_MIN` values,
         and a relation fitted on fewer than :data:`N_RELATION_MIN` configurations, are kept
         and named in one :class:`~crosssection.stats.fits.SmallSampleWarning` per set; an

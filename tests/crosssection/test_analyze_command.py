@@ -245,3 +245,21 @@ def test_a_given_rod_length_is_printed_beside_the_measured_one():
         "L = 287.9 mm measured, 320.0 mm given"
     assert rod_length_text({"rod_length_mm": 287.94, "rod_length_used_mm": 1e-6}) == \
         "L = 287.9 mm measured, 1e-06 mm given"
+
+
+@pytest.mark.parametrize("command", ["analyze", "steps"])
+def test_the_temporary_files_of_a_killed_run_are_removed(command, small_scan, tmp_path):
+    """A run killed while writing leaves its hidden temporary file; the next run removes the
+    command's own, and no other hidden file."""
+    out = tmp_path / "out"
+    out.mkdir()
+    left = {"analyze": [".overlay.png.abcd1234.png", ".summary.json.x1y2z3a4.json",
+                        ".stacks.csv.qwer5678.csv"],
+            "steps": [".step1_raw.png.abcd1234.png", ".steps.json.x1y2z3a4.json"]}[command]
+    for name in left:
+        (out / name).write_text("cut short")
+    (out / ".notes.txt.abcd1234.txt").write_text("the user's")
+    assert crosssection.cli.main([command, str(small_scan), "--out", str(out),
+                                  "--no-figure"]) == 0
+    assert [name for name in left if (out / name).exists()] == []
+    assert (out / ".notes.txt.abcd1234.txt").read_text() == "the user's"

@@ -115,28 +115,109 @@ def test_a_scan_without_junctions_is_flagged_where_it_was_analysed():
 
 
 def test_a_calibration_table_given_in_memory_is_recorded_whole(scan):
+    """Recorded at full precision, in a form AnalysisParams takes back: the parameters of
+    summary.json analyse the scan again into the same tables."""
+    import json
+
     import pandas as pd
 
-    cal = pd.DataFrame({"n_layers": [1, 2, 3], "width_mm": [0.11, 0.205, 0.3]})
+    # widths of more digits than a rounded record keeps
+    cal = pd.DataFrame({"n_layers": [1, 2, 3],
+                        "width_mm": [0.1123456789012345, 0.2051234567890123, 0.3000000000000004]})
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         res = cs.analyze(scan, **KW, calibration=cal)
-    assert res.summary["calibration"].endswith("(1, 0.11), (2, 0.205), (3, 0.3)")
+    pairs = [[int(n), float(w)] for n, w in zip(cal["n_layers"], cal["width_mm"])]
+    assert res.summary["calibration"] == pairs
+    assert res.summary["parameters"]["calibration"] == pairs
+    assert res.summary["inputs"]["calibration"]["widths"] == {
+        "n_layers": [1, 2, 3], "width_mm": cal["width_mm"].tolist()}
+    # through JSON, as a user reads summary.json back
+    recorded = json.loads(json.dumps(res.summary))["parameters"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        again = cs.analyze(scan, cs.AnalysisParams(**recorded))
+    assert again.summary["parameters"] == res.summary["parameters"]
+    for name, table in res.tables.items():
+        pd.testing.assert_frame_equal(again.tables[name], table, check_exact=True, obj=name)
+
+
+def test_the_recorded_calibration_forms_are_parameters():
+    """Pairs (a list or an array) and columns: a table typed by hand, or a batch's record."""
+    from crosssection.core.errors import ConfigError
+
+    pairs = [[1, 0.11], [2, 0.205], [3, 0.3]]
+    want = cs.AnalysisParams(calibration=pairs).calibration
+    assert isinstance(want, Calibration) and want.width_mm == (0.11, 0.205, 0.3)
+    assert cs.AnalysisParams(calibration=np.array(pairs)).calibration == want
+    columns = {"n_layers": [1, 2, 3], "width_mm": [0.11, 0.205, 0.3]}
+    assert cs.AnalysisParams(calibration=columns).calibration == want
+    assert cs.AnalysisParams(calibration=pairs).to_dict()["calibration"] == pairs
+    with pytest.raises(ParameterError, match=r"\[\[n_layers, width_mm\]"):
+        cs.AnalysisParams(calibration=[1, 2, 3])
+    with pytest.raises(ParameterError, match="strictly increasing"):
+        cs.AnalysisParams(calibration=[[1, 0.3], [2, 0.2]])
+    with pytest.raises(ConfigError):
+        Calibration.of(object())
 
 
 def test_a_calibration_file_given_relative_is_recorded_absolute(scan, tmp_path, monkeypatch):
     """summary.json is read from elsewhere than the caller's folder: the path it records must
-    lead to the file from anywhere."""
+    lead to the file from anywhere (links followed, as the command line records it)."""
+    import hashlib
+
     import pandas as pd
 
     pd.DataFrame({"n_layers": [1, 2, 3], "width_mm": [0.11, 0.205, 0.3]}).to_csv(
         tmp_path / "cal.csv", index=False)
+    os.symlink(tmp_path / "cal.csv", tmp_path / "link.csv")
     monkeypatch.chdir(tmp_path)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        res = cs.analyze(scan, **KW, calibration="cal.csv")
-    assert res.summary["calibration"] == str(tmp_path / "cal.csv")
-    assert res.summary["parameters"]["calibration"] == str(tmp_path / "cal.csv")
+        res = cs.analyze(scan, **KW, calibration="link.csv")
+    real = str((tmp_path / "cal.csv").resolve())
+    assert res.summary["calibration"] == real
+    assert res.summary["parameters"]["calibration"] == real
+    # the file's content and table, as a batch records them
+    rec = res.summary["inputs"]["calibration"]
+    assert rec["path"] == "link.csv" and rec["resolved"] == real
+    assert rec["sha256"] == hashlib.sha256((tmp_path / "cal.csv").read_bytes()).hexdigest()
+    assert rec["widths"] == {"n_layers": [1, 2, 3], "width_mm": [0.11, 0.205, 0.3]}
+
+
+def test_the_summary_records_the_smoothing_window_used(result):
+    """Derived from h by default, like the tangent length: the value used, not null."""
+    from crosssection.stages.curvature import default_smooth_px
+    from crosssection.tables import recorded_parameters
+
+    assert result.summary["parameters"]["smooth_px"] == default_smooth_px(5.0) == 11
+    assert result.summary["parameters"]["tangent_mm"] == pytest.approx(0.3)
+    assert recorded_parameters(cs.AnalysisParams(smooth_px=7))["smooth_px"] == 7
+
+
+def test_the_summary_records_what_the_analysis_read(scan, result, tmp_path, monkeypatch):
+    """The scan by path and SHA-256 (an array by shape and dtype) and the library
+    versions."""
+    import hashlib
+
+    from crosssection.core.provenance import ANALYSIS_LIBRARIES
+
+    s = result.summary
+    assert s["inputs"]["image"] == {"path": None, "resolved": None, "sha256": None,
+                                    "shape": list(scan.shape), "dtype": "uint8"}
+    assert s["inputs"]["calibration"] is None and s["image"]["path"] is None
+    assert set(s["libraries"]) == set(ANALYSIS_LIBRARIES)
+    assert s["libraries"]["numpy"] == np.__version__ and s["libraries"]["opencv"]
+    cv2.imwrite(str(tmp_path / "scan.png"), scan[..., ::-1])
+    monkeypatch.chdir(tmp_path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = cs.analyze("scan.png", **KW)
+    real = str((tmp_path / "scan.png").resolve())
+    assert res.summary["image"]["path"] == real
+    assert res.summary["inputs"]["image"] == {
+        "path": "scan.png", "resolved": real,
+        "sha256": hashlib.sha256((tmp_path / "scan.png").read_bytes()).hexdigest()}
 
 
 def test_a_parameter_file_with_a_misspelt_key_is_refused(tmp_path):

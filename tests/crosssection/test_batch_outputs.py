@@ -424,6 +424,24 @@ def test_a_failed_scan_has_no_output_folder_in_the_index(tmp_path):
     assert inputs["calibration"] is None
 
 
+def test_the_records_name_their_inputs_and_times_as_analyze_does(tmp_path):
+    """One record of the inputs for analyze and batch; time stamps with their UTC offset."""
+    from datetime import datetime, timedelta
+
+    inp, out = tmp_path / "in", tmp_path / "out"
+    _scans(inp)
+    B.run_batch(inp, out, workers=1, progress=False, figure=False,
+                cli_params={"px_per_mm": 50, "thickness_mm": 0.1})
+    meta = json.loads((out / "batch.json").read_text())
+    for key in ("started", "finished"):
+        assert datetime.fromisoformat(meta[key]).utcoffset() == timedelta(0), meta[key]
+    summary = json.loads((out / "default" / "s0" / "summary.json").read_text())
+    assert summary["inputs"] == summary["batch"]["inputs"]
+    assert summary["inputs"]["image"]["path"] == str(inp / "s0.png")
+    assert summary["image"]["path"] == str((inp / "s0.png").resolve())
+    assert summary["libraries"]["numpy"]
+
+
 def test_the_summary_records_the_calibration_it_used(tmp_path):
     import hashlib
 

@@ -188,6 +188,17 @@ def test_summary_records_version_options_and_input(scenes, tmp_path):
     assert pd.read_csv(tmp_path / "rep" / "scores.csv")["match_px"].tolist() == [4.5]
 
 
+def test_summary_records_the_default_match_px_used(scenes, tmp_path):
+    """By default each scene's 3 h: the value the scores used, not null."""
+    folder, scene = scenes
+    assert run(folder, tmp_path / "rep") == 0
+    summary = json.loads((tmp_path / "rep" / "summary.json").read_text())
+    params = json.loads((scene / "params.json").read_text())
+    used = pd.read_csv(tmp_path / "rep" / "scores.csv")["match_px"].tolist()
+    assert summary["options"]["match_px"] == used[0] == pytest.approx(
+        3 * params["thickness_mm"] * params["px_per_mm"])
+
+
 def test_unusable_out_is_one_error_line(scenes, tmp_path, capsys):
     folder, _ = scenes
     (tmp_path / "rep").write_text("a file")

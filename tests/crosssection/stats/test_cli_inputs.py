@@ -133,6 +133,25 @@ def test_the_resample_bound_is_said_in_the_help_and_accepted(capfd):
     cli.check_options(args)  # the bound itself is no absurd value
 
 
+def test_the_help_says_how_a_sets_seed_is_derived_and_reproduced(batch, tmp_path, capfd):
+    """Each set's stream derives from --seed and its name: the help says so, and how to get
+    the same numbers again; stats.json records each set's seed."""
+    from crosssection.stats.tables import set_seed
+
+    with pytest.raises(SystemExit):
+        main(["stats", "--help"])
+    help_text = " ".join(capfd.readouterr().out.split())
+    assert "derived from this seed and the set's name" in help_text
+    assert "same --seed and the same set names (--name)" in help_text
+    assert "set_seed" in StatsOptions.__doc__ and "set name" in StatsOptions.__doc__
+    status, _, _ = _stats(capfd, batch, "--out", tmp_path / "rep", *FAST, "--seed", "7",
+                          "--name", "exp")
+    assert status == 0
+    sets = json.loads((tmp_path / "rep" / "stats.json").read_text())["sets"]
+    assert {name: v["seed"] for name, v in sets.items()} == {
+        name: set_seed(7, name) for name in sets}
+
+
 def test_the_defaults_are_those_of_the_statistics_and_the_loader(capfd):
     """One source: the options' defaults, and the help saying them, are StatsOptions' and
     load_inputs'."""
