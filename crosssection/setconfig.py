@@ -214,13 +214,14 @@ def _safe_part(text: str) -> str:
 
 
 def _check_name(name, toml_path) -> str:
-    """``name`` when it is a set name: folder names of letters, digits and ``. _ + -``,
-    starting with a letter or a digit, joined by ``/`` (``eps8/day1``, as a set is named by
-    its path), else a ConfigError naming ``toml_path``."""
+    """``name`` when it is a set name: folder names of ASCII letters, digits and
+    ``. _ + -``, starting with a letter or a digit, joined by ``/`` (``eps8/day1``, as a set
+    is named by its path), else a ConfigError naming ``toml_path``."""
     parts = name.split("/") if isinstance(name, str) else [name]
-    if not all(isinstance(p, str) and _SAFE_NAME.match(p) and p not in (".", "..")
+    # fullmatch: "$" alone would let a name end in a line break
+    if not all(isinstance(p, str) and _SAFE_NAME.fullmatch(p) and p not in (".", "..")
                for p in parts):
-        raise ConfigError(f"name must be folder names (letters, digits, . _ + -, each "
+        raise ConfigError(f"name must be folder names (ASCII letters, digits, . _ + -, each "
                           f"starting with a letter or a digit) joined by '/', got {name!r}",
                           toml_path)
     return name

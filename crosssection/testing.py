@@ -77,10 +77,11 @@ DEGRADATIONS = {
 DEFAULT_SCAN = {"seed": 0, "px_per_mm": 50.0, "n_stacks": 20, "max_layers": 4,
                 "degradation": "clean"}
 
-#: documented ranges of :func:`make_generated_scan`: below them no layout exists, beyond them
-#: one scan takes tens of seconds or more (n_stacks 1000: 76 s; max_layers 100: 23 s)
+#: documented ranges of :func:`make_generated_scan`: below them no layout exists (max_layers
+#: 1: a junction of three stacks conserves layers only as a = b + c, so some stack holds two),
+#: beyond them one scan takes tens of seconds or more (n_stacks 1000: 76 s; max_layers 100: 23 s)
 N_STACKS_RANGE = (10, 300)
-MAX_LAYERS_RANGE = (1, 12)
+MAX_LAYERS_RANGE = (2, 12)
 
 
 @dataclass(frozen=True)
@@ -161,7 +162,8 @@ def make_generated_scan(folder, *, seed: int = 0, px_per_mm: float = 50.0, n_sta
         Approximate number of stacks (density; 10-300). Below about 14 the disk holds 3-4
         Voronoi cells and some seeds (all at 10) find no layout.
     max_layers : int
-        Largest number of layers in a stack (1-12).
+        Largest number of layers in a stack (2-12: with one, no junction of three stacks
+        conserves its layers, and no layout exists).
     degradation : str
         A key of :data:`DEGRADATIONS` (``clean``, ``noisy``, ``jpeg``, ``defects``).
     **scene_options
@@ -378,7 +380,7 @@ if pytest is not None:
 
 # --------------------------------------------------------------------------- hypothesis
 
-def scan_options(*, resolutions=(25.0, 50.0), max_layers=(1, 6), n_stacks=(10, 40),
+def scan_options(*, resolutions=(25.0, 50.0), max_layers=(2, 6), n_stacks=(10, 40),
                  degradations=tuple(DEGRADATIONS)):
     """Hypothesis strategy of :func:`make_generated_scan` keywords.
 

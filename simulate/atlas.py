@@ -1726,6 +1726,9 @@ def _run(args) -> int:
     res = run_atlas(args.out, config, seed=args.seed, workers=workers,
                     sweeps=args.sweeps, progress=sys.stderr.isatty(), rods=args.rods)
     n = sum(len(t) for t in res["tables"].values())
-    print(f"{n} analyses in {res['elapsed_s']:.0f} s; {len(res['charts'])} charts, index in "
-          f"{Path(args.out) / 'index.md'}")
+    # the fits sweep draws its own charts, in its subfolder: they are charts of the report too
+    fits = list(((res.get("fits") or {}).get("charts") or {}).values())
+    where = f" ({len(fits)} under {Path(fits[0]).parent})" if fits else ""
+    print(f"{n} analyses in {res['elapsed_s']:.0f} s; {len(res['charts']) + len(fits)} "
+          f"charts{where}, index in {Path(args.out) / 'index.md'}")
     return 0

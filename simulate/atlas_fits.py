@@ -823,9 +823,28 @@ _COLORS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:
 _MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*", "<", ">")
 
 
+_LINESTYLES = ("-", "--", "-.", ":")
+#: shift between the cases' points along the log n axis of the rate panels, in decades
+DODGE_DECADES = 0.02
+
+
 def _style(case: str):
     i = list(CASES).index(case)
     return _COLORS[i % len(_COLORS)], _MARKERS[i % len(_MARKERS)]
+
+
+def _linestyle(case: str, cases) -> str:
+    """The line style of ``case`` by its place among the charted ``cases``: lines of equal
+    values stay told apart (the one beneath shows through the gaps of the dashes above)."""
+    return _LINESTYLES[list(cases).index(case) % len(_LINESTYLES)]
+
+
+def _dodged(n, case: str, cases) -> np.ndarray:
+    """The sample sizes ``n`` of ``case`` shifted a little along the log axis by its place
+    among ``cases``: rates of a few repetitions often tie (two cases at 1.0 at every n), and
+    tied lines drawn at the same n would hide one another."""
+    i, k = list(cases).index(case), len(cases)
+    return np.asarray(n, float) * 10.0 ** (DODGE_DECADES * (i - (k - 1) / 2))
 
 
 def _figure(w, h):
@@ -895,11 +914,13 @@ def _selection_chart(s: pd.DataFrame):
             ("rate_aic", "min AIC picks the true law"),
             ("rate_within_2", "true law within BIC 2 of the best"))
     ends = []
+    cases = list(dict.fromkeys(s["case"]))
     for ax, (col, title) in zip(axes, cols):
         for case, g in s.groupby("case", sort=False):
             g = g.sort_values("n")
             color, marker = _style(case)
-            ax.plot(g["n"], g[col], marker=marker, color=color, lw=1.5, ms=5)
+            ax.plot(_dodged(g["n"], case, cases), g[col], marker=marker, color=color, lw=1.5,
+                    ms=5, ls=_linestyle(case, cases), gid=f"rate:{col}:{case}")
             if ax is axes[-1]:
                 ends.append((g["n"].iloc[-1], g[col].iloc[-1], _case_label(case), color))
         ax.axhline(STABLE_RATE, color="crimson", ls="--", lw=1)
@@ -912,8 +933,9 @@ def _selection_chart(s: pd.DataFrame):
     lo, hi = _wilson(0.9 * reps, reps)
     fig.suptitle("Model selection against sample size: how often the law the sample was drawn "
                  f"from is chosen\n({reps} repetitions per point: a true rate of 90 % reads as "
-                 f"{lo:.0%}-{hi:.0%}; dashed red line: {STABLE_RATE:.0%}, the 'stable' level)",
-                 fontsize=11)
+                 f"{lo:.0%}-{hi:.0%}; dashed red line: {STABLE_RATE:.0%}, the 'stable' level)"
+                 "\nthe cases' points are set a little apart in n and their lines dashed "
+                 "apart: equal rates would hide one another", fontsize=11)
     return fig
 
 
@@ -922,13 +944,18 @@ def _coverage_chart(s: pd.DataFrame):
     axes = fig.subplots(1, 3)
     ns = sorted(s["n"].unique())
     ends = []
+    cases = list(dict.fromkeys(s["case"]))
     for case, g in s.groupby("case", sort=False):
         g = g.sort_values("n")
         color, marker = _style(case)
+        ls = _linestyle(case, cases)
         c = g.dropna(subset=["coverage"])
-        axes[0].plot(c["n"], c["coverage"], marker=marker, color=color, lw=1.5, ms=5)
-        axes[1].plot(g["n"], 100 * g["rel_bias"], marker=marker, color=color, lw=1.5, ms=5)
-        axes[2].plot(g["n"], 100 * g["rel_sd"], marker=marker, color=color, lw=1.5, ms=5)
+        # coverage is a fraction of a few fits: cases tie often, set apart in n
+        axes[0].plot(_dodged(c["n"], case, cases), c["coverage"], marker=marker, color=color,
+                     lw=1.5, ms=5, ls=ls, gid=f"coverage:{case}")
+        axes[1].plot(g["n"], 100 * g["rel_bias"], marker=marker, color=color, lw=1.5, ms=5,
+                     ls=ls)
+        axes[2].plot(g["n"], 100 * g["rel_sd"], marker=marker, color=color, lw=1.5, ms=5, ls=ls)
         ends.append((g["n"].iloc[-1], 100 * g["rel_sd"].iloc[-1],
                      f"{_case_label(case)} (tracked: {g['param_name'].iloc[0]})", color))
     ci = int(s["ci_reps"].median()) if len(s) else 0
@@ -940,8 +967,8 @@ def _coverage_chart(s: pd.DataFrame):
     a.set_ylim(min(0.5, float(np.nanmin(s["coverage"])) - 0.05) if s["coverage"].notna().any()
                else 0.5, 1.02)
     a.set_ylabel("fraction of 95 % intervals containing the truth")
-    a.set_title(f"coverage ({ci} fits per point)\ndashed: 95 %; band: the spread of {ci} "
-                "fits", fontsize=10)
+    a.set_title(f"coverage ({ci} fits per point; cases set apart in n)\ndashed red: 95 %; "
+                f"band: the spread of {ci} fits", fontsize=10)
     b = axes[1]
     b.axhline(0, color="black", lw=0.8)
     b.set_ylabel("mean relative bias of the fitted parameter (%)")

@@ -135,6 +135,10 @@ class SimulationEnsemble:
     def plot(self, config=0, *, ax=None, stacks: bool = True):
         """Draw one configuration (:func:`plot_configuration`).
 
+        The wall of a compaction (or of a quench with a wall) is drawn where the simulator
+        put it, centred on the origin, with the radius of the configuration's row of
+        ``configs`` (else that of ``params.json``).
+
         Parameters
         ----------
         config : int or str
@@ -153,12 +157,23 @@ class SimulationEnsemble:
         ConfigurationNotFound, ParameterError, ConfigError
             As :meth:`rod`.
         """
-        wall = self.params.get("wall_radius")
+        key = self._key(config)
         return plot_configuration(
             self.rod(config), ax=ax, stacks=stacks,
             lam=float(self.params.get("lam", LAMBDA)),
             contact_distance=self.params.get("contact_distance"),
-            wall_radius=float(wall) if wall else None, title=self._key(config))
+            wall_radius=self._wall_radius(key), title=key)
+
+    def _wall_radius(self, key: str) -> float | None:
+        """The wall radius of configuration ``key``: its row of ``configs`` (a compaction
+        records each configuration's wall), else ``params.json``'s; None without a wall."""
+        wall = self.params.get("wall_radius")
+        number = key.rsplit("_", 1)[-1]
+        if ({"wall_radius", "config_id"} <= set(self.configs.columns) and number.isdigit()):
+            row = self.configs.loc[self.configs["config_id"] == int(number), "wall_radius"]
+            if len(row) and pd.notna(row.iloc[0]):
+                wall = row.iloc[0]
+        return float(wall) if wall else None
 
 
 def load_ensemble(folder) -> SimulationEnsemble:
@@ -220,8 +235,11 @@ def load_ensemble(folder) -> SimulationEnsemble:
 
 def plot_configuration(xy, *, ax=None, stacks: bool = True, lam: float = LAMBDA,
                        contact_distance: float | None = None, wall_radius: float | None = None,
-                       title: str | None = None):
+                       wall_center=(0.0, 0.0), title: str | None = None):
     """Draw a rod configuration; optionally its stacks coloured by number of branches.
+
+    The first node is drawn as a circle, the last as a square; a legend below the axes names
+    them and the wall.
 
     Parameters
     ----------
@@ -238,7 +256,10 @@ def plot_configuration(xy, *, ax=None, stacks: bool = True, lam: float = LAMBDA,
     contact_distance : float, optional
         Contact cut-off delta in units of L (default: the analysis's, 0.5/N).
     wall_radius : float, optional
-        A hard wall drawn as a circle of this radius about the centre of mass.
+        A hard wall drawn as a dashed circle of this radius about ``wall_center``.
+    wall_center : (float, float)
+        The wall's centre (units of L); the quench and the compaction centre their wall on
+        the origin, and a rod's centre of mass need not lie there.
     title : str, optional
 
     Returns
@@ -249,12 +270,18 @@ def plot_configuration(xy, *, ax=None, stacks: bool = True, lam: float = LAMBDA,
     ------
     ParameterError
         ``xy`` is not an (N+1, 2) array of finite numbers with N >= 1 (N >= 2 with
-        ``stacks``: the contact analysis needs two segments).
+        ``stacks``: the contact analysis needs two segments), or ``wall_center`` is not two
+        finite numbers.
     """
     from matplotlib.collections import LineCollection
     from matplotlib.patches import Circle
+    from matplotlib.ticker import MaxNLocator
+    from matplotlib.transforms import offset_copy
 
     xy = _checked_xy(xy, stacks=stacks)
+    if not _is_point(wall_center):
+        raise ParameterError(f"wall_center must be two finite numbers (x, y), got "
+                             f"{wall_center!r}")
     if ax is None:
         from matplotlib.figure import Figure
 
@@ -263,8 +290,8 @@ def plot_configuration(xy, *, ax=None, stacks: bool = True, lam: float = LAMBDA,
         fig = Figure(figsize=(5.5, 5.5), layout="constrained")
         ax = fig.add_subplot()
     ax.plot(xy[:, 0], xy[:, 1], "-", color="0.35", lw=0.7, zorder=1)
-    ax.plot(*xy[0], "o", ms=4, color="black", zorder=3)
-    ax.plot(*xy[-1], "s", ms=4, color="black", zorder=3)
+    ax.plot(*xy[0], "o", ms=4, color="black", zorder=3, label="first node")
+    ax.plot(*xy[-1], "s", ms=4, color="black", zorder=3, label="last node")
     text = title or "configuration"
     if stacks:
         from matplotlib import colormaps
@@ -291,13 +318,33 @@ def plot_configuration(xy, *, ax=None, stacks: bool = True, lam: float = LAMBDA,
         text += (f": {an.n_stacks} stacks, {an.n_branches} branches, "
                  f"{an.n_junctions} junctions\n(line width and colour: n_br)")
     if wall_radius:
-        ax.add_patch(Circle(tuple(xy.mean(axis=0)), wall_radius, fill=False, ls="--",
-                            color="0.4"))
+        # above the stacks: a rod pressed against the wall would hide it
+        ax.add_patch(Circle(tuple(np.asarray(wall_center, float)), wall_radius, fill=False,
+                            ls="--", lw=0.9, color="0.25", zorder=2.5))
+        ax.plot([], [], ls="--", lw=0.9, color="0.25",
+                label=f"wall (radius {wall_radius:.4g} L)")
     ax.set_aspect("equal")
+    # at most five labels per axis: labels such as -0.075 run into each other otherwise
+    ax.xaxis.set_major_locator(MaxNLocator(5))
+    ax.yaxis.set_major_locator(MaxNLocator(5))
+    # below the axis label (about 36 points below the axes): inside the axes, it would hide
+    # part of a rod that fills its wall
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, 0.0), ncol=3, fontsize=8,
+              frameon=False, handlelength=2.0,
+              bbox_transform=offset_copy(ax.transAxes, fig=ax.figure, y=-36, units="points"))
     ax.set_xlabel("x / L")
     ax.set_ylabel("y / L")
     ax.set_title(text, fontsize=9)
     return ax.figure
+
+
+def _is_point(p) -> bool:
+    """Whether ``p`` is two finite numbers."""
+    try:
+        arr = np.asarray(p, float)
+    except (TypeError, ValueError):
+        return False
+    return arr.shape == (2,) and bool(np.isfinite(arr).all())
 
 
 def _checked_xy(xy, *, stacks: bool) -> np.ndarray:

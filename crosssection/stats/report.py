@@ -41,6 +41,10 @@ from crosssection.stats.tables import (COUNT_QUANTITIES, EQ12_CONST, N_RELATION_
 PALETTE = ("#0072B2", "#D55E00", "#009E73", "#CC79A7", "#E69F00", "#56B4E9", "#000000",
            "#F0E442")
 BAND_LEVEL = 0.95
+#: fewest and most histogram bins of a distribution figure; between them numpy's "auto" rule
+#: (the larger of Sturges' and Freedman-Diaconis' counts), at most 2 sqrt(n), sets the number
+#: from the values
+BINS_MIN, BINS_MAX = 5, 50
 
 #: axis labels in words with units (lengths in units of the rod length L)
 LABELS = {
@@ -123,6 +127,35 @@ def _linear_ticks(axis):
     axis.set_major_formatter(fmt)
 
 
+def bin_edges(x, log: bool = False) -> np.ndarray:
+    """Histogram bin edges of the values ``x`` (finite; > 0 when ``log``).
+
+    The number of bins follows the number and spread of the values: numpy's "auto" rule, at
+    most 2 sqrt(n) (Freedman-Diaconis gives a long tail many nearly empty bins), held between
+    :data:`BINS_MIN` and :data:`BINS_MAX`. A fixed count would leave a dozen values one to a
+    bin, a flat row of single counts.
+
+    Parameters
+    ----------
+    x : array of float
+    log : bool
+        Equal bins of log(x), for a logarithmic axis.
+
+    Returns
+    -------
+    array of float
+        Increasing edges from ``x.min()`` to ``x.max()``.
+    """
+    v = np.log(np.asarray(x, float)) if log else np.asarray(x, float)
+    lo, hi = float(v.min()), float(v.max())
+    if hi <= lo:  # one value: one bin around it
+        edges = np.array([lo - 0.5, lo + 0.5]) if not log else np.array([lo - 0.05, lo + 0.05])
+    else:
+        k = min(len(np.histogram_bin_edges(v, bins="auto")) - 1, 2.0 * np.sqrt(v.size))
+        edges = np.linspace(lo, hi, int(np.clip(k, BINS_MIN, BINS_MAX)) + 1)
+    return np.exp(edges) if log else edges
+
+
 def _nanmean(v) -> float:
     v = np.asarray(v, float)
     v = v[np.isfinite(v)]
@@ -187,10 +220,12 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
     """Distribution of one quantity, every set overlaid, with the selected laws.
 
     One panel row per sub-system (whole system, bulk, periphery when present), linear and
-    logarithmic density scales side by side. Points: fraction per unit of the quantity, with
-    counting error bars sqrt(count) / (n * bin width); line: the selected law, shaded: its
-    95 % bootstrap band. For counts (``n_br``) the points are the fraction of stacks at each
-    integer and the line the law's probability mass there.
+    logarithmic density scales side by side. Points: fraction per unit of the quantity in
+    :func:`bin_edges` bins (their number follows the number of values), with counting error
+    bars sqrt(count) / (n * bin width); line: the selected law, shaded: its 95 % bootstrap
+    band. For counts (``n_br``) the points are the fraction of stacks at each integer and the
+    line the law's probability mass there. A set of ``sets`` without a fit (too few values, or
+    all equal) is named in the legend of each row it is missing from.
 
     Parameters
     ----------
@@ -207,8 +242,11 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
     matplotlib.figure.Figure or None
         None when nothing was fitted.
     """
+    from matplotlib.lines import Line2D
+
     count = quantity in COUNT_QUANTITIES
-    sets = _fitted_sets(res, quantity, sets or ens.sets)
+    wanted = list(sets or ens.sets)
+    sets = _fitted_sets(res, quantity, wanted)
     if not sets:
         return None
     colors = colors or set_colors(ens.sets)
@@ -239,10 +277,10 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
                     grid = np.arange(1, int(x.max()) + 3, dtype=float)
                 else:
                     if logscale and x.max() / x.min() > 10:
-                        edges = np.geomspace(x.min(), x.max(), 25)
+                        edges = bin_edges(x, log=True)
                         ax.set_xscale("log")
                     else:
-                        edges = np.linspace(x.min(), x.max(), 25)
+                        edges = bin_edges(x)
                     cnt, edges = np.histogram(x, bins=edges)
                     cnt = cnt.astype(float)
                     width = np.diff(edges)
@@ -335,6 +373,13 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
             0 if ": data" in labels[i] else 2 if "band" in labels[i] or "limit" in labels[i]
             else 1))
         handles, labels = [handles[i] for i in order], [labels[i] for i in order]
+        # a set without a fit in this row is named here too: the figure is also read
+        # without the report's caption
+        for s in wanted:
+            if (s, reg, quantity) not in res.summaries and (
+                    reg == "all" or reg in regions_of(ens.subset(s))):
+                handles.append(Line2D([], [], ls="none", marker="x", color=colors[s]))
+                labels.append(f"{s}: not drawn (too few values to fit, or all equal)")
         if handles:
             row[1].legend(handles, labels, loc="upper left", bbox_to_anchor=(1.02, 1.0),
                           fontsize=8, frameon=False)
@@ -448,8 +493,21 @@ def network_figure(res: StatsResult, colors=None):
         eps = _nanmean(g["epsilon"])
         if np.isfinite(ratio) and np.isfinite(eps):
             eq12 = EQ12_CONST * eps * ratio * np.sqrt(nl)  # Eq. (12) with set means
-            axes[0].plot(nl, eq12, "-", color=c, label=f"{s}: Eq. (12) with the set means (left)")
-            axes[1].plot(nl, eq12 / nl, "-", color=c, label=f"{s}: Eq. (13) (right)")
+            axes[0].plot(nl, eq12, "-", color=c,
+                         label=f"{s}: Eq. (12), paper's C = 2√(π/3) = {EQ12_CONST:.3g}, with "
+                               "the set means (left)")
+            axes[1].plot(nl, eq12 / nl, "-", color=c,
+                         label=f"{s}: Eq. (13), C = {EQ12_CONST:.3g} (right)")
+            fitted = rel.get("eq12_const", np.nan)
+            if np.isfinite(fitted):
+                # the C of relations.csv, through the same set means: how far the data sit
+                # from the paper's constant
+                n_fit = int(res.relations.query("set == @s and relation == 'eq12_const'")
+                            ["n"].iloc[0])
+                axes[0].plot(nl, fitted * eps * ratio * np.sqrt(nl), "-.", color=c, lw=1,
+                             label=f"{s}: Eq. (12), fitted C = {fitted:.3g}"
+                                   + (" (indicative only)" if n_fit < N_RELATION_MIN else "")
+                                   + " (left)")
         if np.isfinite(nbr):
             axes[0].plot(nl, nbr * nl, "--", color=c,
                          label=f"{s}: Eq. (14), <n_br> = {nbr:.2g} (left)")
@@ -486,6 +544,8 @@ def _scatter_fig(res, x, y, xlabel, ylabel, title, *, through_origin=False, pape
         txt = f"{s}: configurations"
         if k.sum() >= 2 and not through_origin and np.ptp(xv[k]) > 0 and np.ptp(yv[k]) > 0:
             txt += f", Pearson r = {np.corrcoef(xv[k], yv[k])[0, 1]:.2f}"
+            if k.sum() < N_RELATION_MIN:  # as correlations.csv marks it
+                txt += f" (n = {int(k.sum())}, indicative only)"
         ax.plot(xv[k], yv[k], "o", color=c, ms=4, alpha=0.8, label=txt)
         if k.sum() >= 2 and through_origin:
             a = np.sum(xv[k] * yv[k]) / np.sum(xv[k] ** 2)
@@ -723,9 +783,11 @@ def _write_files(res: StatsResult, ens: Ensemble, out: Path, *, opts: StatsOptio
                              _pdf_caption(q) + _left_out(res, ens, q, opts.min_n)))
         scatter = [
             ("network_Nbr_vs_Nl.png", "Branches and stacks per configuration (Eqs. (12)-(15))",
-             "Each point is one configuration; solid lines are Eqs. (12)-(13) with the set's mean "
-             "compaction, void size and branch length, dashed lines Eqs. (14)-(15) with its mean "
-             "number of branches per stack.", lambda: network_figure(res, colors)),
+             "Each point is one configuration; solid lines are Eqs. (12)-(13) with the paper's "
+             "constant C = 2√(π/3) and the set's mean compaction, void size and branch length, "
+             "the dash-dotted line Eq. (12) with the C fitted to the set (relations.csv) and "
+             "the same means, dashed lines Eqs. (14)-(15) with its mean number of branches "
+             "per stack.", lambda: network_figure(res, colors)),
             ("sqrt_s_vs_l.png", "Void size against branch length",
              "Each point is one configuration: the square root of its mean void area against "
              "its mean branch length (units of L), with a line through the origin per set and "
@@ -745,9 +807,8 @@ def _write_files(res: StatsResult, ens: Ensemble, out: Path, *, opts: StatsOptio
              "Mean energy of a branch against the number of branches of its stack, "
              "with standard errors, for the whole system (solid), bulk (dotted) and periphery "
              "(dashed), drawn over the whole system where they coincide with it; a stack size "
-             "no branch has leaves a gap in the line. The branches "
-             "of one stack share its energy, so a point resting on a single stack has no error "
-             "bar.", lambda: e_vs_nbr_figure(ens, colors)),
+             "no branch has leaves a gap in the line. " + _e_vs_nbr_bars(ens),
+             lambda: e_vs_nbr_figure(ens, colors)),
         ]
         for name, title, caption, make in scatter:
             fig = make()
@@ -952,6 +1013,21 @@ def _safe(name: str) -> str:
     return "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in str(name))
 
 
+def _e_vs_nbr_bars(ens: Ensemble) -> str:
+    """The sentence of the branch-energy figure's caption saying when a point has no error
+    bar: a scan's branches share their stack's energy, a simulated rod's carry their own."""
+    scans = ens.configs["rod_length_mm"].notna()  # NaN for simulations
+    scan_words = ("the branches of one stack share its energy, so a point resting on a single "
+                  "stack has no error bar")
+    sim_words = ("each branch carries its own energy, so a point resting on a single stack "
+                 "of several branches has an error bar")
+    if scans.all():
+        return scan_words[0].upper() + scan_words[1:] + "."
+    if not scans.any():
+        return "In a simulated rod " + sim_words + "."
+    return f"In a scan {scan_words}; in a simulated rod {sim_words}."
+
+
 def _pdf_caption(q: str) -> str:
     """One sentence saying what a distribution figure shows."""
     if q in COUNT_QUANTITIES:
@@ -1027,7 +1103,6 @@ RELATION_WORDS = {
     "eq15_fluct": "Eq. (15) mean relative deviation of n̄_br from <n_br>",
     "eq16": "Eq. (16) <n_br>√<N_l>/ε (paper 2.2√(π/3))",
     "n_br_exp_mu": "mean of the exponential (geometric) law of n_br (expected <n_br>)",
-    "E_vs_Nbr_e": "<E> against <N_br><e>",
 }
 PAIR_WORDS = {"l_vs_inv_kappa_m": "branch length l vs 1/κ_m",
               "e_vs_l_kappa_m2": "branch energy e vs l κ_m²",
@@ -1119,6 +1194,19 @@ def _relations_shown(rel: pd.DataFrame) -> pd.DataFrame:
              for r, n, f in zip(rel["relation"], rel["n"], rel["fitted"])]
     rel["n"] = [f"{t}: indicative only" if t else n for t, n in zip(notes, rel["n"])]
     return rel
+
+
+def _correlations_shown(cor: pd.DataFrame) -> pd.DataFrame:
+    """The correlations table with the number of pairs of a coefficient computed from too
+    few spelled out beside it, as the relations table does."""
+    # the page says "indicative only" beside the number: the CSV's boolean column is not shown
+    cor = cor.drop(columns=["indicative"], errors="ignore")
+    if cor.empty:
+        return cor
+    notes = [small_sample_note(n, N_RELATION_MIN, "pairs of values a correlation needs")
+             if np.isfinite(r) else "" for n, r in zip(cor["n"], cor["pearson_r"])]
+    cor["n"] = [f"{t}: indicative only" if t else n for t, n in zip(notes, cor["n"])]
+    return cor
 
 
 #: the Gamma fits behind the columns of the micro and dof tables: column -> (quantity,
@@ -1286,7 +1374,7 @@ def _html(res: StatsResult, figs, meta, ens: Ensemble | None = None,
         _html_table(_with_paper(_small_fits_marked(res.dof, res), PAPER_DOF)),
         "<h2>Stacking relations (paper Eqs. (12)-(16))</h2>",
         _html_table(_relations_shown(res.relations)),
-        "<h2>Correlations</h2>", _html_table(res.correlations),
+        "<h2>Correlations</h2>", _html_table(_correlations_shown(res.correlations)),
         "<h2>Selected laws</h2>",
         _html_table(_selected_table(res)) if res.summaries else "<p>none</p>",
     ]

@@ -421,9 +421,11 @@ def compute_stats(ens: Ensemble, opts: StatsOptions | None = None, *,
         and named in one :class:`~crosssection.stats.fits.SmallSampleWarning` per set; an
         ``n_boot`` from 1 to :data:`~crosssection.stats.fits.N_BOOT_MIN` - 1 gives one too,
         and so do the quantities left unfitted for having fewer than ``opts.min_n`` values
-        (one per set, naming them). The ``indicative`` column of ``fits``, ``micro``, ``dof`` and
-        ``relations`` marks the rows resting on fewer values or configurations than those
-        minima; ``fits`` and ``truncation`` keep their columns when nothing was fitted.
+        (one per set, naming them). The ``indicative`` column of ``fits``, ``micro``, ``dof``,
+        ``relations`` and ``correlations`` marks the rows resting on fewer values or
+        configurations than those minima (for ``correlations``, fewer than
+        :data:`N_RELATION_MIN` pairs); ``fits`` and ``truncation`` keep their columns when
+        nothing was fitted.
 
     Raises
     ------
@@ -583,8 +585,10 @@ def relations_table(ens: Ensemble, per_cfg: pd.DataFrame, summaries: dict) -> pd
     - ``eq15_fluct``: <n_br_bar/<n_br> - 1> (paper: a few percent);
     - ``eq16``: <n_br> sqrt(<N_l>)/<eps>, paper 2.2 sqrt(pi/3);
     - ``n_br_exp_mu``: mean of the exponential law of n_br (fitted as counts: the geometric
-      law's mean, = <n_br> at the maximum of the likelihood), with the selected family;
-    - ``E_vs_Nbr_e``: <E> against <N_br><e> (paper, simulations).
+      law's mean, = <n_br> at the maximum of the likelihood), with the selected family.
+
+    The paper's <E> = <N_br><e> is not a row: a configuration's E is the sum of its
+    branches' energies, in scans and simulations alike, so it holds by construction.
     """
     rows = []
     for s in ens.sets:
@@ -624,9 +628,6 @@ def relations_table(ens: Ensemble, per_cfg: pd.DataFrame, summaries: dict) -> pd
              "r2": np.nan, "n": len(e.stacks),
              "note": (f"CI [{ci[0]:.3g}, {ci[1]:.3g}]; selected: "
                       f"{nsum.best if nsum else 'n/a'}")},
-            {"set": s, "relation": "E_vs_Nbr_e", "fitted": _mean(pc["E"]),
-             "expected": _mean(pc["N_br"]) * _mean(e.branches["e"]), "r2": np.nan,
-             "n": len(pc), "note": "<E> = <N_br><e>"},
         ]
     return pd.DataFrame(rows)
 
@@ -643,7 +644,15 @@ def _corr(x, y):
 
 
 def correlations_table(ens: Ensemble) -> pd.DataFrame:
-    """Pearson (and Spearman) coefficients the paper quotes, per set and region."""
+    """Pearson (and Spearman) coefficients the paper quotes, per set and region.
+
+    Returns
+    -------
+    DataFrame
+        set, region, pair, pearson_r, spearman_r, n (pairs of values), paper, and
+        ``indicative``: a coefficient of fewer than :data:`N_RELATION_MIN` pairs, as a
+        relation fitted on fewer configurations (three points give r = 1 or near it).
+    """
     rows = []
     for s in ens.sets:
         e = ens.subset(s)
@@ -660,7 +669,11 @@ def correlations_table(ens: Ensemble) -> pd.DataFrame:
         r, rs, n = _corr(e.configs["E"], e.configs["N_br"])
         rows.append({"set": s, "region": "all", "pair": "E_vs_N_br", "pearson_r": r,
                      "spearman_r": rs, "n": n, "paper": PAPER_CORR["E_vs_N_br"]})
-    return pd.DataFrame(rows)
+    out = pd.DataFrame(rows, columns=["set", "region", "pair", "pearson_r", "spearman_r", "n",
+                                      "paper"])
+    out["indicative"] = ((out["n"] < N_RELATION_MIN)
+                         & np.isfinite(out["pearson_r"].astype(float))).astype(bool)
+    return out
 
 
 def to_markdown(df: pd.DataFrame, floatfmt: str = ".4g") -> str:

@@ -720,7 +720,8 @@ def make_scene(*, seed: int, n_stacks: int = 40, max_layers: int = 6, px_per_mm:
         Approximate number of stacks (20-300 is the tested range; the realised number depends on
         the Voronoi tiling and is in ``summary['n_stacks']``).
     max_layers : int
-        Largest number of layers (branches) in a stack, 1-12 tested.
+        Largest number of layers (branches) in a stack, 2-12 tested (with 1, no junction
+        of three stacks conserves its layers: the counts are infeasible).
     px_per_mm, thickness_mm : float
         Scan resolution and sheet thickness h.
     calibration : Calibration, optional

@@ -86,6 +86,15 @@ def test_a_set_without_name_is_named_by_its_path_in_the_input(tmp_path):
         load_set_config(spaced / "set.toml", root=tmp_path)
 
 
+@pytest.mark.parametrize("name", ["Größe", "a\\n"])
+def test_a_set_name_of_other_than_ascii_letters_is_refused_in_those_words(tmp_path, name):
+    # the message said "letters", and Größe is made of letters: it says which ones
+    (tmp_path / "set.toml").write_text(f'name = "{name}"\n')
+    with pytest.raises(ConfigError, match=r"name must be folder names \(ASCII letters, "
+                                          r"digits, \. _ \+ -, each starting"):
+        load_set_config(tmp_path / "set.toml")
+
+
 def test_calibration_columns_checked(tmp_path):
     (tmp_path / "cal.csv").write_text("layers,w\n1,0.1\n")
     (tmp_path / "set.toml").write_text('calibration = "cal.csv"\n')

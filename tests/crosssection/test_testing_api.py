@@ -64,10 +64,10 @@ def test_factory_caches_and_applies_the_conditions(foldstat_scan_factory):
 
 
 def test_grid_ids_and_unknown_degradation(foldstat_scan_factory):
-    grid = scan_grid(resolutions=[25, 50], layers=[1, 6], densities=[20],
+    grid = scan_grid(resolutions=[25, 50], layers=[2, 6], densities=[20],
                      degradations=["clean", "defects"])
     assert len(grid) == 8 and len({p.id for p in grid}) == 8
-    assert grid[0].id == "25pxmm-1layers-20stacks-clean"
+    assert grid[0].id == "25pxmm-2layers-20stacks-clean"
     with pytest.raises(Exception, match="degradation"):
         foldstat_scan_factory(degradation="sepia")
 
@@ -82,7 +82,7 @@ def test_analysis_params_strategy_gives_valid_resolvable_parameters(params):
 
 @settings(max_examples=2, deadline=None, database=None,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
-@given(scenes(n_stacks=(10, 16), max_layers=(1, 3), resolutions=(50.0,)))
+@given(scenes(n_stacks=(10, 16), max_layers=(2, 3), resolutions=(50.0,)))
 def test_scene_strategy_draws_scans_with_consistent_truth(scene):
     assert scene.rgb.ndim == 3 and scene.rgb.dtype.name == "uint8"
     st = scene.tables["stacks"]

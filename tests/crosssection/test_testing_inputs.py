@@ -50,8 +50,11 @@ def test_generated_scan_refuses_bad_arguments(args, message):
     ({"n_stacks": 0}, "n_stacks must be a whole number in 10-300, got 0"),
     ({"n_stacks": -5}, "n_stacks must be a whole number in 10-300, got -5"),
     ({"n_stacks": 1000}, "n_stacks must be a whole number in 10-300, got 1000"),
-    ({"max_layers": 0}, "max_layers must be a whole number in 1-12, got 0"),
-    ({"max_layers": 100}, "max_layers must be a whole number in 1-12, got 100"),
+    ({"max_layers": 0}, "max_layers must be a whole number in 2-12, got 0"),
+    # one layer per stack has no layout (a junction of three stacks needs a = b + c): refused
+    # at once, not after the generator's search
+    ({"max_layers": 1}, "max_layers must be a whole number in 2-12, got 1"),
+    ({"max_layers": 100}, "max_layers must be a whole number in 2-12, got 100"),
     ({"seed": -1}, "seed must be a whole number >= 0, got -1"),
     ({"seed": "a"}, "seed must be a whole number >= 0, got 'a'"),
     ({"degradation": []}, "degradation must be one of ['clean', 'defects', 'jpeg', 'noisy'], "
@@ -102,9 +105,9 @@ def test_scan_grid_checks_its_conditions_up_front():
         scan_grid(resolutions=50)
     with pytest.raises(ParameterError, match="^resolutions must be a finite number > 0"):
         scan_grid(resolutions=["a"])
-    with pytest.raises(ParameterError, match="^layers must be a whole number in 1-12"):
+    with pytest.raises(ParameterError, match="^layers must be a whole number in 2-12"):
         scan_grid(layers=[100])
-    with pytest.raises(ParameterError, match="^layers must be a whole number in 1-12"):
+    with pytest.raises(ParameterError, match="^layers must be a whole number in 2-12"):
         scan_grid(layers=[1.5])
     with pytest.raises(ParameterError, match="^densities must be a whole number in 10-300"):
         scan_grid(densities=[5])

@@ -105,6 +105,45 @@ def test_a_one_segment_rod_is_drawn_but_has_no_stacks_analysis():
         plot_configuration(two)
 
 
+def test_plot_draws_a_compactions_wall_on_the_origin_not_about_the_centre_of_mass(tmp_path):
+    # a rod off the origin inside a wall of radius 0.4 centred on the origin (where the
+    # simulators put it); the configuration's row of configs holds its own radius
+    root = _folder(tmp_path / "sim")
+    pd.DataFrame({"config_id": [0, 1], "wall_radius": [0.4, 0.45]}).to_csv(
+        root / "configs.csv", index=False)
+    (root / "params.json").write_text('{"command": "compact", "wall_radius": 0.4}')
+    shifted = XY - XY.mean(axis=0) + [0.05, -0.03]
+    np.savez(root / "rods.npz", config_00000=shifted, config_00001=shifted)
+    ens = load_ensemble(root)
+    for config, radius in ((0, 0.4), (1, 0.45)):
+        ax = ens.plot(config, stacks=False).axes[0]
+        (circle,) = [p for p in ax.patches if type(p).__name__ == "Circle"]
+        assert circle.center == pytest.approx((0.0, 0.0))
+        assert circle.radius == pytest.approx(radius)
+        # the legend says what the markers and the dashed circle are
+        labels = [t.get_text() for t in ax.get_legend().get_texts()]
+        assert labels[:2] == ["first node", "last node"] and labels[2].startswith("wall")
+    with pytest.raises(ParameterError, match="^wall_center must be two finite numbers"):
+        plot_configuration(XY, stacks=False, wall_radius=0.4, wall_center=(0.0, np.nan))
+
+
+def test_plot_tick_labels_do_not_run_into_each_other():
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    # a hairpin spanning x -0.08 .. 0.11 beside its colour bar: matplotlib's default ticks
+    # there (-0.075, -0.050, ...) run into each other
+    xy = (XY - XY.mean(axis=0)) * [0.19 / 0.48, 0.3] + [0.012, 0.0]
+    fig = plot_configuration(xy)
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    fig.draw(renderer)
+    ax = fig.axes[0]
+    boxes = [t.get_window_extent(renderer) for t in ax.get_xticklabels()
+             if t.get_visible() and t.get_text()]
+    boxes.sort(key=lambda b: b.x0)
+    assert len(boxes) >= 3
+    assert all(a.x1 < b.x0 for a, b in zip(boxes, boxes[1:]))
+
+
 # --- simulate.render.render_configuration ---------------------------------------------------
 
 @pytest.mark.parametrize("xy, cause", [

@@ -76,6 +76,23 @@ def test_charts_and_index(fits_report):
     assert "](fits/fits_selection.png)" in A.index_section(res)
 
 
+def test_lines_of_equal_rates_stay_told_apart(fits_report):
+    # two cases of equal coverage and selection rates at every n: one line hid the other
+    _, res = fits_report
+    s = res["tables"]["fits_sample_size_summary"].copy()
+    assert s["case"].nunique() == 2
+    s["coverage"], s["rate_selected"] = 0.75, 1.0
+    for fig, gid in ((A._coverage_chart(s), "coverage:{}"),
+                     (A._selection_chart(s), "rate:rate_selected:{}")):
+        lines = [next(ln for ln in fig.axes[0].lines if ln.get_gid() == gid.format(c))
+                 for c in s["case"].unique()]
+        a, b = lines
+        assert np.array_equal(a.get_ydata(), b.get_ydata())
+        assert a.get_linestyle() != b.get_linestyle()
+        # the markers sit side by side, not on top of each other
+        assert (np.asarray(a.get_xdata()) != np.asarray(b.get_xdata())).all()
+
+
 def test_selection_rate_grows_with_n_in_a_separable_case():
     # Gamma alpha = 0.31 against the paper's five laws: hard at n = 20, easy at n = 1000
     rows = (A.sample_size_rows("e_sim", 20, seed=5, reps=12, ci_reps=0, n_boot=0)
@@ -182,6 +199,10 @@ def test_benchmark_cli_runs_the_fits_sweep(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(A.FitsConfig, "quick", classmethod(lambda cls: A.FitsConfig.tiny()))
     out = tmp_path / "report"
     assert main(["benchmark", "--out", str(out), "--quick", "--sweeps", "fits"]) == 0
+    # the charts it says are those it wrote, the fits sweep's included
+    pngs = list(out.rglob("*.png"))
+    assert len(pngs) == 3
+    assert f"; 3 charts (3 under {out / 'fits'}), index in" in capsys.readouterr().out
     index = (out / "index.md").read_text()
     assert "## fits" in index and "](fits/fits_selection.png)" in index
     assert "--sweeps fits" in index

@@ -237,10 +237,11 @@ def test_axis_labels_never_split_a_parenthesis():
 def test_figures_of_small_samples_show_empty_bins_the_law_and_are_marked():
     from crosssection.stats import SmallSampleWarning, plot_pdf
     from crosssection.stats.fits import N_SELECT_MIN
+    from crosssection.stats.report import BINS_MIN
 
     rng = np.random.default_rng(4)
     ens = _ensemble(["a"], rng, n_stacks=4)
-    # six well-spread values: most of the 24 bins are empty
+    # six well-spread values: the fewest bins, BINS_MIN, and some of them empty
     ens.branches = ens.branches.iloc[:6].assign(e=[3540.0, 3620.0, 3790.0, 4390.0, 4550.0,
                                                    5490.0])
     with pytest.warns(SmallSampleWarning, match=r"e: laws selected on fewer than the "
@@ -248,7 +249,7 @@ def test_figures_of_small_samples_show_empty_bins_the_law_and_are_marked():
         fig = plot_pdf(ens, "e")
     lin, log = fig.axes[0], fig.axes[1]
     pts = _line(lin, "points:a:all")
-    assert len(pts.get_xdata()) == 24 and (pts.get_ydata() == 0).sum() >= 18
+    assert len(pts.get_xdata()) == BINS_MIN and (pts.get_ydata() == 0).sum() == 2
     assert len(_line(log, "points:a:all").get_xdata()) <= 6  # a log axis shows no zero
     legend = [t.get_text() for t in log.get_legend().get_texts()]
     assert any(t.startswith("a: data, indicative only (n = 6") for t in legend), legend
@@ -261,3 +262,76 @@ def test_figures_of_small_samples_show_empty_bins_the_law_and_are_marked():
     fig = pdf_figure(_fits(ens, ("e",), n_boot=0), ens, "e")
     legend = [t.get_text() for t in fig.axes[1].get_legend().get_texts()]
     assert "a: data (n = " in legend[0] and not any("indicative" in t for t in legend)
+
+
+def test_the_number_of_bins_follows_the_number_of_values():
+    """A dozen values in 24 bins were a flat row of single counts: the count grows with n,
+    within BINS_MIN..BINS_MAX, on the linear and the log panel alike."""
+    from crosssection.stats.report import BINS_MAX, BINS_MIN, bin_edges
+
+    rng = np.random.default_rng(5)
+    small, large = rng.gamma(2.0, 0.01, 12), rng.gamma(2.0, 0.01, 5000)
+    for log in (False, True):
+        assert len(bin_edges(small, log)) - 1 == BINS_MIN
+        k = len(bin_edges(large, log)) - 1
+        assert 20 <= k <= BINS_MAX
+        edges = bin_edges(large, log)
+        assert edges[0] == pytest.approx(large.min()) and edges[-1] == pytest.approx(large.max())
+    ens = _ensemble(["a"], rng, n_stacks=6)
+    ens.branches = ens.branches.iloc[:12]
+    fig = pdf_figure(_fits(ens, ("length_L",), n_boot=0), ens, "length_L")
+    pts = _line(fig.axes[0], "points:a:all")
+    assert len(pts.get_xdata()) == BINS_MIN
+    # most bins hold more than one value: not a flat row of single counts
+    counts = np.round(pts.get_ydata() * 12 * np.diff(bin_edges(ens.branches["length_L"])))
+    assert counts.sum() == 12 and counts.max() >= 3
+
+
+def test_a_set_left_out_of_a_distribution_figure_is_named_in_its_legend(geometric):
+    ens, res = geometric
+    # "b" has no fit of the branch length (too few values): the figure draws "a" and says so
+    without_b = StatsResult(*(pd.DataFrame() for _ in range(8)), {
+        k: v for k, v in res.summaries.items() if k != ("b", "all", "length_L")})
+    fig = pdf_figure(without_b, ens, "length_L")
+    legend = [t.get_text() for t in fig.axes[1].get_legend().get_texts()]
+    assert "b: not drawn (too few values to fit, or all equal)" in legend
+    assert not any(ln.get_gid() == "points:b:all" for ln in fig.axes[0].lines)
+    # nothing said when every set is drawn
+    legend = [t.get_text() for t in pdf_figure(res, ens, "length_L").axes[1]
+              .get_legend().get_texts()]
+    assert not any("not drawn" in t for t in legend)
+
+
+def test_the_branch_energy_caption_is_true_of_scans_and_simulations(tmp_path):
+    from crosssection.stats.report import _e_vs_nbr_bars
+
+    batch = load_any(demo.write_demo_batch(tmp_path / "b", n_images=2, seed=1,
+                                           sets={"s1": {"n_stacks": 20}}))
+    sim = load_any(demo.write_demo_simulation(tmp_path / "s", n_configs=2, seed=1))
+    # a simulated branch has its own energy: a point on one stack of several has a bar
+    assert "no error bar" not in _e_vs_nbr_bars(sim)
+    assert "own energy" in _e_vs_nbr_bars(sim)
+    assert "share its energy" in _e_vs_nbr_bars(batch)
+    assert "own energy" not in _e_vs_nbr_bars(batch)
+    both = Ensemble(*(pd.concat([getattr(batch, t), getattr(sim, t)], ignore_index=True)
+                      for t in ("configs", "branches", "stacks", "voids")))
+    text = _e_vs_nbr_bars(both)
+    assert "In a scan the branches of one stack share its energy" in text
+    assert "in a simulated rod each branch carries its own energy" in text
+
+
+def test_the_network_figure_names_the_eq12_constant_and_draws_the_fitted_one(tmp_path):
+    from crosssection.stats.report import network_figure
+    from crosssection.stats.tables import EQ12_CONST
+
+    ens = load_any(demo.write_demo_simulation(tmp_path / "s", n_configs=6, seed=1))
+    res = compute_stats(ens, StatsOptions(n_boot=0, gof=False, quantities=("n_br",)))
+    fitted = res.relations.set_index("relation").loc["eq12_const", "fitted"]
+    assert np.isfinite(fitted) and abs(fitted / EQ12_CONST - 1) > 1e-3
+    left = network_figure(res).axes[0]
+    labels = {ln.get_label(): ln for ln in left.lines}
+    (paper,) = [k for k in labels if "Eq. (12), paper's C = 2√(π/3)" in k]
+    (ours,) = [k for k in labels if f"Eq. (12), fitted C = {fitted:.3g}" in k]
+    # the two lines differ by the ratio of the constants
+    ratio = labels[ours].get_ydata() / labels[paper].get_ydata()
+    assert np.allclose(ratio, fitted / EQ12_CONST)

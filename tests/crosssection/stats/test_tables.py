@@ -199,6 +199,42 @@ def test_relations_recover_constants(seed, slope, nbr):
     assert c == pytest.approx(T.EQ12_CONST) and r2 == pytest.approx(1.0)
 
 
+def test_relations_hold_no_row_equal_by_construction():
+    # a configuration's E is the sum of its branches' energies (the simulator's contact
+    # analysis here; a scan's summary sums its branches.csv), so <E> = <N_br><e> exactly and
+    # a row comparing them could never fail
+    from simulate.contacts import analyze_rod
+    from simulate.shapes import hairpin, resample
+
+    an = analyze_rod(resample(hairpin(0.01, arm=0.3), 60), lam=2e4)
+    assert an.energy_total == pytest.approx(an.branches["energy"].sum(), rel=1e-12)
+    ens = _relations_ensemble(np.random.default_rng(3), n=8)
+    rel = T.relations_table(ens, T.per_config_table(ens), {})
+    assert "E_vs_Nbr_e" not in set(rel["relation"])
+    assert set(rel["relation"]) == {*T.SLOPE_RELATIONS, "eq15_fluct", "eq16", "n_br_exp_mu"}
+
+
+def test_correlations_of_few_pairs_are_marked_indicative():
+    # the relations' rule: fewer than N_RELATION_MIN pairs (three points give r = 1 or near)
+    ens = _relations_ensemble(np.random.default_rng(4), n=T.N_RELATION_MIN - 1)
+    cor = T.correlations_table(ens).set_index("pair")
+    assert cor["indicative"].dtype == bool
+    assert cor.loc["E_vs_N_br", "n"] == T.N_RELATION_MIN - 1 and cor.loc["E_vs_N_br",
+                                                                         "indicative"]
+    assert not cor.loc["e_vs_l_kappa_m2", "indicative"]  # hundreds of branches
+    big = T.correlations_table(_relations_ensemble(np.random.default_rng(4),
+                                                   n=T.N_RELATION_MIN))
+    assert not big["indicative"].any()
+    # the page says it beside the number
+    from crosssection.stats.report import _correlations_shown
+
+    shown = _correlations_shown(T.correlations_table(ens)).set_index("pair")
+    assert "indicative" not in shown.columns
+    assert shown.loc["E_vs_N_br", "n"] == (f"n = {T.N_RELATION_MIN - 1}: below the "
+                                           f"{T.N_RELATION_MIN} pairs of values a correlation "
+                                           "needs: indicative only")
+
+
 def test_correlations_and_micro_gamma_fits():
     rng = np.random.default_rng(2)
     ens = _relations_ensemble(rng, n=40)
@@ -279,7 +315,7 @@ def test_small_samples_not_fitted_are_named_and_rows_marked_indicative(tmp_path)
     with pytest.warns(SmallSampleWarning):
         write_report(ens, tmp_path / "r", opts=opts, figures=False)
     rep = D.load_report(tmp_path / "r")
-    for name in ("fits", "micro", "relations"):
+    for name in ("fits", "micro", "relations", "correlations"):
         back, ours = getattr(rep, name), getattr(res, name)
         assert back["indicative"].dtype == bool
         assert back["indicative"].tolist() == ours["indicative"].tolist()
