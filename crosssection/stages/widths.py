@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 
+import cv2
 import numpy as np
 from numba import njit
 from scipy.ndimage import median_filter
@@ -33,8 +34,8 @@ from crosssection.core.calibration import Calibration
 from crosssection.core.polyline import concat_paths
 from crosssection.core.errors import ParameterError
 
-__all__ = ["stack_widths", "stack_widths_px", "path_width_profile_px", "width_profiles_px",
-           "layer_steps", "Calibration"]
+__all__ = ["distance_map", "stack_widths", "stack_widths_px", "path_width_profile_px",
+           "width_profiles_px", "layer_steps", "Calibration"]
 
 #: A level of :func:`layer_steps` is at least this many of its own widths long.
 STEP_SIDE_WIDTHS = 3.0
@@ -42,6 +43,111 @@ STEP_SIDE_WIDTHS = 3.0
 STEP_ON_LEVEL = 0.3
 #: Longest transition between two levels of a step, in widths of the wider.
 STEP_TRANSITION_WIDTHS = 3.0
+
+
+def distance_map(mask) -> np.ndarray:
+    """Euclidean distance of every pixel of a mask to the nearest pixel outside it, float32
+    (0 outside the mask): the exact transform, as ``cv2.distanceTransform(mask, cv2.DIST_L2,
+    cv2.DIST_MASK_PRECISE)`` gives it.
+
+    Computed on the mask's pixels only (:func:`_distance_kernel`): on the dense 2000x2000
+    benchmark scan (7 % ink) 7 ms against 17-33 ms for OpenCV on two threads and 43 ms on
+    one. Bit for bit OpenCV's values on its multi-threaded path; on one thread OpenCV calls
+    IPP, whose square roots differ from the correctly rounded ones by one unit in the last
+    place on about 1 % of the ink, so a batch worker (one OpenCV thread) and a single
+    analysis read the same distances here. A mask without a pixel outside it goes to OpenCV.
+    """
+    m = np.ascontiguousarray(mask, dtype=bool)
+    if m.ndim != 2:
+        raise ParameterError(f"mask must be a 2-D array, got shape {m.shape}")
+    flat = np.flatnonzero(m)
+    if len(flat) == m.size:
+        if m.size == 0:
+            return np.zeros(m.shape, np.float32)
+        return cv2.distanceTransform(m.view(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    out = np.zeros(m.size, np.float32)
+    row_start = np.searchsorted(flat, np.arange(m.shape[0] + 1, dtype=np.int64) * m.shape[1])
+    _distance_kernel(flat, row_start, m.shape[0], m.shape[1], out)
+    return out.reshape(m.shape)
+
+
+@njit(cache=True)
+def _distance_kernel(flat, row_start, m, n, out):  # pragma: no cover - numba
+    """Squared distances of the mask pixels ``flat`` (raster order; ``row_start[i]`` the first
+    of row ``i``) to the nearest background pixel, their square roots written to ``out``.
+
+    Felzenszwalb and Huttenlocher's two passes (as OpenCV), in integers and on the ink only:
+    first the distance along each column to the background (none when the column's run of
+    ink reaches the image's edge: beyond the edge is not background), then along each row
+    the lower envelope of the parabolas ``(x - c)^2 + h_c``. For a pixel of a row's run of
+    ink the nearest background pixel lies in a column of the run or in the background pixel
+    just before or after it (one beyond is farther than that pixel), so the envelope of a run
+    covers those columns only. Boundaries between parabolas are kept as exact fractions, the
+    squared distance is an integer, and its float32 square root is correctly rounded.
+    """
+    k_n = flat.shape[0]
+    none = np.int64(-1)
+    h = np.empty(k_n, np.int64)  # squared distance along the column
+    start = np.empty(n, np.int64)  # first row of each column's current run of ink
+    last = np.full(n, -2, np.int64)  # last row of ink seen in each column
+    for i in range(m):
+        for k in range(row_start[i], row_start[i + 1]):
+            j = flat[k] - i * n
+            if last[j] != i - 1:
+                start[j] = i
+            last[j] = i
+            d = i - start[j] + 1
+            h[k] = d * d if start[j] > 0 else none
+    stop = np.empty(n, np.int64)  # last row of each column's current run (upwards)
+    last[:] = m + 1
+    for i in range(m - 1, -1, -1):
+        for k in range(row_start[i + 1] - 1, row_start[i] - 1, -1):
+            j = flat[k] - i * n
+            if last[j] != i + 1:
+                stop[j] = i
+            last[j] = i
+            if stop[j] < m - 1:
+                d = stop[j] - i + 1
+                if h[k] == none or d * d < h[k]:
+                    h[k] = d * d
+    vc = np.empty(n + 2, np.int64)  # the envelope's parabolas: their columns and heights
+    vh = np.empty(n + 2, np.int64)
+    zn = np.empty(n + 3, np.int64)  # boundary between parabolas e - 1 and e: zn[e] / zd[e]
+    zd = np.empty(n + 3, np.int64)
+    for i in range(m):
+        k = row_start[i]
+        k_end = row_start[i + 1]
+        while k < k_end:
+            kb = k + 1
+            while kb < k_end and flat[kb] == flat[kb - 1] + 1:
+                kb += 1
+            a = flat[k] - i * n  # the run's columns a .. b - 1
+            b = a + (kb - k)
+            top = -1
+            for c in range(max(a - 1, 0), min(b + 1, n)):
+                hc = np.int64(0) if (c < a or c >= b) else h[k + c - a]
+                if hc == none:
+                    continue
+                while top > 0:  # drop the parabolas the new one hides
+                    p = vc[top]
+                    num = hc + c * c - vh[top] - p * p
+                    if num * zd[top] > zn[top] * (2 * (c - p)):
+                        break
+                    top -= 1
+                if top >= 0:
+                    p = vc[top]
+                    zn[top + 1] = hc + c * c - vh[top] - p * p
+                    zd[top + 1] = 2 * (c - p)
+                top += 1
+                vc[top] = c
+                vh[top] = hc
+            e = 0
+            for x in range(a, b):
+                while e < top and zn[e + 1] < x * zd[e + 1]:
+                    e += 1
+                dx = x - vc[e]
+                out[flat[k + x - a]] = np.sqrt(np.float32(dx * dx + vh[e]))
+            k = kb
 
 
 def _segment_medians(values, seg, n_seg) -> np.ndarray:

@@ -309,3 +309,102 @@ def test_rgb_png_decoded_in_rgb_order(tmp_path):
     assert cv2.imwrite(str(tmp_path / "rgb16.png"), rgb16[..., ::-1])
     got16 = load_image(tmp_path / "rgb16.png")
     assert got16.dtype == np.uint16 and np.array_equal(got16, rgb16)
+
+
+# ----------------------------------------------------------------------------- distance
+def _random_masks(rng, n):
+    """Masks of random pixels, of thick lines (some leaving the image) and nearly full ones."""
+    for i in range(n):
+        h, w = int(rng.integers(1, 60)), int(rng.integers(1, 60))
+        kind = i % 3
+        if kind == 0:
+            m = rng.random((h, w)) < rng.random()
+        elif kind == 1:
+            m = np.zeros((h, w), np.uint8)
+            for _ in range(4):
+                a, b = (tuple(int(v) for v in rng.integers(-10, 70, 2)) for _ in range(2))
+                cv2.line(m, a, b, 1, int(rng.integers(1, 15)))
+            m = m.view(bool)
+        else:
+            m = rng.random((h, w)) > 0.01
+        yield m if i % 5 else m[:, ::-1]  # and not contiguous
+
+
+def test_distance_map_is_the_exact_transform():
+    from scipy import ndimage
+
+    from crosssection.stages.widths import distance_map
+
+    rng = np.random.default_rng(3)
+    for m in _random_masks(rng, 600):
+        d = distance_map(m)
+        assert d.dtype == np.float32 and d.shape == m.shape
+        if m.all():
+            continue
+        # the exact distances, rounded once to float32
+        assert np.array_equal(d, ndimage.distance_transform_edt(m).astype(np.float32))
+    assert distance_map(np.zeros((0, 4), bool)).shape == (0, 4)
+
+
+def test_distance_map_is_opencv_precise_on_a_scan(scene_skeleton):
+    from crosssection.stages.widths import distance_map
+
+    _sc, mask, _skel, dist, _h = scene_skeleton
+    if mask.size >= 1 << 14 and cv2.getNumThreads() > 1:  # OpenCV's own code (else IPP's)
+        assert np.array_equal(distance_map(mask), dist)
+    wide = cv2.dilate(mask.view(np.uint8), np.ones((25, 25), np.uint8))  # larger distances
+    n = cv2.getNumThreads()
+    try:
+        cv2.setNumThreads(max(n, 2))
+        ref = cv2.distanceTransform(wide, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    finally:
+        cv2.setNumThreads(n)
+    assert np.array_equal(distance_map(wide.view(bool)), ref)
+
+
+def test_border_pixels_are_argwhere_on_the_frame():
+    from crosssection.pipeline import _border_pixels
+
+    rng = np.random.default_rng(4)
+    for _ in range(300):
+        m = rng.random(tuple(int(v) for v in rng.integers(1, 9, 2))) < rng.random()
+        edge = np.zeros_like(m)
+        edge[[0, -1], :] = edge[:, [0, -1]] = True
+        got = _border_pixels(m)
+        assert got.dtype == np.intp and np.array_equal(got, np.argwhere(m & edge))
+
+
+# ----------------------------------------------------------------------------- tables, hole
+def test_mid_points_are_polyline_mid_points():
+    from crosssection import tables as tb
+    from crosssection.core.polyline import mid_point
+
+    rng = np.random.default_rng(6)
+    for _ in range(300):
+        paths = []
+        for _ in range(int(rng.integers(0, 6))):
+            n = int(rng.integers(0, 30))
+            kind = int(rng.integers(0, 3))
+            paths.append(rng.integers(0, 50, (n, 2)) if kind == 0 else
+                         np.cumsum(rng.integers(-1, 2, (n, 2)), axis=0) if kind == 1 else
+                         np.repeat(rng.integers(0, 9, (1, 2)), n, axis=0))
+        ref = np.array([mid_point(np.asarray(p, float)) if len(p) else [np.nan, np.nan]
+                        for p in paths]).reshape(-1, 2)
+        assert np.array_equal(tb._mid_points(paths), ref, equal_nan=True)
+
+
+def test_outermost_is_the_last_of_each_bin_in_sorted_order():
+    rng = np.random.default_rng(7)
+    for i in range(300):
+        n = int(rng.integers(1, 200))
+        pts = (rng.integers(0, 40, (n, 2)).astype(float) if i % 2 else
+               rng.normal(size=(n, 2)) * 50)  # ties in distance, or none
+        c, n_bins = rng.normal(size=2), int(rng.integers(1, 60))
+        d = pts - c
+        rad = np.hypot(d[:, 0], d[:, 1])
+        b = np.clip(((np.arctan2(d[:, 0], d[:, 1]) + np.pi) / (2 * np.pi) * n_bins)
+                    .astype(np.int64), 0, n_bins - 1)
+        order = np.lexsort((rad, b))
+        sel = order[np.r_[b[order][1:] != b[order][:-1], True]]
+        got_pts, got_rad = hs._outermost(pts, c, n_bins)
+        assert np.array_equal(got_pts, pts[sel]) and np.array_equal(got_rad, rad[sel])
