@@ -80,8 +80,19 @@ def clear_temporary(out_dir, command: str) -> list[Path]:
     OutputError
         A file cannot be removed.
     """
+    return _unlinked(temporary_files(Path(out_dir).expanduser(), OWN_FILES[command]))
+
+
+def _unlinked(paths) -> list[Path]:
+    """Remove the files ``paths``; return those removed (one already gone is skipped).
+
+    Raises
+    ------
+    OutputError
+        A file cannot be removed.
+    """
     removed = []
-    for path in temporary_files(Path(out_dir).expanduser(), OWN_FILES[command]):
+    for path in paths:
         try:
             path.unlink()
         except FileNotFoundError:
@@ -143,19 +154,8 @@ def remove_stale(out_dir, command: str, written) -> list[Path]:
     """
     out = Path(out_dir)
     kept = {Path(p).name for p in written}
-    removed = []
-    for name in OPTIONAL_OUTPUTS[command]:
-        path = out / name
-        if name in kept or not (path.is_file() or path.is_symlink()):
-            continue
-        try:
-            path.unlink()
-        except FileNotFoundError:
-            continue
-        except OSError as exc:
-            raise output_error(exc, path) from None
-        removed.append(path)
-    return removed
+    return _unlinked(out / name for name in OPTIONAL_OUTPUTS[command]
+                     if name not in kept and ((out / name).is_file() or (out / name).is_symlink()))
 
 
 def _removed_note(removed) -> str:

@@ -241,18 +241,13 @@ class AnalysisParams:
     def calibration_source(self) -> str:
         """How the calibration was given, for messages: the default law, the file (absolute,
         links followed), or the object type with its table (rounded)."""
-        c = self.calibration
-        if c is None:
+        record = self.calibration_record()
+        if record is None:
             return "linear n*h"
-        if isinstance(c, (str, Path)):
-            return resolved_path(c)
-        try:
-            table = self._calibration_table()
-        except FoldstatError:
-            return type(c).__name__
-        law = ", ".join(f"({float(n):g}, {float(w):g})"
-                        for n, w in zip(table.n_layers, table.width_mm))
-        return f"{type(c).__name__} (n_layers, width_mm): {law}"
+        if isinstance(record, str):
+            return record
+        law = ", ".join(f"({n:g}, {w:g})" for n, w in record)
+        return f"{type(self.calibration).__name__} (n_layers, width_mm): {law}"
 
     def calibration_record(self):
         """The calibration as ``summary.json`` records it, in a form this class accepts back:

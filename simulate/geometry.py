@@ -149,7 +149,7 @@ def radius_of_gyration(xy) -> float:
 
 
 __all__ = ["positions", "angles", "trapezoid_weights", "center_of_mass", "radius_of_gyration",
-           "checked_rod"]
+           "checked_rod", "is_point"]
 
 
 def checked_rod(xy, *, min_segments: int = 1) -> np.ndarray:
@@ -199,3 +199,12 @@ def checked_rod(xy, *, min_segments: int = 1) -> np.ndarray:
     if bad:
         raise ParameterError(f"{need}, got {bad} non-finite coordinate(s)")
     return arr
+
+
+def is_point(p) -> bool:
+    """Whether ``p`` is two finite numbers."""
+    try:
+        arr = np.asarray(p, float)
+    except (TypeError, ValueError):
+        return False
+    return arr.shape == (2,) and bool(np.isfinite(arr).all())

@@ -25,7 +25,7 @@ import pandas as pd
 
 from crosssection.core.errors import ConfigError, ParameterError
 from simulate.energy import LAMBDA
-from simulate.geometry import checked_rod
+from simulate.geometry import checked_rod, is_point
 
 __all__ = ["SimulationEnsemble", "load_ensemble", "plot_configuration", "ConfigurationNotFound"]
 
@@ -279,7 +279,7 @@ def plot_configuration(xy, *, ax=None, stacks: bool = True, lam: float = LAMBDA,
     from matplotlib.transforms import offset_copy
 
     xy = _checked_xy(xy, stacks=stacks)
-    if not _is_point(wall_center):
+    if not is_point(wall_center):
         raise ParameterError(f"wall_center must be two finite numbers (x, y), got "
                              f"{wall_center!r}")
     if ax is None:
@@ -336,15 +336,6 @@ def plot_configuration(xy, *, ax=None, stacks: bool = True, lam: float = LAMBDA,
     ax.set_ylabel("y / L")
     ax.set_title(text, fontsize=9)
     return ax.figure
-
-
-def _is_point(p) -> bool:
-    """Whether ``p`` is two finite numbers."""
-    try:
-        arr = np.asarray(p, float)
-    except (TypeError, ValueError):
-        return False
-    return arr.shape == (2,) and bool(np.isfinite(arr).all())
 
 
 def _checked_xy(xy, *, stacks: bool) -> np.ndarray:

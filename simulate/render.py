@@ -175,7 +175,7 @@ from crosssection.truth.voids import truth_voids
 from simulate.checks import check_real
 from simulate.contacts import RodAnalysis, analyze_rod
 from simulate.energy import LAMBDA
-from simulate.geometry import checked_rod
+from simulate.geometry import checked_rod, is_point
 
 __all__ = ["render_configuration", "render_directory", "add_subparser", "smooth_line",
            "passes_calibration", "ScanRangeWarning", "TruthWarning", "SCAN_DEFECTS", "CLEAN",
@@ -1848,7 +1848,7 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
             and hole_radius_mm == "auto"):
         check_real("hole_radius_mm", hole_radius_mm, low=0.0, low_open=True,
                    also="'auto' or None")
-    if wall_radius is not None and not _is_point(wall_center_xy):
+    if wall_radius is not None and not is_point(wall_center_xy):
         raise ParameterError(f"wall_center_xy must be two finite numbers (x, y), got "
                              f"{wall_center_xy!r}")
     if px_per_mm * thickness_mm < MIN_SHEET_PX:
@@ -2049,15 +2049,6 @@ def _check_scale(rod_length_mm, thickness_mm, rod_thickness, where=None) -> None
         f"({drawn / rod_thickness:.3g} times): the drawn rod would not be the compacted one; "
         f"leave rod_length_mm out (it is thickness_mm / {rod_thickness:.4g} = "
         f"{thickness_mm / rod_thickness:.4g} mm) or change thickness_mm", "rod_length_mm")
-
-
-def _is_point(p) -> bool:
-    """Whether ``p`` is two finite numbers."""
-    try:
-        arr = np.asarray(p, float)
-    except (TypeError, ValueError):
-        return False
-    return arr.shape == (2,) and bool(np.isfinite(arr).all())
 
 
 def _check_seed(seed) -> None:
