@@ -56,6 +56,16 @@ _MIN_THICKNESS_PX = 1.0
 MIN_HOLE_SHEETS = 5.0
 
 
+#: How an analysis without a calibration names its width law (``summary.json``
+#: ``calibration``): one layer is h wide, n layers n h.
+LINEAR_CALIBRATION = "linear n*h"
+#: Longest ``smooth_px`` accepted: the default window of any scan that holds its sheet
+#: thickness h (h < half the image side) stays below it.
+SMOOTH_PX_MAX = 20_001
+#: Key of the record of a calibration object that is no table (``{key: type name}``).
+UNRECORDED_CALIBRATION = "object"
+
+
 @dataclass(frozen=True)
 class ScanScale:
     """Resolution and sheet thickness of a scan; every mm <-> px conversion.
@@ -243,9 +253,11 @@ class AnalysisParams:
         links followed), or the object type with its table (rounded)."""
         record = self.calibration_record()
         if record is None:
-            return "linear n*h"
+            return LINEAR_CALIBRATION
         if isinstance(record, str):
             return record
+        if isinstance(record, dict):
+            return f"{record[UNRECORDED_CALIBRATION]} object"
         law = ", ".join(f"({n:g}, {w:g})" for n, w in record)
         return f"{type(self.calibration).__name__} (n_layers, width_mm): {law}"
 
@@ -255,7 +267,13 @@ class AnalysisParams:
         read from other folders than the caller's), or a table given in memory as
         ``[[n_layers, width_mm], ...]`` pairs at full precision (the width law is part of the
         result: ``AnalysisParams(**summary["parameters"])`` analyses with the same table).
-        A table that cannot be read is recorded by its type's name."""
+        An object that is no table (one with a ``layers`` method only) is recorded as
+        ``{"object": its type's name}``, which this class refuses back with that reason.
+
+        Returns
+        -------
+        None, str, list of [int, float] or dict
+        """
         c = self.calibration
         if c is None:
             return None
@@ -264,7 +282,7 @@ class AnalysisParams:
         try:
             table = self._calibration_table()
         except FoldstatError:
-            return type(c).__name__
+            return {UNRECORDED_CALIBRATION: type(c).__name__}
         return [[int(n), float(w)] for n, w in zip(table.n_layers, table.width_mm)]
 
     def _calibration_table(self):
@@ -481,8 +499,11 @@ def check_param(name: str, value):
         return v
     if name == "smooth_px":
         v = _number(name, value, integer=True)
-        if v > 1000:
-            raise ParameterError(f"smooth_px = {v} is longer than any stack (at most 1000)")
+        # the default, 2 floor(h) + 1, stays below it for any h a scan can hold: h is less
+        # than half the image's shorter side, under 9 500 px within Pillow's pixel budget
+        if v > SMOOTH_PX_MAX:
+            raise ParameterError(f"smooth_px = {v} is longer than any stack (at most "
+                                 f"{SMOOTH_PX_MAX})")
         return v
     if name == "hole_center_px":
         try:
@@ -522,6 +543,9 @@ def _check_calibration(value):
         return str(value)
     if hasattr(value, "layers") or hasattr(value, "to_frame") or hasattr(value, "columns"):
         return value
+    if isinstance(value, dict) and UNRECORDED_CALIBRATION in value:
+        raise ParameterError(f"the calibration was a {value[UNRECORDED_CALIBRATION]} object, "
+                             "which a record cannot hold: give it again (or its table)")
     if isinstance(value, (list, tuple, dict)) or hasattr(value, "__array__"):
         # the form summary.json records a table given in memory in
         # (AnalysisParams.calibration_record), or the columns of a table

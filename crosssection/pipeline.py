@@ -36,7 +36,7 @@ from crosssection._version import __version__
 from crosssection.core.errors import AnalysisError, FoldstatError, ImageError, ParameterError
 from crosssection.core.provenance import input_record, library_versions, sha256_in_background
 from crosssection.linsys import solve_branch_counts
-from crosssection.params import AnalysisParams
+from crosssection.params import LINEAR_CALIBRATION, AnalysisParams
 from crosssection.result import AnalysisResult, write_step_images
 from crosssection.stages import curvature, hole as hole_stage, voids as void_stage
 from crosssection.stages.clean import clean_mask
@@ -387,7 +387,9 @@ def _calibration(p: AnalysisParams):
 
     if p.calibration is None:
         return Calibration.linear(p.thickness_mm, n_max=50)
-    cal = Calibration.of(p.calibration)
+    # an object with a ``layers`` method serves as given (a law that is no table)
+    cal = (p.calibration if hasattr(p.calibration, "layers")
+           and not isinstance(p.calibration, (str, Path)) else Calibration.of(p.calibration))
     # a cut stack of one layer is about one sheet thick (the paper's calibration: 1.1-1.4 h);
     # a width law off by a factor of 10 is a unit or column error, not a calibration
     w1 = float(np.asarray(cal.width(1.0)).reshape(-1)[0])
@@ -399,7 +401,7 @@ def _calibration(p: AnalysisParams):
 
 
 def analyze(image, params: AnalysisParams | None = None, *, warn: bool = True,
-            **overrides) -> AnalysisResult:
+            image_sha256: str | None = None, **overrides) -> AnalysisResult:
     """Analyse one scan of a cut cross-section (paper, "Image analysis procedure").
 
     Parameters
@@ -413,6 +415,9 @@ def analyze(image, params: AnalysisParams | None = None, *, warn: bool = True,
         only (``result.quality``, ``summary["quality"]``): for callers that report the flags
         themselves, without ``warnings.catch_warnings``, whose filters are shared by all the
         threads of a process.
+    image_sha256 : str, optional
+        The file's SHA-256 when the caller has it (a batch hashes every scan as it plans):
+        recorded in ``summary["inputs"]`` as given instead of hashed again.
     **overrides
         Fields of :class:`~crosssection.params.AnalysisParams` overriding ``params``, e.g.
         ``px_per_mm=50, thickness_mm=0.1, calibration="cal.csv", hole_radius_mm=20``.
@@ -434,23 +439,34 @@ def analyze(image, params: AnalysisParams | None = None, *, warn: bool = True,
     """
     path_hint = str(image) if isinstance(image, (str, Path)) else None
     try:
-        return _analyze(image, params, overrides, warn=warn)
+        return _analyze(image, params, overrides, warn=warn, image_sha256=image_sha256)
     except FoldstatError as exc:
         if exc.path is None and path_hint is not None:
             raise type(exc)(exc.cause, path_hint) from None
         raise
 
 
-def _analyze(image, params, overrides, *, warn: bool = True) -> AnalysisResult:
+def _analyze(image, params, overrides, *, warn: bool = True,
+             image_sha256: str | None = None) -> AnalysisResult:
     t_start = time.perf_counter()
     timer = StageTimer()
     p = _resolve_params(params, overrides, str(image) if isinstance(image, (str, Path)) else None)
     cal = _calibration(p)  # a bad calibration file fails before any image work
     # hashed while it is analysed: the record names the content the results come from
-    sha256 = sha256_in_background(image) if isinstance(image, (str, Path)) else None
+    is_file = isinstance(image, (str, Path))
+    hashing = sha256_in_background(image) if is_file and image_sha256 is None else None
     pre = _preprocess(image, p, timer)
-    inputs = input_record(image, p.calibration, image_sha256=sha256() if sha256 else None,
+    hash_note = None
+    if hashing is not None:
+        image_sha256, hash_note = hashing()
+    inputs = input_record(image, p.calibration, image_sha256=image_sha256, image_hashed=is_file,
                           table=cal if p.calibration is not None else None)
+    if hash_note:
+        note = f"SHA-256 not recorded: {hash_note}"
+        pre = dataclasses.replace(pre, warnings=[*pre.warnings, note])
+        if warn:
+            # user -> analyze -> _analyze: the warning points at the user's call
+            _warnings.warn(f"{image}: {note}", quality.InputWarning, stacklevel=3)
     sg, h_px, scale = pre.graph, p.thickness_px, p.scale
     with timer("widths"):
         # layers ending inside a band leave no junction: the band is cut where its width steps
@@ -563,7 +579,7 @@ def _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, void
     summary = tb.summary(pre=pre, params=p, linear_system=lin, junctions=junctions,
                          stacks=stacks, branches=branches, voids=voids, rod_measured_mm=rod_mm,
                          rod_used_mm=L,
-                         calibration_source=("linear n*h" if p.calibration is None
+                         calibration_source=(LINEAR_CALIBRATION if p.calibration is None
                                              else p.calibration_record()),
                          timings=timer.t, total_time_s=time.perf_counter() - t_start,
                          version=__version__, inputs=inputs, libraries=library_versions())

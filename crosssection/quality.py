@@ -559,8 +559,8 @@ def _count_width_check(stacks) -> list[QualityFlag]:
     if sid and {"mid_x_px", "mid_y_px"} <= set(stacks.columns) and np.isfinite(
             [worst["mid_x_px"], worst["mid_y_px"]]).all():
         # the overlay draws no stack ids: its mid point (stacks.csv, scan pixels) finds it
-        sid = (f"stack {int(worst['stack_id'])} (x {float(worst['mid_x_px']):.0f}, "
-               f"y {float(worst['mid_y_px']):.0f} px in the scan): ")
+        sid = (f"stack {int(worst['stack_id'])} at x {float(worst['mid_x_px']):.0f}, "
+               f"y {float(worst['mid_y_px']):.0f} px of the scan: ")
     return [QualityFlag("count_width", f"{k} stack(s) hold a count a layer or more from what "
                         f"their own width reads ({sid}n_br {int(worst['n_br'])} against "
                         f"{float(worst['layers_est']):.2f} layers from the width): the junctions "

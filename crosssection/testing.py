@@ -380,8 +380,8 @@ if pytest is not None:
 
 # --------------------------------------------------------------------------- hypothesis
 
-def scan_options(*, resolutions=(25.0, 50.0), max_layers=(2, 6), n_stacks=(10, 40),
-                 degradations=tuple(DEGRADATIONS)):
+def scan_options(*, resolutions=(25.0, 50.0), max_layers=(MAX_LAYERS_RANGE[0], 6),
+                 n_stacks=(10, 40), degradations=tuple(DEGRADATIONS)):
     """Hypothesis strategy of :func:`make_generated_scan` keywords.
 
     Parameters

@@ -7,6 +7,7 @@ from __future__ import annotations
 import errno
 import json
 import os
+import re
 import shutil
 import tempfile
 from contextlib import contextmanager
@@ -270,6 +271,11 @@ def clear_stale_folders(final) -> None:
                     p.unlink(missing_ok=True)
 
 
+#: The random part of a name from ``tempfile.mkstemp`` (``tempfile._RandomNameSequence``:
+#: eight of lower-case letters, digits and underscores).
+_MKSTEMP_RANDOM = "[a-z0-9_]{8}"
+
+
 def temporary_files(folder, names) -> list[Path]:
     """The temporary files that :func:`atomic_path` writes of ``names`` in ``folder``
     (``.<name>.XXXX<suffix>``): only a process killed while writing one leaves it behind.
@@ -291,7 +297,10 @@ def temporary_files(folder, names) -> list[Path]:
     found = set()
     for name in names:
         suffix = Path(name).suffix or ".tmp"
-        found.update(p for p in folder.glob(f".{name}.*{suffix}") if p.is_file())
+        # mkstemp's random part only: a user's own hidden file of the same stem stays
+        pattern = re.compile(re.escape(f".{name}.") + _MKSTEMP_RANDOM + re.escape(suffix))
+        found.update(p for p in folder.glob(f".{name}.*{suffix}")
+                     if pattern.fullmatch(p.name) and p.is_file())
     return sorted(found)
 
 

@@ -20,18 +20,28 @@ __all__ = ["file_sha256", "sha256_in_background", "resolved_path", "file_record"
            "ANALYSIS_LIBRARIES"]
 
 #: the libraries whose releases can move an analysis' numbers (``summary.json`` ``libraries``)
-ANALYSIS_LIBRARIES = ("numpy", "scipy", "scikit-image", "opencv", "numba")
+#: (the image decoders included: Pillow, tifffile and imagecodecs read the scans)
+ANALYSIS_LIBRARIES = ("numpy", "scipy", "scikit-image", "opencv", "numba", "pandas", "pillow",
+                      "tifffile", "imagecodecs")
 
-#: a library -> the distributions that install it (the first one installed is read): OpenCV
-#: comes as one of four wheels that all provide ``cv2``
-_DISTRIBUTIONS = {
-    "opencv": ("opencv-python-headless", "opencv-python", "opencv-contrib-python-headless",
-               "opencv-contrib-python"),
-}
+#: a library -> the module whose ``__version__`` is the one imported: OpenCV comes as one of
+#: four wheels that all provide ``cv2``, and the module is what the analysis runs
+_MODULES = {"opencv": "cv2"}
 
 
 def file_sha256(path, chunk: int = 1 << 20) -> str:
-    """The SHA-256 of a file's content, as 64 hex digits.
+    """The SHA-256 of a file's content.
+
+    Parameters
+    ----------
+    path : str or Path
+    chunk : int
+        Bytes read at a time.
+
+    Returns
+    -------
+    str
+        64 hex digits.
 
     Raises
     ------
@@ -45,30 +55,59 @@ def file_sha256(path, chunk: int = 1 << 20) -> str:
     return h.hexdigest()
 
 
-def sha256_in_background(path):
-    """Start hashing a file (:func:`file_sha256`) on a thread; return a function that waits
-    for it and gives the hex digest (None when the file cannot be read).
+def _identity(path):
+    """What changes when a file is written or replaced: device, inode, size, modification
+    time (None when it cannot be read)."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    return st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns
 
-    ``hashlib`` releases the GIL while it hashes, so the analysis goes on meanwhile: hashing
-    the 7.9 MB PNG of a dense 2000x2000 scan takes 7.5-11 ms of the analysis' 0.27 s when
-    done in line.
+
+def sha256_in_background(path):
+    """Start hashing a file (:func:`file_sha256`) on a thread, for the record of an analysis
+    that reads it meanwhile.
+
+    ``hashlib`` releases the GIL while it hashes, so the analysis goes on: hashing the 7.9 MB
+    PNG of a dense 2000x2000 scan takes 7.5-11 ms of the analysis' 0.27 s when done in line.
+    The hash is of a second read of the file: it is kept only when the file is the same
+    (device, inode, size, modification time) from before the analysis read it to after.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file the analysis reads.
+
+    Returns
+    -------
+    callable
+        Called once the analysis has read the file: waits for the hash and returns
+        ``(sha256, problem)``, the hex digest and None, or None and why there is none (the
+        file changed or could not be read).
     """
     import threading
 
+    path = os.path.expanduser(os.fspath(path))
+    before = _identity(path)
     out = {}
 
     def work():
         try:
-            out["sha256"] = file_sha256(os.path.expanduser(os.fspath(path)))
-        except OSError:
-            out["sha256"] = None
+            out["sha256"] = file_sha256(path)
+        except OSError as exc:
+            out["problem"] = f"the file could not be read again to hash it ({exc.strerror or exc})"
 
     thread = threading.Thread(target=work, name="foldstat-sha256", daemon=True)
     thread.start()
 
-    def result() -> str | None:
+    def result():
         thread.join()
-        return out.get("sha256")
+        if "problem" in out:
+            return None, out["problem"]
+        if before is None or _identity(path) != before:
+            return None, "the file changed while it was analysed"
+        return out["sha256"], None
 
     return result
 
@@ -79,7 +118,7 @@ def resolved_path(path) -> str:
     return os.path.realpath(os.path.expanduser(os.fspath(path)))
 
 
-def file_record(path, *, given=None, sha256: str | None = None) -> dict:
+def file_record(path, *, given=None, sha256: str | None = None, hashed: bool = False) -> dict:
     """``{"path", "resolved", "sha256"}`` of one input file.
 
     Parameters
@@ -91,8 +130,14 @@ def file_record(path, *, given=None, sha256: str | None = None) -> dict:
     sha256 : str, optional
         Its SHA-256 when already computed; null when the file cannot be read (a
         calibration that ``steps``, which does not read it, was given and is missing).
+    hashed : bool
+        The hash was attempted already: ``sha256`` is recorded as given, null included.
+
+    Returns
+    -------
+    dict
     """
-    if sha256 is None:
+    if sha256 is None and not hashed:
         try:
             sha256 = file_sha256(os.path.expanduser(os.fspath(path)))
         except OSError:
@@ -101,11 +146,24 @@ def file_record(path, *, given=None, sha256: str | None = None) -> dict:
             "resolved": resolved_path(path), "sha256": sha256}
 
 
-def image_record(image, *, given=None, sha256: str | None = None) -> dict:
-    """The record of a scan: a file's :func:`file_record`; for an array, ``path``,
-    ``resolved`` and ``sha256`` null, with its ``shape`` and ``dtype`` as given."""
+def image_record(image, *, given=None, sha256: str | None = None,
+                 hashed: bool = False) -> dict:
+    """The record of a scan.
+
+    Parameters
+    ----------
+    image : str, Path or ndarray
+    given, sha256, hashed
+        As :func:`file_record`.
+
+    Returns
+    -------
+    dict
+        A file's :func:`file_record`; for an array, ``path``, ``resolved`` and ``sha256``
+        null, with its ``shape`` and ``dtype`` as given.
+    """
     if isinstance(image, (str, os.PathLike)):
-        return file_record(image, given=given, sha256=sha256)
+        return file_record(image, given=given, sha256=sha256, hashed=hashed)
     import numpy as np
 
     a = np.asarray(image)
@@ -139,13 +197,13 @@ def calibration_record(calibration, table=None) -> dict | None:
         table = table if table is not None else Calibration.of(calibration)
         record["widths"] = {"n_layers": [int(n) for n in table.n_layers],
                             "width_mm": [float(w) for w in table.width_mm]}
-    except (FoldstatError, OSError, TypeError, ValueError):
+    except (FoldstatError, OSError, TypeError, ValueError, AttributeError):  # a law, no table
         record["widths"] = None
     return record
 
 
 def input_record(image, calibration=None, *, given=None, image_sha256: str | None = None,
-                 table=None) -> dict:
+                 image_hashed: bool = False, table=None) -> dict:
     """What an analysis read: ``{"image": image_record, "calibration": calibration_record}``.
 
     Parameters
@@ -158,6 +216,9 @@ def input_record(image, calibration=None, *, given=None, image_sha256: str | Non
         The scan's path as the user named it (a batch's ``INPUT_DIR/rel``).
     image_sha256 : str, optional
         The scan's SHA-256 when already computed.
+    image_hashed : bool
+        The scan's hash was attempted already: ``image_sha256`` is recorded as given, null
+        included (a file that changed while it was analysed).
     table : Calibration, optional
         The calibration's table when already read.
 
@@ -165,7 +226,7 @@ def input_record(image, calibration=None, *, given=None, image_sha256: str | Non
     -------
     dict
     """
-    return {"image": image_record(image, given=given, sha256=image_sha256),
+    return {"image": image_record(image, given=given, sha256=image_sha256, hashed=image_hashed),
             "calibration": calibration_record(calibration, table)}
 
 
@@ -173,12 +234,17 @@ def input_record(image, calibration=None, *, given=None, image_sha256: str | Non
 def _version(name: str) -> str | None:
     from importlib.metadata import PackageNotFoundError, version
 
-    for dist in _DISTRIBUTIONS.get(name, (name,)):
+    if name in _MODULES:
+        import importlib
+
         try:
-            return version(dist)
-        except PackageNotFoundError:
-            continue
-    return None
+            return str(importlib.import_module(_MODULES[name]).__version__)
+        except (ImportError, AttributeError):
+            return None
+    try:
+        return version(name)
+    except PackageNotFoundError:
+        return None
 
 
 def library_versions(names=ANALYSIS_LIBRARIES) -> dict:
@@ -191,7 +257,7 @@ def library_versions(names=ANALYSIS_LIBRARIES) -> dict:
     Parameters
     ----------
     names : iterable of str
-        Distribution names (``"opencv"`` reads whichever OpenCV wheel is installed).
+        Distribution names (``"opencv"``: the version of the ``cv2`` module imported).
 
     Returns
     -------

@@ -52,10 +52,19 @@ def distance_map(mask) -> np.ndarray:
 
     Computed on the mask's pixels only (:func:`_distance_kernel`): on the dense 2000x2000
     benchmark scan (7 % ink) 7 ms against 17-33 ms for OpenCV on two threads and 43 ms on
-    one. Bit for bit OpenCV's values on its multi-threaded path; on one thread OpenCV calls
-    IPP, whose square roots differ from the correctly rounded ones by one unit in the last
-    place on about 1 % of the ink, so a batch worker (one OpenCV thread) and a single
-    analysis read the same distances here. A mask without a pixel outside it goes to OpenCV.
+    one. Bit for bit OpenCV's values on its multi-threaded path; on one thread (a batch
+    worker) and on images under 2^14 px OpenCV calls IPP, whose square roots differ from the
+    correctly rounded ones by one unit in the last place on about 1 % of the ink: here every
+    analysis reads the same distances (the sample scans' tables were the same either way). A
+    mask without a pixel outside it goes to OpenCV.
+
+    Parameters
+    ----------
+    mask : (H, W) array of bool
+
+    Returns
+    -------
+    (H, W) float32 array
     """
     m = np.ascontiguousarray(mask, dtype=bool)
     if m.ndim != 2:
@@ -71,7 +80,7 @@ def distance_map(mask) -> np.ndarray:
     return out.reshape(m.shape)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _distance_kernel(flat, row_start, m, n, out):  # pragma: no cover - numba
     """Squared distances of the mask pixels ``flat`` (raster order; ``row_start[i]`` the first
     of row ``i``) to the nearest background pixel, their square roots written to ``out``.
@@ -146,7 +155,10 @@ def _distance_kernel(flat, row_start, m, n, out):  # pragma: no cover - numba
                 while e < top and zn[e + 1] < x * zd[e + 1]:
                     e += 1
                 dx = x - vc[e]
-                out[flat[k + x - a]] = np.sqrt(np.float32(dx * dx + vh[e]))
+                # the square root of the exact integer, in float64 then rounded once more:
+                # correctly rounded in float32 (a float32 of the square would round it first
+                # beyond 2^24, distances over 4096 px)
+                out[flat[k + x - a]] = np.float32(math.sqrt(float(dx * dx + vh[e])))
             k = kb
 
 

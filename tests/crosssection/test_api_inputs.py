@@ -220,6 +220,64 @@ def test_the_summary_records_what_the_analysis_read(scan, result, tmp_path, monk
         "sha256": hashlib.sha256((tmp_path / "scan.png").read_bytes()).hexdigest()}
 
 
+def test_a_scan_replaced_while_it_is_analysed_is_not_recorded_by_the_new_content(
+        scan, tmp_path, monkeypatch):
+    """The hash is of a second read of the file: a file that changed meanwhile is recorded
+    without it, and said; a hash the caller gives is recorded as given."""
+    import time
+
+    from crosssection.core import provenance
+    from crosssection.quality import InputWarning
+
+    path = tmp_path / "scan.png"
+    cv2.imwrite(str(path), scan[..., ::-1])
+    hash_file = provenance.file_sha256
+
+    def replaced_while_hashed(p, chunk=1 << 20):
+        os.utime(p, ns=(time.time_ns(), time.time_ns() + 10**9))  # written again
+        return hash_file(p, chunk)
+
+    monkeypatch.setattr(provenance, "file_sha256", replaced_while_hashed)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = cs.analyze(path, **KW)
+    assert res.summary["inputs"]["image"]["sha256"] is None
+    said = [w for w in caught if issubclass(w.category, InputWarning)]
+    assert len(said) == 1 and "changed while it was analysed" in str(said[0].message)
+    assert any("SHA-256 not recorded" in w for w in res.summary["warnings"])
+    monkeypatch.setattr(provenance, "file_sha256", hash_file)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        given = cs.analyze(path, **KW, image_sha256="ab" * 32)
+    assert given.summary["inputs"]["image"]["sha256"] == "ab" * 32
+
+
+def test_a_calibration_object_that_is_no_table_serves_and_is_recorded_as_such(scan):
+    """An object with ``layers`` and ``width`` methods is a width law: it analyses as given;
+    the record names it instead of passing its type for a file path."""
+    class Law:
+        def layers(self, width_mm):
+            return np.asarray(width_mm, float) / 0.1 - 0.4
+
+        def width(self, n):
+            return 0.1 * (np.asarray(n, float) + 0.4)
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = cs.analyze(scan, **KW, calibration=Law())
+    assert len(res.tables["stacks"]) > 0
+    assert res.summary["parameters"]["calibration"] == {"object": "Law"}
+    with pytest.raises(ParameterError, match="a Law object, which a record cannot hold"):
+        cs.AnalysisParams(**res.summary["parameters"])
+
+
+def test_the_default_smoothing_window_of_any_sheet_is_accepted_back():
+    from crosssection.tables import recorded_parameters
+
+    p = cs.AnalysisParams(px_per_mm=100, thickness_mm=52.0)
+    assert cs.AnalysisParams(**recorded_parameters(p)).smooth_px == 10401
+
+
 def test_a_parameter_file_with_a_misspelt_key_is_refused(tmp_path):
     # a misspelt key read as "not a parameter" would analyse every scan at the default scale
     from crosssection import AnalysisParams

@@ -88,7 +88,7 @@ def test_a_set_without_name_is_named_by_its_path_in_the_input(tmp_path):
 
 @pytest.mark.parametrize("name", ["Größe", "a\\n"])
 def test_a_set_name_of_other_than_ascii_letters_is_refused_in_those_words(tmp_path, name):
-    # the message said "letters", and Größe is made of letters: it says which ones
+    # Größe is made of letters: the message says which letters a name may hold
     (tmp_path / "set.toml").write_text(f'name = "{name}"\n')
     with pytest.raises(ConfigError, match=r"name must be folder names \(ASCII letters, "
                                           r"digits, \. _ \+ -, each starting"):

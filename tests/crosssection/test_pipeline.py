@@ -51,8 +51,9 @@ def test_cli_analyze_contract(scene_dir, tmp_path):
                  "overlay.png"):
         assert (out / name).is_file(), name
     summary = json.loads((out / "summary.json").read_text())
-    for key in schema.SUMMARY_KEYS:
+    for key in schema.SUMMARY_KEYS + schema.PROVENANCE_KEYS:
         assert key in summary
+    assert len(summary["inputs"]["image"]["sha256"]) == 64
     for key in schema.HOLE_KEYS:
         assert key in summary["hole"]
     assert summary["hole"]["found_by"] == "given"

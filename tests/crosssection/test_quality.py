@@ -530,7 +530,7 @@ def test_a_long_stack_whose_count_its_width_contradicts_is_flagged():
     # the overlay draws no ids: with the stacks' mid points the message says where it lies
     placed = stacks.assign(mid_x_px=[511.6, 10.0, 20.0], mid_y_px=[300.2, 10.0, 20.0])
     (flag,) = quality._count_width_check(placed)
-    assert "(stack 0 (x 512, y 300 px in the scan): n_br 4 against 3.08 layers" in flag.message
+    assert "(stack 0 at x 512, y 300 px of the scan: n_br 4 against 3.08 layers" in flag.message
     assert quality.CATEGORIES["count_width"] is quality.LinearSystemWarning
     # within 0.75 layer, or a stack too short for its width to be read: no flag
     ok = stacks.assign(layers_est=[3.3, 2.1, 1.9])

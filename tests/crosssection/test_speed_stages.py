@@ -346,6 +346,41 @@ def test_distance_map_is_the_exact_transform():
     assert distance_map(np.zeros((0, 4), bool)).shape == (0, 4)
 
 
+def test_distance_map_is_correctly_rounded_beyond_4096_px():
+    from scipy import ndimage
+
+    from crosssection.stages.widths import distance_map
+
+    # squared distances beyond 2^24 are not float32 numbers: the root is of the exact integer
+    m = np.ones((300, 6000), bool)
+    m[150, 0] = False
+    assert np.array_equal(distance_map(m), ndimage.distance_transform_edt(m).astype(np.float32))
+
+
+def test_trapezoid_is_numpys():
+    from crosssection.stages.branches import _trapezoid
+
+    rng = np.random.default_rng(5)
+    for n in (2, 3, 7, 64, 1001):
+        y, s = rng.normal(size=n), np.cumsum(rng.uniform(0.1, 2.0, n))
+        assert _trapezoid(y, np.diff(s)) == np.trapezoid(y, s)
+
+
+def test_padded_values_read_the_padded_copy():
+    from crosssection.stages.skeleton import _PaddedValues
+
+    rng = np.random.default_rng(6)
+    img = rng.uniform(0, 9, (37, 53)).astype(np.float32)
+    padded = np.zeros((39, 55), np.float32)
+    padded[1:-1, 1:-1] = img
+    flat = padded.reshape(-1)
+    inside = np.flatnonzero(np.pad(np.ones(img.shape, bool), 1))
+    v = _PaddedValues(img)
+    assert np.array_equal(v[inside], flat[inside])
+    assert all(v[int(p)] == flat[p] for p in inside[::97])
+    assert v.max(initial=0.0) == flat.max(initial=0.0)
+
+
 def test_distance_map_is_opencv_precise_on_a_scan(scene_skeleton):
     from crosssection.stages.widths import distance_map
 

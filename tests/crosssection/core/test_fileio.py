@@ -3,6 +3,7 @@ hidden temporary file it is written through."""
 from __future__ import annotations
 
 import errno
+from pathlib import Path
 
 import pandas as pd
 import pytest
@@ -73,3 +74,16 @@ def test_the_temporary_files_of_atomic_writes_are_found(tmp_path):
     assert [p.name for p in fileio.temporary_files(tmp_path, ["index.csv", "batch.json"])] == [
         ".batch.json.k3j2l1ab.json", ".index.csv.ab12cd34.csv"]
     assert fileio.temporary_files(tmp_path / "none", ["index.csv"]) == []
+
+
+def test_a_users_hidden_file_of_the_same_stem_is_no_temporary_file(tmp_path):
+    # only mkstemp's eight random characters stand between the name and the suffix
+    for name in (".overlay.png.orig.png", ".stacks.csv.my-notes.csv", ".stacks.csv.ab12cd345.csv"):
+        (tmp_path / name).write_text("mine")
+    (tmp_path / ".stacks.csv.a_2b9xyz.csv").write_text("half")
+    found = fileio.temporary_files(tmp_path, ["overlay.png", "stacks.csv"])
+    assert [p.name for p in found] == [".stacks.csv.a_2b9xyz.csv"]
+    with fileio.atomic_path(tmp_path / "stacks.csv") as tmp:
+        # what the writer itself makes is found
+        assert Path(tmp) in fileio.temporary_files(tmp_path, ["stacks.csv"])
+        Path(tmp).write_text("whole")
