@@ -31,8 +31,9 @@ from crosssection.core.fileio import (BROWSER_FILES, clear_stale_folders, save_f
 from crosssection.stats import fits as F
 from crosssection.stats.families import FAMILIES
 from crosssection.stats.data import REPORT_TABLES, Ensemble
-from crosssection.stats.tables import (COUNT_QUANTITIES, EQ12_CONST, N_RELATION_MIN, PAPER_DOF,
-                                       PAPER_MACRO, PAPER_MICRO, QUANTITIES, SLOPE_RELATIONS,
+from crosssection.stats.tables import (CORRELATION_MIN_PAIRS, COUNT_QUANTITIES, EQ12_CONST,
+                                       N_RELATION_MIN, PAPER_DOF, PAPER_MACRO, PAPER_MICRO,
+                                       QUANTITIES, SLOPE_RELATIONS,
                                        StatsOptions, StatsResult, compute_stats, regions_of,
                                        set_seed, small_sample_note, to_markdown)
 
@@ -542,7 +543,8 @@ def _scatter_fig(res, x, y, xlabel, ylabel, title, *, through_origin=False, pape
         xv, yv = np.asarray(g[x], float), np.asarray(g[y], float)
         k = np.isfinite(xv) & np.isfinite(yv)
         txt = f"{s}: configurations"
-        if k.sum() >= 2 and not through_origin and np.ptp(xv[k]) > 0 and np.ptp(yv[k]) > 0:
+        if (k.sum() >= CORRELATION_MIN_PAIRS and not through_origin and np.ptp(xv[k]) > 0
+                and np.ptp(yv[k]) > 0):
             txt += f", Pearson r = {np.corrcoef(xv[k], yv[k])[0, 1]:.2f}"
             if k.sum() < N_RELATION_MIN:  # as correlations.csv marks it
                 txt += f" (n = {int(k.sum())}, indicative only)"

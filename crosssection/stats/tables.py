@@ -80,6 +80,8 @@ POSITIVE_QUANTITIES = {"length_L", "kappa_m_L", "kappa_plus_L", "e", "E", "n_br"
 #: through the origin passes exactly through one point, and R^2 of two to four points says
 #: little about the relation
 N_RELATION_MIN = 5
+#: Fewest pairs of values a correlation coefficient is computed from (two always give +-1).
+CORRELATION_MIN_PAIRS = 3
 #: the relations fitted across configurations (a slope or ratio per set)
 SLOPE_RELATIONS = ("eq12_const", "slope_sqrt_s_vs_l", "eq12_eps_sqrtNl", "eq14_slope")
 
@@ -637,7 +639,7 @@ def _corr(x, y):
 
     x, y = np.asarray(x, float), np.asarray(y, float)
     k = np.isfinite(x) & np.isfinite(y)
-    if k.sum() < 3 or np.ptp(x[k]) == 0 or np.ptp(y[k]) == 0:
+    if k.sum() < CORRELATION_MIN_PAIRS or np.ptp(x[k]) == 0 or np.ptp(y[k]) == 0:
         return np.nan, np.nan, int(k.sum())
     return (float(stats.pearsonr(x[k], y[k])[0]), float(stats.spearmanr(x[k], y[k])[0]),
             int(k.sum()))

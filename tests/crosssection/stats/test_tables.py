@@ -341,3 +341,24 @@ def test_nothing_fitted_keeps_the_fits_columns(tmp_path):
     assert res.fits.empty and list(res.fits.columns) == T.fits_columns()
     assert {"selected", "family", "indicative"} <= set(res.fits.columns)
     assert res.fits[res.fits["selected"].astype(bool)].empty
+
+
+@pytest.mark.filterwarnings("ignore::crosssection.quality.QualityWarning")  # a built ensemble
+def test_two_configurations_give_no_correlation_in_the_table_or_the_figure():
+    # two points always lie on a line: r = +-1 says nothing, in the table as in the legend
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from crosssection.stats.report import _scatter_fig
+
+    ens = _relations_ensemble(np.random.default_rng(5), n=T.CORRELATION_MIN_PAIRS - 1)
+    cor = T.correlations_table(ens).set_index("pair")
+    assert np.isnan(cor.loc["E_vs_N_br", "pearson_r"])
+    res = T.compute_stats(ens, T.StatsOptions(n_boot=0, gof=False))
+    fig = _scatter_fig(res, "N_br", "E", "N_br", "E", "E against N_br")
+    labels = fig.axes[0].get_legend_handles_labels()[1]
+    assert labels and not any("Pearson" in label for label in labels)
+    three = _relations_ensemble(np.random.default_rng(5), n=T.CORRELATION_MIN_PAIRS)
+    fig3 = _scatter_fig(T.compute_stats(three, T.StatsOptions(n_boot=0, gof=False)),
+                        "N_br", "E", "N_br", "E", "E against N_br")
+    assert any("Pearson" in label for label in fig3.axes[0].get_legend_handles_labels()[1])
