@@ -354,18 +354,7 @@ def test_scans_whose_names_merge_get_their_own_folders(tmp_path):
 def test_resume_redoes_a_scan_whose_table_is_missing_empty_or_corrupt(tmp_path, broken):
     """A table emptied, overwritten or deleted since the image was done: the re-run redoes
     the image (stats would refuse the whole batch for one unreadable table)."""
-    from crosssection.core.schema import TABLES
-
-    inp = tmp_path / "in"
-    inp.mkdir()
-    (inp / "a.png").write_bytes(b"\x89PNG")
-    (task,), _ = B.plan_batch(inp, tmp_path / "out", figure=False)
-    folder = Path(task.out_dir)
-    folder.mkdir(parents=True)
-    (folder / "summary.json").write_text(json.dumps({"batch": {"params_hash":
-                                                               task.params_hash}}))
-    for name, columns in TABLES.items():
-        (folder / f"{name}.csv").write_text(",".join(columns + ["extra"]) + "\n")
+    task, folder = _recorded_folder(tmp_path, rows=0)
     assert B.completed_row(task)["status"] == "skipped"
     if broken is None:
         (folder / "stacks.csv").unlink()
