@@ -235,9 +235,11 @@ class AnalysisResult:
         Parameters
         ----------
         out_dir : str or Path
-            Created if needed. Files are written atomically; ``summary.json`` last. Nothing
-            else in the folder is touched: an ``overlay.png`` or step images of an earlier
-            write stay when this one does not write them (``foldstat analyze`` removes them,
+            Created if needed. Files are written atomically; ``summary.json`` last. The
+            hidden temporary files that a write killed midway left there are removed first
+            (:func:`crosssection.commands.clear_temporary`). Nothing else in the folder is
+            touched: an ``overlay.png`` or step images of an earlier write stay when this one
+            does not write them (``foldstat analyze`` removes them,
             :func:`crosssection.commands.remove_stale`).
         figure : bool
             Also write ``overlay.png`` (paper Figs. 1c and 9a).
@@ -262,8 +264,11 @@ class AnalysisResult:
         # the result stays as analysed: the figure's timing goes to the file only
         summary = dict(self.summary)
         paths = {}
+        from crosssection.commands import clear_temporary
+
         try:
             out.mkdir(parents=True, exist_ok=True)
+            clear_temporary(out, "analyze")
             if figure:
                 from crosssection.figures import overlay_figure
                 from crosssection.core.fileio import save_figure

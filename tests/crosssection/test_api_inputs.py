@@ -51,6 +51,21 @@ def test_write_leaves_the_result_as_analysed(result, tmp_path):
     assert result.summary == before
 
 
+def test_write_removes_the_temporary_files_a_killed_write_left(result, tmp_path):
+    """A write killed midway leaves hidden temporary files; the next write removes them, and
+    no hidden file of the user's."""
+    out = tmp_path / "out"
+    out.mkdir()
+    left = [".summary.json.x1y2z3a4.json", ".stacks.csv.qwer5678.csv"]
+    for name in left:
+        (out / name).write_text("cut short")
+    (out / ".notes.txt.abcd1234.txt").write_text("the user's")
+    result.write(out, figure=False)
+    assert [name for name in left if (out / name).exists()] == []
+    assert (out / ".notes.txt.abcd1234.txt").read_text() == "the user's"
+    assert (out / "summary.json").is_file()
+
+
 @pytest.mark.parametrize("where", ["file", "under_file"])
 def test_write_where_a_file_is_in_the_way_is_one_error(result, tmp_path, where):
     blocker = tmp_path / "blocker.txt"
