@@ -40,8 +40,8 @@ from crosssection.params import LINEAR_CALIBRATION, AnalysisParams
 from crosssection.result import AnalysisResult, write_step_images
 from crosssection.stages import curvature, hole as hole_stage, voids as void_stage
 from crosssection.stages.clean import clean_mask
-from crosssection.stages.graph import split_stacks, stack_graph, without_stacks
-from crosssection.stages.load import as_rgb, exif_orientation, load_image, recorded_header
+from crosssection.stages.graph import split_stacks, stack_graph, with_multigraph, without_stacks
+from crosssection.stages.load import load_image_oriented, as_rgb, exif_orientation, recorded_header
 from crosssection.stages.packs import compute_packs
 from crosssection.stages.skeleton import skeletonize_mask
 from crosssection.stages.threshold import (BRIDGE_MAX_H_PX, bridge_broken_lines, passes_at,
@@ -96,12 +96,15 @@ class Preprocessed:
 
 
 def _read(image):
+    """The scan, its path (None for an array) and the EXIF orientation read with a PNG's
+    pixels (None otherwise: :func:`~crosssection.stages.load.exif_orientation` reads it)."""
     if isinstance(image, (str, Path)):
-        return load_image(image), str(image)
+        rgb, orientation = load_image_oriented(image)
+        return rgb, str(image), orientation
     if isinstance(image, np.ndarray):
         rgb = as_rgb(image)
         # the result keeps the scan: never the caller's own array, which the caller may draw on
-        return (rgb.copy() if np.shares_memory(rgb, image) else rgb), None
+        return (rgb.copy() if np.shares_memory(rgb, image) else rgb), None, None
     raise ImageError(f"image must be a file path or an RGB array, got {type(image).__name__}")
 
 
@@ -235,10 +238,11 @@ def preprocess(image, params: AnalysisParams | None = None, *, timer=None,
 
 def _preprocess(image, p: AnalysisParams, timer) -> Preprocessed:
     with timer("load"):
-        rgb, path = _read(image)
+        rgb, path, orientation = _read(image)
         file_px_per_mm, file_pages = (recorded_header(path) if path is not None
                                       else (None, 1))
-        orientation = exif_orientation(path) if path is not None else 1
+        if orientation is None:
+            orientation = exif_orientation(path) if path is not None else 1
     try:
         return _preprocess_read(rgb, path, file_px_per_mm, file_pages, orientation, p, timer)
     except AnalysisError as exc:
@@ -272,17 +276,20 @@ def _preprocess_read(rgb, path, file_px_per_mm, file_pages, orientation, p: Anal
     if not skel.any():
         raise AnalysisError("empty skeleton", path)
     with timer("graph"):
+        # (the MultiGraph of the graph kept only: isolated pieces dropped make another)
         junc, sg, merged = stack_graph(skel, dist, merge_px=p.merge_px,
                                        merge_thick_crossings=p.merge_thick_crossings,
-                                       thickness_px=p.thickness_px)
+                                       thickness_px=p.thickness_px, with_graph=False)
     # unless they are all the ink (then the scan is refused as it stands, empty of stacks
     # after the cleaning or not)
     short = _isolated_short_pieces(sg, l_min_px)
     short = short if len(short) < sg.n_stacks else []
-    if short:
-        with timer("graph"):
+    with timer("graph"):
+        if short:
             _drop_pieces(sg, short, skel, mask, dist)
             sg = without_stacks(sg, short)
+        else:
+            sg = with_multigraph(sg)
     if sg.n_stacks == 0:
         raise AnalysisError("the skeleton has no stack (only isolated points)", path)
     notes = [] if len(junc) else ["no junction found: every stack is a closed loop or a band "

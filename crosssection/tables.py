@@ -379,10 +379,13 @@ def summary(*, pre, params, linear_system, junctions, stacks, branches, voids, r
         # is in the frame a viewer shows
         "exif_orientation": pre.exif_orientation,
         "thresholds": pre.threshold.as_summary(),
+        # (counts of the boolean images: the mean and the sum of 4 Mpx convert every pixel
+        # to a number, 3 ms of a dense 2000x2000 scan's analysis; the same values)
         "cleaning": {"s_min_px": pre.s_min_px, "speck_px": pre.speck_px,
-                     "foreground_fraction": float(pre.mask_clean.mean()),
+                     "foreground_fraction": int(np.count_nonzero(pre.mask_clean))
+                     / pre.mask_clean.size,
                      "ink_outside_hole_fraction": pre.ink_outside_fraction},
-        "skeleton": {"l_min_px": pre.l_min_px, "n_pixels": int(pre.skeleton.sum()),
+        "skeleton": {"l_min_px": pre.l_min_px, "n_pixels": int(np.count_nonzero(pre.skeleton)),
                      "merged_crossing_links": int(pre.merged_links)},
         "linear_system": linear_system.summary() if hasattr(linear_system, "summary") else {},
         "calibration": calibration_source,

@@ -365,8 +365,33 @@ def build_stack_graph(skel, junctions: Junctions, *, smooth_px: int = 5) -> Stac
     return _build_stack_graph(_padded(skel), junctions, smooth_px)
 
 
-def _build_stack_graph(sk: _Padded, junctions: Junctions, smooth_px: int) -> StackGraph:
-    """:func:`build_stack_graph` of a skeleton given as :func:`_padded` returns it."""
+def _multigraph(n_nodes: int, ends) -> nx.MultiGraph:
+    """The MultiGraph of nodes ``0 .. n_nodes - 1`` (added in that order) and one edge per
+    stack, key and ``stack_id`` its index in ``ends``."""
+    g = nx.MultiGraph()
+    g.add_nodes_from(range(n_nodes))
+    g.add_edges_from((u, v, sid, {"stack_id": sid}) for sid, (u, v) in enumerate(ends))
+    return g
+
+
+def with_multigraph(sg: StackGraph) -> StackGraph:
+    """``sg`` with its MultiGraph (``graph``) built when it has none: as
+    :func:`build_stack_graph` builds it, its nodes being ``0 .. len(node_kind) - 1`` in
+    order (``stack_graph(..., with_graph=False)``). Returns ``sg`` itself."""
+    if sg.graph is None:
+        sg.graph = _multigraph(len(sg.node_kind), sg.ends)
+    return sg
+
+
+def _build_stack_graph(sk: _Padded, junctions: Junctions, smooth_px: int, *,
+                       with_graph: bool = True) -> StackGraph:
+    """:func:`build_stack_graph` of a skeleton given as :func:`_padded` returns it.
+
+    Without ``with_graph`` the returned graph's ``graph`` is None (:func:`stack_graph` asks
+    for it once it knows the graph is kept: the MultiGraph of the dense 2000x2000 benchmark
+    scan costs 0.4-1.2 ms, and merged crossings and dropped pieces replace the graph
+    traced first); :func:`_multigraph` of ``len(node_kind)`` nodes and ``ends`` is the one
+    built here."""
     wp = sk.img.shape[1]
     if junctions.pixels:
         jp = np.concatenate(junctions.pixels).astype(np.int64) + 1
@@ -385,29 +410,27 @@ def _build_stack_graph(sk: _Padded, junctions: Junctions, smooth_px: int) -> Sta
     is_loop = meta[:, 0] == _LOOP
     meta = meta.tolist()
     k = len(junctions)
-    g = nx.MultiGraph()
     node_rc: dict[int, np.ndarray] = {}
     node_kind: dict[int, str] = {}
     for j in range(k):
-        g.add_node(j)
         node_rc[j] = np.asarray(junctions.centers_rc[j], dtype=float)
         node_kind[j] = "junction"
     pixel_node: dict[int, int] = {}
 
     def node_of(kind, ident):
+        # the nodes after the junctions are numbered as they are met: k, k + 1, ...
         if kind == _JUNCTION:
             return int(ident)
         ident = int(ident)
         if ident not in pixel_node:
             nid = k + len(pixel_node)
             pixel_node[ident] = nid
-            g.add_node(nid)
             node_rc[nid] = np.array([ident // wp - 1, ident % wp - 1], dtype=float)
             node_kind[nid] = "end" if kind == _END else "loop"
         return pixel_node[ident]
 
     ends = [(node_of(ku, iu), node_of(kv, iv)) for ku, iu, kv, iv in meta]
-    g.add_edges_from((u, v, sid, {"stack_id": sid}) for sid, (u, v) in enumerate(ends))
+    g = _multigraph(k + len(pixel_node), ends) if with_graph else None
     bounds = offs.tolist()
     paths = [rc[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
     if m:
@@ -556,7 +579,8 @@ def short_junction_links(sg: StackGraph, radius_px) -> list[int]:
 
 
 def stack_graph(skel, distance_px, *, merge_px: float = 2.0,
-                merge_thick_crossings: bool = True, thickness_px: float | None = None):
+                merge_thick_crossings: bool = True, thickness_px: float | None = None,
+                with_graph: bool = True):
     """Junctions and stack graph of a skeleton (stages 5-6), thick crossings merged.
 
     The skeleton of an X of thick stacks is two Y joined by a short bridge; junctions joined by
@@ -579,6 +603,10 @@ def stack_graph(skel, distance_px, *, merge_px: float = 2.0,
         skeleton's fork, which lies several h away inside thick blobs (and, at a tangential
         fork, not beyond where the ink's width departs from the trunk's band); ``length_px``
         keeps the fork-to-fork lengths.
+    with_graph : bool
+        False: the returned graph's ``graph`` (the MultiGraph) is None, for a caller that
+        builds another graph from this one (:func:`without_stacks`) or completes it
+        (:func:`with_multigraph`).
 
     Returns
     -------
@@ -592,7 +620,8 @@ def stack_graph(skel, distance_px, *, merge_px: float = 2.0,
         raise ParameterError(f"skeleton must be a 2-D array, got shape {skel.shape}")
     padded = _padded(skel)  # the junctions and every tracing below read it
     junc = padded_junctions(padded.img, padded.sp, _NB_COUNT[padded.bits], merge_px=merge_px)
-    sg = _build_stack_graph(padded, junc, 5)
+    # (the MultiGraph only of the graph kept: merged crossings trace it again)
+    sg = _build_stack_graph(padded, junc, 5, with_graph=False)
     merged = 0
     if merge_thick_crossings and len(junc):
         for _ in range(3):
@@ -600,9 +629,14 @@ def stack_graph(skel, distance_px, *, merge_px: float = 2.0,
             if not links:
                 break
             groups = [sg.ends[s] for s in links]
-            junc = merge_junctions(junc, groups, [sg.paths[s] for s in links])
-            sg = _build_stack_graph(padded, junc, 5)
+            # (junc and sg are this function's own, replaced here: the label image is
+            # rewritten in place)
+            junc = merge_junctions(junc, groups, [sg.paths[s] for s in links],
+                                   reuse_label_image=True)
+            sg = _build_stack_graph(padded, junc, 5, with_graph=False)
             merged += len(links)
+    if with_graph:
+        sg = with_multigraph(sg)
     if thickness_px is not None and len(junc):
         # lengths stay those between the skeleton's forks: the centreline intersection moves
         # a junction along some of its stacks and away from others, and the pixel paths

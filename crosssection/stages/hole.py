@@ -848,12 +848,41 @@ def _without_plate(rgb, ink_mask):
     return np.asarray(ink_mask, bool) & (proj > 0.5 * gap)
 
 
-def _upsampled(small_mask, shape):
-    """A half-resolution component mask dilated by one of its pixels, brought to ``shape``."""
+def _within_upsampled(mask, small_mask):
+    """``mask`` where a half-resolution component mask (``small_mask``, of ``mask[::2,
+    ::2]``), dilated by one of its pixels, covers it at full resolution.
+
+    Pixel (r, c) reads the dilated mask at (r // 2, c // 2), the pixel a nearest-neighbour
+    resize of it to ``mask``'s shape (``cv2.resize``, ``INTER_NEAREST``) reads, for even and
+    odd sides alike: ``floor(r (n + 1) / (2 n + 1)) = floor(r / 2)`` for ``r < 2 n + 1``.
+    """
     import cv2
 
     keep = cv2.dilate(np.ascontiguousarray(small_mask).view(np.uint8), np.ones((3, 3), np.uint8))
-    return cv2.resize(keep, (shape[1], shape[0]), interpolation=cv2.INTER_NEAREST).view(bool)
+    return _and_upsampled(np.ascontiguousarray(mask, dtype=bool), keep.view(bool))
+
+
+@njit(cache=True)
+def _and_upsampled(mask, keep):  # pragma: no cover - numba
+    """``mask & keep[r // 2, c // 2]`` at every pixel (r, c), in one pass over ``mask``.
+
+    0.3 ms for a 2000 x 2000 scan, against 1.2 ms for the resized ``keep`` (a new 4 MB
+    image) and the ``&`` of the two: the pixels in pairs, each pair reading one ``keep``
+    value, ``&`` on booleans (a short-circuit ``and`` is not vectorised: 1.6 ms).
+    """
+    h, w = mask.shape
+    out = np.empty((h, w), np.bool_)
+    for r in range(h):
+        kr = keep[r >> 1]
+        mr = mask[r]
+        orow = out[r]
+        for j in range(w >> 1):
+            kv = kr[j]
+            orow[2 * j] = mr[2 * j] & kv
+            orow[2 * j + 1] = mr[2 * j + 1] & kv
+        if w & 1:
+            orow[w - 1] = mr[w - 1] & kr[w >> 1]
+    return out
 
 
 def find_hole(rgb, ink_mask, *, min_confidence: float = 0.5, path=None) -> Hole:
@@ -901,7 +930,7 @@ def find_hole(rgb, ink_mask, *, min_confidence: float = 0.5, path=None) -> Hole:
         area = np.bincount(lab[small.view(bool)], minlength=n)
         area[0] = small.size - np.count_nonzero(small)
         largest = 1 + int(np.argmax(area[1:]))
-        ink = ink & _upsampled(lab == largest, ink.shape)
+        ink = _within_upsampled(ink, lab == largest)
         big = np.flatnonzero(area >= PIECE_FRACTION * area[largest])
         big = big[big > 0] if len(big) > 2 else ()
     border = _boundary_points(ink)
@@ -958,8 +987,7 @@ def find_hole(rgb, ink_mask, *, min_confidence: float = 0.5, path=None) -> Hole:
     # The rod may be drawn or cut in pieces (a broken line, a layer lost in the cut): every
     # piece as large as PIECE_FRACTION of the largest is held too, specks are not
     if len(big):
-        border = _boundary_points(np.asarray(ink_mask, dtype=bool)
-                                  & _upsampled(np.isin(lab, big), ink.shape))
+        border = _boundary_points(_within_upsampled(ink_mask, np.isin(lab, big)))
     reach = float(np.sqrt(((border - env.center_rc) ** 2).sum(axis=1).max())) + 1.0 \
         if len(border) else env.radius_px
     if reach > env.radius_px + GROWN_PX:
