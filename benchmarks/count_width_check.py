@@ -4,7 +4,9 @@ exact truth: the measurement behind the quality check ``count_width``
 (``crosssection.quality.COUNT_WIDTH_LIMIT``).
 
 For every scene: the scores against the truth and, over the stacks at least four widths long,
-the largest ``|n_br - layers_est|`` and the stacks at or beyond the limit. Scenes: the
+the largest ``|n_br - layers_est|`` and the stacks at or beyond the limit; the same over the
+shorter stacks (``COUNT_WIDTH_SHORT_LIMIT``), and the stacks with both ends free (the
+``isolated_stacks`` check). Scenes: the
 network generator's conditions of ``robust_sweep.py`` (typical, thick dense, 25 px/mm,
 tangential, quench renders) and the independent generator's of ``independent_scenes.py``.
 
@@ -32,12 +34,17 @@ import robust_sweep as rs  # noqa: E402
 
 
 def _stack_numbers(stacks: pd.DataFrame) -> dict:
-    from crosssection.quality import COUNT_WIDTH_LIMIT
+    from crosssection.quality import COUNT_WIDTH_LIMIT, COUNT_WIDTH_SHORT_LIMIT
 
     long_ = stacks["length_mm"] >= 4.0 * stacks["width_mm"]
     off = (stacks["n_br"] - stacks["layers_est"]).abs()
+    free = (stacks["junction_a"] < 0) & (stacks["junction_b"] < 0)
     return {"largest_off_layers": float(off[long_].max()) if long_.any() else 0.0,
-            "stacks_at_limit": int((long_ & (off >= COUNT_WIDTH_LIMIT)).sum())}
+            "stacks_at_limit": int((long_ & (off >= COUNT_WIDTH_LIMIT)).sum()),
+            "largest_off_short": float(off[~long_].max()) if (~long_).any() else 0.0,
+            "short_stacks": int((~long_).sum()),
+            "short_at_limit": int((~long_ & (off >= COUNT_WIDTH_SHORT_LIMIT)).sum()),
+            "free_stacks": int(free.sum())}
 
 
 def network_row(args) -> dict:

@@ -236,6 +236,49 @@ def test_rings_of_ink_apart_from_the_network_are_flagged():
     assert any(w.category is quality.NetworkWarning for w in caught)
 
 
+def test_an_ink_blot_apart_from_the_network_is_flagged():
+    """A filled blot in a cell reads as a free stack of many layers: no part of one curve."""
+    import cv2
+
+    img, kw = _grid_scan()
+    # 2.8 x 1.2 mm: its skeleton is longer than l_min (a round blot's is a point, dropped)
+    cv2.ellipse(img, (225, 225), (70, 30), 0, 0, 360, (40, 70, 190), -1)
+    res, caught = _analyze(img, **kw)
+    assert "isolated_stacks" in res.summary["quality"]["codes"]
+    # the message places the blot on the scan (the overlay draws no stack ids)
+    assert any(w.category is quality.NetworkWarning and "touching no other stack" in
+               str(w.message) and "y 225 px" in str(w.message) for w in caught)
+
+
+def test_an_ink_blot_on_a_short_stack_is_flagged():
+    """A blot on a single sheet between two crossings (3 mm, under four of its widths once
+    blotted) reads many layers more than the count the junctions give it."""
+    import cv2
+
+    img, kw = _grid_scan()
+    res0, _ = _analyze(img, **kw)
+    cv2.circle(img, (150, 225), 30, (40, 70, 190), -1)
+    res, _ = _analyze(img, **kw)
+    assert "count_width" not in res0.summary["quality"]["codes"]
+    assert "count_width" in res.summary["quality"]["codes"]
+
+
+def test_the_blot_checks_hold_on_good_short_and_free_stacks():
+    import pandas as pd
+
+    # junction lumps read up to about two layers off; a lone one-layer fragment is a speck
+    stacks = pd.DataFrame({"stack_id": [0, 1, 2], "junction_a": [0, 0, -1],
+                           "junction_b": [1, 1, -1], "kind": ["junction", "junction", "free_end"],
+                           "n_br": [6, 1, 1], "layers_est": [4.02, 1.1, 1.2],
+                           "length_mm": [0.9, 3.0, 0.5], "width_mm": [0.48, 0.14, 0.15]})
+    assert quality._count_width_check(stacks) == []
+    assert quality._isolated_check(stacks) == []
+    stacks.loc[0, "layers_est"] = 9.0
+    stacks.loc[2, ["n_br", "layers_est"]] = [3, 3.1]
+    assert [f.code for f in quality._count_width_check(stacks)] == ["count_width"]
+    assert [f.code for f in quality._isolated_check(stacks)] == ["isolated_stacks"]
+
+
 def test_layer_conservation_violated_is_flagged():
     # three single sheets meet at every T on the wall: 1 != 1 + 1 (the crossings conserve)
     img, kw = _grid_scan()
