@@ -345,6 +345,10 @@ def _check_fraction(thr, path, rgb=None):
             why = ("the image has no colour (red, green and blue equal to within 2 levels on "
                    "99.9 % of the pixels): a grayscale scan saved as RGB, or no ink at all? "
                    "scan in colour")
+            # grey marks on lighter paper: the cut the threshold found for them reads them
+            if getattr(thr, "options", ""):
+                why += (", or read its dark marks with the paper's rule without its blue "
+                        f"bound: {thr.options}")
         elif blue > 0.95:
             why = (f"{100 * blue:.0f} % of the image is ink-coloured (blue above red and "
                    "green): no paper around the ink to set the cut against (all-ink image?)")

@@ -79,6 +79,9 @@ class ThresholdResult:
         Fraction of the image inside ``region`` (1 without region).
     note : str
         Why the mask is empty, when it is.
+    options : str
+        ``"auto"`` with an empty mask: the options of the ``"fixed"`` method that read the
+        marks of another colour the note names, when a cut reads them; else ``""``.
     n_outside : int
         Pixels outside ``region`` that pass the same cut: ink (or plate) the frame left out;
         when they exceed :data:`OUTSIDE_NOISE_CHECK` of the ink inside, those in pieces of
@@ -98,6 +101,7 @@ class ThresholdResult:
     paper_level: tuple | None = None
     region_fraction: float = 1.0
     note: str = ""
+    options: str = ""
     n_outside: int = 0
     bridged_px: int = 0
 
@@ -570,13 +574,15 @@ def threshold_rgb(rgb, *, method: str = "auto", region=None, blue_min=None,
                                note="" if mask.any() else _range_note(rgb, reg).rstrip("; "))
     levels = _auto_levels(d, m, reg, scale, features)
     if levels is None:
-        note = _marks_of_another_colour(rgb, reg, scale) or (
+        note, options = _marks_of_another_colour(rgb, reg, scale)
+        note = note or (
             f"no ink darker in red and green than the paper by {MIN_CONTRAST_U8:g} (uint8 "
             "units); for faint ink set the cut with --threshold-method fixed --blue-min B "
             "--rg-max R")
         return ThresholdResult(np.zeros(rgb.shape[:2], bool), bm, rg, "auto", None, scale,
                                region_fraction=reg_frac,
-                               note=_range_note(rgb, reg) + "no blue-dominant class: " + note)
+                               note=_range_note(rgb, reg) + "no blue-dominant class: " + note,
+                               options=options)
     ink, paper = levels
     d_cut = 0.5 * (ink[0] + paper[0]) * scale
     m_cut = 0.5 * (ink[1] + paper[1]) * scale
@@ -651,20 +657,128 @@ def _three_classes(px, rg):
     return ink, plate, paper
 
 
-def _marks_of_another_colour(rgb, reg, scale) -> str:
-    """Why a scan without a blue-dominant class holds no blue ink, when it holds dark marks.
+#: Pixels less than half covered by marks of another colour that pass a cut of the paper's
+#: rule, per pixel of the marks, above which the cut takes a surface for marks (the surfaces
+#: receding behind a bright red ink's cut, at the cut halfway to the paper: 0.2 to 0.9; the
+#: marks' own blurred edges and noise: 0.015 at most) ...
+SURFACE_SHARE = 0.1
+#: ... and least share of the pixels three quarters covered by the marks or more that the cut
+#: must pass (a cut that reads a red ink's bands: 0.93 to 1; one that breaks them: 0.82 or
+#: less).
+MARKS_SHARE = 0.9
+
+
+def _rule_cut(px, ink, paper, level, *, by_low=False):
+    """The bound of the paper's rule on the larger of red and green that reads the marks.
+
+    The bound lies halfway between the marks' level and ``level`` (the nearest class's: the
+    paper or a plate). When it passes pixels less than half covered by the marks (by the
+    smaller of red and green), more than :data:`SURFACE_SHARE` times as many as the marks'
+    (a surface lighter than the marks in the smaller of red and green but not in the
+    larger, such as those receding behind a red ink's cut), it lies halfway between the
+    marks and the median of those pixels instead. It reads the marks when it passes :data:`MARKS_SHARE` of the
+    pixels at least three quarters covered by them (by the feature that told them apart) and
+    at most :data:`SURFACE_SHARE` times as many others.
+
+    Parameters
+    ----------
+    px : (N, 3) float array
+        The sampled pixels, uint8 units.
+    ink, paper : (3,) arrays
+        The marks' and the paper's median colours.
+    level : float
+        The nearest class's larger of red and green.
+    by_low : bool
+        Whether the marks were told apart by the smaller of red and green
+        (:func:`_marks_light_in_rg`), not the larger.
+
+    Returns
+    -------
+    cut : float or None
+        ``None`` when the bound does not read the marks.
+    level : float
+        What the bound stays below: ``level``, or the surface's.
+    surface : bool
+        Whether a surface set the bound.
+    """
+    low, rg = px[:, :2].min(axis=1), px[:, :2].max(axis=1)
+    ink_low, paper_low = float(ink[:2].min()), float(paper[:2].min())
+    if by_low:
+        marks = low <= ink_low + 0.25 * (paper_low - ink_low)
+    else:  # a plate dark in one of red and green only is not the marks'
+        marks = rg <= ink[:2].max() + 0.25 * (paper[:2].max() - ink[:2].max())
+    n = np.count_nonzero(marks)
+    foreign = low > 0.5 * (ink_low + paper_low)
+    surface = False
+    cut = 0.5 * (float(ink[:2].max()) + level)
+    passing = foreign & (rg <= cut)
+    if np.count_nonzero(passing) > SURFACE_SHARE * n:
+        level, surface = float(np.median(rg[passing])), True
+        cut = 0.5 * (float(ink[:2].max()) + level)
+    reads = (np.count_nonzero(marks & (rg <= cut)) >= MARKS_SHARE * n
+             and np.count_nonzero(foreign & (rg <= cut)) <= SURFACE_SHARE * n)
+    return (cut if reads else None), level, surface
+
+
+def _marks_light_in_rg(px):
+    """Marks dark in only one of red and green (a bright red ink, (190, 30, 35) on paper
+    (249, 245, 239), lies 60 levels below it in the larger of the two, 215 in the smaller):
+    the smaller of red and green of the pixels ``px`` split in three classes by Otsu's
+    method, the darkest holding at most half the pixels and
+    :data:`OTHER_MARKS_CONTRAST_U8` darker than the lightest (the paper).
+
+    Returns
+    -------
+    None, or (ink, paper, bound)
+        The marks' and the paper's median colours, and the marks' upper bound in the smaller
+        of red and green.
+    """
+    from skimage.filters import threshold_multiotsu
+
+    low = px[:, :2].min(axis=1)
+    if np.ptp(low) == 0:
+        return None
+    try:
+        lo, hi = threshold_multiotsu(low, classes=3)
+    except ValueError:  # fewer than three grey levels
+        return None
+    marks, light = low <= lo, low > hi
+    if not (0 < np.count_nonzero(marks) <= 0.5 * len(px) and np.count_nonzero(light)):
+        return None
+    ink, paper = np.median(px[marks], axis=0), np.median(px[light], axis=0)
+    if paper[:2].min() - ink[:2].min() < OTHER_MARKS_CONTRAST_U8:
+        return None
+    return ink, paper, float(lo)
+
+
+def _marks_of_another_colour(rgb, reg, scale) -> tuple[str, str]:
+    """Why a scan without a blue-dominant class holds no blue ink, when it holds dark marks,
+    and the options of the ``"fixed"`` method that read them.
 
     The larger of red and green of each pixel, the feature the paper's rule cuts, is split
     by Otsu's method (a sample of about 250 000 pixels of ``reg``) into three classes when
     they are marks, a plate framing the paper and the paper (:func:`_three_classes`), into
     two otherwise; a darkest class of at most half the pixels, darker than the paper by
-    :data:`OTHER_MARKS_CONTRAST_U8`, is named by its median colour. Such marks (a black or
-    grey pen, a photocopy, a purple or red ink) can be cut by the paper's rule with the blue
-    bound removed, and the note says with which bound: halfway to the nearest class, so that
-    neither the paper nor a plate passes it. A darkest class along most of the scan's edge
-    is a plate or background, not marks: the note says so (marks lighter in red and green
-    than a grey plate, such as a red ink, cannot be cut apart from it). Marks of a blue hue
-    are left to the faint-ink advice. Returns ``""`` when there is no such class.
+    :data:`OTHER_MARKS_CONTRAST_U8`, is named by its median colour. Marks dark in only one
+    of red and green (a bright red ink) are told apart by the smaller of the two
+    (:func:`_marks_light_in_rg`) and named the same way. Such marks (a black or grey pen, a
+    photocopy, a purple or red ink) can be cut by the paper's rule with the blue bound
+    removed, and the note says with which bound: halfway to the nearest class, so that
+    neither the paper nor a plate passes it, or halfway to a surface lighter than the marks
+    that such a bound would pass (:func:`_rule_cut`). When no bound reads the marks on the
+    scan's own pixels the note says so (and, for marks bright in one channel only, that
+    swapping it with blue makes them blue ink, which the automatic threshold reads). A
+    darkest class along most of the scan's edge is a plate or background, not marks: the
+    note says so (marks lighter in red and green than a grey plate, such as a red ink,
+    cannot be cut apart from it). Marks of a blue hue are left to the faint-ink advice.
+
+    Returns
+    -------
+    note : str
+        ``""`` when there is no such class.
+    options : str
+        ``"--threshold-method fixed --blue-min 0 --rg-max R"`` when a bound reads the marks,
+        else ``""``.
     """
     import colorsys
 
@@ -674,42 +788,61 @@ def _marks_of_another_colour(rgb, reg, scale) -> str:
         px = px[reg[::step, ::step]]
     px = px.reshape(-1, 3).astype(np.float32) / scale
     if len(px) < 20:
-        return ""
+        return "", ""
     rg = px[:, :2].max(axis=1)
     ink, nearest, paper = _three_classes(px, rg)
     if ink is None:
         dark = rg <= _otsu_u8(rg)
-        if not 0 < np.count_nonzero(dark) <= 0.5 * len(px):
-            return ""
-        ink, paper = np.median(px[dark], axis=0), np.median(px[~dark], axis=0)
+        if 0 < np.count_nonzero(dark) <= 0.5 * len(px):
+            ink, paper = np.median(px[dark], axis=0), np.median(px[~dark], axis=0)
+            nearest = paper
+    light = ink is None or paper[:2].max() - ink[:2].max() < OTHER_MARKS_CONTRAST_U8
+    if light:
+        found = _marks_light_in_rg(px)
+        if found is None:
+            return "", ""
+        ink, paper, edge_bound = found
         nearest = paper
-    if paper[:2].max() - ink[:2].max() < OTHER_MARKS_CONTRAST_U8:
-        return ""
+    else:
+        edge_bound = 0.5 * (ink[:2].max() + nearest[:2].max())
     colours = (f"(median RGB ({ink[0]:.0f}, {ink[1]:.0f}, {ink[2]:.0f}) on paper "
                f"({paper[0]:.0f}, {paper[1]:.0f}, {paper[2]:.0f}))")
-    rg_cut = 0.5 * (ink[:2].max() + nearest[:2].max())
     if reg is None:
         # marks lie inside the hole: a darkest class along most of the scan's edge is a
         # plate or background (darker in red and green than red or green marks on paper)
         sub = rgb[::step, ::step]
         edge = np.concatenate([sub[0], sub[-1], sub[1:-1, 0], sub[1:-1, -1]])
-        if np.mean(edge[:, :2].max(axis=1) / scale <= rg_cut) > 0.5:
+        edge = edge[:, :2].min(axis=1) if light else edge[:, :2].max(axis=1)
+        if np.mean(edge / scale <= edge_bound) > 0.5:
             return (f"the scan's darkest pixels (median RGB ({ink[0]:.0f}, {ink[1]:.0f}, "
                     f"{ink[2]:.0f})) frame it: a plate or background, not marks, and no cut "
                     "on red and green tells marks from it; give the hole (--hole-radius-mm, "
-                    "--hole-center-px) or crop the scan to it")
-    recipe = ("; to read them with the paper's rule without its blue bound: --threshold-method "
-              f"fixed --blue-min 0 --rg-max {rg_cut * scale:.0f}")
+                    "--hole-center-px) or crop the scan to it"), ""
+    rg_cut, level, surface = _rule_cut(px, ink, paper, float(nearest[:2].max()), by_low=light)
+    if rg_cut is None:
+        options = ""
+        # marks bright in red (or green) alone turn into ink that is blue by as much
+        k = int(np.argmax(ink))
+        swap = (f"; swapping the scan's {('red', 'green')[k]} and blue channels makes them "
+                "blue ink" if k < 2 and ink[k] - np.delete(ink, k).max()
+                >= OTHER_MARKS_CONTRAST_U8 else "")
+        what = ("the lighter surfaces around them" if surface
+                else "the plate" if nearest is not paper else "the paper")
+        recipe = (f", and no bound on red and green tells them from {what} (the larger of red "
+                  f"and green: {ink[:2].max():.0f} on the marks, {level:.0f} there)" + swap)
+    else:
+        options = f"--threshold-method fixed --blue-min 0 --rg-max {rg_cut * scale:.0f}"
+        recipe = "; to read them with the paper's rule without its blue bound: " + options
     spread = float(ink.max() - ink.min())
     # a dark colour spreads its channels little in grey levels, not in proportion
     if spread < NEUTRAL_SPREAD_U8 and spread < NEUTRAL_SATURATION * max(float(ink.max()), 1.0):
-        return f"the scan's dark marks are black or grey {colours}, not blue ink" + recipe
+        return f"the scan's dark marks are black or grey {colours}, not blue ink" + recipe, options
     hue = 360.0 * colorsys.rgb_to_hsv(*(ink / 255.0))[0]
     name = next(n for h, n in _HUES if hue < h)
     if name == "blue":
-        return ""
+        return "", ""
     return (f"the scan's dark marks are {name} {colours}, not blue ink: the threshold is the "
-            f"paper's rule for a cut inked in blue" + recipe)
+            "paper's rule for a cut inked in blue" + recipe), options
 
 
 #: Thin lines are looked for below this sheet thickness, px: a single sheet is then narrower

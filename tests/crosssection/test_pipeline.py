@@ -340,11 +340,21 @@ def test_uniform_images_raise_analysis_error():
 
 def test_a_colourless_scan_says_so():
     # a colour scan made grey (channels equal, as a grayscale scan saved as RGB): no ink passes,
-    # and the error names the cause; a scan whose ink is of another colour says which
+    # and the error names the cause with the cut that reads the grey marks; a scan whose ink
+    # is of another colour says which
     scene = make_scene(seed=44, n_stacks=20, max_layers=3)
     grey = np.repeat(scene.rgb.mean(axis=2, keepdims=True).astype(np.uint8), 3, axis=2)
-    with pytest.raises(AnalysisError, match="no colour"):
+    with pytest.raises(AnalysisError, match="no colour.*scan in colour, or read its dark marks"
+                       r".*--threshold-method fixed --blue-min 0 --rg-max \d+$") as err:
         analyze(grey)
+    cut = int(str(err.value).rsplit("--rg-max ", 1)[1])
+    given = dict(hole_radius_mm=scene.params["hole_radius_mm"],
+                 hole_center_px=scene.params["hole_center_px"], calibration=scene.calibration,
+                 warn=False)
+    read = analyze(grey, threshold_method="fixed", blue_min=0, rg_max=cut, **given).summary
+    colour = analyze(scene.rgb, **given).summary
+    assert (read["n_junctions"], read["n_branches"]) == (colour["n_junctions"],
+                                                         colour["n_branches"])
     with pytest.raises(AnalysisError, match="no blue-dominant class.*marks are orange"):
         analyze(np.ascontiguousarray(scene.rgb[..., ::-1]))  # blue ink turned orange
 

@@ -299,6 +299,71 @@ def test_black_marks_framed_by_a_plate_get_a_cut_that_leaves_the_plate_out(plate
     assert np.count_nonzero(fixed & truth) > 0.9 * np.count_nonzero(truth)
 
 
+def _tinted(sc, ink_rgb):
+    """The scene's ink turned into ``ink_rgb`` in proportion to its blue dominance, the rest
+    kept: the receding surfaces, a little bluer than grey, take a little of the new hue, as in
+    a scan recoloured by hand."""
+    rgb = sc.rgb.astype(np.float32)
+    d = rgb[..., 2] - rgb[..., :2].max(axis=2)
+    top = np.percentile(d, 99.5)
+    ink = np.median(rgb[d > 0.9 * top], axis=0)
+    w = np.clip((d + 6) / (top + 6), 0, 1)[..., None]
+    new = np.asarray(ink_rgb, np.float32)
+    return np.clip(np.rint(rgb + w * (new - ink)), 0, 255).astype(np.uint8)
+
+
+@pytest.mark.parametrize("seed, receding, ink_rgb", [(14, 0.8, (195, 30, 35)),
+                                                      (14, 0.8, (190, 30, 35)),
+                                                      (13, 0.0, (220, 30, 30))])
+def test_bright_red_marks_are_named_with_a_cut_that_reads_them(seed, receding, ink_rgb):
+    """A bright red ink is lighter than the paper in the larger of red and green by 30 to 60
+    levels only: the note still names it, with a cut of the paper's rule that reads its bands
+    and, beside receding surfaces whose red lies between the ink's and the paper's, leaves
+    them out (the cut halfway to the paper passes a fifth of the ink's count of them)."""
+    sc = make_scene(seed=seed, receding_fraction=receding, **KW)
+    truth = threshold_rgb(sc.rgb).mask
+    halo = cv2.dilate(truth.view(np.uint8), np.ones((3, 3), np.uint8)).view(bool)
+    rgb = _tinted(sc, ink_rgb)
+    res = threshold_rgb(rgb)
+    assert not res.mask.any()
+    assert "marks are red" in res.note and "faint" not in res.note
+    assert res.options.startswith("--threshold-method fixed --blue-min 0 --rg-max ")
+    assert res.note.endswith(res.options)
+    cut = int(res.options.rsplit(" ", 1)[1])
+    fixed = threshold_rgb(rgb, method="fixed", blue_min=0, rg_max=cut).mask
+    assert np.count_nonzero(fixed & truth) > 0.9 * np.count_nonzero(truth)
+    assert np.count_nonzero(fixed & ~halo) < 0.01 * np.count_nonzero(truth)
+
+
+def test_red_marks_that_no_cut_reads_are_named_with_the_channel_swap():
+    """A red ink whose red lies within 10 levels of the receding surfaces': no cut of the
+    paper's rule tells them apart, the note says so rather than give one, and the channel
+    swap it offers makes ink that the automatic threshold reads."""
+    sc = make_scene(seed=14, receding_fraction=0.8, **KW)
+    truth = threshold_rgb(sc.rgb).mask
+    rgb = _tinted(sc, (220, 30, 30))
+    res = threshold_rgb(rgb)
+    assert not res.mask.any() and res.options == ""
+    assert "marks are red" in res.note and "faint" not in res.note
+    assert "no bound on red and green tells them from the lighter surfaces" in res.note
+    assert "swapping the scan's red and blue channels" in res.note
+    swapped = threshold_rgb(np.ascontiguousarray(rgb[..., ::-1])).mask
+    assert np.count_nonzero(swapped & truth) / np.count_nonzero(swapped | truth) > 0.9
+
+
+def test_grey_scan_gets_the_cut_that_reads_its_marks():
+    """A colour scan made grey (a grayscale scan saved as RGB): its marks are named black or
+    grey, and the options given read them."""
+    sc = make_scene(seed=13, receding_fraction=0.8, **KW)
+    truth = threshold_rgb(sc.rgb).mask
+    grey = np.repeat(sc.rgb.mean(axis=2, keepdims=True).astype(np.uint8), 3, axis=2)
+    res = threshold_rgb(grey)
+    assert not res.mask.any() and "marks are black or grey" in res.note
+    cut = int(res.options.rsplit("--rg-max ", 1)[1])
+    fixed = threshold_rgb(grey, method="fixed", blue_min=0, rg_max=cut).mask
+    assert np.count_nonzero(fixed & truth) / np.count_nonzero(fixed | truth) > 0.9
+
+
 def test_faint_blue_ink_keeps_the_faint_ink_advice():
     sc = make_scene(seed=13, receding_fraction=0.0, **KW)
     rgb = sc.rgb.astype(np.float32)
