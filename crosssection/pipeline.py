@@ -45,7 +45,7 @@ from crosssection.stages.load import load_image_oriented, as_rgb, exif_orientati
 from crosssection.stages.packs import compute_packs
 from crosssection.stages.skeleton import skeletonize_mask
 from crosssection.stages.threshold import (BRIDGE_MAX_H_PX, bridge_broken_lines, passes_at,
-                                           colour_features, threshold_rgb)
+                                           colour_features, ink_missed_locally, threshold_rgb)
 from crosssection.stages.widths import (distance_map, layer_steps, stack_widths_px,
                                         width_profiles_px)
 
@@ -93,6 +93,9 @@ class Preprocessed:
     #: The threshold's feature (``blue - max(red, green)``) whose cut places the walls to a
     #: fraction of a pixel (None with the fixed thresholds, which cut several features).
     edge_feature: np.ndarray | None = None
+    #: Ink that the scan's cut leaves out and a cut chosen on each part of the frame takes in
+    #: (:func:`~crosssection.stages.threshold.ink_missed_locally`), over the ink cut.
+    ink_missed_fraction: float = 0.0
 
 
 def _read(image):
@@ -120,9 +123,11 @@ def _resolve_params(params, overrides, path) -> AnalysisParams:
     return AnalysisParams.from_mapping(overrides, path=path, base=params)
 
 
-def _threshold_in_frame(rgb, p: AnalysisParams, path, timer):
+def _threshold_in_frame(rgb, p: AnalysisParams, path, timer, min_piece_px: float = 0.0):
     """Threshold, hole and frame: the ink inside the hole, the hole, the ink fraction left
-    outside, and the threshold's feature (the blue dominance, for the centreline's walls).
+    outside, the threshold's feature (the blue dominance, for the centreline's walls) and the
+    fraction of ink the cut misses in pieces of ``min_piece_px`` or more where a cut chosen
+    locally takes it in.
 
     A given hole frames the threshold directly; otherwise the whole scan is thresholded, the
     hole found (plate edge or ink envelope, with a confidence), and the threshold redone
@@ -168,7 +173,10 @@ def _threshold_in_frame(rgb, p: AnalysisParams, path, timer):
     _check_fraction(thr, path, rgb)
     n_in = np.count_nonzero(thr.mask)
     outside = thr.n_outside / (thr.n_outside + n_in) if n_in else 0.0
-    return thr, hole, outside, m["features"].dominance
+    with timer("threshold"):
+        missed = ink_missed_locally(thr, m["features"], inside, thickness_px=p.thickness_px,
+                                    min_piece_px=min_piece_px)
+    return thr, hole, outside, m["features"].dominance, missed / n_in if n_in else 0.0
 
 
 def _checked_given_hole(rgb, hole, inside, thr, m, path, *, correct=True):
@@ -256,11 +264,13 @@ def _preprocess(image, p: AnalysisParams, timer) -> Preprocessed:
 def _preprocess_read(rgb, path, file_px_per_mm, file_pages, orientation, p: AnalysisParams,
                      timer) -> Preprocessed:
     p.check_image(rgb.shape, path, file_px_per_mm=file_px_per_mm)
-    thr, hole, outside, dominance = _threshold_in_frame(rgb, p, path, timer)
-    confidence = None if p.hole_given else hole.confidence
     s_min_px = p.scale.area_to_px2(p.s_min_used_mm2)
     l_min_px = p.scale.to_px(p.l_min_mm)
     speck_px = min(s_min_px, l_min_px * p.thickness_px) if l_min_px > 0 else s_min_px
+    # missed ink counts in pieces the cleaning would keep
+    thr, hole, outside, dominance, missed = _threshold_in_frame(rgb, p, path, timer,
+                                                                min_piece_px=speck_px)
+    confidence = None if p.hole_given else hole.confidence
     with timer("clean"):
         # a blob too small to hold a branch of length l_min goes whatever its area
         mask = clean_mask(thr.mask, s_min_px=s_min_px, speck_px=speck_px,
@@ -303,7 +313,8 @@ def _preprocess_read(rgb, path, file_px_per_mm, file_pages, orientation, p: Anal
                         s_min_px=s_min_px, speck_px=speck_px, l_min_px=l_min_px,
                         warnings=notes, merged_links=merged, file_px_per_mm=file_px_per_mm,
                         file_pages=file_pages, exif_orientation=orientation,
-                        edge_feature=dominance if thr.dominance_min is not None else None)
+                        edge_feature=dominance if thr.dominance_min is not None else None,
+                        ink_missed_fraction=float(missed))
 
 
 def _isolated_short_pieces(sg, l_min_px) -> list[int]:
@@ -579,7 +590,8 @@ def _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, void
     ink_area_mm2 = p.scale.area_to_mm2(float(np.count_nonzero(pre.mask_clean)))
     flags = quality.assess(
         params=p, hole=pre.hole, hole_confidence=pre.hole_confidence,
-        ink_outside_fraction=pre.ink_outside_fraction, degrees=degrees, stacks=stacks,
+        ink_outside_fraction=pre.ink_outside_fraction,
+        ink_missed_fraction=pre.ink_missed_fraction, degrees=degrees, stacks=stacks,
         rod_length_mm=L, rod_measured_mm=rod_mm, ink_area_in_hole_mm2=ink_area_mm2,
         calibration_max_width_mm=_max_width_mm(cal, p), junctions=junctions,
         image_shape=pre.rgb.shape, file_px_per_mm=pre.file_px_per_mm,

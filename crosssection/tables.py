@@ -384,7 +384,8 @@ def summary(*, pre, params, linear_system, junctions, stacks, branches, voids, r
         "cleaning": {"s_min_px": pre.s_min_px, "speck_px": pre.speck_px,
                      "foreground_fraction": int(np.count_nonzero(pre.mask_clean))
                      / pre.mask_clean.size,
-                     "ink_outside_hole_fraction": pre.ink_outside_fraction},
+                     "ink_outside_hole_fraction": pre.ink_outside_fraction,
+                     "ink_missed_fraction": getattr(pre, "ink_missed_fraction", 0.0)},
         "skeleton": {"l_min_px": pre.l_min_px, "n_pixels": int(np.count_nonzero(pre.skeleton)),
                      "merged_crossing_links": int(pre.merged_links)},
         "linear_system": linear_system.summary() if hasattr(linear_system, "summary") else {},

@@ -86,6 +86,40 @@ def test_a_bluish_plate_is_no_ink_outside_the_hole(seed):
     assert res.summary["cleaning"]["ink_outside_hole_fraction"] > 0.02
 
 
+def _lit_and_cast(rgb, cast, gradient):
+    """The scan under a blue cast (red and green times ``1 - cast``) and an illumination
+    that falls linearly from ``1 - gradient`` on the left to ``1 + gradient`` on the right."""
+    light = 1.0 + gradient * np.linspace(-1.0, 1.0, rgb.shape[1])[None, :, None]
+    out = rgb * np.array([1.0 - cast, 1.0 - cast, 1.0]) * light
+    return np.clip(np.rint(out), 0, 255).astype(np.uint8)
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+def test_ink_the_cut_misses_on_the_dark_side_of_a_scan_is_flagged(scene, dtype):
+    # a blue cast of 15 % raises the paper's dominance and the ink's; lit 1.4 to 0.6, the ink
+    # on the dark side falls below the cut set by the bright side: bands there are lost
+    base, _ = _analyze(scene.rgb, **_given(scene))
+    rgb = _lit_and_cast(scene.rgb, 0.15, -0.40).astype(dtype) * (257 if dtype == np.uint16 else 1)
+    res, caught = _analyze(rgb, **_given(scene))
+    assert res.summary["n_junctions"] < base.summary["n_junctions"]
+    assert "ink_missed" in res.summary["quality"]["codes"]
+    assert res.summary["cleaning"]["ink_missed_fraction"] > quality.INK_MISSED_LIMIT
+    flag = next(f for f in res.quality if f.code == "ink_missed")
+    assert flag.limit == quality.INK_MISSED_LIMIT
+    assert any(w.category is quality.ThresholdWarning for w in caught)
+
+
+@pytest.mark.parametrize("cast, gradient", [(0.06, 0.15), (0.10, 0.30), (0.15, 0.40)])
+def test_a_lit_and_cast_scan_whose_cut_keeps_the_ink_is_not_flagged(scene, cast, gradient):
+    # the same scan lit the other way (its dark side holds less wall band), and within the
+    # documented limits: the cut keeps every band, nothing is missed
+    base, _ = _analyze(scene.rgb, **_given(scene))
+    res, _ = _analyze(_lit_and_cast(scene.rgb, cast, gradient), **_given(scene))
+    assert res.summary["n_junctions"] == base.summary["n_junctions"]
+    assert res.summary["cleaning"]["ink_missed_fraction"] == 0.0
+    assert "ink_missed" not in res.summary["quality"]["codes"]
+
+
 def test_ink_outside_the_given_hole_is_flagged(scene):
     # a hole smaller than the rod: the wall stacks and more lie outside it
     kw = _given(scene, hole_radius_mm=0.7 * scene.params["hole_radius_mm"])
