@@ -64,7 +64,10 @@ at each junction, and smooths it into the junction point (:func:`_hooked_lines`)
 the rod's energy in all, 1.05 to 1.8 times outside the discs, the bands still overlapping at
 every junction, and the drawn rod (``sum n_br x length``) 1.02-1.16 L instead of 1.09-1.45 L.
 A band is not joined to a junction point that its straight join would reach only across
-more than :data:`PAPER_JOIN` of its own widths of paper (outside every band meeting there):
+more than :data:`PAPER_JOIN` of its own widths of paper (outside every band meeting there),
+and an end not joined is not cut back: it ends where its passes end, inside the band they run
+into when they do (cut back, such a one-pass band stopped 9 px short of the band it ends in,
+and the two voids it closes opened into each other; 3 of 22 quench renders of 300 segments):
 the mean of run ends lying far apart can sit where no pass of the band goes (400 segments,
 seed 2: the drawn lines bend 78, 82 and 1.2 times as much as the rod at epsilon = 4, 6 and 8
 when joined there, 24, 1.3 and 0.9 times when not; at epsilon = 19 a two-layer link drawn
@@ -138,7 +141,12 @@ listed as ``truth_warnings`` in its summary): a truth junction farther from the 
 scoring's match radius (3 h) or the widest band there is moved onto the ink of its stacks
 (:func:`_junctions_onto_ink`; a loop stack's junction point, the mean of run ends lying far
 apart, can sit on the paper); the bands of a junction that do not touch (the hook rules left
-the rod cut there, :func:`_disconnected_junctions`); a truth whose stacks hold a rod
+the rod cut there, :func:`_disconnected_junctions`) or that join elsewhere but do not all
+touch at the junction (within the widest band's width of its point or of their ends there,
+:func:`_apart_junctions`: the image has no junction there and the voids they bound open into
+each other); a truth whose void count is not the rod's (the contact analysis' voids of at
+least s_min, allowing for the bands' width, :func:`_void_count_check`); a truth whose stacks
+hold a rod
 ``sum(n_br x length_mm)`` more than :data:`TRUTH_LENGTH_TOLERANCE` away from the rod's length;
 a truth stack of length 0; pieces the truth holds apart whose bands touch in the drawing
 (:func:`_touching_pieces`: passes closer than delta over a contact shorter than the contact
@@ -166,6 +174,7 @@ import pandas as pd
 from crosssection.core import polyline, schema
 from crosssection.core.calibration import Calibration
 from crosssection.core.errors import ConfigError, ParameterError
+from crosssection.core.unionfind import group_labels
 from crosssection.quality import QualityWarning
 from crosssection.truth import degrade, ink
 from crosssection.truth.backdrop import PLATE_NAMES, apply_backdrop, plate_rgb
@@ -324,7 +333,8 @@ def _rod_beyond_validated(n_segments: int, compaction: bool) -> str | None:
 
 class TruthWarning(QualityWarning):
     """A scene's truth disagrees with its own drawing (a junction off the ink, junction bands
-    that do not touch, a drawn rod of another length than the rod's): scores of that scene
+    that do not touch there, voids the drawing opens or closes, a drawn rod of another length
+    than the rod's): scores of that scene
     measure the render as much as the image analysis. The scene's ``truth/summary.json``
     lists the same messages (``truth_warnings``)."""
 
@@ -363,6 +373,127 @@ def _disconnected_junctions(stacks: pd.DataFrame, labels, ink_mask) -> list[int]
         if len(seen) > 1:
             out.append(j)
     return out
+
+
+def _band_masks_near(centre, radius_px: float, bands: list, shape) -> tuple:
+    """The ink of every band (a list of pieces: a line and its width, :func:`_draw_bands`)
+    within ``radius_px`` of ``centre`` (x, y px), each band drawn on its own.
+
+    Returns
+    -------
+    masks : list of (h, w) bool arrays
+        One per band, in a window around ``centre`` wide enough that every band pixel inside
+        the disc is drawn from all of its line (the window's pad holds half the widest band).
+    disc : (h, w) bool array
+        The pixels of the window within ``radius_px`` of ``centre``.
+    """
+    pad = radius_px + 0.5 * max((w for pieces in bands for _, w in pieces), default=0.0) + 2.0
+    lo = np.maximum(np.floor(np.asarray(centre, float) - pad), 0).astype(int)
+    hi = np.minimum(np.ceil(np.asarray(centre, float) + pad) + 1, [shape[1], shape[0]]).astype(int)
+    wshape = (max(int(hi[1] - lo[1]), 1), max(int(hi[0] - lo[0]), 1))
+    rr, cc = np.mgrid[lo[1]:lo[1] + wshape[0], lo[0]:lo[0] + wshape[1]]
+    disc = (cc - centre[0]) ** 2 + (rr - centre[1]) ** 2 <= radius_px ** 2
+    masks = []
+    for pieces in bands:
+        mask = np.zeros(wshape, bool)
+        for i, (piece, width) in enumerate(pieces):
+            q = np.asarray(piece, float) - lo
+            reach = 0.5 * width + 2.0
+            if not len(q) or np.any(q.min(axis=0) - reach >= [wshape[1], wshape[0]]) \
+                    or np.any(q.max(axis=0) + reach < 0):
+                continue  # the piece lies outside the window
+            win, cov = _piece_coverage(q, width, wshape, _flat_ends(pieces, i))
+            mask[win] |= cov >= 0.5
+        masks.append(mask)
+    return masks, disc
+
+
+def _apart_junctions(ends, lines_px, bands: list, junction_xy: dict, shape,
+                     least_radius_px: float) -> list[int]:
+    """The junctions whose drawn bands do not all touch there.
+
+    Around a truth junction the bands of its stacks must form one piece of ink: touching
+    (8-connected, as the image analysis' ink) within the widest band's width (at least
+    ``least_radius_px``) of the junction point or of one of the bands' ends there. A band
+    drawn short of the others (its end not joined to the junction point and its passes
+    ending away from the other bands) leaves paper there: the image has no junction where the
+    truth has one, and the voids it bounds open into each other, even when the bands join
+    elsewhere (so that :func:`_disconnected_junctions` finds the ink in one piece).
+
+    Parameters
+    ----------
+    ends : (M, 2) int array
+        Junctions at the two ends of every stack (-1: a free end).
+    lines_px : list of (P, 2) arrays
+        The drawn line of every stack (x, y px); its first / last point is its end at
+        ``junction_a`` / ``junction_b``.
+    bands : list of lists of (line, width_px)
+        Every stack as drawn: its pieces (one, the line at its width, unless a rod end inside
+        narrows it, :func:`_draw_stacks`).
+    junction_xy : dict
+        Junction id -> its drawn point (x, y px).
+    shape : (int, int)
+        Image shape.
+    least_radius_px : float
+        Smallest neighbourhood radius.
+
+    Returns
+    -------
+    list of int
+        Junction ids, ascending.
+    """
+    at = {}
+    for sid, pair in enumerate(np.asarray(ends, int).reshape(-1, 2)):
+        for e, j in ((0, int(pair[0])), (-1, int(pair[1]))):
+            if j >= 0 and len(lines_px[sid]):
+                at.setdefault(j, []).append((sid, e))
+    kernel = np.ones((3, 3), np.uint8)
+    out = []
+    for j, members in sorted(at.items()):
+        sids = sorted({sid for sid, _ in members})
+        if len(sids) < 2 or j not in junction_xy:
+            continue
+        radius = max(max(w for sid in sids for _, w in bands[sid]), least_radius_px)
+        centres = [np.asarray(junction_xy[j], float)]
+        centres += [np.asarray(lines_px[sid][e], float) for sid, e in members]
+        touching = []
+        for centre in centres:
+            masks, disc = _band_masks_near(centre, radius, [bands[sid] for sid in sids], shape)
+            grown = [cv2.dilate((m & disc).astype(np.uint8), kernel).astype(bool) for m in masks]
+            touching += [(a, b) for a in range(len(sids)) for b in range(a + 1, len(sids))
+                         if (grown[a] & masks[b] & disc).any()]
+        if group_labels(len(sids), touching).max() > 0:
+            out.append(j)
+    return out
+
+
+def _void_count_check(n_truth: int, rod_voids: pd.DataFrame, rod_length_mm: float,
+                      s_min_mm2: float, widest_mm: float, delta_mm: float) -> str | None:
+    """A message when the truth's void count is not the rod's, else None.
+
+    The rod's voids (the contact analysis', areas and perimeters at the centre line) of area
+    ``A`` and perimeter ``P`` are drawn bounded by band edges: smaller by about ``P`` times
+    half the bounding bands' width, or larger by up to ``P`` times half the contact distance
+    where a band is narrower than the spread of its passes. The truth must hold at least the
+    rod's voids with ``A - P widest / 2 >= s_min`` and at most those with
+    ``A + P delta / 2 >= s_min``: outside that range the drawing opened voids into each
+    other (bands that do not touch where the rod's passes do) or closed ones the rod does
+    not have.
+    """
+    if rod_voids is None:
+        return None
+    area = rod_voids["area"].to_numpy(float) * rod_length_mm ** 2
+    per = rod_voids["perimeter"].to_numpy(float) * rod_length_mm
+    n_rod = int(np.sum(area >= s_min_mm2))
+    least = int(np.sum(area - 0.5 * widest_mm * per >= s_min_mm2))
+    most = int(np.sum(area + 0.5 * delta_mm * per >= s_min_mm2))
+    if least <= n_truth <= most:
+        return None
+    return (f"the truth has {n_truth} void{'s' if n_truth != 1 else ''}, the rod {n_rod} of at "
+            f"least s_min = {s_min_mm2:g} mm^2 ({least}-{most} allowing for the bands' width): "
+            "the drawing " + ("opens voids into each other or into the outside where the rod "
+                              "closes them" if n_truth < least else
+                              "closes voids the rod does not have"))
 
 
 def _junctions_onto_ink(junctions: pd.DataFrame, stacks: pd.DataFrame, labels, ink_mask,
@@ -920,14 +1051,28 @@ def _clean_mean_line(line, factor: float = 3.0) -> np.ndarray:
     return p
 
 
-def _trim_ends(own, trim_a_px: float, trim_b_px: float) -> np.ndarray:
-    """``own`` without its first ``trim_a_px`` and last ``trim_b_px`` of arc length (at most a
-    third of it per end; unchanged when fewer than two points would remain)."""
+def _trim_range(own, trim_a_px: float, trim_b_px: float) -> tuple[int, int]:
+    """The points ``own[i0:i1]`` left without the first ``trim_a_px`` and last ``trim_b_px``
+    of arc length (at most a third of it per end; all of them when fewer than two would
+    remain)."""
     if len(own) < 3:
-        return own
+        return 0, len(own)
     u = _arc_px(own)
-    keep = (u >= min(trim_a_px, u[-1] / 3)) & (u <= u[-1] - min(trim_b_px, u[-1] / 3))
-    return own[keep] if keep.sum() >= 2 else own
+    keep = np.flatnonzero((u >= min(trim_a_px, u[-1] / 3))
+                          & (u <= u[-1] - min(trim_b_px, u[-1] / 3)))
+    return (int(keep[0]), int(keep[-1]) + 1) if len(keep) >= 2 else (0, len(own))
+
+
+def _untrimmed_ends(own, full, i0: int, i1: int, hooks) -> np.ndarray:
+    """``own``, trimmed from ``full[i0:i1]``, with the trimmed arc given back at every end
+    that is not hooked and still ends where the trim left it (no lump, no :func:`_beside`
+    cut): the trim only makes room for the hook, and without one it would leave the band
+    short of where its passes reach (of the band they join, when they end inside it)."""
+    if len(own) < 2:
+        return own
+    head = full[:i0] if not hooks[0] and np.array_equal(own[0], full[i0]) else full[:0]
+    tail = full[i1:] if not hooks[1] and np.array_equal(own[-1], full[i1 - 1]) else full[:0]
+    return np.concatenate([head, own, tail]) if len(head) or len(tail) else own
 
 
 def _loop_hooks(own, jp, reach_px: float, half_px: float) -> tuple[bool, bool]:
@@ -1032,7 +1177,9 @@ def _hooked_lines(analysis, frame, widths_px, *, segment_px, smooth, trim=HOOK_T
     the point with a curvature the rod does not have. Here every line is
 
     * its own mean line, glitches removed (:func:`_clean_mean_line`), cut back by ``trim``
-      widths of the widest band at each of its junctions (at most a third of it per end);
+      widths of the widest band at each end joined to its junction (at most a third of it
+      per end); an end not joined keeps its whole length (:func:`_untrimmed_ends`), so that a
+      pass ending inside another band of the junction is drawn into it;
     * joined to the junction point by the smooth curve (:func:`smooth_line`) through it: the
       line turns over the cut length plus up to one rod segment instead of within the last
       sample, and the bands still meet (overlap) at the junction point, the truth's;
@@ -1070,7 +1217,8 @@ def _hooked_lines(analysis, frame, widths_px, *, segment_px, smooth, trim=HOOK_T
     for sid, (a, b) in enumerate(ends):
         for j in {int(a), int(b)} - {-1}:
             bands.setdefault(j, []).append((owns[sid], 0.5 * float(widths_px[sid])))
-    plans = []  # (own line, [hook at start, hook at end]) of every stack
+    # (own line, [hook at start, hook at end], untrimmed line, kept range) of every stack
+    plans = []
     for sid, own in enumerate(owns):
         a, b = (int(x) for x in ends[sid])
         half = 0.5 * float(widths_px[sid]) - 1.0
@@ -1079,8 +1227,10 @@ def _hooked_lines(analysis, frame, widths_px, *, segment_px, smooth, trim=HOOK_T
         limit_px = PAPER_JOIN * float(widths_px[sid])
         far = [j >= 0 and len(own) > 0 and _paper_px(own[e], jpx[row_of[j]], bands[j]) > limit_px
                for e, j in ((0, a), (-1, b))]
-        own = _trim_ends(own, trim * widest[a] if a >= 0 else 0.0,
-                         trim * widest[b] if b >= 0 else 0.0)
+        full = own
+        i0, i1 = _trim_range(own, trim * widest[a] if a >= 0 else 0.0,
+                             trim * widest[b] if b >= 0 else 0.0)
+        own = own[i0:i1]
         hooks = [a >= 0 and not far[0], b >= 0 and not far[1]]
         if a >= 0 and a == b and len(own) >= 2:
             hooks = [h and not f for h, f in
@@ -1094,11 +1244,12 @@ def _hooked_lines(analysis, frame, widths_px, *, segment_px, smooth, trim=HOOK_T
                 if hooks[end]:
                     own, hooks[end] = _beside(own, jpx[row_of[j]], end, half,
                                               (trim + 2.0) * widest[j])
-        plans.append((own, hooks))
-    kept = _joined_hooks([hooks for _, hooks in plans], ends)
+        plans.append((own, hooks, full, i0, i1))
+    kept = _joined_hooks([plan[1] for plan in plans], ends)
     lines = []
-    for sid, ((own, _), hooks) in enumerate(zip(plans, kept)):
+    for sid, ((own, _, full, i0, i1), hooks) in enumerate(zip(plans, kept)):
         a, b = (int(x) for x in ends[sid])
+        own = _untrimmed_ends(own, full, i0, i1, hooks)
         line = np.concatenate([jpx[[row_of[a]]] if hooks[0] else np.zeros((0, 2)), own,
                                jpx[[row_of[b]]] if hooks[1] else np.zeros((0, 2))])
         if a >= 0 and b >= 0 and len(line) >= 2 and polyline.length(line) < 2.0 * segment_px:
@@ -1244,6 +1395,13 @@ def _piece_coverage(piece, width_px, shape, flat_ends, shift=4):
     return win, cov
 
 
+def _flat_ends(pieces, i: int) -> list[int]:
+    """The ends of piece ``i`` of a band (pairs of a line and its width) cut square: those
+    where it narrows into the next piece (0: first point, -1: last)."""
+    return [e for e, j in ((0, i - 1), (-1, i + 1))
+            if 0 <= j < len(pieces) and pieces[j][1] < pieces[i][1]]
+
+
 def _draw_bands(lines_px, n_br, widths_px, shape, steps=None):
     """Anti-aliased ink coverage (exact distance bands) and the stack label image.
 
@@ -1278,9 +1436,7 @@ def _draw_bands(lines_px, n_br, widths_px, shape, steps=None):
     # would in its width's canvas
     for sid, pieces in steps.items():
         for i, (piece, width) in enumerate(pieces):
-            flat = [e for e, j in ((0, i - 1), (-1, i + 1))
-                    if 0 <= j < len(pieces) and pieces[j][1] < width]
-            win, cov = _piece_coverage(piece, width, shape, flat, shift)
+            win, cov = _piece_coverage(piece, width, shape, _flat_ends(pieces, i), shift)
             coverage[win] = np.maximum(coverage[win], cov)
     for sid, p in enumerate(pts):
         if sid in steps:
@@ -1940,6 +2096,21 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
                 f"the bands of junction{'s' if len(cut) > 1 else ''} "
                 f"{', '.join(str(j) for j in cut)} do not touch: the drawn rod is cut where "
                 "the truth holds it together")
+        # bands joined elsewhere can still stand apart at their junction
+        drawn = [[(q, float(cal.width(c)) * px_per_mm) for q, c in pieces[sid]] if sid in pieces
+                 else [(lines_px[sid], float(widths_px[sid]))] for sid in range(len(lines_px))]
+        jt = analysis.junctions
+        apart = [j for j in _apart_junctions(
+            st[["junction_a", "junction_b"]].to_numpy(int), lines_px, drawn,
+            dict(zip(jt["junction_id"].to_numpy(int).tolist(),
+                     _junctions_px(analysis, frame, widths_px))) if len(jt) else {},
+            frame.shape, JUNCTION_INK_H * thickness_mm * px_per_mm) if j not in cut]
+        if apart:
+            truth_warnings.append(
+                f"the bands of junction{'s' if len(apart) > 1 else ''} "
+                f"{', '.join(str(j) for j in apart)} do not all touch there: the image shows "
+                "no junction where the truth has one, and the voids they bound open into "
+                "each other")
         touching = _touching_pieces(st, lines_px, widths_px, gap_px)
         if touching:
             truth_warnings.append(_touching_message(touching, st["stack_id"].to_numpy(int)))
@@ -1949,6 +2120,12 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
                         stack_labels=labels,
                         stack_ends=st[["junction_a", "junction_b"]].to_numpy(int),
                         stack_widths_px=widths_px, min_contact_px=2 * thickness_mm * px_per_mm)
+    void_count = _void_count_check(
+        len(voids.table), analysis.voids, frame.rod_length_mm, (10 * thickness_mm) ** 2,
+        float(np.max(widths_px, initial=0.0)) / px_per_mm,
+        analysis.contact_distance * frame.rod_length_mm)
+    if void_count:
+        truth_warnings.append(void_count)
     img = _draw_scan(rng, coverage, voids.enclosed, frame, lines_px, widths_px,
                      smears=d["smears"], specks=d["specks"], pinholes=d["pinholes"])
     rgb = _finish(img, rng, frame, ink_mask, d)

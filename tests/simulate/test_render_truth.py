@@ -14,10 +14,13 @@ from crosssection.core.errors import ParameterError
 from crosssection.quality import QualityWarning
 from simulate.cli import main
 from simulate.contacts import analyze_rod
+from simulate.energy import LAMBDA
 from simulate.shapes import hairpin, resample
+from simulate import render
 from simulate.render import (JUNCTION_INK_H, TRUTH_LENGTH_TOLERANCE, TruthWarning,
-                             _disconnected_junctions, _junctions_onto_ink, _rod_drawn_check,
-                             render_configuration, render_directory)
+                             _apart_junctions, _disconnected_junctions, _junctions_onto_ink,
+                             _rod_drawn_check, _void_count_check, render_configuration,
+                             render_directory)
 
 # short rods, below the segment count the renders' truth is validated from, on purpose
 pytestmark = pytest.mark.filterwarnings(
@@ -106,15 +109,91 @@ def test_a_render_without_a_defect_of_its_truth_says_nothing():
     assert said == [] and sc.summary["truth_warnings"] == []
 
 
-def test_bands_a_junction_holds_together_that_do_not_touch_are_flagged():
-    """A quenched rod of 60 segments: joined by the hook rules, the tip of its four-layer
-    stack stops 30 px short of the arm that continues it (two networks for the analysis)."""
+def _trimmed_short(monkeypatch):
+    """Band ends left unjoined keep the hook's trim: drawn short of where their passes end."""
+    monkeypatch.setattr(render, "_untrimmed_ends", lambda own, full, i0, i1, hooks: own)
+
+
+def test_bands_a_junction_holds_together_that_do_not_touch_are_flagged(monkeypatch):
+    """A quenched rod of 60 segments: with its unjoined band ends trimmed, the tip of its
+    four-layer stack stops 30 px short of the arm that continues it (two networks for the
+    analysis)."""
+    _trimmed_short(monkeypatch)
     xy = np.load(DATA / "quench_rod_cut_join.npy")
     sc, said = _render(xy, lam=3e4, seed=2)
     n, _ = cv2.connectedComponents(sc.ink_mask.astype(np.uint8), connectivity=8)
     assert n - 1 == 2
     assert any("do not touch: the drawn rod is cut" in m for m in said)
     assert said == sc.summary["truth_warnings"]
+
+
+def test_an_unjoined_band_end_reaches_the_band_its_pass_ends_in():
+    """The same rod drawn: the stack's tip is not joined to its junction point (across the
+    paper) and keeps its whole length, into the arm that continues it."""
+    xy = np.load(DATA / "quench_rod_cut_join.npy")
+    sc, said = _render(xy, lam=3e4, seed=2)
+    n, _ = cv2.connectedComponents(sc.ink_mask.astype(np.uint8), connectivity=8)
+    assert n - 1 == 1
+    assert said == []
+
+
+@pytest.fixture(scope="module")
+def quench_n300_seed1():
+    """The first rod of ``quench --n-configs 6 --seed 1``: five voids above s_min, the line
+    of its one-pass stack 14 ending inside the three-layer band of stack 8 at junction 3,
+    112 px from the junction point (not joined: its join would cross 58 px of paper)."""
+    xy = np.load(DATA / "quench_rod_n300_seed1.npy")
+    return xy, analyze_rod(xy, lam=LAMBDA)
+
+
+def _rod_voids(analysis, sc, s_min_mm2=1.0):
+    return int(np.sum(analysis.voids["area"] * sc.params["rod_length_mm"] ** 2 >= s_min_mm2))
+
+
+def test_an_unjoined_band_end_keeps_the_voids_it_closes(quench_n300_seed1):
+    xy, an = quench_n300_seed1
+    sc, said = _render(xy, analysis=an, hole_radius_mm="auto")
+    assert _rod_voids(an, sc) == 5
+    assert sc.summary["n_voids"] == 5
+    assert said == []
+
+
+def test_bands_apart_at_their_junction_and_lost_voids_are_flagged(quench_n300_seed1,
+                                                                   monkeypatch):
+    """Drawn 9 px short of the band it ends in, stack 14 joins the network elsewhere (one
+    ink component) but not at junction 3: two voids open into their neighbours."""
+    _trimmed_short(monkeypatch)
+    xy, an = quench_n300_seed1
+    sc, said = _render(xy, analysis=an, hole_radius_mm="auto")
+    n, _ = cv2.connectedComponents(sc.ink_mask.astype(np.uint8), connectivity=8)
+    assert n - 1 == 1 and sc.summary["n_voids"] == 3
+    assert any("bands of junction 3 do not all touch there" in m for m in said)
+    assert any("the truth has 3 voids, the rod 5" in m for m in said)
+    assert said == sc.summary["truth_warnings"]
+
+
+def test_apart_junctions_are_those_whose_bands_do_not_touch_there():
+    """Stacks 0 and 1 meet at junction 0; stack 2 (also ending there) stops 6 px short of
+    them, its other end joining stack 1's far end at junction 1: one piece of ink."""
+    ends = np.array([[-1, 0], [0, 1], [0, 1]])
+    lines = [np.array([[10.0, 20.0], [40.0, 20.0]]), np.array([[40.0, 20.0], [80.0, 20.0]]),
+             np.array([[40.0, 33.0], [80.0, 33.0], [80.0, 20.0]])]
+    bands = [[(line, 7.0)] for line in lines]
+    points = {0: (40.0, 20.0), 1: (80.0, 20.0)}
+    assert _apart_junctions(ends, lines, bands, points, (60, 100), 15.0) == [0]
+    lines[2] = np.array([[40.0, 26.0], [80.0, 26.0], [80.0, 20.0]])  # 1 px of overlap
+    bands = [[(line, 7.0)] for line in lines]
+    assert _apart_junctions(ends, lines, bands, points, (60, 100), 15.0) == []
+
+
+def test_a_truth_void_count_outside_the_rods_is_flagged():
+    # areas and perimeters in units of L; a rod of 10 mm: 2 and 4 mm^2, 5 mm around
+    voids = pd.DataFrame({"area": [0.02, 0.04], "perimeter": [0.5, 0.5]})
+    assert _void_count_check(2, voids, 10.0, 1.0, 0.14, 0.2) is None
+    assert "the truth has 1 void, the rod 2" in _void_count_check(1, voids, 10.0, 1.0, 0.14, 0.2)
+    assert "closes voids" in _void_count_check(3, voids, 10.0, 1.0, 0.14, 0.2)
+    # a void that the bands' width can take below s_min may be missing
+    assert _void_count_check(1, voids, 10.0, 1.0, 0.6, 0.2) is None
 
 
 def test_disconnected_junctions_are_those_whose_bands_do_not_touch():
@@ -145,7 +224,8 @@ def _sim(tmp_path, xy, params):
     return sim
 
 
-def test_cli_names_the_scene_of_a_truth_warning(tmp_path, capsys):
+def test_cli_names_the_scene_of_a_truth_warning(tmp_path, capsys, monkeypatch):
+    _trimmed_short(monkeypatch)  # a drawing cut at a junction
     sim = _sim(tmp_path, np.load(DATA / "quench_rod_cut_join.npy"),
                {"command": "quench", "lam": 3e4})
     out = tmp_path / "s"
