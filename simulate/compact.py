@@ -994,7 +994,9 @@ def run_config(config_id: int, seed: int, params: dict, out: str) -> int:
 def check_params(params: CompactParams) -> None:
     """Raise :class:`ParameterError` (naming the option) unless the compaction can run.
 
-    * ``--epsilon`` finite, > 0 and <= 100;
+    * ``--epsilon`` finite, > 1 and <= 100 (at epsilon = L / (2 pi R) <= 1 the wall's
+      circumference holds the whole rod: nothing is compacted, the rod relaxes into an arc
+      along the wall);
     * ``--segments`` >= 8 pi epsilon (4 segments per wall radius: a rod cannot bend inside a
       wall spanned by fewer) and <= 100000;
     * ``--thickness`` finite, > 0 and below half a segment ``1/(2N)`` (contacts are kept
@@ -1004,8 +1006,11 @@ def check_params(params: CompactParams) -> None:
     * ``--noise`` in [0, 3000] (larger noise gives no self-avoiding initial shape);
     """
     eps = params.epsilon
-    if not (math.isfinite(eps) and 0.0 < eps <= 100.0):
-        raise ParameterError(f"--epsilon must be a finite number in (0, 100], got {eps!r}")
+    if not (math.isfinite(eps) and 1.0 < eps <= 100.0):
+        raise ParameterError(f"--epsilon must be a finite number in (1, 100], got {eps!r}"
+                             + (": at epsilon = L/(2 pi R) <= 1 the wall's circumference "
+                                "holds the whole rod, which is not compacted"
+                                if math.isfinite(eps) and 0.0 < eps <= 1.0 else ""))
     n = params.n_segments
     n_min = int(math.ceil(8.0 * math.pi * eps))
     if n < max(n_min, 16):
@@ -1119,7 +1124,8 @@ def add_subparser(sub):
                                        "hard wall (the experiments' epsilon)",
                        description=__doc__.split("\n\n")[0])
     p.add_argument("--epsilon", type=float, required=True,
-                   help="compaction rate L/(2 pi R) reached (experiments: 8-19)")
+                   help="compaction rate L/(2 pi R) reached, above 1 (at 1 the wall's "
+                        "circumference holds the rod; experiments: 8-19)")
     p.add_argument("--segments", type=int, default=CompactParams.n_segments,
                    help="number of segments N of the rod of length L (default "
                         f"{CompactParams.n_segments})")

@@ -14,7 +14,11 @@
 * ``DIR/stacks.csv`` -- config_id, stack_id, n_br, length (for rho(n_br) and paper Eqs. (14)-(15));
 * ``DIR/rods.npz`` -- node positions of every configuration, key ``config_XXXXX``;
 * ``DIR/params.json`` -- all parameters, every default the run used written out
-  (:func:`resolve_defaults`), and the package version;
+  (:func:`resolve_defaults`), and the package and library versions (``version``,
+  ``libraries``) of the run that computed the configurations: a re-run that computes
+  nothing leaves the file as it is; one that adds configurations under other versions keeps
+  the first and lists every run's in ``versions``, with a :class:`MixedVersionsWarning`
+  (:func:`params_record`);
 * ``DIR/failures.csv`` -- config_id, seed, error: one line per configuration whose computation
   raised (its row of configs.csv has the ``error`` and no results; the others go on). A
   re-run tries the failed configurations again. A Dask cluster that goes away stops the
@@ -60,7 +64,7 @@ from crosssection.quality import QualityWarning
 
 from simulate.contacts import MIN_CONTACT_DISTANCE
 from simulate.energy import LAMBDA, LAMBDA_MAX
-from simulate.noise import N_SEGMENTS, NOISE
+from simulate.noise import N_SEGMENTS, NOISE, VALIDATED_QUENCH_SEGMENTS
 from simulate.optimize import (FTOL, LAM_START, MAXITER, N_RUNS, NEMATIC_RUNS, NEMATIC_U, RAMPS,
                                STAGES, XTOL, default_contact_cutoff)
 
@@ -103,6 +107,44 @@ _WALL_CHECK_MIN = 4
 class WallStartWarning(QualityWarning):
     """Some start shapes leave the static hard wall (``--wall-radius``): their configurations
     fail, the others run (:func:`wall_check`)."""
+
+
+class MixedVersionsWarning(QualityWarning):
+    """A re-run adds configurations to an ensemble under another package or library version
+    than the one that computed its others (:func:`params_record`): a seed gives the same rod
+    only with the same floating-point operations, so the ensemble is no longer one run's."""
+
+
+class CoarseSegmentsWarning(QualityWarning):
+    """A quench or anneal of fewer segments than its statistics are validated from
+    (:data:`simulate.noise.VALIDATED_QUENCH_SEGMENTS`)."""
+
+
+def coarse_segments_doubt(params: dict) -> str | None:
+    """Why a quench's or anneal's segment count is doubtful, or None.
+
+    docs/validation/simulator/README.md compares quenches of N = 100 to 1000 segments with a
+    reference: N = 100 differs in four of five ensemble statistics (a segment is a quarter of
+    Rg), N = 200 in alpha_e; the default N = 300 is the smallest kept
+    (:data:`~simulate.noise.VALIDATED_QUENCH_SEGMENTS`, also the smallest the renders' truth
+    is validated from).
+
+    Parameters
+    ----------
+    params : dict
+        Run parameters (see :func:`run_ensemble`); a compaction's are not judged here.
+
+    Returns
+    -------
+    str or None
+    """
+    n = params.get("n_segments")
+    if params.get("command") not in _POWELL or n is None or n >= VALIDATED_QUENCH_SEGMENTS:
+        return None
+    return (f"N = {n} segments is below the {VALIDATED_QUENCH_SEGMENTS} the simulator's "
+            "ensemble statistics are validated from (docs/validation/simulator/README.md: "
+            "N = 100 and 200 disagree with the reference): its energies, Rg and branch "
+            "statistics are the discretisation's")
 
 
 class CoarseRodWarning(QualityWarning):
@@ -503,6 +545,57 @@ def library_versions() -> dict:
     return versions(("numpy", "scipy", "numba", "llvmlite"))
 
 
+def params_record(params: dict, old: dict | None, computing: bool) -> tuple[dict, str | None]:
+    """The content of ``params.json`` and, when the ensemble mixes versions, why.
+
+    ``version`` and ``libraries`` (:func:`library_versions`) say which code computed the
+    rods: a resume keeps those of the folder's record. When it computes configurations
+    under another package or library version, ``versions`` lists the ``{"version",
+    "libraries"}`` of every run that computed some, the recorded one first (absent while
+    all are the same).
+
+    Parameters
+    ----------
+    params : dict
+        The run's parameters, defaults resolved.
+    old : dict or None
+        The folder's params.json, when some of the configurations asked for were computed
+        under it (None: this run computes them all).
+    computing : bool
+        Whether this run computes configurations.
+
+    Returns
+    -------
+    (record, mixed) : (dict, str or None)
+        ``mixed`` names the versions when this run adds configurations to an ensemble
+        computed under several.
+    """
+    now = {"version": __version__, "libraries": library_versions()}
+    if old is None:
+        return {**params, **now}, None
+    first = {"version": old.get("version"), "libraries": old.get("libraries")}
+    runs = old.get("versions")
+    runs = ([r for r in runs if isinstance(r, dict)] if isinstance(runs, list) else []) or [first]
+    if computing and now not in runs:
+        runs = [*runs, now]
+    mixed = None
+    if computing and len(runs) > 1:
+
+        def shown(r):
+            libs = r.get("libraries") or {}
+            return (f"foldstat {r.get('version') or 'of unknown version'}"
+                    + (f" ({', '.join(f'{k} {v}' for k, v in sorted(libs.items()))})"
+                       if isinstance(libs, dict) and libs else ""))
+
+        mixed = (f"the ensemble mixes versions: its configurations were computed by "
+                 f"{'; '.join(shown(r) for r in runs)} (params.json lists them under "
+                 "versions); a seed gives the same rod only with the same versions")
+    record = {**params, **first}
+    if len(runs) > 1:
+        record["versions"] = runs
+    return record, mixed
+
+
 def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None = None,
                  progress: bool | None = None, task=None, columns=None, physics_keys=None,
                  on_wait=None) -> dict:
@@ -555,17 +648,28 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
     ClusterLostError
         The Dask cluster went away: the configurations it had are not recorded, nor are
         the tables written (the part files of the finished ones stay, for the re-run).
+
+    Warns
+    -----
+    CoarseSegmentsWarning
+        A quench or anneal of fewer segments than its statistics are validated from
+        (:func:`coarse_segments_doubt`).
+    MixedVersionsWarning
+        The run adds configurations to an ensemble computed under other package or library
+        versions than its own (:func:`params_record`).
     """
     out = Path(out)
     params = resolve_defaults(params)
     params = {k: params.get(k) for k in sorted(params)}
     check_out_folder(out, params["command"])
     pfile = out / "params.json"
+    raw = None
     if pfile.exists():
         try:
             old = json.loads(pfile.read_text())
         except (OSError, json.JSONDecodeError) as exc:
             raise ConfigError(f"unreadable params.json ({exc})", path=pfile) from None
+        raw = old if isinstance(old, dict) else None
         # a folder that recorded None for a default is compared with the value it stood for
         old = resolve_defaults(old) if isinstance(old, dict) else {}
         diff = [k for k in (_physics_keys(params) if physics_keys is None else physics_keys)
@@ -573,9 +677,16 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
         if diff:
             raise ConfigError("output folder holds a different ensemble (parameters differ: "
                               + ", ".join(diff) + "); use another --out", path=out)
+    coarse = coarse_segments_doubt(params)
+    if coarse:
+        warnings.warn(f"{out}: {coarse}", CoarseSegmentsWarning, stacklevel=2)
     n = int(params["n_configs"])
     seeds = spawn_seeds(params["seed"], n)
     todo = [i for i in range(n) if not _part_ok(part_path(out, i), i, seeds[i])]
+    # the record's versions are those of the run that computed the configurations kept
+    record, mixed = params_record(params, raw if len(todo) < n else None, bool(todo))
+    if mixed:
+        warnings.warn(f"{out}: {mixed}", MixedVersionsWarning, stacklevel=2)
     task = run_config if task is None else task
     failed = {}
     # nothing is written before the executor exists: a refused --scheduler or --workers
@@ -583,8 +694,10 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
     with get_executor(workers, scheduler, on_wait=on_wait) if todo else nullcontext() as ex:
         out.mkdir(parents=True, exist_ok=True)
         # the tables hold the first n configurations: so does the record (parts of a larger
-        # earlier run stay on disk, and a re-run that asks for them again reuses them)
-        write_json(pfile, {**params, "version": __version__, "libraries": library_versions()})
+        # earlier run stay on disk, and a re-run that asks for them again reuses them); a
+        # record that would not change is not rewritten
+        if raw != json.loads(json.dumps(record, default=str)):
+            write_json(pfile, record)
         bar = None
         if progress is not False:
             from tqdm import tqdm
@@ -969,6 +1082,8 @@ def add_subparser(sub):
 __all__ = ["run_ensemble", "report_failures", "run_config", "assemble", "minimize_config",
            "add_subparser", "check_out_folder", "start_shape", "wall_check",
            "WallStartWarning", "CoarseRodWarning", "coarse_rod_doubt", "OUTPUT_FILES",
+           "MixedVersionsWarning", "CoarseSegmentsWarning", "coarse_segments_doubt",
+           "params_record",
            "METHOD_OPTIONS",
            "analysis_records", "write_part", "resolve_defaults", "PARAMETRIZATION",
            "summary_head",

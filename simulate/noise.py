@@ -33,6 +33,10 @@ from simulate.intersect import has_intersection_grid
 #: self-intersection at that resolution (module docstring).
 N_SEGMENTS = 300
 NOISE = 750.0
+#: Fewest segments a quench's statistics are validated from (docs/validation/simulator/
+#: README.md: N = 100 and 200 disagree with the reference, N = 300 is kept), and its
+#: renders' truth (:mod:`simulate.render`).
+VALIDATED_QUENCH_SEGMENTS = 300
 
 
 def _checked_shape_args(n_segments, noise, *, low: int = 1) -> tuple[int, float]:

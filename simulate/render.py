@@ -109,6 +109,12 @@ the paper calibrates the hot wire's nonlinear thickening of a stack by cutting s
 sheets ("Image analysis procedure"). It is written to ``calibration.csv`` so that the pipeline
 inverts the law the bands were drawn with, as a user passes the tool's calibration.
 
+Scene folders. :func:`render_directory` writes each scene with its ``set.toml``
+(:func:`write_set_file`): the scale, ``calibration.csv`` and the hole its ``params.json``
+records, in the form of :mod:`crosssection.setconfig`, so that ``foldstat batch SCENES``
+analyses every scene as ``validate`` does (each scene folder is a set, named by its folder).
+The scoring reads ``params.json`` and ignores it.
+
 Drawing the rod itself (``draw="passes"``, experimental). The bands drawing draws the truth's
 stacks, not the rod: mean lines joined to junction points at a band's side, a band holding a
 fold drawn at its larger layer count over its whole length, lumps where junctions cluster
@@ -178,15 +184,18 @@ from crosssection.core.unionfind import group_labels
 from crosssection.quality import QualityWarning
 from crosssection.truth import degrade, ink
 from crosssection.truth.backdrop import PLATE_NAMES, apply_backdrop, plate_rgb
-from crosssection.truth.scene import LAYER_PIECE_COLUMNS, LAYER_PIECES, Scene, write_scene
+from crosssection.truth.scene import (LAYER_PIECE_COLUMNS, LAYER_PIECES, Scene, read_scene_params,
+                                      write_scene)
 from crosssection.truth.voids import truth_voids
 
 from simulate.checks import check_real
 from simulate.contacts import RodAnalysis, analyze_rod
 from simulate.energy import LAMBDA
 from simulate.geometry import checked_rod, is_point
+from simulate.noise import VALIDATED_QUENCH_SEGMENTS as _VALIDATED_QUENCH_SEGMENTS
 
-__all__ = ["render_configuration", "render_directory", "add_subparser", "smooth_line",
+__all__ = ["render_configuration", "render_directory", "write_set_file", "add_subparser",
+           "smooth_line",
            "passes_calibration", "ScanRangeWarning", "TruthWarning", "SCAN_DEFECTS", "CLEAN",
            "DRAW", "JOIN",
            "PX_PER_MM", "THICKNESS_MM", "VALIDATED_SHEET_PX", "VALIDATED_BLUR_PX",
@@ -220,7 +229,8 @@ VALIDATED_JPEG_QUALITY = 75
 #: zero length and energy errors of +65 to +300 %. A rod with fewer is drawn, with a
 #: :class:`ScanRangeWarning`.
 VALIDATED_COMPACT_SEGMENTS = 2000
-VALIDATED_QUENCH_SEGMENTS = 300
+#: (the quench's own: :data:`simulate.noise.VALIDATED_QUENCH_SEGMENTS`)
+VALIDATED_QUENCH_SEGMENTS = _VALIDATED_QUENCH_SEGMENTS
 #: The clean drawing: no defect, white paper around the hole.
 CLEAN = {"noise_sigma": 0.0, "blur_px": 0.0, "jpeg_quality": None, "smears": 0, "specks": 0,
          "pinholes": 0, "plate": None, "rim_px": 0.0, "illumination": 0.0, "cast": 0.0}
@@ -2177,7 +2187,7 @@ _DEFECT_NAMES = ("noise_sigma", "blur_px", "jpeg_quality", "smears", "specks", "
 RENDER_RECORD = "render.json"
 #: Entries of a simulation's params.json a render does not depend on: a re-run of the
 #: ensemble adds configurations and records the versions it ran with.
-_SOURCE_IGNORED = ("n_configs", "version", "libraries")
+_SOURCE_IGNORED = ("n_configs", "version", "libraries", "versions")
 
 
 def _checked_rod(xy) -> np.ndarray:
@@ -2347,6 +2357,67 @@ def _source_record(source_params: dict | None) -> dict | None:
                                   if k not in _SOURCE_IGNORED}, default=_jsonable))
 
 
+def _foreign_entry(out_dir: Path, keys) -> str | None:
+    """The first entry of ``out_dir`` that no render writes, or None.
+
+    A render writes ``render.json`` and one folder per configuration (named by its key in
+    ``rods.npz``, ``keys``; a folder a killed render left half written holds no scene yet);
+    a scene folder of the same render is kept whatever its name (an earlier ``--limit`` or
+    configurations of another count), and so is a ``validate`` report written inside
+    (:func:`simulate.validate.is_report_folder`). Anything else (an ensemble's tables, a
+    user's notes) would end up mixed with the scenes.
+    """
+    from crosssection.core.fileio import BROWSER_FILES
+    from simulate.ensemble import _own_file
+    from simulate.validate import is_report_folder
+
+    keys = set(keys)
+    for p in sorted(out_dir.iterdir()):
+        if p.name in BROWSER_FILES:
+            continue
+        if p.is_dir() and not p.is_symlink():
+            if (p.name in keys or (p / "params.json").exists() or (p / "truth").exists()
+                    or is_report_folder(p)):
+                continue
+        elif p.is_file() and _own_file(p.name, (RENDER_RECORD,)):
+            continue
+        return p.name
+    return None
+
+
+def write_set_file(folder, params: dict) -> Path:
+    """Write ``folder/set.toml``: the analysis parameters of a scene folder, as
+    :func:`crosssection.truth.scoring.analyze_scene_folder` takes them from its
+    ``params.json`` (the scale, the hole when it has one, ``calibration.csv``), so that a
+    batch of the scenes analyses each as ``validate`` does.
+
+    Parameters
+    ----------
+    folder : str or Path
+        The scene folder (its ``calibration.csv`` is named relative to it).
+    params : dict
+        The scene's parameters (:attr:`crosssection.truth.scene.Scene.params`).
+
+    Returns
+    -------
+    Path
+        The file.
+    """
+    from crosssection.core.fileio import write_text
+    from crosssection.setconfig import SET_FILE
+
+    lines = ["# the analysis parameters of this scene (simulate.render), for `foldstat batch`",
+             f"px_per_mm = {float(params['px_per_mm'])!r}",
+             f"thickness_mm = {float(params['thickness_mm'])!r}",
+             'calibration = "calibration.csv"']
+    if params.get("hole_radius_mm"):
+        lines.append(f"hole_radius_mm = {float(params['hole_radius_mm'])!r}")
+        if params.get("hole_center_px"):
+            x, y = (float(v) for v in params["hole_center_px"])
+            lines.append(f"hole_center_px = [{x!r}, {y!r}]")
+    return write_text(Path(folder) / SET_FILE, "\n".join(lines) + "\n")
+
+
 def _holds_scenes(out_dir: Path) -> bool:
     """Whether ``out_dir`` holds a scene folder, finished or not."""
     return out_dir.is_dir() and any(
@@ -2367,12 +2438,15 @@ def _follows_source(key: str, recorded) -> bool:
     return key in _FROM_SOURCE or (key == "rod_length_mm" and recorded is None)
 
 
-def _claim_out(out_dir: Path, record: dict, name=str) -> bool:
-    """Refuse an output folder whose scenes were rendered otherwise.
+def _claim_out(out_dir: Path, record: dict, name=str, keys=()) -> bool:
+    """Refuse an output folder whose scenes were rendered otherwise, or that holds anything
+    a render does not write.
 
     A re-run resumes (finished scenes are skipped), so the scenes there must have been
     rendered with the same parameters from the same ensemble: otherwise the folder would mix
-    scans of two renders. A folder without scenes is free.
+    scans of two renders. A folder without scenes is free when it is empty (or holds only
+    the half-written folders of a killed render): other files there (an ensemble, a user's
+    notes) are refused, as ``quench`` and ``compact`` refuse them.
 
     Parameters
     ----------
@@ -2381,6 +2455,8 @@ def _claim_out(out_dir: Path, record: dict, name=str) -> bool:
         This render's :func:`_render_record`.
     name : callable
         Keyword -> the name shown for it (the CLI's options).
+    keys : iterable of str
+        The configurations of the source's ``rods.npz`` (the names of the scene folders).
 
     Returns
     -------
@@ -2390,9 +2466,16 @@ def _claim_out(out_dir: Path, record: dict, name=str) -> bool:
     Raises
     ------
     ConfigError
-        The folder holds scenes without ``render.json`` (parameters unknown), an unreadable
-        one, or one of another render (the parameters that differ are listed).
+        The folder holds an entry no render writes (:func:`_foreign_entry`, naming it),
+        scenes without ``render.json`` (parameters unknown), an unreadable one, or one of
+        another render (the parameters that differ are listed).
     """
+    if out_dir.is_dir():
+        foreign = _foreign_entry(out_dir, keys)
+        if foreign is not None:
+            raise ConfigError(f"holds {foreign}, which is no part of a render output: give a "
+                              "new folder, an empty one or one an earlier render wrote",
+                              out_dir)
     if not _holds_scenes(out_dir):
         return False
     path = out_dir / RENDER_RECORD
@@ -2435,6 +2518,8 @@ def render_directory(sim_dir, out_dir, *, configs=None, progress: bool | None = 
     hole (module docstring). Without params.json the rods are drawn as a quench's (a
     :class:`~crosssection.quality.QualityWarning` says so).
 
+    Each scene folder holds a ``set.toml`` (:func:`write_set_file`): ``foldstat batch
+    out_dir`` analyses the scenes with their scale, calibration and hole.
     ``out_dir/render.json`` records the render's parameters, its source folder and the
     package version. A re-run into the same folder resumes: scenes already complete
     (truth/summary.json present) are skipped, provided the folder's render.json has the same
@@ -2465,7 +2550,7 @@ def render_directory(sim_dir, out_dir, *, configs=None, progress: bool | None = 
         ``rod_length_mm`` that contradicts the compaction's thickness.
     ConfigError
         ``sim_dir`` is not a readable simulation folder, or ``out_dir`` holds scenes of
-        another render (or of one that recorded no parameters).
+        another render (or of one that recorded no parameters) or files no render writes.
 
     Warns
     -----
@@ -2539,7 +2624,7 @@ def _render_directory(sim_dir, out_dir, *, configs=None, limit=None, progress=Fa
             kwargs, lam, delta if delta is not None
             else (_source_record(p) or {}).get("contact_distance")))
         # a resumed render keeps the record of the render that made the folder's scenes
-        recorded = _claim_out(out_dir, record, name)
+        recorded = _claim_out(out_dir, record, name, rods.files)
         if p is None:
             # a compaction's wall and scale are in its params.json: without it the rods are
             # drawn with no wall at the gap's scale, which is silently wrong for a compaction
@@ -2558,6 +2643,12 @@ def _render_directory(sim_dir, out_dir, *, configs=None, limit=None, progress=Fa
             for i, key in enumerate(bar):
                 folder = out_dir / key
                 if (folder / "truth" / "summary.json").exists():
+                    if not (folder / "set.toml").exists():
+                        # a scene an older version rendered: made batch-ready from its record
+                        try:
+                            write_set_file(folder, read_scene_params(folder))
+                        except ConfigError:
+                            pass  # a damaged record: validate names the scene
                     written.append(folder)
                     continue
                 try:
@@ -2591,6 +2682,9 @@ def _render_directory(sim_dir, out_dir, *, configs=None, limit=None, progress=Fa
                     # before the first scene: a folder never holds scenes without their record
                     write_json(out_dir / RENDER_RECORD, record)
                     recorded = True
+                # before the scene, whose truth/summary.json marks it complete
+                folder.mkdir(parents=True, exist_ok=True)
+                write_set_file(folder, scene.params)
                 written.append(write_scene(scene, folder))
     return written
 
@@ -2607,7 +2701,7 @@ def add_subparser(sub) -> None:
     p.add_argument("--out", required=True, metavar="SCENES",
                    help="folder of the scene folders (created; its render.json records the "
                         "parameters: a re-run with the same ones resumes, skipping finished "
-                        "scenes)")
+                        "scenes; a folder holding other files is refused)")
     p.add_argument("--px-per-mm", type=float, default=PX_PER_MM,
                    help=f"scan resolution in px/mm (default {PX_PER_MM:g}; a sheet under "
                         f"{VALIDATED_SHEET_PX:g} px, --px-per-mm x --thickness-mm, is beyond "

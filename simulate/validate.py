@@ -39,7 +39,8 @@ from crosssection.core.fileio import write_csv, write_json
 from crosssection.truth.scene import LAYER_PIECES, read_scene_params, read_truth_tables
 from crosssection.truth.scoring import analyze_scene_folder, score
 
-__all__ = ["validate_scenes", "score_scene", "read_truth", "truth_warnings", "add_subparser"]
+__all__ = ["validate_scenes", "score_scene", "read_truth", "truth_warnings", "is_report_folder",
+           "add_subparser", "REPORT_FILES"]
 
 # the headline scores, first in scores.csv (crosssection.truth.scoring names)
 KEY_COLUMNS = ["scene", "rod_length_rel_error", "n_branches_rel_error", "junction_precision",
@@ -176,6 +177,43 @@ def score_scene(scene_dir, *, match_px: float | None = None) -> dict:
     return out
 
 
+#: The files of a report folder (:func:`validate_scenes`).
+REPORT_FILES = ("scores.csv", "summary.json", "failures.csv")
+
+
+def _foreign_entry(out_dir: Path) -> str | None:
+    """The first entry of ``out_dir`` that is no part of a report, or None (browser files
+    and the leftovers of a killed atomic write are part of it)."""
+    from crosssection.core.fileio import BROWSER_FILES
+    from simulate.ensemble import _own_file
+
+    for p in sorted(out_dir.iterdir()):
+        if p.name in BROWSER_FILES or (p.is_file() and _own_file(p.name, REPORT_FILES)):
+            continue
+        return p.name
+    return None
+
+
+def is_report_folder(folder) -> bool:
+    """Whether ``folder`` is a report folder: it holds a :data:`REPORT_FILES` and nothing
+    else."""
+    folder = Path(folder)
+    return (folder.is_dir() and any((folder / f).is_file() for f in REPORT_FILES)
+            and _foreign_entry(folder) is None)
+
+
+def _check_out_dir(out_dir: Path) -> None:
+    """Refuse a report folder holding anything but an earlier report (which a re-run
+    replaces): the scores would be written beside another command's files (a render's
+    scenes, an ensemble), which that command then refuses to resume."""
+    if not out_dir.is_dir():
+        return
+    foreign = _foreign_entry(out_dir)
+    if foreign is not None:
+        raise ConfigError(f"holds {foreign}, which is no part of a validate report: give a "
+                          "new folder, an empty one or one an earlier validate wrote", out_dir)
+
+
 def _scene_folders(scenes_dir: Path, out_dir: Path) -> list[Path]:
     """Every subfolder of ``scenes_dir`` but hidden ones and the report folder itself."""
     out = out_dir.resolve()
@@ -238,7 +276,8 @@ def validate_scenes(scenes_dir, out_dir, *, match_px: float | None = None,
     ParameterError
         ``match_px`` is not a finite number > 0.
     ConfigError
-        ``scenes_dir`` is not a folder or no subfolder of it has a ``truth/summary.json``.
+        ``scenes_dir`` is not a folder or no subfolder of it has a ``truth/summary.json``,
+        or ``out_dir`` holds anything but an earlier report.
     OSError
         ``out_dir`` cannot be created or written.
 
@@ -270,6 +309,7 @@ def _validate(scenes_dir, out_dir, *, match_px, progress) -> tuple[pd.DataFrame,
     if not any((p / "truth" / "summary.json").is_file() for p in scenes):
         raise ConfigError("no scene folders (with truth/summary.json) inside", scenes_dir)
     # before the analyses: an unusable --out should not cost the whole run
+    _check_out_dir(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     rows, failures, ranges = [], [], {}
     from tqdm import tqdm
@@ -348,7 +388,8 @@ def add_subparser(sub) -> None:
     p.add_argument("scenes", metavar="SCENES",
                    help="folder of scene folders (from render), each with its truth/")
     p.add_argument("--out", required=True, metavar="REPORT",
-                   help="report folder (created): scores.csv, summary.json, failures.csv")
+                   help="report folder (created): scores.csv, summary.json, failures.csv; "
+                        "a re-run replaces them; a folder holding other files is refused")
     p.add_argument("--match-px", type=float, default=None,
                    help="junction matching radius in px, > 0 (default: 3 h of each scene)")
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,

@@ -470,9 +470,14 @@ def _simulation_provenance(folder: Path):
     params = dict(params)
     version = params.pop("version", None)
     libraries = params.pop("libraries", None)
+    # an ensemble resumed under other versions lists every run's (simulate.ensemble's
+    # params_record): a record of the code, not a parameter
+    runs = params.pop("versions", None)
     text = json.loads(_provenance(version, params))
     if isinstance(libraries, dict):
         text["libraries"] = libraries
+    if isinstance(runs, list):
+        text["runs"] = [r for r in runs if isinstance(r, dict)]
     return json.dumps(text, sort_keys=True, default=str)
 
 

@@ -33,9 +33,9 @@ from crosssection.stats.families import FAMILIES
 from crosssection.stats.data import REPORT_TABLES, Ensemble
 from crosssection.stats.tables import (CORRELATION_MIN_PAIRS, COUNT_QUANTITIES, EQ12_CONST,
                                        N_RELATION_MIN, PAPER_DOF, PAPER_MACRO, PAPER_MICRO,
-                                       QUANTITIES, SLOPE_RELATIONS,
-                                       StatsOptions, StatsResult, compute_stats, regions_of,
-                                       set_seed, small_sample_note, to_markdown)
+                                       QUANTITIES, StatsOptions, StatsResult, compute_stats,
+                                       regions_of, relation_note, set_seed, small_sample_note,
+                                       to_markdown)
 
 # Okabe-Ito colours (distinguishable with the common colour-vision deficiencies), in the
 # order of the sets; the set's index in the ensemble fixes its colour in every figure.
@@ -924,9 +924,11 @@ def provenance(ens: Ensemble) -> dict:
             unknown += 1
             continue
         records.append(rec)
-    versions = sorted({str(r.get("version")) for r in records if r.get("version")})
+    # a simulation resumed under other versions records each run's (its "runs")
+    runs = [x for r in records for x in (r, *(r.get("runs") or ())) if isinstance(x, dict)]
+    versions = sorted({str(r.get("version")) for r in runs if r.get("version")})
     libs = {}
-    for r in records:
+    for r in runs:
         for k, v in (r.get("libraries") or {}).items():
             libs.setdefault(k, set()).add(str(v))
     names = list(dict.fromkeys(k for r in records for k in (r.get("parameters") or {})))
@@ -1185,15 +1187,14 @@ def _selected_table(res: StatsResult) -> pd.DataFrame:
 
 
 def _relations_shown(rel: pd.DataFrame) -> pd.DataFrame:
-    """The relations table with the sample size of a relation fitted on too few
-    configurations spelled out beside it."""
+    """The relations table with the sample size of a relation computed on too few
+    configurations (or a law's parameter on too few values) spelled out beside it
+    (:func:`~crosssection.stats.tables.relation_note`)."""
     # the page says "indicative only" beside the number: the CSV's boolean column is not shown
     rel = rel.drop(columns=["indicative"], errors="ignore")
     if rel.empty:
         return rel
-    notes = [small_sample_note(n, N_RELATION_MIN, "configurations a fitted relation needs")
-             if r in SLOPE_RELATIONS and np.isfinite(f) else ""
-             for r, n, f in zip(rel["relation"], rel["n"], rel["fitted"])]
+    notes = [relation_note(r, n, f) for r, n, f in zip(rel["relation"], rel["n"], rel["fitted"])]
     rel["n"] = [f"{t}: indicative only" if t else n for t, n in zip(notes, rel["n"])]
     return rel
 

@@ -84,6 +84,29 @@ N_RELATION_MIN = 5
 CORRELATION_MIN_PAIRS = 3
 #: the relations fitted across configurations (a slope or ratio per set)
 SLOPE_RELATIONS = ("eq12_const", "slope_sqrt_s_vs_l", "eq12_eps_sqrtNl", "eq14_slope")
+#: the relations computed across configurations, the slopes and the means over
+#: configurations: each is indicative only below :data:`N_RELATION_MIN` configurations (a
+#: mean of two configurations says as little as a slope through two points);
+#: ``n_br_exp_mu``, a parameter of the law of n_br, follows the laws' rule instead
+CONFIG_RELATIONS = SLOPE_RELATIONS + ("eq15_fluct", "eq16")
+#: the relation that is a law's parameter (the mean of the exponential law of n_br): its
+#: ``n`` counts the stacks, indicative below the values model selection needs
+LAW_RELATION = "n_br_exp_mu"
+
+
+def relation_note(relation: str, n, fitted) -> str:
+    """Why a row of the relations table is indicative only, in the report's words
+    (:func:`small_sample_note`), or "" when it is not (or was not computed)."""
+    try:
+        if not np.isfinite(float(fitted)):
+            return ""
+    except (TypeError, ValueError):
+        return ""
+    if relation in CONFIG_RELATIONS:
+        return small_sample_note(n, N_RELATION_MIN, "configurations a fitted relation needs")
+    if relation == LAW_RELATION:
+        return small_sample_note(n, F.N_SELECT_MIN, "samples model selection needs")
+    return ""
 
 
 def small_sample_note(n, minimum: int, what: str) -> str:
@@ -108,7 +131,8 @@ def _warn_small_samples(summaries: dict, relations: pd.DataFrame, too_few: dict,
             where = q if reg in ("all", SIM_REGION) else f"{q} ({reg})"
             small.setdefault(s, [[], [], []])[0].append(f"{where} n = {r.n}")
     for row in relations.itertuples(index=False):
-        if row.relation in SLOPE_RELATIONS and row.n < N_RELATION_MIN and np.isfinite(row.fitted):
+        # n_br_exp_mu is named with the laws (its law of n_br)
+        if row.relation in CONFIG_RELATIONS and relation_note(row.relation, row.n, row.fitted):
             small.setdefault(row.set, [[], [], []])[1].append(f"{row.relation} n = {row.n}")
     for s, (laws, rels, unfitted) in small.items():
         parts = []
@@ -518,10 +542,9 @@ def compute_stats(ens: Ensemble, opts: StatsOptions | None = None, *,
     micro = pd.DataFrame(micro_rows)
     dof = pd.DataFrame(dof_rows)
     relations = relations_table(ens, per_cfg, summaries)
-    relations["indicative"] = (relations["relation"].isin(SLOPE_RELATIONS)
-                               & (relations["n"] < N_RELATION_MIN)
-                               & np.isfinite(relations["fitted"].astype(float))
-                               if not relations.empty else pd.Series(dtype=bool))
+    relations["indicative"] = (pd.Series([bool(relation_note(r, n, f)) for r, n, f in zip(
+        relations["relation"], relations["n"], relations["fitted"])], dtype=bool,
+        index=relations.index) if not relations.empty else pd.Series(dtype=bool))
     _warn_small_samples(summaries, relations, too_few, opts.min_n)
     correlations = correlations_table(ens)
     return StatsResult(macro, micro, dof, fits_df, trunc_df, relations, correlations, per_cfg,

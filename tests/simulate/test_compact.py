@@ -124,6 +124,9 @@ def test_cli_outputs_and_resume(tmp_path, monkeypatch):
     (["--epsilon", "0"], "--epsilon"),
     (["--epsilon", "-3"], "--epsilon"),
     (["--epsilon", "nan"], "--epsilon"),
+    # the wall's circumference 2 pi R = L / epsilon holds the whole rod: nothing to compact
+    (["--epsilon", "1"], "holds the whole rod"),
+    (["--epsilon", "0.5"], "holds the whole rod"),
     (["--epsilon", "2", "--segments", "20"], "--segments"),
     (["--epsilon", "2", "--thickness", "0"], "--thickness"),
     (["--epsilon", "2", "--thickness", "0.01"], "half a segment"),

@@ -159,7 +159,9 @@ def test_cli_quench_stderr_holds_no_progress_bar_when_not_a_terminal(tmp_path):
     r = subprocess.run([sys.executable, "-m", "simulate", "quench", *argv, "--out",
                         str(tmp_path / "q")], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
-    assert r.stderr == ""
+    # nothing but the one line on the short rod used for speed
+    assert [line for line in r.stderr.splitlines()
+            if "segments is below the 300" not in line] == []
 
 
 def test_nematic_cutoff_reaches_the_minimiser(first, tmp_path):

@@ -161,7 +161,7 @@ def test_compact_in_which_every_configuration_failed_says_so(tmp_path, capsys):
     """--max-iter 1 stops the wall long before its radius: every configuration fails, the
     summary says so (no averages of nothing) and the exit status is quench's, 3."""
     out = tmp_path / "c"
-    argv = ["compact", "--epsilon", "1", "--segments", "32", "--n-configs", "2", "--max-iter",
+    argv = ["compact", "--epsilon", "1.2", "--segments", "32", "--n-configs", "2", "--max-iter",
             "1", "--no-progress", "--out", str(out)]
     assert simulate_main(argv) == 3
     cap = capsys.readouterr()
@@ -180,3 +180,73 @@ def test_a_default_quench_is_not_too_coarse_for_its_stacks():
     assert coarse_rod_doubt({"branches": short}, 300) is not None  # 30 % > 25 %
     long = pd.DataFrame({"length": [0.5 / 300] * 2 + [0.02] * 8})
     assert coarse_rod_doubt({"branches": long}, 300) is None
+
+
+def test_a_resume_keeps_the_versions_that_computed_the_rods(tmp_path, capsys):
+    """A re-run computing nothing leaves params.json as it is (its version is that of the
+    rods); one adding configurations under another version lists both and says so."""
+    from crosssection._version import __version__
+
+    out = tmp_path / "q"
+    argv = ["quench", *POWELL, "--out", str(out)]
+    assert simulate_main(argv) == 0
+    old = {**_params(out), "version": "0.0.1", "libraries": {"numpy": "1.0.0"}}
+    (out / "params.json").write_text(json.dumps(old, indent=2))
+    before = {f: (out / f).read_bytes() for f in ("params.json", "configs.csv", "rods.npz")}
+    capsys.readouterr()
+    assert simulate_main(argv) == 0
+    assert {f: (out / f).read_bytes() for f in before} == before
+    assert "mixes versions" not in capsys.readouterr().err
+    # a configuration more, computed by this version
+    more = [a if a != "1" else "2" for a in argv]
+    assert more[more.index("--n-configs") + 1] == "2"
+    assert simulate_main(more) == 0
+    err = capsys.readouterr().err.splitlines()
+    said = [line for line in err if "mixes versions" in line]
+    assert len(said) == 1 and said[0].startswith(
+        f"warning: {out}: the ensemble mixes versions: its configurations were computed by "
+        f"foldstat 0.0.1 (numpy 1.0.0); foldstat {__version__} (")
+    rec = _params(out)
+    assert (rec["version"], rec["libraries"]) == ("0.0.1", {"numpy": "1.0.0"})
+    assert rec["versions"] == [{"version": "0.0.1", "libraries": {"numpy": "1.0.0"}},
+                               {"version": __version__,
+                                "libraries": ensemble.library_versions()}]
+    # the API says it with its own category
+    with pytest.warns(ensemble.MixedVersionsWarning, match="mixes versions"):
+        ensemble.run_ensemble({**ensemble.params_from_args(_parse(more)), "n_configs": 3},
+                              out, progress=False)
+    assert len(_params(out)["versions"]) == 2  # this version's runs are listed once
+
+
+def test_a_run_computing_every_configuration_records_its_own_version(tmp_path):
+    # a folder whose earlier run was stopped before any configuration finished
+    from crosssection._version import __version__
+
+    out = tmp_path / "q"
+    assert simulate_main(["quench", *POWELL, "--out", str(out)]) == 0
+    (out / "params.json").write_text(json.dumps({**_params(out), "version": "0.0.1"}))
+    for part in (out / "parts").iterdir():
+        part.unlink()
+    assert simulate_main(["quench", *POWELL, "--out", str(out)]) == 0
+    rec = _params(out)
+    assert rec["version"] == __version__ and "versions" not in rec
+
+
+def test_a_quench_coarser_than_the_validated_segments_is_a_warning(tmp_path, capsys):
+    from simulate.noise import VALIDATED_QUENCH_SEGMENTS
+    from simulate.render import VALIDATED_QUENCH_SEGMENTS as RENDERED
+
+    assert VALIDATED_QUENCH_SEGMENTS == RENDERED == 300  # one documented limit
+    out = tmp_path / "q"
+    assert simulate_main(["quench", *POWELL, "--out", str(out)]) == 0
+    said = [line for line in capsys.readouterr().err.splitlines() if "segments" in line]
+    assert said == [f"warning: {out}: N = {N} segments is below the 300 the simulator's "
+                    "ensemble statistics are validated from (docs/validation/simulator/"
+                    "README.md: N = 100 and 200 disagree with the reference): its energies, "
+                    "Rg and branch statistics are the discretisation's"]
+    params = ensemble.params_from_args(_parse(["quench", *POWELL, "--out", str(out)]))
+    with pytest.warns(ensemble.CoarseSegmentsWarning, match=f"N = {N} segments"):
+        ensemble.run_ensemble(params, out, progress=False)
+    assert ensemble.coarse_segments_doubt({**params, "n_segments": 300}) is None
+    # a compaction's segments are judged by its own checks
+    assert ensemble.coarse_segments_doubt({"command": "compact", "n_segments": 64}) is None

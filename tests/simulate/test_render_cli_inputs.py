@@ -223,6 +223,71 @@ def test_an_ensemble_recording_its_defaults_as_null_is_the_same_source(sim, tmp_
         assert (out / "config_00001" / "image.png").exists()
 
 
+def test_a_folder_holding_other_files_is_refused(sim, tmp_path, capsys):
+    # a finished ensemble: scenes written beside its tables would stop it resuming
+    ens = tmp_path / "ens"
+    shutil.copytree(sim, ens)
+    before = sorted(p.name for p in ens.iterdir())
+    status, err = _render(capsys, sim, "--out", ens, "--limit", "1", *FAST)
+    assert status == 2
+    assert _one_error(err) == (f"error: {ens}: holds branches.csv, which is no part of a render "
+                               "output: give a new folder, an empty one or one an earlier "
+                               "render wrote")
+    assert sorted(p.name for p in ens.iterdir()) == before
+    assert main(["quench", "--n-configs", "2", "--segments", "100", "--seed", "1",
+                 "--workers", "1", "--runs", "2", "--nematic-runs", "0", "--maxiter", "5",
+                 "--no-progress", "--out", str(ens)]) == 0
+    # a user's folder
+    junk = tmp_path / "junk"
+    junk.mkdir()
+    (junk / "notes.txt").write_text("hi\n")
+    status, err = _render(capsys, sim, "--out", junk, "--limit", "1", *FAST)
+    assert status == 2 and "holds notes.txt, which is no part of a render output" in err
+    assert sorted(p.name for p in junk.iterdir()) == ["notes.txt"]
+    with pytest.raises(render.ConfigError, match="holds notes.txt"):
+        render_directory(sim, junk, px_per_mm=25, clean=True)
+
+
+def test_a_render_resumes_beside_its_own_report_and_half_written_scene(sim, tmp_path,
+                                                                     capsys):
+    out = tmp_path / "scenes"
+    assert _render(capsys, sim, "--out", out, "--limit", "1", *FAST) == (0, "")
+    # a validate report written inside, a scene a killed render left with its image alone,
+    # the leftover of an atomic write and a browser's file
+    (out / "rep").mkdir()
+    (out / "rep" / "scores.csv").write_text("scene\n")
+    (out / "config_00001").mkdir()
+    (out / "config_00001" / "image.png").write_bytes(b"")
+    (out / ".render.json.abc123.json").write_text("")
+    (out / ".DS_Store").write_text("")
+    assert _render(capsys, sim, "--out", out, *FAST) == (0, "")
+    assert (out / "config_00001" / "truth" / "summary.json").exists()
+
+
+def test_every_scene_is_a_set_a_batch_analyses_as_validate_does(sim, tmp_path, capsys):
+    from crosssection.setconfig import load_set_config
+    from crosssection.truth.scene import read_scene_params
+
+    out = tmp_path / "scenes"
+    assert _render(capsys, sim, "--out", out, "--limit", "1", *FAST) == (0, "")
+    scene = out / "config_00000"
+    params = read_scene_params(scene)
+    assert params["hole_radius_mm"] and params["hole_center_px"]
+    got = load_set_config(scene / "set.toml", root=out)
+    assert got.name == "config_00000" and got.warnings == []
+    # what validate passes the analysis (crosssection.truth.scoring.analyze_scene_folder)
+    assert got.params_for(scene / "image.png") == {
+        "px_per_mm": params["px_per_mm"], "thickness_mm": params["thickness_mm"],
+        "hole_radius_mm": params["hole_radius_mm"],
+        "hole_center_px": params["hole_center_px"],
+        "calibration": str((scene / "calibration.csv").resolve())}
+    # a scene rendered without it (an older version) gets it when the render resumes
+    (scene / "set.toml").unlink()
+    assert _render(capsys, sim, "--out", out, *FAST) == (0, "")
+    assert load_set_config(scene / "set.toml", root=out).params == got.params
+    assert (out / "config_00001" / "set.toml").exists()
+
+
 def test_scenes_without_a_record_are_refused(sim, tmp_path, capsys):
     out = tmp_path / "scenes"
     assert _render(capsys, sim, "--out", out, "--limit", "1", *FAST)[0] == 0

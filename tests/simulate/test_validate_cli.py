@@ -112,6 +112,27 @@ def test_report_folder_inside_scenes_is_not_a_scene(scenes, capsys):
     assert not_analysed(capsys.readouterr().err) == []
 
 
+@pytest.mark.parametrize("where", ["junk", "scenes"])
+def test_a_report_folder_holding_other_files_is_refused(scenes, tmp_path, capsys, where):
+    folder, _ = scenes
+    if where == "junk":
+        out = tmp_path / "junk"
+        out.mkdir()
+        (out / "notes.txt").write_text("hi\n")
+        foreign = "notes.txt"
+    else:
+        # the scenes' own folder: the report would sit beside the scenes and their render.json
+        out, foreign = folder, "config_00000"
+    before = sorted(p.name for p in out.iterdir())
+    assert run(folder, out) == 2
+    err = capsys.readouterr().err
+    assert err == (f"error: {out}: holds {foreign}, which is no part of a validate report: "
+                   "give a new folder, an empty one or one an earlier validate wrote\n")
+    assert sorted(p.name for p in out.iterdir()) == before
+    with pytest.raises(ConfigError, match=f"holds {foreign}"):
+        validate_scenes(folder, out)
+
+
 def test_corrupt_truth_table_fails_its_scene(scenes, tmp_path, capsys):
     folder, scene = scenes
     (scene / "truth" / "stacks.csv").write_text("x\n")

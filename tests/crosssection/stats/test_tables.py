@@ -235,6 +235,39 @@ def test_correlations_of_few_pairs_are_marked_indicative():
                                            "needs: indicative only")
 
 
+def test_every_relation_follows_its_small_sample_rule():
+    ens = _relations_ensemble(np.random.default_rng(4), n=T.N_RELATION_MIN - 1)
+    rel = T.relations_table(ens, T.per_config_table(ens), {})
+    assert set(T.CONFIG_RELATIONS) | {T.LAW_RELATION} == set(rel["relation"])
+    for r in T.CONFIG_RELATIONS:
+        assert T.relation_note(r, T.N_RELATION_MIN - 1, 1.0).startswith(
+            f"n = {T.N_RELATION_MIN - 1}: below the {T.N_RELATION_MIN} configurations")
+        assert T.relation_note(r, T.N_RELATION_MIN, 1.0) == ""
+        assert T.relation_note(r, 1, np.nan) == ""  # not computed: nothing to qualify
+    # the mean of the law of n_br: the laws' rule, on the stacks it is fitted to
+    from crosssection.stats.fits import N_SELECT_MIN
+
+    assert T.relation_note(T.LAW_RELATION, N_SELECT_MIN - 1, 2.0) != ""
+    assert T.relation_note(T.LAW_RELATION, N_SELECT_MIN, 2.0) == ""
+    # the means over configurations (eq15_fluct, eq16) are marked and named as the slopes
+    from crosssection.stats import SmallSampleWarning
+
+    with pytest.warns(SmallSampleWarning) as rec:
+        res = T.compute_stats(ens, T.StatsOptions(n_boot=0, gof=False,
+                                                  quantities=("length_L",)))
+    rel = res.relations.set_index("relation")
+    assert np.isfinite(rel.loc[["eq15_fluct", "eq16"], "fitted"]).all()
+    assert rel.loc[list(T.CONFIG_RELATIONS), "indicative"].all()
+    msg = " ".join(str(w.message) for w in rec if w.category is SmallSampleWarning)
+    for name in T.CONFIG_RELATIONS:
+        assert f"{name} n = {T.N_RELATION_MIN - 1}" in msg, msg
+    # the page says it beside the number
+    from crosssection.stats.report import _relations_shown
+
+    shown = _relations_shown(res.relations).set_index("relation")
+    assert str(shown.loc["eq16", "n"]).endswith("indicative only")
+
+
 def test_correlations_and_micro_gamma_fits():
     rng = np.random.default_rng(2)
     ens = _relations_ensemble(rng, n=40)
@@ -309,7 +342,10 @@ def test_small_samples_not_fitted_are_named_and_rows_marked_indicative(tmp_path)
     assert ind.loc["area_L2"].tolist() == [True, True]
     assert ind.loc["e"].tolist() == [False, False]
     rel = res.relations.set_index("relation")
-    assert rel.loc["eq14_slope", "indicative"] and not rel.loc["eq16", "indicative"]
+    # every relation computed across configurations is marked (test below for the means)
+    computed = np.isfinite(rel["fitted"].astype(float))
+    assert (rel["indicative"] == (computed & rel.index.isin(T.CONFIG_RELATIONS))).all()
+    assert rel.loc["eq14_slope", "indicative"]
     assert res.micro["indicative"].dtype == bool
     # the columns are written and read back
     with pytest.warns(SmallSampleWarning):
@@ -362,3 +398,21 @@ def test_two_configurations_give_no_correlation_in_the_table_or_the_figure():
     fig3 = _scatter_fig(T.compute_stats(three, T.StatsOptions(n_boot=0, gof=False)),
                         "N_br", "E", "N_br", "E", "E against N_br")
     assert any("Pearson" in label for label in fig3.axes[0].get_legend_handles_labels()[1])
+
+
+def test_a_simulation_resumed_under_other_versions_reports_every_version(tmp_path):
+    import json
+
+    from crosssection.stats.report import provenance
+
+    sim = demo.write_demo_simulation(tmp_path / "sim", n_configs=3, seed=1)
+    p = {"command": "quench", "n_segments": 300}
+    runs = [{"version": "0.0.1", "libraries": {"numpy": "1.0.0"}},
+            {"version": "0.0.2", "libraries": {"numpy": "2.0.0"}}]
+    (sim / "params.json").write_text(json.dumps({**p, "version": "0.0.1",
+                                                 "libraries": runs[0]["libraries"],
+                                                 "versions": runs}))
+    prov = provenance(D.load_any(sim))
+    assert prov["versions"] == ["0.0.1", "0.0.2"]
+    assert prov["libraries"]["numpy"] == ["1.0.0", "2.0.0"]
+    assert "versions" not in prov["parameters"]  # a record of the code, not a parameter
