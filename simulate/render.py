@@ -2376,8 +2376,9 @@ def _foreign_entry(out_dir: Path, keys) -> str | None:
         if p.name in BROWSER_FILES:
             continue
         if p.is_dir() and not p.is_symlink():
+            # an empty folder: a validate report begun (validate makes its folder first)
             if (p.name in keys or (p / "params.json").exists() or (p / "truth").exists()
-                    or is_report_folder(p)):
+                    or is_report_folder(p) or not any(p.iterdir())):
                 continue
         elif p.is_file() and _own_file(p.name, (RENDER_RECORD,)):
             continue

@@ -1048,6 +1048,8 @@ def ink_missed_locally(thr: ThresholdResult, features: ColourFeatures, region, *
                 continue
             local_m = min(0.5 * (m_i + m_p) * scale, m_cut)
             new = reg_t & _at_least(d[box], local_d) & _at_most(m[box], local_m) & ~ink[box]
+            if thr.blue_min is not None:  # a blue bound given to "auto" holds here too
+                new &= features.blue[box] >= int(np.ceil(thr.blue_min))
             missed[box] |= new.view(np.uint8)
     if not missed.any():
         return 0

@@ -109,6 +109,15 @@ def test_ink_the_cut_misses_on_the_dark_side_of_a_scan_is_flagged(scene, dtype):
     assert any(w.category is quality.ThresholdWarning for w in caught)
 
 
+@pytest.mark.parametrize("extra", [dict(s_min_mm2=0.0, l_min_mm=0.0),
+                                   dict(threshold_method="auto", blue_min=150)])
+def test_ink_missed_holds_with_the_cleaning_off_and_a_blue_bound_given(scene, extra):
+    """No cleaning: the rims of half-covered pixels along the bands are no missed pieces. A
+    blue bound given to the automatic threshold leaves out what it is meant to."""
+    res, _ = _analyze(_lit_and_cast(scene.rgb, 0.0, 0.20), **_given(scene, **extra))
+    assert res.summary["cleaning"]["ink_missed_fraction"] == 0.0
+
+
 @pytest.mark.parametrize("cast, gradient", [(0.06, 0.15), (0.10, 0.30), (0.15, 0.40)])
 def test_a_lit_and_cast_scan_whose_cut_keeps_the_ink_is_not_flagged(scene, cast, gradient):
     # the same scan lit the other way (its dark side holds less wall band), and within the

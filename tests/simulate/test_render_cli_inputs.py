@@ -256,6 +256,7 @@ def test_a_render_resumes_beside_its_own_report_and_half_written_scene(sim, tmp_
     # the leftover of an atomic write and a browser's file
     (out / "rep").mkdir()
     (out / "rep" / "scores.csv").write_text("scene\n")
+    (out / "begun").mkdir()  # a validate report begun: validate makes its folder first
     (out / "config_00001").mkdir()
     (out / "config_00001" / "image.png").write_bytes(b"")
     (out / ".render.json.abc123.json").write_text("")
