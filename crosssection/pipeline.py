@@ -174,11 +174,9 @@ def _threshold_in_frame(rgb, p: AnalysisParams, path, timer, min_piece_px: float
     n_in = np.count_nonzero(thr.mask)
     outside = thr.n_outside / (thr.n_outside + n_in) if n_in else 0.0
     with timer("threshold"):
-        # inside the hole's circle only: its margin holds the wall band's edge and the plate
-        # pieces that trim_margin took out, which cuts chosen there would take in again
-        missed = ink_missed_locally(thr, m["features"],
-                                    hole_stage.frame_mask(rgb.shape[:2], hole, margin_px=0.0),
-                                    thickness_px=p.thickness_px, min_piece_px=min_piece_px)
+        missed = ink_missed_locally(thr, m["features"], inside, thickness_px=p.thickness_px,
+                                    min_piece_px=min_piece_px,
+                                    disc=(*hole.center_rc, hole.radius_px))
     return thr, hole, outside, m["features"].dominance, missed / n_in if n_in else 0.0
 
 

@@ -57,7 +57,8 @@ import pandas as pd
 
 from crosssection._version import __version__
 from crosssection.core.errors import ConfigError, ParameterError
-from crosssection.core.fileio import BROWSER_FILES, check_out, write_csv, write_json, write_npz
+from crosssection.core.fileio import (BROWSER_FILES, check_out, foreign_entry, write_csv,
+                                      write_json, write_npz)
 from crosssection.core.parallel import (ClusterLostError, capped_workers, get_executor,
                                         spawn_seeds)
 from crosssection.quality import QualityWarning
@@ -473,29 +474,14 @@ OUTPUT_FILES = frozenset({"params.json", "configs.csv", "branches.csv", "voids.c
 _PART_NAME = re.compile(r"config_\d{5,}\.npz|\.config_\d{5,}\.npz\..+")
 
 
-def _own_file(name: str, own) -> bool:
-    """Whether ``name`` is one of ``own`` or the leftover temporary file of an atomic write of
-    one (``.<name>.<random><suffix>``, :func:`crosssection.core.fileio.atomic_path`)."""
-    return name in own or (name.startswith(".") and
-                           any(name.startswith(f".{k}.") for k in own))
-
-
-def _foreign_entry(folder: Path) -> str | None:
-    """The first entry of ``folder`` that no ensemble writes, or None."""
-    for p in sorted(folder.iterdir()):
-        name = p.name
-        if name in BROWSER_FILES:
-            continue
-        if name == "parts" and p.is_dir() and not p.is_symlink():
-            for f in sorted(p.iterdir()):
-                if f.name in BROWSER_FILES:
-                    continue
-                if not (f.is_file() and _PART_NAME.fullmatch(f.name)):
-                    return f"parts/{f.name}"
-            continue
-        if p.is_file() and _own_file(name, OUTPUT_FILES):
-            continue
-        return name
+def _parts_rule(folder: Path) -> str | None:
+    """:func:`~crosssection.core.fileio.foreign_entry`'s rule for an ensemble's subfolders:
+    ``parts`` holds part files only."""
+    if folder.name != "parts":
+        return folder.name
+    for f in sorted(folder.iterdir()):
+        if f.name not in BROWSER_FILES and not (f.is_file() and _PART_NAME.fullmatch(f.name)):
+            return f"parts/{f.name}"
     return None
 
 
@@ -525,7 +511,7 @@ def check_out_folder(out, command: str) -> None:
         raise FileExistsError(errno.EEXIST, os.strerror(errno.EEXIST), str(out))
     if not out.is_dir():
         return
-    foreign = _foreign_entry(out)
+    foreign = foreign_entry(out, OUTPUT_FILES, _parts_rule)
     if foreign is not None:
         raise ParameterError(f"holds {foreign}, which is no part of a {command} output: give "
                              f"a new folder, an empty one or one an earlier {command} wrote",

@@ -2367,23 +2367,18 @@ def _foreign_entry(out_dir: Path, keys) -> str | None:
     (:func:`simulate.validate.is_report_folder`). Anything else (an ensemble's tables, a
     user's notes) would end up mixed with the scenes.
     """
-    from crosssection.core.fileio import BROWSER_FILES
-    from simulate.ensemble import _own_file
+    from crosssection.core.fileio import foreign_entry
     from simulate.validate import is_report_folder
 
     keys = set(keys)
-    for p in sorted(out_dir.iterdir()):
-        if p.name in BROWSER_FILES:
-            continue
-        if p.is_dir() and not p.is_symlink():
-            # an empty folder: a validate report begun (validate makes its folder first)
-            if (p.name in keys or (p / "params.json").exists() or (p / "truth").exists()
-                    or is_report_folder(p) or not any(p.iterdir())):
-                continue
-        elif p.is_file() and _own_file(p.name, (RENDER_RECORD,)):
-            continue
-        return p.name
-    return None
+
+    def scene_or_report(p):
+        # an empty folder: a validate report begun (validate makes its folder first)
+        own = (p.name in keys or (p / "params.json").exists() or (p / "truth").exists()
+               or is_report_folder(p) or not any(p.iterdir()))
+        return None if own else p.name
+
+    return foreign_entry(out_dir, (RENDER_RECORD,), scene_or_report)
 
 
 def write_set_file(folder, params: dict) -> Path:

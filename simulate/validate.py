@@ -35,7 +35,7 @@ import pandas as pd
 from crosssection._version import __version__
 from crosssection.core import schema
 from crosssection.core.errors import ConfigError, FoldstatError, ParameterError
-from crosssection.core.fileio import write_csv, write_json
+from crosssection.core.fileio import foreign_entry, write_csv, write_json
 from crosssection.truth.scene import LAYER_PIECES, read_scene_params, read_truth_tables
 from crosssection.truth.scoring import analyze_scene_folder, score
 
@@ -181,25 +181,12 @@ def score_scene(scene_dir, *, match_px: float | None = None) -> dict:
 REPORT_FILES = ("scores.csv", "summary.json", "failures.csv")
 
 
-def _foreign_entry(out_dir: Path) -> str | None:
-    """The first entry of ``out_dir`` that is no part of a report, or None (browser files
-    and the leftovers of a killed atomic write are part of it)."""
-    from crosssection.core.fileio import BROWSER_FILES
-    from simulate.ensemble import _own_file
-
-    for p in sorted(out_dir.iterdir()):
-        if p.name in BROWSER_FILES or (p.is_file() and _own_file(p.name, REPORT_FILES)):
-            continue
-        return p.name
-    return None
-
-
 def is_report_folder(folder) -> bool:
     """Whether ``folder`` is a report folder: it holds a :data:`REPORT_FILES` and nothing
     else."""
     folder = Path(folder)
     return (folder.is_dir() and any((folder / f).is_file() for f in REPORT_FILES)
-            and _foreign_entry(folder) is None)
+            and foreign_entry(folder, REPORT_FILES) is None)
 
 
 def _check_out_dir(out_dir: Path) -> None:
@@ -208,7 +195,7 @@ def _check_out_dir(out_dir: Path) -> None:
     scenes, an ensemble), which that command then refuses to resume."""
     if not out_dir.is_dir():
         return
-    foreign = _foreign_entry(out_dir)
+    foreign = foreign_entry(out_dir, REPORT_FILES)
     if foreign is not None:
         raise ConfigError(f"holds {foreign}, which is no part of a validate report: give a "
                           "new folder, an empty one or one an earlier validate wrote", out_dir)

@@ -276,6 +276,49 @@ def clear_stale_folders(final) -> None:
 _MKSTEMP_RANDOM = "[a-z0-9_]{8}"
 
 
+def own_file(name: str, own) -> bool:
+    """Whether the file ``name`` is one of ``own`` or the leftover temporary file of an atomic
+    write of one (``.<name>.<random><suffix>``, :func:`atomic_path`)."""
+    return name in own or (name.startswith(".") and
+                           any(name.startswith(f".{k}.") for k in own))
+
+
+def foreign_entry(folder, files=(), folder_rule=None) -> str | None:
+    """The first entry of ``folder``, in name order, that the command writing it does not
+    write, or None: what every command that refuses an ``--out`` holding other files checks.
+
+    Browser files (:data:`BROWSER_FILES`) are nobody's. A file is the command's when
+    :func:`own_file` of ``files`` says so. A subfolder (not a link) is judged by
+    ``folder_rule``; without one every subfolder is foreign.
+
+    Parameters
+    ----------
+    folder : str or Path
+        An existing folder.
+    files : collection of str
+        The names of the files the command writes there.
+    folder_rule : callable, optional
+        ``folder_rule(path)`` of a subfolder: None when it is the command's, else the name
+        (relative to ``folder``) of what in it is not.
+
+    Returns
+    -------
+    str or None
+    """
+    for p in sorted(Path(folder).iterdir()):
+        if p.name in BROWSER_FILES:
+            continue
+        if p.is_dir() and not p.is_symlink():
+            inner = p.name if folder_rule is None else folder_rule(p)
+            if inner is None:
+                continue
+            return inner
+        if p.is_file() and own_file(p.name, files):
+            continue
+        return p.name
+    return None
+
+
 def temporary_files(folder, names) -> list[Path]:
     """The temporary files that :func:`atomic_path` writes of ``names`` in ``folder``
     (``.<name>.XXXX<suffix>``): only a process killed while writing one leaves it behind.

@@ -25,9 +25,9 @@ import pandas as pd
 
 from crosssection._version import __version__
 from crosssection.core.errors import ParameterError
-from crosssection.core.fileio import (BROWSER_FILES, clear_stale_folders, save_figure,
-                                      staging_folder, swap_in_folder, write_csv, write_json,
-                                      write_text)
+from crosssection.core.fileio import (BROWSER_FILES, clear_stale_folders, foreign_entry,
+                                      save_figure, staging_folder, swap_in_folder, write_csv,
+                                      write_json, write_text)
 from crosssection.stats import fits as F
 from crosssection.stats.families import FAMILIES
 from crosssection.stats.data import REPORT_TABLES, Ensemble
@@ -657,23 +657,14 @@ REPORT_FILES = frozenset(
     | {"stats.json", "report.html", "figures"})
 
 
-def _foreign_entry(folder: Path) -> str | None:
-    """The first entry of ``folder`` that no report writes, or None (a leftover temporary
-    file of an atomic write, ``.<name>.<random>``, is the report's)."""
-    for p in sorted(folder.iterdir()):
-        name = p.name
-        if name in BROWSER_FILES:
-            continue
-        if name == "figures" and p.is_dir() and not p.is_symlink():
-            for f in sorted(p.iterdir()):
-                if not (f.suffix == ".png" and f.is_file()) and f.name not in BROWSER_FILES:
-                    return f"figures/{f.name}"
-            continue
-        if name in REPORT_FILES and p.is_file():
-            continue
-        if any(name.startswith(f".{k}.") for k in REPORT_FILES) and p.is_file():
-            continue
-        return name
+def _figures_rule(folder: Path) -> str | None:
+    """:func:`~crosssection.core.fileio.foreign_entry`'s rule for a report's subfolders:
+    ``figures`` holds PNG files only."""
+    if folder.name != "figures":
+        return folder.name
+    for f in sorted(folder.iterdir()):
+        if not (f.suffix == ".png" and f.is_file()) and f.name not in BROWSER_FILES:
+            return f"figures/{f.name}"
     return None
 
 
@@ -714,7 +705,7 @@ def check_report_dir(out_dir, inputs=()) -> None:
             raise ParameterError(f"{'is' if src == real else 'holds'} the input folder {d}, "
                                  "which the report would replace: give another --out", out)
     if out.is_dir():
-        foreign = _foreign_entry(out)
+        foreign = foreign_entry(out, REPORT_FILES, _figures_rule)
         if foreign is not None:
             raise ParameterError(
                 f"holds {foreign}, which is no part of a stats report, and a report replaces "

@@ -87,3 +87,19 @@ def test_a_users_hidden_file_of_the_same_stem_is_no_temporary_file(tmp_path):
         # what the writer itself makes is found
         assert Path(tmp) in fileio.temporary_files(tmp_path, ["stacks.csv"])
         Path(tmp).write_text("whole")
+
+
+def test_foreign_entry_names_the_first_entry_a_command_does_not_write(tmp_path):
+    from crosssection.core.fileio import foreign_entry
+
+    (tmp_path / "a.csv").write_text("")
+    (tmp_path / ".a.csv.x1y2z3a4.csv").write_text("")  # an atomic write cut short
+    (tmp_path / ".DS_Store").write_text("")
+    assert foreign_entry(tmp_path, {"a.csv"}) is None
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / "x.png").write_text("")
+    assert foreign_entry(tmp_path, {"a.csv"}) == "sub"  # no rule: every subfolder is foreign
+    assert foreign_entry(tmp_path, {"a.csv"}, lambda p: None) is None
+    assert foreign_entry(tmp_path, {"a.csv"}, lambda p: f"{p.name}/x.png") == "sub/x.png"
+    (tmp_path / "b.txt").write_text("")
+    assert foreign_entry(tmp_path, {"a.csv"}, lambda p: None) == "b.txt"
