@@ -17,8 +17,8 @@
   (:func:`resolve_defaults`), and the package and library versions (``version``,
   ``libraries``) of the run that computed the configurations: a re-run that computes
   nothing leaves the file as it is; one that adds configurations under other versions keeps
-  the first and lists every run's in ``versions``, with a :class:`MixedVersionsWarning`
-  (:func:`params_record`);
+  the first and lists, in ``versions``, those that computed the part files on disk (each
+  part records its own), with a :class:`MixedVersionsWarning` (:func:`params_record`);
 * ``DIR/failures.csv`` -- config_id, seed, error: one line per configuration whose computation
   raised (its row of configs.csv has the ``error`` and no results; the others go on). A
   re-run tries the failed configurations again. A Dask cluster that goes away stops the
@@ -392,8 +392,10 @@ def write_part(out, config_id: int, row: dict, xy, xy0, branches=(), voids=(), s
     branches, voids, stacks : lists of dict
         See :func:`analysis_records`.
     """
+    # the process that computed the rod records its versions (a Dask worker's may differ
+    # from the client's): params.json lists those of the rods kept (:func:`params_record`)
     meta = json.dumps({"row": row, "branches": list(branches), "voids": list(voids),
-                       "stacks": list(stacks)},
+                       "stacks": list(stacks), "computed_by": computing_versions()},
                       default=lambda o: o.item() if hasattr(o, "item") else str(o))
     write_npz(part_path(out, config_id), xy=xy, xy0=xy0, meta=np.array(meta))
 
@@ -401,6 +403,22 @@ def write_part(out, config_id: int, row: dict, xy, xy0, branches=(), voids=(), s
 def _read_part(path):
     with np.load(path, allow_pickle=False) as z:
         return json.loads(str(z["meta"])), z["xy"].copy()
+
+
+def _parts_versions(out, ids, recorded: dict) -> list[dict]:
+    """The ``{"version", "libraries"}`` that computed the part files ``ids``, each listed once
+    in the order of the ids; a part that does not say (written before parts recorded it) is
+    counted as ``recorded``'s, the folder's params.json."""
+    runs = []
+    for i in ids:
+        try:
+            got = _read_part(part_path(out, i))[0].get("computed_by")
+        except Exception:  # noqa: BLE001 - an unreadable part is redone, its version moot
+            continue
+        run = got if isinstance(got, dict) else recorded
+        if run not in runs:
+            runs.append(run)
+    return runs
 
 
 def _part_ok(path, config_id: int, seed: int) -> bool:
@@ -531,14 +549,22 @@ def library_versions() -> dict:
     return versions(("numpy", "scipy", "numba", "llvmlite"))
 
 
-def params_record(params: dict, old: dict | None, computing: bool) -> tuple[dict, str | None]:
+def computing_versions() -> dict:
+    """``{"version", "libraries"}`` of this process: the package and the libraries that
+    decide a rod's last bits (:func:`library_versions`)."""
+    return {"version": __version__, "libraries": library_versions()}
+
+
+def params_record(params: dict, old: dict | None, kept: list[dict],
+                  computing: bool) -> tuple[dict, str | None]:
     """The content of ``params.json`` and, when the ensemble mixes versions, why.
 
     ``version`` and ``libraries`` (:func:`library_versions`) say which code computed the
-    rods: a resume keeps those of the folder's record. When it computes configurations
-    under another package or library version, ``versions`` lists the ``{"version",
-    "libraries"}`` of every run that computed some, the recorded one first (absent while
-    all are the same).
+    rods: a resume keeps those of the folder's record. When the part files kept were
+    computed under several package or library versions, ``versions`` lists the
+    ``{"version", "libraries"}`` of each, the recorded one first (absent while all are the
+    same). A run lists only the parts on disk: one stopped before any configuration of its
+    own finished leaves the record as it was.
 
     Parameters
     ----------
@@ -547,6 +573,8 @@ def params_record(params: dict, old: dict | None, computing: bool) -> tuple[dict
     old : dict or None
         The folder's params.json, when some of the configurations asked for were computed
         under it (None: this run computes them all).
+    kept : list of dict
+        The versions that computed the part files kept (:func:`_parts_versions`).
     computing : bool
         Whether this run computes configurations.
 
@@ -554,18 +582,18 @@ def params_record(params: dict, old: dict | None, computing: bool) -> tuple[dict
     -------
     (record, mixed) : (dict, str or None)
         ``mixed`` names the versions when this run adds configurations to an ensemble
-        computed under several.
+        computed under others.
     """
-    now = {"version": __version__, "libraries": library_versions()}
+    now = computing_versions()
     if old is None:
         return {**params, **now}, None
     first = {"version": old.get("version"), "libraries": old.get("libraries")}
-    runs = old.get("versions")
-    runs = ([r for r in runs if isinstance(r, dict)] if isinstance(runs, list) else []) or [first]
-    if computing and now not in runs:
-        runs = [*runs, now]
+    if kept and first not in kept:  # the parts say who computed them, the record did not
+        first = kept[0]
+    runs = [first] + [r for r in kept if r != first]
     mixed = None
-    if computing and len(runs) > 1:
+    about = runs + [now] if computing and now not in runs else runs
+    if computing and len(about) > 1:
 
         def shown(r):
             libs = r.get("libraries") or {}
@@ -574,7 +602,7 @@ def params_record(params: dict, old: dict | None, computing: bool) -> tuple[dict
                        if isinstance(libs, dict) and libs else ""))
 
         mixed = (f"the ensemble mixes versions: its configurations were computed by "
-                 f"{'; '.join(shown(r) for r in runs)} (params.json lists them under "
+                 f"{'; '.join(shown(r) for r in about)} (params.json lists them under "
                  "versions); a seed gives the same rod only with the same versions")
     record = {**params, **first}
     if len(runs) > 1:
@@ -669,8 +697,12 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
     n = int(params["n_configs"])
     seeds = spawn_seeds(params["seed"], n)
     todo = [i for i in range(n) if not _part_ok(part_path(out, i), i, seeds[i])]
-    # the record's versions are those of the run that computed the configurations kept
-    record, mixed = params_record(params, raw if len(todo) < n else None, bool(todo))
+    # the record's versions are those of the runs that computed the configurations kept
+    kept = [i for i in range(n) if i not in set(todo)]
+    recorded = {"version": (raw or {}).get("version"), "libraries": (raw or {}).get("libraries")}
+    record, mixed = params_record(params, raw if kept else None,
+                                  _parts_versions(out, kept, recorded) if kept else [],
+                                  bool(todo))
     if mixed:
         warnings.warn(f"{out}: {mixed}", MixedVersionsWarning, stacklevel=2)
     task = run_config if task is None else task
@@ -714,6 +746,12 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
                          for i, (s, e) in sorted(failed.items())],
                         columns=["config_id", "seed", "error"])
     write_csv(out / "failures.csv", fail)
+    if todo:  # the configurations this run computed join the record's versions
+        done = [i for i in range(n) if i not in failed]
+        mine = {"version": record.get("version"), "libraries": record.get("libraries")}
+        final, _ = params_record(params, record, _parts_versions(out, done, mine), False)
+        if final != record:
+            write_json(pfile, final)
     tables = assemble(out, n, columns, failed)
     tables["failed"] = fail
     return tables

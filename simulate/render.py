@@ -185,7 +185,7 @@ from crosssection.quality import QualityWarning
 from crosssection.truth import degrade, ink
 from crosssection.truth.backdrop import PLATE_NAMES, apply_backdrop, plate_rgb
 from crosssection.truth.scene import (LAYER_PIECE_COLUMNS, LAYER_PIECES, Scene, read_scene_params,
-                                      write_scene)
+                                      write_scene, write_set_file)
 from crosssection.truth.voids import truth_voids
 
 from simulate.checks import check_real
@@ -2381,39 +2381,6 @@ def _foreign_entry(out_dir: Path, keys) -> str | None:
     return foreign_entry(out_dir, (RENDER_RECORD,), scene_or_report)
 
 
-def write_set_file(folder, params: dict) -> Path:
-    """Write ``folder/set.toml``: the analysis parameters of a scene folder, as
-    :func:`crosssection.truth.scoring.analyze_scene_folder` takes them from its
-    ``params.json`` (the scale, the hole when it has one, ``calibration.csv``), so that a
-    batch of the scenes analyses each as ``validate`` does.
-
-    Parameters
-    ----------
-    folder : str or Path
-        The scene folder (its ``calibration.csv`` is named relative to it).
-    params : dict
-        The scene's parameters (:attr:`crosssection.truth.scene.Scene.params`).
-
-    Returns
-    -------
-    Path
-        The file.
-    """
-    from crosssection.core.fileio import write_text
-    from crosssection.setconfig import SET_FILE
-
-    lines = ["# the analysis parameters of this scene (simulate.render), for `foldstat batch`",
-             f"px_per_mm = {float(params['px_per_mm'])!r}",
-             f"thickness_mm = {float(params['thickness_mm'])!r}",
-             'calibration = "calibration.csv"']
-    if params.get("hole_radius_mm"):
-        lines.append(f"hole_radius_mm = {float(params['hole_radius_mm'])!r}")
-        if params.get("hole_center_px"):
-            x, y = (float(v) for v in params["hole_center_px"])
-            lines.append(f"hole_center_px = [{x!r}, {y!r}]")
-    return write_text(Path(folder) / SET_FILE, "\n".join(lines) + "\n")
-
-
 def _holds_scenes(out_dir: Path) -> bool:
     """Whether ``out_dir`` holds a scene folder, finished or not."""
     return out_dir.is_dir() and any(
@@ -2679,8 +2646,6 @@ def _render_directory(sim_dir, out_dir, *, configs=None, limit=None, progress=Fa
                     write_json(out_dir / RENDER_RECORD, record)
                     recorded = True
                 # before the scene, whose truth/summary.json marks it complete
-                folder.mkdir(parents=True, exist_ok=True)
-                write_set_file(folder, scene.params)
                 written.append(write_scene(scene, folder))
     return written
 

@@ -26,7 +26,7 @@ from crosssection.core.errors import ConfigError, ImageError
 from crosssection.core.fileio import atomic_path, read_json_object, write_csv, write_json
 
 __all__ = ["Scene", "write_scene", "read_scene", "read_scene_params", "read_truth_tables",
-           "write_image", "LAYER_PIECES", "LAYER_PIECE_COLUMNS"]
+           "write_image", "write_set_file", "LAYER_PIECES", "LAYER_PIECE_COLUMNS"]
 
 #: Fewest rows of a written ``calibration.csv`` (more when the scene has thicker stacks).
 MIN_CALIBRATION_ROWS = 12
@@ -147,7 +147,7 @@ def write_image(rgb: np.ndarray, path, *, px_per_mm: float | None = None) -> Pat
 
 def write_scene(scene: Scene, folder, *, image_name: str = "image.png") -> Path:
     """Write a scene folder: the image, ``params.json`` (the scene's parameters and the
-    package version), ``calibration.csv``, ``truth/``.
+    package version), ``calibration.csv``, ``set.toml`` (:func:`write_set_file`), ``truth/``.
 
     Parameters
     ----------
@@ -178,6 +178,7 @@ def write_scene(scene: Scene, folder, *, image_name: str = "image.png") -> Path:
     # the generator's parameters and the version that drew the scene: its truth is that
     # version's
     write_json(folder / "params.json", {**scene.params, "version": __version__})
+    write_set_file(folder, scene.params)
     pieces = scene.tables.get(LAYER_PIECES)
     (folder / "truth").mkdir(parents=True, exist_ok=True)
     if pieces is not None:
@@ -188,6 +189,39 @@ def write_scene(scene: Scene, folder, *, image_name: str = "image.png") -> Path:
         (folder / "truth" / f"{LAYER_PIECES}.csv").unlink(missing_ok=True)
     schema.write_tables(folder / "truth", scene.summary, scene.tables)
     return folder
+
+
+def write_set_file(folder, params: dict) -> Path:
+    """Write ``folder/set.toml``: the analysis parameters of a scene folder, as
+    :func:`crosssection.truth.scoring.analyze_scene_folder` takes them from its
+    ``params.json`` (the scale, the hole when it has one, ``calibration.csv``), so that a
+    batch of scene folders analyses each as ``validate`` does.
+
+    Parameters
+    ----------
+    folder : str or Path
+        The scene folder (its ``calibration.csv`` is named relative to it).
+    params : dict
+        The scene's parameters (:attr:`crosssection.truth.scene.Scene.params`).
+
+    Returns
+    -------
+    Path
+        The file.
+    """
+    from crosssection.core.fileio import write_text
+    from crosssection.setconfig import SET_FILE
+
+    lines = ["# the analysis parameters of this scene, for `foldstat batch`",
+             f"px_per_mm = {float(params['px_per_mm'])!r}",
+             f"thickness_mm = {float(params['thickness_mm'])!r}",
+             'calibration = "calibration.csv"']
+    if params.get("hole_radius_mm"):
+        lines.append(f"hole_radius_mm = {float(params['hole_radius_mm'])!r}")
+        if params.get("hole_center_px"):
+            x, y = (float(v) for v in params["hole_center_px"])
+            lines.append(f"hole_center_px = [{x!r}, {y!r}]")
+    return write_text(Path(folder) / SET_FILE, "\n".join(lines) + "\n")
 
 
 def _check_number(params: dict, key: str, path, *, required: bool) -> None:

@@ -182,6 +182,26 @@ def test_a_default_quench_is_not_too_coarse_for_its_stacks():
     assert coarse_rod_doubt({"branches": long}, 300) is None
 
 
+def _computed_by(out, run):
+    """Make the folder's ensemble look computed by ``run`` ({"version", "libraries"}): its
+    record and every part file (``run`` None: parts that do not say, as older ones)."""
+    if run is not None:
+        (out / "params.json").write_text(json.dumps({**_params(out), **run}, indent=2))
+    for part in sorted((out / "parts").iterdir()):
+        with np.load(part) as z:
+            arrays = {k: z[k] for k in z.files}
+        meta = json.loads(str(arrays["meta"]))
+        meta.pop("computed_by")
+        if run is not None:
+            meta["computed_by"] = run
+        arrays["meta"] = np.array(json.dumps(meta))
+        with open(part, "wb") as fh:
+            np.savez(fh, **arrays)
+
+
+OLD_RUN = {"version": "0.0.1", "libraries": {"numpy": "1.0.0"}}
+
+
 def test_a_resume_keeps_the_versions_that_computed_the_rods(tmp_path, capsys):
     """A re-run computing nothing leaves params.json as it is (its version is that of the
     rods); one adding configurations under another version lists both and says so."""
@@ -190,8 +210,9 @@ def test_a_resume_keeps_the_versions_that_computed_the_rods(tmp_path, capsys):
     out = tmp_path / "q"
     argv = ["quench", *POWELL, "--out", str(out)]
     assert simulate_main(argv) == 0
-    old = {**_params(out), "version": "0.0.1", "libraries": {"numpy": "1.0.0"}}
-    (out / "params.json").write_text(json.dumps(old, indent=2))
+    assert ensemble._read_part(ensemble.part_path(out, 0))[0]["computed_by"] == \
+        ensemble.computing_versions()
+    _computed_by(out, OLD_RUN)
     before = {f: (out / f).read_bytes() for f in ("params.json", "configs.csv", "rods.npz")}
     capsys.readouterr()
     assert simulate_main(argv) == 0
@@ -216,6 +237,34 @@ def test_a_resume_keeps_the_versions_that_computed_the_rods(tmp_path, capsys):
         ensemble.run_ensemble({**ensemble.params_from_args(_parse(more)), "n_configs": 3},
                               out, progress=False)
     assert len(_params(out)["versions"]) == 2  # this version's runs are listed once
+
+
+def test_a_run_stopped_before_its_first_configuration_leaves_the_versions(tmp_path, capsys,
+                                                                             monkeypatch):
+    """The versions listed are those of the part files on disk: a run under another version
+    stopped before it finished a configuration leaves no trace of its version."""
+    out = tmp_path / "q"
+    argv = ["quench", *POWELL, "--out", str(out)]
+    assert simulate_main(argv) == 0
+    _computed_by(out, OLD_RUN)
+    more = [a if a != "1" else "2" for a in argv]
+
+    def stopped(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(ensemble, "run_config", stopped)
+    with pytest.raises(KeyboardInterrupt), pytest.warns(ensemble.MixedVersionsWarning):
+        ensemble.run_ensemble(ensemble.params_from_args(_parse(more)), out, progress=False)
+    rec = _params(out)
+    assert (rec["version"], rec["libraries"]) == (OLD_RUN["version"], OLD_RUN["libraries"])
+    assert "versions" not in rec
+    # parts written before parts recorded their versions count as the record's
+    _computed_by(out, None)
+    monkeypatch.undo()
+    capsys.readouterr()
+    with pytest.warns(ensemble.MixedVersionsWarning):
+        ensemble.run_ensemble(ensemble.params_from_args(_parse(more)), out, progress=False)
+    assert _params(out)["versions"] == [OLD_RUN, ensemble.computing_versions()]
 
 
 def test_a_run_computing_every_configuration_records_its_own_version(tmp_path):

@@ -39,6 +39,20 @@ def test_scene_folder_round_trip(scene_folder):
     assert no_image.rgb is None and no_image.summary == back.summary
 
 
+def test_a_scene_folder_holds_the_set_file_a_batch_reads(scene_folder):
+    # `foldstat batch` on scene folders reads each with its own scale, hole and calibration
+    from crosssection.setconfig import load_set_config
+
+    folder, scene = scene_folder
+    got = load_set_config(folder / "set.toml", root=folder.parent)
+    assert got.warnings == []
+    assert got.params_for(folder / "image.png") == {
+        "px_per_mm": scene.params["px_per_mm"], "thickness_mm": scene.params["thickness_mm"],
+        "hole_radius_mm": scene.params["hole_radius_mm"],
+        "hole_center_px": list(scene.params["hole_center_px"]),
+        "calibration": str((folder / "calibration.csv").resolve())}
+
+
 def test_layer_pieces_round_trip_and_leave_with_a_scene_without_them(scene_folder, tmp_path):
     import dataclasses
 
