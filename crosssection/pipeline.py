@@ -45,7 +45,7 @@ from crosssection.stages.load import load_image_oriented, as_rgb, exif_orientati
 from crosssection.stages.packs import compute_packs
 from crosssection.stages.skeleton import skeletonize_mask
 from crosssection.stages.threshold import (BRIDGE_MAX_H_PX, bridge_broken_lines, passes_at,
-                                           colour_features, ink_missed_locally, threshold_rgb)
+                                           colour_features, missed_ink, threshold_rgb)
 from crosssection.stages.widths import (distance_map, layer_steps, stack_widths_px,
                                         width_profiles_px)
 
@@ -94,7 +94,8 @@ class Preprocessed:
     #: fraction of a pixel (None with the fixed thresholds, which cut several features).
     edge_feature: np.ndarray | None = None
     #: Ink that the scan's cut leaves out and a cut chosen on each part of the frame takes in
-    #: (:func:`~crosssection.stages.threshold.ink_missed_locally`), over the ink cut.
+    #: (:func:`~crosssection.stages.threshold.missed_ink`; added to the threshold's mask),
+    #: over the ink the scan's cut took in.
     ink_missed_fraction: float = 0.0
 
 
@@ -127,7 +128,8 @@ def _threshold_in_frame(rgb, p: AnalysisParams, path, timer, min_piece_px: float
     """Threshold, hole and frame: the ink inside the hole, the hole, the ink fraction left
     outside, the threshold's feature (the blue dominance, for the centreline's walls) and the
     fraction of ink the cut misses in pieces of ``min_piece_px`` or more where a cut chosen
-    locally takes it in.
+    locally takes it in (where there are such pieces, what the local cuts take in is added
+    to the ink: ``local_px``).
 
     A given hole frames the threshold directly; otherwise the whole scan is thresholded, the
     hole found (plate edge or ink envelope, with a confidence), and the threshold redone
@@ -174,9 +176,14 @@ def _threshold_in_frame(rgb, p: AnalysisParams, path, timer, min_piece_px: float
     n_in = np.count_nonzero(thr.mask)
     outside = thr.n_outside / (thr.n_outside + n_in) if n_in else 0.0
     with timer("threshold"):
-        missed = ink_missed_locally(thr, m["features"], inside, thickness_px=p.thickness_px,
-                                    min_piece_px=min_piece_px,
-                                    disc=(*hole.center_rc, hole.radius_px))
+        taken, missed = missed_ink(thr, m["features"], inside, thickness_px=p.thickness_px,
+                                   min_piece_px=min_piece_px,
+                                   disc=(*hole.center_rc, hole.radius_px))
+        # ink below the scan's cut where a local cut takes it in (the dark side of an unevenly
+        # lit scan): the rest of the pipeline reads it as ink
+        if taken is not None:
+            thr = dataclasses.replace(thr, mask=thr.mask | taken,
+                                      local_px=int(np.count_nonzero(taken)))
     return thr, hole, outside, m["features"].dominance, missed / n_in if n_in else 0.0
 
 
