@@ -25,6 +25,14 @@ smooth     drawn passes bend as the rod does (1.00-1.01 times its energy at epsi
 passes_    ``passes_smooth``, clean
 smooth_
 clean
+passes_    ``passes_smooth`` scored against a truth read from the drawing itself
+drawn      (:func:`drawn_truth`): stacks and junctions of the drawn pass curves in contact
+           where their strokes touch, each junction moved to the nearest fork of the clean
+           drawing's skeleton; the energy the rod's (measured, not kept:
+           docs/validation/compact.md, "Drawing the rod itself")
+passes_    ``passes_drawn``, clean
+drawn_
+clean
 =========  ================================================================================
 
 Each scene is analysed with the calibration and the hole given, as a user who measured them
@@ -51,6 +59,7 @@ output junctions and stacks whose n_br is wrong). Prints the table of
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import time
 import warnings
@@ -60,22 +69,167 @@ import numpy as np
 import pandas as pd
 
 from crosssection.core.fileio import write_csv
-from crosssection.truth.scene import read_scene, write_scene
+from crosssection.core import schema
+from crosssection.truth.scene import LAYER_PIECES, read_scene, write_scene
 from crosssection.truth.scoring import (analyze_scene_folder, match_points, medial_fork_points,
                                          score)
 from simulate.cli import main as simulate_main
 from simulate.contacts import analyze_rod
+from simulate import render as _render
 from simulate.render import render_configuration
 
 CONDITIONS = {"scan": {}, "clean": {"clean": True},
               "polyline": {"clean": True, "smooth": "none"},
               "passes": {"draw": "passes"}, "passes_clean": {"clean": True, "draw": "passes"},
               "passes_smooth": {"draw": "passes", "pass_smooth": 1.0},
-              "passes_smooth_clean": {"clean": True, "draw": "passes", "pass_smooth": 1.0}}
+              "passes_smooth_clean": {"clean": True, "draw": "passes", "pass_smooth": 1.0},
+              "passes_drawn": {"draw": "passes", "pass_smooth": 1.0},
+              "passes_drawn_clean": {"clean": True, "draw": "passes", "pass_smooth": 1.0}}
+#: conditions scored against :func:`drawn_truth` instead of the rod's contact analysis
+DRAWN = ("passes_drawn", "passes_drawn_clean")
+#: :func:`drawn_truth`: paper between touching strokes still read as contact (px), the drawn
+#: curve's resampling step (px), the widest hole of the clean ink filled before its skeleton
+#: (px; a one-pixel gap between touching strokes), and how far beyond the widest band meeting
+#: there a junction may move to a skeleton fork (in h)
+DRAWN_TOLERANCE_PX, DRAWN_STEP_PX, DRAWN_FILL_PX, DRAWN_SNAP_H = 0.0, 2.0, 2.0, 4.0
 TARGETS = {"n_br_exact_length_fraction": 0.85, "junction_f1": 0.90, "rod_length": 0.05,
            "total_energy": 0.25}
 PX_PER_MM, THICKNESS_MM = 50.0, 0.1
 THICK = 5  # n_br from which a stack counts as thick in the error breakdown
+
+
+def _drawn_curve(xy, an, p, kwargs):
+    """The pressed pass curves (x, y) px of ``draw="passes"``, its frame and the clean ink,
+    computed as :func:`simulate.render.render_configuration` draws them for ``kwargs``."""
+    stroke_px = _render.PASS_WIDTH * THICKNESS_MM * PX_PER_MM
+    pitch_px = stroke_px - _render.PASS_OVERLAP_PX
+    cal = _render.passes_calibration(stroke_px / PX_PER_MM, pitch_px / PX_PER_MM)
+    frame = _render._frame(xy, an, cal, px_per_mm=PX_PER_MM, thickness_mm=THICKNESS_MM,
+                           rod_length_mm=None, hole_radius_mm="auto", margin_mm=2.0,
+                           gap_px=2.0, max_size_px=2500, rod_thickness=p["thickness"],
+                           wall_radius=p["wall_radius"])
+    segment_px = frame.scale / (len(xy) - 1)
+    curve, branch_of, _ = _render._pass_curves(
+        xy, an, frame, segment_px=segment_px, pitch_px=pitch_px, stroke_px=stroke_px,
+        taper_px=_render.PASS_TAPER * stroke_px,
+        smooth_px=kwargs.get("pass_smooth", _render.PASS_SMOOTH) * segment_px)
+    coverage, _ = _render._draw_passes(curve, branch_of, an.branches["stack_id"].to_numpy(int),
+                                       stroke_px, frame.shape)
+    return curve, frame, cal, coverage >= 0.5
+
+
+def _skeleton_forks(ink) -> np.ndarray:
+    """(row, col) centres of the forks of the clean ink's skeleton: holes at most
+    :data:`DRAWN_FILL_PX` wide filled (gaps between touching strokes), spurs reaching less
+    than l_min = 1 mm beyond their band pruned (the pipeline's skeleton rule,
+    :func:`crosssection.stages.skeleton.skeletonize_mask`), forks the clusters of skeleton
+    pixels with three or more neighbours."""
+    import cv2
+    from scipy import ndimage
+
+    from crosssection.stages.skeleton import neighbour_count, skeletonize_mask
+
+    ink = np.asarray(ink, bool)
+    lab, n = ndimage.label(~ink)
+    if n:
+        gap = cv2.distanceTransform((~ink).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+        wide = 2.0 * ndimage.maximum(gap, lab, np.arange(1, n + 1))
+        outer = np.unique(np.r_[lab[0], lab[-1], lab[:, 0], lab[:, -1]])
+        ink = ink | np.isin(lab, np.setdiff1d(np.flatnonzero(wide <= DRAWN_FILL_PX) + 1, outer))
+    dist = cv2.distanceTransform(ink.astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    skel = skeletonize_mask(ink, l_min_px=PX_PER_MM, distance_px=dist)
+    lab, n = ndimage.label(neighbour_count(skel) >= 3, structure=np.ones((3, 3)))
+    if not n:
+        return np.zeros((0, 2))
+    return np.array(ndimage.center_of_mass(lab > 0, lab, np.arange(1, n + 1)))
+
+
+_DRAWN_CACHE: dict = {}
+
+
+def drawn_truth(xy, an, p, scene, kwargs, tolerance_px=None):
+    """The truth the passes drawing shows: the scene's tables read from its drawn curve.
+
+    Stacks, branches and junctions are those of :func:`simulate.contacts.analyze_rod` on the
+    pressed pass curves (resampled every :data:`DRAWN_STEP_PX`), two passes in contact where
+    their strokes touch (axes one stroke width apart, plus ``tolerance_px`` of paper); every
+    junction then moves to the nearest fork of the clean drawing's skeleton
+    (:func:`_skeleton_forks`) within the widest band meeting there plus
+    :data:`DRAWN_SNAP_H` h. Stack lengths are the mean drawn length of their passes, branch
+    energies the rod's over the same stretch of rod, the summary (rod length, total energy)
+    the rod's.
+
+    Returns
+    -------
+    (tables, paths_rc, drawn_energy)
+        The truth tables, the stacks' mean lines (row, col) px, and the drawn curve's
+        ``L int kappa^2 ds`` (the rod's energy's units).
+    """
+    from scipy.spatial import cKDTree
+
+    tol = DRAWN_TOLERANCE_PX if tolerance_px is None else tolerance_px
+    curve, frame, cal, ink = _drawn_curve(xy, an, p, kwargs)
+    if not np.array_equal(ink, scene.ink_mask):
+        raise RuntimeError("the drawn curve does not reproduce the scene's ink")
+    stroke_px = _render.PASS_WIDTH * THICKNESS_MM * PX_PER_MM
+    arc = np.r_[0.0, np.cumsum(np.hypot(*np.diff(curve, axis=0).T))]
+    length_px = arc[-1]
+    t = np.linspace(0.0, length_px, int(round(length_px / DRAWN_STEP_PX)) + 1)
+    pts = np.c_[np.interp(t, arc, curve[:, 0]), np.interp(t, arc, curve[:, 1])] / length_px
+    key = (hash(pts.tobytes()), tol)
+    if key not in _DRAWN_CACHE:  # the scan and clean conditions draw the same curve
+        _DRAWN_CACHE.clear()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            _DRAWN_CACHE[key] = analyze_rod(pts, lam=0.0,
+                                            contact_distance=(stroke_px + tol) / length_px)
+    dan = _DRAWN_CACHE[key]
+    st, jt, br = dan.stacks, dan.junctions, dan.branches
+    widths_px = cal.width(st["n_br"].to_numpy(int)) * PX_PER_MM
+    # junctions at the skeleton's forks
+    jxy = jt[["x", "y"]].to_numpy(float) * length_px if len(jt) else np.zeros((0, 2))
+    forks = _skeleton_forks(ink)
+    if len(jxy) and len(forks):
+        widest = {}
+        for sid, ends in enumerate(st[["junction_a", "junction_b"]].to_numpy(int)):
+            for j in ends:
+                widest[int(j)] = max(widest.get(int(j), 0.0), float(widths_px[sid]))
+        reach = np.array([widest.get(int(j), 0.0) for j in jt["junction_id"]])
+        d, k = cKDTree(forks[:, ::-1]).query(jxy)
+        near = d <= reach + DRAWN_SNAP_H * THICKNESS_MM * PX_PER_MM
+        jxy[near] = forks[k[near], ::-1]
+    junctions = pd.DataFrame({"junction_id": jt["junction_id"].astype(int) if len(jt) else [],
+                              "x_px": jxy[:, 0], "y_px": jxy[:, 1],
+                              "n_stacks": jt["n_stacks"].astype(int) if len(jt) else []},
+                             columns=schema.JUNCTION_COLUMNS)
+    lines_px = [np.asarray(line, float) * length_px for line in dan.stack_lines]
+    stacks = _render._stack_table(st, lines_px, frame, cal, px_per_mm=PX_PER_MM,
+                                  thickness_mm=THICKNESS_MM,
+                                  layer_px={sid: float(row.n_br * row.length * length_px)
+                                            for sid, row in st.iterrows()})
+    # branch energies: the rod's over the stretch of rod the branch draws (the drawn curve's
+    # samples lie at equal steps of the rod's arclength)
+    s_rod = np.interp(np.r_[br["s_start"].to_numpy(float), 1.0] * length_px, arc,
+                      np.linspace(0.0, 1.0, len(curve)))
+    d2 = xy[2:] - 2 * xy[1:-1] + xy[:-2]
+    n_seg = len(xy) - 1
+    node_e = np.r_[0.0, np.einsum("ij,ij->i", d2, d2) * n_seg ** 3, 0.0]
+    cum_e = np.r_[0.0, np.cumsum(node_e)]
+    nodes = np.searchsorted(np.arange(n_seg + 1) / n_seg, s_rod, side="left")
+    energy = np.diff(cum_e[nodes])
+    mm_per_unit = length_px / PX_PER_MM
+    branches = pd.DataFrame({
+        "branch_id": br["branch_id"].astype(int), "stack_id": br["stack_id"].astype(int),
+        "length_mm": br["length"] * mm_per_unit, "kappa_pm": br["kappa_pm"] / mm_per_unit,
+        "kappa_plus": br["kappa_plus"] / mm_per_unit,
+        "kappa_m": br["kappa_pm"].abs() / mm_per_unit, "energy": energy,
+        "region": stacks["region"].to_numpy()[br["stack_id"].to_numpy(int)]},
+        columns=schema.BRANCH_COLUMNS)
+    tables = {**scene.tables, "junctions": junctions, "stacks": stacks, "branches": branches}
+    tables.pop(LAYER_PIECES, None)
+    drawn_energy = float(dan.energy_bending * scene.summary["rod_length_mm"] * PX_PER_MM
+                         / length_px)
+    return tables, [line[:, ::-1] for line in lines_px], drawn_energy
 
 
 def _fold_share(xy) -> float:
@@ -309,6 +463,17 @@ def run(epsilons, *, segments, seed, conditions, work, overlays):
                         rod_thickness=p["thickness"], wall_radius=p["wall_radius"],
                         hole_radius_mm="auto", seed=seed + i, **CONDITIONS[cond])
                 render_s = time.perf_counter() - t0
+                drawn_ratio = np.nan
+                if cond in DRAWN:
+                    tables, paths, drawn_e = drawn_truth(xy, an, p, scene, CONDITIONS[cond])
+                    n_br = tables["stacks"]["n_br"]
+                    scene = dataclasses.replace(
+                        scene, tables=tables, paths_rc=paths,
+                        summary={**scene.summary, "n_junctions": len(tables["junctions"]),
+                                 "n_stacks": len(n_br), "n_branches": int(n_br.sum()),
+                                 "mean_branches_per_stack": float(n_br.mean()) if len(n_br)
+                                 else 0.0})
+                    drawn_ratio = drawn_e / scene.summary["total_energy"]
                 write_scene(scene, folder)
                 t0 = time.perf_counter()
                 with warnings.catch_warnings():
@@ -338,6 +503,8 @@ def run(epsilons, *, segments, seed, conditions, work, overlays):
                        "truth_junctions": s["junction_truth"],
                        "out_junctions": s["junction_out"],
                        "fold_energy_share": _fold_share(xy),
+                       # the drawn pass curves' energy over the rod's (drawn truth only)
+                       "drawn_curve_energy_ratio": drawn_ratio,
                        # how much rod the bands draw: sum n_br x drawn stack length over L
                        "drawn_rod_ratio": float((truth.tables["stacks"]["n_br"]
                                                  * truth.tables["stacks"]["length_mm"]).sum()

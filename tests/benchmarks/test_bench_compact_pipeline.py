@@ -75,3 +75,21 @@ def test_the_rod_and_the_analysis_outside_the_discs(bench):
     bent = np.concatenate([[[0.0, 2e-4]], straight, [[5e-3, 2e-4]]])  # 10-px hooks
     scene.tables["junctions"][["y_px", "x_px"]] = (bent[[0, -1]] * L * px)[:, ::-1]
     assert bench._rod_outside(bent, scene) == pytest.approx(0.0, abs=1e-9)
+
+
+def test_the_drawn_truths_forks_ignore_one_pixel_gaps_between_strokes(bench):
+    # a Y of 12-px bands: one fork where the arms part; a one-pixel slit inside the trunk (two
+    # touching strokes a rasterised pixel apart) is ink, a three-pixel one is paper
+    import cv2
+
+    ink = np.zeros((300, 300), np.uint8)
+    for a, b in (((150, 280), (150, 150)), ((150, 150), (60, 30)), ((150, 150), (240, 30))):
+        cv2.line(ink, a, b, 1, 12)
+    slit = ink.astype(bool).copy()
+    slit[200:260, 150] = False
+    forks = bench._skeleton_forks(slit)
+    assert len(forks) == 1
+    assert np.hypot(*(forks[0] - [150, 150])) < 12
+    wide = ink.astype(bool).copy()
+    wide[200:260, 149:152] = False
+    assert len(bench._skeleton_forks(wide)) > 1  # the slit's loop forks twice more
