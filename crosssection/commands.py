@@ -312,6 +312,22 @@ def _same(a, b) -> bool:
     return a == b
 
 
+def _same_calibration(a, b) -> bool:
+    """Two calibration values (paths, tables) that hold the same table: a copy of the set's
+    ``calibration.csv`` elsewhere is the same calibration."""
+    from crosssection.core.calibration import Calibration
+    from crosssection.core.errors import FoldstatError
+
+    if a is None or b is None:
+        return False
+    try:
+        ca, cb = Calibration.of(a), Calibration.of(b)
+    except (FoldstatError, OSError, ValueError):
+        return False
+    return (_same(list(ca.n_layers), list(cb.n_layers))
+            and _same(list(ca.width_mm), list(cb.width_mm)))
+
+
 def set_not_read(image, params: AnalysisParams) -> str | None:
     """Why the scan's own set would analyse it differently, or None.
 
@@ -355,7 +371,8 @@ def set_not_read(image, params: AnalysisParams) -> str | None:
         used = {k: getattr(params, k, None) for k in wanted}
         if isinstance(used.get("calibration"), (str, Path)):
             used["calibration"] = str(Path(used["calibration"]).resolve())
-        differ = [k for k, v in wanted.items() if not _same(v, used[k])]
+        differ = [k for k, v in wanted.items() if not _same(v, used[k])
+                  and not (k == "calibration" and _same_calibration(v, used[k]))]
         if not differ:
             return None
         plural = len(differ) > 1

@@ -117,15 +117,19 @@ def _log_ticks(axis):
     axis.set_minor_formatter(NullFormatter())
 
 
-def _linear_ticks(axis):
-    """At most 5 labels, with a common power of ten beside the axis for values below 1e-2 or
-    above 1e4: plain labels such as 0.00015 on a 4-inch axis run into each other."""
-    from matplotlib.ticker import MaxNLocator, ScalarFormatter
+def _linear_ticks(axis) -> int:
+    """At most 5 labels; for an axis reaching below 1e-2 or beyond 1e4, labels in units of a
+    power of ten, returned (0: none) for the axis label to name. Plain labels such as 0.00015
+    on a 4-inch axis run into each other, and matplotlib's own "x10^k" beside the axis lies
+    under the end of a two-line axis label."""
+    from matplotlib.ticker import FuncFormatter, MaxNLocator
 
     axis.set_major_locator(MaxNLocator(nbins=5))
-    fmt = ScalarFormatter(useMathText=True)
-    fmt.set_powerlimits((-2, 4))
-    axis.set_major_formatter(fmt)
+    top = max(abs(v) for v in axis.get_view_interval())
+    power = int(np.floor(np.log10(top))) if top > 0 and (top >= 1e4 or top < 1e-2) else 0
+    scale = 10.0 ** power
+    axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v / scale:.6g}"))
+    return power
 
 
 def bin_edges(x, log: bool = False) -> np.ndarray:
@@ -352,20 +356,22 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
             elif ymax_lin > 0:
                 # a Gamma law with alpha < 1 diverges at 0: scale the axis to the data
                 ax.set_ylim(0, 1.15 * ymax_lin)
-            # long names on two lines: side-by-side panels' labels must not run together
-            ax.set_xlabel(_wrap_label(label, 36))
             ax.set_ylabel("fraction of stacks $P(n_{br})$" if count
                           else "probability density")
             ax.set_title(f"{REGION_WORDS.get(reg, reg)}: {'linear' if not logscale else 'log'}"
                          f" scale", fontsize=10)
+            power = 0
             if count:
                 ax.xaxis.get_major_locator().set_params(integer=True)
             elif ax.get_xscale() == "log":
                 _log_ticks(ax.xaxis)
             else:
-                _linear_ticks(ax.xaxis)
                 if ax.get_xlim()[0] < 0 <= x_min:  # no negative ticks under positive data
                     ax.set_xlim(left=0)
+                power = _linear_ticks(ax.xaxis)
+            # long names on two lines: side-by-side panels' labels must not run together
+            ax.set_xlabel(_wrap_label(label + (f", in units of $10^{{{power}}}$" if power
+                                               else ""), 36))
         # one legend per row, outside the log panel: never over the data
         handles, labels = row[1].get_legend_handles_labels()
         # per set: its data, then its law, then the band and the detection limit

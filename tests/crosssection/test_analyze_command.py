@@ -8,6 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pandas as pd
 import pytest
 
 import crosssection.cli
@@ -40,6 +41,18 @@ def test_a_set_toml_whose_values_are_not_used_is_named(set_folder):
 def test_a_set_toml_whose_values_are_passed_is_not_named(set_folder):
     params = AnalysisParams(calibration=str(set_folder / "calibration.csv"))
     assert set_not_read(set_folder / SCAN, params) is None
+
+
+def test_a_copy_of_the_sets_calibration_is_the_same_calibration(set_folder, tmp_path_factory):
+    copy = tmp_path_factory.mktemp("elsewhere") / "widths.csv"
+    shutil.copy(set_folder / "calibration.csv", copy)
+    assert set_not_read(set_folder / SCAN, AnalysisParams(calibration=str(copy))) is None
+    # another table is named
+    table = pd.read_csv(copy)
+    table.loc[0, "width_mm"] *= 1.1
+    table.to_csv(copy, index=False)
+    note = set_not_read(set_folder / SCAN, AnalysisParams(calibration=str(copy)))
+    assert note is not None and "calibration" in note
 
 
 def test_the_nearest_set_above_the_scan_is_the_one_read(set_folder):

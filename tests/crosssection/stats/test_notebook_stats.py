@@ -92,6 +92,28 @@ def test_plot_pdf_draws_the_fitted_density():
     assert np.allclose(ys[k], stats.gamma(2.0, scale=0.5).pdf(xs[k]), rtol=0.2)
 
 
+def test_a_large_scale_is_named_in_the_axis_label_not_beside_the_axis():
+    # matplotlib's "x10^4" beside the axis lies under the end of a two-line label
+    rng = np.random.default_rng(1)
+    x = rng.gamma(0.6, 2e4, 400)
+    ens = Ensemble(
+        pd.DataFrame({"set": ["g"], "config_id": ["0"]}).reindex(columns=CONFIG_COLS),
+        pd.DataFrame({"set": "g", "config_id": "0", "e": x,
+                      "region": "none"}).reindex(columns=BRANCH_COLS),
+        pd.DataFrame(columns=STACK_COLS), pd.DataFrame(columns=VOID_COLS))
+    fig = plot_pdf(ens, "e")
+    lin = fig.axes[0]
+    fig.canvas.draw()
+    assert lin.xaxis.get_offset_text().get_text() == ""
+    import re
+
+    power = int(re.search(r"in units of \$10\^\{(\d+)\}\$", lin.get_xlabel()).group(1))
+    top = lin.get_xlim()[1]
+    assert 10 ** power <= top < 10 ** (power + 1)
+    ticks = [float(t.get_text()) for t in lin.get_xticklabels() if t.get_text()]
+    assert ticks and max(ticks) < 10  # 0.5, 1, ... in units of 10^power: not 50000
+
+
 @pytest.mark.parametrize("flag, bar", [([], False), (["--progress"], True)])
 def test_progress_only_when_asked_off_a_terminal(sim, tmp_path, capfd, flag, bar):
     assert _run([str(sim), "--out", str(tmp_path / "r"), "--n-boot", "0", "--no-gof",
