@@ -21,8 +21,10 @@ quantity of a scan is in units of the same L.
 
 Common representation (:class:`Ensemble`):
 
-- ``configs``: set, config_id, N_l, N_br, n_voids, epsilon, E, rod_length_mm (the L of the
-  normalisation, in mm; NaN for simulations), source,
+- ``configs``: set, config_id, N_l, N_br, n_voids (the configuration's stacks, branches and
+  voids: the rows of its tables, also for a scan whose tables hold another number than its
+  summary.json counts, so that every count of a scan has one source), epsilon, E,
+  rod_length_mm (the L of the normalisation, in mm; NaN for simulations), source,
   quality (the image analysis' quality warning codes joined by ";", "" when none; NaN for
   simulations), E_model_share (the analysis' ``total_energy_rel_uncertainty``: the share of E
   not measured on a free centreline; NaN for simulations), input (the folder given to
@@ -31,7 +33,10 @@ Common representation (:class:`Ensemble`):
   and filled at, from its summary.json; NaN for simulations), analysis (JSON text
   ``{"version": ..., "parameters": {...}}``: what made the configuration, from the
   analysis' summary.json or the simulation's params.json; NaN when unknown), batch_note (why
-  the configuration's batch is incomplete, "" when it finished or is no batch)
+  the configuration's batch or simulation ensemble is incomplete: images its batch did not
+  finish or could not analyse, configurations whose simulation failed; "" when none),
+  table_note (a scan's tables holding another number of rows than its summary.json counts,
+  "" when they agree)
 - ``branches``: set, config_id, length_L, kappa_m_L, kappa_plus_L, e, region, n_br (of the
   branch's stack, NaN if unknown), l_min_L (detection limit in units of L, NaN if none)
 
@@ -68,10 +73,11 @@ from crosssection.quality import QualityWarning
 
 CONFIG_COLS = ["set", "config_id", "N_l", "N_br", "n_voids", "epsilon", "E", "rod_length_mm",
                "source", "quality", "E_model_share", "input", "l_min_mm_analysis",
-               "s_min_mm2_analysis", "analysis", "batch_note"]
+               "s_min_mm2_analysis", "analysis", "batch_note", "table_note"]
 #: configs columns that a hand-built ensemble may leave out (NaN: unknown)
 OPTIONAL_CONFIG_COLS = ("rod_length_mm", "source", "quality", "E_model_share", "input",
-                        "l_min_mm_analysis", "s_min_mm2_analysis", "analysis", "batch_note")
+                        "l_min_mm_analysis", "s_min_mm2_analysis", "analysis", "batch_note",
+                        "table_note")
 BRANCH_COLS = ["set", "config_id", "length_L", "kappa_m_L", "kappa_plus_L", "e", "region",
                "n_br", "l_min_L"]
 STACK_COLS = ["set", "config_id", "n_br", "length_L", "region"]
@@ -85,7 +91,7 @@ S_MIN_MM2 = AnalysisParams().s_min_used_mm2
 RECORDED = "recorded"
 SIM_REGION = "none"  # simulations have no wall: no bulk/periphery split (paper, "Two sub-systems")
 TEXT_COLS = {"set", "config_id", "region", "source", "quality", "input", "analysis",
-             "batch_note"}
+             "batch_note", "table_note"}
 ID_COLS = ("set", "config_id")
 
 
@@ -103,7 +109,9 @@ class FlaggedScanWarning(QualityWarning):
 
 class IncompleteBatchWarning(QualityWarning):
     """A batch output that did not finish, or that could not analyse some of its images
-    (``failures.csv``): its statistics are those of the images done."""
+    (``failures.csv``), or a simulation ensemble some of whose configurations failed (a
+    ``configs.csv`` row with an ``error``): its statistics are those of the images or
+    configurations done."""
 
 
 def _folder(folder, name: str = "folder") -> Path:
@@ -417,12 +425,16 @@ def load_simulation(folder, *, set_name=None) -> Ensemble:
     cfg = _read_csv(folder / "configs.csv", ["config_id", "epsilon", "energy_total", "n_stacks",
                                              "n_branches", "n_voids"], nonempty=True,
                     numeric=["epsilon", "energy_total", "n_stacks", "n_branches", "n_voids"])
+    note = ""
     if "error" in cfg.columns:  # configurations whose simulation raised: no results
         bad = cfg["error"].notna() & (cfg["error"].astype(str).str.strip() != "")
         if bad.any():
-            warnings.warn(f"{folder / 'configs.csv'}: {int(bad.sum())} of {len(cfg)} "
-                          "configurations failed in the simulation (see failures.csv) and "
-                          "are left out", QualityWarning, stacklevel=2)
+            n = int(bad.sum())
+            # the report records it as it records a batch's failed scans (batch_note)
+            note = (f"{folder / 'configs.csv'}: {n} of {len(cfg)} configurations failed in "
+                    f"the simulation (config_id {_listed(cfg.loc[bad, 'config_id'])}; see "
+                    f"failures.csv) and {'is' if n == 1 else 'are'} not in the statistics")
+            warnings.warn(note, IncompleteBatchWarning, stacklevel=2)
             cfg = cfg[~bad]
     br = _read_csv(folder / "branches.csv", ["config_id", "length", "kappa_plus", "kappa_pm",
                                              "energy"],
@@ -433,7 +445,7 @@ def load_simulation(folder, *, set_name=None) -> Ensemble:
         "set": name, "config_id": cfg["config_id"].astype(str), "N_l": cfg["n_stacks"],
         "N_br": cfg["n_branches"], "n_voids": cfg["n_voids"], "epsilon": cfg["epsilon"],
         "E": cfg["energy_total"], "rod_length_mm": np.nan, "source": str(folder),
-        "analysis": _simulation_provenance(folder), "batch_note": ""})
+        "analysis": _simulation_provenance(folder), "batch_note": note, "table_note": ""})
     st = None
     if (folder / "stacks.csv").is_file():  # optional: per-stack branch counts
         st = _read_csv(folder / "stacks.csv", ["config_id", "n_br"], numeric=["n_br", "length"])
@@ -593,11 +605,13 @@ def load_image_output(folder, *, set_name: str, config_id: str | None = None,
                    numeric=["stack_id", "n_br", "length_mm"])
     vo = _read_csv(folder / "voids.csv", ["area_mm2", "perimeter_mm", "shape_ratio", "n_edges"],
                    numeric=["area_mm2", "perimeter_mm", "shape_ratio", "n_edges"])
-    for table, df, key, what in (("stacks.csv", st, "n_stacks", "stacks"),
-                                 ("branches.csv", br, "n_branches", "branches"),
-                                 ("voids.csv", vo, "n_voids", "voids")):
+    # a table cut short (or edited) is used as it is: its rows are the scan's counts too,
+    # so that N_br of the whole system is that of bulk and periphery (and the fits' values)
+    table_note = "; ".join(filter(None, (
         _check_count(folder / table, len(df), summary.get(key), what)
-    n_stacks = summary.get("n_stacks", len(st))
+        for table, df, key, what in (("stacks.csv", st, "n_stacks", "stacks"),
+                                     ("branches.csv", br, "n_branches", "branches"),
+                                     ("voids.csv", vo, "n_voids", "voids")))))
     n_br_map = dict(zip(st["stack_id"], st["n_br"]))
     rec_l, rec_s = _recorded_limits(summary)
     # a summary that does not record its limits (written by other tools) gets the
@@ -607,8 +621,8 @@ def load_image_output(folder, *, set_name: str, config_id: str | None = None,
     if s_min_mm2 == RECORDED:
         s_min_mm2 = S_MIN_MM2 if rec_s is None else rec_s
     configs = pd.DataFrame([{
-        "set": set_name, "config_id": str(cid), "N_l": n_stacks,
-        "N_br": summary.get("n_branches", len(br)), "n_voids": summary.get("n_voids", len(vo)),
+        "set": set_name, "config_id": str(cid), "N_l": len(st), "N_br": len(br),
+        "n_voids": len(vo),
         "epsilon": summary.get("epsilon", np.nan), "E": summary.get("total_energy", np.nan),
         "rod_length_mm": L, "source": str(folder),
         "quality": ";".join((summary.get("quality") or {}).get("codes", [])),
@@ -616,7 +630,7 @@ def load_image_output(folder, *, set_name: str, config_id: str | None = None,
         "l_min_mm_analysis": np.nan if rec_l is None else rec_l,
         "s_min_mm2_analysis": np.nan if rec_s is None else rec_s,
         "analysis": _provenance(summary.get("version"), summary.get("parameters")),
-        "batch_note": ""}])
+        "batch_note": "", "table_note": table_note}])
     branches = pd.DataFrame({
         "set": set_name, "config_id": str(cid), "length_L": br["length_mm"] / L,
         "kappa_m_L": br["kappa_m"] * L, "kappa_plus_L": br["kappa_plus"] * L,
@@ -702,15 +716,22 @@ def _values(v) -> str:
     return v[0] if len(v) == 1 else f"{v[0]}-{v[-1]}"
 
 
-def _check_count(path: Path, rows: int, counted, what: str) -> None:
+def _check_count(path: Path, rows: int, counted, what: str) -> str:
     """Warn when a table holds another number of rows than ``summary.json`` counts: the
     analysis writes both from the same tables, so a difference is a truncated or edited
-    file, whose statistics are then those of the rows left."""
+    file, whose statistics (counts included) are then those of the rows left.
+
+    Returns
+    -------
+    str
+        The warning's text (the report records it), "" when the counts agree.
+    """
     if counted is None or not np.isfinite(counted) or rows == counted:
-        return
-    warnings.warn(f"{path}: holds {rows} {what} where summary.json counts {counted:g} "
-                  f"(truncated or edited?); the {rows} rows are used", QualityWarning,
-                  stacklevel=3)
+        return ""
+    text = (f"{path}: holds {rows} {what} where summary.json counts {counted:g} "
+            f"(truncated or edited?); the {rows} rows are used")
+    warnings.warn(text, QualityWarning, stacklevel=4)
+    return text
 
 
 def _listed(items, limit: int = 5) -> str:

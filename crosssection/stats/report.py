@@ -31,11 +31,11 @@ from crosssection.core.fileio import (BROWSER_FILES, clear_stale_folders, foreig
 from crosssection.stats import fits as F
 from crosssection.stats.families import FAMILIES
 from crosssection.stats.data import REPORT_TABLES, Ensemble
-from crosssection.stats.tables import (CORRELATION_MIN_PAIRS, COUNT_QUANTITIES, EQ12_CONST,
-                                       N_RELATION_MIN, PAPER_DOF, PAPER_MACRO, PAPER_MICRO,
-                                       QUANTITIES, StatsOptions, StatsResult, compute_stats,
-                                       regions_of, relation_note, set_seed, small_sample_note,
-                                       to_markdown)
+from crosssection.stats.tables import (CORRELATION_MIN_PAIRS, COUNT_COLUMNS, COUNT_QUANTITIES,
+                                       EQ12_CONST, N_RELATION_MIN, PAPER_DOF, PAPER_MACRO,
+                                       PAPER_MICRO, QUANTITIES, StatsOptions, StatsResult,
+                                       compute_stats, count_text, regions_of, relation_note,
+                                       set_seed, small_sample_note, to_markdown)
 
 # Okabe-Ito colours (distinguishable with the common colour-vision deficiencies), in the
 # order of the sets; the set's index in the ensemble fixes its colour in every figure.
@@ -764,8 +764,9 @@ def _write_files(res: StatsResult, ens: Ensemble, out: Path, *, opts: StatsOptio
     paths["correlations.csv"] = write_csv(out / "correlations.csv", res.correlations)
     # what made each configuration is in stats.json, per set, not a JSON text per row
     paths["per_config.csv"] = write_csv(out / "per_config.csv",
-                                        res.per_config.drop(columns=["analysis"],
-                                                            errors="ignore"))
+                                        _integer_counts(res.per_config.drop(
+                                            columns=["analysis"], errors="ignore"),
+                                            PER_CONFIG_COUNTS))
 
     figs = []  # (title, relative path, one-sentence caption)
     if figures:
@@ -822,6 +823,7 @@ def _write_files(res: StatsResult, ens: Ensemble, out: Path, *, opts: StatsOptio
         "detection_limits": detection_limits(ens),
         "detection_limits_given": dict(limits_given or {}),
         "incomplete_batches": incomplete_batches(ens),
+        "tables_unlike_summary": tables_unlike_summary(ens),
         "options": {k: (list(v) if isinstance(v, tuple) else v)
                     for k, v in vars(opts).items()},
         "model_selection": f"min BIC; a family with fewer parameters within "
@@ -855,6 +857,23 @@ def _write_files(res: StatsResult, ens: Ensemble, out: Path, *, opts: StatsOptio
     paths["report.html"] = write_text(out / "report.html",
                                       _html(res, figs, stats_json, ens, opts, absent))
     return paths
+
+
+#: the counts of a configuration in per_config.csv
+PER_CONFIG_COUNTS = ("N_l", "N_br", "n_voids")
+
+
+def _integer_counts(df: pd.DataFrame, cols) -> pd.DataFrame:
+    """``df`` with its columns ``cols`` as integers (missing cells kept missing) where
+    every value is a whole number: a simulation's counts read from CSV as floats (20.0)."""
+    df = df.copy()
+    for c in cols:
+        if c in df.columns:
+            v = pd.to_numeric(df[c], errors="coerce")
+            finite = v.dropna()
+            if np.isfinite(finite).all() and (finite == np.round(finite)).all():
+                df[c] = v.astype("Int64")
+    return df
 
 
 def _limit_used(values_L, L) -> float | list | None:
@@ -896,8 +915,19 @@ def _resolved(path) -> str:
 
 
 def incomplete_batches(ens: Ensemble) -> list:
-    """What the loader said of every unfinished batch of ``ens`` (``batch_note``), once each."""
-    notes = ens.configs.get("batch_note", pd.Series(dtype=object))
+    """What the loader said of every unfinished batch of ``ens``, and of every simulation
+    ensemble with failed configurations (``batch_note``), once each."""
+    return _notes(ens, "batch_note")
+
+
+def tables_unlike_summary(ens: Ensemble) -> list:
+    """What the loader said of every scan of ``ens`` whose tables hold another number of
+    rows than its summary.json counts (``table_note``: cut short or edited), once each."""
+    return _notes(ens, "table_note")
+
+
+def _notes(ens: Ensemble, column: str) -> list:
+    notes = ens.configs.get(column, pd.Series(dtype=object))
     return list(dict.fromkeys(str(n) for n in notes.dropna() if str(n)))
 
 
@@ -1129,8 +1159,11 @@ def _named(df: pd.DataFrame) -> pd.DataFrame:
 
 
 def _html_table(df: pd.DataFrame) -> str:
+    """``df`` as an HTML table: numbers to 3 significant figures, counts
+    (:data:`~crosssection.stats.tables.COUNT_COLUMNS`) exactly."""
+    counts = {COLUMN_NAMES.get(c, c): count_text for c in COUNT_COLUMNS if c in df.columns}
     return _named(df).to_html(index=False, float_format=lambda v: f"{v:.3g}", na_rep="",
-                              border=0, classes="t")
+                              formatters=counts, border=0, classes="t")
 
 
 def _with_paper(ours: pd.DataFrame, paper: pd.DataFrame) -> pd.DataFrame:
@@ -1227,8 +1260,9 @@ def _small_fits_marked(df: pd.DataFrame, res: StatsResult) -> pd.DataFrame:
     """``df`` (the micro or dof table) with every value taken from a Gamma fit on fewer
     values than model selection needs marked "indicative only", as the other tables mark
     them."""
-    # the page says "indicative only" beside the number: the CSV's boolean column is not shown
-    df = df.drop(columns=["indicative"], errors="ignore")
+    # the page says "indicative only" beside the number: the CSV's boolean columns are not
+    # shown
+    df = df.drop(columns=["indicative", "indicative_e", "indicative_E"], errors="ignore")
     if df.empty or "set" not in df.columns:
         return df
     for col, sources in GAMMA_COLUMNS.items():
@@ -1338,6 +1372,10 @@ def _html(res: StatsResult, figs, meta, ens: Ensemble | None = None,
     ]
     for note in meta.get("incomplete_batches") or ():
         parts.append(f"<p class='warn'><b>Incomplete input:</b> {html.escape(note)}.</p>")
+    for note in meta.get("tables_unlike_summary") or ():
+        parts.append(f"<p class='warn'><b>Table unlike its summary.json:</b> "
+                     f"{html.escape(note)}: the scan's counts, tables and fits are those of "
+                     "the rows; its E and ε are summary.json's.</p>")
     parts += [_methods(meta, opts), _per_set_text(meta)]
     if ens is not None:
         qual = _quality_rows(ens)

@@ -89,6 +89,9 @@ SLOPE_RELATIONS = ("eq12_const", "slope_sqrt_s_vs_l", "eq12_eps_sqrtNl", "eq14_s
 #: mean of two configurations says as little as a slope through two points);
 #: ``n_br_exp_mu``, a parameter of the law of n_br, follows the laws' rule instead
 CONFIG_RELATIONS = SLOPE_RELATIONS + ("eq15_fluct", "eq16")
+#: columns of the report's tables that hold counts (of configurations, branches, voids,
+#: values, resamples, parameters): printed as integers, never rounded (:func:`to_markdown`)
+COUNT_COLUMNS = ("n_configs", "n_branches", "n_voids", "n", "n_dropped", "n_mc", "k")
 #: the relation that is a law's parameter (the mean of the exponential law of n_br): its
 #: ``n`` counts the stacks, indicative below the values model selection needs
 LAW_RELATION = "n_br_exp_mu"
@@ -262,7 +265,13 @@ def per_config_table(ens: Ensemble) -> pd.DataFrame:
 
 
 def macro_table(ens: Ensemble) -> pd.DataFrame:
-    """The paper's table of averages (stacks, branches, voids) per set and region."""
+    """The paper's table of averages (stacks, branches, voids) per set and region.
+
+    ``N_l`` and ``N_br`` of the whole system are the means of the configurations' counts,
+    those of a sub-system the means of its rows per configuration (so that bulk and
+    periphery add up to the whole system); ``n_voids`` (integers, missing for the
+    sub-systems: voids have no region) is the set's total.
+    """
     rows = []
     for s in ens.sets:
         e = ens.subset(s)
@@ -282,8 +291,11 @@ def macro_table(ens: Ensemble) -> pd.DataFrame:
                          "s_L2": s_mean, "sqrt_s_over_p": sp, "l_L": _mean(br["length_L"]),
                          "n_branches": len(br),
                          # voids are counted for the whole system only
-                         "n_voids": len(e.voids) if reg == "all" else np.nan})
-    return pd.DataFrame(rows)
+                         "n_voids": len(e.voids) if reg == "all" else None})
+    out = pd.DataFrame(rows)
+    if not out.empty:  # a count: 103, not 103.0, with the sub-systems' cells missing
+        out["n_voids"] = out["n_voids"].astype("Int64")
+    return out
 
 
 def _clean(x, positive=True):
@@ -450,8 +462,11 @@ def compute_stats(ens: Ensemble, opts: StatsOptions | None = None, *,
         (one per set, naming them). The ``indicative`` column of ``fits``, ``micro``, ``dof``,
         ``relations`` and ``correlations`` marks the rows resting on fewer values or
         configurations than those minima (for ``correlations``, fewer than
-        :data:`N_RELATION_MIN` pairs); ``fits`` and ``truncation`` keep their columns when
-        nothing was fitted.
+        :data:`N_RELATION_MIN` pairs); in ``micro`` and ``dof``, where a row holds the
+        parameters of two Gamma fits, ``indicative_e`` marks those of the fit of e
+        (alpha_e, chi_e) and ``indicative_E`` those of the fit of E (alpha_E, chi_E), both
+        alpha_E/alpha_e, and ``indicative`` either; ``fits`` and ``truncation`` keep their
+        columns when nothing was fitted.
 
     Raises
     ------
@@ -520,9 +535,11 @@ def compute_stats(ens: Ensemble, opts: StatsOptions | None = None, *,
     for s in ens.sets:
         e = subsets[s]
         aE, cE = _gamma_params(summaries.get((s, "all", "E")))
+        small_E = _gamma_small(summaries.get((s, "all", "E")))
         for reg in regions_of(e):
             br = _in_region(e.branches, reg)
             ae, ce = _gamma_params(summaries.get((s, reg, "e")))
+            small_e = _gamma_small(summaries.get((s, reg, "e")))
             micro_rows.append({
                 "set": s, "region": reg, "kappa_m_L": _mean(br["kappa_m_L"]),
                 "l_L": _mean(br["length_L"]),
@@ -530,15 +547,17 @@ def compute_stats(ens: Ensemble, opts: StatsOptions | None = None, *,
                 "e": _mean(br["e"]), "alpha_e": ae, "chi_e": ce,
                 "alpha_E": aE if reg == "all" else np.nan,
                 "chi_E": cE if reg == "all" else np.nan,
-                "indicative": (_gamma_small(summaries.get((s, reg, "e")))
-                               or (reg == "all" and _gamma_small(summaries.get((s, "all",
-                                                                               "E")))))})
+                # which values rest on a small fit, as the report marks its cells:
+                # alpha_e, chi_e on the e fit; alpha_E, chi_E on the E fit
+                "indicative": small_e or (reg == "all" and small_E),
+                "indicative_e": small_e, "indicative_E": reg == "all" and small_E})
+        small_e = _gamma_small(summaries.get((s, "all", "e")))
         ae, _ = _gamma_params(summaries.get((s, "all", "e")))
         dof_rows.append({"set": s, "N_l": _mean(e.configs["N_l"]),
                          "N_br": _mean(e.configs["N_br"]), "alpha_E": aE, "alpha_e": ae,
                          "alpha_E_over_alpha_e": aE / ae if ae else np.nan,
-                         "indicative": (_gamma_small(summaries.get((s, "all", "E")))
-                                        or _gamma_small(summaries.get((s, "all", "e"))))})
+                         "indicative": small_E or small_e,
+                         "indicative_e": small_e, "indicative_E": small_E})
     micro = pd.DataFrame(micro_rows)
     dof = pd.DataFrame(dof_rows)
     relations = relations_table(ens, per_cfg, summaries)
@@ -701,13 +720,33 @@ def correlations_table(ens: Ensemble) -> pd.DataFrame:
     return out
 
 
+def count_text(v) -> str:
+    """A cell of a count column (:data:`COUNT_COLUMNS`) as text: an integer exactly (1906,
+    not 1.91e+03), "" where missing, anything else (a note) as it is."""
+    if v is None or v is pd.NA:
+        return ""
+    if isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_)):
+        return str(int(v))
+    if isinstance(v, (float, np.floating)):
+        if not np.isfinite(v):
+            return ""
+        return str(int(v)) if float(v).is_integer() else format(float(v), ".4g")
+    return str(v)
+
+
 def to_markdown(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
-    """A GitHub-flavoured Markdown table (no extra dependency)."""
-    def fmt(v):
+    """A GitHub-flavoured Markdown table (no extra dependency); the counts
+    (:data:`COUNT_COLUMNS`) exactly, other numbers to ``floatfmt``."""
+    def fmt(v, col):
+        if col in COUNT_COLUMNS:
+            return count_text(v).replace("|", "\\|")
+        if v is None or v is pd.NA:
+            return ""
         if isinstance(v, (float, np.floating)):
             return "" if not np.isfinite(v) else format(float(v), floatfmt)
         return str(v).replace("|", "\\|")
     head = "| " + " | ".join(map(str, df.columns)) + " |"
     sep = "|" + "|".join("---" for _ in df.columns) + "|"
-    body = ["| " + " | ".join(fmt(v) for v in row) + " |" for row in df.itertuples(index=False)]
+    body = ["| " + " | ".join(fmt(v, c) for v, c in zip(row, df.columns)) + " |"
+            for row in df.itertuples(index=False)]
     return "\n".join([head, sep, *body]) + "\n"

@@ -312,6 +312,48 @@ def test_truncated_branch_table_is_used_with_a_warning(batch, tmp_path, capfd):
         assert len(load_any(batch).branches.query("config_id == 'img002'")) == 3
 
 
+def test_a_truncated_table_gives_every_count_of_its_scan_and_is_reported(batch, tmp_path,
+                                                                         capfd):
+    # the rows are used: for the counts of the whole system as for bulk and periphery
+    path = batch / "s1" / "img002" / "branches.csv"
+    pd.read_csv(path).head(3).to_csv(path, index=False)
+    status, _, err = _stats(capfd, batch, "--out", tmp_path / "rep", *FAST)
+    assert status == 0 and len(err) == 1
+    rep = tmp_path / "rep"
+    m = pd.read_csv(rep / "macro.csv").set_index("region")
+    assert m.loc["all", "N_br"] == pytest.approx(m.loc["bulk", "N_br"]
+                                                 + m.loc["periphery", "N_br"])
+    assert m.loc["all", "N_br"] * m.loc["all", "n_configs"] == m.loc["all", "n_branches"]
+    pc = pd.read_csv(rep / "per_config.csv", dtype={"config_id": str}).set_index("config_id")
+    assert pc.loc["img002", "N_br"] == 3
+    assert pc["N_br"].sum() == m.loc["all", "n_branches"]
+    said = err[0].removeprefix("warning: ")
+    assert json.loads((rep / "stats.json").read_text())["tables_unlike_summary"] == [said]
+    assert pc.loc["img002", "table_note"] == said and pc["table_note"].isna().sum() == 2
+    page = (rep / "report.html").read_text()
+    assert "Table unlike its summary.json" in page and str(path) in page
+
+
+def test_failed_simulation_configurations_are_recorded_in_the_report(tmp_path, capfd):
+    sim = demo.write_demo_simulation(tmp_path / "sim", n_configs=6, seed=1)
+    cfg = pd.read_csv(sim / "configs.csv")
+    results = [c for c in cfg.columns if c not in ("config_id", "seed")]
+    cfg[results] = cfg[results].astype(object)
+    cfg.loc[2, results] = None  # as simulate's assemble writes a failed configuration
+    cfg["error"] = ["", "", "RuntimeError: boom", "", "", ""]
+    cfg.to_csv(sim / "configs.csv", index=False)
+    br = pd.read_csv(sim / "branches.csv")
+    br[br["config_id"] != 2].to_csv(sim / "branches.csv", index=False)
+    status, out, err = _stats(capfd, sim, "--out", tmp_path / "rep", *FAST)
+    said = (f"{sim / 'configs.csv'}: 1 of 6 configurations failed in the simulation "
+            "(config_id 2; see failures.csv) and is not in the statistics")
+    assert status == 0 and "5 configurations" in out[0] and err == [f"warning: {said}"]
+    meta = json.loads((tmp_path / "rep" / "stats.json").read_text())
+    assert meta["incomplete_batches"] == [said]
+    page = (tmp_path / "rep" / "report.html").read_text()
+    assert "Incomplete input" in page and "(config_id 2; see failures.csv)" in page
+
+
 def test_the_same_folder_twice_is_counted_once(batch, tmp_path, capfd):
     status, out, err = _stats(capfd, batch, f"{batch}{os.sep}", "--out", tmp_path / "rep",
                               *FAST)

@@ -49,6 +49,23 @@ def test_stats_report_on_batch_and_simulation(tmp_path, seed):
     assert not [p for p in out.rglob(".*")]
 
 
+def test_counts_are_printed_exactly_in_every_table(tmp_path):
+    # about 20 branches per configuration: more than 1000 in the set
+    s = demo.write_demo_simulation(tmp_path / "sim", n_configs=60, seed=1)
+    out = tmp_path / "rep"
+    assert _run([str(s), "--out", str(out), "--n-boot", "0", "--no-gof", "--no-figures"]) == 0
+    m = pd.read_csv(out / "macro.csv", dtype=str).iloc[0]
+    n_br, n_voids = m["n_branches"], m["n_voids"]
+    assert int(n_br) > 1000 and n_voids.isdigit()  # an integer count, not "300.0"
+    page = (out / "report.html").read_text()
+    averages = page.split("<h2>Averages per set: stacks")[1].split("<h2>")[0]
+    assert f"<td>{n_br}</td>" in averages and f"<td>{n_voids}</td>" in averages
+    assert f"| {n_br} | {n_voids} |" in (out / "macro.md").read_text()
+    pc = (out / "per_config.csv").read_text().splitlines()
+    assert pc[0].startswith("set,config_id,N_l,N_br,n_voids,")
+    assert all(c.isdigit() for row in pc[1:] for c in row.split(",")[2:5])
+
+
 def test_stats_same_seed_same_tables(tmp_path):
     s = demo.write_demo_simulation(tmp_path / "sim", n_configs=6, seed=1)
     for k in ("a", "b"):

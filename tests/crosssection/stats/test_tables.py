@@ -364,6 +364,9 @@ def test_micro_marks_gamma_parameters_of_few_values_indicative(tmp_path):
     mic = res.micro.set_index("region").loc["all"]
     # alpha_E rests on the 8 configurations' energies
     assert np.isfinite(mic["alpha_E"]) and mic["indicative"]
+    # ... alpha_e on the ~150 branch energies: a flag for each fit, as the report marks cells
+    assert mic["indicative_E"] and not mic["indicative_e"]
+    assert res.dof[["indicative_E", "indicative_e"]].values.tolist() == [[True, False]]
     big = demo.write_demo_simulation(tmp_path / "big", n_configs=60, seed=1)
     res = T.compute_stats(D.load_any(big), T.StatsOptions(
         n_boot=0, gof=False, quantities=("E", "e")))
