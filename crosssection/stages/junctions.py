@@ -352,7 +352,8 @@ def _end_lines(pr, pc, offs, sids, rev, c0r, c0c, skip, fit):
     """Centreline line of every stack end: mean point and unit direction (PCA) of the path
     pixels between ``skip`` and ``skip + fit`` from the junction's skeleton centre, walked
     from the junction outwards until the path first leaves that annulus. ``n`` = 0 when
-    fewer than three pixels qualify.
+    fewer than three pixels qualify. Also returns, per end, the position of the first point
+    beyond the annulus (the path's length when none is).
 
     Vectorised over all ends; the per-end sums are ``np.bincount`` sums, which add in the
     walk order as a loop would.
@@ -363,7 +364,7 @@ def _end_lines(pr, pc, offs, sids, rev, c0r, c0c, skip, fit):
     cnt = np.zeros(q, np.int64)
     end, pos, ii, lens = _walk_points(offs, sids, rev)
     if len(end) == 0:
-        return mean, direc, cnt
+        return mean, direc, cnt, lens
     d = np.hypot(pr[ii] - c0r[end], pc[ii] - c0c[end])
     stop = lens.copy()  # first point beyond the annulus, per end
     out = d > skip[end] + fit[end]
@@ -400,7 +401,20 @@ def _end_lines(pr, pc, offs, sids, rev, c0r, c0c, skip, fit):
     direc[ok, 0] = tr
     direc[ok, 1] = tc
     cnt[ok] = m[ok]
-    return mean, direc, cnt
+    return mean, direc, cnt, stop
+
+
+def _prefix_lines(paths, cap, c0, skip, fit):
+    """:func:`_end_lines` of the first ``cap[i]`` points of every path ``paths[i]`` (from
+    the junction outwards), ``c0`` their junctions' centres."""
+    q = len(paths)
+    offs = np.zeros(q + 1, np.int64)
+    np.cumsum(cap, out=offs[1:])
+    flat = (np.concatenate([p[:c] for p, c in zip(paths, cap.tolist())]).astype(float)
+            if offs[-1] else np.zeros((0, 2)))
+    return _end_lines(np.ascontiguousarray(flat[:, 0]), np.ascontiguousarray(flat[:, 1]), offs,
+                      np.arange(q, dtype=np.int64), np.zeros(q, np.bool_),
+                      np.ascontiguousarray(c0[:, 0]), np.ascontiguousarray(c0[:, 1]), skip, fit)
 
 
 def fork_points(centers_rc, radius_px, end_paths, end_junction, *, thickness_px: float,
@@ -468,22 +482,29 @@ def fork_points(centers_rc, radius_px, end_paths, end_junction, *, thickness_px:
     if q == 0:
         return out
     end_junction = np.asarray(end_junction, np.int64)
-    lens = np.fromiter((len(p) for p in end_paths), np.int64, count=q)
-    offs = np.zeros(q + 1, np.int64)
-    np.cumsum(lens, out=offs[1:])
-    flat = (np.concatenate([np.asarray(p, float).reshape(-1, 2) for p in end_paths])
-            if offs[-1] else np.zeros((0, 2)))
+    paths = [np.asarray(p).reshape(-1, 2) for p in end_paths]
+    lens = np.fromiter((len(p) for p in paths), np.int64, count=q)
     rad = np.asarray(radius_px, float)[end_junction]
     skip = np.maximum(skip_factor * rad, 2.0)
     if skip_px is not None:
         skip = np.maximum(skip, np.asarray(skip_px, float))
     fit = np.full(q, max(fit_h * thickness_px, 4.0))
     c0 = centers[end_junction]
-    mean, direc, cnt = _end_lines(np.ascontiguousarray(flat[:, 0]),
-                                  np.ascontiguousarray(flat[:, 1]), offs,
-                                  np.arange(q, dtype=np.int64), np.zeros(q, np.bool_),
-                                  np.ascontiguousarray(c0[:, 0]), np.ascontiguousarray(c0[:, 1]),
-                                  skip, fit)
+    # a line is fitted on its path up to where the path first leaves the annulus: within as
+    # many pixels as the annulus' outer radius, and 8 more, unless the path winds there. The
+    # paths are read that far, then those that stay inside are read whole (the same lines:
+    # on the dense 2000x2000 benchmark scan, whose 488 end paths run 114 px on average and
+    # leave after 13, 1.2 ms instead of 2.5 for the whole paths)
+    reach = skip + fit
+    cap = lens.copy()
+    short = np.isfinite(reach) & (reach + 8 < lens)
+    cap[short] = np.ceil(reach[short]).astype(np.int64) + 8
+    mean, direc, cnt, stop = _prefix_lines(paths, cap, c0, skip, fit)
+    redo = np.flatnonzero((stop >= cap) & (cap < lens))
+    if len(redo):
+        out_r = _prefix_lines([paths[i] for i in redo], lens[redo], c0[redo], skip[redo],
+                              fit[redo])
+        mean[redo], direc[redo], cnt[redo] = out_r[:3]
     ok = cnt > 0
     # normal equations of sum_i |(I - t_i t_i^T)(p - m_i)|^2 + w |p - c0|^2, per junction
     proj = np.eye(2)[None] - direc[:, :, None] * direc[:, None, :]
