@@ -73,14 +73,19 @@ def test_batch_folder_loads_into_dataframes_and_plots(batch):
         plot_pdf(ens, "e", set_name="nope")
 
 
+def _one_configuration(quantity: str, x) -> Ensemble:
+    """A set ``g`` of one configuration whose branches hold the values ``x`` of ``quantity``."""
+    return Ensemble(
+        pd.DataFrame({"set": ["g"], "config_id": ["0"]}).reindex(columns=CONFIG_COLS),
+        pd.DataFrame({"set": "g", "config_id": "0", quantity: x,
+                      "region": "none"}).reindex(columns=BRANCH_COLS),
+        pd.DataFrame(columns=STACK_COLS), pd.DataFrame(columns=VOID_COLS))
+
+
 def test_plot_pdf_draws_the_fitted_density():
     rng = np.random.default_rng(0)
     x = rng.gamma(2.0, 0.5, 400)
-    ens = Ensemble(
-        pd.DataFrame({"set": ["g"], "config_id": ["0"]}).reindex(columns=CONFIG_COLS),
-        pd.DataFrame({"set": "g", "config_id": "0", "length_L": x,
-                      "region": "none"}).reindex(columns=BRANCH_COLS),
-        pd.DataFrame(columns=STACK_COLS), pd.DataFrame(columns=VOID_COLS))
+    ens = _one_configuration("length_L", x)
     fig = plot_pdf(ens, "length_L")
     curve = next(ln for ln in fig.axes[0].lines if ln.get_gid() == "law:g:all")
     xs, ys = curve.get_xdata(), curve.get_ydata()
@@ -96,11 +101,7 @@ def test_a_large_scale_is_named_in_the_axis_label_not_beside_the_axis():
     # matplotlib's "x10^4" beside the axis lies under the end of a two-line label
     rng = np.random.default_rng(1)
     x = rng.gamma(0.6, 2e4, 400)
-    ens = Ensemble(
-        pd.DataFrame({"set": ["g"], "config_id": ["0"]}).reindex(columns=CONFIG_COLS),
-        pd.DataFrame({"set": "g", "config_id": "0", "e": x,
-                      "region": "none"}).reindex(columns=BRANCH_COLS),
-        pd.DataFrame(columns=STACK_COLS), pd.DataFrame(columns=VOID_COLS))
+    ens = _one_configuration("e", x)
     fig = plot_pdf(ens, "e")
     lin = fig.axes[0]
     fig.canvas.draw()
