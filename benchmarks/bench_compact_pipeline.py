@@ -159,6 +159,22 @@ def drawn_truth(xy, an, p, scene, kwargs, tolerance_px=None):
     energies the rod's over the same stretch of rod, the summary (rod length, total energy)
     the rod's.
 
+    Parameters
+    ----------
+    xy : (N+1, 2) array
+        The rod (units of L).
+    an : simulate.contacts.RodAnalysis
+        Its contact analysis (the passes' stacks, as the drawing presses them).
+    p : dict
+        The compaction's params.json (``thickness``, ``wall_radius``).
+    scene : crosssection.truth.scene.Scene
+        The rendered scene (its ink mask is checked against the redrawn curve).
+    kwargs : dict
+        The render's options (``pass_smooth``).
+    tolerance_px : float, optional
+        Paper between touching strokes still read as contact (default
+        :data:`DRAWN_TOLERANCE_PX`).
+
     Returns
     -------
     (tables, paths_rc, drawn_energy)

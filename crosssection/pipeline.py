@@ -179,12 +179,14 @@ def _threshold_in_frame(rgb, p: AnalysisParams, path, timer, min_piece_px: float
         taken, missed = missed_ink(thr, m["features"], inside, thickness_px=p.thickness_px,
                                    min_piece_px=min_piece_px,
                                    disc=(*hole.center_rc, hole.radius_px))
+        fraction = missed / n_in if n_in else 0.0
         # ink below the scan's cut where a local cut takes it in (the dark side of an unevenly
-        # lit scan): the rest of the pipeline reads it as ink
-        if taken is not None:
+        # lit scan): the rest of the pipeline reads it as ink, where the ink_missed check
+        # says so (below its limit the scan's cut is kept, pixel for pixel)
+        if taken is not None and fraction > quality.INK_MISSED_LIMIT:
             thr = dataclasses.replace(thr, mask=thr.mask | taken,
                                       local_px=int(np.count_nonzero(taken)))
-    return thr, hole, outside, m["features"].dominance, missed / n_in if n_in else 0.0
+    return thr, hole, outside, m["features"].dominance, fraction
 
 
 def _checked_given_hole(rgb, hole, inside, thr, m, path, *, correct=True):

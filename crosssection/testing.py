@@ -91,8 +91,10 @@ class GeneratedScan:
     Attributes
     ----------
     folder : Path
-        Holds ``image.png``, ``params.json``, ``calibration.csv`` and ``truth/`` (the layout
-        of :func:`crosssection.truth.scene.write_scene`).
+        Holds ``image.png``, ``params.json``, ``calibration.csv``, ``set.toml`` and
+        ``truth/`` (the layout of :func:`crosssection.truth.scene.write_scene`); its
+        ``set.toml`` (scale, calibration, hole) is the one ``foldstat batch`` reads for the
+        scan, before any of a folder above.
     scene : crosssection.truth.scene.Scene
         The image (``rgb``), the truth ``summary`` and ``tables``, and the generator's
         ``params``.

@@ -407,17 +407,40 @@ def _read_part(path):
 
 def _parts_versions(out, ids, recorded: dict) -> list[dict]:
     """The ``{"version", "libraries"}`` that computed the part files ``ids``, each listed once
-    in the order of the ids; a part that does not say (written before parts recorded it) is
-    counted as ``recorded``'s, the folder's params.json."""
-    runs = []
+    in the order of the ids.
+
+    Parameters
+    ----------
+    out : path
+        The ensemble's folder.
+    ids : iterable of int
+        Configurations whose part files are read.
+    recorded : dict
+        The folder's params.json: its ``version`` and ``libraries``, and its ``versions``
+        when it lists several. A part without ``computed_by`` may come from any of those:
+        they are all kept.
+
+    Returns
+    -------
+    list of dict
+    """
+    runs, unsaid = [], False
     for i in ids:
         try:
             got = _read_part(part_path(out, i))[0].get("computed_by")
         except Exception:  # noqa: BLE001 - an unreadable part is redone, its version moot
             continue
-        run = got if isinstance(got, dict) else recorded
-        if run not in runs:
-            runs.append(run)
+        if not isinstance(got, dict):
+            unsaid = True
+        elif got not in runs:
+            runs.append(got)
+    if unsaid:
+        listed = recorded.get("versions")
+        first = {"version": recorded.get("version"), "libraries": recorded.get("libraries")}
+        for run in ([r for r in listed if isinstance(r, dict)]
+                    if isinstance(listed, list) and listed else [first]):
+            if run not in runs:
+                runs.append(run)
     return runs
 
 
@@ -550,8 +573,13 @@ def library_versions() -> dict:
 
 
 def computing_versions() -> dict:
-    """``{"version", "libraries"}`` of this process: the package and the libraries that
-    decide a rod's last bits (:func:`library_versions`)."""
+    """The versions of this process that decide a rod's last bits.
+
+    Returns
+    -------
+    dict
+        ``{"version": the package's, "libraries": ...}`` (:func:`library_versions`).
+    """
     return {"version": __version__, "libraries": library_versions()}
 
 
@@ -698,10 +726,10 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
     seeds = spawn_seeds(params["seed"], n)
     todo = [i for i in range(n) if not _part_ok(part_path(out, i), i, seeds[i])]
     # the record's versions are those of the runs that computed the configurations kept
-    kept = [i for i in range(n) if i not in set(todo)]
-    recorded = {"version": (raw or {}).get("version"), "libraries": (raw or {}).get("libraries")}
+    redo = set(todo)
+    kept = [i for i in range(n) if i not in redo]
     record, mixed = params_record(params, raw if kept else None,
-                                  _parts_versions(out, kept, recorded) if kept else [],
+                                  _parts_versions(out, kept, raw or {}) if kept else [],
                                   bool(todo))
     if mixed:
         warnings.warn(f"{out}: {mixed}", MixedVersionsWarning, stacklevel=2)
@@ -748,8 +776,7 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
     write_csv(out / "failures.csv", fail)
     if todo:  # the configurations this run computed join the record's versions
         done = [i for i in range(n) if i not in failed]
-        mine = {"version": record.get("version"), "libraries": record.get("libraries")}
-        final, _ = params_record(params, record, _parts_versions(out, done, mine), False)
+        final, _ = params_record(params, record, _parts_versions(out, done, record), False)
         if final != record:
             write_json(pfile, final)
     tables = assemble(out, n, columns, failed)

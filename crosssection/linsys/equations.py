@@ -100,9 +100,10 @@ def _argmin(z: list) -> int:
 def _candidate_rows(pack, ends) -> list:
     """Distinct non-trivial rows of the geometric partition and of ``pack.candidates``.
 
-    The partitions are read as they are (:func:`candidate_partitions` copies each side into
-    a list), and :func:`_junction_equation` asks once: the equations of the 162 junctions of
-    the dense 2000 x 2000 benchmark scan in 1.7 ms against 2.1."""
+    The partitions are read as they are, not copied side by side into lists as
+    :func:`candidate_partitions` gives them, and :func:`_junction_equation` asks once: the
+    equations of the 162 junctions of the dense 2000 x 2000 benchmark scan take 1.7 ms, 2.1
+    with copies asked for twice."""
     rows = []
     for a, b in [(pack.side_a, pack.side_b)] + list(getattr(pack, "candidates", [])):
         if _covers(a, b, ends):

@@ -922,7 +922,17 @@ def incomplete_batches(ens: Ensemble) -> list:
 
 def tables_unlike_summary(ens: Ensemble) -> list:
     """What the loader said of every scan of ``ens`` whose tables hold another number of
-    rows than its summary.json counts (``table_note``: cut short or edited), once each."""
+    rows than its summary.json counts (``table_note``: cut short or edited), once each.
+
+    Parameters
+    ----------
+    ens : Ensemble
+
+    Returns
+    -------
+    list of str
+        The notes, in the order of the configurations.
+    """
     return _notes(ens, "table_note")
 
 
@@ -1129,7 +1139,7 @@ COLUMN_NAMES = {
 RELATION_WORDS = {
     "eq12_const": "Eq. (12) constant C in N_br = C ε (√s̄/l̄) √N_l (expected 2√(π/3))",
     "slope_sqrt_s_vs_l": "slope of √s̄ against l̄ (paper 1.1)",
-    "eq12_eps_sqrtNl": "K in N_br = K ε √N_l (expected C × slope)",
+    "eq12_eps_sqrtNl": "K in N_br = K ε √N_l (expected 2√(π/3) × slope)",
     "eq14_slope": "Eq. (14) slope of N_br against N_l (expected <n_br>)",
     "eq15_fluct": "Eq. (15) mean relative deviation of n̄_br from <n_br>",
     "eq16": "Eq. (16) <n_br>√<N_l>/ε (paper 2.2√(π/3))",

@@ -722,7 +722,17 @@ def correlations_table(ens: Ensemble) -> pd.DataFrame:
 
 def count_text(v) -> str:
     """A cell of a count column (:data:`COUNT_COLUMNS`) as text: an integer exactly (1906,
-    not 1.91e+03), "" where missing, anything else (a note) as it is."""
+    not 1.91e+03), "" where missing, anything else (a note) as it is.
+
+    Parameters
+    ----------
+    v : object
+        The cell.
+
+    Returns
+    -------
+    str
+    """
     if v is None or v is pd.NA:
         return ""
     if isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_)):

@@ -168,6 +168,29 @@ def test_a_scan_with_no_ink_missed_keeps_the_mask_of_its_cut(scene, cast, gradie
     np.testing.assert_array_equal(res.mask_threshold, _cut_in_hole(rgb, scene))
 
 
+@pytest.mark.parametrize("share, repaired", [(0.5, False), (2.0, True)])
+def test_ink_taken_in_by_local_cuts_is_added_only_where_the_check_flags_it(scene, monkeypatch,
+                                                                          share, repaired):
+    # a local cut's pixels (a made-up piece of paper) counted at share x the limit: added to
+    # the ink, and flagged, above the limit only
+    from crosssection import pipeline
+
+    rgb = scene.rgb
+    cut = _cut_in_hole(rgb, scene)
+    taken = np.zeros(cut.shape, bool)
+    r, c = np.argwhere(~cut & _hole_frame(scene))[len(cut) // 2]
+    taken[r, c] = True
+
+    def fake(thr, *args, **kwargs):
+        return taken, int(share * quality.INK_MISSED_LIMIT * np.count_nonzero(thr.mask)) + 1
+
+    monkeypatch.setattr(pipeline, "missed_ink", fake)
+    res, _ = _analyze(rgb, **_given(scene))
+    assert ("ink_missed" in res.summary["quality"]["codes"]) == repaired
+    assert res.summary["thresholds"]["local_px"] == int(repaired)
+    np.testing.assert_array_equal(res.mask_threshold, cut | taken if repaired else cut)
+
+
 def test_ink_outside_the_given_hole_is_flagged(scene):
     # a hole smaller than the rod: the wall stacks and more lie outside it
     kw = _given(scene, hole_radius_mm=0.7 * scene.params["hole_radius_mm"])

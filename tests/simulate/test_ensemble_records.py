@@ -184,7 +184,7 @@ def test_a_default_quench_is_not_too_coarse_for_its_stacks():
 
 def _computed_by(out, run):
     """Make the folder's ensemble look computed by ``run`` ({"version", "libraries"}): its
-    record and every part file (``run`` None: parts that do not say, as older ones)."""
+    record and every part file (``run`` None: parts without ``computed_by``)."""
     if run is not None:
         (out / "params.json").write_text(json.dumps({**_params(out), **run}, indent=2))
     for part in sorted((out / "parts").iterdir()):
@@ -258,13 +258,29 @@ def test_a_run_stopped_before_its_first_configuration_leaves_the_versions(tmp_pa
     rec = _params(out)
     assert (rec["version"], rec["libraries"]) == (OLD_RUN["version"], OLD_RUN["libraries"])
     assert "versions" not in rec
-    # parts written before parts recorded their versions count as the record's
+    # parts without computed_by count as the record's
     _computed_by(out, None)
     monkeypatch.undo()
     capsys.readouterr()
     with pytest.warns(ensemble.MixedVersionsWarning):
         ensemble.run_ensemble(ensemble.params_from_args(_parse(more)), out, progress=False)
     assert _params(out)["versions"] == [OLD_RUN, ensemble.computing_versions()]
+
+
+def test_parts_that_do_not_say_keep_the_versions_the_record_lists(tmp_path, capsys):
+    # a folder listing two versions whose parts do not say which computed them: a re-run
+    # that computes nothing leaves the record as it is
+    out = tmp_path / "q"
+    argv = ["quench", *POWELL, "--out", str(out)]
+    assert simulate_main(argv) == 0
+    other = {"version": "0.0.2", "libraries": {"numpy": "1.0.1"}}
+    _computed_by(out, None)
+    (out / "params.json").write_text(json.dumps(
+        {**_params(out), **OLD_RUN, "versions": [OLD_RUN, other]}, indent=2))
+    before = (out / "params.json").read_bytes()
+    assert simulate_main(argv) == 0
+    assert (out / "params.json").read_bytes() == before
+    assert "mixes versions" not in capsys.readouterr().err
 
 
 def test_a_run_computing_every_configuration_records_its_own_version(tmp_path):

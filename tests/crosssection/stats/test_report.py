@@ -49,7 +49,7 @@ def test_stats_report_on_batch_and_simulation(tmp_path, seed):
     assert not [p for p in out.rglob(".*")]
 
 
-def test_counts_are_printed_exactly_in_every_table(tmp_path):
+def test_counts_are_printed_exactly_in_the_macro_and_per_configuration_tables(tmp_path):
     # about 20 branches per configuration: more than 1000 in the set
     s = demo.write_demo_simulation(tmp_path / "sim", n_configs=60, seed=1)
     out = tmp_path / "rep"
