@@ -373,11 +373,16 @@ def steps_figure(rgb, mask_threshold, mask_clean, skeleton, junction_centers_rc,
         fig = _figure(img.shape, ncols=4, inches=16.0)
         axes = fig.subplots(1, 4)
     else:
-        axes = list(np.ravel(axes))
-        if len(axes) != 4:
-            from crosssection.core.errors import ParameterError
+        from matplotlib.axes import Axes
 
+        from crosssection.core.errors import ParameterError
+
+        axes = list(np.ravel(np.asarray(axes, dtype=object)))
+        if len(axes) != 4:
             raise ParameterError(f"steps need 4 axes, got {len(axes)}")
+        if not all(isinstance(a, Axes) for a in axes):
+            raise ParameterError("steps need 4 matplotlib Axes, got "
+                                 f"{', '.join(sorted({type(a).__name__ for a in axes}))}")
         fig = axes[0].figure
     titles = titles or step_titles()
     # every panel in the scan's pixel coordinates, whatever size it is drawn at

@@ -472,6 +472,8 @@ def analyze(image, params: AnalysisParams | None = None, *, warn: bool = True,
         (:mod:`crosssection.quality`), unless ``warn`` is False.
     """
     path_hint = str(image) if isinstance(image, (str, Path)) else None
+    if not isinstance(warn, (bool, np.bool_)):
+        raise ParameterError(f"warn must be True or False, got {warn!r}", path_hint)
     try:
         return _analyze(image, params, overrides, warn=warn, image_sha256=image_sha256)
     except FoldstatError as exc:

@@ -112,7 +112,7 @@ class AnalysisResult:
                 ("junctions", num("n_junctions", "d")), ("stacks", num("n_stacks", "d")),
                 ("branches", num("n_branches", "d")), ("voids", num("n_voids", "d")),
                 ("branches per stack", num("mean_branches_per_stack", ".2f")),
-                ("rod length L", num("rod_length_mm", ".1f") + " mm"),
+                ("rod length L", html.escape(rod_length_text(s).removeprefix("L = "))),
                 ("epsilon = L / 2 pi R", num("epsilon", ".2f")),
                 ("total energy e", num("total_energy", ".4g"))]
         warn = "".join(f"<li><b>{html.escape(f.code)}</b>: {html.escape(f.message)}</li>"
@@ -185,6 +185,12 @@ class AnalysisResult:
         """
         from crosssection import figures as F
 
+        if ax is not None and kind in ("overlay", "curvature", "widths"):
+            from matplotlib.axes import Axes
+
+            if not isinstance(ax, Axes):
+                raise ParameterError(f"ax must be one matplotlib Axes for {kind!r}, got "
+                                     f"{type(ax).__name__}")
         if kind == "overlay":
             if ax is None:
                 return F.overlay_figure(self.rgb, self, thickness_px=self._drawn_thickness_px())

@@ -152,7 +152,8 @@ def as_rgb(arr, *, path=None) -> np.ndarray:
             raise ImageError("float image with NaN or infinite values", path)
         lo, hi = float(a.min()), float(a.max())
         if lo < 0 or hi > 1:
-            raise ImageError(f"float image values {lo:g}..{hi:g}: they must lie in [0, 1]",
+            # repr: a value a rounding above 1 prints as 1 with :g
+            raise ImageError(f"float image values {lo!r}..{hi!r}: they must lie in [0, 1]",
                              path)
         a = np.round(a * 65535.0).astype(np.uint16)
     elif a.dtype != np.uint8:

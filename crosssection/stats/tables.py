@@ -440,9 +440,9 @@ def compute_stats(ens: Ensemble, opts: StatsOptions | None = None, *,
     Parameters
     ----------
     ens : Ensemble
-        Values the fits leave out (not finite, or <= 0) are counted in the ``n_dropped``
-        column of ``fits`` and told in one warning per set and quantity
-        (:func:`fit_quantity`).
+        Values the fits leave out (not finite, or <= 0, or below the detection limit of a
+        truncated fit) are counted in the ``n_dropped`` column of ``fits``; those not finite
+        or <= 0 are also told in one warning per set and quantity (:func:`fit_quantity`).
     opts : StatsOptions, optional
     progress : bool or None
         A tqdm bar on stderr over the fits (set, region, quantity: the slow part, bootstrap

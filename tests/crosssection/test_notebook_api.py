@@ -70,6 +70,27 @@ def test_plot_into_given_axes(result):
         result.plot("steps", ax=axes[0, 0])
     with pytest.raises(ParameterError, match="kind"):
         result.plot("histogram")
+    # a wrong ax is named, not an AttributeError from inside matplotlib's callers
+    for kind, ax in (("overlay", axes), ("curvature", "x"), ("widths", 5)):
+        with pytest.raises(ParameterError, match="ax must be one matplotlib Axes"):
+            result.plot(kind, ax=ax)
+    with pytest.raises(ParameterError, match="4 matplotlib Axes"):
+        result.plot("steps", ax=["a", "b", "c", "d"])
+
+
+def test_html_shows_the_rod_length_the_energies_and_epsilon_use(foldstat_scan_factory):
+    given = foldstat_scan_factory(seed=4, n_stacks=20, max_layers=4).analyze(rod_length_mm=100.0)
+    page = given._repr_html_()
+    measured = given.summary["rod_length_mm"]
+    assert f"{measured:.1f} mm measured, 100.0 mm given" in page
+    assert f"{given.summary['epsilon']:.2f}" in page
+
+
+def test_warn_takes_a_bool(result):
+    from crosssection import analyze
+
+    with pytest.raises(ParameterError, match="warn must be True or False"):
+        analyze(result.rgb, warn="no")
 
 
 def test_the_widths_plot_names_its_line_by_whether_a_calibration_was_given(result):

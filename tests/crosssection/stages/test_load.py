@@ -466,3 +466,13 @@ def test_a_scan_stored_turned_gives_the_same_analysis(tmp_path, orientation):
     # the summary says which frame the coordinates are in
     assert res.summary["exif_orientation"] == orientation
     assert ref.summary["exif_orientation"] == 1
+
+
+def test_a_float_image_a_rounding_above_one_is_named_with_its_value():
+    # printed with :g, 1 + 1e-12 read "1" in a message saying values must lie in [0, 1]
+    from crosssection.stages.load import as_rgb
+
+    img = np.full((8, 8, 3), 0.5)
+    img[0, 0, 2] = 1.0 + 1e-12
+    with pytest.raises(ImageError, match=r"0\.5\.\.1\.000000000001: they must lie in \[0, 1\]"):
+        as_rgb(img)
