@@ -45,7 +45,8 @@ from crosssection.stages.load import load_image_oriented, as_rgb, exif_orientati
 from crosssection.stages.packs import compute_packs
 from crosssection.stages.skeleton import skeletonize_mask
 from crosssection.stages.threshold import (BRIDGE_MAX_H_PX, bridge_broken_lines, passes_at,
-                                           colour_features, missed_ink, threshold_rgb)
+                                           colour_features, missed_ink, threshold_rgb,
+                                           _range_note)
 from crosssection.stages.widths import (distance_map, layer_steps, stack_widths_px,
                                         width_profiles_px)
 
@@ -364,7 +365,10 @@ def _check_fraction(thr, path, rgb=None):
     if frac == 0:
         why = getattr(thr, "note", "") or "not a blue-ink scan, or adjust the threshold"
         blue = _blue_share(rgb) if rgb is not None else 0.0
-        if rgb is not None and _achromatic(rgb):
+        # data of fewer bits than their type (9-bit values in uint16) look grey at 8 bits:
+        # the threshold's note names the range, the likelier cause
+        narrow = rgb is not None and bool(_range_note(rgb, None))
+        if rgb is not None and not narrow and _achromatic(rgb):
             why = ("the image has no colour (red, green and blue equal to within 2 levels on "
                    "99.9 % of the pixels): a grayscale scan saved as RGB, or no ink at all? "
                    "scan in colour")

@@ -136,9 +136,12 @@ def as_rgb(arr, *, path=None) -> np.ndarray:
         Grayscale, wrong shape, bad dtype or values, too small.
     """
     a = np.asarray(arr)
-    if a.ndim == 2 or (a.ndim == 3 and a.shape[2] in (1, 2)):
+    if a.ndim == 2 or (a.ndim == 3 and a.shape[2] == 1):
         raise ImageError("grayscale image: an RGB scan of blue ink is needed to threshold "
                          "on colour", path)
+    if a.ndim == 3 and a.shape[2] == 2:
+        raise ImageError("2-channel image (grayscale with alpha, or two colour planes): an "
+                         "RGB scan of blue ink is needed to threshold on colour", path)
     if a.ndim != 3 or a.shape[2] not in (3, 4):
         raise ImageError(f"not an RGB image (array shape {a.shape})", path)
     if a.dtype == np.bool_:
@@ -170,6 +173,10 @@ def as_rgb(arr, *, path=None) -> np.ndarray:
         elif a.dtype != np.uint16:
             a = a.astype(np.uint16)
     if a.shape[2] == 4:
+        if not np.any(a[..., 3]):
+            # composited over white it would read as a blank page, "no colour"
+            raise ImageError("fully transparent image (alpha 0 everywhere): its colours "
+                             "are not shown; save the scan without an alpha channel", path)
         a = _composite_alpha(a)
     h, w = a.shape[:2]
     if min(h, w) < MIN_SIDE_PX:

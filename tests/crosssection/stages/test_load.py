@@ -476,3 +476,12 @@ def test_a_float_image_a_rounding_above_one_is_named_with_its_value():
     img[0, 0, 2] = 1.0 + 1e-12
     with pytest.raises(ImageError, match=r"0\.5\.\.1\.000000000001: they must lie in \[0, 1\]"):
         as_rgb(img)
+
+
+def test_two_channels_and_full_transparency_are_named_as_such():
+    from crosssection.stages.load import as_rgb
+
+    with pytest.raises(ImageError, match="2-channel image"):
+        as_rgb(np.zeros((64, 64, 2), np.uint8))
+    with pytest.raises(ImageError, match="fully transparent"):
+        as_rgb(np.zeros((64, 64, 4), np.uint8))

@@ -477,6 +477,18 @@ def test_an_empty_mask_of_12_bit_data_in_16_bits_says_so(method):
     assert "reach only" not in threshold_rgb(rgb16, method=method).note
 
 
+def test_9_bit_data_in_16_bits_are_named_by_their_range_not_as_a_grey_scan():
+    # at 8 bits 9-bit data are 0..1: grey, but the range is the likelier cause
+    import crosssection
+    from crosssection.core.errors import AnalysisError
+
+    sc = make_scene(seed=3, **KW)
+    nine = sc.rgb.astype(np.uint16) * 2
+    with pytest.raises(AnalysisError, match=r"\(9-bit data\?\)") as err:
+        crosssection.analyze(nine, px_per_mm=sc.params["px_per_mm"])
+    assert "no colour" not in str(err.value)
+
+
 def test_a_plate_darker_than_red_marks_is_named_as_a_plate_not_as_marks():
     """Red ink is lighter in red and green than a grey plate: the darkest class is the
     plate, which frames the scan; the note says so and gives no cut (one would read the
