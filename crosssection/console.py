@@ -43,8 +43,9 @@ Doubtful results are printed as 'warning: FILE: ...' lines on stderr."""
 DESCRIPTION = (
     "Folding statistics of confined elastic sheets and rods: analyse scans of cut "
     "cross-sections (analyze, steps, batch), compute ensemble statistics (stats), simulate "
-    "the folding of a confined rod (quench, anneal), render simulations as scans and validate "
-    "the analysis on them (render, validate). 'foldstat COMMAND --help' lists every option "
+    "the folding of a confined rod (quench, anneal) and compact it (compact), render "
+    "simulations as scans and validate the analysis on them (render, validate), chart "
+    "accuracy and speed (benchmark). 'foldstat COMMAND --help' lists every option "
     "of a command with its unit and default.")
 
 

@@ -112,6 +112,9 @@ def run(args) -> int:
     written = copy_samples(args.dest, overwrite=args.force)
     scans = [p for p in written if p.parent == Path(args.dest).expanduser()
              and p.suffix in (".png", ".jpg", ".tif")]
+    # the batch's output beside the scans, never in their own folder
+    dest = Path(args.dest).expanduser()
+    out = "batch/" if dest.resolve() != Path("batch").resolve() else f"{dest.name}_out/"
     print(f"{len(scans)} sample scans and their truth -> {args.dest} "
-          f"(next: foldstat batch {shlex.quote(str(args.dest))} --out batch/)")
+          f"(next: foldstat batch {shlex.quote(str(args.dest))} --out {out})")
     return 0

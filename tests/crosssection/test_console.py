@@ -103,6 +103,15 @@ def test_bad_input_is_one_line_and_status_2(tmp_path, capsys):
     assert len(capsys.readouterr().err.strip().splitlines()) == 1
 
 
+def test_the_next_command_samples_suggest_writes_beside_the_scans(tmp_path, capsys,
+                                                                  monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert console.main(["samples", "scans"]) == 0
+    assert "(next: foldstat batch scans --out batch/)" in capsys.readouterr().out
+    assert console.main(["samples", "batch"]) == 0  # never the scans' own folder
+    assert "(next: foldstat batch batch --out batch_out/)" in capsys.readouterr().out
+
+
 def test_samples_are_copied_out_and_not_overwritten(tmp_path, capsys):
     src = samples_path()
     dest = tmp_path / "samples"
