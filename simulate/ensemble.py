@@ -405,16 +405,14 @@ def _read_part(path):
         return json.loads(str(z["meta"])), z["xy"].copy()
 
 
-def _parts_versions(out, ids, recorded: dict) -> list[dict]:
-    """The ``{"version", "libraries"}`` that computed the part files ``ids``, each listed once
-    in the order of the ids.
+def _parts_versions(metas, recorded: dict) -> list[dict]:
+    """The ``{"version", "libraries"}`` that computed some part files, each listed once in
+    the order of the parts.
 
     Parameters
     ----------
-    out : path
-        The ensemble's folder.
-    ids : iterable of int
-        Configurations whose part files are read.
+    metas : iterable of dict
+        The parts' records (:func:`_kept_part`).
     recorded : dict
         The folder's params.json: its ``version`` and ``libraries``, and its ``versions``
         when it lists several. A part without ``computed_by`` may come from any of those:
@@ -425,11 +423,8 @@ def _parts_versions(out, ids, recorded: dict) -> list[dict]:
     list of dict
     """
     runs, unsaid = [], False
-    for i in ids:
-        try:
-            got = _read_part(part_path(out, i))[0].get("computed_by")
-        except Exception:  # noqa: BLE001 - an unreadable part is redone, its version moot
-            continue
+    for meta in metas:
+        got = meta.get("computed_by")
         if not isinstance(got, dict):
             unsaid = True
         elif got not in runs:
@@ -444,18 +439,20 @@ def _parts_versions(out, ids, recorded: dict) -> list[dict]:
     return runs
 
 
-def _part_ok(path, config_id: int, seed: int) -> bool:
-    """Whether a part file is a complete result of this configuration (same id and seed);
-    a truncated, garbled or foreign one is redone, so a resume never fails on it."""
+def _kept_part(path, config_id: int, seed: int) -> dict | None:
+    """The record of a part file that is a complete result of this configuration (same id
+    and seed), else None: a truncated, garbled or foreign one is redone, so a resume never
+    fails on it."""
     if not path.exists():
-        return False
+        return None
     try:
         meta, xy = _read_part(path)
         row = meta["row"]
-        return (int(row["config_id"]) == config_id and int(row["seed"]) == int(seed)
-                and xy.ndim == 2 and xy.shape[1] == 2 and bool(np.isfinite(xy).all()))
+        ok = (int(row["config_id"]) == config_id and int(row["seed"]) == int(seed)
+              and xy.ndim == 2 and xy.shape[1] == 2 and bool(np.isfinite(xy).all()))
     except Exception:  # noqa: BLE001 - any unreadable part is simply redone
-        return False
+        return None
+    return meta if ok else None
 
 
 def assemble(out, n_configs: int, columns=None, failed=None) -> dict:
@@ -724,13 +721,12 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
         warnings.warn(f"{out}: {coarse}", CoarseSegmentsWarning, stacklevel=2)
     n = int(params["n_configs"])
     seeds = spawn_seeds(params["seed"], n)
-    todo = [i for i in range(n) if not _part_ok(part_path(out, i), i, seeds[i])]
+    kept = {i: meta for i in range(n)
+            if (meta := _kept_part(part_path(out, i), i, seeds[i])) is not None}
+    todo = [i for i in range(n) if i not in kept]
     # the record's versions are those of the runs that computed the configurations kept
-    redo = set(todo)
-    kept = [i for i in range(n) if i not in redo]
     record, mixed = params_record(params, raw if kept else None,
-                                  _parts_versions(out, kept, raw or {}) if kept else [],
-                                  bool(todo))
+                                  _parts_versions(kept.values(), raw or {}), bool(todo))
     if mixed:
         warnings.warn(f"{out}: {mixed}", MixedVersionsWarning, stacklevel=2)
     task = run_config if task is None else task
@@ -775,8 +771,9 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
                         columns=["config_id", "seed", "error"])
     write_csv(out / "failures.csv", fail)
     if todo:  # the configurations this run computed join the record's versions
-        done = [i for i in range(n) if i not in failed]
-        final, _ = params_record(params, record, _parts_versions(out, done, record), False)
+        metas = [kept[i] if i in kept else _read_part(part_path(out, i))[0]
+                 for i in range(n) if i not in failed]
+        final, _ = params_record(params, record, _parts_versions(metas, record), False)
         if final != record:
             write_json(pfile, final)
     tables = assemble(out, n, columns, failed)
