@@ -36,11 +36,12 @@ hidden_energy_fraction      fraction of the truth energy lying where a stack's c
 
 Usage: python benchmarks/independent_sweep.py [--conditions typical,thick,lowres,peel,thick_dense,midres]
        [--seed 1] [--per-condition 8] [--workers 2] [--out benchmarks/out] [--quick]
-       [--hole-not-given]
+       [--hole-not-given] [--no-calibration]
 Writes OUT/independent_sweep.csv (one row per scene: condition, seed, the scene's
 description, generate_s (empty when the scene was on disk), the scores above, warnings,
 analyze_s) and OUT/independent_sweep.json (package version, parameters, library versions),
-named ``independent_sweep_nohole`` with ``--hole-not-given``; prints the median of each
+named ``independent_sweep_nohole`` with ``--hole-not-given`` (``_nocal`` added with
+``--no-calibration``: the generator's width law withheld, the pipeline reads its own); prints the median of each
 score per condition.
 """
 from __future__ import annotations
@@ -259,7 +260,8 @@ def _scene_on_disk(folder: Path, name: str) -> bool:
     return True
 
 
-def run_one(condition: str, seed: int, folder: str, hole_given: bool = True) -> dict:
+def run_one(condition: str, seed: int, folder: str, hole_given: bool = True,
+            calibrated: bool = True) -> dict:
     """Generate (unless on disk), analyse and score one scene; return its row."""
     import crosssection
 
@@ -284,7 +286,8 @@ def run_one(condition: str, seed: int, folder: str, hole_given: bool = True) -> 
                          hole_center_px=tuple(truth["hole_center_px"])) if hole_given else {})
             res = crosssection.analyze(
                 str(folder / f"{name}.png"), px_per_mm=truth["px_per_mm"],
-                thickness_mm=truth["thickness_mm"], calibration=str(folder / "calibration.csv"),
+                thickness_mm=truth["thickness_mm"],
+                calibration=str(folder / "calibration.csv") if calibrated else None,
                 rod_length_mm=truth["L_mm"], **hole)
     except crosssection.FoldstatError as exc:
         row.update(error=exc.one_line(), analyze_s=time.perf_counter() - t0)
@@ -324,6 +327,8 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "out"))
     ap.add_argument("--hole-not-given", action="store_true",
                     help="the pipeline finds the hole (default: radius and centre given)")
+    ap.add_argument("--no-calibration", action="store_true",
+                    help="withhold the generator's width law: the pipeline reads its own")
     args = ap.parse_args(argv)
     conditions = [c for c in args.conditions.split(",") if c]
     unknown = sorted(set(conditions) - set(CONDITIONS))
@@ -347,15 +352,16 @@ def main(argv=None) -> int:
     rows = []
     if args.workers == 1:
         for c, s in jobs:
-            rows.append(run_one(c, s, str(folder), not args.hole_not_given))
+            rows.append(run_one(c, s, str(folder), not args.hole_not_given,
+                                not args.no_calibration))
             _progress(rows[-1])
     else:
         import multiprocessing as mp
 
         # 'spawn': workers start clean, without the parent's threads (numba, BLAS)
         with ProcessPoolExecutor(args.workers, mp_context=mp.get_context("spawn")) as ex:
-            futures = [ex.submit(run_one, c, s, str(folder), not args.hole_not_given)
-                       for c, s in jobs]
+            futures = [ex.submit(run_one, c, s, str(folder), not args.hole_not_given,
+                                 not args.no_calibration) for c, s in jobs]
             for fut in as_completed(futures):
                 rows.append(fut.result())
                 _progress(rows[-1])
@@ -367,13 +373,15 @@ def main(argv=None) -> int:
     last = [c for c in (*METRICS, "n_stacks_out", "n_junctions_out", "warnings", "analyze_s",
                         "error") if c in df]
     df = df[[c for c in df if c not in last] + last]
-    stem = "independent_sweep_nohole" if args.hole_not_given else "independent_sweep"
+    stem = ("independent_sweep_nohole" if args.hole_not_given else "independent_sweep") + \
+        ("_nocal" if args.no_calibration else "")
     csv = out / f"{stem}.csv"
     write_csv(csv, df)
     meta = {"foldstat_version": crosssection.__version__,
             "parameters": {"conditions": conditions, "seed": args.seed, "per_condition": n,
                            "workers": args.workers, "scene_folder": SCENE_DIR,
-                           "analyze": "defaults; px_per_mm, thickness_mm, calibration, "
+                           "analyze": "defaults; px_per_mm, thickness_mm, "
+                                      + ("" if args.no_calibration else "calibration, ")
                                       + ("" if args.hole_not_given else
                                          "hole_radius_mm, hole_center_px, ")
                                       + "rod_length_mm given",

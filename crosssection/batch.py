@@ -86,7 +86,7 @@ Design choices
 - A calibration is used only when a ``set.toml`` or ``--calibration`` names it. A
   ``calibration.csv`` lying beside scans that are analysed without one is named in a
   ``warning:`` line (and in batch.json): every such scan would otherwise read its layer counts
-  as ``n h`` wide and be flagged ``no_calibration``.
+  through the width law read from itself and be flagged ``no_calibration``.
 """
 from __future__ import annotations
 

@@ -463,8 +463,8 @@ def widths_figure(stacks_df, calibration=None, *, ax=None,
     ax : matplotlib axes, optional
         Draw into it instead of a new figure.
     calibration_label : str
-        The line's legend entry (an analysis without a calibration reads widths against
-        ``w = n h``, which is no calibration).
+        The line's legend entry (an analysis without a calibration reads widths against the
+        law read from the scan, or ``w = n h``: no calibration either way).
 
     Returns
     -------

@@ -23,6 +23,7 @@ from crosssection.core.provenance import resolved_path
 
 __all__ = ["ScanScale", "AnalysisParams", "add_analysis_arguments", "check_param", "PARAM_NAMES",
            "THRESHOLD_METHODS", "CURVATURE_METHODS", "SKELETON_METHODS", "WIDTH_STATISTICS",
+           "WIDTH_LAWS", "CHOICE_PARAMS",
            "SWITCHES", "switched_off"]
 
 #: The parameters that are on by default, each turned off by ``--no-<name>`` on the command
@@ -41,6 +42,13 @@ THRESHOLD_METHODS = ("auto", "fixed", "otsu")
 CURVATURE_METHODS = ("walls", "missing", "paper")
 SKELETON_METHODS = ("thinning", "skimage")
 WIDTH_STATISTICS = ("median", "mean")
+#: Width law of an analysis without a calibration; the first is the default
+#: (crosssection.stages.widthlaw)
+WIDTH_LAWS = ("fitted", "linear")
+#: The parameters whose value is one of a few names, with those names.
+CHOICE_PARAMS = {"threshold_method": THRESHOLD_METHODS, "curvature_method": CURVATURE_METHODS,
+                 "skeleton_method": SKELETON_METHODS, "width_statistic": WIDTH_STATISTICS,
+                 "width_law": WIDTH_LAWS}
 #: Sheet thickness in pixels below which a scan is low resolution: one pixel of width is a
 #: third of a layer or more, and a curvature window of one layer spans under 15 px
 #: (``crosssection.quality``, ``low_resolution``)
@@ -144,8 +152,12 @@ class AnalysisParams:
         "hole centre, x = column, y = row (default: found in the scan)", "px", nargs=2,
         metavar=("X", "Y")))
     calibration: object = field(default=None, metadata=_opt(
-        "CSV n_layers,width_mm: width of a cut stack of n layers (default: width = n h, "
-        "with a warning)"))
+        "CSV n_layers,width_mm: width of a cut stack of n layers (default: the law "
+        "width_law, with a warning)"))
+    width_law: str = field(default=WIDTH_LAWS[0], metadata=_opt(
+        "without a calibration: fitted (width = a + b n, a read at the junctions, b from "
+        "the widths' lattice of whole layers; w = n h where the scan shows none) or linear "
+        "(width = n h); ignored when a calibration is given", choices=WIDTH_LAWS))
     rod_length_mm: float | None = field(default=None, metadata=_opt(
         "known rod length L for the dimensionless energies and epsilon (default: measured "
         "sum n_br l)", "mm"))
@@ -481,8 +493,7 @@ def check_param(name: str, value):
     """Validate and normalise one parameter value (``ParameterError`` naming it)."""
     if value is None:
         if name in ("px_per_mm", "thickness_mm", "l_min_mm", "merge_px", "sliver_width_h",
-                    "threshold_method", "curvature_method", "skeleton_method",
-                    "width_statistic") + tuple(SWITCHES):
+                    *CHOICE_PARAMS, *SWITCHES):
             raise ParameterError(f"{name} is required")
         return None
     if name in _POSITIVE:
@@ -513,14 +524,8 @@ def check_param(name: str, value):
                                  f"{value!r}") from None
         return (_number("hole_center_px x", x, minimum=-math.inf),
                 _number("hole_center_px y", y, minimum=-math.inf))
-    if name == "threshold_method":
-        return _choice(name, value, THRESHOLD_METHODS)
-    if name == "curvature_method":
-        return _choice(name, value, CURVATURE_METHODS)
-    if name == "skeleton_method":
-        return _choice(name, value, SKELETON_METHODS)
-    if name == "width_statistic":
-        return _choice(name, value, WIDTH_STATISTICS)
+    if name in CHOICE_PARAMS:
+        return _choice(name, value, CHOICE_PARAMS[name])
     if name in SWITCHES:
         if not isinstance(value, bool):
             raise ParameterError(f"{name} must be true or false, got {value!r}")

@@ -42,11 +42,13 @@ from crosssection.stages import curvature, hole as hole_stage, voids as void_sta
 from crosssection.stages.clean import clean_mask
 from crosssection.stages.graph import split_stacks, stack_graph, with_multigraph, without_stacks
 from crosssection.stages.load import load_image_oriented, as_rgb, exif_orientation, recorded_header
+from crosssection.linsys.equations import conservation_equations
 from crosssection.stages.packs import compute_packs
 from crosssection.stages.skeleton import skeletonize_mask
 from crosssection.stages.threshold import (BRIDGE_MAX_H_PX, bridge_broken_lines, passes_at,
                                            colour_features, missed_ink, threshold_rgb,
                                            _range_note)
+from crosssection.stages.widthlaw import fit_width_law
 from crosssection.stages.widths import (distance_map, layer_steps, stack_widths_px,
                                         width_profiles_px)
 
@@ -508,20 +510,26 @@ def _analyze(image, params, overrides, *, warn: bool = True,
             # user -> analyze -> _analyze: the warning points at the user's call
             _warnings.warn(f"{image}: {note}", quality.InputWarning, stacklevel=3)
     sg, h_px, scale = pre.graph, p.thickness_px, p.scale
+    law, packs = None, None
     with timer("widths"):
         # layers ending inside a band leave no junction: the band is cut where its width steps
         profiles = width_profiles_px(sg.paths, pre.distance_px)
+        if p.calibration is None and p.width_law == "fitted":
+            law, packs = _fitted_law(sg, pre.distance_px, profiles, p)
+            if law.ok:
+                cal = law.calibration()
         cuts = layer_steps(sg, pre.distance_px, lambda w: cal.layers(scale.to_mm(w)),
                            thickness_px=h_px, profiles=profiles) if p.layer_steps else {}
         if cuts:
-            sg, profiles = split_stacks(sg, cuts), None
+            sg, profiles, packs = split_stacks(sg, cuts), None, None
             pre = dataclasses.replace(pre, graph=sg)
         width_mm = scale.to_mm(stack_widths_px(sg, pre.distance_px, junction_margin_px=2 * h_px,
                                                statistic=p.width_statistic,
                                                profiles=profiles))
         layers_est = np.asarray(cal.layers(width_mm), dtype=float)
     with timer("packs"):
-        packs = compute_packs(sg, tangent_px=scale.to_px(p.tangent_used_mm))
+        if packs is None:
+            packs = compute_packs(sg, tangent_px=scale.to_px(p.tangent_used_mm))
     with timer("linear_system"):
         lin = solve_branch_counts(sg, packs, layers_est,
                                   integer_refinement=p.integer_refinement)
@@ -553,7 +561,21 @@ def _analyze(image, params, overrides, *, warn: bool = True,
                                 profiles=profiles, stack_energy=stack_energy)
         junctions = tb.junction_table(pre.junctions, sg, packs, n_br, lin)
     return _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, voids, warn,
-                   rod_mm, L, timer, t_start, inputs)
+                   rod_mm, L, timer, t_start, inputs, law)
+
+
+def _fitted_law(sg, distance_px, profiles, p: AnalysisParams):
+    """The width law read from the scan's stacks and clear junctions
+    (:mod:`crosssection.stages.widthlaw`), and the packs it read them from (kept when no
+    stack is cut at a layer step)."""
+    scale = p.scale
+    width_mm = scale.to_mm(stack_widths_px(sg, distance_px, junction_margin_px=2 * p.thickness_px,
+                                           statistic=p.width_statistic, profiles=profiles))
+    packs = compute_packs(sg, tangent_px=scale.to_px(p.tangent_used_mm))
+    hard, _, _, _ = conservation_equations(sg, packs)
+    law = fit_width_law(width_mm, scale.to_mm(np.asarray(sg.length_px, dtype=float)),
+                        [row for _, row in hard], thickness_mm=p.thickness_mm)
+    return law, packs
 
 
 def _touch_px(sg, width_px, h_px) -> float:
@@ -600,7 +622,7 @@ def _border_pixels(mask) -> np.ndarray:
 
 
 def _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, voids, warn,
-            rod_mm, L, timer, t_start, inputs=None) -> AnalysisResult:
+            rod_mm, L, timer, t_start, inputs=None, law=None) -> AnalysisResult:
     """Summary, quality checks and warnings: the :class:`AnalysisResult` built in one place."""
     from crosssection.core import schema
 
@@ -614,16 +636,17 @@ def _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, void
         calibration_max_width_mm=_max_width_mm(cal, p), junctions=junctions,
         image_shape=pre.rgb.shape, file_px_per_mm=pre.file_px_per_mm,
         file_pages=pre.file_pages, network_shares=_network_shares(lin, stacks),
-        border_ink_rc=_border_pixels(pre.mask_clean))
+        border_ink_rc=_border_pixels(pre.mask_clean), width_law=law)
     notes = list(pre.warnings) + [f"linear system: {f}" for f in lin.flags
                                   if not str(f).startswith("disconnected")]
     summary = tb.summary(pre=pre, params=p, linear_system=lin, junctions=junctions,
                          stacks=stacks, branches=branches, voids=voids, rod_measured_mm=rod_mm,
                          rod_used_mm=L,
-                         calibration_source=(LINEAR_CALIBRATION if p.calibration is None
-                                             else p.calibration_record()),
+                         calibration_source=_calibration_source(p, law),
                          timings=timer.t, total_time_s=time.perf_counter() - t_start,
                          version=__version__, inputs=inputs, libraries=library_versions())
+    if law is not None:
+        summary["width_law"] = law.record()
     summary["quality"] = quality.quality_block(flags)
     summary["warnings"] = notes + [f.message for f in flags]
     where = pre.path or "<array>"
@@ -638,6 +661,15 @@ def _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, void
         mask_clean=pre.mask_clean, skeleton=pre.skeleton, junction_clusters=pre.junctions,
         packs=packs, linear_system=lin, profiles=profiles, params=p, path=pre.path,
         quality=tuple(flags))
+
+
+def _calibration_source(p: AnalysisParams, law) -> object:
+    """``summary.json`` ``calibration``: the given one's record, or the law used without."""
+    if p.calibration is not None:
+        return p.calibration_record()
+    if law is not None and law.ok:
+        return f"fitted to the scan: {law.describe()}"
+    return LINEAR_CALIBRATION
 
 
 def _max_width_mm(cal, p) -> float | None:

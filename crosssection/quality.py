@@ -10,7 +10,8 @@ code                     what is measured                                     li
 =======================  ===================================================  ====================
 pages                    images (pages, frames) the scan file holds; only     > 1
                          the first is analysed
-no_calibration           no width calibration given: layers from width = n h  always flagged
+no_calibration           no width calibration given: layers from the width    always flagged
+                         law read from the scan (or width = n h)
 scale_mismatch           px_per_mm used / the resolution the file records     off by > 2 %
                          (a scanner's: 100 dpi or more)
 low_resolution           sheet thickness h in pixels                          h < 3 px
@@ -76,7 +77,8 @@ h = 6.25 px (0.25 layer at 3 px, 0.19 at 4 px, 0.15 at 5 px). In the validation 
 (``docs/validation/atlas``, 10 scenes per cell, network and render scenes) it is raised on 1
 scene in 10 at blur 1.5 px (h = 3, 4, 5 and 6 px; counts exact on those), 1-3 at 2 px
 (exact n_br 0.34-1.0) and 3-9 at 3 px (0.31-1.0), on 1 and 3 of 10 at noise 30 and 45
-(exact n_br 0.51 in the median) and on every scene analysed without its calibration. At h < 3 px
+(exact n_br 0.51 in the median) and on every scene analysed without its calibration under
+``w = n h`` (``width_law="linear"``). At h < 3 px
 (``low_resolution``) right widths scatter as much as wrong ones (up to 0.24 on 14 scans at 25
 px/mm) and the check is not made. A ``px_per_mm`` half the true one doubles every count, back
 on the lattice: it is seen only as h below 3 px when the true h is below 6 px. Widths near
@@ -343,11 +345,20 @@ def _crossed_check(params, hole) -> list[QualityFlag]:
     return [QualityFlag("hole_crossed", msg, cut, GIVEN_CROSSED_LIMIT)]
 
 
+def _no_calibration_message(width_law) -> str:
+    if width_law is not None and width_law.ok:
+        return ("no width calibration: layer counts from the width law read from this scan, "
+                f"{width_law.describe()} (pass a calibration CSV)")
+    why = "" if width_law is None else f" ({width_law.describe()})"
+    return ("no width calibration: layer counts assume a stack of n layers is n h wide"
+            f"{why} (pass a calibration CSV)")
+
+
 def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stacks,
            rod_length_mm, rod_measured_mm, ink_area_in_hole_mm2, calibration_max_width_mm,
            junctions, image_shape=None, file_px_per_mm=None,
            file_pages=1, network_shares=None, border_ink_rc=None,
-           ink_missed_fraction=0.0) -> list[QualityFlag]:
+           ink_missed_fraction=0.0, width_law=None) -> list[QualityFlag]:
     """Run every check of the module table on one analysis.
 
     Parameters
@@ -393,6 +404,10 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
         in pieces the cleaning keeps, over the ink cut
         (:func:`crosssection.stages.threshold.missed_ink`; the pipeline adds it to the ink):
         the ``ink_missed`` check.
+    width_law : WidthLawFit, optional
+        The width law read from the scan when no calibration is given
+        (:func:`crosssection.stages.widthlaw.fit_width_law`): named by the ``no_calibration``
+        flag.
 
     Returns
     -------
@@ -405,8 +420,7 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
                                  "frames); only the first is analysed: save each scan as its "
                                  "own file", file_pages, 1))
     if params.calibration is None:
-        flags.append(QualityFlag("no_calibration", "no width calibration: layer counts assume "
-                                 "a stack of n layers is n h wide (pass a calibration CSV)"))
+        flags.append(QualityFlag("no_calibration", _no_calibration_message(width_law)))
     if file_px_per_mm and abs(params.px_per_mm / file_px_per_mm - 1.0) > SCALE_TOLERANCE:
         flags.append(QualityFlag(
             "scale_mismatch", f"the file records {25.4 * file_px_per_mm:.0f} dpi "

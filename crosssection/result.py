@@ -207,9 +207,15 @@ class AnalysisResult:
 
             cal = _calibration(self.params) if self.params is not None else None
             given = self.params is not None and self.params.calibration is not None
-            return F.widths_figure(self.stacks, cal, ax=ax,
-                                   calibration_label="calibration w(n)" if given else
-                                   "no calibration: w = n h")
+            label = "calibration w(n)" if given else "no calibration: w = n h"
+            law = self.summary.get("width_law") or {}
+            if not given and law.get("ok"):
+                from crosssection.stages.widthlaw import WidthLawFit
+
+                fit = WidthLawFit(**law)
+                cal, label = fit.calibration(), (f"read from the scan: w = {fit.offset_mm:.3f}"
+                                                 f" + {fit.step_mm:.3f} n mm")
+            return F.widths_figure(self.stacks, cal, ax=ax, calibration_label=label)
         raise ParameterError(f"kind must be one of 'overlay', 'steps', 'curvature', 'widths', "
                              f"got {kind!r}")
 

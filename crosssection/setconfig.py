@@ -33,7 +33,7 @@ from pathlib import Path
 
 from crosssection.core.errors import ConfigError, ParameterError
 from crosssection.core.fileio import read_toml
-from crosssection.params import PARAM_NAMES, SET_META_KEYS, check_param
+from crosssection.params import CHOICE_PARAMS, PARAM_NAMES, SET_META_KEYS, check_param
 
 SET_FILE = "set.toml"
 
@@ -104,8 +104,7 @@ def _check_value(key, value, path, where, origin=None):
             cal = Path(path).parent / cal
         check_calibration(cal, origin=path if origin is None else origin)
         return str(cal.resolve())
-    if isinstance(value, str) and key not in ("threshold_method", "curvature_method",
-                                              "skeleton_method", "width_statistic"):
+    if isinstance(value, str) and key not in CHOICE_PARAMS:
         raise ConfigError(f"{ctx} must be a number, got {value!r}", path)
     try:
         value = check_param(key, value)

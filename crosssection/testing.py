@@ -457,8 +457,7 @@ def analysis_params(**fixed):
     """
     from hypothesis import strategies as st
 
-    from crosssection.params import (CURVATURE_METHODS, SKELETON_METHODS, THRESHOLD_METHODS,
-                                     WIDTH_STATISTICS, AnalysisParams)
+    from crosssection.params import CHOICE_PARAMS, AnalysisParams
 
     def opt(strategy):
         return st.none() | strategy
@@ -466,10 +465,7 @@ def analysis_params(**fixed):
     fields = {
         "px_per_mm": st.floats(20.0, 100.0),
         "thickness_mm": st.floats(0.05, 0.3),
-        "threshold_method": st.sampled_from(THRESHOLD_METHODS),
-        "curvature_method": st.sampled_from(CURVATURE_METHODS),
-        "skeleton_method": st.sampled_from(SKELETON_METHODS),
-        "width_statistic": st.sampled_from(WIDTH_STATISTICS),
+        **{name: st.sampled_from(names) for name, names in CHOICE_PARAMS.items()},
         "integer_refinement": st.booleans(),
         "layer_steps": st.booleans(),
         "hole_correction": st.booleans(),

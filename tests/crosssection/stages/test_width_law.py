@@ -1,0 +1,141 @@
+"""The width law read from a scan without a calibration (crosssection.stages.widthlaw)."""
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+import crosssection
+from crosssection.core.calibration import Calibration
+from crosssection.stages.widthlaw import (MIN_CONTRAST, ONE_LAYER_RANGE_H, STEP_RANGE_H,
+                                          fit_width_law, junction_offsets_mm)
+from crosssection.truth.network import make_scene
+from crosssection.truth.scoring import score
+
+H = 0.1
+
+
+def _network(rng, n_junctions: int):
+    """Stack counts conserved at Y junctions: each junction splits a trunk of n into two of
+    k and n - k. Returns the counts and the conservation rows (trunk - branches)."""
+    counts, rows = [], []
+    for _ in range(n_junctions):
+        n = int(rng.integers(2, 9))
+        k = int(rng.integers(1, n))
+        base = len(counts)
+        counts += [n, k, n - k]
+        rows.append({base: 1, base + 1: -1, base + 2: -1})
+    return np.array(counts, float), rows
+
+
+@settings(max_examples=60, deadline=None)
+@given(a=st.floats(-0.3, 0.8), b=st.floats(STEP_RANGE_H[0] + 0.02, STEP_RANGE_H[1] - 0.02),
+       noise=st.floats(0.0, 0.12), seed=st.integers(0, 2**31 - 1))
+def test_an_affine_law_is_recovered(a, b, noise, seed):
+    rng = np.random.default_rng(seed)
+    n, rows = _network(rng, 20)
+    width = H * (a + b * n) + rng.normal(0.0, noise * H, len(n))
+    fit = fit_width_law(width, rng.uniform(1.0, 10.0, len(n)), rows, thickness_mm=H)
+    lo, hi = ONE_LAYER_RANGE_H
+    if not lo + 0.05 < a + b < hi - 0.05:  # one layer beyond the accepted range: refused
+        if not lo - 0.05 < a + b < hi + 0.05:
+            assert not fit.ok
+        return
+    assert fit.ok, fit.reason
+    # the counts read back through the law are the drawn ones
+    layers = np.asarray(fit.calibration().layers(np.clip(width, 1e-6, None)))
+    assert np.array_equal(np.round(layers), n)
+    assert fit.step_mm == pytest.approx(b * H, rel=0.05)
+
+
+def test_a_wide_step_is_not_taken_for_its_half():
+    # b = 1.8 h: b / 2 = 0.9 h lies in the range searched and fits the lattice as well
+    rng = np.random.default_rng(3)
+    n, rows = _network(rng, 15)
+    fit = fit_width_law(H * (0.2 + 1.8 * n), np.ones(len(n)), rows, thickness_mm=H)
+    assert fit.ok and fit.step_mm == pytest.approx(0.18, rel=1e-6)
+    assert fit.offset_mm == pytest.approx(0.02, abs=1e-9)
+
+
+def test_the_junctions_choose_which_lattice_point_is_one_layer():
+    # the lattice alone allows offsets 0.3 h, 1.4 h, -0.8 h...: the junctions measure 0.3 h
+    rng = np.random.default_rng(5)
+    n, rows = _network(rng, 12)
+    width = H * (0.3 + 1.1 * n)
+    assert np.median(junction_offsets_mm(width, rows)) == pytest.approx(0.03)
+    fit = fit_width_law(width, np.ones(len(n)), rows, thickness_mm=H)
+    assert fit.one_layer_mm == pytest.approx(0.14)
+
+
+def test_widths_without_layers_are_refused():
+    rng = np.random.default_rng(7)
+    n, rows = _network(rng, 20)
+    fit = fit_width_law(rng.uniform(0.1, 0.9, len(n)), np.ones(len(n)), rows, thickness_mm=H)
+    assert not fit.ok and fit.contrast < MIN_CONTRAST
+    assert "no layers" in fit.reason
+
+
+def test_too_few_junctions_are_refused():
+    fit = fit_width_law(H * (0.3 + 1.1 * np.array([1, 2, 3.0])), np.ones(3),
+                        [{0: 1, 1: -1}], thickness_mm=H)
+    assert not fit.ok and "junctions" in fit.reason
+
+
+def test_a_row_with_equal_packs_measures_no_offset():
+    assert junction_offsets_mm([0.1, 0.2, 0.3, 0.4], [{0: 1, 1: 1, 2: -1, 3: -1}]).size == 0
+
+
+def _scene_kw(scene, **extra):
+    p = scene.params
+    return dict(px_per_mm=p["px_per_mm"], thickness_mm=p["thickness_mm"],
+                hole_radius_mm=p["hole_radius_mm"], hole_center_px=tuple(p["hole_center_px"]),
+                **extra)
+
+
+def _analyze(rgb, **kw):
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        return crosssection.analyze(rgb, **kw), caught
+
+
+@pytest.mark.parametrize("law", ["generator", "wide step"])
+def test_a_scan_without_its_calibration_is_counted_as_with_it(law):
+    n = np.arange(1, 41.0)
+    cal = None if law == "generator" else Calibration(tuple(n), tuple(0.02 + 0.13 * n))
+    scene = make_scene(seed=12, n_stacks=40, max_layers=6, calibration=cal)
+    res, caught = _analyze(scene.rgb, **_scene_kw(scene))
+    given, _ = _analyze(scene.rgb, **_scene_kw(scene, calibration=scene.calibration))
+    assert np.array_equal(res.stacks["n_br"], given.stacks["n_br"])
+    s = score((res.summary, res.tables), (scene.summary, scene.tables), match_px=15)
+    assert s["n_br_exact_length_fraction"] == 1.0
+    assert abs(s["rod_length_rel_error"]) < 0.01
+    law_record = res.summary["width_law"]
+    assert law_record["ok"] and law_record["n_junctions"] >= 3
+    w1 = float(scene.calibration.width(1.0))
+    assert law_record["offset_mm"] + law_record["step_mm"] == pytest.approx(w1, rel=0.05)
+    assert res.summary["calibration"].startswith("fitted to the scan")
+    # still flagged: the counts rest on a law nobody measured
+    flag = next(f for f in res.quality if f.code == "no_calibration")
+    assert "read from this scan" in flag.message
+    assert any(w.category is crosssection.quality.CalibrationWarning for w in caught)
+
+
+def test_the_linear_law_stays_an_option():
+    scene = make_scene(seed=12, n_stacks=40, max_layers=6)
+    res, _ = _analyze(scene.rgb, **_scene_kw(scene, width_law="linear"))
+    assert "width_law" not in res.summary
+    assert res.summary["calibration"] == "linear n*h"
+    # w = n h reads the generator's 2-layer stacks (2.57 h) as 3: the rod comes out long
+    s = score((res.summary, res.tables), (scene.summary, scene.tables), match_px=15)
+    assert s["rod_length_rel_error"] > 0.1
+
+
+def test_a_given_calibration_is_used_whatever_the_width_law():
+    scene = make_scene(seed=12, n_stacks=40, max_layers=6)
+    a, _ = _analyze(scene.rgb, **_scene_kw(scene, calibration=scene.calibration))
+    b, _ = _analyze(scene.rgb, **_scene_kw(scene, calibration=scene.calibration,
+                                           width_law="linear"))
+    assert "width_law" not in a.summary
+    assert np.array_equal(a.stacks["n_br"], b.stacks["n_br"])
