@@ -327,7 +327,8 @@ def summary(*, pre, params, linear_system, junctions, stacks, branches, voids, r
     rod_measured_mm, rod_used_mm : float
         ``sum n_br l`` and the L used (given or measured).
     calibration_source : str or list
-        ``"linear n*h"``, the calibration file (absolute, links followed) or the table given
+        ``"linear n*h"``, ``"fitted to the scan: ..."`` (the law read without a
+        calibration), the calibration file (absolute, links followed) or the table given
         in memory as ``[[n_layers, width_mm], ...]`` (:meth:`AnalysisParams.calibration_record`).
     timings : dict
         Stage name -> seconds.
