@@ -48,7 +48,9 @@ def milp_solve(C: sp.csr_matrix, penalties: np.ndarray, e: np.ndarray, w: np.nda
         ``scipy.optimize.milp`` status (0 = optimal).
     """
     # imported here: scipy.optimize takes about 0.3 s to import and most scans never get here
-    from scipy.optimize import Bounds, LinearConstraint, milp
+    from scipy.optimize import Bounds, LinearConstraint
+
+    from crosssection.core.quiet import milp
 
     m = len(e)
     k = C.shape[0]

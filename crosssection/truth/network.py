@@ -270,7 +270,9 @@ def _solve_counts(rng, net, ends, caps, mean_layers, time_limit=60.0):
     """Integer layer counts with exact pack conservation (mixed-integer program).
 
     Returns (n per edge, chosen split per node) or (None, None) when infeasible."""
-    from scipy.optimize import Bounds, LinearConstraint, milp
+    from scipy.optimize import Bounds, LinearConstraint
+
+    from crosssection.core.quiet import milp
 
     E = len(net.edges)
     splits = [_candidate_splits(ends[v], bool(net.is_wall[v])) for v in range(len(net.pos))]
