@@ -9,17 +9,24 @@ Each scene is analysed three times with default settings, the scale and the hole
 - ``linear``: without a calibration, ``width_law="linear"`` (n layers read as n h wide).
 
 Scenes: the conditions of ``benchmarks/robust_sweep.py`` (network scenes drawn with the
-generators' law ``h (n + 0.4 sqrt n)``, and simulator renders), and typical network scenes
-drawn with other width laws (``--laws``): ``nh`` (w = n h), ``step1.3`` (0.05 h + 1.3 h n),
-``sqrt1.0`` (h (n + sqrt n)), ``step1.6`` (1.6 h n), ``step0.9`` (0.5 h + 0.9 h n) and
-``quad`` (h (0.3 + 1.2 n + 0.01 n^2)).
+generators' law ``h (n + 0.4 sqrt n)``, and simulator renders); typical network scenes drawn
+with other width laws (``--laws``): ``nh`` (w = n h), ``step1.3`` (0.05 h + 1.3 h n),
+``sqrt1.0`` (h (n + sqrt n)), ``step1.6`` (1.6 h n), ``step0.9`` (0.5 h + 0.9 h n), ``quad``
+(h (0.3 + 1.2 n + 0.01 n^2)), ``sqrt2`` (h (n + 2 sqrt n): one layer 3 h), ``rim1.4`` (h (n +
+1.4)), ``thin0.55`` (h (n - 0.45)) and ``saturating`` (8 h (1 - exp(-n / 5))); typical
+network scenes whose stacks' widths scatter about the generators' law from stack to stack
+(``--scatters``, relative: a cut's rim varies; ``make_scene(width_scatter=...)``); and
+typical scenes analysed without a calibration with ``px_per_mm`` given wrong by a factor
+(``--scales``; the calibration's analysis keeps the right one; rod lengths scored in pixels).
 
 Usage: python benchmarks/width_law_check.py [--conditions typical,lowres,thick_dense,renders]
-       [--laws nh,step1.3,sqrt1.0,step1.6,step0.9,quad] [--per-condition 6] [--per-law 3]
+       [--laws nh,step1.3,...] [--per-condition 6] [--per-law 3]
+       [--scatters 0.06,0.1] [--per-scatter 4] [--scales 0.7,1.4] [--per-scale 3]
        [--seed 100] [--workers 2] [--out DIR]
 Writes DIR/width_law.csv (one row per scene and analysis: rod length error, junction F1, exact
 n_br on stack length, energy error, the law read: offset a/h, step b/h, lattice contrast,
-junctions, reason when refused) and prints the medians per scene set and analysis.
+junctions, the share of them its counts conserve and the share under w = n h, reason when
+refused) and prints the medians per scene set and analysis.
 """
 from __future__ import annotations
 
@@ -44,6 +51,10 @@ LAWS = {
     "step1.6": lambda n: 1.6 * H * n,
     "step0.9": lambda n: H * (0.5 + 0.9 * n),
     "quad": lambda n: H * (0.3 + 1.2 * n + 0.01 * n ** 2),
+    "sqrt2": lambda n: H * (n + 2.0 * np.sqrt(n)),
+    "rim1.4": lambda n: H * (n + 1.4),
+    "thin0.55": lambda n: H * (n - 0.45),
+    "saturating": lambda n: 8.0 * H * (1.0 - np.exp(-n / 5.0)),
 }
 ANALYSES = ("given", "fitted", "linear")
 
@@ -57,8 +68,13 @@ def _scene(kind: str, name: str, seed: int):
         if name == "renders":
             return rs._render_scene(seed)
         return rs.make_network_scene(seed, rs.scene_options(name, seed))
-    n = np.arange(1, 41.0)
     opt = rs.scene_options("typical", seed)
+    if kind == "scale":
+        return rs.make_network_scene(seed, opt)
+    if kind == "scatter":
+        scene = make_scene(seed=seed, **opt["scene"], width_scatter=float(name))
+        return rs.with_backdrop(scene, np.random.default_rng(seed + 7), **opt["backdrop"])
+    n = np.arange(1, 41.0)
     scene = make_scene(seed=seed, **opt["scene"],
                        calibration=Calibration(tuple(n), tuple(LAWS[name](n))))
     return rs.with_backdrop(scene, np.random.default_rng(seed + 7), **opt["backdrop"])
@@ -72,11 +88,16 @@ def run_one(kind: str, name: str, seed: int) -> list[dict]:
     scene = _scene(kind, name, seed)
     p = scene.params
     h_px = p["thickness_mm"] * p["px_per_mm"]
-    base = dict(px_per_mm=p["px_per_mm"], thickness_mm=p["thickness_mm"])
-    if p.get("hole_radius_mm"):
-        base.update(hole_radius_mm=p["hole_radius_mm"], hole_center_px=tuple(p["hole_center_px"]))
+    # a scale given wrong by a factor f (kind "scale") to the analyses without a calibration:
+    # the hole stays where it is on the scan, and the rod length is scored in pixels
+    factor = float(name) if kind == "scale" else 1.0
     rows = []
     for analysis in ANALYSES:
+        f = 1.0 if analysis == "given" else factor
+        base = dict(px_per_mm=p["px_per_mm"] * f, thickness_mm=p["thickness_mm"])
+        if p.get("hole_radius_mm"):
+            base.update(hole_radius_mm=p["hole_radius_mm"] / f,
+                        hole_center_px=tuple(p["hole_center_px"]))
         extra = {"given": dict(calibration=scene.calibration), "fitted": {},
                  "linear": dict(width_law="linear")}[analysis]
         t0 = time.perf_counter()
@@ -88,7 +109,7 @@ def run_one(kind: str, name: str, seed: int) -> list[dict]:
         law = res.summary.get("width_law") or {}
         h = p["thickness_mm"]
         rows.append({"scenes": kind, "name": name, "seed": seed, "analysis": analysis,
-                     "rod_length_rel_error": s["rod_length_rel_error"],
+                     "rod_length_rel_error": (1.0 + s["rod_length_rel_error"]) * f - 1.0,
                      "junction_f1": s["junction_f1"],
                      "n_br_exact_length_fraction": s["n_br_exact_length_fraction"],
                      "total_energy_rel_error": s["total_energy_rel_error"],
@@ -96,6 +117,8 @@ def run_one(kind: str, name: str, seed: int) -> list[dict]:
                      else np.nan,
                      "step_h": law["step_mm"] / h if law.get("step_mm") is not None else np.nan,
                      "contrast": law.get("contrast", np.nan),
+                     "closure": law.get("closure", np.nan),
+                     "closure_linear": law.get("closure_linear", np.nan),
                      "law_junctions": law.get("n_junctions", np.nan),
                      "law_reason": law.get("reason", ""), "analyze_s": t})
     return rows
@@ -107,6 +130,11 @@ def main(argv=None) -> int:
     ap.add_argument("--laws", default=",".join(LAWS))
     ap.add_argument("--per-condition", type=int, default=6)
     ap.add_argument("--per-law", type=int, default=3)
+    ap.add_argument("--scatters", default="0.06,0.1")
+    ap.add_argument("--per-scatter", type=int, default=4)
+    ap.add_argument("--scales", default="0.7,1.4",
+                    help="factors px_per_mm is given wrong by, without a calibration")
+    ap.add_argument("--per-scale", type=int, default=3)
     ap.add_argument("--seed", type=int, default=100)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "out"))
@@ -118,6 +146,10 @@ def main(argv=None) -> int:
         ap.error(f"unknown condition(s) or law(s): {', '.join(bad)}")
     jobs = [("condition", c, args.seed + i) for c in conds for i in range(args.per_condition)]
     jobs += [("law", w, args.seed + i) for w in laws for i in range(args.per_law)]
+    jobs += [("scatter", f"{float(x):g}", args.seed + i)
+             for x in args.scatters.split(",") if x for i in range(args.per_scatter)]
+    jobs += [("scale", f"{float(x):g}", args.seed + i)
+             for x in args.scales.split(",") if x for i in range(args.per_scale)]
     t0 = time.perf_counter()
     if args.workers > 1:
         import multiprocessing as mp

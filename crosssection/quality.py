@@ -345,13 +345,21 @@ def _crossed_check(params, hole) -> list[QualityFlag]:
     return [QualityFlag("hole_crossed", msg, cut, GIVEN_CROSSED_LIMIT)]
 
 
-def _no_calibration_message(width_law) -> str:
+def _no_calibration_message(width_law, thickness_mm: float) -> str:
     if width_law is not None and width_law.ok:
+        from crosssection.stages.widthlaw import PLAUSIBLE_STEP_H
+
+        step_h = width_law.step_mm / thickness_mm
+        lo, hi = PLAUSIBLE_STEP_H
+        doubt = ("" if lo <= step_h <= hi else
+                 f"; each layer adds {step_h:.2f} h to a stack's width, "
+                 f"{'less than a sheet' if step_h < lo else 'more than a cut thickens it'}: "
+                 "check px_per_mm and thickness_mm")
         return ("no width calibration: layer counts from the width law read from this scan, "
-                f"{width_law.describe()} (pass a calibration CSV)")
-    why = "" if width_law is None else f" ({width_law.describe()})"
-    return ("no width calibration: layer counts assume a stack of n layers is n h wide"
-            f"{why} (pass a calibration CSV)")
+                f"{width_law.describe()}{doubt} (pass a calibration CSV)")
+    why = "" if width_law is None else f", and no width law read from the scan ({width_law.reason})"
+    return (f"no width calibration{why}: layer counts assume a stack of n layers is n h wide "
+            "(pass a calibration CSV)")
 
 
 def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stacks,
@@ -420,7 +428,8 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
                                  "frames); only the first is analysed: save each scan as its "
                                  "own file", file_pages, 1))
     if params.calibration is None:
-        flags.append(QualityFlag("no_calibration", _no_calibration_message(width_law)))
+        flags.append(QualityFlag("no_calibration",
+                                 _no_calibration_message(width_law, params.thickness_mm)))
     if file_px_per_mm and abs(params.px_per_mm / file_px_per_mm - 1.0) > SCALE_TOLERANCE:
         flags.append(QualityFlag(
             "scale_mismatch", f"the file records {25.4 * file_px_per_mm:.0f} dpi "

@@ -546,7 +546,7 @@ def _place_stacks(net, ends, chosen, n, widths_px, radius_px, fan_deg=60.0):
 
 
 def _attempt_layout(rng, *, n_cells, radius_px, image_size, max_layers, mean_layers, cal,
-                    px_per_mm, gap_px, fan_deg=60.0):
+                    px_per_mm, gap_px, fan_deg=60.0, scatter=(0.0, None)):
     """One layout try: a :class:`_Layout`, or the reason (str) it was rejected."""
     size = image_size or int(math.ceil(2 * radius_px / 0.9))
     shape = (size, size)
@@ -567,7 +567,11 @@ def _attempt_layout(rng, *, n_cells, radius_px, image_size, max_layers, mean_lay
     n, chosen = _solve_counts(rng, net, ends, caps, mean_layers)
     if n is None:
         return "counts infeasible"
-    stacks, node_xy = _place_stacks(net, ends, chosen, n, cal.width(n) * px_per_mm, radius_px,
+    widths_px = cal.width(n) * px_per_mm
+    if scatter[0] > 0:
+        widths_px = widths_px * (1.0 + scatter[0] * np.clip(
+            scatter[1].standard_normal(len(widths_px)), -2.5, 2.5))
+    stacks, node_xy = _place_stacks(net, ends, chosen, n, widths_px, radius_px,
                                     fan_deg=fan_deg)
     out = max(float(np.max(np.hypot(st.xy[:, 0], st.xy[:, 1]) + st.width_px / 2 - radius_px))
               for st in stacks)
@@ -711,7 +715,8 @@ def make_scene(*, seed: int, n_stacks: int = 40, max_layers: int = 6, px_per_mm:
                smears: int = 0, specks: int = 0, pinholes: int = 0,
                image_size: int | None = None, mean_layers: float | None = None,
                receding_fraction: float = 0.3, kappa_c_per_mm: float | None = None,
-               fan_deg: float = 60.0, max_tries: int = 40) -> Scene:
+               fan_deg: float = 60.0, width_scatter: float = 0.0,
+               max_tries: int = 40) -> Scene:
     """Generate a synthetic cross-section scan with exact truth.
 
     Parameters
@@ -753,6 +758,11 @@ def make_scene(*, seed: int, n_stacks: int = 40, max_layers: int = 6, px_per_mm:
         (0 < fan_deg <= 90). The default 60 opens the forks quickly; 30-35 gives the tangential
         forks of real scans, where two branches leave side by side and stay merged longer.
         Wall junctions keep their own fan.
+    width_scatter : float
+        Relative scatter of each stack's drawn width about the calibration's (a normal
+        deviate clipped at 2.5 sigma, drawn apart from the scene's other draws: 0 gives the
+        same scene as before). A cut's melted rim varies from stack to stack; the scene's
+        calibration stays the mean law.
     max_tries : int
         Layouts tried before giving up.
 
@@ -770,7 +780,10 @@ def make_scene(*, seed: int, n_stacks: int = 40, max_layers: int = 6, px_per_mm:
         raise ParameterError(f"calibration must be a Calibration, got {type(calibration).__name__}")
     if not 0.0 < fan_deg <= 90.0:
         raise ParameterError(f"fan_deg must be in (0, 90], got {fan_deg}")
+    if not 0.0 <= width_scatter <= 0.3:
+        raise ParameterError(f"width_scatter must be in [0, 0.3], got {width_scatter}")
     rng = np.random.default_rng(seed)
+    scatter = (width_scatter, np.random.default_rng((seed, 1)))
     cal = calibration or Calibration.nonlinear(thickness_mm, n_max=max(40, max_layers + 5))
     s_min_mm2 = (10 * thickness_mm) ** 2
     n_cells = max(3, int(round(n_stacks / 3.0)))
@@ -793,7 +806,8 @@ def make_scene(*, seed: int, n_stacks: int = 40, max_layers: int = 6, px_per_mm:
         layout = _attempt_layout(rng, n_cells=n_cells, radius_px=radius_px,
                                  image_size=image_size, max_layers=max_layers,
                                  mean_layers=mean_layers, cal=cal, px_per_mm=px_per_mm,
-                                 gap_px=2 * thickness_mm * px_per_mm, fan_deg=fan_deg)
+                                 gap_px=2 * thickness_mm * px_per_mm, fan_deg=fan_deg,
+                                 scatter=scatter)
         if isinstance(layout, str):
             failures.append(layout)
             continue
@@ -824,7 +838,8 @@ def make_scene(*, seed: int, n_stacks: int = 40, max_layers: int = 6, px_per_mm:
                     "blur_px": blur_px, "jpeg_quality": jpeg_quality, "smears": smears,
                     "specks": specks, "pinholes": pinholes, "image_size": layout.shape[0],
                     "mean_layers": mean_layers, "kappa_c_per_mm": kappa_c_per_mm,
-                    "fan_deg": fan_deg, "layout_attempts": len(failures) + 1},
+                    "fan_deg": fan_deg, "width_scatter": width_scatter,
+                    "layout_attempts": len(failures) + 1},
     }
     ends = layout.ends
     packs = [([int(ends[v][i][0]) for i in A], [int(ends[v][i][0]) for i in B])
