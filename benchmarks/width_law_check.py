@@ -17,12 +17,14 @@ with other width laws (``--laws``): ``nh`` (w = n h), ``step1.3`` (0.05 h + 1.3 
 network scenes whose stacks' widths scatter about the generators' law from stack to stack
 (``--scatters``, relative: a cut's rim varies; ``make_scene(width_scatter=...)``); and
 typical scenes analysed without a calibration with ``px_per_mm`` given wrong by a factor
-(``--scales``; the calibration's analysis keeps the right one; rod lengths scored in pixels).
+(``--scales``; the calibration's analysis keeps the right one; rod lengths scored in pixels);
+and ``blurred`` scenes beyond what the pipeline reads even with its calibration (25-40 px/mm,
+blur 2-3 px, noise 20-45; ``--per-blurred``).
 
 Usage: python benchmarks/width_law_check.py [--conditions typical,lowres,thick_dense,renders]
        [--laws nh,step1.3,...] [--per-condition 6] [--per-law 3]
        [--scatters 0.06,0.1] [--per-scatter 4] [--scales 0.7,1.4] [--per-scale 3]
-       [--seed 100] [--workers 2] [--out DIR]
+       [--per-blurred 8] [--seed 100] [--workers 2] [--out DIR]
 Writes DIR/width_law.csv (one row per scene and analysis: rod length error, junction F1, exact
 n_br on stack length, energy error, the law read: offset a/h, step b/h, lattice contrast,
 junctions, the share of them its counts conserve and the share under w = n h, reason when
@@ -71,6 +73,13 @@ def _scene(kind: str, name: str, seed: int):
     opt = rs.scene_options("typical", seed)
     if kind == "scale":
         return rs.make_network_scene(seed, opt)
+    if kind == "blurred":
+        # beyond what the pipeline reads with its calibration: blur 2-3 px, noise 20-45
+        rng = np.random.default_rng(seed + 11)
+        return make_scene(seed=seed, n_stacks=40, max_layers=6,
+                          px_per_mm=float(rng.choice([25.0, 30.0, 35.0, 40.0])),
+                          blur_px=float(rng.uniform(2.0, 3.0)),
+                          noise_sigma=float(rng.uniform(20.0, 45.0)))
     if kind == "scatter":
         scene = make_scene(seed=seed, **opt["scene"], width_scatter=float(name))
         return rs.with_backdrop(scene, np.random.default_rng(seed + 7), **opt["backdrop"])
@@ -135,6 +144,7 @@ def main(argv=None) -> int:
     ap.add_argument("--scales", default="0.7,1.4",
                     help="factors px_per_mm is given wrong by, without a calibration")
     ap.add_argument("--per-scale", type=int, default=3)
+    ap.add_argument("--per-blurred", type=int, default=8)
     ap.add_argument("--seed", type=int, default=100)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "out"))
@@ -150,6 +160,7 @@ def main(argv=None) -> int:
              for x in args.scatters.split(",") if x for i in range(args.per_scatter)]
     jobs += [("scale", f"{float(x):g}", args.seed + i)
              for x in args.scales.split(",") if x for i in range(args.per_scale)]
+    jobs += [("blurred", "2-3px", args.seed + i) for i in range(args.per_blurred)]
     t0 = time.perf_counter()
     if args.workers > 1:
         import multiprocessing as mp

@@ -212,9 +212,10 @@ class AnalysisResult:
             if not given and law.get("ok"):
                 from crosssection.stages.widthlaw import WidthLawFit
 
-                fit = WidthLawFit(**law)
+                fit = WidthLawFit.from_record(law)
+                bend = (f" {fit.quadratic_mm:+.1e} n²" if fit.quadratic_mm else "")
                 cal, label = fit.calibration(), (f"read from the scan: w = {fit.offset_mm:.3f}"
-                                                 f" + {fit.step_mm:.3f} n mm")
+                                                 f" + {fit.step_mm:.3f} n{bend} mm")
             return F.widths_figure(self.stacks, cal, ax=ax, calibration_label=label)
         raise ParameterError(f"kind must be one of 'overlay', 'steps', 'curvature', 'widths', "
                              f"got {kind!r}")

@@ -29,8 +29,10 @@ n)`` the thin stacks' line reads 17 layers as 16.3.
 it conserve (:func:`junction_closure`) is set against the share under ``w = n h``. The law is
 refused where it closes fewer junctions than ``w = n h``, or, its lattice faint (contrast
 below :data:`MIN_CONTRAST`), fewer than :data:`FAINT_MARGIN` junctions more; also where fewer
-than :data:`MIN_JUNCTIONS` junctions measure the offset, or one layer would be outside
-:data:`ONE_LAYER_RANGE_H`. Then
+than :data:`MIN_JUNCTIONS` junctions measure the offset, one layer would be outside
+:data:`ONE_LAYER_RANGE_H`, or every candidate law reads more than :data:`MAX_EMPTY_SHARE` of
+the stacks' length as no layer (a drawing of single sheets only, whose junctions measure an
+offset as wide as the sheets) or bends back within the widths. Then
 the analysis reads ``w = n h`` and the ``no_calibration`` flag says why. A faint lattice is
 no reason alone: widths scattered by 10 % from stack to stack (a cut's rim varies) fade the
 lattice to a contrast of 0.2-0.56 while the law found still gives the calibration's counts,
@@ -133,15 +135,36 @@ class WidthLawFit:
         """Continuous layer count of a width under the law (its increasing branch)."""
         return _inverse(self.offset_mm, self.step_mm, self.quadratic_mm, width_mm)
 
+    @property
+    def rising_layers(self) -> float:
+        """Layers up to which the law rises at half its slope at one layer or more (infinite
+        for a law that does not bend down; 0 for one that falls from the start)."""
+        first = self.step_mm + 2.0 * self.quadratic_mm
+        if not first > 0:
+            return 0.0
+        if self.quadratic_mm >= 0:
+            return float("inf")
+        # b + 2 c n = first / 2
+        return (0.5 * first - self.step_mm) / (2.0 * self.quadratic_mm)
+
     def calibration(self, n_max: int = 50) -> Calibration:
-        """The law as a :class:`Calibration` of ``n = 1..n_max`` (extended linearly beyond,
-        and from where a law bending down would stop rising, at half its first slope)."""
+        """The law as a :class:`Calibration` of ``n = 1..n_max``, extended linearly beyond,
+        and beyond :attr:`rising_layers` for a law bending down (a fit refuses a law that
+        bends down within the widths it was read from).
+
+        Raises
+        ------
+        ConfigError
+            The law falls from one layer on (no calibration of it exists).
+        """
         n = np.arange(1, int(n_max) + 1, dtype=float)
-        slope = self.step_mm + 2.0 * self.quadratic_mm * n
-        rising = slope >= 0.5 * (self.step_mm + 2.0 * self.quadratic_mm)
-        top = int(np.argmin(rising)) if not np.all(rising) else len(n)
-        n = n[:max(top, 2)]
+        n = n[n <= max(self.rising_layers, 2.0)]
         return Calibration(tuple(n), tuple(self.width_mm(n)), source="fitted to the scan")
+
+    @classmethod
+    def from_record(cls, record: dict) -> "WidthLawFit":
+        """The fit from its ``summary.json`` record (:meth:`record`; null read as NaN)."""
+        return cls(**{k: (float("nan") if v is None else v) for k, v in record.items()})
 
     def describe(self) -> str:
         """One line for messages and ``summary.json``."""
@@ -203,8 +226,21 @@ def junction_offsets_mm(width_mm, rows) -> np.ndarray:
 
 
 def lattice_contrast(widths, weights, steps) -> np.ndarray:
-    """``sum_i weights_i exp(2 pi i widths_i / step) / sum_i weights_i`` for every step
-    (complex: its modulus is the contrast, its phase the lattice's offset)."""
+    """The lattice sum of the widths at every step.
+
+    Parameters
+    ----------
+    widths, weights : (M,) arrays
+        Stack widths (mm) and their weights (stack lengths).
+    steps : (S,) array
+        Lattice steps (mm).
+
+    Returns
+    -------
+    (S,) complex array
+        ``sum_i weights_i exp(2 pi i widths_i / step) / sum_i weights_i``: its modulus is
+        the contrast (1: every width a whole number of steps), its phase the lattice's offset.
+    """
     u = np.asarray(widths, float)[None, :]
     wt = np.asarray(weights, float)
     c = np.exp(2j * np.pi * u / np.asarray(steps, float)[:, None]) @ wt
@@ -228,6 +264,7 @@ def fit_width_law(width_mm, length_mm, rows, *, thickness_mm: float) -> WidthLaw
     -------
     WidthLawFit
     """
+    rows = list(rows)
     h = float(thickness_mm)
     w_all = np.asarray(width_mm, float)
     ell = np.asarray(length_mm, float)
@@ -255,15 +292,25 @@ def fit_width_law(width_mm, length_mm, rows, *, thickness_mm: float) -> WidthLaw
     cands = sorted({round(m * p, 12) for p in _peaks(steps, con) for m in range(1, 5)
                     if m * p <= hi})
     fits = [_law_at_step(b, w, ell, a_junctions, w_good, ell_good, h, nj) for b in cands]
+    # a law bending back within the widths it was read from counts no stack twice over
+    # (and a law whose one layer is no width is none)
+    fits = [f for f in fits if f.one_layer_mm > 0
+            and f.rising_layers >= float(np.max(f.layers(w_good)))]
+    # judged through the table the analysis reads its counts from
+    finite = np.isfinite(w_all)
+    read = []
+    for f in fits:
+        r = np.full(len(w_all), np.nan)
+        r[finite] = f.calibration().layers(w_all[finite])
+        read.append(r)
     # every stack holds a layer: a law that reads stacks as none is no law of this scan
-    empty = [float(ell_good[np.round(f.layers(w_good)) < 1].sum() / ell_good.sum())
-             for f in fits]
-    fits = [replace(f, closure=junction_closure(f.layers(w_all), rows))
-            for f, e in zip(fits, empty) if e <= MAX_EMPTY_SHARE]
+    empty = [float(ell_good[np.round(r[good]) < 1].sum() / ell_good.sum()) for r in read]
+    fits = [replace(f, closure=junction_closure(r, rows))
+            for f, r, e in zip(fits, read, empty) if e <= MAX_EMPTY_SHARE]
     if not fits:
         return WidthLawFit(**fail, reason=f"every law of the widths' lattice reads more than "
                                           f"{MAX_EMPTY_SHARE:.0%} of the stacks' length as no "
-                                          "layer")
+                                          "layer, or bends back within them")
     top = max(f.closure for f in fits)
     best = [f for f in fits if f.closure == top]
     # twice the counts conserve as well as the counts: among the laws the junctions like

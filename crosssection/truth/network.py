@@ -760,9 +760,9 @@ def make_scene(*, seed: int, n_stacks: int = 40, max_layers: int = 6, px_per_mm:
         Wall junctions keep their own fan.
     width_scatter : float
         Relative scatter of each stack's drawn width about the calibration's (a normal
-        deviate clipped at 2.5 sigma, drawn apart from the scene's other draws: 0 gives the
-        same scene as before). A cut's melted rim varies from stack to stack; the scene's
-        calibration stays the mean law.
+        deviate clipped at 2.5 sigma, drawn apart from the scene's other draws: 0 draws
+        nothing, and the scene is the one drawn without it). A cut's melted rim varies from
+        stack to stack; the scene's calibration stays the mean law.
     max_tries : int
         Layouts tried before giving up.
 

@@ -22,14 +22,18 @@ def test_printf_inside_is_discarded_and_stdout_restored_after():
         from crosssection.core.quiet import c_stdout_silenced
         libc = ctypes.CDLL(None)
         print("before", flush=True)
+        libc.printf(b"C before\\n")
         with c_stdout_silenced():
             libc.printf(b"from C\\n")
-            print("from Python")
+            print("from Python", flush=True)
+            with c_stdout_silenced():
+                libc.printf(b"nested\\n")
+            libc.printf(b"still silenced\\n")
         libc.printf(b"C after\\n")
         libc.fflush(None)
         print("after")
     """)
-    assert out.splitlines() == ["before", "C after", "after"]
+    assert out.splitlines() == ["before", "C before", "C after", "after"]
 
 
 def test_a_generated_scene_prints_nothing():
