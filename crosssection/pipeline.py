@@ -510,22 +510,22 @@ def _analyze(image, params, overrides, *, warn: bool = True,
             # user -> analyze -> _analyze: the warning points at the user's call
             _warnings.warn(f"{image}: {note}", quality.InputWarning, stacklevel=3)
     sg, h_px, scale = pre.graph, p.thickness_px, p.scale
-    law, packs = None, None
+    law, packs, width_mm = None, None, None
     with timer("widths"):
         # layers ending inside a band leave no junction: the band is cut where its width steps
         profiles = width_profiles_px(sg.paths, pre.distance_px)
         if p.calibration is None and p.width_law == "fitted":
-            law, packs = _fitted_law(sg, pre.distance_px, profiles, p)
+            width_mm = _stack_widths_mm(sg, pre.distance_px, profiles, p)
+            law, packs = _fitted_law(sg, width_mm, p)
             if law.ok:
                 cal = law.calibration()
         cuts = layer_steps(sg, pre.distance_px, lambda w: cal.layers(scale.to_mm(w)),
                            thickness_px=h_px, profiles=profiles) if p.layer_steps else {}
         if cuts:
-            sg, profiles, packs = split_stacks(sg, cuts), None, None
+            sg, profiles, packs, width_mm = split_stacks(sg, cuts), None, None, None
             pre = dataclasses.replace(pre, graph=sg)
-        width_mm = scale.to_mm(stack_widths_px(sg, pre.distance_px, junction_margin_px=2 * h_px,
-                                               statistic=p.width_statistic,
-                                               profiles=profiles))
+        if width_mm is None:
+            width_mm = _stack_widths_mm(sg, pre.distance_px, profiles, p)
         layers_est = np.asarray(cal.layers(width_mm), dtype=float)
     with timer("packs"):
         if packs is None:
@@ -564,13 +564,17 @@ def _analyze(image, params, overrides, *, warn: bool = True,
                    rod_mm, L, timer, t_start, inputs, law)
 
 
-def _fitted_law(sg, distance_px, profiles, p: AnalysisParams):
+def _stack_widths_mm(sg, distance_px, profiles, p: AnalysisParams) -> np.ndarray:
+    """Each stack's width (mm) away from its ends."""
+    return p.scale.to_mm(stack_widths_px(sg, distance_px, junction_margin_px=2 * p.thickness_px,
+                                         statistic=p.width_statistic, profiles=profiles))
+
+
+def _fitted_law(sg, width_mm, p: AnalysisParams):
     """The width law read from the scan's stacks and clear junctions
-    (:mod:`crosssection.stages.widthlaw`), and the packs it read them from (kept when no
-    stack is cut at a layer step)."""
+    (:mod:`crosssection.stages.widthlaw`), and the packs it read them from (kept, with the
+    widths, when no stack is cut at a layer step)."""
     scale = p.scale
-    width_mm = scale.to_mm(stack_widths_px(sg, distance_px, junction_margin_px=2 * p.thickness_px,
-                                           statistic=p.width_statistic, profiles=profiles))
     packs = compute_packs(sg, tangent_px=scale.to_px(p.tangent_used_mm))
     hard, _, _, _ = conservation_equations(sg, packs)
     law = fit_width_law(width_mm, scale.to_mm(np.asarray(sg.length_px, dtype=float)),

@@ -175,13 +175,17 @@ class WidthLawFit:
         """The fit from its ``summary.json`` record (:meth:`record`; null read as NaN)."""
         return cls(**{k: (float("nan") if v is None else v) for k, v in record.items()})
 
+    def formula(self) -> str:
+        """The law as an equation, in mm: ``w = a + b n (+ c n^2 or + r sqrt(n)) mm``."""
+        bend = (f" {self.quadratic_mm:+.2e} n^2" if self.quadratic_mm else
+                f" {self.root_mm:+.4f} sqrt(n)" if self.root_mm else "")
+        return f"w = {self.offset_mm:.4f} + {self.step_mm:.4f} n{bend} mm"
+
     def describe(self) -> str:
         """One line for messages and ``summary.json``."""
         if not self.ok:
             return f"no width law found in the scan ({self.reason})"
-        bend = (f" {self.quadratic_mm:+.2e} mm x n^2" if self.quadratic_mm else
-                f" {self.root_mm:+.4f} mm x sqrt(n)" if self.root_mm else "")
-        return (f"w = {self.offset_mm:.4f} mm + {self.step_mm:.4f} mm x n{bend} (one layer "
+        return (f"{self.formula()} (one layer "
                 f"{self.one_layer_mm:.3f} mm; lattice contrast {self.contrast:.2f} on "
                 f"{self.n_stacks} stacks, offset from {self.n_junctions} junctions, counts "
                 f"conserved at {self.closure:.0%} of them)")
@@ -303,7 +307,6 @@ def fit_width_law(width_mm, length_mm, rows, *, thickness_mm: float) -> WidthLaw
     steps = np.linspace(lo, hi, 241)
     con = np.abs(lattice_contrast(w, ell, steps))
     a_junctions = float(np.median(offsets))
-    rows = list(rows)
     # the lattice's strongest steps and their multiples (b / m fits every lattice b fits) are
     # candidates, and the junctions choose among them: a cut whose rim varies blurs the
     # lattice until a wrong peak can be the highest
