@@ -6,11 +6,19 @@ runs under; session-scoped fixtures are generated once per worker.
 """
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
+from hypothesis import settings
 
 REPO = Path(__file__).resolve().parents[1]
+
+# The suite draws the same property-test examples on every run, so a clean clone passes or fails
+# reproducibly; HYPOTHESIS_PROFILE=explore draws fresh ones on each run to look for new failures.
+settings.register_profile("suite", derandomize=True, print_blob=True)
+settings.register_profile("explore", derandomize=False, print_blob=True)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "suite"))
 
 
 @pytest.fixture(scope="session")
