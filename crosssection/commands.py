@@ -22,8 +22,6 @@ DIR may not be the scan's own folder: a batch of that folder would read the outp
 """
 from __future__ import annotations
 
-import math
-import warnings
 from pathlib import Path
 
 from crosssection.core import schema
@@ -205,12 +203,7 @@ def run(args) -> int:
     check_not_beside(args.image, args.out)
     clear_temporary(args.out, "analyze")
     params = AnalysisParams.from_cli_args(args, path=args.image)
-    note = set_not_read(args.image, params)
-    if note:
-        from crosssection.quality import QualityWarning
-
-        warnings.warn(note, QualityWarning, stacklevel=2)
-    result = analyze(args.image, params)
+    result = analyze(args.image, params)  # it names a set.toml whose values it does not use
     out = Path(args.out).expanduser()
     earlier = earlier_run(out)
     written = result.write(out, figure=not args.no_figure, steps=args.steps)
@@ -293,95 +286,3 @@ def steps_record(pre, params: AnalysisParams, written) -> dict:
         "warnings": list(pre.warnings),
         "outputs": sorted(Path(p).name for p in written),
     }
-
-
-def _shown(path: Path) -> Path:
-    """``path`` relative to the working folder where it lies below it (as a user typed it)."""
-    try:
-        return path.relative_to(Path.cwd().resolve())
-    except (ValueError, OSError):  # not below it, or the working folder is gone
-        return path
-
-
-def _same(a, b) -> bool:
-    """Equal parameter values: numbers to rounding, sequences element by element."""
-    if isinstance(a, (int, float)) and isinstance(b, (int, float)):
-        return math.isclose(float(a), float(b), rel_tol=1e-9)
-    if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
-        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
-    return a == b
-
-
-def _same_calibration(a, b) -> bool:
-    """Two calibration values (paths, tables) that hold the same table: a copy of the set's
-    ``calibration.csv`` elsewhere is the same calibration."""
-    from crosssection.core.calibration import Calibration
-    from crosssection.core.errors import FoldstatError
-
-    if a is None or b is None:
-        return False
-    try:
-        ca, cb = Calibration.of(a), Calibration.of(b)
-    except (FoldstatError, OSError, ValueError):
-        return False
-    return (_same(list(ca.n_layers), list(cb.n_layers))
-            and _same(list(ca.width_mm), list(cb.width_mm)))
-
-
-def set_not_read(image, params: AnalysisParams) -> str | None:
-    """Why the scan's own set would analyse it differently, or None.
-
-    ``analyze`` reads only its options; the ``set.toml`` of the set a scan belongs to (the
-    nearest one in its folder or above) is read by ``batch``. Where that file sets values
-    other than the ones used (a calibration, the scale, the hole), the same scan gives other
-    numbers in a batch: the user most likely meant them. Without a ``set.toml``, a
-    ``calibration.csv`` beside an uncalibrated scan is named the same way.
-
-    Parameters
-    ----------
-    image : str or Path
-        The scan.
-    params : AnalysisParams
-        The parameters the analysis uses.
-
-    Returns
-    -------
-    str or None
-        A ``FILE: ...`` message, None when nothing differs.
-    """
-    from crosssection.batch import loose_calibration
-    from crosssection.core.errors import FoldstatError
-    from crosssection.setconfig import SET_FILE, load_set_config
-
-    image = Path(image)
-    try:
-        parents = image.resolve().parents
-    except (OSError, RuntimeError):  # a loop of symbolic links: the loader names it
-        return None
-    for folder in parents:
-        toml = folder / SET_FILE
-        if not toml.is_file():
-            continue
-        shown, where = _shown(toml), _shown(folder)
-        try:
-            wanted = load_set_config(toml).params_for(image)
-        except (FoldstatError, OSError, ValueError):
-            return f"{image}: {shown} is not read by analyze (and it is not valid: run batch " \
-                   "on its folder to see why)"
-        used = {k: getattr(params, k, None) for k in wanted}
-        if isinstance(used.get("calibration"), (str, Path)):
-            used["calibration"] = str(Path(used["calibration"]).resolve())
-        differ = [k for k, v in wanted.items() if not _same(v, used[k])
-                  and not (k == "calibration" and _same_calibration(v, used[k]))]
-        if not differ:
-            return None
-        plural = len(differ) > 1
-        return (f"{image}: {shown} is not read by analyze; its {', '.join(differ)} for this "
-                f"scan {'differ from the ones' if plural else 'differs from the one'} used: "
-                f"pass {'them as options' if plural else 'it as an option'}, or run batch on "
-                f"{where}")
-    cal = loose_calibration(image, params.calibration)
-    if cal is not None:
-        return (f"{image}: {cal} beside it is not used (no calibration given): pass "
-                f"--calibration {cal}")
-    return None

@@ -476,6 +476,11 @@ def analyze(image, params: AnalysisParams | None = None, *, warn: bool = True,
     QualityWarning
         One warning (of a subclass naming the check) per failed quality check
         (:mod:`crosssection.quality`), unless ``warn`` is False.
+    SetWarning
+        The set the file belongs to (the nearest ``set.toml`` in its folder or above, or a
+        ``calibration.csv`` beside an uncalibrated scan) holds a calibration, scale or hole
+        other than the ones used, unless ``warn`` is False: ``batch`` reads the set, this
+        function only its parameters.
     """
     path_hint = str(image) if isinstance(image, (str, Path)) else None
     if not isinstance(warn, (bool, np.bool_)):
@@ -496,6 +501,12 @@ def _analyze(image, params, overrides, *, warn: bool = True,
     cal = _calibration(p)  # a bad calibration file fails before any image work
     # hashed while it is analysed: the record names the content the results come from
     is_file = isinstance(image, (str, Path))
+    if warn and is_file:
+        from crosssection.setconfig import set_not_read
+
+        note = set_not_read(image, p)
+        if note:  # the same scan would read other numbers in a batch of its set
+            _warnings.warn(note, quality.SetWarning, stacklevel=3)
     hashing = sha256_in_background(image) if is_file and image_sha256 is None else None
     pre = _preprocess(image, p, timer)
     hash_note = None

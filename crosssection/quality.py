@@ -191,7 +191,7 @@ import numpy as np
 
 from crosssection.params import LOW_RESOLUTION_H_PX
 
-__all__ = ["QualityFlag", "QualityWarning", "CATEGORIES", "assess", "quality_block"]
+__all__ = ["QualityFlag", "QualityWarning", "SetWarning", "CATEGORIES", "assess", "quality_block"]
 
 #: ``scale_mismatch``: relative difference between ``px_per_mm`` and the file's recorded
 #: resolution beyond which the scale is doubtful (a scanner's nominal resolution is exact;
@@ -205,6 +205,11 @@ class QualityWarning(UserWarning):
 
 class InputWarning(QualityWarning):
     """The file holds more than the one scan analysed."""
+
+
+class SetWarning(QualityWarning):
+    """The scan's set (its ``set.toml``, or a ``calibration.csv`` beside it) holds values the
+    analysis was not given: ``analyze`` reads only its parameters, ``batch`` reads the set."""
 
 
 class CalibrationWarning(QualityWarning):

@@ -27,11 +27,12 @@ file must exist and hold the columns ``n_layers,width_mm``.
 """
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from crosssection.core.errors import ConfigError, ParameterError
+from crosssection.core.errors import ConfigError, FoldstatError, ParameterError
 from crosssection.core.fileio import read_toml
 from crosssection.params import CHOICE_PARAMS, PARAM_NAMES, SET_META_KEYS, check_param
 
@@ -301,5 +302,94 @@ def failed_set(toml_path, error: str, root=None) -> SetConfig:
 
 
 __all__ = ["SetConfig", "load_set_config", "default_set_name", "check_params",
-           "check_calibration", "failed_set",
+           "check_calibration", "failed_set", "set_not_read",
            "SET_FILE", "DEFAULT_PARAMS", "DEFAULT_SET_NAME", "PARAM_KEYS", "ALLOWED_KEYS"]
+
+
+def _shown(path: Path) -> Path:
+    """``path`` relative to the working folder where it lies below it (as a user typed it)."""
+    try:
+        return path.relative_to(Path.cwd().resolve())
+    except (ValueError, OSError):  # not below it, or the working folder is gone
+        return path
+
+
+def _same(a, b) -> bool:
+    """Equal parameter values: numbers to rounding, sequences element by element."""
+    if isinstance(a, (int, float)) and isinstance(b, (int, float)):
+        return math.isclose(float(a), float(b), rel_tol=1e-9)
+    if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
+    return a == b
+
+
+def _same_calibration(a, b) -> bool:
+    """Two calibration values (paths, tables) that hold the same table: a copy of the set's
+    ``calibration.csv`` elsewhere is the same calibration."""
+    from crosssection.core.calibration import Calibration
+
+    if a is None or b is None:
+        return False
+    try:
+        ca, cb = Calibration.of(a), Calibration.of(b)
+    except (FoldstatError, OSError, ValueError):
+        return False
+    return (_same(list(ca.n_layers), list(cb.n_layers))
+            and _same(list(ca.width_mm), list(cb.width_mm)))
+
+
+def set_not_read(image, params: AnalysisParams) -> str | None:
+    """Why the scan's own set would analyse it differently, or None.
+
+    ``analyze`` reads only its parameters; the ``set.toml`` of the set a scan belongs to (the
+    nearest one in its folder or above) is read by ``batch``. Where that file sets values
+    other than the ones used (a calibration, the scale, the hole), the same scan gives other
+    numbers in a batch: the user most likely meant them. Without a ``set.toml``, a
+    ``calibration.csv`` beside an uncalibrated scan is named the same way.
+
+    Parameters
+    ----------
+    image : str or Path
+        The scan.
+    params : AnalysisParams
+        The parameters the analysis uses.
+
+    Returns
+    -------
+    str or None
+        A ``FILE: ...`` message, None when nothing differs.
+    """
+    from crosssection.batch import loose_calibration
+
+    image = Path(image)
+    try:
+        parents = image.resolve().parents
+    except (OSError, RuntimeError):  # a loop of symbolic links: the loader names it
+        return None
+    for folder in parents:
+        toml = folder / SET_FILE
+        if not toml.is_file():
+            continue
+        shown, where = _shown(toml), _shown(folder)
+        try:
+            wanted = load_set_config(toml).params_for(image)
+        except (FoldstatError, OSError, ValueError):
+            return f"{image}: {shown} is not read by analyze (and it is not valid: run batch " \
+                   "on its folder to see why)"
+        used = {k: getattr(params, k, None) for k in wanted}
+        if isinstance(used.get("calibration"), (str, Path)):
+            used["calibration"] = str(Path(used["calibration"]).resolve())
+        differ = [k for k, v in wanted.items() if not _same(v, used[k])
+                  and not (k == "calibration" and _same_calibration(v, used[k]))]
+        if not differ:
+            return None
+        plural = len(differ) > 1
+        return (f"{image}: {shown} is not read by analyze; its {', '.join(differ)} for this "
+                f"scan {'differ from the ones' if plural else 'differs from the one'} used: "
+                f"pass {'them as options' if plural else 'it as an option'}, or run batch on "
+                f"{where}")
+    cal = loose_calibration(image, params.calibration)
+    if cal is not None:
+        return (f"{image}: {cal} beside it is not used (no calibration given): pass "
+                f"--calibration {cal}")
+    return None

@@ -1,4 +1,5 @@
-"""``analyze`` names the set.toml or calibration.csv it does not read (only ``batch`` does);
+"""``analyze`` (command and API) names the set.toml or calibration.csv it does not read (only
+``batch`` does);
 ``analyze`` and ``steps`` refuse an empty ``--out`` and leave their output folder describing
 the last run alone."""
 from __future__ import annotations
@@ -6,16 +7,19 @@ from __future__ import annotations
 import shutil
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import pandas as pd
 import pytest
 
 import crosssection.cli
+import crosssection
 from crosssection.commands import (OPTIONAL_OUTPUTS, OVERLAY, STEP_IMAGES, STEPS_FIGURE,
-                                   STEPS_RECORD, remove_stale, set_not_read)
+                                   STEPS_RECORD, remove_stale)
 from crosssection.params import AnalysisParams
-from crosssection.quality import QualityWarning
+from crosssection.quality import QualityWarning, SetWarning
+from crosssection.setconfig import set_not_read
 from crosssection.samples import samples_path
 
 SCAN = "scan_01_sparse.png"
@@ -82,6 +86,18 @@ def test_the_cli_prints_it_as_one_warning_line(set_folder, capsys):
                                   "--no-figure", "--calibration",
                                   str(set_folder / "calibration.csv")]) == 0
     assert "set.toml" not in capsys.readouterr().err
+
+
+@pytest.mark.filterwarnings("ignore::crosssection.quality.CalibrationWarning")
+def test_the_api_warns_with_its_own_category(set_folder):
+    scan = set_folder / SCAN
+    with pytest.warns(SetWarning, match="set.toml is not read by analyze") as caught:
+        crosssection.analyze(scan)
+    assert [w.filename for w in caught if w.category is SetWarning] == [__file__]
+    with warnings.catch_warnings():  # the set's values passed, or warnings left to the caller
+        warnings.simplefilter("error", SetWarning)
+        crosssection.analyze(scan, calibration=str(set_folder / "calibration.csv"))
+        crosssection.analyze(scan, warn=False)
 
 
 # ---------------------------------------------------------------- the output folder
