@@ -119,7 +119,8 @@ def check_writable(path) -> None:
     Raises
     ------
     OutputError
-        Naming the folder (or the parent) and the cause.
+        Naming the folder and the cause (the parent that cannot be written, when the folder
+        does not exist yet).
     """
     import tempfile
 
@@ -136,7 +137,13 @@ def check_writable(path) -> None:
             pass
     except OSError as exc:
         # named by the folder: the probe's hidden name means nothing to the user
-        raise output_error(OSError(exc.errno, exc.strerror), probe) from None
+        if probe == folder:
+            raise output_error(OSError(exc.errno, exc.strerror), probe) from None
+        from crosssection.core.errors import OutputError
+
+        why = exc.strerror or type(exc).__name__
+        raise OutputError(f"cannot be created: {probe} cannot be written ({why})",
+                          folder) from None
 
 
 def _renamed(exc: OSError, path: Path) -> OSError:

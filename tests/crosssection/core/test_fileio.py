@@ -103,3 +103,27 @@ def test_foreign_entry_names_the_first_entry_a_command_does_not_write(tmp_path):
     assert foreign_entry(tmp_path, {"a.csv"}, lambda p: f"{p.name}/x.png") == "sub/x.png"
     (tmp_path / "b.txt").write_text("")
     assert foreign_entry(tmp_path, {"a.csv"}, lambda p: None) == "b.txt"
+
+
+@pytest.mark.parametrize("exists", [True, False])
+def test_an_unwritable_output_is_named_as_given(tmp_path, monkeypatch, capsys, exists):
+    import tempfile
+
+    import crosssection.cli
+
+    def refused(*args, **kwargs):
+        raise PermissionError(13, "Permission denied", str(tmp_path / ".foldstat-probe-x"))
+
+    out = tmp_path / "samples"
+    if exists:
+        out.mkdir()
+    monkeypatch.setattr(tempfile, "NamedTemporaryFile", refused)
+    assert crosssection.cli.main(["samples", str(out)]) == 2
+    err = capsys.readouterr().err
+    # the folder given is named; where it does not exist yet, so is the parent that refused
+    if exists:
+        assert err == f"error: {out}: cannot write (Permission denied)\n"
+    else:
+        assert err == (f"error: {out}: cannot be created: {tmp_path} cannot be written "
+                       "(Permission denied)\n")
+    assert list(tmp_path.iterdir()) == ([out] if exists else [])
