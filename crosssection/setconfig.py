@@ -315,9 +315,10 @@ def _shown(path: Path) -> Path:
 
 
 def _same(a, b) -> bool:
-    """Equal parameter values: numbers to rounding, sequences element by element."""
+    """Equal parameter values: numbers to a part in 10^4 (a set.toml records a hole to the
+    hundredth of a pixel; a scene's truth holds it to the bit), sequences element by element."""
     if isinstance(a, (int, float)) and isinstance(b, (int, float)):
-        return math.isclose(float(a), float(b), rel_tol=1e-9)
+        return math.isclose(float(a), float(b), rel_tol=1e-4, abs_tol=1e-9)
     if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
         return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
     return a == b

@@ -47,6 +47,18 @@ def test_a_set_toml_whose_values_are_passed_is_not_named(set_folder):
     assert set_not_read(set_folder / SCAN, params) is None
 
 
+def test_a_value_rounded_as_a_set_toml_records_it_is_the_same(set_folder):
+    (set_folder / "set.toml").write_text('px_per_mm = 50\nthickness_mm = 0.1\n'
+                                         'hole_radius_mm = 7.5742\n'
+                                         'hole_center_px = [428.06, 426.92]\n')
+    params = AnalysisParams(hole_radius_mm=7.574174774219351,
+                            hole_center_px=(428.0562755100713, 426.9233176459393))
+    assert set_not_read(set_folder / SCAN, params) is None
+    note = set_not_read(set_folder / SCAN, AnalysisParams(hole_radius_mm=7.58,
+                                                          hole_center_px=(428.06, 426.92)))
+    assert note is not None and "hole_radius_mm for this scan differs" in note
+
+
 def test_a_copy_of_the_sets_calibration_is_the_same_calibration(set_folder, tmp_path_factory):
     copy = tmp_path_factory.mktemp("elsewhere") / "widths.csv"
     shutil.copy(set_folder / "calibration.csv", copy)
