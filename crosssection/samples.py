@@ -46,6 +46,12 @@ def samples_path() -> Path:
                       "or source tree)", here / "_samples")
 
 
+#: the record each command writes at the top of its output folder, and the command
+OUTPUT_RECORDS = {"batch.json": "foldstat batch", "summary.json": "foldstat analyze",
+                  "steps.json": "foldstat steps", "stats.json": "foldstat stats",
+                  "configs.csv": "a simulation"}
+
+
 def copy_samples(dest, *, overwrite: bool = False) -> list[Path]:
     """Copy the sample scans, their ``set.toml``, calibration and truth into ``dest``.
 
@@ -69,7 +75,9 @@ def copy_samples(dest, *, overwrite: bool = False) -> list[Path]:
     ConfigError
         A file to write exists (and not ``overwrite``), or the samples are missing.
     OutputError
-        ``dest`` is a file, or a file or folder cannot be written there.
+        ``dest`` is a file or the output folder of a command (a batch would read its
+        figures as scans, and its next run would not know the scans), or a file or folder
+        cannot be written there.
     """
     if not isinstance(dest, (str, os.PathLike)):
         raise ParameterError(f"dest must be a folder path, got {type(dest).__name__}")
@@ -79,6 +87,10 @@ def copy_samples(dest, *, overwrite: bool = False) -> list[Path]:
     if dest.exists() and not dest.is_dir():
         raise OutputError("is a file, not a folder: give a folder to copy the samples into",
                           dest)
+    record = next((name for name in OUTPUT_RECORDS if (dest / name).is_file()), None)
+    if record is not None:
+        raise OutputError(f"holds the output of {OUTPUT_RECORDS[record]} ({record}): copy the "
+                          "samples into a folder of their own", dest)
     files = sorted(p for p in src.rglob("*") if p.is_file() and "__pycache__" not in p.parts)
     targets = [dest / p.relative_to(src) for p in files]
     if not overwrite:

@@ -166,6 +166,16 @@ def test_samples_into_a_file_or_an_empty_path_is_one_line(tmp_path, capsys, monk
     assert sorted(p.name for p in tmp_path.iterdir()) == ["set.toml"]
 
 
+@pytest.mark.parametrize("record", ["batch.json", "summary.json", "stats.json"])
+def test_samples_into_a_commands_output_folder_is_one_line(tmp_path, capsys, record):
+    (tmp_path / record).write_text("{}")
+    assert console.main(["samples", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"error: {tmp_path}: holds the output of ")
+    assert f"({record})" in err[0]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [record]
+
+
 def test_python_m_crosssection_offers_samples(tmp_path, capsys):
     from crosssection.cli import build_parser, main
 
