@@ -114,7 +114,7 @@ import pandas as pd
 from crosssection._version import __version__
 from crosssection.core import provenance, schema
 from crosssection.core.errors import (ConfigError, FoldstatError, ImageError, OutputError,
-                                      ParameterError, output_error)
+                                      ParameterError, output_error, printable)
 from crosssection.core.fileio import (BROWSER_FILES, PARTIAL_TAG, check_out, clear_stale_folders,
                                       is_working_folder, missing_file_reason, read_json_object,
                                       staging_folder, swap_in_folder, temporary_files,
@@ -236,6 +236,15 @@ def _broken_link(image: Path) -> str | None:
     return None
 
 
+def _not_utf8(image: Path, rel: str) -> str | None:
+    """The one-line reason of an image whose name is not UTF-8 text, else None: the batch's
+    tables and records name each scan, and a later run must find it by that name."""
+    if printable(rel) == rel:
+        return None
+    return ImageError("file name is not UTF-8 text: rename the file (the batch's tables "
+                      "name every scan)", image).one_line()
+
+
 def effective_params(params: dict) -> dict:
     """The parameters an analysis runs with: every default filled in, the derived ones
     (``s_min_mm2``, ``tangent_mm``) computed, a calibration file replaced by its SHA-256.
@@ -320,7 +329,7 @@ def image_seed(seed: int | None, rel: str) -> int:
     import numpy as np
 
     base = np.random.SeedSequence(seed).entropy
-    key = int.from_bytes(hashlib.sha256(rel.encode()).digest()[:8], "little")
+    key = int.from_bytes(hashlib.sha256(os.fsencode(rel)).digest()[:8], "little")
     return int(np.random.SeedSequence([base, key]).generate_state(1, dtype=np.uint32)[0])
 
 
@@ -452,10 +461,11 @@ def plan_batch(input_dir, out_dir, *, cli_params: dict | None = None, seed: int 
         rel = img.relative_to(root).as_posix()
         out_rel = f"{_set_folder(cfg.name)}/{_safe_component(img.stem)}"
         params = {} if cfg.error else _params_in_set(cfg, img)
-        tasks.append(ImageTask(image=str(img), rel=rel, set_name=cfg.name, out_dir="",
-                               out_rel=out_rel, given=str(given_root / rel), params=params,
+        tasks.append(ImageTask(image=str(img), rel=printable(rel), set_name=cfg.name,
+                               out_dir="", out_rel=out_rel,
+                               given=printable(given_root / rel), params=params,
                                seed=image_seed(seed, rel), figure=figure,
-                               error=cfg.error or _broken_link(img)))
+                               error=cfg.error or _broken_link(img) or _not_utf8(img, rel)))
     # the scans outside any set first: a set file taking their name is the one named
     check_set_names(([default_set] if any(t.set_name == DEFAULT_SET_NAME and not t.error
                                           for t in tasks) else []) + [*sets.values()], root)

@@ -7,6 +7,7 @@ into one line on stderr (file and cause) with a non-zero exit status.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import signal
 import sys
@@ -149,11 +150,29 @@ def run_parsed(parser: argparse.ArgumentParser, argv=None) -> int:
     (one line, never a traceback). Quality warnings are printed as ``warning: FILE: ...``
     lines on stderr.
     """
-    with signals_as_interrupts() as received:
+    with signals_as_interrupts() as received, _escaping_stdout():
         status = _run_parsed(parser, argv)
         # a command that reports its own interrupt (stats) returns INTERRUPTED
         return (TERMINATED if signal.SIGTERM in received and status == INTERRUPTED
                 else status)
+
+
+@contextlib.contextmanager
+def _escaping_stdout():
+    """Standard output that shows what its encoding cannot hold (a file name in an ASCII
+    terminal, bytes of a name that are not UTF-8) as backslash escapes, as standard error
+    does, instead of failing after the work is done."""
+    out = sys.stdout
+    strict = getattr(out, "errors", None) == "strict" and hasattr(out, "reconfigure")
+    if strict:
+        out.flush()
+        out.reconfigure(errors="backslashreplace")
+    try:
+        yield
+    finally:
+        if strict:
+            out.flush()
+            out.reconfigure(errors="strict")
 
 
 def _run_parsed(parser: argparse.ArgumentParser, argv=None) -> int:

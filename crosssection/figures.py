@@ -14,6 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
+from crosssection.core.errors import printable
+
 __all__ = ["overlay_figure", "draw_overlay", "overlay_window", "steps_figure", "threshold_title",
            "step_titles", "curvature_figure", "widths_figure", "dim_image"]
 
@@ -179,6 +181,7 @@ def overlay_figure(rgb, result=None, *, junctions_df=None, stacks_df=None, paths
     shown = (f"{Path(path).parent.name}/{Path(path).name}"
              if path and Path(path).stem.lower() in GENERIC_STEMS and Path(path).parent.name
              else Path(path).name if path else "")
+    shown = printable(shown)  # a name that is not UTF-8 cannot be drawn as it is
     head = title or ((f"{shown}: " if shown else "") + "stacks: width and label = n_br")
     wide = f"{head}   (00000 junctions, 00000 stacks, 000000 branches)"
     _, _, header_in = _overlay_header(wide, n_items, _figure_width_in(view))

@@ -1,6 +1,25 @@
 """Errors that reach the user as one clear line (file and cause), never a traceback."""
 from __future__ import annotations
 
+import os
+
+
+def printable(path) -> str:
+    """``path`` as text that every UTF-8 file and figure can hold: bytes of a file name that
+    are not UTF-8 (held by Python as lone surrogates) are shown as ``\\xff`` escapes, as
+    Python's stderr shows them.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+
+    Returns
+    -------
+    str
+    """
+    return os.fsdecode(path).encode("utf-8", "surrogateescape").decode("utf-8",
+                                                                      "backslashreplace")
+
 
 class FoldstatError(Exception):
     """Base class of every expected failure of the toolkit.
@@ -20,8 +39,8 @@ class FoldstatError(Exception):
 
     def one_line(self) -> str:
         """The message shown to the user: ``"<file>: <cause>"``."""
-        msg = " ".join(self.cause.split())
-        return f"{self.path}: {msg}" if self.path else msg
+        msg = " ".join(printable(self.cause).split())
+        return f"{printable(self.path)}: {msg}" if self.path else msg
 
 
 class ImageError(FoldstatError):
