@@ -102,9 +102,22 @@ def _unlinked(paths) -> list[Path]:
 
 
 def earlier_run(out_dir) -> bool:
-    """Whether ``out_dir`` holds the record of an earlier ``analyze`` or ``steps`` run."""
+    """Whether ``out_dir`` holds the record of an earlier ``analyze`` or ``steps`` run: a
+    JSON object with the package version, as both records hold (a file of the same name that
+    is not one leaves the folder the user's, whose files no run removes)."""
     out = Path(out_dir).expanduser()
-    return any((out / name).is_file() for name in RUN_RECORDS)
+    return any(_is_run_record(out / name) for name in RUN_RECORDS)
+
+
+def _is_run_record(path: Path) -> bool:
+    import json
+
+    try:
+        with open(path, "rb") as fh:
+            record = json.loads(fh.read(1 << 24))
+    except (OSError, ValueError):
+        return False
+    return isinstance(record, dict) and "version" in record and "parameters" in record
 
 
 def check_not_beside(image, out_dir) -> None:
@@ -217,7 +230,7 @@ def run(args) -> int:
 
 def run_steps(args) -> int:
     """``steps``: stages 1-6 only, then the step images and their record ``steps.json``."""
-    from crosssection.core.fileio import write_json
+    from crosssection.core.fileio import renamed_together, write_json
     from crosssection.figures import step_titles
     from crosssection.pipeline import preprocess, write_step_images
 
@@ -229,12 +242,13 @@ def run_steps(args) -> int:
     out = Path(args.out).expanduser()
     earlier = earlier_run(out)
     try:
-        paths = write_step_images(out, pre.rgb, pre.threshold.mask, pre.mask_clean,
-                                  pre.skeleton, pre.junctions.centers_rc,
-                                  figure=not args.no_figure,
-                                  titles=step_titles(pre.threshold.as_summary()))
-        # written last, as summary.json is: its presence marks the images complete
-        record = write_json(out / STEPS_RECORD, steps_record(pre, params, paths.values()))
+        with renamed_together():  # never one run's images beside another's
+            paths = write_step_images(out, pre.rgb, pre.threshold.mask, pre.mask_clean,
+                                      pre.skeleton, pre.junctions.centers_rc,
+                                      figure=not args.no_figure,
+                                      titles=step_titles(pre.threshold.as_summary()))
+            # written last, as summary.json is: its presence marks the images complete
+            record = write_json(out / STEPS_RECORD, steps_record(pre, params, paths.values()))
     except OutputError:
         raise
     except OSError as exc:

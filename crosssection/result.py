@@ -246,7 +246,9 @@ class AnalysisResult:
         Parameters
         ----------
         out_dir : str or Path
-            Created if needed. Files are written atomically; ``summary.json`` last. The
+            Created if needed. Files are written atomically, all renamed into place at the
+            end (``summary.json`` last): a write stopped midway leaves the folder's earlier
+            files as they were. The
             hidden temporary files that a write killed midway left there are removed first
             (:func:`crosssection.commands.clear_temporary`). Nothing else in the folder is
             touched: an ``overlay.png`` or step images of an earlier write stay when this one
@@ -276,22 +278,23 @@ class AnalysisResult:
         summary = dict(self.summary)
         paths = {}
         from crosssection.commands import clear_temporary
+        from crosssection.core.fileio import renamed_together, save_figure
 
         try:
             out.mkdir(parents=True, exist_ok=True)
             clear_temporary(out, "analyze")
-            if figure:
-                from crosssection.figures import overlay_figure
-                from crosssection.core.fileio import save_figure
+            with renamed_together():  # never one run's figure beside another's tables
+                if figure:
+                    from crosssection.figures import overlay_figure
 
-                t0 = time.perf_counter()
-                fig = overlay_figure(self.rgb, self, thickness_px=self.thickness_px)
-                paths["overlay"] = save_figure(fig, out / "overlay.png")
-                summary["output_timings_s"] = {**summary.get("output_timings_s", {}),
-                                               "overlay_figure": time.perf_counter() - t0}
-            if steps:
-                paths.update(self.write_steps(out))
-            paths.update(schema.write_tables(out, summary, self.tables))
+                    t0 = time.perf_counter()
+                    fig = overlay_figure(self.rgb, self, thickness_px=self.thickness_px)
+                    paths["overlay"] = save_figure(fig, out / "overlay.png")
+                    summary["output_timings_s"] = {**summary.get("output_timings_s", {}),
+                                                   "overlay_figure": time.perf_counter() - t0}
+                if steps:
+                    paths.update(self.write_steps(out))
+                paths.update(schema.write_tables(out, summary, self.tables))
         except OutputError:
             raise
         except OSError as exc:

@@ -1,9 +1,12 @@
 """Atomic writing of outputs: write to a temporary file in the same folder, then rename.
 
-A re-run never sees a half-written file: either the old one or the complete new one.
+A re-run never sees a half-written file: either the old one or the complete new one. Within
+:func:`renamed_together` the renames wait for the end of the block, so a folder holds either
+all the files of the earlier run or all of the new one's.
 """
 from __future__ import annotations
 
+import contextvars
 import errno
 import json
 import os
@@ -38,6 +41,53 @@ _WRITE_ERRNOS = frozenset(e for e in (errno.ENOSPC, getattr(errno, "EDQUOT", Non
                                       errno.EFBIG, errno.EIO) if e is not None)
 
 
+#: the renames :func:`atomic_path` leaves to the enclosing :func:`renamed_together` block
+_PENDING: contextvars.ContextVar = contextvars.ContextVar("foldstat_pending_renames",
+                                                         default=None)
+
+
+@contextmanager
+def renamed_together():
+    """Hold back the renames of :func:`atomic_path` to the end of the block, and do them
+    there in the order the files were written (a run's record, written last, lands last).
+
+    A block stopped midway (an error, an interrupt) removes its temporary files and leaves
+    the folder's files as they were: an output folder written again never mixes two runs
+    (one run's figures beside another's tables). A kill leaves only hidden temporary files
+    (``.<name>.XXXX<suffix>``), which the next run removes. A nested block is its outer
+    block's. Per thread: another thread's writes are its own.
+    """
+    if _PENDING.get() is not None:
+        yield
+        return
+    pending: list = []
+    token = _PENDING.set(pending)
+    done = False
+    try:
+        yield
+        done = True
+    finally:
+        _PENDING.reset(token)
+        if not done:
+            _discard(tmp for tmp, _ in pending)
+    for i, (tmp, path) in enumerate(pending):
+        try:
+            os.replace(tmp, path)
+        except OSError as exc:
+            _discard(rest for rest, _ in pending[i:])
+            raise _renamed(exc, path) from None
+
+
+def _discard(paths) -> None:
+    """Remove temporary files, those already gone or that cannot be removed left (the next
+    run's :func:`temporary_files` finds them)."""
+    for p in paths:
+        try:
+            p.unlink(missing_ok=True)
+        except OSError:
+            pass
+
+
 @contextmanager
 def atomic_path(path, suffix=None):
     """Yield a temporary path next to ``path``; rename it onto ``path`` on success.
@@ -64,10 +114,14 @@ def atomic_path(path, suffix=None):
         raise _renamed(exc, path) from None
     os.close(fd)
     tmp = Path(tmp)
+    pending = _PENDING.get()
     try:
         os.chmod(tmp, 0o666 & ~UMASK)  # mkstemp creates 0600; outputs get the usual mode
         yield tmp
-        os.replace(tmp, path)
+        if pending is None:
+            os.replace(tmp, path)
+        else:  # renamed with the block's other files at its end
+            pending.append((tmp, path))
     except OSError as exc:
         named = {os.fsdecode(n) for n in (exc.filename, exc.filename2)
                  if isinstance(n, (str, bytes, os.PathLike))}
@@ -75,7 +129,7 @@ def atomic_path(path, suffix=None):
             raise  # about another file: the writer's own error
         raise _renamed(exc, path) from None
     finally:
-        if tmp.exists():
+        if tmp.exists() and (pending is None or (tmp, path) not in pending):
             tmp.unlink()
 
 

@@ -304,3 +304,34 @@ def test_the_temporary_files_of_a_killed_run_are_removed(command, small_scan, tm
                                   "--no-figure"]) == 0
     assert [name for name in left if (out / name).exists()] == []
     assert (out / ".notes.txt.abcd1234.txt").read_text() == "the user's"
+
+
+def test_an_analysis_stopped_while_writing_leaves_the_earlier_one_whole(small_scan, tmp_path,
+                                                                        monkeypatch):
+    from crosssection.core import schema
+
+    out = tmp_path / "out"
+    main = crosssection.cli.main
+    assert main(["analyze", str(small_scan), "--out", str(out), "--steps"]) == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+
+    def interrupted(*args, **kwargs):  # the figures are written, the tables not yet
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(schema, "write_tables", interrupted)
+    assert main(["analyze", str(small_scan), "--out", str(out), "--steps",
+                 "--px-per-mm", "40"]) == 130
+    # the earlier run's files, all of them and only them: no new figure beside old tables
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+
+
+def test_a_file_named_like_a_record_is_not_an_earlier_run(small_scan, tmp_path):
+    out = tmp_path / "mine"
+    out.mkdir()
+    for name in ("notes.txt", OVERLAY, STEP_IMAGES[0]):
+        (out / name).write_text("mine")
+    (out / "summary.json").write_text("x")  # not a record: the folder is the user's
+    assert crosssection.cli.main(["analyze", str(small_scan), "--out", str(out),
+                                  "--no-figure"]) == 0
+    assert all((out / name).read_text() == "mine" for name in ("notes.txt", OVERLAY,
+                                                               STEP_IMAGES[0]))

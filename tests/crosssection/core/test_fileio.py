@@ -127,3 +127,30 @@ def test_an_unwritable_output_is_named_as_given(tmp_path, monkeypatch, capsys, e
         assert err == (f"error: {out}: cannot be created: {tmp_path} cannot be written "
                        "(Permission denied)\n")
     assert list(tmp_path.iterdir()) == ([out] if exists else [])
+
+
+def test_files_written_together_appear_together(tmp_path):
+    (tmp_path / "a.csv").write_text("old a")
+    with fileio.renamed_together():
+        fileio.write_text(tmp_path / "a.csv", "new a")
+        fileio.write_json(tmp_path / "b.json", {"b": 1})
+        with fileio.renamed_together():  # nested: the outer block's
+            fileio.write_text(tmp_path / "c.txt", "c")
+        # nothing is in place before the block ends
+        assert (tmp_path / "a.csv").read_text() == "old a"
+        assert not (tmp_path / "b.json").exists() and not (tmp_path / "c.txt").exists()
+    assert (tmp_path / "a.csv").read_text() == "new a"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.csv", "b.json", "c.txt"]
+
+
+@pytest.mark.parametrize("stop", [KeyboardInterrupt, ValueError])
+def test_a_block_stopped_midway_leaves_the_earlier_files(tmp_path, stop):
+    (tmp_path / "a.csv").write_text("old a")
+    with pytest.raises(stop):
+        with fileio.renamed_together():
+            fileio.write_text(tmp_path / "a.csv", "new a")
+            fileio.write_text(tmp_path / "b.txt", "b")
+            raise stop()
+    # no temporary file is left, the earlier file is whole
+    assert [p.name for p in tmp_path.iterdir()] == ["a.csv"]
+    assert (tmp_path / "a.csv").read_text() == "old a"
