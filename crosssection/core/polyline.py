@@ -247,12 +247,22 @@ def _smooth_flat(r, c, offs, closed, half, projs):
     return ox, oy, n
 
 
-def _end_projectors(half: int) -> np.ndarray:
-    """A fixed-size stack of end projectors, one per half window 0..half (row k used for k)."""
-    projs = np.zeros((half + 1, max(half, 1), 2 * half + 1))
-    for k in range(1, half + 1):
-        projs[k, :k, :2 * k + 1] = _end_projector(k)
-    return projs
+class _end_projectors(dict):
+    """The end projectors of half windows 0..``half``, ``[k]`` of shape (k, 2k + 1), made
+    when first asked for: only the half windows the paths use (a path shorter than its
+    window takes a shorter one). All of them at once took (half + 1) half (2 half + 1)
+    floats: 233 GiB at a 5001-px window."""
+
+    def __init__(self, half: int):
+        super().__init__()
+        self.half = int(half)
+
+    def __missing__(self, k: int) -> np.ndarray:
+        if not 0 <= k <= self.half:
+            raise KeyError(k)
+        proj = _end_projector(k) if k else np.zeros((0, 1))
+        self[k] = proj
+        return proj
 
 
 def _lengths_kernel(r, c, offs, closed, half, projs):

@@ -321,3 +321,13 @@ def test_values_beyond_any_scan_are_refused_before_they_overflow(name):
     with pytest.raises(ParameterError, match=f"^{name} = 1e\\+300 is beyond any scan"):
         cs.AnalysisParams(**{name: 1e300})
     assert getattr(cs.AnalysisParams(**{name: 1000.0}), name) == 1000.0
+
+
+def test_a_smoothing_window_beyond_ten_sheet_thicknesses_is_refused():
+    from crosssection.core.errors import ParameterError
+
+    assert cs.AnalysisParams(px_per_mm=50, thickness_mm=0.1, smooth_px=50).smooth_px == 50
+    with pytest.raises(ParameterError, match="smooth_px = 51 px is more than 10 sheet"):
+        cs.AnalysisParams(px_per_mm=50, thickness_mm=0.1, smooth_px=51)
+    # the bound follows h
+    assert cs.AnalysisParams(px_per_mm=100, thickness_mm=0.1, smooth_px=51).smooth_px == 51

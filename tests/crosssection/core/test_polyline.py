@@ -108,3 +108,17 @@ def test_smoothed_lengths_batch_equals_single():
                for p, c in zip(paths, closed)]
         np.testing.assert_allclose(got, ref, rtol=1e-12, atol=1e-12)
     assert pl.smoothed_lengths(np.zeros((0, 2)), [0], np.zeros(0, bool)).shape == (0,)
+
+
+def test_a_window_longer_than_the_paths_costs_only_the_windows_they_use():
+    # a 5001-point window once asked for the end projectors of every half window up to 2500
+    # at once (233 GiB); the paths here take half windows of at most 149
+    rng = np.random.default_rng(3)
+    paths = [np.cumsum(rng.normal(size=(n, 2)), axis=0) for n in (40, 120, 299)]
+    big = pl.smooth_paths(paths, window_px=5001)
+    exact = pl.smooth_paths(paths, window_px=2 * 149 + 1)
+    for a, b, p in zip(big, exact, paths):
+        assert np.array_equal(a, b) and np.array_equal(a, pl.smooth(p, window_px=5001))
+    lengths = pl.smoothed_lengths(np.concatenate(paths), np.cumsum([0, 40, 120, 299]),
+                                  np.zeros(3, bool), window_px=5001)
+    assert np.allclose(lengths, [pl.length(b) for b in big])
