@@ -235,6 +235,11 @@ class AnalysisParams:
         if (self.hole_center_px is None) != (self.hole_radius_mm is None) \
                 and self.hole_center_px is not None:
             raise ParameterError("hole_center_px needs hole_radius_mm")
+        if self.tangent_mm is not None and self.tangent_mm * self.px_per_mm < 1.0:
+            raise ParameterError(f"tangent_mm = {self.tangent_mm:g} mm is "
+                                 f"{self.tangent_mm * self.px_per_mm:.3g} px at "
+                                 f"{self.px_per_mm:g} px/mm: a tangent is fitted on one pixel "
+                                 "or more (default 3 h)")
         if self.smooth_px is not None and self.smooth_px > SMOOTH_H_MAX * self.thickness_px:
             # averaged over more than a bend: on generated scans (h = 5 px) the total energy
             # read -12 % at the default 11 px, -25 to -33 % at 21 px and -40 to +183 % at
@@ -496,7 +501,12 @@ _NON_NEGATIVE = ("s_min_mm2", "l_min_mm", "merge_px", "blue_min", "rg_max", "sli
 #: own length, and the length in pixels must stay an integer the kernels can hold).
 _BEYOND = {"rod_length_mm": (1e7, "mm of sheet (10 km)"),
            "kappa_c_per_mm": (1e4, "1/mm (a radius of 0.1 um)"),
-           "tangent_mm": (1e4, "mm (10 m)")}
+           "tangent_mm": (1e4, "mm (10 m)"),
+           "bending_rigidity_J": (1e9, "J m (a steel plate 1 cm thick and 1 m wide: 2e4)"),
+           "sliver_width_h": (1e3, "h (a gap wider than any hole below s_min)")}
+#: Lower bounds of the same kind: a plastic threshold at a curvature of a 10 km radius is no
+#: threshold (every bend of a scan exceeds it), and the energies it leaves underflow
+_BELOW = {"kappa_c_per_mm": (1e-7, "1/mm (a radius of 10 km)")}
 
 
 def check_param(name: str, value):
@@ -508,12 +518,11 @@ def check_param(name: str, value):
         return None
     if name in _POSITIVE:
         v = _number(name, value)
-        if name in _BEYOND and v > _BEYOND[name][0]:
-            top, what = _BEYOND[name]
-            raise ParameterError(f"{name} = {v:g} is beyond any scan (at most {top:g} {what})")
+        _check_range(name, v)
         return v
     if name in _NON_NEGATIVE:
         v = _number(name, value, allow_equal=True)
+        _check_range(name, v)
         if name == "merge_px" and v > 50:
             raise ParameterError(f"merge_px = {v:g} px would merge distant junctions "
                                  "(at most 50 px)")
@@ -543,6 +552,15 @@ def check_param(name: str, value):
     if name == "calibration":
         return _check_calibration(value)
     raise ParameterError(f"unknown parameter {name!r}")
+
+
+def _check_range(name: str, v: float) -> None:
+    if name in _BEYOND and v > _BEYOND[name][0]:
+        top, what = _BEYOND[name]
+        raise ParameterError(f"{name} = {v:g} is beyond any scan (at most {top:g} {what})")
+    if name in _BELOW and v < _BELOW[name][0]:
+        bottom, what = _BELOW[name]
+        raise ParameterError(f"{name} = {v:g} is below any scan (at least {bottom:g} {what})")
 
 
 def _choice(name, value, allowed):

@@ -331,3 +331,23 @@ def test_a_smoothing_window_beyond_ten_sheet_thicknesses_is_refused():
         cs.AnalysisParams(px_per_mm=50, thickness_mm=0.1, smooth_px=51)
     # the bound follows h
     assert cs.AnalysisParams(px_per_mm=100, thickness_mm=0.1, smooth_px=51).smooth_px == 51
+
+
+@pytest.mark.parametrize("name, value, cause", [
+    ("bending_rigidity_J", 1e308, "beyond any scan"),
+    ("kappa_c_per_mm", 1e-300, "below any scan"),
+    ("sliver_width_h", 1e300, "beyond any scan"),
+    ("tangent_mm", 1e-9, "a tangent is fitted on one pixel or more"),
+])
+def test_values_no_scan_can_mean_are_refused(name, value, cause):
+    # accepted, they gave an energy in J of null (overflow), energies of 1e-296, or ran
+    from crosssection.core.errors import ParameterError
+
+    with pytest.raises(ParameterError, match=cause) as err:
+        cs.AnalysisParams(px_per_mm=50, thickness_mm=0.1, **{name: value})
+    assert err.value.one_line().startswith(name)
+    # values a sheet can have pass
+    typical = {"bending_rigidity_J": 1e-4, "kappa_c_per_mm": 1e-3, "sliver_width_h": 3.0,
+               "tangent_mm": 0.05}[name]
+    assert getattr(cs.AnalysisParams(px_per_mm=50, thickness_mm=0.1, **{name: typical}),
+                   name) == typical
