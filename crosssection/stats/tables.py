@@ -510,6 +510,13 @@ def compute_stats(ens: Ensemble, opts: StatsOptions | None = None, *,
                     too_few.setdefault(s, []).append(f"{where} n = {n_q}")
                 continue
             summaries[(s, reg, q)] = summ
+            n_fit = int(summ.table["n"].max()) if len(summ.table) else 0
+            if summ.best is None and n_fit < opts.min_n:
+                # a detection limit given above the values leaves none to fit
+                where = q if reg in ("all", SIM_REGION) else f"{q} ({reg})"
+                too_few.setdefault(s, []).append(
+                    f"{where} n = {n_fit} ({summ.n_dropped + ndrop} below the detection "
+                    "limit or not finite)")
             t = summ.table.copy()
             t.insert(0, "quantity", q)
             t.insert(0, "region", reg)

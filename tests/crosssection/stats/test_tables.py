@@ -419,3 +419,17 @@ def test_a_simulation_resumed_under_other_versions_reports_every_version(tmp_pat
     assert prov["versions"] == ["0.0.1", "0.0.2"]
     assert prov["libraries"]["numpy"] == ["1.0.0", "2.0.0"]
     assert "versions" not in prov["parameters"]  # a record of the code, not a parameter
+
+
+def test_a_detection_limit_above_every_value_is_named(tmp_path):
+    from crosssection.stats import SmallSampleWarning
+
+    batch = demo.write_demo_batch(tmp_path / "b", n_images=3, seed=2)
+    ens = D.load_any(batch, l_min_mm=1e6)  # a kilometre: above every branch
+    opts = T.StatsOptions(n_boot=0, gof=False, quantities=("length_L",))
+    with pytest.warns(SmallSampleWarning) as rec:
+        T.compute_stats(ens, opts)
+    msgs = [str(w.message) for w in rec if w.category is SmallSampleWarning]
+    for s, n in ens.branches.groupby("set").size().items():  # each set names its own
+        assert any(m.startswith(f"set {s}: ") and f"length_L n = 0 ({n} below the detection "
+                   "limit or not finite)" in m for m in msgs), msgs
