@@ -1,6 +1,7 @@
 """The result of one analysis, :class:`AnalysisResult`, and how it is written to disk."""
 from __future__ import annotations
 
+import json
 import os
 import time
 from dataclasses import dataclass, field
@@ -289,7 +290,11 @@ class AnalysisResult:
 
                     t0 = time.perf_counter()
                     fig = overlay_figure(self.rgb, self, thickness_px=self.thickness_px)
-                    paths["overlay"] = save_figure(fig, out / "overlay.png")
+                    made_from = {"image": summary.get("image"),
+                                 "parameters": summary.get("parameters")}
+                    paths["overlay"] = save_figure(
+                        fig, out / "overlay.png",
+                        description=json.dumps(made_from, default=str, sort_keys=True))
                     summary["output_timings_s"] = {**summary.get("output_timings_s", {}),
                                                    "overlay_figure": time.perf_counter() - t0}
                 if steps:

@@ -254,16 +254,25 @@ def write_text(path, text: str) -> Path:
     return Path(path)
 
 
-def save_figure(fig, path, **kwargs) -> Path:
+def save_figure(fig, path, *, description: str | None = None, **kwargs) -> Path:
     """Save a matplotlib figure as PNG atomically and close it.
 
     zlib level 3 instead of PIL's default 6: on a 1200 x 1272 scan overlay 0.39 s against
     1.24 s of encoding, for a file 12 % larger (a dimmed scan's noise compresses poorly).
+    The PNG's text records the package version (``Software``) and ``description`` (what the
+    figure was made from, e.g. the parameters) when given.
     """
+    import matplotlib
     import matplotlib.pyplot as plt
+
+    from crosssection._version import __version__
 
     kwargs.setdefault("dpi", 120)
     kwargs.setdefault("pil_kwargs", {"compress_level": 3})
+    metadata = {"Software": f"foldstat {__version__} (matplotlib {matplotlib.__version__})"}
+    if description:
+        metadata["Description"] = description
+    kwargs["metadata"] = {**metadata, **kwargs.get("metadata", {})}
     with atomic_path(path, suffix=".png") as tmp:
         fig.savefig(tmp, format="png", **kwargs)
     plt.close(fig)

@@ -335,3 +335,20 @@ def test_a_file_named_like_a_record_is_not_an_earlier_run(small_scan, tmp_path):
                                   "--no-figure"]) == 0
     assert all((out / name).read_text() == "mine" for name in ("notes.txt", OVERLAY,
                                                                STEP_IMAGES[0]))
+
+
+def test_the_overlay_records_the_version_and_what_it_was_made_from(small_scan, tmp_path):
+    import json
+
+    from PIL import Image
+
+    from crosssection._version import __version__
+
+    out = tmp_path / "out"
+    assert crosssection.cli.main(["analyze", str(small_scan), "--out", str(out),
+                                  "--px-per-mm", "40"]) == 0
+    text = Image.open(out / OVERLAY).text
+    assert text["Software"].startswith(f"foldstat {__version__} ")
+    made_from = json.loads(text["Description"])
+    assert made_from["parameters"]["px_per_mm"] == 40.0
+    assert made_from["image"]["path"] == str(small_scan)
