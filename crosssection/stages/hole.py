@@ -241,8 +241,9 @@ def _fit_points(pts, center_rc, radius_px, gap_px, path) -> Hole:
         raise AnalysisError("cannot fit the hole: the mask has no foreground", path)
     try:
         hull = pts[ConvexHull(pts).vertices]
-    except QhullError as exc:  # collinear points
-        raise AnalysisError(f"cannot fit the hole: degenerate foreground ({exc.args[0][:40]})",
+    except QhullError:  # collinear points (Qhull's own message is a page of its options)
+        raise AnalysisError(f"cannot fit the hole: the ink's {len(pts)} border points lie on "
+                            "one line (too little ink kept: check the threshold)",
                             path) from None
     if center_rc is None:
         c0, r0 = kasa_fit(hull)

@@ -415,3 +415,16 @@ def test_remap_in_blocks_is_opencvs():
         want = cv2.remap(src, mc, mr, interp, borderMode=cv2.BORDER_REPLICATE)
         for limit in (7, 64, 200):
             assert np.array_equal(_remap(src, mc, mr, interp, limit=limit), want)
+
+
+def test_ink_on_one_line_is_one_plain_line():
+    from crosssection.core.errors import AnalysisError
+    from crosssection.stages.hole import fit_hole
+
+    mask = np.zeros((40, 40), bool)
+    mask[np.arange(5, 30), np.arange(5, 30)] = True  # a diagonal: collinear border points
+    with pytest.raises(AnalysisError) as err:
+        fit_hole(mask, path="scan.png")
+    msg = err.value.one_line()
+    assert msg.startswith("scan.png: cannot fit the hole: ") and "lie on one line" in msg
+    assert "QH" not in msg and "Qhull" not in msg
