@@ -167,9 +167,11 @@ class AnalysisParams:
         "ink threshold: auto (blue dominance, cut chosen from the scan), fixed (the paper's "
         "blue >= blue_min, red and green <= rg_max) or otsu", choices=THRESHOLD_METHODS))
     blue_min: float | None = field(default=None, metadata=_opt(
-        "fixed threshold: minimum blue, native units (default 100 for 8-bit)"))
+        "minimum blue, native units: the fixed threshold's cut (default 100 for 8-bit); "
+        "given with auto, an extra bound on the automatic cut"))
     rg_max: float | None = field(default=None, metadata=_opt(
-        "fixed threshold: maximum red and green, native units (default 130 for 8-bit)"))
+        "maximum red and green, native units: the fixed threshold's cut (default 130 for "
+        "8-bit); given with auto, an extra bound on the automatic cut"))
     s_min_mm2: float | None = field(default=None, metadata=_opt(
         "smallest void (default (10 h)^2, the paper's)", "mm^2"))
     sliver_width_h: float = field(default=1.5, metadata=_opt(
@@ -424,7 +426,7 @@ class AnalysisParams:
         if s_min_px >= h * w:
             given = ("s_min_mm2" if self.s_min_mm2 is not None
                      else "thickness_mm (s_min = (10 h)^2)")
-            raise ParameterError(f"s_min = {self.s_min_used_mm2:g} mm^2 = {s_min_px:.0f} px at "
+            raise ParameterError(f"s_min = {self.s_min_used_mm2:g} mm^2 = {s_min_px:.6g} px at "
                                  f"px_per_mm = {self.px_per_mm:g} is not smaller than the "
                                  f"image ({w}x{h} px): check px_per_mm and {given}" + hint,
                                  path)
@@ -433,7 +435,7 @@ class AnalysisParams:
                                  f"{self.thickness_px:.1f} px is not small against the image "
                                  f"({w}x{h} px); check px_per_mm and thickness_mm" + hint, path)
         if l_min_px >= max(h, w):
-            raise ParameterError(f"l_min = {self.l_min_mm:g} mm = {l_min_px:.0f} px exceeds the "
+            raise ParameterError(f"l_min = {self.l_min_mm:g} mm = {l_min_px:.6g} px exceeds the "
                                  f"image size ({w}x{h} px)" + hint, path)
         if self.hole_radius_mm is not None:
             r_px = self.scale.to_px(self.hole_radius_mm)
