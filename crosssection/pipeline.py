@@ -593,6 +593,18 @@ def _fitted_law(sg, width_mm, p: AnalysisParams):
     return law, packs
 
 
+def _inscribed_radius_px(distance_px, junctions) -> np.ndarray:
+    """Radius of the ink disc inscribed at each junction: the largest distance to the paper
+    within 2 px of its centre (the centre is a mean of junction pixels)."""
+    out = np.zeros(len(junctions))
+    rows, cols = distance_px.shape
+    for i, (x, y) in enumerate(zip(junctions["x_px"].to_numpy(), junctions["y_px"].to_numpy())):
+        r, c = int(round(y)), int(round(x))
+        win = distance_px[max(r - 2, 0):min(r + 3, rows), max(c - 2, 0):min(c + 3, cols)]
+        out[i] = float(win.max()) if win.size else 0.0
+    return out
+
+
 def _touch_px(sg, width_px, h_px) -> float:
     """How close a void's border must pass to a junction to count it (half the widest stack
     at the junction, 90th percentile over junctions, plus h)."""
@@ -651,7 +663,8 @@ def _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, void
         calibration_max_width_mm=_max_width_mm(cal, p), junctions=junctions,
         image_shape=pre.rgb.shape, file_px_per_mm=pre.file_px_per_mm,
         file_pages=pre.file_pages, network_shares=_network_shares(lin, stacks),
-        border_ink_rc=_border_pixels(pre.mask_clean), width_law=law)
+        border_ink_rc=_border_pixels(pre.mask_clean), width_law=law,
+        junction_radius_px=_inscribed_radius_px(pre.distance_px, junctions))
     notes = list(pre.warnings) + [f"linear system: {f}" for f in lin.flags
                                   if not str(f).startswith("disconnected")]
     summary = tb.summary(pre=pre, params=p, linear_system=lin, junctions=junctions,

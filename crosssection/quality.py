@@ -46,6 +46,9 @@ count_width              stacks at least 4 widths long whose final n_br is a  an
                          more from it (an ink blot or smear on a stack)
 isolated_stacks          pieces of ink touching no other stack (both ends     any, beside others
                          free) whose width reads two layers or more
+junction_blot            radius of the ink disc inscribed at a junction /     > 2 at any junction
+                         half the width of its widest stack (an ink blot
+                         over a junction)
 =======================  ===================================================  ====================
 
 The ``linear_system`` check reads ``junctions.csv``: a violation is a junction whose final
@@ -188,6 +191,7 @@ import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
+import pandas as pd
 
 from crosssection.params import LOW_RESOLUTION_H_PX
 
@@ -260,6 +264,7 @@ CATEGORIES = {
     "linear_system": LinearSystemWarning,
     "count_width": LinearSystemWarning,
     "isolated_stacks": NetworkWarning,
+    "junction_blot": NetworkWarning,
 }
 for _name, _cls in {c.__name__: c for c in CATEGORIES.values()}.items():
     globals()[_name] = _cls
@@ -371,7 +376,8 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
            rod_length_mm, rod_measured_mm, ink_area_in_hole_mm2, calibration_max_width_mm,
            junctions, image_shape=None, file_px_per_mm=None,
            file_pages=1, network_shares=None, border_ink_rc=None,
-           ink_missed_fraction=0.0, width_law=None) -> list[QualityFlag]:
+           ink_missed_fraction=0.0, width_law=None,
+           junction_radius_px=None) -> list[QualityFlag]:
     """Run every check of the module table on one analysis.
 
     Parameters
@@ -421,6 +427,9 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
         The width law read from the scan when no calibration is given
         (:func:`crosssection.stages.widthlaw.fit_width_law`): named by the ``no_calibration``
         flag.
+    junction_radius_px : (K,) array, optional
+        Radius of the ink disc inscribed at each junction of ``junctions`` (in its order):
+        the ``junction_blot`` check (not made without it).
 
     Returns
     -------
@@ -507,7 +516,46 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
     if h_px >= LATTICE_MIN_H_PX:
         flags += _lattice_check(stacks, h_px)
     flags += _linear_system_checks(junctions)
+    if junction_radius_px is not None:
+        flags += _blot_check(junction_radius_px, junctions, stacks, params.px_per_mm)
     return flags
+
+
+#: ``junction_blot``: the ink disc inscribed at a junction over half the width of its widest
+#: stack. A fork's merged ink is no wider than its trunk: on scans of both generators and the
+#: simulator's renders (network typical, 25 px/mm, thick dense, tangential and renders, 4
+#: seeds each; independent typical, thick, 25 px/mm, peels and thick dense, 3 each; 1618
+#: junctions) the median is 0.90-1.05 and the largest 1.60; four renders of rods compacted
+#: to epsilon 14 and 19 raise no flag (``benchmarks/bench_compact_pipeline.py --epsilon
+#: 19:2,14:2 --conditions scan``). A disc of ink 0.9 mm in radius
+#: over a junction of stacks of 1-4 layers reads 4.2; drawn at the hole's centre of four
+#: typical scans it covered the network once (2.0, flagged; rod +2.0 %) and otherwise lay in
+#: a void, where the cleaning drops it (rod within 0.4 %) (``python
+#: benchmarks/junction_blots.py``).
+JUNCTION_BLOT_RATIO = 2.0
+
+
+def _blot_check(radius_px, junctions, stacks, px_per_mm) -> list[QualityFlag]:
+    radius_px = np.asarray(radius_px, float)
+    if not len(radius_px) or not len(stacks) or "junction_id" not in junctions:
+        return []
+    ends = pd.concat([stacks[["junction_a", "width_mm"]].set_axis(["j", "w"], axis=1),
+                      stacks[["junction_b", "width_mm"]].set_axis(["j", "w"], axis=1)])
+    widest_px = ends[ends["j"] >= 0].groupby("j")["w"].max() * px_per_mm
+    half = widest_px.reindex(junctions["junction_id"].to_numpy()).to_numpy() / 2.0
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ratio = radius_px / half
+    bad = np.flatnonzero(np.isfinite(ratio) & (ratio > JUNCTION_BLOT_RATIO))
+    if not len(bad):
+        return []
+    i = bad[np.argmax(ratio[bad])]
+    at = junctions.iloc[i]
+    return [QualityFlag("junction_blot", f"{len(bad)} junction(s) sit in ink wider than their "
+                        f"widest stack by more than {JUNCTION_BLOT_RATIO:g} times (at x "
+                        f"{float(at['x_px']):.0f}, y {float(at['y_px']):.0f} px: an ink disc of "
+                        f"radius {radius_px[i]:.0f} px, {ratio[i]:.1f} times the widest stack's "
+                        "half width): an ink blot over a junction hides how its layers pass; "
+                        "check the overlay", float(ratio[i]), JUNCTION_BLOT_RATIO)]
 
 
 #: ``networks``: a separate network of ink counts when it holds this share of the rod or more

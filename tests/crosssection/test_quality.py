@@ -683,3 +683,26 @@ def test_a_long_stack_whose_count_its_width_contradicts_is_flagged():
     # within 0.75 layer, or a stack too short for its width to be read: no flag
     ok = stacks.assign(layers_est=[3.3, 2.1, 1.9])
     assert quality._count_width_check(ok) == []
+
+
+@pytest.mark.parametrize("radius_mm", [0.6, 0.9])
+def test_an_ink_blot_over_a_junction_is_flagged(scene, radius_mm):
+    import cv2
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the clean scan raises nothing
+        clean = crosssection.analyze(scene.rgb, **_given(scene))
+    # a disc of ink centred on the junction whose stacks are widest
+    st = clean.stacks
+    widest = st.groupby("junction_a")["width_mm"].max().rename_axis("junction_id")
+    j = clean.junctions.set_index("junction_id").loc[widest.idxmax()]
+    r_px = int(round(radius_mm * scene.params["px_per_mm"]))
+    assert r_px > widest.max() * scene.params["px_per_mm"]  # wider than any of its stacks
+    rgb = scene.rgb.copy()
+    cv2.circle(rgb, (int(round(j["x_px"])), int(round(j["y_px"]))), r_px, (40, 60, 170), -1)
+    res, caught = _analyze(rgb, **_given(scene))  # the blot may upset other checks too
+    assert any(w.category is quality.NetworkWarning and "ink blot over a junction"
+               in str(w.message) for w in caught)
+    flag = next(f for f in res.quality if f.code == "junction_blot")
+    assert flag.value > quality.JUNCTION_BLOT_RATIO
+    assert "junction_blot" in res.summary["quality"]["codes"]
