@@ -11,7 +11,7 @@ is dropped by the cleaning and changes nothing; one over the network is what the
 for). Prints the median, the 99th percentile and the largest ratio per condition, and the
 scans flagged.
 
-Usage: python benchmarks/junction_blots.py [--workers 2] [--out DIR]
+Usage: python benchmarks/junction_blots.py [--workers 2]
 """
 from __future__ import annotations
 
@@ -83,30 +83,36 @@ def independent(condition: str, seed: int, folder: str):
     return (f"independent {condition}", *_ratios(res))
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--workers", type=int, default=2)
-    args = ap.parse_args(argv)
-    import independent_scenes as gen
-
-    folder = tempfile.mkdtemp(prefix="junction-blots-")
-    gen.write_calibration(Path(folder) / "calibration.csv")
+def _run(workers: int, folder: str) -> dict:
     jobs = [(network, (c, s)) for c in ("typical", "lowres", "thick_dense", "tangential",
                                         "renders") for s in range(100, 104)]
     jobs += [(independent, (c, s, folder)) for c in ("typical", "thick", "lowres", "peel",
                                                       "thick_dense") for s in range(100, 103)]
     jobs += [(network, ("typical", s, b)) for b in (0.6, 0.9) for s in range(1, 5)]
     rows: dict = {}
-    with ProcessPoolExecutor(args.workers) as ex:
+    with ProcessPoolExecutor(workers) as ex:
         for fut in [ex.submit(f, *a) for f, a in jobs]:
             name, ratios, flagged = fut.result()
             r = rows.setdefault(name, {"ratios": [], "scans": 0, "flagged": 0})
             r["ratios"] += ratios
             r["scans"] += 1
             r["flagged"] += int(flagged)
+    return rows
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--workers", type=int, default=2)
+    args = ap.parse_args(argv)
+    import independent_scenes as gen
+
+    with tempfile.TemporaryDirectory(prefix="junction-blots-") as folder:
+        gen.write_calibration(Path(folder) / "calibration.csv")
+        rows = _run(args.workers, folder)
     print(f"{'scans':34s} {'junctions':>9s} {'median':>7s} {'p99':>6s} {'max':>6s}  flagged")
     for name, r in rows.items():
         a = np.asarray(r["ratios"])
+        a = a[np.isfinite(a)]  # a junction whose stacks hold no measured width
         print(f"{name:34s} {len(a):9d} {np.median(a):7.2f} {np.percentile(a, 99):6.2f} "
               f"{a.max():6.2f}  {r['flagged']} of {r['scans']}")
     return 0

@@ -241,8 +241,8 @@ def _not_utf8(image: Path, rel: str) -> str | None:
     tables and records name each scan, and a later run must find it by that name."""
     if printable(rel) == rel:
         return None
-    return ImageError("file name is not UTF-8 text: rename the file (the batch's tables "
-                      "name every scan)", image).one_line()
+    return ImageError("file name or folder name is not UTF-8 text: rename it (the batch's "
+                      "tables name every scan)", image).one_line()
 
 
 def effective_params(params: dict) -> dict:
@@ -329,7 +329,7 @@ def image_seed(seed: int | None, rel: str) -> int:
     import numpy as np
 
     base = np.random.SeedSequence(seed).entropy
-    key = int.from_bytes(hashlib.sha256(os.fsencode(rel)).digest()[:8], "little")
+    key = int.from_bytes(hashlib.sha256(rel.encode("utf-8", "surrogateescape")).digest()[:8], "little")
     return int(np.random.SeedSequence([base, key]).generate_state(1, dtype=np.uint32)[0])
 
 

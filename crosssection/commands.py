@@ -113,9 +113,8 @@ def _is_run_record(path: Path) -> bool:
     import json
 
     try:
-        with open(path, "rb") as fh:
-            record = json.loads(fh.read(1 << 24))
-    except (OSError, ValueError):
+        record = json.loads(path.read_bytes())
+    except (OSError, ValueError, RecursionError):
         return False
     return isinstance(record, dict) and "version" in record and "parameters" in record
 

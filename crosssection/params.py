@@ -500,7 +500,8 @@ _NON_NEGATIVE = ("s_min_mm2", "l_min_mm", "merge_px", "blue_min", "rg_max", "sli
 #: Upper bounds of values that no scan reaches, beyond which the arithmetic overflows or the
 #: numbers printed are meaningless: 10 km of sheet; a curvature of a 0.1 um radius, a thousand
 #: times below any sheet's thickness; a tangent fit 10 m long (the fit is cut at the stack's
-#: own length, and the length in pixels must stay an integer the kernels can hold).
+#: own length, and the length in pixels must stay an integer the kernels can hold); a bending
+#: rigidity 50 000 times a steel plate's; a sliver rule wider than any hole it applies to.
 _BEYOND = {"rod_length_mm": (1e7, "mm of sheet (10 km)"),
            "kappa_c_per_mm": (1e4, "1/mm (a radius of 0.1 um)"),
            "tangent_mm": (1e4, "mm (10 m)"),

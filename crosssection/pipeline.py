@@ -501,14 +501,14 @@ def _analyze(image, params, overrides, *, warn: bool = True,
     cal = _calibration(p)  # a bad calibration file fails before any image work
     # hashed while it is analysed: the record names the content the results come from
     is_file = isinstance(image, (str, Path))
-    if warn and is_file:
+    hashing = sha256_in_background(image) if is_file and image_sha256 is None else None
+    pre = _preprocess(image, p, timer)
+    if warn and is_file:  # named once the scan is read: a file that is not fails alone
         from crosssection.setconfig import set_not_read
 
         note = set_not_read(image, p)
         if note:  # the same scan would read other numbers in a batch of its set
             _warnings.warn(note, quality.SetWarning, stacklevel=3)
-    hashing = sha256_in_background(image) if is_file and image_sha256 is None else None
-    pre = _preprocess(image, p, timer)
     hash_note = None
     if hashing is not None:
         image_sha256, hash_note = hashing()

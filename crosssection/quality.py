@@ -529,7 +529,7 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
 #: to epsilon 14 and 19 raise no flag (``benchmarks/bench_compact_pipeline.py --epsilon
 #: 19:2,14:2 --conditions scan``). A disc of ink 0.9 mm in radius
 #: over a junction of stacks of 1-4 layers reads 4.2; drawn at the hole's centre of four
-#: typical scans it covered the network once (2.0, flagged; rod +2.0 %) and otherwise lay in
+#: typical scans it covered the network once (2.01, flagged; rod +2.0 %) and otherwise lay in
 #: a void, where the cleaning drops it (rod within 0.4 %) (``python
 #: benchmarks/junction_blots.py``).
 JUNCTION_BLOT_RATIO = 2.0

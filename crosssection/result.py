@@ -249,9 +249,8 @@ class AnalysisResult:
         out_dir : str or Path
             Created if needed. Files are written atomically, all renamed into place at the
             end (``summary.json`` last): a write stopped midway leaves the folder's earlier
-            files as they were. The
-            hidden temporary files that a write killed midway left there are removed first
-            (:func:`crosssection.commands.clear_temporary`). Nothing else in the folder is
+            files as they were. The hidden temporary files that a write killed midway left
+            there are removed first (:func:`crosssection.commands.clear_temporary`). Nothing else in the folder is
             touched: an ``overlay.png`` or step images of an earlier write stay when this one
             does not write them (``foldstat analyze`` removes them,
             :func:`crosssection.commands.remove_stale`).

@@ -34,7 +34,8 @@ from pathlib import Path
 
 from crosssection.core.errors import ConfigError, FoldstatError, ParameterError
 from crosssection.core.fileio import read_toml
-from crosssection.params import CHOICE_PARAMS, PARAM_NAMES, SET_META_KEYS, check_param
+from crosssection.params import (CHOICE_PARAMS, PARAM_NAMES, SET_META_KEYS, AnalysisParams,
+                                 check_param)
 
 SET_FILE = "set.toml"
 

@@ -17,8 +17,11 @@ def printable(path) -> str:
     -------
     str
     """
-    return os.fsdecode(path).encode("utf-8", "surrogateescape").decode("utf-8",
-                                                                      "backslashreplace")
+    text = os.fsdecode(path)
+    try:
+        return text.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+    except UnicodeEncodeError:  # a lone surrogate that stands for no byte (from JSON, say)
+        return text.encode("utf-8", "backslashreplace").decode("utf-8")
 
 
 class FoldstatError(Exception):

@@ -1,8 +1,8 @@
 """Atomic writing of outputs: write to a temporary file in the same folder, then rename.
 
 A re-run never sees a half-written file: either the old one or the complete new one. Within
-:func:`renamed_together` the renames wait for the end of the block, so a folder holds either
-all the files of the earlier run or all of the new one's.
+:func:`renamed_together` the renames wait for the end of the block, so a run stopped before
+them leaves the folder's earlier files as they were.
 """
 from __future__ import annotations
 
@@ -52,30 +52,41 @@ def renamed_together():
     there in the order the files were written (a run's record, written last, lands last).
 
     A block stopped midway (an error, an interrupt) removes its temporary files and leaves
-    the folder's files as they were: an output folder written again never mixes two runs
-    (one run's figures beside another's tables). A kill leaves only hidden temporary files
-    (``.<name>.XXXX<suffix>``), which the next run removes. A nested block is its outer
-    block's. Per thread: another thread's writes are its own.
+    the folder's files as they were: an output folder written again does not mix two runs
+    (one run's figures beside another's tables), short of a failure among the renames
+    themselves. A kill leaves only hidden temporary files (``.<name>.XXXX<suffix>``), which
+    the next run removes. A nested block's files are renamed with its outer block's, or
+    removed when the nested block fails. Per thread: another thread's writes are its own.
     """
-    if _PENDING.get() is not None:
-        yield
+    pending = _PENDING.get()
+    if pending is not None:  # nested
+        start = len(pending)
+        try:
+            yield
+        except BaseException:
+            _discard(tmp for tmp, _ in pending[start:])
+            del pending[start:]
+            raise
         return
-    pending: list = []
+    pending = []
     token = _PENDING.set(pending)
-    done = False
     try:
         yield
-        done = True
+    except BaseException:
+        _discard(tmp for tmp, _ in pending)
+        raise
     finally:
         _PENDING.reset(token)
-        if not done:
-            _discard(tmp for tmp, _ in pending)
-    for i, (tmp, path) in enumerate(pending):
-        try:
-            os.replace(tmp, path)
-        except OSError as exc:
-            _discard(rest for rest, _ in pending[i:])
-            raise _renamed(exc, path) from None
+    done = 0
+    try:
+        for tmp, path in pending:
+            try:
+                os.replace(tmp, path)
+            except OSError as exc:
+                raise _renamed(exc, path) from None
+            done += 1
+    finally:  # an error or an interrupt among the renames: no temporary file left behind
+        _discard(tmp for tmp, _ in pending[done:])
 
 
 def _discard(paths) -> None:

@@ -250,8 +250,8 @@ def _smooth_flat(r, c, offs, closed, half, projs):
 class _end_projectors(dict):
     """The end projectors of half windows 0..``half``, ``[k]`` of shape (k, 2k + 1), made
     when first asked for: only the half windows the paths use (a path shorter than its
-    window takes a shorter one). All of them at once took (half + 1) half (2 half + 1)
-    floats: 233 GiB at a 5001-px window."""
+    window takes a shorter one): all of them at once would take (half + 1) half
+    (2 half + 1) floats, 233 GiB at a 5001-px window."""
 
     def __init__(self, half: int):
         super().__init__()

@@ -120,6 +120,11 @@ def small_sample_note(n, minimum: int, what: str) -> str:
     return f"n = {int(n)}: below the {minimum} {what}"
 
 
+def _where(q: str, reg: str) -> str:
+    """A quantity as the warnings name it: with its region unless it is the whole set's."""
+    return q if reg in ("all", SIM_REGION) else f"{q} ({reg})"
+
+
 def _warn_small_samples(summaries: dict, relations: pd.DataFrame, too_few: dict,
                         min_n: int) -> None:
     """One :class:`~crosssection.stats.fits.SmallSampleWarning` per set naming the quantities
@@ -131,8 +136,7 @@ def _warn_small_samples(summaries: dict, relations: pd.DataFrame, too_few: dict,
     for (s, reg, q), summ in summaries.items():
         r = summ.results.get(summ.best) if summ.best else None
         if r is not None and r.n < F.N_SELECT_MIN:
-            where = q if reg in ("all", SIM_REGION) else f"{q} ({reg})"
-            small.setdefault(s, [[], [], []])[0].append(f"{where} n = {r.n}")
+            small.setdefault(s, [[], [], []])[0].append(f"{_where(q, reg)} n = {r.n}")
     for row in relations.itertuples(index=False):
         # n_br_exp_mu is named with the laws (its law of n_br)
         if row.relation in CONFIG_RELATIONS and relation_note(row.relation, row.n, row.fitted):
@@ -506,17 +510,15 @@ def compute_stats(ens: Ensemble, opts: StatsOptions | None = None, *,
             if summ is None:
                 n_q = _n_fittable(subsets[s], q, reg)
                 if n_q < opts.min_n:  # else all values equal, told by fit_quantity
-                    where = q if reg in ("all", SIM_REGION) else f"{q} ({reg})"
-                    too_few.setdefault(s, []).append(f"{where} n = {n_q}")
+                    too_few.setdefault(s, []).append(f"{_where(q, reg)} n = {n_q}")
                 continue
             summaries[(s, reg, q)] = summ
             n_fit = int(summ.table["n"].max()) if len(summ.table) else 0
             if summ.best is None and n_fit < opts.min_n:
-                # a detection limit given above the values leaves none to fit
-                where = q if reg in ("all", SIM_REGION) else f"{q} ({reg})"
+                # a detection limit given above most values leaves too few to fit
                 too_few.setdefault(s, []).append(
-                    f"{where} n = {n_fit} ({summ.n_dropped + ndrop} below the detection "
-                    "limit or not finite)")
+                    f"{_where(q, reg)} n = {n_fit} ({summ.n_dropped + ndrop} below the "
+                    "detection limit or not finite)")
             t = summ.table.copy()
             t.insert(0, "quantity", q)
             t.insert(0, "region", reg)

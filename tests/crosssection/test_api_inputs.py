@@ -340,7 +340,8 @@ def test_a_smoothing_window_beyond_ten_sheet_thicknesses_is_refused():
     ("tangent_mm", 1e-9, "a tangent is fitted on one pixel or more"),
 ])
 def test_values_no_scan_can_mean_are_refused(name, value, cause):
-    # accepted, they gave an energy in J of null (overflow), energies of 1e-296, or ran
+    # such values give an energy in J that overflows, energies of 1e-296, or fits on a
+    # billionth of a pixel
     from crosssection.core.errors import ParameterError
 
     with pytest.raises(ParameterError, match=cause) as err:

@@ -24,6 +24,7 @@ def test_printable_escapes_only_what_utf8_cannot_hold():
     err = ImageError("cannot read", os.fsdecode(b"bad\xff.png"))
     assert err.one_line() == "bad\\xff.png: cannot read"
     err.one_line().encode("utf-8")  # every table can hold it
+    assert printable("a\ud800b") == "a\\ud800b"  # a surrogate that stands for no byte
 
 
 @pytest.fixture
@@ -60,7 +61,7 @@ def test_a_batch_records_a_name_that_is_not_utf8_and_goes_on(bad_name, tmp_path,
                                                           SCAN: "ok"}
     failures = pd.read_csv(out / "failures.csv")
     assert list(failures["image"]) == ["bad\\xffname.png"]
-    assert "file name is not UTF-8 text" in failures["reason"].iloc[0]
+    assert "file name or folder name is not UTF-8 text" in failures["reason"].iloc[0]
     capsys.readouterr()
     assert crosssection.cli.main(argv) == 3  # a re-run resumes: the scan done is skipped
     assert "0 done, 1 skipped, 1 failed" in capsys.readouterr().out

@@ -154,3 +154,34 @@ def test_a_block_stopped_midway_leaves_the_earlier_files(tmp_path, stop):
     # no temporary file is left, the earlier file is whole
     assert [p.name for p in tmp_path.iterdir()] == ["a.csv"]
     assert (tmp_path / "a.csv").read_text() == "old a"
+
+
+def test_a_nested_block_that_fails_publishes_nothing(tmp_path):
+    (tmp_path / "a.csv").write_text("old a")
+    with fileio.renamed_together():
+        fileio.write_text(tmp_path / "b.txt", "b")
+        with pytest.raises(ValueError):
+            with fileio.renamed_together():
+                fileio.write_text(tmp_path / "a.csv", "new a")
+                raise ValueError
+    # the outer block's file lands, the failed inner block's does not, no temporary is left
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.csv", "b.txt"]
+    assert (tmp_path / "a.csv").read_text() == "old a"
+
+
+def test_a_failed_rename_leaves_no_temporary_file(tmp_path, monkeypatch):
+    real = fileio.os.replace
+    calls = []
+
+    def replace(src, dst):
+        calls.append(dst)
+        if len(calls) == 2:
+            raise KeyboardInterrupt  # an interrupt among the renames
+        return real(src, dst)
+
+    monkeypatch.setattr(fileio.os, "replace", replace)
+    with pytest.raises(KeyboardInterrupt):
+        with fileio.renamed_together():
+            for name in ("a.txt", "b.txt", "c.txt"):
+                fileio.write_text(tmp_path / name, name)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt"]

@@ -111,8 +111,8 @@ def test_smoothed_lengths_batch_equals_single():
 
 
 def test_a_window_longer_than_the_paths_costs_only_the_windows_they_use():
-    # a 5001-point window once asked for the end projectors of every half window up to 2500
-    # at once (233 GiB); the paths here take half windows of at most 149
+    # the end projectors of every half window up to 2500 would take 233 GiB; the paths here
+    # take half windows of at most 149
     rng = np.random.default_rng(3)
     paths = [np.cumsum(rng.normal(size=(n, 2)), axis=0) for n in (40, 120, 299)]
     big = pl.smooth_paths(paths, window_px=5001)
