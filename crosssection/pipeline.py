@@ -41,7 +41,8 @@ from crosssection.result import AnalysisResult, write_step_images
 from crosssection.stages import curvature, hole as hole_stage, voids as void_stage
 from crosssection.stages.clean import clean_mask
 from crosssection.stages.graph import split_stacks, stack_graph, with_multigraph, without_stacks
-from crosssection.stages.load import load_image_oriented, as_rgb, exif_orientation, recorded_header
+from crosssection.stages.load import (exif_orientation, load_image_oriented, recorded_header,
+                                      rgb_and_opacity)
 from crosssection.linsys.equations import conservation_equations
 from crosssection.stages.packs import compute_packs
 from crosssection.stages.skeleton import skeletonize_mask
@@ -100,18 +101,22 @@ class Preprocessed:
     #: (:func:`~crosssection.stages.threshold.missed_ink`; added to the threshold's mask),
     #: over the ink the scan's cut took in.
     ink_missed_fraction: float = 0.0
+    #: The pixels an alpha channel made transparent or partly, composited over white (None:
+    #: every pixel opaque).
+    see_through: np.ndarray | None = None
 
 
 def _read(image):
-    """The scan, its path (None for an array) and the EXIF orientation read with a PNG's
-    pixels (None otherwise: :func:`~crosssection.stages.load.exif_orientation` reads it)."""
+    """The scan, its path (None for an array), the EXIF orientation read with a PNG's
+    pixels (None otherwise: :func:`~crosssection.stages.load.exif_orientation` reads it) and
+    the mask of the pixels an alpha channel made see-through (None: all opaque)."""
     if isinstance(image, (str, Path)):
-        rgb, orientation = load_image_oriented(image)
-        return rgb, str(image), orientation
+        rgb, orientation, see_through = load_image_oriented(image, opacity=True)
+        return rgb, str(image), orientation, see_through
     if isinstance(image, np.ndarray):
-        rgb = as_rgb(image)
+        rgb, see_through = rgb_and_opacity(image)
         # the result keeps the scan: never the caller's own array, which the caller may draw on
-        return (rgb.copy() if np.shares_memory(rgb, image) else rgb), None, None
+        return (rgb.copy() if np.shares_memory(rgb, image) else rgb), None, None, see_through
     raise ImageError(f"image must be a file path or an RGB array, got {type(image).__name__}")
 
 
@@ -259,13 +264,15 @@ def preprocess(image, params: AnalysisParams | None = None, *, timer=None,
 
 def _preprocess(image, p: AnalysisParams, timer) -> Preprocessed:
     with timer("load"):
-        rgb, path, orientation = _read(image)
+        rgb, path, orientation, see_through = _read(image)
         file_px_per_mm, file_pages = (recorded_header(path) if path is not None
                                       else (None, 1))
         if orientation is None:
             orientation = exif_orientation(path) if path is not None else 1
     try:
-        return _preprocess_read(rgb, path, file_px_per_mm, file_pages, orientation, p, timer)
+        pre = _preprocess_read(rgb, path, file_px_per_mm, file_pages, orientation, p, timer)
+        return dataclasses.replace(pre, see_through=see_through) if see_through is not None \
+            else pre
     except AnalysisError as exc:
         if file_pages <= 1:
             raise
@@ -664,7 +671,8 @@ def _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, void
         image_shape=pre.rgb.shape, file_px_per_mm=pre.file_px_per_mm,
         file_pages=pre.file_pages, network_shares=_network_shares(lin, stacks),
         border_ink_rc=_border_pixels(pre.mask_clean), width_law=law,
-        junction_radius_px=_inscribed_radius_px(pre.distance_px, junctions))
+        junction_radius_px=_inscribed_radius_px(pre.distance_px, junctions),
+        see_through=pre.see_through)
     notes = list(pre.warnings) + [f"linear system: {f}" for f in lin.flags
                                   if not str(f).startswith("disconnected")]
     summary = tb.summary(pre=pre, params=p, linear_system=lin, junctions=junctions,

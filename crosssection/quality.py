@@ -10,6 +10,9 @@ code                     what is measured                                     li
 =======================  ===================================================  ====================
 pages                    images (pages, frames) the scan file holds; only     > 1
                          the first is analysed
+see_through              pixels inside the hole that an alpha channel made    > 0.1 %
+                         transparent or partly (composited over white) /
+                         the hole's pixels
 no_calibration           no width calibration given: layers from the width    always flagged
                          law read from the scan (or width = n h)
 scale_mismatch           px_per_mm used / the resolution the file records     off by > 2 %
@@ -243,6 +246,7 @@ class LinearSystemWarning(QualityWarning):
 
 CATEGORIES = {
     "pages": InputWarning,
+    "see_through": InputWarning,
     "no_calibration": CalibrationWarning,
     "scale_mismatch": CalibrationWarning,
     "widths_out_of_range": CalibrationWarning,
@@ -377,7 +381,7 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
            junctions, image_shape=None, file_px_per_mm=None,
            file_pages=1, network_shares=None, border_ink_rc=None,
            ink_missed_fraction=0.0, width_law=None,
-           junction_radius_px=None) -> list[QualityFlag]:
+           junction_radius_px=None, see_through=None) -> list[QualityFlag]:
     """Run every check of the module table on one analysis.
 
     Parameters
@@ -430,6 +434,8 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
     junction_radius_px : (K,) array, optional
         Radius of the ink disc inscribed at each junction of ``junctions`` (in its order):
         the ``junction_blot`` check (not made without it).
+    see_through : (H, W) bool array, optional
+        The pixels an alpha channel made transparent or partly: the ``see_through`` check.
 
     Returns
     -------
@@ -441,6 +447,8 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
         flags.append(QualityFlag("pages", f"the file holds {file_pages} images (pages or "
                                  "frames); only the first is analysed: save each scan as its "
                                  "own file", file_pages, 1))
+    if see_through is not None:
+        flags += _see_through_check(see_through, hole)
     if params.calibration is None:
         flags.append(QualityFlag("no_calibration",
                                  _no_calibration_message(width_law, params.thickness_mm)))
@@ -519,6 +527,27 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
     if junction_radius_px is not None:
         flags += _blot_check(junction_radius_px, junctions, stacks, params.px_per_mm)
     return flags
+
+
+#: ``see_through``: share of the hole's pixels an alpha channel made see-through, beyond which
+#: the scan's colours there are not the ink's and the paper's (a transparent margin outside
+#: the hole, as a cropped export leaves it, is no doubt)
+SEE_THROUGH_LIMIT = 0.001
+
+
+def _see_through_check(see_through, hole) -> list[QualityFlag]:
+    rows, cols = see_through.shape
+    r, c = np.ogrid[:rows, :cols]
+    (cr, cc), rad = hole.center_rc, hole.radius_px
+    inside = (r - cr) ** 2 + (c - cc) ** 2 <= rad ** 2
+    n_in = int(np.count_nonzero(inside))
+    share = float(np.count_nonzero(see_through & inside)) / n_in if n_in else 0.0
+    if share <= SEE_THROUGH_LIMIT:
+        return []
+    return [QualityFlag("see_through", f"{100 * share:.1f} % of the hole's pixels are "
+                        "transparent or partly (alpha channel), read composited over white: "
+                        "the colours there are not the scan's (save the scan without "
+                        "transparency)", share, SEE_THROUGH_LIMIT)]
 
 
 #: ``junction_blot``: the ink disc inscribed at a junction over half the width of its widest

@@ -115,6 +115,11 @@ def _composite_alpha(rgba: np.ndarray) -> np.ndarray:
 
 
 def as_rgb(arr, *, path=None) -> np.ndarray:
+    """:func:`rgb_and_opacity` without the mask of the pixels it composited."""
+    return rgb_and_opacity(arr, path=path)[0]
+
+
+def rgb_and_opacity(arr, *, path=None) -> tuple[np.ndarray, np.ndarray | None]:
     """Validate and convert an array to (H, W, 3) uint8/uint16 RGB (see module docstring).
 
     Parameters
@@ -128,7 +133,10 @@ def as_rgb(arr, *, path=None) -> np.ndarray:
 
     Returns
     -------
-    (H, W, 3) uint8 or uint16 array
+    rgb : (H, W, 3) uint8 or uint16 array
+    see_through : (H, W) bool array or None
+        The pixels an alpha channel made transparent or partly (composited over white, the
+        paper's colour); None when every pixel is opaque.
 
     Raises
     ------
@@ -172,17 +180,20 @@ def as_rgb(arr, *, path=None) -> np.ndarray:
             a = a.astype(np.uint8)
         elif a.dtype != np.uint16:
             a = a.astype(np.uint16)
+    see_through = None
     if a.shape[2] == 4:
         if not np.any(a[..., 3]):
             # composited over white it would read as a blank page, "no colour"
             raise ImageError("fully transparent image (alpha 0 everywhere): its colours "
                              "are not shown; save the scan without an alpha channel", path)
+        see_through = a[..., 3] < np.iinfo(a.dtype).max
+        see_through = see_through if see_through.any() else None
         a = _composite_alpha(a)
     h, w = a.shape[:2]
     if min(h, w) < MIN_SIDE_PX:
         raise ImageError(f"image too small ({w}x{h} px; at least {MIN_SIDE_PX} px a side)",
                          path)
-    return np.ascontiguousarray(a)
+    return np.ascontiguousarray(a), see_through
 
 
 # ----------------------------------------------------------------------------- orientation
@@ -818,7 +829,7 @@ def load_image(path) -> np.ndarray:
     return load_image_oriented(path)[0]
 
 
-def load_image_oriented(path) -> tuple[np.ndarray, int | None]:
+def load_image_oriented(path, *, opacity: bool = False) -> tuple:
     """:func:`load_image`, and for a PNG the orientation its ``eXIf`` chunk gave the pixels.
 
     The orientation is read with the pixels: :func:`exif_orientation` walks the chunks of the
@@ -827,6 +838,8 @@ def load_image_oriented(path) -> tuple[np.ndarray, int | None]:
     Parameters
     ----------
     path : str or Path
+    opacity : bool
+        Also return the mask of the pixels an alpha channel made see-through.
 
     Returns
     -------
@@ -835,6 +848,8 @@ def load_image_oriented(path) -> tuple[np.ndarray, int | None]:
     orientation : int or None
         The EXIF orientation 1-8 of a PNG (1: none); None for another format, whose
         orientation :func:`exif_orientation` reads.
+    see_through : (H, W) bool array or None
+        With ``opacity`` only: as :func:`rgb_and_opacity` gives it.
 
     Raises
     ------
@@ -876,4 +891,5 @@ def load_image_oriented(path) -> tuple[np.ndarray, int | None]:
             arr = _read_tiff(path)
         else:
             arr = _read_pillow(path)
-        return as_rgb(arr, path=path), orientation
+        rgb, see_through = rgb_and_opacity(arr, path=path)
+        return (rgb, orientation, see_through) if opacity else (rgb, orientation)

@@ -706,3 +706,20 @@ def test_an_ink_blot_over_a_junction_is_flagged(scene, radius_mm):
     flag = next(f for f in res.quality if f.code == "junction_blot")
     assert flag.value > quality.JUNCTION_BLOT_RATIO
     assert "junction_blot" in res.summary["quality"]["codes"]
+
+
+def test_a_scan_partly_transparent_inside_the_hole_is_flagged(scene):
+    rgba = np.dstack([scene.rgb, np.full(scene.rgb.shape[:2], 255, np.uint8)])
+    p = scene.params
+    cx, cy = (int(v) for v in p["hole_center_px"])
+    rgba[cy - 40:cy + 40, :, 3] = 128  # a band across the hole, half transparent
+    res, caught = _analyze(rgba, **_given(scene))
+    flag = next(f for f in res.quality if f.code == "see_through")
+    assert flag.value > quality.SEE_THROUGH_LIMIT
+    assert any(w.category is quality.InputWarning and "transparent" in str(w.message)
+               for w in caught)
+    # a transparent margin outside the hole (a cropped export) is no doubt
+    rgba[..., 3] = 255
+    rgba[:4, :4, 3] = 0
+    res, caught = _analyze(rgba, **_given(scene))
+    assert "see_through" not in res.summary["quality"]["codes"]
