@@ -329,7 +329,8 @@ def image_seed(seed: int | None, rel: str) -> int:
     import numpy as np
 
     base = np.random.SeedSequence(seed).entropy
-    key = int.from_bytes(hashlib.sha256(rel.encode("utf-8", "surrogateescape")).digest()[:8], "little")
+    digest = hashlib.sha256(rel.encode("utf-8", "surrogateescape")).digest()
+    key = int.from_bytes(digest[:8], "little")
     return int(np.random.SeedSequence([base, key]).generate_state(1, dtype=np.uint32)[0])
 
 

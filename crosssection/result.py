@@ -250,9 +250,9 @@ class AnalysisResult:
             Created if needed. Files are written atomically, all renamed into place at the
             end (``summary.json`` last): a write stopped midway leaves the folder's earlier
             files as they were. The hidden temporary files that a write killed midway left
-            there are removed first (:func:`crosssection.commands.clear_temporary`). Nothing else in the folder is
-            touched: an ``overlay.png`` or step images of an earlier write stay when this one
-            does not write them (``foldstat analyze`` removes them,
+            there are removed first (:func:`crosssection.commands.clear_temporary`).
+            Nothing else in the folder is touched: an ``overlay.png`` or step images of an
+            earlier write stay when this one does not write them (``foldstat analyze`` removes them,
             :func:`crosssection.commands.remove_stale`).
         figure : bool
             Also write ``overlay.png`` (paper Figs. 1c and 9a).
