@@ -2,8 +2,8 @@
 """The ``junction_blot`` check's measure on scans without blots, and on blotted ones.
 
 For every junction: the radius of the ink disc inscribed there over half the width of its
-widest stack (:func:`crosssection.quality._blot_check`). Scans of the network generator
-(typical, 25 px/mm, thick dense, tangential forks, the simulator's renders; seeds 100-103)
+widest stack (:func:`crosssection.quality.junction_blot_ratios`). Scans of the network
+generator (typical, 25 px/mm, thick dense, tangential forks, the simulator's renders; seeds 100-103)
 and of the independent generator (typical, thick, 25 px/mm, peels, thick dense; seeds
 100-102), default settings with their calibration; then typical network scans with a disc of
 ink of 0.6 and 0.9 mm radius drawn over the hole's centre (seeds 1-4: a blot lying in a void
@@ -33,15 +33,12 @@ def _ratios(res) -> tuple[list, bool]:
     """Per junction, the check's ratio (the pipeline's distance map of the cleaned ink), and
     whether the analysis raised the flag."""
     from crosssection.pipeline import _inscribed_radius_px
+    from crosssection.quality import junction_blot_ratios
     from crosssection.stages.widths import distance_map
 
     radius = _inscribed_radius_px(distance_map(res.mask_clean), res.junctions)
-    st = res.stacks
-    out = []
-    for rad, jid in zip(radius, res.junctions["junction_id"]):
-        w = st[(st.junction_a == jid) | (st.junction_b == jid)]["width_mm"].max()
-        out.append(float(rad / (w * res.params.px_per_mm / 2)))
-    return out, "junction_blot" in res.summary["quality"]["codes"]
+    ratios = junction_blot_ratios(radius, res.junctions, res.stacks, res.params.px_per_mm)
+    return ratios.tolist(), "junction_blot" in res.summary["quality"]["codes"]
 
 
 def network(condition: str, seed: int, blot_mm: float = 0.0):

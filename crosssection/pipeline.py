@@ -270,9 +270,8 @@ def _preprocess(image, p: AnalysisParams, timer) -> Preprocessed:
         if orientation is None:
             orientation = exif_orientation(path) if path is not None else 1
     try:
-        pre = _preprocess_read(rgb, path, file_px_per_mm, file_pages, orientation, p, timer)
-        return dataclasses.replace(pre, see_through=see_through) if see_through is not None \
-            else pre
+        return _preprocess_read(rgb, path, file_px_per_mm, file_pages, orientation, p, timer,
+                                see_through)
     except AnalysisError as exc:
         if file_pages <= 1:
             raise
@@ -282,7 +281,7 @@ def _preprocess(image, p: AnalysisParams, timer) -> Preprocessed:
 
 
 def _preprocess_read(rgb, path, file_px_per_mm, file_pages, orientation, p: AnalysisParams,
-                     timer) -> Preprocessed:
+                     timer, see_through=None) -> Preprocessed:
     p.check_image(rgb.shape, path, file_px_per_mm=file_px_per_mm)
     s_min_px = p.scale.area_to_px2(p.s_min_used_mm2)
     l_min_px = p.scale.to_px(p.l_min_mm)
@@ -336,7 +335,7 @@ def _preprocess_read(rgb, path, file_px_per_mm, file_pages, orientation, p: Anal
                         warnings=notes, merged_links=merged, file_px_per_mm=file_px_per_mm,
                         file_pages=file_pages, exif_orientation=orientation,
                         edge_feature=dominance if thr.dominance_min is not None else None,
-                        ink_missed_fraction=float(missed))
+                        ink_missed_fraction=float(missed), see_through=see_through)
 
 
 def _isolated_short_pieces(sg, l_min_px) -> list[int]:

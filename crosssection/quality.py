@@ -536,10 +536,9 @@ SEE_THROUGH_LIMIT = 0.001
 
 
 def _see_through_check(see_through, hole) -> list[QualityFlag]:
-    rows, cols = see_through.shape
-    r, c = np.ogrid[:rows, :cols]
-    (cr, cc), rad = hole.center_rc, hole.radius_px
-    inside = (r - cr) ** 2 + (c - cc) ** 2 <= rad ** 2
+    from crosssection.stages.hole import frame_mask
+
+    inside = frame_mask(see_through.shape, hole, margin_px=0.0)
     n_in = int(np.count_nonzero(inside))
     share = float(np.count_nonzero(see_through & inside)) / n_in if n_in else 0.0
     if share <= SEE_THROUGH_LIMIT:
@@ -564,16 +563,36 @@ def _see_through_check(see_through, hole) -> list[QualityFlag]:
 JUNCTION_BLOT_RATIO = 2.0
 
 
-def _blot_check(radius_px, junctions, stacks, px_per_mm) -> list[QualityFlag]:
+def junction_blot_ratios(radius_px, junctions, stacks, px_per_mm) -> np.ndarray:
+    """The ``junction_blot`` measure of every junction: the radius of the ink disc inscribed
+    there over half the width of its widest stack (NaN where no stack of it has a width).
+
+    Parameters
+    ----------
+    radius_px : (K,) array
+        Inscribed radius at each junction of ``junctions``, in its order.
+    junctions, stacks : DataFrame
+        The junction and stack tables.
+    px_per_mm : float
+
+    Returns
+    -------
+    (K,) float array
+    """
     radius_px = np.asarray(radius_px, float)
     if not len(radius_px) or not len(stacks) or "junction_id" not in junctions:
-        return []
+        return np.full(len(radius_px), np.nan)
     ends = pd.concat([stacks[["junction_a", "width_mm"]].set_axis(["j", "w"], axis=1),
                       stacks[["junction_b", "width_mm"]].set_axis(["j", "w"], axis=1)])
     widest_px = ends[ends["j"] >= 0].groupby("j")["w"].max() * px_per_mm
     half = widest_px.reindex(junctions["junction_id"].to_numpy()).to_numpy() / 2.0
     with np.errstate(invalid="ignore", divide="ignore"):
-        ratio = radius_px / half
+        return radius_px / half
+
+
+def _blot_check(radius_px, junctions, stacks, px_per_mm) -> list[QualityFlag]:
+    radius_px = np.asarray(radius_px, float)
+    ratio = junction_blot_ratios(radius_px, junctions, stacks, px_per_mm)
     bad = np.flatnonzero(np.isfinite(ratio) & (ratio > JUNCTION_BLOT_RATIO))
     if not len(bad):
         return []

@@ -126,6 +126,7 @@ def atomic_path(path, suffix=None):
     os.close(fd)
     tmp = Path(tmp)
     pending = _PENDING.get()
+    handed_over = False
     try:
         os.chmod(tmp, 0o666 & ~UMASK)  # mkstemp creates 0600; outputs get the usual mode
         yield tmp
@@ -133,6 +134,7 @@ def atomic_path(path, suffix=None):
             os.replace(tmp, path)
         else:  # renamed with the block's other files at its end
             pending.append((tmp, path))
+            handed_over = True
     except OSError as exc:
         named = {os.fsdecode(n) for n in (exc.filename, exc.filename2)
                  if isinstance(n, (str, bytes, os.PathLike))}
@@ -140,7 +142,7 @@ def atomic_path(path, suffix=None):
             raise  # about another file: the writer's own error
         raise _renamed(exc, path) from None
     finally:
-        if tmp.exists() and (pending is None or (tmp, path) not in pending):
+        if not handed_over and tmp.exists():
             tmp.unlink()
 
 
