@@ -165,11 +165,12 @@ class ImageTask:
 
 
 def is_output_folder(folder) -> bool:
-    """Whether ``folder`` holds foldstat's own output: a batch's (``batch.json``) or one
-    scan's analysis (``summary.json`` beside ``junctions.csv``), whose figures are not scans."""
-    folder = Path(folder)
-    return (folder / "batch.json").is_file() or (
-        (folder / "summary.json").is_file() and (folder / "junctions.csv").is_file())
+    """Whether ``folder`` holds the output of a foldstat command (a batch, an analysis, step
+    images, a stats report: :func:`crosssection.core.records.output_of`), whose figures are
+    not scans."""
+    from crosssection.core.records import output_of
+
+    return output_of(folder) is not None
 
 
 def find_images(input_dir, *, exclude=()) -> list[Path]:

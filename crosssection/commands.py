@@ -27,6 +27,7 @@ from pathlib import Path
 from crosssection.core import schema
 from crosssection.core.errors import OutputError, output_error
 from crosssection.core.fileio import check_out, temporary_files
+from crosssection.core.records import is_record, output_of
 from crosssection.params import AnalysisParams, add_analysis_arguments
 
 #: the step images of paper Fig. 2, and the figure of the four side by side
@@ -103,20 +104,29 @@ def _unlinked(paths) -> list[Path]:
 
 def earlier_run(out_dir) -> bool:
     """Whether ``out_dir`` holds the record of an earlier ``analyze`` or ``steps`` run: a
-    JSON object with the package version, as both records hold (a file of the same name that
-    is not one leaves the folder the user's, whose files no run removes)."""
+    JSON object with the package version and the parameters, as both records hold (a file of
+    the same name that is not one leaves the folder the user's, whose files no run
+    removes)."""
     out = Path(out_dir).expanduser()
-    return any(_is_run_record(out / name) for name in RUN_RECORDS)
+    return any(is_record(out / name, ("version", "parameters")) for name in RUN_RECORDS)
 
 
-def _is_run_record(path: Path) -> bool:
-    import json
+def check_not_other_output(out_dir) -> None:
+    """Refuse an output folder that holds the output of another command.
 
-    try:
-        record = json.loads(path.read_bytes())
-    except (OSError, ValueError, RecursionError):
-        return False
-    return isinstance(record, dict) and "version" in record and "parameters" in record
+    Raises
+    ------
+    ParameterError
+        ``out_dir`` holds a batch's, a stats report's or a simulation's record: one scan's
+        tables beside it would be read as part of it (a batch's summary, a report's
+        tables), and a re-run of that command would not know them.
+    """
+    from crosssection.core.errors import ParameterError
+
+    held = output_of(out_dir)
+    if held is not None and held[0] not in RUN_RECORDS:
+        raise ParameterError(f"{out_dir} holds the output of {held[1]} ({held[0]}): give a "
+                             "folder of its own", "--out")
 
 
 def check_not_beside(image, out_dir) -> None:
@@ -213,6 +223,7 @@ def run(args) -> int:
 
     check_out(args.out)
     check_not_beside(args.image, args.out)
+    check_not_other_output(args.out)
     clear_temporary(args.out, "analyze")
     params = AnalysisParams.from_cli_args(args, path=args.image)
     result = analyze(args.image, params)  # it names a set.toml whose values it does not use
@@ -235,6 +246,7 @@ def run_steps(args) -> int:
 
     check_out(args.out)
     check_not_beside(args.image, args.out)
+    check_not_other_output(args.out)
     clear_temporary(args.out, "steps")
     params = AnalysisParams.from_cli_args(args, path=args.image)
     pre = preprocess(args.image, params)

@@ -20,6 +20,7 @@ from pathlib import Path
 
 from crosssection.core.errors import ConfigError, OutputError, ParameterError, output_error
 from crosssection.core.fileio import check_out
+from crosssection.core.records import output_of
 
 __all__ = ["samples_path", "copy_samples", "add_subparser"]
 
@@ -44,12 +45,6 @@ def samples_path() -> Path:
             return cand
     raise ConfigError("the sample scans are not installed (reinstall foldstat from its wheel "
                       "or source tree)", here / "_samples")
-
-
-#: the record each command writes at the top of its output folder, and the command
-OUTPUT_RECORDS = {"batch.json": "foldstat batch", "summary.json": "foldstat analyze",
-                  "steps.json": "foldstat steps", "stats.json": "foldstat stats",
-                  "configs.csv": "a simulation"}
 
 
 def copy_samples(dest, *, overwrite: bool = False) -> list[Path]:
@@ -87,10 +82,10 @@ def copy_samples(dest, *, overwrite: bool = False) -> list[Path]:
     if dest.exists() and not dest.is_dir():
         raise OutputError("is a file, not a folder: give a folder to copy the samples into",
                           dest)
-    record = next((name for name in OUTPUT_RECORDS if (dest / name).is_file()), None)
-    if record is not None:
-        raise OutputError(f"holds the output of {OUTPUT_RECORDS[record]} ({record}): copy the "
-                          "samples into a folder of their own", dest)
+    held = output_of(dest)
+    if held is not None:
+        raise OutputError(f"holds the output of {held[1]} ({held[0]}): copy the samples into "
+                          "a folder of their own", dest)
     files = sorted(p for p in src.rglob("*") if p.is_file() and "__pycache__" not in p.parts)
     targets = [dest / p.relative_to(src) for p in files]
     if not overwrite:

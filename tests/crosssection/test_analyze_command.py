@@ -352,3 +352,19 @@ def test_the_overlay_records_the_version_and_what_it_was_made_from(small_scan, t
     made_from = json.loads(text["Description"])
     assert made_from["parameters"]["px_per_mm"] == 40.0
     assert made_from["image"]["path"] == str(small_scan)
+
+
+@pytest.mark.parametrize("command", ["analyze", "steps"])
+@pytest.mark.parametrize("record, held", [("batch.json", "foldstat batch"),
+                                          ("stats.json", "foldstat stats"),
+                                          ("configs.csv", "a simulation")])
+def test_another_commands_output_folder_is_refused(small_scan, tmp_path, capsys, command,
+                                                   record, held):
+    out = tmp_path / "theirs"
+    out.mkdir()
+    (out / record).write_text('{"version": "0"}' if record.endswith(".json") else "config\n")
+    assert crosssection.cli.main([command, str(small_scan), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"error: --out: {out} holds the output of {held} ({record}): give a "
+                   "folder of its own"]
+    assert [p.name for p in out.iterdir()] == [record]

@@ -364,15 +364,24 @@ def test_resume_redoes_a_scan_whose_table_is_missing_empty_or_corrupt(tmp_path, 
 
 
 def test_output_folders_inside_the_input_are_not_scans(tmp_path):
+    record = '{"version": "0", "parameters": {}}'
     inp = tmp_path / "in"
     (inp / "old_batch" / "default" / "s").mkdir(parents=True)
-    (inp / "old_batch" / "batch.json").write_text("{}")
+    (inp / "old_batch" / "batch.json").write_text(record)
     (inp / "old_batch" / "default" / "s" / "overlay.png").write_bytes(b"")
-    (inp / "one" / "result").mkdir(parents=True)
-    for name in ("summary.json", "junctions.csv", "overlay.png"):
-        (inp / "one" / "result" / name).write_text("")
+    for folder, names in (("result", ("summary.json", "junctions.csv", "overlay.png")),
+                          ("steps", ("steps.json", "step1_raw.png", "steps.png")),
+                          ("report", ("stats.json", "figures/micro.png"))):
+        for name in names:
+            (inp / "one" / folder / name).parent.mkdir(parents=True, exist_ok=True)
+            (inp / "one" / folder / name).write_text(record if name.endswith(".json") else "")
     (inp / "one" / "scan.png").write_bytes(b"")
-    assert [p.relative_to(inp).as_posix() for p in B.find_images(inp)] == ["one/scan.png"]
+    # a user's folder holding a file of a record's name that is no record is searched
+    (inp / "mine").mkdir()
+    (inp / "mine" / "summary.json").write_text("my notes")
+    (inp / "mine" / "scan.png").write_bytes(b"")
+    assert [p.relative_to(inp).as_posix() for p in B.find_images(inp)] == ["mine/scan.png",
+                                                                           "one/scan.png"]
 
 
 def test_a_set_file_replacing_a_command_line_value_says_so(tmp_path):

@@ -166,14 +166,21 @@ def test_samples_into_a_file_or_an_empty_path_is_one_line(tmp_path, capsys, monk
     assert sorted(p.name for p in tmp_path.iterdir()) == ["set.toml"]
 
 
-@pytest.mark.parametrize("record", ["batch.json", "summary.json", "stats.json"])
+@pytest.mark.parametrize("record", ["batch.json", "summary.json", "stats.json", "steps.json"])
 def test_samples_into_a_commands_output_folder_is_one_line(tmp_path, capsys, record):
-    (tmp_path / record).write_text("{}")
+    (tmp_path / record).write_text('{"version": "0"}')
     assert console.main(["samples", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith(f"error: {tmp_path}: holds the output of ")
     assert f"({record})" in err[0]
     assert sorted(p.name for p in tmp_path.iterdir()) == [record]
+
+
+def test_samples_beside_a_users_file_named_like_a_record(tmp_path):
+    (tmp_path / "summary.json").write_text("my notes")  # no record: the folder is the user's
+    assert console.main(["samples", str(tmp_path)]) == 0
+    assert (tmp_path / "set.toml").is_file()
+    assert (tmp_path / "summary.json").read_text() == "my notes"
 
 
 def test_python_m_crosssection_offers_samples(tmp_path, capsys):
