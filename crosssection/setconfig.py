@@ -116,7 +116,8 @@ def _check_value(key, value, path, where, origin=None):
 
 
 def check_calibration(cal_path, origin=None) -> Path:
-    """Check that a calibration CSV exists and has numeric ``n_layers,width_mm`` columns.
+    """Check that a calibration CSV reads as a calibration (the checks of
+    :meth:`crosssection.core.calibration.Calibration.from_csv`, in its words).
 
     Parameters
     ----------
@@ -134,21 +135,15 @@ def check_calibration(cal_path, origin=None) -> Path:
     ConfigError
         Missing, unreadable or malformed file.
     """
-    import pandas as pd
+    from crosssection.core.calibration import Calibration
 
     cal_path = Path(cal_path)
-    named = f" (named in {origin})" if origin else ""
-    if not cal_path.is_file():
-        raise ConfigError(f"calibration file not found{named}", cal_path)
     try:
-        df = pd.read_csv(cal_path)
-    except Exception as exc:  # noqa: BLE001 - any parse failure is a config error
-        raise ConfigError(f"calibration file unreadable{named}: {exc}", cal_path) from exc
-    missing = [c for c in ("n_layers", "width_mm") if c not in df.columns]
-    if missing:
-        raise ConfigError(f"calibration lacks columns {missing}{named}", cal_path)
-    if len(df) == 0 or not all(pd.api.types.is_numeric_dtype(df[c]) for c in ("n_layers", "width_mm")):
-        raise ConfigError(f"calibration needs numeric rows n_layers,width_mm{named}", cal_path)
+        Calibration.from_csv(cal_path)
+    except ConfigError as exc:
+        if not origin:
+            raise
+        raise ConfigError(f"{exc.cause} (named in {origin})", cal_path) from None
     return cal_path
 
 
