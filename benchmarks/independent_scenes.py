@@ -97,8 +97,29 @@ from types import MappingProxyType
 import cv2
 import numpy as np
 from scipy import ndimage
-from scipy.optimize import Bounds, LinearConstraint, milp
+from scipy.optimize import Bounds, LinearConstraint
+from scipy.optimize import milp as _milp
 from scipy.spatial import Voronoi, cKDTree
+
+def milp(*args, **kwargs):
+    """scipy's ``milp`` with file descriptor 1 sent to the null device: HiGHS 1.12 prints
+    stray lines with C's ``printf`` whatever its ``disp`` option (this generator imports
+    nothing of the package, which has its own wrapper for the same reason)."""
+    import ctypes
+
+    libc = ctypes.CDLL(None)
+    sys.stdout.flush()
+    libc.fflush(None)
+    saved, null = os.dup(1), os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, 1)
+        return _milp(*args, **kwargs)
+    finally:
+        libc.fflush(None)
+        os.dup2(saved, 1)
+        os.close(saved)
+        os.close(null)
+
 
 #: Layer thickness h (mm).
 H_MM = 0.1
