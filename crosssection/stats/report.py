@@ -158,7 +158,12 @@ def bin_edges(x, log: bool = False) -> np.ndarray:
     else:
         k = min(len(np.histogram_bin_edges(v, bins="auto")) - 1, 2.0 * np.sqrt(v.size))
         edges = np.linspace(lo, hi, int(np.clip(k, BINS_MIN, BINS_MAX)) + 1)
-    return np.exp(edges) if log else edges
+    if not log:
+        return edges
+    edges = np.exp(edges)
+    if hi > lo:  # exp(log(x)) rounds: the end edges are the values themselves, kept in
+        edges[0], edges[-1] = np.min(x), np.max(x)
+    return edges
 
 
 def _nanmean(v) -> float:
