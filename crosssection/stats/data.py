@@ -418,7 +418,7 @@ def load_simulation(folder, *, set_name=None) -> Ensemble:
     ParameterError
         ``folder`` is not a path or ``set_name`` not a string.
     ConfigError
-        A table is missing or malformed.
+        A table is missing or malformed, or every configuration failed.
     """
     folder = _folder(folder)
     name = _set_name(set_name) or folder.resolve().name
@@ -434,6 +434,9 @@ def load_simulation(folder, *, set_name=None) -> Ensemble:
             note = (f"{folder / 'configs.csv'}: {n} of {len(cfg)} configurations failed in "
                     f"the simulation (config_id {_listed(cfg.loc[bad, 'config_id'])}; see "
                     f"failures.csv) and {'is' if n == 1 else 'are'} not in the statistics")
+            if bad.all():  # as a batch with no finished image: no statistics to draw
+                raise ConfigError(f"ensemble holds no finished configuration (all {n} failed "
+                                  "in the simulation; see failures.csv)", folder)
             warnings.warn(note, IncompleteBatchWarning, stacklevel=2)
             cfg = cfg[~bad]
     br = _read_csv(folder / "branches.csv", ["config_id", "length", "kappa_plus", "kappa_pm",

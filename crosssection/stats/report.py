@@ -564,8 +564,8 @@ def _scatter_fig(res, x, y, xlabel, ylabel, title, *, through_origin=False, pape
             a = np.sum(xv[k] * yv[k]) / np.sum(xv[k] ** 2)
             xs = np.linspace(0, xv[k].max() * 1.1, 10)
             ax.plot(xs, a * xs, "-", color=c, label=f"{s}: fit through 0, slope {a:.3g}")
-    if paper_slope is not None:
-        xs = np.array([0, np.nanmax(pc[x]) * 1.1])
+    if paper_slope is not None and np.isfinite(np.asarray(pc[x], float)).any():
+        xs = np.array([0, np.nanmax(np.asarray(pc[x], float)) * 1.1])
         ax.plot(xs, paper_slope * xs, ":", color="grey", label=f"paper: slope {paper_slope}")
     ax.set(xlabel=xlabel, ylabel=ylabel, title=title)
     ax.legend(fontsize=7, frameon=False, loc="upper left", bbox_to_anchor=(1.01, 1.0))

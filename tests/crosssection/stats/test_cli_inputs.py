@@ -354,6 +354,24 @@ def test_failed_simulation_configurations_are_recorded_in_the_report(tmp_path, c
     assert "Incomplete input" in page and "(config_id 2; see failures.csv)" in page
 
 
+def test_a_simulation_whose_every_configuration_failed_is_one_line(tmp_path, capfd):
+    """It crashed in the figures (the maximum of no value), exit 1."""
+    sim = demo.write_demo_simulation(tmp_path / "sim", n_configs=2, seed=1)
+    cfg = pd.read_csv(sim / "configs.csv")
+    results = [c for c in cfg.columns if c not in ("config_id", "seed")]
+    cfg[results] = cfg[results].astype(object)
+    cfg.loc[:, results] = None
+    cfg["error"] = "RuntimeError: boom"
+    cfg.to_csv(sim / "configs.csv", index=False)
+    for name in ("branches.csv", "stacks.csv", "voids.csv"):
+        if (sim / name).is_file():
+            pd.read_csv(sim / name).iloc[:0].to_csv(sim / name, index=False)
+    status, _, err = _stats(capfd, sim, "--out", tmp_path / "rep", *FAST)
+    assert status == 2 and err == [f"error: {sim}: ensemble holds no finished configuration "
+                                   "(all 2 failed in the simulation; see failures.csv)"]
+    assert not (tmp_path / "rep").exists()
+
+
 def test_the_same_folder_twice_is_counted_once(batch, tmp_path, capfd):
     status, out, err = _stats(capfd, batch, f"{batch}{os.sep}", "--out", tmp_path / "rep",
                               *FAST)
