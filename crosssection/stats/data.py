@@ -266,18 +266,44 @@ def _read_csv(path: Path, required, *, numeric=(), nonempty: bool = False) -> pd
     return df
 
 
+#: the values a column of the tables read here can hold: (least value, whole numbers only).
+#: A value outside, as a hand edit leaves, would enter the means of macro.csv and micro.csv
+#: (the fits leave out values <= 0, the means did not): the table is refused instead
+DOMAINS = {
+    **dict.fromkeys(("length", "length_mm", "perimeter", "perimeter_mm", "area", "area_mm2",
+                     "energy", "energy_total", "kappa_plus", "kappa_m", "epsilon",
+                     "shape_ratio"), (0.0, False)),
+    **dict.fromkeys(("n_stacks", "n_branches", "n_voids", "n_edges"), (0.0, True)),
+    "n_br": (1.0, True),
+}
+
+
 def _numbers(col: pd.Series, name: str, path: Path) -> pd.Series:
-    """``col`` as floats; a cell that is not a number is a ``ConfigError`` naming the
-    column, the cell and its row (1 = the first row under the header)."""
+    """``col`` as floats; a cell that is not a number, or a number outside the column's
+    :data:`DOMAINS`, is a ``ConfigError`` naming the column, the cell and its row (1 = the
+    first row under the header)."""
     if col.dtype.kind in "biuf":
-        return col.astype(float)
-    num = pd.to_numeric(col, errors="coerce")
-    bad = num.isna() & col.notna()
-    if bad.any():
-        pos = int(np.argmax(bad.to_numpy()))
-        raise ConfigError(f"column {name} holds {str(col.iloc[pos])!r} in data row {pos + 1} "
-                          "where a number is expected", path)
-    return num.astype(float)
+        num = col.astype(float)
+    else:
+        num = pd.to_numeric(col, errors="coerce")
+        bad = num.isna() & col.notna()
+        if bad.any():
+            pos = int(np.argmax(bad.to_numpy()))
+            raise ConfigError(f"column {name} holds {str(col.iloc[pos])!r} in data row "
+                              f"{pos + 1} where a number is expected", path)
+        num = num.astype(float)
+    if name in DOMAINS:
+        least, whole = DOMAINS[name]
+        v = num.to_numpy()
+        with np.errstate(invalid="ignore"):  # an empty cell (NaN) is a missing value
+            bad = (v < least) | np.isinf(v) | ((np.isfinite(v) & (v != np.round(v)))
+                                               if whole else False)
+        if bad.any():
+            pos = int(np.argmax(bad))
+            kind = "a whole number" if whole else "a number"
+            raise ConfigError(f"column {name} holds {v[pos]:g} in data row {pos + 1} where "
+                              f"{kind} >= {least:g} is expected", path)
+    return num
 
 
 #: summary.json entries read as numbers (null stands for unknown)
