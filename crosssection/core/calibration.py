@@ -19,6 +19,10 @@ from crosssection.core.fileio import write_csv
 
 __all__ = ["Calibration"]
 
+#: The largest calibration file read: a table of layer counts and widths is a few hundred
+#: bytes; a file of megabytes is another file (a scan, a log) given by mistake.
+CALIBRATION_MAX_BYTES = 1 << 20
+
 #: Decimals of ``width_mm`` written to a calibration table (1 nm, far below any scan's pixel).
 WIDTH_DECIMALS = 6
 
@@ -116,7 +120,19 @@ class Calibration:
             Missing file, missing columns, non-numeric, non-positive or non-increasing values,
             or a fractional ``n_layers`` (its row named); the message names the file.
         """
+        from crosssection.core.fileio import special_file_reason
+
         path = Path(path)
+        special = special_file_reason(path)
+        if special:
+            raise ConfigError(special, path)
+        try:
+            size = path.stat().st_size
+        except OSError:
+            size = 0  # read_csv names what is wrong with the path
+        if size > CALIBRATION_MAX_BYTES:
+            raise ConfigError(f"{size} bytes, more than a calibration table of layer counts "
+                              "and widths holds: is it the right file?", path)
         try:
             table = pd.read_csv(path, comment="#", skipinitialspace=True)
         except FileNotFoundError:

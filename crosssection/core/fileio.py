@@ -299,12 +299,32 @@ def write_npz(path, **arrays) -> Path:
     return Path(path)
 
 
+def special_file_reason(path) -> str | None:
+    """Why ``path`` is no file to read, for a named pipe, a socket or a device (reading one
+    blocks, or never ends: /dev/zero filled 24 GB); None for a regular file, a folder or a
+    path that does not exist (which their own checks name)."""
+    import stat
+
+    try:
+        mode = os.stat(path).st_mode
+    except (OSError, ValueError):
+        return None
+    if stat.S_ISREG(mode) or stat.S_ISDIR(mode):
+        return None
+    kind = ("a named pipe" if stat.S_ISFIFO(mode) else "a socket" if stat.S_ISSOCK(mode)
+            else "a device")
+    return f"is {kind}, not a file (reading it blocks or never ends): give a file"
+
+
 def read_toml(path) -> dict:
     """A TOML file as a dict; unreadable or invalid files are one ``ConfigError`` naming it."""
     import tomllib
 
     from crosssection.core.errors import ConfigError
 
+    special = special_file_reason(path)
+    if special:
+        raise ConfigError(special, path)
     try:
         return tomllib.loads(Path(path).read_text(encoding="utf-8"))
     except tomllib.TOMLDecodeError as exc:

@@ -863,6 +863,11 @@ def load_image_oriented(path, *, opacity: bool = False) -> tuple:
         raise ImageError(missing_file_reason(path), path)
     if path.is_dir():
         raise ImageError("is a directory, not an image file", path)
+    from crosssection.core.fileio import special_file_reason
+
+    special = special_file_reason(path)
+    if special:
+        raise ImageError(special, path)
     try:
         with open(path, "rb") as fh:
             head = fh.read(8)

@@ -169,3 +169,33 @@ def test_an_all_ink_image_is_told_as_such(tmp_path, capsys):
     assert main(["analyze", str(path), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "100 % of the image is ink-coloured" in err[0]
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "mkfifo"), reason="named pipes are POSIX")
+@pytest.mark.parametrize("which", ["scan", "calibration"])
+def test_a_named_pipe_is_refused_not_read(which, tmp_path, capsys):
+    """Reading a pipe blocks until something writes to it: the command hung."""
+    import os
+
+    scan = tmp_path / "scan.png"
+    Image.fromarray(_good_rgb(3)).save(scan)
+    pipe = tmp_path / {"scan": "pipe.png", "calibration": "pipe.csv"}[which]
+    os.mkfifo(pipe)
+    args = ["analyze", str(pipe if which == "scan" else scan), "--out", str(tmp_path / "out"),
+            "--px-per-mm", "50"]
+    args += ["--calibration", str(pipe)] if which == "calibration" else []
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: ") and str(pipe) in err[0]
+    assert "is a named pipe, not a file" in err[0]
+
+
+def test_a_calibration_of_megabytes_is_another_file(tmp_path, capsys):
+    scan = tmp_path / "scan.png"
+    Image.fromarray(_good_rgb(3)).save(scan)
+    cal = tmp_path / "cal.csv"
+    cal.write_text("n_layers,width_mm\n" + "1,0.1\n" * 300_000)
+    assert main(["analyze", str(scan), "--out", str(tmp_path / "out"), "--px-per-mm", "50",
+                 "--calibration", str(cal)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"error: {cal}: ") and "bytes" in err[0]
