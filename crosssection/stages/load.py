@@ -60,6 +60,7 @@ import sys
 import tempfile
 import threading
 import warnings
+from typing import NamedTuple
 import zlib
 from contextlib import contextmanager
 from pathlib import Path
@@ -716,16 +717,30 @@ def _read_pillow(path: Path) -> np.ndarray:
 MIN_SCANNER_DPI = 100.0
 
 
-def recorded_header(path) -> tuple[float | None, int]:
+class Header(NamedTuple):
+    """What a scan file's header records (:func:`recorded_header`)."""
+
+    #: the resolution in px/mm, None when missing, not a scanner's, or not square
+    px_per_mm: float | None
+    #: how many images the file holds (TIFF pages, animation frames); 1 when unknown
+    pages: int
+    #: the recorded resolution across the scan over the one along it, when they differ by
+    #: more than 1 % (pixels that are not square); None otherwise
+    aspect: float | None = None
+
+
+def recorded_header(path) -> Header:
     """What a scan file's header records: its resolution in px/mm (or None) and how many
     images it holds, from one read of the header (Pillow; the file is not checked here).
 
     The resolution: scanners write it into the file (PNG ``pHYs``, TIFF ``XResolution``, JPEG
     JFIF density; 1200 dpi = 47.24 px/mm); image software writes 72 or 96 dpi whatever the
-    image, so a value below :data:`MIN_SCANNER_DPI`, a different resolution across and along
-    the scan (more than 1 %), a missing or unreadable one give None. The images (TIFF pages,
-    animation frames): the loader decodes the first; the others would be left out without a
-    word (a scanner's batch saved as one multi-page TIFF holds several cuts); 1 when unknown.
+    image, so a value below :data:`MIN_SCANNER_DPI`, a missing or unreadable one give None. A
+    different resolution across and along the scan (more than 1 %) gives None and its ratio
+    as ``aspect``: such pixels are not square, and every length read from them is off along
+    one axis. The images (TIFF pages, animation frames): the loader decodes the first; the
+    others would be left out without a word (a scanner's batch saved as one multi-page TIFF
+    holds several cuts); 1 when unknown.
 
     Parameters
     ----------
@@ -733,7 +748,7 @@ def recorded_header(path) -> tuple[float | None, int]:
 
     Returns
     -------
-    (float or None, int)
+    Header
     """
     from PIL import Image
 
@@ -744,15 +759,16 @@ def recorded_header(path) -> tuple[float | None, int]:
                 dpi = im.info.get("dpi")
                 pages = max(int(getattr(im, "n_frames", 1)), 1)
     except Exception:  # noqa: BLE001 - metadata is advisory: any failure means no value
-        return None, 1
+        return Header(None, 1)
     try:
         x, y = (float(v) for v in dpi)
     except (TypeError, ValueError):
-        return None, pages
-    if not (math.isfinite(x) and math.isfinite(y)) or min(x, y) < MIN_SCANNER_DPI \
-            or abs(x - y) > 0.01 * max(x, y):
-        return None, pages
-    return 0.5 * (x + y) / 25.4, pages
+        return Header(None, pages)
+    if not (math.isfinite(x) and math.isfinite(y)) or min(x, y) < MIN_SCANNER_DPI:
+        return Header(None, pages)
+    if abs(x - y) > 0.01 * max(x, y):
+        return Header(None, pages, x / y)
+    return Header(0.5 * (x + y) / 25.4, pages)
 
 
 def exif_orientation(path) -> int:

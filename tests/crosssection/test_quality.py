@@ -607,6 +607,29 @@ def test_the_recorded_resolution_of_png_tiff_and_jpeg(tmp_path, dpi, expected):
     assert recorded_header(tmp_path / "missing.png")[0] is None
 
 
+@pytest.mark.parametrize("dpi, aspect", [((1270, 1143), 1270 / 1143), ((1270, 635), 2.0),
+                                         ((1270, 1265), None), ((96, 48), None)])
+def test_pixels_that_are_not_square_are_flagged(scene, tmp_path, dpi, aspect):
+    """A scan squeezed to 90 % along one axis, saved with the resolutions it has, read 5 %
+    of its rod short with no word (the recorded resolution was dropped as not square)."""
+    from PIL import Image
+
+    from crosssection.stages.load import recorded_header
+
+    path = tmp_path / "scan.tif"
+    Image.fromarray(scene.rgb).save(path, dpi=dpi)
+    assert recorded_header(path).aspect == (None if aspect is None
+                                            else pytest.approx(aspect, rel=1e-3))
+    res, caught = _analyze(str(path), **_given(scene))
+    flagged = aspect is not None
+    assert ("non_square" in res.summary["quality"]["codes"]) is flagged
+    if flagged:
+        flag = next(f for f in res.quality if f.code == "non_square")
+        assert flag.value == pytest.approx(aspect - 1, rel=1e-3)
+        assert any(w.category is quality.CalibrationWarning and "not square" in str(w.message)
+                   for w in caught)
+
+
 def test_a_file_holding_several_scans_is_flagged(scene, tmp_path):
     # a scanner's batch saved as one multi-page TIFF: the first page is analysed, the others
     # would be left out without a word
