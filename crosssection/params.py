@@ -168,10 +168,10 @@ class AnalysisParams:
         "blue >= blue_min, red and green <= rg_max) or otsu", choices=THRESHOLD_METHODS))
     blue_min: float | None = field(default=None, metadata=_opt(
         "minimum blue, native units: the fixed threshold's cut (default 100 for 8-bit); "
-        "given with auto, an extra bound on the automatic cut"))
+        "given with auto, an extra bound on the automatic cut; not with otsu"))
     rg_max: float | None = field(default=None, metadata=_opt(
         "maximum red and green, native units: the fixed threshold's cut (default 130 for "
-        "8-bit); given with auto, an extra bound on the automatic cut"))
+        "8-bit, also otsu's bound); given with auto, an extra bound on the automatic cut"))
     s_min_mm2: float | None = field(default=None, metadata=_opt(
         "smallest void (default (10 h)^2, the paper's)", "mm^2"))
     sliver_width_h: float = field(default=1.5, metadata=_opt(
@@ -234,6 +234,11 @@ class AnalysisParams:
                 f"sheet thickness h = {self.thickness_mm:g} mm is {self.thickness_px:.3g} px at "
                 f"{self.px_per_mm:g} px/mm: below one pixel it cannot be resolved (check "
                 "px_per_mm and thickness_mm)")
+        if self.threshold_method == "otsu" and self.blue_min is not None:
+            # Otsu's method chooses the blue cut itself; only rg_max bounds it
+            raise ParameterError(f"blue_min = {self.blue_min:g} is not used by the otsu "
+                                 "threshold, which chooses the blue cut itself: leave it out, "
+                                 "or use threshold_method fixed or auto")
         if (self.hole_center_px is None) != (self.hole_radius_mm is None) \
                 and self.hole_center_px is not None:
             raise ParameterError("hole_center_px needs hole_radius_mm")

@@ -375,6 +375,11 @@ def _check_fraction(thr, path, rgb=None):
     frac = np.count_nonzero(thr.mask) / thr.mask.size
     if frac == 0:
         why = getattr(thr, "note", "") or "not a blue-ink scan, or adjust the threshold"
+        if not getattr(thr, "note", "") and thr.method != "auto" and thr.rg_max is not None:
+            bounds = ", ".join(f"{k} = {v:g}" for k, v in (("blue_min", thr.blue_min),
+                                                            ("rg_max", thr.rg_max))
+                               if v is not None)
+            why = f"not a blue-ink scan, or the threshold's bounds ({bounds}) exclude its ink"
         blue = _blue_share(rgb) if rgb is not None else 0.0
         # data of fewer bits than their type (9-bit values in uint16) look grey at 8 bits:
         # the threshold's note names the range, the likelier cause

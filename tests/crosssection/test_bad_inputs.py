@@ -199,3 +199,32 @@ def test_a_calibration_of_megabytes_is_another_file(tmp_path, capsys):
                  "--calibration", str(cal)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith(f"error: {cal}: ") and "bytes" in err[0]
+
+
+def test_blue_min_with_otsu_is_refused_not_ignored(tmp_path, capsys):
+    """Otsu chooses the blue cut itself: a --blue-min given with it was recorded in
+    summary.json as used and changed nothing."""
+    from crosssection.core.errors import ParameterError
+    from crosssection.params import AnalysisParams
+
+    scan = tmp_path / "scan.png"
+    Image.fromarray(_good_rgb(3)).save(scan)
+    assert main(["analyze", str(scan), "--out", str(tmp_path / "out"), "--px-per-mm", "50",
+                 "--threshold-method", "otsu", "--blue-min", "250"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "blue_min = 250 is not used by the otsu threshold" in err[0]
+    with pytest.raises(ParameterError, match="not used by the otsu"):
+        AnalysisParams(px_per_mm=50, thickness_mm=0.1, threshold_method="otsu", blue_min=90)
+    AnalysisParams(px_per_mm=50, thickness_mm=0.1, threshold_method="otsu", rg_max=120)
+
+
+@pytest.mark.parametrize("method, options, named", [
+    ("otsu", ["--rg-max", "10"], "(rg_max = 10)"),
+    ("fixed", ["--blue-min", "255"], "(blue_min = 255, rg_max = 130)")])
+def test_bounds_that_exclude_every_pixel_are_named(tmp_path, capsys, method, options, named):
+    scan = tmp_path / "scan.png"
+    Image.fromarray(_good_rgb(3)).save(scan)
+    assert main(["analyze", str(scan), "--out", str(tmp_path / "out"), "--px-per-mm", "50",
+                 "--threshold-method", method, *options]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "empty mask" in err[0] and named in err[0]
