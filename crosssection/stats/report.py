@@ -1176,9 +1176,12 @@ def _named(df: pd.DataFrame) -> pd.DataFrame:
 def _html_table(df: pd.DataFrame) -> str:
     """``df`` as an HTML table: numbers to 3 significant figures, counts
     (:data:`~crosssection.stats.tables.COUNT_COLUMNS`) exactly."""
-    counts = {COLUMN_NAMES.get(c, c): count_text for c in COUNT_COLUMNS if c in df.columns}
+    df = df.copy()
+    for c in COUNT_COLUMNS:
+        if c in df.columns:  # as text: pandas prints a nullable column's NA as "<NA>"
+            df[c] = [count_text(v) for v in df[c]]
     return _named(df).to_html(index=False, float_format=lambda v: f"{v:.3g}", na_rep="",
-                              formatters=counts, border=0, classes="t")
+                              border=0, classes="t")
 
 
 def _with_paper(ours: pd.DataFrame, paper: pd.DataFrame) -> pd.DataFrame:

@@ -351,3 +351,13 @@ def test_the_network_figure_names_the_eq12_constant_and_draws_the_fitted_one(tmp
     # the two lines differ by the ratio of the constants
     ratio = labels[ours].get_ydata() / labels[paper].get_ydata()
     assert np.allclose(ratio, fitted / EQ12_CONST)
+
+
+def test_a_missing_count_is_an_empty_cell_not_pandas_na():
+    """A nullable count column (voids of the bulk, the paper's rows) showed "<NA>"."""
+    from crosssection.stats.report import _html_table
+
+    df = pd.DataFrame({"set": ["a", "b"], "n_voids": pd.array([141, None], dtype="Int64"),
+                       "l_L": [0.0102, np.nan]})
+    page = _html_table(df)
+    assert "NA" not in page and "<td>141</td>" in page and page.count("<td></td>") == 2
