@@ -261,7 +261,7 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
         return None
     colors = colors or set_colors(ens.sets)
     regs = [r for r in ("all", "bulk", "periphery")
-            if any((s, r, quantity) in res.summaries for s in sets)]
+            if any(_has_fit(res, s, r, quantity) for s in sets)]
     fig, axes = _subplots(len(regs), 2, figsize=(12.5, 0.4 + 3.6 * len(regs)))
     label = LABELS.get(quantity, quantity)
     for row, reg in zip(axes, regs):
@@ -388,7 +388,7 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
         # a set without a fit in this row is named here too: the figure is also read
         # without the report's caption
         for s in wanted:
-            if (s, reg, quantity) not in res.summaries and (
+            if not _has_fit(res, s, reg, quantity) and (
                     reg == "all" or reg in regions_of(ens.subset(s))):
                 handles.append(Line2D([], [], ls="none", marker="x", color=colors[s]))
                 labels.append(f"{s}: not drawn (too few values to fit, or all equal)")
@@ -547,12 +547,16 @@ def _scatter_fig(res, x, y, xlabel, ylabel, title, *, through_origin=False, pape
                  colors=None):
     pc = res.per_config
     colors = colors or set_colors(list(dict.fromkeys(pc["set"])))
+    if not (np.isfinite(np.asarray(pc[x], float)) & np.isfinite(np.asarray(pc[y], float))).any():
+        return None  # no configuration has both (no void at all): nothing to draw
     fig, ax = _subplots(figsize=(8.5, 4.8))
     ax = ax[0, 0]
     for s, g in pc.groupby("set", sort=False):
         c = colors[s]
         xv, yv = np.asarray(g[x], float), np.asarray(g[y], float)
         k = np.isfinite(xv) & np.isfinite(yv)
+        if not k.any():
+            continue
         txt = f"{s}: configurations"
         if (k.sum() >= CORRELATION_MIN_PAIRS and not through_origin and np.ptp(xv[k]) > 0
                 and np.ptp(yv[k]) > 0):
@@ -774,6 +778,7 @@ def _write_files(res: StatsResult, ens: Ensemble, out: Path, *, opts: StatsOptio
                                             PER_CONFIG_COUNTS))
 
     figs = []  # (title, relative path, one-sentence caption)
+    empty = []  # the titles of figures with no value to draw
     if figures:
         fdir = out / "figures"
         colors = set_colors(ens.sets)
@@ -820,6 +825,8 @@ def _write_files(res: StatsResult, ens: Ensemble, out: Path, *, opts: StatsOptio
             if fig is not None:
                 paths[name] = save_figure(fig, fdir / name)
                 figs.append((title, f"figures/{name}", caption))
+            else:
+                empty.append(title.lower())
 
     stats_json = {
         "package": "foldstat", "version": __version__,
@@ -859,6 +866,9 @@ def _write_files(res: StatsResult, ens: Ensemble, out: Path, *, opts: StatsOptio
             "made_by": provenance(ens.subset(s))}
     paths["stats.json"] = write_json(out / "stats.json", stats_json)
     absent = _not_drawn(res, ens, opts.quantities, opts.min_n) if figures else ""
+    if empty:
+        absent += (" " if absent else "") + ("Not drawn (no configuration with the values): "
+                                             + "; ".join(empty) + ".")
     paths["report.html"] = write_text(out / "report.html",
                                       _html(res, figs, stats_json, ens, opts, absent))
     return paths
@@ -1090,8 +1100,16 @@ def _pdf_caption(q: str) -> str:
 
 
 def _fitted_sets(res: StatsResult, q: str, sets) -> list:
-    """The sets among ``sets`` with a fit of quantity ``q`` in some sub-system."""
-    return [s for s in sets if any(k[0] == s and k[2] == q for k in res.summaries)]
+    """The sets among ``sets`` with a fit of quantity ``q`` in some sub-system (a summary
+    whose every law failed, as when a detection limit leaves no value, is none)."""
+    return [s for s in sets if any(_has_fit(res, s, r, q) for r in ("all", "bulk", "periphery"))]
+
+
+def _has_fit(res: StatsResult, s: str, region: str, q: str) -> bool:
+    """Whether set ``s`` has a fit of ``q`` in ``region`` (a summary whose every law failed
+    is none)."""
+    summ = res.summaries.get((s, region, q))
+    return summ is not None and any(r.ok for r in summ.results.values())
 
 
 def _left_out(res: StatsResult, ens: Ensemble, q: str, min_n: int) -> str:
@@ -1102,9 +1120,9 @@ def _left_out(res: StatsResult, ens: Ensemble, q: str, min_n: int) -> str:
     missing = [s for s in ens.sets if s not in fitted]
     # rows drawn for some set, missing for another that is drawn in other rows
     rows = [r for r in ("all", "bulk", "periphery")
-            if any((s, r, q) in res.summaries for s in fitted)]
+            if any(_has_fit(res, s, r, q) for s in fitted)]
     partial = [f"{s} ({REGION_WORDS.get(r, r)})" for s in fitted for r in rows
-               if (s, r, q) not in res.summaries and r in regions_of(ens.subset(s))]
+               if not _has_fit(res, s, r, q) and r in regions_of(ens.subset(s))]
     if not (missing or partial):
         return ""
     return (f" Not drawn (fewer than {min_n} positive values, or all equal): "

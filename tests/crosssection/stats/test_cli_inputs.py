@@ -626,3 +626,29 @@ def test_a_value_outside_its_columns_domain_is_one_line(tmp_path, capfd, table, 
     assert status == 2 and err == [f"error: {sim / table}: column {column} holds "
                                    f"{float(value):g} in data row 2 where {kind} >= 0 is "
                                    "expected"]
+
+
+def test_figures_with_no_value_are_not_drawn_but_named(tmp_path, capfd):
+    """A detection limit above every length drew six empty axes; an ensemble without voids
+    drew the void-size scatter with no point."""
+    sim = demo.write_demo_simulation(tmp_path / "sim", n_configs=6, seed=1)
+    vo = pd.read_csv(sim / "voids.csv")
+    vo.iloc[:0].to_csv(sim / "voids.csv", index=False)
+    status, _, _ = _stats(capfd, sim, "--out", tmp_path / "rep", "--n-boot", "0",
+                          "--no-gof")
+    assert status == 0
+    figures = {p.name for p in (tmp_path / "rep" / "figures").iterdir()}
+    assert "sqrt_s_vs_l.png" not in figures and "pdf_area_L2.png" not in figures
+    assert "pdf_length_L.png" in figures
+    page = (tmp_path / "rep" / "report.html").read_text()
+    assert "Not drawn (no configuration with the values): void size against branch length" \
+        in page
+
+
+def test_a_detection_limit_above_every_length_draws_no_empty_axes(batch, tmp_path, capfd):
+    status, _, err = _stats(capfd, batch, "--out", tmp_path / "rep", "--n-boot", "0",
+                            "--no-gof", "--l-min-mm", "1e6", small=True)
+    assert status == 0 and any("below the detection limit" in e for e in err)
+    assert not (tmp_path / "rep" / "figures" / "pdf_length_L.png").exists()
+    assert "the distribution of the branch length" in (tmp_path / "rep" /
+                                                        "report.html").read_text()
