@@ -132,6 +132,22 @@ def _linear_ticks(axis) -> int:
     return power
 
 
+#: the longest set name a figure's legend spells out (longer ones shrank the panels, clipped
+#: their titles and ran their tick labels together)
+LEGEND_NAME_MAX = 28
+
+
+def _short(name: str) -> str:
+    """A set's name as a figure's legend gives it: whole up to :data:`LEGEND_NAME_MAX`
+    characters, else its start and end around an ellipsis (the report's tables spell it
+    out)."""
+    name = str(name)
+    if len(name) <= LEGEND_NAME_MAX:
+        return name
+    keep = (LEGEND_NAME_MAX - 1) // 2
+    return f"{name[:keep]}…{name[-keep:]}"
+
+
 def bin_edges(x, log: bool = False) -> np.ndarray:
     """Histogram bin edges of the values ``x`` (finite; > 0 when ``log``).
 
@@ -311,14 +327,14 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
                 else:
                     yerr = err[k]
                     ymax_lin = max(ymax_lin, float(np.max(h[k] + err[k])))
-                data_label = (f"{s}: data (n = {n})" if n >= F.N_SELECT_MIN else
-                              f"{s}: data, indicative only (n = {n} < {F.N_SELECT_MIN})")
+                data_label = (f"{_short(s)}: data (n = {n})" if n >= F.N_SELECT_MIN else
+                              f"{_short(s)}: data, indicative only (n = {n} < {F.N_SELECT_MIN})")
                 ax.errorbar(mids[k], h[k], yerr=yerr, fmt="o", ms=4, color=c, lw=1,
                             capsize=2, label=data_label, gid=f"points:{s}:{reg}")
                 if best is None:
                     continue
                 band = _band(best, grid, cut, count)
-                band_label = f"{s}: {int(BAND_LEVEL * 100)} % bootstrap band"
+                band_label = f"{_short(s)}: {int(BAND_LEVEL * 100)} % bootstrap band"
                 if band is not None and count:  # masses live at the integers only
                     ax.vlines(grid, band[0], band[1], color=c, alpha=0.3, lw=7,
                               label=band_label)
@@ -331,7 +347,7 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
                     text += f", mean {float(np.sum(kk * best.pmf(kk))):.3g}"
                 law = _curve(best, best.params, grid, cut, count)
                 ax.plot(grid, law, "s--" if count else "-", ms=4 if count else 0, mfc="none",
-                        color=c, lw=1.6, label=f"{s}: {text}", gid=f"law:{s}:{reg}")
+                        color=c, lw=1.6, label=f"{_short(s)}: {text}", gid=f"law:{s}:{reg}")
                 shown = np.asarray(law, float)
                 shown = shown[np.isfinite(shown) & (shown > 0)]
                 if logscale and shown.size:
@@ -347,12 +363,12 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
                     ax.axvspan(span[0], span[1], color=c, alpha=0.08, lw=0,
                                gid=f"limits:{s}:{reg}")
                     ax.axvline(span[1], color=c, ls=":", lw=1, gid=f"limit:{s}:{reg}",
-                               label=(f"{s}: detection limits {span[0]:.2g}-{span[1]:.2g} "
+                               label=(f"{_short(s)}: detection limits {span[0]:.2g}-{span[1]:.2g} "
                                       "(per scan, shaded; dotted: largest)")
                                if logscale else None)
                 elif span is not None:
                     ax.axvline(span[1], color=c, ls=":", lw=1, gid=f"limit:{s}:{reg}",
-                               label=f"{s}: detection limit" if logscale else None)
+                               label=f"{_short(s)}: detection limit" if logscale else None)
         for ax, logscale in zip(row, (False, True)):
             if logscale:
                 ax.set_yscale("log")
@@ -391,7 +407,7 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
             if not _has_fit(res, s, reg, quantity) and (
                     reg == "all" or reg in regions_of(ens.subset(s))):
                 handles.append(Line2D([], [], ls="none", marker="x", color=colors[s]))
-                labels.append(f"{s}: not drawn (too few values to fit, or all equal)")
+                labels.append(f"{_short(s)}: not drawn (too few values to fit, or all equal)")
         if handles:
             row[1].legend(handles, labels, loc="upper left", bbox_to_anchor=(1.02, 1.0),
                           fontsize=8, frameon=False)
@@ -497,19 +513,19 @@ def network_figure(res: StatsResult, colors=None):
         if not np.isfinite(nbr):  # no per-stack counts (simulations): the Eq. (14) fitted slope
             nbr = rel.get("eq14_slope", np.nan)
         axes[0].plot(g["N_l"], g["N_br"], "o", color=c, ms=4, alpha=0.8,
-                     label=f"{s}: configurations (both panels)")
+                     label=f"{_short(s)}: configurations (both panels)")
         axes[1].plot(g["N_l"], g["n_br_bar"], "o", color=c, ms=4, alpha=0.8,
-                     label=f"{s}: configurations (both panels)")
+                     label=f"{_short(s)}: configurations (both panels)")
         nl = np.linspace(max(1, g["N_l"].min() * 0.8), g["N_l"].max() * 1.2, 100)
         ratio = _nanmean(g["sqrt_s_bar"] / g["l_bar"])  # NaN for scans without voids
         eps = _nanmean(g["epsilon"])
         if np.isfinite(ratio) and np.isfinite(eps):
             eq12 = EQ12_CONST * eps * ratio * np.sqrt(nl)  # Eq. (12) with set means
             axes[0].plot(nl, eq12, "-", color=c,
-                         label=f"{s}: Eq. (12), paper's C = 2√(π/3) = {EQ12_CONST:.3g}, with "
+                         label=f"{_short(s)}: Eq. (12), paper's C = 2√(π/3) = {EQ12_CONST:.3g}, with "
                                "the set means (left)")
             axes[1].plot(nl, eq12 / nl, "-", color=c,
-                         label=f"{s}: Eq. (13), C = {EQ12_CONST:.3g} (right)")
+                         label=f"{_short(s)}: Eq. (13), C = {EQ12_CONST:.3g} (right)")
             fitted = rel.get("eq12_const", np.nan)
             if np.isfinite(fitted):
                 # the C of relations.csv, through the same set means: how far the data sit
@@ -517,13 +533,13 @@ def network_figure(res: StatsResult, colors=None):
                 n_fit = int(res.relations.query("set == @s and relation == 'eq12_const'")
                             ["n"].iloc[0])
                 axes[0].plot(nl, fitted * eps * ratio * np.sqrt(nl), "-.", color=c, lw=1,
-                             label=f"{s}: Eq. (12), fitted C = {fitted:.3g}"
+                             label=f"{_short(s)}: Eq. (12), fitted C = {fitted:.3g}"
                                    + (" (indicative only)" if n_fit < N_RELATION_MIN else "")
                                    + " (left)")
         if np.isfinite(nbr):
             axes[0].plot(nl, nbr * nl, "--", color=c,
-                         label=f"{s}: Eq. (14), <n_br> = {nbr:.2g} (left)")
-            axes[1].axhline(nbr, ls="--", color=c, label=f"{s}: Eq. (15), <n_br> = {nbr:.2g} (right)")
+                         label=f"{_short(s)}: Eq. (14), <n_br> = {nbr:.2g} (left)")
+            axes[1].axhline(nbr, ls="--", color=c, label=f"{_short(s)}: Eq. (15), <n_br> = {nbr:.2g} (right)")
     axes[0].set(xlabel="number of stacks per configuration $N_l$",
                 ylabel="number of branches per configuration $N_{br}$",
                 title="branches against stacks")
@@ -557,7 +573,7 @@ def _scatter_fig(res, x, y, xlabel, ylabel, title, *, through_origin=False, pape
         k = np.isfinite(xv) & np.isfinite(yv)
         if not k.any():
             continue
-        txt = f"{s}: configurations"
+        txt = f"{_short(s)}: configurations"
         if (k.sum() >= CORRELATION_MIN_PAIRS and not through_origin and np.ptp(xv[k]) > 0
                 and np.ptp(yv[k]) > 0):
             txt += f", Pearson r = {np.corrcoef(xv[k], yv[k])[0, 1]:.2f}"
@@ -567,7 +583,7 @@ def _scatter_fig(res, x, y, xlabel, ylabel, title, *, through_origin=False, pape
         if k.sum() >= 2 and through_origin:
             a = np.sum(xv[k] * yv[k]) / np.sum(xv[k] ** 2)
             xs = np.linspace(0, xv[k].max() * 1.1, 10)
-            ax.plot(xs, a * xs, "-", color=c, label=f"{s}: fit through 0, slope {a:.3g}")
+            ax.plot(xs, a * xs, "-", color=c, label=f"{_short(s)}: fit through 0, slope {a:.3g}")
     if paper_slope is not None and np.isfinite(np.asarray(pc[x], float)).any():
         xs = np.array([0, np.nanmax(np.asarray(pc[x], float)) * 1.1])
         ax.plot(xs, paper_slope * xs, ":", color="grey", label=f"paper: slope {paper_slope}")
@@ -603,7 +619,7 @@ def e_vs_nbr_figure(ens: Ensemble, colors=None):
             ax.errorbar(st.index, st["mean"], yerr=st["sem"].fillna(0), fmt="o" + ls, color=c,
                         ms=4 if reg is None else 2, lw=1, capsize=2,
                         alpha=1 if reg is None else 0.6,
-                        label=f"{s}: {REGION_WORDS[reg or 'all']}")
+                        label=f"{_short(s)}: {REGION_WORDS[reg or 'all']}")
     ax.set(xlabel="number of branches in the stack $n_{br}$",
            ylabel=r"mean branch energy $\langle e\rangle$ (dimensionless)",
            title=r"mean branch energy against $n_{br}$ (mean $\pm$ standard error)")

@@ -361,3 +361,18 @@ def test_a_missing_count_is_an_empty_cell_not_pandas_na():
                        "l_L": [0.0102, np.nan]})
     page = _html_table(df)
     assert "NA" not in page and "<td>141</td>" in page and page.count("<td></td>") == 2
+
+
+def test_a_long_set_name_is_shortened_in_the_legend_only():
+    """Names of 60 characters shrank the panels, clipped their titles and ran their tick
+    labels together."""
+    from crosssection.stats.report import LEGEND_NAME_MAX, _short
+
+    long = "experiment_polyester_sheet_december_2026_series_A_hole_8mm"
+    assert _short("set_a") == "set_a" and len(_short(long)) == LEGEND_NAME_MAX - 1
+    assert _short(long).startswith("experiment_p") and _short(long).endswith("_A_hole_8mm")
+    ens = _ensemble([long], np.random.default_rng(3), n_stacks=60)
+    fig = pdf_figure(_fits(ens, ("length_L",), n_boot=0), ens, "length_L")
+    texts = [t.get_text() for ax in fig.axes if ax.get_legend()
+             for t in ax.get_legend().get_texts()]
+    assert texts and all(t.startswith(_short(long) + ": ") for t in texts)
