@@ -8,7 +8,8 @@ folder of SCENES (``image.png``, ``params.json``, ``calibration.csv``, ``truth/`
 used, the input folder and the package version) and ``REPORT/failures.csv`` (one line per
 scene that could not be analysed or scored: the run goes on). Every subfolder of SCENES is
 taken for a scene, so that one whose ``truth/`` is missing is listed as failed rather than
-lost.
+lost, but for report folders (:func:`is_report_folder`): a report may be written directly in
+SCENES, not deeper.
 
 A scene whose render flagged its truth (``truth_warnings`` in ``truth/summary.json``: the truth
 disagrees with its own drawing, :class:`simulate.render.TruthWarning`) is scored, counted in the
@@ -201,11 +202,26 @@ def _check_out_dir(out_dir: Path) -> None:
                           "new folder, an empty one or one an earlier validate wrote", out_dir)
 
 
+def _check_out_inside(scenes_dir: Path, out_dir: Path) -> None:
+    """Refuse a report folder deeper inside ``scenes_dir`` than one of its subfolders: it
+    would lie in a scene folder (or a subfolder taken for one), which the next ``validate``
+    or ``render`` then finds holding files no scene has. A report directly in
+    ``scenes_dir`` is kept apart from the scenes (:func:`_scene_folders`)."""
+    out, root = out_dir.resolve(), scenes_dir.resolve()
+    if out != root and out.is_relative_to(root) and out.parent != root:
+        raise ConfigError(f"lies inside {scenes_dir / out.relative_to(root).parts[0]}, which "
+                          f"validate takes for a scene: give a folder outside {scenes_dir} or "
+                          "directly in it", out_dir)
+
+
 def _scene_folders(scenes_dir: Path, out_dir: Path) -> list[Path]:
-    """Every subfolder of ``scenes_dir`` but hidden ones and the report folder itself."""
+    """Every subfolder of ``scenes_dir`` but hidden ones and report folders: this run's
+    (perhaps not yet written) and those of earlier runs given an ``--out`` there, which hold
+    no scene (:func:`is_report_folder`)."""
     out = out_dir.resolve()
     return sorted(p for p in scenes_dir.iterdir()
-                  if p.is_dir() and not p.name.startswith(".") and p.resolve() != out)
+                  if p.is_dir() and not p.name.startswith(".") and p.resolve() != out
+                  and not is_report_folder(p))
 
 
 def _one_line(exc: BaseException, scene: Path) -> str:
@@ -236,7 +252,8 @@ def validate_scenes(scenes_dir, out_dir, *, match_px: float | None = None,
                     progress: bool | None = None) -> pd.DataFrame:
     """Score every scene folder under ``scenes_dir``; write the report into ``out_dir``.
 
-    Every subfolder of ``scenes_dir`` (but hidden ones and ``out_dir``) is a scene; one that
+    Every subfolder of ``scenes_dir`` (but hidden ones and report folders, ``out_dir`` and
+    those of earlier runs, :func:`is_report_folder`) is a scene; one that
     cannot be analysed or scored, or has no ``truth/summary.json``, is a line of
     ``failures.csv`` (``scene``, ``error``) and the run goes on.
 
@@ -264,7 +281,8 @@ def validate_scenes(scenes_dir, out_dir, *, match_px: float | None = None,
         ``match_px`` is not a finite number > 0.
     ConfigError
         ``scenes_dir`` is not a folder or no subfolder of it has a ``truth/summary.json``,
-        or ``out_dir`` holds anything but an earlier report.
+        ``out_dir`` holds anything but an earlier report, or lies inside a subfolder of
+        ``scenes_dir``.
     OSError
         ``out_dir`` cannot be created or written.
 
@@ -292,6 +310,7 @@ def _validate(scenes_dir, out_dir, *, match_px, progress) -> tuple[pd.DataFrame,
         raise ConfigError("folder not found", scenes_dir)
     if not scenes_dir.is_dir():
         raise ConfigError("not a folder", scenes_dir)
+    _check_out_inside(scenes_dir, out_dir)
     scenes = _scene_folders(scenes_dir, out_dir)
     if not any((p / "truth" / "summary.json").is_file() for p in scenes):
         raise ConfigError("no scene folders (with truth/summary.json) inside", scenes_dir)
@@ -376,7 +395,8 @@ def add_subparser(sub) -> None:
                    help="folder of scene folders (from render), each with its truth/")
     p.add_argument("--out", required=True, metavar="REPORT",
                    help="report folder (created): scores.csv, summary.json, failures.csv; "
-                        "a re-run replaces them; a folder holding other files is refused")
+                        "a re-run replaces them; a folder holding other files is refused; "
+                        "inside SCENES only directly (a report there is no scene)")
     p.add_argument("--match-px", type=float, default=None,
                    help="junction matching radius in px, > 0 (default: 3 h of each scene)")
     p.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,

@@ -112,6 +112,32 @@ def test_report_folder_inside_scenes_is_not_a_scene(scenes, capsys):
     assert not_analysed(capsys.readouterr().err) == []
 
 
+def test_a_report_inside_scenes_is_no_scene_of_a_run_reporting_elsewhere(scenes, tmp_path,
+                                                                        capsys):
+    folder, _ = scenes
+    assert run(folder, folder / "validation") == 0
+    assert run(folder, tmp_path / "rep") == 0
+    assert not_analysed(capsys.readouterr().err) == []
+    summary = json.loads((tmp_path / "rep" / "summary.json").read_text())
+    assert (summary["n_scenes"], summary["n_failed"]) == (1, 0)
+
+
+@pytest.mark.parametrize("inside", [("config_00000", "rep"), ("reports", "v1")])
+def test_a_report_deeper_inside_scenes_is_refused(scenes, capsys, inside):
+    """Deeper than a subfolder of SCENES, the report would lie in a folder taken for a scene
+    (the scene's own, or one the next run lists as a failed scene)."""
+    folder, _ = scenes
+    out = folder.joinpath(*inside)
+    before = sorted(str(p.relative_to(folder)) for p in folder.rglob("*"))
+    assert run(folder, out) == 2
+    assert capsys.readouterr().err == (
+        f"error: {out}: lies inside {folder / inside[0]}, which validate takes for a scene: "
+        f"give a folder outside {folder} or directly in it\n")
+    assert sorted(str(p.relative_to(folder)) for p in folder.rglob("*")) == before
+    with pytest.raises(ConfigError, match="which validate takes for a scene"):
+        validate_scenes(folder, out)
+
+
 @pytest.mark.parametrize("where", ["junk", "scenes"])
 def test_a_report_folder_holding_other_files_is_refused(scenes, tmp_path, capsys, where):
     folder, _ = scenes
