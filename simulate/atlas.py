@@ -15,7 +15,8 @@ analyses each with :func:`crosssection.analyze` and scores it against its truth 
 - one chart per sweep (``SWEEP.png``): line charts for the one-dimensional sweeps, stability
   maps (two swept parameters, failure boundary drawn) and accuracy against time for the
   pipeline variants (Pareto front drawn, default marked); ``stage_times.png``;
-- ``index.md``: every chart with a one-line reading computed from the numbers.
+- ``index.md``: every chart with a one-line reading computed from the numbers, after the
+  command line and the package and library versions the numbers were computed with.
 
 Sweeps (every random choice seeded from ``--seed``):
 
@@ -1629,6 +1630,27 @@ def _stage_reading(df) -> str:
             "largest stages there: " + ", ".join(f"{n} {t:.2f} s" for t, n in top) + ".")
 
 
+def versions_line() -> str:
+    """The package and library versions of this process, as ``index.md`` names them.
+
+    The quenched rods are chaotic (another numba, llvmlite or numpy build ends on other
+    rods) and a new release of an analysis library can move the scores' last bits: a report
+    read later must say which code computed it.
+
+    Returns
+    -------
+    str
+        ``Versions: foldstat X; numpy Y, scipy Z, ...`` (``not installed`` for a library
+        that is not).
+    """
+    from crosssection._version import __version__
+    from crosssection.core.provenance import ANALYSIS_LIBRARIES, library_versions
+
+    libs = library_versions(ANALYSIS_LIBRARIES + ("llvmlite",))
+    return (f"Versions: foldstat {__version__}; "
+            + ", ".join(f"{k} {v or 'not installed'}" for k, v in libs.items()) + ".")
+
+
 def _index(command, tables, failures, charts, readings, elapsed) -> str:
     took = "" if elapsed is None else f" ({elapsed / 60:.1f} min)"
     lines = [ATLAS_TITLE, "",
@@ -1640,7 +1662,8 @@ def _index(command, tables, failures, charts, readings, elapsed) -> str:
              "within 3 h). Failure limits: exact n_br < 0.8, junction F1 < 0.9, |total "
              "energy error| > 20 %. Medians over scenes. Times are wall times of one "
              "analysis in a warm worker process (the same image analysed once before, "
-             "untimed), with as many workers as the command says sharing the machine.", ""]
+             "untimed), with as many workers as the command says sharing the machine.", "",
+             versions_line(), ""]
     for name in list(tables) + (["stage_times"] if "stage_times" in charts else []):
         if name not in charts:
             continue

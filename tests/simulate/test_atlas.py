@@ -138,6 +138,19 @@ def test_charts_and_index(report):
     assert res["readings"]["epsilon"].startswith("compacted simulator rods:")
 
 
+def test_index_names_the_package_and_library_versions(report):
+    """The quenched rods and the scores' last bits follow the code that computed them."""
+    from crosssection._version import __version__
+    from crosssection.core.provenance import library_versions
+
+    out, _ = report
+    index = (out / "index.md").read_text()
+    assert f"Versions: foldstat {__version__}; " in index
+    for name in ("numpy", "scipy", "numba", "llvmlite", "opencv", "scikit-image"):
+        version = library_versions((name,))[name]
+        assert f"{name} {version or 'not installed'}" in index, name
+
+
 def test_failed_analysis_is_scored_as_empty():
     base = atlas.Base("variants", "network", 5, 3.0, (("max_layers", 3), ("n_stacks", 15)))
     broken = atlas.Variant("nothing passes", (("threshold_method", "fixed"),
