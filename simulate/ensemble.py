@@ -66,8 +66,8 @@ from crosssection.quality import QualityWarning
 from simulate.contacts import MIN_CONTACT_DISTANCE
 from simulate.energy import LAMBDA, LAMBDA_MAX
 from simulate.noise import N_SEGMENTS, NOISE, VALIDATED_QUENCH_SEGMENTS
-from simulate.optimize import (FTOL, LAM_START, MAXITER, N_RUNS, NEMATIC_RUNS, NEMATIC_U, RAMPS,
-                               STAGES, XTOL, default_contact_cutoff)
+from simulate.optimize import (FTOL, LAM_START, MAXITER, N_RUNS, NEMATIC_RUNS, NEMATIC_U,
+                               NEMATIC_U_MAX, RAMPS, STAGES, XTOL, default_contact_cutoff)
 
 CONFIG_COLUMNS = ["config_id", "seed", "rg", "epsilon", "epsilon_sqrt2", "energy_total",
                   "energy_bending", "energy_confinement", "n_stacks", "n_branches",
@@ -857,8 +857,9 @@ def _add_common(p, command):
                         f"{max(NEMATIC_RUNS) + 2} or more: it is never cut down to fit fewer "
                         f"runs; {powell})")
     p.add_argument("--u", type=float, default=None,
-                   help=f"nematic strength u, dimensionless, 50-150 (default {NEMATIC_U:g}; "
-                        f"{powell})")
+                   help=f"nematic strength u, dimensionless (default {NEMATIC_U:g}; "
+                        f"{powell}): above 0 and at most {NEMATIC_U_MAX:g}, the paper's "
+                        "range 50-150; --nematic-runs '' for no nematic term")
     p.add_argument("--nematic-cutoff", type=float, default=None,
                    help="distance within which two segments touch for the nematic term, in "
                         "units of L (quench with --method powell; default one segment, 1/N)")
@@ -1028,8 +1029,18 @@ def _powell_params(args) -> dict:
         raise ParameterError(f"--nematic-runs must name {which}: the nematic term must not be "
                              f"used in the last run (paper), got {nematic!r} "
                              "(--nematic-runs '' for none)")
-    return dict(n_runs=runs, maxiter=maxiter, nematic_runs=nem,
-                u=_finite("--u", given(args.u, NEMATIC_U), low=0.0),
+    u = _finite("--u", given(args.u, NEMATIC_U), low=0.0)
+    if u > NEMATIC_U_MAX:
+        raise ParameterError(f"--u must be <= {NEMATIC_U_MAX:g} (the paper's range is 50-150): "
+                             "above, the nematic term outweighs the bending and confinement "
+                             f"it is meant to help minimise, got {args.u:g}")
+    if u == 0 and nem:
+        # a protocol naming runs with a term of no strength: which one the user meant is
+        # unknown, and params.json would record both
+        named = ("the default " if args.nematic_runs is None else "") + "--nematic-runs"
+        raise ParameterError(f"--u must be > 0 with {named} {nematic!r}: give --nematic-runs "
+                             "'' for no nematic term, got 0")
+    return dict(n_runs=runs, maxiter=maxiter, nematic_runs=nem, u=u,
                 ftol=_finite("--ftol", given(args.ftol, FTOL), low=0.0, low_open=True),
                 xtol=_finite("--xtol", given(args.xtol, XTOL), low=0.0, low_open=True))
 

@@ -111,6 +111,36 @@ def test_a_wall_just_wider_than_a_segment_is_taken_as_given():
     assert params_from_args(args)["wall_radius"] == 0.0126
 
 
+@pytest.mark.parametrize("command, extra, says", [
+    ("quench", ["--u", "1e9"], "--u must be <= 1000 (the paper's range is 50-150)"),
+    ("anneal", ["--u", "1001"], "--u must be <= 1000 (the paper's range is 50-150)"),
+    ("quench", ["--u", "0"], "--u must be > 0 with the default --nematic-runs '1,2': give "
+                             "--nematic-runs '' for no nematic term, got 0"),
+    ("quench", ["--u", "0", "--nematic-runs", "0"], "--u must be > 0 with --nematic-runs '0'"),
+])
+def test_a_nematic_strength_outside_its_range_is_refused(tmp_path, command, extra, says):
+    out = tmp_path / "out"
+    r = subprocess.run([sys.executable, "-m", "simulate", command, "--n-configs", "1",
+                        "--segments", "40", *extra, "--out", str(out)], capture_output=True,
+                       text=True)
+    assert r.returncode == 2 and r.stderr.startswith(f"error: {out}: {says}")
+    assert r.stderr.count("\n") == 1 and not out.exists()
+
+
+@pytest.mark.parametrize("extra, u, runs", [(["--u", "1000"], 1000.0, [1, 2]),
+                                            (["--u", "50"], 50.0, [1, 2]),
+                                            (["--u", "0", "--nematic-runs", ""], 0.0, [])])
+def test_a_nematic_strength_in_its_range_is_taken_as_given(extra, u, runs):
+    """Up to ten times the paper's u, the strongest measured; 0 with no nematic run is the
+    protocol without the term."""
+    from simulate.cli import build_parser
+    from simulate.ensemble import params_from_args
+
+    args = build_parser(["quench"]).parse_args(["quench", *extra, "--out", "o"])
+    params = params_from_args(args)
+    assert (params["u"], params["nematic_runs"]) == (u, runs)
+
+
 def _quench_params(**kw):
     """The parameters :func:`simulate.ensemble.minimize_config` reads, for a short quench."""
     return {**dict(command="quench", method="powell", lam=20.0, n_runs=3, maxiter=4,
