@@ -2724,7 +2724,7 @@ def add_subparser(sub) -> None:
                         "the smallest disk around the rod) or 'none' (the pipeline then fits "
                         "one)")
     p.add_argument("--limit", type=int, default=None,
-                   help="render only the first K configurations (default: all)")
+                   help="render only the first K configurations, K >= 1 (default: all)")
     p.add_argument("--seed", type=int, default=0,
                    help="base seed of colours, noise and defects; configuration i uses "
                         "seed + i (default 0)")
@@ -2812,8 +2812,9 @@ def _run(args) -> int:
                   smooth=args.smooth, draw=args.draw, join=args.join,
                   hole_radius_mm=_hole_arg(args.hole),
                   **{k: v for k, v in opts.items() if v is not None})
-    if args.limit is not None and args.limit < 0:
-        raise ParameterError(f"must be >= 0, got {args.limit}", "--limit")
+    if args.limit is not None and args.limit < 1:
+        # 0 would render nothing and create no folder, yet read as a finished render
+        raise ParameterError(f"must be >= 1, got {args.limit}", "--limit")
     try:
         _check_options(kwargs)
         out = _render_directory(args.sim_dir, args.out, limit=args.limit,

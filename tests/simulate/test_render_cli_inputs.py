@@ -426,3 +426,11 @@ def test_a_plate_is_given_on_the_command_line_as_a_triple(sim, tmp_path, capsys,
         assert np.abs(img[2, 2].astype(int) - (200, 120, 60)).max() <= 12  # the corner: plate
     else:
         assert status == 2 and "--plate" in _one_error(err)
+
+
+@pytest.mark.parametrize("limit", ["0", "-1"])
+def test_a_limit_below_one_is_refused(sim, tmp_path, capsys, limit):
+    status, err = _render(capsys, sim, "--out", tmp_path / "s", "--limit", limit, *FAST)
+    assert status == 2
+    assert _one_error(err) == f"error: --limit: must be >= 1, got {limit}"
+    assert not (tmp_path / "s").exists()
