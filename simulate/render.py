@@ -2512,8 +2512,9 @@ def render_directory(sim_dir, out_dir, *, configs=None, progress: bool | None = 
         An absurd option or output folder, a scene over :data:`MAX_SCENE_PX` pixels, or a
         ``rod_length_mm`` that contradicts the compaction's thickness.
     ConfigError
-        ``sim_dir`` is not a readable simulation folder, or ``out_dir`` holds scenes of
-        another render (or of one that recorded no parameters) or files no render writes.
+        ``sim_dir`` is not a readable simulation folder or its ``rods.npz`` holds no
+        configuration (every one failed), or ``out_dir`` holds scenes of another render (or
+        of one that recorded no parameters) or files no render writes.
 
     Warns
     -----
@@ -2580,6 +2581,12 @@ def _render_directory(sim_dir, out_dir, *, configs=None, limit=None, progress=Fa
     with rods:
         keys = sorted(rods.files) if configs is None else [k for k in sorted(rods.files)
                                                            if k in set(configs)]
+        if not rods.files:
+            # an ensemble whose every configuration failed stores none: rendering nothing
+            # would look like a finished render of an empty folder
+            failed = sim_dir / "failures.csv"
+            why = f" (see {failed})" if failed.is_file() else ""
+            raise ConfigError(f"no finished configuration to render in rods.npz{why}", sim_dir)
         if limit is not None:
             keys = keys[:limit]
         # an ensemble that recorded None for its default delta analyses with that default

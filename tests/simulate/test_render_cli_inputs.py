@@ -434,3 +434,20 @@ def test_a_limit_below_one_is_refused(sim, tmp_path, capsys, limit):
     assert status == 2
     assert _one_error(err) == f"error: --limit: must be >= 1, got {limit}"
     assert not (tmp_path / "s").exists()
+
+
+def test_an_ensemble_whose_every_configuration_failed_is_refused(sim, tmp_path, capsys):
+    """Its rods.npz holds no configuration: rendering nothing would read as a finished
+    render."""
+    failed = tmp_path / "failed"
+    failed.mkdir()
+    shutil.copy(sim / "params.json", failed)
+    np.savez(failed / "rods.npz")
+    (failed / "failures.csv").write_text("config_id,seed,error\n0,1,AnalysisError: x\n")
+    status, err = _render(capsys, failed, "--out", tmp_path / "s", *FAST)
+    assert status == 2
+    assert _one_error(err) == (f"error: {failed}: no finished configuration to render in "
+                               f"rods.npz (see {failed / 'failures.csv'})")
+    assert not (tmp_path / "s").exists()
+    with pytest.raises(render.ConfigError, match="no finished configuration"):
+        render_directory(failed, tmp_path / "s", px_per_mm=25, clean=True)
