@@ -996,8 +996,13 @@ def _read_rods(path, rod_jobs) -> dict:
     """Rod index -> node positions, from a report's ``rods.npz`` (see :func:`run_atlas`)."""
     import zipfile
 
+    from simulate.render import not_npz
+
     path = Path(path)
     try:
+        cause = not_npz(path)
+        if cause is not None:
+            raise ParameterError(f"unreadable rods file ({cause})", path)
         with np.load(path, allow_pickle=False) as f:
             stored = {k: np.asarray(f[k], float) for k in f.files}
     except FileNotFoundError:

@@ -200,7 +200,7 @@ __all__ = ["render_configuration", "render_directory", "write_set_file", "add_su
            "DRAW", "JOIN",
            "PX_PER_MM", "THICKNESS_MM", "VALIDATED_SHEET_PX", "VALIDATED_BLUR_PX",
            "VALIDATED_NOISE_SIGMA", "VALIDATED_JPEG_QUALITY", "VALIDATED_COMPACT_SEGMENTS",
-           "VALIDATED_QUENCH_SEGMENTS", "SCALE_TOLERANCE"]
+           "VALIDATED_QUENCH_SEGMENTS", "SCALE_TOLERANCE", "not_npz"]
 
 #: Scan resolution and sheet thickness h of a render: the paper's sheet at the typical scans'
 #: resolution (h = 5 px).
@@ -2282,9 +2282,50 @@ def _rods_path(sim_dir: Path) -> Path:
     return rods_path
 
 
+#: The first bytes of what ``np.load`` reads: a zip archive (``.npz``; an empty one starts with
+#: its end record) and an ``.npy`` array. Anything else numpy takes for a pickle.
+_NPZ_MAGIC = (b"PK\x03\x04", b"PK\x05\x06")
+_NPY_MAGIC = b"\x93NUMPY"
+
+
+def not_npz(path: Path) -> str | None:
+    """Why ``path`` is no NumPy archive at all, from its first bytes, or None.
+
+    ``np.load`` takes any other file for a pickle and refuses it with advice to load it
+    unsafely, which says nothing of what is wrong with the file: a caller names this cause
+    instead.
+
+    Parameters
+    ----------
+    path : Path
+        An existing file.
+
+    Returns
+    -------
+    str or None
+        ``"empty file, not a NumPy .npz archive"``, ``"not a NumPy .npz archive"``, or None
+        when the file starts as a zip archive or an ``.npy`` array does.
+
+    Raises
+    ------
+    OSError
+        The file cannot be read.
+    """
+    with open(path, "rb") as fh:
+        head = fh.read(len(_NPY_MAGIC))
+    if not head:
+        return "empty file, not a NumPy .npz archive"
+    if head.startswith(_NPZ_MAGIC) or head.startswith(_NPY_MAGIC):
+        return None
+    return "not a NumPy .npz archive"
+
+
 def _open_rods(rods_path: Path):
     """The configurations archive, opened lazily (arrays are read on access)."""
     try:
+        cause = not_npz(rods_path)
+        if cause is not None:
+            raise ConfigError(f"unreadable rods file ({cause})", rods_path)
         rods = np.load(rods_path, allow_pickle=False)
     except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
         raise ConfigError(f"unreadable rods file ({' '.join(str(exc).split())})",

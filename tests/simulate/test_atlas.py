@@ -229,6 +229,17 @@ def test_rods_of_another_seed_are_refused(report, tmp_path):
                         sweeps=("resolution",), rods=tmp_path / "missing.npz")
 
 
+def test_a_rods_file_of_another_format_is_named_so(tmp_path, capsys):
+    """numpy takes a file of no known format for a pickle: the cause is the format, never
+    advice to load it unsafely."""
+    bad = tmp_path / "rods.npz"
+    bad.write_text("junk\n")
+    assert main(["benchmark", "--out", str(tmp_path / "r"), "--quick", "--sweeps",
+                 "resolution", "--rods", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert err == f"error: {bad}: unreadable rods file (not a NumPy .npz archive)\n"
+
+
 @pytest.mark.parametrize("args, message", [
     (["--workers", "0"], "--workers"),
     (["--seed", "-1"], "--seed"),

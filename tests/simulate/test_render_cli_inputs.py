@@ -451,3 +451,20 @@ def test_an_ensemble_whose_every_configuration_failed_is_refused(sim, tmp_path, 
     assert not (tmp_path / "s").exists()
     with pytest.raises(render.ConfigError, match="no finished configuration"):
         render_directory(failed, tmp_path / "s", px_per_mm=25, clean=True)
+
+
+@pytest.mark.parametrize("content, cause", [
+    (b"junk\n", "not a NumPy .npz archive"),
+    (b"", "empty file, not a NumPy .npz archive"),
+    # numpy reads a file of no known format as a pickle
+    (b"\x80\x04K\x01.", "not a NumPy .npz archive"),
+])
+def test_a_rods_file_of_another_format_is_named_so(sim, tmp_path, capsys, content, cause):
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    shutil.copy(sim / "params.json", bad)
+    (bad / "rods.npz").write_bytes(content)
+    status, err = _render(capsys, bad, "--out", tmp_path / "s", *FAST)
+    assert status == 2
+    assert _one_error(err) == f"error: {bad / 'rods.npz'}: unreadable rods file ({cause})"
+    assert "pickle" not in err
