@@ -168,6 +168,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import shutil
 import warnings
 import zipfile
 from dataclasses import dataclass
@@ -2402,7 +2403,8 @@ def _foreign_entry(out_dir: Path, keys) -> str | None:
     """The first entry of ``out_dir`` that no render writes, or None.
 
     A render writes ``render.json`` and one folder per configuration (named by its key in
-    ``rods.npz``, ``keys``; a folder a killed render left half written holds no scene yet);
+    ``rods.npz``, ``keys``; a folder a killed render left half written holds no scene yet,
+    nor does the hidden folder a scene is written into, :func:`_write_scene_whole`);
     a scene folder of the same render is kept whatever its name (an earlier ``--limit`` or
     configurations of another count), and so is a ``validate`` report written inside
     (:func:`simulate.validate.is_report_folder`). Anything else (an ensemble's tables, a
@@ -2416,7 +2418,7 @@ def _foreign_entry(out_dir: Path, keys) -> str | None:
     def scene_or_report(p):
         # an empty folder: a validate report begun (validate makes its folder first)
         own = (p.name in keys or (p / "params.json").exists() or (p / "truth").exists()
-               or is_report_folder(p) or not any(p.iterdir()))
+               or is_report_folder(p) or _is_partial_folder(p) or not any(p.iterdir()))
         return None if own else p.name
 
     return foreign_entry(out_dir, (RENDER_RECORD,), scene_or_report)
@@ -2694,8 +2696,58 @@ def _render_directory(sim_dir, out_dir, *, configs=None, limit=None, progress=Fa
                     write_json(out_dir / RENDER_RECORD, record)
                     recorded = True
                 # before the scene, whose truth/summary.json marks it complete
-                written.append(write_scene(scene, folder))
+                written.append(_write_scene_whole(scene, folder))
     return written
+
+
+#: Suffix of the hidden folder a scene is written into before it takes its name
+#: (:func:`_write_scene_whole`).
+_PARTIAL = ".partial"
+
+
+def _partial_folder(folder: Path) -> Path:
+    """The hidden sibling in which the scene ``folder`` is written before it takes its name."""
+    return folder.with_name(f".{folder.name}{_PARTIAL}")
+
+
+def _is_partial_folder(p: Path) -> bool:
+    """Whether ``p`` is a scene a render began and never finished (:func:`_partial_folder`)."""
+    return p.name.startswith(".") and p.name.endswith(_PARTIAL)
+
+
+def _write_scene_whole(scene: Scene, folder: Path) -> Path:
+    """Write ``scene`` into ``folder`` whole or not at all.
+
+    The scene is written into a hidden sibling (:func:`_partial_folder`) that is then renamed:
+    writing the image takes seconds, and a render stopped meanwhile would otherwise leave a
+    scene folder without its files (validate takes every folder for a scene). A stop removes
+    the sibling; one left by a killed render is replaced by the next run. A ``folder`` an
+    older version left half written (files but no ``truth/summary.json``) is written into as
+    it is: it may hold files the render did not write, which a rename cannot replace.
+
+    Parameters
+    ----------
+    scene : Scene
+    folder : Path
+        The scene folder; absent, empty or half written.
+
+    Returns
+    -------
+    Path
+        ``folder``.
+    """
+    if folder.is_dir() and any(folder.iterdir()):
+        return write_scene(scene, folder)
+    tmp = _partial_folder(folder)
+    shutil.rmtree(tmp, ignore_errors=True)
+    try:
+        write_scene(scene, tmp)
+        # an empty folder is replaced: one a stopped render of an older version left
+        tmp.replace(folder)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return folder
 
 
 def add_subparser(sub) -> None:

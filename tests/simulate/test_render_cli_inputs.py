@@ -2,6 +2,7 @@
 renders in one output folder (simulate.render)."""
 import json
 import shutil
+from pathlib import Path
 
 import numpy as np
 from PIL import Image
@@ -468,3 +469,30 @@ def test_a_rods_file_of_another_format_is_named_so(sim, tmp_path, capsys, conten
     assert status == 2
     assert _one_error(err) == f"error: {bad / 'rods.npz'}: unreadable rods file ({cause})"
     assert "pickle" not in err
+
+
+def test_a_stopped_render_leaves_no_scene_folder_without_its_scene(sim, tmp_path,
+                                                                  monkeypatch):
+    """Writing a scene's image takes seconds: a stop meanwhile leaves no folder that validate
+    would take for a failed scene, and the next run renders the scene."""
+    out = tmp_path / "s"
+    real = render.write_scene
+
+    def stopped(scene, folder, **kw):
+        Path(folder).mkdir(parents=True)
+        (Path(folder) / "image.png").write_bytes(b"half")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(render, "write_scene", stopped)
+    with pytest.raises(KeyboardInterrupt):
+        render_directory(sim, out, configs=["config_00000"], px_per_mm=25, clean=True)
+    assert sorted(p.name for p in out.iterdir()) == [render.RENDER_RECORD]
+    monkeypatch.setattr(render, "write_scene", real)
+    # a killed render's hidden folder is no foreign file, and is replaced
+    partial = out / ".config_00000.partial"
+    partial.mkdir()
+    (partial / "image.png").write_bytes(b"half")
+    assert render_directory(sim, out, configs=["config_00000"], px_per_mm=25,
+                            clean=True) == [out / "config_00000"]
+    assert (out / "config_00000" / "truth" / "summary.json").is_file()
+    assert sorted(p.name for p in out.iterdir()) == ["config_00000", render.RENDER_RECORD]
