@@ -271,6 +271,22 @@ def test_ink_across_circle_finds_a_given_hole_that_cuts_the_wall_band(radius_fac
         assert frac > 0.1
 
 
+@pytest.mark.parametrize("gap_px", [8.0, 20.0])
+def test_a_ring_drawn_round_a_right_hole_beyond_paper_does_not_cross_it(gap_px):
+    """A marker's ring 0.25-0.5 mm outside the hole took the place of the given hole and
+    counted as a stack (+18 % of rod); the rod stops at its wall, and paper follows it."""
+    from crosssection.stages.hole import ink_across_circle
+
+    img, c = _ring_scan()
+    rr, cc = np.mgrid[:img.shape[0], :img.shape[1]]
+    d = np.hypot(rr - c[0], cc - c[1])
+    img[(d > 300.0 + gap_px) & (d <= 304.0 + gap_px)] = (40, 70, 170)
+    ink = threshold_rgb(img).mask
+    assert ink_across_circle(lambda r, q: ink[r, q], img.shape, Hole(c, 300.0, False)) == 0.0
+    # the same ring where a circle 3 % short cuts the band is still crossed
+    assert ink_across_circle(lambda r, q: ink[r, q], img.shape, Hole(c, 291.0, False)) > 0.1
+
+
 def test_ink_across_circle_ignores_a_background_that_passes_everywhere():
     """A blue plate (or background) passing the ink's cut all round is not a cut band."""
     from crosssection.stages.hole import ink_across_circle
