@@ -206,7 +206,7 @@ def overlay_figure(rgb, result=None, *, junctions_df=None, stacks_df=None, paths
         handles.append(Line2D([], [], color="0.25", ls="--", lw=1.2, label="hole"))
     px_per_mm = getattr(_get(result, "params"), "px_per_mm", None)
     if px_per_mm:
-        _scale_bar(ax, float(px_per_mm), view[1])
+        _scale_bar(ax, float(px_per_mm), view[1], img[max(r0, 0):r1, max(c0, 0):c1])
     text, ncol, _ = _overlay_header(
         f"{head}   ({n_j} junctions, {m} stacks, {n_br_total} branches)", len(handles),
         fig.get_figwidth())
@@ -220,16 +220,29 @@ def overlay_figure(rgb, result=None, *, junctions_df=None, stacks_df=None, paths
     return fig
 
 
-def _scale_bar(ax, px_per_mm: float, width_px: float) -> None:
-    """A bar of a round length in mm (about a fifth of the view's width) in the lower left
-    corner of ``ax``, labelled with its length."""
+def _scale_bar(ax, px_per_mm: float, width_px: float, view_rgb=None) -> None:
+    """A bar of a round length in mm (about a fifth of the view's width) in the corner of
+    ``ax`` with the least ink of ``view_rgb`` (the lower left one without it; a scan cropped
+    through its hole has stacks in the corners), labelled with its length."""
     from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
 
     target_mm = 0.2 * width_px / px_per_mm
     nice = [m * 10.0 ** k for k in range(-2, 4) for m in (1, 2, 5)]
     mm = max([v for v in nice if v <= target_mm] or [nice[0]])
     label = f"{mm:g} mm"
-    ax.add_artist(AnchoredSizeBar(ax.transData, mm * px_per_mm, label, "lower left",
+    loc = "lower left"
+    if view_rgb is not None and view_rgb.size:
+        img = np.asarray(view_rgb)
+        h, w = img.shape[:2]
+        bh, bw = max(int(0.08 * h), 1), max(int(1.3 * mm * px_per_mm), 1)
+        rows = {"lower": slice(h - bh, h), "upper": slice(0, bh)}
+        cols = {"left": slice(0, bw), "right": slice(w - bw, w)}
+        top = np.iinfo(img.dtype).max if img.dtype.kind in "ui" else 1.0
+        # ink and marks are darker than paper in at least one channel
+        dark = {f"{v} {u}": float(np.mean(img[rows[v], cols[u]].min(axis=-1) < 0.63 * top))
+                for v in ("lower", "upper") for u in ("left", "right")}
+        loc = min(dark, key=lambda k: (dark[k] > 0.005, dark[k], k != "lower left"))
+    ax.add_artist(AnchoredSizeBar(ax.transData, mm * px_per_mm, label, loc,
                                   pad=0.4, borderpad=0.5, sep=3, frameon=False,
                                   size_vertical=max(1.0, 0.004 * width_px), color="black",
                                   fontproperties={"size": 8}))

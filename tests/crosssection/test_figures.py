@@ -233,3 +233,27 @@ def test_the_legend_holds_what_the_overlay_draws_and_a_generic_name_its_folder(t
     bulk_only = res.stacks.assign(region="bulk")
     fig = overlay_figure(res.rgb, res, stacks_df=bulk_only)
     assert "periphery" not in [t.get_text() for t in fig.legends[0].get_texts()]
+
+
+@pytest.mark.parametrize("dtype, top", [(np.uint8, 255), (np.uint16, 65535)])
+def test_the_scale_bar_goes_to_a_corner_without_ink(dtype, top):
+    """On a scan cropped through its hole the bar in the lower left lay over a stack."""
+    import matplotlib.pyplot as plt
+    from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
+
+    from crosssection.figures import _scale_bar
+
+    def loc_of(img):
+        fig, ax = plt.subplots()
+        ax.imshow(img.astype(float) / top)
+        _scale_bar(ax, 50.0, img.shape[1], img)
+        bar = next(a for a in ax.artists if isinstance(a, AnchoredSizeBar))
+        plt.close(fig)
+        return bar.loc
+
+    img = np.full((400, 400, 3), top, dtype)
+    assert loc_of(img) == 3  # lower left, where it always was
+    img[360:, :150] = np.array([40, 70, 170]) * (top // 255)  # a stack across that corner
+    assert loc_of(img) == 4  # lower right
+    img[360:, 250:] = np.array([40, 70, 170]) * (top // 255)
+    assert loc_of(img) in (1, 2)  # an upper corner
