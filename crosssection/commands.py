@@ -117,14 +117,15 @@ def check_not_other_output(out_dir) -> None:
     Raises
     ------
     ParameterError
-        ``out_dir`` holds a batch's, a stats report's or a simulation's record: one scan's
-        tables beside it would be read as part of it (a batch's summary, a report's
-        tables), and a re-run of that command would not know them.
+        ``out_dir`` holds the record of a batch, a stats report, a render, a validate
+        report or a simulation: one scan's tables beside it would be read as part of it (a
+        batch's summary, a report's tables), and a re-run of that command would not know
+        them.
     """
     from crosssection.core.errors import ParameterError
 
     held = output_of(out_dir)
-    if held is not None and held[0] not in RUN_RECORDS:
+    if held is not None and held[1] not in ("foldstat analyze", "foldstat steps"):
         raise ParameterError(f"{out_dir} holds the output of {held[1]} ({held[0]}): give a "
                              "folder of its own", "--out")
 

@@ -1,32 +1,68 @@
 """The records that mark a folder as the output of a foldstat command.
 
-Every command writes one record at the top of its output folder. Three commands read that
-mark: ``batch`` does not search such a folder for scans (its figures are not scans),
-``analyze`` and ``steps`` do not write into another command's output, and ``samples`` does
-not copy scans into one.
+``batch``, ``stats``, ``analyze``, ``steps``, ``render`` and ``validate`` write a JSON record at
+the top of their output folder, and a simulation (``quench``, ``anneal``, ``compact``) its
+``configs.csv``. Three commands read that mark: ``batch`` does not search such a folder for
+scans (its figures are not scans), ``analyze`` and ``steps`` do not write into another
+command's output, and ``samples`` does not copy scans into one.
+
+A file of a record's name that another tool wrote (a scanner's ``summary.json`` with a
+``version`` of its own) marks nothing: each record is known by keys only foldstat writes
+together.
 """
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
-#: the record each command writes at the top of its output folder, and the command
-RECORDS = {"batch.json": "foldstat batch", "stats.json": "foldstat stats",
-           "summary.json": "foldstat analyze", "steps.json": "foldstat steps"}
+#: (file, command, keys the record holds, and values some of them must have), in the order
+#: they are looked for: a validate report's summary.json is told from an analysis' by its keys
+RECORDS = (
+    ("batch.json", "foldstat batch", {"package": "foldstat", "version": None}),
+    ("stats.json", "foldstat stats", {"package": "foldstat", "version": None}),
+    ("summary.json", "foldstat analyze", {"version": None, "parameters": None}),
+    ("summary.json", "foldstat validate", {"package": "foldstat", "version": None,
+                                           "scenes_dir": None}),
+    ("steps.json", "foldstat steps", {"command": "steps", "version": None,
+                                      "parameters": None}),
+    ("render.json", "foldstat render", {"command": "render", "version": None}),
+)
 #: the table a simulation (quench, anneal, compact) writes at the top of its output folder
 SIMULATION_TABLE = "configs.csv"
+#: the largest file read as a record: foldstat's are kilobytes; a file of megabytes of that
+#: name is someone else's, and would be read whole for every folder a batch searches
+RECORD_MAX_BYTES = 4 << 20
 
 
-def is_record(path, keys=("version",)) -> bool:
+def is_record(path, keys) -> bool:
     """Whether ``path`` is a record foldstat wrote: a JSON object holding ``keys``.
 
-    A file of the same name that is not one (a user's own notes) marks nothing.
+    Parameters
+    ----------
+    path : str or Path
+    keys : iterable of str, or mapping of str to a value or None
+        The keys the record holds; where a mapping gives a value, the key holds that value.
+
+    Returns
+    -------
+    bool
+        False too for anything but a regular file of at most :data:`RECORD_MAX_BYTES` (a
+        named pipe would block the read).
     """
+    import stat
+
     try:
+        st = os.stat(path)
+        if not stat.S_ISREG(st.st_mode) or st.st_size > RECORD_MAX_BYTES:
+            return False
         record = json.loads(Path(path).read_bytes())
     except (OSError, ValueError, RecursionError):
         return False
-    return isinstance(record, dict) and all(k in record for k in keys)
+    if not isinstance(record, dict):
+        return False
+    wanted = keys if isinstance(keys, dict) else dict.fromkeys(keys)
+    return all(k in record and (v is None or record[k] == v) for k, v in wanted.items())
 
 
 def output_of(folder) -> tuple[str, str] | None:
@@ -43,8 +79,8 @@ def output_of(folder) -> tuple[str, str] | None:
         simulation"`` for a folder with ``configs.csv``), or None for any other folder.
     """
     folder = Path(folder).expanduser()
-    for name, command in RECORDS.items():
-        if is_record(folder / name):
+    for name, command, keys in RECORDS:
+        if is_record(folder / name, keys):
             return name, command
     if (folder / SIMULATION_TABLE).is_file():
         return SIMULATION_TABLE, "a simulation"

@@ -355,14 +355,18 @@ def test_the_overlay_records_the_version_and_what_it_was_made_from(small_scan, t
 
 
 @pytest.mark.parametrize("command", ["analyze", "steps"])
-@pytest.mark.parametrize("record, held", [("batch.json", "foldstat batch"),
-                                          ("stats.json", "foldstat stats"),
-                                          ("configs.csv", "a simulation")])
+@pytest.mark.parametrize("record, text, held", [
+    ("batch.json", '{"package": "foldstat", "version": "0"}', "foldstat batch"),
+    ("stats.json", '{"package": "foldstat", "version": "0"}', "foldstat stats"),
+    ("render.json", '{"command": "render", "version": "0"}', "foldstat render"),
+    ("summary.json", '{"package": "foldstat", "version": "0", "scenes_dir": "s"}',
+     "foldstat validate"),
+    ("configs.csv", "config_id\n", "a simulation")])
 def test_another_commands_output_folder_is_refused(small_scan, tmp_path, capsys, command,
-                                                   record, held):
+                                                   record, text, held):
     out = tmp_path / "theirs"
     out.mkdir()
-    (out / record).write_text('{"version": "0"}' if record.endswith(".json") else "config\n")
+    (out / record).write_text(text)
     assert crosssection.cli.main([command, str(small_scan), "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [f"error: --out: {out} holds the output of {held} ({record}): give a "

@@ -364,21 +364,24 @@ def test_resume_redoes_a_scan_whose_table_is_missing_empty_or_corrupt(tmp_path, 
 
 
 def test_output_folders_inside_the_input_are_not_scans(tmp_path):
-    record = '{"version": "0", "parameters": {}}'
+    records = {"batch.json": '{"package": "foldstat", "version": "0"}',
+               "stats.json": '{"package": "foldstat", "version": "0"}',
+               "summary.json": '{"version": "0", "parameters": {}}',
+               "steps.json": '{"command": "steps", "version": "0", "parameters": {}}'}
     inp = tmp_path / "in"
     (inp / "old_batch" / "default" / "s").mkdir(parents=True)
-    (inp / "old_batch" / "batch.json").write_text(record)
+    (inp / "old_batch" / "batch.json").write_text(records["batch.json"])
     (inp / "old_batch" / "default" / "s" / "overlay.png").write_bytes(b"")
     for folder, names in (("result", ("summary.json", "junctions.csv", "overlay.png")),
                           ("steps", ("steps.json", "step1_raw.png", "steps.png")),
                           ("report", ("stats.json", "figures/micro.png"))):
         for name in names:
             (inp / "one" / folder / name).parent.mkdir(parents=True, exist_ok=True)
-            (inp / "one" / folder / name).write_text(record if name.endswith(".json") else "")
+            (inp / "one" / folder / name).write_text(records.get(name, ""))
     (inp / "one" / "scan.png").write_bytes(b"")
     # a user's folder holding a file of a record's name that is no record is searched
     (inp / "mine").mkdir()
-    (inp / "mine" / "summary.json").write_text("my notes")
+    (inp / "mine" / "summary.json").write_text('{"version": 2, "operator": "lab scanner"}')
     (inp / "mine" / "scan.png").write_bytes(b"")
     assert [p.relative_to(inp).as_posix() for p in B.find_images(inp)] == ["mine/scan.png",
                                                                            "one/scan.png"]
@@ -489,3 +492,13 @@ def test_resume_redoes_a_scan_whose_overlay_was_cut_short(tmp_path):
     (folder / "overlay.png").write_bytes(data[:len(data) // 2])
     assert B.completed_row(task) is None
     assert B.redo_reason(task) == f"overlay.png in {folder} is cut short"
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "mkfifo"), reason="named pipes are POSIX")
+def test_a_named_pipe_named_like_a_record_does_not_block_the_search(tmp_path):
+    import os
+
+    (tmp_path / "sub").mkdir()
+    os.mkfifo(tmp_path / "sub" / "summary.json")
+    (tmp_path / "sub" / "scan.png").write_bytes(b"")
+    assert [p.name for p in B.find_images(tmp_path)] == ["scan.png"]

@@ -166,9 +166,16 @@ def test_samples_into_a_file_or_an_empty_path_is_one_line(tmp_path, capsys, monk
     assert sorted(p.name for p in tmp_path.iterdir()) == ["set.toml"]
 
 
-@pytest.mark.parametrize("record", ["batch.json", "summary.json", "stats.json", "steps.json"])
+RECORDS = {"batch.json": '{"package": "foldstat", "version": "0"}',
+           "stats.json": '{"package": "foldstat", "version": "0"}',
+           "summary.json": '{"version": "0", "parameters": {}}',
+           "steps.json": '{"command": "steps", "version": "0", "parameters": {}}',
+           "render.json": '{"command": "render", "version": "0"}'}
+
+
+@pytest.mark.parametrize("record", sorted(RECORDS))
 def test_samples_into_a_commands_output_folder_is_one_line(tmp_path, capsys, record):
-    (tmp_path / record).write_text('{"version": "0"}')
+    (tmp_path / record).write_text(RECORDS[record])
     assert console.main(["samples", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith(f"error: {tmp_path}: holds the output of ")
@@ -177,7 +184,9 @@ def test_samples_into_a_commands_output_folder_is_one_line(tmp_path, capsys, rec
 
 
 def test_samples_beside_a_users_file_named_like_a_record(tmp_path):
-    (tmp_path / "summary.json").write_text("my notes")  # no record: the folder is the user's
+    # no record, nor another tool's metadata with a version: the folder is the user's
+    (tmp_path / "summary.json").write_text("my notes")
+    (tmp_path / "batch.json").write_text('{"version": 2, "operator": "scanner export"}')
     assert console.main(["samples", str(tmp_path)]) == 0
     assert (tmp_path / "set.toml").is_file()
     assert (tmp_path / "summary.json").read_text() == "my notes"
