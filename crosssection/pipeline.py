@@ -209,10 +209,11 @@ def _checked_given_hole(rgb, hole, inside, thr, m, path, *, correct=True):
     given circle on more than :data:`~crosssection.stages.hole.GIVEN_CROSSED_LIMIT` of it
     (:func:`~crosssection.stages.hole.ink_across_circle`), the hole is looked for in the scan
     (:func:`~crosssection.stages.hole.find_hole`). One found with confidence, near the given
-    one (:data:`~crosssection.stages.hole.GIVEN_NEAR_FRACTION`) and crossed at most half as
-    much frames the ink better: it replaces the given hole (with ``correct`` False the given
-    one is kept), and the ``hole_crossed`` check names both. Returns ``(hole, frame,
-    threshold)``.
+    one (:data:`~crosssection.stages.hole.GIVEN_NEAR_FRACTION`), crossed at most half as
+    much and taking in beyond the given circle ink of the rod inside it
+    (:func:`_beyond_joins_rod`) frames the ink better: it replaces the given hole (with
+    ``correct`` False the given one is kept), and the ``hole_crossed`` check names both.
+    Returns ``(hole, frame, threshold)``.
     """
     feats = m["features"]
 
@@ -236,7 +237,7 @@ def _checked_given_hole(rgb, hole, inside, thr, m, path, *, correct=True):
         return hole, inside, thr
     frame = hole_stage.frame_mask(rgb.shape[:2], found)
     thr_found = threshold_rgb(rgb, region=frame, **m)
-    if crossed(found, thr_found) > 0.5 * cut:
+    if crossed(found, thr_found) > 0.5 * cut or not _beyond_joins_rod(thr_found.mask, hole):
         return hole, inside, thr
     if not correct:
         return (dataclasses.replace(hole, given_crossed=cut,
@@ -245,6 +246,29 @@ def _checked_given_hole(rgb, hole, inside, thr, m, path, *, correct=True):
     found = dataclasses.replace(found, given_crossed=cut, replaced=True,
                                 alternative=(hole.center_rc.copy(), float(hole.radius_px)))
     return found, frame, thr_found
+
+
+def _beyond_joins_rod(mask, hole) -> bool:
+    """Whether most of the ink of ``mask`` beyond the circle of ``hole`` belongs to the rod
+    inside it (the same 8-connected piece as ink within 0.8 of its radius).
+
+    The rod is one sheet: a wall band that a circle drawn too small cuts goes on into the
+    stacks that meet the wall, while a ring drawn round a right hole (a marker's, a plate's
+    edge) lies apart from the rod, beyond paper.
+    """
+    n, labels = cv2.connectedComponents(mask.view(np.uint8), connectivity=8)
+    rr, cc = np.nonzero(mask)
+    if n < 2 or not len(rr):
+        return True
+    r0, c0 = (float(v) for v in hole.center_rc)
+    d = np.hypot(rr - r0, cc - c0)
+    lab = labels[rr, cc]
+    beyond = lab[d > float(hole.radius_px) + hole_stage.FRAME_MARGIN_PX]
+    if not len(beyond):
+        return True
+    rod = np.zeros(n, bool)
+    rod[lab[d < 0.8 * float(hole.radius_px)]] = True
+    return float(np.mean(rod[beyond])) >= 0.5
 
 
 def preprocess(image, params: AnalysisParams | None = None, *, timer=None,

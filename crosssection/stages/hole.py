@@ -386,12 +386,10 @@ def ink_across_circle(is_ink, shape, hole, *, margin_px: float = FRAME_MARGIN_PX
     wall, or leaves them wholly beyond it (a one-layer wall band is 2.5 px wide at 25 px/mm).
     Sampled every pixel of arc, a point of the circle counts when ink lies on its ray within
     :data:`BEYOND_FRACTION` of the radius (plus 4 px) beyond the frame's edge
-    (``radius + margin_px``, rays sampled every 2 px), unless ink reaches the circle from
-    inside and paper follows it before that edge (the rod stopped at its wall: a ring drawn
-    round the hole beyond a gap of paper is not the rod), and not at 1.1 times the radius
-    plus 10 px, where a wall band beyond a circle slightly off has ended: a plate or a
-    background that passes the ink's cut everywhere does not count. Points outside the image
-    are not counted.
+    (``radius + margin_px``, rays sampled every 2 px), but not at 1.1 times the radius plus
+    10 px, where a wall band beyond a circle slightly off has ended: a plate or a background
+    that passes the ink's cut everywhere does not count. Points outside the image are not
+    counted.
 
     Parameters
     ----------
@@ -428,17 +426,9 @@ def ink_across_circle(is_ink, shape, hole, *, margin_px: float = FRAME_MARGIN_PX
     beyond = np.zeros(len(t), bool)
     for radius in np.arange(edge + 1.0, edge + BEYOND_FRACTION * R + 4.0, 2.0):
         beyond |= at(radius)[0]
-    # the rod stops at its wall: where ink reaches the circle from inside and paper follows
-    # it before the frame's edge, ink further out (a marker's ring drawn round the hole) is
-    # not the rod going on; a wall band wholly beyond a circle drawn too small has no ink
-    # inside the circle, and a band the circle cuts no paper
-    inside = at(R - 1.0)[0] | at(R - 2.0)[0]
-    gap = np.zeros(len(t), bool)
-    for radius in np.arange(R, edge + 1.5, 1.0):
-        gap |= ~at(radius)[0]
     counted = at(edge + 1.0)[1]
     far, in_far = at(1.1 * R + 10.0)
-    crossed = beyond & ~(inside & gap) & ~(far & in_far) & counted
+    crossed = beyond & ~(far & in_far) & counted
     return float(np.count_nonzero(crossed)) / max(np.count_nonzero(counted), 1)
 
 
