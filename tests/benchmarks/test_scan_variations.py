@@ -34,6 +34,8 @@ def test_every_variation_alters_the_scan(sv):
             assert out.shape == (120 + 2 * sv.PAD_PX, 150 + 2 * sv.PAD_PX, 3)
         elif v == "crop":
             assert out.shape[0] < img.shape[0]
+        elif v == "dpi600":  # 50 -> 23.62 px/mm
+            assert out.shape == (57, 71, 3)
         else:
             assert out.shape == img.shape and not np.array_equal(out, img), v
     blue = sv.alter(img, "plate_60_90_170", (75.0, 60.0), 55.0, np.random.default_rng(1))
@@ -59,3 +61,23 @@ def test_the_truth_follows_a_turned_or_padded_scan(sv):
     assert t["render"]["size"] == 150 + 2 * sv.PAD_PX
     same, same_lines = sv.moved_truth(truth, lines, "jpeg50", 150)
     assert same is truth and same_lines is lines
+
+
+@pytest.mark.parametrize("variation", ["rot7", "dpi600"])
+def test_the_truth_follows_a_turned_or_resampled_scan(sv, variation):
+    img = np.full((120, 150, 3), 250, np.uint8)
+    img[40:47, 30:37] = 0                                   # a dark square centred (33, 43)
+    truth = {"hole_center_px": [75.0, 60.0], "junctions": [{"x": 33.0, "y": 43.0}],
+             "stacks": [{"mid": [33.0, 43.0]}], "forks": [], "px_per_mm": 50.0,
+             "render": {"size": 150}}
+    lines = {"s0": np.array([[33.0, 43.0], [75.0, 60.0]])}
+    out = sv.alter(img, variation, (75.0, 60.0), 55.0, np.random.default_rng(1), 50.0)
+    t, ln = sv.moved_truth(truth, lines, variation, 150, 120)
+    dark = np.clip(200.0 - out[..., 0], 0, None)            # the square only
+    yy, xx = np.mgrid[:out.shape[0], :out.shape[1]]
+    centroid = ((dark * xx).sum() / dark.sum(), (dark * yy).sum() / dark.sum())
+    assert np.allclose((t["junctions"][0]["x"], t["junctions"][0]["y"]), centroid, atol=0.15)
+    assert np.allclose(ln["s0"][0], centroid, atol=0.15)
+    if variation == "dpi600":
+        assert t["px_per_mm"] == pytest.approx(600 / 25.4)
+        assert t["render"]["size"] == 71 and truth["px_per_mm"] == 50.0
