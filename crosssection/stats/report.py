@@ -138,14 +138,52 @@ LEGEND_NAME_MAX = 28
 
 
 def _short(name: str) -> str:
-    """A set's name as a figure's legend gives it: whole up to :data:`LEGEND_NAME_MAX`
-    characters, else its start and end around an ellipsis (the report's tables spell it
-    out)."""
+    """``name`` whole up to :data:`LEGEND_NAME_MAX` characters, else its start and end
+    around an ellipsis, :data:`LEGEND_NAME_MAX` characters in all."""
     name = str(name)
     if len(name) <= LEGEND_NAME_MAX:
         return name
     keep = (LEGEND_NAME_MAX - 1) // 2
-    return f"{name[:keep]}…{name[-keep:]}"
+    return f"{name[:keep]}…{name[-(LEGEND_NAME_MAX - 1 - keep):]}"
+
+
+def legend_names(sets) -> dict:
+    """Each set's name as a figure's legend gives it (the report's tables spell it out).
+
+    Names up to :data:`LEGEND_NAME_MAX` characters are kept whole. Longer ones are shortened
+    around an ellipsis (:func:`_short`); where two of them would read the same, each keeps
+    the part that tells it from the others, with as much of its start and end as the length
+    allows; where even that part is too long, every name is kept whole.
+
+    Parameters
+    ----------
+    sets : iterable of str
+
+    Returns
+    -------
+    dict
+        Set -> its name in a legend.
+    """
+    import os
+
+    names = list(dict.fromkeys(str(s) for s in sets))
+    out = {s: _short(s) for s in names}
+    groups = {}
+    for n in names:
+        groups.setdefault(out[n], []).append(n)
+    for same in (g for g in groups.values() if len(g) > 1):
+        pre = len(os.path.commonprefix(same))
+        suf = len(os.path.commonprefix([n[::-1] for n in same]))
+        for n in same:
+            core = n[pre:len(n) - suf]
+            budget = LEGEND_NAME_MAX - len(core) - 2
+            if not core or budget < 2:
+                return {m: m for m in names}
+            head = min(pre, budget // 2)
+            tail = min(suf, budget - head)
+            out[n] = (n[:head] + ("…" if head < pre else "") + core
+                      + ("…" if tail < suf else "") + (n[len(n) - tail:] if tail else ""))
+    return out if len(set(out.values())) == len(names) else {m: m for m in names}
 
 
 def bin_edges(x, log: bool = False) -> np.ndarray:
@@ -276,6 +314,7 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
     if not sets:
         return None
     colors = colors or set_colors(ens.sets)
+    name = legend_names(ens.sets)
     regs = [r for r in ("all", "bulk", "periphery")
             if any(_has_fit(res, s, r, quantity) for s in sets)]
     fig, axes = _subplots(len(regs), 2, figsize=(12.5, 0.4 + 3.6 * len(regs)))
@@ -327,14 +366,14 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
                 else:
                     yerr = err[k]
                     ymax_lin = max(ymax_lin, float(np.max(h[k] + err[k])))
-                data_label = (f"{_short(s)}: data (n = {n})" if n >= F.N_SELECT_MIN else
-                              f"{_short(s)}: data, indicative only (n = {n} < {F.N_SELECT_MIN})")
+                data_label = (f"{name[s]}: data (n = {n})" if n >= F.N_SELECT_MIN else
+                              f"{name[s]}: data, indicative only (n = {n} < {F.N_SELECT_MIN})")
                 ax.errorbar(mids[k], h[k], yerr=yerr, fmt="o", ms=4, color=c, lw=1,
                             capsize=2, label=data_label, gid=f"points:{s}:{reg}")
                 if best is None:
                     continue
                 band = _band(best, grid, cut, count)
-                band_label = f"{_short(s)}: {int(BAND_LEVEL * 100)} % bootstrap band"
+                band_label = f"{name[s]}: {int(BAND_LEVEL * 100)} % bootstrap band"
                 if band is not None and count:  # masses live at the integers only
                     ax.vlines(grid, band[0], band[1], color=c, alpha=0.3, lw=7,
                               label=band_label)
@@ -347,7 +386,7 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
                     text += f", mean {float(np.sum(kk * best.pmf(kk))):.3g}"
                 law = _curve(best, best.params, grid, cut, count)
                 ax.plot(grid, law, "s--" if count else "-", ms=4 if count else 0, mfc="none",
-                        color=c, lw=1.6, label=f"{_short(s)}: {text}", gid=f"law:{s}:{reg}")
+                        color=c, lw=1.6, label=f"{name[s]}: {text}", gid=f"law:{s}:{reg}")
                 shown = np.asarray(law, float)
                 shown = shown[np.isfinite(shown) & (shown > 0)]
                 if logscale and shown.size:
@@ -363,12 +402,12 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
                     ax.axvspan(span[0], span[1], color=c, alpha=0.08, lw=0,
                                gid=f"limits:{s}:{reg}")
                     ax.axvline(span[1], color=c, ls=":", lw=1, gid=f"limit:{s}:{reg}",
-                               label=(f"{_short(s)}: detection limits {span[0]:.2g}-{span[1]:.2g} "
+                               label=(f"{name[s]}: detection limits {span[0]:.2g}-{span[1]:.2g} "
                                       "(per scan, shaded; dotted: largest)")
                                if logscale else None)
                 elif span is not None:
                     ax.axvline(span[1], color=c, ls=":", lw=1, gid=f"limit:{s}:{reg}",
-                               label=f"{_short(s)}: detection limit" if logscale else None)
+                               label=f"{name[s]}: detection limit" if logscale else None)
         for ax, logscale in zip(row, (False, True)):
             if logscale:
                 ax.set_yscale("log")
@@ -407,7 +446,7 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
             if not _has_fit(res, s, reg, quantity) and (
                     reg == "all" or reg in regions_of(ens.subset(s))):
                 handles.append(Line2D([], [], ls="none", marker="x", color=colors[s]))
-                labels.append(f"{_short(s)}: not drawn (too few values to fit, or all equal)")
+                labels.append(f"{name[s]}: not drawn (too few values to fit, or all equal)")
         if handles:
             row[1].legend(handles, labels, loc="upper left", bbox_to_anchor=(1.02, 1.0),
                           fontsize=8, frameon=False)
@@ -506,6 +545,7 @@ def network_figure(res: StatsResult, colors=None):
     colors = colors or set_colors(list(dict.fromkeys(pc["set"])))
     fig, axes = _subplots(1, 2, figsize=(12.5, 4.6))
     axes = axes[0]
+    name = legend_names(pc["set"])
     for s, g in pc.groupby("set", sort=False):
         c = colors[s]
         rel = res.relations[res.relations["set"] == s].set_index("relation")["fitted"]
@@ -513,19 +553,19 @@ def network_figure(res: StatsResult, colors=None):
         if not np.isfinite(nbr):  # no per-stack counts (simulations): the Eq. (14) fitted slope
             nbr = rel.get("eq14_slope", np.nan)
         axes[0].plot(g["N_l"], g["N_br"], "o", color=c, ms=4, alpha=0.8,
-                     label=f"{_short(s)}: configurations (both panels)")
+                     label=f"{name[s]}: configurations (both panels)")
         axes[1].plot(g["N_l"], g["n_br_bar"], "o", color=c, ms=4, alpha=0.8,
-                     label=f"{_short(s)}: configurations (both panels)")
+                     label=f"{name[s]}: configurations (both panels)")
         nl = np.linspace(max(1, g["N_l"].min() * 0.8), g["N_l"].max() * 1.2, 100)
         ratio = _nanmean(g["sqrt_s_bar"] / g["l_bar"])  # NaN for scans without voids
         eps = _nanmean(g["epsilon"])
         if np.isfinite(ratio) and np.isfinite(eps):
             eq12 = EQ12_CONST * eps * ratio * np.sqrt(nl)  # Eq. (12) with set means
             axes[0].plot(nl, eq12, "-", color=c,
-                         label=f"{_short(s)}: Eq. (12), paper's C = 2√(π/3) = {EQ12_CONST:.3g}, with "
+                         label=f"{name[s]}: Eq. (12), paper's C = 2√(π/3) = {EQ12_CONST:.3g}, with "
                                "the set means (left)")
             axes[1].plot(nl, eq12 / nl, "-", color=c,
-                         label=f"{_short(s)}: Eq. (13), C = {EQ12_CONST:.3g} (right)")
+                         label=f"{name[s]}: Eq. (13), C = {EQ12_CONST:.3g} (right)")
             fitted = rel.get("eq12_const", np.nan)
             if np.isfinite(fitted):
                 # the C of relations.csv, through the same set means: how far the data sit
@@ -533,13 +573,13 @@ def network_figure(res: StatsResult, colors=None):
                 n_fit = int(res.relations.query("set == @s and relation == 'eq12_const'")
                             ["n"].iloc[0])
                 axes[0].plot(nl, fitted * eps * ratio * np.sqrt(nl), "-.", color=c, lw=1,
-                             label=f"{_short(s)}: Eq. (12), fitted C = {fitted:.3g}"
+                             label=f"{name[s]}: Eq. (12), fitted C = {fitted:.3g}"
                                    + (" (indicative only)" if n_fit < N_RELATION_MIN else "")
                                    + " (left)")
         if np.isfinite(nbr):
             axes[0].plot(nl, nbr * nl, "--", color=c,
-                         label=f"{_short(s)}: Eq. (14), <n_br> = {nbr:.2g} (left)")
-            axes[1].axhline(nbr, ls="--", color=c, label=f"{_short(s)}: Eq. (15), <n_br> = {nbr:.2g} (right)")
+                         label=f"{name[s]}: Eq. (14), <n_br> = {nbr:.2g} (left)")
+            axes[1].axhline(nbr, ls="--", color=c, label=f"{name[s]}: Eq. (15), <n_br> = {nbr:.2g} (right)")
     axes[0].set(xlabel="number of stacks per configuration $N_l$",
                 ylabel="number of branches per configuration $N_{br}$",
                 title="branches against stacks")
@@ -567,13 +607,14 @@ def _scatter_fig(res, x, y, xlabel, ylabel, title, *, through_origin=False, pape
         return None  # no configuration has both (no void at all): nothing to draw
     fig, ax = _subplots(figsize=(8.5, 4.8))
     ax = ax[0, 0]
+    name = legend_names(pc["set"])
     for s, g in pc.groupby("set", sort=False):
         c = colors[s]
         xv, yv = np.asarray(g[x], float), np.asarray(g[y], float)
         k = np.isfinite(xv) & np.isfinite(yv)
         if not k.any():
             continue
-        txt = f"{_short(s)}: configurations"
+        txt = f"{name[s]}: configurations"
         if (k.sum() >= CORRELATION_MIN_PAIRS and not through_origin and np.ptp(xv[k]) > 0
                 and np.ptp(yv[k]) > 0):
             txt += f", Pearson r = {np.corrcoef(xv[k], yv[k])[0, 1]:.2f}"
@@ -583,7 +624,7 @@ def _scatter_fig(res, x, y, xlabel, ylabel, title, *, through_origin=False, pape
         if k.sum() >= 2 and through_origin:
             a = np.sum(xv[k] * yv[k]) / np.sum(xv[k] ** 2)
             xs = np.linspace(0, xv[k].max() * 1.1, 10)
-            ax.plot(xs, a * xs, "-", color=c, label=f"{_short(s)}: fit through 0, slope {a:.3g}")
+            ax.plot(xs, a * xs, "-", color=c, label=f"{name[s]}: fit through 0, slope {a:.3g}")
     if paper_slope is not None and np.isfinite(np.asarray(pc[x], float)).any():
         xs = np.array([0, np.nanmax(np.asarray(pc[x], float)) * 1.1])
         ax.plot(xs, paper_slope * xs, ":", color="grey", label=f"paper: slope {paper_slope}")
@@ -600,6 +641,7 @@ def e_vs_nbr_figure(ens: Ensemble, colors=None):
     colors = colors or set_colors(ens.sets)
     fig, ax = _subplots(figsize=(8.5, 4.8))
     ax = ax[0, 0]
+    name = legend_names(ens.sets)
     for s in ens.sets:
         g = br[br["set"] == s]
         if g.empty:
@@ -619,7 +661,7 @@ def e_vs_nbr_figure(ens: Ensemble, colors=None):
             ax.errorbar(st.index, st["mean"], yerr=st["sem"].fillna(0), fmt="o" + ls, color=c,
                         ms=4 if reg is None else 2, lw=1, capsize=2,
                         alpha=1 if reg is None else 0.6,
-                        label=f"{_short(s)}: {REGION_WORDS[reg or 'all']}")
+                        label=f"{name[s]}: {REGION_WORDS[reg or 'all']}")
     ax.set(xlabel="number of branches in the stack $n_{br}$",
            ylabel=r"mean branch energy $\langle e\rangle$ (dimensionless)",
            title=r"mean branch energy against $n_{br}$ (mean $\pm$ standard error)")

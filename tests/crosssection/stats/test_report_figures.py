@@ -366,11 +366,17 @@ def test_a_missing_count_is_an_empty_cell_not_pandas_na():
 def test_a_long_set_name_is_shortened_in_the_legend_only():
     """Names of 60 characters shrank the panels, clipped their titles and ran their tick
     labels together."""
-    from crosssection.stats.report import LEGEND_NAME_MAX, _short
+    from crosssection.stats.report import LEGEND_NAME_MAX, _short, legend_names
 
     long = "experiment_polyester_sheet_december_2026_series_A_hole_8mm"
-    assert _short("set_a") == "set_a" and len(_short(long)) == LEGEND_NAME_MAX - 1
+    assert _short("set_a") == "set_a" and len(_short(long)) == LEGEND_NAME_MAX
     assert _short(long).startswith("experiment_p") and _short(long).endswith("_A_hole_8mm")
+    # names that differ only where the ellipsis falls keep the part that tells them apart
+    a, b = (f"polyester_sheet_8mm_hole_series_{x}_compaction_19" for x in "AB")
+    assert _short(a) == _short(b)
+    names = legend_names([a, b, "quench"])
+    assert len(set(names.values())) == 3 and names["quench"] == "quench"
+    assert all(len(v) <= LEGEND_NAME_MAX for v in names.values())
     ens = _ensemble([long], np.random.default_rng(3), n_stacks=60)
     fig = pdf_figure(_fits(ens, ("length_L",), n_boot=0), ens, "length_L")
     texts = [t.get_text() for ax in fig.axes if ax.get_legend()
