@@ -451,20 +451,28 @@ def load_simulation(folder, *, set_name=None) -> Ensemble:
     cfg = _read_csv(folder / "configs.csv", ["config_id", "epsilon", "energy_total", "n_stacks",
                                              "n_branches", "n_voids"], nonempty=True,
                     numeric=["epsilon", "energy_total", "n_stacks", "n_branches", "n_voids"])
-    note = ""
-    if "error" in cfg.columns:  # configurations whose simulation raised: no results
-        bad = cfg["error"].notna() & (cfg["error"].astype(str).str.strip() != "")
-        if bad.any():
-            n = int(bad.sum())
-            # the report records it as it records a batch's failed scans (batch_note)
-            note = (f"{folder / 'configs.csv'}: {n} of {len(cfg)} configurations failed in "
-                    f"the simulation (config_id {_listed(cfg.loc[bad, 'config_id'])}; see "
-                    f"failures.csv) and {'is' if n == 1 else 'are'} not in the statistics")
-            if bad.all():  # as a batch with no finished image: no statistics to draw
-                raise ConfigError(f"ensemble holds no finished configuration (all {n} failed "
-                                  "in the simulation; see failures.csv)", folder)
-            warnings.warn(note, IncompleteBatchWarning, stacklevel=2)
-            cfg = cfg[~bad]
+    notes = []
+    # configurations whose simulation raised, or whose rod's contact analysis did (a rod but
+    # no network): no results
+    for col, what in (("error", "failed in the simulation"),
+                      ("analysis_error", "have no network (the contact analysis failed)")):
+        if col not in cfg.columns:
+            continue
+        bad = cfg[col].notna() & (cfg[col].astype(str).str.strip() != "")
+        if not bad.any():
+            continue
+        n = int(bad.sum())
+        see = "failures.csv" if col == "error" else f"{col} in configs.csv"
+        if bad.all():  # as a batch with no finished image: no statistics to draw
+            raise ConfigError(f"ensemble holds no finished configuration (all {n} {what}; "
+                              f"see {see})", folder)
+        # the report records it as it records a batch's failed scans (batch_note)
+        notes.append(f"{folder / 'configs.csv'}: {n} of {len(cfg)} configurations {what} "
+                     f"(config_id {_listed(cfg.loc[bad, 'config_id'])}; see {see}) and "
+                     f"{'is' if n == 1 else 'are'} not in the statistics")
+        warnings.warn(notes[-1], IncompleteBatchWarning, stacklevel=2)
+        cfg = cfg[~bad]
+    note = "; ".join(notes)
     br = _read_csv(folder / "branches.csv", ["config_id", "length", "kappa_plus", "kappa_pm",
                                              "energy"],
                    numeric=["length", "kappa_plus", "kappa_pm", "energy", "n_br"])

@@ -543,6 +543,9 @@ def network_figure(res: StatsResult, colors=None):
     """N_br vs N_l with Eqs. (12) and (14), and n_br_bar vs N_l with Eqs. (13) and (15), per set."""
     pc = res.per_config
     colors = colors or set_colors(list(dict.fromkeys(pc["set"])))
+    if not (np.isfinite(np.asarray(pc["N_l"], float))
+            & np.isfinite(np.asarray(pc["N_br"], float))).any():
+        return None  # no configuration with a network: nothing to draw
     fig, axes = _subplots(1, 2, figsize=(12.5, 4.6))
     axes = axes[0]
     name = legend_names(pc["set"])

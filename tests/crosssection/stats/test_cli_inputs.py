@@ -652,3 +652,29 @@ def test_a_detection_limit_above_every_length_draws_no_empty_axes(batch, tmp_pat
     assert not (tmp_path / "rep" / "figures" / "pdf_length_L.png").exists()
     assert "the distribution of the branch length" in (tmp_path / "rep" /
                                                         "report.html").read_text()
+
+
+def test_configurations_without_a_network_are_left_out_and_named(tmp_path, capfd):
+    """A rod whose contact analysis failed has no counts: it entered the statistics as a
+    configuration of no branch, and an ensemble of only such rods drew empty figures."""
+    sim = demo.write_demo_simulation(tmp_path / "sim", n_configs=3, seed=1)
+    cfg = pd.read_csv(sim / "configs.csv")
+    cfg["analysis_error"] = ["", "ValueError: no contact", ""]
+    for c in ("n_stacks", "n_branches", "n_voids"):
+        cfg[c] = cfg[c].astype(object)
+        cfg.loc[1, c] = None
+    cfg.to_csv(sim / "configs.csv", index=False)
+    for name in ("branches.csv", "voids.csv"):
+        t = pd.read_csv(sim / name)
+        t[t["config_id"] != 1].to_csv(sim / name, index=False)
+    status, out, err = _stats(capfd, sim, "--out", tmp_path / "rep", *FAST)
+    assert status == 0 and "2 configurations" in out[0]
+    assert err == [f"warning: {sim / 'configs.csv'}: 1 of 3 configurations have no network "
+                   "(the contact analysis failed) (config_id 1; see analysis_error in "
+                   "configs.csv) and is not in the statistics"]
+    cfg["analysis_error"] = "ValueError: no contact"
+    cfg.to_csv(sim / "configs.csv", index=False)
+    status, _, err = _stats(capfd, sim, "--out", tmp_path / "rep2", *FAST)
+    assert status == 2 and err == [f"error: {sim}: ensemble holds no finished configuration "
+                                   "(all 3 have no network (the contact analysis failed); "
+                                   "see analysis_error in configs.csv)"]
