@@ -2304,14 +2304,20 @@ def not_npz(path: Path) -> str | None:
     Returns
     -------
     str or None
-        ``"empty file, not a NumPy .npz archive"``, ``"not a NumPy .npz archive"``, or None
-        when the file starts as a zip archive or an ``.npy`` array does.
+        ``"empty file, not a NumPy .npz archive"``, ``"not a NumPy .npz archive"``, why a
+        named pipe or a device is no file to read, or None when the file starts as a zip
+        archive or an ``.npy`` array does.
 
     Raises
     ------
     OSError
         The file cannot be read.
     """
+    from crosssection.core.fileio import special_file_reason
+
+    special = special_file_reason(path)
+    if special:
+        return special
     with open(path, "rb") as fh:
         head = fh.read(len(_NPY_MAGIC))
     if not head:

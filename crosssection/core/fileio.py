@@ -300,9 +300,10 @@ def write_npz(path, **arrays) -> Path:
 
 
 def special_file_reason(path) -> str | None:
-    """Why ``path`` is no file to read, for a named pipe, a socket or a device (reading one
-    blocks, or never ends: /dev/zero filled 24 GB); None for a regular file, a folder or a
-    path that does not exist (which their own checks name)."""
+    """Why ``path`` is no file to read, for a named pipe, a socket or a device (reading a
+    pipe blocks until something writes to it; reading /dev/zero or /dev/random never ends);
+    None for a regular file, a folder or a path that does not exist (which their own checks
+    name)."""
     import stat
 
     try:
@@ -313,7 +314,7 @@ def special_file_reason(path) -> str | None:
         return None
     kind = ("a named pipe" if stat.S_ISFIFO(mode) else "a socket" if stat.S_ISSOCK(mode)
             else "a device")
-    return f"is {kind}, not a file (reading it blocks or never ends): give a file"
+    return f"is {kind}, not a file (reading it may block or never end): give a file"
 
 
 def read_toml(path) -> dict:

@@ -1,6 +1,7 @@
 """``render`` refuses bad input with one ``error:`` line and exit status 2, and never mixes two
 renders in one output folder (simulate.render)."""
 import json
+import os
 import shutil
 from pathlib import Path
 
@@ -469,6 +470,16 @@ def test_a_rods_file_of_another_format_is_named_so(sim, tmp_path, capsys, conten
     assert status == 2
     assert _one_error(err) == f"error: {bad / 'rods.npz'}: unreadable rods file ({cause})"
     assert "pickle" not in err
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="named pipes are POSIX")
+def test_a_rods_file_that_is_a_named_pipe_is_refused_not_read(sim, tmp_path, capsys):
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    shutil.copy(sim / "params.json", bad)
+    os.mkfifo(bad / "rods.npz")
+    status, err = _render(capsys, bad, "--out", tmp_path / "s", *FAST)
+    assert status == 2 and "is a named pipe, not a file" in _one_error(err)
 
 
 def test_a_stopped_render_leaves_no_scene_folder_without_its_scene(sim, tmp_path,
