@@ -93,8 +93,8 @@ class Preprocessed:
     merged_links: int
     file_px_per_mm: float | None = None
     file_pages: int = 1
-    #: the file's recorded resolution across over along, when they differ (not square)
-    file_aspect: float | None = None
+    #: the file's recorded resolutions (dpi) along x and y, when they differ (not square)
+    file_dpi_xy: tuple | None = None
     exif_orientation: int = 1
     #: The threshold's feature (``blue - max(red, green)``) whose cut places the walls to a
     #: fraction of a pixel (None with the fixed thresholds, which cut several features).
@@ -297,7 +297,7 @@ def _preprocess(image, p: AnalysisParams, timer) -> Preprocessed:
             orientation = exif_orientation(path) if path is not None else 1
     try:
         return _preprocess_read(rgb, path, file_px_per_mm, file_pages, orientation, p, timer,
-                                see_through, file_aspect=header.aspect)
+                                see_through, file_dpi_xy=header.dpi_xy)
     except AnalysisError as exc:
         if file_pages <= 1:
             raise
@@ -307,7 +307,7 @@ def _preprocess(image, p: AnalysisParams, timer) -> Preprocessed:
 
 
 def _preprocess_read(rgb, path, file_px_per_mm, file_pages, orientation, p: AnalysisParams,
-                     timer, see_through=None, file_aspect=None) -> Preprocessed:
+                     timer, see_through=None, file_dpi_xy=None) -> Preprocessed:
     p.check_image(rgb.shape, path, file_px_per_mm=file_px_per_mm)
     s_min_px = p.scale.area_to_px2(p.s_min_used_mm2)
     l_min_px = p.scale.to_px(p.l_min_mm)
@@ -362,7 +362,7 @@ def _preprocess_read(rgb, path, file_px_per_mm, file_pages, orientation, p: Anal
                         file_pages=file_pages, exif_orientation=orientation,
                         edge_feature=dominance if thr.dominance_min is not None else None,
                         ink_missed_fraction=float(missed), see_through=see_through,
-                        file_aspect=file_aspect)
+                        file_dpi_xy=file_dpi_xy)
 
 
 def _isolated_short_pieces(sg, l_min_px) -> list[int]:
@@ -700,7 +700,7 @@ def _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, void
         rod_length_mm=L, rod_measured_mm=rod_mm, ink_area_in_hole_mm2=ink_area_mm2,
         calibration_max_width_mm=_max_width_mm(cal, p), junctions=junctions,
         image_shape=pre.rgb.shape, file_px_per_mm=pre.file_px_per_mm,
-        file_pages=pre.file_pages, file_aspect=pre.file_aspect, network_shares=_network_shares(lin, stacks),
+        file_pages=pre.file_pages, file_dpi_xy=pre.file_dpi_xy, network_shares=_network_shares(lin, stacks),
         border_ink_rc=_border_pixels(pre.mask_clean), width_law=law,
         junction_radius_px=_inscribed_radius_px(pre.distance_px, junctions),
         see_through=pre.see_through)

@@ -17,8 +17,8 @@ no_calibration           no width calibration given: layers from the width    al
                          law read from the scan (or width = n h)
 scale_mismatch           px_per_mm used / the resolution the file records     off by > 2 %
                          (a scanner's: 100 dpi or more)
-non_square               the file's recorded resolution across / along the    off by > 1 %
-                         scan (a scanner's: 100 dpi or more)
+non_square               the file's recorded resolution along x / along y (a   off by > 1 %
+                         scanner's: 100 dpi or more)
 low_resolution           sheet thickness h in pixels                          h < 3 px
 ink_missed               ink that the scan's cut leaves out and a cut chosen  > 0.5 %
                          on each 20 h tile of the frame takes in (added to
@@ -385,7 +385,7 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
            file_pages=1, network_shares=None, border_ink_rc=None,
            ink_missed_fraction=0.0, width_law=None,
            junction_radius_px=None, see_through=None,
-           file_aspect=None) -> list[QualityFlag]:
+           file_dpi_xy=None) -> list[QualityFlag]:
     """Run every check of the module table on one analysis.
 
     Parameters
@@ -440,10 +440,9 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
         the ``junction_blot`` check (not made without it).
     see_through : (H, W) bool array, optional
         The pixels an alpha channel made transparent or partly: the ``see_through`` check.
-    file_aspect : float, optional
-        The scan file's recorded resolution across over along, when they differ by more
-        than 1 % (:func:`crosssection.stages.load.recorded_header`): the ``non_square``
-        check.
+    file_dpi_xy : (float, float), optional
+        The scan file's recorded resolutions along x and y, when they differ by more than
+        1 % (:func:`crosssection.stages.load.recorded_header`): the ``non_square`` check.
 
     Returns
     -------
@@ -467,12 +466,13 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
             f"length, width and layer count rests on the scale (pass px_per_mm = "
             f"{file_px_per_mm:.2f} if the file is right)",
             value=params.px_per_mm / file_px_per_mm - 1.0, limit=SCALE_TOLERANCE))
-    if file_aspect:
+    if file_dpi_xy:
+        x, y = file_dpi_xy
         flags.append(QualityFlag(
-            "non_square", f"the file records a resolution {file_aspect:.3g} times as fine "
-            "across the scan as along it: its pixels are not square, and every length, width "
-            "and curvature is off along one axis (rescan, or resample the image to square "
-            "pixels)", value=file_aspect - 1.0, limit=0.01))
+            "non_square", f"the file records {x:.0f} dpi along x and {y:.0f} dpi along y: "
+            "its pixels are not square, and every length, width and curvature is off along "
+            "one axis (rescan, or resample the image to square pixels)",
+            value=x / y - 1.0, limit=0.01))
     if h_px < LOW_RESOLUTION_H_PX:
         flags.append(QualityFlag("low_resolution", f"sheet thickness is {h_px:.2f} px "
                                  f"(< {LOW_RESOLUTION_H_PX:g} px): layer counts from widths and "

@@ -858,8 +858,8 @@ def _add_common(p, command):
                         f"runs; {powell})")
     p.add_argument("--u", type=float, default=None,
                    help=f"nematic strength u, dimensionless (default {NEMATIC_U:g}; "
-                        f"{powell}): above 0 and at most {NEMATIC_U_MAX:g}, the paper's "
-                        "range 50-150; --nematic-runs '' for no nematic term")
+                        f"{powell}): at most {NEMATIC_U_MAX:g}, the paper's range 50-150; "
+                        "0 only with --nematic-runs '' (no nematic term)")
     p.add_argument("--nematic-cutoff", type=float, default=None,
                    help="distance within which two segments touch for the nematic term, in "
                         "units of L (quench with --method powell; default one segment, 1/N)")

@@ -724,9 +724,9 @@ class Header(NamedTuple):
     px_per_mm: float | None
     #: how many images the file holds (TIFF pages, animation frames); 1 when unknown
     pages: int
-    #: the recorded resolution across the scan over the one along it, when they differ by
-    #: more than 1 % (pixels that are not square); None otherwise
-    aspect: float | None = None
+    #: the recorded resolutions (dpi) along the rows and along the columns, when they differ
+    #: by more than 1 % (pixels that are not square); None otherwise
+    dpi_xy: tuple[float, float] | None = None
 
 
 def recorded_header(path) -> Header:
@@ -736,9 +736,9 @@ def recorded_header(path) -> Header:
     The resolution: scanners write it into the file (PNG ``pHYs``, TIFF ``XResolution``, JPEG
     JFIF density; 1200 dpi = 47.24 px/mm); image software writes 72 or 96 dpi whatever the
     image, so a value below :data:`MIN_SCANNER_DPI`, a missing or unreadable one give None. A
-    different resolution across and along the scan (more than 1 %) gives None and its ratio
-    as ``aspect``: such pixels are not square, and every length read from them is off along
-    one axis. The images (TIFF pages, animation frames): the loader decodes the first; the
+    different resolution along the rows (x) and the columns (y) (more than 1 %) gives None
+    and the two as ``dpi_xy``: such pixels are not square, and every length read from them
+    is off along one axis. The images (TIFF pages, animation frames): the loader decodes the first; the
     others would be left out without a word (a scanner's batch saved as one multi-page TIFF
     holds several cuts); 1 when unknown.
 
@@ -767,7 +767,7 @@ def recorded_header(path) -> Header:
     if not (math.isfinite(x) and math.isfinite(y)) or min(x, y) < MIN_SCANNER_DPI:
         return Header(None, pages)
     if abs(x - y) > 0.01 * max(x, y):
-        return Header(None, pages, x / y)
+        return Header(None, pages, (x, y))
     return Header(0.5 * (x + y) / 25.4, pages)
 
 

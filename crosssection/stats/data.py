@@ -300,7 +300,7 @@ def _numbers(col: pd.Series, name: str, path: Path) -> pd.Series:
                                                if whole else False)
         if bad.any():
             pos = int(np.argmax(bad))
-            kind = "a whole number" if whole else "a number"
+            kind = "a finite whole number" if whole else "a finite number"
             raise ConfigError(f"column {name} holds {v[pos]:g} in data row {pos + 1} where "
                               f"{kind} >= {least:g} is expected", path)
     return num

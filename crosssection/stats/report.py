@@ -1186,8 +1186,8 @@ def _left_out(res: StatsResult, ens: Ensemble, q: str, min_n: int) -> str:
                if not _has_fit(res, s, r, q) and r in regions_of(ens.subset(s))]
     if not (missing or partial):
         return ""
-    return (f" Not drawn (fewer than {min_n} positive values, or all equal): "
-            f"{', '.join(missing + partial)}.")
+    return (f" Not drawn (fewer than {min_n} positive values above any detection limit, or "
+            f"all equal): {', '.join(missing + partial)}.")
 
 
 def _not_drawn(res: StatsResult, ens: Ensemble, quantities, min_n: int) -> str:
@@ -1196,7 +1196,8 @@ def _not_drawn(res: StatsResult, ens: Ensemble, quantities, min_n: int) -> str:
     absent = [q for q in quantities if not _fitted_sets(res, q, ens.sets)]
     if not absent:
         return ""
-    return ("Not drawn (fewer than {} positive values, or all equal, in every set): the "
+    return ("Not drawn (fewer than {} positive values above any detection limit, or all "
+            "equal, in every set): the "
             "distribution of the {}.".format(min_n, ", of the ".join(WORDS[q] for q in absent)))
 
 

@@ -618,8 +618,8 @@ def test_pixels_that_are_not_square_are_flagged(scene, tmp_path, dpi, aspect):
 
     path = tmp_path / "scan.tif"
     Image.fromarray(scene.rgb).save(path, dpi=dpi)
-    assert recorded_header(path).aspect == (None if aspect is None
-                                            else pytest.approx(aspect, rel=1e-3))
+    assert recorded_header(path).dpi_xy == (None if aspect is None
+                                            else pytest.approx(dpi, rel=1e-3))
     res, caught = _analyze(str(path), **_given(scene))
     flagged = aspect is not None
     assert ("non_square" in res.summary["quality"]["codes"]) is flagged
@@ -627,6 +627,7 @@ def test_pixels_that_are_not_square_are_flagged(scene, tmp_path, dpi, aspect):
         flag = next(f for f in res.quality if f.code == "non_square")
         assert flag.value == pytest.approx(aspect - 1, rel=1e-3)
         assert any(w.category is quality.CalibrationWarning and "not square" in str(w.message)
+                   and f"{dpi[0]} dpi along x and {dpi[1]} dpi along y" in str(w.message)
                    for w in caught)
 
 

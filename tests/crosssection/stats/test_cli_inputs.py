@@ -622,7 +622,7 @@ def test_a_value_outside_its_columns_domain_is_one_line(tmp_path, capfd, table, 
     df.loc[1, column] = value
     df.to_csv(sim / table, index=False)
     status, _, err = _stats(capfd, sim, "--out", tmp_path / "rep", *FAST)
-    kind = "a whole number" if column == "n_stacks" else "a number"
+    kind = "a finite whole number" if column == "n_stacks" else "a finite number"
     assert status == 2 and err == [f"error: {sim / table}: column {column} holds "
                                    f"{float(value):g} in data row 2 where {kind} >= 0 is "
                                    "expected"]

@@ -102,7 +102,8 @@ def test_a_set_too_small_to_fit_is_named_under_the_figure(tmp_path):
     assert _run([str(b), str(s), "--out", str(out), "--fast"]) == 0
     html = (out / "report.html").read_text()
     # three configurations give three total energies: fewer than the 5 a fit needs
-    assert "Not drawn (fewer than 5 positive values, or all equal): few." in html
+    assert ("Not drawn (fewer than 5 positive values above any detection limit, or all "
+            "equal): few.") in html
     # its branches are many and draw it; it has no stacks.csv, so no n_br to draw either
     assert html.count("Not drawn") == 2
     e_part = html.split("Distribution of the branch energy e")[1].split("<h3")[0]
@@ -162,8 +163,9 @@ def test_absent_figures_and_rows_are_named_and_log_axes_follow_the_data(tmp_path
     out = tmp_path / "rep"
     assert _run([str(s), "--out", str(out), "--n-boot", "0", "--no-gof"]) == 0
     assert not (out / "figures" / "pdf_E.png").exists()
-    assert ("Not drawn (fewer than 5 positive values, or all equal, in every set): the "
-            "distribution of the total energy" in (out / "report.html").read_text())
+    assert ("Not drawn (fewer than 5 positive values above any detection limit, or all "
+            "equal, in every set): the distribution of the total energy"
+            in (out / "report.html").read_text())
     # a set with 6 periphery branches: absent from that row of the figure and named
     b = demo.write_demo_batch(tmp_path / "b", n_images=2, seed=2,
                               sets={"A": {"n_stacks": 30}, "B": {"n_stacks": 30}})
@@ -173,8 +175,8 @@ def test_absent_figures_and_rows_are_named_and_log_axes_follow_the_data(tmp_path
     ens.branches.loc[per[4:], "region"] = "bulk"  # B keeps 4 periphery branches
     res = compute_stats(ens, StatsOptions(n_boot=20, gof=False, quantities=("length_L",)))
     assert ("B", "periphery", "length_L") not in res.summaries
-    assert "Not drawn (fewer than 5 positive values, or all equal): B (periphery" in \
-        _left_out(res, ens, "length_L", 5)
+    assert ("Not drawn (fewer than 5 positive values above any detection limit, or all "
+            "equal): B (periphery") in _left_out(res, ens, "length_L", 5)
     # the log panels' y-range is that of the points and the laws, not of the bands: a band
     # exploding to 1e15 times the law (a small sample's bootstrap) is clipped
     from crosssection.stats import report as R

@@ -192,7 +192,7 @@ def test_a_scene_image_records_its_resolution_as_a_scanner_does(tmp_path, suffix
 
     rgb = (np.random.default_rng(0).random((40, 50, 3)) * 255).astype(np.uint8)
     path = write_image(rgb, tmp_path / f"scan{suffix}", px_per_mm=25.0)
-    px_per_mm, pages, aspect = recorded_header(path)
-    assert px_per_mm == pytest.approx(25.0, rel=1e-6) and pages == 1 and aspect is None
+    px_per_mm, pages, dpi_xy = recorded_header(path)
+    assert px_per_mm == pytest.approx(25.0, rel=1e-6) and pages == 1 and dpi_xy is None
     assert np.array_equal(load_image(path), rgb)
     assert recorded_header(write_image(rgb, tmp_path / f"bare{suffix}"))[0] is None
