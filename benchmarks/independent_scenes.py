@@ -104,13 +104,22 @@ from scipy.spatial import Voronoi, cKDTree
 def milp(*args, **kwargs):
     """scipy's ``milp`` with file descriptor 1 sent to the null device: HiGHS 1.12 prints
     stray lines with C's ``printf`` whatever its ``disp`` option (this generator imports
-    nothing of the package, which has its own wrapper for the same reason)."""
+    nothing of the package, which has its own wrapper for the same reason). Without a C
+    library to flush or a usable fd 1, the call is left as it is."""
     import ctypes
 
-    libc = ctypes.CDLL(None)
-    sys.stdout.flush()
-    libc.fflush(None)
-    saved, null = os.dup(1), os.open(os.devnull, os.O_WRONLY)
+    try:
+        libc = ctypes.CDLL(None)
+        sys.stdout.flush()
+        libc.fflush(None)
+        saved = os.dup(1)
+    except (OSError, ValueError, AttributeError):
+        return _milp(*args, **kwargs)
+    try:
+        null = os.open(os.devnull, os.O_WRONLY)
+    except OSError:
+        os.close(saved)
+        return _milp(*args, **kwargs)
     try:
         os.dup2(null, 1)
         return _milp(*args, **kwargs)

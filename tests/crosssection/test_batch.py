@@ -102,6 +102,24 @@ def test_calibration_columns_checked(tmp_path):
         load_set_config(tmp_path / "set.toml")
 
 
+@pytest.mark.parametrize("table, cause", [
+    ("n_layers,width_mm\n1,abc\n2,0.2\n", "calibration contains non-numeric or missing values"),
+    ("n_layers,width_mm\n1,0.1\n2.5,0.2\n", "is not a whole number of layers"),
+    ("n_layers,width_mm\n1,0.2\n2,0.1\n", "strictly increasing")])
+def test_a_set_calibration_is_checked_as_the_command_line_checks_it(tmp_path, table, cause):
+    """Through a set.toml the same file read "needs numeric rows", and a fractional count or
+    widths going down passed."""
+    from crosssection.core.calibration import Calibration
+
+    (tmp_path / "cal.csv").write_text(table)
+    (tmp_path / "set.toml").write_text('calibration = "cal.csv"\n')
+    with pytest.raises(ConfigError, match=cause) as via_set:
+        load_set_config(tmp_path / "set.toml")
+    with pytest.raises(ConfigError) as direct:
+        Calibration.from_csv(tmp_path / "cal.csv")
+    assert via_set.value.cause == f"{direct.value.cause} (named in {tmp_path / 'set.toml'})"
+
+
 def test_override_naming_no_image_is_a_warning(tmp_path):
     (tmp_path / "set.toml").write_text('[images."ghost.png"]\npx_per_mm = 30\n')
     cfg = load_set_config(tmp_path / "set.toml")
