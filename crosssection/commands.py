@@ -111,8 +111,19 @@ def earlier_run(out_dir) -> bool:
     return any(is_record(out / name, ("version", "parameters")) for name in RUN_RECORDS)
 
 
-def check_not_other_output(out_dir) -> None:
-    """Refuse an output folder that holds the output of another command.
+def check_not_other_output(out_dir, image=None, command="analyze") -> None:
+    """Refuse an output folder that holds the output of another command, or that of the
+    other of ``analyze`` and ``steps`` for another scan.
+
+    Parameters
+    ----------
+    out_dir : str or Path
+    image : str or Path, optional
+        The scan this run reads: an analysis in the folder of a ``steps`` run, or step images
+        in the folder of an ``analyze`` run, must be of the same file (by path, links
+        followed, or by content). A run of the same command replaces every file of the
+        earlier one, whatever its scan.
+    command : {"analyze", "steps"}
 
     Raises
     ------
@@ -120,14 +131,55 @@ def check_not_other_output(out_dir) -> None:
         ``out_dir`` holds the record of a batch, a stats report, a render, a validate
         report or a simulation: one scan's tables beside it would be read as part of it (a
         batch's summary, a report's tables), and a re-run of that command would not know
-        them.
+        them. Or it holds the other command's output for another scan: ``steps`` would
+        leave its images beside another scan's tables, ``analyze`` would remove another
+        scan's step images.
     """
     from crosssection.core.errors import ParameterError
 
     held = output_of(out_dir)
-    if held is not None and held[1] not in ("foldstat analyze", "foldstat steps"):
+    if held is None:
+        return
+    if held[1] not in ("foldstat analyze", "foldstat steps"):
         raise ParameterError(f"{out_dir} holds the output of {held[1]} ({held[0]}): give a "
                              "folder of its own", "--out")
+    if image is None:
+        return
+    for name in RUN_RECORDS:
+        if name == (STEPS_RECORD if command == "steps" else "summary.json"):
+            continue  # this run replaces that record and every file it describes
+        other = _recorded_scan(Path(out_dir).expanduser() / name)
+        if other is not None and not _same_scan(image, *other):
+            raise ParameterError(f"{out_dir} holds the output of foldstat "
+                                 f"{'steps' if name == STEPS_RECORD else 'analyze'} for "
+                                 f"another scan ({other[0]}): give a folder of its own",
+                                 "--out")
+
+
+def _recorded_scan(record_path: Path):
+    """``(resolved path, sha256)`` of the scan a run's record names, or None."""
+    import json
+
+    if not is_record(record_path, ("version", "parameters")):
+        return None
+    try:
+        image = json.loads(record_path.read_bytes())["inputs"]["image"]
+        return str(image["resolved"]), image.get("sha256")
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
+def _same_scan(image, resolved: str, sha256) -> bool:
+    """Whether ``image`` is the scan recorded as ``resolved`` with ``sha256``: the same file,
+    or one of the same content (the scans' folder moved)."""
+    from crosssection.core.provenance import file_sha256, resolved_path
+
+    if resolved_path(image) == resolved:
+        return True
+    try:
+        return sha256 is not None and file_sha256(image) == sha256
+    except OSError:
+        return True  # unreadable: the loader names it
 
 
 def check_not_beside(image, out_dir) -> None:
@@ -224,7 +276,7 @@ def run(args) -> int:
 
     check_out(args.out)
     check_not_beside(args.image, args.out)
-    check_not_other_output(args.out)
+    check_not_other_output(args.out, args.image)
     clear_temporary(args.out, "analyze")
     params = AnalysisParams.from_cli_args(args, path=args.image)
     result = analyze(args.image, params)  # it names a set.toml whose values it does not use
@@ -247,7 +299,7 @@ def run_steps(args) -> int:
 
     check_out(args.out)
     check_not_beside(args.image, args.out)
-    check_not_other_output(args.out)
+    check_not_other_output(args.out, args.image, "steps")
     clear_temporary(args.out, "steps")
     params = AnalysisParams.from_cli_args(args, path=args.image)
     pre = preprocess(args.image, params)

@@ -372,3 +372,35 @@ def test_another_commands_output_folder_is_refused(small_scan, tmp_path, capsys,
     assert err == [f"error: --out: {out} holds the output of {held} ({record}): give a "
                    "folder of its own"]
     assert [p.name for p in out.iterdir()] == [record]
+
+
+def test_steps_beside_another_scans_analysis_and_back_are_refused(small_scan, tmp_path,
+                                                                  capsys):
+    """steps of one scan beside another scan's tables mixed the two; analyze into another
+    scan's step images removed them."""
+    from crosssection.truth.network import make_scene
+    from crosssection.truth.scene import write_image
+
+    other = write_image(make_scene(seed=22, n_stacks=20, max_layers=3).rgb,
+                        tmp_path / "other.png")
+    copy = tmp_path / "copy" / "scan.png"  # the same bytes elsewhere: the same scan
+    copy.parent.mkdir()
+    shutil.copy(small_scan, copy)
+    for first, second in (("analyze", "steps"), ("steps", "analyze")):
+        out = tmp_path / first
+        assert crosssection.cli.main([first, str(small_scan), "--out", str(out),
+                                      "--no-figure"]) == 0
+        before = {p.name: p.read_bytes() for p in out.iterdir()}
+        capsys.readouterr()
+        assert crosssection.cli.main([second, str(other), "--out", str(out)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and f"holds the output of foldstat {first} for another scan" \
+            in err[0]
+        assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+        assert crosssection.cli.main([second, str(copy), "--out", str(out),
+                                      "--no-figure"]) == 0
+    # the same command replaces every file of the earlier run, whatever its scan
+    out = tmp_path / "again"
+    for scan in (small_scan, other):
+        assert crosssection.cli.main(["analyze", str(scan), "--out", str(out),
+                                      "--no-figure"]) == 0
