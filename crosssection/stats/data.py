@@ -107,6 +107,11 @@ class FlaggedScanWarning(QualityWarning):
     summary.json) enters the statistics."""
 
 
+class DuplicateScanWarning(QualityWarning):
+    """Two scans of a batch hold the same bytes (the same SHA-256 in their summary.json):
+    one cut analysed twice under two names weighs twice in the statistics."""
+
+
 class IncompleteBatchWarning(QualityWarning):
     """A batch output that did not finish, or that could not analyse some of its images
     (``failures.csv``), or a simulation ensemble some of whose configurations failed (a
@@ -1007,7 +1012,28 @@ def load_batch(folder, *, l_min_mm=RECORDED, s_min_mm2=RECORDED) -> Ensemble:
         ([f"{folder / 'batch.json'}: {note}"] if note else []) + ([failed] if failed else []))
     warn_flagged(ens, stacklevel=2)
     warn_limits_below(ens, folder, stacklevel=2)
+    _warn_duplicates([img for _, _, img in found])
     return ens
+
+
+def _warn_duplicates(image_folders) -> None:
+    """One :class:`DuplicateScanWarning` per group of image outputs whose scans hold the
+    same bytes (``inputs.image.sha256`` of their summary.json)."""
+    by_hash = {}
+    for img in image_folders:
+        try:
+            sha = json.loads((Path(img) / "summary.json").read_text(encoding="utf-8"))[
+                "inputs"]["image"]["sha256"]
+        except (OSError, ValueError, KeyError, TypeError):
+            continue
+        if isinstance(sha, str) and sha:
+            by_hash.setdefault(sha, []).append(Path(img))
+    for sha, same in by_hash.items():
+        if len(same) > 1:
+            others = ", ".join(str(p) for p in same[1:])
+            warnings.warn(f"{same[0]}: the same scan (SHA-256 {sha[:12]}...) as {others}: "
+                          "one cut analysed under several names weighs that many times in "
+                          "the statistics", DuplicateScanWarning, stacklevel=3)
 
 
 def load_any(folder, *, set_name=None, l_min_mm=RECORDED, s_min_mm2=RECORDED) -> Ensemble:

@@ -678,3 +678,17 @@ def test_configurations_without_a_network_are_left_out_and_named(tmp_path, capfd
     assert status == 2 and err == [f"error: {sim}: ensemble holds no finished configuration "
                                    "(all 3 have no network (the contact analysis failed); "
                                    "see analysis_error in configs.csv)"]
+
+
+def test_the_same_scan_twice_in_a_batch_is_named(batch, tmp_path, capfd):
+    """A copy of a scan under another name was analysed and counted twice without a word."""
+    summaries = sorted(batch.glob("s1/*/summary.json"))
+    for path, sha in zip(summaries, ("ab" * 32, "ab" * 32, "cd" * 32)):
+        s = json.loads(path.read_text())
+        s["inputs"] = {"image": {"path": "x.png", "resolved": "/x.png", "sha256": sha}}
+        path.write_text(json.dumps(s))
+    status, out, err = _stats(capfd, batch, "--out", tmp_path / "rep", *FAST)
+    assert status == 0 and "3 configurations" in out[0]
+    assert err == [f"warning: {summaries[0].parent}: the same scan (SHA-256 abababababab...) "
+                   f"as {summaries[1].parent}: one cut analysed under several names weighs "
+                   "that many times in the statistics"]
