@@ -574,7 +574,7 @@ def loose_calibration(image, calibration) -> Path | None:
     """The ``calibration.csv`` lying beside a scan analysed without any calibration (the user
     most likely meant it: only a ``set.toml`` or ``--calibration`` names one), or None."""
     cal = Path(image).parent / CALIBRATION_FILE
-    return cal if not calibration and cal.is_file() else None
+    return cal if calibration is None and cal.is_file() else None
 
 
 def _unused_calibrations(tasks) -> list[str]:

@@ -51,6 +51,9 @@ count_width              stacks at least 4 widths long whose final n_br is a  an
                          more from it (an ink blot or smear on a stack)
 isolated_stacks          pieces of ink touching no other stack (both ends     any, beside others
                          free) whose width reads two layers or more
+rod_ends                 bands of an odd number of layers ending away from    > 2
+                         any junction, attached at their other end (each
+                         holds a rod end; a rod has two)
 junction_blot            radius of the ink disc inscribed at a junction /     > 2 at any junction
                          half the width of its widest stack (an ink blot
                          over a junction)
@@ -271,6 +274,7 @@ CATEGORIES = {
     "linear_system": LinearSystemWarning,
     "count_width": LinearSystemWarning,
     "isolated_stacks": NetworkWarning,
+    "rod_ends": NetworkWarning,
     "junction_blot": NetworkWarning,
 }
 for _name, _cls in {c.__name__: c for c in CATEGORIES.values()}.items():
@@ -826,6 +830,31 @@ def _isolated_check(stacks) -> list[QualityFlag]:
                         k, 0)]
 
 
+#: ``rod_ends``: bands of an odd number of layers that end in the scan, away from any
+#: junction, attached to the network at their other end. Each holds an end of the rod, and a
+#: sheet's cross-section has two: more are bands broken where their ink is lost (faded past
+#: the threshold, covered by a label or a blot).
+ROD_ENDS_MAX = 2
+
+
+def _rod_ends_check(stacks) -> list[QualityFlag]:
+    if not {"junction_a", "junction_b", "kind", "n_br"} <= set(stacks.columns):
+        return []
+    free_a, free_b = stacks["junction_a"] < 0, stacks["junction_b"] < 0
+    hanging = (stacks["kind"] == "free_end") & (free_a != free_b) & (stacks["n_br"] % 2 == 1)
+    k = int(hanging.sum())
+    if k <= ROD_ENDS_MAX:
+        return []
+    worst = stacks.loc[stacks.loc[hanging, "n_br"].idxmax()]
+    where = (_stack_position(stacks, int(worst["stack_id"])) if "stack_id" in stacks
+             else "a stack")
+    return [QualityFlag("rod_ends", f"{k} bands of an odd number of layers end away from any "
+                        f"junction ({where}: n_br {int(worst['n_br'])}); each holds an end of "
+                        f"the rod, which has {ROD_ENDS_MAX}: bands are broken where their ink "
+                        "is lost (faded below the threshold, covered by a label or a blot); "
+                        "check the overlay", k, ROD_ENDS_MAX)]
+
+
 def _stack_checks(params, stacks, calibration_max_width_mm) -> list[QualityFlag]:
     flags = []
     m = len(stacks)
@@ -833,6 +862,7 @@ def _stack_checks(params, stacks, calibration_max_width_mm) -> list[QualityFlag]
         return flags
     flags += _count_width_check(stacks)
     flags += _isolated_check(stacks)
+    flags += _rod_ends_check(stacks)
     free = (stacks["junction_a"] < 0) & (stacks["junction_b"] < 0) & (stacks["kind"] == "free_end")
     specks = int((free & (stacks["length_mm"] < 2 * params.l_min_mm)).sum())
     if _frac(specks, m) > 0.05:

@@ -376,8 +376,10 @@ def set_not_read(image, params: AnalysisParams) -> str | None:
         used = {k: getattr(params, k, None) for k in wanted}
         if isinstance(used.get("calibration"), (str, Path)):
             used["calibration"] = str(Path(used["calibration"]).resolve())
-        differ = [k for k, v in wanted.items() if not _same(v, used[k])
-                  and not (k == "calibration" and _same_calibration(v, used[k]))]
+        # a calibration given as a table (a DataFrame, pairs) is compared by its values
+        differ = [k for k, v in wanted.items()
+                  if not (_same_calibration(v, used[k]) if k == "calibration"
+                          else _same(v, used[k]))]
         if not differ:
             return None
         plural = len(differ) > 1

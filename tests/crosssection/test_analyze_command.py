@@ -47,6 +47,18 @@ def test_a_set_toml_whose_values_are_passed_is_not_named(set_folder):
     assert set_not_read(set_folder / SCAN, params) is None
 
 
+def test_a_calibration_given_as_a_table_is_compared_by_its_values(set_folder):
+    """A DataFrame calibration crashed the comparison with the set's (the truth value of a
+    DataFrame is ambiguous), and with no set.toml, the look for a calibration.csv beside."""
+    table = pd.read_csv(set_folder / "calibration.csv")
+    assert set_not_read(set_folder / SCAN, AnalysisParams(calibration=table)) is None
+    other = table.assign(width_mm=table["width_mm"] * 1.1)
+    note = set_not_read(set_folder / SCAN, AnalysisParams(calibration=other))
+    assert note is not None and "its calibration for this scan differs" in note
+    (set_folder / "set.toml").unlink()
+    assert set_not_read(set_folder / SCAN, AnalysisParams(calibration=table)) is None
+
+
 def test_a_value_rounded_as_a_set_toml_records_it_is_the_same(set_folder):
     (set_folder / "set.toml").write_text('px_per_mm = 50\nthickness_mm = 0.1\n'
                                          'hole_radius_mm = 7.5742\n'
