@@ -111,7 +111,7 @@ def earlier_run(out_dir) -> bool:
     return any(is_record(out / name, ("version", "parameters")) for name in RUN_RECORDS)
 
 
-def check_not_other_output(out_dir, image=None, command="analyze") -> None:
+def check_not_other_output(out_dir, image=None, command="analyze", *, given_as="--out") -> None:
     """Refuse an output folder that holds the output of another command, or that of the
     other of ``analyze`` and ``steps`` for another scan.
 
@@ -124,6 +124,8 @@ def check_not_other_output(out_dir, image=None, command="analyze") -> None:
         followed, or by content). A run of the same command replaces every file of the
         earlier one, whatever its scan.
     command : {"analyze", "steps"}
+    given_as : str
+        How the folder was given, named in the error (the option, or the API's argument).
 
     Raises
     ------
@@ -142,7 +144,7 @@ def check_not_other_output(out_dir, image=None, command="analyze") -> None:
         return
     if held[1] not in ("foldstat analyze", "foldstat steps"):
         raise ParameterError(f"{out_dir} holds the output of {held[1]} ({held[0]}): give a "
-                             "folder of its own", "--out")
+                             "folder of its own", given_as)
     if image is None:
         return
     for name in RUN_RECORDS:
@@ -153,7 +155,7 @@ def check_not_other_output(out_dir, image=None, command="analyze") -> None:
             raise ParameterError(f"{out_dir} holds the output of foldstat "
                                  f"{'steps' if name == STEPS_RECORD else 'analyze'} for "
                                  f"another scan ({other[0]}): give a folder of its own",
-                                 "--out")
+                                 given_as)
 
 
 def _recorded_scan(record_path: Path):
@@ -182,7 +184,7 @@ def _same_scan(image, resolved: str, sha256) -> bool:
         return True  # unreadable: the loader names it
 
 
-def check_not_beside(image, out_dir) -> None:
+def check_not_beside(image, out_dir, *, given_as="--out") -> None:
     """Refuse an output folder that is the scan's own folder.
 
     Raises
@@ -200,7 +202,7 @@ def check_not_beside(image, out_dir) -> None:
     if same:
         raise ParameterError(f"{out_dir} is the scan's own folder: its images would lie "
                              "beside the scan, where a batch reads them as scans; give another "
-                             "folder", "--out")
+                             "folder", given_as)
 
 
 def remove_stale(out_dir, command: str, written) -> list[Path]:

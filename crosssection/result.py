@@ -267,12 +267,21 @@ class AnalysisResult:
         Raises
         ------
         ParameterError
-            ``out_dir`` is not a path.
+            ``out_dir`` is not a path, holds the output of another command (a batch, a stats
+            report, a render, a validate report, a simulation) or step images of another
+            scan, or is the scan's own folder (as ``foldstat analyze`` refuses them:
+            :func:`crosssection.commands.check_not_other_output`,
+            :func:`crosssection.commands.check_not_beside`).
         OutputError
             The folder cannot be created or written (a file in the way, no permission).
         """
         if not isinstance(out_dir, (str, os.PathLike)) or not str(out_dir).strip():
             raise ParameterError(f"out_dir must be a folder path, got {out_dir!r}")
+        from crosssection.commands import check_not_beside, check_not_other_output
+
+        if self.path is not None:
+            check_not_beside(self.path, out_dir, given_as="out_dir")
+        check_not_other_output(out_dir, self.path, given_as="out_dir")
         out = Path(out_dir).expanduser()
         # the result stays as analysed: the figure's timing goes to the file only
         summary = dict(self.summary)

@@ -416,3 +416,21 @@ def test_steps_beside_another_scans_analysis_and_back_are_refused(small_scan, tm
     for scan in (small_scan, other):
         assert crosssection.cli.main(["analyze", str(scan), "--out", str(out),
                                       "--no-figure"]) == 0
+
+
+def test_the_api_write_refuses_what_the_command_refuses(small_scan, tmp_path):
+    """result.write into a batch's output made its statistics those of the stray analysis;
+    into the scan's own folder, the next batch read overlay.png as a scan."""
+    from crosssection.core.errors import ParameterError
+
+    res = crosssection.analyze(str(small_scan), warn=False)
+    batch = tmp_path / "batch"
+    batch.mkdir()
+    (batch / "batch.json").write_text('{"package": "foldstat", "version": "0"}')
+    with pytest.raises(ParameterError, match="out_dir: .* holds the output of foldstat batch"):
+        res.write(batch)
+    with pytest.raises(ParameterError, match="the scan's own folder"):
+        res.write(small_scan.parent)
+    assert [p.name for p in batch.iterdir()] == ["batch.json"]
+    assert "summary.json" in {p.name for p in res.write(tmp_path / "mine").values()} or \
+        (tmp_path / "mine" / "summary.json").is_file()
