@@ -698,6 +698,9 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
         versions than its own (:func:`params_record`).
     """
     out = Path(out)
+    # the workers write the parts: a Dask worker runs in its own working folder, where a
+    # relative path names another place than the client's
+    where = str(out.expanduser().absolute())
     params = resolve_defaults(params)
     params = {k: params.get(k) for k in sorted(params)}
     check_out_folder(out, params["command"])
@@ -750,9 +753,9 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
             if todo:
                 if workers == 1 and not scheduler:
                     # inline executor runs at submit: submit one by one so the bar moves
-                    done = ((i, ex.submit(task, i, seeds[i], params, str(out))) for i in todo)
+                    done = ((i, ex.submit(task, i, seeds[i], params, where)) for i in todo)
                 else:
-                    ids = {ex.submit(task, i, seeds[i], params, str(out)): i for i in todo}
+                    ids = {ex.submit(task, i, seeds[i], params, where): i for i in todo}
                     done = ((ids[f], f) for f in as_completed(ids))
                 for i, fut in done:
                     try:

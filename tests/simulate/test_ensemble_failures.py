@@ -98,3 +98,18 @@ def test_statistics_leave_failed_configurations_out_with_a_warning(tmp_path):
     assert sorted(ens.configs["config_id"]) == ["0", "1", "2"]
     msgs = [str(w.message) for w in caught if issubclass(w.category, QualityWarning)]
     assert len(msgs) == 1 and "1 of 4 configurations failed" in msgs[0]
+
+
+def test_the_workers_are_given_the_output_folder_absolute(tmp_path, monkeypatch):
+    """A Dask worker runs in its own working folder: a relative --out sent as it was wrote the
+    parts there, and the client found none."""
+    seen = []
+
+    def task(config_id, seed, params, out):
+        seen.append(out)
+        return _task(config_id, seed, params, out)
+
+    monkeypatch.chdir(tmp_path)
+    tables = run_ensemble(PARAMS, "ens", task=task, progress=False)
+    assert len(tables["configs"]) == 4
+    assert seen and all(Path(o).is_absolute() and Path(o) == tmp_path / "ens" for o in seen)
