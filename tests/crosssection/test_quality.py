@@ -384,6 +384,30 @@ def test_the_blot_checks_hold_on_good_short_and_free_stacks():
     assert [f.code for f in quality._isolated_check(stacks)] == ["isolated_stacks"]
 
 
+def test_more_odd_bands_ending_in_the_scan_than_a_rod_has_ends_are_flagged():
+    """A rod has two ends; each band of an odd count ending away from any junction holds one.
+    Fold caps (even counts), isolated pieces and clean scans (none of 45 generated scans of
+    four generators had more than 2) are not flagged."""
+    import pandas as pd
+
+    def stacks(ends):
+        # ends: (n_br, free at a, free at b) per stack hanging from the network
+        rows = [dict(stack_id=i, junction_a=-1 if fa else 0, junction_b=-1 if fb else 1,
+                     kind="free_end" if (fa or fb) else "junction", n_br=n,
+                     length_mm=2.0, width_mm=0.14 * n, mid_x_px=10.0 * i, mid_y_px=5.0)
+                for i, (n, fa, fb) in enumerate(ends)]
+        return pd.DataFrame(rows)
+
+    two_rod_ends = stacks([(1, True, False), (3, False, True), (2, True, False),
+                           (4, True, False), (1, True, True), (1, False, False)])
+    assert quality._rod_ends_check(two_rod_ends) == []
+    three = stacks([(1, True, False), (3, False, True), (1, True, False), (2, False, False)])
+    flags = quality._rod_ends_check(three)
+    assert [f.code for f in flags] == ["rod_ends"] and flags[0].value == 3
+    assert "n_br 3" in flags[0].message and quality.CATEGORIES["rod_ends"] is \
+        quality.NetworkWarning
+
+
 def test_layer_conservation_violated_is_flagged():
     # three single sheets meet at every T on the wall: 1 != 1 + 1 (the crossings conserve)
     img, kw = _grid_scan()
