@@ -333,18 +333,20 @@ class _ClusterExecutor(Executor):
         self._inner.shutdown(wait=wait)
 
 
-def _watch_workers(client, stop, joined, on_wait, grace: float) -> None:
+def _watch_workers(client, stop, joined, on_wait, grace: float, on_lost=None) -> None:
     """Set ``joined`` once the cluster has a worker; call ``on_wait`` once if it has none
-    after ``grace`` seconds. Returns when ``stop`` is set or the client fails."""
+    after ``grace`` seconds, and ``on_lost`` once each time every worker has left for
+    ``grace`` seconds after one had joined (the tasks wait for a worker without a word).
+    Returns when ``stop`` is set."""
     deadline = time.monotonic() + grace
     warned = False
     while not stop.is_set():
         if _has_workers(client, grace):
             joined.set()
-            return
-        if not warned and time.monotonic() >= deadline and not stop.is_set():
+            deadline, warned = time.monotonic() + grace, False
+        elif not warned and time.monotonic() >= deadline and not stop.is_set():
             warned = True
-            on_wait()
+            (on_lost if joined.is_set() and on_lost is not None else on_wait)()
         stop.wait(0.5)
 
 
@@ -380,7 +382,9 @@ def _cluster_executor(address: str, on_wait=None):
         watcher = threading.Thread(
             target=_watch_workers, name="cluster-workers", daemon=True,
             args=(client, stop, joined, lambda: notify(f"{where}: no worker has joined; "
-                                                       "waiting"), SCHEDULER_TIMEOUT_S))
+                                                       "waiting"), SCHEDULER_TIMEOUT_S,
+                  lambda: notify(f"{where}: every worker has left; waiting for one "
+                                 "(interrupt to stop: a re-run resumes)")))
         watcher.start()
         try:
             yield ex
@@ -442,9 +446,9 @@ def get_executor(workers: int | None = 1, scheduler: str | None = None, *, on_wa
         not Dask's) is a ``ParameterError`` naming ``--scheduler ADDRESS``.
     on_wait : callable, optional
         Called with a one-line message (``"--scheduler ADDRESS: ..."``) when the cluster has
-        had no worker for :data:`SCHEDULER_TIMEOUT_S` (the tasks wait for one), and when the
-        block is interrupted before any worker joined (nothing ran). Default: a
-        :class:`ClusterWarning`.
+        had no worker for :data:`SCHEDULER_TIMEOUT_S` (the tasks wait for one), before any
+        joined or after every one left, and when the block is interrupted before any worker
+        joined (nothing ran). Default: a :class:`ClusterWarning`.
 
     Yields
     ------

@@ -252,6 +252,25 @@ def test_a_cluster_without_workers_is_named_and_an_interrupt_says_nothing_ran(sh
                     f"{where}: no worker had joined: nothing ran"]
 
 
+def test_a_cluster_whose_every_worker_left_is_named(short_timeout):
+    """The batch waited for a worker without a word once its only worker died."""
+    cl = _cluster(n_workers=1)
+    told = []
+    try:
+        with get_executor(scheduler=cl.scheduler_address, on_wait=told.append) as ex:
+            assert ex.submit(sum, [1, 2]).result(timeout=20) == 3
+            time.sleep(1.0)  # the watch has seen the worker
+            cl.scale(0)
+            deadline = time.monotonic() + 15
+            while not told and time.monotonic() < deadline:
+                time.sleep(0.1)
+    finally:
+        cl.close()
+    where = f"--scheduler {cl.scheduler_address}"
+    assert told == [f"{where}: every worker has left; waiting for one (interrupt to stop: a "
+                    "re-run resumes)"]
+
+
 def test_a_cluster_with_workers_gets_no_waiting_notice(short_timeout):
     cl = _cluster(n_workers=1)
     told = []
