@@ -120,6 +120,39 @@ def as_rgb(arr, *, path=None) -> np.ndarray:
     return rgb_and_opacity(arr, path=path)[0]
 
 
+#: Values of a float image converted at a time (:func:`_float_to_uint16`).
+_FLOAT_CHUNK = 1 << 22
+
+
+def _float_to_uint16(a: np.ndarray, path=None) -> np.ndarray:
+    """A float image with values in [0, 1] as 16-bit, converted a block of rows at a time:
+    in one piece, the float64 copy and its temporaries took 1.1 GB for a 4000 x 4000 scan
+    (peak 1.5-1.7 GB for the analysis, against 0.65-0.77 GB from 8- or 16-bit arrays).
+
+    Raises
+    ------
+    ImageError
+        NaN or infinite values, or values outside [0, 1].
+    """
+    out = np.empty(a.shape, np.uint16)
+    rows = max(1, _FLOAT_CHUNK // max(int(np.prod(a.shape[1:])), 1))
+    lo, hi = np.inf, -np.inf
+    for r in range(0, a.shape[0], rows):
+        # float64: float16 cannot hold 65535, and its product would overflow to inf
+        c = a[r:r + rows].astype(np.float64)
+        if not np.all(np.isfinite(c)):
+            raise ImageError("float image with NaN or infinite values", path)
+        lo, hi = min(lo, float(c.min())), max(hi, float(c.max()))
+        np.multiply(c, 65535.0, out=c)
+        np.round(c, out=c)
+        np.clip(c, 0.0, 65535.0, out=c)  # out of range is refused below
+        out[r:r + rows] = c
+    if lo < 0 or hi > 1:
+        # repr: a value a rounding above 1 prints as 1 with :g
+        raise ImageError(f"float image values {lo!r}..{hi!r}: they must lie in [0, 1]", path)
+    return out
+
+
 def rgb_and_opacity(arr, *, path=None) -> tuple[np.ndarray, np.ndarray | None]:
     """Validate and convert an array to (H, W, 3) uint8/uint16 RGB (see module docstring).
 
@@ -158,16 +191,7 @@ def rgb_and_opacity(arr, *, path=None) -> tuple[np.ndarray, np.ndarray | None]:
     if a.size == 0:
         raise ImageError(f"empty image (array shape {a.shape})", path)
     if a.dtype.kind == "f":
-        # float64 first: float16 cannot hold 65535, and its product would overflow to inf
-        a = a.astype(np.float64)
-        if not np.all(np.isfinite(a)):
-            raise ImageError("float image with NaN or infinite values", path)
-        lo, hi = float(a.min()), float(a.max())
-        if lo < 0 or hi > 1:
-            # repr: a value a rounding above 1 prints as 1 with :g
-            raise ImageError(f"float image values {lo!r}..{hi!r}: they must lie in [0, 1]",
-                             path)
-        a = np.round(a * 65535.0).astype(np.uint16)
+        a = _float_to_uint16(a, path)
     elif a.dtype != np.uint8:
         if a.dtype.kind not in "ui":
             raise ImageError(f"unsupported pixel type {a.dtype}", path)

@@ -352,3 +352,21 @@ def test_values_no_scan_can_mean_are_refused(name, value, cause):
                "tangent_mm": 0.05}[name]
     assert getattr(cs.AnalysisParams(px_per_mm=50, thickness_mm=0.1, **{name: typical}),
                    name) == typical
+
+
+@pytest.mark.parametrize("dtype", [np.float16, np.float32, np.float64])
+def test_a_float_image_is_converted_in_blocks_as_in_one_piece(monkeypatch, dtype):
+    """In one piece the float64 copy of a 4000 x 4000 scan and its temporaries took 1.1 GB."""
+    from crosssection.core.errors import ImageError
+    from crosssection.stages import load
+
+    monkeypatch.setattr(load, "_FLOAT_CHUNK", 60)  # blocks of 4 rows of 5 x 3 values
+    a = np.random.default_rng(1).random((13, 5, 3)).astype(dtype)
+    ref = np.round(a.astype(np.float64) * 65535.0).astype(np.uint16)
+    assert np.array_equal(load._float_to_uint16(a), ref)
+    a[12, 4, 2] = 1.5  # in the last block
+    with pytest.raises(ImageError, match=r"values .*\.\.1\.5: they must lie in \[0, 1\]"):
+        load._float_to_uint16(a)
+    a[12, 4, 2] = np.nan
+    with pytest.raises(ImageError, match="NaN or infinite"):
+        load._float_to_uint16(a)
