@@ -669,6 +669,7 @@ def process_image(task: ImageTask) -> dict:
             summary_path = staging / "summary.json"
             summary = json.loads(summary_path.read_text())
             info["wall_s"] = time.perf_counter() - t0
+            info["peak_rss_mb"] = _peak_rss_mb()  # kept for the index of a re-run
             summary["batch"] = info
             write_json(summary_path, summary)
             # the complete folder takes the place of an old one (other parameters)
@@ -679,7 +680,7 @@ def process_image(task: ImageTask) -> dict:
             raise output_error(exc, final) from None
         staging = None
         row = _row(task, "ok", summary, wall_s=info["wall_s"])
-        row["peak_rss_mb"] = _peak_rss_mb()
+        row["peak_rss_mb"] = info["peak_rss_mb"]
         return row
     except Exception as exc:  # noqa: BLE001 - a bad image is recorded, the batch goes on
         # a file that could not be written is named where it was to go: the hidden staging
@@ -828,6 +829,8 @@ def completed_row(task: ImageTask) -> dict | None:
         return None
     row = _row(task, "skipped", summary, wall_s=info.get("wall_s", math.nan))
     row["seed"] = info.get("seed", task.seed)  # the seed the image was analysed with
+    peak = info.get("peak_rss_mb")  # as the analysis measured it (None: not recorded)
+    row["peak_rss_mb"] = float(peak) if isinstance(peak, (int, float)) else math.nan
     return row
 
 

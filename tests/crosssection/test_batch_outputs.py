@@ -207,10 +207,14 @@ def test_a_rerun_with_other_options_says_which_images_it_redoes(tmp_path, capsys
     (fixed / "set.toml").write_text("px_per_mm = 50\nthickness_mm = 0.1\nl_min_mm = 1.5\n")
     out = tmp_path / "out"
     assert _batch(capsys, inp, out)[0] == 0
-    # the same options resume in silence
+    first = pd.read_csv(out / "index.csv").set_index("image")
+    # the same options resume in silence, keeping what the analyses measured
     status, err = _batch(capsys, inp, out)
     assert status == 0 and _notices(err) == []
-    assert (pd.read_csv(out / "index.csv")["status"] == "skipped").all()
+    index = pd.read_csv(out / "index.csv").set_index("image")
+    assert (index["status"] == "skipped").all()
+    assert first["peak_rss_mb"].notna().all()
+    assert index["peak_rss_mb"].equals(first["peak_rss_mb"])
     # another value of an option: the images it concerns are redone, and the batch says so
     status, err = _batch(capsys, inp, out, "--l-min-mm", "2")
     assert status == 0
