@@ -782,7 +782,8 @@ def _marks_of_another_colour(rgb, reg, scale) -> tuple[str, str]:
     swapping it with blue makes them blue ink, which the automatic threshold reads). A
     darkest class along most of the scan's edge is a plate or background, not marks: the
     note says so (marks lighter in red and green than a grey plate, such as a red ink,
-    cannot be cut apart from it). Marks of a blue hue are left to the faint-ink advice.
+    cannot be cut apart from it). Light marks of a blue hue are left to the faint-ink advice;
+    dark ones are named blue-black (blue above red and green by too little for the classes).
 
     Returns
     -------
@@ -852,7 +853,13 @@ def _marks_of_another_colour(rgb, reg, scale) -> tuple[str, str]:
     hue = 360.0 * colorsys.rgb_to_hsv(*(ink / 255.0))[0]
     name = next(n for h, n in _HUES if hue < h)
     if name == "blue":
-        return "", ""
+        if light:
+            return "", ""
+        # ink nearly black: blue above red and green by less than the contrast the classes
+        # need, which the faint-ink advice (darker than the paper by too little) misnames
+        return (f"the scan's dark marks are blue-black {colours}: blue exceeds red and green "
+                f"there by {ink[2] - ink[:2].max():.0f} only, less than the "
+                f"{MIN_CONTRAST_U8:g} the automatic threshold needs" + recipe), options
     return (f"the scan's dark marks are {name} {colours}, not blue ink: the threshold is the "
             "paper's rule for a cut inked in blue" + recipe), options
 

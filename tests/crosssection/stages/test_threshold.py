@@ -262,7 +262,10 @@ def _recoloured(sc, ink_rgb):
 @pytest.mark.parametrize("ink_rgb, colour", [((35, 35, 40), "black or grey"),
                                              ((150, 35, 45), "red"),
                                              ((40, 120, 50), "green"),
-                                             ((48, 23, 62), "purple")])
+                                             ((48, 23, 62), "purple"),
+                                             # blue by less than the classes' contrast: the
+                                             # note called it ink not darker than the paper
+                                             ((15, 15, 35), "blue-black")])
 def test_marks_of_another_colour_are_named(ink_rgb, colour):
     """A scan drawn with a pen of another colour fails the blue rule, and the note says what
     the marks are rather than calling them faint, with a cut that reads them (all these
