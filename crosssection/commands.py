@@ -166,6 +166,8 @@ def _recorded_scan(record_path: Path):
         return None
     try:
         image = json.loads(record_path.read_bytes())["inputs"]["image"]
+        if image.get("resolved") is None:  # an image given to the API as an array
+            return "an image given as an array", None
         return str(image["resolved"]), image.get("sha256")
     except (OSError, ValueError, KeyError, TypeError):
         return None
@@ -174,10 +176,11 @@ def _recorded_scan(record_path: Path):
 def _same_scan(image, resolved: str, sha256) -> bool:
     """Whether ``image`` is the scan recorded as ``resolved`` with ``sha256``: the same file,
     or one of the same content (the scans' folder moved)."""
+    from crosssection.core.fileio import special_file_reason
     from crosssection.core.provenance import file_sha256, resolved_path
 
-    if resolved_path(image) == resolved:
-        return True
+    if resolved_path(image) == resolved or special_file_reason(image):
+        return True  # (a pipe or a device: the loader refuses it, unread)
     try:
         return sha256 is not None and file_sha256(image) == sha256
     except OSError:
@@ -200,9 +203,10 @@ def check_not_beside(image, out_dir, *, given_as="--out") -> None:
     except (OSError, RuntimeError):  # a loop of symbolic links: the loader names it
         return
     if same:
-        raise ParameterError(f"{out_dir} is the scan's own folder: its images would lie "
-                             "beside the scan, where a batch reads them as scans; give another "
-                             "folder", given_as)
+        raise ParameterError(f"{out_dir} is the scan's own folder: the outputs would lie "
+                             "beside the scan, where a batch reads their images as scans and "
+                             "takes the folder for an analysis'; give another folder",
+                             given_as)
 
 
 def remove_stale(out_dir, command: str, written) -> list[Path]:

@@ -833,7 +833,8 @@ def _isolated_check(stacks) -> list[QualityFlag]:
 #: ``rod_ends``: bands of an odd number of layers that end in the scan, away from any
 #: junction, attached to the network at their other end. Each holds an end of the rod, and a
 #: sheet's cross-section has two: more are bands broken where their ink is lost (faded past
-#: the threshold, covered by a label or a blot).
+#: the threshold, covered by a label or a blot). A band that ends past a layer step (a stack
+#: between a step and a free end) is not counted: the check can miss, never invent, an end.
 ROD_ENDS_MAX = 2
 
 

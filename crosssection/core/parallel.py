@@ -287,6 +287,12 @@ class _ClusterExecutor(Executor):
         self._inner = client.get_executor(pure=False)
         self._where = where
         self._closing = False
+        self._pending = set()  # the outer futures not done: the watch says "waiting" only then
+
+    @property
+    def busy(self) -> bool:
+        """Whether a task submitted here is not done yet."""
+        return bool(self._pending)
 
     def lost(self) -> ClusterLostError:
         """The error of a task the cluster lost."""
@@ -317,9 +323,11 @@ class _ClusterExecutor(Executor):
                 pass
 
         def back(f):
+            self._pending.discard(f)
             if f.cancelled():
                 inner.cancel()
 
+        self._pending.add(outer)
         outer.add_done_callback(back)
         inner.add_done_callback(forward)
         return outer
@@ -333,17 +341,20 @@ class _ClusterExecutor(Executor):
         self._inner.shutdown(wait=wait)
 
 
-def _watch_workers(client, stop, joined, on_wait, grace: float, on_lost=None) -> None:
+def _watch_workers(client, stop, joined, on_wait, grace: float, on_lost=None,
+                   busy=lambda: True) -> None:
     """Set ``joined`` once the cluster has a worker; call ``on_wait`` once if it has none
     after ``grace`` seconds, and ``on_lost`` once each time every worker has left for
-    ``grace`` seconds after one had joined (the tasks wait for a worker without a word).
-    Returns when ``stop`` is set."""
+    ``grace`` seconds after one had joined while ``busy()`` says tasks wait (they would wait
+    without a word; an idle cluster may retire its workers). Returns when ``stop`` is set."""
     deadline = time.monotonic() + grace
     warned = False
     while not stop.is_set():
         if _has_workers(client, grace):
             joined.set()
             deadline, warned = time.monotonic() + grace, False
+        elif joined.is_set() and not busy():
+            deadline = time.monotonic() + grace
         elif not warned and time.monotonic() >= deadline and not stop.is_set():
             warned = True
             (on_lost if joined.is_set() and on_lost is not None else on_wait)()
@@ -384,7 +395,8 @@ def _cluster_executor(address: str, on_wait=None):
             args=(client, stop, joined, lambda: notify(f"{where}: no worker has joined; "
                                                        "waiting"), SCHEDULER_TIMEOUT_S,
                   lambda: notify(f"{where}: every worker has left; waiting for one "
-                                 "(interrupt to stop: a re-run resumes)")))
+                                 "(interrupt to stop: a re-run resumes)"),
+                  lambda: ex.busy))
         watcher.start()
         try:
             yield ex

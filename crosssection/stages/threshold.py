@@ -857,8 +857,9 @@ def _marks_of_another_colour(rgb, reg, scale) -> tuple[str, str]:
             return "", ""
         # ink nearly black: blue above red and green by less than the contrast the classes
         # need, which the faint-ink advice (darker than the paper by too little) misnames
-        return (f"the scan's dark marks are blue-black {colours}: blue exceeds red and green "
-                f"there by {ink[2] - ink[:2].max():.0f} only, less than the "
+        apart = (ink[2] - ink[:2].max()) - (paper[2] - paper[:2].max())
+        return (f"the scan's dark marks are blue-black {colours}: blue above red and green "
+                f"sets them apart from the paper by {apart:.0f} only, less than the "
                 f"{MIN_CONTRAST_U8:g} the automatic threshold needs" + recipe), options
     return (f"the scan's dark marks are {name} {colours}, not blue ink: the threshold is the "
             "paper's rule for a cut inked in blue" + recipe), options

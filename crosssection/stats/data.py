@@ -456,27 +456,33 @@ def load_simulation(folder, *, set_name=None) -> Ensemble:
     cfg = _read_csv(folder / "configs.csv", ["config_id", "epsilon", "energy_total", "n_stacks",
                                              "n_branches", "n_voids"], nonempty=True,
                     numeric=["epsilon", "energy_total", "n_stacks", "n_branches", "n_voids"])
-    notes = []
     # configurations whose simulation raised, or whose rod's contact analysis did (a rod but
     # no network): no results
+    kinds = []
     for col, what in (("error", "failed in the simulation"),
                       ("analysis_error", "have no network (the contact analysis failed)")):
-        if col not in cfg.columns:
-            continue
-        bad = cfg[col].notna() & (cfg[col].astype(str).str.strip() != "")
-        if not bad.any():
-            continue
-        n = int(bad.sum())
-        see = "failures.csv" if col == "error" else f"{col} in configs.csv"
-        if bad.all():  # as a batch with no finished image: no statistics to draw
-            raise ConfigError(f"ensemble holds no finished configuration (all {n} {what}; "
-                              f"see {see})", folder)
-        # the report records it as it records a batch's failed scans (batch_note)
-        notes.append(f"{folder / 'configs.csv'}: {n} of {len(cfg)} configurations {what} "
-                     f"(config_id {_listed(cfg.loc[bad, 'config_id'])}; see {see}) and "
-                     f"{'is' if n == 1 else 'are'} not in the statistics")
-        warnings.warn(notes[-1], IncompleteBatchWarning, stacklevel=2)
-        cfg = cfg[~bad]
+        if col in cfg.columns:
+            bad = cfg[col].notna() & (cfg[col].astype(str).str.strip() != "")
+            if kinds:  # a configuration is named once, by what stopped it first
+                bad &= ~kinds[-1][0]
+            kinds.append((bad | (kinds[-1][0] if kinds else False), bad, what,
+                          "failures.csv" if col == "error" else f"{col} in configs.csv"))
+    out = kinds[-1][0] if kinds else pd.Series(False, index=cfg.index)
+    said = [f"{int(bad.sum())} {what}; see {see}" for _, bad, what, see in kinds if bad.any()]
+    if said and out.all():  # as a batch with no finished image: no statistics to draw
+        raise ConfigError("ensemble holds no finished configuration ("
+                          + ("all " + said[0] if len(said) == 1 else "; ".join(said)) + ")",
+                          folder)
+    notes = []
+    for _, bad, what, see in kinds:
+        if bad.any():
+            n = int(bad.sum())
+            # the report records it as it records a batch's failed scans (batch_note)
+            notes.append(f"{folder / 'configs.csv'}: {n} of {len(cfg)} configurations {what} "
+                         f"(config_id {_listed(cfg.loc[bad, 'config_id'])}; see {see}) and "
+                         f"{'is' if n == 1 else 'are'} not in the statistics")
+            warnings.warn(notes[-1], IncompleteBatchWarning, stacklevel=2)
+    cfg = cfg[~out]
     note = "; ".join(notes)
     br = _read_csv(folder / "branches.csv", ["config_id", "length", "kappa_plus", "kappa_pm",
                                              "energy"],
@@ -1012,28 +1018,29 @@ def load_batch(folder, *, l_min_mm=RECORDED, s_min_mm2=RECORDED) -> Ensemble:
         ([f"{folder / 'batch.json'}: {note}"] if note else []) + ([failed] if failed else []))
     warn_flagged(ens, stacklevel=2)
     warn_limits_below(ens, folder, stacklevel=2)
-    _warn_duplicates([img for _, _, img in found])
+    _warn_duplicates([(set_name, img) for set_name, _, img in found])
     return ens
 
 
 def _warn_duplicates(image_folders) -> None:
-    """One :class:`DuplicateScanWarning` per group of image outputs whose scans hold the
-    same bytes (``inputs.image.sha256`` of their summary.json)."""
+    """One :class:`DuplicateScanWarning` per group of image outputs of one set whose scans
+    hold the same bytes (``inputs.image.sha256`` of their summary.json); sets are analysed
+    apart, so one scan in two sets weighs once in each."""
     by_hash = {}
-    for img in image_folders:
+    for set_name, img in image_folders:
         try:
             sha = json.loads((Path(img) / "summary.json").read_text(encoding="utf-8"))[
                 "inputs"]["image"]["sha256"]
         except (OSError, ValueError, KeyError, TypeError):
             continue
         if isinstance(sha, str) and sha:
-            by_hash.setdefault(sha, []).append(Path(img))
-    for sha, same in by_hash.items():
+            by_hash.setdefault((set_name, sha), []).append(Path(img))
+    for (_, sha), same in by_hash.items():
         if len(same) > 1:
             others = ", ".join(str(p) for p in same[1:])
             warnings.warn(f"{same[0]}: the same scan (SHA-256 {sha[:12]}...) as {others}: "
-                          "one cut analysed under several names weighs that many times in "
-                          "the statistics", DuplicateScanWarning, stacklevel=3)
+                          f"one cut analysed {len(same)} times weighs {len(same)} times in "
+                          "its set's statistics", DuplicateScanWarning, stacklevel=3)
 
 
 def load_any(folder, *, set_name=None, l_min_mm=RECORDED, s_min_mm2=RECORDED) -> Ensemble:

@@ -190,6 +190,23 @@ def test_a_named_pipe_is_refused_not_read(which, tmp_path, capsys):
     assert "is a named pipe, not a file" in err[0]
 
 
+@pytest.mark.skipif(not hasattr(__import__("os"), "mkfifo"), reason="named pipes are POSIX")
+def test_a_named_pipe_beside_another_scans_output_is_refused_unread(tmp_path, capsys):
+    """Checking whether the scan is the one of the step images in --out hashed the pipe."""
+    import os
+
+    scan = tmp_path / "scan.png"
+    Image.fromarray(_good_rgb(3)).save(scan)
+    out = tmp_path / "out"
+    assert main(["steps", str(scan), "--out", str(out), "--px-per-mm", "50"]) == 0
+    os.mkfifo(tmp_path / "pipe.png")
+    capsys.readouterr()
+    assert main(["analyze", str(tmp_path / "pipe.png"), "--out", str(out),
+                 "--px-per-mm", "50"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "is a named pipe, not a file" in err[0]
+
+
 def test_a_calibration_of_megabytes_is_another_file(tmp_path, capsys):
     scan = tmp_path / "scan.png"
     Image.fromarray(_good_rgb(3)).save(scan)

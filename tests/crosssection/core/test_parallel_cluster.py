@@ -259,8 +259,10 @@ def test_a_cluster_whose_every_worker_left_is_named(short_timeout):
     try:
         with get_executor(scheduler=cl.scheduler_address, on_wait=told.append) as ex:
             assert ex.submit(sum, [1, 2]).result(timeout=20) == 3
+            ex.submit(time.sleep, 0.5)
             time.sleep(1.0)  # the watch has seen the worker
             cl.scale(0)
+            ex.submit(sum, [3, 4])  # a task for a worker that is no more
             deadline = time.monotonic() + 15
             while not told and time.monotonic() < deadline:
                 time.sleep(0.1)
@@ -269,6 +271,20 @@ def test_a_cluster_whose_every_worker_left_is_named(short_timeout):
     where = f"--scheduler {cl.scheduler_address}"
     assert told == [f"{where}: every worker has left; waiting for one (interrupt to stop: a "
                     "re-run resumes)"]
+
+
+def test_an_idle_cluster_retiring_its_workers_gets_no_notice(short_timeout):
+    cl = _cluster(n_workers=1)
+    told = []
+    try:
+        with get_executor(scheduler=cl.scheduler_address, on_wait=told.append) as ex:
+            assert ex.submit(sum, [1, 2]).result(timeout=20) == 3
+            time.sleep(1.0)
+            cl.scale(0)  # nothing waits: an adaptive cluster may do this
+            time.sleep(3.0)
+    finally:
+        cl.close()
+    assert told == []
 
 
 def test_a_cluster_with_workers_gets_no_waiting_notice(short_timeout):

@@ -690,5 +690,5 @@ def test_the_same_scan_twice_in_a_batch_is_named(batch, tmp_path, capfd):
     status, out, err = _stats(capfd, batch, "--out", tmp_path / "rep", *FAST)
     assert status == 0 and "3 configurations" in out[0]
     assert err == [f"warning: {summaries[0].parent}: the same scan (SHA-256 abababababab...) "
-                   f"as {summaries[1].parent}: one cut analysed under several names weighs "
-                   "that many times in the statistics"]
+                   f"as {summaries[1].parent}: one cut analysed 2 times weighs 2 times in its "
+                   "set's statistics"]
