@@ -56,6 +56,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+from collections import Counter
 import math
 import os
 import reprlib
@@ -878,7 +879,11 @@ def _batch_image_folders(folder: Path):
             out.append((rel.parts[0], "/".join(rel.parts[1:]), img))
         else:
             out.append((folder.resolve().name, rel.parts[0], img))
-    return out
+    # a folder holding several batches' outputs (of one set's name) holds one scan's name
+    # several times: those are named by their path, a configuration being one per set
+    seen = Counter((s, c) for s, c, _ in out)
+    return [(s, c if seen[(s, c)] == 1 else img.relative_to(folder).as_posix(), img)
+            for s, c, img in out]
 
 
 def _recorded_set(summary_path: Path) -> str | None:

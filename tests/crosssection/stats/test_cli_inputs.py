@@ -692,3 +692,18 @@ def test_the_same_scan_twice_in_a_batch_is_named(batch, tmp_path, capfd):
     assert err == [f"warning: {summaries[0].parent}: the same scan (SHA-256 abababababab...) "
                    f"as {summaries[1].parent}: one cut analysed 2 times weighs 2 times in its "
                    "set's statistics"]
+
+
+def test_a_folder_holding_two_batches_of_one_set_name(tmp_path, capfd):
+    """Their scans share names within the set: the report's tables crashed on the repeated
+    (set, configuration) pair (exit 1)."""
+    root = tmp_path / "runs"
+    for run in ("monday", "tuesday"):
+        _batch(root / run)
+        (root / run / "batch.json").unlink()
+        (root / run / "index.csv").unlink(missing_ok=True)
+    status, out, _ = _stats(capfd, root, "--out", tmp_path / "rep", "--n-boot", "0",
+                            "--no-gof")
+    assert status == 0 and "6 configurations" in out[0]
+    pc = pd.read_csv(tmp_path / "rep" / "per_config.csv", dtype={"config_id": str})
+    assert pc[["set", "config_id"]].duplicated().sum() == 0
