@@ -702,6 +702,10 @@ def test_a_folder_holding_two_batches_of_one_set_name(tmp_path, capfd):
         _batch(root / run)
         (root / run / "batch.json").unlink()
         (root / run / "index.csv").unlink(missing_ok=True)
+        for path in (root / run).glob("s1/*/summary.json"):  # as batch records the set
+            summary = json.loads(path.read_text())
+            summary["batch"] = {"set": "s1"}
+            path.write_text(json.dumps(summary))
     status, out, _ = _stats(capfd, root, "--out", tmp_path / "rep", "--n-boot", "0",
                             "--no-gof")
     assert status == 0 and "6 configurations" in out[0]
