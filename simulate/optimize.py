@@ -237,7 +237,9 @@ def _check_runs(n_runs, nematic_runs) -> tuple[int, set]:
         raise ParameterError(f"nematic_runs must be a sequence of run numbers, got "
                              f"{reprlib.repr(nematic_runs)}") from None
     if n_runs > 0 and (n_runs - 1) in nem:
-        raise ParameterError("the nematic term must not be used in the last run (paper)")
+        raise ParameterError(f"nematic_runs {sorted(nem)} names run {n_runs - 1}, the last of "
+                             f"n_runs = {n_runs}: the nematic term must not be used in the last "
+                             f"run (paper; nematic_runs defaults to {list(NEMATIC_RUNS)})")
     return n_runs, nem
 
 

@@ -256,6 +256,26 @@ def _probe_scheduler(address: str, timeout: float) -> None:
         raise outcome[0]
 
 
+def _address_problem(address: str) -> str | None:
+    """What is wrong with a ``tcp://`` or ``tls://`` scheduler address, or None (other
+    schemes are left to Dask): a malformed one waited out the whole timeout before Dask's
+    own words ("invalid literal for int()")."""
+    from urllib.parse import urlsplit
+
+    if not address.startswith(("tcp://", "tls://")):
+        return None
+    try:
+        parts = urlsplit(address)
+        port = parts.port
+    except ValueError:
+        return "its port is not a whole number from 1 to 65535 (expected tcp://HOST:PORT)"
+    if not parts.hostname:
+        return "it names no host (expected tcp://HOST:PORT)"
+    if port is not None and not 1 <= port <= 65535:  # no port: Dask's default, or its words
+        return "its port is not a whole number from 1 to 65535 (expected tcp://HOST:PORT)"
+    return None
+
+
 def _why_no_scheduler(exc: BaseException) -> str:
     """One line on why ``exc`` means no usable scheduler."""
     if type(exc) is TimeoutError:  # the probe's own limit (Dask's are OSErrors)
@@ -381,6 +401,9 @@ def _cluster_executor(address: str, on_wait=None):
 
     where = f"--scheduler {address}"
     notify = _warn if on_wait is None else on_wait
+    problem = _address_problem(address)
+    if problem:
+        raise ParameterError(f"not a scheduler address: {problem}", where)
     with quiet_loggers():
         try:
             _probe_scheduler(address, SCHEDULER_TIMEOUT_S)

@@ -196,6 +196,16 @@ def test_lbfgs_quench_refuses_absurd_options(name, value):
         lbfgs_quench(XY0, LAM, **{name: value})
 
 
+def test_fewer_runs_than_the_default_nematic_runs_name_them():
+    """n_runs = 2 with the default nematic_runs said only "must not be used in the last run",
+    naming neither the parameter nor its default."""
+    from simulate.optimize import NEMATIC_RUNS, _check_runs
+
+    with pytest.raises(ParameterError, match=r"^nematic_runs \[1, 2\] names run 1, the last "
+                       r"of n_runs = 2: .* defaults to \[1, 2\]"):
+        _check_runs(2, NEMATIC_RUNS)
+
+
 @pytest.mark.parametrize("kw, match", [
     (dict(n_runs=-1), "^n_runs must be"), (dict(maxiter=0), "^maxiter must be"),
     (dict(nematic_runs=(9,)), "must not be used in the last run"),

@@ -230,6 +230,21 @@ def test_a_lost_task_is_not_a_cancelled_one_but_a_closed_client_s_are(tmp_path):
         cl.close()
 
 
+@pytest.mark.parametrize("address, why", [
+    ("tcp://127.0.0.1:8799x", "its port is not a whole number from 1 to 65535"),
+    ("tcp://127.0.0.1:99999", "its port is not a whole number from 1 to 65535"),
+    ("tcp://:8786", "it names no host")])
+def test_a_malformed_scheduler_address_is_refused_at_once(address, why):
+    """It waited out the whole timeout, then gave Dask's "invalid literal for int()"."""
+    t0 = time.monotonic()
+    with pytest.raises(ParameterError) as err:
+        with get_executor(scheduler=address):
+            pass
+    assert time.monotonic() - t0 < 2.0
+    assert err.value.one_line() == (f"--scheduler {address}: not a scheduler address: {why} "
+                                    "(expected tcp://HOST:PORT)")
+
+
 # ---------------------------------------------------------------- no worker
 
 
