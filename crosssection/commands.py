@@ -27,7 +27,7 @@ from pathlib import Path
 from crosssection.core import schema
 from crosssection.core.errors import OutputError, output_error
 from crosssection.core.fileio import check_out, temporary_files
-from crosssection.core.records import is_record, output_of
+from crosssection.core.records import is_record, output_of, read_record
 from crosssection.params import AnalysisParams, add_analysis_arguments
 
 #: the step images of paper Fig. 2, and the figure of the four side by side
@@ -47,8 +47,8 @@ OPTIONAL_OUTPUTS = {
 }
 
 
-#: the records that mark a folder as the output of an earlier run of either command
-RUN_RECORDS = ("summary.json", STEPS_RECORD)
+#: the record that marks a folder as the output of an earlier run of each command
+RUN_RECORDS = {"analyze": "summary.json", "steps": STEPS_RECORD}
 #: per command, every file it may write into its output folder
 OWN_FILES = {
     "analyze": ("summary.json", *(f"{name}.csv" for name in schema.TABLES),
@@ -108,7 +108,8 @@ def earlier_run(out_dir) -> bool:
     the same name that is not one leaves the folder the user's, whose files no run
     removes)."""
     out = Path(out_dir).expanduser()
-    return any(is_record(out / name, ("version", "parameters")) for name in RUN_RECORDS)
+    return any(is_record(out / name, ("version", "parameters"))
+               for name in RUN_RECORDS.values())
 
 
 def check_not_other_output(out_dir, image=None, command="analyze", *, given_as="--out") -> None:
@@ -147,29 +148,27 @@ def check_not_other_output(out_dir, image=None, command="analyze", *, given_as="
                              "folder of its own", given_as)
     if image is None:
         return
-    for name in RUN_RECORDS:
-        if name == (STEPS_RECORD if command == "steps" else "summary.json"):
+    for other_command, name in RUN_RECORDS.items():
+        if other_command == command:
             continue  # this run replaces that record and every file it describes
         other = _recorded_scan(Path(out_dir).expanduser() / name)
         if other is not None and not _same_scan(image, *other):
-            raise ParameterError(f"{out_dir} holds the output of foldstat "
-                                 f"{'steps' if name == STEPS_RECORD else 'analyze'} for "
-                                 f"another scan ({other[0]}): give a folder of its own",
+            raise ParameterError(f"{out_dir} holds the output of foldstat {other_command} "
+                                 f"for another scan ({other[0]}): give a folder of its own",
                                  given_as)
 
 
 def _recorded_scan(record_path: Path):
     """``(resolved path, sha256)`` of the scan a run's record names, or None."""
-    import json
-
-    if not is_record(record_path, ("version", "parameters")):
+    record = read_record(record_path, ("version", "parameters"))
+    if record is None:
         return None
     try:
-        image = json.loads(record_path.read_bytes())["inputs"]["image"]
+        image = record["inputs"]["image"]
         if image.get("resolved") is None:  # an image given to the API as an array
             return "an image given as an array", None
         return str(image["resolved"]), image.get("sha256")
-    except (OSError, ValueError, KeyError, TypeError):
+    except (KeyError, TypeError, AttributeError):  # a record of another shape
         return None
 
 

@@ -292,23 +292,21 @@ def _preprocess(image, p: AnalysisParams, timer) -> Preprocessed:
     with timer("load"):
         rgb, path, orientation, see_through = _read(image)
         header = recorded_header(path) if path is not None else Header(None, 1)
-        file_px_per_mm, file_pages = header.px_per_mm, header.pages
         if orientation is None:
             orientation = exif_orientation(path) if path is not None else 1
     try:
-        return _preprocess_read(rgb, path, file_px_per_mm, file_pages, orientation, p, timer,
-                                see_through, file_dpi_xy=header.dpi_xy)
+        return _preprocess_read(rgb, path, header, orientation, p, timer, see_through)
     except AnalysisError as exc:
-        if file_pages <= 1:
+        if header.pages <= 1:
             raise
         # a blank first page (a scanner's preview, a cover sheet) fails as an empty scan
-        raise type(exc)(f"{exc.cause} (the file holds {file_pages} images and only the first "
+        raise type(exc)(f"{exc.cause} (the file holds {header.pages} images and only the first "
                         "is read: save each scan as its own file)", exc.path) from None
 
 
-def _preprocess_read(rgb, path, file_px_per_mm, file_pages, orientation, p: AnalysisParams,
-                     timer, see_through=None, file_dpi_xy=None) -> Preprocessed:
-    p.check_image(rgb.shape, path, file_px_per_mm=file_px_per_mm)
+def _preprocess_read(rgb, path, header: Header, orientation, p: AnalysisParams, timer,
+                     see_through=None) -> Preprocessed:
+    p.check_image(rgb.shape, path, file_px_per_mm=header.px_per_mm)
     s_min_px = p.scale.area_to_px2(p.s_min_used_mm2)
     l_min_px = p.scale.to_px(p.l_min_mm)
     speck_px = min(s_min_px, l_min_px * p.thickness_px) if l_min_px > 0 else s_min_px
@@ -358,11 +356,12 @@ def _preprocess_read(rgb, path, file_px_per_mm, file_pages, orientation, p: Anal
                         ink_outside_fraction=float(outside), mask_clean=mask, skeleton=skel,
                         junctions=junc, graph=sg, distance_px=dist, path=path,
                         s_min_px=s_min_px, speck_px=speck_px, l_min_px=l_min_px,
-                        warnings=notes, merged_links=merged, file_px_per_mm=file_px_per_mm,
-                        file_pages=file_pages, exif_orientation=orientation,
+                        warnings=notes, merged_links=merged,
+                        file_px_per_mm=header.px_per_mm, file_pages=header.pages,
+                        exif_orientation=orientation,
                         edge_feature=dominance if thr.dominance_min is not None else None,
                         ink_missed_fraction=float(missed), see_through=see_through,
-                        file_dpi_xy=file_dpi_xy)
+                        file_dpi_xy=header.dpi_xy)
 
 
 def _isolated_short_pieces(sg, l_min_px) -> list[int]:
@@ -700,7 +699,8 @@ def _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, void
         rod_length_mm=L, rod_measured_mm=rod_mm, ink_area_in_hole_mm2=ink_area_mm2,
         calibration_max_width_mm=_max_width_mm(cal, p), junctions=junctions,
         image_shape=pre.rgb.shape, file_px_per_mm=pre.file_px_per_mm,
-        file_pages=pre.file_pages, file_dpi_xy=pre.file_dpi_xy, network_shares=_network_shares(lin, stacks),
+        file_pages=pre.file_pages, file_dpi_xy=pre.file_dpi_xy,
+        network_shares=_network_shares(lin, stacks),
         border_ink_rc=_border_pixels(pre.mask_clean), width_law=law,
         junction_radius_px=_inscribed_radius_px(pre.distance_px, junctions),
         see_through=pre.see_through)

@@ -374,8 +374,6 @@ def set_not_read(image, params: AnalysisParams) -> str | None:
             return f"{image}: {shown} is not read by analyze (and it is not valid: run batch " \
                    "on its folder to see why)"
         used = {k: getattr(params, k, None) for k in wanted}
-        if isinstance(used.get("calibration"), (str, Path)):
-            used["calibration"] = str(Path(used["calibration"]).resolve())
         # a calibration given as a table (a DataFrame, pairs) is compared by its values
         differ = [k for k, v in wanted.items()
                   if not (_same_calibration(v, used[k]) if k == "calibration"

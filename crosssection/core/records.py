@@ -35,8 +35,8 @@ SIMULATION_TABLE = "configs.csv"
 RECORD_MAX_BYTES = 4 << 20
 
 
-def is_record(path, keys) -> bool:
-    """Whether ``path`` is a record foldstat wrote: a JSON object holding ``keys``.
+def read_record(path, keys) -> dict | None:
+    """The record foldstat wrote at ``path``: a JSON object holding ``keys``, else None.
 
     Parameters
     ----------
@@ -46,8 +46,8 @@ def is_record(path, keys) -> bool:
 
     Returns
     -------
-    bool
-        False too for anything but a regular file of at most :data:`RECORD_MAX_BYTES` (a
+    dict or None
+        None too for anything but a regular file of at most :data:`RECORD_MAX_BYTES` (a
         named pipe would block the read).
     """
     import stat
@@ -55,14 +55,21 @@ def is_record(path, keys) -> bool:
     try:
         st = os.stat(path)
         if not stat.S_ISREG(st.st_mode) or st.st_size > RECORD_MAX_BYTES:
-            return False
+            return None
         record = json.loads(Path(path).read_bytes())
     except (OSError, ValueError, RecursionError):
-        return False
+        return None
     if not isinstance(record, dict):
-        return False
+        return None
     wanted = keys if isinstance(keys, dict) else dict.fromkeys(keys)
-    return all(k in record and (v is None or record[k] == v) for k, v in wanted.items())
+    if all(k in record and (v is None or record[k] == v) for k, v in wanted.items()):
+        return record
+    return None
+
+
+def is_record(path, keys) -> bool:
+    """Whether ``path`` is a record foldstat wrote (:func:`read_record`)."""
+    return read_record(path, keys) is not None
 
 
 def output_of(folder) -> tuple[str, str] | None:

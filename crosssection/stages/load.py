@@ -60,10 +60,10 @@ import sys
 import tempfile
 import threading
 import warnings
-from typing import NamedTuple
 import zlib
 from contextlib import contextmanager
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -762,9 +762,9 @@ def recorded_header(path) -> Header:
     image, so a value below :data:`MIN_SCANNER_DPI`, a missing or unreadable one give None. A
     different resolution along the rows (x) and the columns (y) (more than 1 %) gives None
     and the two as ``dpi_xy``: such pixels are not square, and every length read from them
-    is off along one axis. The images (TIFF pages, animation frames): the loader decodes the first; the
-    others would be left out without a word (a scanner's batch saved as one multi-page TIFF
-    holds several cuts); 1 when unknown.
+    is off along one axis. The images (TIFF pages, animation frames): the loader decodes the
+    first; the others would be left out without a word (a scanner's batch saved as one
+    multi-page TIFF holds several cuts); 1 when unknown.
 
     Parameters
     ----------

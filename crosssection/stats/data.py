@@ -56,11 +56,11 @@ from __future__ import annotations
 import csv
 import io
 import json
-from collections import Counter
 import math
 import os
 import reprlib
 import warnings
+from collections import Counter
 from dataclasses import dataclass
 from numbers import Real
 from pathlib import Path
@@ -459,31 +459,31 @@ def load_simulation(folder, *, set_name=None) -> Ensemble:
                     numeric=["epsilon", "energy_total", "n_stacks", "n_branches", "n_voids"])
     # configurations whose simulation raised, or whose rod's contact analysis did (a rod but
     # no network): no results
-    kinds = []
-    for col, what in (("error", "failed in the simulation"),
-                      ("analysis_error", "have no network (the contact analysis failed)")):
+    stopped = pd.Series(False, index=cfg.index)
+    kinds = []  # (configurations, what stopped them, where it is told)
+    for col, what, see in (("error", "failed in the simulation", "failures.csv"),
+                           ("analysis_error", "have no network (the contact analysis failed)",
+                            "analysis_error in configs.csv")):
         if col in cfg.columns:
-            bad = cfg[col].notna() & (cfg[col].astype(str).str.strip() != "")
-            if kinds:  # a configuration is named once, by what stopped it first
-                bad &= ~kinds[-1][0]
-            kinds.append((bad | (kinds[-1][0] if kinds else False), bad, what,
-                          "failures.csv" if col == "error" else f"{col} in configs.csv"))
-    out = kinds[-1][0] if kinds else pd.Series(False, index=cfg.index)
-    said = [f"{int(bad.sum())} {what}; see {see}" for _, bad, what, see in kinds if bad.any()]
-    if said and out.all():  # as a batch with no finished image: no statistics to draw
+            # a configuration is named once, by what stopped it first
+            bad = cfg[col].notna() & (cfg[col].astype(str).str.strip() != "") & ~stopped
+            stopped |= bad
+            if bad.any():
+                kinds.append((bad, what, see))
+    if kinds and stopped.all():  # as a batch with no finished image: no statistics to draw
+        said = [f"{int(bad.sum())} {what}; see {see}" for bad, what, see in kinds]
         raise ConfigError("ensemble holds no finished configuration ("
                           + ("all " + said[0] if len(said) == 1 else "; ".join(said)) + ")",
                           folder)
     notes = []
-    for _, bad, what, see in kinds:
-        if bad.any():
-            n = int(bad.sum())
-            # the report records it as it records a batch's failed scans (batch_note)
-            notes.append(f"{folder / 'configs.csv'}: {n} of {len(cfg)} configurations {what} "
-                         f"(config_id {_listed(cfg.loc[bad, 'config_id'])}; see {see}) and "
-                         f"{'is' if n == 1 else 'are'} not in the statistics")
-            warnings.warn(notes[-1], IncompleteBatchWarning, stacklevel=2)
-    cfg = cfg[~out]
+    for bad, what, see in kinds:
+        n = int(bad.sum())
+        # the report records it as it records a batch's failed scans (batch_note)
+        notes.append(f"{folder / 'configs.csv'}: {n} of {len(cfg)} configurations {what} "
+                     f"(config_id {_listed(cfg.loc[bad, 'config_id'])}; see {see}) and "
+                     f"{'is' if n == 1 else 'are'} not in the statistics")
+        warnings.warn(notes[-1], IncompleteBatchWarning, stacklevel=2)
+    cfg = cfg[~stopped]
     note = "; ".join(notes)
     br = _read_csv(folder / "branches.csv", ["config_id", "length", "kappa_plus", "kappa_pm",
                                              "energy"],

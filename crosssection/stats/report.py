@@ -367,7 +367,8 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
                     yerr = err[k]
                     ymax_lin = max(ymax_lin, float(np.max(h[k] + err[k])))
                 data_label = (f"{name[s]}: data (n = {n})" if n >= F.N_SELECT_MIN else
-                              f"{name[s]}: data, indicative only (n = {n} < {F.N_SELECT_MIN})")
+                              f"{name[s]}: data, indicative only "
+                              f"(n = {n} < {F.N_SELECT_MIN})")
                 ax.errorbar(mids[k], h[k], yerr=yerr, fmt="o", ms=4, color=c, lw=1,
                             capsize=2, label=data_label, gid=f"points:{s}:{reg}")
                 if best is None:
@@ -402,7 +403,8 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
                     ax.axvspan(span[0], span[1], color=c, alpha=0.08, lw=0,
                                gid=f"limits:{s}:{reg}")
                     ax.axvline(span[1], color=c, ls=":", lw=1, gid=f"limit:{s}:{reg}",
-                               label=(f"{name[s]}: detection limits {span[0]:.2g}-{span[1]:.2g} "
+                               label=(f"{name[s]}: detection limits "
+                                      f"{span[0]:.2g}-{span[1]:.2g} "
                                       "(per scan, shaded; dotted: largest)")
                                if logscale else None)
                 elif span is not None:
@@ -543,8 +545,7 @@ def network_figure(res: StatsResult, colors=None):
     """N_br vs N_l with Eqs. (12) and (14), and n_br_bar vs N_l with Eqs. (13) and (15), per set."""
     pc = res.per_config
     colors = colors or set_colors(list(dict.fromkeys(pc["set"])))
-    if not (np.isfinite(np.asarray(pc["N_l"], float))
-            & np.isfinite(np.asarray(pc["N_br"], float))).any():
+    if not _pairs(pc, "N_l", "N_br").any():
         return None  # no configuration with a network: nothing to draw
     fig, axes = _subplots(1, 2, figsize=(12.5, 4.6))
     axes = axes[0]
@@ -565,8 +566,8 @@ def network_figure(res: StatsResult, colors=None):
         if np.isfinite(ratio) and np.isfinite(eps):
             eq12 = EQ12_CONST * eps * ratio * np.sqrt(nl)  # Eq. (12) with set means
             axes[0].plot(nl, eq12, "-", color=c,
-                         label=f"{name[s]}: Eq. (12), paper's C = 2√(π/3) = {EQ12_CONST:.3g}, with "
-                               "the set means (left)")
+                         label=f"{name[s]}: Eq. (12), paper's C = 2√(π/3) = "
+                               f"{EQ12_CONST:.3g}, with the set means (left)")
             axes[1].plot(nl, eq12 / nl, "-", color=c,
                          label=f"{name[s]}: Eq. (13), C = {EQ12_CONST:.3g} (right)")
             fitted = rel.get("eq12_const", np.nan)
@@ -582,7 +583,8 @@ def network_figure(res: StatsResult, colors=None):
         if np.isfinite(nbr):
             axes[0].plot(nl, nbr * nl, "--", color=c,
                          label=f"{name[s]}: Eq. (14), <n_br> = {nbr:.2g} (left)")
-            axes[1].axhline(nbr, ls="--", color=c, label=f"{name[s]}: Eq. (15), <n_br> = {nbr:.2g} (right)")
+            axes[1].axhline(nbr, ls="--", color=c,
+                            label=f"{name[s]}: Eq. (15), <n_br> = {nbr:.2g} (right)")
     axes[0].set(xlabel="number of stacks per configuration $N_l$",
                 ylabel="number of branches per configuration $N_{br}$",
                 title="branches against stacks")
@@ -602,11 +604,16 @@ def network_figure(res: StatsResult, colors=None):
     return fig
 
 
+def _pairs(df, x, y) -> np.ndarray:
+    """Which rows of ``df`` hold finite values of both ``x`` and ``y``."""
+    return np.isfinite(np.asarray(df[x], float)) & np.isfinite(np.asarray(df[y], float))
+
+
 def _scatter_fig(res, x, y, xlabel, ylabel, title, *, through_origin=False, paper_slope=None,
                  colors=None):
     pc = res.per_config
     colors = colors or set_colors(list(dict.fromkeys(pc["set"])))
-    if not (np.isfinite(np.asarray(pc[x], float)) & np.isfinite(np.asarray(pc[y], float))).any():
+    if not _pairs(pc, x, y).any():
         return None  # no configuration has both (no void at all): nothing to draw
     fig, ax = _subplots(figsize=(8.5, 4.8))
     ax = ax[0, 0]
@@ -614,7 +621,7 @@ def _scatter_fig(res, x, y, xlabel, ylabel, title, *, through_origin=False, pape
     for s, g in pc.groupby("set", sort=False):
         c = colors[s]
         xv, yv = np.asarray(g[x], float), np.asarray(g[y], float)
-        k = np.isfinite(xv) & np.isfinite(yv)
+        k = _pairs(g, x, y)
         if not k.any():
             continue
         txt = f"{name[s]}: configurations"
@@ -628,7 +635,7 @@ def _scatter_fig(res, x, y, xlabel, ylabel, title, *, through_origin=False, pape
             a = np.sum(xv[k] * yv[k]) / np.sum(xv[k] ** 2)
             xs = np.linspace(0, xv[k].max() * 1.1, 10)
             ax.plot(xs, a * xs, "-", color=c, label=f"{name[s]}: fit through 0, slope {a:.3g}")
-    if paper_slope is not None and np.isfinite(np.asarray(pc[x], float)).any():
+    if paper_slope is not None:
         xs = np.array([0, np.nanmax(np.asarray(pc[x], float)) * 1.1])
         ax.plot(xs, paper_slope * xs, ":", color="grey", label=f"paper: slope {paper_slope}")
     ax.set(xlabel=xlabel, ylabel=ylabel, title=title)
@@ -1163,7 +1170,8 @@ def _pdf_caption(q: str) -> str:
 def _fitted_sets(res: StatsResult, q: str, sets) -> list:
     """The sets among ``sets`` with a fit of quantity ``q`` in some sub-system (a summary
     whose every law failed, as when a detection limit leaves no value, is none)."""
-    return [s for s in sets if any(_has_fit(res, s, r, q) for r in ("all", "bulk", "periphery"))]
+    return [s for s in sets
+            if any(_has_fit(res, s, r, q) for r in ("all", "bulk", "periphery"))]
 
 
 def _has_fit(res: StatsResult, s: str, region: str, q: str) -> bool:
