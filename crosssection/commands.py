@@ -13,7 +13,9 @@ parameters, the package version and the input file they were made with.
 A run leaves DIR describing itself alone: when DIR holds the record of an earlier run
 (``summary.json`` or ``steps.json``), the files of the command that this run does not write
 (``overlay.png`` under ``--no-figure``, the step images without ``--steps``, ``steps.png``
-under ``steps --no-figure``) are removed from DIR once the new outputs are written. Only those
+under ``steps --no-figure``) are removed from DIR once the new outputs are written; the step
+images of a ``steps`` run of the same scan, which its ``steps.json`` describes, stay beside an
+``analyze`` without ``--steps``. Only those
 names are: nothing else in DIR is touched, a folder with no such record keeps its files (they
 are the user's), and a run that fails leaves the previous outputs whole. Every file is written
 to a hidden temporary file and renamed; those that a run killed while writing left in DIR
@@ -232,8 +234,21 @@ def remove_stale(out_dir, command: str, written) -> list[Path]:
     """
     out = Path(out_dir)
     kept = {Path(p).name for p in written}
-    return _unlinked(out / name for name in OPTIONAL_OUTPUTS[command]
+    names = OPTIONAL_OUTPUTS[command]
+    if command == "analyze" and not kept & set(STEP_IMAGES) and _steps_record(out):
+        # the step images a steps run made of the same scan (another scan's output is
+        # refused before any work), described by its own record: that run's, kept
+        names = tuple(n for n in names if n not in (*STEP_IMAGES, STEPS_FIGURE, STEPS_RECORD))
+    return _unlinked(out / name for name in names
                      if name not in kept and ((out / name).is_file() or (out / name).is_symlink()))
+
+
+def _steps_record(out: Path) -> bool:
+    """Whether ``out`` holds the record of a ``steps`` run."""
+    from crosssection.core.records import RECORDS
+
+    keys = next(k for f, c, k in RECORDS if f == STEPS_RECORD)
+    return is_record(out / STEPS_RECORD, keys)
 
 
 def _removed_note(removed) -> str:

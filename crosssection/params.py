@@ -577,12 +577,26 @@ def _choice(name, value, allowed):
     return value
 
 
+def _calibration_class():
+    from crosssection.core.calibration import Calibration
+
+    return Calibration
+
+
 def _check_calibration(value):
     if isinstance(value, (str, Path)):
         if not str(value):
             raise ParameterError("calibration must be a file path")
         return str(value)
-    if hasattr(value, "layers") or hasattr(value, "to_frame") or hasattr(value, "columns"):
+    if hasattr(value, "columns") or (hasattr(value, "to_frame")
+                                     and not isinstance(value, _calibration_class())):
+        # a table is copied into a Calibration: the caller's DataFrame may change later,
+        # and these parameters are frozen (and hashable)
+        try:
+            return _calibration_class().of(value)
+        except FoldstatError as exc:
+            raise ParameterError(exc.cause) from None
+    if hasattr(value, "layers"):
         return value
     if isinstance(value, dict) and UNRECORDED_CALIBRATION in value:
         raise ParameterError(f"the calibration was a {value[UNRECORDED_CALIBRATION]} object, "
@@ -590,10 +604,8 @@ def _check_calibration(value):
     if isinstance(value, (list, tuple, dict)) or hasattr(value, "__array__"):
         # the form summary.json records a table given in memory in
         # (AnalysisParams.calibration_record), or the columns of a table
-        from crosssection.core.calibration import Calibration
-
         try:
-            return Calibration.of(value)
+            return _calibration_class().of(value)
         except FoldstatError as exc:
             raise ParameterError(exc.cause) from None
     raise ParameterError(f"calibration must be a CSV path, a Calibration, a table with "

@@ -46,9 +46,9 @@ from crosssection.stages.load import (Header, exif_orientation, load_image_orien
 from crosssection.linsys.equations import conservation_equations
 from crosssection.stages.packs import compute_packs
 from crosssection.stages.skeleton import skeletonize_mask
-from crosssection.stages.threshold import (BRIDGE_MAX_H_PX, bridge_broken_lines, passes_at,
-                                           colour_features, missed_ink, threshold_rgb,
-                                           _range_note)
+from crosssection.stages.threshold import (BRIDGE_MAX_H_PX, bridge_broken_lines,
+                                           colour_features, faint_band_ends, missed_ink,
+                                           passes_at, threshold_rgb, _range_note)
 from crosssection.stages.widthlaw import fit_width_law
 from crosssection.stages.widths import (distance_map, layer_steps, stack_widths_px,
                                         width_profiles_px)
@@ -119,7 +119,10 @@ def _read(image):
         rgb, see_through = rgb_and_opacity(image)
         # the result keeps the scan: never the caller's own array, which the caller may draw on
         return (rgb.copy() if np.shares_memory(rgb, image) else rgb), None, None, see_through
-    raise ImageError(f"image must be a file path or an RGB array, got {type(image).__name__}")
+    hint = (" (an image object: pass numpy.asarray(image))"
+            if hasattr(image, "__array_interface__") or hasattr(image, "__array__") else "")
+    raise ImageError(f"image must be a file path or an RGB array, got {type(image).__name__}"
+                     f"{hint}")
 
 
 def _resolve_params(params, overrides, path) -> AnalysisParams:
@@ -484,7 +487,11 @@ def analyze(image, params: AnalysisParams | None = None, *, warn: bool = True,
     Parameters
     ----------
     image : str, Path or ndarray
-        Image file (PNG, TIFF 8/16-bit, JPEG) or an (H, W, 3) RGB array.
+        Image file (PNG, TIFF 8/16-bit, JPEG) or an RGB array: (H, W, 3), or (H, W, 4)
+        with alpha (composited over white); uint8, uint16, float in [0, 1], or another
+        integer type with values within 0..65535 (within 0..255: read as 8-bit); any
+        strides (:func:`~crosssection.stages.load.rgb_and_opacity`). The array is not
+        modified.
     params : AnalysisParams or dict, optional
         Parameters (default: :class:`~crosssection.params.AnalysisParams` defaults).
     warn : bool
@@ -595,6 +602,13 @@ def _analyze(image, params, overrides, *, warn: bool = True,
         width_px = scale.to_px(width_mm)
         tol = hole_stage.wall_tolerance_px(sg, width_px, h_px)
         regions = hole_stage.classify_regions(sg, pre.junctions.centers_rc, pre.hole, tol_px=tol)
+    faint = []
+    thr = pre.threshold
+    if pre.edge_feature is not None and thr.paper_level is not None:
+        with timer("regions"):
+            faint = faint_band_ends(sg, pre.edge_feature, paper_level=thr.paper_level[0],
+                                    cut=thr.dominance_min, mask=pre.mask_clean, hole=pre.hole,
+                                    width_px=width_px, thickness_px=h_px)
     with timer("voids"):
         voids = void_stage.find_voids(pre.mask_clean, hole=pre.hole, s_min_px=pre.s_min_px,
                                       px_per_mm=p.px_per_mm,
@@ -609,7 +623,7 @@ def _analyze(image, params, overrides, *, warn: bool = True,
                                 profiles=profiles, stack_energy=stack_energy)
         junctions = tb.junction_table(pre.junctions, sg, packs, n_br, lin)
     return _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, voids, warn,
-                   rod_mm, L, timer, t_start, inputs, law)
+                   rod_mm, L, timer, t_start, inputs, law, faint)
 
 
 def _stack_widths_mm(sg, distance_px, profiles, p: AnalysisParams) -> np.ndarray:
@@ -686,7 +700,7 @@ def _border_pixels(mask) -> np.ndarray:
 
 
 def _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, voids, warn,
-            rod_mm, L, timer, t_start, inputs=None, law=None) -> AnalysisResult:
+            rod_mm, L, timer, t_start, inputs=None, law=None, faint=None) -> AnalysisResult:
     """Summary, quality checks and warnings: the :class:`AnalysisResult` built in one place."""
     from crosssection.core import schema
 
@@ -703,7 +717,7 @@ def _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, void
         network_shares=_network_shares(lin, stacks),
         border_ink_rc=_border_pixels(pre.mask_clean), width_law=law,
         junction_radius_px=_inscribed_radius_px(pre.distance_px, junctions),
-        see_through=pre.see_through)
+        see_through=pre.see_through, faint_ends=faint)
     notes = list(pre.warnings) + [f"linear system: {f}" for f in lin.flags
                                   if not str(f).startswith("disconnected")]
     summary = tb.summary(pre=pre, params=p, linear_system=lin, junctions=junctions,

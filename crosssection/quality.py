@@ -23,6 +23,9 @@ low_resolution           sheet thickness h in pixels                          h 
 ink_missed               ink that the scan's cut leaves out and a cut chosen  > 0.5 %
                          on each 20 h tile of the frame takes in (added to
                          the ink), in pieces the cleaning keeps / the ink cut
+faint_ink                free band ends that a ray of 3 widths beyond them    > 0
+                         finds continued by ink bluer than halfway from the
+                         paper to the cut (faded ink the cut dropped)
 hole_fitted              hole found in the scan, with its confidence          confidence < 0.5
 ink_outside_hole         ink pixels outside the hole (in pieces of 20 px or   > 2 %
                          more: not a plate's noise) / all ink pixels
@@ -216,7 +219,9 @@ class QualityWarning(UserWarning):
 
 
 class InputWarning(QualityWarning):
-    """The file holds more than the one scan analysed."""
+    """The input is not quite what was analysed: the file holds more than the one scan
+    (``pages``), an alpha channel made pixels see-through (``see_through``), or the file's
+    SHA-256 could not be recorded."""
 
 
 class SetWarning(QualityWarning):
@@ -259,6 +264,7 @@ CATEGORIES = {
     "layer_lattice": CalibrationWarning,
     "low_resolution": ResolutionWarning,
     "ink_missed": ThresholdWarning,
+    "faint_ink": ThresholdWarning,
     "hole_fitted": FrameWarning,
     "ink_outside_hole": FrameWarning,
     "hole_crossed": FrameWarning,
@@ -389,7 +395,7 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
            file_pages=1, network_shares=None, border_ink_rc=None,
            ink_missed_fraction=0.0, width_law=None,
            junction_radius_px=None, see_through=None,
-           file_dpi_xy=None) -> list[QualityFlag]:
+           file_dpi_xy=None, faint_ends=None) -> list[QualityFlag]:
     """Run every check of the module table on one analysis.
 
     Parameters
@@ -447,6 +453,9 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
     file_dpi_xy : (float, float), optional
         The scan file's recorded resolutions along x and y, when they differ by more than
         1 % (:func:`crosssection.stages.load.recorded_header`): the ``non_square`` check.
+    faint_ends : list of (int, (float, float)), optional
+        Free band ends that fainter blue ink continues
+        (:func:`crosssection.stages.threshold.faint_band_ends`): the ``faint_ink`` check.
 
     Returns
     -------
@@ -499,6 +508,13 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
             "colour-balanced, or set the cut by hand: threshold_method fixed with blue_min and "
             "rg_max)",
             ink_missed_fraction, INK_MISSED_LIMIT))
+    if faint_ends:
+        sid, (r, c) = faint_ends[0]
+        flags.append(QualityFlag(
+            "faint_ink", f"{len(faint_ends)} band end(s) continued by fainter blue ink below "
+            f"the threshold's cut (stack {sid}, its end at x {c:.0f}, y {r:.0f} px of the "
+            "scan): ink faded there is lost, and the rod with it (look at the overlay; a "
+            "light-blue smear at a band's end also reads so)", len(faint_ends), 0))
     flags += _crossed_check(params, hole)
     if ink_outside_fraction > 0.02:
         flags.append(QualityFlag("ink_outside_hole", f"{100 * ink_outside_fraction:.1f} % of the "
@@ -807,6 +823,20 @@ def _count_width_check(stacks) -> list[QualityFlag]:
 ISOLATED_LAYERS = 2
 
 
+def _energy_share(stacks, which) -> str:
+    """The share of the scan's bending energy the stacks ``which`` carry, as the clause a
+    message ends with (empty below 1 %, or without the energies): a pen stroke's sharp turns
+    can hold most of a scan's energy."""
+    if not {"energy_per_branch", "n_br"} <= set(stacks.columns):
+        return ""
+    e = (stacks["energy_per_branch"] * stacks["n_br"]).to_numpy(float)
+    total = float(np.nansum(e))
+    part = float(np.nansum(e[np.asarray(which, bool)]))
+    if not (total > 0) or part < 0.01 * total:
+        return ""
+    return f"; they carry {100 * part / total:.0f} % of the total bending energy"
+
+
 def _isolated_check(stacks) -> list[QualityFlag]:
     if not {"junction_a", "junction_b", "kind", "n_br"} <= set(stacks.columns):
         return []
@@ -826,8 +856,8 @@ def _isolated_check(stacks) -> list[QualityFlag]:
     return [QualityFlag("isolated_stacks", f"{k} piece(s) of ink touching no other stack read "
                         f"as stacks of several layers ({where}: n_br {int(worst['n_br'])}"
                         f"{size}): one sheet's cross-section is one connected curve, so these "
-                        "are ink blots or stains, counted as stacks; clean the scan",
-                        k, 0)]
+                        "are ink blots or stains, counted as stacks"
+                        f"{_energy_share(stacks, thick)}; clean the scan", k, 0)]
 
 
 #: ``rod_ends``: bands of an odd number of layers that end in the scan, away from any
@@ -865,19 +895,22 @@ def _stack_checks(params, stacks, calibration_max_width_mm) -> list[QualityFlag]
     flags += _isolated_check(stacks)
     flags += _rod_ends_check(stacks)
     free = (stacks["junction_a"] < 0) & (stacks["junction_b"] < 0) & (stacks["kind"] == "free_end")
-    specks = int((free & (stacks["length_mm"] < 2 * params.l_min_mm)).sum())
+    speck = free & (stacks["length_mm"] < 2 * params.l_min_mm)
+    specks = int(speck.sum())
     if _frac(specks, m) > 0.05:
         flags.append(QualityFlag("specks", f"{specks} of {m} stacks are short isolated pieces "
-                                 "(specks surviving the cleaning?): they are counted as stacks; "
-                                 "clean the scan or check the threshold", _frac(specks, m), 0.05))
+                                 "(specks surviving the cleaning?): they are counted as stacks"
+                                 f"{_energy_share(stacks, speck)}; clean the scan or check the "
+                                 "threshold", _frac(specks, m), 0.05))
     # one rod's cross-section is a connected curve: a closed ring that touches none of the
     # other stacks is not a part of it (a ring stain, or a speck whose hole exceeds s_min)
-    loops = int((stacks["kind"] == "loop").sum())
+    loop = stacks["kind"] == "loop"
+    loops = int(loop.sum())
     if loops and m > loops:
         flags.append(QualityFlag("loops", f"{loops} closed loop(s) of ink touching no other "
                                  "stack (ring stains or holed specks surviving the cleaning?): "
-                                 "they are counted as stacks; clean the scan",
-                                 loops, 0))
+                                 f"they are counted as stacks{_energy_share(stacks, loop)}; "
+                                 "clean the scan", loops, 0))
     if calibration_max_width_mm:
         wide = int((stacks["width_mm"] > 1.05 * calibration_max_width_mm).sum())
         if _frac(wide, m) > 0.05:

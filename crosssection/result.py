@@ -30,9 +30,12 @@ def rod_length_text(summary: dict) -> str:
     return f"L = {mm(measured)} mm measured, {mm(used)} mm given"
 
 
-@dataclass(repr=False)
+@dataclass(repr=False, eq=False)
 class AnalysisResult:
     """Everything ``analyze`` computed for one scan.
+
+    Compared by identity (``==`` is ``is``): two analyses of one scan differ in their
+    timings; compare their ``tables`` and ``summary`` to compare their results.
 
     Attributes
     ----------

@@ -383,10 +383,10 @@ def set_not_read(image, params: AnalysisParams) -> str | None:
         plural = len(differ) > 1
         return (f"{image}: {shown} is not read by analyze; its {', '.join(differ)} for this "
                 f"scan {'differ from the ones' if plural else 'differs from the one'} used: "
-                f"pass {'them as options' if plural else 'it as an option'}, or run batch on "
-                f"{where}")
+                f"pass {'them' if plural else 'it'} (options of the command line, "
+                f"parameters of analyze in Python), or run batch on {where}")
     cal = loose_calibration(image, params.calibration)
     if cal is not None:
         return (f"{image}: {cal} beside it is not used (no calibration given): pass "
-                f"--calibration {cal}")
+                f"--calibration {cal} (calibration= in Python)")
     return None

@@ -227,16 +227,20 @@ def junction_table(junctions, graph, packs, n_br, linear_system) -> pd.DataFrame
         "x_px": junctions.centers_rc[:, 1] if k else np.zeros(0),
         "y_px": junctions.centers_rc[:, 0] if k else np.zeros(0),
         "n_stacks": deg,
-        "pack_a": [" ".join(f"{s}.{e}" for s, e in a) for a, _ in sides],
-        "pack_b": [" ".join(f"{s}.{e}" for s, e in b) for _, b in sides],
-        "ambiguous": [bool(getattr(packs.get(j), "ambiguous", False)) for j in range(k)],
-        "reference_dependent": [bool(getattr(packs.get(j), "reference_dependent", False))
-                                for j in range(k)],
-        "equation": kinds,
-        "conservation_residual": cons,
-        "conservation_ok": ok,
-        "repartitioned": [kd == "repartitioned" for kd in kinds],
-        "n_pixels": [len(p) for p in junctions.pixels],
+        # typed: a scan without junctions has the dtypes of one with them
+        "pack_a": pd.Series([" ".join(f"{s}.{e}" for s, e in a) for a, _ in sides],
+                            dtype=str),
+        "pack_b": pd.Series([" ".join(f"{s}.{e}" for s, e in b) for _, b in sides],
+                            dtype=str),
+        "ambiguous": np.array([bool(getattr(packs.get(j), "ambiguous", False))
+                               for j in range(k)], dtype=bool),
+        "reference_dependent": np.array([bool(getattr(packs.get(j), "reference_dependent",
+                                                      False)) for j in range(k)], dtype=bool),
+        "equation": pd.Series(kinds, dtype=str),
+        "conservation_residual": np.array(cons, dtype=np.int64),
+        "conservation_ok": np.array(ok, dtype=bool),
+        "repartitioned": np.array([kd == "repartitioned" for kd in kinds], dtype=bool),
+        "n_pixels": np.array([len(p) for p in junctions.pixels], dtype=np.int64),
     })
 
 
@@ -266,14 +270,16 @@ def _energy_rel_uncertainty(stacks: pd.DataFrame) -> float | None:
     """Share of the total bending energy that rests on the fork-zone model or the noise floor:
     ``sum_i E_i min(u_i, 1) / sum_i E_i`` over stacks, ``E_i = n_br e_i`` their energy and
     ``u_i`` their ``energy_rel_uncertainty`` (a stack without one counted in full); None when
-    the total is 0 or the column is absent."""
+    the total is 0, the column is absent, or no stack has one (the paper's method, which
+    estimates none)."""
     if "energy_rel_uncertainty" not in stacks or not len(stacks):
         return None
     e = (stacks["energy_per_branch"] * stacks["n_br"]).to_numpy(float)
     total = float(np.nansum(e))
-    if not total > 0:
+    u = stacks["energy_rel_uncertainty"].to_numpy(float)
+    if not total > 0 or not np.isfinite(u).any():
         return None
-    u = np.nan_to_num(stacks["energy_rel_uncertainty"].to_numpy(float), nan=1.0)
+    u = np.nan_to_num(u, nan=1.0)
     return float(np.nansum(e * np.minimum(u, 1.0)) / total)
 
 

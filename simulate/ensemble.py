@@ -701,6 +701,8 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
     # the workers write the parts: a Dask worker runs in its own working folder, where a
     # relative path names another place than the client's
     where = str(out.expanduser().absolute())
+    if task is None:  # a dict typed in Python is checked as the command line's options are
+        params = checked_params(params)
     params = resolve_defaults(params)
     params = {k: params.get(k) for k in sorted(params)}
     check_out_folder(out, params["command"])
@@ -1001,6 +1003,73 @@ def params_from_args(args) -> dict:
             raise ParameterError(f"--lambda-start {args.lam_start:g} is above --lambda "
                                  f"{args.lam:g}: the ramp compacts the rod toward --lambda")
     return resolve_defaults(params)
+
+
+#: :func:`run_ensemble`'s parameter names -> the command line's (argparse ``dest``)
+_ARG_NAMES = {"n_configs": "n_configs", "n_segments": "segments", "lam": "lam",
+              "noise": "noise", "seed": "seed", "method": "method",
+              "nematic_cutoff": "nematic_cutoff", "wall_radius": "wall_radius",
+              "contact_distance": "contact_distance", "parametrization": "parametrization",
+              "n_runs": "runs", "maxiter": "maxiter", "nematic_runs": "nematic_runs", "u": "u",
+              "ftol": "ftol", "xtol": "xtol", "lam_start": "lam_start", "stages": "stages",
+              "ramp": "ramp"}
+_WHOLE = ("n_configs", "n_segments", "seed", "n_runs", "maxiter", "stages")
+
+
+def checked_params(params: dict) -> dict:
+    """A quench's or anneal's parameters given to :func:`run_ensemble` in Python, checked as
+    the command line checks its options and completed with its defaults.
+
+    Parameters
+    ----------
+    params : dict
+        ``command`` ("quench" or "anneal") and any of the keys :func:`run_ensemble` lists;
+        a key left out takes the command line's default.
+
+    Returns
+    -------
+    dict
+        As :func:`params_from_args` returns it.
+
+    Raises
+    ------
+    ParameterError
+        An unknown key, a value of the wrong type, or one the command line refuses (the
+        message names the option).
+    """
+    from simulate.cli import build_parser
+
+    command = params.get("command")
+    if command not in _POWELL:
+        raise ParameterError(f"params['command'] must be one of {', '.join(_POWELL)}, got "
+                             f"{command!r}")
+    unknown = sorted(set(params) - set(_ARG_NAMES) - {"command"})
+    if unknown:
+        raise ParameterError(f"unknown {command} parameter(s) {', '.join(map(repr, unknown))} "
+                             f"(known: {', '.join(_ARG_NAMES)})")
+    args = build_parser().parse_args([command, "--out", "."])
+    for key, value in params.items():
+        if key == "command" or value is None:
+            continue
+        if key in _WHOLE and (isinstance(value, bool) or not isinstance(value, (int, np.integer))):
+            raise ParameterError(f"params[{key!r}] must be a whole number, got {value!r}")
+        if key == "nematic_runs" and not isinstance(value, str):
+            try:
+                value = ",".join(str(int(k)) for k in value)
+            except (TypeError, ValueError):
+                raise ParameterError(f"params['nematic_runs'] must be run numbers, got "
+                                     f"{value!r}") from None
+        elif key in ("method", "parametrization", "ramp"):
+            allowed = {"method": METHODS[command], "parametrization": ("tangent", "bend"),
+                       "ramp": RAMPS}[key]
+            if value not in allowed:
+                raise ParameterError(f"params[{key!r}] must be one of {', '.join(allowed)}, "
+                                     f"got {value!r}")
+        elif key not in _WHOLE and key != "nematic_runs":
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.number)):
+                raise ParameterError(f"params[{key!r}] must be a number, got {value!r}")
+        setattr(args, _ARG_NAMES[key], int(value) if key in _WHOLE else value)
+    return params_from_args(args)
 
 
 def _powell_params(args) -> dict:

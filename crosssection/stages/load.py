@@ -149,7 +149,10 @@ def _float_to_uint16(a: np.ndarray, path=None) -> np.ndarray:
         out[r:r + rows] = c
     if lo < 0 or hi > 1:
         # repr: a value a rounding above 1 prints as 1 with :g
-        raise ImageError(f"float image values {lo!r}..{hi!r}: they must lie in [0, 1]", path)
+        hint = (" (values up to 255 are an 8-bit image in floats: divide by 255, or convert "
+                "with astype(numpy.uint8))" if lo >= 0 and hi <= 255 else "")
+        raise ImageError(f"float image values {lo!r}..{hi!r}: they must lie in [0, 1]{hint}",
+                         path)
     return out
 
 
@@ -185,7 +188,9 @@ def rgb_and_opacity(arr, *, path=None) -> tuple[np.ndarray, np.ndarray | None]:
         raise ImageError("2-channel image (grayscale with alpha, or two colour planes): an "
                          "RGB scan of blue ink is needed to threshold on colour", path)
     if a.ndim != 3 or a.shape[2] not in (3, 4):
-        raise ImageError(f"not an RGB image (array shape {a.shape})", path)
+        hint = (": channels come last, (H, W, 3); move them with numpy.moveaxis(a, 0, -1)"
+                if a.ndim == 3 and a.shape[0] in (3, 4) else "")
+        raise ImageError(f"not an RGB image (array shape {a.shape}){hint}", path)
     if a.dtype == np.bool_:
         raise ImageError("binary image: an RGB scan is needed", path)
     if a.size == 0:
@@ -196,7 +201,10 @@ def rgb_and_opacity(arr, *, path=None) -> tuple[np.ndarray, np.ndarray | None]:
         if a.dtype.kind not in "ui":
             raise ImageError(f"unsupported pixel type {a.dtype}", path)
         lo, hi = int(a.min()), int(a.max())
-        if lo < 0 or hi > 65535:
+        if lo < 0:
+            raise ImageError(f"negative pixel values ({lo}..{hi}): an image holds 0..255 "
+                             "(8-bit) or 0..65535 (16-bit)", path)
+        if hi > 65535:
             raise ImageError(f"pixel values {lo}..{hi} out of the 16-bit range", path)
         # values within 0..255 are an 8-bit image in a wider type (numpy arithmetic, or
         # astype(int)): read as 16-bit they would be a black scan. A real 16-bit scan whose

@@ -47,6 +47,7 @@ in the native units of the image (uint16: uint8 values times 257).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -1111,3 +1112,106 @@ def missed_ink(thr: ThresholdResult, features: ColourFeatures, region, *,
     taken = np.zeros(features.shape, bool)
     taken[frame] = missed.view(bool)
     return taken, n_px
+
+
+#: :func:`faint_band_ends`: length of the stretch beyond a band's free end that is read, in
+#: band widths (at least :data:`FAINT_MIN_H` sheet thicknesses), and the share of its samples
+#: that must lie at or above the faint level for the band to be taken as continued there
+FAINT_WIDTHS = 2.0
+FAINT_MIN_H = 4.0
+FAINT_SHARE = 0.8
+
+
+def faint_band_ends(graph, dominance, *, paper_level: float, cut: float, mask, hole,
+                    width_px, thickness_px: float) -> list:
+    """Free band ends that fainter ink continues: a band whose ink fades below the cut.
+
+    A marker running dry, or ink washed out along part of the rod, leaves bands that end in
+    the middle of the scan where the rod goes on, lighter: the cut drops it and the rod loses
+    that length, with nothing else wrong (a test scan whose ink faded to 35 % of its contrast
+    across it lost 20 % of its rod, its junctions and stacks otherwise right). The fading ink
+    is as light as the smears and the receding surfaces the cut is there to refuse, so it is
+    not taken in; it is told by its shape. From each free end of a stack (a node of kind
+    ``"end"``) a ray is followed along the end's direction (the chord of its skeleton from
+    three widths to one width before the end: the last width may hook into a corner of the
+    cut) for :data:`FAINT_WIDTHS` widths (at least :data:`FAINT_MIN_H` h) past the band's
+    own cap, reading the bluest of three samples across it (a quarter width apart). The end is continued when
+    :data:`FAINT_SHARE` of the ray's samples inside the hole (at least half of the ray must
+    be) are paper-side of the ink but bluer than the midpoint of the paper's dominance and the
+    cut, the level of :func:`bridge_broken_lines` (a receding surface, blue by 8-16 levels over
+    its grey, stays below it; a smear at a band's end passes). A ray meeting ink stops there.
+
+    Parameters
+    ----------
+    graph : StackGraph
+    dominance : (H, W) array
+        ``blue - max(red, green)`` (native units, as ``cut`` and ``paper_level``).
+    paper_level, cut : float
+        The paper's dominance and the cut's (:class:`ThresholdResult` ``paper_level[0]`` and
+        ``dominance_min``).
+    mask : (H, W) bool array
+        The ink.
+    hole : Hole
+    width_px : (M,) array
+        Every stack's band width, px.
+    thickness_px : float
+
+    Returns
+    -------
+    list of (int, (float, float))
+        The stack and the (row, col) of every end continued by fainter ink.
+    """
+    H, W = mask.shape
+    level = 0.5 * (float(paper_level) + float(cut))
+    cr, cc = (float(v) for v in hole.center_rc)
+    inner = float(hole.radius_px) - float(thickness_px)
+    found = []
+    for sid, (u, v) in enumerate(graph.ends):
+        w = max(float(width_px[sid]), float(thickness_px))
+        for node, reverse in ((u, True), (v, False)):
+            if graph.node_kind.get(node) != "end":
+                continue
+            path = np.asarray(graph.paths[sid], float)
+            if reverse:
+                path = path[::-1]
+            # the direction before the cap, where the skeleton may hook into a corner
+            k1 = min(len(path) - 3, int(round(w)))
+            k2 = min(len(path) - 1, int(round(3 * w)))
+            if k1 < 0 or k2 - k1 < 2:
+                continue
+            d = path[-1 - k1] - path[-1 - k2]
+            n = math.hypot(*d)
+            if n == 0:
+                continue
+            d /= n
+            span = max(FAINT_WIDTHS * w, FAINT_MIN_H * thickness_px)
+            t = np.arange(1.0, w + span)
+            r = np.rint(path[-1, 0] + t * d[0]).astype(np.int64)
+            c = np.rint(path[-1, 1] + t * d[1]).astype(np.int64)
+            on = (r >= 0) & (r < H) & (c >= 0) & (c < W)
+            r, c, t = r[on], c[on], t[on]
+            ink = mask[r, c]
+            # past the band's own cap (the skeleton ends inside it), up to the next ink
+            paper = np.flatnonzero(~ink)
+            if not len(paper):
+                continue
+            r, c, t, ink = r[paper[0]:], c[paper[0]:], t[paper[0]:], ink[paper[0]:]
+            t = t - t[0]
+            stop = np.flatnonzero(ink)
+            keep = (t < span) & ((r - cr) ** 2 + (c - cc) ** 2 <= inner * inner)
+            if len(stop):
+                keep[stop[0]:] = False
+            r, c = r[keep], c[keep]
+            if len(r) < 0.5 * span:
+                continue
+            # the bluest of three samples across the ray: a direction a few degrees off
+            # still reads a band as narrow as the one that ends
+            q = 0.25 * w
+            best = np.full(len(r), -np.inf)
+            for o in (-q, 0.0, q):
+                rr = np.clip(np.rint(r - o * d[1]).astype(np.int64), 0, H - 1)
+                ccol = np.clip(np.rint(c + o * d[0]).astype(np.int64), 0, W - 1)
+                best = np.maximum(best, dominance[rr, ccol])
+            if np.count_nonzero(best >= level) >= FAINT_SHARE * len(r):
+                found.append((sid, (float(path[-1, 0]), float(path[-1, 1]))))
+    return found

@@ -170,8 +170,21 @@ def run(args) -> int:
               "(re-run the command to write it)", file=sys.stderr)
         return TERMINATED if isinstance(exc, Terminated) else INTERRUPTED
     for w in caught:  # hand them on to the command line, which prints ours as lines
-        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        message = w.message
+        if issubclass(w.category, Warning) and not _names_a_file(str(message)):
+            # a warning about a set or an option: the report it is about is the FILE
+            message = w.category(f"{args.out}: {message}")
+        warnings.warn_explicit(message, w.category, w.filename, w.lineno)
     return status
+
+
+def _names_a_file(message: str) -> bool:
+    """Whether ``message`` starts with a file or folder (``FILE: ...``)."""
+    head = message.split(": ", 1)[0]
+    try:
+        return bool(head) and Path(head).expanduser().exists()
+    except (OSError, ValueError):
+        return False
 
 
 def _run(args) -> int:

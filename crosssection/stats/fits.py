@@ -354,10 +354,11 @@ class FitResult:
         return self.ok and not self.rejected and bool(np.isfinite(self.bic))
 
     def label(self, digits: int = 3) -> str:
-        """Short text with every parameter, such as ``gamma alpha=0.31 chi=728``."""
+        """Short text with the law's name and every parameter, such as
+        ``Gamma alpha=0.31 chi=728`` (the figures' legends)."""
         ps = " ".join(f"{k}={self.params[k]:.{digits}g}"
                       for k in FAMILIES[self.family].param_names if k in self.params)
-        return f"{self.family} {ps}"
+        return f"{FAMILIES[self.family].title} {ps}"
 
     def p_text(self) -> str:
         """The p-value as printed: ``p < 1/200`` at the Monte-Carlo floor, else

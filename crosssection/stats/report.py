@@ -109,11 +109,16 @@ def _subplots(nrows=1, ncols=1, figsize=(6, 4.5)):
 
 
 def _log_ticks(axis):
-    """Labels at 1, 2 and 5 times the powers of ten and none at the other minor ticks: the
-    default labels every minor tick of a short log range, and the labels then overlap."""
+    """Labels at 1, 2 and 5 times the powers of ten (every whole multiple on a range of
+    less than a decade, which would hold only one or two of those) and none at the other
+    minor ticks: the default labels every minor tick of a short log range, and the labels
+    then overlap."""
     from matplotlib.ticker import LogLocator, NullFormatter
 
-    axis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+    lo, hi = sorted(axis.get_view_interval())
+    short = lo > 0 and hi / lo < 10
+    subs = tuple(float(k) for k in range(1, 10)) if short else (1.0, 2.0, 5.0)
+    axis.set_major_locator(LogLocator(base=10, subs=subs))
     axis.set_minor_formatter(NullFormatter())
 
 
@@ -243,19 +248,29 @@ def _curve(r: F.FitResult, params, xs, cut, count: bool):
 
 
 def _band(r: F.FitResult, xs, cut, count: bool, level=BAND_LEVEL):
-    """Pointwise ``level`` band of the law over its bootstrap replicates, or None."""
+    """Pointwise ``level`` band of the law over its bootstrap replicates, or None.
+
+    Drawn only where at least ``level`` of the replicates hold ``x`` in their support, from
+    those replicates: a law bounded by its sample's extremes (Bose-Einstein's ``x_lo``,
+    ``x_hi``) has a support that moves from replicate to replicate, and where some replicates
+    are 0 the band would run from 0 to the law's height, a slab over decades of density on a
+    log axis."""
     reps = r.replicates()
     if len(reps) < 10:  # too few replicates for a 95 % band
         return None
     with np.errstate(all="ignore"):
         ys = np.array([_curve(r, p, xs, cut, count) for p in reps], float)
+    inside = np.isfinite(ys) & (ys > 0)
+    ys = np.where(inside, ys, np.nan)
     q = (1 - level) / 2
     with np.errstate(all="ignore"):
         import warnings
 
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
-            return np.nanquantile(ys, q, axis=0), np.nanquantile(ys, 1 - q, axis=0)
+            lo, hi = np.nanquantile(ys, q, axis=0), np.nanquantile(ys, 1 - q, axis=0)
+    shared = inside.mean(axis=0) >= level
+    return np.where(shared, lo, np.nan), np.where(shared, hi, np.nan)
 
 
 def _sample(ens: Ensemble, set_name, reg, quantity, summ):
@@ -420,8 +435,10 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
                 ax.set_ylim(0, 1.15 * ymax_lin)
             ax.set_ylabel("fraction of stacks $P(n_{br})$" if count
                           else "probability density")
-            ax.set_title(f"{REGION_WORDS.get(reg, reg)}: {'linear' if not logscale else 'log'}"
-                         f" scale", fontsize=10)
+            scale = ("linear scale" if not logscale else
+                     "log scales" if ax.get_xscale() == "log" else
+                     "log density scale")
+            ax.set_title(f"{REGION_WORDS.get(reg, reg)}: {scale}", fontsize=10)
             power = 0
             if count:
                 ax.xaxis.get_major_locator().set_params(integer=True)
@@ -1161,7 +1178,8 @@ def _pdf_caption(q: str) -> str:
     return (f"Probability density of the {WORDS[q]} (points, counting error bars "
             f"sqrt(count)/(n bin width)) with the selected law (line) and its 95 % bootstrap "
             f"band, one colour per set, one row per sub-system, linear (left) and logarithmic "
-            f"(right) scales" + ("; dotted: detection limit, below which the fit is truncated "
+            f"(right) density scales, the right panel's x axis logarithmic too where the "
+            f"values span more than a decade (its title says which)" + ("; dotted: detection limit, below which the fit is truncated "
                                  "(where a set's scans differ, their range shaded and the "
                                  "largest dotted)."
                                  if QUANTITIES[q][3] else "."))
@@ -1280,6 +1298,13 @@ def _with_paper(ours: pd.DataFrame, paper: pd.DataFrame) -> pd.DataFrame:
                                                or c == "set"])], ignore_index=True)
 
 
+#: parameters of a law that the sample sets rather than the fit (:mod:`..families`): shown
+#: with what they are instead of a bootstrap interval
+SAMPLE_BOUNDS = {"x_lo": "the sample's least value or the detection limit",
+                 "x_hi": "the sample's largest value",
+                 "x_min": "the detection limit or the sample's least value"}
+
+
 def _selected_table(res: StatsResult) -> pd.DataFrame:
     """The selected law of every set, sub-system and quantity, parameters with intervals."""
     rows = []
@@ -1291,9 +1316,17 @@ def _selected_table(res: StatsResult) -> pd.DataFrame:
             continue
         ps = []
         for nm in FAMILIES[r.family].param_names:
+            if nm in SAMPLE_BOUNDS:
+                # the sample's extreme or the detection limit, not a fitted value: its
+                # resamples' spread is no confidence interval
+                ps.append(f"{nm} = {r.params[nm]:.3g} ({SAMPLE_BOUNDS[nm]})")
+                continue
             lo, hi = r.ci.get(nm, (np.nan, np.nan))
             ci = f" [{lo:.3g}, {hi:.3g}]" if np.isfinite(lo) and np.isfinite(hi) else ""
             ps.append(f"{nm} = {r.params[nm]:.3g}{ci}")
+        if r.discrete:  # a count law's parameters are the continuous law's: say its mean
+            kk = np.arange(1, 10_000)
+            ps.append(f"mean {float(np.sum(kk * r.pmf(kk))):.3g}")
         others = sorted((o.bic - r.bic, f) for f, o in summ.results.items()
                         if o.selectable and f != r.family)
         # a degenerate fit may reach a lower BIC (its shape parameters run off to a limit
@@ -1415,8 +1448,58 @@ def _model_share_note(ens: Ensemble) -> str:
             "out 3-15 % above the truth's on two generators.</p>")
 
 
-def _methods(meta, opts: StatsOptions) -> str:
+#: How each curvature method of the analysis reads κ, for the methods paragraph
+#: (:data:`crosssection.params.CURVATURE_METHODS`)
+_CURVATURE_TEXT = {
+    "walls": "parabolic fits over 5 n<sub>br</sub> h along the centreline read between each "
+             "band's two walls; near junctions, where a band is still merged with its "
+             "neighbours, κ is read along the merged band's outer wall where a layer lies "
+             "along it and otherwise continued from the nearest fitted windows (their trend "
+             "where it exceeds the noise), and the scan's own fit noise is removed from e",
+    "missing": "parabolic fits over 5 n<sub>br</sub> h along the centreline read between "
+               "each band's two walls; near junctions, where a band is still merged with its "
+               "neighbours, κ is continued from the nearest fitted windows (their trend where "
+               "it exceeds the noise), and the scan's own fit noise is removed from e",
+    "paper": "parabolic fits over 5 n<sub>br</sub> h along the smoothed skeleton, as in the "
+             "paper; near junctions κ is the nearest fitted one, and the fit noise is not "
+             "removed from e",
+}
+
+
+def _curvature_methods(ens) -> list:
+    """The curvature methods the scans of ``ens`` were analysed with (their recorded
+    parameters; the default for a record without one), in the order of
+    :data:`_CURVATURE_TEXT`; [] without scans."""
+    from crosssection.params import AnalysisParams
+
+    if ens is None or "analysis" not in ens.configs:
+        return []
+    used = set()
+    for cell in ens.configs["analysis"].dropna():
+        try:
+            rec = json.loads(cell)
+        except (TypeError, ValueError):
+            continue
+        params = rec.get("parameters") if isinstance(rec, dict) else None
+        if params:  # an analysis (a simulation records no image parameters)
+            used.add(params.get("curvature_method") or AnalysisParams.curvature_method)
+    return [m for m in _CURVATURE_TEXT if m in used] + sorted(used - set(_CURVATURE_TEXT))
+
+
+def _curvature_text(methods) -> str:
+    """`` (images: ...)`` naming how κ was read, per curvature method used."""
+    if not methods:
+        return ""
+    parts = [f"<code>{html.escape(str(m))}</code>: {_CURVATURE_TEXT.get(m, 'see the analysis')}"
+             for m in methods]
+    if len(parts) == 1:
+        return f" (images, curvature method {parts[0]})"
+    return " (images, analysed with several curvature methods; " + "; ".join(parts) + ")"
+
+
+def _methods(meta, opts: StatsOptions, ens=None) -> str:
     """The methods paragraph of the report."""
+    methods = _curvature_methods(ens)
     n_mc = opts.n_mc
     gof = (f"Goodness of fit: Anderson-Darling statistic (for the counts n_br, the "
            f"likelihood-ratio statistic G) with a parametric-bootstrap p-value from {n_mc} "
@@ -1431,12 +1514,7 @@ def _methods(meta, opts: StatsOptions) -> str:
         "measure its length l, mean curvature κ<sub>m</sub>, mean absolute curvature "
         "κ<sub>+</sub> and energy e: for scans the bending energy e = L∫κ²ds, for simulated "
         "rods the branch's bending energy plus its confinement energy, as in the paper's "
-        "simulations (images: κ from parabolic fits over "
-        "5 n<sub>br</sub> h along the smoothed skeleton, as in the paper; near junctions, where "
-        "a band is still merged with its neighbours, κ is read along the merged band's outer "
-        "wall where a layer lies along it and otherwise continued from the nearest fitted "
-        "windows, and the scan's own fit noise is removed from e); per configuration the "
-        "numbers of stacks "
+        f"simulations{_curvature_text(methods)}; per configuration the numbers of stacks "
         "N<sub>l</sub> and branches N<sub>br</sub>, the compaction ε and the total energy E; "
         "per void its area s and shape ratio √s/p. Lengths are in units of the rod length L. "
         "Branches touching the container wall form the periphery, the others the bulk "
@@ -1482,7 +1560,7 @@ def _html(res: StatsResult, figs, meta, ens: Ensemble | None = None,
         parts.append(f"<p class='warn'><b>Table unlike its summary.json:</b> "
                      f"{html.escape(note)}: the scan's counts, tables and fits are those of "
                      "the rows; its E and ε are summary.json's.</p>")
-    parts += [_methods(meta, opts), _per_set_text(meta)]
+    parts += [_methods(meta, opts, ens), _per_set_text(meta)]
     if ens is not None:
         qual = _quality_rows(ens)
         if len(qual):
@@ -1503,8 +1581,10 @@ def _html(res: StatsResult, figs, meta, ens: Ensemble | None = None,
             for n in ("macro", "micro", "fits", "relations", "dof", "truncation"))
         + " <a href='correlations.csv'>correlations.csv</a> "
           "<a href='per_config.csv'>per_config.csv</a> <a href='stats.json'>stats.json</a></p>",
-        "<h2>Averages per set: stacks, branches and voids</h2><p>Means over all "
-        "configurations of a set; the paper's values below ours.</p>",
+        "<h2>Averages per set: stacks, branches and voids</h2><p>N<sub>l</sub> and "
+        "N<sub>br</sub> are means over the configurations of a set; n<sub>br</sub>, s/L², "
+        "√s/p and l/L are pooled means over all the set's stacks, voids and branches (see "
+        "docs/report.md). The paper's values below ours.</p>",
         _html_table(_with_paper(res.macro, PAPER_MACRO)),
         "<h2>Averages per set: curvature and energy</h2><p>Means, and the shape α and scale χ "
         "of the Gamma law fitted to the branch energies e and to the total energies E; the "

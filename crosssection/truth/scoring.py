@@ -161,8 +161,21 @@ def match_points(out_xy: np.ndarray, truth_xy: np.ndarray, max_dist) -> tuple[np
     return r[ok], c[ok]
 
 
-def score(result, truth, *, match_px: float | None = None, px_per_mm: float = 50.0,
-          thickness_mm: float = 0.1) -> dict:
+def _recorded(given, name, result_summary, truth_summary, default) -> float:
+    """A scale the caller gave, else the one the analysis (or the truth) recorded: a scan of
+    25 px/mm scored at 50 would match junctions within 6 h."""
+    if given is not None:
+        return float(given)
+    for summary in (result_summary, truth_summary):
+        for record in (summary.get("parameters") or {}, summary):
+            value = record.get(name) if isinstance(record, dict) else None
+            if isinstance(value, (int, float)) and not isinstance(value, bool) and value > 0:
+                return float(value)
+    return default
+
+
+def score(result, truth, *, match_px: float | None = None, px_per_mm: float | None = None,
+          thickness_mm: float | None = None) -> dict:
     """Compare an analysis with the truth.
 
     Parameters
@@ -171,8 +184,10 @@ def score(result, truth, *, match_px: float | None = None, px_per_mm: float = 50
         ``tables`` holds the four schema DataFrames.
     match_px : float, optional
         Junction matching radius in pixels; default 3 h (``3 * thickness_mm * px_per_mm``).
-    px_per_mm, thickness_mm : float
-        Used only for the default ``match_px``.
+    px_per_mm, thickness_mm : float, optional
+        The scan's scale and sheet thickness, for the default ``match_px`` and the stack and
+        void matching radii; default: those the analysis recorded (``summary["parameters"]``),
+        else the truth's, else 50 px/mm and 0.1 mm.
 
     Returns
     -------
@@ -190,6 +205,8 @@ def score(result, truth, *, match_px: float | None = None, px_per_mm: float = 50
     """
     rs, rt = _as_pair(result, "result")
     ts, tt = _as_pair(truth, "truth")
+    px_per_mm = _recorded(px_per_mm, "px_per_mm", rs, ts, 50.0)
+    thickness_mm = _recorded(thickness_mm, "thickness_mm", rs, ts, 0.1)
     if match_px is None:
         match_px = 3.0 * thickness_mm * px_per_mm
     out = {"match_px": float(match_px)}

@@ -434,3 +434,23 @@ def test_the_api_write_refuses_what_the_command_refuses(small_scan, tmp_path):
     assert [p.name for p in batch.iterdir()] == ["batch.json"]
     assert "summary.json" in {p.name for p in res.write(tmp_path / "mine").values()} or \
         (tmp_path / "mine" / "summary.json").is_file()
+
+
+def test_analyze_keeps_the_step_images_of_a_steps_run_of_the_same_scan(small_scan, tmp_path,
+                                                                      capsys):
+    """steps then analyze into one folder: analyze's re-run clean-up took the steps run's
+    images and record for its own."""
+    out = tmp_path / "both"
+    assert crosssection.cli.main(["steps", str(small_scan), "--out", str(out)]) == 0
+    steps = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert "steps.json" in steps
+    assert crosssection.cli.main(["analyze", str(small_scan), "--out", str(out),
+                                  "--no-figure"]) == 0
+    assert "removed" not in capsys.readouterr().out
+    assert {n: (out / n).read_bytes() for n in steps} == steps
+    assert (out / "summary.json").is_file()
+    # analyze --steps writes its own step images: the steps run's record no longer
+    # describes them
+    assert crosssection.cli.main(["analyze", str(small_scan), "--out", str(out),
+                                  "--no-figure", "--steps"]) == 0
+    assert not (out / "steps.json").exists()

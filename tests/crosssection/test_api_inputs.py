@@ -176,6 +176,22 @@ def test_the_recorded_calibration_forms_are_parameters():
         Calibration.of(object())
 
 
+def test_a_calibration_table_is_copied_into_the_frozen_parameters():
+    """The caller's DataFrame changed afterwards changes neither the parameters nor what they
+    analyse again; the parameters stay hashable."""
+    import pandas as pd
+
+    cal = pd.DataFrame({"n_layers": [1, 2, 3], "width_mm": [0.14, 0.25, 0.36]})
+    params = cs.AnalysisParams(calibration=cal)
+    cal["width_mm"] = cal["n_layers"] * 0.1
+    assert isinstance(params.calibration, Calibration)
+    assert params.calibration.width_mm == (0.14, 0.25, 0.36)
+    assert params.to_dict()["calibration"] == [[1, 0.14], [2, 0.25], [3, 0.36]]
+    assert hash(params) == hash(cs.AnalysisParams(calibration=[[1, 0.14], [2, 0.25], [3, 0.36]]))
+    with pytest.raises(ParameterError, match="strictly increasing"):
+        cs.AnalysisParams(calibration=pd.DataFrame({"n_layers": [1, 2], "width_mm": [0.3, 0.2]}))
+
+
 def test_a_calibration_file_given_relative_is_recorded_absolute(scan, tmp_path, monkeypatch):
     """summary.json is read from elsewhere than the caller's folder: the path it records must
     lead to the file from anywhere (links followed, as the command line records it)."""
@@ -370,3 +386,51 @@ def test_a_float_image_is_converted_in_blocks_as_in_one_piece(monkeypatch, dtype
     a[12, 4, 2] = np.nan
     with pytest.raises(ImageError, match="NaN or infinite"):
         load._float_to_uint16(a)
+
+
+@pytest.mark.parametrize("make, says", [
+    (lambda a: np.moveaxis(a, -1, 0), "numpy.moveaxis"),
+    (lambda a: a.astype(np.float32), "divide by 255"),
+    (lambda a: a.astype(np.int16) - 128, "negative pixel values"),
+])
+def test_an_array_in_a_common_wrong_form_is_refused_with_the_fix(scan, make, says):
+    from crosssection.core.errors import ImageError
+
+    with pytest.raises(ImageError, match=says):
+        cs.analyze(make(scan), **KW)
+
+
+def test_an_image_object_is_refused_with_the_fix(scan):
+    from PIL import Image
+
+    from crosssection.core.errors import ImageError
+
+    with pytest.raises(ImageError, match=r"numpy\.asarray"):
+        cs.analyze(Image.fromarray(scan), **KW)
+
+
+def test_results_compare_by_identity(result):
+    import pickle
+
+    again = pickle.loads(pickle.dumps(result))
+    assert result == result and result != again
+    assert again.summary["n_branches"] == result.summary["n_branches"]
+
+
+def test_a_scan_without_junctions_has_the_tables_dtypes_of_one_with_them(result):
+    img = np.full((400, 400, 3), 245, np.uint8)
+    img[195:205, 50:350] = (31, 57, 167)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        lone = cs.analyze(img, **KW, hole_radius_mm=3.8, hole_center_px=[200, 200])
+    assert len(lone.junctions) == 0 and len(result.junctions) > 0
+    assert lone.junctions.dtypes.to_dict() == result.junctions.dtypes.to_dict()
+
+
+def test_the_paper_method_records_no_share_of_energy_on_the_fork_zone_model(scan):
+    """The paper's method estimates no per-stack uncertainty: its total is unknown, not 1."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = cs.analyze(scan, **KW, curvature_method="paper")
+    assert res.stacks["energy_rel_uncertainty"].isna().all()
+    assert res.summary["total_energy_rel_uncertainty"] is None

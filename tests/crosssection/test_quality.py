@@ -382,6 +382,13 @@ def test_the_blot_checks_hold_on_good_short_and_free_stacks():
     stacks.loc[2, ["n_br", "layers_est"]] = [3, 3.1]
     assert [f.code for f in quality._count_width_check(stacks)] == ["count_width"]
     assert [f.code for f in quality._isolated_check(stacks)] == ["isolated_stacks"]
+    # the message says how much of the scan's energy the pieces hold: a pen stroke's turns
+    # can be most of it
+    stacks["energy_per_branch"] = [10.0, 20.0, 100.0]
+    assert "they carry 79 % of the total bending energy" in \
+        quality._isolated_check(stacks)[0].message
+    stacks.loc[2, "energy_per_branch"] = 0.1
+    assert "bending energy" not in quality._isolated_check(stacks)[0].message
 
 
 def test_more_odd_bands_ending_in_the_scan_than_a_rod_has_ends_are_flagged():
@@ -771,3 +778,19 @@ def test_a_scan_partly_transparent_inside_the_hole_is_flagged(scene):
     rgba[:4, :4, 3] = 0
     res, caught = _analyze(rgba, **_given(scene))
     assert "see_through" not in res.summary["quality"]["codes"]
+
+
+def test_ink_faded_across_part_of_the_scan_is_flagged(scene):
+    """A strip where the ink faded to a third of its contrast: the cut drops the bands
+    there, and their ends, continued by lighter blue ink, are named."""
+    rgb = scene.rgb.astype(np.float32)
+    cx, cy = scene.params["hole_center_px"]
+    strip = np.s_[:, int(cx) + 20:int(cx) + 120]
+    paper = np.median(rgb[:20, :20].reshape(-1, 3), axis=0)
+    rgb[strip] = 0.35 * rgb[strip] + 0.65 * paper
+    res, caught = _analyze(np.clip(rgb, 0, 255).astype(np.uint8), **_given(scene))
+    flag = next(f for f in res.quality if f.code == "faint_ink")
+    assert flag.value >= 2 and "fainter blue ink" in flag.message
+    assert any(w.category is quality.ThresholdWarning for w in caught)
+    # every end named lies at the strip's edge
+    assert res.summary["n_free_end_stacks"] >= flag.value

@@ -61,9 +61,7 @@ def test_a_smaller_rerun_records_the_configurations_its_tables_hold(tmp_path):
     from simulate.ensemble import run_ensemble
 
     params = dict(command="quench", n_configs=3, n_segments=30, lam=2e4, noise=75.0, seed=2,
-                  method="lbfgs", n_runs=1, maxiter=3, nematic_runs=[], u=0.0,
-                  nematic_cutoff=None, ftol=1e-4, xtol=1e-4, wall_radius=None,
-                  contact_distance=None, parametrization="bend")
+                  method="lbfgs", wall_radius=None, contact_distance=None)
     run_ensemble(params, tmp_path, progress=False)
     run_ensemble({**params, "n_configs": 2}, tmp_path, progress=False)
     assert json.loads((tmp_path / "params.json").read_text())["n_configs"] == 2
@@ -377,3 +375,38 @@ def test_more_workers_than_cpus_are_capped_in_one_warning_line(tmp_path, command
     assert r.returncode == 0, r.stderr
     lines = [ln for ln in r.stderr.splitlines() if f"--workers {asked}" in ln]
     assert len(lines) == 1 and lines[0].startswith("warning: ")
+
+
+def test_a_dict_typed_in_python_takes_the_command_lines_defaults_and_checks():
+    """run_ensemble's parameters given in Python: missing keys are the command line's
+    defaults, and what the command line refuses is one ParameterError naming it."""
+    from crosssection.core.errors import ParameterError
+    from simulate.cli import build_parser
+    from simulate.ensemble import checked_params, params_from_args
+
+    partial = checked_params({"command": "quench", "n_configs": 2, "n_segments": 40,
+                              "seed": 1})
+    full = params_from_args(build_parser().parse_args(
+        ["quench", "--n-configs", "2", "--segments", "40", "--seed", "1", "--out", "."]))
+    assert partial == full and partial["wall_radius"] is None and partial["n_runs"] >= 1
+    # a dict the command line made goes through unchanged
+    assert checked_params(full) == full
+    with pytest.raises(ParameterError, match="no effect on quench --method lbfgs"):
+        checked_params({"command": "quench", "method": "lbfgs", "n_runs": 2})
+    for bad, named in [({"seed": -1}, "--seed"), ({"lam": -5.0}, "--lambda"),
+                       ({"noise": float("nan")}, "--noise"), ({"method": "bogus"}, "method"),
+                       ({"n_segments": 2}, "--segments"), ({"n_configs": 0}, "--n-configs"),
+                       ({"seed": 1.5}, "seed"), ({"lamda": 1.0}, "lamda"),
+                       ({"command": "compact"}, "command")]:
+        with pytest.raises(ParameterError, match=named):
+            checked_params({"command": "quench", **bad})
+
+
+def test_run_ensemble_refuses_a_bad_dict_before_writing(tmp_path):
+    from crosssection.core.errors import ParameterError
+    from simulate.ensemble import run_ensemble
+
+    with pytest.raises(ParameterError, match="--seed"):
+        run_ensemble({"command": "quench", "n_configs": 1, "seed": -1}, tmp_path / "e",
+                     progress=False)
+    assert not (tmp_path / "e").exists()

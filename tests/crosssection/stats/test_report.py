@@ -138,7 +138,10 @@ def test_small_samples_are_named_in_a_warning_and_in_the_report(tmp_path, capfd)
     assert main(["stats", str(sim), "--out", str(tmp_path / "r"), "--n-boot", "0", "--no-gof",
                  "--no-figures"]) == 0
     err = capfd.readouterr().err.splitlines()
-    assert len([ln for ln in err if ln.startswith("warning: set tiny: ")]) == 1
+    assert len([ln for ln in err if ": set tiny: " in ln]) == 1
+    # 'warning: FILE: ...': a warning about a set names the report it is about
+    assert all(ln.startswith(f"warning: {tmp_path / 'r'}: set ") for ln in err
+               if ": set " in ln)
     page = (tmp_path / "r" / "report.html").read_text()
     n = N_RELATION_MIN - 1
     assert f"n = {n_voids}: below the {N_SELECT_MIN} samples model selection needs" in page
@@ -227,3 +230,24 @@ def test_a_selection_the_data_do_not_decide_is_said_so():
         assert ("do not tell the two laws apart" in text) == (gap < BIC_UNDECIDED)
         said.append(gap < BIC_UNDECIDED)
     assert any(said)
+
+
+def test_the_methods_paragraph_names_the_curvature_method_the_scans_used(tmp_path):
+    """The report described the default estimator whatever the scans were analysed with."""
+    import json as _json
+
+    from crosssection.stats.report import _curvature_methods, _curvature_text
+
+    class _Ens:
+        def __init__(self, methods):
+            self.configs = pd.DataFrame({"analysis": [
+                _json.dumps({"version": "x", "parameters": {"curvature_method": m}})
+                for m in methods] + [_json.dumps({"version": "x", "parameters": {}})]})
+
+    # a configuration without image parameters (a simulation) names no method
+    assert _curvature_methods(_Ens(["paper"])) == ["paper"]
+    text = _curvature_text(_curvature_methods(_Ens(["walls", "paper"])))
+    assert "several" in text and "smoothed skeleton" in text and "two walls" in text
+    assert _curvature_methods(None) == [] and _curvature_text([]) == ""
+    only = _curvature_text(["paper"])
+    assert "<code>paper</code>" in only and "walls" not in only

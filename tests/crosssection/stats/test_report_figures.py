@@ -382,3 +382,23 @@ def test_a_long_set_name_is_shortened_in_the_legend_only():
     texts = [t.get_text() for ax in fig.axes if ax.get_legend()
              for t in ax.get_legend().get_texts()]
     assert texts and all(t.startswith(_short(long) + ": ") for t in texts)
+
+
+def test_the_bootstrap_band_is_drawn_only_where_the_replicates_share_the_support():
+    """A Bose-Einstein law is bounded by its sample's extremes, which move from resample to
+    resample: its band stops where replicates disagree on the support, instead of running
+    from 0 to the law's height there."""
+    import numpy as np
+
+    from crosssection.stats import fits as F
+    from crosssection.stats.report import _band
+
+    x = np.random.default_rng(3).gamma(1.5, 0.01, 300) + 0.002
+    r = F.fit_family(x, "bose_einstein", n_boot=60, seed=1)
+    grid = np.linspace(x.min() * 0.9, x.max() * 1.1, 400)
+    lo, hi = _band(r, grid, None, False)
+    drawn = np.isfinite(lo) & np.isfinite(hi)
+    assert drawn.any()
+    # beyond the sample, no replicate's support: nothing drawn; where drawn, above 0
+    assert not drawn[(grid < x.min()) | (grid > x.max())].any()
+    assert (lo[drawn] > 0).all()

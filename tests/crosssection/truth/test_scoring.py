@@ -183,3 +183,17 @@ def test_score_names_a_wrong_argument(bad):
     with pytest.raises(ParameterError, match="^result must be"):
         score(bad, sc)
     assert score(sc, sc)["junction_f1"] == 1.0
+
+
+def test_the_matching_radius_is_that_of_the_scale_the_analysis_recorded(truth):
+    """A 25 px/mm analysis is matched within 3 h = 7.5 px, not the 15 px of 50 px/mm."""
+    out = _copy(truth)
+    out[0]["parameters"] = {"px_per_mm": 25.0, "thickness_mm": 0.1}
+    assert score(out, truth)["match_px"] == pytest.approx(7.5)
+    assert score(out, truth, px_per_mm=50.0)["match_px"] == pytest.approx(15.0)
+    bare = _copy(truth)
+    bare[0].pop("parameters", None)
+    bare[0].pop("px_per_mm", None)
+    t = _copy(truth)
+    t[0].pop("px_per_mm", None)
+    assert score(bare, t)["match_px"] == pytest.approx(15.0)
