@@ -109,17 +109,35 @@ def _subplots(nrows=1, ncols=1, figsize=(6, 4.5)):
 
 
 def _log_ticks(axis):
-    """Labels at 1, 2 and 5 times the powers of ten (every whole multiple on a range of
-    less than a decade, which would hold only one or two of those) and none at the other
-    minor ticks: the default labels every minor tick of a short log range, and the labels
-    then overlap."""
-    from matplotlib.ticker import LogLocator, NullFormatter
+    """Labels at 1, 2 and 5 times the powers of ten on a range of up to two and a half
+    decades (every whole multiple below one decade, the powers alone beyond) and none at the
+    other minor ticks: the default labels every minor tick of a short log range, and the
+    labels then overlap."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
     lo, hi = sorted(axis.get_view_interval())
-    short = lo > 0 and hi / lo < 10
-    subs = tuple(float(k) for k in range(1, 10)) if short else (1.0, 2.0, 5.0)
+    decades = np.log10(hi / lo) if lo > 0 else np.inf
+    # 1, 2 and 5 up to two and a half decades, the powers of ten alone beyond (more would
+    # run together on a panel a few inches wide)
+    subs = (tuple(float(k) for k in range(1, 10)) if decades < 1 else
+            (1.0, 2.0, 5.0) if decades <= 2.5 else (1.0,))
     axis.set_major_locator(LogLocator(base=10, subs=subs))
+    # every major tick labelled (matplotlib's log formatter leaves out the 2s and 5s of a
+    # range of one or two decades, which then shows one or two labels)
+    axis.set_major_formatter(FuncFormatter(lambda v, _: _power_label(v)))
     axis.set_minor_formatter(NullFormatter())
+
+
+def _power_label(v: float) -> str:
+    """``v`` as ``m×10^k`` in mathtext (``10^k`` for m = 1)."""
+    if not (v > 0 and np.isfinite(v)):
+        return ""
+    k = int(np.floor(np.log10(v) + 1e-9))
+    m = round(v / 10.0 ** k, 6)
+    if m >= 10:
+        m, k = m / 10, k + 1
+    mant = "" if abs(m - 1) < 1e-6 else f"{m:g}\\times"
+    return f"${mant}10^{{{k}}}$"
 
 
 def _linear_ticks(axis) -> int:

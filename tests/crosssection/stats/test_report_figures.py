@@ -402,3 +402,26 @@ def test_the_bootstrap_band_is_drawn_only_where_the_replicates_share_the_support
     # beyond the sample, no replicate's support: nothing drawn; where drawn, above 0
     assert not drawn[(grid < x.min()) | (grid > x.max())].any()
     assert (lo[drawn] > 0).all()
+
+
+@pytest.mark.parametrize("lo, hi, least", [(0.0027, 0.0365, 3), (0.0045, 0.06, 3),
+                                           (8.0, 700.0, 5)])
+def test_a_log_axis_of_one_or_two_decades_has_labels_enough(lo, hi, least):
+    """matplotlib's log formatter labelled only 10^-2 and 2x10^-2 of a 0.003-0.04 axis."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from crosssection.stats.report import _log_ticks
+
+    fig, ax = plt.subplots()
+    ax.set_xscale("log")
+    ax.set_xlim(lo, hi)
+    _log_ticks(ax.xaxis)
+    fig.canvas.draw()
+    shown = [t.get_text() for t in ax.get_xticklabels()
+             if t.get_text() and lo <= t.get_position()[0] <= hi]
+    plt.close(fig)
+    assert len(shown) >= least, shown
+    assert len(set(shown)) == len(shown)
