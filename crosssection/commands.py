@@ -14,10 +14,10 @@ A run leaves DIR describing itself alone: when DIR holds the record of an earlie
 (``summary.json`` or ``steps.json``), the files of the command that this run does not write
 (``overlay.png`` under ``--no-figure``, the step images without ``--steps``, ``steps.png``
 under ``steps --no-figure``) are removed from DIR once the new outputs are written; the step
-images of a ``steps`` run of the same scan, which its ``steps.json`` describes, stay beside an
-``analyze`` without ``--steps``. Only those
-names are: nothing else in DIR is touched, a folder with no such record keeps its files (they
-are the user's), and a run that fails leaves the previous outputs whole. Every file is written
+images of a ``steps`` run of the same scan, which its ``steps.json`` describes, stay beside
+an ``analyze`` without ``--steps``. Only those names are: nothing else in DIR is touched, a
+folder with no such record keeps its files (they are the user's), and a run that fails
+leaves the previous outputs whole. Every file is written
 to a hidden temporary file and renamed; those that a run killed while writing left in DIR
 (``.overlay.png.XXXX.png``) are removed when the next run starts (:func:`clear_temporary`).
 DIR may not be the scan's own folder: a batch of that folder would read the outputs as scans.

@@ -1135,11 +1135,12 @@ def faint_band_ends(graph, dominance, *, paper_level: float, cut: float, mask, h
     ``"end"``) a ray is followed along the end's direction (the chord of its skeleton from
     three widths to one width before the end: the last width may hook into a corner of the
     cut) for :data:`FAINT_WIDTHS` widths (at least :data:`FAINT_MIN_H` h) past the band's
-    own cap, reading the bluest of three samples across it (a quarter width apart). The end is continued when
-    :data:`FAINT_SHARE` of the ray's samples inside the hole (at least half of the ray must
-    be) are paper-side of the ink but bluer than the midpoint of the paper's dominance and the
-    cut, the level of :func:`bridge_broken_lines` (a receding surface, blue by 8-16 levels over
-    its grey, stays below it; a smear at a band's end passes). A ray meeting ink stops there.
+    own cap, reading the bluest of three samples across it, a quarter width apart. The end
+    is continued when :data:`FAINT_SHARE` of the ray's samples inside the hole (at least half
+    of the ray must be) are bluer than the midpoint of the paper's dominance and the cut, the
+    level of :func:`bridge_broken_lines` (a receding surface, blue by 8-16 levels over its
+    grey, stays below it; a light-blue smear at a band's end passes). A ray meeting ink stops
+    there.
 
     Parameters
     ----------
