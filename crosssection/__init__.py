@@ -11,6 +11,11 @@ simulator, which imports the shared core) does not pay for the whole pipeline's 
 import importlib
 
 from crosssection._version import __version__
+from crosssection.core.numbacache import use_writable_cache
+
+# before numba is imported: a read-only install run from a read-only home has no cache
+# folder otherwise, and every compiled kernel fails (crosssection.core.numbacache)
+use_writable_cache()
 
 _LAZY = {
     "analyze": "crosssection.pipeline",

@@ -117,8 +117,8 @@ from crosssection.core.errors import (ConfigError, FoldstatError, ImageError, Ou
                                       ParameterError, output_error, printable)
 from crosssection.core.fileio import (BROWSER_FILES, PARTIAL_TAG, check_out, clear_stale_folders,
                                       is_working_folder, missing_file_reason, read_json_object,
-                                      staging_folder, swap_in_folder, temporary_files,
-                                      write_csv, write_json)
+                                      special_file_reason, staging_folder, swap_in_folder,
+                                      temporary_files, write_csv, write_json)
 from crosssection.core.parallel import (ClusterLostError, capped_workers, compiling_in_turn,
                                         get_executor)
 from crosssection.params import (PARAM_NAMES, AnalysisParams, add_analysis_arguments,
@@ -231,9 +231,14 @@ def _walk_scans(input_dir, *, exclude=()) -> tuple[list[Path], list[Path]]:
 
 
 def _broken_link(image: Path) -> str | None:
-    """The one-line reason of an image that is a symbolic link to nothing, else None."""
+    """The one-line reason of an image that is a symbolic link to nothing, or a named pipe,
+    a socket or a device named like a scan (hashing it while planning would block or never
+    end), else None."""
     if image.is_symlink() and not image.exists():
         return ImageError(missing_file_reason(image), image).one_line()
+    special = special_file_reason(image)
+    if special:
+        return ImageError(special, image).one_line()
     return None
 
 
@@ -344,8 +349,19 @@ def _set_folder(set_name: str) -> str:
     return f"set_{set_name}" if set_name.lower() in RESERVED_NAMES else set_name
 
 
+#: the longest output folder name a scan's stem gives (characters): its staging folder adds
+#: a prefix and a suffix, and a name of 255 bytes, the usual limit, would fail as it is written
+FOLDER_NAME_MAX = 100
+
+
 def _safe_component(text: str) -> str:
-    return "".join(c if (c.isalnum() or c in "-_+") else "_" for c in text)
+    safe = "".join(c if (c.isalnum() or c in "-_+") else "_" for c in text)
+    if len(safe.encode("utf-8", "surrogateescape")) <= FOLDER_NAME_MAX:
+        return safe
+    # a long name keeps its start, and a hash of the whole keeps it apart from its kin
+    digest = hashlib.sha256(text.encode("utf-8", "surrogateescape")).hexdigest()[:12]
+    head = safe.encode("utf-8", "surrogateescape")[:FOLDER_NAME_MAX - 13]
+    return head.decode("utf-8", "ignore") + "-" + digest
 
 
 def _clashing(names: list[str], taken: list[str]) -> list[bool]:

@@ -243,6 +243,14 @@ def remove_stale(out_dir, command: str, written) -> list[Path]:
                      if name not in kept and ((out / name).is_file() or (out / name).is_symlink()))
 
 
+def _check_image_given(image) -> None:
+    """An empty IMAGE is one line naming it (``Path("")`` is the working folder)."""
+    if not str(image).strip():
+        from crosssection.core.errors import ImageError
+
+        raise ImageError("empty image path: give the scan's file")
+
+
 def _steps_record(out: Path) -> bool:
     """Whether ``out`` holds the record of a ``steps`` run."""
     from crosssection.core.records import RECORDS
@@ -294,6 +302,7 @@ def run(args) -> int:
     from crosssection.pipeline import analyze
     from crosssection.result import rod_length_text
 
+    _check_image_given(args.image)
     check_out(args.out)
     check_not_beside(args.image, args.out)
     check_not_other_output(args.out, args.image)
@@ -317,6 +326,7 @@ def run_steps(args) -> int:
     from crosssection.figures import step_titles
     from crosssection.pipeline import preprocess, write_step_images
 
+    _check_image_given(args.image)
     check_out(args.out)
     check_not_beside(args.image, args.out)
     check_not_other_output(args.out, args.image, "steps")

@@ -112,6 +112,9 @@ def _read(image):
     """The scan, its path (None for an array), the EXIF orientation read with a PNG's
     pixels (None otherwise: :func:`~crosssection.stages.load.exif_orientation` reads it) and
     the mask of the pixels an alpha channel made see-through (None: all opaque)."""
+    if isinstance(image, str) and not image.strip():
+        # Path("") is the working folder, which the loader would name as a folder
+        raise ImageError("empty image path: give the scan's file")
     if isinstance(image, (str, Path)):
         rgb, orientation, see_through = load_image_oriented(image, opacity=True)
         return rgb, str(image), orientation, see_through
@@ -717,7 +720,8 @@ def _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, void
         network_shares=_network_shares(lin, stacks),
         border_ink_rc=_border_pixels(pre.mask_clean), width_law=law,
         junction_radius_px=_inscribed_radius_px(pre.distance_px, junctions),
-        see_through=pre.see_through, faint_ends=faint)
+        see_through=pre.see_through, faint_ends=faint,
+        calibration_one_layer_mm=_one_layer_mm(cal, p))
     notes = list(pre.warnings) + [f"linear system: {f}" for f in lin.flags
                                   if not str(f).startswith("disconnected")]
     summary = tb.summary(pre=pre, params=p, linear_system=lin, junctions=junctions,
@@ -751,6 +755,18 @@ def _calibration_source(p: AnalysisParams, law) -> object:
     if law is not None and law.ok:
         return f"fitted to the scan: {law.describe()}"
     return LINEAR_CALIBRATION
+
+
+def _one_layer_mm(cal, p) -> float | None:
+    """The given calibration's width of one layer (None without one, or for an object that
+    is no table)."""
+    if p.calibration is None or not hasattr(cal, "width"):
+        return None
+    try:
+        w = float(np.asarray(cal.width(1.0), float).reshape(-1)[0])
+    except (TypeError, ValueError, IndexError):
+        return None
+    return w if np.isfinite(w) and w > 0 else None
 
 
 def _max_width_mm(cal, p) -> float | None:

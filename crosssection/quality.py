@@ -44,6 +44,8 @@ epsilon_ink              L h over the ink area inside the hole                ou
 specks                   free stacks (both ends free) shorter than 2 l_min    > 5 % of stacks
 loops                    closed loops of ink touching no other stack          any, beside others
 widths_out_of_range      stacks wider than the calibration's widest entry     > 5 % of stacks
+thickness_calibration    the calibration's width of one layer / the sheet     outside [1/2, 5/2]
+                         thickness h (a cut sheet's band is about h wide)
 layer_lattice            median |layers from width - final n_br|, weighted    > 0.12 layer, or
                          by stack length (h >= 3 px)                          0.75 px / h if more
 linear_system            junctions whose final counts violate conservation    > 10 % of junctions
@@ -262,6 +264,7 @@ CATEGORIES = {
     "non_square": CalibrationWarning,
     "widths_out_of_range": CalibrationWarning,
     "layer_lattice": CalibrationWarning,
+    "thickness_calibration": CalibrationWarning,
     "low_resolution": ResolutionWarning,
     "ink_missed": ThresholdWarning,
     "faint_ink": ThresholdWarning,
@@ -326,6 +329,12 @@ def hole_outside_fraction(shape, center_rc, radius_px, n: int = 4096) -> float:
 
 
 HOLE_CUT_LIMIT = 0.005
+
+#: ``thickness_calibration``: the range of a calibration's one-layer width over the sheet
+#: thickness h. A cut sheet's band is its thickness plus the ink's spread: 1.4 h on the
+#: sample scans' calibration, 1.0 h for the law n h; a factor 2 either way beyond that is a
+#: thickness or a calibration of another sheet
+THICKNESS_RATIO = (0.5, 2.5)
 
 #: ``ink_missed``: ink below the scan's cut that local cuts took in, over the ink cut (module
 #: docstring)
@@ -395,7 +404,8 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
            file_pages=1, network_shares=None, border_ink_rc=None,
            ink_missed_fraction=0.0, width_law=None,
            junction_radius_px=None, see_through=None,
-           file_dpi_xy=None, faint_ends=None) -> list[QualityFlag]:
+           file_dpi_xy=None, faint_ends=None,
+           calibration_one_layer_mm=None) -> list[QualityFlag]:
     """Run every check of the module table on one analysis.
 
     Parameters
@@ -453,6 +463,9 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
     file_dpi_xy : (float, float), optional
         The scan file's recorded resolutions along x and y, when they differ by more than
         1 % (:func:`crosssection.stages.load.recorded_header`): the ``non_square`` check.
+    calibration_one_layer_mm : float, optional
+        The given calibration's width of one layer: the ``thickness_calibration`` check (not
+        made without it).
     faint_ends : list of (int, (float, float)), optional
         Free band ends that fainter blue ink continues
         (:func:`crosssection.stages.threshold.faint_band_ends`): the ``faint_ink`` check.
@@ -472,6 +485,16 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
     if params.calibration is None:
         flags.append(QualityFlag("no_calibration",
                                  _no_calibration_message(width_law, params.thickness_mm)))
+    if calibration_one_layer_mm:
+        ratio = calibration_one_layer_mm / params.thickness_mm
+        if not THICKNESS_RATIO[0] <= ratio <= THICKNESS_RATIO[1]:
+            flags.append(QualityFlag(
+                "thickness_calibration", f"the calibration reads one layer "
+                f"{calibration_one_layer_mm:.3g} mm wide, {ratio:.2g} times the sheet "
+                f"thickness h = {params.thickness_mm:g} mm: one of them is not this scan's "
+                "(h sets the speck and void limits, the curvature window 5 n_br h and the "
+                "resolution check; check thickness_mm and the calibration)",
+                ratio, THICKNESS_RATIO[0] if ratio < THICKNESS_RATIO[0] else THICKNESS_RATIO[1]))
     if file_px_per_mm and abs(params.px_per_mm / file_px_per_mm - 1.0) > SCALE_TOLERANCE:
         flags.append(QualityFlag(
             "scale_mismatch", f"the file records {25.4 * file_px_per_mm:.0f} dpi "

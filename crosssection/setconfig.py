@@ -209,7 +209,7 @@ def _safe_part(text: str) -> str:
     return safe or "set"
 
 
-def _check_name(name, toml_path) -> str:
+def valid_set_name(name, toml_path) -> str:
     """``name`` when it is a set name: folder names of ASCII letters, digits and
     ``. _ + -``, starting with a letter or a digit, joined by ``/`` (``eps8/day1``, as a set
     is named by its path), else a ConfigError naming ``toml_path``."""
@@ -254,9 +254,9 @@ def load_set_config(toml_path, *, defaults: dict | None = None,
     data = read_toml(toml_path)
     folder = toml_path.parent
     if "name" in data:
-        name = _check_name(data["name"], toml_path)
+        name = valid_set_name(data["name"], toml_path)
     else:
-        name = _check_name(default_set_name(folder, root), toml_path)
+        name = valid_set_name(default_set_name(folder, root), toml_path)
     images = data.get("images", {})
     if not isinstance(images, dict) or any(not isinstance(v, dict) for v in images.values()):
         raise ConfigError("[images] must hold one table per image, e.g. "
@@ -291,13 +291,13 @@ def failed_set(toml_path, error: str, root=None) -> SetConfig:
     toml_path = Path(toml_path)
     name = default_set_name(toml_path.parent, root)
     try:
-        _check_name(name, toml_path)
+        valid_set_name(name, toml_path)
     except ConfigError:
         name = "invalid_set"
     return SetConfig(name=name, folder=toml_path.parent, source=toml_path, error=error)
 
 
-__all__ = ["SetConfig", "load_set_config", "default_set_name", "check_params",
+__all__ = ["SetConfig", "load_set_config", "default_set_name", "valid_set_name", "check_params",
            "check_calibration", "failed_set", "set_not_read",
            "SET_FILE", "DEFAULT_PARAMS", "DEFAULT_SET_NAME", "PARAM_KEYS", "ALLOWED_KEYS"]
 

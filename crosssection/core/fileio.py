@@ -169,7 +169,25 @@ def check_out(path, name: str = "--out") -> None:
         from crosssection.core.errors import ParameterError
 
         raise ParameterError("empty path: give the output folder", name)
+    if _in_a_link_loop(Path(path).expanduser()):
+        from crosssection.core.errors import ParameterError
+
+        raise ParameterError(f"{path} is a loop of symbolic links: give another folder", name)
     check_writable(path)
+
+
+def _in_a_link_loop(path: Path, limit: int = 40) -> bool:
+    """Whether following the symbolic link ``path`` never ends (a loop)."""
+    seen = set()
+    for _ in range(limit):
+        if not path.is_symlink():
+            return False
+        key = os.path.abspath(path)
+        if key in seen:
+            return True
+        seen.add(key)
+        path = Path(os.path.dirname(key)) / os.readlink(path)
+    return True
 
 
 def check_writable(path) -> None:

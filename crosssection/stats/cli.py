@@ -124,6 +124,14 @@ def check_options(args) -> None:
     if args.name and len(args.name) != len(args.dirs):
         raise ParameterError(f"given {len(args.name)} times for {len(args.dirs)} DIRs", "--name")
     if args.name:
+        from crosssection.core.errors import ConfigError
+        from crosssection.setconfig import valid_set_name
+
+        for name in args.name:
+            try:  # a set name is a folder of the report's tables: as a set.toml's name
+                valid_set_name(name, None)
+            except ConfigError as exc:
+                raise ParameterError(exc.cause, "--name") from None
         seen = {}
         for d, name in zip(args.dirs, args.name):
             # the loader keeps the second apart as NAME#k, so a repeated name cannot pool two

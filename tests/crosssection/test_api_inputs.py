@@ -434,3 +434,15 @@ def test_the_paper_method_records_no_share_of_energy_on_the_fork_zone_model(scan
         res = cs.analyze(scan, **KW, curvature_method="paper")
     assert res.stacks["energy_rel_uncertainty"].isna().all()
     assert res.summary["total_energy_rel_uncertainty"] is None
+
+
+def test_an_empty_image_path_is_named_so(tmp_path, capsys):
+    """Path("") is the working folder: it was called a folder, not an image."""
+    import crosssection.cli
+    from crosssection.core.errors import ImageError
+
+    with pytest.raises(ImageError, match="empty image path"):
+        cs.analyze("")
+    for command in ("analyze", "steps"):
+        assert crosssection.cli.main([command, "", "--out", str(tmp_path / command)]) == 2
+        assert capsys.readouterr().err == "error: empty image path: give the scan's file\n"

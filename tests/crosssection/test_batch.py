@@ -520,3 +520,30 @@ def test_a_named_pipe_named_like_a_record_does_not_block_the_search(tmp_path):
     os.mkfifo(tmp_path / "sub" / "summary.json")
     (tmp_path / "sub" / "scan.png").write_bytes(b"")
     assert [p.name for p in B.find_images(tmp_path)] == ["scan.png"]
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "mkfifo"), reason="named pipes are POSIX")
+def test_a_named_pipe_named_like_a_scan_is_a_failed_image_not_a_hang(tmp_path):
+    """Hashing the scans while planning read the pipe, and the batch waited for ever."""
+    import os
+
+    inp, out = tmp_path / "in", tmp_path / "out"
+    save_png(inp / "a.png", draw_scan(3))
+    os.mkfifo(inp / "pipe.png")
+    index = B.run_batch(inp, out, workers=1, progress=False)
+    rows = dict(zip(index["image"], index["status"]))
+    assert rows == {"a.png": "ok", "pipe.png": "failed"}
+    failures = (out / "failures.csv").read_text()
+    assert "pipe.png" in failures and "named pipe" in failures
+
+
+def test_a_scan_of_a_long_legal_name_is_analysed(tmp_path):
+    """A stem of 245 characters: its staging folder's name passed the file system's 255."""
+    inp, out = tmp_path / "in", tmp_path / "out"
+    long_a, long_b = "z" * 245, "z" * 244 + "y"
+    save_png(inp / f"{long_a}.png", draw_scan(3))
+    save_png(inp / f"{long_b}.png", draw_scan(4))
+    index = B.run_batch(inp, out, workers=1, progress=False, figure=False)
+    assert list(index["status"]) == ["ok", "ok"]
+    folders = [p.name for p in (out / "default").iterdir() if p.is_dir()]
+    assert len(folders) == 2 and all(len(f) <= B.FOLDER_NAME_MAX for f in folders)

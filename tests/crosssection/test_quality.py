@@ -794,3 +794,11 @@ def test_ink_faded_across_part_of_the_scan_is_flagged(scene):
     assert any(w.category is quality.ThresholdWarning for w in caught)
     # every end named lies at the strip's edge
     assert res.summary["n_free_end_stacks"] >= flag.value
+
+
+def test_a_thickness_the_calibration_contradicts_is_flagged(scene):
+    """h = 0.3 mm with a calibration reading one layer 0.14 mm wide: one of them is wrong."""
+    res, caught = _analyze(scene.rgb, **_given(scene, thickness_mm=0.3))
+    flag = next(f for f in res.quality if f.code == "thickness_calibration")
+    assert flag.value == pytest.approx(0.14 / 0.3, rel=0.01) and flag.limit == 0.5
+    assert any(w.category is quality.CalibrationWarning for w in caught)

@@ -185,3 +185,17 @@ def test_a_failed_rename_leaves_no_temporary_file(tmp_path, monkeypatch):
             for name in ("a.txt", "b.txt", "c.txt"):
                 fileio.write_text(tmp_path / name, name)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt"]
+
+
+def test_a_loop_of_symbolic_links_as_the_output_is_named_so(tmp_path):
+    """It was called a file in the way of a folder."""
+    from crosssection.core.errors import ParameterError
+    from crosssection.core.fileio import check_out
+
+    (tmp_path / "one").symlink_to(tmp_path / "two")
+    (tmp_path / "two").symlink_to(tmp_path / "one")
+    with pytest.raises(ParameterError, match="loop of symbolic links"):
+        check_out(tmp_path / "one")
+    (tmp_path / "real").mkdir()
+    (tmp_path / "link").symlink_to(tmp_path / "real")
+    check_out(tmp_path / "link")  # a link to a folder is that folder
