@@ -201,7 +201,8 @@ __all__ = ["render_configuration", "render_directory", "write_set_file", "add_su
            "DRAW", "JOIN",
            "PX_PER_MM", "THICKNESS_MM", "VALIDATED_SHEET_PX", "VALIDATED_BLUR_PX",
            "VALIDATED_NOISE_SIGMA", "VALIDATED_JPEG_QUALITY", "VALIDATED_COMPACT_SEGMENTS",
-           "VALIDATED_QUENCH_SEGMENTS", "SCALE_TOLERANCE", "not_npz"]
+           "VALIDATED_QUENCH_SEGMENTS", "SCALE_TOLERANCE", "MAX_BLUR_PX", "MAX_ROD_COORD",
+           "not_npz"]
 
 #: Scan resolution and sheet thickness h of a render: the paper's sheet at the typical scans'
 #: resolution (h = 5 px).
@@ -287,6 +288,16 @@ SCALE_TOLERANCE = 0.01
 MAX_SCENE_PX = 10_000 * 10_000
 #: Thinnest sheet drawn, px (the analysis' own limit, ``crosssection.params``).
 MIN_SHEET_PX = 1.0
+#: Widest Gaussian blur drawn, sigma in px: ten sheet thicknesses at the defaults (h = 5 px).
+#: A band h wide blurred with sigma keeps about h / (sqrt(2 pi) sigma) of its contrast, 4 %
+#: here, so no scan is blurrier. Far wider blurs cost more than any scene: measured at the
+#: defaults, sigma 1000 px runs for minutes and 1e4 px crashes OpenCV's filter.
+MAX_BLUR_PX = 50.0
+#: Largest |coordinate| of a rod, in units of the rod length L: a rod's nodes lie within L of
+#: one another and the simulations centre it on the origin or its wall, so |x| is of order 1;
+#: a thousand times that still leaves the squared distances of the analysis and of the
+#: drawing far from floating-point overflow.
+MAX_ROD_COORD = 1e3
 
 
 class ScanRangeWarning(QualityWarning):
@@ -839,10 +850,19 @@ def _frame(xy, analysis, cal, *, px_per_mm, thickness_mm, rod_length_mm, hole_ra
         far = (xy.max(axis=0) - hole_center_l) * scale
         need = hole_px + 2 * thickness_mm * px_per_mm - np.minimum(c_off, far)
         margin_px = max(margin_px, float(need.max()))
-    size = np.ceil((xy.max(axis=0) - lo) * scale + 2 * margin_px).astype(int) + 1
+    # in floats: an absurd scale would overflow integers before _check_scene_size sees it
+    size = np.ceil((xy.max(axis=0) - lo) * scale + 2 * margin_px) + 1
+    fits = bool(np.isfinite(size).all()) and float(size[0]) * float(size[1]) <= MAX_SCENE_PX
+    shape = ((int(size[1]), int(size[0])) if fits else (float(size[1]), float(size[0])))
     hole_xy = None if hole_px is None else (hole_center_l - lo) * scale + margin_px
-    return _Frame(lo, scale, margin_px, (int(size[1]), int(size[0])), rod_length_mm, gap_ok,
+    return _Frame(lo, scale, margin_px, shape, rod_length_mm, gap_ok,
                   hole_radius_mm, hole_xy, hole_px, hole_is_wall)
+
+
+def _px_count(v) -> str:
+    """A scene side in px as a message shows it: whole up to a billion, else in powers of
+    ten."""
+    return f"{int(v)}" if math.isfinite(v) and v < 1e9 else f"{v:.3g}"
 
 
 def _check_scene_size(frame: _Frame, px_per_mm: float) -> None:
@@ -855,15 +875,15 @@ def _check_scene_size(frame: _Frame, px_per_mm: float) -> None:
         the image: the rod length and the hole.
     """
     h_px, w_px = frame.shape
-    if h_px * w_px <= MAX_SCENE_PX:
+    if isinstance(h_px, int) and isinstance(w_px, int) and h_px * w_px <= MAX_SCENE_PX:
         return
     side = math.isqrt(MAX_SCENE_PX)
     hole = ("" if frame.hole_radius_mm is None
             else f" in a hole of radius {frame.hole_radius_mm:.4g} mm")
     raise ParameterError(
-        f"the scene would be {w_px} x {h_px} px (> {side} x {side} px): a rod of "
-        f"{frame.rod_length_mm:.4g} mm{hole} at {px_per_mm:g} px/mm; lower px_per_mm, "
-        "thickness_mm, rod_length_mm or hole_radius_mm", "px_per_mm")
+        f"the scene would be {_px_count(w_px)} x {_px_count(h_px)} px (> {side} x {side} "
+        f"px): a rod of {frame.rod_length_mm:.4g} mm{hole} at {px_per_mm:g} px/mm; lower "
+        "px_per_mm, thickness_mm, rod_length_mm or hole_radius_mm", "px_per_mm")
 
 
 def _arc_px(line) -> np.ndarray:
@@ -1707,6 +1727,10 @@ def _defects(clean: bool, given: dict, has_hole: bool) -> dict:
         v = d[k]
         if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
             raise ParameterError(f"{k} must be a finite number >= 0, got {v!r}")
+    if d["blur_px"] > MAX_BLUR_PX:
+        raise ParameterError(f"blur_px must be at most {MAX_BLUR_PX:g} px (ten sheet "
+                             "thicknesses at the defaults: a band keeps 4 % of its contrast), "
+                             f"got {d['blur_px']:g}")
     for k in ("illumination", "cast"):
         if d[k] >= 1:
             raise ParameterError(f"{k} must be below 1 (a relative deviation), got {d[k]!r}")
@@ -1908,7 +1932,8 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
     clean : bool
         Start from no defect (:data:`CLEAN`) instead of a real scan's (:data:`SCAN_DEFECTS`).
     noise_sigma, blur_px : float, optional
-        Gaussian noise (grey levels) and Gaussian blur sigma (px).
+        Gaussian noise (grey levels) and Gaussian blur sigma (px, at most
+        :data:`MAX_BLUR_PX`).
     jpeg_quality : int, optional
         JPEG round trip at this quality (1-100; 0: none).
     smears, specks, pinholes : int, optional
@@ -1975,7 +2000,8 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
     Raises
     ------
     ParameterError
-        An absurd option, a scene that would exceed :data:`MAX_SCENE_PX` pixels (checked
+        An absurd option, a rod with a segment of zero length or a coordinate beyond
+        :data:`MAX_ROD_COORD`, a scene that would exceed :data:`MAX_SCENE_PX` pixels (checked
         before anything is drawn), or a ``rod_length_mm`` that contradicts ``rod_thickness``
         (``thickness_mm / rod_length_mm`` off by more than :data:`SCALE_TOLERANCE`).
 
@@ -2200,10 +2226,38 @@ def _checked_rod(xy) -> np.ndarray:
     margins alone, with truth tables of a rod that is not drawn.
     """
     arr = checked_rod(xy, min_segments=2)
+    cause = _rod_defect(arr)
+    if cause:
+        raise ParameterError(f"xy {cause}")
     check_real("rod length", float(np.sum(np.hypot(*np.diff(arr, axis=0).T))), low=0.0,
                low_open=True, why="the sum of the segments of xy; a rod whose nodes all "
                "coincide has nothing to draw")
     return arr
+
+
+def _rod_defect(xy: np.ndarray) -> str | None:
+    """Why the finite (N+1, 2) rod ``xy`` cannot be drawn with an exact truth, or None.
+
+    Parameters
+    ----------
+    xy : (N+1, 2) float array
+
+    Returns
+    -------
+    str or None
+        A coordinate beyond :data:`MAX_ROD_COORD`, or a segment of zero length (two
+        consecutive nodes at the same place), in a phrase following the rod's name.
+    """
+    far = float(np.abs(xy).max())
+    if far > MAX_ROD_COORD:
+        return (f"has a coordinate of {far:.3g}, beyond {MAX_ROD_COORD:g} (rods are in units "
+                "of the rod length L, centred near the origin)")
+    zero = np.flatnonzero(~np.any(np.diff(xy, axis=0), axis=1))
+    if len(zero) and len(zero) < len(xy) - 1:
+        return (f"has {len(zero)} segment(s) of zero length (nodes {zero[0]} and {zero[0] + 1} "
+                "at the same place): a rod's energy is that of its segments, and a repeated "
+                "node gives a bend of no length")
+    return None
 
 
 def _check_scale(rod_length_mm, thickness_mm, rod_thickness, where=None) -> None:
@@ -2597,6 +2651,11 @@ def _render_directory(sim_dir, out_dir, *, configs=None, limit=None, progress=Fa
     if out_dir.resolve() == sim_dir.resolve():
         raise ParameterError(f"{out_dir} is the simulation folder being rendered: the scenes "
                              "go to another folder", name("out_dir"))
+    if sim_dir.resolve() in out_dir.resolve().parents:
+        # a simulation folder holds only its own outputs: scenes inside it stop a later run
+        # of the simulation from extending it
+        raise ParameterError(f"{out_dir} is inside the simulation folder {sim_dir} being "
+                             "rendered: give a folder outside it", name("out_dir"))
     lam = LAMBDA
     delta = None
     p = None
@@ -2682,6 +2741,9 @@ def _render_directory(sim_dir, out_dir, *, configs=None, limit=None, progress=Fa
                 if not np.any(np.diff(xy, axis=0)):
                     raise ConfigError(f"array {key!r} is a rod of zero length (its nodes all "
                                       "coincide)", rods_path)
+                cause = _rod_defect(xy)
+                if cause:
+                    raise ConfigError(f"array {key!r} {cause}", rods_path)
                 an = analyze_rod(xy, lam=lam, contact_distance=delta)
                 with warnings.catch_warnings(record=True) as caught:
                     warnings.simplefilter("always")
@@ -2788,7 +2850,7 @@ def add_subparser(sub) -> None:
                         f"0 with --clean; above {VALIDATED_NOISE_SIGMA:g}: a warning)")
     p.add_argument("--blur", type=float, default=None,
                    help=f"Gaussian blur sigma in px (default {d['blur_px']:g}, 0 with --clean; "
-                        f"above {VALIDATED_BLUR_PX:g}: a warning)")
+                        f"above {VALIDATED_BLUR_PX:g}: a warning; at most {MAX_BLUR_PX:g})")
     p.add_argument("--jpeg", type=_jpeg_arg, default=None,
                    help=f"JPEG quality 1-100 of a round trip, or 0 or 'none' (default "
                         f"{d['jpeg_quality']}, none with --clean; below "

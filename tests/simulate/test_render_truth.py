@@ -45,10 +45,12 @@ def _render(xy, **kw):
 def test_a_rod_of_zero_length_is_refused():
     with pytest.raises(ParameterError, match=r"rod length must be a finite number > 0.*xy"):
         render_configuration(np.zeros((101, 2)), clean=True)
-    # one node off the others is a rod
+    # one node off the others is a rod, but one of zero-length segments
     xy = np.zeros((101, 2))
     xy[50:, 0] = 1.0
-    render_configuration(xy, clean=True)
+    with pytest.raises(ParameterError, match="segment.s. of zero length"):
+        render_configuration(xy, clean=True)
+    render_configuration(np.c_[np.linspace(0.0, 1.0, 101), np.zeros(101)], clean=True)
 
 
 def test_a_rods_file_holding_a_zero_length_rod_exits_2_naming_it(tmp_path, capsys):

@@ -1,0 +1,119 @@
+"""``render`` refuses what no scan can be, before drawing anything: a blur wider than a scan
+has, a rod with coinciding consecutive nodes or coordinates far beyond the rod length, a scale
+whose scene overflows, an output folder inside the simulation it reads (simulate.render)."""
+import shutil
+
+import numpy as np
+import pytest
+
+from crosssection.core.errors import ParameterError
+from simulate import render
+from simulate.cli import main
+from simulate.render import MAX_BLUR_PX, MAX_ROD_COORD, MAX_SCENE_PX, render_configuration
+
+pytestmark = [pytest.mark.filterwarnings("ignore::simulate.render.TruthWarning"),
+              pytest.mark.filterwarnings("ignore::simulate.render.ScanRangeWarning")]
+
+FAST = ["--px-per-mm", "25", "--clean", "--limit", "1"]
+
+
+@pytest.fixture(scope="module")
+def sim(tmp_path_factory):
+    """A quench ensemble of one short rod."""
+    out = tmp_path_factory.mktemp("quench") / "sim"
+    assert main(["quench", "--n-configs", "1", "--segments", "60", "--seed", "1",
+                 "--runs", "2", "--nematic-runs", "0", "--maxiter", "5", "--no-progress",
+                 "--out", str(out)]) == 0
+    return out
+
+
+@pytest.fixture
+def not_drawn(monkeypatch):
+    """Fail on the first drawing step: a refusal comes before any memory is spent."""
+    def drawn(*args, **kwargs):
+        raise AssertionError("drawn")
+
+    for f in ("_hooked_lines", "_stack_lines", "_draw_bands", "_draw_passes"):
+        monkeypatch.setattr(render, f, drawn)
+
+
+def _error(capsys, *argv) -> str:
+    """The one ``error:`` line of ``render *argv``, which exits 2."""
+    capsys.readouterr()
+    assert main(["render", *map(str, argv)]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: "), lines
+    assert "Traceback" not in lines[0] and "unexpected" not in lines[0]
+    return lines[0]
+
+
+def _with_rods(sim, folder, change):
+    """A copy of ``sim`` whose rods are ``change(rod)``."""
+    shutil.copytree(sim, folder)
+    with np.load(sim / "rods.npz") as rods:
+        np.savez(folder / "rods.npz", **{k: change(rods[k]) for k in rods.files})
+    return folder
+
+
+@pytest.mark.parametrize("blur", ["1e30", "1e4", str(MAX_BLUR_PX * 1.01)])
+def test_a_blur_wider_than_a_scan_is_refused(sim, tmp_path, capsys, not_drawn, blur):
+    line = _error(capsys, sim, "--out", tmp_path / "s", "--blur", blur, *FAST)
+    assert line.startswith(f"error: --blur: must be at most {MAX_BLUR_PX:g} px")
+    assert not (tmp_path / "s").exists()
+    with pytest.raises(ParameterError, match="blur_px must be at most"):
+        render_configuration(np.load(sim / "rods.npz")["config_00000"], blur_px=float(blur))
+
+
+def test_a_blur_at_the_bound_is_drawn(sim, tmp_path, capsys):
+    capsys.readouterr()
+    assert main(["render", str(sim), "--out", str(tmp_path / "s"), "--blur",
+                 str(MAX_BLUR_PX), *FAST]) == 0
+
+
+def test_repeated_nodes_are_refused_naming_the_file_and_configuration(sim, tmp_path, capsys):
+    """Each node twice: the same drawing, but zero-length segments whose bends have no
+    length, and a truth energy a thousand times the rod's."""
+    dup = _with_rods(sim, tmp_path / "dup", lambda xy: np.repeat(xy, 2, axis=0))
+    line = _error(capsys, dup, "--out", tmp_path / "s", *FAST)
+    assert line.startswith(f"error: {dup / 'rods.npz'}: array 'config_00000' has ")
+    assert "zero length" in line
+    assert not (tmp_path / "s").exists()
+    xy = np.load(sim / "rods.npz")["config_00000"]
+    with pytest.raises(ParameterError, match="zero length"):
+        render_configuration(np.insert(xy, 5, xy[5], axis=0))
+
+
+@pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
+@pytest.mark.parametrize("factor", [1e200, 2 * MAX_ROD_COORD])
+def test_coordinates_far_beyond_the_rod_length_are_refused(sim, tmp_path, capsys, factor):
+    far = _with_rods(sim, tmp_path / "far", lambda xy: (xy - xy.mean(0)) * factor
+                     + factor * MAX_ROD_COORD / 100)
+    line = _error(capsys, far, "--out", tmp_path / "s", *FAST)
+    assert line.startswith(f"error: {far / 'rods.npz'}: array 'config_00000' has a coordinate")
+    assert f"beyond {MAX_ROD_COORD:g}" in line
+    with pytest.raises(ParameterError, match="beyond"):
+        render_configuration(np.load(far / "rods.npz")["config_00000"])
+
+
+@pytest.mark.parametrize("flags", [["--px-per-mm", "1e30"], ["--thickness-mm", "1e30"],
+                                   ["--hole", "1e30"], ["--rod-length-mm", "1e30"],
+                                   ["--px-per-mm", "1e200", "--rod-length-mm", "1e200"]])
+def test_an_overflowing_scene_size_is_told_as_it_is(sim, tmp_path, capsys, not_drawn, flags):
+    line = _error(capsys, sim, "--out", tmp_path / "s", "--limit", "1", *flags)
+    assert line.startswith("error: --px-per-mm: the scene would be ")
+    w, h = (float(v) for v in line.split("would be ")[1].split(" px")[0].split(" x "))
+    assert w > 0 and h > 0 and w * h > MAX_SCENE_PX
+
+
+def test_an_out_inside_the_simulation_folder_is_refused(sim, tmp_path, capsys):
+    sim = shutil.copytree(sim, tmp_path / "sim")
+    before = sorted(p.name for p in sim.iterdir())
+    for out in (sim / "scenes", sim / "a" / "b"):
+        line = _error(capsys, sim, "--out", out, *FAST)
+        assert line.startswith("error: --out: ") and "inside the simulation folder" in line
+        assert "outside" in line
+    assert sorted(p.name for p in sim.iterdir()) == before
+    # the simulation stays a quench output that a later quench extends
+    assert main(["quench", "--n-configs", "2", "--segments", "60", "--seed", "1",
+                 "--runs", "2", "--nematic-runs", "0", "--maxiter", "5", "--no-progress",
+                 "--out", str(sim)]) == 0
