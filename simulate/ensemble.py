@@ -65,9 +65,11 @@ from crosssection.quality import QualityWarning
 
 from simulate.contacts import MIN_CONTACT_DISTANCE
 from simulate.energy import LAMBDA, LAMBDA_MAX
-from simulate.noise import N_SEGMENTS, NOISE, VALIDATED_QUENCH_SEGMENTS
-from simulate.optimize import (FTOL, LAM_START, MAXITER, N_RUNS, NEMATIC_RUNS, NEMATIC_U,
-                               NEMATIC_U_MAX, RAMPS, STAGES, XTOL, default_contact_cutoff)
+from simulate.noise import (N_SEGMENTS, NOISE, NOISE_PER_SEGMENT_MAX,
+                            VALIDATED_QUENCH_SEGMENTS)
+from simulate.optimize import (FTOL, FTOL_MAX, LAM_START, MAXITER, N_RUNS, N_RUNS_MAX,
+                               NEMATIC_RUNS, NEMATIC_U, NEMATIC_U_MAX, RAMPS, STAGES,
+                               STAGES_MAX, XTOL, XTOL_MAX, default_contact_cutoff)
 
 CONFIG_COLUMNS = ["config_id", "seed", "rg", "epsilon", "epsilon_sqrt2", "energy_total",
                   "energy_bending", "energy_confinement", "n_stacks", "n_branches",
@@ -838,7 +840,9 @@ def _add_common(p, command):
                         f"default {LAMBDA:g}, the paper's; at most {LAMBDA_MAX:g}, above "
                         "which the rod is jammed)")
     p.add_argument("--noise", type=float, default=NOISE,
-                   help=f"initial noise D, dimensionless (default {NOISE:g}, the paper's)")
+                   help=f"initial noise D, dimensionless (default {NOISE:g}, the paper's; at "
+                        f"most {NOISE_PER_SEGMENT_MAX:g} N, above which nearly every start "
+                        "shape crosses itself)")
     p.add_argument("--segments", type=int, default=N_SEGMENTS,
                    help=f"number of segments N of the rod of length L (default {N_SEGMENTS})")
     p.add_argument("--seed", type=int, default=0, help="ensemble seed (default 0)")
@@ -848,7 +852,8 @@ def _add_common(p, command):
     # params_from_args: so a method that does not use them can tell the ones the user gave
     powell = "with --method " + " or ".join(_POWELL[command])
     p.add_argument("--runs", type=int, default=None,
-                   help=f"Powell runs per configuration (default {N_RUNS}; {powell})")
+                   help=f"Powell runs per configuration (default {N_RUNS}; at most "
+                        f"{N_RUNS_MAX}; {powell})")
     p.add_argument("--maxiter", type=int, default=None,
                    help=f"iterations per Powell run (default {MAXITER}; {powell})")
     p.add_argument("--parametrization", choices=["tangent", "bend"], default=None,
@@ -867,11 +872,14 @@ def _add_common(p, command):
                         "0 only with --nematic-runs '' (no nematic term)")
     p.add_argument("--nematic-cutoff", type=float, default=None,
                    help="distance within which two segments touch for the nematic term, in "
-                        "units of L (quench with --method powell; default one segment, 1/N)")
+                        "units of L, below 1 (quench with --method powell; default one "
+                        "segment, 1/N)")
     p.add_argument("--ftol", type=float, default=None,
-                   help=f"Powell ftol (default {FTOL:g}, scipy's; {powell})")
+                   help=f"Powell ftol (default {FTOL:g}, scipy's; at most {FTOL_MAX:g}; "
+                        f"{powell})")
     p.add_argument("--xtol", type=float, default=None,
-                   help=f"Powell xtol (default {XTOL:g}, scipy's; {powell})")
+                   help=f"Powell xtol (default {XTOL:g}, scipy's; at most {XTOL_MAX:g}; "
+                        f"{powell})")
     p.add_argument("--wall-radius", type=float, default=None,
                    help="hard-wall disk radius in units of L, above half a segment 1/(2N); "
                         "the wall stops the rod but does not compress it, so a start shape "
@@ -891,7 +899,8 @@ def _add_common(p, command):
         p.add_argument("--lambda-start", dest="lam_start", type=float, default=LAM_START,
                        help=f"initial Lambda of the ramp (default {LAM_START:g})")
         p.add_argument("--stages", type=int, default=STAGES,
-                       help=f"number of Lambda stages (default {STAGES})")
+                       help=f"number of Lambda stages (default {STAGES}, at most "
+                            f"{STAGES_MAX})")
         p.add_argument("--ramp", choices=RAMPS, default=RAMPS[0],
                        help=f"Lambda schedule (default {RAMPS[0]})")
     p.set_defaults(func=run, command=command)
@@ -967,9 +976,15 @@ def params_from_args(args) -> dict:
         raise ParameterError(f"--lambda must be <= {LAMBDA_MAX:g} (the paper's is {LAMBDA:g}): "
                              "above, the rod is jammed and the bending energy drowns in the "
                              f"confinement, got {args.lam:g}")
+    noise = _finite("--noise", args.noise, low=0.0)
+    noise_max = NOISE_PER_SEGMENT_MAX * args.segments
+    if noise > noise_max:
+        raise ParameterError(f"--noise must be <= {NOISE_PER_SEGMENT_MAX:g} N = {noise_max:g} at "
+                             f"--segments {args.segments} (the paper's is {NOISE:g} at "
+                             f"{N_SEGMENTS}): above, nearly every start shape crosses itself "
+                             f"and none is drawn, got {args.noise:g}")
     params = dict(command=args.command, n_configs=args.n_configs, n_segments=args.segments,
-                  lam=lam,
-                  noise=_finite("--noise", args.noise, low=0.0), seed=args.seed,
+                  lam=lam, noise=noise, seed=args.seed,
                   method=args.method,
                   nematic_cutoff=_finite("--nematic-cutoff", args.nematic_cutoff, low=0.0,
                                          low_open=True, allow_none=True),
@@ -980,6 +995,10 @@ def params_from_args(args) -> dict:
                   parametrization=args.parametrization, **dict.fromkeys(_POWELL_KEYS))
     if args.method in _POWELL[args.command]:
         params.update(_powell_params(args))
+    nc = params["nematic_cutoff"]
+    if nc is not None and nc >= 1.0:
+        # as the contact distance: two segments of a rod of length 1 are always closer
+        raise ParameterError(f"--nematic-cutoff must be below the rod length 1, got {nc:g}")
     cd = params["contact_distance"]
     if cd is not None and not MIN_CONTACT_DISTANCE <= cd < 1.0:
         # the analysis' own range (simulate.contacts.analyze_rod): refused here, before a
@@ -994,8 +1013,10 @@ def params_from_args(args) -> dict:
                              f"(a disk no wider than one segment cannot hold the rod), got "
                              f"{args.wall_radius!r}")
     if args.command == "anneal":
-        if args.stages < 1:
-            raise ParameterError(f"--stages must be >= 1, got {args.stages}")
+        if not 1 <= args.stages <= STAGES_MAX:
+            raise ParameterError(f"--stages must be from 1 to {STAGES_MAX} (the default is "
+                                 f"{STAGES}; each stage is a whole Powell protocol), got "
+                                 f"{args.stages}")
         params.update(lam_start=_finite("--lambda-start", args.lam_start, low=0.0,
                                         low_open=True),
                       stages=args.stages, ramp=args.ramp)
@@ -1087,6 +1108,9 @@ def _powell_params(args) -> dict:
     for name, v in (("--runs", runs), ("--maxiter", maxiter)):
         if v < 1:
             raise ParameterError(f"{name} must be >= 1, got {v}")
+    if runs > N_RUNS_MAX:
+        raise ParameterError(f"--runs must be <= {N_RUNS_MAX} (the paper's protocol has "
+                             f"{N_RUNS}; each run is a whole Powell minimisation), got {runs}")
     if any(k < 0 or k >= runs - 1 for k in nem):
         which = (f"runs 0..{runs - 2} of the --runs {runs}" if runs > 1 else
                  f"no run: --runs {runs} has only the last")
@@ -1112,9 +1136,15 @@ def _powell_params(args) -> dict:
         named = ("the default " if args.nematic_runs is None else "") + "--nematic-runs"
         raise ParameterError(f"--u must be > 0 with {named} {nematic!r}: give --nematic-runs "
                              "'' for no nematic term, got 0")
-    return dict(n_runs=runs, maxiter=maxiter, nematic_runs=nem, u=u,
-                ftol=_finite("--ftol", given(args.ftol, FTOL), low=0.0, low_open=True),
-                xtol=_finite("--xtol", given(args.xtol, XTOL), low=0.0, low_open=True))
+    tols = {}
+    for name, v, default, high in (("--ftol", args.ftol, FTOL, FTOL_MAX),
+                                   ("--xtol", args.xtol, XTOL, XTOL_MAX)):
+        tols[name[2:]] = _finite(name, given(v, default), low=0.0, low_open=True)
+        if tols[name[2:]] > high:
+            raise ParameterError(f"{name} must be <= {high:g} (default {default:g}): looser, "
+                                 "Powell stops before the rod is minimised, got "
+                                 f"{tols[name[2:]]:g}")
+    return dict(n_runs=runs, maxiter=maxiter, nematic_runs=nem, u=u, **tols)
 
 
 def _round_up(x: float, digits: int = 3) -> str:
