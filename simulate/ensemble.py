@@ -67,7 +67,8 @@ from simulate.contacts import MIN_CONTACT_DISTANCE
 from simulate.energy import LAMBDA, LAMBDA_MAX
 from simulate.noise import (N_SEGMENTS, NOISE, NOISE_PER_SEGMENT_MAX,
                             VALIDATED_QUENCH_SEGMENTS)
-from simulate.optimize import (FTOL, FTOL_MAX, LAM_START, MAXITER, N_RUNS, N_RUNS_MAX,
+from simulate.optimize import (FTOL, FTOL_MAX, LAM_START, MAXITER, MAXITER_MAX, N_RUNS,
+                               N_RUNS_MAX,
                                NEMATIC_RUNS, NEMATIC_U, NEMATIC_U_MAX, RAMPS, STAGES,
                                STAGES_MAX, XTOL, XTOL_MAX, default_contact_cutoff)
 
@@ -855,7 +856,8 @@ def _add_common(p, command):
                    help=f"Powell runs per configuration (default {N_RUNS}; at most "
                         f"{N_RUNS_MAX}; {powell})")
     p.add_argument("--maxiter", type=int, default=None,
-                   help=f"iterations per Powell run (default {MAXITER}; {powell})")
+                   help=f"iterations per Powell run (default {MAXITER}; at most "
+                        f"{MAXITER_MAX}; {powell})")
     p.add_argument("--parametrization", choices=["tangent", "bend"], default=None,
                    help="Powell search coordinates (default: tangent for quench = the "
                         "prototype's statistics; bend for anneal = winds into the spiral; "
@@ -1111,6 +1113,9 @@ def _powell_params(args) -> dict:
     if runs > N_RUNS_MAX:
         raise ParameterError(f"--runs must be <= {N_RUNS_MAX} (the paper's protocol has "
                              f"{N_RUNS}; each run is a whole Powell minimisation), got {runs}")
+    if maxiter > MAXITER_MAX:
+        raise ParameterError(f"--maxiter must be <= {MAXITER_MAX} (default {MAXITER}; ftol ends "
+                             f"a run long before), got {maxiter}")
     if any(k < 0 or k >= runs - 1 for k in nem):
         which = (f"runs 0..{runs - 2} of the --runs {runs}" if runs > 1 else
                  f"no run: --runs {runs} has only the last")

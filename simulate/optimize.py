@@ -88,6 +88,9 @@ XTOL_MAX = 1e-3
 #: Most Powell runs per configuration the options take: a hundred times the paper's 10 runs,
 #: already about a quarter of an hour per configuration at N = 120 (about a second a run).
 N_RUNS_MAX = 1000
+#: Most iterations of one Powell run the options take: a thousand times the default 30 (a
+#: run of 30 iterations takes about a second at N = 120, and ftol ends it long before).
+MAXITER_MAX = 30_000
 #: Defaults of :func:`anneal`: first Lambda of the ramp and number of Lambda stages.
 LAM_START = 1e3
 STAGES = 24

@@ -10,7 +10,7 @@ import pytest
 from crosssection.core.errors import ParameterError
 from simulate.ensemble import checked_params
 from simulate.noise import NOISE_PER_SEGMENT_MAX, initial_shape
-from simulate.optimize import FTOL_MAX, N_RUNS_MAX, STAGES_MAX, XTOL_MAX
+from simulate.optimize import FTOL_MAX, MAXITER_MAX, N_RUNS_MAX, STAGES_MAX, XTOL_MAX
 
 
 @pytest.mark.parametrize("argv, named, bound", [
@@ -25,6 +25,7 @@ from simulate.optimize import FTOL_MAX, N_RUNS_MAX, STAGES_MAX, XTOL_MAX
     (["quench", "--runs", "1000000000"], "--runs", f"<= {N_RUNS_MAX}"),
     (["anneal", "--runs", str(N_RUNS_MAX + 1)], "--runs", f"<= {N_RUNS_MAX}"),
     (["anneal", "--stages", "100000000"], "--stages", f"from 1 to {STAGES_MAX}"),
+    (["quench", "--maxiter", "1000000000"], "--maxiter", f"<= {MAXITER_MAX}"),
 ])
 def test_options_beyond_their_bound_are_one_line(tmp_path, argv, named, bound):
     out = tmp_path / "out"
@@ -47,6 +48,7 @@ def test_a_python_dict_is_bounded_as_the_command_line(key, value):
 def test_the_bounds_leave_the_working_range_open():
     p = checked_params({"command": "anneal", "n_segments": 40, "ftol": FTOL_MAX,
                         "xtol": XTOL_MAX, "n_runs": N_RUNS_MAX, "stages": STAGES_MAX,
+                        "maxiter": MAXITER_MAX,
                         "noise": NOISE_PER_SEGMENT_MAX * 40})
     assert p["ftol"] == FTOL_MAX and p["stages"] == STAGES_MAX
     # at the largest noise a start shape is still drawn within initial_shape's redraws
