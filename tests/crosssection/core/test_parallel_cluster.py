@@ -342,7 +342,8 @@ def test_quiet_loggers_silence_dask_below_critical_and_restore_levels():
     assert (child.level, logging.getLogger("tornado").level, other.level) == before
 
 
-def test_batch_tells_the_wait_for_a_worker_as_it_happens(tmp_path, capsys, short_timeout):
+def test_batch_tells_the_wait_for_a_worker_as_it_happens(tmp_path, capsys, short_timeout,
+                                                         monkeypatch):
     import signal
 
     from PIL import Image
@@ -352,14 +353,30 @@ def test_batch_tells_the_wait_for_a_worker_as_it_happens(tmp_path, capsys, short
     Image.fromarray(np.zeros((8, 8, 3), np.uint8)).save(inp / "a.png")
     cl = _cluster(n_workers=0)
     main = threading.main_thread().ident
-    interrupt = threading.Timer(short_timeout + 2.5,
-                                lambda: signal.pthread_kill(main, signal.SIGINT))
-    interrupt.start()
+    # the user interrupts once told of the wait: on a loaded machine a fixed delay could
+    # fall while Dask's client starts, which takes the interrupt for its own
+    waiting, done = threading.Event(), threading.Event()
+    watch = parallel._watch_workers
+
+    def told_watch(client, stop, joined, on_none, *rest):
+        def told():
+            on_none()
+            waiting.set()
+        return watch(client, stop, joined, told, *rest)
+
+    monkeypatch.setattr(parallel, "_watch_workers", told_watch)
+
+    def interrupt():
+        if waiting.wait(120) and not done.wait(0.5):
+            signal.pthread_kill(main, signal.SIGINT)
+
+    interrupter = threading.Thread(target=interrupt, daemon=True)
+    interrupter.start()
     try:
         status = crosssection_main(["batch", str(inp), "--out", str(out), "--scheduler",
                                     cl.scheduler_address, "--quiet"])
     finally:
-        interrupt.cancel()
+        done.set()
         cl.close()
     where = f"--scheduler {cl.scheduler_address}"
     assert status == 130
