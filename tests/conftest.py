@@ -86,9 +86,12 @@ def signalled_run():
         pytest.skip("needs /proc to find the command's child processes")
 
     def run(argv, sig, ready, env=None, within=20.0):
+        # SIGINT as a terminal's job has it: a suite started in the background of a
+        # non-interactive shell passes SIG_IGN on, which the command line rightly keeps
         proc = subprocess.Popen([sys.executable, *map(str, argv)], stdout=subprocess.PIPE,
                                 stderr=subprocess.PIPE, text=True,
-                                env=None if env is None else {**os.environ, **env})
+                                env=None if env is None else {**os.environ, **env},
+                                preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
         start = time.monotonic()
         try:
             while not ready(proc.pid):

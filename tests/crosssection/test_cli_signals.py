@@ -171,7 +171,14 @@ def test_an_interrupt_the_analysis_catches_still_stops_the_batch(tmp_path, monke
         return batch._row(task, "ok")
 
     monkeypatch.setattr(batch, "process_image", caught)
-    assert main(["batch", str(inp), "--out", str(out), "--workers", "1", "--quiet"]) == status
+    # Python's own SIGINT handler, as a terminal's job has it (a suite started in the
+    # background of a non-interactive shell inherits SIG_IGN, which the command keeps)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        assert main(["batch", str(inp), "--out", str(out), "--workers", "1",
+                     "--quiet"]) == status
+    finally:
+        signal.signal(signal.SIGINT, previous)
     assert capsys.readouterr().err == f"error: {word} (re-run the same command to resume)\n"
     assert ran == ["a0.png"]  # no scan started after the interrupt
     assert pd.read_csv(out / "failures.csv").empty

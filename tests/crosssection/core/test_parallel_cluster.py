@@ -367,9 +367,13 @@ def test_batch_tells_the_wait_for_a_worker_as_it_happens(tmp_path, capsys, short
     monkeypatch.setattr(parallel, "_watch_workers", told_watch)
 
     def interrupt():
-        if waiting.wait(120) and not done.wait(0.5):
+        waiting.wait(60)  # told, or the batch would wait for ever: interrupted either way
+        if not done.wait(0.5):
             signal.pthread_kill(main, signal.SIGINT)
 
+    # Python's own SIGINT handler, whatever an earlier test of this process left: the command
+    # line keeps an inherited SIG_IGN (a run under nohup), and the interrupt would be lost
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     interrupter = threading.Thread(target=interrupt, daemon=True)
     interrupter.start()
     try:
@@ -377,6 +381,7 @@ def test_batch_tells_the_wait_for_a_worker_as_it_happens(tmp_path, capsys, short
                                     cl.scheduler_address, "--quiet"])
     finally:
         done.set()
+        signal.signal(signal.SIGINT, previous)
         cl.close()
     where = f"--scheduler {cl.scheduler_address}"
     assert status == 130
