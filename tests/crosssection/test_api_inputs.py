@@ -437,7 +437,7 @@ def test_the_paper_method_records_no_share_of_energy_on_the_fork_zone_model(scan
 
 
 def test_an_empty_image_path_is_named_so(tmp_path, capsys):
-    """Path("") is the working folder: it was called a folder, not an image."""
+    """Path("") is the working folder: an empty path is named as such, not as a folder."""
     import crosssection.cli
     from crosssection.core.errors import ImageError
 

@@ -188,7 +188,7 @@ def test_a_failed_rename_leaves_no_temporary_file(tmp_path, monkeypatch):
 
 
 def test_a_loop_of_symbolic_links_as_the_output_is_named_so(tmp_path):
-    """It was called a file in the way of a folder."""
+    """Not a file in the way of a folder: the message says what it is."""
     from crosssection.core.errors import ParameterError
     from crosssection.core.fileio import check_out
 

@@ -717,6 +717,6 @@ def test_a_folder_holding_two_batches_of_one_set_name(tmp_path, capfd):
 
 @pytest.mark.parametrize("name", ["", "a/../b", "../up", "x y"])
 def test_a_set_name_no_folder_can_hold_is_refused(batch, tmp_path, capfd, name):
-    """--name 'a/../b' made sets a/../b/...; '' was ignored."""
+    """A set name is a folder of the report: --name takes what a set.toml's name takes."""
     status, _, err = _stats(capfd, batch, "--out", tmp_path / "r", "--name", name, *FAST)
     assert status == 2 and len(err) == 1 and err[0].startswith("error: --name: name must be")

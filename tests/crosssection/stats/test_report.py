@@ -233,7 +233,7 @@ def test_a_selection_the_data_do_not_decide_is_said_so():
 
 
 def test_the_methods_paragraph_names_the_curvature_method_the_scans_used(tmp_path):
-    """The report described the default estimator whatever the scans were analysed with."""
+    """The methods paragraph says how κ was read: each method the scans recorded."""
     import json as _json
 
     from crosssection.stats.report import _curvature_methods, _curvature_text
