@@ -31,7 +31,7 @@ def _user_cache() -> Path:
     """numba's user-wide cache folder on this system (XDG on Linux, as numba's appdirs)."""
     base = os.environ.get("XDG_CACHE_HOME")
     try:
-        return Path(base) if base else Path.home() / ".cache" / "numba"
+        return (Path(base) if base else Path.home() / ".cache") / "numba"
     except RuntimeError:  # no home folder at all
         return Path("/nonexistent")
 

@@ -249,6 +249,12 @@ def _nanmean(v) -> float:
     return float(np.mean(v)) if v.size else float("nan")
 
 
+def _count_mean(r: F.FitResult, top: int = 10_000) -> float:
+    """Mean of a law fitted as counts: ``sum k P(k)`` over k = 1 .. ``top``."""
+    kk = np.arange(1, top)
+    return float(np.sum(kk * r.pmf(kk)))
+
+
 def _fit_text(r: F.FitResult) -> str:
     p = r.p_text()
     return r.label() + (f", {p}" if p else "")
@@ -416,8 +422,7 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
                                     label=band_label)
                 text = _fit_text(best)
                 if count:  # the law's parameters are those of the continuous law: say its mean
-                    kk = np.arange(1, 10 * int(x.max()) + 100)
-                    text += f", mean {float(np.sum(kk * best.pmf(kk))):.3g}"
+                    text += f", mean {_count_mean(best):.3g}"
                 law = _curve(best, best.params, grid, cut, count)
                 ax.plot(grid, law, "s--" if count else "-", ms=4 if count else 0, mfc="none",
                         color=c, lw=1.6, label=f"{name[s]}: {text}", gid=f"law:{s}:{reg}")
@@ -1343,8 +1348,7 @@ def _selected_table(res: StatsResult) -> pd.DataFrame:
             ci = f" [{lo:.3g}, {hi:.3g}]" if np.isfinite(lo) and np.isfinite(hi) else ""
             ps.append(f"{nm} = {r.params[nm]:.3g}{ci}")
         if r.discrete:  # a count law's parameters are the continuous law's: say its mean
-            kk = np.arange(1, 10_000)
-            ps.append(f"mean {float(np.sum(kk * r.pmf(kk))):.3g}")
+            ps.append(f"mean {_count_mean(r):.3g}")
         others = sorted((o.bic - r.bic, f) for f, o in summ.results.items()
                         if o.selectable and f != r.family)
         # a degenerate fit may reach a lower BIC (its shape parameters run off to a limit
