@@ -4,11 +4,13 @@ them, against the same scan with its exact hole.
 
 A radius read with a rule, or a centre clicked on the scan, can be off by a millimetre. Every
 scene of the robust sweep's conditions (``robust_sweep.scene_options``; seeds ``--seed`` ...)
-is analysed with its exact hole, then with the radius 3 % and 1 % short and 3 % long, and the
-centre 0.5 and 1 mm off (in a direction drawn from the seed), with the pipeline's default (a
+is analysed with its exact hole, then with the radius 3 % and 1 % short and 3 % and 6 % long,
+and the centre 0.5 and 1 mm off (in a direction drawn from the seed), with the pipeline's default (a
 given circle that the ink crosses is replaced by the hole found in the scan when near,
-``hole_crossed``) and with ``hole_correction=False``. Scores as the robust sweep's
-(``crosssection.truth.scoring.score``).
+``hole_crossed``; a given circle wider than the wall, replaced by a plate's edge found at the
+ink's envelope, ``hole_wide``) and with ``hole_correction=False``. Scores as the robust sweep's
+(``crosssection.truth.scoring.score``), and the periphery's stack count and epsilon against
+the exact hole's (``periphery_ratio``, ``epsilon_ratio``).
 
 Usage: python benchmarks/hole_given_off.py [--conditions typical,thick_dense,lowres]
        [--per-condition 8] [--seed 100] [--workers 2] [--out DIR]
@@ -31,7 +33,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 #: (name, radius factor, centre offset in mm)
 PERTURBATIONS = (("exact", 1.0, 0.0), ("radius -3 %", 0.97, 0.0), ("radius -1 %", 0.99, 0.0),
-                 ("radius +3 %", 1.03, 0.0), ("centre 0.5 mm", 1.0, 0.5),
+                 ("radius +3 %", 1.03, 0.0), ("radius +6 %", 1.06, 0.0),
+                 ("centre 0.5 mm", 1.0, 0.5),
                  ("centre 1 mm", 1.0, 1.0))
 SCORES = ("rod_length_rel_error", "junction_f1", "n_br_exact_length_fraction",
           "total_energy_rel_error", "n_voids_rel_error")
@@ -74,7 +77,14 @@ def run_scene(condition: str, seed: int) -> list[dict]:
             row["hole_replaced"] = res.hole.replaced
             row["given_crossed"] = res.hole.given_crossed
             row["quality"] = ";".join(res.summary["quality"]["codes"])
+            row["n_periphery"] = int((res.tables["stacks"]["region"] == "periphery").sum())
+            row["epsilon"] = res.summary["epsilon"]
             rows.append(row)
+    exact = rows[0] if rows and rows[0]["perturbation"] == "exact" else None
+    for row in rows:
+        if exact is not None and "epsilon" in row and "epsilon" in exact:
+            row["periphery_ratio"] = row["n_periphery"] / max(exact["n_periphery"], 1)
+            row["epsilon_ratio"] = row["epsilon"] / exact["epsilon"]
     return rows
 
 
@@ -102,7 +112,11 @@ def main(argv=None) -> int:
                     f1=("junction_f1", "median"), f1_min=("junction_f1", "min"),
                     nbr=("n_br_exact_length_fraction", "median"),
                     nbr_min=("n_br_exact_length_fraction", "min"),
-                    energy=("total_energy_rel_error", "median"))
+                    energy=("total_energy_rel_error", "median"),
+                    periphery=("periphery_ratio", "median"),
+                    periphery_min=("periphery_ratio", "min"),
+                    epsilon=("epsilon_ratio", "median"),
+                    wide=("quality", lambda v: int(v.fillna("").str.contains("hole_wide").sum())))
                .reset_index())
     summary = summary.sort_values(["condition", "perturbation"],
                                   key=lambda s: s.map(order) if s.name == "perturbation" else s,

@@ -177,6 +177,11 @@ def _threshold_in_frame(rgb, p: AnalysisParams, path, timer, min_piece_px: float
         with timer("hole"):
             hole, inside, thr = _checked_given_hole(rgb, hole, inside, thr, m, path,
                                                     correct=p.hole_correction)
+    if p.hole_given and not hole.replaced:
+        with timer("hole"):
+            hole, inside, thr = _checked_wide_hole(rgb, hole, inside, thr, m, path,
+                                                   thickness_px=p.thickness_px,
+                                                   correct=p.hole_correction)
     with timer("threshold"):
         n_px = 0
         if p.thickness_px < BRIDGE_MAX_H_PX:
@@ -252,6 +257,47 @@ def _checked_given_hole(rgb, hole, inside, thr, m, path, *, correct=True):
     found = dataclasses.replace(found, given_crossed=cut, replaced=True,
                                 alternative=(hole.center_rc.copy(), float(hole.radius_px)))
     return found, frame, thr_found
+
+
+def _checked_wide_hole(rgb, hole, inside, thr, m, path, *, thickness_px, correct=True):
+    """A given hole wider than the wall the rod is pressed against, replaced by the plate's
+    edge found there.
+
+    A radius given too large by more than 2 h leaves the wall band's junctions beyond the
+    periphery's tolerance: every stack reads as bulk, and epsilon is low (a sample scan
+    given 7 % too large: 26 periphery stacks of 57 -> 0, epsilon 5.78 -> 5.39, no word).
+    :func:`~crosssection.stages.hole.given_hole_wide` tells such a hole by the ink's
+    envelope. A plate's edge found in the scan (:func:`~crosssection.stages.hole.find_hole`)
+    at that envelope is the wall: it replaces the given hole (with ``correct`` False the
+    given one is kept). A plate's edge at the given circle makes it right (a loose rod, away
+    from the wall). Without a plate nothing tells a hole given too wide from a rod lying
+    away from its wall: the given hole is kept. The ``hole_wide`` check names both.
+    Returns ``(hole, frame, threshold)``.
+    """
+    env = hole_stage.given_hole_wide(thr.mask, hole, thickness_px=thickness_px)
+    if env is None:
+        return hole, inside, thr
+    within = max(2.0 * float(thickness_px), 3.5)
+    found = None
+    try:
+        whole = threshold_rgb(rgb, **m)
+        if whole.mask.any():
+            found = hole_stage.find_hole(rgb, whole.mask, path=path)
+    except FoldstatError:
+        found = None
+    plate = (found is not None and found.confidence >= 0.5
+             and found.reason.startswith("plate edge"))
+    if plate and abs(found.radius_px - hole.radius_px) <= within \
+            and np.hypot(*(found.center_rc - hole.center_rc)) <= within:
+        return hole, inside, thr
+    hole = dataclasses.replace(hole, envelope=env)
+    if not (plate and correct and abs(found.radius_px - env[1]) <= within
+            and np.hypot(*(found.center_rc - env[0])) <= within):
+        return hole, inside, thr
+    found = dataclasses.replace(found, replaced=True, envelope=env,
+                                alternative=(hole.center_rc.copy(), float(hole.radius_px)))
+    frame = hole_stage.frame_mask(rgb.shape[:2], found)
+    return found, frame, threshold_rgb(rgb, region=frame, **m)
 
 
 def _beyond_joins_rod(mask, hole) -> bool:

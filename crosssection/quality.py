@@ -32,6 +32,11 @@ ink_outside_hole         ink pixels outside the hole (in pieces of 20 px or   > 
 hole_crossed             fraction of a given hole's circle beyond which ink   > 1 %, where the
                          goes on (the circle cuts the wall band); the hole    hole found near it
                          found in the scan replaces it                        frames the ink
+hole_wide                fraction of a given hole's circle that the ink       < 10 %, where the
+                         reaches within 2 h, where its envelope, a circle     envelope is reached
+                         2 h or more inside, is reached (the rod pressed      on 50 %; a plate's
+                         against a smaller wall); a plate's edge found at     edge at the given
+                         the envelope replaces the given hole                 circle clears it
 hole_cut                 area of the hole outside the scan / the hole's area; > 0.5 %, or
                          ink on the border where the hole overhangs it by h   >= h px
 no_junction              junctions found                                      none
@@ -271,6 +276,7 @@ CATEGORIES = {
     "hole_fitted": FrameWarning,
     "ink_outside_hole": FrameWarning,
     "hole_crossed": FrameWarning,
+    "hole_wide": FrameWarning,
     "hole_cut": FrameWarning,
     "no_junction": NetworkWarning,
     "junction_degree": NetworkWarning,
@@ -379,6 +385,29 @@ def _crossed_check(params, hole) -> list[QualityFlag]:
         msg = (f"{head}: the hole found in the scan ({describe(used)}) frames the ink; check "
                f"hole_radius_mm and hole_center_px")
     return [QualityFlag("hole_crossed", msg, cut, GIVEN_CROSSED_LIMIT)]
+
+
+def _wide_check(params, hole) -> list[QualityFlag]:
+    """The ``hole_wide`` check: a given hole wider than the wall the ink is pressed against."""
+    from crosssection.stages.hole import WIDE_REACH_MAX
+
+    env = getattr(hole, "envelope", None)
+    if env is None:
+        return []
+    mm = params.scale.to_mm
+    (r0, c0), rad, reach, _env_reach = env
+    given = hole.alternative[1] if hole.replaced else hole.radius_px
+    head = (f"the ink reaches the given hole's circle on {100 * reach:.0f} % of it, and is "
+            f"pressed against a circle {mm(given - rad):.2f} mm inside it (radius "
+            f"{mm(rad):.2f} mm, centre x = {c0:.0f}, y = {r0:.0f} px)")
+    if hole.replaced:
+        msg = (f"{head}: the plate's edge found there is used (radius "
+               f"{mm(hole.radius_px):.2f} mm; given {mm(given):.2f} mm): check the hole given")
+    else:
+        msg = (f"{head}: a hole given too large reads the stacks along the wall as bulk and "
+               "epsilon low; check hole_radius_mm and hole_center_px, or leave them out to "
+               "find the hole")
+    return [QualityFlag("hole_wide", msg, reach, WIDE_REACH_MAX)]
 
 
 def _no_calibration_message(width_law, thickness_mm: float) -> str:
@@ -539,6 +568,7 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
             "scan): ink faded there is lost, and the rod with it (look at the overlay; a "
             "light-blue smear at a band's end also reads so)", len(faint_ends), 0))
     flags += _crossed_check(params, hole)
+    flags += _wide_check(params, hole)
     if ink_outside_fraction > 0.02:
         flags.append(QualityFlag("ink_outside_hole", f"{100 * ink_outside_fraction:.1f} % of the "
                                  "ink lies outside the hole (ignored): check the hole and the "

@@ -98,7 +98,8 @@ _REREAD_BELOW = 0.9
 _FAR_RAYS = 180
 
 __all__ = ["Hole", "fit_hole", "find_hole", "frame_mask", "trim_margin", "check_hole",
-           "classify_regions", "wall_tolerance_px", "kasa_fit", "ink_across_circle"]
+           "classify_regions", "wall_tolerance_px", "kasa_fit", "ink_across_circle",
+           "given_hole_wide"]
 
 
 @dataclass
@@ -126,6 +127,11 @@ class Hole:
         found in the scan, replaced it (``replaced``), else the one found.
     replaced : bool
         Whether this hole, found in the scan, replaced the given one.
+    envelope : tuple or None
+        For a given hole wider than the wall the ink is pressed against
+        (:func:`given_hole_wide`): ``(center_rc, radius_px, reach_given, reach_envelope)``,
+        the ink's envelope and the fractions of the given circle and of the envelope that
+        the ink reaches; else None.
     """
 
     center_rc: np.ndarray
@@ -136,6 +142,7 @@ class Hole:
     given_crossed: float = 0.0
     alternative: tuple | None = None
     replaced: bool = False
+    envelope: tuple | None = None
 
     def as_summary(self) -> dict:
         """``{center_x_px, center_y_px, radius_px}`` for ``summary.json``."""
@@ -522,12 +529,68 @@ def _circle_fit(points, c0, r0):
     return x[:2], float(x[2]), keep
 
 
-def _envelope_confidence(pts, hole) -> float:
+def _envelope_confidence(pts, hole, within_px: float = 3.5) -> float:
     """Fraction of 2-px angular bins whose outermost ink (of the border points ``pts``)
-    reaches the circle within 3 px."""
+    reaches the circle within ``within_px``."""
     n_bins = int(np.clip(np.pi * hole.radius_px, 36, 4096))
     outer, rad = _outermost(pts, hole.center_rc, n_bins)
-    return float(np.count_nonzero(rad >= hole.radius_px - 3.5)) / n_bins
+    return float(np.count_nonzero(rad >= hole.radius_px - within_px)) / n_bins
+
+
+#: A given hole is wider than the wall when the ink reaches within 2 h of its circle on
+#: less than this fraction of it while the ink's envelope, a circle at least 2 h inside it,
+#: is reached on :data:`WIDE_ENVELOPE_MIN` of it (:func:`given_hole_wide`).
+WIDE_REACH_MAX = 0.1
+#: ... see :data:`WIDE_REACH_MAX`.
+WIDE_ENVELOPE_MIN = 0.5
+
+
+def given_hole_wide(mask, hole, *, thickness_px: float):
+    """The ink's envelope when a given hole is wider than the wall the rod is pressed against.
+
+    The wall band lines the wall, so the ink reaches a right hole's circle on most of it;
+    the stacks pressed against the wall end their junctions half a band inside it, within
+    the periphery's tolerance (:func:`wall_tolerance_px`: half a band + 2 h). A radius given
+    more than 2 h too large leaves every such junction beyond that tolerance: every stack
+    reads as bulk, and epsilon (``L / 2 pi R``) is low by the radius' excess. Such a hole is
+    told by the ink reaching within 2 h of its circle on less than :data:`WIDE_REACH_MAX` of
+    it, where the ink's own envelope (:func:`fit_hole`, centred within a fifth of the radius)
+    lies more than 2 h inside it and is reached on :data:`WIDE_ENVELOPE_MIN` of it (a rod
+    pressed against a smaller wall). A loose rod far from a right wall (a render of a
+    quenched rod) reaches neither circle.
+
+    Parameters
+    ----------
+    mask : bool array (H, W)
+        The ink within the given hole's frame.
+    hole : Hole
+        The hole given.
+    thickness_px : float
+        Sheet thickness h, px.
+
+    Returns
+    -------
+    tuple or None
+        ``(center_rc, radius_px, reach_given, reach_envelope)`` of the envelope, or None when
+        the given hole is not too wide.
+    """
+    pts = _boundary_points(mask)
+    if len(pts) < 3:
+        return None
+    within = max(2.0 * float(thickness_px), 3.5)
+    reach = _envelope_confidence(pts, hole, within)
+    if reach >= WIDE_REACH_MAX:
+        return None
+    try:
+        env = _fit_points(pts, None, None, None, None)
+    except AnalysisError:
+        return None
+    env_reach = _envelope_confidence(pts, env)
+    off = float(np.hypot(*(env.center_rc - hole.center_rc)))
+    if (env_reach < WIDE_ENVELOPE_MIN or off > GIVEN_NEAR_FRACTION * hole.radius_px
+            or env.radius_px > hole.radius_px - within):
+        return None
+    return env.center_rc, float(env.radius_px), reach, env_reach
 
 
 def _wall_points(rgb, ink_mask, c0, r0, n_rays, *, far=False):

@@ -458,3 +458,63 @@ def test_ink_on_one_line_is_one_plain_line():
     msg = err.value.one_line()
     assert msg.startswith("scan.png: cannot fit the hole: ") and "lie on one line" in msg
     assert "QH" not in msg and "Qhull" not in msg
+
+
+@pytest.mark.parametrize("plate", ["grey", None])
+def test_a_given_hole_too_wide_is_flagged_and_a_plate_edge_replaces_it(scene, plate):
+    """A radius given 6 % too large left the wall band's junctions beyond the periphery's
+    tolerance: every stack read as bulk and epsilon low, with no word. The plate's edge,
+    where the scan shows one, replaces it; on bare paper the hole is kept and flagged."""
+    from crosssection import analyze
+
+    sc, c, R = scene
+    img = sc.rgb
+    if plate is not None:
+        ink = threshold_rgb(sc.rgb, method="fixed").mask
+        img = apply_backdrop(sc.rgb, ink_mask=ink, hole_center_rc=c, hole_radius_px=R,
+                             rng=np.random.default_rng(5), plate=plate, rim_px=0)
+    p = sc.params
+    kw = dict(px_per_mm=p["px_per_mm"], thickness_mm=p["thickness_mm"],
+              calibration=sc.calibration, hole_center_px=tuple(p["hole_center_px"]))
+    exact = analyze(img, hole_radius_mm=p["hole_radius_mm"], **kw)
+    assert "hole_wide" not in exact.summary["quality"]["codes"]
+    n_periphery = int((exact.tables["stacks"]["region"] == "periphery").sum())
+    assert n_periphery > 0
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        wide = analyze(img, hole_radius_mm=1.06 * p["hole_radius_mm"], **kw)
+    assert "hole_wide" in wide.summary["quality"]["codes"]
+    assert any(issubclass(w.category, FrameWarning) and "given hole's circle" in str(w.message)
+               for w in caught)
+    regions = wide.tables["stacks"]["region"]
+    if plate is None:
+        assert wide.hole.radius_px == pytest.approx(1.06 * R)
+        assert int((regions == "periphery").sum()) < n_periphery / 2
+        return
+    assert wide.hole.replaced and wide.hole.radius_px == pytest.approx(R, abs=2.0)
+    assert int((regions == "periphery").sum()) == n_periphery
+    assert wide.summary["epsilon"] == pytest.approx(exact.summary["epsilon"], rel=0.01)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FrameWarning)
+        kept = analyze(img, hole_radius_mm=1.06 * p["hole_radius_mm"], hole_correction=False,
+                       **kw)
+    assert "hole_wide" in kept.summary["quality"]["codes"]
+    assert kept.hole.radius_px == pytest.approx(1.06 * R)
+
+
+def test_a_rod_away_from_a_right_wall_is_not_a_hole_too_wide(scene):
+    """A plate's edge at the given circle makes the hole right, however far inside it the
+    rod lies (a loose rod): the ink alone cannot tell."""
+    from crosssection import analyze
+
+    sc, c, R = scene
+    ink = threshold_rgb(sc.rgb, method="fixed").mask
+    p = sc.params
+    wide_R = 1.06 * R
+    img = apply_backdrop(sc.rgb, ink_mask=ink, hole_center_rc=c, hole_radius_px=wide_R,
+                         rng=np.random.default_rng(5), plate="grey", rim_px=0)
+    res = analyze(img, px_per_mm=p["px_per_mm"], thickness_mm=p["thickness_mm"],
+                  calibration=sc.calibration, hole_center_px=tuple(p["hole_center_px"]),
+                  hole_radius_mm=1.06 * p["hole_radius_mm"])
+    assert "hole_wide" not in res.summary["quality"]["codes"]
+    assert res.hole.radius_px == pytest.approx(wide_R)
