@@ -265,6 +265,9 @@ PASS_TAPER = 4.0
 #: resolution, 1.00-1.01 times, but the pressing is then loose where a stack's spacing
 #: changes within a segment (docs/validation/compact.md, "Drawing the rod itself").
 PASS_SMOOTH = 0.0
+#: largest ``pass_smooth``, in rod segments: beyond a few segments the pressing is smoothed
+#: away from the stacks it holds together (and the kernel's length grows without bound)
+PASS_SMOOTH_MAX = 50.0
 #: ``draw="passes"``: adjacent pressed passes overlap by this much so that the rasterised
 #: strokes leave no paper line between them.
 PASS_OVERLAP_PX = 1.0
@@ -2064,6 +2067,9 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
                     ("pass_smooth", pass_smooth)):
         if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
             raise ParameterError(f"{name} must be a finite number >= 0, got {v!r}")
+    if pass_smooth > PASS_SMOOTH_MAX:
+        raise ParameterError(f"pass_smooth must be at most {PASS_SMOOTH_MAX:g} rod segments, "
+                             f"got {pass_smooth!r}")
     if draw == "passes" and not pass_width * thickness_mm * px_per_mm > PASS_OVERLAP_PX:
         raise ParameterError(f"pass_width must exceed {PASS_OVERLAP_PX} px, got "
                              f"{pass_width * thickness_mm * px_per_mm:g} px")
@@ -2313,6 +2319,13 @@ def _check_options(kwargs: dict) -> dict:
         raise ParameterError(f"draw must be one of {DRAW}, got {kwargs['draw']!r}")
     if kwargs.get("join", "hook") not in JOIN:
         raise ParameterError(f"join must be one of {JOIN}, got {kwargs['join']!r}")
+    if "pass_smooth" in kwargs:
+        v = kwargs["pass_smooth"]
+        if kwargs.get("draw", "bands") != "passes":
+            raise ParameterError("pass_smooth applies only to draw 'passes'")
+        if not (isinstance(v, (int, float)) and math.isfinite(v) and 0 <= v <= PASS_SMOOTH_MAX):
+            raise ParameterError(f"pass_smooth must be a number in [0, {PASS_SMOOTH_MAX:g}] "
+                                 f"rod segments, got {v!r}")
     for k in ("px_per_mm", "thickness_mm", "rod_length_mm"):
         v = kwargs.get(k)
         if v is not None and not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
@@ -2887,6 +2900,10 @@ def add_subparser(sub) -> None:
                    help="draw one band of the calibrated width per stack (bands, default) or "
                         "the rod itself, every pass a stroke and the passes of a stack "
                         "pressed together (passes; its calibration w(n) is linear in n)")
+    p.add_argument("--pass-smooth", type=float, default=None, metavar="S",
+                   help="--draw passes: smooth the passes' pressing along the rod over S rod "
+                        "segments (0 <= S <= 50; default: over one pitch); 1 draws the rods "
+                        "that read best (docs/validation/compact.md)")
     p.add_argument("--hole", default="auto",
                    help="hole radius in mm, 'auto' (default: the wall of a compaction, else "
                         "the smallest disk around the rod) or 'none' (the pipeline then fits "
@@ -2922,7 +2939,7 @@ _OPTION = {"noise_sigma": "--noise", "blur_px": "--blur", "jpeg_quality": "--jpe
            "px_per_mm": "--px-per-mm", "thickness_mm": "--thickness-mm",
            "rod_length_mm": "--rod-length-mm", "hole_radius_mm": "--hole", "seed": "--seed",
            "clean": "--clean", "smooth": "--smooth", "draw": "--draw", "join": "--join",
-           "out_dir": "--out"}
+           "pass_smooth": "--pass-smooth", "out_dir": "--out"}
 
 
 def _cli_names(message: str) -> str:
@@ -2975,6 +2992,8 @@ def _run(args) -> int:
             "illumination": args.illumination, "cast": args.cast}
     if args.jpeg is not None:
         opts["jpeg_quality"] = 0 if args.jpeg == "none" else args.jpeg
+    if args.pass_smooth is not None:
+        opts["pass_smooth"] = args.pass_smooth
     kwargs = dict(px_per_mm=args.px_per_mm, thickness_mm=args.thickness_mm,
                   rod_length_mm=args.rod_length_mm, clean=args.clean, seed=args.seed,
                   smooth=args.smooth, draw=args.draw, join=args.join,

@@ -327,3 +327,32 @@ def test_a_rod_too_coarse_for_its_stacks_is_one_warning_line(tmp_path, capsys):
     assert share > COARSE_BRANCH_SHARE
     assert err == [e for e in err if e.startswith(f"warning: {out}: ")]
     assert sum("too long for the stacks" in e and f"{100 * share:.0f} %" in e for e in err) == 1
+
+
+def test_flat_folds_counts_turns_that_bring_segments_closer_than_h():
+    """A hairpin at one node (176 degrees, as at epsilon 30) folds the rod flat through its
+    hard core: its segments are closer than h within pi h / 2 of the node whatever h; a
+    turn of 140 degrees keeps them h apart there."""
+    def bent(deg):
+        a = np.radians(180.0 - deg)
+        return np.array([[-1.0, 0.0], [0.0, 0.0], [-np.cos(a), np.sin(a)]])
+
+    assert compact.flat_folds(bent(176.0)) == 1
+    assert compact.flat_folds(bent(140.0)) == 0
+    # the limit is where the arms are h apart at s = pi h / 2
+    theta = np.radians(compact.FLAT_FOLD_DEG)
+    assert 2 * (np.pi / 2) * np.cos(theta / 2) == pytest.approx(1.0)
+    straight = np.c_[np.linspace(0, 1, 6), np.zeros(6)]
+    assert compact.flat_folds(straight) == 0
+
+
+def test_cli_reports_flat_folds_as_one_warning_line(tmp_path, monkeypatch, capsys):
+    """Rods folded flat through themselves pass the segment check (the two segments of a
+    node are adjacent): the command counts them in configs.csv and says so in one line."""
+    monkeypatch.setattr(compact, "flat_folds", lambda xy: 2)
+    out = tmp_path / "c"
+    assert simulate_main(["compact", *SMALL, "--seed", "5", "--out", str(out)]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    flat = [e for e in err if "fold flat through themselves" in e]
+    assert len(flat) == 1 and flat[0].startswith(f"warning: {out}: 2 of 2 configurations")
+    assert (pd.read_csv(out / "configs.csv").n_flat_folds == 2).all()

@@ -117,3 +117,23 @@ def test_an_out_inside_the_simulation_folder_is_refused(sim, tmp_path, capsys):
     assert main(["quench", "--n-configs", "2", "--segments", "60", "--seed", "1",
                  "--runs", "2", "--nematic-runs", "0", "--maxiter", "5", "--no-progress",
                  "--out", str(sim)]) == 0
+
+
+@pytest.mark.parametrize("value,extra,word", [("1", (), "applies only to --draw 'passes'"),
+                                              ("1e9", ("--draw", "passes"), "[0, 50]"),
+                                              ("nan", ("--draw", "passes"), "[0, 50]"),
+                                              ("-1", ("--draw", "passes"), "[0, 50]")])
+def test_pass_smooth_is_refused_out_of_range_or_without_passes(sim, tmp_path, capsys,
+                                                               not_drawn, value, extra, word):
+    line = _error(capsys, sim, "--out", tmp_path / "s", "--pass-smooth", value, *extra, *FAST)
+    assert line.startswith("error: --pass-smooth: ") and word in line
+    assert not (tmp_path / "s").exists()
+
+
+def test_pass_smooth_reaches_the_drawing_and_its_record(sim, tmp_path):
+    import json
+
+    out = tmp_path / "s"
+    assert main(["render", str(sim), "--out", str(out), "--draw", "passes",
+                 "--pass-smooth", "1", *FAST]) == 0
+    assert json.loads((out / "render.json").read_text())["params"]["pass_smooth"] == 1.0
