@@ -112,7 +112,8 @@ inverts the law the bands were drawn with, as a user passes the tool's calibrati
 Scene folders. :func:`render_directory` writes each scene with its ``set.toml``
 (:func:`write_set_file`): the scale, ``calibration.csv`` and the hole its ``params.json``
 records, in the form of :mod:`crosssection.setconfig`, so that ``foldstat batch SCENES``
-analyses every scene as ``validate`` does (each scene folder is a set, named by its folder).
+analyses every scene as ``validate`` does; the scenes of one render are one set, named after
+its folder (:func:`render_set_name`), each with its own hole.
 The scoring reads ``params.json`` and ignores it.
 
 Drawing the rod itself (``draw="passes"``, experimental). The bands drawing draws the truth's
@@ -2737,7 +2738,8 @@ def _render_directory(sim_dir, out_dir, *, configs=None, limit=None, progress=Fa
                     if not (folder / "set.toml").exists():
                         # a scene an older version rendered: made batch-ready from its record
                         try:
-                            write_set_file(folder, read_scene_params(folder))
+                            write_set_file(folder, read_scene_params(folder),
+                                           set_name=render_set_name(out_dir))
                         except ConfigError:
                             pass  # a damaged record: validate names the scene
                     written.append(folder)
@@ -2777,7 +2779,7 @@ def _render_directory(sim_dir, out_dir, *, configs=None, limit=None, progress=Fa
                     write_json(out_dir / RENDER_RECORD, record)
                     recorded = True
                 # before the scene, whose truth/summary.json marks it complete
-                written.append(_write_scene_whole(scene, folder))
+                written.append(_write_scene_whole(scene, folder, render_set_name(out_dir)))
     return written
 
 
@@ -2796,7 +2798,28 @@ def _is_partial_folder(p: Path) -> bool:
     return p.name.startswith(".") and p.name.endswith(_PARTIAL)
 
 
-def _write_scene_whole(scene: Scene, folder: Path) -> Path:
+def render_set_name(out_dir) -> str:
+    """The set name of a render's scenes: its folder's name, made a set name (characters
+    other than ASCII letters, digits and ``. _ + -`` become ``_``; ``render`` when nothing
+    is left). Every scene of one render is then one set of a batch, one ensemble for
+    ``stats`` beside the simulation it was drawn from.
+
+    Parameters
+    ----------
+    out_dir : str or Path
+
+    Returns
+    -------
+    str
+    """
+    import re
+
+    name = re.sub(r"[^A-Za-z0-9._+-]", "_", Path(out_dir).resolve().name)
+    name = re.sub(r"^[^A-Za-z0-9]+", "", name)
+    return name or "render"
+
+
+def _write_scene_whole(scene: Scene, folder: Path, set_name: str | None = None) -> Path:
     """Write ``scene`` into ``folder`` whole or not at all.
 
     The scene is written into a hidden sibling (:func:`_partial_folder`) that is then renamed:
@@ -2818,11 +2841,11 @@ def _write_scene_whole(scene: Scene, folder: Path) -> Path:
         ``folder``.
     """
     if folder.is_dir() and any(folder.iterdir()):
-        return write_scene(scene, folder)
+        return write_scene(scene, folder, set_name=set_name)
     tmp = _partial_folder(folder)
     shutil.rmtree(tmp, ignore_errors=True)
     try:
-        write_scene(scene, tmp)
+        write_scene(scene, tmp, set_name=set_name)
         # an empty folder is replaced: one a stopped render of an older version left
         tmp.replace(folder)
     except BaseException:

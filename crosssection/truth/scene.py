@@ -13,6 +13,7 @@ Both generators (``crosssection.truth.network.make_scene``, ``simulate.render``)
 """
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -145,7 +146,8 @@ def write_image(rgb: np.ndarray, path, *, px_per_mm: float | None = None) -> Pat
     return path
 
 
-def write_scene(scene: Scene, folder, *, image_name: str = "image.png") -> Path:
+def write_scene(scene: Scene, folder, *, image_name: str = "image.png",
+                set_name: str | None = None) -> Path:
     """Write a scene folder: the image, ``params.json`` (the scene's parameters and the
     package version), ``calibration.csv``, ``set.toml`` (:func:`write_set_file`), ``truth/``.
 
@@ -156,6 +158,8 @@ def write_scene(scene: Scene, folder, *, image_name: str = "image.png") -> Path:
         Created if needed.
     image_name : str
         File name of the image (``.png``, ``.jpg`` or ``.tif``; PNG by default).
+    set_name : str, optional
+        The set the scene belongs to (:func:`write_set_file`).
 
     Returns
     -------
@@ -178,7 +182,7 @@ def write_scene(scene: Scene, folder, *, image_name: str = "image.png") -> Path:
     # the generator's parameters and the version that drew the scene: its truth is that
     # version's
     write_json(folder / "params.json", {**scene.params, "version": __version__})
-    write_set_file(folder, scene.params)
+    write_set_file(folder, scene.params, image_name=image_name, set_name=set_name)
     pieces = scene.tables.get(LAYER_PIECES)
     (folder / "truth").mkdir(parents=True, exist_ok=True)
     if pieces is not None:
@@ -191,11 +195,16 @@ def write_scene(scene: Scene, folder, *, image_name: str = "image.png") -> Path:
     return folder
 
 
-def write_set_file(folder, params: dict) -> Path:
+def write_set_file(folder, params: dict, *, image_name: str = "image.png",
+                   set_name: str | None = None) -> Path:
     """Write ``folder/set.toml``: the analysis parameters of a scene folder, as
     :func:`crosssection.truth.scoring.analyze_scene_folder` takes them from its
     ``params.json`` (the scale, the hole when it has one, ``calibration.csv``), so that a
     batch of scene folders analyses each as ``validate`` does.
+
+    The hole is the image's own (``[images."image.png"]``): scenes of one render that share
+    a ``set_name`` and a scale are then one set of a batch, one ensemble for ``stats``, each
+    with its hole.
 
     Parameters
     ----------
@@ -203,6 +212,11 @@ def write_set_file(folder, params: dict) -> Path:
         The scene folder (its ``calibration.csv`` is named relative to it).
     params : dict
         The scene's parameters (:attr:`crosssection.truth.scene.Scene.params`).
+    image_name : str
+        The scene's image file.
+    set_name : str, optional
+        The set's ``name`` (:func:`crosssection.setconfig.valid_set_name`); without it the
+        set is named by the folder's path.
 
     Returns
     -------
@@ -210,14 +224,17 @@ def write_set_file(folder, params: dict) -> Path:
         The file.
     """
     from crosssection.core.fileio import write_text
-    from crosssection.setconfig import SET_FILE
+    from crosssection.setconfig import SET_FILE, valid_set_name
 
-    lines = ["# the analysis parameters of this scene, for `foldstat batch`",
-             f"px_per_mm = {float(params['px_per_mm'])!r}",
-             f"thickness_mm = {float(params['thickness_mm'])!r}",
-             'calibration = "calibration.csv"']
+    lines = ["# the analysis parameters of this scene, for `foldstat batch`"]
+    if set_name is not None:
+        lines.append(f'name = "{valid_set_name(set_name, Path(folder) / SET_FILE)}"')
+    lines += [f"px_per_mm = {float(params['px_per_mm'])!r}",
+              f"thickness_mm = {float(params['thickness_mm'])!r}",
+              'calibration = "calibration.csv"']
     if params.get("hole_radius_mm"):
-        lines.append(f"hole_radius_mm = {float(params['hole_radius_mm'])!r}")
+        lines += ["", f"[images.{json.dumps(image_name)}]",
+                  f"hole_radius_mm = {float(params['hole_radius_mm'])!r}"]
         if params.get("hole_center_px"):
             x, y = (float(v) for v in params["hole_center_px"])
             lines.append(f"hole_center_px = [{x!r}, {y!r}]")

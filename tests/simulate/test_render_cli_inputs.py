@@ -267,7 +267,10 @@ def test_a_render_resumes_beside_its_own_report_and_half_written_scene(sim, tmp_
     assert (out / "config_00001" / "truth" / "summary.json").exists()
 
 
-def test_every_scene_is_a_set_a_batch_analyses_as_validate_does(sim, tmp_path, capsys):
+def test_a_render_is_one_set_a_batch_analyses_as_validate_does(sim, tmp_path, capsys):
+    """Each scene's set.toml gives the analysis validate runs, its hole its image's own; the
+    scenes of one render share the set's name, so that a batch of them is one ensemble
+    (each scene its own set gave stats nothing to fit)."""
     from crosssection.setconfig import load_set_config
     from crosssection.truth.scene import read_scene_params
 
@@ -277,7 +280,7 @@ def test_every_scene_is_a_set_a_batch_analyses_as_validate_does(sim, tmp_path, c
     params = read_scene_params(scene)
     assert params["hole_radius_mm"] and params["hole_center_px"]
     got = load_set_config(scene / "set.toml", root=out)
-    assert got.name == "config_00000" and got.warnings == []
+    assert got.name == "scenes" and got.warnings == []
     # what validate passes the analysis (crosssection.truth.scoring.analyze_scene_folder)
     assert got.params_for(scene / "image.png") == {
         "px_per_mm": params["px_per_mm"], "thickness_mm": params["thickness_mm"],
@@ -289,6 +292,13 @@ def test_every_scene_is_a_set_a_batch_analyses_as_validate_does(sim, tmp_path, c
     assert _render(capsys, sim, "--out", out, *FAST) == (0, "")
     assert load_set_config(scene / "set.toml", root=out).params == got.params
     assert (out / "config_00001" / "set.toml").exists()
+    import pandas as pd
+
+    from crosssection.cli import main as foldstat
+
+    assert foldstat(["batch", str(out), "--out", str(tmp_path / "b"), "--no-progress"]) == 0
+    index = pd.read_csv(tmp_path / "b" / "index.csv")
+    assert len(index) == 2 and set(index["set"]) == {"scenes"}
 
 
 def test_scenes_without_a_record_are_refused(sim, tmp_path, capsys):
