@@ -116,6 +116,7 @@ from crosssection.core import provenance, schema
 from crosssection.core.errors import (ConfigError, FoldstatError, ImageError, OutputError,
                                       ParameterError, output_error, printable)
 from crosssection.core.fileio import (BROWSER_FILES, PARTIAL_TAG, check_out, clear_stale_folders,
+                                      exclusive_lock,
                                       is_working_folder, missing_file_reason, read_json_object,
                                       special_file_reason, staging_folder, swap_in_folder,
                                       temporary_files, write_csv, write_json)
@@ -1023,11 +1024,8 @@ def batch_lock(out: Path):
     """Hold an exclusive lock on the output folder ``out`` while a batch writes into it.
 
     Two batches writing into one folder would each remove the other's staging folders as a
-    killed run's, and each write an index of its own. The lock is ``flock`` on
-    :data:`LOCK_FILE`, which the system releases when the process dies: a batch killed
-    (``kill -9``, out of memory) leaves a file that locks nothing, and its re-run goes on. A
-    file system without locks (some network disks), or a platform without ``flock``, runs
-    the batch unlocked.
+    killed run's, and each write an index of its own. The lock is
+    :func:`~crosssection.core.fileio.exclusive_lock` on :data:`LOCK_FILE`.
 
     Parameters
     ----------
@@ -1041,57 +1039,14 @@ def batch_lock(out: Path):
     OutputError
         The lock file cannot be created.
     """
-    try:
-        import fcntl
-    except ImportError:
+    def unlocked():
+        warnings.warn(f"{out}: its file system takes no lock: a second batch into it "
+                      "would not be refused (run one batch at a time there)",
+                      BatchWarning, stacklevel=4)
+
+    with exclusive_lock(out / LOCK_FILE, where=out, busy="another batch is writing into it",
+                        unlocked=unlocked):
         yield
-        return
-    path = out / LOCK_FILE
-    if path.is_symlink():
-        # writing the process id through it would overwrite a file that is not the batch's
-        raise ParameterError(f"{LOCK_FILE} is a symbolic link (to {os.readlink(path)}), not "
-                             "the batch's lock file: remove it", out)
-    while True:
-        try:
-            # O_NOFOLLOW: a link put there between the check above and this call
-            fd = os.open(path, os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0), 0o666)
-        except OSError as exc:
-            raise output_error(exc, path) from None
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            holder = os.read(fd, 32).decode("ascii", "replace").strip()
-            os.close(fd)
-            raise ParameterError("another batch is writing into it"
-                                 + (f" (pid {holder})" if holder.isdigit() else "")
-                                 + ": wait for it to end, or give another --out", out) from None
-        except OSError:
-            # no locks on this file system (a network disk without a lock service)
-            warnings.warn(f"{out}: its file system takes no lock: a second batch into it "
-                          "would not be refused (run one batch at a time there)",
-                          BatchWarning, stacklevel=3)
-            break
-        # a batch that ends removes the file it locked: a lock taken on that file, now
-        # nameless, would lock nothing, so the file is opened afresh
-        try:
-            if os.fstat(fd).st_ino == os.stat(path).st_ino:
-                break
-        except OSError:
-            pass
-        os.close(fd)
-    try:
-        os.ftruncate(fd, 0)
-        os.write(fd, f"{os.getpid()}\n".encode())
-    except OSError:
-        pass  # only a second batch's message names the process id
-    try:
-        yield
-    finally:
-        try:
-            os.unlink(path)  # before the lock is released (see above)
-        except OSError:
-            pass
-        os.close(fd)
 
 
 def clear_leftovers(out: Path, tasks) -> None:

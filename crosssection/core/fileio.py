@@ -269,16 +269,20 @@ def write_json(path, data) -> Path:
 
 
 def write_csv(path, df: pd.DataFrame) -> Path:
-    """Write a DataFrame as CSV (no index) atomically."""
+    """Write a DataFrame as CSV (no index) atomically, in UTF-8.
+
+    A path whose bytes are not UTF-8 (the system keeps them as surrogates) is written with
+    those bytes as ``\\udcXX`` escapes: the file stays UTF-8 for every reader."""
     with atomic_path(path) as tmp:
-        df.to_csv(tmp, index=False)
+        df.to_csv(tmp, index=False, encoding="utf-8", errors="backslashreplace")
     return Path(path)
 
 
 def write_text(path, text: str) -> Path:
-    """Write text atomically."""
+    """Write text atomically, in UTF-8 (non-UTF-8 path bytes escaped as by
+    :func:`write_csv`)."""
     with atomic_path(path) as tmp:
-        tmp.write_text(text)
+        tmp.write_text(text, encoding="utf-8", errors="backslashreplace")
     return Path(path)
 
 
@@ -511,3 +515,84 @@ def missing_file_reason(path) -> str:
         return f"symbolic link to {os.readlink(path)}, which cannot be found"
     return "file not found"
 
+
+@contextmanager
+def exclusive_lock(path, *, where, busy: str, unlocked=None):
+    """Hold an exclusive lock on the file ``path`` (created, holding the process id) while
+    one command writes an output; a second is refused.
+
+    The lock is ``flock``, which the system releases when the process dies: a run killed
+    (``kill -9``, out of memory) leaves a file that locks nothing, and its re-run goes on. A
+    file system without locks (some network disks), or a platform without ``flock``, runs
+    unlocked (``unlocked()`` is called then).
+
+    Parameters
+    ----------
+    path : Path
+        The lock file; its folder exists.
+    where : str or Path
+        What a refusal names (the output).
+    busy : str
+        The refusal's cause (``"another batch is writing into it"``).
+    unlocked : callable, optional
+        Called once when the file system takes no lock.
+
+    Raises
+    ------
+    ParameterError
+        Another process holds the lock (named by its process id).
+    OutputError
+        The lock file cannot be created.
+    """
+    from crosssection.core.errors import ParameterError, output_error
+
+    try:
+        import fcntl
+    except ImportError:
+        yield
+        return
+    path = Path(path)
+    if path.is_symlink():
+        # writing the process id through it would overwrite a file that is not the lock
+        raise ParameterError(f"{path.name} is a symbolic link (to {os.readlink(path)}), not "
+                             "the lock file: remove it", where)
+    while True:
+        try:
+            # O_NOFOLLOW: a link put there between the check above and this call
+            fd = os.open(path, os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0), 0o666)
+        except OSError as exc:
+            raise output_error(exc, path) from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.read(fd, 32).decode("ascii", "replace").strip()
+            os.close(fd)
+            raise ParameterError(busy + (f" (pid {holder})" if holder.isdigit() else "")
+                                 + ": wait for it to end, or give another --out",
+                                 where) from None
+        except OSError:
+            # no locks on this file system (a network disk without a lock service)
+            if unlocked is not None:
+                unlocked()
+            break
+        # a run that ends removes the file it locked: a lock taken on that file, now
+        # nameless, would lock nothing, so the file is opened afresh
+        try:
+            if os.fstat(fd).st_ino == os.stat(path).st_ino:
+                break
+        except OSError:
+            pass
+        os.close(fd)
+    try:
+        os.ftruncate(fd, 0)
+        os.write(fd, f"{os.getpid()}\n".encode())
+    except OSError:
+        pass  # only a second run's message names the process id
+    try:
+        yield
+    finally:
+        try:
+            os.unlink(path)  # before the lock is released (see above)
+        except OSError:
+            pass
+        os.close(fd)

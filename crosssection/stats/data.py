@@ -120,6 +120,13 @@ class IncompleteBatchWarning(QualityWarning):
     configurations done."""
 
 
+def _text(name: str) -> str:
+    """A file or folder name as text: bytes that are not UTF-8 (kept by the system as
+    surrogates) become U+FFFD, so that a set or configuration named after them can be
+    written into the report's tables."""
+    return name.encode("utf-8", "surrogateescape").decode("utf-8", "replace")
+
+
 def _folder(folder, name: str = "folder") -> Path:
     """``folder`` as a Path, or a ParameterError naming ``name`` when it is no path (None, a
     number) or an empty string (which would read the working folder)."""
@@ -453,7 +460,7 @@ def load_simulation(folder, *, set_name=None) -> Ensemble:
         A table is missing or malformed, or every configuration failed.
     """
     folder = _folder(folder)
-    name = _set_name(set_name) or folder.resolve().name
+    name = _set_name(set_name) or _text(folder.resolve().name)
     cfg = _read_csv(folder / "configs.csv", ["config_id", "epsilon", "energy_total", "n_stacks",
                                              "n_branches", "n_voids"], nonempty=True,
                     numeric=["epsilon", "energy_total", "n_stacks", "n_branches", "n_voids"])
@@ -641,7 +648,7 @@ def load_image_output(folder, *, set_name: str, config_id: str | None = None,
     _set_name(config_id, "config_id")
     _limit(l_min_mm, "l_min_mm")
     _limit(s_min_mm2, "s_min_mm2")
-    cid = config_id or folder.name
+    cid = config_id or _text(folder.name)
     report = _validation_report(folder)
     if report is not None:
         raise report
@@ -857,7 +864,8 @@ def _batch_image_folders(folder: Path):
                 lost.append(output)
                 continue
             # a scan's folder is one name inside its set's folder, however deep that is
-            out.append((row["set"] or Path(output).parts[0], Path(output).name, img))
+            out.append((row["set"] or _text(Path(output).parts[0]), _text(Path(output).name),
+                        img))
         if lost:
             warnings.warn(f"{index}: {len(lost)} image(s) listed as done have no summary.json "
                           f"({_listed(lost, 3)}) and are left out", QualityWarning,
@@ -874,11 +882,11 @@ def _batch_image_folders(folder: Path):
         # the set a batch recorded in the scan's summary (a nested set's name is a path)
         recorded = _recorded_set(summ)
         if recorded:
-            out.append((recorded, rel.name, img))
+            out.append((recorded, _text(rel.name), img))
         elif len(rel.parts) >= 2:
-            out.append((rel.parts[0], "/".join(rel.parts[1:]), img))
+            out.append((_text(rel.parts[0]), _text("/".join(rel.parts[1:])), img))
         else:
-            out.append((folder.resolve().name, rel.parts[0], img))
+            out.append((_text(folder.resolve().name), _text(rel.parts[0]), img))
     # a folder holding several batches' outputs (of one set's name) holds one scan's name
     # several times: those are named by their path, a configuration being one per set
     seen = Counter((s, c) for s, c, _ in out)
@@ -1093,7 +1101,7 @@ def load_any(folder, *, set_name=None, l_min_mm=RECORDED, s_min_mm2=RECORDED) ->
                           DetectionLimitWarning, stacklevel=2)
         return load_simulation(folder, set_name=set_name)
     if kind == "image":
-        return load_image_output(folder, set_name=set_name or Path(folder).resolve().name,
+        return load_image_output(folder, set_name=set_name or _text(Path(folder).resolve().name),
                                  l_min_mm=l_min_mm, s_min_mm2=s_min_mm2)
     ens = load_batch(folder, l_min_mm=l_min_mm, s_min_mm2=s_min_mm2)
     if set_name:

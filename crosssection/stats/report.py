@@ -25,7 +25,8 @@ import pandas as pd
 
 from crosssection._version import __version__
 from crosssection.core.errors import ParameterError
-from crosssection.core.fileio import (BROWSER_FILES, clear_stale_folders, foreign_entry,
+from crosssection.core.fileio import (BROWSER_FILES, clear_stale_folders, exclusive_lock,
+                                      foreign_entry,
                                       save_figure, staging_folder, swap_in_folder, write_csv,
                                       write_json, write_text)
 from crosssection.stats import fits as F
@@ -845,25 +846,36 @@ def _named_error(exc: OSError, path) -> OSError:
 def _staged_folder(out: Path):
     """Yield a new hidden folder beside ``out``; on success it takes the place of ``out``.
 
+    One report at a time: the folder's lock (``.<name>.lock`` beside it,
+    :func:`~crosssection.core.fileio.exclusive_lock`) refuses a second run in one line.
+
     Hidden working folders of a killed earlier run (``.<name>.partial-*``, ``.<name>.old-*``)
     are removed first. On failure or interrupt the working folder is removed and ``out`` is
     left as it was.
     """
     real = out.resolve()
     try:
-        clear_stale_folders(real)
-        stage = staging_folder(real)
+        real.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise _named_error(exc, out) from None
-    try:
-        yield stage
+    # a second report into the same folder would remove this one's working folder as a
+    # killed run's (both then end "written", the folder holding part of one report)
+    with exclusive_lock(real.parent / f".{real.name}.lock", where=out,
+                        busy="another stats run is writing this report"):
         try:
-            swap_in_folder(stage, real)
+            clear_stale_folders(real)
+            stage = staging_folder(real)
         except OSError as exc:
             raise _named_error(exc, out) from None
-    finally:
-        if stage.exists():
-            shutil.rmtree(stage, ignore_errors=True)
+        try:
+            yield stage
+            try:
+                swap_in_folder(stage, real)
+            except OSError as exc:
+                raise _named_error(exc, out) from None
+        finally:
+            if stage.exists():
+                shutil.rmtree(stage, ignore_errors=True)
 
 
 def _write_files(res: StatsResult, ens: Ensemble, out: Path, *, opts: StatsOptions, inputs,

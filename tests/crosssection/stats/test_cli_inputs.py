@@ -720,3 +720,35 @@ def test_a_set_name_no_folder_can_hold_is_refused(batch, tmp_path, capfd, name):
     """A set name is a folder of the report: --name takes what a set.toml's name takes."""
     status, _, err = _stats(capfd, batch, "--out", tmp_path / "r", "--name", name, *FAST)
     assert status == 2 and len(err) == 1 and err[0].startswith("error: --name: name must be")
+
+
+def test_a_folder_whose_name_is_not_utf8_is_reported(batch, tmp_path, capfd):
+    """A scan folder named in bytes that are not UTF-8 (analyze writes into it) gave stats
+    an unexpected error, exit 1: its path is written into per_config.csv escaped."""
+    odd = tmp_path / os.fsdecode(b"x\xe9")
+    try:
+        odd.mkdir()
+    except (UnicodeEncodeError, OSError):
+        pytest.skip("the file system refuses names that are not UTF-8")
+    scan = sorted(p.parent for p in batch.rglob("summary.json"))[0]
+    import shutil
+
+    shutil.copytree(scan, odd / "scan")
+    status, out, err = _stats(capfd, odd / "scan", "--out", tmp_path / "rep", *FAST)
+    assert status == 0 and not [e for e in err if not e.startswith("warning: ")]
+    text = (tmp_path / "rep" / "per_config.csv").read_bytes().decode("utf-8")
+    assert "\\udce9" in text
+
+
+def test_a_second_stats_run_writing_the_same_report_is_refused(batch, tmp_path, capfd):
+    """Two runs into one --out both exited 0, the second having removed the first's working
+    folder: the folder held part of one report. While one writes, a second is refused."""
+    out = tmp_path / "rep"
+    with fileio.exclusive_lock(tmp_path / ".rep.lock", where=out, busy="held"):
+        status, _, err = _stats(capfd, batch, "--out", out, *FAST)
+    assert status == 2 and len(err) == 1
+    assert err[0].startswith(f"error: {out}: another stats run is writing this report")
+    assert not out.exists()
+    status, _, err = _stats(capfd, batch, "--out", out, *FAST)
+    assert status == 0 and (out / "macro.csv").is_file()
+    assert not (tmp_path / ".rep.lock").exists()
