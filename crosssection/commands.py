@@ -142,8 +142,13 @@ def check_not_other_output(out_dir, image=None, command="analyze", *, given_as="
     """
     from crosssection.core.errors import ParameterError
 
+    out = Path(out_dir).expanduser()
     held = output_of(out_dir)
     if held is None:
+        foreign = None if earlier_run(out) else _foreign_table(out)
+        if foreign:
+            raise ParameterError(f"{out_dir} holds {foreign}, which foldstat did not write "
+                                 "(a run would replace it): give a folder of its own", given_as)
         return
     if held[1] not in ("foldstat analyze", "foldstat steps"):
         raise ParameterError(f"{out_dir} holds the output of {held[1]} ({held[0]}): give a "
@@ -158,6 +163,58 @@ def check_not_other_output(out_dir, image=None, command="analyze", *, given_as="
             raise ParameterError(f"{out_dir} holds the output of foldstat {other_command} "
                                  f"for another scan ({other[0]}): give a folder of its own",
                                  given_as)
+
+
+def check_not_inside_other_output(out_dir, *, given_as="--out") -> None:
+    """Refuse a scene folder, or a folder inside a batch's output, as the output folder of
+    ``analyze`` or ``steps`` (:func:`_scene_or_batch_output`).
+
+    Raises
+    ------
+    ParameterError
+    """
+    from crosssection.core.errors import ParameterError
+
+    why = _scene_or_batch_output(Path(out_dir).expanduser())
+    if why:
+        raise ParameterError(f"{out_dir} {why}: give a folder of its own", given_as)
+
+
+def _scene_or_batch_output(out: Path) -> str | None:
+    """Why ``out`` belongs to another command's output below its top: a scene folder (its
+    ``truth/``, which validate and batch read as a scene), or a folder inside a batch's
+    output (a per-scan folder: the batch's index would describe another scan there)."""
+    if (out / "truth" / "summary.json").is_file() and (out / "params.json").is_file():
+        return "is a scene folder (its truth/ and params.json: batch and validate read it)"
+    try:
+        parents = list(out.resolve().parents)[:3]
+    except (OSError, RuntimeError):
+        return None
+    for parent in parents:
+        if is_record(parent / "batch.json", {"package": "foldstat", "version": None}):
+            return f"lies inside the output of foldstat batch ({parent})"
+    return None
+
+
+def _foreign_table(out: Path) -> str | None:
+    """The first file of ``out`` named as an analysis' table whose columns are not the
+    table's, or a ``summary.json`` that is not an analysis' record: a user's file that an
+    analysis would replace."""
+    for name, columns in schema.TABLES.items():
+        path = out / f"{name}.csv"
+        if not path.is_file():
+            continue
+        try:
+            with open(path, encoding="utf-8", errors="replace") as fh:
+                head = fh.readline().strip().split(",")
+        except OSError:
+            continue
+        if head[:len(columns)] != list(columns):
+            return path.name
+    summary = out / "summary.json"
+    if summary.is_file() and not is_record(summary, ("version", "parameters")):
+        return summary.name
+    return None
 
 
 def _recorded_scan(record_path: Path):
@@ -305,6 +362,7 @@ def run(args) -> int:
     _check_image_given(args.image)
     check_out(args.out)
     check_not_beside(args.image, args.out)
+    check_not_inside_other_output(args.out)
     check_not_other_output(args.out, args.image)
     clear_temporary(args.out, "analyze")
     params = AnalysisParams.from_cli_args(args, path=args.image)
@@ -329,6 +387,7 @@ def run_steps(args) -> int:
     _check_image_given(args.image)
     check_out(args.out)
     check_not_beside(args.image, args.out)
+    check_not_inside_other_output(args.out)
     check_not_other_output(args.out, args.image, "steps")
     clear_temporary(args.out, "steps")
     params = AnalysisParams.from_cli_args(args, path=args.image)

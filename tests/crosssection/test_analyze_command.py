@@ -343,6 +343,11 @@ def test_a_file_named_like_a_record_is_not_an_earlier_run(small_scan, tmp_path):
     for name in ("notes.txt", OVERLAY, STEP_IMAGES[0]):
         (out / name).write_text("mine")
     (out / "summary.json").write_text("x")  # not a record: the folder is the user's
+    # ... and a run would replace that summary.json: refused
+    assert crosssection.cli.main(["analyze", str(small_scan), "--out", str(out),
+                                  "--no-figure"]) == 2
+    assert (out / "summary.json").read_text() == "x"
+    (out / "summary.json").unlink()
     assert crosssection.cli.main(["analyze", str(small_scan), "--out", str(out),
                                   "--no-figure"]) == 0
     assert all((out / name).read_text() == "mine" for name in ("notes.txt", OVERLAY,
@@ -454,3 +459,33 @@ def test_analyze_keeps_the_step_images_of_a_steps_run_of_the_same_scan(small_sca
     assert crosssection.cli.main(["analyze", str(small_scan), "--out", str(out),
                                   "--no-figure", "--steps"]) == 0
     assert not (out / "steps.json").exists()
+
+
+def test_analyze_refuses_a_scene_a_batch_folder_and_a_users_tables(tmp_path, capsys):
+    """analyze wrote into a render's scene folder (a later batch then skipped the scene as an
+    analysis), into a batch's per-scan folder (another scan's results there), and over a
+    user's stacks.csv: each is refused in one line, exit 2, nothing written."""
+    import json
+
+    from crosssection.cli import main
+
+    scan = Path(__file__).resolve().parents[2] / "sample_images" / "scan_01_sparse.png"
+    scene = tmp_path / "scene"
+    (scene / "truth").mkdir(parents=True)
+    (scene / "truth" / "summary.json").write_text("{}")
+    (scene / "params.json").write_text("{}")
+    batch = tmp_path / "b"
+    (batch / "set" / "scan").mkdir(parents=True)
+    (batch / "batch.json").write_text(json.dumps({"package": "foldstat", "version": "0"}))
+    user = tmp_path / "user"
+    user.mkdir()
+    (user / "stacks.csv").write_text("a,b\n1,2\n")
+    for out, word in ((scene, "is a scene folder"), (batch / "set" / "scan",
+                                                      "lies inside the output of foldstat batch"),
+                      (user, "holds stacks.csv, which foldstat did not write")):
+        capsys.readouterr()
+        assert main(["analyze", str(scan), "--out", str(out)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and word in err[0], err
+        assert not (out / "summary.json").exists()
+    assert (user / "stacks.csv").read_text() == "a,b\n1,2\n"
