@@ -217,11 +217,14 @@ def _check_out_inside(scenes_dir: Path, out_dir: Path) -> None:
 def _scene_folders(scenes_dir: Path, out_dir: Path) -> list[Path]:
     """Every subfolder of ``scenes_dir`` but hidden ones and report folders: this run's
     (perhaps not yet written) and those of earlier runs given an ``--out`` there, which hold
-    no scene (:func:`is_report_folder`)."""
+    no scene (:func:`is_report_folder`), and other commands' outputs (a batch of the scenes,
+    a stats report: :func:`crosssection.core.records.output_of`), which batch skips too."""
+    from crosssection.core.records import output_of
+
     out = out_dir.resolve()
     return sorted(p for p in scenes_dir.iterdir()
                   if p.is_dir() and not p.name.startswith(".") and p.resolve() != out
-                  and not is_report_folder(p))
+                  and not is_report_folder(p) and output_of(p) is None)
 
 
 def _one_line(exc: BaseException, scene: Path) -> str:

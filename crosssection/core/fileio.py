@@ -337,7 +337,10 @@ def special_file_reason(path) -> str | None:
 
 
 def read_toml(path) -> dict:
-    """A TOML file as a dict; unreadable or invalid files are one ``ConfigError`` naming it."""
+    """A TOML file as a dict; unreadable or invalid files are one ``ConfigError`` naming it.
+
+    A UTF-8 byte-order mark (Windows' Notepad writes one) is skipped, as in the CSV files
+    read."""
     import tomllib
 
     from crosssection.core.errors import ConfigError
@@ -346,7 +349,7 @@ def read_toml(path) -> dict:
     if special:
         raise ConfigError(special, path)
     try:
-        return tomllib.loads(Path(path).read_text(encoding="utf-8"))
+        return tomllib.loads(Path(path).read_text(encoding="utf-8-sig"))
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"invalid TOML: {exc}", path) from None
     except (OSError, UnicodeDecodeError) as exc:

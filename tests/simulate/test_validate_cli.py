@@ -112,6 +112,20 @@ def test_report_folder_inside_scenes_is_not_a_scene(scenes, capsys):
     assert not_analysed(capsys.readouterr().err) == []
 
 
+def test_a_batch_and_a_stats_report_inside_scenes_are_not_scenes(scenes, tmp_path, capsys):
+    """A batch of the scenes and its stats report written into the scenes folder were
+    counted as failed scenes (exit 3); batch skips such folders, and so does validate."""
+    import json
+
+    folder, _ = scenes
+    for name, record in (("b", "batch.json"), ("rep", "stats.json")):
+        (folder / name).mkdir()
+        (folder / name / record).write_text(json.dumps({"package": "foldstat",
+                                                         "version": "0"}))
+    assert run(folder, tmp_path / "val") == 0
+    assert not_analysed(capsys.readouterr().err) == []
+
+
 def test_a_report_inside_scenes_is_no_scene_of_a_run_reporting_elsewhere(scenes, tmp_path,
                                                                         capsys):
     folder, _ = scenes
