@@ -2340,6 +2340,15 @@ def _check_options(kwargs: dict) -> dict:
     return defects
 
 
+def _failed_count(sim_dir: Path) -> int:
+    """Rows of a simulation's ``failures.csv`` (configurations that stored no rod)."""
+    try:
+        with open(sim_dir / "failures.csv", encoding="utf-8", errors="replace") as fh:
+            return max(sum(1 for line in fh if line.strip()) - 1, 0)
+    except OSError:
+        return 0
+
+
 def _rods_path(sim_dir: Path) -> Path:
     """``sim_dir/rods.npz``, once ``sim_dir`` is known to be a folder holding it."""
     if sim_dir.exists() and not sim_dir.is_dir():
@@ -2709,6 +2718,13 @@ def _render_directory(sim_dir, out_dir, *, configs=None, limit=None, progress=Fa
             failed = sim_dir / "failures.csv"
             why = f" (see {failed})" if failed.is_file() else ""
             raise ConfigError(f"no finished configuration to render in rods.npz{why}", sim_dir)
+        asked = (p or {}).get("n_configs")
+        if configs is None and isinstance(asked, int) \
+                and len(rods.files) + _failed_count(sim_dir) < asked:
+            # a run stopped before the end: its rods.npz holds the last finished run's
+            warnings.warn(f"{sim_dir}: rods.npz holds {len(rods.files)} of the {asked} "
+                          "configurations params.json asks for (a run stopped before the end: "
+                          "re-run it to finish it)", TruthWarning, stacklevel=3)
         if limit is not None:
             keys = keys[:limit]
         # an ensemble that recorded None for its default delta analyses with that default

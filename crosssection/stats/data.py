@@ -490,6 +490,14 @@ def load_simulation(folder, *, set_name=None) -> Ensemble:
                      f"(config_id {_listed(cfg.loc[bad, 'config_id'])}; see {see}) and "
                      f"{'is' if n == 1 else 'are'} not in the statistics")
         warnings.warn(notes[-1], IncompleteBatchWarning, stacklevel=2)
+    asked = _configs_asked(folder)
+    if asked is not None and len(cfg) < asked:
+        # a run stopped before the end (killed, or a larger --n-configs begun): the tables
+        # hold the configurations of the last run that finished
+        notes.append(f"{folder / 'configs.csv'}: {len(cfg)} of the {asked} configurations "
+                     "params.json asks for (a run stopped before the end: re-run the same "
+                     "command to finish it)")
+        warnings.warn(notes[-1], IncompleteBatchWarning, stacklevel=2)
     cfg = cfg[~stopped]
     note = "; ".join(notes)
     br = _read_csv(folder / "branches.csv", ["config_id", "length", "kappa_plus", "kappa_pm",
@@ -524,6 +532,15 @@ def load_simulation(folder, *, set_name=None) -> Ensemble:
         "shape_ratio": vo["shape_ratio"], "n_edges": vo["n_edges"], "s_min_L2": np.nan})
     return Ensemble(configs.reindex(columns=CONFIG_COLS), branches.reindex(columns=BRANCH_COLS),
                     stacks.reindex(columns=STACK_COLS), voids.reindex(columns=VOID_COLS))
+
+
+def _configs_asked(folder: Path) -> int | None:
+    """The ``n_configs`` a simulation's ``params.json`` records, or None."""
+    try:
+        n = json.loads((folder / "params.json").read_text()).get("n_configs")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return n if isinstance(n, int) and not isinstance(n, bool) and n > 0 else None
 
 
 def _simulation_provenance(folder: Path):

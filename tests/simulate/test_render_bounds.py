@@ -137,3 +137,25 @@ def test_pass_smooth_reaches_the_drawing_and_its_record(sim, tmp_path):
     assert main(["render", str(sim), "--out", str(out), "--draw", "passes",
                  "--pass-smooth", "1", *FAST]) == 0
     assert json.loads((out / "render.json").read_text())["params"]["pass_smooth"] == 1.0
+
+
+def test_an_unfinished_ensemble_is_rendered_with_a_warning(sim, tmp_path, capsys):
+    """A quench stopped before the end (params.json asking for more configurations than
+    rods.npz holds) was rendered, and fitted by stats, without a word."""
+    import json
+
+    from crosssection.cli import main as foldstat
+
+    short = tmp_path / "short"
+    shutil.copytree(sim, short)
+    params = json.loads((short / "params.json").read_text())
+    params["n_configs"] = 5
+    (short / "params.json").write_text(json.dumps(params))
+    capsys.readouterr()
+    assert main(["render", str(short), "--out", str(tmp_path / "s"), *FAST]) == 0
+    err = capsys.readouterr().err
+    assert f"warning: {short}: rods.npz holds 1 of the 5 configurations" in err
+    foldstat(["stats", str(short), "--out", str(tmp_path / "r"), "--n-boot", "0", "--no-gof",
+              "--no-figures"])
+    assert "configs.csv: 1 of the 5 configurations params.json asks for" in \
+        capsys.readouterr().err
