@@ -1065,8 +1065,10 @@ def check_params(params: CompactParams) -> None:
     given = ("--thickness" if params.thickness is not None else
              f"the thickness that epsilon {eps:g} implies (h/R = {H_OVER_R:g})")
     if h >= 0.5 / n:
+        n_max = math.ceil(0.5 / h) - 1
         raise ParameterError(f"{given} {h:.3g} must be below half a segment 1/(2N) = "
-                             f"{0.5 / n:.3g}: use fewer segments or a thinner rod")
+                             f"{0.5 / n:.3g}: use at most {n_max} segments (--segments) or "
+                             "a thinner rod (--thickness)")
     r = params.wall_radius
     frac = h / (math.pi * (r - 0.5 * h) ** 2) if r > 0.5 * h else math.inf
     if frac >= MAX_AREA_FRACTION:
@@ -1172,7 +1174,10 @@ def add_subparser(sub):
                        description=__doc__.split("\n\n")[0])
     p.add_argument("--epsilon", type=float, required=True,
                    help="compaction rate L/(2 pi R) reached, above 1 (at 1 the wall's "
-                        "circumference holds the rod; experiments: 8-19)")
+                        "circumference holds the rod; experiments: 8-19); with the default "
+                        "thickness (h = 0.005 R) the rod's segments must be more than 2 h "
+                        "long: epsilon > 0.005 N / pi, 3.2 at N = 2000 (fewer --segments "
+                        "below)")
     p.add_argument("--segments", type=int, default=CompactParams.n_segments,
                    help="number of segments N of the rod of length L (default "
                         f"{CompactParams.n_segments})")
