@@ -279,6 +279,14 @@ def load_set_config(toml_path, *, defaults: dict | None = None,
                               f"{', '.join(PARAM_KEYS)}", toml_path)
         key = Path(rel).as_posix()
         overrides[key] = check_params(table, toml_path, where=f"images.{rel!r}.")
+        replaced = [k for k, v in overrides[key].items()
+                    if k in (given or {}) and given[k] != v]
+        if replaced:
+            warnings.append(f"{toml_path}: [images.{rel!r}] sets "
+                            + ", ".join(f"{k} = {overrides[key][k]!r}" for k in replaced)
+                            + ", which replaces " + ", ".join(
+                                f"--{k.replace('_', '-')} {given[k]!r}" for k in replaced)
+                            + " for that scan")
         if not (folder / key).is_file():
             warnings.append(f"{toml_path}: [images.{rel!r}] names no image of the set")
     return SetConfig(name=name, folder=folder, params=params, overrides=overrides,

@@ -48,6 +48,19 @@ def test_set_toml_valid_with_override(tmp_path):
     assert p["thickness_mm"] == 0.12 and p["kappa_c_per_mm"] == 3.5
 
 
+def test_an_image_table_replacing_an_option_is_named(tmp_path):
+    """A per-image value replaced a command-line option without a word (only the set's
+    top-level values were named); a BOM (Notepad's) no longer makes the file invalid."""
+    (tmp_path / "x.png").write_bytes(b"")
+    (tmp_path / "set.toml").write_bytes(
+        b'\xef\xbb\xbfpx_per_mm = 40\n[images."x.png"]\nhole_radius_mm = 19.5\n')
+    cfg = load_set_config(tmp_path / "set.toml", given={"hole_radius_mm": 7.0})
+    assert cfg.error is None and len(cfg.warnings) == 1
+    assert ("[images.'x.png'] sets hole_radius_mm = 19.5, which replaces --hole-radius-mm "
+            "7.0 for that scan") in cfg.warnings[0]
+    assert load_set_config(tmp_path / "set.toml", given={"hole_radius_mm": 19.5}).warnings == []
+
+
 @pytest.mark.parametrize("text, word", [
     ('px_per_m = 50\n', "unknown key"),
     ('px_per_mm = -3\n', "> 0"),
