@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import importlib
+import os
 import signal
 import sys
 import threading
@@ -150,7 +151,7 @@ def run_parsed(parser: argparse.ArgumentParser, argv=None) -> int:
     (one line, never a traceback). Quality warnings are printed as ``warning: FILE: ...``
     lines on stderr.
     """
-    with signals_as_interrupts() as received, _escaping_stdout():
+    with signals_as_interrupts() as received, _escaping_stdout(), _closed_pipes_ignored():
         status = _run_parsed(parser, argv)
         # a command that reports its own interrupt (stats) returns INTERRUPTED
         return (TERMINATED if signal.SIGTERM in received and status == INTERRUPTED
@@ -173,6 +174,54 @@ def _escaping_stdout():
         if strict:
             out.flush()
             out.reconfigure(errors="strict")
+
+
+class _PipeWriter:
+    """A text stream whose reader may go away (``| head -1``): once a write meets a closed
+    pipe, the stream's descriptor is pointed at the null device and the rest of the output is
+    dropped, so that the command finishes its work (its files are its result) instead of
+    failing on its messages."""
+
+    def __init__(self, stream):
+        self._stream = stream
+
+    def _closed(self):
+        try:
+            os.dup2(os.open(os.devnull, os.O_WRONLY), self._stream.fileno())
+        except (OSError, ValueError, AttributeError):
+            pass
+
+    def write(self, text):
+        try:
+            return self._stream.write(text)
+        except BrokenPipeError:
+            self._closed()
+            return len(text)
+
+    def flush(self):
+        try:
+            self._stream.flush()
+        except BrokenPipeError:
+            self._closed()
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+
+@contextlib.contextmanager
+def _closed_pipes_ignored():
+    """Standard output and error as :class:`_PipeWriter` for the command's run."""
+    out, err = sys.stdout, sys.stderr
+    sys.stdout, sys.stderr = _PipeWriter(out), _PipeWriter(err)
+    try:
+        yield
+    finally:
+        for wrapped, real in ((sys.stdout, out), (sys.stderr, err)):
+            try:
+                wrapped.flush()
+            except (OSError, ValueError):
+                pass
+        sys.stdout, sys.stderr = out, err
 
 
 def _run_parsed(parser: argparse.ArgumentParser, argv=None) -> int:

@@ -185,3 +185,21 @@ def test_an_interrupt_the_analysis_catches_still_stops_the_batch(tmp_path, monke
     index = pd.read_csv(out / "index.csv")
     assert index["image"].tolist() == (["a0.png"] if swallowed else [])
     assert json.loads((out / "batch.json").read_text())["interrupted"] is True
+
+
+def test_a_reader_gone_away_does_not_fail_the_command(tmp_path):
+    """``analyze ... | head -0`` wrote its outputs and then exited 2 on a broken pipe
+    ("error: output: Broken pipe"), and ``2>&1 | head -1`` exited 1 ("a bug"): the messages
+    to a closed pipe are dropped and the command's status is its work's."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    scan = Path(__file__).resolve().parents[2] / "sample_images" / "scan_01_sparse.png"
+    out = tmp_path / "o"
+    proc = subprocess.Popen([sys.executable, "-m", "crosssection", "analyze", str(scan),
+                             "--out", str(out)], stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT)
+    proc.stdout.close()  # the reader is gone before the command writes a line
+    assert proc.wait(timeout=300) == 0
+    assert (out / "summary.json").is_file()
