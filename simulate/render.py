@@ -2660,7 +2660,30 @@ def render_directory(sim_dir, out_dir, *, configs=None, progress: bool | None = 
 def _render_directory(sim_dir, out_dir, *, configs=None, limit=None, progress=False, kwargs,
                       name=str) -> list[Path]:
     """:func:`render_directory`, the first ``limit`` configurations only when given; the
-    keywords of the messages shown as ``name(keyword)``."""
+    keywords of the messages shown as ``name(keyword)``.
+
+    One render at a time writes into ``out_dir``: two with other options each took the
+    folder for theirs (render.json of one, scenes of the other). The lock is
+    :func:`~crosssection.core.fileio.exclusive_lock` on ``.<name>.render.lock`` beside it."""
+    from crosssection.core.fileio import exclusive_lock
+
+    if not str(out_dir).strip():
+        raise ParameterError("empty path: give the output folder", name("out_dir"))
+    out = Path(out_dir).expanduser().resolve()
+    if not out.parent.is_dir():
+        # nothing is created before the folder is checked (a folder inside the simulation
+        # is refused); a render into a new parent runs unlocked
+        return _render_directory_locked(sim_dir, out_dir, configs=configs, limit=limit,
+                                        progress=progress, kwargs=kwargs, name=name)
+    with exclusive_lock(out.parent / f".{out.name}.render.lock", where=out_dir,
+                        busy="another render is writing into it"):
+        return _render_directory_locked(sim_dir, out_dir, configs=configs, limit=limit,
+                                        progress=progress, kwargs=kwargs, name=name)
+
+
+def _render_directory_locked(sim_dir, out_dir, *, configs=None, limit=None, progress=False,
+                             kwargs, name=str) -> list[Path]:
+    """:func:`_render_directory` holding the folder's lock."""
     from tqdm import tqdm
 
     from crosssection.core.fileio import write_json

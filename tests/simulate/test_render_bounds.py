@@ -159,3 +159,16 @@ def test_an_unfinished_ensemble_is_rendered_with_a_warning(sim, tmp_path, capsys
               "--no-figures"])
     assert "configs.csv: 1 of the 5 configurations params.json asks for" in \
         capsys.readouterr().err
+
+
+def test_a_second_render_into_the_same_folder_is_refused(sim, tmp_path, capsys):
+    """Two renders with other options started together each took the folder for theirs
+    (render.json of one, the scenes of the other): the second is refused in one line."""
+    from crosssection.core.fileio import exclusive_lock
+
+    out = tmp_path / "s"
+    with exclusive_lock(tmp_path / ".s.render.lock", where=out, busy="held"):
+        line = _error(capsys, sim, "--out", out, *FAST)
+    assert "another render is writing into it" in line and not out.exists()
+    assert main(["render", str(sim), "--out", str(out), *FAST]) == 0
+    assert not (tmp_path / ".s.render.lock").exists()
