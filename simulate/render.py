@@ -2340,6 +2340,26 @@ def _check_options(kwargs: dict) -> dict:
     return defects
 
 
+def _scene_whole(folder: Path) -> bool:
+    """Whether a scene folder a render finished is still whole: its image ends (a PNG with
+    its closing chunk), its truth tables and records are there. A scene damaged since (a
+    file cut short or removed) is rendered again on resume, as a batch redoes a scan whose
+    output lost a table."""
+    from crosssection.core import schema
+
+    image = folder / "image.png"
+    try:
+        with open(image, "rb") as fh:
+            fh.seek(-12, 2)
+            if fh.read(12)[4:8] != b"IEND":
+                return False
+    except OSError:
+        return False
+    needed = [folder / "params.json", folder / "calibration.csv",
+              *(folder / "truth" / f"{t}.csv" for t in schema.TABLES)]
+    return all(p.is_file() and p.stat().st_size > 0 for p in needed)
+
+
 def _failed_count(sim_dir: Path) -> int:
     """Rows of a simulation's ``failures.csv`` (configurations that stored no rod)."""
     try:
@@ -2773,7 +2793,7 @@ def _render_directory_locked(sim_dir, out_dir, *, configs=None, limit=None, prog
                   disable=None if progress is None else not progress) as bar:
             for i, key in enumerate(bar):
                 folder = out_dir / key
-                if (folder / "truth" / "summary.json").exists():
+                if (folder / "truth" / "summary.json").exists() and _scene_whole(folder):
                     if not (folder / "set.toml").exists():
                         # a scene an older version rendered: made batch-ready from its record
                         try:

@@ -172,3 +172,18 @@ def test_a_second_render_into_the_same_folder_is_refused(sim, tmp_path, capsys):
     assert "another render is writing into it" in line and not out.exists()
     assert main(["render", str(sim), "--out", str(out), *FAST]) == 0
     assert not (tmp_path / ".s.render.lock").exists()
+
+
+def test_a_damaged_scene_is_rendered_again_on_resume(sim, tmp_path):
+    """A scene whose image was cut short or whose truth table was removed was trusted by a
+    resumed render (validate then failed it): it is rendered again, identically."""
+    out = tmp_path / "s"
+    assert main(["render", str(sim), "--out", str(out), *FAST]) == 0
+    scene = out / "config_00000"
+    image = (scene / "image.png").read_bytes()
+    (scene / "image.png").write_bytes(image[:1000])
+    assert main(["render", str(sim), "--out", str(out), *FAST]) == 0
+    assert (scene / "image.png").read_bytes() == image
+    (scene / "truth" / "stacks.csv").unlink()
+    assert main(["render", str(sim), "--out", str(out), *FAST]) == 0
+    assert (scene / "truth" / "stacks.csv").is_file()
