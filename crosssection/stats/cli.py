@@ -149,6 +149,11 @@ def check_options(args) -> None:
     for flag, v in (("--n-boot", n_boot), ("--n-mc", n_mc)):
         if v > MAX_RESAMPLES:
             raise ParameterError(f"must be at most {MAX_RESAMPLES}, got {v}", flag)
+    if args.no_gof and args.n_mc is not None:
+        # quench refuses an option that has no effect too: its value would be recorded and
+        # nothing done with it
+        raise ParameterError("has no effect with --no-gof (no goodness-of-fit test is run): "
+                             "give one of the two", "--n-mc")
     if n_mc == 0 and not args.no_gof:
         # without a resample there is no p-value to give
         raise ParameterError("0 resamples give no p-value: give an integer >= 1, or "

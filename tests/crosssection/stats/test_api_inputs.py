@@ -310,7 +310,12 @@ def test_cli_refuses_zero_gof_resamples(tmp_path):
     with pytest.raises(ParameterError) as err:
         cli.check_options(args)
     assert err.value.one_line().startswith("--n-mc: ")
-    cli.check_options(p.parse_args(["stats", "d", "--out", "r", "--n-mc", "0", "--no-gof"]))
+    cli.check_options(p.parse_args(["stats", "d", "--out", "r", "--no-gof"]))
+    # --n-mc with --no-gof would be recorded and nothing done with it: refused as quench does
+    for n in ("0", "10"):
+        with pytest.raises(ParameterError, match="no effect with --no-gof"):
+            cli.check_options(p.parse_args(["stats", "d", "--out", "r", "--n-mc", n,
+                                            "--no-gof"]))
     # an explicit value wins over --fast's, so --fast does not make 0 resamples usable
     with pytest.raises(ParameterError, match="--n-mc"):
         cli.check_options(p.parse_args(["stats", "d", "--out", "r", "--n-mc", "0", "--fast"]))
