@@ -1478,7 +1478,9 @@ def _model_share_note(ens: Ensemble) -> str:
             "free centreline (<code>total_energy_rel_uncertainty</code>). Measured on "
             "generated scans with exact truth, one branch's e is good to about a factor 1.5 "
             "and a scan's E to within 5-30 % (31-57 % too high on two generators written "
-            "apart from the package's, whose arms meet their bands at drawn corners); the "
+            "apart from the package's, whose arms meet their bands at drawn corners, 23 % "
+            "too low on a third, whose branches bend hardest just after their bands "
+            "part); the "
             "largest energies tend to read low and "
             "nearly straight branches high, and α<sub>e</sub> (the Gamma shape of e) came "
             "out 3-15 % above the truth's on two generators.</p>")
