@@ -270,8 +270,10 @@ def _checked_wide_hole(rgb, hole, inside, thr, m, path, *, thickness_px, correct
     envelope. A plate's edge found in the scan (:func:`~crosssection.stages.hole.find_hole`)
     at that envelope is the wall: it replaces the given hole (with ``correct`` False the
     given one is kept). A plate's edge at the given circle makes it right (a loose rod, away
-    from the wall). Without a plate nothing tells a hole given too wide from a rod lying
-    away from its wall: the given hole is kept. The ``hole_wide`` check names both.
+    from the wall). Without a plate, an envelope the ink lines on
+    :data:`~crosssection.stages.hole.WIDE_LINED_MIN` of it is the wall and replaces the
+    given hole; one lined less tells a hole given too wide from a rod lying away from its
+    wall no better than the given one: it is kept. The ``hole_wide`` check names both.
     Returns ``(hole, frame, threshold)``.
     """
     env = hole_stage.given_hole_wide(thr.mask, hole, thickness_px=thickness_px)
@@ -291,9 +293,17 @@ def _checked_wide_hole(rgb, hole, inside, thr, m, path, *, thickness_px, correct
             and np.hypot(*(found.center_rc - hole.center_rc)) <= within:
         return hole, inside, thr
     hole = dataclasses.replace(hole, envelope=env)
-    if not (plate and correct and abs(found.radius_px - env[1]) <= within
-            and np.hypot(*(found.center_rc - env[0])) <= within):
+    at_envelope = plate and (abs(found.radius_px - env[1]) <= within
+                             and np.hypot(*(found.center_rc - env[0])) <= within)
+    # without a plate, ink lining a circle all round is pressed against the wall: that
+    # circle is the wall (a loose rod lines no circle)
+    lined = not plate and env[3] >= hole_stage.WIDE_LINED_MIN
+    if not correct or not (at_envelope or lined):
         return hole, inside, thr
+    if lined:
+        found = hole_stage.Hole(np.asarray(env[0], float).copy(), float(env[1]), True,
+                                float(env[3]), f"ink envelope, ink lines {100 * env[3]:.0f} % "
+                                "of it")
     found = dataclasses.replace(found, replaced=True, envelope=env,
                                 alternative=(hole.center_rc.copy(), float(hole.radius_px)))
     frame = hole_stage.frame_mask(rgb.shape[:2], found)

@@ -36,7 +36,8 @@ hole_wide                fraction of a given hole's circle that the ink       < 
                          reaches within 2 h, where its envelope, a circle     envelope is reached
                          2 h or more inside, is reached (the rod pressed      on 50 %; a plate's
                          against a smaller wall); a plate's edge found at     edge at the given
-                         the envelope replaces the given hole                 circle clears it
+                         the envelope replaces the given hole, or the         circle clears it
+                         envelope where the ink lines 90 % of it
 hole_cut                 area of the hole outside the scan / the hole's area; > 0.5 %, or
                          ink on the border where the hole overhangs it by h   >= h px
 no_junction              junctions found                                      none
@@ -401,7 +402,8 @@ def _wide_check(params, hole) -> list[QualityFlag]:
             f"pressed against a circle {mm(given - rad):.2f} mm inside it (radius "
             f"{mm(rad):.2f} mm, centre x = {c0:.0f}, y = {r0:.0f} px)")
     if hole.replaced:
-        msg = (f"{head}: the plate's edge found there is used (radius "
+        by = "plate's edge" if hole.reason.startswith("plate edge") else "ink's envelope"
+        msg = (f"{head}: the {by} found there is used (radius "
                f"{mm(hole.radius_px):.2f} mm; given {mm(given):.2f} mm): check the hole given")
     else:
         msg = (f"{head}: a hole given too large reads the stacks along the wall as bulk and "

@@ -546,6 +546,9 @@ def _envelope_confidence(pts, hole, within_px: float = 3.5) -> float:
 WIDE_REACH_MAX = 0.1
 #: ... see :data:`WIDE_REACH_MAX`.
 WIDE_ENVELOPE_MIN = 0.5
+#: An envelope the ink reaches on this fraction of it is the wall itself (the wall band lines
+#: it all round): it replaces a given hole too wide where no plate's edge is found.
+WIDE_LINED_MIN = 0.9
 
 
 def given_hole_wide(mask, hole, *, thickness_px: float):

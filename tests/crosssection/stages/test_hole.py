@@ -460,16 +460,17 @@ def test_ink_on_one_line_is_one_plain_line():
     assert "QH" not in msg and "Qhull" not in msg
 
 
-@pytest.mark.parametrize("plate", ["grey", None])
+@pytest.mark.parametrize("plate", ["grey", None, "none, off the wall"])
 def test_a_given_hole_too_wide_is_flagged_and_a_plate_edge_replaces_it(scene, plate):
     """A radius given 6 % too large left the wall band's junctions beyond the periphery's
     tolerance: every stack read as bulk and epsilon low, with no word. The plate's edge,
-    where the scan shows one, replaces it; on bare paper the hole is kept and flagged."""
+    where the scan shows one, replaces it, and on bare paper the ink's envelope where the
+    ink lines it all round; a rod off the wall on a quarter of it keeps the hole, flagged."""
     from crosssection import analyze
 
     sc, c, R = scene
-    img = sc.rgb
-    if plate is not None:
+    img = sc.rgb if plate is None else _leave_wall(sc.rgb, c, R)
+    if plate == "grey":
         ink = threshold_rgb(sc.rgb, method="fixed").mask
         img = apply_backdrop(sc.rgb, ink_mask=ink, hole_center_rc=c, hole_radius_px=R,
                              rng=np.random.default_rng(5), plate=plate, rim_px=0)
@@ -487,7 +488,7 @@ def test_a_given_hole_too_wide_is_flagged_and_a_plate_edge_replaces_it(scene, pl
     assert any(issubclass(w.category, FrameWarning) and "given hole's circle" in str(w.message)
                for w in caught)
     regions = wide.tables["stacks"]["region"]
-    if plate is None:
+    if plate == "none, off the wall":
         assert wide.hole.radius_px == pytest.approx(1.06 * R)
         assert int((regions == "periphery").sum()) < n_periphery / 2
         return
