@@ -226,9 +226,6 @@ class AnalysisParams:
     def __post_init__(self):
         for f in fields(self):
             object.__setattr__(self, f.name, check_param(f.name, getattr(self, f.name)))
-        if self.px_per_mm > _MAX_PX_PER_MM:
-            raise ParameterError(f"px_per_mm = {self.px_per_mm:g} is beyond any scanner "
-                                 f"(at most {_MAX_PX_PER_MM:g})")
         if self.thickness_px < _MIN_THICKNESS_PX:
             raise ParameterError(
                 f"sheet thickness h = {self.thickness_mm:g} mm is {self.thickness_px:.3g} px at "
@@ -527,6 +524,9 @@ def check_param(name: str, value):
     if name in _POSITIVE:
         v = _number(name, value)
         _check_range(name, v)
+        if name == "px_per_mm" and v > _MAX_PX_PER_MM:
+            raise ParameterError(f"px_per_mm = {v:g} is beyond any scanner "
+                                 f"(at most {_MAX_PX_PER_MM:g})")
         return v
     if name in _NON_NEGATIVE:
         v = _number(name, value, allow_equal=True)

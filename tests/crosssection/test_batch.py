@@ -70,6 +70,7 @@ def test_an_image_table_replacing_an_option_is_named(tmp_path):
     ('calibration = "nowhere.csv"\n', "not found"),
     ('hole_center_px = [1, 2, 3]\n', "[x, y]"),
     ('this is = = not toml\n', "invalid TOML"),
+    ('px_per_mm = 99999999999999999999999999\n', "beyond any scanner"),
 ])
 def test_set_toml_errors_are_clear(tmp_path, text, word):
     (tmp_path / "set.toml").write_text(text)
