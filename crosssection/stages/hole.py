@@ -562,8 +562,10 @@ def given_hole_wide(mask, hole, *, thickness_px: float):
     told by the ink reaching within 2 h of its circle on less than :data:`WIDE_REACH_MAX` of
     it, where the ink's own envelope (:func:`fit_hole`, centred within a fifth of the radius)
     lies more than 2 h inside it and is reached on :data:`WIDE_ENVELOPE_MIN` of it (a rod
-    pressed against a smaller wall). A loose rod far from a right wall (a render of a
-    quenched rod) reaches neither circle.
+    pressed against a smaller wall), or by an envelope 2 h or more inside that the ink lines
+    on :data:`WIDE_LINED_MIN` of it while it reaches the given circle on less than half (a
+    radius given alone too large: the centre fitted with it hugs one side of the rod). A
+    loose rod far from a right wall (a render of a quenched rod) does neither.
 
     Parameters
     ----------
@@ -585,15 +587,20 @@ def given_hole_wide(mask, hole, *, thickness_px: float):
         return None
     within = max(2.0 * float(thickness_px), 3.5)
     reach = _envelope_confidence(pts, hole, within)
-    if reach >= WIDE_REACH_MAX:
-        return None
+    if reach >= 0.5:
+        return None  # the ink lines the given circle (1.0 on every right hole measured)
     try:
         env = _fit_points(pts, None, None, None, None)
     except AnalysisError:
         return None
     env_reach = _envelope_confidence(pts, env)
+    # the ink reaches the given circle nowhere while pressed against a smaller one, or it
+    # lines a smaller circle all round (a radius given alone too large: the centre fitted
+    # with it hugs one side of the rod, reached there)
+    pressed = reach < WIDE_REACH_MAX and env_reach >= WIDE_ENVELOPE_MIN
     off = float(np.hypot(*(env.center_rc - hole.center_rc)))
-    if (env_reach < WIDE_ENVELOPE_MIN or off > GIVEN_NEAR_FRACTION * hole.radius_px
+    if (not (pressed or env_reach >= WIDE_LINED_MIN)
+            or off > GIVEN_NEAR_FRACTION * hole.radius_px
             or env.radius_px > hole.radius_px - within):
         return None
     return env.center_rc, float(env.radius_px), reach, env_reach

@@ -519,3 +519,27 @@ def test_a_rod_away_from_a_right_wall_is_not_a_hole_too_wide(scene):
                   hole_radius_mm=1.06 * p["hole_radius_mm"])
     assert "hole_wide" not in res.summary["quality"]["codes"]
     assert res.hole.radius_px == pytest.approx(wide_R)
+
+
+def test_a_radius_given_alone_too_wide_is_replaced_by_the_lined_envelope():
+    """A radius given alone 7 % too large (a sample scan, 8.5 mm for 7.94): the centre
+    fitted with it hugs one side of the rod, which reaches that circle on 29 % of it, so no
+    flag was raised while 17 of the 26 wall stacks read as bulk and epsilon 7 % low. The ink
+    lines a smaller circle all round: that circle is the wall."""
+    from pathlib import Path
+
+    from crosssection import analyze
+
+    root = Path(__file__).resolve().parents[3] / "sample_images"
+    kw = dict(px_per_mm=50, thickness_mm=0.1, calibration=str(root / "calibration.csv"))
+    scan = str(root / "scan_02_medium.png")
+    exact = analyze(scan, hole_radius_mm=7.9351, hole_center_px=(428.75, 423.44), **kw)
+    with warnings.catch_warnings(record=True):
+        warnings.simplefilter("always")
+        wide = analyze(scan, hole_radius_mm=8.5, **kw)
+    assert "hole_wide" in wide.summary["quality"]["codes"]
+    assert wide.hole.replaced
+    assert wide.hole.radius_px == pytest.approx(exact.hole.radius_px, abs=1.0)
+    assert wide.summary["epsilon"] == pytest.approx(exact.summary["epsilon"], rel=0.005)
+    regions = [t.tables["stacks"]["region"] for t in (exact, wide)]
+    assert list(regions[0]) == list(regions[1])
