@@ -145,7 +145,8 @@ def check_not_other_output(out_dir, image=None, command="analyze", *, given_as="
     out = Path(out_dir).expanduser()
     held = output_of(out_dir)
     if held is None:
-        foreign = None if earlier_run(out) else _foreign_table(out)
+        # (steps writes no table: a user's stacks.csv beside its images is left alone)
+        foreign = None if command != "analyze" or earlier_run(out) else _foreign_table(out)
         if foreign:
             raise ParameterError(f"{out_dir} holds {foreign}, which foldstat did not write "
                                  "(a run would replace it): give a folder of its own", given_as)
@@ -187,7 +188,8 @@ def _scene_or_batch_output(out: Path) -> str | None:
     if (out / "truth" / "summary.json").is_file() and (out / "params.json").is_file():
         return "is a scene folder (its truth/ and params.json: batch and validate read it)"
     try:
-        parents = list(out.resolve().parents)[:3]
+        # a scan's folder is <out>/<set>/<stem>, a set's name up to a few folders deep
+        parents = list(out.resolve().parents)[:6]
     except (OSError, RuntimeError):
         return None
     for parent in parents:
