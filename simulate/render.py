@@ -167,6 +167,7 @@ up; signed curvatures therefore compare in absolute value.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import shutil
@@ -181,7 +182,7 @@ import pandas as pd
 
 from crosssection.core import polyline, schema
 from crosssection.core.calibration import Calibration
-from crosssection.core.errors import ConfigError, ParameterError
+from crosssection.core.errors import ConfigError, OutputError, ParameterError
 from crosssection.core.unionfind import group_labels
 from crosssection.quality import QualityWarning
 from crosssection.truth import degrade, ink
@@ -2695,8 +2696,14 @@ def _render_directory(sim_dir, out_dir, *, configs=None, limit=None, progress=Fa
         # is refused); a render into a new parent runs unlocked
         return _render_directory_locked(sim_dir, out_dir, configs=configs, limit=limit,
                                         progress=progress, kwargs=kwargs, name=name)
-    with exclusive_lock(out.parent / f".{out.name}.render.lock", where=out_dir,
-                        busy="another render is writing into it"):
+    lock = contextlib.ExitStack()
+    try:
+        lock.enter_context(exclusive_lock(out.parent / f".{out.name}.render.lock",
+                                          where=out_dir, busy="another render is writing "
+                                          "into it"))
+    except OutputError:
+        pass  # a folder that cannot be written: the render says so in its own words
+    with lock:
         return _render_directory_locked(sim_dir, out_dir, configs=configs, limit=limit,
                                         progress=progress, kwargs=kwargs, name=name)
 
