@@ -279,7 +279,7 @@ def _checked_wide_hole(rgb, hole, inside, thr, m, path, *, thickness_px, correct
     env = hole_stage.given_hole_wide(thr.mask, hole, thickness_px=thickness_px)
     if env is None:
         return hole, inside, thr
-    within = max(2.0 * float(thickness_px), 3.5)
+    within = hole_stage.wide_tolerance_px(thickness_px)
     found = None
     try:
         whole = threshold_rgb(rgb, **m)

@@ -2069,9 +2069,7 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
                     ("pass_smooth", pass_smooth)):
         if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
             raise ParameterError(f"{name} must be a finite number >= 0, got {v!r}")
-    if pass_smooth > PASS_SMOOTH_MAX:
-        raise ParameterError(f"pass_smooth must be at most {PASS_SMOOTH_MAX:g} rod segments, "
-                             f"got {pass_smooth!r}")
+    _check_pass_smooth(pass_smooth)
     if draw == "passes" and not pass_width * thickness_mm * px_per_mm > PASS_OVERLAP_PX:
         raise ParameterError(f"pass_width must exceed {PASS_OVERLAP_PX} px, got "
                              f"{pass_width * thickness_mm * px_per_mm:g} px")
@@ -2307,6 +2305,13 @@ def _check_seed(seed) -> None:
         raise ParameterError(f"seed must be a whole number >= 0, got {seed!r}")
 
 
+def _check_pass_smooth(v) -> None:
+    """``pass_smooth`` is a number of rod segments in [0, :data:`PASS_SMOOTH_MAX`]."""
+    if not (isinstance(v, (int, float)) and math.isfinite(v) and 0 <= v <= PASS_SMOOTH_MAX):
+        raise ParameterError(f"pass_smooth must be a number in [0, {PASS_SMOOTH_MAX:g}] rod "
+                             f"segments, got {v!r}")
+
+
 def _check_options(kwargs: dict) -> dict:
     """Check the scan options of :func:`render_directory` before any configuration is
     analysed (a bad value fails at once, not after the first analysis); return the scan
@@ -2322,12 +2327,9 @@ def _check_options(kwargs: dict) -> dict:
     if kwargs.get("join", "hook") not in JOIN:
         raise ParameterError(f"join must be one of {JOIN}, got {kwargs['join']!r}")
     if "pass_smooth" in kwargs:
-        v = kwargs["pass_smooth"]
         if kwargs.get("draw", "bands") != "passes":
             raise ParameterError("pass_smooth applies only to draw 'passes'")
-        if not (isinstance(v, (int, float)) and math.isfinite(v) and 0 <= v <= PASS_SMOOTH_MAX):
-            raise ParameterError(f"pass_smooth must be a number in [0, {PASS_SMOOTH_MAX:g}] "
-                                 f"rod segments, got {v!r}")
+        _check_pass_smooth(kwargs["pass_smooth"])
     for k in ("px_per_mm", "thickness_mm", "rod_length_mm"):
         v = kwargs.get(k)
         if v is not None and not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
@@ -2689,20 +2691,20 @@ def _render_directory(sim_dir, out_dir, *, configs=None, limit=None, progress=Fa
     from crosssection.core.fileio import exclusive_lock
 
     if not str(out_dir).strip():
+        # Path("") is the current folder
         raise ParameterError("empty path: give the output folder", name("out_dir"))
     out = Path(out_dir).expanduser().resolve()
-    if not out.parent.is_dir():
-        # nothing is created before the folder is checked (a folder inside the simulation
-        # is refused); a render into a new parent runs unlocked
-        return _render_directory_locked(sim_dir, out_dir, configs=configs, limit=limit,
-                                        progress=progress, kwargs=kwargs, name=name)
     lock = contextlib.ExitStack()
-    try:
-        lock.enter_context(exclusive_lock(out.parent / f".{out.name}.render.lock",
-                                          where=out_dir, busy="another render is writing "
-                                          "into it"))
-    except OutputError:
-        pass  # a folder that cannot be written: the render says so in its own words
+    # nothing is created before the folder is checked (a folder inside the simulation is
+    # refused): a render into a new parent runs unlocked, and so does one into a folder that
+    # cannot be written, which the render names in its own words
+    if out.parent.is_dir():
+        try:
+            lock.enter_context(exclusive_lock(out.parent / f".{out.name}.render.lock",
+                                              where=out_dir, busy="another render is "
+                                              "writing into it"))
+        except OutputError:
+            pass
     with lock:
         return _render_directory_locked(sim_dir, out_dir, configs=configs, limit=limit,
                                         progress=progress, kwargs=kwargs, name=name)
@@ -2716,9 +2718,6 @@ def _render_directory_locked(sim_dir, out_dir, *, configs=None, limit=None, prog
     from crosssection.core.fileio import write_json
 
     defects = _check_options(kwargs)
-    if not str(out_dir).strip():
-        # Path("") is the current folder
-        raise ParameterError("empty path: give the output folder", name("out_dir"))
     sim_dir, out_dir = Path(sim_dir), Path(out_dir)
     rods_path = _rods_path(sim_dir)
     if out_dir.resolve() == sim_dir.resolve():
@@ -2794,6 +2793,7 @@ def _render_directory_locked(sim_dir, out_dir, *, configs=None, limit=None, prog
             # once for the run: every scene has the same options (per scene it is silenced)
             warnings.warn(f"{out_dir}: {beyond}", ScanRangeWarning, stacklevel=3)
         base_seed = int(kwargs.pop("seed", 0))
+        set_name = render_set_name(out_dir)
         short_seen = set()
         # disable=None is tqdm's "only on a terminal"
         with tqdm(keys, desc="render", unit="config",
@@ -2805,7 +2805,7 @@ def _render_directory_locked(sim_dir, out_dir, *, configs=None, limit=None, prog
                         # a scene an older version rendered: made batch-ready from its record
                         try:
                             write_set_file(folder, read_scene_params(folder),
-                                           set_name=render_set_name(out_dir))
+                                           set_name=set_name)
                         except ConfigError:
                             pass  # a damaged record: validate names the scene
                     written.append(folder)
@@ -2845,7 +2845,7 @@ def _render_directory_locked(sim_dir, out_dir, *, configs=None, limit=None, prog
                     write_json(out_dir / RENDER_RECORD, record)
                     recorded = True
                 # before the scene, whose truth/summary.json marks it complete
-                written.append(_write_scene_whole(scene, folder, render_set_name(out_dir)))
+                written.append(_write_scene_whole(scene, folder, set_name))
     return written
 
 
@@ -2865,10 +2865,9 @@ def _is_partial_folder(p: Path) -> bool:
 
 
 def render_set_name(out_dir) -> str:
-    """The set name of a render's scenes: its folder's name, made a set name (characters
-    other than ASCII letters, digits and ``. _ + -`` become ``_``; ``render`` when nothing
-    is left). Every scene of one render is then one set of a batch, one ensemble for
-    ``stats`` beside the simulation it was drawn from.
+    """The set name of a render's scenes: the name batch gives its folder
+    (:func:`crosssection.setconfig.default_set_name`). Every scene of one render is then one
+    set of a batch, one ensemble for ``stats`` beside the simulation it was drawn from.
 
     Parameters
     ----------
@@ -2878,11 +2877,9 @@ def render_set_name(out_dir) -> str:
     -------
     str
     """
-    import re
+    from crosssection.setconfig import default_set_name
 
-    name = re.sub(r"[^A-Za-z0-9._+-]", "_", Path(out_dir).resolve().name)
-    name = re.sub(r"^[^A-Za-z0-9]+", "", name)
-    return name or "render"
+    return default_set_name(Path(out_dir).resolve())
 
 
 def _write_scene_whole(scene: Scene, folder: Path, set_name: str | None = None) -> Path:

@@ -551,6 +551,13 @@ WIDE_ENVELOPE_MIN = 0.5
 WIDE_LINED_MIN = 0.9
 
 
+def wide_tolerance_px(thickness_px: float) -> float:
+    """How far inside a given circle the ink may stop before the hole is too wide: 2 h (the
+    periphery's tolerance beyond half a band, :func:`wall_tolerance_px`), at least 3.5 px
+    (:func:`_envelope_confidence`'s reach)."""
+    return max(2.0 * float(thickness_px), 3.5)
+
+
 def given_hole_wide(mask, hole, *, thickness_px: float):
     """The ink's envelope when a given hole is wider than the wall the rod is pressed against.
 
@@ -585,7 +592,7 @@ def given_hole_wide(mask, hole, *, thickness_px: float):
     pts = _boundary_points(mask)
     if len(pts) < 3:
         return None
-    within = max(2.0 * float(thickness_px), 3.5)
+    within = wide_tolerance_px(thickness_px)
     reach = _envelope_confidence(pts, hole, within)
     if reach >= 0.5:
         return None  # the ink lines the given circle (1.0 on every right hole measured)

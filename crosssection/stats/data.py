@@ -490,8 +490,9 @@ def load_simulation(folder, *, set_name=None) -> Ensemble:
                      f"(config_id {_listed(cfg.loc[bad, 'config_id'])}; see {see}) and "
                      f"{'is' if n == 1 else 'are'} not in the statistics")
         warnings.warn(notes[-1], IncompleteBatchWarning, stacklevel=2)
-    asked = _configs_asked(folder)
-    if asked is not None and len(cfg) < asked:
+    params = _simulation_params(folder)
+    asked = (params or {}).get("n_configs")
+    if isinstance(asked, int) and not isinstance(asked, bool) and asked > 0 and len(cfg) < asked:
         # a run stopped before the end (killed, or a larger --n-configs begun): the tables
         # hold the configurations of the last run that finished
         notes.append(f"{folder / 'configs.csv'}: {len(cfg)} of the {asked} configurations "
@@ -509,7 +510,7 @@ def load_simulation(folder, *, set_name=None) -> Ensemble:
         "set": name, "config_id": cfg["config_id"].astype(str), "N_l": cfg["n_stacks"],
         "N_br": cfg["n_branches"], "n_voids": cfg["n_voids"], "epsilon": cfg["epsilon"],
         "E": cfg["energy_total"], "rod_length_mm": np.nan, "source": str(folder),
-        "analysis": _simulation_provenance(folder), "batch_note": note, "table_note": ""})
+        "analysis": _simulation_provenance(params), "batch_note": note, "table_note": ""})
     st = None
     if (folder / "stacks.csv").is_file():  # optional: per-stack branch counts
         st = _read_csv(folder / "stacks.csv", ["config_id", "n_br"], numeric=["n_br", "length"])
@@ -534,23 +535,20 @@ def load_simulation(folder, *, set_name=None) -> Ensemble:
                     stacks.reindex(columns=STACK_COLS), voids.reindex(columns=VOID_COLS))
 
 
-def _configs_asked(folder: Path) -> int | None:
-    """The ``n_configs`` a simulation's ``params.json`` records, or None."""
-    try:
-        n = json.loads((folder / "params.json").read_text()).get("n_configs")
-    except (OSError, ValueError, AttributeError):
-        return None
-    return n if isinstance(n, int) and not isinstance(n, bool) and n > 0 else None
-
-
-def _simulation_provenance(folder: Path):
-    """The ``analysis`` cell of a simulation's configurations: the version and parameters
-    of its ``params.json`` (NaN when it has none or cannot be read)."""
+def _simulation_params(folder: Path) -> dict | None:
+    """A simulation's ``params.json`` as a dict, or None when it has none or it cannot be
+    read."""
     try:
         params = json.loads((folder / "params.json").read_text(encoding="utf-8"))
     except (OSError, ValueError):
-        return np.nan
-    if not isinstance(params, dict):
+        return None
+    return params if isinstance(params, dict) else None
+
+
+def _simulation_provenance(params: dict | None):
+    """The ``analysis`` cell of a simulation's configurations: the version and parameters
+    of its ``params.json`` (:func:`_simulation_params`; NaN without one)."""
+    if params is None:
         return np.nan
     params = dict(params)
     version = params.pop("version", None)
