@@ -17,6 +17,7 @@ import warnings
 from contextlib import contextmanager
 
 from crosssection._version import __version__
+from crosssection.console import _Parser
 from crosssection.core.errors import FoldstatError
 from crosssection.quality import QualityWarning
 
@@ -42,6 +43,8 @@ class OneLineParser(argparse.ArgumentParser):
     def error(self, message):
         print(f"error: {self.prog}: {' '.join(message.split())}", file=sys.stderr)
         raise SystemExit(2)
+
+    _print_message = _Parser._print_message
 
 
 def make_parser(prog: str, description: str, subcommands: dict,
@@ -232,7 +235,13 @@ def _closed_pipes_ignored():
 
 def _run_parsed(parser: argparse.ArgumentParser, argv=None) -> int:
     try:
-        args = parser.parse_args(argv)
+        try:
+            args = parser.parse_args(argv)
+        except SystemExit:
+            # --help, --version or a usage error, printed by argparse: an output that cannot
+            # take the text (a full disk) is an error too, not a silent success
+            sys.stdout.flush()
+            raise
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             status = int(args.func(args) or 0)

@@ -219,6 +219,12 @@ class _Parser(argparse.ArgumentParser):
 
         OneLineParser.error(self, message)
 
+    def _print_message(self, message, file=None):
+        # argparse drops a failed write of --help or --version (a full disk): let it fail,
+        # so that the command says so and exits 2
+        if message:
+            (file or sys.stderr).write(message)
+
 
 def _chosen(argv) -> str | None:
     """The subcommand named in ``argv``: its first word not starting with '-' (the top level
@@ -279,7 +285,11 @@ def main(argv=None) -> int:
     name = _chosen(argv)
     if name not in commands:
         # --help, --version, no or an unknown subcommand: argparse prints and exits
-        build_parser(argv).parse_args(argv)
+        try:
+            build_parser(argv).parse_args(argv)
+        except OSError as exc:  # the text could not be written (a full disk)
+            print(f"error: output: {exc.strerror or exc}", file=sys.stderr)
+            return 2
         return 2  # pragma: no cover - parse_args exits above
     try:
         importlib.import_module(commands[name])

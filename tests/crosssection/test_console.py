@@ -203,3 +203,24 @@ def test_python_m_crosssection_offers_samples(tmp_path, capsys):
                          capture_output=True, text=True, timeout=120)
     assert run.returncode == 0 and run.stderr == "", run.stderr
     assert (tmp_path / "s" / "set.toml").is_file() and "5 sample scans" in run.stdout
+
+
+class _FullDisk:
+    """A standard output whose every write fails as on a full disk."""
+
+    def write(self, text):
+        raise OSError(28, "No space left on device")
+
+    def flush(self):
+        pass
+
+
+@pytest.mark.parametrize("main", [console.main, crosssection.cli.main, simulate.cli.main])
+@pytest.mark.parametrize("argv", [["--version"], ["--help"], ["analyze", "--help"]])
+def test_help_or_version_that_cannot_be_written_is_an_error(main, argv, monkeypatch, capsys):
+    if main is simulate.cli.main and argv[0] == "analyze":
+        argv = ["quench", "--help"]
+    monkeypatch.setattr(sys, "stdout", _FullDisk())
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err == "error: output: No space left on device\n"
