@@ -2,7 +2,10 @@
 
 Each check compares a measured quantity with a documented limit. A failed check is a
 :class:`QualityFlag` in ``summary.json`` (``quality`` block), a ``warnings.warn`` with its own
-category (a subclass of :class:`QualityWarning`) from the API, a ``warning: FILE: ...`` line on
+category from the API (:data:`CHECK_WARNINGS`: one class per check, named after its code,
+``no_calibration`` -> ``NoCalibrationWarning``, ``linear_system`` -> ``ConservationWarning``,
+each a subclass of its group's category in :data:`CATEGORIES`, itself a
+:class:`QualityWarning`), a ``warning: FILE: ...`` line on
 stderr from the command line, and the ``quality`` column of a batch's ``index.csv``.
 
 =======================  ===================================================  ====================
@@ -214,7 +217,8 @@ import pandas as pd
 
 from crosssection.params import LOW_RESOLUTION_H_PX
 
-__all__ = ["QualityFlag", "QualityWarning", "SetWarning", "CATEGORIES", "assess", "quality_block"]
+__all__ = ["QualityFlag", "QualityWarning", "SetWarning", "CATEGORIES", "CHECK_WARNINGS", "assess",
+           "quality_block"]
 
 #: ``scale_mismatch``: relative difference between ``px_per_mm`` and the file's recorded
 #: resolution beyond which the scale is doubtful (a scanner's nominal resolution is exact;
@@ -297,6 +301,26 @@ for _name, _cls in {c.__name__: c for c in CATEGORIES.values()}.items():
     globals()[_name] = _cls
     __all__.append(_name)
 
+#: class names of the checks whose CamelCase name is taken by their group's
+_CHECK_NAMES = {"linear_system": "ConservationWarning"}
+
+
+def _check_warning(code: str, group: type) -> type:
+    """The warning category of one check: a subclass of its group's category, so that a
+    filter can silence one check (``warnings.simplefilter("ignore", NoCalibrationWarning)``)
+    or its whole group (``CalibrationWarning``)."""
+    name = _CHECK_NAMES.get(code, "".join(w.capitalize() for w in code.split("_")) + "Warning")
+    doc = (f"The ``{code}`` check failed (the table of :mod:`crosssection.quality`); one of "
+           f"the :class:`{group.__name__}` checks.")
+    return type(name, (group,), {"__doc__": doc, "__module__": __name__, "code": code})
+
+
+#: check code -> its own warning category (a subclass of its group's, :data:`CATEGORIES`)
+CHECK_WARNINGS = {code: _check_warning(code, group) for code, group in CATEGORIES.items()}
+for _cls in CHECK_WARNINGS.values():
+    globals()[_cls.__name__] = _cls
+    __all__.append(_cls.__name__)
+
 
 @dataclass(frozen=True)
 class QualityFlag:
@@ -309,7 +333,8 @@ class QualityFlag:
 
     @property
     def category(self) -> type:
-        return CATEGORIES.get(self.code, QualityWarning)
+        """The check's own warning category (:data:`CHECK_WARNINGS`)."""
+        return CHECK_WARNINGS.get(self.code, QualityWarning)
 
 
 def _frac(num, den) -> float:

@@ -48,7 +48,7 @@ def test_no_calibration_is_flagged(scene):
     kw.pop("calibration")
     res, caught = _analyze(scene.rgb, **kw)
     assert "no_calibration" in res.summary["quality"]["codes"]
-    assert any(w.category is quality.CalibrationWarning for w in caught)
+    assert any(issubclass(w.category, quality.CalibrationWarning) for w in caught)
 
 
 def test_low_resolution_is_flagged():
@@ -57,7 +57,7 @@ def test_low_resolution_is_flagged():
     assert "low_resolution" in res.summary["quality"]["codes"]
     flag = next(f for f in res.quality if f.code == "low_resolution")
     assert flag.value == pytest.approx(2.5) and flag.limit == 3.0
-    assert any(w.category is quality.ResolutionWarning for w in caught)
+    assert any(issubclass(w.category, quality.ResolutionWarning) for w in caught)
 
 
 @pytest.mark.parametrize("seed", [1000, 1006])
@@ -118,7 +118,7 @@ def test_ink_the_cut_misses_on_the_dark_side_of_a_scan_is_taken_in_and_flagged(s
     flag = next(f for f in res.quality if f.code == "ink_missed")
     assert flag.limit == quality.INK_MISSED_LIMIT
     assert "taken in by local cuts" in flag.message
-    assert any(w.category is quality.ThresholdWarning for w in caught)
+    assert any(issubclass(w.category, quality.ThresholdWarning) for w in caught)
 
 
 @pytest.mark.parametrize("extra", [dict(s_min_mm2=0.0, l_min_mm=0.0),
@@ -213,7 +213,7 @@ def test_a_given_rod_length_far_from_the_measured_one_is_flagged(scene):
     flag = next(f for f in res.quality if f.code == "rod_length")
     assert flag.value == pytest.approx(1.0 / res.summary["rod_length_mm"])
     assert flag.limit == 1 / quality.ROD_LENGTH_FACTOR
-    assert any(w.category is quality.NetworkWarning and "rod length given, L = 1 mm" in
+    assert any(issubclass(w.category, quality.NetworkWarning) and "rod length given, L = 1 mm" in
                str(w.message) for w in caught)
 
 
@@ -338,7 +338,7 @@ def test_rings_of_ink_apart_from_the_network_are_flagged():
     res, caught = _analyze(img, **kw)
     assert "loops" not in res0.summary["quality"]["codes"]
     assert "loops" in res.summary["quality"]["codes"]
-    assert any(w.category is quality.NetworkWarning for w in caught)
+    assert any(issubclass(w.category, quality.NetworkWarning) for w in caught)
 
 
 def test_an_ink_blot_apart_from_the_network_is_flagged():
@@ -351,7 +351,7 @@ def test_an_ink_blot_apart_from_the_network_is_flagged():
     res, caught = _analyze(img, **kw)
     assert "isolated_stacks" in res.summary["quality"]["codes"]
     # the message places the blot on the scan (the overlay draws no stack ids)
-    assert any(w.category is quality.NetworkWarning and "touching no other stack" in
+    assert any(issubclass(w.category, quality.NetworkWarning) and "touching no other stack" in
                str(w.message) and "y 225 px" in str(w.message) for w in caught)
 
 
@@ -422,7 +422,7 @@ def test_layer_conservation_violated_is_flagged():
     flag = next(f for f in res.quality if f.code == "linear_system")
     assert flag.value > flag.limit
     assert (~res.junctions["conservation_ok"].astype(bool)).sum() >= 4  # the four T's
-    assert any(w.category is quality.LinearSystemWarning for w in caught)
+    assert any(issubclass(w.category, quality.LinearSystemWarning) for w in caught)
 
 
 def test_junction_degree_is_flagged():
@@ -448,7 +448,7 @@ def test_hole_found_with_low_confidence_is_flagged():
     cv2.line(img, (30, 250), (260, 60), (40, 70, 190), 6)
     res, caught = _analyze(img, px_per_mm=50, thickness_mm=0.1)
     assert "hole_fitted" in res.summary["quality"]["codes"]
-    assert any(w.category is quality.FrameWarning for w in caught)
+    assert any(issubclass(w.category, quality.FrameWarning) for w in caught)
 
 
 def test_plate_is_not_ink_and_hole_is_found(scene):
@@ -536,7 +536,7 @@ def test_a_hole_cut_by_the_scan_border_is_flagged(scene):
     assert 0.02 < flag.value < 0.04 and flag.limit == quality.HOLE_CUT_LIMIT  # segment: 2.7 %
     # a given hole may be wrong rather than the scan cropped: the message says both
     assert "hole given" in flag.message and "hole_radius_mm" in flag.message
-    assert any(w.category is quality.FrameWarning and "outside the scan" in str(w.message)
+    assert any(issubclass(w.category, quality.FrameWarning) and "outside the scan" in str(w.message)
                for w in caught)
     # found rather than given, the hole is fitted to the wall's arc and still flagged
     kw = _given(scene)
@@ -574,7 +574,7 @@ def test_a_shallow_cut_through_the_wall_band_is_flagged(scene):
     res, caught = _analyze(rgb, **_given(scene, hole_center_px=centre))
     flag = next(f for f in res.quality if f.code == "hole_cut")
     assert "border" in flag.message and flag.value >= p["thickness_mm"] * p["px_per_mm"]
-    assert any(w.category is quality.FrameWarning for w in caught)
+    assert any(issubclass(w.category, quality.FrameWarning) for w in caught)
 
 
 @pytest.mark.parametrize("overhang_px", [0.8, 1.8, 2.8])
@@ -612,7 +612,7 @@ def test_a_scale_other_than_the_files_recorded_resolution_is_flagged(scene, tmp_
         if flagged:
             flag = next(f for f in res.quality if f.code == "scale_mismatch")
             assert flag.value == pytest.approx(50.0 / (1200 / 25.4) - 1, rel=1e-3)
-            assert any(w.category is quality.CalibrationWarning and "1200 dpi" in str(w.message)
+            assert any(issubclass(w.category, quality.CalibrationWarning) and "1200 dpi" in str(w.message)
                        for w in caught)
     # the same scale is right when given as the file records it
     res, _ = _analyze(str(tmp_path / "scan_1200.png"), **_given(scene, px_per_mm=1200 / 25.4))
@@ -657,7 +657,7 @@ def test_pixels_that_are_not_square_are_flagged(scene, tmp_path, dpi, aspect):
     if flagged:
         flag = next(f for f in res.quality if f.code == "non_square")
         assert flag.value == pytest.approx(aspect - 1, rel=1e-3)
-        assert any(w.category is quality.CalibrationWarning and "not square" in str(w.message)
+        assert any(issubclass(w.category, quality.CalibrationWarning) and "not square" in str(w.message)
                    and f"{dpi[0]} dpi along x and {dpi[1]} dpi along y" in str(w.message)
                    for w in caught)
 
@@ -680,7 +680,7 @@ def test_a_file_holding_several_scans_is_flagged(scene, tmp_path):
     res3, caught = _analyze(str(three), **_given(scene))
     assert "pages" not in res1.summary["quality"]["codes"] and res1.summary["file_pages"] == 1
     assert "pages" in res3.summary["quality"]["codes"] and res3.summary["file_pages"] == 3
-    assert any(w.category is quality.InputWarning and "3 images" in str(w.message)
+    assert any(issubclass(w.category, quality.InputWarning) and "3 images" in str(w.message)
                for w in caught)
     # the first page is the one analysed
     assert res3.summary["n_stacks"] == res1.summary["n_stacks"]
@@ -698,7 +698,7 @@ def test_two_cross_sections_in_one_scan_are_flagged(scene):
     assert "networks" not in one.summary["quality"]["codes"]
     flag = next(f for f in res.quality if f.code == "networks")
     assert flag.value == 2 and flag.limit == 1
-    assert any(w.category is quality.NetworkWarning and "2 separate networks" in str(w.message)
+    assert any(issubclass(w.category, quality.NetworkWarning) and "2 separate networks" in str(w.message)
                for w in caught)
 
 
@@ -756,7 +756,7 @@ def test_an_ink_blot_over_a_junction_is_flagged(scene, radius_mm):
     rgb = scene.rgb.copy()
     cv2.circle(rgb, (int(round(j["x_px"])), int(round(j["y_px"]))), r_px, (40, 60, 170), -1)
     res, caught = _analyze(rgb, **_given(scene))  # the blot may upset other checks too
-    assert any(w.category is quality.NetworkWarning and "ink blot over a junction"
+    assert any(issubclass(w.category, quality.NetworkWarning) and "ink blot over a junction"
                in str(w.message) for w in caught)
     flag = next(f for f in res.quality if f.code == "junction_blot")
     assert flag.value > quality.JUNCTION_BLOT_RATIO
@@ -771,7 +771,7 @@ def test_a_scan_partly_transparent_inside_the_hole_is_flagged(scene):
     res, caught = _analyze(rgba, **_given(scene))
     flag = next(f for f in res.quality if f.code == "see_through")
     assert flag.value > quality.SEE_THROUGH_LIMIT
-    assert any(w.category is quality.InputWarning and "transparent" in str(w.message)
+    assert any(issubclass(w.category, quality.InputWarning) and "transparent" in str(w.message)
                for w in caught)
     # a transparent margin outside the hole (a cropped export) is no doubt
     rgba[..., 3] = 255
@@ -791,7 +791,7 @@ def test_ink_faded_across_part_of_the_scan_is_flagged(scene):
     res, caught = _analyze(np.clip(rgb, 0, 255).astype(np.uint8), **_given(scene))
     flag = next(f for f in res.quality if f.code == "faint_ink")
     assert flag.value >= 2 and "fainter blue ink" in flag.message
-    assert any(w.category is quality.ThresholdWarning for w in caught)
+    assert any(issubclass(w.category, quality.ThresholdWarning) for w in caught)
     # every end named lies at the strip's edge
     assert res.summary["n_free_end_stacks"] >= flag.value
 
@@ -801,4 +801,29 @@ def test_a_thickness_the_calibration_contradicts_is_flagged(scene):
     res, caught = _analyze(scene.rgb, **_given(scene, thickness_mm=0.3))
     flag = next(f for f in res.quality if f.code == "thickness_calibration")
     assert flag.value == pytest.approx(0.14 / 0.3, rel=0.01) and flag.limit == 0.5
-    assert any(w.category is quality.CalibrationWarning for w in caught)
+    assert any(issubclass(w.category, quality.CalibrationWarning) for w in caught)
+
+
+def test_each_check_has_its_own_category_under_its_group():
+    names = set()
+    for code, cls in quality.CHECK_WARNINGS.items():
+        assert cls.code == code and issubclass(cls, quality.CATEGORIES[code])
+        assert getattr(quality, cls.__name__) is cls
+        names.add(cls.__name__)
+    assert len(names) == len(quality.CHECK_WARNINGS)
+    assert quality.QualityFlag("no_calibration", "m").category is quality.NoCalibrationWarning
+
+
+def test_one_check_can_be_silenced_without_its_group(scene):
+    # a sheet thickness three times too large: two calibration checks (the calibration's
+    # one-layer width against h, and widths beyond the calibration); silencing the first
+    # keeps the second
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        warnings.simplefilter("ignore", quality.ThicknessCalibrationWarning)
+        res = crosssection.analyze(scene.rgb, **_given(scene, thickness_mm=0.3))
+    shown = {w.category for w in caught if issubclass(w.category, quality.QualityWarning)}
+    codes = res.summary["quality"]["codes"]
+    assert {"thickness_calibration", "widths_out_of_range"} <= set(codes)
+    assert quality.ThicknessCalibrationWarning not in shown
+    assert quality.WidthsOutOfRangeWarning in shown

@@ -186,7 +186,7 @@ def test_a_scan_without_its_calibration_is_counted_as_with_it(law):
     # still flagged: the counts rest on a law nobody measured
     flag = next(f for f in res.quality if f.code == "no_calibration")
     assert "read from this scan" in flag.message
-    assert any(w.category is crosssection.quality.CalibrationWarning for w in caught)
+    assert any(w.category is crosssection.quality.NoCalibrationWarning for w in caught)
 
 
 def test_the_linear_law_stays_an_option():
