@@ -167,11 +167,13 @@ class AnalysisParams:
         "ink threshold: auto (blue dominance, cut chosen from the scan), fixed (the paper's "
         "blue >= blue_min, red and green <= rg_max) or otsu", choices=THRESHOLD_METHODS))
     blue_min: float | None = field(default=None, metadata=_opt(
-        "minimum blue, native units: the fixed threshold's cut (default 100 for 8-bit); "
-        "given with auto, an extra bound on the automatic cut; not with otsu"))
+        "minimum blue, native units: the fixed threshold's cut (default 100 for 8-bit, "
+        "100 * 257 for 16-bit; for a float array in [0, 1], given in its scale); given with "
+        "auto, an extra bound on the automatic cut; not with otsu"))
     rg_max: float | None = field(default=None, metadata=_opt(
         "maximum red and green, native units: the fixed threshold's cut (default 130 for "
-        "8-bit, also otsu's bound); given with auto, an extra bound on the automatic cut"))
+        "8-bit, 130 * 257 for 16-bit, also otsu's bound; for a float array in [0, 1], given "
+        "in its scale); given with auto, an extra bound on the automatic cut"))
     s_min_mm2: float | None = field(default=None, metadata=_opt(
         "smallest void (default (10 h)^2, the paper's)", "mm^2"))
     sliver_width_h: float = field(default=1.5, metadata=_opt(

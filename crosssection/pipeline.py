@@ -464,7 +464,10 @@ def _check_fraction(thr, path, rgb=None):
             bounds = ", ".join(f"{k} = {v:g}" for k, v in (("blue_min", thr.blue_min),
                                                             ("rg_max", thr.rg_max))
                                if v is not None)
-            why = f"not a blue-ink scan, or the threshold's bounds ({bounds}) exclude its ink"
+            units = (" in 16-bit units, 8-bit values times 257" if rgb is not None
+                     and rgb.dtype == np.uint16 else " in 8-bit units")
+            why = (f"not a blue-ink scan, or the threshold's bounds ({bounds}{units}) exclude "
+                   "its ink")
         blue = _blue_share(rgb) if rgb is not None else 0.0
         # data of fewer bits than their type (9-bit values in uint16) look grey at 8 bits:
         # the threshold's note names the range, the likelier cause
@@ -582,8 +585,9 @@ def analyze(image, params: AnalysisParams | None = None, *, warn: bool = True,
     SetWarning
         The set the file belongs to (the nearest ``set.toml`` in its folder or above, or a
         ``calibration.csv`` beside an uncalibrated scan) holds a calibration, scale or hole
-        other than the ones used, unless ``warn`` is False: ``batch`` reads the set, this
-        function only its parameters.
+        other than the ones used, unless ``warn`` is False (the note is in
+        ``summary["warnings"]`` either way): ``batch`` reads the set, this function only its
+        parameters.
     """
     path_hint = str(image) if isinstance(image, (str, Path)) else None
     if not isinstance(warn, (bool, np.bool_)):
@@ -600,18 +604,22 @@ def _analyze(image, params, overrides, *, warn: bool = True,
              image_sha256: str | None = None) -> AnalysisResult:
     t_start = time.perf_counter()
     timer = StageTimer()
-    p = _resolve_params(params, overrides, str(image) if isinstance(image, (str, Path)) else None)
+    p = _bounds_in_16_bits(
+        _resolve_params(params, overrides, str(image) if isinstance(image, (str, Path)) else None),
+        image)
     cal = _calibration(p)  # a bad calibration file fails before any image work
     # hashed while it is analysed: the record names the content the results come from
     is_file = isinstance(image, (str, Path))
     hashing = sha256_in_background(image) if is_file and image_sha256 is None else None
     pre = _preprocess(image, p, timer)
-    if warn and is_file:  # named once the scan is read: a file that is not fails alone
+    if is_file:  # named once the scan is read: a file that is not fails alone
         from crosssection.setconfig import set_not_read
 
         note = set_not_read(image, p)
         if note:  # the same scan would read other numbers in a batch of its set
-            _warnings.warn(note, quality.SetWarning, stacklevel=3)
+            pre = dataclasses.replace(pre, warnings=[*pre.warnings, note])
+            if warn:
+                _warnings.warn(note, quality.SetWarning, stacklevel=3)
     hash_note = None
     if hashing is not None:
         image_sha256, hash_note = hashing()
@@ -683,6 +691,16 @@ def _analyze(image, params, overrides, *, warn: bool = True,
         junctions = tb.junction_table(pre.junctions, sg, packs, n_br, lin)
     return _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, voids, warn,
                    rod_mm, L, timer, t_start, inputs, law, faint)
+
+
+def _bounds_in_16_bits(p: AnalysisParams, image) -> AnalysisParams:
+    """The threshold's bounds given in a float image's own scale (at most 1, as its values)
+    in the 16-bit units the image is read in (:mod:`crosssection.stages.load`)."""
+    if not (isinstance(image, np.ndarray) and image.dtype.kind == "f"):
+        return p
+    scaled = {k: v * 65535.0 for k, v in (("blue_min", p.blue_min), ("rg_max", p.rg_max))
+              if v is not None and 0 <= v <= 1}
+    return dataclasses.replace(p, **scaled) if scaled else p
 
 
 def _stack_widths_mm(sg, distance_px, profiles, p: AnalysisParams) -> np.ndarray:
@@ -777,7 +795,8 @@ def _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, void
         border_ink_rc=_border_pixels(pre.mask_clean), width_law=law,
         junction_radius_px=_inscribed_radius_px(pre.distance_px, junctions),
         see_through=pre.see_through, faint_ends=faint,
-        calibration_one_layer_mm=_one_layer_mm(cal, p))
+        calibration_one_layer_mm=_one_layer_mm(cal, p),
+        void_areas_mm2=voids["area_mm2"].to_numpy() if "area_mm2" in voids else None)
     notes = list(pre.warnings) + [f"linear system: {f}" for f in lin.flags
                                   if not str(f).startswith("disconnected")]
     summary = tb.summary(pre=pre, params=p, linear_system=lin, junctions=junctions,

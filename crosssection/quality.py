@@ -52,6 +52,8 @@ rod_length               a given L over the one measured (``sum n_br l``)     ou
 epsilon_ink              L h over the ink area inside the hole                outside [0.4, 2.5]
 specks                   free stacks (both ends free) shorter than 2 l_min    > 5 % of stacks
 loops                    closed loops of ink touching no other stack          any, beside others
+tiny_voids               voids smaller than h^2 (an ``s_min_mm2`` below it    any
+                         keeps pinholes in the ink as voids)
 widths_out_of_range      stacks wider than the calibration's widest entry     > 5 % of stacks
 thickness_calibration    the calibration's width of one layer / the sheet     outside [1/2, 5/2]
                          thickness h (a cut sheet's band is about h wide)
@@ -291,6 +293,7 @@ CATEGORIES = {
     "epsilon_ink": NetworkWarning,
     "specks": NetworkWarning,
     "loops": NetworkWarning,
+    "tiny_voids": NetworkWarning,
     "linear_system": LinearSystemWarning,
     "count_width": LinearSystemWarning,
     "isolated_stacks": NetworkWarning,
@@ -461,7 +464,7 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
            ink_missed_fraction=0.0, width_law=None,
            junction_radius_px=None, see_through=None,
            file_dpi_xy=None, faint_ends=None,
-           calibration_one_layer_mm=None) -> list[QualityFlag]:
+           calibration_one_layer_mm=None, void_areas_mm2=None) -> list[QualityFlag]:
     """Run every check of the module table on one analysis.
 
     Parameters
@@ -525,6 +528,8 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
     faint_ends : list of (int, (float, float)), optional
         Free band ends that fainter blue ink continues
         (:func:`crosssection.stages.threshold.faint_band_ends`): the ``faint_ink`` check.
+    void_areas_mm2 : array_like, optional
+        The voids' areas: the ``tiny_voids`` check (not made without them).
 
     Returns
     -------
@@ -538,6 +543,8 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
                                  "own file", file_pages, 1))
     if see_through is not None:
         flags += _see_through_check(see_through, hole)
+    if void_areas_mm2 is not None:
+        flags += _tiny_void_check(np.asarray(void_areas_mm2, float), params)
     if params.calibration is None:
         flags.append(QualityFlag("no_calibration",
                                  _no_calibration_message(width_law, params.thickness_mm)))
@@ -971,6 +978,20 @@ def _rod_ends_check(stacks) -> list[QualityFlag]:
                         f"the rod, which has {ROD_ENDS_MAX}: bands are broken where their ink "
                         "is lost (faded below the threshold, covered by a label or a blot); "
                         "check the overlay", k, ROD_ENDS_MAX)]
+
+
+def _tiny_void_check(areas_mm2: np.ndarray, params) -> list[QualityFlag]:
+    """Voids smaller than a sheet's cross-section squared: a gap between layers is at least a
+    sheet thick, so such a void is a pinhole in the ink (a default ``s_min_mm2`` of
+    (10 h)^2 never keeps one)."""
+    h2 = params.thickness_mm ** 2
+    tiny = int(np.count_nonzero(areas_mm2 < h2))
+    if not tiny:
+        return []
+    return [QualityFlag("tiny_voids", f"{tiny} of {areas_mm2.size} voids are smaller than h^2 = "
+                        f"{h2:.3g} mm^2 (pinholes in the ink, each adding junctions and stacks "
+                        f"around it): s_min_mm2 = {params.s_min_used_mm2:.3g} keeps them; give "
+                        f"at least h^2", tiny, 0)]
 
 
 def _stack_checks(params, stacks, calibration_max_width_mm) -> list[QualityFlag]:

@@ -179,7 +179,10 @@ def _check_value(name, value, vmax):
     except (TypeError, ValueError):
         raise ParameterError(f"{name} must be a number, got {value!r}") from None
     if not (0 <= v <= vmax):
-        raise ParameterError(f"{name}={value} outside the image range 0..{vmax:g}")
+        # an integer array whose values all lie within 0..255 is read as 8-bit
+        bits = "8-bit" if vmax == 255 else "16-bit"
+        raise ParameterError(f"{name}={value} outside the image range 0..{vmax:g} (the image "
+                             f"is read as {bits})")
     return v
 
 
@@ -591,7 +594,7 @@ def threshold_rgb(rgb, *, method: str = "auto", region=None, blue_min=None,
         note = note or (
             f"no ink darker in red and green than the paper by {MIN_CONTRAST_U8:g} (uint8 "
             "units); for faint ink set the cut with --threshold-method fixed --blue-min B "
-            "--rg-max R")
+            "--rg-max R (in Python threshold_method='fixed', blue_min=B, rg_max=R)")
         return ThresholdResult(np.zeros(rgb.shape[:2], bool), bm, rg, "auto", None, scale,
                                region_fraction=reg_frac,
                                note=_range_note(rgb, reg) + "no blue-dominant class: " + note,

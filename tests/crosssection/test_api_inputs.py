@@ -41,6 +41,19 @@ def test_an_8_bit_image_in_a_wider_integer_type_reads_as_8_bit(scan, result, dty
     assert wide.summary["total_energy"] == result.summary["total_energy"]
 
 
+def test_a_float_image_takes_its_fixed_bounds_in_its_own_scale(scan):
+    fixed = dict(KW, threshold_method="fixed")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ref = cs.analyze(scan, **fixed, blue_min=100, rg_max=130)
+        own = cs.analyze(scan / 255.0, **fixed, blue_min=100 / 255, rg_max=130 / 255)
+    assert own.summary["n_branches"] == ref.summary["n_branches"] > 0
+    assert own.summary["thresholds"]["blue_min"] == pytest.approx(100 * 257)
+    # the record re-runs the same analysis
+    again = cs.analyze(scan / 255.0, cs.AnalysisParams(**own.summary["parameters"]), warn=False)
+    assert again.summary["n_branches"] == own.summary["n_branches"]
+
+
 def test_the_result_holds_its_own_copy_of_the_scan(scan, result):
     assert not np.shares_memory(result.rgb, scan)
 

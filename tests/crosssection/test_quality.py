@@ -827,3 +827,15 @@ def test_one_check_can_be_silenced_without_its_group(scene):
     assert {"thickness_calibration", "widths_out_of_range"} <= set(codes)
     assert quality.ThicknessCalibrationWarning not in shown
     assert quality.WidthsOutOfRangeWarning in shown
+
+
+def test_pinholes_kept_as_voids_by_a_tiny_s_min_are_flagged():
+    sc = make_scene(seed=5, n_stacks=30, max_layers=4, pinholes=25)
+    res, _ = _analyze(sc.rgb, **_given(sc))
+    assert "tiny_voids" not in res.summary["quality"]["codes"]
+    h2 = sc.params["thickness_mm"] ** 2
+    res, caught = _analyze(sc.rgb, **_given(sc, s_min_mm2=h2 / 10))
+    flag = next(f for f in res.quality if f.code == "tiny_voids")
+    assert flag.value == int((res.voids["area_mm2"] < h2).sum()) >= 1
+    assert res.summary["n_voids"] > sc.summary["n_voids"]
+    assert any(w.category is quality.TinyVoidsWarning for w in caught)
