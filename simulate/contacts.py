@@ -298,6 +298,24 @@ def _smooth_short_runs(mult, min_len):
 # main entry
 
 
+#: largest relative departure of a rod's length from 1 (units of L) that
+#: :func:`analyze_rod` accepts: the simulators keep it within 1e-6, a rod resampled from a
+#: finer curve is shorter by its chords, and a rod in other units is off by far more
+UNIT_LENGTH_TOLERANCE = 0.05
+
+
+def _check_unit_length(xy) -> None:
+    """Refuse a rod in other units than its length: its Rg and areas would be in those
+    units while its branches' lengths, fractions of the rod, stay in units of L."""
+    seg = np.hypot(*np.diff(xy, axis=0).T)
+    total = float(seg.sum())
+    if not abs(total - 1.0) <= UNIT_LENGTH_TOLERANCE:
+        from crosssection.core.errors import ParameterError
+
+        raise ParameterError(f"xy must be in units of the rod length L (total length 1), "
+                             f"got a rod of length {total:.6g}: pass xy / {total:.6g}")
+
+
 def analyze_rod(xy, *, lam: float, contact_distance: float | None = None,
                 min_run: float | None = None, void_px: float | None = None) -> RodAnalysis:
     """Stacks, junctions, branches, voids, Rg and energies of one rod configuration.
@@ -335,10 +353,11 @@ def analyze_rod(xy, *, lam: float, contact_distance: float | None = None,
     ------
     ParameterError
         An argument out of the ranges above, naming it (with a hint when ``xy`` looks
-        transposed).
+        transposed), or a rod whose length is not 1 within :data:`UNIT_LENGTH_TOLERANCE`.
     """
     xy = checked_rod(xy, min_segments=2)
     n = xy.shape[0] - 1
+    _check_unit_length(xy)
     lam = check_real("lam", lam, low=0.0)
     if contact_distance is None:
         delta = default_contact_distance(n)

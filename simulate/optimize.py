@@ -56,7 +56,7 @@ import numpy as np
 from crosssection.core.errors import ParameterError
 
 from simulate.checks import check_real, check_seed, check_whole
-from simulate.energy import bending_energy, confinement_energy
+from simulate.energy import LAMBDA_MAX, bending_energy, confinement_energy
 from simulate.geometry import angles, checked_rod, positions
 from simulate.intersect import has_intersection_grid
 from simulate.powell import powell_run
@@ -217,13 +217,16 @@ def _result(xy, lam, method, t0, stats, history):
 
 def _checked_start(xy0, lam) -> tuple[np.ndarray, float]:
     """The start ``xy0`` and ``lam`` of a minimisation, checked: an (N+1, 2) array of finite
-    numbers with N >= 2 and a finite Lambda >= 0 (a negative one pushes the rod to infinity)."""
+    numbers with N >= 2 and a finite Lambda from 0 (a negative one pushes the rod to infinity) to
+    :data:`simulate.energy.LAMBDA_MAX`, the command line's bound."""
     try:
         xy0 = checked_rod(xy0, min_segments=2)
     except ParameterError as exc:
         # the shared check names the argument xy; here it is called xy0
         raise ParameterError("xy0" + exc.cause[len("xy"):].replace("xy.T", "xy0.T")) from None
-    return xy0, check_real("lam", lam, low=0.0)
+    return xy0, check_real("lam", lam, low=0.0, high=LAMBDA_MAX,
+                           why="above it the rod is jammed and the bending energy drowns in "
+                               "the confinement")
 
 
 def _check_powell_options(*, maxiter, xtol, ftol, u, contact_cutoff, min_separation,

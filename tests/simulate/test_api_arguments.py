@@ -141,11 +141,13 @@ def test_minimisers_refuse_a_start_that_is_not_a_rod(minimise, xy0, cause):
         minimise(xy0, LAM)
 
 
-@pytest.mark.parametrize("lam", [-5.0, -1e-9, math.nan, math.inf, "7e5", None])
+@pytest.mark.parametrize("lam", [-5.0, -1e-9, math.nan, math.inf, "7e5", None, 1e12])
 @pytest.mark.parametrize("minimise", [powell_protocol, lbfgs_quench, anneal, scipy_powell,
                                       scipy_protocol])
-def test_minimisers_refuse_a_lambda_that_is_not_a_number_at_least_0(minimise, lam):
-    with pytest.raises(ParameterError, match="^lam must be a finite number >= 0, got "):
+def test_minimisers_refuse_a_lambda_out_of_0_to_the_jammed_bound(minimise, lam):
+    # the command line's bound (quench --lambda) holds in the API too
+    with pytest.raises(ParameterError, match="^lam must be a finite number >= 0 and <= 1e"
+                                             r"\+10 \(above it the rod is jammed"):
         minimise(XY0, lam)
 
 

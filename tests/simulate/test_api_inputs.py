@@ -130,9 +130,12 @@ def test_plot_draws_a_compactions_wall_on_the_origin_not_about_the_centre_of_mas
 def test_plot_tick_labels_do_not_run_into_each_other():
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
-    # a hairpin spanning x -0.08 .. 0.11 beside its colour bar: matplotlib's default ticks
-    # there (-0.075, -0.050, ...) run into each other
-    xy = (XY - XY.mean(axis=0)) * [0.19 / 0.48, 0.3] + [0.012, 0.0]
+    # a rod folded five times, spanning x -0.08 .. 0.11 beside its colour bar: matplotlib's
+    # default ticks there (-0.075, -0.050, ...) run into each other
+    arm, gap = 0.195, 0.004
+    legs = [np.c_[np.linspace(0, arm, 40)[::1 - 2 * (k % 2)], np.full(40, k * gap)]
+            for k in range(5)]
+    xy = resample(np.concatenate(legs), 120) + [0.015, 0.0]
     fig = plot_configuration(xy)
     renderer = FigureCanvasAgg(fig).get_renderer()
     fig.draw(renderer)
@@ -215,3 +218,10 @@ def test_load_ensemble_needs_a_folder_path(folder):
 
     with pytest.raises(ParameterError, match="simulation folder's path"):
         load_ensemble(folder)
+
+
+@pytest.mark.parametrize("factor", [3.0, 1 / 50])
+def test_a_rod_in_other_units_than_its_length_is_refused(factor):
+    with pytest.raises(ParameterError, match=r"units of the rod length L .* pass xy / "):
+        analyze_rod(XY * factor, lam=LAM)
+    assert len(analyze_rod(XY, lam=LAM).branches)
