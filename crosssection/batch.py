@@ -4,7 +4,10 @@
 
 Layout of ``OUT_DIR``::
 
-    index.csv          one row per image: set, status (ok / failed / skipped), output folder
+    index.csv          one row per image: set, status (ok / failed / skipped, or pending
+                       while the run that analyses it has not reached it: a run stopped
+                       midway leaves no row of an earlier run's results for a scan it was
+                       redoing), output folder
                        (empty for a failed image), summary numbers (n_junctions ...
                        total_energy, with the rod length and hole radius that make its
                        epsilon), wall_s, reason
@@ -139,8 +142,9 @@ INDEX_COLUMNS = (["image", "set", "status", "output"] + SUMMARY_NUMBERS
 FAILURE_COLUMNS = ["image", "set", "reason"]
 #: exit status of a batch that finished but could not analyse every image
 EXIT_SOME_FAILED = 3
-#: how often (s) the index is rewritten while the batch runs, so a killed batch leaves one
-INDEX_EVERY_S = 5.0
+#: how often (s) at most the index is rewritten while the batch runs, so a killed batch
+#: leaves one (it is also written before the first analysis and after each failure)
+INDEX_EVERY_S = 2.0
 
 
 @dataclass
@@ -1004,8 +1008,12 @@ def _write_record(path: Path, write, data) -> None:
                           err.path or path) from None
 
 
-def _write_tables(out: Path, rows: dict, tasks: list[ImageTask]):
-    ordered = [rows[t.rel] for t in tasks if t.rel in rows]
+def _write_tables(out: Path, rows: dict, tasks: list[ImageTask], pending=()):
+    """``index.csv`` and ``failures.csv`` of the rows so far; the tasks of ``pending`` not
+    yet in ``rows`` are listed as pending, with their output folder and no numbers."""
+    waiting = {t.rel: t for t in pending}
+    ordered = [rows[t.rel] if t.rel in rows else _row(waiting[t.rel], "pending")
+               for t in tasks if t.rel in rows or t.rel in waiting]
     index = pd.DataFrame(ordered, columns=INDEX_COLUMNS)
     for c in ("n_junctions", "n_stacks", "n_branches", "n_voids", "seed"):
         index[c] = pd.to_numeric(index[c], errors="coerce").astype("Int64")  # ints, blank if none
@@ -1226,6 +1234,9 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
         meta = _start(out, input_dir, tasks, sets, redone, stale, {
             "workers": workers, "scheduler": scheduler, "seed": seed, "figure": figure,
             "force": force, "cli_params": cli_params or {}})
+        # before any analysis: an earlier run's rows of the scans redone now must not
+        # outlive their folders if this run is killed
+        _write_tables(out, rows, tasks, pending=todo)
     except BaseException:
         held.close()
         pool.close()
@@ -1237,7 +1248,7 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
     bar = tqdm(total=len(tasks), initial=len(rows), unit="img", desc="batch",
                disable=None if progress is None else not progress,
                dynamic_ncols=True)
-    last_write = time.monotonic()
+    last_write, failed_now = time.monotonic(), False
     fn = task_fn or process_image
     queue, suspects = deque(todo), deque()
     interrupted, stopped = False, False
@@ -1299,15 +1310,16 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
                             # error: not the image's failure, left for the re-run
                             continue
                         rows[t.rel] = row
+                        failed_now = failed_now or row["status"] == "failed"
                         bar.update(1)
                     if lost is not None:
                         raise lost
                     stop = interrupt()
                     if stop is not None:  # an interrupt that the analysis swallowed
                         raise stop
-                    if time.monotonic() - last_write > INDEX_EVERY_S:
-                        _write_tables(out, rows, tasks)
-                        last_write = time.monotonic()
+                    if failed_now or time.monotonic() - last_write > INDEX_EVERY_S:
+                        _write_tables(out, rows, tasks, pending=todo)
+                        last_write, failed_now = time.monotonic(), False
             ex = None
     except (KeyboardInterrupt, ClusterLostError):
         # an interrupt landing once every image is done stops nothing: the batch is complete
@@ -1321,12 +1333,13 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
         pool.close()  # the first pool, when no image was left to analyse
         bar.close()
         try:
-            index = _write_tables(out, rows, tasks)
+            index = _write_tables(out, rows, tasks, pending=todo)
             counts = index["status"].value_counts().to_dict()
             meta.update(finished=provenance.timestamp(),
                         elapsed_s=time.time() - t_start,
-                        counts={k: int(counts.get(k, 0)) for k in ("ok", "skipped", "failed")},
-                        complete=len(index) == len(tasks), interrupted=interrupted)
+                        counts={k: int(counts.get(k, 0))
+                                for k in ("ok", "skipped", "failed", "pending")},
+                        complete=len(rows) == len(tasks), interrupted=interrupted)
             _write_record(out / "batch.json", write_json, meta)
         except OutputError:
             # a batch that stops for another reason (an interrupt, the same full disk) is

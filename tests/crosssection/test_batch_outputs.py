@@ -504,11 +504,13 @@ def test_an_interrupt_after_the_last_image_finishes_the_batch(tmp_path, monkeypa
     real = B._write_tables
     calls = {"n": 0}
 
-    def interrupted_once(*args):
+    def interrupted_once(*args, **kw):
         calls["n"] += 1
-        if calls["n"] == 1:  # the interrupt lands after the first rows (two slots)
+        # the first write lists every scan pending; the interrupt lands at the next, after
+        # the first rows (two slots)
+        if calls["n"] == 2:
             raise KeyboardInterrupt
-        return real(*args)
+        return real(*args, **kw)
 
     monkeypatch.setattr(B, "INDEX_EVERY_S", -1.0)
     monkeypatch.setattr(B, "_write_tables", interrupted_once)
@@ -520,6 +522,26 @@ def test_an_interrupt_after_the_last_image_finishes_the_batch(tmp_path, monkeypa
             B.run_batch(inp, out, workers=1, progress=False, task_fn=_quick)
     meta = json.loads((out / "batch.json").read_text())
     assert meta["complete"] is complete and meta["interrupted"] is not complete
+
+
+def test_a_rerun_killed_before_its_first_result_leaves_no_row_of_the_earlier_run(tmp_path):
+    # the earlier run's rows of the scans being redone must not outlive their folders: a
+    # run killed (SIGKILL, out of memory) before its first result lists them as pending
+    inp, out = tmp_path / "in", tmp_path / "out"
+    _set(inp / "x", "", "s0.png", "s1.png")
+    B.run_batch(inp, out, workers=1, progress=False, task_fn=_quick)
+    assert set(pd.read_csv(out / "index.csv")["status"]) == {"ok"}
+    seen = {}
+
+    def killed(task):
+        seen["index"] = pd.read_csv(out / "index.csv", keep_default_na=False)
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        B.run_batch(inp, out, workers=1, progress=False, task_fn=killed, force=True)
+    first = seen["index"]
+    assert set(first["status"]) == {"pending"} and first["total_energy"].eq("").all()
+    assert list(first["output"]) == ["x/s0", "x/s1"]  # the folders keep their names
 
 
 # ----------------------------------------------------------------------------- full disk, leftovers
@@ -535,9 +557,12 @@ def test_a_batch_whose_records_cannot_be_written_stops_naming_the_file(tmp_path,
 
     inp, out = _scans(tmp_path / "in", n=2), tmp_path / "out"
     real = B.write_csv
+    calls = {"n": 0}
 
     def full(path, df):
-        if Path(path).name == "index.csv":
+        # the disk fills up after the first write, which lists the scans pending
+        calls["n"] += Path(path).name == "index.csv"
+        if Path(path).name == "index.csv" and calls["n"] > 1:
             with fileio.atomic_path(path):
                 raise OSError(errno.ENOSPC, "No space left on device")  # as a write raises it
         return real(path, df)
