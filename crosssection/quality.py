@@ -61,6 +61,9 @@ layer_lattice            median |layers from width - final n_br|, weighted    > 
                          by stack length (h >= 3 px)                          0.75 px / h if more
 linear_system            junctions whose final counts violate conservation    > 10 % of junctions
                          junctions repartitioned by the widths                > 25 % of junctions
+layer_multiple           the greatest common divisor of every stack's n_br    >= 2, on 6 stacks
+                         (no single sheet anywhere: each layer read d times   or more
+                         by a scale or calibration off by a factor d)
 count_width              stacks at least 4 widths long whose final n_br is a  any
                          layer or more (0.75) from the count their own width
                          reads (``layers_est``); shorter stacks 3 layers or
@@ -276,6 +279,7 @@ CATEGORIES = {
     "non_square": CalibrationWarning,
     "widths_out_of_range": CalibrationWarning,
     "layer_lattice": CalibrationWarning,
+    "layer_multiple": CalibrationWarning,
     "thickness_calibration": CalibrationWarning,
     "low_resolution": ResolutionWarning,
     "ink_missed": ThresholdWarning,
@@ -440,16 +444,28 @@ def _wide_check(params, hole) -> list[QualityFlag]:
     return [QualityFlag("hole_wide", msg, reach, WIDE_REACH_MAX)]
 
 
+#: one-layer widths (sheet thicknesses) beyond which the width law read from a scan names
+#: the scale or the thickness as doubtful: the paper's cut sheets read 1.1-1.4 h, and a
+#: scale read twice too small reads them 2.2-2.8 h
+PLAUSIBLE_ONE_LAYER_H = (0.8, 2.0)
+
+
 def _no_calibration_message(width_law, thickness_mm: float) -> str:
     if width_law is not None and width_law.ok:
         from crosssection.stages.widthlaw import PLAUSIBLE_STEP_H
 
         step_h = width_law.step_mm / thickness_mm
+        one_h = width_law.one_layer_mm / thickness_mm
         lo, hi = PLAUSIBLE_STEP_H
-        doubt = ("" if lo <= step_h <= hi else
-                 f"; each layer adds {step_h:.2f} h to a stack's width, "
-                 f"{'less than a sheet' if step_h < lo else 'more than a cut thickens it'}: "
-                 "check px_per_mm and thickness_mm")
+        if not lo <= step_h <= hi:
+            doubt = (f"; each layer adds {step_h:.2f} h to a stack's width, "
+                     f"{'less than a sheet' if step_h < lo else 'more than a cut thickens it'}"
+                     ": check px_per_mm and thickness_mm")
+        elif not PLAUSIBLE_ONE_LAYER_H[0] <= one_h <= PLAUSIBLE_ONE_LAYER_H[1]:
+            doubt = (f"; a single sheet reads {one_h:.2f} h wide (the paper's: 1.1-1.4 h): "
+                     "check px_per_mm and thickness_mm")
+        else:
+            doubt = ""
         return ("no width calibration: layer counts from the width law read from this scan, "
                 f"{width_law.describe()}{doubt} (pass a calibration CSV)")
     why = "" if width_law is None else f", and no width law read from the scan ({width_law.reason})"
@@ -606,11 +622,18 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
     if ink_outside_fraction > 0.02:
         # as much ink outside as a rod's is a plate the colour rule passes: the hole's edge
         # then holds a rim of it, read as part of the wall band
-        plate = (": a plate around the hole passes the ink's colour rule, and a rim of it "
-                 "inside a hole placed a pixel or two wide thickens the wall band by a layer; "
-                 "give the hole (hole_radius_mm and hole_center_px) and look at the wall "
-                 "stacks on the overlay" if ink_outside_fraction > 0.2 else
-                 ": check the hole and the threshold")
+        if ink_outside_fraction <= 0.2:
+            plate = ": check the hole and the threshold"
+        elif params.hole_given and params.hole_center_px is not None:
+            plate = (": a plate around the hole that passes the ink's colour rule, or another "
+                     "cut section or marks in the scan; only the given hole is analysed (look "
+                     "at the overlay: a plate's rim inside the hole would thicken the wall "
+                     "band by a layer)")
+        else:
+            plate = (": a plate around the hole passes the ink's colour rule, and a rim of it "
+                     "inside a hole placed a pixel or two wide thickens the wall band by a "
+                     "layer; give the hole (hole_radius_mm and hole_center_px) and look at the "
+                     "wall stacks on the overlay")
         flags.append(QualityFlag("ink_outside_hole", f"{100 * ink_outside_fraction:.1f} % of the "
                                  f"ink lies outside the hole (ignored){plate}",
                                  ink_outside_fraction, 0.02))
@@ -886,6 +909,31 @@ def _stack_position(stacks, sid: int) -> str:
     return f"stack {sid}"
 
 
+#: ``layer_multiple``: fewest stacks on which a common divisor of every count is flagged
+#: (a rod's network shows single sheets: its two ends, and the most frequent stacks of the
+#: paper's tables hold one or two layers)
+LAYER_MULTIPLE_MIN_STACKS = 6
+
+
+def _layer_multiple_check(stacks) -> list[QualityFlag]:
+    """Every stack holding a multiple of d >= 2 layers: a scale read d times too small (a
+    2400 dpi scan without its resolution, analysed at 50 px/mm) or a calibration d times too
+    narrow reads each layer d times, and the widths and the junctions' conservation agree
+    with it."""
+    n = stacks["n_br"].to_numpy()
+    n = n[n > 0].astype(np.int64)
+    if n.size < LAYER_MULTIPLE_MIN_STACKS:
+        return []
+    d = int(np.gcd.reduce(n))
+    if d < 2:
+        return []
+    return [QualityFlag("layer_multiple", f"every one of the {n.size} stacks holds a multiple "
+                        f"of {d} layers (no single sheet anywhere): a scale or a calibration off "
+                        f"by a factor {d} reads each layer {d} times; check px_per_mm (a scan "
+                        f"made at {d} times the resolution assumed, the file not recording "
+                        "it) and the calibration", d, 2)]
+
+
 def _count_width_check(stacks) -> list[QualityFlag]:
     need = {"n_br", "layers_est", "length_mm", "width_mm"}
     if not len(stacks) or not need <= set(stacks.columns):
@@ -999,6 +1047,7 @@ def _stack_checks(params, stacks, calibration_max_width_mm) -> list[QualityFlag]
     m = len(stacks)
     if not m:
         return flags
+    flags += _layer_multiple_check(stacks)
     flags += _count_width_check(stacks)
     flags += _isolated_check(stacks)
     flags += _rod_ends_check(stacks)

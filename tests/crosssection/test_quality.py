@@ -6,6 +6,7 @@ import subprocess
 import sys
 import warnings
 
+import cv2
 import numpy as np
 import pytest
 
@@ -839,3 +840,40 @@ def test_pinholes_kept_as_voids_by_a_tiny_s_min_are_flagged():
     assert flag.value == int((res.voids["area_mm2"] < h2).sum()) >= 1
     assert res.summary["n_voids"] > sc.summary["n_voids"]
     assert any(w.category is quality.TinyVoidsWarning for w in caught)
+
+
+def test_a_scan_read_at_half_its_scale_doubles_every_count_and_is_flagged(scene):
+    # a scan made at twice the resolution assumed (2400 dpi read at 50 px/mm): each n-layer
+    # width reads as the calibration's 2n-layer width, on the lattice and conserved
+    big = cv2.resize(scene.rgb, None, fx=2, fy=2, interpolation=cv2.INTER_CUBIC)
+    kw = _given(scene)
+    kw["hole_radius_mm"] *= 2
+    kw["hole_center_px"] = tuple(2 * c + 0.5 for c in kw["hole_center_px"])
+    res, caught = _analyze(big, **kw)
+    n_br = res.stacks["n_br"].to_numpy()
+    assert len(n_br) >= 6 and (n_br % 2 == 0).all()
+    flag = next(f for f in res.quality if f.code == "layer_multiple")
+    assert flag.value == 2
+    assert any(w.category is quality.LayerMultipleWarning for w in caught)
+    right, _ = _analyze(scene.rgb, **_given(scene))
+    assert "layer_multiple" not in right.summary["quality"]["codes"]
+
+
+def test_ink_outside_a_given_hole_does_not_ask_for_the_hole(scene):
+    # two cut sections side by side, the first's hole given: the second is ink outside it
+    two = np.concatenate([scene.rgb, scene.rgb], axis=1)
+    res, _ = _analyze(two, **_given(scene))
+    flag = next(f for f in res.quality if f.code == "ink_outside_hole")
+    assert flag.value > 0.2
+    assert "another cut section" in flag.message and "give the hole" not in flag.message
+    assert res.summary["n_stacks"] == _analyze(scene.rgb, **_given(scene))[0].summary["n_stacks"]
+
+
+def test_a_width_law_read_at_half_the_scale_names_the_scale(scene):
+    big = cv2.resize(scene.rgb, None, fx=2, fy=2, interpolation=cv2.INTER_CUBIC)
+    for rgb, doubtful in ((scene.rgb, False), (big, True)):
+        res, _ = _analyze(rgb, px_per_mm=scene.params["px_per_mm"],
+                          thickness_mm=scene.params["thickness_mm"])
+        flag = next(f for f in res.quality if f.code == "no_calibration")
+        assert "read from this scan" in flag.message
+        assert ("check px_per_mm" in flag.message) is doubtful
