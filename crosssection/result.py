@@ -292,6 +292,7 @@ class AnalysisResult:
         from crosssection.commands import clear_temporary
         from crosssection.core.fileio import renamed_together, save_figure
 
+        created = not out.exists()
         try:
             out.mkdir(parents=True, exist_ok=True)
             clear_temporary(out, "analyze")
@@ -312,8 +313,10 @@ class AnalysisResult:
                     paths.update(self.write_steps(out))
                 paths.update(schema.write_tables(out, summary, self.tables))
         except OutputError:
+            _remove_if_empty(out, created)
             raise
         except OSError as exc:
+            _remove_if_empty(out, created)
             raise output_error(exc, out) from None
         return paths
 
@@ -339,6 +342,16 @@ class AnalysisResult:
         if self.junction_clusters is not None:
             return np.asarray(self.junction_clusters.centers_rc, float).reshape(-1, 2)
         return np.zeros((0, 2))
+
+
+def _remove_if_empty(folder: Path, created: bool) -> None:
+    """Remove a folder this write created when it failed before leaving anything in it (a
+    full disk): no empty result folder is left to look like a run."""
+    if created:
+        try:
+            folder.rmdir()
+        except OSError:
+            pass  # not empty, or gone: left as it is
 
 
 def write_step_images(out_dir, rgb, mask_threshold, mask_clean, skeleton, junction_centers_rc,

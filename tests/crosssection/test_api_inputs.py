@@ -64,6 +64,24 @@ def test_write_leaves_the_result_as_analysed(result, tmp_path):
     assert result.summary == before
 
 
+def test_a_write_that_fails_leaves_no_empty_folder_it_made(result, tmp_path, monkeypatch):
+    import errno
+
+    from crosssection.core import schema
+
+    def full(*args, **kw):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(schema, "write_tables", full)
+    with pytest.raises(OutputError, match="No space left"):
+        result.write(tmp_path / "new" / "out", figure=False)
+    assert not (tmp_path / "new" / "out").exists()
+    (tmp_path / "mine").mkdir()  # a folder the user made stays
+    with pytest.raises(OutputError):
+        result.write(tmp_path / "mine", figure=False)
+    assert (tmp_path / "mine").is_dir()
+
+
 def test_write_removes_the_temporary_files_a_killed_write_left(result, tmp_path):
     """A write killed midway leaves hidden temporary files; the next write removes them, and
     no hidden file of the user's."""
