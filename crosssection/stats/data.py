@@ -38,7 +38,12 @@ Common representation (:class:`Ensemble`):
   table_note (a scan's tables holding another number of rows than its summary.json counts,
   "" when they agree)
 - ``branches``: set, config_id, length_L, kappa_m_L, kappa_plus_L, e, region, n_br (of the
-  branch's stack, NaN if unknown), l_min_L (detection limit in units of L, NaN if none)
+  branch's stack, NaN if unknown), l_min_L (detection limit in units of L, NaN if none),
+  stack_id (the branch's stack within its configuration, for scans: a scan gives every
+  branch of a stack the stack's length, curvature and energy, so the fits treat the
+  branches of one (set, config_id, stack_id) as one independent value,
+  :func:`branch_groups`; NaN where each branch is its own: simulations, whose branches
+  have their own lengths, and tables that do not say; optional in a hand-built ensemble)
 
 Detection limits: by default an image's are those its analysis used (``l_min_mm`` and
 ``s_min_mm2`` of the parameters in its summary.json), since below them the analysis pruned
@@ -80,7 +85,10 @@ OPTIONAL_CONFIG_COLS = ("rod_length_mm", "source", "quality", "E_model_share", "
                         "l_min_mm_analysis", "s_min_mm2_analysis", "analysis", "batch_note",
                         "table_note")
 BRANCH_COLS = ["set", "config_id", "length_L", "kappa_m_L", "kappa_plus_L", "e", "region",
-               "n_br", "l_min_L"]
+               "n_br", "l_min_L", "stack_id"]
+#: branches columns that a hand-built ensemble may leave out (NaN: each branch its own
+#: stack, see :func:`branch_groups`)
+OPTIONAL_BRANCH_COLS = ("stack_id",)
 STACK_COLS = ["set", "config_id", "n_br", "length_L", "region"]
 VOID_COLS = ["set", "config_id", "area_L2", "perimeter_L", "shape_ratio", "n_edges", "s_min_L2"]
 #: Default detection limits of image data: the analysis' own (paper: branches shorter than
@@ -204,10 +212,39 @@ class Ensemble:
     def __post_init__(self):
         self.configs = _numeric(_checked_table(self.configs, "configs", CONFIG_COLS,
                                                OPTIONAL_CONFIG_COLS), CONFIG_COLS)
-        self.branches = _numeric(_checked_table(self.branches, "branches", BRANCH_COLS),
-                                 BRANCH_COLS)
+        self.branches = _numeric(_checked_table(self.branches, "branches", BRANCH_COLS,
+                                                OPTIONAL_BRANCH_COLS), BRANCH_COLS)
         self.stacks = _numeric(_checked_table(self.stacks, "stacks", STACK_COLS), STACK_COLS)
         self.voids = _numeric(_checked_table(self.voids, "voids", VOID_COLS), VOID_COLS)
+
+
+def branch_groups(branches: pd.DataFrame) -> np.ndarray:
+    """The stack of each branch as a group label for the fits (``groups`` of
+    :func:`crosssection.stats.fits.fit_all`).
+
+    Parameters
+    ----------
+    branches : pandas.DataFrame
+        Rows of :attr:`Ensemble.branches` (set, config_id and, optionally, stack_id).
+
+    Returns
+    -------
+    numpy.ndarray
+        One label per row, object dtype: the tuple (set, config_id, stack_id) where
+        stack_id is known (the branches of a scan's stack share one value), None where it
+        is not (a group of its own: simulations, hand-built tables without the column).
+    """
+    n = len(branches)
+    if "stack_id" not in branches.columns or n == 0:
+        return np.full(n, None, dtype=object)
+    sid = pd.to_numeric(branches["stack_id"], errors="coerce").to_numpy(float)
+    sets = branches["set"].astype(str).to_numpy()
+    cids = branches["config_id"].astype(str).to_numpy()
+    out = np.full(n, None, dtype=object)
+    for i in np.flatnonzero(np.isfinite(sid)):
+        # the same stack number in two scans (or sets) is two stacks
+        out[i] = (sets[i], cids[i], float(sid[i]))
+    return out
 
 
 def _checked_table(df, table: str, cols, optional=()) -> pd.DataFrame:
@@ -707,7 +744,9 @@ def load_image_output(folder, *, set_name: str, config_id: str | None = None,
         "kappa_m_L": br["kappa_m"] * L, "kappa_plus_L": br["kappa_plus"] * L,
         "e": br["energy"], "region": br["region"].astype(str),
         "n_br": br["stack_id"].map(n_br_map),
-        "l_min_L": (l_min_mm / L) if l_min_mm else np.nan})
+        "l_min_L": (l_min_mm / L) if l_min_mm else np.nan,
+        # its branches repeat the stack's values: one independent value per stack
+        "stack_id": br["stack_id"]})
     stacks = pd.DataFrame({"set": set_name, "config_id": str(cid), "n_br": st["n_br"],
                            "length_L": st["length_mm"] / L, "region": st["region"].astype(str)})
     voids = pd.DataFrame({

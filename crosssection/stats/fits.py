@@ -47,6 +47,17 @@ likelihood-ratio statistic G = 2 sum_k c_k ln(c_k / (n P_k)) instead of Anderson
 Bootstrap replicates of the parameters are kept in :attr:`FitResult.boot` so that figures can
 draw a confidence band of the fitted density without refitting.
 
+Groups (clusters): the branches of one stack share its length, curvature and energy, so a
+scan's table of branches repeats each stack's value n_br times. Every entry point but
+:func:`truncation_bias` takes ``groups=``, one label per observation: the point estimates
+stay the maximum-likelihood fit of all observations (each group weighted by its size: the
+laws are those of branches), while the intervals resample whole groups (cluster bootstrap),
+the goodness of fit draws one value per group and repeats it, and model selection counts
+groups (BIC on a composite likelihood, :func:`fit_family`; :data:`N_SELECT_MIN`). Treated
+as independent, repeated values give intervals too narrow by about the square root of the
+mean group size and p-values that reject the true law. None, or labels all distinct, make
+each observation its own group: the procedures of independent values, draw for draw.
+
 P-values come from n Monte-Carlo resamples, so the smallest one is 1/(n + 1); a p-value at that
 floor only says p < 1/(n + 1) and is printed so (:meth:`FitResult.p_text`).
 
@@ -124,13 +135,16 @@ def _warn_few_boot(n_boot: int, *, stacklevel: int) -> None:
         warnings.warn(text, SmallSampleWarning, stacklevel=stacklevel + 1)
 
 
-def _warn_few_values(n: int, best, *, stacklevel: int) -> None:
+def _warn_few_values(n: int, best, *, stacklevel: int, n_groups: int | None = None) -> None:
     """One SmallSampleWarning when a model selection rests on fewer than
-    :data:`N_SELECT_MIN` observations."""
-    if n >= N_SELECT_MIN:
+    :data:`N_SELECT_MIN` independent values (``n_groups`` groups of the ``n``
+    observations; None: each observation its own)."""
+    n_ind = n if n_groups is None else n_groups
+    if n_ind >= N_SELECT_MIN:
         return
     chosen = f"the law selected ({best})" if best else "no law was selected; the fits"
-    warnings.warn(f"x: {n} values, fewer than the {N_SELECT_MIN} samples model selection "
+    what = f"{n} values" if n_ind == n else f"{n} values in {n_ind} independent groups"
+    warnings.warn(f"x: {what}, fewer than the {N_SELECT_MIN} samples model selection "
                   f"needs: {chosen} {'is' if best else 'are'} indicative only",
                   SmallSampleWarning, stacklevel=stacklevel + 1)
 
@@ -200,14 +214,80 @@ def _as_cuts(truncation, n):
     return c
 
 
-def _finite(x, c, *, stacklevel: int = 3):
-    """``(x, c, n_left_out)`` without the observations that are not finite or whose cut is
-    not, with one QualityWarning giving their number (none when all are finite)."""
+def _as_groups(groups, n):
+    """Integer group codes of ``n`` observations (equal codes: one group), or None.
+
+    Any hashable labels (numbers, text, tuples) name the groups; a missing label (None,
+    NaN) makes its observation a group of its own.
+
+    Raises
+    ------
+    ParameterError
+        ``groups`` is text, not one-dimensional, holds unhashable labels, or has another
+        length than the observations.
+    """
+    if groups is None:
+        return None
+    if isinstance(groups, (str, bytes)) or not hasattr(groups, "__len__"):
+        raise ParameterError(f"groups must be an array of labels, one per observation, got "
+                             f"{_short(groups)}")
+    if isinstance(groups, np.ndarray) and groups.ndim != 1:
+        raise ParameterError(f"groups must be a 1-D array of labels, got an array of shape "
+                             f"{groups.shape}")
+    labels = (pd.Series(groups.to_numpy(), dtype=object)
+              if isinstance(groups, (pd.Series, pd.Index)) else
+              pd.Series(list(groups), dtype=object))
+    if len(labels) != n:
+        raise ParameterError(f"groups has {len(labels)} labels, expected {n} (one per "
+                             "observation)")
+    try:
+        codes, _ = pd.factorize(labels)
+    except TypeError:  # a list among the labels
+        raise ParameterError(f"groups must hold hashable labels (numbers, text, tuples), "
+                             f"got {_short(groups)}") from None
+    codes = np.asarray(codes, np.int64)
+    alone = codes < 0
+    codes[alone] = codes.max(initial=-1) + 1 + np.arange(int(alone.sum()))
+    return codes
+
+
+def _compact(g):
+    """Codes 0..G-1 of the groups ``g`` still holds (after observations were left out), or
+    None when every observation is a group of its own: the procedures of ungrouped data,
+    draw for draw."""
+    if g is None:
+        return None
+    _, codes = np.unique(g, return_inverse=True)
+    codes = codes.reshape(-1)
+    return None if codes.size == 0 or codes.max() + 1 == codes.size else codes
+
+
+def _n_groups(g, n: int) -> int:
+    """Number of groups of compact codes ``g`` (``n`` when None: one per observation)."""
+    return n if g is None else int(g.max()) + 1
+
+
+def _cluster_index(rng, g) -> np.ndarray:
+    """Indices of one cluster-bootstrap resample of compact codes ``g``: as many groups as
+    there are, drawn with replacement, each bringing all its observations."""
+    order = np.argsort(g, kind="stable")
+    sizes = np.bincount(g)
+    starts = np.cumsum(sizes) - sizes
+    pick = rng.integers(0, sizes.size, sizes.size)
+    s = sizes[pick]
+    pos = np.repeat(starts[pick] - (np.cumsum(s) - s), s) + np.arange(int(s.sum()))
+    return order[pos]
+
+
+def _finite(x, c, g=None, *, stacklevel: int = 3):
+    """``(x, c, g, n_left_out)`` without the observations that are not finite or whose cut
+    is not (``g``: their group codes, or None), with one QualityWarning giving their number
+    (none when all are finite)."""
     bad_x = ~np.isfinite(x)
     bad = bad_x if c is None else bad_x | ~np.isfinite(c)
     n_bad = int(bad.sum())
     if not n_bad:
-        return x, c, 0
+        return x, c, g, 0
     parts = []
     if bad_x.any():
         parts.append(f"{int(bad_x.sum())} not finite (NaN or inf)")
@@ -216,7 +296,7 @@ def _finite(x, c, *, stacklevel: int = 3):
     warnings.warn(f"x: {n_bad} of {x.size} observations left out of the fit: "
                   f"{' and '.join(parts)}", QualityWarning, stacklevel=stacklevel)
     keep = ~bad
-    return x[keep], (None if c is None else c[keep]), n_bad
+    return x[keep], (None if c is None else c[keep]), (None if g is None else g[keep]), n_bad
 
 
 def _count(value, name: str, minimum: int = 0) -> None:
@@ -299,7 +379,12 @@ class FitResult:
     params : dict
         Every parameter of the family in the paper's notation (``param_names`` of the
         family, e.g. alpha, beta, x_lo, x_hi for Bose-Einstein).
-    loglik, aic, bic : float
+    loglik : float
+        Maximum log-likelihood, summed over the observations.
+    aic, bic : float
+        Information criteria. With groups of observations (``groups`` of
+        :func:`fit_family`) they take ``n_groups`` as the sample size and the
+        log-likelihood times ``n_groups / n`` (see :func:`fit_family`).
     n : int
         Number of observations used.
     k : int
@@ -325,6 +410,10 @@ class FitResult:
     discrete : bool
         Whether the law was fitted to counts (see the module docstring); its probability
         masses are :meth:`pmf`.
+    n_groups : int or None
+        Number of independent groups the observations form (the stacks whose branches
+        repeat one value); ``n`` when each observation is its own group, None when not
+        given (a hand-built result: taken as ``n``, see :attr:`n_independent`).
     boot : numpy.ndarray or None
         Bootstrap replicates of the parameters, shape (n_boot, len(param_names)), rows that
         could not be refitted are NaN; None without bootstrap. Not compared nor printed.
@@ -346,7 +435,14 @@ class FitResult:
     n_mc: int = 0
     rejected: str = ""
     discrete: bool = False
+    n_groups: int | None = None
     boot: np.ndarray | None = field(default=None, compare=False, repr=False)
+
+    @property
+    def n_independent(self) -> int:
+        """The number of independent values the fit rests on: ``n_groups``, or ``n`` when
+        the groups are not given."""
+        return self.n if self.n_groups is None else self.n_groups
 
     @property
     def selectable(self) -> bool:
@@ -458,16 +554,22 @@ def _g_statistic(p, ks, cnt) -> float:
     return float(g) if np.isfinite(g) else np.inf
 
 
-def _gof_counts(x, fam, params, n_mc, rng) -> "GoodnessOfFit":
-    """Parametric-bootstrap p-value of the G statistic of a count fit (refit per sample)."""
+def _gof_counts(x, fam, params, n_mc, rng, g=None) -> "GoodnessOfFit":
+    """Parametric-bootstrap p-value of the G statistic of a count fit (refit per sample);
+    with compact group codes ``g``, one count drawn per group and repeated by its size (as
+    :func:`goodness_of_fit` does)."""
     ks, cnt = np.unique(np.round(x), return_counts=True)
     stat0 = _g_statistic(count_pmf(fam.name, params, ks), ks, cnt)
     theta_hat = fam.theta(params)
-    cut = np.full(x.size, COUNT_MIN - 0.5)
+    sizes = None if g is None else np.bincount(g)
+    n_draw = x.size if g is None else sizes.size
+    cut = np.full(n_draw, COUNT_MIN - 0.5)
     null = np.full(n_mc, np.nan)
     for i in range(n_mc):
         # rounding a draw of the law truncated at 1/2 is a draw of the discretised law
-        xs = np.round(fam.sample(params, x.size, cut, rng))
+        xs = np.round(fam.sample(params, n_draw, cut, rng))
+        if sizes is not None:
+            xs = np.repeat(xs, sizes)
         if not np.all(np.isfinite(xs)) or no_spread(xs):
             continue
         try:
@@ -515,11 +617,15 @@ class GoodnessOfFit:
     n_mc: int
 
 
-def _applicability(fam, x, c, k) -> str:
-    """Why ``fam`` cannot be fitted to ``x`` ("" when it can)."""
+def _applicability(fam, x, c, k, g=None) -> str:
+    """Why ``fam`` cannot be fitted to ``x`` ("" when it can); ``g``: compact group codes
+    (None: each observation its own group)."""
     n = x.size
     if n < max(3, k + 1):
         return f"too few observations ({n})"
+    if _n_groups(g, n) < max(3, k + 1):
+        # a group's observations repeat one value: they are one observation of the law
+        return f"too few groups ({_n_groups(g, n)} for {n} observations)"
     if fam.positive and np.any(x <= 0):
         n_low = int(np.sum(x <= 0))
         return f"needs x > 0 ({n_low} value{'s' if n_low > 1 else ''} <= 0)"
@@ -537,20 +643,21 @@ def _applicability(fam, x, c, k) -> str:
     return ""
 
 
-def _checked_sample(x, truncation, *, n_boot, n_mc, gof, ci_level, seed):
-    """The observations and cuts of a fit with its options checked: ``(x, cuts, n_dropped)``
-    with the non-finite values left out (:func:`_finite`)."""
+def _checked_sample(x, truncation, *, n_boot, n_mc, gof, ci_level, seed, groups=None):
+    """The observations, cuts and group codes of a fit with its options checked:
+    ``(x, cuts, groups, n_dropped)`` with the non-finite values left out (:func:`_finite`);
+    the group codes are not compacted (:func:`_compact`)."""
     x = _observations(x)
     _count(n_boot, "n_boot")
     _check_mc(n_mc, gof)
     _level(ci_level, "ci_level")
     _check_seed(seed)
-    return _finite(x, _as_cuts(truncation, x.size))
+    return _finite(x, _as_cuts(truncation, x.size), _as_groups(groups, x.size))
 
 
 def fit_family(x, family: str, *, truncation=None, n_boot: int = N_BOOT, seed=0,
                gof: bool = True, n_mc: int = N_MC, ci_level: float = 0.95,
-               discrete: bool = False) -> FitResult:
+               discrete: bool = False, groups=None) -> FitResult:
     """Maximum-likelihood fit of one family, with bootstrap intervals and a GOF p-value.
 
     Parameters
@@ -579,6 +686,19 @@ def fit_family(x, family: str, *, truncation=None, n_boot: int = N_BOOT, seed=0,
     discrete : bool
         ``x`` are counts >= :data:`COUNT_MIN`: fit the discretised law (module docstring);
         only the families backed by ``scipy.stats`` and no truncation.
+    groups : array_like, optional
+        One label per observation: the observations of one group repeat one draw of the
+        law (the branches of a stack share its length, curvature and energy), so the groups,
+        not the observations, are the independent values. None (default), or all labels
+        distinct, makes each observation its own group; a missing label (None, NaN) too.
+        The parameters stay the maximum-likelihood fit of the observations (each group's
+        value weighted by its size); the intervals resample whole groups with their cuts
+        (cluster bootstrap), the p-value draws one value per group (see
+        :func:`goodness_of_fit`), and AIC and BIC count ``n_groups`` values with the
+        log-likelihood scaled by ``n_groups / n`` (a composite likelihood: summed over the
+        repeated observations it would count each group's information as many times as it
+        has observations, and the criteria would favour the larger laws as if the sample
+        were that many independent values).
 
     Returns
     -------
@@ -592,9 +712,9 @@ def fit_family(x, family: str, *, truncation=None, n_boot: int = N_BOOT, seed=0,
     ------
     ParameterError
         ``x`` is not a 1-D array of numbers, ``family`` is unknown, ``truncation`` is not
-        finite or has another length than ``x``, an observation lies below its cut, or an
-        option is absurd (negative ``n_boot``, ``n_mc`` < 1 with ``gof``, ``ci_level``
-        outside (0, 1), a seed numpy cannot use).
+        finite or has another length than ``x``, ``groups`` has another length than ``x``,
+        an observation lies below its cut, or an option is absurd (negative ``n_boot``,
+        ``n_mc`` < 1 with ``gof``, ``ci_level`` outside (0, 1), a seed numpy cannot use).
 
     Warns
     -----
@@ -604,26 +724,28 @@ def fit_family(x, family: str, *, truncation=None, n_boot: int = N_BOOT, seed=0,
     _count(n_boot, "n_boot")
     _warn_few_boot(n_boot, stacklevel=2)
     return _fit_one(x, family, truncation=truncation, n_boot=n_boot, seed=seed, gof=gof,
-                    n_mc=n_mc, ci_level=ci_level, discrete=discrete)
+                    n_mc=n_mc, ci_level=ci_level, discrete=discrete, groups=groups)
 
 
 def _fit_one(x, family: str, *, truncation, n_boot, seed, gof, n_mc, ci_level,
-             discrete) -> FitResult:
+             discrete, groups=None) -> FitResult:
     """:func:`fit_family` without its warning on ``n_boot`` (:func:`fit_all` gives it once
     for all its families)."""
     fam = _family(family)
-    x, c, _ = _checked_sample(x, truncation, n_boot=n_boot, n_mc=n_mc, gof=gof,
-                              ci_level=ci_level, seed=seed)
+    x, c, g, _ = _checked_sample(x, truncation, n_boot=n_boot, n_mc=n_mc, gof=gof,
+                                 ci_level=ci_level, seed=seed, groups=groups)
+    g = _compact(g)
     n = x.size
+    n_groups = _n_groups(g, n)
     truncated = c is not None
     k = fam.k(truncated)
-    why = _applicability(fam, x, c, k)
+    why = _applicability(fam, x, c, k, g)
     if not why and discrete:
         why = _count_problem(fam, x, c)
     if why:
         return FitResult(family, {p: float("nan") for p in fam.param_names}, float("nan"),
                          float("nan"), float("nan"), n, k, truncated=truncated, ok=False,
-                         note=why, discrete=discrete)
+                         note=why, discrete=discrete, n_groups=n_groups)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         try:
@@ -631,13 +753,15 @@ def _fit_one(x, family: str, *, truncation, n_boot, seed, gof, n_mc, ci_level,
         except _FIT_ERRORS as exc:
             return FitResult(family, {p: float("nan") for p in fam.param_names},
                              float("nan"), float("nan"), float("nan"), n, k,
-                             truncated=truncated, discrete=discrete,
+                             truncated=truncated, discrete=discrete, n_groups=n_groups,
                              rejected=f"the fit failed ({type(exc).__name__}: "
                                       f"{' '.join(str(exc).split())})")
         params = fam.params(theta, x, c)
-        res = FitResult(family, params, float(ll), float(2 * k - 2 * ll),
-                        float(k * np.log(n) - 2 * ll), n, k, truncated=truncated,
-                        discrete=discrete)
+        # the composite log-likelihood of the criteria: the information of n_groups values
+        ll_sel = ll if g is None else ll * n_groups / n
+        res = FitResult(family, params, float(ll), float(2 * k - 2 * ll_sel),
+                        float(k * np.log(n_groups) - 2 * ll_sel), n, k, truncated=truncated,
+                        discrete=discrete, n_groups=n_groups)
         if not all(np.isfinite(v) for v in params.values()):
             return replace(res, rejected="the fit did not converge (non-finite parameter)")
         # a law outside the domain (a spike narrower than any sample with a spread) cannot
@@ -649,16 +773,17 @@ def _fit_one(x, family: str, *, truncation, n_boot, seed, gof, n_mc, ci_level,
             return replace(res, rejected=rejected)
         s_boot, s_gof = _seedseq(seed).spawn(2)
         draws = (bootstrap_draws(x, family, truncation=c, n_boot=n_boot, seed=s_boot,
-                                 discrete=discrete) if n_boot else None)
+                                 discrete=discrete, groups=g) if n_boot else None)
         ci = _percentile_ci(draws, fam.param_names, ci_level) if n_boot else {}
         if not gof:
-            g = GoodnessOfFit(float("nan"), float("nan"), 0)
+            test = GoodnessOfFit(float("nan"), float("nan"), 0)
         elif discrete:
-            g = _gof_counts(x, fam, params, n_mc, np.random.default_rng(s_gof))
+            test = _gof_counts(x, fam, params, n_mc, np.random.default_rng(s_gof), g)
         else:
-            g = goodness_of_fit(x, family, params, truncation=c, n_mc=n_mc, seed=s_gof)
-    return replace(res, ci=ci, pvalue=g.pvalue, statistic=g.statistic, n_mc=g.n_mc,
-                   boot=draws)
+            test = goodness_of_fit(x, family, params, truncation=c, n_mc=n_mc, seed=s_gof,
+                                   groups=g)
+    return replace(res, ci=ci, pvalue=test.pvalue, statistic=test.statistic,
+                   n_mc=test.n_mc, boot=draws)
 
 
 def _count_tail(fam, params) -> str:
@@ -752,8 +877,14 @@ def _spike(fam, params, x, discrete: bool) -> str:
 
 
 def bootstrap_draws(x, family: str, *, truncation=None, n_boot: int = N_BOOT, seed=0,
-                    discrete: bool = False) -> np.ndarray:
+                    discrete: bool = False, groups=None) -> np.ndarray:
     """Bootstrap replicates of every parameter of a family (refits of resampled data).
+
+    With ``groups``, each resample draws as many groups as there are, with replacement,
+    each with all its observations and their cuts (cluster bootstrap): the observations of
+    a group repeat one value, and resampling them one by one would treat the repeats as
+    independent values, giving intervals too narrow by about the square root of the mean
+    group size.
 
     Parameters
     ----------
@@ -767,6 +898,9 @@ def bootstrap_draws(x, family: str, *, truncation=None, n_boot: int = N_BOOT, se
     seed : int, SeedSequence or numpy.random.Generator
     discrete : bool
         Refit as counts (see :func:`fit_family`).
+    groups : array_like, optional
+        One label per observation (see :func:`fit_family`); None: each observation its
+        own group.
 
     Returns
     -------
@@ -777,15 +911,16 @@ def bootstrap_draws(x, family: str, *, truncation=None, n_boot: int = N_BOOT, se
     ------
     ParameterError
         Bad arguments (as for :func:`fit_family`), or a family that cannot be fitted to
-        ``x`` (too few observations, values <= 0 for a law of x > 0, no spread).
+        ``x`` (too few observations or groups, values <= 0 for a law of x > 0, no spread).
     """
     fam = _family(family)
     x = _observations(x)
     _count(n_boot, "n_boot")
     _check_seed(seed, generator=True)
     c = _as_cuts(truncation, x.size)
-    x, c, _ = _finite(x, c)
-    _require_applicable(fam, x, c, discrete)
+    x, c, g, _ = _finite(x, c, _as_groups(groups, x.size))
+    g = _compact(g)
+    _require_applicable(fam, x, c, discrete, g)
     rng = np.random.default_rng(seed)
     names = fam.param_names
     draws = np.full((n_boot, len(names)), np.nan)
@@ -798,7 +933,7 @@ def bootstrap_draws(x, family: str, *, truncation=None, n_boot: int = N_BOOT, se
         raise ParameterError(f"cannot fit {fam.name} to x: the fit failed "
                              f"({type(exc).__name__}: {' '.join(str(exc).split())})") from None
     for b in range(n_boot):
-        idx = rng.integers(0, x.size, x.size)
+        idx = rng.integers(0, x.size, x.size) if g is None else _cluster_index(rng, g)
         xb = x[idx]
         cb = None if c is None else c[idx]
         if no_spread(xb):
@@ -812,11 +947,11 @@ def bootstrap_draws(x, family: str, *, truncation=None, n_boot: int = N_BOOT, se
     return draws
 
 
-def _require_applicable(fam, x, c, discrete: bool) -> None:
+def _require_applicable(fam, x, c, discrete: bool, g=None) -> None:
     """A ParameterError saying why ``fam`` cannot be fitted to ``x`` (fit_family returns the
     reason in a FitResult instead; the functions that return bare numbers have no room for
     it)."""
-    why = _applicability(fam, x, c, fam.k(c is not None))
+    why = _applicability(fam, x, c, fam.k(c is not None), g)
     if not why and discrete:
         why = _count_problem(fam, x, c)
     if why:
@@ -843,7 +978,7 @@ def _percentile_ci(draws, names, level) -> dict:
 
 
 def bootstrap_ci(x, family: str, *, truncation=None, n_boot: int = N_BOOT, seed=0,
-                 level: float = 0.95, discrete: bool = False) -> dict:
+                 level: float = 0.95, discrete: bool = False, groups=None) -> dict:
     """Percentile bootstrap intervals of every parameter of a family.
 
     Parameters
@@ -859,6 +994,9 @@ def bootstrap_ci(x, family: str, *, truncation=None, n_boot: int = N_BOOT, seed=
         Coverage, between 0 and 1.
     discrete : bool
         Refit as counts (see :func:`fit_family`).
+    groups : array_like, optional
+        One label per observation: whole groups are resampled (see
+        :func:`bootstrap_draws`); None: each observation its own group.
 
     Returns
     -------
@@ -881,12 +1019,12 @@ def bootstrap_ci(x, family: str, *, truncation=None, n_boot: int = N_BOOT, seed=
     _count(n_boot, "n_boot")
     _warn_few_boot(n_boot, stacklevel=2)
     draws = bootstrap_draws(x, family, truncation=truncation, n_boot=n_boot, seed=seed,
-                            discrete=discrete)
+                            discrete=discrete, groups=groups)
     return _percentile_ci(draws, _family(family).param_names, level)
 
 
 def goodness_of_fit(x, family: str, params: dict, *, truncation=None, n_mc: int = N_MC,
-                    seed=0) -> GoodnessOfFit:
+                    seed=0, groups=None) -> GoodnessOfFit:
     """Anderson-Darling goodness of fit with a p-value that accounts for fitted parameters.
 
     The statistic is that of ``x`` under the law of ``params``; its p-value comes from
@@ -897,6 +1035,15 @@ def goodness_of_fit(x, family: str, params: dict, *, truncation=None, n_mc: int 
     (exponential, Gamma, log-normal, Gaussian) use ``scipy.stats.goodness_of_fit`` (the same
     procedure, loc fixed at 0 for the positive laws), which refits ``x`` itself; other
     parameters are tested as given by the procedure written here.
+
+    With ``groups`` (one label per observation, the observations of a group repeating one
+    value: the branches of a stack), each Monte-Carlo sample reproduces that design: one
+    value per group drawn from the law truncated at the group's cut (the largest of its
+    observations' cuts), repeated by the group's size, refitted by the same weighted
+    maximum likelihood, and its statistic computed on the repeated sample, as that of
+    ``x`` is. Against independent samples of the same size, the statistic of repeated
+    values is larger (the empirical law moves in steps of whole groups), and the true law
+    would be rejected on most samples.
 
     Parameters
     ----------
@@ -909,6 +1056,9 @@ def goodness_of_fit(x, family: str, params: dict, *, truncation=None, n_mc: int 
     n_mc : int
         Monte Carlo samples, at least 1 (the p-value resolution is 1/(n_mc + 1)).
     seed : int, SeedSequence or numpy.random.Generator
+    groups : array_like, optional
+        One label per observation (see :func:`fit_family`); None, or all labels distinct:
+        each observation its own group.
 
     Returns
     -------
@@ -929,10 +1079,13 @@ def goodness_of_fit(x, family: str, params: dict, *, truncation=None, n_mc: int 
     _count(n_mc, "n_mc", 1)
     _check_seed(seed, generator=True)
     c = _as_cuts(truncation, x.size)
-    x, c, _ = _finite(x, c)
-    _require_applicable(fam, x, c, False)
+    x, c, g, _ = _finite(x, c, _as_groups(groups, x.size))
+    g = _compact(g)
+    _require_applicable(fam, x, c, False, g)
     params = _checked_params(fam, params)
     rng = np.random.default_rng(seed)
+    if g is not None:
+        return _gof_grouped(x, c, g, fam, params, n_mc, rng)
     # far-off parameters overflow in the samplers and refits: those resamples are skipped,
     # and the p-value says on how many it rests (n_mc)
     with np.errstate(all="ignore"), warnings.catch_warnings():
@@ -962,6 +1115,52 @@ def goodness_of_fit(x, family: str, params: dict, *, truncation=None, n_mc: int 
             except _FIT_ERRORS:
                 continue
             null[i] = anderson_darling(fam.pit(fam.params(th, xs, c), xs, c))
+    null = null[np.isfinite(null)]
+    if null.size == 0:
+        return GoodnessOfFit(stat0, float("nan"), 0)
+    return GoodnessOfFit(stat0, float((np.sum(null >= stat0) + 1) / (null.size + 1)),
+                         int(null.size))
+
+
+def _group_design(c, g):
+    """``(sizes, cuts)`` of the groups of compact codes ``g``: how many observations each
+    has, and the cut a value drawn for it must pass (the largest of its observations' cuts,
+    since the value stands for all of them; None without cuts)."""
+    sizes = np.bincount(g)
+    if c is None:
+        return sizes, None
+    cuts = np.full(sizes.size, -np.inf)
+    np.maximum.at(cuts, g, c)
+    return sizes, cuts
+
+
+def _gof_grouped(x, c, g, fam, params, n_mc, rng) -> GoodnessOfFit:
+    """:func:`goodness_of_fit` of observations in groups (compact codes ``g``): each
+    Monte-Carlo sample draws one value per group, repeats it by the group's size and is
+    refitted (weighted MLE) before its statistic is computed."""
+    sizes, gcut = _group_design(c, g)
+    cut_rep = None if gcut is None else np.repeat(gcut, sizes)
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        stat0 = anderson_darling(fam.pit(params, x, c))
+        theta_hat = fam.theta(params)
+        null = np.full(n_mc, np.nan)
+        for i in range(n_mc):
+            xs = np.repeat(fam.sample(params, sizes.size, gcut, rng), sizes)
+            if not np.all(np.isfinite(xs)) or no_spread(xs):
+                continue
+            try:
+                th, _ = fam.fit(xs, cut_rep, theta_hat)
+            except _FIT_ERRORS:
+                continue
+            null[i] = anderson_darling(fam.pit(fam.params(th, xs, cut_rep), xs, cut_rep))
+    return _mc_pvalue(stat0, null)
+
+
+def _mc_pvalue(stat0: float, null) -> GoodnessOfFit:
+    """The Monte-Carlo p-value of ``stat0`` against the statistics ``null`` of the samples
+    that could be refitted (NaN for the others)."""
+    null = np.asarray(null, float)
     null = null[np.isfinite(null)]
     if null.size == 0:
         return GoodnessOfFit(stat0, float("nan"), 0)
@@ -1049,7 +1248,7 @@ def select_model(results: dict, *, delta: float = DELTA_BIC_SIMPLER) -> str | No
 
 def fit_all(x, families=PAPER_FAMILIES, *, truncation=None, seed=0, n_boot: int = N_BOOT,
             gof: bool = True, n_mc: int = N_MC, select_from=None,
-            ci_level: float = 0.95, discrete: bool = False) -> FitSummary:
+            ci_level: float = 0.95, discrete: bool = False, groups=None) -> FitSummary:
     """Fit several families to one sample and select the simplest supported law.
 
     Parameters
@@ -1069,6 +1268,10 @@ def fit_all(x, families=PAPER_FAMILIES, *, truncation=None, seed=0, n_boot: int 
         Families taking part in model selection, among ``families`` (default: all fitted).
     discrete : bool
         The observations are counts (see :func:`fit_family`).
+    groups : array_like, optional
+        One label per observation, the observations of a group repeating one value (see
+        :func:`fit_family`: intervals, p-values and BIC then rest on the groups, and so
+        does the count of values model selection needs).
 
     Returns
     -------
@@ -1085,18 +1288,18 @@ def fit_all(x, families=PAPER_FAMILIES, *, truncation=None, seed=0, n_boot: int 
     Warns
     -----
     SmallSampleWarning
-        Fewer than :data:`N_SELECT_MIN` observations left to fit (model selection picks
-        the true law in 90 % of samples only from about that many: the law selected is
-        indicative only), and, once for all the families, ``n_boot`` from 1 to
-        :data:`N_BOOT_MIN` - 1.
+        Fewer than :data:`N_SELECT_MIN` observations (groups, with ``groups``) left to fit
+        (model selection picks the true law in 90 % of samples only from about that many
+        independent values: the law selected is indicative only), and, once for all the
+        families, ``n_boot`` from 1 to :data:`N_BOOT_MIN` - 1.
     """
     return _fit_all(x, families, truncation=truncation, seed=seed, n_boot=n_boot, gof=gof,
                     n_mc=n_mc, select_from=select_from, ci_level=ci_level,
-                    discrete=discrete, warn_small=True, stacklevel=2)
+                    discrete=discrete, warn_small=True, stacklevel=2, groups=groups)
 
 
 def _fit_all(x, families, *, truncation, seed, n_boot, gof, n_mc, select_from, ci_level,
-             discrete, warn_small: bool, stacklevel: int) -> FitSummary:
+             discrete, warn_small: bool, stacklevel: int, groups=None) -> FitSummary:
     """:func:`fit_all`; ``warn_small`` False leaves the small-sample warnings to the caller
     (:func:`crosssection.stats.tables.compute_stats` gives one per set, not one per fit).
     ``stacklevel`` counts the frames from here to the user's call."""
@@ -1108,22 +1311,25 @@ def _fit_all(x, families, *, truncation, seed, n_boot, gof, n_mc, select_from, c
         if outside:
             raise ParameterError(f"select_from names {outside}, which are not among the "
                                  f"families fitted {families}")
-    x, c, n_dropped = _checked_sample(x, truncation, n_boot=n_boot, n_mc=n_mc, gof=gof,
-                                      ci_level=ci_level, seed=seed)
+    x, c, g, n_dropped = _checked_sample(x, truncation, n_boot=n_boot, n_mc=n_mc, gof=gof,
+                                         ci_level=ci_level, seed=seed, groups=groups)
     if c is not None:
         keep = x >= c
         n_dropped += int(x.size - keep.sum())
         x, c = x[keep], c[keep]
+        g = None if g is None else g[keep]
+    g = _compact(g)
     seeds = _seedseq(seed).spawn(len(families))
     results = {f: _fit_one(x, f, truncation=c, n_boot=n_boot, seed=s, gof=gof, n_mc=n_mc,
-                           ci_level=ci_level, discrete=discrete)
+                           ci_level=ci_level, discrete=discrete, groups=g)
                for f, s in zip(families, seeds)}
     sel = {f: results[f] for f in select}
     best = select_model(sel)
     _warn_positive_left_out(results, best, stacklevel=stacklevel + 1)
     if warn_small:
         _warn_few_boot(n_boot, stacklevel=stacklevel + 1)
-        _warn_few_values(x.size, best, stacklevel=stacklevel + 1)
+        _warn_few_values(x.size, best, stacklevel=stacklevel + 1,
+                         n_groups=_n_groups(g, x.size))
     return FitSummary(results, best, summary_table(results, best), n_dropped)
 
 
@@ -1148,7 +1354,9 @@ def _warn_positive_left_out(results: dict, best, *, stacklevel: int) -> None:
 def summary_table(results: dict, best: str | None) -> pd.DataFrame:
     """One row per family.
 
-    Columns: family, n, k, truncated, counts (fitted as a law on the integers);
+    Columns: family, n, n_groups (the independent groups among the n observations, the
+    stacks of scan branches; n when each is its own), k, truncated, counts (fitted as a law
+    on the integers);
     p1_name, p1, p1_lo, p1_hi, ... for every parameter
     (up to :data:`MAX_PARAMS`); loglik, aic, bic, delta_bic (to the best selectable fit),
     ad_statistic, pvalue, n_mc, p_text, selected, rejected, note.
@@ -1157,7 +1365,8 @@ def summary_table(results: dict, best: str | None) -> pd.DataFrame:
     finite = [r.bic for r in results.values() if r.selectable]
     bmin = min(finite) if finite else np.nan
     for f, r in results.items():
-        row = {"family": f, "n": r.n, "k": r.k, "truncated": r.truncated,
+        row = {"family": f, "n": r.n, "n_groups": r.n_independent, "k": r.k,
+               "truncated": r.truncated,
                "counts": bool(r.discrete)}
         for i, nm in enumerate(FAMILIES[f].param_names, 1):
             lo, hi = r.ci.get(nm, (np.nan, np.nan))
@@ -1169,7 +1378,7 @@ def summary_table(results: dict, best: str | None) -> pd.DataFrame:
                     "selected": f == best, "rejected": r.rejected, "note": r.note})
         rows.append(row)
     pcols = [f"p{i}{s}" for i in range(1, MAX_PARAMS + 1) for s in ("_name", "", "_lo", "_hi")]
-    cols = ["family", "n", "k", "truncated", "counts", *pcols, "loglik", "aic", "bic", "delta_bic",
+    cols = ["family", "n", "n_groups", "k", "truncated", "counts", *pcols, "loglik", "aic", "bic", "delta_bic",
             "ad_statistic", "pvalue", "n_mc", "p_text", "selected", "rejected", "note"]
     return pd.DataFrame(rows).reindex(columns=cols)
 
@@ -1217,7 +1426,7 @@ def truncation_bias(x, truncation, families=("exponential", "gamma", "lognormal"
     _count(n_boot, "n_boot")
     _check_seed(seed)
     c = _as_cuts(truncation, x.size)
-    x, c, _ = _finite(x, c)
+    x, c, _, _ = _finite(x, c)
     keep = x >= c
     if not keep.any():
         raise ParameterError("x holds no observation" if x.size == 0 else

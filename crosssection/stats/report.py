@@ -36,7 +36,7 @@ from crosssection.stats.tables import (CORRELATION_MIN_PAIRS, COUNT_COLUMNS, COU
                                        EQ12_CONST, N_RELATION_MIN, PAPER_DOF, PAPER_MACRO,
                                        PAPER_MICRO, QUANTITIES, StatsOptions, StatsResult,
                                        compute_stats, count_text, regions_of, relation_note,
-                                       set_seed, small_sample_note, to_markdown)
+                                       n_text, set_seed, small_sample_note, to_markdown)
 
 # Okabe-Ito colours (distinguishable with the common colour-vision deficiencies), in the
 # order of the sets; the set's index in the ensemble fixes its colour in every figure.
@@ -406,9 +406,12 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
                 else:
                     yerr = err[k]
                     ymax_lin = max(ymax_lin, float(np.max(h[k] + err[k])))
-                data_label = (f"{name[s]}: data (n = {n})" if n >= F.N_SELECT_MIN else
-                              f"{name[s]}: data, indicative only "
-                              f"(n = {n} < {F.N_SELECT_MIN})")
+                # the stacks, not the branches repeating their values, are independent
+                n_ind = min(r.n_independent for r in summ.results.values())
+                n_shown = f"{n}" if n_ind == n else f"{n}, {n_ind} stacks"
+                data_label = (f"{name[s]}: data (n = {n_shown})" if n_ind >= F.N_SELECT_MIN
+                              else f"{name[s]}: data, indicative only "
+                              f"(n = {n_shown} < {F.N_SELECT_MIN})")
                 ax.errorbar(mids[k], h[k], yerr=yerr, fmt="o", ms=4, color=c, lw=1,
                             capsize=2, label=data_label, gid=f"points:{s}:{reg}")
                 if best is None:
@@ -570,9 +573,9 @@ def plot_pdf(source, quantity: str = "e", *, set_name: str | None = None, seed: 
     if not summaries:
         raise PlotPdfError(f"{', '.join(map(str, sets))}: too few positive values of "
                            f"{quantity} to fit (at least {opts.min_n})")
-    small = [f"{s}{'' if reg == 'all' else f' ({reg})'} n = {summ.results[summ.best].n}"
+    small = [f"{s}{'' if reg == 'all' else f' ({reg})'} {n_text(summ.results[summ.best])}"
              for (s, reg, _), summ in summaries.items()
-             if summ.best and summ.results[summ.best].n < F.N_SELECT_MIN]
+             if summ.best and summ.results[summ.best].n_independent < F.N_SELECT_MIN]
     if small:
         warnings.warn(f"{quantity}: laws selected on fewer than the {F.N_SELECT_MIN} samples "
                       f"model selection needs ({', '.join(small)}): indicative only",
@@ -971,7 +974,8 @@ def _write_files(res: StatsResult, ens: Ensemble, out: Path, *, opts: StatsOptio
                 "selected": summ.best,
                 "fits": {f: {"params": r.params, "ci": r.ci, "bic": r.bic, "aic": r.aic,
                              "pvalue": r.pvalue, "n_mc": r.n_mc, "p_text": r.p_text(),
-                             "n": r.n, "truncated": r.truncated, "counts": r.discrete,
+                             "n": r.n, "n_groups": r.n_independent,
+                             "truncated": r.truncated, "counts": r.discrete,
                              "rejected": r.rejected}
                          for f, r in summ.results.items() if r.ok}}
         stats_json["sets"][s] = {
@@ -1376,10 +1380,12 @@ def _selected_table(res: StatsResult) -> pd.DataFrame:
             lower = ", ".join(f"{FAMILIES[f].title}, {d:+.1f}" for d, f in aside)
             runner += (("; " if runner else "")
                        + f"lower, set aside as degenerate (see Degenerate fits): {lower}")
-        small = small_sample_note(r.n, F.N_SELECT_MIN, "samples model selection needs")
+        small = small_sample_note(r.n, F.N_SELECT_MIN, "samples model selection needs",
+                                  r.n_independent)
+        shown = r.n if r.n_independent == r.n else f"{r.n} ({r.n_independent} stacks)"
         rows.append({
             "set": s, "region": reg, "quantity": q,
-            "n": f"{small}: indicative only" if small else r.n,
+            "n": f"{small}: indicative only" if small else shown,
             "selected law": FAMILIES[r.family].title + (" (fitted as counts)" if r.discrete
                                                          else "")
             + (" (truncated at the detection limit)" if r.truncated else ""),
@@ -1422,11 +1428,12 @@ GAMMA_COLUMNS = {"alpha_e": (("e", None),), "chi_e": (("e", None),),
                  "alpha_E_over_alpha_e": (("E", "all"), ("e", "all"))}
 
 
-def _gamma_n(res: StatsResult, s, reg, q) -> float:
-    """Values of the Gamma fit of quantity ``q`` in set ``s`` and sub-system ``reg``."""
+def _gamma_n(res: StatsResult, s, reg, q) -> tuple:
+    """Values of the Gamma fit of quantity ``q`` in set ``s`` and sub-system ``reg``, and
+    the independent ones among them (stacks, for scan branches): ``(n, n_groups)``."""
     summ = res.summaries.get((s, reg, q))
     r = summ.results.get("gamma") if summ is not None else None
-    return float(r.n) if r is not None else np.nan
+    return (float(r.n), float(r.n_independent)) if r is not None else (np.nan, np.nan)
 
 
 def _small_fits_marked(df: pd.DataFrame, res: StatsResult) -> pd.DataFrame:
@@ -1445,9 +1452,11 @@ def _small_fits_marked(df: pd.DataFrame, res: StatsResult) -> pd.DataFrame:
         for _, row in df.iterrows():
             v = row[col]
             reg = row.get("region", "all")
-            notes = [small_sample_note(_gamma_n(res, row["set"], r or reg, q), F.N_SELECT_MIN,
-                                       f"samples model selection needs ({q})")
-                     for q, r in sources]
+            notes = []
+            for q, r in sources:
+                n, n_ind = _gamma_n(res, row["set"], r or reg, q)
+                notes.append(small_sample_note(n, F.N_SELECT_MIN,
+                                               f"samples model selection needs ({q})", n_ind))
             notes = [n for n in notes if n]
             cells.append(f"{v:.3g} ({'; '.join(notes)}: indicative only)"
                          if notes and isinstance(v, (int, float)) and np.isfinite(v) else v)

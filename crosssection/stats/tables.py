@@ -29,7 +29,7 @@ import pandas as pd
 from crosssection.core.errors import ParameterError
 from crosssection.quality import QualityWarning
 from crosssection.stats import fits as F
-from crosssection.stats.data import SIM_REGION, Ensemble
+from crosssection.stats.data import SIM_REGION, Ensemble, branch_groups
 from crosssection.stats.families import SPREAD_RTOL, binary_exponent, no_spread
 
 # Eq. (12): N_br = (2 sqrt(pi)/sqrt(3)) eps (sqrt(s)/l) sqrt(N_l)
@@ -91,7 +91,8 @@ SLOPE_RELATIONS = ("eq12_const", "slope_sqrt_s_vs_l", "eq12_eps_sqrtNl", "eq14_s
 CONFIG_RELATIONS = SLOPE_RELATIONS + ("eq15_fluct", "eq16")
 #: columns of the report's tables that hold counts (of configurations, branches, voids,
 #: values, resamples, parameters): printed as integers, never rounded (:func:`to_markdown`)
-COUNT_COLUMNS = ("n_configs", "n_branches", "n_voids", "n", "n_dropped", "n_mc", "k")
+COUNT_COLUMNS = ("n_configs", "n_branches", "n_voids", "n", "n_groups", "n_dropped", "n_mc",
+                 "k")
 #: the relation that is a law's parameter (the mean of the exponential law of n_br): its
 #: ``n`` counts the stacks, indicative below the values model selection needs
 LAW_RELATION = "n_br_exp_mu"
@@ -112,12 +113,27 @@ def relation_note(relation: str, n, fitted) -> str:
     return ""
 
 
-def small_sample_note(n, minimum: int, what: str) -> str:
+def small_sample_note(n, minimum: int, what: str, n_groups=None) -> str:
     """The words that follow a sample size below its minimum, as the report prints them
-    ("n = 6: below the 50 samples model selection needs"); "" when ``n`` is enough."""
-    if not (np.isfinite(n) and n < minimum):
+    ("n = 6: below the 50 samples model selection needs"); "" when ``n`` is enough.
+
+    ``n_groups``, the independent stacks among ``n`` branches, is what is compared with
+    ``minimum`` when given and unlike ``n`` ("n = 60 (20 stacks): below ...")."""
+    if n_groups is None or not np.isfinite(n_groups) or n_groups == n:
+        if not (np.isfinite(n) and n < minimum):
+            return ""
+        return f"n = {int(n)}: below the {minimum} {what}"
+    if not n_groups < minimum:
         return ""
-    return f"n = {int(n)}: below the {minimum} {what}"
+    return f"n = {int(n)} ({int(n_groups)} stacks): below the {minimum} {what}"
+
+
+def n_text(r) -> str:
+    """The values a fit rests on, as the warnings and notes give them: ``n = 40``, or
+    ``n = 120 (40 stacks)`` for branches grouped by stack."""
+    if r.n_independent == r.n:
+        return f"n = {r.n}"
+    return f"n = {r.n} ({r.n_independent} stacks)"
 
 
 def _where(q: str, reg: str) -> str:
@@ -135,8 +151,8 @@ def _warn_small_samples(summaries: dict, relations: pd.DataFrame, too_few: dict,
     small = {s: [[], [], items] for s, items in too_few.items()}
     for (s, reg, q), summ in summaries.items():
         r = summ.results.get(summ.best) if summ.best else None
-        if r is not None and r.n < F.N_SELECT_MIN:
-            small.setdefault(s, [[], [], []])[0].append(f"{_where(q, reg)} n = {r.n}")
+        if r is not None and r.n_independent < F.N_SELECT_MIN:
+            small.setdefault(s, [[], [], []])[0].append(f"{_where(q, reg)} {n_text(r)}")
     for row in relations.itertuples(index=False):
         # n_br_exp_mu is named with the laws (its law of n_br)
         if row.relation in CONFIG_RELATIONS and relation_note(row.relation, row.n, row.fitted):
@@ -328,6 +344,11 @@ def _warn_left_out(ens: Ensemble, quantity: str, values, positive: bool) -> None
 def fit_quantity(ens: Ensemble, quantity: str, region: str, opts: StatsOptions, seed):
     """Fit every family of ``quantity`` in one set and region.
 
+    The branches of one stack of a scan repeat its length, curvature and energy: the fits
+    of branch quantities take the stacks as groups
+    (:func:`~crosssection.stats.data.branch_groups`), so that their intervals, p-values and
+    model selection rest on the independent stacks while the laws stay those of branches.
+
     Values that are not finite, and values <= 0 of the quantities fitted with laws of
     x > 0 (all of :data:`POSITIVE_QUANTITIES`), are left out, counted in the third element
     and, for the whole system (region ``"all"``; a sub-system's are among them), told in one
@@ -360,11 +381,13 @@ def fit_quantity(ens: Ensemble, quantity: str, region: str, opts: StatsOptions, 
         c = np.asarray(df[tcol], float)[keep]
         if np.all(np.isfinite(c)):
             cuts = c
+    groups = branch_groups(df)[keep] if table == "branches" else None
     # the small-sample warnings are given by the callers, once per set (compute_stats) or
     # per figure (plot_pdf), not once per fit
     summ = F._fit_all(x, fams, truncation=cuts, seed=seed, n_boot=opts.n_boot, gof=opts.gof,
                       n_mc=opts.n_mc, select_from=None, ci_level=0.95,
-                      discrete=quantity in COUNT_QUANTITIES, warn_small=False, stacklevel=3)
+                      discrete=quantity in COUNT_QUANTITIES, warn_small=False, stacklevel=3,
+                      groups=groups)
     bias = None
     # with every value below its cut, nothing is left to compare the fits on
     if cuts is not None and np.any(x >= cuts):
@@ -397,10 +420,11 @@ def fits_columns() -> list:
 
 def _gamma_small(summ) -> bool:
     """Whether the Gamma parameters taken from ``summ`` (see :func:`_gamma_params`) rest on
-    fewer than :data:`~crosssection.stats.fits.N_SELECT_MIN` values."""
+    fewer than :data:`~crosssection.stats.fits.N_SELECT_MIN` independent values (stacks,
+    for the branches of scans)."""
     if summ is None or "gamma" not in summ.results or not summ.results["gamma"].selectable:
         return False
-    return summ.results["gamma"].n < F.N_SELECT_MIN
+    return summ.results["gamma"].n_independent < F.N_SELECT_MIN
 
 
 def _gamma_params(summ):
@@ -524,7 +548,7 @@ def compute_stats(ens: Ensemble, opts: StatsOptions | None = None, *,
             t.insert(0, "region", reg)
             t.insert(0, "set", s)
             t["n_dropped"] = summ.n_dropped + ndrop
-            t["indicative"] = t["n"] < F.N_SELECT_MIN
+            t["indicative"] = t["n_groups"] < F.N_SELECT_MIN
             fit_rows.append(t)
             if bias is not None:
                 bias.insert(0, "quantity", q)
