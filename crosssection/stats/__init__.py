@@ -7,11 +7,14 @@ From Python: ``load_any(folder)`` reads a batch output, an ``analyze`` output or
 ensemble into an :class:`Ensemble` of DataFrames; ``load_report(folder)`` reads a report
 folder back; ``plot_pdf(folder_or_ensemble, "e")`` draws a density with its fitted laws.
 """
-from crosssection.stats.data import (Ensemble, Report, detect_kind, load_any, load_batch,
-                                     load_image_output, load_report, load_simulation)
+from crosssection.stats.data import (DetectionLimitWarning, DuplicateScanWarning, Ensemble,
+                                     FlaggedScanWarning, IncompleteBatchWarning,
+                                     MixedParametersWarning, Report, detect_kind, load_any,
+                                     load_batch, load_image_output, load_report,
+                                     load_simulation)
 from crosssection.stats.families import FAMILIES, Family, register
 from crosssection.stats.fits import (PAPER_FAMILIES, FitResult, FitSummary, GoodnessOfFit,
-                                     SmallSampleWarning, bootstrap_ci,
+                                     LeftOutWarning, SmallSampleWarning, bootstrap_ci,
                                      fit_all, fit_family, goodness_of_fit, select_model,
                                      truncation_bias)
 from crosssection.stats.tables import StatsOptions, StatsResult, compute_stats
@@ -20,7 +23,9 @@ __all__ = ["Ensemble", "Report", "load_report", "plot_pdf", "detect_kind", "load
            "load_batch", "load_image_output", "load_simulation", "FAMILIES", "Family", "register", "PAPER_FAMILIES", "FitResult",
            "FitSummary", "GoodnessOfFit", "SmallSampleWarning", "bootstrap_ci", "fit_all",
            "fit_family", "goodness_of_fit", "select_model", "truncation_bias", "StatsOptions",
-           "StatsResult", "compute_stats"]
+           "StatsResult", "compute_stats", "DetectionLimitWarning", "DuplicateScanWarning",
+           "FlaggedScanWarning", "IncompleteBatchWarning", "MixedParametersWarning",
+           "LeftOutWarning"]
 
 
 def __getattr__(name):

@@ -121,6 +121,18 @@ class DuplicateScanWarning(QualityWarning):
     one cut analysed twice under two names weighs twice in the statistics."""
 
 
+class MixedParametersWarning(QualityWarning):
+    """The configurations of one set were made with different analysis (or simulation)
+    parameters, beyond those each scan has its own of (its hole, its rod length, its
+    calibration file): their statistics are pooled although they were not measured alike."""
+
+
+#: parameters each scan of a set may have its own of (``[images]`` of its set.toml): a set
+#: differing in these alone is one measurement
+PER_SCAN_PARAMETERS = ("hole_radius_mm", "hole_center_px", "hole_given", "rod_length_mm",
+                       "calibration")
+
+
 class IncompleteBatchWarning(QualityWarning):
     """A batch output that did not finish, or that could not analyse some of its images
     (``failures.csv``), or a simulation ensemble some of whose configurations failed (a
@@ -1000,6 +1012,19 @@ def _check_finished(folder: Path, n_found: int) -> str:
     return note
 
 
+def _clipped(text: str, most: int = 80) -> str:
+    """One line of at most ``most`` characters (a failure's reason, in a warning)."""
+    text = " ".join(str(text).split())
+    return text if len(text) <= most else text[:most - 3] + "..."
+
+
+def _unnamed(reason: str, image: str) -> str:
+    """A failure's reason without the file name it starts with (the image is named
+    beside it)."""
+    head, sep, rest = reason.partition(": ")
+    return rest if sep and Path(head).name == Path(image).name else reason
+
+
 def _check_failures(folder: Path) -> str:
     """Warn when the batch's ``failures.csv`` lists images: the batch could not analyse
     them, and the statistics leave them out (a re-run of the batch tries them again).
@@ -1019,8 +1044,11 @@ def _check_failures(folder: Path) -> str:
     if not n:
         return ""
     col = rows[0].index("image") if rows and "image" in rows[0] else None
-    names = [row[col] for row in listed if col is not None and col < len(row)]
-    shown = (f" ({', '.join(names[:5])}{', ...' if len(names) > 5 else ''})" if names else "")
+    why = rows[0].index("reason") if rows and "reason" in rows[0] else None
+    names = [row[col] + (f": {_clipped(_unnamed(row[why], row[col]))}"
+                         if why is not None and why < len(row) and row[why].strip() else "")
+             for row in listed if col is not None and col < len(row)]
+    shown = (f" ({'; '.join(names[:5])}{'; ...' if len(names) > 5 else ''})" if names else "")
     try:
         total = json.loads((folder / "batch.json").read_text(encoding="utf-8"))["n_images"]
     except (OSError, ValueError, TypeError, KeyError):

@@ -113,6 +113,10 @@ COUNT_SD = 1.0 / np.sqrt(12.0)
 _FIT_ERRORS = (ValueError, FloatingPointError, RuntimeError, OverflowError, ZeroDivisionError)
 
 
+class LeftOutWarning(QualityWarning):
+    """Observations of a fit left out: not finite (NaN or inf), or their cut not."""
+
+
 class SmallSampleWarning(QualityWarning):
     """A fit, a model selection or a relation rests on fewer observations than it needs
     (:data:`N_SELECT_MIN`; :data:`crosssection.stats.tables.N_RELATION_MIN`): its numbers
@@ -294,7 +298,7 @@ def _finite(x, c, g=None, *, stacklevel: int = 3):
     if c is not None and (bad & ~bad_x).any():
         parts.append(f"{int((bad & ~bad_x).sum())} with a cut that is not finite")
     warnings.warn(f"x: {n_bad} of {x.size} observations left out of the fit: "
-                  f"{' and '.join(parts)}", QualityWarning, stacklevel=stacklevel)
+                  f"{' and '.join(parts)}", LeftOutWarning, stacklevel=stacklevel)
     keep = ~bad
     return x[keep], (None if c is None else c[keep]), (None if g is None else g[keep]), n_bad
 

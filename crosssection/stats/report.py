@@ -988,6 +988,7 @@ def _write_files(res: StatsResult, ens: Ensemble, out: Path, *, opts: StatsOptio
             "seed": (seeds or {}).get(s, opts.seed),
             "detection_limits": detection_limits(ens.subset(s)),
             "made_by": provenance(ens.subset(s))}
+        _warn_mixed(s, stats_json["sets"][s]["made_by"])
     paths["stats.json"] = write_json(out / "stats.json", stats_json)
     absent = _not_drawn(res, ens, opts.quantities, opts.min_n) if figures else ""
     if empty:
@@ -1121,6 +1122,23 @@ def provenance(ens: Ensemble) -> dict:
     if libs:
         out["libraries"] = {k: sorted(v) for k, v in libs.items()}
     return out
+
+
+def _warn_mixed(set_name: str, made_by: dict) -> None:
+    """A :class:`~crosssection.stats.data.MixedParametersWarning` when a set pools
+    configurations made with different parameters other than each scan's own
+    (:data:`~crosssection.stats.data.PER_SCAN_PARAMETERS`)."""
+    from crosssection.stats.data import PER_SCAN_PARAMETERS, MixedParametersWarning
+
+    differ = {k: v for k, v in (made_by.get("parameters_differing") or {}).items()
+              if k not in PER_SCAN_PARAMETERS}
+    if differ:
+        what = "; ".join(f"{k}: {', '.join(json.dumps(x) for x in vals)}"
+                         for k, vals in differ.items())
+        warnings.warn(f"set {set_name!r} pools configurations made with different parameters "
+                      f"({what}): its statistics mix measurements not made alike (analyse "
+                      "them again with one set of parameters, or give them different set "
+                      "names)", MixedParametersWarning, stacklevel=3)
 
 
 def input_sets(ens: Ensemble) -> dict:

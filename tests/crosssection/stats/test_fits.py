@@ -189,7 +189,7 @@ def test_truncated_gof_detects_wrong_law():
 def test_fit_all_table_and_drops():
     rng = np.random.default_rng(4)
     x = np.concatenate([rng.exponential(1.0, 300), [np.nan]])
-    with pytest.warns(QualityWarning, match=r"1 of 301 observations left out of the fit: "
+    with pytest.warns(F.LeftOutWarning, match=r"1 of 301 observations left out of the fit: "
                                             r"1 not finite"):
         s = F.fit_all(x, truncation=0.1, seed=0, n_boot=20, n_mc=19)
     assert s.n_dropped == 1 + int(np.sum(x[:-1] < 0.1))

@@ -3,6 +3,7 @@ were analysed with, an unfinished batch, scans the analysis flagged, the paramet
 versions that made the data; per-set random streams; checked hand-built ensembles; and the
 figures' detection limits and stack-size gaps."""
 import json
+import warnings
 
 import matplotlib
 import numpy as np
@@ -13,7 +14,7 @@ from crosssection.cli import main
 from crosssection.core.errors import ParameterError
 from crosssection.stats import demo, report
 from crosssection.stats.data import (BRANCH_COLS, STACK_COLS, VOID_COLS, DetectionLimitWarning,
-                                     Ensemble, FlaggedScanWarning, load_any)
+                                     Ensemble, MixedParametersWarning, FlaggedScanWarning, load_any)
 from crosssection.stats.tables import StatsOptions, compute_stats, set_seed
 
 matplotlib.use("Agg")
@@ -43,12 +44,15 @@ def analysed(tmp_path):
     return root
 
 
-def _stats(capfd, *argv):
+def _stats(capfd, *argv, mixed: bool = False):
+    """(status, warning lines); the line on the fixture's two sheet thicknesses only with
+    ``mixed``."""
     capfd.readouterr()
     status = main(["stats", *map(str, argv)])
     out, err = capfd.readouterr()
     err = [ln for ln in err.splitlines()
-           if not (": set " in ln and ln.endswith("indicative only"))]
+           if not (": set " in ln and ln.endswith("indicative only"))
+           and (mixed or "made with different parameters" not in ln)]
     return status, err
 
 
@@ -123,8 +127,12 @@ def test_many_flagged_scans_of_a_set_give_one_line(tmp_path):
 def test_stats_json_records_resolved_inputs_and_what_made_the_data(analysed, tmp_path, capfd,
                                                                    monkeypatch):
     monkeypatch.chdir(analysed.parent)
-    status, _ = _stats(capfd, "b", "--out", tmp_path / "rep", *FAST)
+    status, err = _stats(capfd, "b", "--out", tmp_path / "rep", *FAST, mixed=True)
     assert status == 0
+    assert err == [f"warning: {tmp_path / 'rep'}: set 's1' pools configurations made with "
+                   "different parameters (thickness_mm: 0.08, 0.1): its statistics mix "
+                   "measurements not made alike (analyse them again with one set of "
+                   "parameters, or give them different set names)"]
     meta = json.loads((tmp_path / "rep" / "stats.json").read_text())
     assert meta["inputs"] == [str(analysed.resolve())]
     assert list(meta["sets_of_inputs"]) == [str(analysed.resolve())]
@@ -134,6 +142,17 @@ def test_stats_json_records_resolved_inputs_and_what_made_the_data(analysed, tmp
     assert made["parameters_differing"] == {"thickness_mm": [0.08, 0.1]}
     assert "thickness_mm (0.08, 0.1)" in (tmp_path / "rep" / "report.html").read_text()
     assert "analysis" not in pd.read_csv(tmp_path / "rep" / "per_config.csv").columns
+
+
+def test_a_set_differing_only_in_each_scans_hole_is_not_mixed(analysed, tmp_path):
+    for i, summ in enumerate(_summaries(analysed)):
+        _edit(summ, parameters={"l_min_mm": 2.0, "thickness_mm": 0.1, "px_per_mm": 50.0,
+                                "hole_radius_mm": 7.0 + i, "calibration": f"c{i}.csv"})
+    ens = load_any(analysed)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", MixedParametersWarning)
+        report.write_report(ens, tmp_path / "rep", opts=StatsOptions(n_boot=0, gof=False),
+                            figures=False)
 
 
 def test_a_sets_intervals_do_not_depend_on_the_other_sets(tmp_path):

@@ -144,6 +144,18 @@ def test_batch_skips_staging_folders_and_failed_rows(tmp_path):
     assert sorted(ens.configs["config_id"]) == ["img000", "img001"]
 
 
+def test_the_warning_on_failed_scans_gives_each_ones_reason(tmp_path):
+    b = demo.write_demo_batch(tmp_path / "b", n_images=2, seed=4, sets={"s": {"n_stacks": 10}})
+    pd.DataFrame({"image": ["s/blank.png", "s/x.png"], "set": ["s", "s"],
+                  "reason": [f"{tmp_path}/in/s/blank.png: empty mask: no pixel passes",
+                             "not an image file"]}).to_csv(b / "failures.csv", index=False)
+    with pytest.warns(D.IncompleteBatchWarning) as rec:
+        D.load_any(b)
+    said = " ".join(str(w.message) for w in rec)
+    assert "(s/blank.png: empty mask: no pixel passes; s/x.png: not an image file)" in said
+    assert str(tmp_path / "in") not in said
+
+
 def test_unrecognised_folder(tmp_path):
     with pytest.raises(ConfigError):
         D.detect_kind(tmp_path)
