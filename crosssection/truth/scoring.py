@@ -339,11 +339,11 @@ def score_folder(out_dir, scene_dir, *, match_px: float | None = None) -> dict:
 
 def meets_targets(s: dict) -> dict:
     """The accuracy targets of typical scans as booleans: rod length within 3 %, junction F1 >= 0.95,
-    exact n_br on >= 90 % of stack length, void count within 5 %."""
+    exact n_br on >= 95 % of stack length, void count within 5 %."""
     return {
         "rod_length": abs(s["rod_length_rel_error"]) <= 0.03,
         "junction_f1": s["junction_f1"] >= 0.95,
-        "n_br_exact": s["n_br_exact_length_fraction"] >= 0.90,
+        "n_br_exact": s["n_br_exact_length_fraction"] >= 0.95,
         "void_count": abs(s["n_voids_rel_error"]) <= 0.05,
     }
 

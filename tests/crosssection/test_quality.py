@@ -229,9 +229,9 @@ def test_the_true_rod_length_given_is_not_flagged(scene):
     assert res.summary["quality"]["codes"] == ["hole_cut"]
 
 
-@pytest.mark.parametrize("ratio, flagged", [(0.49, True), (0.51, False), (1.0, False),
-                                            (1.99, False), (2.01, True), (25.4, True)])
-def test_a_given_rod_length_may_differ_by_a_factor_two(ratio, flagged):
+@pytest.mark.parametrize("ratio, flagged", [(0.79, True), (0.81, False), (1.0, False),
+                                            (1.24, False), (1.26, True), (25.4, True)])
+def test_a_given_rod_length_may_differ_by_a_factor_1_25(ratio, flagged):
     from types import SimpleNamespace
 
     from crosssection.params import AnalysisParams
@@ -801,7 +801,7 @@ def test_a_thickness_the_calibration_contradicts_is_flagged(scene):
     """h = 0.3 mm with a calibration reading one layer 0.14 mm wide: one of them is wrong."""
     res, caught = _analyze(scene.rgb, **_given(scene, thickness_mm=0.3))
     flag = next(f for f in res.quality if f.code == "thickness_calibration")
-    assert flag.value == pytest.approx(0.14 / 0.3, rel=0.01) and flag.limit == 0.5
+    assert flag.value == pytest.approx(0.14 / 0.3, rel=0.01) and flag.limit == quality.THICKNESS_RATIO[0]
     assert any(issubclass(w.category, quality.CalibrationWarning) for w in caught)
 
 
@@ -877,3 +877,12 @@ def test_a_width_law_read_at_half_the_scale_names_the_scale(scene):
         flag = next(f for f in res.quality if f.code == "no_calibration")
         assert "read from this scan" in flag.message
         assert ("check px_per_mm" in flag.message) is doubtful
+
+
+def test_a_sheet_thickness_given_twice_too_large_names_the_thickness(scene):
+    h = scene.params["thickness_mm"]
+    res, _ = _analyze(scene.rgb, **_given(scene, thickness_mm=2 * h))
+    flag = next(f for f in res.quality if f.code == "thickness_calibration")
+    assert flag.value < quality.THICKNESS_RATIO[0] and "thickness_mm" in flag.message
+    right, _ = _analyze(scene.rgb, **_given(scene))
+    assert "thickness_calibration" not in right.summary["quality"]["codes"]
