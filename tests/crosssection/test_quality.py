@@ -886,3 +886,12 @@ def test_a_sheet_thickness_given_twice_too_large_names_the_thickness(scene):
     assert flag.value < quality.THICKNESS_RATIO[0] and "thickness_mm" in flag.message
     right, _ = _analyze(scene.rgb, **_given(scene))
     assert "thickness_calibration" not in right.summary["quality"]["codes"]
+
+
+def test_the_docs_list_every_check_with_its_category():
+    from pathlib import Path
+
+    page = (Path(__file__).resolve().parents[2] / "docs" / "quality.md").read_text()
+    rows = [ln for ln in page.splitlines() if ln.startswith("| `")]
+    listed = {ln.split("`")[1]: ln.split("`")[3] for ln in rows}
+    assert listed == {c: cls.__name__ for c, cls in quality.CHECK_WARNINGS.items()}
