@@ -2039,6 +2039,14 @@ def _lag_variance(prof, lag_mm):
     return float(d @ d) / (2.0 * d.size)
 
 
+#: Largest centreline jitter (px, independent from pixel to pixel) a measured curvature noise
+#: may stand for (:func:`noise_variance`): ``720 sigma^2 / w^5`` for a parabola fitted over
+#: ``w`` px. Generated scans read 0-0.06 px, a JPEG saved five times at quality 30 0.5 px,
+#: a scan enlarged twice by pixel repetition 0.65 px; a sticker cutting a dense scan's wall
+#: band into two long open stacks, the only ones the estimate rested on, 1.3 px: their bends,
+#: taken as noise and removed from every stack, took the scan's energy from -19 to -73 %.
+NOISE_MAX_PX = 1.0
+
 #: A stack whose own noise estimate exceeds this many times the pooled estimate of the scan's
 #: other stacks of its window is left out of the pooled noise (:func:`_without_outliers`): on
 #: noise-only arcs the stacks' own estimates are 0.3-1.9 times the pooled one (5-95 %, at most
@@ -2130,6 +2138,10 @@ def noise_variance(profiles, n_br, *, thickness_px: float, px_per_mm: float,
         # measure of its noise (a lone ring of radius 8 mm read +27 % without it)
         measured = _measured_noise(profiles, n_br, nbs, window, sm, px_per_mm, min_pairs,
                                    loops=True)
+    # an estimate beyond what a centreline jittered by NOISE_MAX_PX gives is bending the
+    # lags caught on the few stacks it rests on, not the scan's noise
+    measured = {nb: v for nb, v in measured.items()
+                if v <= 720.0 * NOISE_MAX_PX ** 2 / window[nb] ** 5 * float(px_per_mm) ** 2}
     out = {}
     for nb in nbs:
         if nb in measured:
