@@ -109,23 +109,110 @@ def _subplots(nrows=1, ncols=1, figsize=(6, 4.5)):
     return fig, axes
 
 
+#: candidate mantissas of the labelled ticks of a log axis, densest first: the axis is
+#: labelled at the densest whose labels keep apart (every whole multiple on a range of less
+#: than a decade, then 1-2-5, 1-3, one mantissa per decade, then every 2nd, 3rd... power of
+#: ten)
+LOG_LABEL_SUBS = (tuple(float(k) for k in range(1, 10)), (1.0, 2.0, 5.0), (1.0, 3.0), (1.0,))
+#: the least gap between two neighbouring tick labels of a log axis, in units of their font
+#: size
+LOG_LABEL_GAP_EM = 0.6
+#: the drawn width of a label over the width of its glyphs' outlines (mathtext's spacing),
+#: erring on the side of fewer labels
+LOG_LABEL_WIDTH_MARGIN = 1.2
+
+
+def _log_tick_values(lo: float, hi: float, subs, step: int = 1) -> np.ndarray:
+    """``m 10^k`` for ``m`` in ``subs`` and every ``step``-th power ``k``, from the decade
+    below ``lo`` to the one above ``hi``."""
+    k0, k1 = int(np.floor(np.log10(lo))) - 1, int(np.ceil(np.log10(hi))) + 1
+    return np.array(sorted(m * 10.0 ** k for k in range(k0, k1 + 1) if k % step == 0
+                           for m in subs))
+
+
+def _log_labels_fit(ticks, lo: float, hi: float, length_px: float, sizes) -> bool:
+    """Whether the labels of the ``ticks`` inside ``[lo, hi]`` keep apart on a log axis
+    ``length_px`` pixels long; ``sizes(values)`` gives their extents along the axis and the
+    least gap between two, in pixels."""
+    inside = ticks[(ticks >= lo * (1 - 1e-9)) & (ticks <= hi * (1 + 1e-9))]
+    if inside.size < 2:
+        return True
+    pos = length_px * np.log(inside / lo) / np.log(hi / lo)
+    size, gap = sizes(inside)
+    return bool(np.all(np.diff(pos) >= (size[1:] + size[:-1]) / 2 + gap))
+
+
+def _labelled_log_locator():
+    """A matplotlib locator of the labelled (major) ticks of a log axis: the densest
+    candidate of :data:`LOG_LABEL_SUBS`, then every 2nd, 3rd... power of ten, whose labels
+    (:func:`_power_label`) keep apart.
+
+    The choice is made each time the axis is drawn, from the length it then has (after the
+    figure's layout) and the extent of each label's text: neither the panel's final width
+    nor its span is known when the ticks are set up, and no fixed rule suits every span and
+    width (labels at 1, 2 and 5 over two decades need a panel about six inches wide).
+    """
+    from matplotlib.textpath import TextPath
+    from matplotlib.ticker import Locator
+
+    class LabelledLogLocator(Locator):
+        def __call__(self):
+            return self.tick_values(*self.axis.get_view_interval())
+
+        def tick_values(self, vmin, vmax):
+            lo, hi = sorted((float(vmin), float(vmax)))
+            if not (lo > 0 and np.isfinite(hi) and hi > lo):
+                return np.array([])
+            along_x = self.axis.axis_name == "x"
+            ax = self.axis.axes
+            length_px = ax.bbox.width if along_x else ax.bbox.height
+            prop = self.axis.majorTicks[0].label1.get_fontproperties()
+            px = ax.figure.dpi / 72.0  # points to pixels
+
+            def sizes(values):
+                ext = [TextPath((0, 0), _power_label(v), prop=prop).get_extents()
+                       for v in values]
+                size = np.array([e.width * LOG_LABEL_WIDTH_MARGIN if along_x else e.height
+                                 for e in ext])
+                return size * px, LOG_LABEL_GAP_EM * prop.get_size_in_points() * px
+
+            decades = np.log10(hi / lo)
+            # densest first; at one label per decade, the mantissa that puts the most labels
+            # in view (a span of a decade and a half may hold one power of ten only)
+            levels = [[(subs, 1)] for subs in LOG_LABEL_SUBS[(0 if decades < 1 else 1):]]
+            levels[-1] += [((m,), 1) for m in (2.0, 3.0, 5.0)]
+            levels += [[((1.0,), step)] for step in range(2, int(decades) + 2)]
+            ticks = np.array([])
+            for level in levels:
+                fits = [t for t in (_log_tick_values(lo, hi, subs, step)
+                                    for subs, step in level)
+                        if _log_labels_fit(t, lo, hi, length_px, sizes)]
+                if fits:
+                    return max(fits, key=lambda t: np.sum((t >= lo * (1 - 1e-9))
+                                                          & (t <= hi * (1 + 1e-9))))
+                ticks = _log_tick_values(lo, hi, *level[0])
+            return ticks
+
+    return LabelledLogLocator()
+
+
 def _log_ticks(axis):
-    """Labels at 1, 2 and 5 times the powers of ten on a range of up to two and a half
-    decades (every whole multiple below one decade, the powers alone beyond) and none at the
-    other minor ticks: the default labels every minor tick of a short log range, and the
-    labels then overlap."""
+    """Label a log axis at powers of ten and, where room allows, at 1-2-5 (or 1-3, or every
+    whole) multiples of them, chosen when drawn so that no two labels meet
+    (:func:`_labelled_log_locator`); the other ticks are unlabelled minor ticks.
+
+    matplotlib's own log labels leave out the 2s and 5s of a range of one or two decades,
+    which then shows one or two labels, and label every minor tick of a shorter range, where
+    they overlap.
+    """
     from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
-    lo, hi = sorted(axis.get_view_interval())
-    decades = np.log10(hi / lo) if lo > 0 else np.inf
-    # 1, 2 and 5 up to two and a half decades, the powers of ten alone beyond (more would
-    # run together on a panel a few inches wide)
-    subs = (tuple(float(k) for k in range(1, 10)) if decades < 1 else
-            (1.0, 2.0, 5.0) if decades <= 2.5 else (1.0,))
-    axis.set_major_locator(LogLocator(base=10, subs=subs))
-    # every major tick labelled (matplotlib's log formatter leaves out the 2s and 5s of a
-    # range of one or two decades, which then shows one or two labels)
+    axis.set_major_locator(_labelled_log_locator())
     axis.set_major_formatter(FuncFormatter(lambda v, _: _power_label(v)))
+    # unlabelled ticks at every whole multiple, the powers of ten among them where the labels
+    # skip some (ticks at a major tick's place are not drawn twice)
+    axis.set_minor_locator(LogLocator(base=10, subs=tuple(float(k) for k in range(1, 10)),
+                                      numticks=100))
     axis.set_minor_formatter(NullFormatter())
 
 
@@ -320,6 +407,16 @@ def _sample(ens: Ensemble, set_name, reg, quantity, summ):
     return x[ok], cut, span
 
 
+def _limits_label(name: str, span) -> str:
+    """The legend entry of a set's detection limits ``span`` = (smallest, largest): a range
+    where its ends differ at the two digits shown, one value where they do not (a range
+    such as "0.0056-0.0056" reads as a misprint)."""
+    lo, hi = f"{span[0]:.2g}", f"{span[1]:.2g}"
+    if lo == hi:
+        return f"{name}: detection limit {hi} (dotted)"
+    return f"{name}: detection limits {lo}-{hi} (per scan, shaded; dotted: largest)"
+
+
 def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors=None):
     """Distribution of one quantity, every set overlaid, with the selected laws.
 
@@ -445,13 +542,10 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
                     ax.axvspan(span[0], span[1], color=c, alpha=0.08, lw=0,
                                gid=f"limits:{s}:{reg}")
                     ax.axvline(span[1], color=c, ls=":", lw=1, gid=f"limit:{s}:{reg}",
-                               label=(f"{name[s]}: detection limits "
-                                      f"{span[0]:.2g}-{span[1]:.2g} "
-                                      "(per scan, shaded; dotted: largest)")
-                               if logscale else None)
+                               label=_limits_label(name[s], span) if logscale else None)
                 elif span is not None:
                     ax.axvline(span[1], color=c, ls=":", lw=1, gid=f"limit:{s}:{reg}",
-                               label=f"{name[s]}: detection limit" if logscale else None)
+                               label=_limits_label(name[s], span) if logscale else None)
         for ax, logscale in zip(row, (False, True)):
             if logscale:
                 ax.set_yscale("log")
@@ -585,8 +679,55 @@ def plot_pdf(source, quantity: str = "e", *, set_name: str | None = None, seed: 
     return pdf_figure(fits_only, ens, quantity, sets=sets)
 
 
+#: relative difference below which two sets' Eq. (14)-(15) lines are drawn as one line of
+#: alternating colours (two lines a pixel apart hide each other)
+SAME_LINE_REL = 0.02
+
+
+def _shared_dashes(values) -> list:
+    """Per value, the dash pattern ``(offset, (on, off))`` of its line: the plain dashes of
+    a line alone, and for lines whose values agree within :data:`SAME_LINE_REL`, dashes
+    that alternate between them, so that every colour shows along the shared line."""
+    values = [float(v) for v in values]
+    groups = []  # indices of values drawn as one line
+    for i, v in enumerate(values):
+        for g in groups:
+            w = values[g[0]]
+            if np.isfinite(v) and abs(v - w) <= SAME_LINE_REL * max(abs(v), abs(w)):
+                g.append(i)
+                break
+        else:
+            groups.append([i])
+    out = [None] * len(values)
+    on = 4.0
+    for g in groups:
+        for j, i in enumerate(g):
+            out[i] = (0.0, (on, on)) if len(g) == 1 else (j * on, (on, on * (len(g) - 1)))
+    return out
+
+
 def network_figure(res: StatsResult, colors=None):
-    """N_br vs N_l with Eqs. (12) and (14), and n_br_bar vs N_l with Eqs. (13) and (15), per set."""
+    """The network relations of the paper per configuration, every set overlaid.
+
+    Left: the number of branches N_br against the number of stacks N_l with Eq. (12), with
+    the paper's constant and with the constant fitted to the set, and Eq. (14); right: the
+    mean number of branches per stack N_br/N_l with Eqs. (13) and (15). The legend gives one
+    entry per set (its fitted constant and mean number of branches per stack) and names each
+    line style once; where two sets' Eq. (14)-(15) lines coincide, their dashes alternate.
+
+    Parameters
+    ----------
+    res : StatsResult
+    colors : dict, optional
+        Set -> colour (default :func:`set_colors` of the sets of ``res.per_config``).
+
+    Returns
+    -------
+    matplotlib.figure.Figure or None
+        None when no configuration has both counts.
+    """
+    from matplotlib.lines import Line2D
+
     pc = res.per_config
     colors = colors or set_colors(list(dict.fromkeys(pc["set"])))
     if not _pairs(pc, "N_l", "N_br").any():
@@ -594,16 +735,22 @@ def network_figure(res: StatsResult, colors=None):
     fig, axes = _subplots(1, 2, figsize=(12.5, 4.6))
     axes = axes[0]
     name = legend_names(pc["set"])
-    for s, g in pc.groupby("set", sort=False):
-        c = colors[s]
+    groups = list(pc.groupby("set", sort=False))
+    nbrs = {}
+    for s, g in groups:
         rel = res.relations[res.relations["set"] == s].set_index("relation")["fitted"]
         nbr = res.macro.query("set == @s and region == 'all'")["n_br"].iloc[0]
         if not np.isfinite(nbr):  # no per-stack counts (simulations): the Eq. (14) fitted slope
             nbr = rel.get("eq14_slope", np.nan)
-        axes[0].plot(g["N_l"], g["N_br"], "o", color=c, ms=4, alpha=0.8,
-                     label=f"{name[s]}: configurations (both panels)")
-        axes[1].plot(g["N_l"], g["n_br_bar"], "o", color=c, ms=4, alpha=0.8,
-                     label=f"{name[s]}: configurations (both panels)")
+        nbrs[s] = float(nbr)
+    dashes = dict(zip(nbrs, _shared_dashes(nbrs.values())))
+    handles, labels, styles = [], [], set()
+    for s, g in groups:
+        c, nbr = colors[s], nbrs[s]
+        rel = res.relations[res.relations["set"] == s].set_index("relation")["fitted"]
+        axes[0].plot(g["N_l"], g["N_br"], "o", color=c, ms=4, alpha=0.8)
+        axes[1].plot(g["N_l"], g["n_br_bar"], "o", color=c, ms=4, alpha=0.8)
+        words = [f"{name[s]}: configurations"]
         nl = np.linspace(max(1, g["N_l"].min() * 0.8), g["N_l"].max() * 1.2, 100)
         ratio = _nanmean(g["sqrt_s_bar"] / g["l_bar"])  # NaN for scans without voids
         eps = _nanmean(g["epsilon"])
@@ -611,9 +758,10 @@ def network_figure(res: StatsResult, colors=None):
             eq12 = EQ12_CONST * eps * ratio * np.sqrt(nl)  # Eq. (12) with set means
             axes[0].plot(nl, eq12, "-", color=c,
                          label=f"{name[s]}: Eq. (12), paper's C = 2√(π/3) = "
-                               f"{EQ12_CONST:.3g}, with the set means (left)")
+                               f"{EQ12_CONST:.3g}, with the set means")
             axes[1].plot(nl, eq12 / nl, "-", color=c,
-                         label=f"{name[s]}: Eq. (13), C = {EQ12_CONST:.3g} (right)")
+                         label=f"{name[s]}: Eq. (13), C = {EQ12_CONST:.3g}")
+            styles.add("-")
             fitted = rel.get("eq12_const", np.nan)
             if np.isfinite(fitted):
                 # the C of relations.csv, through the same set means: how far the data sit
@@ -621,30 +769,37 @@ def network_figure(res: StatsResult, colors=None):
                 n_fit = int(res.relations.query("set == @s and relation == 'eq12_const'")
                             ["n"].iloc[0])
                 axes[0].plot(nl, fitted * eps * ratio * np.sqrt(nl), "-.", color=c, lw=1,
-                             label=f"{name[s]}: Eq. (12), fitted C = {fitted:.3g}"
-                                   + (" (indicative only)" if n_fit < N_RELATION_MIN else "")
-                                   + " (left)")
+                             label=f"{name[s]}: Eq. (12), fitted C = {fitted:.3g}")
+                styles.add("-.")
+                words.append(f"fitted C = {fitted:.3g}"
+                             + (" (indicative only)" if n_fit < N_RELATION_MIN else ""))
         if np.isfinite(nbr):
-            axes[0].plot(nl, nbr * nl, "--", color=c,
-                         label=f"{name[s]}: Eq. (14), <n_br> = {nbr:.2g} (left)")
-            axes[1].axhline(nbr, ls="--", color=c,
-                            label=f"{name[s]}: Eq. (15), <n_br> = {nbr:.2g} (right)")
+            axes[0].plot(nl, nbr * nl, ls=dashes[s], color=c,
+                         label=f"{name[s]}: Eq. (14), <n_br> = {nbr:.2g}")
+            axes[1].axhline(nbr, ls=dashes[s], color=c,
+                            label=f"{name[s]}: Eq. (15), <n_br> = {nbr:.2g}")
+            styles.add("--")
+            words.append(f"<n_br> = {nbr:.2g}")
+        handles.append(Line2D([], [], ls="none", marker="o", ms=4, color=c))
+        labels.append(", ".join(words))
     axes[0].set(xlabel="number of stacks per configuration $N_l$",
                 ylabel="number of branches per configuration $N_{br}$",
                 title="branches against stacks")
     axes[1].set(xlabel="number of stacks per configuration $N_l$",
                 ylabel=r"mean branches per stack $\bar n_{br}=N_{br}/N_l$",
                 title="mean branches per stack against stacks")
-    # one legend for both panels, right of them (the sets' points are the same in both)
-    seen = {}
-    for ax in axes:
-        for h, lab in zip(*ax.get_legend_handles_labels()):
-            seen.setdefault(lab, h)
-    sets = list(dict.fromkeys(pc["set"]))
-    labels = sorted(seen, key=lambda lab: sets.index(lab.split(": ")[0])
-                    if lab.split(": ")[0] in sets else len(sets))  # grouped by set
-    axes[1].legend([seen[lab] for lab in labels], labels, fontsize=7, frameon=False,
-                   loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    # one legend for both panels, right of them: a set's points are the same in both and
+    # take its colour, each line style is named once (in the sets' colours in the panels)
+    key = {"-": f"Eq. (12) left, (13) right: paper's C = 2√(π/3) = {EQ12_CONST:.3g}, "
+                "with the set's means",
+           "-.": "Eq. (12), left: the C fitted to the set",
+           "--": "Eq. (14) left, (15) right: the set's mean <n_br>"}
+    for ls in ("-", "-.", "--"):
+        if ls in styles:
+            handles.append(Line2D([], [], ls=ls, color="0.3", lw=1.5))
+            labels.append(key[ls])
+    axes[1].legend(handles, [_wrap_label(t, 60) for t in labels], fontsize=8,
+                   frameon=False, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     return fig
 
 
