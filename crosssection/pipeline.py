@@ -47,7 +47,8 @@ from crosssection.linsys.equations import conservation_equations
 from crosssection.stages.packs import compute_packs
 from crosssection.stages.skeleton import skeletonize_mask
 from crosssection.stages.threshold import (BRIDGE_MAX_H_PX, bridge_broken_lines,
-                                           colour_features, faint_band_ends, missed_ink,
+                                           colour_features, dark_marks, faint_band_ends,
+                                           missed_ink,
                                            passes_at, threshold_rgb, _range_note)
 from crosssection.stages.widthlaw import fit_width_law
 from crosssection.stages.widths import (distance_map, layer_steps, stack_widths_px,
@@ -103,6 +104,10 @@ class Preprocessed:
     #: (:func:`~crosssection.stages.threshold.missed_ink`; added to the threshold's mask),
     #: over the ink the scan's cut took in.
     ink_missed_fraction: float = 0.0
+    #: Pixels inside the frame as dark as the ink in red and green but not ink (another
+    #: pen, pencil, a shadow), in pieces, over the ink's
+    #: (:func:`~crosssection.stages.threshold.dark_marks`).
+    dark_marks_fraction: float = 0.0
     #: The pixels an alpha channel made transparent or partly, composited over white (None:
     #: every pixel opaque).
     see_through: np.ndarray | None = None
@@ -207,7 +212,8 @@ def _threshold_in_frame(rgb, p: AnalysisParams, path, timer, min_piece_px: float
         if taken is not None and fraction > quality.INK_MISSED_LIMIT:
             thr = dataclasses.replace(thr, mask=thr.mask | taken,
                                       local_px=int(np.count_nonzero(taken)))
-    return thr, hole, outside, m["features"].dominance, fraction
+        marks = dark_marks(thr, m["features"], inside, thickness_px=p.thickness_px)
+    return thr, hole, outside, m["features"].dominance, fraction, marks
 
 
 def _checked_given_hole(rgb, hole, inside, thr, m, path, *, correct=True):
@@ -375,7 +381,7 @@ def _preprocess_read(rgb, path, header: Header, orientation, p: AnalysisParams, 
     # missed ink counts in pieces of 10 h^2 or more (the cleaning's default speck, l_min h at
     # h = 0.1 mm), however small the cleaning is set: below that the rim of half-covered
     # pixels along every band counts (s_min_mm2 = 0 read 0.03-0.26 % on the sample scans)
-    thr, hole, outside, dominance, missed = _threshold_in_frame(
+    thr, hole, outside, dominance, missed, marks = _threshold_in_frame(
         rgb, p, path, timer, min_piece_px=max(speck_px, 10.0 * p.thickness_px ** 2))
     confidence = None if p.hole_given else hole.confidence
     with timer("clean"):
@@ -423,7 +429,7 @@ def _preprocess_read(rgb, path, header: Header, orientation, p: AnalysisParams, 
                         exif_orientation=orientation,
                         edge_feature=dominance if thr.dominance_min is not None else None,
                         ink_missed_fraction=float(missed), see_through=see_through,
-                        file_dpi_xy=header.dpi_xy)
+                        file_dpi_xy=header.dpi_xy, dark_marks_fraction=float(marks))
 
 
 def _isolated_short_pieces(sg, l_min_px) -> list[int]:
@@ -787,6 +793,7 @@ def _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, void
         params=p, hole=pre.hole, hole_confidence=pre.hole_confidence,
         ink_outside_fraction=pre.ink_outside_fraction,
         ink_missed_fraction=pre.ink_missed_fraction, degrees=degrees, stacks=stacks,
+        dark_marks_fraction=pre.dark_marks_fraction,
         rod_length_mm=L, rod_measured_mm=rod_mm, ink_area_in_hole_mm2=ink_area_mm2,
         calibration_max_width_mm=_max_width_mm(cal, p), junctions=junctions,
         image_shape=pre.rgb.shape, file_px_per_mm=pre.file_px_per_mm,

@@ -26,6 +26,9 @@ low_resolution           sheet thickness h in pixels                          h 
 ink_missed               ink that the scan's cut leaves out and a cut chosen  > 0.5 %
                          on each 20 h tile of the frame takes in (added to
                          the ink), in pieces the cleaning keeps / the ink cut
+dark_marks               pixels inside the hole as dark in red and green as   > 5 %
+                         the ink but not blue (another pen, pencil, a
+                         shadow), in pieces of 4 h^2 or more / the ink's
 faint_ink                free band ends that a ray of 3 widths beyond them    > 0
                          finds continued by ink bluer than halfway from the
                          paper to the cut (faded ink the cut dropped)
@@ -288,6 +291,7 @@ CATEGORIES = {
     "low_resolution": ResolutionWarning,
     "ink_missed": ThresholdWarning,
     "faint_ink": ThresholdWarning,
+    "dark_marks": ThresholdWarning,
     "hole_fitted": FrameWarning,
     "ink_outside_hole": FrameWarning,
     "hole_crossed": FrameWarning,
@@ -383,6 +387,10 @@ THICKNESS_RATIO = (0.8, 2.5)
 #: ``ink_missed``: ink below the scan's cut that local cuts took in, over the ink cut (module
 #: docstring)
 INK_MISSED_LIMIT = 0.005
+
+#: ``dark_marks``: dark pixels inside the hole that are not ink, over the ink's, beyond which
+#: marks of another colour are named
+DARK_MARKS_LIMIT = 0.05
 
 
 def _ink_cut_by_border(border_ink_rc, hole, overhang_px: float) -> int:
@@ -487,7 +495,8 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
            ink_missed_fraction=0.0, width_law=None,
            junction_radius_px=None, see_through=None,
            file_dpi_xy=None, faint_ends=None,
-           calibration_one_layer_mm=None, void_areas_mm2=None) -> list[QualityFlag]:
+           calibration_one_layer_mm=None, void_areas_mm2=None,
+           dark_marks_fraction=0.0) -> list[QualityFlag]:
     """Run every check of the module table on one analysis.
 
     Parameters
@@ -553,6 +562,9 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
         (:func:`crosssection.stages.threshold.faint_band_ends`): the ``faint_ink`` check.
     void_areas_mm2 : array_like, optional
         The voids' areas: the ``tiny_voids`` check (not made without them).
+    dark_marks_fraction : float
+        Dark pixels inside the frame that are not ink, in pieces, over the ink's
+        (:func:`crosssection.stages.threshold.dark_marks`): the ``dark_marks`` check.
 
     Returns
     -------
@@ -617,6 +629,12 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
             "colour-balanced, or set the cut by hand: threshold_method fixed with blue_min and "
             "rg_max)",
             ink_missed_fraction, INK_MISSED_LIMIT))
+    if dark_marks_fraction > DARK_MARKS_LIMIT:
+        flags.append(QualityFlag(
+            "dark_marks", f"marks as dark as the ink but not blue lie inside the hole, "
+            f"{100 * dark_marks_fraction:.0f} % of the ink's area (another pen, pencil, a "
+            "shadow): they are not read as ink, and a rod drawn or cut in them is lost (look "
+            "at the overlay)", dark_marks_fraction, DARK_MARKS_LIMIT))
     if faint_ends:
         sid, (r, c) = faint_ends[0]
         flags.append(QualityFlag(

@@ -1219,3 +1219,65 @@ def faint_band_ends(graph, dominance, *, paper_level: float, cut: float, mask, h
             if np.count_nonzero(best >= level) >= FAINT_SHARE * len(r):
                 found.append((sid, (float(path[-1, 0]), float(path[-1, 1]))))
     return found
+
+
+#: ``dark_marks``: the least piece (in sheet thicknesses squared) of dark pixels that are not
+#: ink counted as marks; the step of the lattice they are read on (px)
+DARK_MARK_MIN_H2 = 4.0
+DARK_MARK_STEP = 2
+
+
+def dark_marks(thr: ThresholdResult, features: ColourFeatures, region, *,
+               thickness_px: float) -> float:
+    """Pixels inside the frame as dark in red and green as the ink but not taken as ink (a
+    black or grey pen, pencil, a shadow), in pieces of at least :data:`DARK_MARK_MIN_H2`
+    h^2, over the ink's pixels.
+
+    Dark means a larger of red and green below the midpoint of the ink's and the paper's
+    (``"auto"``'s levels; with the other methods the median of the ink's pixels and of the
+    frame's others). The ink's own rim, whose half-covered pixels are darker than the paper
+    and less blue than the ink, is left out: pixels within ``max(3, h)`` px of the ink are
+    not counted, nor those as near the frame's edge (a dark plate's rim inside the hole's
+    circle). Read on a lattice of :data:`DARK_MARK_STEP` px (a piece of 4 h^2 holds 25
+    lattice points at h = 5 px), about 5 ms on a 2000 x 2000 scan.
+
+    Returns
+    -------
+    float
+        0 when the ink's and the paper's levels are not known or the frame holds no ink.
+    """
+    import cv2
+
+    step = DARK_MARK_STEP
+    mask = np.asarray(thr.mask, bool)
+    n_ink = int(np.count_nonzero(mask))
+    if not n_ink:
+        return 0.0
+    dark = features.darkness[::step, ::step]
+    ink = mask[::step, ::step]
+    frame = np.ones_like(ink) if region is None else np.asarray(region, bool)[::step, ::step]
+    if thr.ink_level is not None and thr.paper_level is not None:
+        ink_dark, paper_dark = float(thr.ink_level[1]), float(thr.paper_level[1])
+    else:
+        if not (frame & ~ink).any():
+            return 0.0
+        ink_dark = float(np.median(dark[ink]))
+        paper_dark = float(np.median(dark[frame & ~ink]))
+    if not paper_dark - ink_dark > MIN_CONTRAST_U8 * features.scale:
+        return 0.0
+    cut = 0.5 * (ink_dark + paper_dark)
+    rim = max(3.0, float(thickness_px)) / step
+    size = 2 * int(math.ceil(rim)) + 1
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))
+    near = cv2.dilate(np.ascontiguousarray(ink, np.uint8), disc) > 0
+    # nor the frame's own edge, where a dark plate's rim inside the hole's circle runs
+    inner = cv2.erode(np.ascontiguousarray(frame, np.uint8), disc,
+                      borderType=cv2.BORDER_CONSTANT, borderValue=0) > 0
+    cand = (dark < cut) & inner & ~near
+    if not cand.any():
+        return 0.0
+    _, _, stats, _ = cv2.connectedComponentsWithStats(np.ascontiguousarray(cand, np.uint8),
+                                                      connectivity=8)
+    area = stats[1:, cv2.CC_STAT_AREA]
+    big = area[area * step * step >= DARK_MARK_MIN_H2 * thickness_px ** 2]
+    return float(big.sum()) * step * step / n_ink

@@ -889,9 +889,32 @@ def test_a_sheet_thickness_given_twice_too_large_names_the_thickness(scene):
 
 
 def test_the_docs_list_every_check_with_its_category():
+    import importlib.util
     from pathlib import Path
 
-    page = (Path(__file__).resolve().parents[2] / "docs" / "quality.md").read_text()
+    root = Path(__file__).resolve().parents[2]
+    page = (root / "docs" / "quality.md").read_text()
     rows = [ln for ln in page.splitlines() if ln.startswith("| `")]
     listed = {ln.split("`")[1]: ln.split("`")[3] for ln in rows}
     assert listed == {c: cls.__name__ for c, cls in quality.CHECK_WARNINGS.items()}
+    # the page is the module's table as written: python scripts/make_quality_doc.py
+    spec = importlib.util.spec_from_file_location("make_quality_doc",
+                                                  root / "scripts" / "make_quality_doc.py")
+    make = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(make)
+    assert page == make.page()
+
+
+def test_half_the_rod_drawn_in_black_ink_is_named(scene):
+    # a second pen: the ink of the right half redrawn black is not read as ink
+    rgb = scene.rgb.copy()
+    rgbi = rgb.astype(int)
+    ink = rgbi[..., 2] - rgbi[..., :2].max(axis=2) > 40
+    ink[:, : rgb.shape[1] // 2] = False
+    rgb[ink] = (40, 40, 55)
+    res, caught = _analyze(rgb, **_given(scene))
+    flag = next(f for f in res.quality if f.code == "dark_marks")
+    assert flag.value > quality.DARK_MARKS_LIMIT
+    assert any(w.category is quality.DarkMarksWarning for w in caught)
+    clean, _ = _analyze(scene.rgb, **_given(scene))
+    assert "dark_marks" not in clean.summary["quality"]["codes"]

@@ -183,9 +183,9 @@ def test_a_cluster_lost_mid_batch_leaves_its_images_for_the_rerun(tmp_path, capf
         closer.join(30)
         cl.close()
     index = pd.read_csv(out / "index.csv")
-    # the slow images were neither done nor failed: a re-run does them
-    assert list(index["image"]) == ["a.png", "b.png"]
-    assert list(index["status"]) == ["ok", "ok"]
+    # the slow images were neither done nor failed: pending, a re-run does them
+    assert list(index["image"]) == ["a.png", "b.png", "slow1.png", "slow2.png"]
+    assert list(index["status"]) == ["ok", "ok", "pending", "pending"]
     assert pd.read_csv(out / "failures.csv").empty
     err = capfd.readouterr().err
     assert "Traceback" not in err and "ERROR" not in err

@@ -1,0 +1,67 @@
+#!/usr/bin/env python
+"""Write docs/quality.md, the table of every quality check, from the table of
+``crosssection/quality.py``'s docstring (the one source of the checks' limits).
+
+Usage: python scripts/make_quality_doc.py [--out docs/quality.md]
+"""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+HEAD = """# Quality checks
+
+Every analysis runs these checks (`crosssection/quality.py`, where each limit is derived). A
+failed check is a `warning: FILE: ...` line on stderr, a `warnings.warn` of its own category
+(a subclass of its group's, itself a `crosssection.QualityWarning`), an entry of the `quality`
+block of `summary.json` (`code`, `message`, `value`, `limit`) and a code in the `quality`
+column of a batch's `index.csv`. Silence one check in Python with
+`warnings.simplefilter("ignore", crosssection.quality.NoCalibrationWarning)`, or a group with
+`CalibrationWarning`.
+
+| code | category (group) | measured | flagged when |
+|---|---|---|---|
+"""
+
+
+def check_rows() -> list[tuple[str, str, str]]:
+    """(code, what is measured, limit) of each row of the docstring's table."""
+    import crosssection.quality as q
+
+    lines = q.__doc__.split("\n")
+    rules = [i for i, line in enumerate(lines) if line.startswith("=====")]
+    widths = [len(w) for w in lines[rules[0]].split()]
+    a, b = widths[0] + 2, widths[0] + 2 + widths[1] + 2
+    rows = []
+    for line in lines[rules[1] + 1:rules[2]]:
+        code, what, limit = line[:a].strip(), line[a:b].strip(), line[b:].strip()
+        if code:
+            rows.append([code, what, limit])
+        else:
+            rows[-1][1] += f" {what}" if what else ""
+            rows[-1][2] += f" {limit}" if limit else ""
+    return [tuple(r) for r in rows]
+
+
+def page() -> str:
+    import crosssection.quality as q
+
+    out = []
+    for code, what, limit in check_rows():
+        cls = q.CHECK_WARNINGS[code]
+        out.append(f"| `{code}` | `{cls.__name__}` (`{cls.__mro__[1].__name__}`) | "
+                   f"{what.replace('``', '`')} | {limit.replace('``', '`')} |")
+    return HEAD + "\n".join(out) + "\n"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--out", default=str(Path(__file__).resolve().parents[1] / "docs" /
+                                         "quality.md"))
+    args = ap.parse_args(argv)
+    Path(args.out).write_text(page())
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
