@@ -24,7 +24,7 @@ import numpy as np
 import pandas as pd
 
 from crosssection._version import __version__
-from crosssection.core.errors import ParameterError
+from crosssection.core.errors import OutputError, ParameterError
 from crosssection.core.fileio import (BROWSER_FILES, clear_stale_folders, exclusive_lock,
                                       foreign_entry,
                                       save_figure, staging_folder, swap_in_folder, write_csv,
@@ -1026,7 +1026,17 @@ def _staged_folder(out: Path):
         except OSError as exc:
             raise _named_error(exc, out) from None
         try:
-            yield stage
+            try:
+                yield stage
+            except OSError as exc:
+                # a file of the working folder that could not be written (a full disk): the
+                # report folder is what the user gave and can act on
+                where = getattr(exc, "path", None) or exc.filename
+                if where is None or str(stage) not in str(where):
+                    raise
+                cause = (exc.cause if isinstance(exc, OutputError) else
+                         f"cannot write ({exc.strerror or ' '.join(str(exc).split())})")
+                raise OutputError(cause, out) from None
             try:
                 swap_in_folder(stage, real)
             except OSError as exc:

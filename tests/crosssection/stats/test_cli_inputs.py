@@ -474,6 +474,20 @@ def test_an_interrupted_first_report_leaves_nothing(tmp_path, capfd, monkeypatch
     assert not (tmp_path / "rep").exists() and _hidden_beside(tmp_path / "rep") == []
 
 
+def test_a_full_disk_names_the_report_folder_not_its_working_folder(tmp_path, capfd,
+                                                                     monkeypatch):
+    sim = demo.write_demo_simulation(tmp_path / "sim", n_configs=6, seed=1)
+
+    def full(path, text):
+        raise OSError(28, "No space left on device", str(path))
+
+    monkeypatch.setattr(report, "write_text", full)
+    status, _, err = _stats(capfd, sim, "--out", tmp_path / "rep", *FAST)
+    assert status == 2
+    assert err[-1] == f"error: {tmp_path / 'rep'}: cannot write (No space left on device)"
+    assert not (tmp_path / "rep").exists() and _hidden_beside(tmp_path / "rep") == []
+
+
 def test_a_failed_swap_puts_the_old_report_back(tmp_path, monkeypatch):
     old, new = tmp_path / "rep", tmp_path / ".rep.partial-x"
     for folder, text in ((old, "old"), (new, "new")):
