@@ -470,10 +470,10 @@ def _check_fraction(thr, path, rgb=None):
             bounds = ", ".join(f"{k} = {v:g}" for k, v in (("blue_min", thr.blue_min),
                                                             ("rg_max", thr.rg_max))
                                if v is not None)
-            units = (" in 16-bit units, 8-bit values times 257" if rgb is not None
-                     and rgb.dtype == np.uint16 else " in 8-bit units")
-            why = (f"not a blue-ink scan, or the threshold's bounds ({bounds}{units}) exclude "
-                   "its ink")
+            units = ("16-bit units, 8-bit values times 257" if rgb is not None
+                     and rgb.dtype == np.uint16 else "8-bit units")
+            why = (f"not a blue-ink scan, or the threshold's bounds ({bounds}) exclude its ink "
+                   f"(bounds in {units})")
         blue = _blue_share(rgb) if rgb is not None else 0.0
         # data of fewer bits than their type (9-bit values in uint16) look grey at 8 bits:
         # the threshold's note names the range, the likelier cause

@@ -633,8 +633,9 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
         flags.append(QualityFlag(
             "dark_marks", f"marks as dark as the ink but not blue lie inside the hole, "
             f"{100 * dark_marks_fraction:.0f} % of the ink's area (another pen, pencil, a "
-            "shadow): they are not read as ink, and a rod drawn or cut in them is lost (look "
-            "at the overlay)", dark_marks_fraction, DARK_MARKS_LIMIT))
+            "shadow, a plate inside a hole too wide): they are not read as ink, and a rod "
+            "drawn or cut in them is lost (look at the overlay)", dark_marks_fraction,
+            DARK_MARKS_LIMIT))
     if faint_ends:
         sid, (r, c) = faint_ends[0]
         flags.append(QualityFlag(

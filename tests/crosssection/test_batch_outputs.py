@@ -658,8 +658,8 @@ def test_stats_names_the_images_a_batch_could_not_analyse(tmp_path, capsys):
     with pytest.warns(IncompleteBatchWarning) as caught:
         ens = load_batch(out)
     said = [str(w.message) for w in caught if w.category is IncompleteBatchWarning]
-    assert said == [f"{out / 'failures.csv'}: 1 of 2 images (corrupt.png) was not analysed "
-                    "and is not in the statistics"]
+    assert said == [f"{out / 'failures.csv'}: 1 of 2 images (corrupt.png: not an image file "
+                    "(unknown or corrupt format)) was not analysed and is not in the statistics"]
     # the report says it too, beside the unfinished batches
     from crosssection.stats.report import incomplete_batches
 

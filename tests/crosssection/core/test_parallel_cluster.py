@@ -389,4 +389,4 @@ def test_batch_tells_the_wait_for_a_worker_as_it_happens(tmp_path, capsys, short
         f"warning: {where}: no worker has joined; waiting",
         f"warning: {where}: no worker had joined: nothing ran",
         "error: interrupted (re-run the same command to resume)"]
-    assert pd.read_csv(out / "index.csv").empty
+    assert set(pd.read_csv(out / "index.csv")["status"]) == {"pending"}
