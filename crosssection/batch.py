@@ -4,13 +4,13 @@
 
 Layout of ``OUT_DIR``::
 
-    index.csv          one row per image: set, status (ok / failed / skipped, or pending
-                       while the run that analyses it has not reached it: a run stopped
-                       midway leaves no row of an earlier run's results for a scan it was
-                       redoing), output folder
-                       (empty for a failed image), summary numbers (n_junctions ...
-                       total_energy, with the rod length and hole radius that make its
-                       epsilon), wall_s, reason
+    index.csv          one row per image (:data:`INDEX_COLUMNS`): image, set, status (ok /
+                       failed / skipped, or pending while the run that analyses it has not
+                       reached it: a run stopped midway leaves no row of an earlier run's
+                       results for a scan it was redoing), output folder (empty for a
+                       failed image), summary numbers (n_junctions ... total_energy, with
+                       the rod length and hole radius that make its epsilon), quality (the
+                       failed checks' codes), wall_s, seed, params_hash, peak_rss_mb, reason
     failures.csv       image, set, reason   (one line per failed image)
     batch.json         parameters, sets, package version, counts
     <set>/<stem>/      the ``analyze`` layout: summary.json, junctions.csv, stacks.csv,

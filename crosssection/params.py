@@ -56,11 +56,11 @@ LOW_RESOLUTION_H_PX = 3.0
 
 # Sanity limits that turn absurd values into one clear error rather than a hang or a
 # MemoryError: a sheet thinner than a pixel cannot be resolved, and a scan of more than
-# 2 000 px per mm (a 12.7 um pixel) is beyond any flatbed scanner.
+# 2 000 px per mm (a 0.5 um pixel, 50 800 dpi) is beyond any scanner or microscope scan.
 _MAX_PX_PER_MM = 2000.0
 _MIN_THICKNESS_PX = 1.0
-#: A hole narrower than this many sheet thicknesses holds no folded rod (the experiments'
-#: holes are 200 h wide and more).
+#: A hole whose radius is below this many sheet thicknesses holds no folded rod (the
+#: experiments' holes are 200 h wide and more).
 MIN_HOLE_SHEETS = 5.0
 
 
@@ -70,7 +70,7 @@ LINEAR_CALIBRATION = "linear n*h"
 #: Longest ``smooth_px`` accepted: the default window of any scan that holds its sheet
 #: thickness h (h < half the image side) stays below it.
 SMOOTH_PX_MAX = 20_001
-#: Longest ``smooth_px`` accepted, in sheet thicknesses h (the default is 2 h + 1)
+#: Longest ``smooth_px`` accepted, in sheet thicknesses h (the default is 2 floor(h) + 1)
 SMOOTH_H_MAX = 10
 #: Key of the record of a calibration object that is no table (``{key: type name}``).
 UNRECORDED_CALIBRATION = "object"
@@ -158,7 +158,8 @@ class AnalysisParams:
         "width_law, with a warning)"))
     width_law: str = field(default=WIDTH_LAWS[0], metadata=_opt(
         "without a calibration: fitted (width = a + b n, a read at the junctions, b from "
-        "the widths' lattice of whole layers; w = n h where the scan shows none) or linear "
+        "the widths' lattice of whole layers, bent by a term in n^2 or sqrt(n) where wide "
+        "stacks ask for it; w = n h where the scan shows none) or linear "
         "(width = n h); ignored when a calibration is given", choices=WIDTH_LAWS))
     rod_length_mm: float | None = field(default=None, metadata=_opt(
         "known rod length L for the dimensionless energies and epsilon (default: measured "
@@ -168,12 +169,14 @@ class AnalysisParams:
         "blue >= blue_min, red and green <= rg_max) or otsu", choices=THRESHOLD_METHODS))
     blue_min: float | None = field(default=None, metadata=_opt(
         "minimum blue, native units: the fixed threshold's cut (default 100 for 8-bit, "
-        "100 * 257 for 16-bit; for a float array in [0, 1], given in its scale); given with "
-        "auto, an extra bound on the automatic cut; not with otsu"))
+        "100 * 257 for 16-bit and float files; for a float array in [0, 1] given to "
+        "analyze, in its scale); given with auto, an extra bound on the automatic cut; not "
+        "with otsu"))
     rg_max: float | None = field(default=None, metadata=_opt(
         "maximum red and green, native units: the fixed threshold's cut (default 130 for "
-        "8-bit, 130 * 257 for 16-bit, also otsu's bound; for a float array in [0, 1], given "
-        "in its scale); given with auto, an extra bound on the automatic cut"))
+        "8-bit, 130 * 257 for 16-bit and float files, also otsu's bound; for a float array "
+        "in [0, 1] given to analyze, in its scale); given with auto, an extra bound on the "
+        "automatic cut"))
     s_min_mm2: float | None = field(default=None, metadata=_opt(
         "smallest void (default (10 h)^2, the paper's)", "mm^2"))
     sliver_width_h: float = field(default=1.5, metadata=_opt(
@@ -198,7 +201,7 @@ class AnalysisParams:
     bending_rigidity_J: float | None = field(default=None, metadata=_opt(
         "bending rigidity B; adds total_energy_J = e B / (2 L) to the summary", "J m"))
     smooth_px: int | None = field(default=None, metadata=_opt(
-        "sliding-average window of the centrelines (default 2 h + 1, at most 10 h)", "px"))
+        "sliding-average window of the centrelines (default 2 floor(h) + 1, at most 10 h)", "px"))
     merge_px: float = field(default=2.0, metadata=_opt(
         "junction pixels closer than this are one junction", "px"))
     merge_thick_crossings: bool = field(default=True, metadata=_opt(
@@ -253,7 +256,7 @@ class AnalysisParams:
             raise ParameterError(
                 f"smooth_px = {self.smooth_px} px is more than {SMOOTH_H_MAX} sheet "
                 f"thicknesses (h = {self.thickness_px:.3g} px): the centrelines would be "
-                "averaged over their bends (default 2 h + 1)")
+                "averaged over their bends (default 2 floor(h) + 1)")
 
     # ------------------------------------------------------------------ derived values
     @property
@@ -448,8 +451,8 @@ class AnalysisParams:
                                      f"the hole is more than twice the scan ({w}x{h} px); "
                                      "check hole_radius_mm and px_per_mm" + hint, path)
             if r_px < MIN_HOLE_SHEETS * self.thickness_px:
-                raise ParameterError(f"hole radius {self.hole_radius_mm:g} mm = {r_px:.1g} px: "
-                                     f"narrower than {MIN_HOLE_SHEETS:g} sheet thicknesses "
+                raise ParameterError(f"hole radius {self.hole_radius_mm:g} mm = {r_px:.1f} px: "
+                                     f"a radius below {MIN_HOLE_SHEETS:g} sheet thicknesses "
                                      f"({self.thickness_mm:g} mm), no rod fits in it; check "
                                      "hole_radius_mm and px_per_mm" + hint, path)
             if self.hole_center_px is not None:

@@ -29,9 +29,10 @@ ink_missed               ink that the scan's cut leaves out and a cut chosen  > 
 dark_marks               pixels inside the hole as dark in red and green as   > 5 %
                          the ink but not blue (another pen, pencil, a
                          shadow), in pieces of 4 h^2 or more / the ink's
-faint_ink                free band ends that a ray of 3 widths beyond them    > 0
-                         finds continued by ink bluer than halfway from the
-                         paper to the cut (faded ink the cut dropped)
+faint_ink                free band ends continued, over 80 % of a ray of 2    > 0
+                         band widths (4 h at least) past the band's cap, by
+                         ink bluer than halfway from the paper to the cut
+                         (faded ink the cut dropped)
 hole_fitted              hole found in the scan, with its confidence          confidence < 0.5
 ink_outside_hole         ink pixels outside the hole (in pieces of 20 px or   > 2 %
                          more: not a plate's noise) / all ink pixels
@@ -45,7 +46,7 @@ hole_wide                fraction of a given hole's circle that the ink       < 
                          the envelope replaces the given hole, or the         circle clears it
                          envelope where the ink lines 90 % of it
 hole_cut                 area of the hole outside the scan / the hole's area; > 0.5 %, or
-                         ink on the border where the hole overhangs it by h   >= h px
+                         ink on the border where the hole overhangs it by h   >= max(h, 2) px
 no_junction              junctions found                                      none
 junction_degree          largest junction degree (paper: degree 4 ~ 1 %)      > 6
 networks                 separate networks of ink each holding at least 10 %  > 1
@@ -57,22 +58,24 @@ specks                   free stacks (both ends free) shorter than 2 l_min    > 
 loops                    closed loops of ink touching no other stack          any, beside others
 tiny_voids               voids smaller than h^2 (an ``s_min_mm2`` below it    any
                          keeps pinholes in the ink as voids)
-widths_out_of_range      stacks wider than the calibration's widest entry     > 5 % of stacks
+widths_out_of_range      stacks more than 5 % wider than the calibration's    > 5 % of stacks
+                         widest entry
 thickness_calibration    the calibration's width of one layer / the sheet     outside [0.8, 2.5]
                          thickness h (a cut sheet's band is about h wide)
 layer_lattice            median |layers from width - final n_br|, weighted    > 0.12 layer, or
                          by stack length (h >= 3 px)                          0.75 px / h if more
-linear_system            junctions whose final counts violate conservation    > 10 % of junctions
-                         junctions repartitioned by the widths                > 25 % of junctions
+linear_system            junctions whose final counts violate conservation,   > 10 % of junctions,
+                         or junctions repartitioned by the widths             or > 25 % of them
 layer_multiple           the greatest common divisor of every stack's n_br    >= 2, on 6 stacks
                          (no single sheet anywhere: each layer read d times   or more
                          by a scale or calibration off by a factor d)
-count_width              stacks at least 4 widths long whose final n_br is a  any
-                         layer or more (0.75) from the count their own width
+count_width              stacks at least 4 widths long whose final n_br is    any
+                         0.75 layer or more from the count their own width
                          reads (``layers_est``); shorter stacks 3 layers or
                          more from it (an ink blot or smear on a stack)
 isolated_stacks          pieces of ink touching no other stack (both ends     any, beside others
-                         free) whose width reads two layers or more
+                         free) whose count is 2 or more or whose width reads
+                         1.75 layers or more
 rod_ends                 bands of an odd number of layers ending away from    > 2
                          any junction, attached at their other end (each
                          holds a rod end; a rod has two)
@@ -1098,8 +1101,8 @@ def _stack_checks(params, stacks, calibration_max_width_mm) -> list[QualityFlag]
     if calibration_max_width_mm:
         wide = int((stacks["width_mm"] > 1.05 * calibration_max_width_mm).sum())
         if _frac(wide, m) > 0.05:
-            flags.append(QualityFlag("widths_out_of_range", f"{wide} of {m} stacks are wider "
-                                     f"than the calibration's widest entry "
+            flags.append(QualityFlag("widths_out_of_range", f"{wide} of {m} stacks are more "
+                                     f"than 5 % wider than the calibration's widest entry "
                                      f"({calibration_max_width_mm:g} mm): their counts are "
                                      "extrapolated; extend the calibration", _frac(wide, m),
                                      0.05))

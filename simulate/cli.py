@@ -1,4 +1,4 @@
-"""Command line: ``python -m simulate {quench,anneal,render,validate} ...``."""
+"""Command line: ``python -m simulate {quench,anneal,render,validate,compact,benchmark} ...``."""
 from __future__ import annotations
 
 import argparse

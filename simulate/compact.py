@@ -1,7 +1,8 @@
 """Compaction of a rod of finite thickness by a shrinking hard wall: the ``compact`` subcommand.
 
 ``python -m simulate compact --epsilon E [--segments N] [--thickness H] [--n-configs K]
-[--seed S] [--noise D] [--contact-distance DELTA] [--workers W] [--scheduler ADDR] --out DIR``
+[--seed S] [--noise D] [--contact-distance DELTA] [--wall-rate RATE] [--max-iter M] [--workers W]
+[--scheduler ADDR] [--progress | --no-progress] --out DIR``
 
 The quench (:mod:`simulate.ensemble`) confines an infinitely thin rod by a soft quadratic
 potential and reaches epsilon ~ 2-4; the experiments of the paper ("Statistical distributions

@@ -31,8 +31,8 @@ on the number of workers. Every finished configuration is written atomically to
 are assembled from the parts at the end.
 
 Measured, the paper's ensemble (``quench --n-configs 250 --lambda 7e5 --noise 750 --segments
-300 --seed 1 --workers 2``, powell, tangent coordinates): 307 s wall on 2 cores, 607 CPU-s
-(docs/validation/simulator/README.md, "Quench speed"); <Rg> = 0.057, <eps> = 2.85
+300 --seed 1 --workers 2``, powell, tangent coordinates): its time on 2 cores is in README.md
+("Speed") and docs/validation/README.md; <Rg> = 0.057, <eps> = 2.85
 (1/(2 pi Rg)) or 2.02 (sqrt(2) Rg reading; paper 2.3), <N_br>/<N_l> = 21.2/14.0 = 1.5 (paper ~20/~10), <sqrt(s)/p> =
 0.20 (paper 0.19), <E> = 4139 = 1837 bending + 2302 confinement (paper 4300); Gamma shapes:
 total energy 31 (paper 61), branch energy 0.62 (0.31), branch length 1.26 (0.4).

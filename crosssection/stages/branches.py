@@ -70,7 +70,8 @@ def bending_energy(kappa_per_mm, s_mm, *, rod_length_mm, kappa_c_per_mm=None,
     s_mm : array (n,)
         Arc length of the samples, mm (increasing).
     rod_length_mm : float
-        Total rod length L, mm (the pipeline uses L = sum of n_br * length over stacks).
+        Rod length L, mm (the pipeline's ``rod_length_used_mm``: the given
+        ``rod_length_mm``, else the measured sum of n_br * length over stacks).
     kappa_c_per_mm : float, optional
         Plastic threshold (paper: 0.54 or 0.24 1/mm depending on the sheets).
     noise_var_per_mm2 : float

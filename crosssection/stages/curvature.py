@@ -65,8 +65,8 @@ fit on size 5 n_br h, after coordinates translation and rotation in the tangent 
    generator's scenes turn by at most 1.48 rad (``benchmarks/zone_turns.py``); a trend
    continued from a skeleton's hook into a wide junction blob of a compacted render turned
    4-8.5 rad, a loop the image would show, and carried up to 42 % of its measured energy.
-   Free ends keep the paper's rule (their skeleton is shortened, not merged). Everywhere the curvature is
-   bounded by ``2 / (n_br h)``: the innermost layer of a stack cannot have a negative radius,
+   Free ends keep the paper's rule (their skeleton is shortened, not merged). With the
+   ``walls`` and ``missing`` methods the curvature is bounded by ``2 / (n_br h)``: the innermost layer of a stack cannot have a negative radius,
    so a tighter estimate is a skeleton kink, not a bend. A stack at a junction shorter than
    twice ``max(2 r, r_Ja + r_Jb)`` (r its median inscribed radius, r_J the inscribed radius
    at each junction end, 0 at a free end) has no sample outside its forks' hooks (each one

@@ -3,11 +3,13 @@
 Three kinds of input folders are detected automatically:
 
 - a simulation ensemble (``configs.csv`` + ``branches.csv`` + ``voids.csv``, from
-  ``python -m simulate quench``): lengths already in units of L, one set;
+  ``python -m simulate quench``, ``anneal`` or ``compact``): lengths already in units of L,
+  one set;
 - a single ``analyze`` output (``summary.json`` + the schema tables): one configuration;
 - a batch output (``index.csv``, ``batch.json`` and/or per-image folders
-  ``<set>/<stem>/summary.json``): the set is the first folder level under the batch root (or
-  the folder name when images sit directly under it). The ``truth/`` folder of a generated
+  ``<set>/<stem>/summary.json``): the set is the one ``index.csv`` records for each image,
+  else its summary's ``batch.set``, else its first folder level under the batch root (the
+  folder name when images sit directly under it; :func:`load_batch`). The ``truth/`` folder of a generated
   scene (beside its ``params.json``, :mod:`crosssection.truth.scene`) holds the same tables
   but is no analysis; a folder of scans is refused (``foldstat batch`` reads those).
 
@@ -98,7 +100,7 @@ S_MIN_MM2 = AnalysisParams().s_min_used_mm2
 #: default of the loaders' ``l_min_mm`` and ``s_min_mm2``: the limits each scan's analysis
 #: recorded in its summary.json
 RECORDED = "recorded"
-SIM_REGION = "none"  # simulations have no wall: no bulk/periphery split (paper, "Two sub-systems")
+SIM_REGION = "none"  # quench and anneal have no wall: no bulk/periphery split (paper, "Two sub-systems"); compact writes its own regions
 TEXT_COLS = {"set", "config_id", "region", "source", "quality", "input", "analysis",
              "batch_note", "table_note"}
 ID_COLS = ("set", "config_id")

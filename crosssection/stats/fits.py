@@ -1265,7 +1265,8 @@ def fit_all(x, families=PAPER_FAMILIES, *, truncation=None, seed=0, n_boot: int 
         One key of :data:`FAMILIES` or several (default: the paper's five laws).
     truncation : float or array_like, optional
         Detection limit (a finite scalar or one per observation).
-    seed : int
+    seed : int, numpy.random.SeedSequence or None
+        As for :func:`fit_family`.
     n_boot, gof, n_mc, ci_level
         See :func:`fit_family`.
     select_from : str or sequence of str, optional
@@ -1405,7 +1406,8 @@ def truncation_bias(x, truncation, families=("exponential", "gamma", "lognormal"
     families : str or sequence of str
     n_boot : int
         Bootstrap resamples for intervals of the truncated fit (0: none).
-    seed : int
+    seed : int, numpy.random.SeedSequence or None
+        As for :func:`fit_family`.
 
     Returns
     -------

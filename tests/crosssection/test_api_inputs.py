@@ -113,7 +113,7 @@ def test_write_needs_a_path(result):
 
 
 def test_a_hole_too_small_for_a_rod_is_a_parameter_error(scan):
-    with pytest.raises(ParameterError, match="narrower than 5 sheet thicknesses"):
+    with pytest.raises(ParameterError, match="a radius below 5 sheet thicknesses"):
         cs.analyze(scan, **KW, hole_radius_mm=0.01, hole_center_px=(200.0, 200.0))
 
 
