@@ -11,6 +11,7 @@ function, the fraction of stacks at each k against the fitted law's mass at k.
 from __future__ import annotations
 
 import errno
+import functools
 import html
 import json
 import os
@@ -142,6 +143,17 @@ def _log_labels_fit(ticks, lo: float, hi: float, length_px: float, sizes) -> boo
     return bool(np.all(np.diff(pos) >= (size[1:] + size[:-1]) / 2 + gap))
 
 
+@functools.lru_cache(maxsize=4096)
+def _label_extent(text: str, prop) -> tuple[float, float]:
+    """(width, height) in points of a tick label's outline: measured once per text and font
+    (a mathtext outline takes about a millisecond, and every draw of every log axis asks
+    for the same few labels)."""
+    from matplotlib.textpath import TextPath
+
+    ext = TextPath((0, 0), text, prop=prop).get_extents()
+    return float(ext.width), float(ext.height)
+
+
 def _labelled_log_locator():
     """A matplotlib locator of the labelled (major) ticks of a log axis: the densest
     candidate of :data:`LOG_LABEL_SUBS`, then every 2nd, 3rd... power of ten, whose labels
@@ -152,7 +164,6 @@ def _labelled_log_locator():
     nor its span is known when the ticks are set up, and no fixed rule suits every span and
     width (labels at 1, 2 and 5 over two decades need a panel about six inches wide).
     """
-    from matplotlib.textpath import TextPath
     from matplotlib.ticker import Locator
 
     class LabelledLogLocator(Locator):
@@ -169,12 +180,17 @@ def _labelled_log_locator():
             prop = self.axis.majorTicks[0].label1.get_fontproperties()
             px = ax.figure.dpi / 72.0  # points to pixels
 
+            em = prop.get_size_in_points() * px
+
             def sizes(values):
-                ext = [TextPath((0, 0), _power_label(v), prop=prop).get_extents()
-                       for v in values]
-                size = np.array([e.width * LOG_LABEL_WIDTH_MARGIN if along_x else e.height
-                                 for e in ext])
-                return size * px, LOG_LABEL_GAP_EM * prop.get_size_in_points() * px
+                if len(values) * (1.0 + LOG_LABEL_GAP_EM) * em > length_px:
+                    # more labels than fit at one em each (a view of many decades): the
+                    # outlines need not be measured
+                    return np.full(len(values), length_px), LOG_LABEL_GAP_EM * em
+                ext = [_label_extent(_power_label(v), prop) for v in values]
+                size = np.array([w * LOG_LABEL_WIDTH_MARGIN if along_x else h
+                                 for w, h in ext])
+                return size * px, LOG_LABEL_GAP_EM * em
 
             decades = np.log10(hi / lo)
             # densest first; at one label per decade, the mantissa that puts the most labels
