@@ -3,8 +3,9 @@
 Figures follow the paper's style: probability densities in linear and logarithmic scales, one
 panel row per sub-system (all branches, bulk, periphery), every set overlaid in its own colour
 (the same colour in every figure, :func:`set_colors`). The data are points with counting
-error bars, sqrt(count) / (n * bin width); the selected law is a line with its 95 % bootstrap
-band (the pointwise 2.5-97.5 % quantiles of the law over the bootstrap replicates of its
+error bars, sqrt(count) / (n * bin width), the count's Poisson error in whole stacks where
+branches repeat their stack's value (:func:`_bin_errors`); the selected law is a line with its
+95 % bootstrap band (the pointwise 2.5-97.5 % quantiles of the law over the bootstrap replicates of its
 parameters). The number of branches per stack is an integer: it is drawn as a probability mass
 function, the fraction of stacks at each k against the fitted law's mass at k.
 """
@@ -32,7 +33,7 @@ from crosssection.core.fileio import (BROWSER_FILES, clear_stale_folders, exclus
                                       write_json, write_text)
 from crosssection.stats import fits as F
 from crosssection.stats.families import FAMILIES
-from crosssection.stats.data import REPORT_TABLES, Ensemble
+from crosssection.stats.data import REPORT_TABLES, Ensemble, branch_groups
 from crosssection.stats.tables import (CORRELATION_MIN_PAIRS, COUNT_COLUMNS, COUNT_QUANTITIES,
                                        EQ12_CONST, N_RELATION_MIN, PAPER_DOF, PAPER_MACRO,
                                        PAPER_MICRO, QUANTITIES, StatsOptions, StatsResult,
@@ -420,7 +421,34 @@ def _sample(ens: Ensemble, set_name, reg, quantity, summ):
         cut = float(np.nanmean(c[ok]))
         span = (float(np.nanmin(c[ok])), float(np.nanmax(c[ok])))
         ok &= x >= c
-    return x[ok], cut, span
+    groups = (branch_groups(df) if table == "branches"
+              else np.full(len(df), None, dtype=object))
+    return x[ok], cut, span, groups[ok]
+
+
+def _bin_errors(bins: np.ndarray, groups, n_bins: int) -> np.ndarray:
+    """Counting error of each bin, sqrt(sum over its groups of their count squared): the
+    branches of one stack repeat its value and fall in one bin together, so a bin's count
+    varies by whole stacks (Poisson in the stacks); a value without a group counts alone,
+    which is sqrt(count).
+
+    Parameters
+    ----------
+    bins : (n,) int array
+        The bin of each value (-1: none).
+    groups : (n,) object array
+        Group labels (:func:`~crosssection.stats.data.branch_groups`; None: its own group).
+    n_bins : int
+    """
+    keep = bins >= 0
+    labels = [g if g is not None else ("own", i) for i, g in enumerate(groups)]
+    codes = pd.factorize(pd.Series(labels, dtype=object))[0]
+    pairs = pd.DataFrame({"bin": bins[keep], "group": codes[keep]})
+    sizes = pairs.groupby(["bin", "group"]).size()
+    var = (sizes.astype(float) ** 2).groupby(level=0).sum()
+    out = np.zeros(n_bins)
+    out[var.index.to_numpy(int)] = var.to_numpy()
+    return np.sqrt(out)
 
 
 def _limits_label(name: str, span) -> str:
@@ -439,7 +467,8 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
     One panel row per sub-system (whole system, bulk, periphery when present), linear and
     logarithmic density scales side by side. Points: fraction per unit of the quantity in
     :func:`bin_edges` bins (their number follows the number of values), with counting error
-    bars sqrt(count) / (n * bin width); line: the selected law, shaded: its 95 % bootstrap
+    bars sqrt(count) / (n * bin width), counted in stacks where branches repeat their stack's
+    value (:func:`_bin_errors`); line: the selected law, shaded: its 95 % bootstrap
     band. For counts (``n_br``) the points are the fraction of stacks at each integer and the
     line the law's probability mass there. A set of ``sets`` without a fit (too few values, or
     all equal) is named in the legend of each row it is missing from.
@@ -480,7 +509,7 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
             summ = res.summaries.get((s, reg, quantity))
             if summ is None:
                 continue
-            x, cut, span = _sample(ens, s, reg, quantity, summ)
+            x, cut, span, groups = _sample(ens, s, reg, quantity, summ)
             if x.size == 0:
                 continue
             x_min = min(x_min, float(x.min()))
@@ -491,6 +520,7 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
                 if count:
                     ks = np.arange(max(1, int(x.min())), int(x.max()) + 1)
                     cnt = np.array([(x == k).sum() for k in ks], float)
+                    bins = np.round(x).astype(int) - int(ks[0])
                     mids, width = ks.astype(float), np.ones(ks.size)
                     grid = np.arange(1, int(x.max()) + 3, dtype=float)
                 else:
@@ -501,13 +531,17 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
                         edges = bin_edges(x)
                     cnt, edges = np.histogram(x, bins=edges)
                     cnt = cnt.astype(float)
+                    # np.histogram's bins: the last one closed on the right
+                    bins = np.clip(np.searchsorted(edges, x, side="right") - 1, -1,
+                                   len(cnt) - 1)
+                    bins[(x < edges[0]) | (x > edges[-1])] = -1
                     width = np.diff(edges)
                     mids = (np.sqrt(edges[1:] * edges[:-1]) if ax.get_xscale() == "log"
                             else (edges[1:] + edges[:-1]) / 2)
                     grid = (np.geomspace(edges[0], edges[-1], 300) if ax.get_xscale() == "log"
                             else np.linspace(edges[0], edges[-1], 300))
                 h = cnt / (n * width)
-                err = np.sqrt(cnt) / (n * width)
+                err = _bin_errors(bins, groups, cnt.size) / (n * width)
                 # an empty bin is a measured zero: drawn on the linear panel (a small sample
                 # has many), left out only where a log axis cannot show it
                 k = cnt > 0 if logscale else np.ones(cnt.size, bool)
@@ -1414,7 +1448,8 @@ def _pdf_caption(q: str) -> str:
                 f"against the selected law's probability mass at each integer (open squares) "
                 f"with its 95 % bootstrap band, one colour per set, one row per sub-system.")
     return (f"Probability density of the {WORDS[q]} (points, counting error bars "
-            f"sqrt(count)/(n bin width)) with the selected law (line) and its 95 % bootstrap "
+            f"sqrt(count)/(n bin width), with count squared summed over the stacks where a "
+            f"stack's branches share its value) with the selected law (line) and its 95 % bootstrap "
             f"band, one colour per set, one row per sub-system, linear (left) and logarithmic "
             f"(right) density scales, the right panel's x axis logarithmic too where the "
             f"values span more than a decade (its title says which)" + ("; dotted: detection limit, below which the fit is truncated "

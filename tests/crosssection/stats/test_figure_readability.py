@@ -152,3 +152,18 @@ def test_coinciding_n_br_lines_of_two_sets_alternate_their_dashes():
     assert list(c_seq) == list(d_seq) and c_off != d_off
     # each colour's dashes fall in the other's gaps
     assert abs(c_off - d_off) == c_seq[0] and c_seq[1] == c_seq[0]
+
+
+def test_bin_errors_count_whole_stacks():
+    from crosssection.stats.report import _bin_errors
+
+    bins = np.array([0, 0, 0, 1, 1, -1])
+    # three branches of one stack in bin 0; two lone values in bin 1; one value outside
+    groups = np.full(6, None, dtype=object)
+    for i in range(3):
+        groups[i] = ("s", "c", 1.0)
+    err = _bin_errors(bins, groups, 2)
+    assert err == pytest.approx([3.0, np.sqrt(2.0)])
+    # without groups: sqrt(count)
+    assert _bin_errors(bins, np.full(6, None, dtype=object), 2) == pytest.approx(
+        [np.sqrt(3.0), np.sqrt(2.0)])
