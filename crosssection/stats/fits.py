@@ -1108,22 +1108,8 @@ def goodness_of_fit(x, family: str, params: dict, *, truncation=None, n_mc: int 
                 # its loop: the procedure below skips such resamples instead
                 pass
         stat0 = anderson_darling(fam.pit(params, x, c))
-        theta_hat = fam.theta(params)
-        null = np.full(n_mc, np.nan)
-        for i in range(n_mc):
-            xs = fam.sample(params, x.size, c, rng)
-            if not np.all(np.isfinite(xs)) or no_spread(xs):
-                continue
-            try:
-                th, _ = fam.fit(xs, c, theta_hat)
-            except _FIT_ERRORS:
-                continue
-            null[i] = anderson_darling(fam.pit(fam.params(th, xs, c), xs, c))
-    null = null[np.isfinite(null)]
-    if null.size == 0:
-        return GoodnessOfFit(stat0, float("nan"), 0)
-    return GoodnessOfFit(stat0, float((np.sum(null >= stat0) + 1) / (null.size + 1)),
-                         int(null.size))
+        null = _null_statistics(fam, params, n_mc, rng, np.ones(x.size, np.int64), c, c)
+    return _mc_pvalue(stat0, null)
 
 
 def _group_design(c, g):
@@ -1147,18 +1133,30 @@ def _gof_grouped(x, c, g, fam, params, n_mc, rng) -> GoodnessOfFit:
     with np.errstate(all="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         stat0 = anderson_darling(fam.pit(params, x, c))
-        theta_hat = fam.theta(params)
-        null = np.full(n_mc, np.nan)
-        for i in range(n_mc):
-            xs = np.repeat(fam.sample(params, sizes.size, gcut, rng), sizes)
-            if not np.all(np.isfinite(xs)) or no_spread(xs):
-                continue
-            try:
-                th, _ = fam.fit(xs, cut_rep, theta_hat)
-            except _FIT_ERRORS:
-                continue
-            null[i] = anderson_darling(fam.pit(fam.params(th, xs, cut_rep), xs, cut_rep))
+        null = _null_statistics(fam, params, n_mc, rng, sizes, gcut, cut_rep)
     return _mc_pvalue(stat0, null)
+
+
+def _null_statistics(fam, params, n_mc, rng, sizes, draw_cuts, fit_cuts) -> np.ndarray:
+    """Anderson-Darling statistics of ``n_mc`` samples of the law ``params``, each refitted:
+    one value drawn per group (truncated at ``draw_cuts``), repeated by the group's
+    ``sizes`` (all 1: independent observations), refitted with the observations' cuts
+    ``fit_cuts``; NaN where a sample cannot be refitted."""
+    theta_hat = fam.theta(params)
+    alone = bool(np.all(sizes == 1))
+    null = np.full(n_mc, np.nan)
+    for i in range(n_mc):
+        xs = fam.sample(params, sizes.size, draw_cuts, rng)
+        if not alone:
+            xs = np.repeat(xs, sizes)
+        if not np.all(np.isfinite(xs)) or no_spread(xs):
+            continue
+        try:
+            th, _ = fam.fit(xs, fit_cuts, theta_hat)
+        except _FIT_ERRORS:
+            continue
+        null[i] = anderson_darling(fam.pit(fam.params(th, xs, fit_cuts), xs, fit_cuts))
+    return null
 
 
 def _mc_pvalue(stat0: float, null) -> GoodnessOfFit:
