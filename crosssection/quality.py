@@ -355,6 +355,14 @@ class QualityFlag:
         return CHECK_WARNINGS.get(self.code, QualityWarning)
 
 
+def _short_of(value: float, limit: float) -> str:
+    """``value`` with the fewest decimals (two at least) that print it below ``limit``."""
+    digits = 2
+    while digits < 6 and round(value, digits) >= limit:
+        digits += 1
+    return f"{value:.{digits}f}"
+
+
 def _frac(num, den) -> float:
     return float(num) / float(den) if den else 0.0
 
@@ -611,7 +619,7 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
             "one axis (rescan, or resample the image to square pixels)",
             value=x / y - 1.0, limit=0.01))
     if h_px < LOW_RESOLUTION_H_PX:
-        flags.append(QualityFlag("low_resolution", f"sheet thickness is {h_px:.2f} px "
+        flags.append(QualityFlag("low_resolution", f"sheet thickness is {_short_of(h_px, LOW_RESOLUTION_H_PX)} px "
                                  f"(< {LOW_RESOLUTION_H_PX:g} px): layer counts from widths and "
                                  "bending energies are unreliable (check px_per_mm and "
                                  "thickness_mm; scan at a resolution that makes h 3 px or more)",

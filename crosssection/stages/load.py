@@ -149,8 +149,10 @@ def _float_to_uint16(a: np.ndarray, path=None) -> np.ndarray:
         out[r:r + rows] = c
     if lo < 0 or hi > 1:
         # repr: a value a rounding above 1 prints as 1 with :g
-        hint = (" (values up to 255 are an 8-bit image in floats: divide by 255, or convert "
-                "with astype(numpy.uint8))" if lo >= 0 and hi <= 255 else "")
+        fix = ("save it as 8-bit integers, or as floats divided by 255" if path is not None
+               else "divide by 255, or convert with astype(numpy.uint8)")
+        hint = (f" (values up to 255 are an 8-bit image in floats: {fix})"
+                if lo >= 0 and hi <= 255 else "")
         raise ImageError(f"float image values {lo!r}..{hi!r}: they must lie in [0, 1]{hint}",
                          path)
     return out

@@ -836,20 +836,21 @@ def _marks_of_another_colour(rgb, reg, scale) -> tuple[str, str]:
                     "on red and green tells marks from it; give the hole (--hole-radius-mm, "
                     "--hole-center-px) or crop the scan to it"), ""
     rg_cut, level, surface = _rule_cut(px, ink, paper, float(nearest[:2].max()), by_low=light)
+    # marks bright in red (or green) alone turn into ink that is blue by as much; red marks
+    # are what blue ink looks like in an array in OpenCV's BGR order
+    k = int(np.argmax(ink))
+    swap = (f"; swapping the scan's {('red', 'green')[k]} and blue channels makes them "
+            "blue ink" + (" (an array in OpenCV's BGR order reads so)" if k == 0 else "")
+            if k < 2 and ink[k] - np.delete(ink, k).max() >= OTHER_MARKS_CONTRAST_U8 else "")
     if rg_cut is None:
         options = ""
-        # marks bright in red (or green) alone turn into ink that is blue by as much
-        k = int(np.argmax(ink))
-        swap = (f"; swapping the scan's {('red', 'green')[k]} and blue channels makes them "
-                "blue ink" if k < 2 and ink[k] - np.delete(ink, k).max()
-                >= OTHER_MARKS_CONTRAST_U8 else "")
         what = ("the lighter surfaces around them" if surface
                 else "the plate" if nearest is not paper else "the paper")
         recipe = (f", and no bound on red and green tells them from {what} (the larger of red "
                   f"and green: {ink[:2].max():.0f} on the marks, {level:.0f} there)" + swap)
     else:
         options = f"--threshold-method fixed --blue-min 0 --rg-max {rg_cut * scale:.0f}"
-        recipe = "; to read them with the paper's rule without its blue bound: " + options
+        recipe = swap + "; to read them with the paper's rule without its blue bound: " + options
     spread = float(ink.max() - ink.min())
     # a dark colour spreads its channels little in grey levels, not in proportion
     if spread < NEUTRAL_SPREAD_U8 and spread < NEUTRAL_SATURATION * max(float(ink.max()), 1.0):

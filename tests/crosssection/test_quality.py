@@ -61,6 +61,11 @@ def test_low_resolution_is_flagged():
     assert any(issubclass(w.category, quality.ResolutionWarning) for w in caught)
 
 
+@pytest.mark.parametrize("h_px, shown", [(2.5, "2.50"), (2.998, "2.998"), (2.99999, "2.99999")])
+def test_a_thickness_just_below_the_limit_prints_below_it(h_px, shown):
+    assert quality._short_of(h_px, 3.0) == shown
+
+
 @pytest.mark.parametrize("seed", [1000, 1006])
 def test_a_bluish_plate_is_no_ink_outside_the_hole(seed):
     # the scan's noise puts scattered pixels of a bluish plate through the ink's cut (5 % of

@@ -332,6 +332,9 @@ def test_bright_red_marks_are_named_with_a_cut_that_reads_them(seed, receding, i
     assert "marks are red" in res.note and "faint" not in res.note
     assert res.options.startswith("--threshold-method fixed --blue-min 0 --rg-max ")
     assert res.note.endswith(res.options)
+    # red marks are also what blue ink is in an array in OpenCV's BGR order
+    assert ("swapping the scan's red and blue channels makes them blue ink (an array in "
+            "OpenCV's BGR order reads so)" in res.note)
     cut = int(res.options.rsplit(" ", 1)[1])
     fixed = threshold_rgb(rgb, method="fixed", blue_min=0, rg_max=cut).mask
     assert np.count_nonzero(fixed & truth) > 0.9 * np.count_nonzero(truth)
