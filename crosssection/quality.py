@@ -41,10 +41,12 @@ hole_crossed             fraction of a given hole's circle beyond which ink   > 
                          found in the scan replaces it                        frames the ink
 hole_wide                fraction of a given hole's circle that the ink       < 10 %, where the
                          reaches within 2 h, where its envelope, a circle     envelope is reached
-                         2 h or more inside, is reached (the rod pressed      on 50 %; a plate's
-                         against a smaller wall); a plate's edge found at     edge at the given
-                         the envelope replaces the given hole, or the         circle clears it
-                         envelope where the ink lines 90 % of it
+                         2 h or more inside, is reached (the rod pressed      on 50 %; < 50 %,
+                         against a smaller wall); a plate's edge found at     where the ink lines
+                         the envelope replaces the given hole, or the         90 % of it; a
+                         envelope where the ink lines 90 % of it              plate's edge at the
+                                                                              given circle clears
+                                                                              it
 hole_cut                 area of the hole outside the scan / the hole's area; > 0.5 %, or
                          ink on the border where the hole overhangs it by h   >= max(h, 2) px
 no_junction              junctions found                                      none
@@ -447,7 +449,7 @@ def _crossed_check(params, hole) -> list[QualityFlag]:
 
 def _wide_check(params, hole) -> list[QualityFlag]:
     """The ``hole_wide`` check: a given hole wider than the wall the ink is pressed against."""
-    from crosssection.stages.hole import WIDE_REACH_MAX
+    from crosssection.stages.hole import WIDE_LINED_REACH_MAX, WIDE_REACH_MAX
 
     env = getattr(hole, "envelope", None)
     if env is None:
@@ -467,7 +469,9 @@ def _wide_check(params, hole) -> list[QualityFlag]:
         msg = (f"{head}: a hole given too large reads the stacks along the wall as bulk and "
                "epsilon low; check hole_radius_mm and hole_center_px (and px_per_mm), or "
                "leave them out to find the hole")
-    return [QualityFlag("hole_wide", msg, reach, WIDE_REACH_MAX)]
+    # the limit of the rule that fired: reached nowhere, or short of half where lined
+    limit = WIDE_REACH_MAX if reach < WIDE_REACH_MAX else WIDE_LINED_REACH_MAX
+    return [QualityFlag("hole_wide", msg, reach, limit)]
 
 
 #: one-layer widths (sheet thicknesses) beyond which the width law read from a scan names

@@ -549,6 +549,8 @@ WIDE_ENVELOPE_MIN = 0.5
 #: An envelope the ink reaches on this fraction of it is the wall itself (the wall band lines
 #: it all round): it replaces a given hole too wide where no plate's edge is found.
 WIDE_LINED_MIN = 0.9
+#: ... while the ink reaches the given circle on less than this fraction of it.
+WIDE_LINED_REACH_MAX = 0.5
 
 
 def wide_tolerance_px(thickness_px: float) -> float:
@@ -594,7 +596,7 @@ def given_hole_wide(mask, hole, *, thickness_px: float):
         return None
     within = wide_tolerance_px(thickness_px)
     reach = _envelope_confidence(pts, hole, within)
-    if reach >= 0.5:
+    if reach >= WIDE_LINED_REACH_MAX:
         return None  # the ink lines the given circle (1.0 on every right hole measured)
     try:
         env = _fit_points(pts, None, None, None, None)

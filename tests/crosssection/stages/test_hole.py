@@ -541,6 +541,9 @@ def test_a_radius_given_alone_too_wide_is_replaced_by_the_lined_envelope():
         warnings.simplefilter("always")
         wide = analyze(scan, hole_radius_mm=8.5, **kw)
     assert "hole_wide" in wide.summary["quality"]["codes"]
+    # the flag records the limit of the rule that fired: its value lies beyond it
+    flag = next(f for f in wide.quality if f.code == "hole_wide")
+    assert flag.value < flag.limit == 0.5
     assert wide.hole.replaced
     assert wide.hole.radius_px == pytest.approx(exact.hole.radius_px, abs=1.0)
     assert wide.summary["epsilon"] == pytest.approx(exact.summary["epsilon"], rel=0.005)
