@@ -83,7 +83,8 @@ rod_ends                 bands of an odd number of layers ending away from    > 
                          holds a rod end; a rod has two)
 junction_blot            radius of the ink disc inscribed at a junction /     > 2 at any junction
                          half the width of its widest stack (an ink blot
-                         over a junction)
+                         over a junction, or a void below s_min filled
+                         there: named when 4 h^2 of paper was filled)
 =======================  ===================================================  ====================
 
 The ``linear_system`` check reads ``junctions.csv``: a violation is a junction whose final
@@ -508,7 +509,7 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
            junctions, image_shape=None, file_px_per_mm=None,
            file_pages=1, network_shares=None, border_ink_rc=None,
            ink_missed_fraction=0.0, width_law=None,
-           junction_radius_px=None, see_through=None,
+           junction_radius_px=None, junction_filled_px=None, see_through=None,
            file_dpi_xy=None, faint_ends=None,
            calibration_one_layer_mm=None, void_areas_mm2=None,
            dark_marks_fraction=0.0) -> list[QualityFlag]:
@@ -717,7 +718,8 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
         flags += _lattice_check(stacks, h_px)
     flags += _linear_system_checks(junctions)
     if junction_radius_px is not None:
-        flags += _blot_check(junction_radius_px, junctions, stacks, params.px_per_mm)
+        flags += _blot_check(junction_radius_px, junctions, stacks, params,
+                             filled_px=junction_filled_px)
     return flags
 
 
@@ -753,6 +755,9 @@ def _see_through_check(see_through, hole) -> list[QualityFlag]:
 #: a void, where the cleaning drops it (rod within 0.4 %) (``python
 #: benchmarks/junction_blots.py``).
 JUNCTION_BLOT_RATIO = 2.0
+#: ``junction_blot``: paper filled by the cleaning inside the junction's ink disc, in h^2,
+#: from which the message names a void below s_min rather than a blot (pinholes fill less)
+FILLED_VOID_H2 = 4.0
 
 
 def junction_blot_ratios(radius_px, junctions, stacks, px_per_mm) -> np.ndarray:
@@ -782,20 +787,29 @@ def junction_blot_ratios(radius_px, junctions, stacks, px_per_mm) -> np.ndarray:
         return radius_px / half
 
 
-def _blot_check(radius_px, junctions, stacks, px_per_mm) -> list[QualityFlag]:
+def _blot_check(radius_px, junctions, stacks, params, filled_px=None) -> list[QualityFlag]:
     radius_px = np.asarray(radius_px, float)
-    ratio = junction_blot_ratios(radius_px, junctions, stacks, px_per_mm)
+    ratio = junction_blot_ratios(radius_px, junctions, stacks, params.px_per_mm)
     bad = np.flatnonzero(np.isfinite(ratio) & (ratio > JUNCTION_BLOT_RATIO))
     if not len(bad):
         return []
     i = bad[np.argmax(ratio[bad])]
     at = junctions.iloc[i]
+    cause = "an ink blot over a junction hides how its layers pass"
+    # paper the cleaning filled there, beyond pinholes: a void below s_min, closed by the
+    # paper's rule, whose junctions merge into one ink disc
+    filled = 0.0 if filled_px is None else float(np.asarray(filled_px, float)[i])
+    if filled >= FILLED_VOID_H2 * params.thickness_px ** 2:
+        cause = (f"a void of {params.scale.area_to_mm2(filled):.2f} mm^2 or more there, below "
+                 f"s_min = {params.s_min_used_mm2:.3g} mm^2, was filled (the paper's rule) and its "
+                 "junctions merged into one; lower s_min_mm2 if the scan shows a void there, "
+                 "or an ink blot hides how the layers pass")
     return [QualityFlag("junction_blot", f"{len(bad)} junction(s) sit in ink wider than their "
                         f"widest stack by more than {JUNCTION_BLOT_RATIO:g} times (at x "
                         f"{float(at['x_px']):.0f}, y {float(at['y_px']):.0f} px: an ink disc of "
                         f"radius {radius_px[i]:.0f} px, {ratio[i]:.1f} times the widest stack's "
-                        "half width): an ink blot over a junction hides how its layers pass; "
-                        "check the overlay", float(ratio[i]), JUNCTION_BLOT_RATIO)]
+                        f"half width): {cause}; check the overlay", float(ratio[i]),
+                        JUNCTION_BLOT_RATIO)]
 
 
 #: ``networks``: a separate network of ink counts when it holds this share of the rod or more

@@ -769,6 +769,21 @@ def test_an_ink_blot_over_a_junction_is_flagged(scene, radius_mm):
     assert "junction_blot" in res.summary["quality"]["codes"]
 
 
+def test_a_void_below_s_min_filled_at_a_junction_is_named_not_blamed_on_a_blot():
+    """Three thin bands around a void smaller than s_min: the cleaning fills it (the paper's
+    rule) and its junctions merge into one wide ink disc; the flag names the filled void and
+    s_min, not an ink blot."""
+    sc = make_scene(seed=22, n_stacks=30, max_layers=4)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        smallest = float(crosssection.analyze(sc.rgb, **_given(sc)).voids["area_mm2"].min())
+    res, caught = _analyze(sc.rgb, **_given(sc, s_min_mm2=1.05 * smallest))
+    flag = next(f for f in res.quality if f.code == "junction_blot")
+    assert flag.value > quality.JUNCTION_BLOT_RATIO
+    assert f"below s_min = {1.05 * smallest:.3g} mm^2, was filled" in flag.message
+    assert any("was filled" in str(w.message) for w in caught)
+
+
 def test_a_scan_partly_transparent_inside_the_hole_is_flagged(scene):
     rgba = np.dstack([scene.rgb, np.full(scene.rgb.shape[:2], 255, np.uint8)])
     p = scene.params
