@@ -119,7 +119,7 @@ from crosssection.core import provenance, schema
 from crosssection.core.errors import (ConfigError, FoldstatError, ImageError, OutputError,
                                       ParameterError, output_error, printable)
 from crosssection.core.fileio import (BROWSER_FILES, PARTIAL_TAG, check_out, clear_stale_folders,
-                                      exclusive_lock,
+                                      exclusive_lock, lock_holds,
                                       is_working_folder, missing_file_reason, read_json_object,
                                       special_file_reason, staging_folder, swap_in_folder,
                                       temporary_files, write_csv, write_json)
@@ -164,6 +164,7 @@ class ImageTask:
     figure: bool = True
     error: str | None = None
     compile_lock: str | None = None  # shared by the local workers (compiling_in_turn)
+    run_token: str | None = None  # the batch's lock token: results are kept while it holds
 
 
 # --------------------------------------------------------------------------- discovery
@@ -693,6 +694,11 @@ def process_image(task: ImageTask) -> dict:
             info["peak_rss_mb"] = _peak_rss_mb()  # kept for the index of a re-run
             summary["batch"] = info
             write_json(summary_path, summary)
+            if not lock_holds(_out_root(task) / LOCK_FILE, task.run_token):
+                # the batch stopped (or another took the folder) while this task ran on a
+                # cluster's worker: its index says pending, and a re-run may be writing here
+                return _row(task, "failed", reason="the batch stopped before this scan's "
+                            "results were written: not kept", wall_s=time.perf_counter() - t0)
             # the complete folder takes the place of an old one (other parameters)
             swap_in_folder(staging, final)
         except OutputError:
@@ -712,6 +718,14 @@ def process_image(task: ImageTask) -> dict:
     finally:
         if staging is not None:
             shutil.rmtree(staging, ignore_errors=True)
+
+
+def _out_root(task: ImageTask) -> Path:
+    """The batch's output folder of ``task``: its ``out_dir`` less the ``out_rel`` parts."""
+    root = Path(task.out_dir)
+    for _ in Path(task.out_rel).parts:
+        root = root.parent
+    return root
 
 
 def input_record(task: ImageTask) -> dict:
@@ -1040,6 +1054,12 @@ def batch_lock(out: Path):
     out : Path
         The output folder (existing).
 
+    Yields
+    ------
+    str or None
+        The run's token (:func:`~crosssection.core.fileio.lock_holds`): each task keeps its
+        results only while the lock file holds it.
+
     Raises
     ------
     ParameterError
@@ -1053,8 +1073,8 @@ def batch_lock(out: Path):
                       BatchWarning, stacklevel=4)
 
     with exclusive_lock(out / LOCK_FILE, where=out, busy="another batch is writing into it",
-                        unlocked=unlocked):
-        yield
+                        unlocked=unlocked) as token:
+        yield token
 
 
 def clear_leftovers(out: Path, tasks) -> None:
@@ -1208,7 +1228,7 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
     held = ExitStack()  # the batch's lock on out, to the end of the run
     try:
         out.mkdir(parents=True, exist_ok=True)
-        held.enter_context(batch_lock(out))
+        token = held.enter_context(batch_lock(out))
         # this batch alone writes into out now: what killed runs left there can go
         clear_leftovers(out, tasks)
         stale = stale_outputs(out, tasks)
@@ -1227,7 +1247,7 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
             if done is not None:
                 rows[t.rel] = done
                 continue
-            todo.append(replace(t, compile_lock=lock))
+            todo.append(replace(t, compile_lock=lock, run_token=token))
             why = None if force else redo_reason(t)
             if why:
                 redone.append((t.given or t.image, why))

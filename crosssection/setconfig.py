@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 import re
+import unicodedata
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -202,8 +203,12 @@ def default_set_name(folder, root=None) -> str:
 
 
 def _safe_part(text: str) -> str:
-    """A folder name made of the characters a set name takes (others become ``_``; a name
-    must start with a letter or a digit): ``exp A`` -> ``exp_A``."""
+    """A folder name made of the characters a set name takes (accents dropped, others become
+    ``_``; a name must start with a letter or a digit): ``exp A`` -> ``exp_A``, ``série à``
+    -> ``serie_a``."""
+    # letters with accents keep their base letter (NFKD splits off the combining marks)
+    text = "".join(c for c in unicodedata.normalize("NFKD", text)
+                   if not unicodedata.combining(c))
     safe = re.sub(r"[^A-Za-z0-9._+-]", "_", text)
     safe = re.sub(r"^[^A-Za-z0-9]+", "", safe)
     return safe or "set"

@@ -13,6 +13,7 @@ import os
 import re
 import shutil
 import tempfile
+import uuid
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -519,10 +520,24 @@ def missing_file_reason(path) -> str:
     return "file not found"
 
 
+def lock_holds(path, token) -> bool:
+    """Whether the lock file ``path`` still holds the run ``token`` (:func:`exclusive_lock`):
+    False once that run has ended (the file removed) or another holds it. A task that
+    outlives its run (a cluster's worker, still analysing when the batch was stopped) must
+    not write into an output another run may be writing; True when ``token`` is None."""
+    if token is None:
+        return True
+    try:
+        with open(path, encoding="ascii", errors="replace") as f:
+            return token in f.read(64).split()
+    except OSError:
+        return False
+
+
 @contextmanager
 def exclusive_lock(path, *, where, busy: str, unlocked=None):
-    """Hold an exclusive lock on the file ``path`` (created, holding the process id) while
-    one command writes an output; a second is refused.
+    """Hold an exclusive lock on the file ``path`` (created, holding the process id and a
+    token of this run) while one command writes an output; a second is refused.
 
     The lock is ``flock``, which the system releases when the process dies: a run killed
     (``kill -9``, out of memory) leaves a file that locks nothing, and its re-run goes on. A
@@ -540,6 +555,11 @@ def exclusive_lock(path, *, where, busy: str, unlocked=None):
     unlocked : callable, optional
         Called once when the file system takes no lock.
 
+    Yields
+    ------
+    str or None
+        The run's token, which :func:`lock_holds` checks (None without ``flock``).
+
     Raises
     ------
     ParameterError
@@ -552,7 +572,7 @@ def exclusive_lock(path, *, where, busy: str, unlocked=None):
     try:
         import fcntl
     except ImportError:
-        yield
+        yield None
         return
     path = Path(path)
     if path.is_symlink():
@@ -568,7 +588,8 @@ def exclusive_lock(path, *, where, busy: str, unlocked=None):
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            holder = os.read(fd, 32).decode("ascii", "replace").strip()
+            words = os.read(fd, 64).decode("ascii", "replace").split()
+            holder = words[0] if words else ""
             os.close(fd)
             raise ParameterError(busy + (f" (pid {holder})" if holder.isdigit() else "")
                                  + ": wait for it to end, or give another --out",
@@ -586,13 +607,14 @@ def exclusive_lock(path, *, where, busy: str, unlocked=None):
         except OSError:
             pass
         os.close(fd)
+    token = uuid.uuid4().hex
     try:
         os.ftruncate(fd, 0)
-        os.write(fd, f"{os.getpid()}\n".encode())
+        os.write(fd, f"{os.getpid()} {token}\n".encode())
     except OSError:
         pass  # only a second run's message names the process id
     try:
-        yield
+        yield token
     finally:
         try:
             os.unlink(path)  # before the lock is released (see above)

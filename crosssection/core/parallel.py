@@ -408,6 +408,9 @@ def _cluster_executor(address: str, on_wait=None):
         try:
             _probe_scheduler(address, SCHEDULER_TIMEOUT_S)
             client = distributed.Client(address, timeout=SCHEDULER_TIMEOUT_S)
+        except ValueError as exc:  # Dask's parse of the address: nothing was waited for
+            raise ParameterError(f"not a scheduler address: {_why_no_scheduler(exc)} "
+                                 "(expected tcp://HOST:PORT)", where) from None
         except Exception as exc:  # noqa: BLE001 - whatever answered is no usable scheduler
             raise ParameterError(f"no Dask scheduler answered within {SCHEDULER_TIMEOUT_S} s "
                                  f"({_why_no_scheduler(exc)})", where) from None
@@ -500,6 +503,10 @@ def get_executor(workers: int | None = 1, scheduler: str | None = None, *, on_wa
     client runs, the loggers of Dask and its event loop (:data:`CLIENT_LOGGERS`) let only
     CRITICAL records through.
     """
+    if scheduler is not None and not str(scheduler).strip():
+        raise ParameterError("not a scheduler address: it is empty (expected tcp://HOST:PORT; "
+                             "leave --scheduler out to run on this machine)",
+                             f"--scheduler {scheduler!r}")
     if scheduler:
         with _cluster_executor(scheduler, on_wait) as ex:
             yield ex

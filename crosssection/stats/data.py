@@ -913,7 +913,8 @@ def _batch_image_folders(folder: Path):
     """(set, config_id, folder) of every finished image of a batch output.
 
     ``index.csv`` (columns set, status, output) is used when present: rows with status ``ok``
-    or ``skipped`` (done in an earlier run) whose folder holds a summary. Otherwise every
+    or ``skipped`` (done in an earlier run) whose folder holds a summary, none when no row
+    is (every scan failed or still pending). Without a usable index every
     ``summary.json`` below ``folder`` counts, in the set its ``batch.set`` records (else its
     first path component), except in hidden folders (the batch's ``.<stem>.partial-*``
     staging folders of interrupted runs), generated scenes' truth and the folders
@@ -938,7 +939,9 @@ def _batch_image_folders(folder: Path):
             warnings.warn(f"{index}: {len(lost)} image(s) listed as done have no summary.json "
                           f"({_listed(lost, 3)}) and are left out", QualityWarning,
                           stacklevel=2)
-        if out:
+        if rows is not None:
+            # a usable index is the batch's word: its failed and pending scans' folders (an
+            # earlier run's results, or another option's) are not finished images
             return out
     stale = _stale_outputs(folder)
     out = []
@@ -1107,7 +1110,9 @@ def load_batch(folder, *, l_min_mm=RECORDED, s_min_mm2=RECORDED) -> Ensemble:
         parts.append(load_image_output(img, set_name=set_name, config_id=cid,
                                        l_min_mm=l_min_mm, s_min_mm2=s_min_mm2, warn=False))
     if not parts:
-        raise ConfigError("batch output holds no finished image (no */summary.json)", folder)
+        why = ("its index.csv lists no scan as done (ok or skipped)"
+               if (folder / "index.csv").is_file() else "no */summary.json")
+        raise ConfigError(f"batch output holds no finished image ({why})", folder)
     note = _check_finished(folder, len(found))
     failed = _check_failures(folder)
     ens = Ensemble.concat(parts)

@@ -93,6 +93,11 @@ def test_a_set_without_name_is_named_by_its_path_in_the_input(tmp_path):
     spaced.mkdir(parents=True)
     (spaced / "set.toml").write_text("")
     assert load_set_config(spaced / "set.toml", root=tmp_path).name == "exp_A/day_1"
+    # accented letters keep their base letter: été and àtè stay apart
+    for name, made in (("série à", "serie_a"), ("été", "ete"), ("àtè", "ate"), ("☃", "set")):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "set.toml").write_text("")
+        assert load_set_config(tmp_path / name / "set.toml", root=tmp_path).name == made
     (spaced / "set.toml").write_text('name = "eps8/day1"\n')
     assert load_set_config(spaced / "set.toml", root=tmp_path).name == "eps8/day1"
     (spaced / "set.toml").write_text('name = "my set"\n')

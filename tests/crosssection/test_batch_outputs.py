@@ -648,6 +648,30 @@ def test_a_second_batch_into_the_same_folder_is_refused(tmp_path, capsys):
     assert not (out / B.LOCK_FILE).exists()
 
 
+def test_a_task_that_outlives_its_batch_keeps_nothing(tmp_path):
+    """A cluster's worker still analysing when the batch was stopped (its lock released, or
+    taken by a re-run) must not write into the output: its results are dropped."""
+    from dataclasses import replace
+
+    inp, out = _scans(tmp_path / "in"), tmp_path / "out"
+    out.mkdir()
+    (task,), _ = B.plan_batch(inp, out, cli_params={"px_per_mm": 50.0, "thickness_mm": 0.1},
+                              figure=False)
+    with B.batch_lock(out) as token:
+        assert token and token in (out / B.LOCK_FILE).read_text()
+        mine = replace(task, run_token=token)
+    row = B.process_image(mine)  # the batch has ended: no lock file
+    assert row["status"] == "failed" and "batch stopped" in row["reason"]
+    assert [p for p in out.rglob("*") if not p.is_dir() or any(p.iterdir())] == []
+    with B.batch_lock(out):  # a re-run holds the folder now
+        assert B.process_image(mine)["status"] == "failed"
+        assert not Path(task.out_dir).exists()
+        assert list(out.rglob(f"*{B.PARTIAL_TAG}*")) == []
+    with B.batch_lock(out) as token:
+        assert B.process_image(replace(task, run_token=token))["status"] == "ok"
+    assert (Path(task.out_dir) / "summary.json").is_file()
+
+
 @pytest.mark.filterwarnings("ignore::crosssection.stats.data.FlaggedScanWarning")
 def test_stats_names_the_images_a_batch_could_not_analyse(tmp_path, capsys):
     from crosssection.stats.data import IncompleteBatchWarning, load_batch

@@ -245,6 +245,21 @@ def test_a_malformed_scheduler_address_is_refused_at_once(address, why):
                                     "(expected tcp://HOST:PORT)")
 
 
+@pytest.mark.parametrize("address, why", [("notanaddress", "missing port number"),
+                                          ("http://127.0.0.1:8799", "unknown address scheme"),
+                                          ("", "it is empty"), ("  ", "it is empty")])
+def test_an_address_dask_cannot_parse_or_an_empty_one_is_not_a_scheduler_address(address,
+                                                                                 why):
+    """Dask's own parse of the address failed at once, but was reported as no scheduler
+    answering within the timeout; an empty address ran the batch here, silently."""
+    with pytest.raises(ParameterError) as err:
+        with get_executor(scheduler=address):
+            pass
+    line = err.value.one_line()
+    assert "not a scheduler address: " in line and why in line
+    assert "answered" not in line and line.endswith(")")
+
+
 # ---------------------------------------------------------------- no worker
 
 

@@ -414,6 +414,24 @@ def test_scene_truth_beside_analysis_outputs_is_left_out(tmp_path):
     assert sorted(ens.configs["config_id"]) == ["img000", "img001"]
 
 
+@pytest.mark.parametrize("statuses", [("failed", "failed"), ("pending", "pending"),
+                                      ("ok", "failed")])
+def test_a_batch_index_is_trusted_when_it_lists_no_scan_as_done(tmp_path, statuses):
+    """A re-run that failed every scan (or was stopped before its first) left the earlier
+    run's folders beside an index that lists none as done: they are not read as finished."""
+    b = demo.write_demo_batch(tmp_path / "b", n_images=2, seed=1, sets={"s1": {"n_stacks": 10}})
+    lines = (b / "index.csv").read_text().splitlines()
+    rows = [line.replace(",ok,", f",{st},") for line, st in zip(lines[1:], statuses)]
+    (b / "index.csv").write_text("\n".join([lines[0], *rows]) + "\n")
+    if "ok" not in statuses:
+        with pytest.raises(ConfigError, match="index.csv lists no scan as done"):
+            load_any(b)
+        return
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert list(load_any(b).configs["config_id"]) == ["img000"]
+
+
 def test_a_batch_json_marks_a_batch(tmp_path):
     (tmp_path / "b").mkdir()
     (tmp_path / "b" / "batch.json").write_text(json.dumps({"complete": False}))
