@@ -557,14 +557,22 @@ def load_simulation(folder, *, set_name=None) -> Ensemble:
                    numeric=["length", "kappa_plus", "kappa_pm", "energy", "n_br"])
     vo = _read_csv(folder / "voids.csv", ["config_id", "area", "shape_ratio", "n_edges"],
                    numeric=["area", "perimeter", "shape_ratio", "n_edges"])
+    st = None
+    if (folder / "stacks.csv").is_file():  # optional: per-stack branch counts
+        st = _read_csv(folder / "stacks.csv", ["config_id", "n_br"], numeric=["n_br", "length"])
+    # the simulator writes configs.csv's counts and the tables from the same analysis: a
+    # difference is a table truncated or edited (or tables of two runs mixed)
+    table_note = "; ".join(filter(None, (
+        _check_config_counts(folder / table, df, cfg, key, what)
+        for table, df, key, what in (("branches.csv", br, "n_branches", "branches"),
+                                     ("stacks.csv", st, "n_stacks", "stacks"),
+                                     ("voids.csv", vo, "n_voids", "voids")))))
     configs = pd.DataFrame({
         "set": name, "config_id": cfg["config_id"].astype(str), "N_l": cfg["n_stacks"],
         "N_br": cfg["n_branches"], "n_voids": cfg["n_voids"], "epsilon": cfg["epsilon"],
         "E": cfg["energy_total"], "rod_length_mm": np.nan, "source": str(folder),
-        "analysis": _simulation_provenance(params), "batch_note": note, "table_note": ""})
-    st = None
-    if (folder / "stacks.csv").is_file():  # optional: per-stack branch counts
-        st = _read_csv(folder / "stacks.csv", ["config_id", "n_br"], numeric=["n_br", "length"])
+        "analysis": _simulation_provenance(params), "batch_note": note,
+        "table_note": table_note})
     n_br = br["n_br"] if "n_br" in br.columns else _stack_counts(br, st)
     branches = pd.DataFrame({
         "set": name, "config_id": br["config_id"].astype(str), "length_L": br["length"],
@@ -854,6 +862,32 @@ def _check_count(path: Path, rows: int, counted, what: str) -> str:
         return ""
     text = (f"{path}: holds {rows} {what} where summary.json counts {counted:g} "
             f"(truncated or edited?); the {rows} rows are used")
+    warnings.warn(text, QualityWarning, stacklevel=4)
+    return text
+
+
+def _check_config_counts(path: Path, table, cfg, key: str, what: str) -> str:
+    """:func:`_check_count` for a simulation's table: its rows of each configuration against
+    ``configs.csv``'s ``key`` (configurations whose count is not a number are not checked).
+
+    Returns
+    -------
+    str
+        The warning's text, "" when every configuration's count agrees.
+    """
+    if table is None or key not in cfg.columns or "config_id" not in table.columns:
+        return ""
+    counted = pd.to_numeric(cfg[key], errors="coerce")
+    rows = table["config_id"].astype(str).value_counts()
+    held = rows.reindex(cfg["config_id"].astype(str)).fillna(0).to_numpy()
+    bad = np.isfinite(counted.to_numpy(float)) & (held != counted.to_numpy(float))
+    if not bad.any():
+        return ""
+    ids = cfg["config_id"].astype(str).to_numpy()[bad]
+    text = (f"{path}: holds {int(held[bad].sum())} {what} of {len(ids)} configuration(s) "
+            f"(config_id {_listed(ids)}) where configs.csv counts "
+            f"{counted.to_numpy(float)[bad].sum():g} (truncated, edited, or tables of two "
+            "runs?); the rows held are used")
     warnings.warn(text, QualityWarning, stacklevel=4)
     return text
 

@@ -432,6 +432,23 @@ def test_a_batch_index_is_trusted_when_it_lists_no_scan_as_done(tmp_path, status
         assert list(load_any(b).configs["config_id"]) == ["img000"]
 
 
+@pytest.mark.parametrize("table, what", [("branches.csv", "branches"), ("voids.csv", "voids")])
+def test_a_simulation_table_cut_short_is_named(tmp_path, table, what):
+    """A simulation's branches.csv cut to its first rows was read without a word, although
+    configs.csv counts every configuration's branches, stacks and voids."""
+    sim = demo.write_demo_simulation(tmp_path / "sim", n_configs=4, seed=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", QualityWarning)
+        whole = load_any(sim)
+    lines = (sim / table).read_text().splitlines()
+    (sim / table).write_text("\n".join(lines[:len(lines) // 2]) + "\n")
+    with pytest.warns(QualityWarning, match=f"{table}: holds .* {what} of .* where configs.csv "
+                      "counts"):
+        cut = load_any(sim)
+    assert "truncated, edited" in cut.configs["table_note"].iloc[0]
+    assert (whole.configs["table_note"] == "").all()
+
+
 def test_a_batch_json_marks_a_batch(tmp_path):
     (tmp_path / "b").mkdir()
     (tmp_path / "b" / "batch.json").write_text(json.dumps({"complete": False}))
