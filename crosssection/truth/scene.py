@@ -307,6 +307,16 @@ def read_truth_tables(truth_dir) -> tuple[dict, dict]:
 
     truth_dir = Path(truth_dir)
     summary, tables = schema.read_tables(truth_dir)
+    # the truth's summary and tables are written together: another count is a table cut
+    # short or edited, whose scores would be scores against a part of the truth
+    for name, key in (("junctions", "n_junctions"), ("stacks", "n_stacks"),
+                      ("branches", "n_branches"), ("voids", "n_voids")):
+        counted = summary.get(key)
+        if (isinstance(counted, (int, float)) and not isinstance(counted, bool)
+                and math.isfinite(counted) and len(tables[name]) != counted):
+            raise ConfigError(f"holds {len(tables[name])} rows where summary.json counts "
+                              f"{counted:g} {name} (truncated or edited): not scored",
+                              truth_dir / f"{name}.csv")
     path = truth_dir / f"{LAYER_PIECES}.csv"
     if path.exists():
         try:
@@ -316,6 +326,13 @@ def read_truth_tables(truth_dir) -> tuple[dict, dict]:
         missing = [c for c in LAYER_PIECE_COLUMNS if c not in df.columns]
         if missing:
             raise ConfigError(f"lacks column(s) {missing}", path)
+        # every stack holds one piece at least (the pieces between its layer steps)
+        absent = sorted(set(tables["stacks"]["stack_id"]) - set(df["stack_id"]))
+        if absent:
+            raise ConfigError(f"holds no piece of {len(absent)} of the "
+                              f"{len(tables['stacks'])} stacks (stack_id "
+                              f"{', '.join(map(str, absent[:5]))}{', ...' if len(absent) > 5 else ''}"
+                              "; truncated or edited): not scored", path)
         tables[LAYER_PIECES] = df
     return summary, tables
 
