@@ -1067,9 +1067,11 @@ def check_params(params: CompactParams) -> None:
              f"the thickness that epsilon {eps:g} implies (h/R = {H_OVER_R:g})")
     if h >= 0.5 / n:
         n_max = math.ceil(0.5 / h) - 1
+        fix = (f"use at most {n_max} segments (--segments) or a thinner rod (--thickness)"
+               if n_max >= 3 else "a rod of 3 segments or more needs a thickness below 1/6 "
+               "of its length: give a thinner rod (--thickness)")
         raise ParameterError(f"{given} {h:.3g} must be below half a segment 1/(2N) = "
-                             f"{0.5 / n:.3g}: use at most {n_max} segments (--segments) or "
-                             "a thinner rod (--thickness)")
+                             f"{0.5 / n:.3g}: {fix}")
     r = params.wall_radius
     frac = h / (math.pi * (r - 0.5 * h) ** 2) if r > 0.5 * h else math.inf
     if frac >= MAX_AREA_FRACTION:

@@ -63,7 +63,7 @@ from crosssection.core.parallel import (ClusterLostError, capped_workers, get_ex
                                         spawn_seeds)
 from crosssection.quality import QualityWarning
 
-from simulate.contacts import MIN_CONTACT_DISTANCE
+from simulate.contacts import MIN_CONTACT_DISTANCE, default_contact_distance
 from simulate.energy import LAMBDA, LAMBDA_MAX
 from simulate.noise import (N_SEGMENTS, NOISE, NOISE_PER_SEGMENT_MAX,
                             VALIDATED_QUENCH_SEGMENTS)
@@ -1002,6 +1002,14 @@ def params_from_args(args) -> dict:
         # as the contact distance: two segments of a rod of length 1 are always closer
         raise ParameterError(f"--nematic-cutoff must be below the rod length 1, got {nc:g}")
     cd = params["contact_distance"]
+    if cd is not None and not MIN_CONTACT_DISTANCE <= cd < 1.0 \
+            and cd == default_contact_distance(args.segments):
+        # the default, half a segment, of a rod of very many segments
+        raise ParameterError(f"--segments {args.segments}: the default contact distance, half "
+                             f"a segment ({cd:.6g}), is below the analysis' "
+                             f"{MIN_CONTACT_DISTANCE:g}: use at most "
+                             f"{math.floor(0.5 / MIN_CONTACT_DISTANCE + 1e-9)} segments or give "
+                             "--contact-distance")
     if cd is not None and not MIN_CONTACT_DISTANCE <= cd < 1.0:
         # the analysis' own range (simulate.contacts.analyze_rod): refused here, before a
         # minimisation whose every analysis would fail on it

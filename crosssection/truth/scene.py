@@ -23,7 +23,7 @@ import numpy as np
 
 from crosssection.core import schema
 from crosssection.core.calibration import Calibration
-from crosssection.core.errors import ConfigError, ImageError
+from crosssection.core.errors import ConfigError, ImageError, output_error
 from crosssection.core.fileio import atomic_path, read_json_object, write_csv, write_json
 
 __all__ = ["Scene", "write_scene", "read_scene", "read_scene_params", "read_truth_tables",
@@ -139,7 +139,10 @@ def write_image(rgb: np.ndarray, path, *, px_per_mm: float | None = None) -> Pat
                     if px_per_mm is not None:
                         data = _png_with_resolution(data, px_per_mm)
                     Path(tmp).write_bytes(data)
-        except (OSError, ValueError, cv2.error) as exc:
+        except OSError as exc:  # a full disk, no permission: the system's words, naming
+            # the image rather than its hidden temporary file
+            raise output_error(OSError(exc.errno, exc.strerror), path) from None
+        except (ValueError, cv2.error) as exc:
             raise ImageError(f"cannot write image ({type(exc).__name__})", path) from None
         if not ok:
             raise ImageError("cannot write image", path)

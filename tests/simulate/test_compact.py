@@ -130,6 +130,8 @@ def test_cli_outputs_and_resume(tmp_path, monkeypatch):
     (["--epsilon", "2", "--segments", "20"], "--segments"),
     (["--epsilon", "2", "--thickness", "0"], "--thickness"),
     (["--epsilon", "2", "--thickness", "0.01"], "half a segment"),
+    # no number of segments makes such a rod: "use at most 0 segments" was no advice
+    (["--epsilon", "2", "--thickness", "1"], "needs a thickness below 1/6 of its length"),
     (["--epsilon", "30", "--segments", "1000", "--thickness", "0.0004"], "fill"),
     (["--epsilon", "2", "--n-configs", "0"], "--n-configs"),
     (["--epsilon", "2", "--contact-distance", "1e-5"], "--contact-distance"),

@@ -36,11 +36,22 @@ def test_one_stage_anneal_is_a_quench_at_the_target_lambda():
     (["compact", "--epsilon", "1.5", "--thickness", "1e-6"], "--thickness"),
 ])
 def test_absurd_simulation_options_are_one_line(tmp_path, argv, named):
+    """Each named by the option at fault."""
     out = tmp_path / "out"
     r = subprocess.run([sys.executable, "-m", "simulate", *argv, "--n-configs", "1",
                         "--segments", "40", "--out", str(out)], capture_output=True, text=True)
     assert r.returncode == 2, r.stderr
     assert r.stderr.count("\n") == 1 and named in r.stderr and "Traceback" not in r.stderr
+
+
+def test_too_many_segments_for_the_default_contact_distance_names_segments(tmp_path):
+    """It named --contact-distance, which was not given."""
+    out = tmp_path / "out"
+    r = subprocess.run([sys.executable, "-m", "simulate", "quench", "--segments", "50001",
+                        "--n-configs", "1", "--out", str(out)], capture_output=True, text=True)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1
+    assert r.stderr.startswith("error: --segments 50001: the default contact distance")
+    assert "use at most 50000 segments or give --contact-distance" in r.stderr
 
 
 @pytest.mark.parametrize("command", ["quench", "compact"])

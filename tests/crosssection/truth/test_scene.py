@@ -79,6 +79,24 @@ def test_write_scene_refuses_an_unwritable_image(scene_folder, tmp_path):
         assert not list((tmp_path / "bad").iterdir())  # nothing half-written
 
 
+def test_an_image_the_disk_cannot_take_names_the_image_and_the_cause(tmp_path, monkeypatch):
+    """A full disk was "cannot write image (OSError)", its cause dropped."""
+    import errno
+    from pathlib import Path
+
+    from crosssection.core.errors import OutputError
+    from crosssection.truth.scene import write_image
+
+    def full(self, data):
+        raise OSError(errno.ENOSPC, "No space left on device", str(self))
+
+    monkeypatch.setattr(Path, "write_bytes", full)
+    with pytest.raises(OutputError) as err:
+        write_image(np.zeros((8, 8, 3), np.uint8), tmp_path / "image.png")
+    assert err.value.one_line() == (f"{tmp_path / 'image.png'}: cannot write (No space left "
+                                    "on device)")
+
+
 @pytest.mark.parametrize("content, message", [
     (None, "file not found"),
     ("{px_per_mm: 50", "malformed JSON"),
