@@ -624,7 +624,8 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
             "one axis (rescan, or resample the image to square pixels)",
             value=x / y - 1.0, limit=0.01))
     if h_px < LOW_RESOLUTION_H_PX:
-        flags.append(QualityFlag("low_resolution", f"sheet thickness is {_short_of(h_px, LOW_RESOLUTION_H_PX)} px "
+        shown = _short_of(h_px, LOW_RESOLUTION_H_PX)
+        flags.append(QualityFlag("low_resolution", f"sheet thickness is {shown} px "
                                  f"(< {LOW_RESOLUTION_H_PX:g} px): layer counts from widths and "
                                  "bending energies are unreliable (check px_per_mm and "
                                  "thickness_mm; scan at a resolution that makes h 3 px or more)",

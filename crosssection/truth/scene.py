@@ -332,10 +332,10 @@ def read_truth_tables(truth_dir) -> tuple[dict, dict]:
         # every stack holds one piece at least (the pieces between its layer steps)
         absent = sorted(set(tables["stacks"]["stack_id"]) - set(df["stack_id"]))
         if absent:
+            shown = ", ".join(map(str, absent[:5])) + (", ..." if len(absent) > 5 else "")
             raise ConfigError(f"holds no piece of {len(absent)} of the "
-                              f"{len(tables['stacks'])} stacks (stack_id "
-                              f"{', '.join(map(str, absent[:5]))}{', ...' if len(absent) > 5 else ''}"
-                              "; truncated or edited): not scored", path)
+                              f"{len(tables['stacks'])} stacks (stack_id {shown}; truncated "
+                              "or edited): not scored", path)
         tables[LAYER_PIECES] = df
     return summary, tables
 
