@@ -56,9 +56,9 @@ import numpy as np
 import pandas as pd
 
 from crosssection._version import __version__
-from crosssection.core.errors import ConfigError, ParameterError
-from crosssection.core.fileio import (BROWSER_FILES, check_out, foreign_entry, write_csv,
-                                      write_json, write_npz)
+from crosssection.core.errors import ConfigError, ParameterError, output_error
+from crosssection.core.fileio import (BROWSER_FILES, check_out, foreign_entry,
+                                      renamed_together, write_csv, write_json, write_npz)
 from crosssection.core.parallel import (ClusterLostError, capped_workers, get_executor,
                                         spawn_seeds)
 from crosssection.quality import QualityWarning
@@ -499,11 +499,12 @@ def assemble(out, n_configs: int, columns=None, failed=None) -> dict:
     branches = _with_extras(pd.DataFrame(brows), BRANCH_COLUMNS)
     voids = _with_extras(pd.DataFrame(vrows), VOID_COLUMNS)
     stacks = _with_extras(pd.DataFrame(srows), STACK_COLUMNS)  # per-stack n_br for the stats
-    write_csv(out / "stacks.csv", stacks)
-    write_csv(out / "configs.csv", configs)
-    write_csv(out / "branches.csv", branches)
-    write_csv(out / "voids.csv", voids)
-    write_npz(out / "rods.npz", **rods)
+    with renamed_together():  # one run's tables, or the earlier run's: never some of each
+        write_csv(out / "stacks.csv", stacks)
+        write_csv(out / "configs.csv", configs)
+        write_csv(out / "branches.csv", branches)
+        write_csv(out / "voids.csv", voids)
+        write_npz(out / "rods.npz", **rods)
     return {"configs": configs, "branches": branches, "voids": voids, "stacks": stacks}
 
 
@@ -767,6 +768,11 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
                         fut.result()
                     except (BrokenExecutor, ClusterLostError):
                         raise  # a dead pool or cluster, not this configuration: a re-run resumes
+                    except OSError as exc:
+                        if exc.errno not in (errno.ENOSPC, errno.EDQUOT):
+                            failed[i] = (int(seeds[i]), f"{type(exc).__name__}: {exc}")
+                        else:  # a full disk fails every configuration after: stop here
+                            raise output_error(exc, part_path(out, i)) from None
                     except Exception as exc:  # noqa: BLE001 - recorded, the ensemble goes on
                         failed[i] = (int(seeds[i]), f"{type(exc).__name__}: {exc}")
                     if bar is not None:

@@ -113,3 +113,45 @@ def test_the_workers_are_given_the_output_folder_absolute(tmp_path, monkeypatch)
     tables = run_ensemble(PARAMS, "ens", task=task, progress=False)
     assert len(tables["configs"]) == 4
     assert seen and all(Path(o).is_absolute() and Path(o) == tmp_path / "ens" for o in seen)
+
+
+def _full_disk_task(config_id, seed, params, out):
+    """A configuration whose part file the disk cannot take (after configuration 1)."""
+    import errno
+
+    if config_id >= 2:
+        (Path(out).parent / f"ran_{config_id}").write_text("x")
+        raise OSError(errno.ENOSPC, "No space left on device", str(Path(out) / "parts"))
+    return _task(config_id, seed, params, out)
+
+
+def test_a_full_disk_stops_the_run_and_leaves_the_tables_of_the_last_one(tmp_path,
+                                                                          monkeypatch):
+    """A disk filling during a longer run went on computing every configuration (each
+    failing to save) and left configs.csv of the new run beside the old branches.csv."""
+    from crosssection.core.errors import OutputError
+
+    out = tmp_path / "ens"
+    out.mkdir()
+    run_ensemble({**PARAMS, "n_configs": 2}, out, task=_task, progress=False)
+    before = {p.name: p.read_bytes() for p in out.iterdir() if p.suffix in (".csv", ".npz")}
+    with pytest.raises(OutputError, match="No space left on device"):
+        run_ensemble({**PARAMS, "n_configs": 6}, out, task=_full_disk_task, progress=False)
+    assert sorted(p.name for p in tmp_path.glob("ran_*")) == ["ran_0", "ran_1", "ran_2"]
+    # the tables are written as one: a disk full on the third leaves all as they were
+    orig = pd.DataFrame.to_csv
+
+    def full_on_branches(self, path=None, *args, **kwargs):
+        import errno
+
+        if path is not None and ".branches.csv." in str(path):
+            raise OSError(errno.ENOSPC, "No space left on device", str(path))
+        return orig(self, path, *args, **kwargs)
+
+    monkeypatch.setattr(pd.DataFrame, "to_csv", full_on_branches)
+    with pytest.raises(OSError):
+        run_ensemble({**PARAMS, "n_configs": 4}, out, task=_task, progress=False)
+    after = {p.name: p.read_bytes() for p in out.iterdir() if p.suffix in (".csv", ".npz")}
+    assert {k: after[k] for k in before if k != "failures.csv"} == \
+        {k: v for k, v in before.items() if k != "failures.csv"}
+    assert not [p for p in out.iterdir() if p.name.startswith(".")]
