@@ -19,13 +19,14 @@ def _task(config_id, seed, params, out):
         raise FloatingPointError(f"diverged at step {config_id}")
     xy = np.column_stack([np.linspace(0, 1, 5), np.full(5, 0.1 * config_id)])
     row = {"config_id": config_id, "seed": seed, "epsilon": 2.0, "energy_total": 10.0 + config_id,
-           "energy_bending": 10.0, "energy_confinement": 0.0, "rg": 0.3, "n_stacks": 2,
-           "n_branches": 3, "n_voids": 1}
+           "energy_bending": 10.0, "energy_confinement": 0.0, "rg": 0.3, "n_stacks": 1,
+           "n_branches": 1, "n_voids": 1}
     branches = [{"branch_id": 0, "length": 0.5, "kappa_plus": 1.0, "kappa_pm": 0.5,
-                 "energy_bending": 2.0, "energy": 2.0}]
+                 "energy_bending": 2.0, "energy": 2.0, "stack_id": 0}]
     voids = [{"area": 0.01, "perimeter": 0.4, "shape_ratio": 0.25, "n_edges": 3}]
+    stacks = [{"stack_id": 0, "n_br": 1, "length": 0.5}]
     (Path(out).parent / f"ran_{config_id}").write_text("x")
-    write_part(out, config_id, row, xy, xy, branches, voids)
+    write_part(out, config_id, row, xy, xy, branches, voids, stacks)
     return config_id
 
 
