@@ -298,6 +298,8 @@ MIN_SHEET_PX = 1.0
 #: here, so no scan is blurrier. Far wider blurs cost more than any scene: measured at the
 #: defaults, sigma 1000 px runs for minutes and 1e4 px crashes OpenCV's filter.
 MAX_BLUR_PX = 50.0
+#: Largest scan noise (grey levels of 8 bits): the contrast between the ink and the paper.
+MAX_NOISE_SIGMA = 255.0
 #: Largest |coordinate| of a rod, in units of the rod length L: a rod's nodes lie within L of
 #: one another and the simulations centre it on the origin or its wall, so |x| is of order 1;
 #: a thousand times that still leaves the squared distances of the analysis and of the
@@ -1732,6 +1734,10 @@ def _defects(clean: bool, given: dict, has_hole: bool) -> dict:
         v = d[k]
         if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
             raise ParameterError(f"{k} must be a finite number >= 0, got {v!r}")
+    if d["noise_sigma"] > MAX_NOISE_SIGMA:
+        raise ParameterError(f"noise_sigma must be at most {MAX_NOISE_SIGMA:g} grey levels "
+                             "(the ink's contrast with the paper: beyond, the scan is noise), "
+                             f"got {d['noise_sigma']:g}")
     if d["blur_px"] > MAX_BLUR_PX:
         raise ParameterError(f"blur_px must be at most {MAX_BLUR_PX:g} px (ten sheet "
                              "thicknesses at the defaults: a band keeps 4 % of its contrast), "

@@ -9,7 +9,8 @@ import pytest
 from crosssection.core.errors import ParameterError
 from simulate import render
 from simulate.cli import main
-from simulate.render import MAX_BLUR_PX, MAX_ROD_COORD, MAX_SCENE_PX, render_configuration
+from simulate.render import (MAX_BLUR_PX, MAX_NOISE_SIGMA, MAX_ROD_COORD, MAX_SCENE_PX,
+                             render_configuration)
 
 pytestmark = [pytest.mark.filterwarnings("ignore::simulate.render.TruthWarning"),
               pytest.mark.filterwarnings("ignore::simulate.render.ScanRangeWarning")]
@@ -62,6 +63,14 @@ def test_a_blur_wider_than_a_scan_is_refused(sim, tmp_path, capsys, not_drawn, b
     assert not (tmp_path / "s").exists()
     with pytest.raises(ParameterError, match="blur_px must be at most"):
         render_configuration(np.load(sim / "rods.npz")["config_00000"], blur_px=float(blur))
+
+
+@pytest.mark.parametrize("noise", ["1e9", "256"])
+def test_noise_beyond_the_inks_contrast_is_refused(sim, tmp_path, capsys, not_drawn, noise):
+    """1e9 grey levels of noise was drawn with a warning only."""
+    line = _error(capsys, sim, "--out", tmp_path / "s", "--noise", noise, *FAST)
+    assert line.startswith(f"error: --noise: must be at most {MAX_NOISE_SIGMA:g} grey levels")
+    assert not (tmp_path / "s").exists()
 
 
 def test_a_blur_at_the_bound_is_drawn(sim, tmp_path, capsys):

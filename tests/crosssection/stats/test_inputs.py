@@ -100,6 +100,9 @@ def test_a_simulations_branches_take_their_stacks_counts(tmp_path):
     br.to_csv(sim / "branches.csv", index=False)
     pd.DataFrame([{"config_id": c, "stack_id": s, "n_br": n, "length": 0.01}
                   for (c, s), n in counts.items()]).to_csv(sim / "stacks.csv", index=False)
+    cfg = pd.read_csv(sim / "configs.csv")  # configs.csv counts the stacks made here
+    cfg["n_stacks"] = [sum(1 for c, _ in counts if c == cid) for cid in cfg["config_id"]]
+    cfg.to_csv(sim / "configs.csv", index=False)
     ens = load_simulation(sim)
     want = [counts[(c, s)] for c, s in zip(br["config_id"], br["stack_id"])]
     assert ens.branches["n_br"].to_numpy().tolist() == want

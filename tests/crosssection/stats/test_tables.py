@@ -7,6 +7,7 @@ import pytest
 
 from crosssection.core.errors import ConfigError
 from crosssection.core.schema import write_tables
+from crosssection.quality import QualityWarning
 from crosssection.stats import data as D
 from crosssection.stats import demo
 from crosssection.stats import tables as T
@@ -102,7 +103,7 @@ def test_simulation_ensemble_is_read_in_units_of_L(tmp_path):
     pd.DataFrame({"config_id": [0, 1], "seed": 1, "rg": 0.06, "epsilon": [2.2, 2.4],
                   "energy_total": [4000.0, 4600.0], "energy_bending": 0.0,
                   "energy_confinement": 0.0, "n_stacks": [10, 12], "n_branches": [20, 25],
-                  "n_voids": [3, 4], "method": "powell", "wall_s": 1.0}).to_csv(
+                  "n_voids": [1, 1], "method": "powell", "wall_s": 1.0}).to_csv(
         sim / "configs.csv", index=False)
     pd.DataFrame({"config_id": [0, 0, 1], "branch_id": [0, 1, 0], "length": [0.1, 0.2, 0.05],
                   "kappa_plus": [30.0, 40.0, 20.0], "kappa_pm": [-30.0, 10.0, 20.0],
@@ -112,7 +113,9 @@ def test_simulation_ensemble_is_read_in_units_of_L(tmp_path):
                   "shape_ratio": [0.16, 0.15], "n_edges": [4, 5]}).to_csv(
         sim / "voids.csv", index=False)
     assert D.detect_kind(sim) == "simulation"
-    ens = D.load_any(sim)
+    # three rows stand for the configurations' 45 branches: named, and used
+    with pytest.warns(QualityWarning, match="branches.csv: holds 3 branches .* counts 45"):
+        ens = D.load_any(sim)
     assert ens.sets == ["sim"]
     np.testing.assert_allclose(ens.branches["kappa_m_L"], [30.0, 10.0, 20.0])  # |kappa_pm|
     np.testing.assert_allclose(ens.branches["length_L"], [0.1, 0.2, 0.05])
