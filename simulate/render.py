@@ -644,7 +644,9 @@ def _touching_pieces(stacks: pd.DataFrame, lines_px, widths_px, gap_px: float) -
     Two bands touch when their lines come closer than half their widths plus ``gap_px``
     (less paper than the smallest visible gap). Pieces the truth holds apart: two stacks
     whose junctions are neither shared nor linked by one stack (bands of one junction
-    cluster meet there), and two parts of a one-pass stack more than three of its widths
+    cluster meet there), two stacks that are, where they touch away from the ends of both
+    at junctions (a rod end curled back onto its neighbour), and two parts of a one-pass
+    stack more than three of its widths
     apart along it, both away from its ends at junctions (where its line is hooked into the
     junction point and may curl over its own ink; the line of a band of several passes ending
     in a fold runs out to the fold and back over itself). The contact
@@ -722,7 +724,10 @@ def _touching_pieces(stacks: pd.DataFrame, lines_px, widths_px, gap_px: float) -
     codes, inverse = np.unique(a.astype(np.int64) * n + b, return_inverse=True)
     related = np.array([c // n == c % n or bool(junctions[c // n] & near[c % n])
                         for c in codes], bool)
-    hit = self_touch | ~related[inverse.ravel()]
+    # related stacks meet at their junctions: a touch far from any junction of either (a rod
+    # end curled back onto its neighbour's band) is pieces apart as well
+    near_junction = at_junction(i, a) | at_junction(j, b)
+    hit = self_touch | (~same & ~(related[inverse.ravel()] & near_junction))
     out, seen = [], set()
     for n in np.flatnonzero(hit):
         key = (int(min(a[n], b[n])), int(max(a[n], b[n])))

@@ -151,13 +151,34 @@ def test_unrelated_bands_closer_than_the_gap_touch():
     assert _touching_pieces(_stacks([(-1, -1), (-1, -1)]), lines, widths, gap_px=2.0) == []
 
 
-def test_bands_of_one_junction_may_touch():
-    lines = [_line(0, 0, 100, 0), _line(0, 8, 100, 8)]
+def test_bands_of_one_junction_may_touch_near_it():
+    # within the end zones (3 x (widest band + 2 gaps) = 33 px) of the junction ends
+    lines = [_line(0, 0, 30, 0), _line(0, 8, 30, 8)]
     widths = np.array([7.0, 7.0])
     assert _touching_pieces(_stacks([(0, 1), (1, 2)]), lines, widths, gap_px=2.0) == []
     # linked through one stack (junctions 0-1): one junction cluster
     lines.append(_line(200, 0, 300, 0))
     assert _touching_pieces(_stacks([(0, 5), (1, 6), (0, 1)]), lines, np.full(3, 7.0),
+                            gap_px=2.0) == []
+
+
+def test_a_rod_end_curled_back_onto_its_neighbour_touches_it():
+    """A free end of a stack of junction 0 lying on the middle of another stack of junction
+    0: related stacks, but they touch far from any junction end of either, where the image
+    shows a fork the truth does not have."""
+    t = np.linspace(0, np.pi, 200)
+    trunk = _line(0, 0, 300, 0, n=300)
+    # from junction 0 (0, 0) up and round, its free end down onto the trunk at x = 150
+    curl = np.concatenate([_line(0, 0, 0, 60, n=60),
+                           np.column_stack([75 - 75 * np.cos(t), 60 + 75 * np.sin(t)]),
+                           _line(150, 60, 150, 8, n=50)])
+    hits = _touching_pieces(_stacks([(0, 1), (0, -1)]), [trunk, curl], np.array([7.0, 7.0]),
+                            gap_px=2.0)
+    assert [(a, b) for a, b, _, _ in hits] == [(0, 1)]
+    assert abs(hits[0][2] - 150) < 10
+    # the same end stopping short of the trunk by more than the gap: apart
+    short = curl[curl[:, 1] > 20]
+    assert _touching_pieces(_stacks([(0, 1), (0, -1)]), [trunk, short], np.array([7.0, 7.0]),
                             gap_px=2.0) == []
 
 
