@@ -384,7 +384,11 @@ def run_steps(args) -> int:
     """``steps``: stages 1-6 only, then the step images and their record ``steps.json``."""
     from crosssection.core.fileio import renamed_together, write_json
     from crosssection.figures import step_titles
+    import json
+
+    from crosssection.core.provenance import resolved_path
     from crosssection.pipeline import preprocess, write_step_images
+    from crosssection.tables import recorded_parameters
 
     _check_image_given(args.image)
     check_out(args.out)
@@ -398,10 +402,14 @@ def run_steps(args) -> int:
     earlier = earlier_run(out)
     try:
         with renamed_together():  # never one run's images beside another's
+            made_from = {"image": None if pre.path is None else resolved_path(pre.path),
+                         "parameters": recorded_parameters(params)}
             paths = write_step_images(out, pre.rgb, pre.threshold.mask, pre.mask_clean,
                                       pre.skeleton, pre.junctions.centers_rc,
                                       figure=not args.no_figure,
-                                      titles=step_titles(pre.threshold.as_summary()))
+                                      titles=step_titles(pre.threshold.as_summary()),
+                                      description=json.dumps(made_from, default=str,
+                                                             sort_keys=True))
             # written last, as summary.json is: its presence marks the images complete
             record = write_json(out / STEPS_RECORD, steps_record(pre, params, paths.values()))
     except OutputError:

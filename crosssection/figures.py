@@ -444,7 +444,7 @@ def curvature_figure(profiles, stacks_df=None, *, ax=None, max_stacks=8):
     matplotlib.figure.Figure
         Solid: the fitted samples; dotted: fork zones and ends (not fitted).
     """
-    ax = _axes(ax, (7.0, 4.2))
+    ax = _axes(ax, (8.4, 4.2), right=0.78)
     profiles = list(profiles or [])
     order = sorted(range(len(profiles)), key=lambda i: -float(profiles[i].length_mm))
     for k, i in enumerate(order[:max_stacks]):
@@ -461,8 +461,9 @@ def curvature_figure(profiles, stacks_df=None, *, ax=None, max_stacks=8):
     ax.set_ylabel(r"curvature $\kappa$ [1/mm]")
     ax.set_title(f"curvature along the {min(max_stacks, len(profiles))} longest stacks "
                  "(dotted: not fitted)", fontsize=10)
-    if profiles:
-        ax.legend(fontsize=7, frameon=False)
+    if profiles:  # beside the axes: the curves run anywhere inside them
+        ax.legend(fontsize=7, frameon=False, loc="upper left", bbox_to_anchor=(1.01, 1.0),
+                  borderaxespad=0.0)
     return ax.figure
 
 
@@ -515,13 +516,14 @@ def widths_figure(stacks_df, calibration=None, *, ax=None,
     return ax.figure
 
 
-def _axes(ax, figsize):
-    """``ax``, or the single axes of a new (pyplot-free) figure."""
+def _axes(ax, figsize, right: float = 0.97):
+    """``ax``, or the single axes of a new (pyplot-free) figure (``right``: where the axes
+    end, leaving room for a legend beside them)."""
     if ax is not None:
         return ax
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=figsize)
     ax = fig.add_subplot()
-    fig.subplots_adjust(left=0.12, right=0.97, bottom=0.13, top=0.9)
+    fig.subplots_adjust(left=0.12 * 7.0 / figsize[0], right=right, bottom=0.13, top=0.9)
     return ax

@@ -328,9 +328,13 @@ class AnalysisResult:
         circles), all at the scan's resolution, and ``steps.png`` (the four side by side,
         ``figures.steps_figure``) when ``figure``.
         """
+        made_from = {"image": self.summary.get("image"),
+                     "parameters": self.summary.get("parameters")}
         return write_step_images(out_dir, self.rgb, self.mask_threshold, self.mask_clean,
                                  self.skeleton, self.graph_junction_centers(), figure=figure,
-                                 titles=self._step_titles())
+                                 titles=self._step_titles(),
+                                 description=json.dumps(made_from, default=str,
+                                                        sort_keys=True))
 
     def _step_titles(self) -> list:
         """The steps figure's panel titles, the threshold's with the rule and cuts used."""
@@ -354,23 +358,49 @@ def _remove_if_empty(folder: Path, created: bool) -> None:
             pass  # not empty, or gone: left as it is
 
 
+def _png_text_chunks(text: dict) -> bytes:
+    """PNG ``tEXt`` chunks of ``text`` (Latin-1 keys and values; others escaped)."""
+    import struct
+    import zlib
+
+    out = b""
+    for key, value in text.items():
+        body = (b"tEXt" + key.encode("latin-1") + b"\0"
+                + str(value).encode("latin-1", "backslashreplace"))
+        out += (struct.pack(">I", len(body) - 4) + body
+                + struct.pack(">I", zlib.crc32(body) & 0xFFFFFFFF))
+    return out
+
+
 def write_step_images(out_dir, rgb, mask_threshold, mask_clean, skeleton, junction_centers_rc,
-                      *, figure: bool = True, titles=None) -> dict:
+                      *, figure: bool = True, titles=None, description: str | None = None
+                      ) -> dict:
     """Write the four step images of paper Fig. 2 (see ``AnalysisResult.write_steps``);
-    ``titles``: the four panel titles of ``steps.png`` (``figures.steps_figure``)."""
+    ``titles``: the four panel titles of ``steps.png`` (``figures.steps_figure``). Each PNG's
+    text records the package version (``Software``) and ``description`` (what the images
+    were made from) when given, as the figures do."""
     import cv2
 
+    from crosssection._version import __version__
     from crosssection.core.fileio import atomic_path
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = {}
+    text = {"Software": f"foldstat {__version__}"}
+    if description is not None:
+        text["Description"] = description
+    chunks = _png_text_chunks(text)
+    end_ihdr = 8 + 8 + 13 + 4  # signature, IHDR's length and type, its data, its CRC
 
     def save(name, img):
         p = out / name
+        ok, buf = cv2.imencode(".png", img)
+        if not ok:
+            raise ImageError("cannot write image", p)
+        data = buf.tobytes()
         with atomic_path(p) as tmp:
-            if not cv2.imwrite(str(tmp), img):
-                raise ImageError("cannot write image", p)
+            tmp.write_bytes(data[:end_ihdr] + chunks + data[end_ihdr:])
         paths[name[:-4]] = p
 
     raw = np.asarray(rgb)
@@ -389,5 +419,5 @@ def write_step_images(out_dir, rgb, mask_threshold, mask_clean, skeleton, juncti
 
         fig = steps_figure(raw, mask_threshold, mask_clean, skeleton, junction_centers_rc,
                            titles=titles)
-        paths["steps"] = save_figure(fig, out / "steps.png")
+        paths["steps"] = save_figure(fig, out / "steps.png", description=description)
     return paths

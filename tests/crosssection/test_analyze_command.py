@@ -373,6 +373,25 @@ def test_the_overlay_records_the_version_and_what_it_was_made_from(small_scan, t
     assert made_from["image"]["path"] == str(small_scan)
 
 
+@pytest.mark.parametrize("command", ["analyze --steps", "steps"])
+def test_the_step_images_record_the_version_and_what_they_were_made_from(small_scan,
+                                                                          tmp_path, command):
+    """The four step images carried no text, steps.png only the version."""
+    import json
+
+    from PIL import Image
+
+    from crosssection._version import __version__
+
+    out = tmp_path / "out"
+    assert crosssection.cli.main([*command.split(), str(small_scan), "--out", str(out),
+                                  "--px-per-mm", "40"]) == 0
+    for name in (*STEP_IMAGES, "steps.png"):
+        text = Image.open(out / name).text
+        assert text["Software"].startswith(f"foldstat {__version__}")
+        assert json.loads(text["Description"])["parameters"]["px_per_mm"] == 40.0
+
+
 @pytest.mark.parametrize("command", ["analyze", "steps"])
 @pytest.mark.parametrize("record, text, held", [
     ("batch.json", '{"package": "foldstat", "version": "0"}', "foldstat batch"),
