@@ -779,6 +779,9 @@ def _fit_one(x, family: str, *, truncation, n_boot, seed, gof, n_mc, ci_level,
         draws = (bootstrap_draws(x, family, truncation=c, n_boot=n_boot, seed=s_boot,
                                  discrete=discrete, groups=g) if n_boot else None)
         ci = _percentile_ci(draws, fam.param_names, ci_level) if n_boot else {}
+        undetermined = _degenerate_resamples(fam, draws, x, c, ci_level)
+        if undetermined:
+            return replace(res, ci=ci, boot=draws, rejected=undetermined)
         if not gof:
             test = GoodnessOfFit(float("nan"), float("nan"), 0)
         elif discrete:
@@ -969,6 +972,31 @@ def _count_problem(fam, x, c) -> str:
     if np.any(x < COUNT_MIN) or np.any(x != np.round(x)):
         return f"counts must be integers >= {COUNT_MIN}"
     return ""
+
+
+def _degenerate_resamples(fam, draws, x, c, level) -> str:
+    """Why a fit is not determined by the data when its interval reaches its degenerate
+    laws ("" when it does not).
+
+    A fit whose point estimate passes :meth:`degeneracy` can still have a share of its
+    bootstrap replicates beyond it (a Bose-Einstein beta whose interval runs five decades
+    down to beta x << 1, where the law is 1/x and beta is undetermined): when that share
+    exceeds the interval's tail, ``(1 - level) / 2``, the data do not tell the law from its
+    degenerate limit, and the fit is not named as the law of the data.
+    """
+    if draws is None or not len(draws):
+        return ""
+    names = fam.param_names
+    finite = draws[np.all(np.isfinite(draws), axis=1)]
+    if not len(finite):
+        return ""
+    reasons = [fam.degeneracy(dict(zip(names, map(float, row))), x, c) for row in finite]
+    bad = [r for r in reasons if r]
+    share = len(bad) / len(finite)
+    if share <= (1 - level) / 2:
+        return ""
+    return (f"{100 * share:.0f} % of the bootstrap resamples fit its degenerate limit (as: "
+            f"{bad[0]}): the data do not determine it")
 
 
 def _percentile_ci(draws, names, level) -> dict:

@@ -8,6 +8,7 @@ import warnings
 
 import cv2
 import numpy as np
+import pandas as pd
 import pytest
 
 import crosssection
@@ -823,6 +824,30 @@ def test_a_thickness_the_calibration_contradicts_is_flagged(scene):
     flag = next(f for f in res.quality if f.code == "thickness_calibration")
     assert flag.value == pytest.approx(0.14 / 0.3, rel=0.01) and flag.limit == quality.THICKNESS_RATIO[0]
     assert any(issubclass(w.category, quality.CalibrationWarning) for w in caught)
+
+
+def test_stacks_bending_near_their_tightest_bend_with_much_energy_are_flagged():
+    """A thick stack between two close forks read at 0.92 of 2 / (n_br h) held 19 % of an
+    energy 71 % high, with no word; no stack of the package's generators passes 0.25."""
+    from crosssection.params import AnalysisParams
+
+    params = AnalysisParams(px_per_mm=50.0, thickness_mm=0.1)
+    stacks = pd.DataFrame({"stack_id": [0, 1, 2], "n_br": [8, 1, 2],
+                           "kappa_plus": [0.92 * 2 / (8 * 0.1), 0.3, 0.5],
+                           "energy_per_branch": [100.0, 2000.0, 500.0],
+                           "mid_x_px": [10.0, 20.0, 30.0], "mid_y_px": [5.0, 6.0, 7.0]})
+    (flag,) = quality._tight_bends_check(params, stacks)
+    share = 800.0 / 3800.0
+    assert flag.value == pytest.approx(share) and flag.limit == quality.TIGHT_BEND_SHARE
+    assert "n_br 8, mean |kappa| 2.30 /mm against 2.50" in flag.message
+    assert f"carry {100 * share:.0f} % of the total bending energy" in flag.message
+    assert flag.category is quality.TightBendsWarning
+    assert issubclass(flag.category, quality.CurvatureWarning)
+    # below the ratio, or holding too little of the energy: no flag
+    assert quality._tight_bends_check(params, stacks.assign(
+        kappa_plus=[0.6 * 2 / (8 * 0.1), 0.3, 0.5])) == []
+    assert quality._tight_bends_check(params, stacks.assign(
+        energy_per_branch=[10.0, 2000.0, 500.0])) == []
 
 
 def test_each_check_has_its_own_category_under_its_group():

@@ -232,3 +232,26 @@ def test_slope_beyond_the_float_range_is_nan_with_a_warning():
     with pytest.warns(QualityWarning, match="eq14_slope: the slope"):
         a, r2, n = T.slope_through_origin(x, y, "eq14_slope")
     assert np.isnan(a) and r2 == pytest.approx(1.0) and n == 2
+
+
+def test_a_fit_whose_interval_reaches_its_degenerate_limit_is_not_named():
+    """A Bose-Einstein beta of 0.003 whose bootstrap interval ran down to 6e-8 (beta x << 1,
+    where the law is 1/x and beta is undetermined) was selected as the law of e: a share of
+    degenerate resamples beyond the interval's tail makes the fit undetermined."""
+    from crosssection.stats.families import FAMILIES
+
+    fam = FAMILIES["bose_einstein"]
+    x = np.linspace(10.0, 400.0, 200)
+    row = {"alpha": 1.0, "beta": 0.003, "x_lo": 10.0, "x_hi": 400.0}
+    assert fam.degeneracy(row, x) == ""  # the point estimate passes
+
+    def draws(n_degenerate):
+        out = np.tile([row[k] for k in fam.param_names], (100, 1)).astype(float)
+        out[:n_degenerate, fam.param_names.index("beta")] = 6e-8
+        return out
+
+    said = F._degenerate_resamples(fam, draws(10), x, None, 0.95)
+    assert said.startswith("10 % of the bootstrap resamples fit its degenerate limit")
+    assert "beta x << 1" in said and said.endswith("the data do not determine it")
+    assert F._degenerate_resamples(fam, draws(2), x, None, 0.95) == ""  # within the tail
+    assert F._degenerate_resamples(fam, None, x, None, 0.95) == ""
