@@ -191,8 +191,8 @@ SWEEPS = {
     "cast": SweepInfo("line", "cast", "colour cast (largest gain deviation per channel, %)",
                       "Colour cast: accuracy and time against its amplitude", scale=100.0),
     "layers": SweepInfo("line", "mean_layers", "mean layers per stack (realised, truth)",
-                        "Compaction: accuracy and time against the mean number of layers per "
-                        "stack", plot_x="truth_mean_n_br"),
+                        "Stack thickness: accuracy and time against the mean number of "
+                        "layers per stack", plot_x="truth_mean_n_br"),
     "stacks": SweepInfo("line", "n_stacks", "stacks per scene (realised, truth)",
                         "Scene size: accuracy and time against the number of stacks",
                         plot_x="truth_n_stacks", log_x=True),
@@ -203,7 +203,7 @@ SWEEPS = {
                           "Pipeline variants: accuracy against analysis time on the same "
                           "scans"),
     "map_h_layers": SweepInfo("map", "h_px", "sheet thickness h (px)",
-                              "Stability map: resolution x compaction (median per cell; "
+                              "Stability map: resolution x layers per stack (median per cell; "
                               "failing cells hatched, boundary drawn)",
                               y="mean_layers", ylabel="mean layers per stack (target)"),
     "map_h_blur": SweepInfo("map", "h_px", "sheet thickness h (px)",

@@ -760,7 +760,8 @@ def network_figure(res: StatsResult, colors=None):
     """The network relations of the paper per configuration, every set overlaid.
 
     Left: the number of branches N_br against the number of stacks N_l with Eq. (12), with
-    the paper's constant and with the constant fitted to the set, and Eq. (14); right: the
+    the paper's constant through the set's means and, as crosses, with the constant fitted
+    to the set and each configuration's own means, and Eq. (14); right: the
     mean number of branches per stack N_br/N_l with Eqs. (13) and (15). The legend gives one
     entry per set (its fitted constant and mean number of branches per stack) and names each
     line style once; where two sets' Eq. (14)-(15) lines coincide, their dashes alternate.
@@ -814,22 +815,24 @@ def network_figure(res: StatsResult, colors=None):
             styles.add("-")
             fitted = rel.get("eq12_const", np.nan)
             if np.isfinite(fitted):
-                # the C of relations.csv, through the same set means: how far the data sit
-                # from the paper's constant
+                # the C of relations.csv with each configuration's own epsilon and
+                # sqrt(s_bar)/l_bar, as it was fitted: a line through the set's means would
+                # miss configurations of other epsilon however well the relation holds
                 n_fit = int(res.relations.query("set == @s and relation == 'eq12_const'")
                             ["n"].iloc[0])
-                axes[0].plot(nl, fitted * eps * ratio * np.sqrt(nl), "-.", color=c, lw=1,
+                own = fitted * g["epsilon"] * g["sqrt_s_bar"] / g["l_bar"] * np.sqrt(g["N_l"])
+                axes[0].plot(g["N_l"], own, "x", color=c, ms=5, mew=1.0,
                              label=f"{name[s]}: Eq. (12), fitted C = {fitted:.3g}")
-                styles.add("-.")
+                styles.add("x")
                 words.append(f"fitted C = {fitted:.3g}"
                              + (" (indicative only)" if n_fit < N_RELATION_MIN else ""))
         if np.isfinite(nbr):
             axes[0].plot(nl, nbr * nl, ls=dashes[s], color=c,
-                         label=f"{name[s]}: Eq. (14), <n_br> = {nbr:.2g}")
+                         label=f"{name[s]}: Eq. (14), <n_br> = {nbr:.3g}")
             axes[1].axhline(nbr, ls=dashes[s], color=c,
-                            label=f"{name[s]}: Eq. (15), <n_br> = {nbr:.2g}")
+                            label=f"{name[s]}: Eq. (15), <n_br> = {nbr:.3g}")
             styles.add("--")
-            words.append(f"<n_br> = {nbr:.2g}")
+            words.append(f"<n_br> = {nbr:.3g}")
         handles.append(Line2D([], [], ls="none", marker="o", ms=4, color=c))
         labels.append(", ".join(words))
     axes[0].set(xlabel="number of stacks per configuration $N_l$",
@@ -842,11 +845,13 @@ def network_figure(res: StatsResult, colors=None):
     # take its colour, each line style is named once (in the sets' colours in the panels)
     key = {"-": f"Eq. (12) left, (13) right: paper's C = 2√(π/3) = {EQ12_CONST:.3g}, "
                 "with the set's means",
-           "-.": "Eq. (12), left: the C fitted to the set",
+           "x": "Eq. (12), left: the C fitted to the set, with each configuration's own "
+                "ε and √s̄/l̄ (on its point where the relation holds)",
            "--": "Eq. (14) left, (15) right: the set's mean <n_br>"}
-    for ls in ("-", "-.", "--"):
+    for ls in ("-", "x", "--"):
         if ls in styles:
-            handles.append(Line2D([], [], ls=ls, color="0.3", lw=1.5))
+            handles.append(Line2D([], [], ls="none", marker="x", ms=5, color="0.3")
+                           if ls == "x" else Line2D([], [], ls=ls, color="0.3", lw=1.5))
             labels.append(key[ls])
     axes[1].legend(handles, [_wrap_label(t, 60) for t in labels], fontsize=8,
                    frameon=False, loc="upper left", bbox_to_anchor=(1.01, 1.0))
@@ -1133,9 +1138,10 @@ def _write_files(res: StatsResult, ens: Ensemble, out: Path, *, opts: StatsOptio
             ("network_Nbr_vs_Nl.png", "Branches and stacks per configuration (Eqs. (12)-(15))",
              "Each point is one configuration; solid lines are Eqs. (12)-(13) with the paper's "
              "constant C = 2√(π/3) and the set's mean compaction, void size and branch length, "
-             "the dash-dotted line Eq. (12) with the C fitted to the set (relations.csv) and "
-             "the same means, dashed lines Eqs. (14)-(15) with its mean number of branches "
-             "per stack.", lambda: network_figure(res, colors)),
+             "crosses Eq. (12) with the C fitted to the set (relations.csv) and each "
+             "configuration's own compaction, void size and branch length (on the point "
+             "where the relation holds), dashed lines Eqs. (14)-(15) with its mean number "
+             "of branches per stack.", lambda: network_figure(res, colors)),
             ("sqrt_s_vs_l.png", "Void size against branch length",
              "Each point is one configuration: the square root of its mean void area against "
              "its mean branch length (units of L), with a line through the origin per set and "
@@ -1527,7 +1533,8 @@ RELATION_WORDS = {
     "eq14_slope": "Eq. (14) slope of N_br against N_l (expected <n_br>)",
     "eq15_fluct": "Eq. (15) mean relative deviation of n̄_br from <n_br>",
     "eq16": "Eq. (16) <n_br>√<N_l>/ε (paper 2.2√(π/3))",
-    "n_br_exp_mu": "mean of the exponential (geometric) law of n_br (expected <n_br>)",
+    "n_br_exp_mu": "mean of the exponential (geometric) law of n_br (= <n_br> by its "
+                   "maximum likelihood: not a test; its interval and the selected law)",
 }
 PAIR_WORDS = {"l_vs_inv_kappa_m": "branch length l vs 1/κ_m",
               "e_vs_l_kappa_m2": "branch energy e vs l κ_m²",

@@ -348,9 +348,14 @@ def test_the_network_figure_names_the_eq12_constant_and_draws_the_fitted_one(tmp
     labels = {ln.get_label(): ln for ln in left.lines}
     (paper,) = [k for k in labels if "Eq. (12), paper's C = 2√(π/3)" in k]
     (ours,) = [k for k in labels if f"Eq. (12), fitted C = {fitted:.3g}" in k]
-    # the two lines differ by the ratio of the constants
-    ratio = labels[ours].get_ydata() / labels[paper].get_ydata()
-    assert np.allclose(ratio, fitted / EQ12_CONST)
+    # the fitted constant is drawn per configuration, with its own epsilon and means: on the
+    # points where the relation holds (a line through the set's means missed them)
+    pc = res.per_config
+    own = fitted * pc["epsilon"] * pc["sqrt_s_bar"] / pc["l_bar"] * np.sqrt(pc["N_l"])
+    assert np.allclose(labels[ours].get_xdata(), pc["N_l"])
+    assert np.allclose(labels[ours].get_ydata(), own)
+    assert labels[ours].get_linestyle() == "None" and labels[ours].get_marker() == "x"
+    assert len(labels[paper].get_xdata()) == 100  # the paper's constant: a line
 
 
 def test_a_missing_count_is_an_empty_cell_not_pandas_na():
