@@ -559,9 +559,12 @@ def check_param(name: str, value):
     if name in CHOICE_PARAMS:
         return _choice(name, value, CHOICE_PARAMS[name])
     if name in SWITCHES:
-        if not isinstance(value, bool):
+        import numpy as np
+
+        # numpy's booleans too (a parameter grid built with numpy or pandas)
+        if not isinstance(value, (bool, np.bool_)):
             raise ParameterError(f"{name} must be true or false, got {value!r}")
-        return value
+        return bool(value)
     if name == "calibration":
         return _check_calibration(value)
     raise ParameterError(f"unknown parameter {name!r}")

@@ -768,6 +768,9 @@ def _fit_one(x, family: str, *, truncation, n_boot, seed, gof, n_mc, ci_level,
                         discrete=discrete, n_groups=n_groups)
         if not all(np.isfinite(v) for v in params.values()):
             return replace(res, rejected="the fit did not converge (non-finite parameter)")
+        if not np.isfinite(ll):  # a value at the edge of floating point (5e-324) can do it
+            return replace(res, rejected="the fit did not converge (log-likelihood not "
+                                         "finite: values at the limits of floating point?)")
         # a law outside the domain (a spike narrower than any sample with a spread) cannot
         # be tested either
         rejected = (fam.domain(params) or fam.degeneracy(params, x, c)
@@ -946,10 +949,15 @@ def bootstrap_draws(x, family: str, *, truncation=None, n_boot: int = N_BOOT, se
         if no_spread(xb):
             continue
         try:
-            th, _ = _fit_counts(fam, xb, theta_hat) if discrete else fam.fit(xb, cb, theta_hat)
+            # a resample's refit may wander where the log-likelihood overflows, as the fit
+            # of the data may (fit_family silences the same)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
+                th, _ = (_fit_counts(fam, xb, theta_hat) if discrete
+                         else fam.fit(xb, cb, theta_hat))
+                p = fam.params(th, xb, cb)
         except _FIT_ERRORS:
             continue
-        p = fam.params(th, xb, cb)
         draws[b] = [p[nm] for nm in names]
     return draws
 

@@ -129,6 +129,32 @@ def test_a_number_beyond_the_float_range_is_a_parameter_error(scan, name, value)
     assert len(msg) < 120 and "-inf" not in msg  # not the number's 400 digits
 
 
+@pytest.mark.parametrize("value", [np.True_, np.False_])
+def test_numpy_booleans_are_switches(value):
+    """A parameter grid built with numpy gives np.True_: it was refused."""
+    params = cs.AnalysisParams(**KW, layer_steps=value, hole_correction=value)
+    assert params.layer_steps is bool(value) and type(params.hole_correction) is bool
+
+
+def test_a_crop_whose_found_hole_is_no_hole_names_the_hole_found():
+    """A crop of a sample scan, no hole given: the hole found was refused as if the user had
+    given a wrong hole_radius_mm."""
+    from pathlib import Path
+
+    from PIL import Image
+
+    from crosssection.core.errors import AnalysisError
+
+    root = Path(__file__).resolve().parents[2] / "sample_images"
+    crop = np.asarray(Image.open(root / "scan_01_sparse.png"))[100:500, 100:500]
+    with pytest.raises(AnalysisError) as err:
+        cs.analyze(crop, warn=False)
+    line = err.value.one_line()
+    assert "the hole found in the scan is no hole of it" in line
+    assert "give the hole (hole_radius_mm and hole_center_px)" in line
+    assert "check hole_radius_mm" not in line
+
+
 def test_params_given_as_text_is_a_parameter_error(scan):
     with pytest.raises(ParameterError, match="AnalysisParams or a dict"):
         cs.analyze(scan, "px_per_mm=50")

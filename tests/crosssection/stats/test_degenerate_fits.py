@@ -255,3 +255,22 @@ def test_a_fit_whose_interval_reaches_its_degenerate_limit_is_not_named():
     assert "beta x << 1" in said and said.endswith("the data do not determine it")
     assert F._degenerate_resamples(fam, draws(2), x, None, 0.95) == ""  # within the tail
     assert F._degenerate_resamples(fam, None, x, None, 0.95) == ""
+
+
+def test_a_fit_whose_log_likelihood_is_not_finite_is_not_selectable():
+    """One value of 5e-324 beside a Gamma sample gave the Gamma fit a log-likelihood of +inf,
+    returned as a fit."""
+    x = np.append(np.random.default_rng(0).gamma(0.5, 1.0, 200), 5e-324)
+    r = F.fit_family(x, "gamma", n_boot=0, gof=False)
+    assert "log-likelihood not finite" in r.rejected and not r.selectable
+
+
+def test_bootstrap_intervals_let_no_refit_warning_out():
+    """bootstrap_ci leaked a RuntimeWarning of every resample's refit that fit_family
+    silences."""
+    g = np.random.default_rng(0).gamma(0.3, 1.0, 100)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for family, x in (("powerlaw_cutoff", g), ("bose_einstein", g * 1e-310)):
+            ci = F.bootstrap_ci(x, family, n_boot=40)
+            assert set(ci) == set(F.FAMILIES[family].param_names)
