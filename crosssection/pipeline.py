@@ -183,9 +183,9 @@ def _threshold_in_frame(rgb, p: AnalysisParams, path, timer, min_piece_px: float
             # the hole the scan was searched for: no option of the user's is at fault
             raise AnalysisError(f"the hole {'fitted' if p.hole_given else 'found'} in the "
                                 f"scan is no hole of it ({exc.cause.split(': check')[0]}): "
-                                "the scan may not hold "
-                                "the whole hole (a crop); give the hole (hole_radius_mm and "
-                                "hole_center_px), or check px_per_mm", path) from None
+                                "the scan may not hold the whole hole (a crop); give the hole "
+                                "(hole_radius_mm and hole_center_px), or check px_per_mm",
+                                path) from None
     with timer("threshold"):
         thr = threshold_rgb(rgb, region=inside, **m)
     if given:
