@@ -52,7 +52,7 @@ BINS_MIN, BINS_MAX = 5, 50
 
 #: axis labels in words with units (lengths in units of the rod length L)
 LABELS = {
-    "length_L": r"branch length $\ell/L$ (rod length L)",
+    "length_L": r"branch length $\ell/L$ (dimensionless)",
     "kappa_m_L": r"mean branch curvature $|\kappa_m| L$ (dimensionless)",
     "kappa_plus_L": r"mean absolute branch curvature $\kappa_+ L$ (dimensionless)",
     # a scan's e is its bending energy; a simulated branch's adds its confinement energy

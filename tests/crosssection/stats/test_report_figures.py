@@ -226,7 +226,7 @@ def test_axis_labels_never_split_a_parenthesis():
     "(rod length" and a lone "L)"."""
     from crosssection.stats.report import LABELS, _wrap_label
 
-    wrapped = _wrap_label(LABELS["length_L"], 36)
+    wrapped = _wrap_label("branch length $\\ell/L$ (rod length L)", 36)
     assert wrapped.splitlines()[-1] == "(rod length L)"
     for label in LABELS.values():
         for line in _wrap_label(label, 36).splitlines():
