@@ -1133,7 +1133,7 @@ def _write_files(res: StatsResult, ens: Ensemble, out: Path, *, opts: StatsOptio
                 name = f"pdf_{q}.png"
                 paths[name] = save_figure(fig, fdir / name)
                 figs.append((f"Distribution of the {WORDS[q]}", f"figures/{name}",
-                             _pdf_caption(q) + _left_out(res, ens, q, opts.min_n)))
+                             _pdf_caption(q, ens) + _left_out(res, ens, q, opts.min_n)))
         scatter = [
             ("network_Nbr_vs_Nl.png", "Branches and stacks per configuration (Eqs. (12)-(15))",
              "Each point is one configuration; solid lines are Eqs. (12)-(13) with the paper's "
@@ -1447,21 +1447,28 @@ def _e_vs_nbr_bars(ens: Ensemble) -> str:
     return f"In a scan {scan_words}; in a simulated rod {sim_words}."
 
 
-def _pdf_caption(q: str) -> str:
-    """One sentence saying what a distribution figure shows."""
+def _pdf_caption(q: str, ens: Ensemble | None = None) -> str:
+    """One sentence saying what a distribution figure of ``ens`` shows: the stacks' shared
+    counts where scans' branches are drawn, sub-system rows where the quantity has them, a
+    detection limit where some configuration has one."""
+    table, column, _, cut, _ = QUANTITIES[q]
+    rows = (", one row per sub-system" if table in ("branches", "stacks") else "")
     if q in COUNT_QUANTITIES:
         return (f"Fraction of stacks with each {WORDS[q]} (points, error bars sqrt(count)/n) "
                 f"against the selected law's probability mass at each integer (open squares) "
-                f"with its 95 % bootstrap band, one colour per set, one row per sub-system.")
+                f"with its 95 % bootstrap band, one colour per set{rows}.")
+    scans = ens is None or bool(ens.configs["rod_length_mm"].notna().any())
+    shared = (", with count squared summed over the stacks where a stack's branches share "
+              "its value" if table == "branches" and scans else "")
+    limited = cut is not None and (ens is None or bool(np.isfinite(
+        np.asarray(getattr(ens, table)[cut], float)).any()))
     return (f"Probability density of the {WORDS[q]} (points, counting error bars "
-            f"sqrt(count)/(n bin width), with count squared summed over the stacks where a "
-            f"stack's branches share its value) with the selected law (line) and its 95 % bootstrap "
-            f"band, one colour per set, one row per sub-system, linear (left) and logarithmic "
-            f"(right) density scales, the right panel's x axis logarithmic too where the "
-            f"values span more than a decade (its title says which)" + ("; dotted: detection limit, below which the fit is truncated "
-                                 "(where a set's scans differ, their range shaded and the "
-                                 "largest dotted)."
-                                 if QUANTITIES[q][3] else "."))
+            f"sqrt(count)/(n bin width){shared}) with the selected law (line) and its 95 % "
+            f"bootstrap band, one colour per set{rows}, linear (left) and logarithmic (right) "
+            f"density scales, the right panel's x axis logarithmic too where the values span "
+            f"more than a decade (its title says which)"
+            + ("; dotted: detection limit, below which the fit is truncated (where a set's "
+               "scans differ, their range shaded and the largest dotted)." if limited else "."))
 
 
 def _fitted_sets(res: StatsResult, q: str, sets) -> list:
@@ -1856,7 +1863,7 @@ def _html(res: StatsResult, figs, meta, ens: Ensemble | None = None,
                       f"{len(ens.configs)} configurations)</h2><p>The image analysis flagged "
                       "these scans; their values enter every table and figure below.</p>",
                       _html_table(qual)]
-        else:
+        elif ens.configs["rod_length_mm"].notna().any():  # scans (simulations have none)
             parts.append("<p>Input quality: no scan carries an image-analysis quality "
                          "warning.</p>")
         parts.append(_model_share_note(ens))

@@ -430,3 +430,21 @@ def test_a_log_axis_of_one_or_two_decades_has_labels_enough(lo, hi, least):
     plt.close(fig)
     assert len(shown) >= least, shown
     assert len(set(shown)) == len(shown)
+
+
+def test_distribution_captions_say_only_what_applies(tmp_path):
+    """Captions written for scans' branches (counts summed over stacks, one row per
+    sub-system, a detection limit) were given to a configuration's E, to the voids and to
+    simulations, which have none of them."""
+    from crosssection.stats.report import _pdf_caption
+
+    scans = load_any(demo.write_demo_batch(tmp_path / "b", n_images=2, seed=1))
+    sims = load_any(demo.write_demo_simulation(tmp_path / "s", n_configs=2, seed=1))
+    e_scan, e_sim = _pdf_caption("e", scans), _pdf_caption("e", sims)
+    assert "summed over the stacks" in e_scan and "one row per sub-system" in e_scan
+    assert "summed over the stacks" not in e_sim and "one row per sub-system" in e_sim
+    for q in ("E", "area_L2", "shape_ratio"):
+        text = _pdf_caption(q, scans)
+        assert "summed over the stacks" not in text and "sub-system" not in text
+    assert "detection limit" in _pdf_caption("area_L2", scans)
+    assert "detection limit" not in _pdf_caption("area_L2", sims)
