@@ -311,9 +311,10 @@ def read_truth_tables(truth_dir) -> tuple[dict, dict]:
     truth_dir = Path(truth_dir)
     summary, tables = schema.read_tables(truth_dir)
     # the truth's summary and tables are written together: another count is a table cut
-    # short or edited, whose scores would be scores against a part of the truth
+    # short or edited, whose scores would be scores against a part of the truth (the tables
+    # scored row by row; the totals of branches.csv come from the summary)
     for name, key in (("junctions", "n_junctions"), ("stacks", "n_stacks"),
-                      ("branches", "n_branches"), ("voids", "n_voids")):
+                      ("voids", "n_voids")):
         counted = summary.get(key)
         if (isinstance(counted, (int, float)) and not isinstance(counted, bool)
                 and math.isfinite(counted) and len(tables[name]) != counted):

@@ -183,8 +183,7 @@ def test_corrupt_truth_table_fails_its_scene(scenes, tmp_path, capsys):
     assert (summary["n_scored"], summary["n_failed"]) == (0, 1)
 
 
-@pytest.mark.parametrize("table", ["junctions", "stacks", "branches", "voids",
-                                   "layer_pieces"])
+@pytest.mark.parametrize("table", ["junctions", "stacks", "voids", "layer_pieces"])
 def test_a_truth_table_cut_short_fails_its_scene(scenes, tmp_path, capsys, table):
     """A junctions.csv cut to two rows scored F1 0.21 (and a layer_pieces.csv cut short
     raised exact n_br) with exit 0: the summary's counts, and a piece for every stack, are
