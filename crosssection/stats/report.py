@@ -1770,7 +1770,11 @@ def _curvature_methods(ens) -> list:
     if ens is None or "analysis" not in ens.configs:
         return []
     used = set()
-    for cell in ens.configs["analysis"].dropna():
+    # scans only: a simulation's record holds its own parameters, no curvature method
+    cells = ens.configs["analysis"]
+    if "rod_length_mm" in ens.configs:
+        cells = cells[ens.configs["rod_length_mm"].notna()]
+    for cell in cells.dropna():
         try:
             rec = json.loads(cell)
         except (TypeError, ValueError):

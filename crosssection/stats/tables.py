@@ -501,7 +501,8 @@ def compute_stats(ens: Ensemble, opts: StatsOptions | None = None, *,
     Raises
     ------
     ParameterError
-        ``ens`` is not an :class:`Ensemble` or ``opts`` not a valid :class:`StatsOptions`.
+        ``ens`` is not an :class:`Ensemble` (or has rows without a set name) or ``opts``
+        not a valid :class:`StatsOptions`.
     """
     if not isinstance(ens, Ensemble):
         raise ParameterError(f"ens must be an Ensemble (from crosssection.stats.load_any), "
@@ -510,6 +511,18 @@ def compute_stats(ens: Ensemble, opts: StatsOptions | None = None, *,
         raise ParameterError(f"opts must be a StatsOptions, got {type(opts).__name__}")
     opts = opts or StatsOptions()
     opts.check()
+    for name in ("configs", "branches", "stacks", "voids"):
+        # every row belongs to a set: a missing name would be matched against nothing
+        df = getattr(ens, name)
+        if "set" in df.columns and len(df) and df["set"].isna().any():
+            raise ParameterError(f"ens.{name} has {int(df['set'].isna().sum())} row(s) without "
+                                 "a set name (column 'set')")
+    for name, column in (("branches", "length_L"), ("voids", "area_L2"),
+                         ("voids", "perimeter_L")):
+        values = np.asarray(getattr(ens, name).get(column, []), float)
+        if (values < 0).any():  # as the loaders refuse them in the tables on disk
+            raise ParameterError(f"ens.{name}.{column} holds {int((values < 0).sum())} "
+                                 "negative value(s): a length or an area is >= 0")
     if F.few_boot_text(opts.n_boot):
         warnings.warn(F.few_boot_text(opts.n_boot), F.SmallSampleWarning, stacklevel=2)
     per_cfg = per_config_table(ens)

@@ -301,6 +301,19 @@ def test_compute_stats_checks_its_arguments():
         compute_stats(_ensemble(G), opts)
 
 
+def test_compute_stats_refuses_a_hand_built_ensemble_without_sets_or_with_negative_sizes():
+    """A set of NaN gave pandas' merge error; a negative void area a leaked RuntimeWarning."""
+    from dataclasses import replace
+
+    ens = _ensemble(G)
+    opts = StatsOptions(n_boot=0, gof=False, quantities=("e",))
+    with pytest.raises(ParameterError, match=r"ens.configs has 1 row\(s\) without a set"):
+        compute_stats(replace(ens, configs=ens.configs.assign(set=np.nan)), opts)
+    with pytest.raises(ParameterError, match="ens.branches.length_L holds 1 negative"):
+        compute_stats(replace(ens, branches=ens.branches.assign(
+            length_L=np.r_[-1.0, np.ones(len(ens.branches) - 1)])), opts)
+
+
 def test_cli_refuses_zero_gof_resamples(tmp_path):
     import argparse
 

@@ -72,8 +72,9 @@ def test_stats_same_seed_same_tables(tmp_path):
         _run([str(s), "--out", str(tmp_path / k), "--n-boot", "8", "--n-mc", "9",
               "--no-figures"])
     assert (tmp_path / "a" / "fits.csv").read_text() == (tmp_path / "b" / "fits.csv").read_text()
-    # a report of simulations alone says nothing of scans' quality
-    assert "Input quality" not in (tmp_path / "a" / "report.html").read_text()
+    # a report of simulations alone says nothing of scans' quality nor of image curvature
+    page = (tmp_path / "a" / "report.html").read_text()
+    assert "Input quality" not in page and "curvature method" not in page
 
 
 def test_stats_bad_inputs(tmp_path):
