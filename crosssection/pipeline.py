@@ -21,6 +21,7 @@ made here:
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
 import warnings as _warnings
 from contextlib import contextmanager
@@ -749,19 +750,16 @@ def _inscribed_radius_px(distance_px, junctions) -> np.ndarray:
     return out
 
 
-def _filled_near_px(pre, junctions, radius_px) -> np.ndarray:
-    """Paper pixels the cleaning filled within each junction's inscribed ink disc (a void
-    below ``s_min`` closed there makes the same wide ink as a blot)."""
-    filled = np.zeros(len(junctions))
+def _filled_near_px(pre, junctions, i: int, radius_px: float) -> int:
+    """Paper pixels the cleaning filled within ``radius_px`` of junction ``i`` (a void below
+    ``s_min`` closed there makes the same wide ink as a blot)."""
     rows, cols = pre.mask_clean.shape
-    xs, ys = junctions["x_px"].to_numpy(), junctions["y_px"].to_numpy()
-    for i, (x, y, rad) in enumerate(zip(xs, ys, radius_px)):
-        r, c, k = int(round(y)), int(round(x)), int(np.ceil(rad)) + 1
-        box = np.s_[max(r - k, 0):min(r + k + 1, rows), max(c - k, 0):min(c + k + 1, cols)]
-        rr, cc = np.ogrid[box]
-        disc = (rr - y) ** 2 + (cc - x) ** 2 <= rad ** 2
-        filled[i] = np.count_nonzero(pre.mask_clean[box] & ~pre.threshold.mask[box] & disc)
-    return filled
+    x, y = float(junctions["x_px"].iloc[i]), float(junctions["y_px"].iloc[i])
+    r, c, k = int(round(y)), int(round(x)), int(np.ceil(radius_px)) + 1
+    box = np.s_[max(r - k, 0):min(r + k + 1, rows), max(c - k, 0):min(c + k + 1, cols)]
+    rr, cc = np.ogrid[box]
+    disc = (rr - y) ** 2 + (cc - x) ** 2 <= radius_px ** 2
+    return int(np.count_nonzero(pre.mask_clean[box] & ~pre.threshold.mask[box] & disc))
 
 
 def _touch_px(sg, width_px, h_px) -> float:
@@ -814,7 +812,6 @@ def _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, void
 
     degrees = junctions["n_stacks"].to_numpy()
     ink_area_mm2 = p.scale.area_to_mm2(float(np.count_nonzero(pre.mask_clean)))
-    radius_px = _inscribed_radius_px(pre.distance_px, junctions)
     flags = quality.assess(
         params=p, hole=pre.hole, hole_confidence=pre.hole_confidence,
         ink_outside_fraction=pre.ink_outside_fraction,
@@ -826,8 +823,8 @@ def _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, void
         file_pages=pre.file_pages, file_dpi_xy=pre.file_dpi_xy,
         network_shares=_network_shares(lin, stacks),
         border_ink_rc=_border_pixels(pre.mask_clean), width_law=law,
-        junction_radius_px=radius_px, junction_filled_px=_filled_near_px(pre, junctions,
-                                                                          radius_px),
+        junction_radius_px=_inscribed_radius_px(pre.distance_px, junctions),
+        filled_near_junction=functools.partial(_filled_near_px, pre, junctions),
         see_through=pre.see_through, faint_ends=faint,
         calibration_one_layer_mm=_one_layer_mm(cal, p),
         void_areas_mm2=voids["area_mm2"].to_numpy() if "area_mm2" in voids else None)

@@ -518,7 +518,7 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
            junctions, image_shape=None, file_px_per_mm=None,
            file_pages=1, network_shares=None, border_ink_rc=None,
            ink_missed_fraction=0.0, width_law=None,
-           junction_radius_px=None, junction_filled_px=None, see_through=None,
+           junction_radius_px=None, filled_near_junction=None, see_through=None,
            file_dpi_xy=None, faint_ends=None,
            calibration_one_layer_mm=None, void_areas_mm2=None,
            dark_marks_fraction=0.0) -> list[QualityFlag]:
@@ -574,6 +574,9 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
     junction_radius_px : (K,) array, optional
         Radius of the ink disc inscribed at each junction of ``junctions`` (in its order):
         the ``junction_blot`` check (not made without it).
+    filled_near_junction : callable, optional
+        ``filled_near_junction(i, radius_px)``: paper the cleaning filled within that radius
+        of junction ``i`` (px), asked of the junction a ``junction_blot`` flag names only.
     see_through : (H, W) bool array, optional
         The pixels an alpha channel made transparent or partly: the ``see_through`` check.
     file_dpi_xy : (float, float), optional
@@ -729,7 +732,7 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
     flags += _linear_system_checks(junctions)
     if junction_radius_px is not None:
         flags += _blot_check(junction_radius_px, junctions, stacks, params,
-                             filled_px=junction_filled_px)
+                             filled_near=filled_near_junction)
     return flags
 
 
@@ -797,7 +800,7 @@ def junction_blot_ratios(radius_px, junctions, stacks, px_per_mm) -> np.ndarray:
         return radius_px / half
 
 
-def _blot_check(radius_px, junctions, stacks, params, filled_px=None) -> list[QualityFlag]:
+def _blot_check(radius_px, junctions, stacks, params, filled_near=None) -> list[QualityFlag]:
     radius_px = np.asarray(radius_px, float)
     ratio = junction_blot_ratios(radius_px, junctions, stacks, params.px_per_mm)
     bad = np.flatnonzero(np.isfinite(ratio) & (ratio > JUNCTION_BLOT_RATIO))
@@ -808,7 +811,7 @@ def _blot_check(radius_px, junctions, stacks, params, filled_px=None) -> list[Qu
     cause = "an ink blot over a junction hides how its layers pass"
     # paper the cleaning filled there, beyond pinholes: a void below s_min, closed by the
     # paper's rule, whose junctions merge into one ink disc
-    filled = 0.0 if filled_px is None else float(np.asarray(filled_px, float)[i])
+    filled = 0.0 if filled_near is None else float(filled_near(int(i), float(radius_px[i])))
     if filled >= FILLED_VOID_H2 * params.thickness_px ** 2:
         cause = (f"a void of {params.scale.area_to_mm2(filled):.2f} mm^2 or more there, below "
                  f"s_min = {params.s_min_used_mm2:.3g} mm^2, was filled (the paper's rule) and its "

@@ -358,20 +358,6 @@ def _remove_if_empty(folder: Path, created: bool) -> None:
             pass  # not empty, or gone: left as it is
 
 
-def _png_text_chunks(text: dict) -> bytes:
-    """PNG ``tEXt`` chunks of ``text`` (Latin-1 keys and values; others escaped)."""
-    import struct
-    import zlib
-
-    out = b""
-    for key, value in text.items():
-        body = (b"tEXt" + key.encode("latin-1") + b"\0"
-                + str(value).encode("latin-1", "backslashreplace"))
-        out += (struct.pack(">I", len(body) - 4) + body
-                + struct.pack(">I", zlib.crc32(body) & 0xFFFFFFFF))
-    return out
-
-
 def write_step_images(out_dir, rgb, mask_threshold, mask_clean, skeleton, junction_centers_rc,
                       *, figure: bool = True, titles=None, description: str | None = None
                       ) -> dict:
@@ -382,7 +368,7 @@ def write_step_images(out_dir, rgb, mask_threshold, mask_clean, skeleton, juncti
     import cv2
 
     from crosssection._version import __version__
-    from crosssection.core.fileio import atomic_path
+    from crosssection.core.fileio import atomic_path, png_with_chunks
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -390,8 +376,9 @@ def write_step_images(out_dir, rgb, mask_threshold, mask_clean, skeleton, juncti
     text = {"Software": f"foldstat {__version__}"}
     if description is not None:
         text["Description"] = description
-    chunks = _png_text_chunks(text)
-    end_ihdr = 8 + 8 + 13 + 4  # signature, IHDR's length and type, its data, its CRC
+    # tEXt: Latin-1 keys and values (others escaped)
+    chunks = [(b"tEXt", k.encode("latin-1") + b"\0"
+               + str(v).encode("latin-1", "backslashreplace")) for k, v in text.items()]
 
     def save(name, img):
         p = out / name
@@ -400,7 +387,7 @@ def write_step_images(out_dir, rgb, mask_threshold, mask_clean, skeleton, juncti
             raise ImageError("cannot write image", p)
         data = buf.tobytes()
         with atomic_path(p) as tmp:
-            tmp.write_bytes(data[:end_ihdr] + chunks + data[end_ihdr:])
+            tmp.write_bytes(png_with_chunks(data, chunks))
         paths[name[:-4]] = p
 
     raw = np.asarray(rgb)

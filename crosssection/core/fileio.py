@@ -520,6 +520,20 @@ def missing_file_reason(path) -> str:
     return "file not found"
 
 
+def png_with_chunks(data: bytes, chunks) -> bytes:
+    """A PNG's bytes with ``chunks`` (``(type, data)`` pairs of bytes, each given its length
+    and CRC) inserted right after its ``IHDR``, where ancillary chunks such as ``pHYs`` and
+    ``tEXt`` may stand (before the image data)."""
+    import struct
+    import zlib
+
+    extra = b"".join(struct.pack(">I", len(body)) + kind + body
+                     + struct.pack(">I", zlib.crc32(kind + body) & 0xFFFFFFFF)
+                     for kind, body in chunks)
+    end_ihdr = 8 + 8 + 13 + 4  # signature, IHDR's length and type, its data, its CRC
+    return data[:end_ihdr] + extra + data[end_ihdr:]
+
+
 def lock_holds(path, token) -> bool:
     """Whether the lock file ``path`` still holds the run ``token`` (:func:`exclusive_lock`):
     False once that run has ended (the file removed) or another holds it. A task that

@@ -787,18 +787,17 @@ def network_figure(res: StatsResult, colors=None):
     axes = axes[0]
     name = legend_names(pc["set"])
     groups = list(pc.groupby("set", sort=False))
-    nbrs = {}
+    nbrs, rels = {}, {}
     for s, g in groups:
-        rel = res.relations[res.relations["set"] == s].set_index("relation")["fitted"]
+        rels[s] = res.relations[res.relations["set"] == s].set_index("relation")["fitted"]
         nbr = res.macro.query("set == @s and region == 'all'")["n_br"].iloc[0]
         if not np.isfinite(nbr):  # no per-stack counts (simulations): the Eq. (14) fitted slope
-            nbr = rel.get("eq14_slope", np.nan)
+            nbr = rels[s].get("eq14_slope", np.nan)
         nbrs[s] = float(nbr)
     dashes = dict(zip(nbrs, _shared_dashes(nbrs.values())))
     handles, labels, styles = [], [], set()
     for s, g in groups:
-        c, nbr = colors[s], nbrs[s]
-        rel = res.relations[res.relations["set"] == s].set_index("relation")["fitted"]
+        c, nbr, rel = colors[s], nbrs[s], rels[s]
         axes[0].plot(g["N_l"], g["N_br"], "o", color=c, ms=4, alpha=0.8)
         axes[1].plot(g["N_l"], g["n_br_bar"], "o", color=c, ms=4, alpha=0.8)
         words = [f"{name[s]}: configurations"]
@@ -1432,10 +1431,19 @@ def _safe(name: str) -> str:
     return "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in str(name))
 
 
+def _scan_rows(ens: Ensemble, unknown: bool = False) -> pd.Series:
+    """Which configurations of ``ens`` are scans: those that record the rod length of their
+    normalisation (NaN for simulations; ``unknown`` for all where the column is absent)."""
+    configs = ens.configs
+    if "rod_length_mm" not in configs:
+        return pd.Series(unknown, index=configs.index)
+    return configs["rod_length_mm"].notna()
+
+
 def _e_vs_nbr_bars(ens: Ensemble) -> str:
     """The sentence of the branch-energy figure's caption saying when a point has no error
     bar: a scan's branches share their stack's energy, a simulated rod's carry their own."""
-    scans = ens.configs["rod_length_mm"].notna()  # NaN for simulations
+    scans = _scan_rows(ens)
     scan_words = ("the branches of one stack share its energy, so a point resting on a single "
                   "stack has no error bar")
     sim_words = ("each branch carries its own energy, so a point resting on a single stack "
@@ -1457,7 +1465,7 @@ def _pdf_caption(q: str, ens: Ensemble | None = None) -> str:
         return (f"Fraction of stacks with each {WORDS[q]} (points, error bars sqrt(count)/n) "
                 f"against the selected law's probability mass at each integer (open squares) "
                 f"with its 95 % bootstrap band, one colour per set{rows}.")
-    scans = ens is None or bool(ens.configs["rod_length_mm"].notna().any())
+    scans = ens is None or bool(_scan_rows(ens).any())
     shared = (", with count squared summed over the stacks where a stack's branches share "
               "its value" if table == "branches" and scans else "")
     limited = cut is not None and (ens is None or bool(np.isfinite(
@@ -1771,10 +1779,7 @@ def _curvature_methods(ens) -> list:
         return []
     used = set()
     # scans only: a simulation's record holds its own parameters, no curvature method
-    cells = ens.configs["analysis"]
-    if "rod_length_mm" in ens.configs:
-        cells = cells[ens.configs["rod_length_mm"].notna()]
-    for cell in cells.dropna():
+    for cell in ens.configs.loc[_scan_rows(ens, unknown=True), "analysis"].dropna():
         try:
             rec = json.loads(cell)
         except (TypeError, ValueError):
@@ -1867,7 +1872,7 @@ def _html(res: StatsResult, figs, meta, ens: Ensemble | None = None,
                       f"{len(ens.configs)} configurations)</h2><p>The image analysis flagged "
                       "these scans; their values enter every table and figure below.</p>",
                       _html_table(qual)]
-        elif ens.configs["rod_length_mm"].notna().any():  # scans (simulations have none)
+        elif _scan_rows(ens).any():  # simulations have no image analysis
             parts.append("<p>Input quality: no scan carries an image-analysis quality "
                          "warning.</p>")
         parts.append(_model_share_note(ens))

@@ -24,7 +24,8 @@ import numpy as np
 from crosssection.core import schema
 from crosssection.core.calibration import Calibration
 from crosssection.core.errors import ConfigError, ImageError, output_error
-from crosssection.core.fileio import atomic_path, read_json_object, write_csv, write_json
+from crosssection.core.fileio import (atomic_path, png_with_chunks, read_json_object, write_csv,
+                                      write_json)
 
 __all__ = ["Scene", "write_scene", "read_scene", "read_scene_params", "read_truth_tables",
            "write_image", "write_set_file", "LAYER_PIECES", "LAYER_PIECE_COLUMNS"]
@@ -77,16 +78,12 @@ class Scene:
 
 
 def _png_with_resolution(data: bytes, px_per_mm: float) -> bytes:
-    """A PNG's bytes with a ``pHYs`` chunk (pixels per metre) after its ``IHDR``, as a
-    scanner records its resolution."""
+    """A PNG's bytes with a ``pHYs`` chunk (pixels per metre), as a scanner records its
+    resolution."""
     import struct
-    import zlib
 
     ppm = int(round(px_per_mm * 1000.0))
-    body = b"pHYs" + struct.pack(">IIB", ppm, ppm, 1)
-    chunk = struct.pack(">I", 9) + body + struct.pack(">I", zlib.crc32(body) & 0xFFFFFFFF)
-    end_ihdr = 8 + 8 + 13 + 4  # signature, IHDR's length and type, its data, its CRC
-    return data[:end_ihdr] + chunk + data[end_ihdr:]
+    return png_with_chunks(data, [(b"pHYs", struct.pack(">IIB", ppm, ppm, 1))])
 
 
 def write_image(rgb: np.ndarray, path, *, px_per_mm: float | None = None) -> Path:
