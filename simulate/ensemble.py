@@ -814,7 +814,8 @@ def summary_head(tables: dict, out) -> tuple[str, pd.DataFrame]:
     head : str
         ``"K configurations -> OUT"``, followed by how many failed when some did, or by
         the statement that none succeeded: then there is nothing to average and the caller
-        prints ``head`` alone.
+        prints ``head`` alone; and by how many configurations beyond K an earlier run left
+        in ``parts/``.
     done : DataFrame
         The rows of configs.csv of the configurations that succeeded (possibly none).
     """
@@ -825,7 +826,23 @@ def summary_head(tables: dict, out) -> tuple[str, pd.DataFrame]:
         head += f": none succeeded, no results (errors in {Path(out) / 'failures.csv'})"
     elif len(failed):
         head += f" ({len(failed)} failed)"
+    beyond = _parts_beyond(out, len(c))
+    if beyond:
+        # a lower --n-configs than an earlier run's keeps its parts for a later resume
+        head += (f" ({beyond} more configuration{'s' if beyond > 1 else ''} of an earlier run "
+                 "kept in parts/, not in the tables)")
     return head, done
+
+
+def _parts_beyond(out, n_configs: int) -> int:
+    """How many part files of ``out`` hold configurations numbered ``n_configs`` or more."""
+    n = 0
+    for f in (Path(out) / "parts").glob("config_*.npz"):
+        try:
+            n += int(f.stem[len("config_"):]) >= n_configs
+        except ValueError:
+            continue
+    return n
 
 
 def report_failures(tables: dict, out) -> int:

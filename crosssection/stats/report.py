@@ -245,6 +245,18 @@ def _power_label(v: float) -> str:
     return f"${mant}10^{{{k}}}$"
 
 
+def _scaled_label(label: str, power: int) -> str:
+    """An axis label whose ticks read the quantity in units of ``10^power``: its symbol
+    times ``10^-power`` (E read 1-4 on ticks of 1e4-4e4 is labelled 10^-4 E), or the words
+    "in units of 10^power" for a label without a symbol."""
+    if not power:
+        return label
+    i = label.find("$")
+    if i < 0:
+        return f"{label}, in units of $10^{{{power}}}$"
+    return f"{label[:i + 1]}10^{{{-power}}}\\,{label[i + 1:]}"
+
+
 def _linear_ticks(axis) -> int:
     """At most 5 labels; for an axis reaching below 1e-2 or beyond 1e4, labels in units of a
     power of ten, returned (0: none) for the axis label to name. Plain labels such as 0.00015
@@ -620,8 +632,7 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
                     ax.set_xlim(left=0)
                 power = _linear_ticks(ax.xaxis)
             # long names on two lines: side-by-side panels' labels must not run together
-            ax.set_xlabel(_wrap_label(label + (f", in units of $10^{{{power}}}$" if power
-                                               else ""), 36))
+            ax.set_xlabel(_wrap_label(_scaled_label(label, power), 36))
         # one legend per row, outside the log panel: never over the data
         handles, labels = row[1].get_legend_handles_labels()
         # per set: its data, then its law, then the band and the detection limit

@@ -143,6 +143,18 @@ def test_summary_head_counts_the_failed_and_says_when_none_succeeded():
     assert done.empty and "none succeeded" in head and "nan" not in head
 
 
+def test_summary_head_names_parts_an_earlier_larger_run_left(tmp_path):
+    (tmp_path / "parts").mkdir()
+    for i in (0, 1, 2, 3):
+        (tmp_path / "parts" / f"config_{i:05d}.npz").write_bytes(b"")
+    (tmp_path / "parts" / "config_x.npz").write_bytes(b"")
+    head, _ = ensemble.summary_head(_tables(2, []), tmp_path)
+    assert head.endswith("(2 more configurations of an earlier run kept in parts/, not in "
+                         "the tables)")
+    head, _ = ensemble.summary_head(_tables(4, []), tmp_path)
+    assert head == f"4 configurations -> {tmp_path}"
+
+
 def test_quench_in_which_every_configuration_failed_says_so(tmp_path, monkeypatch, capsys):
     def failing(*a, **k):
         raise FloatingPointError("diverged")

@@ -108,7 +108,10 @@ def test_a_large_scale_is_named_in_the_axis_label_not_beside_the_axis():
     assert lin.xaxis.get_offset_text().get_text() == ""
     import re
 
-    power = int(re.search(r"in units of \$10\^\{(\d+)\}\$", lin.get_xlabel()).group(1))
+    # the symbol times 10^-k on one line of its own at most: e in units of 10^k
+    label = lin.get_xlabel()
+    power = -int(re.search(r"\$10\^\{(-\d+)\}\\,e\$", label).group(1))
+    assert label.count("\n") <= 1
     top = lin.get_xlim()[1]
     assert 10 ** power <= top < 10 ** (power + 1)
     ticks = [float(t.get_text()) for t in lin.get_xticklabels() if t.get_text()]
