@@ -266,6 +266,9 @@ def draw_overlay(ax, rgb, result=None, *, junctions_df=None, stacks_df=None, pat
     (n_junctions, n_stacks, n_branches) : tuple of int
         What was drawn.
     """
+    import math
+
+    from matplotlib import patheffects
     from matplotlib.collections import LineCollection
     from matplotlib.patches import Circle
 
@@ -309,6 +312,7 @@ def draw_overlay(ax, rgb, result=None, *, junctions_df=None, stacks_df=None, pat
     fontsize = 7.0
     if label_min_px is None:
         label_min_px = 4 * fontsize / pt_per_px
+    label_px = fontsize / pt_per_px
     lengths = np.array([len(p) for p in paths])
     order = np.argsort(-lengths, kind="stable")[:max_labels]
     for i in order:
@@ -321,8 +325,12 @@ def draw_overlay(ax, rgb, result=None, *, junctions_df=None, stacks_df=None, pat
             y, x = np.asarray(p[len(p) // 2], float)
         if not (np.isfinite(x) and np.isfinite(y)):
             continue
-        ax.text(x, y, str(int(n_br[i])), fontsize=fontsize, ha="center", va="center",
-                color="black", fontweight="bold", clip_on=True)
+        t = ax.text(x, y, str(int(n_br[i])), fontsize=fontsize, ha="center", va="center",
+                    color="black", fontweight="bold", clip_on=True)
+        if hole is not None and abs(math.hypot(x - hole.center_rc[1], y - hole.center_rc[0])
+                                    - hole.radius_px) < label_px:
+            # a wall stack's label on the hole's dashed circle: a white outline keeps it read
+            t.set_path_effects([patheffects.withStroke(linewidth=2.0, foreground="white")])
 
     if junctions_df is not None and len(junctions_df):
         ax.scatter(junctions_df["x_px"], junctions_df["y_px"],

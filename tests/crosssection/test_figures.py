@@ -257,3 +257,17 @@ def test_the_scale_bar_goes_to_a_corner_without_ink(dtype, top):
     assert loc_of(img) == 4  # lower right
     img[360:, 250:] = np.array([40, 70, 170]) * (top // 255)
     assert loc_of(img) in (1, 2)  # an upper corner
+
+
+def test_a_label_on_the_hole_circle_is_outlined_and_one_inside_is_not():
+    # a wall stack's n_br label sits on the dashed circle: outlined in white to stay read
+    size = 400
+    ang = np.linspace(0.2, 1.2, 200)
+    on_wall = np.stack([200 + 150 * np.sin(ang), 200 + 150 * np.cos(ang)], 1).round()
+    inside = np.stack([np.full(200, 200.0), np.linspace(100, 300, 200)], 1)
+    paths = [on_wall.astype(int), inside.astype(int)]
+    stacks = pd.DataFrame(dict(n_br=[1, 2], region=["periphery", "bulk"]))
+    fig = overlay_figure(np.full((size, size, 3), 245, np.uint8), stacks_df=stacks,
+                         paths=paths, hole=Hole(np.array([200.0, 200.0]), 150.0, False))
+    texts = {t.get_text(): t for t in fig.axes[0].texts}
+    assert texts["1"].get_path_effects() and not texts["2"].get_path_effects()
