@@ -907,6 +907,25 @@ def _scatter_fig(res, x, y, xlabel, ylabel, title, *, through_origin=False, pape
     return fig
 
 
+def _means_by_count(branches: pd.DataFrame) -> pd.DataFrame:
+    """Mean branch energy per n_br and its standard error over independent values.
+
+    The branches of a scan's stack repeat the stack's energy (:func:`branch_groups`): each
+    stack is one value, or the error would be too small by about the square root of n_br.
+    Within one n_br every stack holds the same number of branches, so the mean over stacks
+    is the mean over branches.
+    """
+    from crosssection.stats.data import branch_groups
+
+    g = branch_groups(branches)
+    own = np.array([x is None for x in g])
+    unit = np.where(own, np.arange(len(g)).astype(object), g)
+    per = (pd.DataFrame({"n_br": branches["n_br"].to_numpy(), "e": branches["e"].to_numpy(),
+                         "unit": [str(u) for u in unit]})
+           .groupby(["n_br", "unit"], sort=False)["e"].mean().reset_index())
+    return per.groupby("n_br")["e"].agg(["mean", "sem", "size"])
+
+
 def e_vs_nbr_figure(ens: Ensemble, colors=None):
     """Mean branch energy against the number of branches of its stack (paper fig energo_micro3)."""
     br = ens.branches.dropna(subset=["n_br", "e"])
@@ -928,7 +947,7 @@ def e_vs_nbr_figure(ens: Ensemble, colors=None):
             gg = g if reg is None else g[g["region"] == reg]
             if gg.empty:
                 continue
-            st = gg.groupby("n_br")["e"].agg(["mean", "sem", "size"])
+            st = _means_by_count(gg)
             # every integer in the range: a stack size without branches is a gap (NaN),
             # where the line breaks instead of joining its neighbours across it
             st = st.reindex(np.arange(int(st.index.min()), int(st.index.max()) + 1))
@@ -938,7 +957,7 @@ def e_vs_nbr_figure(ens: Ensemble, colors=None):
                         label=f"{name[s]}: {REGION_WORDS[reg or 'all']}")
     ax.set(xlabel="number of branches in the stack $n_{br}$",
            ylabel=r"mean branch energy $\langle e\rangle$ (dimensionless)",
-           title=r"mean branch energy against $n_{br}$ (mean $\pm$ standard error)")
+           title=r"mean branch energy against $n_{br}$ (mean $\pm$ standard error over stacks)")
     ax.xaxis.get_major_locator().set_params(integer=True)
     ax.legend(fontsize=7, frameon=False, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     return fig
@@ -1455,8 +1474,8 @@ def _e_vs_nbr_bars(ens: Ensemble) -> str:
     """The sentence of the branch-energy figure's caption saying when a point has no error
     bar: a scan's branches share their stack's energy, a simulated rod's carry their own."""
     scans = _scan_rows(ens)
-    scan_words = ("the branches of one stack share its energy, so a point resting on a single "
-                  "stack has no error bar")
+    scan_words = ("the branches of one stack share its energy, so the standard error is over "
+                  "stacks and a point resting on a single stack has no error bar")
     sim_words = ("each branch carries its own energy, so a point resting on a single stack "
                  "of several branches has an error bar")
     if scans.all():

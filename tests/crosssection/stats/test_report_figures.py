@@ -448,3 +448,19 @@ def test_distribution_captions_say_only_what_applies(tmp_path):
         assert "summed over the stacks" not in text and "sub-system" not in text
     assert "detection limit" in _pdf_caption("area_L2", scans)
     assert "detection limit" not in _pdf_caption("area_L2", sims)
+
+
+def test_the_branch_energy_error_bars_count_a_stack_once():
+    # two stacks of 3 branches (energies 1 and 3, repeated per branch) and one of 2: the
+    # error of the n_br = 3 point is over the two stacks, not the six branch rows
+    from crosssection.stats.report import _means_by_count
+
+    br = pd.DataFrame({"set": "s", "config_id": "c", "stack_id": [0, 0, 0, 1, 1, 1, 2, 2],
+                       "n_br": [3, 3, 3, 3, 3, 3, 2, 2], "e": [1, 1, 1, 3, 3, 3, 5, 5.0]})
+    st = _means_by_count(br)
+    assert st.loc[3, "mean"] == 2.0 and st.loc[3, "size"] == 2
+    assert st.loc[3, "sem"] == pytest.approx(np.std([1, 3], ddof=1) / np.sqrt(2))
+    assert np.isnan(st.loc[2, "sem"])  # one stack: no error bar
+    # without stack ids (a simulation) every branch is its own value
+    sim = _means_by_count(br.drop(columns="stack_id"))
+    assert sim.loc[3, "size"] == 6 and sim.loc[2, "sem"] == 0.0
