@@ -22,8 +22,11 @@ PACKAGES = ("crosssection", "simulate")
 def _writable(folder: Path, access=os.access) -> bool:
     """Whether ``folder``, or the nearest folder above it that exists, can be written."""
     for cand in (folder, *folder.parents):
-        if cand.exists():
-            return cand.is_dir() and access(cand, os.W_OK | os.X_OK)
+        try:
+            if cand.exists():
+                return cand.is_dir() and access(cand, os.W_OK | os.X_OK)
+        except OSError:  # a folder above that cannot be entered (HOME of another user)
+            return False
     return False
 
 

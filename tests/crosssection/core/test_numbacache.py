@@ -32,6 +32,25 @@ def test_a_folder_of_its_own_where_nothing_can_be_written(tmp_path):
     assert Path(folder).parent == Path(__import__("tempfile").gettempdir())
 
 
+def test_a_home_that_cannot_be_entered_is_no_place(tmp_path, monkeypatch):
+    # another user's HOME (sudo -u, a container's --user): Path.exists raised PermissionError
+    # and every command died on import
+    from crosssection.core import numbacache
+
+    real = Path.exists
+
+    def exists(self, **kw):
+        if "locked" in self.parts:
+            raise PermissionError(13, "Permission denied", str(self))
+        return real(self, **kw)
+
+    monkeypatch.setattr(Path, "exists", exists)
+    folder = numbacache.numba_cache_dir({}, package_dirs=[tmp_path],
+                                        user_cache=tmp_path / "locked" / ".cache" / "numba",
+                                        access=_no_write)
+    assert folder is not None and "foldstat-numba-cache" in folder
+
+
 def test_the_package_sets_it_before_numba_is_imported(tmp_path):
     """``import crosssection`` in a process where nothing is writable: the variable is set,
     and numba (imported after) reads it."""
