@@ -189,7 +189,9 @@ def _threshold_in_frame(rgb, p: AnalysisParams, path, timer, min_piece_px: float
                                 path) from None
     with timer("threshold"):
         thr = threshold_rgb(rgb, region=inside, **m)
-    if given:
+    if p.hole_given:
+        # a radius given alone is fitted to the ink: a radius too short cuts the wall band
+        # as a whole hole given off does
         with timer("hole"):
             hole, inside, thr = _checked_given_hole(rgb, hole, inside, thr, m, path,
                                                     correct=p.hole_correction)
@@ -805,6 +807,19 @@ def _border_pixels(mask) -> np.ndarray:
                            np.column_stack([np.full_like(bottom, H - 1), bottom])])
 
 
+def _odd_steps(graph, n_br) -> list:
+    """(row, col) of the layer steps where an odd number of layers ends: a rod end there."""
+    at = {}
+    for sid, (u, v) in enumerate(graph.ends):
+        for node in (u, v):
+            if graph.node_kind[node] == "step":
+                at.setdefault(node, []).append(int(n_br[sid]))
+    # layers ending at a step: the count on one side less the other's (sum of the sides'
+    # counts, odd with them)
+    return [tuple(float(x) for x in graph.node_rc[node]) for node, ns in sorted(at.items())
+            if sum(ns) % 2]
+
+
 def _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, voids, warn,
             rod_mm, L, timer, t_start, inputs=None, law=None, faint=None) -> AnalysisResult:
     """Summary, quality checks and warnings: the :class:`AnalysisResult` built in one place."""
@@ -827,7 +842,8 @@ def _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, void
         filled_near_junction=functools.partial(_filled_near_px, pre, junctions),
         see_through=pre.see_through, faint_ends=faint,
         calibration_one_layer_mm=_one_layer_mm(cal, p),
-        void_areas_mm2=voids["area_mm2"].to_numpy() if "area_mm2" in voids else None)
+        void_areas_mm2=voids["area_mm2"].to_numpy() if "area_mm2" in voids else None,
+        odd_steps=_odd_steps(pre.graph, stacks["n_br"].to_numpy()))
     notes = list(pre.warnings) + [f"linear system: {f}" for f in lin.flags
                                   if not str(f).startswith("disconnected")]
     summary = tb.summary(pre=pre, params=p, linear_system=lin, junctions=junctions,

@@ -79,7 +79,8 @@ isolated_stacks          pieces of ink touching no other stack (both ends     an
                          free) whose count is 2 or more or whose width reads
                          1.75 layers or more
 rod_ends                 bands of an odd number of layers ending away from    > 2
-                         any junction, attached at their other end (each
+                         any junction, attached at their other end, and
+                         layer steps ending an odd number of layers (each
                          holds a rod end; a rod has two)
 junction_blot            radius of the ink disc inscribed at a junction /     > 2 at any junction
                          half the width of its widest stack (an ink blot
@@ -442,15 +443,17 @@ def _crossed_check(params, hole) -> list[QualityFlag]:
     if not hole.replaced:
         used, unused = unused, used
 
-    def describe(h):
+    def describe(h, given=False):
         (r0, c0), rad = h
-        return f"radius {mm(rad):.2f} mm, centre x = {c0:.0f}, y = {r0:.0f} px"
+        # a radius given alone: its centre is fitted to the ink
+        centre = "its centre fitted at" if given and params.hole_center_px is None else "centre"
+        return f"radius {mm(rad):.2f} mm, {centre} x = {c0:.0f}, y = {r0:.0f} px"
     head = (f"ink goes on beyond the given hole on {100 * cut:.0f} % of its circle (it cuts "
             f"the wall band)")
     if hole.replaced:
         msg = (f"{head}: the hole found in the scan is used ({describe(used)}; given "
-               f"{describe(unused)}): check the hole given, and px_per_mm (a scale off "
-               "by a few % moves a hole given in mm as much)")
+               f"{describe(unused, True)}): check the hole given, and px_per_mm (a scale "
+               "off by a few % moves a hole given in mm as much)")
     else:
         msg = (f"{head}: the hole found in the scan ({describe(used)}) frames the ink; check "
                f"hole_radius_mm and hole_center_px, and px_per_mm")
@@ -521,7 +524,7 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
            junction_radius_px=None, filled_near_junction=None, see_through=None,
            file_dpi_xy=None, faint_ends=None,
            calibration_one_layer_mm=None, void_areas_mm2=None,
-           dark_marks_fraction=0.0) -> list[QualityFlag]:
+           dark_marks_fraction=0.0, odd_steps=None) -> list[QualityFlag]:
     """Run every check of the module table on one analysis.
 
     Parameters
@@ -593,6 +596,9 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
     dark_marks_fraction : float
         Dark pixels inside the frame that are not ink, in pieces, over the ink's
         (:func:`crosssection.stages.threshold.dark_marks`): the ``dark_marks`` check.
+    odd_steps : sequence of (float, float), optional
+        (row, col) of the layer steps where an odd number of layers ends (a rod end inside a
+        band, :func:`crosssection.stages.widths.layer_steps`): counted by ``rod_ends``.
 
     Returns
     -------
@@ -727,7 +733,7 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
     if network_shares is not None:
         flags += _network_check(network_shares)
     flags += _rod_checks(params, hole, rod_length_mm, rod_measured_mm, ink_area_in_hole_mm2)
-    flags += _stack_checks(params, stacks, calibration_max_width_mm)
+    flags += _stack_checks(params, stacks, calibration_max_width_mm, odd_steps or ())
     if h_px >= LATTICE_MIN_H_PX:
         flags += _lattice_check(stacks, h_px)
     flags += _linear_system_checks(junctions)
@@ -1073,29 +1079,39 @@ def _isolated_check(stacks) -> list[QualityFlag]:
 
 
 #: ``rod_ends``: bands of an odd number of layers that end in the scan, away from any
-#: junction, attached to the network at their other end. Each holds an end of the rod, and a
-#: sheet's cross-section has two: more are bands broken where their ink is lost (faded past
-#: the threshold, covered by a label or a blot). A band that ends past a layer step (a stack
-#: between a step and a free end) is not counted: the check can miss, never invent, an end.
+#: junction, attached to the network at their other end, and layer steps where an odd number
+#: of layers ends inside a band. Each holds an end of the rod, and a sheet's cross-section
+#: has two: more are bands broken where their ink is lost (faded past the threshold, crossed
+#: by a pencil line, covered by a label or a blot). A band that ends past a layer step (a
+#: stack between a step and a free end) is not counted: the check can miss, never invent, an
+#: end.
 ROD_ENDS_MAX = 2
 
 
-def _rod_ends_check(stacks) -> list[QualityFlag]:
+def _rod_ends_check(stacks, odd_steps=()) -> list[QualityFlag]:
     if not {"junction_a", "junction_b", "kind", "n_br"} <= set(stacks.columns):
         return []
     free_a, free_b = stacks["junction_a"] < 0, stacks["junction_b"] < 0
     hanging = (stacks["kind"] == "free_end") & (free_a != free_b) & (stacks["n_br"] % 2 == 1)
-    k = int(hanging.sum())
+    k = int(hanging.sum()) + len(odd_steps)
     if k <= ROD_ENDS_MAX:
         return []
-    worst = stacks.loc[stacks.loc[hanging, "n_br"].idxmax()]
-    where = (_stack_position(stacks, int(worst["stack_id"])) if "stack_id" in stacks
-             else "a stack")
-    return [QualityFlag("rod_ends", f"{k} bands of an odd number of layers end away from any "
-                        f"junction ({where}: n_br {int(worst['n_br'])}); each holds an end of "
-                        f"the rod, which has {ROD_ENDS_MAX}: bands are broken where their ink "
-                        "is lost (faded below the threshold, covered by a label or a blot); "
-                        "check the overlay", k, ROD_ENDS_MAX)]
+    parts = []
+    if hanging.any():
+        worst = stacks.loc[stacks.loc[hanging, "n_br"].idxmax()]
+        where = (_stack_position(stacks, int(worst["stack_id"])) if "stack_id" in stacks
+                 else "a stack")
+        parts.append(f"{int(hanging.sum())} bands of an odd number of layers end away from "
+                     f"any junction ({where}: n_br {int(worst['n_br'])})")
+    if len(odd_steps):
+        r, c = odd_steps[0]
+        parts.append(f"{len(odd_steps)} layer steps end an odd number of layers inside a band "
+                     f"(at x {c:.0f}, y {r:.0f} px of the scan)")
+    return [QualityFlag("rod_ends", f"{k} ends of the rod away from any junction: "
+                        f"{' and '.join(parts)}; the rod has {ROD_ENDS_MAX}: bands are broken "
+                        "where their ink is lost (faded below the threshold, crossed by a "
+                        "pencil line, covered by a label or a blot); check the overlay", k,
+                        ROD_ENDS_MAX)]
 
 
 def _tiny_void_check(areas_mm2: np.ndarray, params) -> list[QualityFlag]:
@@ -1147,7 +1163,8 @@ def _tight_bends_check(params, stacks) -> list[QualityFlag]:
                         "(check the overlay)", share, TIGHT_BEND_SHARE)]
 
 
-def _stack_checks(params, stacks, calibration_max_width_mm) -> list[QualityFlag]:
+def _stack_checks(params, stacks, calibration_max_width_mm,
+                  odd_steps=()) -> list[QualityFlag]:
     flags = []
     m = len(stacks)
     if not m:
@@ -1156,7 +1173,7 @@ def _stack_checks(params, stacks, calibration_max_width_mm) -> list[QualityFlag]
     flags += _tight_bends_check(params, stacks)
     flags += _count_width_check(stacks)
     flags += _isolated_check(stacks)
-    flags += _rod_ends_check(stacks)
+    flags += _rod_ends_check(stacks, odd_steps)
     free = (stacks["junction_a"] < 0) & (stacks["junction_b"] < 0) & (stacks["kind"] == "free_end")
     speck = free & (stacks["length_mm"] < 2 * params.l_min_mm)
     specks = int(speck.sum())

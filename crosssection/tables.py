@@ -16,6 +16,8 @@ Conventions (tested in tests/crosssection/test_pipeline.py):
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pandas as pd
 from numba import njit
@@ -354,6 +356,9 @@ def summary(*, pre, params, linear_system, junctions, stacks, branches, voids, r
     deg = junctions["n_stacks"].to_numpy()
     kinds = stacks["kind"].tolist()
     radius_mm = params.scale.to_mm(pre.hole.radius_px)
+    if params.hole_radius_mm is not None and math.isclose(radius_mm, params.hole_radius_mm,
+                                                          rel_tol=1e-12):
+        radius_mm = float(params.hole_radius_mm)  # as given, not its round trip through px
     total_energy = float(branches["energy"].sum()) if len(branches) else 0.0
     h, w = pre.rgb.shape[:2]
     out = {

@@ -1174,7 +1174,7 @@ def add_subparser(sub):
     """Register the ``compact`` subcommand."""
     p = sub.add_parser("compact", help="compact rods of finite thickness in a shrinking "
                                        "hard wall (the experiments' epsilon)",
-                       description=__doc__.split("\n\n")[0])
+                       description=__doc__.split("\n\n")[0].replace("``", ""))
     p.add_argument("--epsilon", type=float, required=True,
                    help="compaction rate L/(2 pi R) reached, above 1 (at 1 the wall's "
                         "circumference holds the rod; experiments: 8-19); with the default "

@@ -1268,7 +1268,7 @@ def run(args) -> int:
 def add_subparser(sub):
     """Register the ``quench`` and ``anneal`` subcommands."""
     q = sub.add_parser("quench", help="quench an ensemble of random rods (paper protocol)",
-                       description=__doc__.split("\n\n")[0])
+                       description=__doc__.split("\n\n")[0].replace("``", ""))
     _add_common(q, "quench")
     a = sub.add_parser("anneal", help="anneal rods: Lambda ramped slowly to the target",
                        description="Like quench, but Lambda is ramped from --lambda-start to "

@@ -1,8 +1,8 @@
-"""``python -m crosssection stats DIR... --out REPORT_DIR``: ensemble statistics and report.
+"""``stats DIR... --out REPORT_DIR``: ensemble statistics and report.
 
 Each DIR is a batch output (every set folder inside becomes a set), a single ``analyze``
-output, or a simulation ensemble from ``python -m simulate quench`` (one set named after the
-folder, or after ``--name``). ``--name exp`` for a batch of several sets ``A``, ``B`` names
+output, or a simulation ensemble from ``python -m simulate quench``, ``anneal`` or
+``compact`` (one set named after the folder, or after ``--name``). ``--name exp`` for a batch of several sets ``A``, ``B`` names
 them ``exp/A``, ``exp/B`` (a batch of one set: ``exp``); sets are never pooled. Sets of the
 same name from different DIRs (two folders both named ``run``) are kept apart as ``run``,
 ``run#2``, ... (``#k``: the DIR's position); give ``--name`` once per DIR to name them.

@@ -420,6 +420,26 @@ def test_more_odd_bands_ending_in_the_scan_than_a_rod_has_ends_are_flagged():
     assert [f.code for f in flags] == ["rod_ends"] and flags[0].value == 3
     assert "n_br 3" in flags[0].message and quality.CATEGORIES["rod_ends"] is \
         quality.NetworkWarning
+    # a band cut in two (a pencil line across it) leaves a layer step of an odd count on
+    # one side of the cut: two free bands and two odd steps are four rod ends
+    flags = quality._rod_ends_check(two_rod_ends, [(50.0, 60.0), (70.0, 80.0)])
+    assert flags[0].value == 4 and "2 layer steps end an odd number" in flags[0].message
+    assert "x 60, y 50 px" in flags[0].message
+    assert quality._rod_ends_check(two_rod_ends.iloc[:0], [(1.0, 2.0), (3.0, 4.0)]) == []
+
+
+def test_odd_steps_are_the_steps_where_an_odd_number_of_layers_ends():
+    from types import SimpleNamespace
+
+    from crosssection.pipeline import _odd_steps
+
+    # stacks 0-1 meet at step 10 (3 | 2 layers: a rod end), 2-3 at step 11 (4 | 2: a fold),
+    # stack 4 hangs from junction 0 to a free end
+    g = SimpleNamespace(ends=[(0, 10), (10, 1), (1, 11), (11, 2), (0, 12)],
+                        node_kind={0: "junction", 1: "junction", 2: "junction", 10: "step",
+                                   11: "step", 12: "end"},
+                        node_rc={10: np.array([5.0, 6.0]), 11: np.array([7.0, 8.0])})
+    assert _odd_steps(g, np.array([3, 2, 4, 2, 1])) == [(5.0, 6.0)]
 
 
 def test_layer_conservation_violated_is_flagged():

@@ -320,6 +320,25 @@ def test_a_given_hole_a_little_off_is_replaced_by_the_hole_found(scene, radius_f
     assert kept.summary["rod_length_mm"] < 0.99 * exact.summary["rod_length_mm"]
 
 
+def test_a_radius_given_alone_and_short_is_replaced_by_the_hole_found(scene):
+    """A radius given without its centre, 10 % short: the hole fitted to the ink with it cut
+    the wall band (rod about half) and the warning blamed a plate; the hole found replaces
+    it, as a whole hole given off."""
+    from crosssection import analyze
+    from crosssection.quality import FrameWarning
+
+    sc, c, R = scene
+    p = sc.params
+    kw = dict(px_per_mm=p["px_per_mm"], thickness_mm=p["thickness_mm"],
+              calibration=sc.calibration)
+    exact = analyze(sc.rgb, hole_radius_mm=p["hole_radius_mm"],
+                    hole_center_px=tuple(p["hole_center_px"]), **kw)
+    with pytest.warns(FrameWarning, match="its centre fitted at"):
+        short = analyze(sc.rgb, hole_radius_mm=0.9 * p["hole_radius_mm"], **kw)
+    assert abs(short.summary["rod_length_mm"] / exact.summary["rod_length_mm"] - 1) < 0.005
+    assert "ink_outside_hole" not in short.summary["quality"]["codes"]
+
+
 @pytest.mark.parametrize("gap_mm", [0.25, 0.5])
 def test_a_ring_drawn_round_a_right_hole_does_not_replace_it(scene, gap_mm):
     """A marker's ring 0.25-0.5 mm outside a hole given right took its place, and counted as
@@ -525,10 +544,12 @@ def test_a_rod_away_from_a_right_wall_is_not_a_hole_too_wide(scene):
 
 
 def test_a_radius_given_alone_too_wide_is_replaced_by_the_lined_envelope():
-    """A radius given alone 7 % too large (a sample scan, 8.5 mm for 7.94): the centre
-    fitted with it hugs one side of the rod, which reaches that circle on 29 % of it, so no
-    flag was raised while 17 of the 26 wall stacks read as bulk and epsilon 7 % low. The ink
-    lines a smaller circle all round: that circle is the wall."""
+    """A radius given alone 5-7 % too large (a sample scan, 8.3-8.5 mm for 7.94): the centre
+    fitted with it hugs one side of the rod, which reaches that circle on 29 % of it (8.5
+    mm), so no flag was raised while 17 of the 26 wall stacks read as bulk and epsilon 7 %
+    low. The ink lines a smaller circle all round: that circle is the wall. (At 8.5 mm the
+    fitted circle also cuts the rod on its far side, and the hole found replaces it first,
+    ``hole_crossed``.)"""
     from pathlib import Path
 
     from crosssection import analyze
@@ -539,7 +560,10 @@ def test_a_radius_given_alone_too_wide_is_replaced_by_the_lined_envelope():
     exact = analyze(scan, hole_radius_mm=7.9351, hole_center_px=(428.75, 423.44), **kw)
     with warnings.catch_warnings(record=True):
         warnings.simplefilter("always")
-        wide = analyze(scan, hole_radius_mm=8.5, **kw)
+        crossed = analyze(scan, hole_radius_mm=8.5, **kw)
+        wide = analyze(scan, hole_radius_mm=8.3, **kw)
+    assert crossed.summary["quality"]["codes"] == ["hole_crossed"] and crossed.hole.replaced
+    assert crossed.summary["epsilon"] == pytest.approx(exact.summary["epsilon"], rel=0.005)
     assert "hole_wide" in wide.summary["quality"]["codes"]
     # the flag records the limit of the rule that fired: its value lies beyond it
     flag = next(f for f in wide.quality if f.code == "hole_wide")
@@ -549,3 +573,17 @@ def test_a_radius_given_alone_too_wide_is_replaced_by_the_lined_envelope():
     assert wide.summary["epsilon"] == pytest.approx(exact.summary["epsilon"], rel=0.005)
     regions = [t.tables["stacks"]["region"] for t in (exact, wide)]
     assert list(regions[0]) == list(regions[1])
+
+
+def test_a_given_radius_is_recorded_as_given():
+    # not its round trip through pixels (7.574200000000001 in index.csv for 7.5742)
+    from pathlib import Path
+
+    from crosssection import analyze
+
+    root = Path(__file__).resolve().parents[3] / "sample_images"
+    assert 7.5742 * 50 / 50 != 7.5742
+    res = analyze(str(root / "scan_01_sparse.png"), px_per_mm=50, thickness_mm=0.1,
+                  calibration=str(root / "calibration.csv"), hole_radius_mm=7.5742,
+                  hole_center_px=(428.06, 426.92))
+    assert not res.hole.replaced and res.summary["hole"]["radius_mm"] == 7.5742
