@@ -574,7 +574,12 @@ def _gof_counts(x, fam, params, n_mc, rng, g=None) -> "GoodnessOfFit":
         xs = np.round(fam.sample(params, n_draw, cut, rng))
         if sizes is not None:
             xs = np.repeat(xs, sizes)
-        if not np.all(np.isfinite(xs)) or no_spread(xs):
+        if not np.all(np.isfinite(xs)):
+            continue
+        if no_spread(xs):
+            # one count only: the refit's limit puts all its mass there (G -> 0), a sample
+            # below the data's statistic; left out, they raised the p-value of small sets
+            null[i] = 0.0
             continue
         try:
             th, _ = _fit_counts(fam, xs, theta_hat)
@@ -782,7 +787,7 @@ def _fit_one(x, family: str, *, truncation, n_boot, seed, gof, n_mc, ci_level,
         draws = (bootstrap_draws(x, family, truncation=c, n_boot=n_boot, seed=s_boot,
                                  discrete=discrete, groups=g) if n_boot else None)
         ci = _percentile_ci(draws, fam.param_names, ci_level) if n_boot else {}
-        undetermined = _degenerate_resamples(fam, draws, x, c, ci_level)
+        undetermined = _degenerate_resamples(fam, draws, x, c, ci_level, discrete)
         if undetermined:
             return replace(res, ci=ci, boot=draws, rejected=undetermined)
         if not gof:
@@ -982,15 +987,17 @@ def _count_problem(fam, x, c) -> str:
     return ""
 
 
-def _degenerate_resamples(fam, draws, x, c, level) -> str:
+def _degenerate_resamples(fam, draws, x, c, level, discrete=False) -> str:
     """Why a fit is not determined by the data when its interval reaches its degenerate
     laws ("" when it does not).
 
-    A fit whose point estimate passes :meth:`degeneracy` can still have a share of its
-    bootstrap replicates beyond it (a Bose-Einstein beta whose interval runs five decades
-    down to beta x << 1, where the law is 1/x and beta is undetermined): when that share
-    exceeds the interval's tail, ``(1 - level) / 2``, the data do not tell the law from its
-    degenerate limit, and the fit is not named as the law of the data.
+    A fit whose point estimate passes :meth:`degeneracy` (for counts, :func:`_count_tail`
+    as well) can still have a share of its bootstrap replicates beyond it (a Bose-Einstein
+    beta whose interval runs five decades down to beta x << 1, where the law is 1/x and
+    beta is undetermined; a Gaussian of counts whose mean falls below the smallest count in
+    a quarter of them): when that share exceeds the interval's tail, ``(1 - level) / 2``,
+    the data do not tell the law from its degenerate limit, and the fit is not named as the
+    law of the data.
     """
     if draws is None or not len(draws):
         return ""
@@ -998,7 +1005,10 @@ def _degenerate_resamples(fam, draws, x, c, level) -> str:
     finite = draws[np.all(np.isfinite(draws), axis=1)]
     if not len(finite):
         return ""
-    reasons = [fam.degeneracy(dict(zip(names, map(float, row))), x, c) for row in finite]
+    def reason(params):
+        return fam.degeneracy(params, x, c) or (_count_tail(fam, params) if discrete else "")
+
+    reasons = [reason(dict(zip(names, map(float, row)))) for row in finite]
     bad = [r for r in reasons if r]
     share = len(bad) / len(finite)
     if share <= (1 - level) / 2:

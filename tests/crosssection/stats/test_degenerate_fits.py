@@ -274,3 +274,35 @@ def test_bootstrap_intervals_let_no_refit_warning_out():
         for family, x in (("powerlaw_cutoff", g), ("bose_einstein", g * 1e-310)):
             ci = F.bootstrap_ci(x, family, n_boot=40)
             assert set(ci) == set(F.FAMILIES[family].param_names)
+
+
+def test_a_count_fit_whose_resamples_fall_below_the_smallest_count_is_not_named():
+    """A Gaussian of counts with mu 1.2 was selected for n_br while a third of its bootstrap
+    fits had mu below 1 (the geometric law in disguise, which the point estimate's own rule
+    rejects)."""
+    from crosssection.stats.families import FAMILIES
+
+    fam = FAMILIES["gaussian"]
+    x = np.array([1.0] * 30 + [2.0] * 15 + [3.0] * 8 + [4.0] * 4)
+
+    def draws(n_below):
+        out = np.tile([1.2, 1.4], (100, 1))
+        out[:n_below, 0] = -0.5
+        return out
+
+    said = F._degenerate_resamples(fam, draws(30), x, None, 0.95, discrete=True)
+    assert said.startswith("30 % of the bootstrap resamples") and "in disguise" in said
+    assert F._degenerate_resamples(fam, draws(30), x, None, 0.95) == ""  # not counts
+    assert F._degenerate_resamples(fam, draws(2), x, None, 0.95, discrete=True) == ""
+
+
+def test_the_count_test_keeps_its_samples_of_one_count():
+    # five stacks, four of one layer: a third of the null samples hold one count only; they
+    # were left out (n_mc 123 of 199) and the p-value rose to 1
+    from crosssection.stats.families import FAMILIES
+
+    x = np.array([1.0, 1.0, 1.0, 1.0, 2.0])
+    fam = FAMILIES["exponential"]
+    r = F.fit_family(x, "exponential", discrete=True, n_boot=0, gof=False)
+    test = F._gof_counts(x, fam, r.params, 199, np.random.default_rng(0))
+    assert test.n_mc == 199 and test.pvalue < 1.0
