@@ -26,6 +26,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from crosssection import quality
 from crosssection.core import schema
 from crosssection.core.errors import OutputError, output_error
 from crosssection.core.fileio import check_out, temporary_files
@@ -380,6 +381,22 @@ def run(args) -> int:
     return 0
 
 
+def _warn_frame(pre, params, image) -> None:
+    """The warnings of ``analyze`` that stages 1-6 decide (the file, the scale, the threshold,
+    the hole; a set.toml beside the scan that is not read): the step images show that
+    frame."""
+    import warnings
+
+    from crosssection.pipeline import frame_flags
+    from crosssection.setconfig import set_not_read
+
+    note = set_not_read(image, params)
+    if note:
+        warnings.warn(note, quality.SetWarning, stacklevel=2)
+    for f in frame_flags(pre, params):
+        warnings.warn(f"{pre.path or image}: {f.message}", f.category, stacklevel=2)
+
+
 def run_steps(args) -> int:
     """``steps``: stages 1-6 only, then the step images and their record ``steps.json``."""
     from crosssection.core.fileio import renamed_together, write_json
@@ -398,6 +415,7 @@ def run_steps(args) -> int:
     clear_temporary(args.out, "steps")
     params = AnalysisParams.from_cli_args(args, path=args.image)
     pre = preprocess(args.image, params)
+    _warn_frame(pre, params, args.image)
     out = Path(args.out).expanduser()
     earlier = earlier_run(out)
     try:

@@ -72,6 +72,9 @@ LINEAR_CALIBRATION = "linear n*h"
 SMOOTH_PX_MAX = 20_001
 #: Longest ``smooth_px`` accepted, in sheet thicknesses h (the default is 2 floor(h) + 1)
 SMOOTH_H_MAX = 10
+#: Longest ``tangent_mm`` accepted, in sheet thicknesses h (default 3 h; 1.5-12 h measured):
+#: a tangent of 100 mm on a 15 mm hole turned 201 branches into 293 with no warning of it
+TANGENT_H_MAX = 20
 #: Key of the record of a calibration object that is no table (``{key: type name}``).
 UNRECORDED_CALIBRATION = "object"
 
@@ -197,7 +200,7 @@ class AnalysisParams:
         "width of a stack from its width profile away from its ends: median or mean",
         choices=WIDTH_STATISTICS))
     tangent_mm: float | None = field(default=None, metadata=_opt(
-        "length of the stack-tangent fit at junctions (default 3 h)", "mm"))
+        "length of the stack-tangent fit at junctions (default 3 h, at most 20 h)", "mm"))
     bending_rigidity_J: float | None = field(default=None, metadata=_opt(
         "bending rigidity B; adds total_energy_J = e B / (2 L) to the summary", "J m"))
     smooth_px: int | None = field(default=None, metadata=_opt(
@@ -249,6 +252,13 @@ class AnalysisParams:
                                  f"{self.tangent_mm * self.px_per_mm:.3g} px at "
                                  f"{self.px_per_mm:g} px/mm: a tangent is fitted on one pixel "
                                  "or more (default 3 h)")
+        if self.tangent_mm is not None and self.tangent_mm > TANGENT_H_MAX * self.thickness_mm:
+            # a stack's direction at a junction is read over tangent_mm: beyond a few sheet
+            # thicknesses it reads the bends of the stacks, not their directions
+            raise ParameterError(f"tangent_mm = {self.tangent_mm:g} mm is more than "
+                                 f"{TANGENT_H_MAX} sheet thicknesses (h = "
+                                 f"{self.thickness_mm:g} mm): a stack's direction at a "
+                                 "junction would be read over its bends (default 3 h)")
         if self.smooth_px is not None and self.smooth_px > SMOOTH_H_MAX * self.thickness_px:
             # averaged over more than a bend: on generated scans (h = 5 px) the total energy
             # read -12 % at the default 11 px, -25 to -33 % at 21 px and -40 to +183 % at

@@ -164,8 +164,10 @@ def _threshold_in_frame(rgb, p: AnalysisParams, path, timer, min_piece_px: float
                  features=colour_features(rgb))
         if not given:
             whole = threshold_rgb(rgb, **m)
+    bounds = {k: v for k, v in (("blue_min", p.blue_min), ("rg_max", p.rg_max))
+              if v is not None}
     if not given:
-        _check_fraction(whole, path, rgb)
+        _check_fraction(whole, path, rgb, bounds)
     with timer("hole"):
         if given:
             x, y = p.hole_center_px
@@ -211,7 +213,12 @@ def _threshold_in_frame(rgb, p: AnalysisParams, path, timer, min_piece_px: float
         trimmed, n_cut = hole_stage.trim_margin(thr.mask, hole)
         if n_cut:
             thr = dataclasses.replace(thr, mask=trimmed, n_outside=thr.n_outside + n_cut)
-    _check_fraction(thr, path, rgb)
+    if p.hole_given and not thr.mask.any() and threshold_rgb(rgb, **m).mask.any():
+        (r0, c0), rad = hole.center_rc, p.scale.to_mm(hole.radius_px)
+        raise ParameterError(f"no ink inside the given hole (radius {rad:.4g} mm, centre x = "
+                             f"{c0:.0f}, y = {r0:.0f} px) while the scan holds some: check "
+                             "hole_radius_mm and hole_center_px, and px_per_mm", path)
+    _check_fraction(thr, path, rgb, bounds)
     n_in = np.count_nonzero(thr.mask)
     outside = thr.n_outside / (thr.n_outside + n_in) if n_in else 0.0
     with timer("threshold"):
@@ -445,6 +452,35 @@ def _preprocess_read(rgb, path, header: Header, orientation, p: AnalysisParams, 
                         file_dpi_xy=header.dpi_xy, dark_marks_fraction=float(marks))
 
 
+#: the quality checks decided before the network is read: those ``steps`` reports
+FRAME_CHECKS = ("pages", "see_through", "scale_mismatch", "non_square", "low_resolution",
+                "ink_missed", "dark_marks", "hole_fitted", "ink_outside_hole", "hole_crossed",
+                "hole_wide", "hole_cut")
+
+
+def frame_flags(pre: Preprocessed, params: AnalysisParams) -> list:
+    """The quality checks of :data:`FRAME_CHECKS` on stages 1-6 alone (``steps``): the
+    file, the scale, the threshold and the hole, as :func:`analyze` reports them.
+
+    Returns
+    -------
+    list of :class:`~crosssection.quality.QualityFlag`
+    """
+    from crosssection.core import schema
+
+    flags = quality.assess(
+        params=params, hole=pre.hole, hole_confidence=pre.hole_confidence,
+        ink_outside_fraction=pre.ink_outside_fraction,
+        ink_missed_fraction=pre.ink_missed_fraction, degrees=np.zeros(0, np.int64),
+        stacks=schema.empty_table("stacks"), dark_marks_fraction=pre.dark_marks_fraction,
+        rod_length_mm=0.0, rod_measured_mm=0.0, ink_area_in_hole_mm2=0.0,
+        calibration_max_width_mm=None, junctions=schema.empty_table("junctions"),
+        image_shape=pre.rgb.shape, file_px_per_mm=pre.file_px_per_mm,
+        file_pages=pre.file_pages, file_dpi_xy=pre.file_dpi_xy,
+        border_ink_rc=_border_pixels(pre.mask_clean), see_through=pre.see_through)
+    return [f for f in flags if f.code in FRAME_CHECKS]
+
+
 def _isolated_short_pieces(sg, l_min_px) -> list[int]:
     """Stacks with two free ends (an ink piece touching no other) shorter than ``l_min_px``.
 
@@ -475,11 +511,15 @@ def _drop_pieces(sg, stacks, skel, mask, dist) -> None:
         dist[box][~mask[box]] = 0.0
 
 
-def _check_fraction(thr, path, rgb=None):
+def _check_fraction(thr, path, rgb=None, given_bounds=None):
     frac = np.count_nonzero(thr.mask) / thr.mask.size
     if frac == 0:
         why = getattr(thr, "note", "") or "not a blue-ink scan, or adjust the threshold"
-        if not getattr(thr, "note", "") and thr.method != "auto" and thr.rg_max is not None:
+        if not getattr(thr, "note", "") and thr.method == "auto" and given_bounds:
+            # the bounds the user gave the automatic cut are the likelier cause
+            named = ", ".join(f"{k} = {v:g}" for k, v in given_bounds.items())
+            why = f"not a blue-ink scan, or the bounds given ({named}) exclude its ink"
+        elif not getattr(thr, "note", "") and thr.method != "auto" and thr.rg_max is not None:
             bounds = ", ".join(f"{k} = {v:g}" for k, v in (("blue_min", thr.blue_min),
                                                             ("rg_max", thr.rg_max))
                                if v is not None)
@@ -557,7 +597,7 @@ def _calibration(p: AnalysisParams):
     if not 0.1 * p.thickness_mm <= w1 <= 10.0 * p.thickness_mm:
         raise ParameterError(f"calibration {p.calibration_source()}: one layer is {w1:.3g} mm "
                              f"wide, not about the sheet thickness h = {p.thickness_mm:g} mm "
-                             "(check its units and columns)")
+                             "(check its units and columns, and thickness_mm)")
     return cal
 
 

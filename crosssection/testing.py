@@ -471,7 +471,7 @@ def analysis_params(**fixed):
         "hole_correction": st.booleans(),
         "l_min_mm": st.floats(0.2, 3.0),
         "merge_px": st.floats(0.0, 6.0),
-        "tangent_mm": opt(st.floats(0.1, 1.0)),
+        "tangent_mm": opt(st.floats(0.1, 0.9)),
         "s_min_mm2": opt(st.floats(0.1, 4.0)),
         "kappa_c_per_mm": opt(st.floats(0.5, 20.0)),
     }

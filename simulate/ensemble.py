@@ -996,7 +996,8 @@ def params_from_args(args) -> dict:
             raise ParameterError(f"{name} must be >= {low}, got {v}")
     if args.segments > 100_000 or args.n_configs > 10_000_000:
         raise ParameterError("--segments must be <= 100000 and --n-configs <= 10000000")
-    lam = _finite("--lambda", args.lam, low=0.0)
+    # no confinement, nothing folds: the rod relaxes straight (epsilon below 1)
+    lam = _finite("--lambda", args.lam, low=0.0, low_open=True)
     if lam > LAMBDA_MAX:
         raise ParameterError(f"--lambda must be <= {LAMBDA_MAX:g} (the paper's is {LAMBDA:g}): "
                              "above, the rod is jammed and the bending energy drowns in the "
@@ -1004,10 +1005,11 @@ def params_from_args(args) -> dict:
     noise = _finite("--noise", args.noise, low=0.0)
     noise_max = NOISE_PER_SEGMENT_MAX * args.segments
     if noise > noise_max:
-        raise ParameterError(f"--noise must be <= {NOISE_PER_SEGMENT_MAX:g} N = {noise_max:g} at "
-                             f"--segments {args.segments} (the paper's is {NOISE:g} at "
-                             f"{N_SEGMENTS}): above, nearly every start shape crosses itself "
-                             f"and none is drawn, got {args.noise:g}")
+        raise ParameterError(f"--noise (default {NOISE:g}, the paper's at {N_SEGMENTS} "
+                             f"segments) must be <= {NOISE_PER_SEGMENT_MAX:g} N = "
+                             f"{noise_max:g} at --segments {args.segments}: above, nearly "
+                             "every start shape crosses itself and none is drawn; lower "
+                             f"--noise or raise --segments, got {args.noise:g}")
     params = dict(command=args.command, n_configs=args.n_configs, n_segments=args.segments,
                   lam=lam, noise=noise, seed=args.seed,
                   method=args.method,

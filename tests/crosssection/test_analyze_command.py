@@ -510,3 +510,22 @@ def test_analyze_refuses_a_scene_a_batch_folder_and_a_users_tables(tmp_path, cap
         assert len(err) == 1 and word in err[0], err
         assert not (out / "summary.json").exists()
     assert (user / "stacks.csv").read_text() == "a,b\n1,2\n"
+
+
+def test_steps_warns_of_its_frame_as_analyze_does(small_scan, tmp_path, capfd):
+    # a scale that makes h 2 px, and a scan with transparent pixels: analyze warned of both,
+    # steps of neither, its images drawn on the same doubtful frame
+    import numpy as np
+    from PIL import Image
+
+    rgba = np.asarray(Image.open(small_scan).convert("RGBA")).copy()
+    rgba[150:250, 150:250, 3] = 0
+    scan = tmp_path / "see_through.png"
+    Image.fromarray(rgba).save(scan)
+    capfd.readouterr()
+    assert subprocess.run([sys.executable, "-m", "crosssection", "steps", str(scan), "--out",
+                           str(tmp_path / "s"), "--px-per-mm", "20"]).returncode == 0
+    err = capfd.readouterr().err.splitlines()
+    assert all(ln.startswith(f"warning: {scan}: ") for ln in err)
+    assert any("sheet thickness is 2.00 px" in ln for ln in err)
+    assert any("transparent" in ln for ln in err)

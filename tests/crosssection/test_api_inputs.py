@@ -393,7 +393,17 @@ def test_a_scan_scale_refuses_what_analysis_parameters_refuse(px_per_mm, thickne
 def test_values_beyond_any_scan_are_refused_before_they_overflow(name):
     with pytest.raises(ParameterError, match=f"^{name} = 1e\\+300 is beyond any scan"):
         cs.AnalysisParams(**{name: 1e300})
-    assert getattr(cs.AnalysisParams(**{name: 1000.0}), name) == 1000.0
+    ok = 2.0 if name == "tangent_mm" else 1000.0  # a tangent is at most 20 h
+    assert getattr(cs.AnalysisParams(**{name: ok}), name) == ok
+
+
+def test_a_tangent_beyond_twenty_sheet_thicknesses_is_refused():
+    # 100 mm on a 15-mm hole turned 201 branches into 293, and no warning named it
+    from crosssection.core.errors import ParameterError
+
+    with pytest.raises(ParameterError, match="tangent_mm = 2.1 mm is more than 20 sheet"):
+        cs.AnalysisParams(thickness_mm=0.1, tangent_mm=2.1)
+    assert cs.AnalysisParams(thickness_mm=0.2, tangent_mm=2.1).tangent_mm == 2.1
 
 
 def test_a_smoothing_window_beyond_ten_sheet_thicknesses_is_refused():

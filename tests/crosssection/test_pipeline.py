@@ -338,6 +338,23 @@ def test_uniform_images_raise_analysis_error():
         analyze(np.tile(np.array([40, 70, 190], np.uint8), (64, 64, 1)))
 
 
+def test_an_empty_mask_names_the_option_that_emptied_it():
+    # a given hole holding no ink, and bounds given to the automatic cut that exclude the
+    # ink, were reported as a scan without blue ink
+    from crosssection.core.errors import ParameterError
+
+    scene = make_scene(seed=44, n_stacks=20, max_layers=3)
+    p = scene.params
+    kw = dict(px_per_mm=p["px_per_mm"], thickness_mm=p["thickness_mm"])
+    empty = np.full(scene.rgb.shape, 245, np.uint8)
+    empty[:40, :40] = (40, 70, 190)  # ink in a corner only, far from the hole
+    with pytest.raises(ParameterError, match="no ink inside the given hole .* check "
+                                             "hole_radius_mm and hole_center_px"):
+        analyze(empty, hole_radius_mm=1.0, hole_center_px=tuple(p["hole_center_px"]), **kw)
+    with pytest.raises(AnalysisError, match=r"the bounds given \(rg_max = 0\) exclude"):
+        analyze(scene.rgb, rg_max=0, **kw)
+
+
 def test_a_colourless_scan_says_so():
     # a colour scan made grey (channels equal, as a grayscale scan saved as RGB): no ink passes,
     # and the error names the cause with the cut that reads the grey marks; a scan whose ink
@@ -432,3 +449,13 @@ def test_the_summary_says_how_the_hole_was_found(sample_dir):
                                    calibration=str(sample_dir / "calibration.csv"),
                                    hole_radius_mm=res.summary["hole"]["radius_mm"])
     assert res.summary["hole"]["found_by"] == "radius given, centre fitted to the ink"
+
+
+def test_a_calibration_far_from_the_thickness_names_both():
+    # thickness_mm 10 with a calibration of 0.14 mm per layer blamed the (right) calibration
+    from crosssection.core.errors import ParameterError
+
+    scene = make_scene(seed=44, n_stacks=20, max_layers=3)
+    with pytest.raises(ParameterError, match="not about the sheet thickness h = 10 mm "
+                                             r"\(check its units and columns, and thickness_mm"):
+        analyze(scene.rgb, px_per_mm=50, thickness_mm=10, calibration=scene.calibration)

@@ -113,6 +113,16 @@ def test_lambda_above_the_bound_is_refused_in_one_line(lam, tmp_path):
     assert r.stdout == "" and not out.exists()
 
 
+def test_no_confinement_and_a_noise_beyond_the_segments_name_their_options():
+    # Lambda 0 relaxed the rod straight (epsilon 0.35, one stack) without a word; at
+    # --segments 3 the default noise was refused as if the user had given it
+    with pytest.raises(ParameterError, match=r"--lambda must be a finite number > 0"):
+        ensemble.params_from_args(_parse(["quench", "--lambda", "0", "--out", "x"]))
+    with pytest.raises(ParameterError, match=r"--noise \(default 750.*lower --noise or raise "
+                                             r"--segments, got 750"):
+        ensemble.params_from_args(_parse(["quench", "--segments", "3", "--out", "x"]))
+
+
 def test_lambda_bound_is_inclusive_and_documented():
     for command in ("quench", "anneal"):
         params = ensemble.params_from_args(_parse([command, "--lambda", repr(LAMBDA_MAX),
