@@ -677,7 +677,8 @@ def process_image(task: ImageTask) -> dict:
         params = AnalysisParams.from_mapping(task.params, path=task.image)
         with compiling_in_turn(task.compile_lock):
             # the flags are in the summary; the driver prints them once per image
-            result = analyze(task.image, params, warn=False, image_sha256=task.image_sha or None)
+            result = analyze(task.image, params, warn=False, image_sha256=task.image_sha or None,
+                             scale_given=task.params.get("px_per_mm") is not None)
         info = {"params_hash": task.params_hash, "image": task.rel, "set": task.set_name,
                 "seed": task.seed, "params": task.params, "version": __version__,
                 "inputs": input_record(task)}

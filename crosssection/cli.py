@@ -18,7 +18,7 @@ from contextlib import contextmanager
 
 from crosssection._version import __version__
 from crosssection.console import _Parser
-from crosssection.core.errors import FoldstatError
+from crosssection.core.errors import FoldstatError, printable
 from crosssection.quality import QualityWarning
 
 #: exit status of a command stopped by SIGINT (Ctrl-C), and by SIGTERM (128 + signal number, as
@@ -276,7 +276,8 @@ def _print_warnings(caught) -> None:
     seen = set()
     for w in caught:
         if issubclass(w.category, QualityWarning):
-            line = f"warning: {' '.join(str(w.message).split())}"
+            # a file name that is not UTF-8 (surrogate escapes) is shown escaped, not fatal
+            line = f"warning: {' '.join(printable(str(w.message)).split())}"
             if line not in seen:
                 seen.add(line)
                 print(line, file=sys.stderr)

@@ -369,7 +369,8 @@ def run(args) -> int:
     check_not_other_output(args.out, args.image)
     clear_temporary(args.out, "analyze")
     params = AnalysisParams.from_cli_args(args, path=args.image)
-    result = analyze(args.image, params)  # it names a set.toml whose values it does not use
+    # it names a set.toml whose values it does not use
+    result = analyze(args.image, params, scale_given=args.px_per_mm is not None)
     out = Path(args.out).expanduser()
     earlier = earlier_run(out)
     written = result.write(out, figure=not args.no_figure, steps=args.steps)
@@ -381,7 +382,7 @@ def run(args) -> int:
     return 0
 
 
-def _warn_frame(pre, params, image) -> None:
+def _warn_frame(pre, params, image, scale_given=True) -> None:
     """The warnings of ``analyze`` that stages 1-6 decide (the file, the scale, the threshold,
     the hole; a set.toml beside the scan that is not read): the step images show that
     frame."""
@@ -393,7 +394,7 @@ def _warn_frame(pre, params, image) -> None:
     note = set_not_read(image, params)
     if note:
         warnings.warn(note, quality.SetWarning, stacklevel=2)
-    for f in frame_flags(pre, params):
+    for f in frame_flags(pre, params, scale_given=scale_given):
         warnings.warn(f"{pre.path or image}: {f.message}", f.category, stacklevel=2)
 
 
@@ -415,7 +416,7 @@ def run_steps(args) -> int:
     clear_temporary(args.out, "steps")
     params = AnalysisParams.from_cli_args(args, path=args.image)
     pre = preprocess(args.image, params)
-    _warn_frame(pre, params, args.image)
+    _warn_frame(pre, params, args.image, scale_given=args.px_per_mm is not None)
     out = Path(args.out).expanduser()
     earlier = earlier_run(out)
     try:

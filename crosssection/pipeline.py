@@ -453,14 +453,21 @@ def _preprocess_read(rgb, path, header: Header, orientation, p: AnalysisParams, 
 
 
 #: the quality checks decided before the network is read: those ``steps`` reports
-FRAME_CHECKS = ("pages", "see_through", "scale_mismatch", "non_square", "low_resolution",
+FRAME_CHECKS = ("pages", "see_through", "scale_assumed", "scale_mismatch", "non_square",
+                "low_resolution",
                 "ink_missed", "dark_marks", "hole_fitted", "ink_outside_hole", "hole_crossed",
                 "hole_wide", "hole_cut")
 
 
-def frame_flags(pre: Preprocessed, params: AnalysisParams) -> list:
+def _scale_assumed(pre: Preprocessed, scale_given: bool) -> bool:
+    """A file read at the default scale: no resolution given, none recorded in the file."""
+    return not scale_given and pre.path is not None and pre.file_px_per_mm is None
+
+
+def frame_flags(pre: Preprocessed, params: AnalysisParams, *, scale_given: bool = True) -> list:
     """The quality checks of :data:`FRAME_CHECKS` on stages 1-6 alone (``steps``): the
-    file, the scale, the threshold and the hole, as :func:`analyze` reports them.
+    file, the scale, the threshold and the hole, as :func:`analyze` reports them
+    (``scale_given`` as there).
 
     Returns
     -------
@@ -477,7 +484,8 @@ def frame_flags(pre: Preprocessed, params: AnalysisParams) -> list:
         calibration_max_width_mm=None, junctions=schema.empty_table("junctions"),
         image_shape=pre.rgb.shape, file_px_per_mm=pre.file_px_per_mm,
         file_pages=pre.file_pages, file_dpi_xy=pre.file_dpi_xy,
-        border_ink_rc=_border_pixels(pre.mask_clean), see_through=pre.see_through)
+        border_ink_rc=_border_pixels(pre.mask_clean), see_through=pre.see_through,
+        scale_assumed=_scale_assumed(pre, scale_given))
     return [f for f in flags if f.code in FRAME_CHECKS]
 
 
@@ -602,7 +610,8 @@ def _calibration(p: AnalysisParams):
 
 
 def analyze(image, params: AnalysisParams | None = None, *, warn: bool = True,
-            image_sha256: str | None = None, **overrides) -> AnalysisResult:
+            image_sha256: str | None = None, scale_given: bool | None = None,
+            **overrides) -> AnalysisResult:
     """Analyse one scan of a cut cross-section (paper, "Image analysis procedure").
 
     Parameters
@@ -623,6 +632,12 @@ def analyze(image, params: AnalysisParams | None = None, *, warn: bool = True,
     image_sha256 : str, optional
         The file's SHA-256 when the caller has it (a batch hashes every scan as it plans):
         recorded in ``summary["inputs"]`` as given instead of hashed again.
+    scale_given : bool, optional
+        Whether the user gave the scan's resolution (the command line's ``--px-per-mm``, a
+        set's ``px_per_mm``). By default: ``px_per_mm`` among ``overrides`` or in a dict
+        ``params``, and any :class:`~crosssection.params.AnalysisParams` ``params`` (its
+        scale taken as the caller's). A file that records no resolution read at the default
+        scale is flagged (``scale_assumed``).
     **overrides
         Fields of :class:`~crosssection.params.AnalysisParams` overriding ``params``, e.g.
         ``px_per_mm=50, thickness_mm=0.1, calibration="cal.csv", hole_radius_mm=20``.
@@ -651,8 +666,16 @@ def analyze(image, params: AnalysisParams | None = None, *, warn: bool = True,
     path_hint = str(image) if isinstance(image, (str, Path)) else None
     if not isinstance(warn, (bool, np.bool_)):
         raise ParameterError(f"warn must be True or False, got {warn!r}", path_hint)
+    if scale_given is None:
+        scale_given = (overrides.get("px_per_mm") is not None
+                       or isinstance(params, AnalysisParams)
+                       or (isinstance(params, dict) and params.get("px_per_mm") is not None))
+    elif not isinstance(scale_given, (bool, np.bool_)):
+        raise ParameterError(f"scale_given must be True, False or None, got {scale_given!r}",
+                             path_hint)
     try:
-        return _analyze(image, params, overrides, warn=warn, image_sha256=image_sha256)
+        return _analyze(image, params, overrides, warn=warn, image_sha256=image_sha256,
+                        scale_given=bool(scale_given))
     except FoldstatError as exc:
         if exc.path is None and path_hint is not None:
             raise type(exc)(exc.cause, path_hint) from None
@@ -660,7 +683,7 @@ def analyze(image, params: AnalysisParams | None = None, *, warn: bool = True,
 
 
 def _analyze(image, params, overrides, *, warn: bool = True,
-             image_sha256: str | None = None) -> AnalysisResult:
+             image_sha256: str | None = None, scale_given: bool = True) -> AnalysisResult:
     t_start = time.perf_counter()
     timer = StageTimer()
     p = _bounds_in_16_bits(
@@ -749,7 +772,7 @@ def _analyze(image, params, overrides, *, warn: bool = True,
                                 profiles=profiles, stack_energy=stack_energy)
         junctions = tb.junction_table(pre.junctions, sg, packs, n_br, lin)
     return _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, voids, warn,
-                   rod_mm, L, timer, t_start, inputs, law, faint)
+                   rod_mm, L, timer, t_start, inputs, law, faint, scale_given)
 
 
 def _bounds_in_16_bits(p: AnalysisParams, image) -> AnalysisParams:
@@ -861,7 +884,8 @@ def _odd_steps(graph, n_br) -> list:
 
 
 def _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, voids, warn,
-            rod_mm, L, timer, t_start, inputs=None, law=None, faint=None) -> AnalysisResult:
+            rod_mm, L, timer, t_start, inputs=None, law=None, faint=None,
+            scale_given=True) -> AnalysisResult:
     """Summary, quality checks and warnings: the :class:`AnalysisResult` built in one place."""
     from crosssection.core import schema
 
@@ -883,7 +907,8 @@ def _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, void
         see_through=pre.see_through, faint_ends=faint,
         calibration_one_layer_mm=_one_layer_mm(cal, p),
         void_areas_mm2=voids["area_mm2"].to_numpy() if "area_mm2" in voids else None,
-        odd_steps=_odd_steps(pre.graph, stacks["n_br"].to_numpy()))
+        odd_steps=_odd_steps(pre.graph, stacks["n_br"].to_numpy()),
+        scale_assumed=_scale_assumed(pre, scale_given))
     notes = list(pre.warnings) + [f"linear system: {f}" for f in lin.flags
                                   if not str(f).startswith("disconnected")]
     summary = tb.summary(pre=pre, params=p, linear_system=lin, junctions=junctions,

@@ -18,6 +18,8 @@ see_through              pixels inside the hole that an alpha channel made    > 
                          the hole's pixels
 no_calibration           no width calibration given: layers from the width    always flagged
                          law read from the scan (or width = n h)
+scale_assumed            a file that records no resolution, read without a    always flagged
+                         px_per_mm given (at the default)
 scale_mismatch           px_per_mm used / the resolution the file records     off by > 2 %
                          (a scanner's: 100 dpi or more)
 non_square               the file's recorded resolution along x / along y (a   off by > 1 %
@@ -297,6 +299,7 @@ CATEGORIES = {
     "pages": InputWarning,
     "see_through": InputWarning,
     "no_calibration": CalibrationWarning,
+    "scale_assumed": CalibrationWarning,
     "scale_mismatch": CalibrationWarning,
     "non_square": CalibrationWarning,
     "widths_out_of_range": CalibrationWarning,
@@ -524,7 +527,8 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
            junction_radius_px=None, filled_near_junction=None, see_through=None,
            file_dpi_xy=None, faint_ends=None,
            calibration_one_layer_mm=None, void_areas_mm2=None,
-           dark_marks_fraction=0.0, odd_steps=None) -> list[QualityFlag]:
+           dark_marks_fraction=0.0, odd_steps=None,
+           scale_assumed=False) -> list[QualityFlag]:
     """Run every check of the module table on one analysis.
 
     Parameters
@@ -596,6 +600,9 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
     dark_marks_fraction : float
         Dark pixels inside the frame that are not ink, in pieces, over the ink's
         (:func:`crosssection.stages.threshold.dark_marks`): the ``dark_marks`` check.
+    scale_assumed : bool
+        The scan is a file read at the default ``px_per_mm``: none given, none recorded in
+        the file (the ``scale_assumed`` check).
     odd_steps : sequence of (float, float), optional
         (row, col) of the layer steps where an odd number of layers ends (a rod end inside a
         band, :func:`crosssection.stages.widths.layer_steps`): counted by ``rod_ends``.
@@ -627,6 +634,13 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
                 "(h sets the speck and void limits, the curvature window 5 n_br h and the "
                 "resolution check; check thickness_mm and the calibration)",
                 ratio, THICKNESS_RATIO[0] if ratio < THICKNESS_RATIO[0] else THICKNESS_RATIO[1]))
+    if scale_assumed:
+        flags.append(QualityFlag(
+            "scale_assumed", f"no resolution given and none recorded in the file: read at "
+            f"the default {params.px_per_mm:g} px/mm ({25.4 * params.px_per_mm:.0f} dpi); "
+            "every length, width and layer count rests on the scale (a 1200-dpi scan reads "
+            f"{100 * (1200 / 25.4 / params.px_per_mm - 1):+.1f} % in lengths at it): give "
+            "px_per_mm", 1.0, 0.0))
     if file_px_per_mm and abs(params.px_per_mm / file_px_per_mm - 1.0) > SCALE_TOLERANCE:
         flags.append(QualityFlag(
             "scale_mismatch", f"the file records {25.4 * file_px_per_mm:.0f} dpi "

@@ -1005,11 +1005,11 @@ def params_from_args(args) -> dict:
     noise = _finite("--noise", args.noise, low=0.0)
     noise_max = NOISE_PER_SEGMENT_MAX * args.segments
     if noise > noise_max:
-        raise ParameterError(f"--noise (default {NOISE:g}, the paper's at {N_SEGMENTS} "
-                             f"segments) must be <= {NOISE_PER_SEGMENT_MAX:g} N = "
-                             f"{noise_max:g} at --segments {args.segments}: above, nearly "
-                             "every start shape crosses itself and none is drawn; lower "
-                             f"--noise or raise --segments, got {args.noise:g}")
+        raise ParameterError(f"--noise must be <= {NOISE_PER_SEGMENT_MAX:g} N = {noise_max:g} "
+                             f"at --segments {args.segments} (its default, {NOISE:g}, is the "
+                             f"paper's at {N_SEGMENTS} segments): above, nearly every start "
+                             "shape crosses itself and none is drawn; lower --noise or raise "
+                             f"--segments, got {args.noise:g}")
     params = dict(command=args.command, n_configs=args.n_configs, n_segments=args.segments,
                   lam=lam, noise=noise, seed=args.seed,
                   method=args.method,

@@ -853,10 +853,14 @@ def _frame(xy, analysis, cal, *, px_per_mm, thickness_mm, rod_length_mm, hole_ra
         # the hole holds the cut: a rod reaching beyond it is no scan of one
         reach_mm = float(np.hypot(*(xy - hole_center_l).T).max()) * rod_length_mm
         if reach_mm > hole_radius_mm:
+            # the least radius to 4 digits, rounded up: a radius given as printed holds it
+            step = 10.0 ** (math.floor(math.log10(reach_mm)) - 3)
+            least = math.ceil(reach_mm / step) * step
             raise ParameterError(f"{hole_radius_mm:.4g} mm is smaller than "
                                  f"the rod, which reaches {reach_mm:.4g} mm from the hole's "
-                                 "centre: the hole must hold it ('auto' fits one)",
-                                 "hole_radius_mm")
+                                 "centre (a given hole is centred on the rod's centroid): "
+                                 f"give at least {least:.4g} mm, or 'auto', the smallest "
+                                 "disk holding the rod", "hole_radius_mm")
     if hole_px is not None:
         c_off = (hole_center_l - lo) * scale
         far = (xy.max(axis=0) - hole_center_l) * scale
@@ -2751,7 +2755,9 @@ def _render_directory_locked(sim_dir, out_dir, *, configs=None, limit=None, prog
         if not isinstance(p, dict):
             raise ConfigError("expected a JSON object", pj)
         wall = {"rod_thickness": p.get("thickness"), "wall_radius": p.get("wall_radius")}
-        if p.get("thickness") is not None or p.get("wall_radius") is not None:
+        # a compaction's rod has a thickness; a quench held by a static wall (--wall-radius)
+        # has none, and is drawn as any quench, in the smallest disk holding it
+        if p.get("thickness") is not None:
             for k, v in wall.items():
                 if not (isinstance(v, (int, float)) and not isinstance(v, bool)
                         and math.isfinite(v) and v > 0):
@@ -3000,7 +3006,10 @@ def add_subparser(sub) -> None:
     p.add_argument("--pass-smooth", type=float, default=None, metavar="S",
                    help="--draw passes: smooth the passes' pressing along the rod over S rod "
                         "segments (0 <= S <= 50; default: over one pitch); 1 draws the rods "
-                        "that read best (docs/validation/compact.md)")
+                        "whose energy and layers read best (docs/validation/compact.md); "
+                        "their truth junctions lie at the tips of the paper's wedges, where "
+                        "no skeleton forks, so validate's junction F1 does not score the "
+                        "pipeline on them")
     p.add_argument("--hole", default="auto",
                    help="hole radius in mm, 'auto' (default: the wall of a compaction, else "
                         "the smallest disk around the rod) or 'none' (the pipeline then fits "

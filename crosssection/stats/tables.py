@@ -256,6 +256,14 @@ def regions_of(ens: Ensemble) -> list[str]:
     return ["all"] + [r for r in ("bulk", "periphery") if r in present]
 
 
+def table_regions(ens: Ensemble) -> list[str]:
+    """The rows of the macro and micro tables: ``["all"]``, and both sub-systems when the
+    branches carry either (a scan whose every stack touches the wall has a bulk of no stack,
+    a measurement its row of zero counts states)."""
+    regions = regions_of(ens)
+    return ["all", "bulk", "periphery"] if len(regions) > 1 else regions
+
+
 def _in_region(df, region):
     if region == "all" or "region" not in df.columns:
         return df
@@ -297,7 +305,7 @@ def macro_table(ens: Ensemble) -> pd.DataFrame:
     rows = []
     for s in ens.sets:
         e = ens.subset(s)
-        for reg in regions_of(e):
+        for reg in table_regions(e):
             br, st = _in_region(e.branches, reg), _in_region(e.stacks, reg)
             if reg == "all":
                 N_l, N_br = _mean(e.configs["N_l"]), _mean(e.configs["N_br"])
@@ -584,7 +592,7 @@ def compute_stats(ens: Ensemble, opts: StatsOptions | None = None, *,
         e = subsets[s]
         aE, cE = _gamma_params(summaries.get((s, "all", "E")))
         small_E = _gamma_small(summaries.get((s, "all", "E")))
-        for reg in regions_of(e):
+        for reg in table_regions(e):
             br = _in_region(e.branches, reg)
             ae, ce = _gamma_params(summaries.get((s, reg, "e")))
             small_e = _gamma_small(summaries.get((s, reg, "e")))

@@ -529,3 +529,29 @@ def test_steps_warns_of_its_frame_as_analyze_does(small_scan, tmp_path, capfd):
     assert all(ln.startswith(f"warning: {scan}: ") for ln in err)
     assert any("sheet thickness is 2.00 px" in ln for ln in err)
     assert any("transparent" in ln for ln in err)
+
+
+def test_a_file_without_a_resolution_read_at_the_default_scale_is_flagged(small_scan, tmp_path,
+                                                                         capfd):
+    # a 1200-dpi scan saved without its resolution and read without --px-per-mm: lengths
+    # 5.5 % short, no check could tell
+    from crosssection import analyze
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assumed = analyze(str(small_scan))
+        given = analyze(str(small_scan), px_per_mm=50)
+        as_object = analyze(str(small_scan), AnalysisParams())
+        told = analyze(str(small_scan), scale_given=True)
+    assert "scale_assumed" in assumed.summary["quality"]["codes"]
+    assert any(issubclass(w.category, crosssection.quality.ScaleAssumedWarning)
+               and "a 1200-dpi scan reads -5.5 %" in str(w.message) for w in caught)
+    for r in (given, as_object, told):
+        assert "scale_assumed" not in r.summary["quality"]["codes"]
+    capfd.readouterr()
+    main = crosssection.cli.main
+    assert main(["analyze", str(small_scan), "--out", str(tmp_path / "a"), "--no-figure"]) == 0
+    assert "no resolution given and none recorded" in capfd.readouterr().err
+    assert main(["analyze", str(small_scan), "--out", str(tmp_path / "b"), "--no-figure",
+                 "--px-per-mm", "50"]) == 0
+    assert "no resolution given" not in capfd.readouterr().err

@@ -47,6 +47,11 @@ def test_analyze_draws_and_records_a_name_that_is_not_utf8(bad_name, tmp_path, c
                                   "--calibration", str(samples_path() / "calibration.csv")]) == 0
     assert (out / "overlay.png").stat().st_size > 0 and (out / "summary.json").is_file()
     assert "error" not in capsys.readouterr().err
+    # its warnings name it escaped (a surrogate could not be printed: "unexpected
+    # UnicodeEncodeError", exit 1)
+    assert crosssection.cli.main(["analyze", str(bad_name), "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "error" not in err and "warning: " in err and "bad\\xffname.png" in err
 
 
 def test_a_batch_records_a_name_that_is_not_utf8_and_goes_on(bad_name, tmp_path, capsys):

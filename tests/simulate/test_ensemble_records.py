@@ -118,7 +118,8 @@ def test_no_confinement_and_a_noise_beyond_the_segments_name_their_options():
     # --segments 3 the default noise was refused as if the user had given it
     with pytest.raises(ParameterError, match=r"--lambda must be a finite number > 0"):
         ensemble.params_from_args(_parse(["quench", "--lambda", "0", "--out", "x"]))
-    with pytest.raises(ParameterError, match=r"--noise \(default 750.*lower --noise or raise "
+    with pytest.raises(ParameterError, match=r"--noise must be <= 50 N = 150 at --segments 3 "
+                                             r"\(its default, 750.*lower --noise or raise "
                                              r"--segments, got 750"):
         ensemble.params_from_args(_parse(["quench", "--segments", "3", "--out", "x"]))
 

@@ -425,6 +425,13 @@ def test_a_hole_smaller_than_the_rod_is_refused(sim, tmp_path, capsys):
     status, err = _render(capsys, sim, "--out", out, "--hole", "0.5", *FAST)
     assert status == 2 and "smaller than the rod" in _one_error(err) and "--hole" in err
     assert not out.exists()
+    # it says where a given hole is centred and the least radius it takes, which holds the rod
+    import re
+
+    assert "centred on the rod's centroid" in err
+    least = re.search(r"give at least ([0-9.e+]+) mm", err).group(1)
+    status, err = _render(capsys, sim, "--out", out, "--hole", least, "--limit", "1", *FAST)
+    assert status == 0, err
 
 
 @pytest.mark.parametrize("plate, ok", [("200,120,60", True), ("10,20", False),
@@ -517,3 +524,18 @@ def test_a_stopped_render_leaves_no_scene_folder_without_its_scene(sim, tmp_path
                             clean=True) == [out / "config_00000"]
     assert (out / "config_00000" / "truth" / "summary.json").is_file()
     assert sorted(p.name for p in out.iterdir()) == ["config_00000", render.RENDER_RECORD]
+
+
+def test_a_quench_held_by_a_wall_renders_as_a_quench(sim, tmp_path, capsys):
+    # quench --wall-radius records wall_radius without a thickness: render took it for a
+    # compaction and failed on "thickness must be a number > 0 ... got None"
+    src = tmp_path / "walled"
+    shutil.copytree(sim, src)
+    p = json.loads((src / "params.json").read_text())
+    (src / "params.json").write_text(json.dumps({**p, "wall_radius": 0.5}))
+    status, err = _render(capsys, src, "--out", tmp_path / "scenes", "--limit", "1", *FAST)
+    assert status == 0 and "error" not in err
+    # a compaction's record without its wall is still refused
+    (src / "params.json").write_text(json.dumps({**p, "thickness": 1e-4}))
+    status, err = _render(capsys, src, "--out", tmp_path / "other", *FAST)
+    assert status == 2 and "wall_radius must be a number > 0" in _one_error(err)

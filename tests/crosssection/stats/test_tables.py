@@ -64,6 +64,23 @@ def test_image_units_are_normalised_by_rod_length(tmp_path):
     assert m.loc["bulk", "N_br"] == 2 and m.loc["periphery", "l_L"] == pytest.approx(0.03)
 
 
+def test_a_sub_system_without_stacks_has_its_row_of_zero_counts(tmp_path):
+    # every stack at the wall: the bulk row was missing, as if not computed
+    _image(tmp_path / "b" / "setA" / "img0", L=1000.0, lengths_mm=[10.0, 20.0, 30.0],
+           kappa_m=[0.5, 0.25, 0.1], energy=[5.0, 6.0, 7.0],
+           regions=["periphery"] * 3, stack_of=[0, 0, 1], n_br=[2, 1],
+           areas_mm2=[4.0, 9.0], ratios=[0.2, 0.18])
+    ens = D.load_any(tmp_path / "b", l_min_mm=1.0, s_min_mm2=1.0)
+    m = T.macro_table(ens).set_index("region")
+    assert list(m.index) == ["all", "bulk", "periphery"]
+    assert m.loc["bulk", "N_l"] == 0 and m.loc["bulk", "N_br"] == 0
+    assert m.loc["bulk", "n_branches"] == 0 and np.isnan(m.loc["bulk", "l_L"])
+    assert m.loc["periphery", "N_br"] == m.loc["all", "N_br"] == 3
+    res = T.compute_stats(ens, T.StatsOptions(n_boot=0, gof=False))
+    assert list(res.micro["region"]) == ["all", "bulk", "periphery"]
+    assert np.isnan(res.micro.set_index("region").loc["bulk", "e"])
+
+
 def test_given_rod_length_normalises_every_quantity(tmp_path):
     # measured L = 500 mm, analysed with --rod-length-mm 1000: the energies and epsilon of the
     # summary use 1000, so lengths, curvatures and areas must as well
