@@ -589,7 +589,7 @@ def _params_in_set(cfg: SetConfig, image: Path) -> dict:
     target lies.
     """
     rel = image.relative_to(cfg.folder).as_posix()
-    return {**cfg.params, **cfg.overrides.get(rel, {})}
+    return {**cfg.params, **cfg.override_of(rel)}
 
 
 def loose_calibration(image, calibration) -> Path | None:

@@ -233,7 +233,18 @@ def _closed_pipes_ignored():
         sys.stdout, sys.stderr = out, err
 
 
+def _resume_hint(args) -> str:
+    """How to resume a stopped command. A batch given --force redoes every scan again when
+    re-run with it, and keeps the scans done earlier, redone or not, without it: it says
+    so."""
+    if getattr(args, "force", False):
+        return ("re-run the same command to resume; with --force it redoes every scan again, "
+                "without it keeps the scans already done, redone by this run or not")
+    return "re-run the same command to resume"
+
+
 def _run_parsed(parser: argparse.ArgumentParser, argv=None) -> int:
+    args = None
     try:
         try:
             args = parser.parse_args(argv)
@@ -259,10 +270,10 @@ def _run_parsed(parser: argparse.ArgumentParser, argv=None) -> int:
         print(f"error: {where}: {why}", file=sys.stderr)
         return 2
     except Terminated:
-        print("error: terminated (re-run the same command to resume)", file=sys.stderr)
+        print(f"error: terminated ({_resume_hint(args)})", file=sys.stderr)
         return TERMINATED
     except KeyboardInterrupt:
-        print("error: interrupted (re-run the same command to resume)", file=sys.stderr)
+        print(f"error: interrupted ({_resume_hint(args)})", file=sys.stderr)
         return INTERRUPTED
     except Exception as exc:  # noqa: BLE001 - last resort: one line, never a traceback
         print(f"error: unexpected {type(exc).__name__}: {' '.join(str(exc).split())}",

@@ -88,8 +88,14 @@ class SetConfig:
         """Parameters of one image of the set: the set's, updated by its override table."""
         rel = Path(image_path).resolve().relative_to(self.folder.resolve()).as_posix()
         out = dict(self.params)
-        out.update(self.overrides.get(rel, {}))
+        out.update(self.override_of(rel))
         return out
+
+    def override_of(self, rel: str) -> dict:
+        """The override table of the image at ``rel`` (a path relative to the set folder),
+        names compared in one Unicode form: a file copied from a Mac keeps its accents
+        decomposed (NFD), a set.toml typed elsewhere holds them composed (NFC)."""
+        return self.overrides.get(unicodedata.normalize("NFC", rel), {})
 
 
 def _check_value(key, value, path, where, origin=None):
@@ -282,7 +288,7 @@ def load_set_config(toml_path, *, defaults: dict | None = None,
         if bad:
             raise ConfigError(f"unknown key {bad[0]!r} in [images.{rel!r}]; allowed: "
                               f"{', '.join(PARAM_KEYS)}", toml_path)
-        key = Path(rel).as_posix()
+        key = unicodedata.normalize("NFC", Path(rel).as_posix())
         overrides[key] = check_params(table, toml_path, where=f"images.{rel!r}.")
         replaced = [k for k, v in overrides[key].items()
                     if k in (given or {}) and given[k] != v]
@@ -292,7 +298,8 @@ def load_set_config(toml_path, *, defaults: dict | None = None,
                             + ", which replaces " + ", ".join(
                                 f"--{k.replace('_', '-')} {given[k]!r}" for k in replaced)
                             + " for that scan")
-        if not (folder / key).is_file():
+        if not any((folder / unicodedata.normalize(form, key)).is_file()
+                   for form in ("NFC", "NFD")):
             warnings.append(f"{toml_path}: [images.{rel!r}] names no image of the set")
     return SetConfig(name=name, folder=folder, params=params, overrides=overrides,
                      source=toml_path, warnings=warnings)

@@ -70,6 +70,9 @@ def _init_worker(parent_pid: int):
     and make the speedup depend on the libraries' defaults.
     """
     _die_with_parent(parent_pid)
+    # a worker's results carry its quality flags; a library's warning printed from it (a
+    # glyph a font lacks, drawing a scan's name) reached the user's stderr as raw lines
+    warnings.simplefilter("ignore")
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
                 "NUMBA_NUM_THREADS"):
         os.environ.setdefault(var, "1")

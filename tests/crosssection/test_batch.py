@@ -566,3 +566,19 @@ def test_a_scan_of_a_long_legal_name_is_analysed(tmp_path):
     assert list(index["status"]) == ["ok", "ok"]
     folders = [p.name for p in (out / "default").iterdir() if p.is_dir()]
     assert len(folders) == 2 and all(len(f) <= B.FOLDER_NAME_MAX for f in folders)
+
+
+def test_an_override_finds_its_scan_in_either_unicode_form(tmp_path):
+    # médium.png stored decomposed (NFD, as a Mac copy leaves it), its table typed composed:
+    # the hole was not applied, and the set said the table named no image
+    import unicodedata
+
+    inp, out = tmp_path / "in", tmp_path / "out"
+    (inp / "s").mkdir(parents=True)
+    nfd = unicodedata.normalize("NFD", "médium.png")
+    (inp / "s" / nfd).write_bytes(b"")
+    (inp / "s" / "set.toml").write_text('[images."médium.png"]\nhole_radius_mm = 7.9\n'
+                                        'hole_center_px = [10, 20]\n', encoding="utf-8")
+    tasks, sets = B.plan_batch(inp, out)
+    assert [t.params.get("hole_radius_mm") for t in tasks] == [7.9]
+    assert not any("names no image" in w for s in sets.values() for w in s.warnings)

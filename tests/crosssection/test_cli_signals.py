@@ -204,3 +204,15 @@ def test_a_reader_gone_away_does_not_fail_the_command(tmp_path):
     proc.stdout.close()  # the reader is gone before the command writes a line
     assert proc.wait(timeout=300) == 0
     assert (out / "summary.json").is_file()
+
+
+def test_an_interrupted_forced_batch_says_what_a_re_run_does():
+    # "re-run the same command to resume" redid every scan of a --force batch again
+    import argparse
+
+    from crosssection.cli import _resume_hint
+
+    assert _resume_hint(argparse.Namespace(force=False)) == "re-run the same command to resume"
+    assert "with --force it redoes every scan again" in _resume_hint(
+        argparse.Namespace(force=True))
+    assert _resume_hint(None) == "re-run the same command to resume"

@@ -29,6 +29,22 @@ def _pid(_):
     return os.getpid()
 
 
+def _warns(_):
+    import warnings
+
+    warnings.warn("Glyph 25195 missing from font(s) DejaVu Sans.", UserWarning)
+    return 1
+
+
+def test_a_worker_prints_no_library_warning(capfd):
+    # a worker process's warnings reached the user's stderr as raw lines (a glyph a font
+    # lacks, drawing a scan named in CJK characters, with --workers 2)
+    capfd.readouterr()
+    with get_executor(2) as ex:
+        assert list(ex.map(_warns, range(2))) == [1, 1]
+    assert "Glyph" not in capfd.readouterr().err
+
+
 def test_spawn_seeds_are_stable_and_independent():
     a = spawn_seeds(42, 50)
     assert a == spawn_seeds(42, 50) and len(set(a)) == 50
