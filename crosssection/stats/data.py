@@ -82,6 +82,8 @@ from crosssection.quality import QualityWarning
 CONFIG_COLS = ["set", "config_id", "N_l", "N_br", "n_voids", "epsilon", "E", "rod_length_mm",
                "source", "quality", "E_model_share", "input", "l_min_mm_analysis",
                "s_min_mm2_analysis", "analysis", "batch_note", "table_note"]
+#: the cause of the error of a table an output should hold and does not
+MISSING_TABLE = "missing table"
 #: configs columns that a hand-built ensemble may leave out (NaN: unknown)
 OPTIONAL_CONFIG_COLS = ("rod_length_mm", "source", "quality", "E_model_share", "input",
                         "l_min_mm_analysis", "s_min_mm2_analysis", "analysis", "batch_note",
@@ -313,7 +315,7 @@ def _read_csv(path: Path, required, *, numeric=(), nonempty: bool = False) -> pd
     try:
         df = pd.read_csv(path)
     except FileNotFoundError:
-        raise ConfigError("missing table", path) from None
+        raise ConfigError(MISSING_TABLE, path) from None
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
         raise ConfigError(f"unreadable CSV ({type(exc).__name__})", path) from None
     except OSError as exc:
@@ -943,8 +945,9 @@ def _read_index(index: Path, folder: Path):
     return rows
 
 
-def _batch_image_folders(folder: Path):
-    """(set, config_id, folder) of every finished image of a batch output.
+def _batch_image_folders(folder: Path, notes=None):
+    """(set, config_id, folder) of every finished image of a batch output; what is left out
+    is said in ``notes`` (a list, appended to) as well as warned.
 
     ``index.csv`` (columns set, status, output) is used when present: rows with status ``ok``
     or ``skipped`` (done in an earlier run) whose folder holds a summary, none when no row
@@ -954,6 +957,7 @@ def _batch_image_folders(folder: Path):
     staging folders of interrupted runs), generated scenes' truth and the folders
     ``batch.json`` lists as stale. A scan's ``config_id`` is its folder's name.
     """
+    notes = [] if notes is None else notes
     index = folder / "index.csv"
     if index.is_file():
         rows = _read_index(index, folder)
@@ -970,9 +974,10 @@ def _batch_image_folders(folder: Path):
             out.append((row["set"] or _text(Path(output).parts[0]), _text(Path(output).name),
                         img))
         if lost:
-            warnings.warn(f"{index}: {len(lost)} image(s) listed as done have no summary.json "
-                          f"({_listed(lost, 3)}) and are left out", QualityWarning,
-                          stacklevel=2)
+            note = (f"{index}: {len(lost)} image(s) listed as done have no summary.json "
+                    f"({_listed(lost, 3)}) and are left out")
+            notes.append(note)
+            warnings.warn(note, QualityWarning, stacklevel=2)
         if rows is not None:
             # a usable index is the batch's word: its failed and pending scans' folders (an
             # earlier run's results, or another option's) are not finished images
@@ -1138,11 +1143,20 @@ def load_batch(folder, *, l_min_mm=RECORDED, s_min_mm2=RECORDED) -> Ensemble:
     folder = _folder(folder)
     _limit(l_min_mm, "l_min_mm")
     _limit(s_min_mm2, "s_min_mm2")
-    parts = []
-    found = _batch_image_folders(folder)
+    parts, notes = [], []
+    found = _batch_image_folders(folder, notes)
     for set_name, cid, img in found:
-        parts.append(load_image_output(img, set_name=set_name, config_id=cid,
-                                       l_min_mm=l_min_mm, s_min_mm2=s_min_mm2, warn=False))
+        try:
+            parts.append(load_image_output(img, set_name=set_name, config_id=cid,
+                                           l_min_mm=l_min_mm, s_min_mm2=s_min_mm2, warn=False))
+        except ConfigError as exc:
+            if exc.cause != MISSING_TABLE:
+                raise  # a malformed table is an error to see, not data to drop
+            # a table deleted by hand leaves its scan out, as a missing summary.json does,
+            # not the batch
+            note = f"{exc.one_line()}: this image is left out"
+            notes.append(note)
+            warnings.warn(note, QualityWarning, stacklevel=2)
     if not parts:
         why = ("its index.csv lists no scan as done (ok or skipped)"
                if (folder / "index.csv").is_file() else "no */summary.json")
@@ -1150,18 +1164,21 @@ def load_batch(folder, *, l_min_mm=RECORDED, s_min_mm2=RECORDED) -> Ensemble:
     note = _check_finished(folder, len(found))
     failed = _check_failures(folder)
     ens = Ensemble.concat(parts)
+    notes += _warn_duplicates([(set_name, img) for set_name, _, img in found])
     ens.configs["batch_note"] = "; ".join(
-        ([f"{folder / 'batch.json'}: {note}"] if note else []) + ([failed] if failed else []))
+        ([f"{folder / 'batch.json'}: {note}"] if note else []) + ([failed] if failed else [])
+        + notes)
     warn_flagged(ens, stacklevel=2)
     warn_limits_below(ens, folder, stacklevel=2)
-    _warn_duplicates([(set_name, img) for set_name, _, img in found])
     return ens
 
 
-def _warn_duplicates(image_folders) -> None:
+def _warn_duplicates(image_folders) -> list[str]:
     """One :class:`DuplicateScanWarning` per group of image outputs of one set whose scans
-    hold the same bytes (``inputs.image.sha256`` of their summary.json); sets are analysed
-    apart, so one scan in two sets weighs once in each."""
+    hold the same bytes (``inputs.image.sha256`` of their summary.json), and its text
+    returned (the report's note); sets are analysed apart, so one scan in two sets weighs
+    once in each."""
+    notes = []
     by_hash = {}
     for set_name, img in image_folders:
         try:
@@ -1174,9 +1191,12 @@ def _warn_duplicates(image_folders) -> None:
     for (_, sha), same in by_hash.items():
         if len(same) > 1:
             others = ", ".join(str(p) for p in same[1:])
-            warnings.warn(f"{same[0]}: the same scan (SHA-256 {sha[:12]}...) as {others}: "
-                          f"one cut analysed {len(same)} times weighs {len(same)} times in "
-                          "its set's statistics", DuplicateScanWarning, stacklevel=3)
+            note = (f"{same[0]}: the same scan (SHA-256 {sha[:12]}...) as {others}: one cut "
+                    f"analysed {len(same)} times weighs {len(same)} times in its set's "
+                    "statistics")
+            notes.append(note)
+            warnings.warn(note, DuplicateScanWarning, stacklevel=3)
+    return notes
 
 
 def load_any(folder, *, set_name=None, l_min_mm=RECORDED, s_min_mm2=RECORDED) -> Ensemble:
@@ -1403,7 +1423,7 @@ def load_report(folder) -> Report:
         except pd.errors.EmptyDataError:  # an empty table is written without a header
             tables[name] = pd.DataFrame()
         except FileNotFoundError:
-            raise ConfigError("missing table", path) from None
+            raise ConfigError(MISSING_TABLE, path) from None
         except (pd.errors.ParserError, UnicodeDecodeError) as exc:
             raise ConfigError(f"unreadable CSV ({type(exc).__name__})", path) from None
     return Report(**tables, meta=meta, folder=folder)

@@ -710,6 +710,27 @@ def test_the_same_scan_twice_in_a_batch_is_named(batch, tmp_path, capfd):
                    "set's statistics"]
 
 
+def test_scans_left_out_or_weighed_twice_are_named_in_the_report(batch, tmp_path, capfd):
+    # these notes went to stderr only, and a deleted table refused the whole batch
+    import shutil
+
+    b = tmp_path / "b"
+    shutil.copytree(batch, b)
+    summaries = sorted(b.glob("s1/*/summary.json"))
+    for path in summaries[:2]:
+        s = json.loads(path.read_text())
+        s["inputs"] = {"image": {"path": "x.png", "resolved": "/x.png", "sha256": "ab" * 32}}
+        path.write_text(json.dumps(s))
+    (summaries[2].parent / "voids.csv").unlink()
+    status, out, err = _stats(capfd, b, "--out", tmp_path / "rep", *FAST)
+    assert status == 0 and "2 configurations" in out[0]
+    assert any("voids.csv: missing table: this image is left out" in ln for ln in err)
+    rep = json.loads((tmp_path / "rep" / "stats.json").read_text())
+    said = json.dumps(rep["incomplete_batches"])
+    assert "missing table" in said and "weighs 2 times" in said
+    assert "weighs 2 times" in (tmp_path / "rep" / "report.html").read_text()
+
+
 def test_a_folder_holding_two_batches_of_one_set_name(tmp_path, capfd):
     """Their scans share names within the set: the report's tables crashed on the repeated
     (set, configuration) pair (exit 1)."""
