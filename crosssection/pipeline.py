@@ -454,9 +454,8 @@ def _preprocess_read(rgb, path, header: Header, orientation, p: AnalysisParams, 
 
 #: the quality checks decided before the network is read: those ``steps`` reports
 FRAME_CHECKS = ("pages", "see_through", "scale_assumed", "scale_mismatch", "non_square",
-                "low_resolution",
-                "ink_missed", "dark_marks", "hole_fitted", "ink_outside_hole", "hole_crossed",
-                "hole_wide", "hole_cut")
+                "low_resolution", "ink_missed", "dark_marks", "hole_fitted",
+                "ink_outside_hole", "hole_crossed", "hole_wide", "hole_cut")
 
 
 def _scale_assumed(pre: Preprocessed, scale_given: bool) -> bool:

@@ -640,7 +640,7 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
             f"the default {params.px_per_mm:g} px/mm ({25.4 * params.px_per_mm:.0f} dpi); "
             "every length, width and layer count rests on the scale (a 1200-dpi scan reads "
             f"{100 * (1200 / 25.4 / params.px_per_mm - 1):+.1f} % in lengths at it): give "
-            "px_per_mm", 1.0, 0.0))
+            "px_per_mm"))
     if file_px_per_mm and abs(params.px_per_mm / file_px_per_mm - 1.0) > SCALE_TOLERANCE:
         flags.append(QualityFlag(
             "scale_mismatch", f"the file records {25.4 * file_px_per_mm:.0f} dpi "
