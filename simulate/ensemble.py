@@ -911,7 +911,8 @@ def _add_common(p, command):
                         "must fit inside (default: none)")
     p.add_argument("--contact-distance", type=float, default=None,
                    help="contact cut-off of the analysis, in units of L, from "
-                        f"{MIN_CONTACT_DISTANCE:g} to below 1 (default half a segment, 1/(2N))")
+                        f"{MIN_CONTACT_DISTANCE:g} to {CONTACT_DISTANCE_MAX:g} (default half a "
+                        "segment, 1/(2N))")
     p.add_argument("--workers", type=int, default=1, help="local worker processes (default 1)")
     p.add_argument("--scheduler", default=None,
                    help="Dask scheduler address, e.g. tcp://host:8786 (default: local workers)")
@@ -929,6 +930,11 @@ def _add_common(p, command):
         p.add_argument("--ramp", choices=RAMPS, default=RAMPS[0],
                        help=f"Lambda schedule (default {RAMPS[0]})")
     p.set_defaults(func=run, command=command)
+
+
+#: the largest contact distance a quench or anneal takes, in units of L (the paper's rods
+#: have a radius of gyration of 0.05: 0.99 made the rod one stack of one branch, silently)
+CONTACT_DISTANCE_MAX = 0.1
 
 
 def _finite(name, value, *, low=None, low_open=False, allow_none=False):
@@ -1035,11 +1041,13 @@ def params_from_args(args) -> dict:
                              f"{MIN_CONTACT_DISTANCE:g}: use at most "
                              f"{math.floor(0.5 / MIN_CONTACT_DISTANCE + 1e-9)} segments or give "
                              "--contact-distance")
-    if cd is not None and not MIN_CONTACT_DISTANCE <= cd < 1.0:
-        # the analysis' own range (simulate.contacts.analyze_rod): refused here, before a
-        # minimisation whose every analysis would fail on it
+    if cd is not None and not MIN_CONTACT_DISTANCE <= cd <= CONTACT_DISTANCE_MAX:
+        # below, the analysis' own range (simulate.contacts.analyze_rod), on which every
+        # analysis would fail; above, every pass of a folded rod touches every other
         raise ParameterError(f"--contact-distance must be from {MIN_CONTACT_DISTANCE:g} up to "
-                             f"below the rod length 1, got {cd:g}")
+                             f"{CONTACT_DISTANCE_MAX:g} (twice a folded rod's radius of "
+                             "gyration, about 0.05: beyond, its whole rod is one stack), got "
+                             f"{cd:g}")
     wall, half = params["wall_radius"], 0.5 / args.segments
     if wall is not None and wall <= half:
         # a segment is a straight chord 1/N long: a disk no wider holds it only as its

@@ -33,6 +33,8 @@ def test_one_stage_anneal_is_a_quench_at_the_target_lambda():
     # below the analysis' range: every configuration's analysis would fail on it
     (["quench", "--contact-distance", "1e-9"], "--contact-distance"),
     (["anneal", "--contact-distance", "1"], "--contact-distance"),
+    # the whole rod one stack (0.99 was taken silently)
+    (["quench", "--contact-distance", "0.99"], "--contact-distance"),
     (["compact", "--epsilon", "1.5", "--thickness", "1e-6"], "--thickness"),
 ])
 def test_absurd_simulation_options_are_one_line(tmp_path, argv, named):
