@@ -302,6 +302,27 @@ def _checked_table(df, table: str, cols, optional=()) -> pd.DataFrame:
     return df
 
 
+def _cut_last_line(path: Path, n_columns: int) -> bool:
+    """Whether a CSV file's last line was cut: no newline after it, and fewer fields than
+    the header's ``n_columns`` (a table edited by hand may lack the final newline alone)."""
+    import csv
+
+    try:
+        with open(path, "rb") as fh:
+            fh.seek(0, os.SEEK_END)
+            size = fh.tell()
+            if size == 0:
+                return False
+            fh.seek(max(0, size - 65536))
+            tail = fh.read()
+    except OSError:
+        return False
+    if tail.endswith((b"\n", b"\r")):
+        return False
+    last = tail.rsplit(b"\n", 1)[-1].decode("utf-8", "replace")
+    return len(next(csv.reader([last]), [])) < n_columns
+
+
 def _read_csv(path: Path, required, *, numeric=(), nonempty: bool = False) -> pd.DataFrame:
     """A table with its ``required`` columns, and its ``numeric`` columns (those present) as
     floats.
@@ -321,6 +342,10 @@ def _read_csv(path: Path, required, *, numeric=(), nonempty: bool = False) -> pd
     except OSError as exc:
         raise ConfigError(f"unreadable CSV ({exc.strerror or type(exc).__name__})",
                           path) from None
+    if len(df) and _cut_last_line(path, len(df.columns)):
+        # a last line short of fields and of its newline was cut while written (a full disk,
+        # a copy stopped): no row
+        df = df.iloc[:-1]
     missing = [c for c in required if c not in df.columns]
     if missing:
         raise ConfigError(f"lacks columns {missing}", path)

@@ -314,6 +314,21 @@ def test_truncated_branch_table_is_used_with_a_warning(batch, tmp_path, capfd):
         assert len(load_any(batch).branches.query("config_id == 'img002'")) == 3
 
 
+def test_a_table_cut_inside_its_last_line_counts_no_row_of_it(batch, tmp_path, capfd):
+    # a stacks.csv cut to 200 bytes: its cut-off line was read as a row (one n_br NaN)
+    path = batch / "s1" / "img002" / "stacks.csv"
+    text = path.read_bytes()
+    first, second = text.split(b"\n")[:2]
+    path.write_bytes(first + b"\n" + second + b"\n" + second[:len(second) // 3])
+    status, _, err = _stats(capfd, batch, "--out", tmp_path / "rep", *FAST)
+    assert status == 0 and len(err) == 1 and "the 1 rows are used" in err[0], err
+    # a table that only lacks its final newline (edited by hand) keeps every row
+    path.write_bytes(first + b"\n" + second)
+    from crosssection.stats.data import _read_csv
+
+    assert len(_read_csv(path, ["n_br"])) == 1
+
+
 def test_a_truncated_table_gives_every_count_of_its_scan_and_is_reported(batch, tmp_path,
                                                                          capfd):
     # the rows are used: for the counts of the whole system as for bulk and periphery
