@@ -210,7 +210,8 @@ def _threshold_in_frame(rgb, p: AnalysisParams, path, timer, min_piece_px: float
         if n_px:
             thr = dataclasses.replace(thr, mask=bridged, bridged_px=n_px)
         # the frame's margin holds the wall band's edge, not a plate the colour rule passed
-        trimmed, n_cut = hole_stage.trim_margin(thr.mask, hole)
+        trimmed, n_cut = hole_stage.trim_margin(thr.mask, hole, features=m["features"],
+                                                levels=(thr.ink_level, thr.paper_level))
         if n_cut:
             thr = dataclasses.replace(thr, mask=trimmed, n_outside=thr.n_outside + n_cut)
     if p.hole_given and not thr.mask.any() and threshold_rgb(rgb, **m).mask.any():
@@ -634,9 +635,10 @@ def analyze(image, params: AnalysisParams | None = None, *, warn: bool = True,
     scale_given : bool, optional
         Whether the user gave the scan's resolution (the command line's ``--px-per-mm``, a
         set's ``px_per_mm``). By default: ``px_per_mm`` among ``overrides`` or in a dict
-        ``params``, and any :class:`~crosssection.params.AnalysisParams` ``params`` (its
-        scale taken as the caller's). A file that records no resolution read at the default
-        scale is flagged (``scale_assumed``).
+        ``params``, and an :class:`~crosssection.params.AnalysisParams` ``params`` whose
+        ``px_per_mm`` is not the default (at the default it cannot tell a scale chosen from
+        one left out: pass True if the scan is at it). A file that records no resolution read
+        at the default scale is flagged (``scale_assumed``).
     **overrides
         Fields of :class:`~crosssection.params.AnalysisParams` overriding ``params``, e.g.
         ``px_per_mm=50, thickness_mm=0.1, calibration="cal.csv", hole_radius_mm=20``.
@@ -666,8 +668,10 @@ def analyze(image, params: AnalysisParams | None = None, *, warn: bool = True,
     if not isinstance(warn, (bool, np.bool_)):
         raise ParameterError(f"warn must be True or False, got {warn!r}", path_hint)
     if scale_given is None:
+        default_scale = AnalysisParams.__dataclass_fields__["px_per_mm"].default
         scale_given = (overrides.get("px_per_mm") is not None
-                       or isinstance(params, AnalysisParams)
+                       or (isinstance(params, AnalysisParams)
+                           and params.px_per_mm != default_scale)
                        or (isinstance(params, dict) and params.get("px_per_mm") is not None))
     elif not isinstance(scale_given, (bool, np.bool_)):
         raise ParameterError(f"scale_given must be True, False or None, got {scale_given!r}",

@@ -439,8 +439,10 @@ def ink_across_circle(is_ink, shape, hole, *, margin_px: float = FRAME_MARGIN_PX
     return float(np.count_nonzero(crossed)) / max(np.count_nonzero(counted), 1)
 
 
-def trim_margin(mask, hole, *, margin_px: float = FRAME_MARGIN_PX) -> tuple[np.ndarray, int]:
-    """Ink of the frame's margin kept only where it continues ink lying inside the wall.
+def trim_margin(mask, hole, *, margin_px: float = FRAME_MARGIN_PX, features=None,
+                levels=None) -> tuple[np.ndarray, int]:
+    """Ink of the frame's margin kept only where it continues ink lying inside the wall, and
+    where it is more ink than plate.
 
     The margin of :func:`frame_mask` lets the ink pressed against the wall (and a given hole
     a pixel or two too small) in whole. A plate that passes the ink's colour rule (a blue
@@ -452,6 +454,17 @@ def trim_margin(mask, hole, *, margin_px: float = FRAME_MARGIN_PX) -> tuple[np.n
     wall band's outer edge ragged and read +30 % of energy on the validation atlas's network
     scenes, +2 % without the trim.)
 
+    Beyond the wall the band's ink is blurred into the plate, not into the paper the cut was
+    chosen against. A cut halfway from the ink to the paper passes a pixel of 8 % ink on a
+    bluish plate (blue dominance 52 against the ink's 109 and the cut's 56.5): the margin
+    widened the wall band by 2 px, a layer at 25 px/mm (rod +18 %, every wall stack one
+    layer over). Given the features and the ink's levels, a margin pixel is also kept only
+    when it lies at least halfway from the plate's levels (the medians of a ring 4-8 px
+    beyond the margin) to the ink's, on the blue dominance and on the red-green darkness
+    where the plate is nearer the ink than the paper is by a tenth of their contrast: the
+    band's edge against the plate where it is against the paper. Where the plate is paper,
+    the scan's cut is kept as it is.
+
     Parameters
     ----------
     mask : (H, W) bool array
@@ -459,6 +472,12 @@ def trim_margin(mask, hole, *, margin_px: float = FRAME_MARGIN_PX) -> tuple[np.n
     hole : Hole
     margin_px : float
         The frame's margin.
+    features : ColourFeatures, optional
+        The scan's (:func:`crosssection.stages.threshold.colour_features`).
+    levels : tuple of two (2,) tuples, optional
+        The ink's and the paper's blue dominance and darkness (``ThresholdResult.ink_level``,
+        ``paper_level``); with ``features``, margin pixels nearer a plate's levels than the
+        ink's are dropped.
 
     Returns
     -------
@@ -504,11 +523,62 @@ def trim_margin(mask, hole, *, margin_px: float = FRAME_MARGIN_PX) -> tuple[np.n
         ci = np.clip(np.rint(c0 + (cc - c0) * f).astype(np.int64), 0, W - 1)
         backed |= mask[ri, ci]
     drop = ~backed
+    plate = (None if features is None or levels is None or None in levels
+             else _plate_levels(features, r0, c0, R + margin_px))
+    if plate is not None:
+        (ink_d, ink_m), (paper_d, paper_m) = ((float(a), float(b)) for a, b in levels)
+        if _moves_the_cut(plate[0], ink_d, paper_d):
+            drop |= features.dominance[rr, cc] < 0.5 * (ink_d + plate[0])
+        if _moves_the_cut(plate[1], ink_m, paper_m):
+            drop |= features.darkness[rr, cc] > 0.5 * (ink_m + plate[1])
     if not drop.any():
         return mask, 0
     mask = mask.copy()
     mask[rr[drop], cc[drop]] = False
     return mask, int(np.count_nonzero(drop))
+
+
+#: The ring whose medians are the plate's levels (:func:`trim_margin`), px beyond the frame:
+#: past the wall band's blur (1-2 px), near enough to be the plate the band touches.
+PLATE_RING_PX = (4.0, 8.0)
+#: A plate's level nearer the ink's than the paper's by more than this share of the ink's
+#: contrast to the paper moves the margin's cut on that feature (:func:`trim_margin`); below,
+#: a plate of paper would move it by its noise.
+PLATE_APART = 0.1
+#: ... and only when it lies at least this share of that contrast from the ink's: a plate
+#: coloured as the ink (blue dominance 80 against its 86) would put the cut inside the ink's
+#: own noise, dropping half the wall band's margin; no colour tells such a plate from ink.
+PLATE_DISTINCT = 0.25
+
+
+def _moves_the_cut(plate, ink, paper) -> bool:
+    """Whether a plate's ``plate`` level of one feature moves the margin's cut on it: between
+    the ink's and the paper's, farther than :data:`PLATE_APART` from the paper's and
+    :data:`PLATE_DISTINCT` from the ink's, in shares of their contrast."""
+    contrast = ink - paper
+    if contrast == 0:
+        return False
+    share = (plate - paper) / contrast  # 0 at the paper, 1 at the ink
+    return PLATE_APART < share < 1.0 - PLATE_DISTINCT
+
+
+def _plate_levels(features, r0, c0, r_frame):
+    """Median blue dominance and darkness of the ring ``PLATE_RING_PX`` beyond the frame of
+    radius ``r_frame`` centred at (``r0``, ``c0``), or None when the scan holds none of it."""
+    H, W = features.shape
+    lo, hi = r_frame + PLATE_RING_PX[0], r_frame + PLATE_RING_PX[1]
+    # five circles across the ring, a pixel apart along each
+    n = max(int(2.0 * np.pi * hi), 8)
+    t = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
+    radii = np.linspace(lo, hi, 5)
+    rr = np.rint(r0 + np.outer(radii, np.sin(t))).astype(np.int64).ravel()
+    cc = np.rint(c0 + np.outer(radii, np.cos(t))).astype(np.int64).ravel()
+    ok = (rr >= 0) & (rr < H) & (cc >= 0) & (cc < W)
+    if np.count_nonzero(ok) < 16:
+        return None
+    rr, cc = rr[ok], cc[ok]
+    return (float(np.median(features.dominance[rr, cc])),
+            float(np.median(features.darkness[rr, cc])))
 
 
 def _circle_fit(points, c0, r0):

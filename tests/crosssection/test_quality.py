@@ -149,20 +149,30 @@ def test_a_lit_and_cast_scan_whose_cut_keeps_the_ink_is_not_flagged(scene, cast,
     assert "ink_missed" not in res.summary["quality"]["codes"]
 
 
-def _hole_frame(scene):
-    from crosssection.stages.hole import Hole, frame_mask
+def _hole(scene):
+    from crosssection.stages.hole import Hole
 
     p = scene.params
-    hole = Hole(np.array(p["hole_center_px"][::-1], float),
+    return Hole(np.array(p["hole_center_px"][::-1], float),
                 p["hole_radius_mm"] * p["px_per_mm"], False)
-    return frame_mask(scene.rgb.shape[:2], hole)
+
+
+def _hole_frame(scene):
+    from crosssection.stages.hole import frame_mask
+
+    return frame_mask(scene.rgb.shape[:2], _hole(scene))
 
 
 def _cut_in_hole(rgb, scene):
-    """The automatic threshold's mask of the scan inside its given hole."""
-    from crosssection.stages.threshold import threshold_rgb
+    """The automatic threshold's mask of the scan inside its given hole, the frame's margin
+    trimmed as the pipeline trims it (the darkened paper beyond the wall of an unevenly lit
+    scan is a plate there)."""
+    from crosssection.stages.hole import trim_margin
+    from crosssection.stages.threshold import colour_features, threshold_rgb
 
-    return threshold_rgb(rgb, region=_hole_frame(scene)).mask
+    thr = threshold_rgb(rgb, region=_hole_frame(scene))
+    return trim_margin(thr.mask, _hole(scene), features=colour_features(rgb),
+                       levels=(thr.ink_level, thr.paper_level))[0]
 
 
 @pytest.mark.parametrize("cast, gradient", [(0.0, 0.0), (0.10, 0.30)])

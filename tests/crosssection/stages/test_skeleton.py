@@ -520,3 +520,28 @@ def test_distance_map_of_another_shape_is_refused():
     mask = _wide_band_with_branches()
     with pytest.raises(ParameterError, match="distance_px"):
         sk.skeletonize_mask(mask, l_min_px=50.0, distance_px=np.zeros((10, 10)))
+
+
+def _thin_band_with_fat_stub(reach_px):
+    """A 10-px band (2 layers at h = 5 px) along row 60 and a 40-px wide stub (8 layers)
+    with a round end, its ink reaching ``reach_px`` beyond the band's lower edge."""
+    m = np.zeros((260, 400), np.uint8)
+    m[55:65, 20:380] = 1
+    tip = 65 + reach_px
+    cv2.rectangle(m, (180, 60), (220, tip - 20), 1, -1)
+    cv2.circle(m, (200, tip - 20), 20, 1, -1)
+    return m.astype(bool)
+
+
+@pytest.mark.parametrize("reach_px, kept", [(40, False), (70, True), (90, True)])
+def test_a_fat_stub_is_measured_beyond_the_thin_band_it_leaves(reach_px, kept):
+    """The fork of a stub wider than its band lies inside the stub's own ink, 20 px from
+    the background where the band is 5 px half wide: measured there, a stub of 8 layers
+    reaching 70 px (1.4 mm) beyond a 2-layer band read 50 px and was pruned as a spur, its
+    layers lost from the rod length. Read on the band past the fork, it stays when it
+    reaches more than l_min = 50 px, and goes when it does not."""
+    mask = _thin_band_with_fat_stub(reach_px)
+    dist = cv2.distanceTransform(mask.view(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    skel = sk.skeletonize_mask(mask, l_min_px=50.0, distance_px=dist)
+    assert skel[90:, 190:211].any() == kept
+    assert skel[60, 30:170].any() or skel[59, 30:170].any()  # the band stays either way
