@@ -240,7 +240,14 @@ def _resume_hint(args) -> str:
     if getattr(args, "force", False):
         return ("re-run the same command to resume; with --force it redoes every scan again, "
                 "without it keeps the scans already done, redone by this run or not")
+    if getattr(args, "command", None) in _ONE_SHOT:
+        # one scan's run has nothing to resume: its folder holds the earlier run's files
+        return "no file was written; re-run the same command"
     return "re-run the same command to resume"
+
+
+#: commands whose output is written at once at their end: a stopped run resumes nothing
+_ONE_SHOT = ("analyze", "steps")
 
 
 def _run_parsed(parser: argparse.ArgumentParser, argv=None) -> int:
@@ -263,7 +270,8 @@ def _run_parsed(parser: argparse.ArgumentParser, argv=None) -> int:
         return 2
     except OSError as exc:
         # the output (or an input) path cannot be used: the user's to fix, not a bug
-        where = exc.filename if exc.filename is not None else "output"
+        where = (" ".join(printable(exc.filename).splitlines()) if exc.filename is not None
+                 else "output")
         why = exc.strerror or str(exc)
         if isinstance(exc, (FileExistsError, NotADirectoryError)):
             why = f"{why}: a file is in the way of a folder (give another --out)"

@@ -115,7 +115,18 @@ def earlier_run(out_dir) -> bool:
                for name in RUN_RECORDS.values())
 
 
-def check_not_other_output(out_dir, image=None, command="analyze", *, given_as="--out") -> None:
+def run_files(command: str, *, figure: bool = True, steps: bool = False) -> tuple:
+    """The files a run of ``command`` writes into its output folder: ``analyze`` its record
+    and tables, ``overlay.png`` with ``figure`` and the step images with ``steps``; ``steps``
+    its images, ``steps.png`` with ``figure``, and its record."""
+    if command == "steps":
+        return (*STEP_IMAGES, *((STEPS_FIGURE,) if figure else ()), STEPS_RECORD)
+    return ("summary.json", *(f"{name}.csv" for name in schema.TABLES),
+            *((OVERLAY,) if figure else ()), *((*STEP_IMAGES, STEPS_FIGURE) if steps else ()))
+
+
+def check_not_other_output(out_dir, image=None, command="analyze", *, given_as="--out",
+                           writes=None) -> None:
     """Refuse an output folder that holds the output of another command, or that of the
     other of ``analyze`` and ``steps`` for another scan.
 
@@ -130,6 +141,10 @@ def check_not_other_output(out_dir, image=None, command="analyze", *, given_as="
     command : {"analyze", "steps"}
     given_as : str
         How the folder was given, named in the error (the option, or the API's argument).
+    writes : iterable of str, optional
+        The files this run writes (:func:`run_files`; default: every file ``command`` may
+        write): in a folder of no earlier run, one of them that foldstat did not write is
+        refused, the others are left.
 
     Raises
     ------
@@ -147,7 +162,8 @@ def check_not_other_output(out_dir, image=None, command="analyze", *, given_as="
     held = output_of(out_dir)
     if held is None:
         # (steps writes no table: a user's stacks.csv beside its images is left alone)
-        foreign = None if command != "analyze" or earlier_run(out) else _foreign_table(out)
+        foreign = None if earlier_run(out) else _foreign_file(
+            out, command, OWN_FILES[command] if writes is None else tuple(writes))
         if foreign:
             raise ParameterError(f"{out_dir} holds {foreign}, which foldstat did not write "
                                  "(a run would replace it): give a folder of its own", given_as)
@@ -197,6 +213,37 @@ def _scene_or_batch_output(out: Path) -> str | None:
         if is_record(parent / "batch.json", {"package": "foldstat", "version": None}):
             return f"lies inside the output of foldstat batch ({parent})"
     return None
+
+
+def _foreign_file(out: Path, command: str, writes) -> str | None:
+    """The first file of ``out`` that a run of ``command`` writing ``writes`` would replace
+    and that foldstat did not write: an analysis' table whose columns are not the table's,
+    an image of the run's names without foldstat's ``Software`` text (a scan named
+    overlay.png), a record (``summary.json``, ``steps.json``) that is not one."""
+    for name in writes:
+        path = out / name
+        if name.endswith(".png") and path.is_file() and not _png_by_foldstat(path):
+            return name
+        if name == STEPS_RECORD and path.is_file() and not is_record(
+                path, ("version", "parameters")):
+            return name
+    return _foreign_table(out) if command == "analyze" else None
+
+
+#: Bytes of a PNG read for its ``Software`` text: foldstat's images write it before their
+#: pixels, right after the header.
+_PNG_HEAD_BYTES = 4096
+
+
+def _png_by_foldstat(path: Path) -> bool:
+    """Whether the PNG at ``path`` holds the ``Software`` text foldstat writes
+    (:func:`crosssection.core.fileio.save_figure`, the step images)."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(_PNG_HEAD_BYTES)
+    except OSError:
+        return True  # unreadable: nothing to tell, and nothing a run could replace either
+    return b"tEXtSoftware\x00foldstat " in head
 
 
 def _foreign_table(out: Path) -> str | None:
@@ -366,7 +413,9 @@ def run(args) -> int:
     check_out(args.out)
     check_not_beside(args.image, args.out)
     check_not_inside_other_output(args.out)
-    check_not_other_output(args.out, args.image)
+    check_not_other_output(args.out, args.image,
+                           writes=run_files("analyze", figure=not args.no_figure,
+                                            steps=args.steps))
     clear_temporary(args.out, "analyze")
     params = AnalysisParams.from_cli_args(args, path=args.image)
     # it names a set.toml whose values it does not use
@@ -412,7 +461,8 @@ def run_steps(args) -> int:
     check_out(args.out)
     check_not_beside(args.image, args.out)
     check_not_inside_other_output(args.out)
-    check_not_other_output(args.out, args.image, "steps")
+    check_not_other_output(args.out, args.image, "steps",
+                           writes=run_files("steps", figure=not args.no_figure))
     clear_temporary(args.out, "steps")
     params = AnalysisParams.from_cli_args(args, path=args.image)
     pre = preprocess(args.image, params)

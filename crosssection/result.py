@@ -280,11 +280,12 @@ class AnalysisResult:
         """
         if not isinstance(out_dir, (str, os.PathLike)) or not str(out_dir).strip():
             raise ParameterError(f"out_dir must be a folder path, got {out_dir!r}")
-        from crosssection.commands import check_not_beside, check_not_other_output
+        from crosssection.commands import check_not_beside, check_not_other_output, run_files
 
         if self.path is not None:
             check_not_beside(self.path, out_dir, given_as="out_dir")
-        check_not_other_output(out_dir, self.path, given_as="out_dir")
+        check_not_other_output(out_dir, self.path, given_as="out_dir",
+                               writes=run_files("analyze", figure=figure, steps=steps))
         out = Path(out_dir).expanduser()
         # the result stays as analysed: the figure's timing goes to the file only
         summary = dict(self.summary)

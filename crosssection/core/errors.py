@@ -43,7 +43,8 @@ class FoldstatError(Exception):
     def one_line(self) -> str:
         """The message shown to the user: ``"<file>: <cause>"``."""
         msg = " ".join(printable(self.cause).split())
-        return f"{printable(self.path)}: {msg}" if self.path else msg
+        # a file name holding a line break stays on the one line, as in warnings
+        return f"{' '.join(printable(self.path).splitlines())}: {msg}" if self.path else msg
 
 
 class ImageError(FoldstatError):

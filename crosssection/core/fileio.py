@@ -11,6 +11,7 @@ import errno
 import json
 import os
 import re
+import secrets
 import shutil
 import tempfile
 import uuid
@@ -54,8 +55,9 @@ def renamed_together():
 
     A block stopped midway (an error, an interrupt) removes its temporary files and leaves
     the folder's files as they were: an output folder written again does not mix two runs
-    (one run's figures beside another's tables), short of a failure among the renames
-    themselves. A kill leaves only hidden temporary files (``.<name>.XXXX<suffix>``), which
+    (one run's figures beside another's tables). A rename refused among the renames puts the
+    files already renamed back (each replaced file is hard-linked aside first; on a file
+    system without hard links, what cannot be linked cannot be put back). A kill leaves only hidden temporary files (``.<name>.XXXX<suffix>``), which
     the next run removes. A nested block's files are renamed with its outer block's, or
     removed when the nested block fails. Per thread: another thread's writes are its own.
     """
@@ -78,16 +80,51 @@ def renamed_together():
         raise
     finally:
         _PENDING.reset(token)
-    done = 0
+    done = []  # (path, a hard link to the file it replaced, or None)
     try:
         for tmp, path in pending:
+            backup = _linked_aside(path)
             try:
                 os.replace(tmp, path)
             except OSError as exc:
+                _discard([backup] if backup else [])
                 raise _renamed(exc, path) from None
-            done += 1
-    finally:  # an error or an interrupt among the renames: no temporary file left behind
-        _discard(tmp for tmp, _ in pending[done:])
+            done.append((path, backup))
+    except BaseException:
+        # a rename refused midway (a file made read-only, a full quota) or an interrupt: the
+        # files already renamed go back to the earlier run's, so the folder is one run's
+        _put_back(done)
+        raise
+    finally:  # no temporary file left behind
+        _discard(tmp for tmp, _ in pending[len(done):])
+    _discard(b for _, b in done if b)
+
+
+def _linked_aside(path: Path) -> Path | None:
+    """A hard link to the file at ``path`` under a temporary name of :func:`atomic_path`'s
+    pattern (a kill leaves it to the next run's :func:`temporary_files`), or None when there
+    is no file or it cannot be linked (then a failed block cannot put it back)."""
+    if not path.is_file():
+        return None
+    aside = path.with_name(f".{path.name}.{secrets.token_hex(4)}{path.suffix or '.tmp'}")
+    try:
+        os.link(path, aside)
+    except OSError:
+        return None
+    return aside
+
+
+def _put_back(done) -> None:
+    """Undo the renames ``done`` (:func:`renamed_together`), last first: each file back to
+    the one it replaced, a file that replaced none removed; what cannot be undone stays."""
+    for path, backup in reversed(done):
+        try:
+            if backup is not None:
+                os.replace(backup, path)
+            else:
+                path.unlink(missing_ok=True)
+        except OSError:
+            pass
 
 
 def _discard(paths) -> None:

@@ -512,6 +512,33 @@ def test_analyze_refuses_a_scene_a_batch_folder_and_a_users_tables(tmp_path, cap
     assert (user / "stacks.csv").read_text() == "a,b\n1,2\n"
 
 
+@pytest.mark.parametrize("command, name", [("analyze", "overlay.png"),
+                                           ("steps", "steps.png"),
+                                           ("steps", "steps.json")])
+def test_a_users_image_or_record_named_as_an_output_is_not_replaced(tmp_path, capsys,
+                                                                     command, name):
+    """A folder of scans holding one named overlay.png lost it to analyze without a word
+    (a later batch over the folder then read the overlay as a scan); steps replaced a
+    user's steps.png and steps.json. Refused in one line, exit 2, the file kept; a folder
+    of an earlier run is written again."""
+    from crosssection.cli import main
+
+    scan = Path(__file__).resolve().parents[2] / "sample_images" / "scan_01_sparse.png"
+    user = tmp_path / "user"
+    user.mkdir()
+    content = scan.read_bytes() if name.endswith(".png") else b'{"a": 1}'
+    (user / name).write_bytes(content)
+    capsys.readouterr()
+    assert main([command, str(scan), "--out", str(user), "--px-per-mm", "50"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"error: --out: {user} holds {name}, which foldstat did not write (a run "
+                   "would replace it): give a folder of its own"]
+    assert (user / name).read_bytes() == content
+    ours = tmp_path / "ours"
+    for _ in range(2):
+        assert main([command, str(scan), "--out", str(ours), "--px-per-mm", "50"]) == 0
+
+
 def test_steps_warns_of_its_frame_as_analyze_does(small_scan, tmp_path, capfd):
     # a scale that makes h 2 px, and a scan with transparent pixels: analyze warned of both,
     # steps of neither, its images drawn on the same doubtful frame
@@ -541,9 +568,13 @@ def test_a_file_without_a_resolution_read_at_the_default_scale_is_flagged(small_
         warnings.simplefilter("always")
         assumed = analyze(str(small_scan))
         given = analyze(str(small_scan), px_per_mm=50)
-        as_object = analyze(str(small_scan), AnalysisParams())
-        told = analyze(str(small_scan), scale_given=True)
-    assert "scale_assumed" in assumed.summary["quality"]["codes"]
+        # a parameters object at the default scale cannot say whether it was chosen: the
+        # README's own style, AnalysisParams(calibration=...), would otherwise go unflagged
+        default_object = analyze(str(small_scan), AnalysisParams())
+        as_object = analyze(str(small_scan), AnalysisParams(px_per_mm=49.5))
+        told = analyze(str(small_scan), AnalysisParams(), scale_given=True)
+    for r in (assumed, default_object):
+        assert "scale_assumed" in r.summary["quality"]["codes"]
     assert any(issubclass(w.category, crosssection.quality.ScaleAssumedWarning)
                and "a 1200-dpi scan reads -5.5 %" in str(w.message) for w in caught)
     for r in (given, as_object, told):

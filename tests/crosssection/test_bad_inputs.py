@@ -245,3 +245,12 @@ def test_bounds_that_exclude_every_pixel_are_named(tmp_path, capsys, method, opt
                  "--threshold-method", method, *options]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "empty mask" in err[0] and named in err[0]
+
+
+def test_a_file_name_with_a_line_break_stays_on_one_error_line(tmp_path, capsys):
+    # warnings joined such a name's lines; errors printed it over two
+    p = tmp_path / "bad\nname.png"
+    p.write_text("not a PNG")
+    assert main(["analyze", str(p), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("error: ") and "bad name.png" in err

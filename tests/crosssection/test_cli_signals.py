@@ -216,3 +216,7 @@ def test_an_interrupted_forced_batch_says_what_a_re_run_does():
     assert "with --force it redoes every scan again" in _resume_hint(
         argparse.Namespace(force=True))
     assert _resume_hint(None) == "re-run the same command to resume"
+    # one scan's run writes its files together at its end: nothing to resume
+    for command in ("analyze", "steps"):
+        assert _resume_hint(argparse.Namespace(command=command)) == (
+            "no file was written; re-run the same command")

@@ -184,7 +184,32 @@ def test_a_failed_rename_leaves_no_temporary_file(tmp_path, monkeypatch):
         with fileio.renamed_together():
             for name in ("a.txt", "b.txt", "c.txt"):
                 fileio.write_text(tmp_path / name, name)
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt"]
+    # a.txt, renamed before the interrupt, replaced nothing: it goes too
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+def test_a_rename_refused_midway_puts_the_earlier_files_back(tmp_path, monkeypatch):
+    """A re-run whose summary.json could not be replaced (made immutable) left the new run's
+    overlay and tables beside the old run's summary: stats then pooled 77 branches where the
+    summary counted 64. The files renamed before the refusal go back to the earlier run's."""
+    for name in ("a.csv", "b.csv", "summary.json"):
+        (tmp_path / name).write_text(f"old {name}")
+    real = fileio.os.replace
+
+    def replace(src, dst):
+        if Path(dst).name == "summary.json" and Path(src).name.startswith(".summary"):
+            raise PermissionError(1, "Operation not permitted", str(src), None, str(dst))
+        return real(src, dst)
+
+    monkeypatch.setattr(fileio.os, "replace", replace)
+    with pytest.raises(PermissionError, match="summary.json"):
+        with fileio.renamed_together():
+            fileio.write_text(tmp_path / "a.csv", "new a")
+            fileio.write_text(tmp_path / "new.csv", "new")
+            fileio.write_text(tmp_path / "b.csv", "new b")
+            fileio.write_text(tmp_path / "summary.json", "new summary")
+    assert {p.name: p.read_text() for p in tmp_path.iterdir()} == {
+        "a.csv": "old a.csv", "b.csv": "old b.csv", "summary.json": "old summary.json"}
 
 
 def test_a_loop_of_symbolic_links_as_the_output_is_named_so(tmp_path):
