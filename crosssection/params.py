@@ -374,24 +374,46 @@ class AnalysisParams:
 
     @classmethod
     def from_toml(cls, path, *, table: str | None = None) -> "AnalysisParams":
-        """Parameters from a TOML file (top level, or one of its tables).
+        """Parameters from a TOML file: its top level, updated by one of its tables.
 
         Its tables (a set.toml's ``[images."..."]``) and a set's ``name`` are not parameters
         and are passed over; any other key must be a parameter: a misspelt one is an error,
-        not a default silently used.
+        not a default silently used. The parameters of one image of a set.toml, its override
+        table included, are ``crosssection.setconfig.load_set_config(toml_path).params_for(image)``.
+
+        Parameters
+        ----------
+        path : str or Path
+            The TOML file.
+        table : str, optional
+            A top-level table whose keys update the top level's (``[dense]`` in a file of
+            ``px_per_mm = 50`` and ``[dense] s_min_mm2 = 0.02``).
+
+        Returns
+        -------
+        AnalysisParams
 
         Raises
         ------
         ParameterError
-            An unknown key (its name, the file) or a value out of range.
+            An unknown key (its name, the file), a value out of range, or a table the file
+            does not hold (a table misspelt would otherwise give the defaults).
         """
         path = Path(path)
         data = read_toml(path)
+        values = {k: v for k, v in data.items()
+                  if not isinstance(v, dict) and k not in SET_META_KEYS}
         if table is not None:
-            data = data.get(table, {})
-        return cls.from_mapping({k: v for k, v in data.items()
-                                 if not isinstance(v, dict) and k not in SET_META_KEYS},
-                                path=path, relative_to=path)
+            tables = sorted(k for k, v in data.items() if isinstance(v, dict) and k != "images")
+            sub = data.get(table)
+            if table == "images" or not isinstance(sub, dict):
+                hint = (f"its tables: {', '.join(tables)}" if tables else "it holds none")
+                if "images" in data:
+                    hint += ("; an image's table of a set.toml is read by crosssection."
+                             "setconfig.load_set_config(path).params_for(image)")
+                raise ParameterError(f"no parameter table [{table}] ({hint})", path)
+            values.update({k: v for k, v in sub.items() if not isinstance(v, dict)})
+        return cls.from_mapping(values, path=path, relative_to=path)
 
     @classmethod
     def from_cli_args(cls, args, *, path=None) -> "AnalysisParams":

@@ -665,8 +665,10 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
     low_confidence = hole_confidence is not None and hole_confidence < 0.5
     if low_confidence:
         flags.append(QualityFlag("hole_fitted", f"hole found with low confidence "
-                                 f"{hole_confidence:.2f}: pass hole_radius_mm and "
-                                 "hole_center_px (when the scan holds the whole hole)",
+                                 f"{hole_confidence:.2f}: every mark of ink inside it (a "
+                                 "stroke, a label) is read as rod, and epsilon rests on its "
+                                 "radius; pass hole_radius_mm and hole_center_px (when the "
+                                 "scan holds the whole hole)",
                                  hole_confidence, 0.5))
     if ink_missed_fraction > INK_MISSED_LIMIT:
         flags.append(QualityFlag(

@@ -85,8 +85,36 @@ class SetConfig:
     warnings: list = field(default_factory=list)
 
     def params_for(self, image_path) -> dict:
-        """Parameters of one image of the set: the set's, updated by its override table."""
-        rel = Path(image_path).resolve().relative_to(self.folder.resolve()).as_posix()
+        """Parameters of one image of the set: the set's, updated by its override table.
+
+        Parameters
+        ----------
+        image_path : str or Path
+            The image: a path as the caller reaches it, or relative to the set folder
+            (``"scan_03.png"``, as the set.toml names it).
+
+        Returns
+        -------
+        dict
+            Keyword parameters of :func:`crosssection.analyze`.
+
+        Raises
+        ------
+        ParameterError
+            The image lies outside the set folder.
+        """
+        folder = self.folder.resolve()
+        path = Path(image_path)
+        candidates = [path.resolve()]
+        if not path.is_absolute():
+            candidates.append((folder / path).resolve())
+        for cand in candidates:
+            if cand.is_relative_to(folder):
+                rel = cand.relative_to(folder).as_posix()
+                break
+        else:
+            raise ParameterError(f"the image lies outside the set folder {self.folder}",
+                                 image_path)
         out = dict(self.params)
         out.update(self.override_of(rel))
         return out

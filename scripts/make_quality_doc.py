@@ -17,7 +17,11 @@ failed check is a `warning: FILE: ...` line on stderr, a `warnings.warn` of its 
 block of `summary.json` (`code`, `message`, `value`, `limit`) and a code in the `quality`
 column of a batch's `index.csv`. Silence one check in Python with
 `warnings.simplefilter("ignore", crosssection.quality.NoCalibrationWarning)`, or a group with
-`CalibrationWarning`.
+`CalibrationWarning`. One more `QualityWarning` is no check: `SetWarning`, raised by `analyze`
+when the scan's set (its `set.toml`, or a `calibration.csv` beside it) holds values the
+analysis was not given (`batch` reads the set; in Python,
+`crosssection.setconfig.load_set_config(toml_path).params_for(image)` gives them); ignoring
+`QualityWarning` silences it too.
 
 | code | category (group) | measured | flagged when |
 |---|---|---|---|

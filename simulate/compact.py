@@ -1149,7 +1149,7 @@ def run(args) -> int:
     print(f"{head}: epsilon {params['epsilon']:g} (R = "
           f"{params['wall_radius']:.5f}, h = {params['thickness']:.3g}), <E> = "
           f"{c.energy_total.mean():.4g}, <N_l> = {c.n_stacks.mean():.1f}, <N_br> = "
-          f"{c.n_branches.mean():.1f}, {c.wall_s.mean():.1f} s per configuration")
+          f"{c.n_branches.mean():.1f}, {c.wall_s.mean():.1f} s per configuration (wall clock)")
     coarse = coarse_rod_doubt(tables, params["n_segments"])
     if coarse:
         warnings.warn(f"{args.out}: {coarse}", CoarseRodWarning, stacklevel=2)

@@ -422,6 +422,10 @@ def _run(args) -> int:
     n_flagged = int((df["truth_warnings"] > 0).sum()) if len(df) else 0
     flagged = (f" ({n_flagged} with a truth flagged by its render, left out of the means)"
                if n_flagged else "")
+    if n_flagged and n_flagged == len(df):
+        # summary.json's mean is then empty: say where the scores are
+        flagged = (f" (every one with a truth flagged by its render: summary.json's mean is "
+                   "empty, mean_all holds their means)")
     print(f"{len(df)} scenes scored{flagged}, {len(failures)} failed; report in {args.out}"
           + (f" (see {Path(args.out) / 'failures.csv'})" if len(failures) else ""))
     return EXIT_SOME_FAILED if len(failures) else 0

@@ -147,7 +147,10 @@ def _float_to_uint16(a: np.ndarray, path=None) -> np.ndarray:
         np.round(c, out=c)
         np.clip(c, 0.0, 65535.0, out=c)  # out of range is refused below
         out[r:r + rows] = c
-    if lo < 0 or hi > 1:
+    # a value within half a 16-bit level of [0, 1] (a rounding of float arithmetic, 1 + 1e-7)
+    # converts to the pixel 0 or 65535 it means
+    tol = 0.5 / 65535.0
+    if lo < -tol or hi > 1 + tol:
         # repr: a value a rounding above 1 prints as 1 with :g
         fix = ("save it as 8-bit integers, or as floats divided by 255" if path is not None
                else "divide by 255, or convert with astype(numpy.uint8)")

@@ -840,7 +840,8 @@ def _marks_of_another_colour(rgb, reg, scale) -> tuple[str, str]:
     # are what blue ink looks like in an array in OpenCV's BGR order
     k = int(np.argmax(ink))
     swap = (f"; swapping the scan's {('red', 'green')[k]} and blue channels makes them "
-            "blue ink" + (" (an array in OpenCV's BGR order reads so)" if k == 0 else "")
+            "blue ink" + (" (an array in OpenCV's BGR order reads so: pass image[..., ::-1])"
+                          if k == 0 else "")
             if k < 2 and ink[k] - np.delete(ink, k).max() >= OTHER_MARKS_CONTRAST_U8 else "")
     if rg_cut is None:
         options = ""
@@ -850,7 +851,9 @@ def _marks_of_another_colour(rgb, reg, scale) -> tuple[str, str]:
                   f"and green: {ink[:2].max():.0f} on the marks, {level:.0f} there)" + swap)
     else:
         options = f"--threshold-method fixed --blue-min 0 --rg-max {rg_cut * scale:.0f}"
-        recipe = swap + "; to read them with the paper's rule without its blue bound: " + options
+        recipe = (swap + "; to read them with the paper's rule without its blue bound: "
+                  + options + f" (in Python threshold_method='fixed', blue_min=0, "
+                  f"rg_max={rg_cut * scale:.0f})")
     spread = float(ink.max() - ink.min())
     # a dark colour spreads its channels little in grey levels, not in proportion
     if spread < NEUTRAL_SPREAD_U8 and spread < NEUTRAL_SATURATION * max(float(ink.max()), 1.0):

@@ -344,7 +344,11 @@ def _warn_left_out(ens: Ensemble, quantity: str, values, positive: bool) -> None
     n_low = int(np.sum(np.isfinite(v) & (v <= 0))) if positive else 0
     if not (n_nan or n_low):
         return
-    parts = ([f"{n_nan} not finite (NaN or inf)"] if n_nan else []) + (
+    # a mean curvature is NaN on a branch too short to hold one (shorter than one segment of
+    # a simulated rod): say so, as the fits then lean to the longer branches
+    why = (": branches too short to hold a curvature, shorter than one segment of a simulated "
+           "rod, so the fits lean to the longer ones" if quantity.startswith("kappa") else "")
+    parts = ([f"{n_nan} not finite (NaN or inf{why})"] if n_nan else []) + (
         [f"{n_low} <= 0 (the laws fitted live on x > 0)"] if n_low else [])
     where = f"set {', '.join(map(str, ens.sets))}: " if len(ens.sets) else ""
     warnings.warn(f"{where}{quantity}: {n_nan + n_low} of {v.size} values left out of the "

@@ -393,7 +393,8 @@ def analyze_scene_folder(scene_dir, *, image_name: str | None = None, use_hole: 
     if use_calibration and cal.exists():
         want["calibration"] = str(cal)
     want.update(kwargs)
-    result = analyze(str(image), AnalysisParams.from_mapping(want, path=image))
+    result = analyze(str(image), AnalysisParams.from_mapping(want, path=image),
+                     scale_given="px_per_mm" in params)
     return result, _as_pair(result)
 
 

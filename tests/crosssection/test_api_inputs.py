@@ -513,3 +513,27 @@ def test_an_empty_image_path_is_named_so(tmp_path, capsys):
     for command in ("analyze", "steps"):
         assert crosssection.cli.main([command, "", "--out", str(tmp_path / command)]) == 2
         assert capsys.readouterr().err == "error: empty image path: give the scan's file\n"
+
+
+def test_a_parameter_table_inherits_the_top_level_and_a_missing_one_is_refused(tmp_path):
+    # a table misspelt read as empty gave every default: the top level's scale lost with it
+    from crosssection import AnalysisParams
+    from crosssection.core.errors import ParameterError
+    from crosssection.setconfig import load_set_config
+
+    f = tmp_path / "p.toml"
+    f.write_text("px_per_mm = 40\n[dense]\ns_min_mm2 = 0.02\n")
+    p = AnalysisParams.from_toml(f, table="dense")
+    assert (p.px_per_mm, p.s_min_mm2) == (40, 0.02)
+    with pytest.raises(ParameterError, match=r"no parameter table \[nope\].*dense"):
+        AnalysisParams.from_toml(f, table="nope")
+    s = tmp_path / "set.toml"
+    s.write_text('px_per_mm = 40\n[images."a.png"]\nhole_radius_mm = 5\n')
+    with pytest.raises(ParameterError, match="params_for"):
+        AnalysisParams.from_toml(s, table="images")
+    # an image named as the set.toml names it, or by a path the caller reaches it by
+    cfg = load_set_config(s)
+    assert cfg.params_for("a.png")["hole_radius_mm"] == 5
+    assert cfg.params_for(tmp_path / "a.png")["hole_radius_mm"] == 5
+    with pytest.raises(ParameterError, match="outside the set folder"):
+        cfg.params_for(tmp_path.parent / "b.png")

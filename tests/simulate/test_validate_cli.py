@@ -384,3 +384,14 @@ def test_scenes_of_a_coarse_rod_are_named_once_and_kept_in_the_means(scenes, tmp
     summary = json.loads((tmp_path / "rep" / "summary.json").read_text())
     assert summary["beyond_validated"] == [scene.name]
     assert summary["n_flagged"] == 0 and summary["mean"] == summary["mean_all"] != {}
+
+
+def test_every_truth_flagged_says_where_the_means_are(scenes, tmp_path, capsys):
+    # the default renders at epsilon 19 are all flagged: an empty mean with no word read as
+    # no scores at all
+    folder, scene = scenes
+    _flag(scene, ["the truth has 23 voids, the rod 22"])
+    assert run(folder, tmp_path / "rep") == 0
+    out = capsys.readouterr().out
+    assert ("1 scenes scored (every one with a truth flagged by its render: summary.json's "
+            "mean is empty, mean_all holds their means)") in out

@@ -471,13 +471,20 @@ def test_a_scan_stored_turned_gives_the_same_analysis(tmp_path, orientation):
     assert ref.summary["exif_orientation"] == 1
 
 
-def test_a_float_image_a_rounding_above_one_is_named_with_its_value():
-    # printed with :g, 1 + 1e-12 read "1" in a message saying values must lie in [0, 1]
+def test_a_float_image_a_rounding_beyond_its_range_reads_as_its_end():
+    # float arithmetic leaves 1 + 1e-7 (float32's step) after a colour conversion: it is the
+    # pixel 1 means, not an image in another range; beyond half a 16-bit level it is refused,
+    # its value printed whole (with :g, 1.00001 read "1" in a message saying [0, 1])
     from crosssection.stages.load import as_rgb
 
-    img = np.full((8, 8, 3), 0.5)
-    img[0, 0, 2] = 1.0 + 1e-12
-    with pytest.raises(ImageError, match=r"0\.5\.\.1\.000000000001: they must lie in \[0, 1\]"):
+    img = np.full((16, 16, 3), 0.5, np.float32)
+    img[0, 0, 2] = np.nextafter(np.float32(1), np.float32(2))
+    img[0, 1, 0] = -1e-7
+    rgb = as_rgb(img)
+    assert rgb.dtype == np.uint16 and rgb[0, 0, 2] == 65535 and rgb[0, 1, 0] == 0
+    img = img.astype(np.float64)
+    img[0, 0, 2] = 1.0 + 1e-5
+    with pytest.raises(ImageError, match=r"\.\.1\.00001: they must lie in \[0, 1\]"):
         as_rgb(img)
 
 

@@ -275,7 +275,7 @@ def test_marks_of_another_colour_are_named(ink_rgb, colour):
     res = threshold_rgb(_recoloured(sc, ink_rgb))
     assert not res.mask.any()
     assert f"marks are {colour}" in res.note and "faint" not in res.note
-    cut = int(res.note.rsplit("--rg-max ", 1)[1])
+    cut = int(res.note.rsplit("--rg-max ", 1)[1].split()[0])
     fixed = threshold_rgb(_recoloured(sc, ink_rgb), method="fixed", blue_min=0, rg_max=cut)
     iou = np.count_nonzero(fixed.mask & truth) / np.count_nonzero(fixed.mask | truth)
     assert iou > 0.9
@@ -296,7 +296,7 @@ def test_black_marks_framed_by_a_plate_get_a_cut_that_leaves_the_plate_out(plate
                          rng=np.random.default_rng(1), plate=plate, rim_px=0.0)
     res = threshold_rgb(rgb)
     assert not res.mask.any() and "marks are black or grey" in res.note
-    cut = int(res.note.rsplit("--rg-max ", 1)[1])
+    cut = int(res.note.rsplit("--rg-max ", 1)[1].split()[0])
     fixed = threshold_rgb(rgb, method="fixed", blue_min=0, rg_max=cut).mask
     assert np.count_nonzero(fixed & ~truth) < 0.05 * np.count_nonzero(truth)
     assert np.count_nonzero(fixed & truth) > 0.9 * np.count_nonzero(truth)
@@ -331,10 +331,12 @@ def test_bright_red_marks_are_named_with_a_cut_that_reads_them(seed, receding, i
     assert not res.mask.any()
     assert "marks are red" in res.note and "faint" not in res.note
     assert res.options.startswith("--threshold-method fixed --blue-min 0 --rg-max ")
-    assert res.note.endswith(res.options)
+    cut_u8 = res.options.rsplit(" ", 1)[1]
+    assert res.note.endswith(res.options + " (in Python threshold_method='fixed', blue_min=0, "
+                             f"rg_max={cut_u8})")
     # red marks are also what blue ink is in an array in OpenCV's BGR order
     assert ("swapping the scan's red and blue channels makes them blue ink (an array in "
-            "OpenCV's BGR order reads so)" in res.note)
+            "OpenCV's BGR order reads so: pass image[..., ::-1])" in res.note)
     cut = int(res.options.rsplit(" ", 1)[1])
     fixed = threshold_rgb(rgb, method="fixed", blue_min=0, rg_max=cut).mask
     assert np.count_nonzero(fixed & truth) > 0.9 * np.count_nonzero(truth)
