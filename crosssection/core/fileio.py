@@ -57,9 +57,10 @@ def renamed_together():
     the folder's files as they were: an output folder written again does not mix two runs
     (one run's figures beside another's tables). A rename refused among the renames puts the
     files already renamed back (each replaced file is hard-linked aside first; on a file
-    system without hard links, what cannot be linked cannot be put back). A kill leaves only hidden temporary files (``.<name>.XXXX<suffix>``), which
-    the next run removes. A nested block's files are renamed with its outer block's, or
-    removed when the nested block fails. Per thread: another thread's writes are its own.
+    system without hard links, what cannot be linked cannot be put back). A kill leaves
+    only hidden temporary files (``.<name>.XXXX<suffix>``), which the next run removes. A
+    nested block's files are renamed with its outer block's, or removed when the nested
+    block fails. Per thread: another thread's writes are its own.
     """
     pending = _PENDING.get()
     if pending is not None:  # nested

@@ -22,13 +22,16 @@ pixel thick skeleton, without redundant kinks". Three steps:
    neighbours) is reached before the walked length (1 per axial step, sqrt 2 per diagonal step,
    from the free end to the junction pixel) reaches ``l_min_px``, the walked pixels are deleted.
    Given the distance map (as the pipeline does), the walked length plus the distance to the
-   background at the free end is compared with ``l_min_px`` plus that distance at the junction
-   pixel: a branch counts from where it leaves its band to where its ink ends (a thinning
-   stops about a half width short of a band's end), the paper's detection limit being a
-   branch length. Measured from the skeleton's end, a stack of 4-8 layers ending in folds
-   1-2 mm beyond the band it leaves was pruned whole, its layers lost from the rod length. A spur from a one-pixel step of a
-   thick band's edge runs the band's half width to its axis; measured from the junction pixel
-   alone, such a spur survives on a band wider than about ``2 l_min`` (18 layers at h = 5 px)
+   background at the free end (a thinning may stop short of a band's end by up to that) is
+   compared with ``l_min_px`` plus the half width of the band the spur leaves, read on the
+   junction's other branches (:func:`_band_half_width`) where the distance at the junction
+   pixel alone would pass the limit: a branch counts from where it leaves its band to where
+   its ink ends, the paper's detection limit being a branch length. Read at the junction
+   pixel, which lies inside a stub wider than its band, a stack of 4-8 layers ending in folds
+   1-2 mm beyond a thin band was pruned whole, its layers lost from the rod length. A spur
+   from a one-pixel step of a thick band's edge runs the band's half width to its axis;
+   measured from the junction pixel alone, without the distance map, such a spur survives
+   on a band wider than about ``2 l_min`` (18 layers at h = 5 px)
    as a dead-end stack of the band's layer count: on a scan of the independent generator's
    thick dense networks, four such stacks of 9-10 layers across one 20-layer wall band made a
    junction of degree 7 and 1.4 % of the rod length.
