@@ -80,6 +80,9 @@ count_width              stacks at least 4 widths long whose final n_br is    an
 isolated_stacks          pieces of ink touching no other stack (both ends     any, beside others
                          free) whose count is 2 or more or whose width reads
                          1.75 layers or more
+stubby_stacks            dead-end stacks of 3 layers or more no longer than   any
+                         they are wide (an ink blot read as a stack of
+                         folds, or folds too short to read)
 rod_ends                 bands of an odd number of layers ending away from    > 2
                          any junction, attached at their other end, and
                          layer steps ending an odd number of layers (each
@@ -327,6 +330,7 @@ CATEGORIES = {
     "linear_system": LinearSystemWarning,
     "count_width": LinearSystemWarning,
     "isolated_stacks": NetworkWarning,
+    "stubby_stacks": NetworkWarning,
     "rod_ends": NetworkWarning,
     "junction_blot": NetworkWarning,
     "tight_bends": CurvatureWarning,
@@ -1094,6 +1098,40 @@ def _isolated_check(stacks) -> list[QualityFlag]:
                         f"{_energy_share(stacks, thick)}; clean the scan", k, 0)]
 
 
+#: ``stubby_stacks``: least n_br of a dead-end stack no longer than wide that is flagged. A
+#: band of one or two sheets ending in a fold is as short as it is wide only below l_min,
+#: where it is pruned; an ink blot of 1.5-2 mm touching a band read as 12-17 layers.
+STUBBY_LAYERS = 3
+
+
+def _stubby_check(stacks) -> list[QualityFlag]:
+    """Dead-end stacks (one end at a junction, one free) of ``STUBBY_LAYERS`` or more no
+    longer than they are wide: an ink blot beside a band reads as such a stack, its layers
+    from its width; folds that short cannot be read either (their layers and lengths)."""
+    need = {"junction_a", "junction_b", "kind", "n_br", "length_mm", "width_mm"}
+    if not need <= set(stacks.columns):
+        return []
+    dead = (stacks["kind"] == "free_end") & ((stacks["junction_a"] >= 0)
+                                             != (stacks["junction_b"] >= 0))
+    stub = dead & (stacks["n_br"] >= STUBBY_LAYERS) & (stacks["length_mm"] <= stacks["width_mm"])
+    k = int(stub.sum())
+    if not k:
+        return []
+    rod = float((stacks["n_br"] * stacks["length_mm"]).sum())
+    part = float((stacks["n_br"] * stacks["length_mm"])[stub].sum())
+    worst = stacks.loc[stacks.loc[stub, "n_br"].idxmax()]
+    where = (_stack_position(stacks, int(worst["stack_id"])) if "stack_id" in stacks
+             else "a stack")
+    share = f"{100 * part / rod:.1f} %" if rod > 0 else "part"
+    return [QualityFlag("stubby_stacks", f"{k} dead-end stack(s) of several layers no longer "
+                        f"than they are wide ({where}: n_br {int(worst['n_br'])}, "
+                        f"{float(worst['length_mm']):.2f} mm long and "
+                        f"{float(worst['width_mm']):.2f} mm wide) hold {share} of the rod "
+                        "length: an ink blot beside a band reads as such a stack of folds, "
+                        "and folds that short are read with their count and length doubtful; "
+                        "look at the overlay" f"{_energy_share(stacks, stub)}", k, 0)]
+
+
 #: ``rod_ends``: bands of an odd number of layers that end in the scan, away from any
 #: junction, attached to the network at their other end, and layer steps where an odd number
 #: of layers ends inside a band. Each holds an end of the rod, and a sheet's cross-section
@@ -1189,6 +1227,7 @@ def _stack_checks(params, stacks, calibration_max_width_mm,
     flags += _tight_bends_check(params, stacks)
     flags += _count_width_check(stacks)
     flags += _isolated_check(stacks)
+    flags += _stubby_check(stacks)
     flags += _rod_ends_check(stacks, odd_steps)
     free = (stacks["junction_a"] < 0) & (stacks["junction_b"] < 0) & (stacks["kind"] == "free_end")
     speck = free & (stacks["length_mm"] < 2 * params.l_min_mm)

@@ -993,3 +993,29 @@ def test_half_the_rod_drawn_in_black_ink_is_named(scene):
     assert any(w.category is quality.DarkMarksWarning for w in caught)
     clean, _ = _analyze(scene.rgb, **_given(scene))
     assert "dark_marks" not in clean.summary["quality"]["codes"]
+
+
+@pytest.mark.parametrize("radius_px, flagged", [(40, True), (20, False)])
+def test_an_ink_blot_read_as_a_stack_of_folds_is_flagged(tmp_path, radius_px, flagged):
+    """A round blot of 1.6 mm hanging from a single sheet read as a dead-end stack of 6
+    layers, the rod 20 % longer, warned of by the layer counts alone; a blot below l_min is
+    pruned and not flagged."""
+    from crosssection import analyze
+
+    size, c = 900, (450, 450)
+    mask = np.zeros((size, size), np.uint8)
+    cv2.circle(mask, c, 395, 1, 10)
+    cv2.line(mask, (100, 450), (800, 450), 1, 5)
+    cv2.circle(mask, (450, 450 + radius_px - 1), radius_px, 1, -1)
+    rgb = np.full((size, size, 3), 255, np.uint8)
+    rgb[mask > 0] = (30, 50, 160)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = analyze(rgb, px_per_mm=50, thickness_mm=0.1, hole_radius_mm=8.0,
+                      hole_center_px=c)
+    assert ("stubby_stacks" in res.summary["quality"]["codes"]) == flagged
+    assert any(issubclass(w.category, quality.NetworkWarning)
+               and "no longer than they are wide" in str(w.message) for w in caught) == flagged
+    if flagged:
+        (flag,) = [f for f in res.quality if f.code == "stubby_stacks"]
+        assert flag.value == 1 and "ink blot" in flag.message
