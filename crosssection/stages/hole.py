@@ -249,9 +249,12 @@ def _fit_points(pts, center_rc, radius_px, gap_px, path) -> Hole:
     try:
         hull = pts[ConvexHull(pts).vertices]
     except QhullError:  # collinear points (Qhull's own message is a page of its options)
+        # a plate of the ink's colour around the hole leaves the ink's envelope the scan's
+        # edge, as too little ink kept does
         raise AnalysisError(f"cannot fit the hole: the ink's {len(pts)} border points lie on "
-                            "one line (too little ink kept: check the threshold)",
-                            path) from None
+                            "one line (too little ink kept, or a plate of the ink's colour "
+                            "around the hole: check the threshold, or give the hole with "
+                            "hole_radius_mm and hole_center_px)", path) from None
     if center_rc is None:
         c0, r0 = kasa_fit(hull)
         if radius_px is not None:

@@ -587,3 +587,15 @@ def test_a_given_radius_is_recorded_as_given():
                   calibration=str(root / "calibration.csv"), hole_radius_mm=7.5742,
                   hole_center_px=(428.06, 426.92))
     assert not res.hole.replaced and res.summary["hole"]["radius_mm"] == 7.5742
+
+
+def test_border_points_on_one_line_name_a_plate_of_the_inks_colour():
+    # a plate of the ink's colour around the hole left the ink's border on the scan's edge:
+    # the message blamed too little ink alone
+    from crosssection.core.errors import AnalysisError
+    from crosssection.stages.hole import _fit_points
+
+    pts = np.c_[np.zeros(74), np.arange(74.0)]
+    with pytest.raises(AnalysisError, match="or a plate of the ink's colour around the hole"
+                                            ".*give the hole"):
+        _fit_points(pts, None, None, 2.0, "scan.png")
