@@ -487,8 +487,9 @@ def _walled_scan(plate, *, seed=0):
 def test_a_bluish_plate_does_not_widen_the_wall_band():
     """Beyond the wall the band's ink blurs into the plate, not into paper: a plate of blue
     dominance 52, near the cut's 56 (halfway from the ink's 110 to the paper's 4), let 2 px
-    of the frame's margin in, 0.6 layer at 25 px/mm (every wall stack of a tester's scans one
-    layer over, rod +19 %). The wall band reads as wide as on a grey plate or on paper."""
+    of the frame's margin in, 0.6 layer at 25 px/mm (every wall stack of an outside
+    generator's scans one layer over, rod +19 %). The wall band reads as wide as on a grey
+    plate or on paper."""
     widths = {}
     # "inky": a plate no colour tells from the ink (a dark-blue plate): the margin is dropped
     for name, plate in (("bluish", (97, 106, 158)), ("grey", (128, 125, 120)),
