@@ -52,12 +52,12 @@ OPTIONAL_OUTPUTS = {
 
 #: the record that marks a folder as the output of an earlier run of each command
 RUN_RECORDS = {"analyze": "summary.json", "steps": STEPS_RECORD}
+#: per command, the files every run of it writes
+_ALWAYS_WRITTEN = {"analyze": ("summary.json", *(f"{name}.csv" for name in schema.TABLES)),
+                   "steps": (*STEP_IMAGES, STEPS_RECORD)}
 #: per command, every file it may write into its output folder
-OWN_FILES = {
-    "analyze": ("summary.json", *(f"{name}.csv" for name in schema.TABLES),
-                *OPTIONAL_OUTPUTS["analyze"]),
-    "steps": (*STEP_IMAGES, STEPS_FIGURE, STEPS_RECORD),
-}
+OWN_FILES = {command: (*always, *OPTIONAL_OUTPUTS[command])
+             for command, always in _ALWAYS_WRITTEN.items()}
 
 
 def clear_temporary(out_dir, command: str) -> list[Path]:
@@ -120,9 +120,11 @@ def run_files(command: str, *, figure: bool = True, steps: bool = False) -> tupl
     and tables, ``overlay.png`` with ``figure`` and the step images with ``steps``; ``steps``
     its images, ``steps.png`` with ``figure``, and its record."""
     if command == "steps":
-        return (*STEP_IMAGES, *((STEPS_FIGURE,) if figure else ()), STEPS_RECORD)
-    return ("summary.json", *(f"{name}.csv" for name in schema.TABLES),
-            *((OVERLAY,) if figure else ()), *((*STEP_IMAGES, STEPS_FIGURE) if steps else ()))
+        optional = (STEPS_FIGURE,) if figure else ()
+    else:
+        optional = ((OVERLAY,) if figure else ()) + ((*STEP_IMAGES, STEPS_FIGURE) if steps
+                                                     else ())
+    return (*_ALWAYS_WRITTEN[command], *optional)
 
 
 def check_not_other_output(out_dir, image=None, command="analyze", *, given_as="--out",

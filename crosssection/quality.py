@@ -1117,8 +1117,8 @@ def _stubby_check(stacks) -> list[QualityFlag]:
     k = int(stub.sum())
     if not k:
         return []
-    rod = float((stacks["n_br"] * stacks["length_mm"]).sum())
-    part = float((stacks["n_br"] * stacks["length_mm"])[stub].sum())
+    layer_length = stacks["n_br"] * stacks["length_mm"]
+    rod, part = float(layer_length.sum()), float(layer_length[stub].sum())
     worst = stacks.loc[stacks.loc[stub, "n_br"].idxmax()]
     where = (_stack_position(stacks, int(worst["stack_id"])) if "stack_id" in stacks
              else "a stack")
@@ -1129,7 +1129,7 @@ def _stubby_check(stacks) -> list[QualityFlag]:
                         f"{float(worst['width_mm']):.2f} mm wide) hold {share} of the rod "
                         "length: an ink blot beside a band reads as such a stack of folds, "
                         "and folds that short are read with their count and length doubtful; "
-                        "look at the overlay" f"{_energy_share(stacks, stub)}", k, 0)]
+                        f"look at the overlay{_energy_share(stacks, stub)}", k, 0)]
 
 
 #: ``rod_ends``: bands of an odd number of layers that end in the scan, away from any

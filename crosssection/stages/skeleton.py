@@ -544,6 +544,13 @@ def _band_half_width(code_of, offs, j, path, extra) -> float:
     return float(max(extra[q] for q in front))
 
 
+def _past_its_band(code_of, offs, j, path, reach, l_min, extra) -> bool:
+    """Whether a spur flagged by the distance at its junction pixel ``j`` reaches ``l_min``
+    beyond its band read past the fork (:func:`_band_half_width`): ``reach`` is its walked
+    length plus the distance at its free end, ``path`` its pixels. Such a spur is kept."""
+    return reach >= l_min and reach >= l_min + _band_half_width(code_of, offs, j, path, extra)
+
+
 def _walk_all(hc, w, ends, l_min, buf_len, offs, extra=None, l_walk=None):
     """Walks from the free ends ``ends`` on a fixed image (row codes ``hc``, row length ``w``),
     all at once.
@@ -636,9 +643,8 @@ def _walk_all(hc, w, ends, l_min, buf_len, offs, extra=None, l_walk=None):
     if extra is not None:
         # spurs only by the band's width at their junction: that width read past the fork
         for i in np.flatnonzero(spur & (length + lead >= l_min)).tolist():
-            path = pixels[walkers == i].tolist()
-            if length[i] + lead[i] >= l_min + _band_half_width(code_of, offs_l, int(stop[i]),
-                                                               path, extra):
+            if _past_its_band(code_of, offs_l, int(stop[i]), pixels[walkers == i].tolist(),
+                              length[i] + lead[i], l_min, extra):
                 spur[i] = False
     length[~spur] = 0.0
     return spur, length, walkers, pixels, stop
@@ -725,9 +731,8 @@ def _prune(hc, w, idx, l_min, mark=None, extra=None):
                 lead = 0.0 if extra is None else float(extra[starts[i]])
                 again, run_i, stop_i = _walk_on(code_of, offs_l, starts[i], 255, 0.0, 0, l_min,
                                                 buf_len, pth, extra, l_walk, lead)
-                if not again or (extra is not None and run_i + lead >= l_min and run_i + lead
-                                 >= l_min + _band_half_width(code_of, offs_l, stop_i, pth,
-                                                             extra)):
+                if not again or (extra is not None and _past_its_band(
+                        code_of, offs_l, stop_i, pth, run_i + lead, l_min, extra)):
                     continue
             pending += pth
             deleted.update(pth)
