@@ -268,7 +268,7 @@ def branch_table(profiles, n_br, regions, length_mm, *, rod_length_mm,
     return schema.check_table("branches", branches), stack_energy
 
 
-def _energy_rel_uncertainty(stacks: pd.DataFrame) -> float | None:
+def energy_rel_uncertainty(stacks: pd.DataFrame) -> float | None:
     """Share of the total bending energy that rests on the fork-zone model or the noise floor:
     ``sum_i E_i min(u_i, 1) / sum_i E_i`` over stacks, ``E_i = n_br e_i`` their energy and
     ``u_i`` their ``energy_rel_uncertainty`` (a stack without one counted in full); None when
@@ -372,7 +372,7 @@ def summary(*, pre, params, linear_system, junctions, stacks, branches, voids, r
         "rod_length_given": params.rod_length_mm is not None,
         "epsilon": rod_used_mm / (2.0 * np.pi * radius_mm) if radius_mm > 0 else None,
         "total_energy": total_energy,
-        "total_energy_rel_uncertainty": _energy_rel_uncertainty(stacks),
+        "total_energy_rel_uncertainty": energy_rel_uncertainty(stacks),
         "hole": {**pre.hole.as_summary(), "fitted": bool(pre.hole.fitted),
                  "radius_mm": float(radius_mm), "confidence": pre.hole_confidence,
                  # a plate's edge, or the ink's envelope (a rod that does not reach the wall
