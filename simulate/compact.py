@@ -934,13 +934,14 @@ def wall_regions(xy, branches: pd.DataFrame, stacks: pd.DataFrame, *, wall_radiu
     """Bulk or periphery of every branch and stack (paper, "Two sub-systems": branches with an
     extremity in contact with the container form the periphery).
 
-    As in the scans (:func:`crosssection.stages.hole.classify_regions`), a stack is in the
-    periphery when one of its ends touches the wall, and its branches share its region. An
-    end is a branch extremity (the rod at ``s_start`` or ``s_end``); it touches the wall when
-    it lies within ``contact_distance (1 + n_br / 2)`` of it: the stack's passes are up to a
-    contact distance apart, so the extremity of an inner pass of a stack pressed on the wall
-    sits about half the stack's width away from it (the scans' tolerance is likewise half the
-    widest stack plus a margin).
+    A stack is in the periphery when one of its ends touches the wall, and its branches
+    share its region. An end is a branch extremity (the rod at ``s_start`` or ``s_end``); it
+    touches the wall when it lies within ``contact_distance (1 + n_br / 2)`` of it: the
+    stack's passes are up to a contact distance apart, so the extremity of an inner pass of a
+    stack pressed on the wall sits about half the stack's width away from it. The scans
+    (:func:`crosssection.stages.hole.classify_regions`) take half the widest stack at the
+    end's junction plus 2 h instead, so a single sheet leaving a thick wall band is periphery
+    there and bulk here (docs/report.md: about a fifth more periphery stacks on scans).
 
     Parameters
     ----------

@@ -276,6 +276,35 @@ def _mean(v):
     return float(np.mean(v)) if v.size else np.nan
 
 
+def _se(v):
+    """Standard error of the mean of the finite values (NaN below two)."""
+    v = np.asarray(v, float)
+    v = v[np.isfinite(v)]
+    return float(np.std(v, ddof=1) / np.sqrt(v.size)) if v.size >= 2 else np.nan
+
+
+def _pooled_se(values, groups):
+    """Standard error of the mean pooled over every value, with the values of one group (a
+    configuration) not independent: the cluster-robust error of a ratio estimator,
+    ``sqrt(G / (G - 1) sum_g (S_g - m n_g)^2) / N`` for G groups of n_g values summing to S_g
+    and the pooled mean m (NaN below two groups). Branches of one rod, or of one scan's
+    stack, are not independent draws: the error over values alone would be too small."""
+    v = np.asarray(values, float)
+    g = np.asarray(groups)
+    k = np.isfinite(v)
+    v, g = v[k], g[k]
+    if v.size == 0:
+        return np.nan
+    _, inv = np.unique(g.astype(str), return_inverse=True)
+    n_g = np.bincount(inv)
+    if n_g.size < 2:
+        return np.nan
+    s_g = np.bincount(inv, weights=v)
+    m = v.sum() / v.size
+    G = n_g.size
+    return float(np.sqrt(G / (G - 1) * np.sum((s_g - m * n_g) ** 2)) / v.size)
+
+
 def per_config_table(ens: Ensemble) -> pd.DataFrame:
     """Per configuration: N_l, N_br, n_br_bar = N_br/N_l, epsilon, E, s_bar, l_bar, e_bar.
 
@@ -300,7 +329,8 @@ def macro_table(ens: Ensemble) -> pd.DataFrame:
     ``N_l`` and ``N_br`` of the whole system are the means of the configurations' counts,
     those of a sub-system the means of its rows per configuration (so that bulk and
     periphery add up to the whole system); ``n_voids`` (integers, missing for the
-    sub-systems: voids have no region) is the set's total.
+    sub-systems: voids have no region) is the set's total. ``N_l_se``, ``N_br_se``,
+    ``n_br_se`` and ``l_L_se`` are standard errors (:func:`_se`, :func:`_pooled_se`).
     """
     rows = []
     for s in ens.sets:
@@ -308,20 +338,23 @@ def macro_table(ens: Ensemble) -> pd.DataFrame:
         for reg in table_regions(e):
             br, st = _in_region(e.branches, reg), _in_region(e.stacks, reg)
             if reg == "all":
-                N_l, N_br = _mean(e.configs["N_l"]), _mean(e.configs["N_br"])
+                n_l, n_b = e.configs["N_l"], e.configs["N_br"]
                 s_mean = _mean(e.voids["area_L2"])
                 sp = _mean(e.voids["shape_ratio"])
             else:  # counts of this sub-system per configuration; voids have no region
                 cids = e.configs["config_id"]
-                N_l = _mean(st.groupby("config_id").size().reindex(cids, fill_value=0))
-                N_br = _mean(br.groupby("config_id").size().reindex(cids, fill_value=0))
+                n_l = st.groupby("config_id").size().reindex(cids, fill_value=0)
+                n_b = br.groupby("config_id").size().reindex(cids, fill_value=0)
                 s_mean = sp = np.nan
             rows.append({"set": s, "region": reg, "n_configs": len(e.configs),
-                         "N_l": N_l, "N_br": N_br, "n_br": _mean(st["n_br"]),
+                         "N_l": _mean(n_l), "N_br": _mean(n_b), "n_br": _mean(st["n_br"]),
                          "s_L2": s_mean, "sqrt_s_over_p": sp, "l_L": _mean(br["length_L"]),
                          "n_branches": len(br),
                          # voids are counted for the whole system only
-                         "n_voids": len(e.voids) if reg == "all" else None})
+                         "n_voids": len(e.voids) if reg == "all" else None,
+                         "N_l_se": _se(n_l), "N_br_se": _se(n_b),
+                         "n_br_se": _pooled_se(st["n_br"], st["config_id"]),
+                         "l_L_se": _pooled_se(br["length_L"], br["config_id"])})
     out = pd.DataFrame(rows)
     if not out.empty:  # a count: 103, not 103.0, with the sub-systems' cells missing
         out["n_voids"] = out["n_voids"].astype("Int64")
@@ -446,6 +479,31 @@ def _gamma_params(summ):
         return np.nan, np.nan
     p = summ.results["gamma"].params
     return p["alpha"], p["chi"]
+
+
+def _gamma_alpha_ci(summ) -> tuple[float, float]:
+    """The bootstrap interval of the Gamma shape of ``summ`` (the fits table's), NaN
+    without one."""
+    if summ is None or "gamma" not in summ.results or not summ.results["gamma"].selectable:
+        return np.nan, np.nan
+    lo, hi = summ.results["gamma"].ci.get("alpha", (np.nan, np.nan))
+    return float(lo), float(hi)
+
+
+def _ratio_ci(a, a_ci, b, b_ci) -> tuple[float, float]:
+    """A 95 % interval of ``a / b`` from the 95 % intervals of two independent estimates,
+    on the log scale (each interval's half width in log read as 1.96 standard errors)."""
+    z = 1.959963984540054
+    try:
+        se = [(np.log(hi) - np.log(lo)) / (2 * z) for lo, hi in (a_ci, b_ci)]
+    except (TypeError, ValueError):
+        return np.nan, np.nan
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r = np.log(a / b)
+        half = z * np.hypot(*se)
+    if not (np.isfinite(r) and np.isfinite(half)):
+        return np.nan, np.nan
+    return float(np.exp(r - half)), float(np.exp(r + half))
 
 
 def set_seed(seed: int | None, name: str) -> int | None:
@@ -595,29 +653,40 @@ def compute_stats(ens: Ensemble, opts: StatsOptions | None = None, *,
     for s in ens.sets:
         e = subsets[s]
         aE, cE = _gamma_params(summaries.get((s, "all", "E")))
+        aE_ci = _gamma_alpha_ci(summaries.get((s, "all", "E")))
         small_E = _gamma_small(summaries.get((s, "all", "E")))
         for reg in table_regions(e):
             br = _in_region(e.branches, reg)
             ae, ce = _gamma_params(summaries.get((s, reg, "e")))
+            ae_ci = _gamma_alpha_ci(summaries.get((s, reg, "e")))
             small_e = _gamma_small(summaries.get((s, reg, "e")))
+            whole = reg == "all"
             micro_rows.append({
                 "set": s, "region": reg, "kappa_m_L": _mean(br["kappa_m_L"]),
                 "l_L": _mean(br["length_L"]),
-                "E_tilde": _mean(e.configs["E"]) if reg == "all" else np.nan,
+                "E_tilde": _mean(e.configs["E"]) if whole else np.nan,
                 "e": _mean(br["e"]), "alpha_e": ae, "chi_e": ce,
-                "alpha_E": aE if reg == "all" else np.nan,
-                "chi_E": cE if reg == "all" else np.nan,
+                "alpha_E": aE if whole else np.nan,
+                "chi_E": cE if whole else np.nan,
                 # which values rest on a small fit, as the report marks its cells:
                 # alpha_e, chi_e on the e fit; alpha_E, chi_E on the E fit
-                "indicative": small_e or (reg == "all" and small_E),
-                "indicative_e": small_e, "indicative_E": reg == "all" and small_E})
+                "indicative": small_e or (whole and small_E),
+                "indicative_e": small_e, "indicative_E": whole and small_E,
+                "E_tilde_se": _se(e.configs["E"]) if whole else np.nan,
+                "e_se": _pooled_se(br["e"], br["config_id"]),
+                "alpha_e_lo": ae_ci[0], "alpha_e_hi": ae_ci[1],
+                "alpha_E_lo": aE_ci[0] if whole else np.nan,
+                "alpha_E_hi": aE_ci[1] if whole else np.nan})
         small_e = _gamma_small(summaries.get((s, "all", "e")))
         ae, _ = _gamma_params(summaries.get((s, "all", "e")))
+        ratio_ci = _ratio_ci(aE, aE_ci, ae, _gamma_alpha_ci(summaries.get((s, "all", "e"))))
         dof_rows.append({"set": s, "N_l": _mean(e.configs["N_l"]),
                          "N_br": _mean(e.configs["N_br"]), "alpha_E": aE, "alpha_e": ae,
                          "alpha_E_over_alpha_e": aE / ae if ae else np.nan,
                          "indicative": small_E or small_e,
-                         "indicative_e": small_e, "indicative_E": small_E})
+                         "indicative_e": small_e, "indicative_E": small_E,
+                         "alpha_E_over_alpha_e_lo": ratio_ci[0],
+                         "alpha_E_over_alpha_e_hi": ratio_ci[1]})
     micro = pd.DataFrame(micro_rows)
     dof = pd.DataFrame(dof_rows)
     relations = relations_table(ens, per_cfg, summaries)
@@ -739,15 +808,24 @@ def relations_table(ens: Ensemble, per_cfg: pd.DataFrame, summaries: dict) -> pd
     return pd.DataFrame(rows)
 
 
-def _corr(x, y):
+def _corr(x, y) -> dict:
+    """Pearson's r with its 95 % interval (Fisher's z, as scipy gives it) and the p-value of
+    r = 0, Spearman's r, and the number of pairs."""
     from scipy import stats
 
     x, y = np.asarray(x, float), np.asarray(y, float)
     k = np.isfinite(x) & np.isfinite(y)
+    out = {"pearson_r": np.nan, "spearman_r": np.nan, "n": int(k.sum()), "pearson_lo": np.nan,
+           "pearson_hi": np.nan, "pearson_p": np.nan}
     if k.sum() < CORRELATION_MIN_PAIRS or np.ptp(x[k]) == 0 or np.ptp(y[k]) == 0:
-        return np.nan, np.nan, int(k.sum())
-    return (float(stats.pearsonr(x[k], y[k])[0]), float(stats.spearmanr(x[k], y[k])[0]),
-            int(k.sum()))
+        return out
+    res = stats.pearsonr(x[k], y[k])
+    out.update(pearson_r=float(res.statistic), spearman_r=float(stats.spearmanr(x[k], y[k])[0]),
+               pearson_p=float(res.pvalue))
+    if k.sum() > 3:  # Fisher's z has a standard error of 1 / sqrt(n - 3)
+        ci = res.confidence_interval(0.95)
+        out.update(pearson_lo=float(ci.low), pearson_hi=float(ci.high))
+    return out
 
 
 def correlations_table(ens: Ensemble) -> pd.DataFrame:
@@ -756,9 +834,11 @@ def correlations_table(ens: Ensemble) -> pd.DataFrame:
     Returns
     -------
     DataFrame
-        set, region, pair, pearson_r, spearman_r, n (pairs of values), paper, and
-        ``indicative``: a coefficient of fewer than :data:`N_RELATION_MIN` pairs, as a
-        relation fitted on fewer configurations (three points give r = 1 or near it).
+        set, region, pair, pearson_r, spearman_r, n (pairs of values), paper, pearson_lo and
+        pearson_hi (95 % interval of r, Fisher's z, from 4 pairs), pearson_p (p-value of
+        r = 0), and ``indicative``: a coefficient of fewer than :data:`N_RELATION_MIN`
+        pairs, as a relation fitted on fewer configurations (three points give r = 1 or
+        near it).
     """
     rows = []
     for s in ens.sets:
@@ -770,14 +850,13 @@ def correlations_table(ens: Ensemble) -> pd.DataFrame:
             for pair, (x, y) in {
                     "l_vs_inv_kappa_m": (br["length_L"], inv),
                     "e_vs_l_kappa_m2": (br["e"], br["length_L"] * km ** 2)}.items():
-                r, rs, n = _corr(x, y)
-                rows.append({"set": s, "region": reg, "pair": pair, "pearson_r": r,
-                             "spearman_r": rs, "n": n, "paper": PAPER_CORR[pair]})
-        r, rs, n = _corr(e.configs["E"], e.configs["N_br"])
-        rows.append({"set": s, "region": "all", "pair": "E_vs_N_br", "pearson_r": r,
-                     "spearman_r": rs, "n": n, "paper": PAPER_CORR["E_vs_N_br"]})
+                rows.append({"set": s, "region": reg, "pair": pair, **_corr(x, y),
+                             "paper": PAPER_CORR[pair]})
+        rows.append({"set": s, "region": "all", "pair": "E_vs_N_br",
+                     **_corr(e.configs["E"], e.configs["N_br"]),
+                     "paper": PAPER_CORR["E_vs_N_br"]})
     out = pd.DataFrame(rows, columns=["set", "region", "pair", "pearson_r", "spearman_r", "n",
-                                      "paper"])
+                                      "paper", "pearson_lo", "pearson_hi", "pearson_p"])
     out["indicative"] = ((out["n"] < N_RELATION_MIN)
                          & np.isfinite(out["pearson_r"].astype(float))).astype(bool)
     return out

@@ -319,6 +319,59 @@ def test_correlations_and_micro_gamma_fits():
     assert res.fits.groupby(["quantity"])["selected"].sum().eq(1).all()
 
 
+def test_the_tables_carry_the_uncertainty_of_their_means_shapes_and_coefficients():
+    from scipy import stats
+
+    rng = np.random.default_rng(5)
+    ens = _relations_ensemble(rng, n=30)
+    ens.branches["e"] = rng.gamma(0.5, 300.0, len(ens.branches))
+    res = T.compute_stats(ens, T.StatsOptions(seed=1, n_boot=100, gof=False,
+                                              quantities=("e", "E")))
+    mac = res.macro.set_index("region").loc["all"]
+    n_l = ens.configs["N_l"].to_numpy(float)
+    assert mac["N_l_se"] == pytest.approx(n_l.std(ddof=1) / np.sqrt(len(n_l)))
+    # a pooled mean's error counts configurations, not branches: every branch of a
+    # configuration shares its length, so the error over branches alone would be far smaller
+    ln = ens.branches["length_L"].to_numpy(float)
+    assert mac["l_L_se"] > 3 * ln.std(ddof=1) / np.sqrt(len(ln))
+    per = ens.branches.groupby("config_id")["length_L"].agg(["sum", "size"])
+    m = per["sum"].sum() / per["size"].sum()
+    G = len(per)
+    want = np.sqrt(G / (G - 1) * ((per["sum"] - m * per["size"]) ** 2).sum()) / per["size"].sum()
+    assert mac["l_L_se"] == pytest.approx(want)
+    mic = res.micro.set_index("region").loc["all"]
+    assert mic["alpha_e_lo"] < mic["alpha_e"] < mic["alpha_e_hi"]
+    assert mic["alpha_E_lo"] < mic["alpha_E"] < mic["alpha_E_hi"]
+    gamma = res.fits[(res.fits["quantity"] == "e") & (res.fits["family"] == "gamma")].iloc[0]
+    assert (mic["alpha_e_lo"], mic["alpha_e_hi"]) == (gamma["p1_lo"], gamma["p1_hi"])
+    dof = res.dof.iloc[0]
+    assert dof["alpha_E_over_alpha_e_lo"] < dof["alpha_E_over_alpha_e"] \
+        < dof["alpha_E_over_alpha_e_hi"]
+    cor = res.correlations.set_index("pair").loc["E_vs_N_br"]
+    want = stats.pearsonr(ens.configs["E"], ens.configs["N_br"])
+    assert cor["pearson_p"] == pytest.approx(want.pvalue)
+    ci = want.confidence_interval(0.95)
+    assert (cor["pearson_lo"], cor["pearson_hi"]) == pytest.approx((ci.low, ci.high))
+    # one configuration: no error over configurations
+    one = T.macro_table(D.Ensemble(ens.configs.iloc[:1], ens.branches[
+        ens.branches["config_id"] == "0"], ens.stacks[ens.stacks["config_id"] == "0"],
+        ens.voids[ens.voids["config_id"] == "0"])).iloc[0]
+    assert np.isnan(one["N_l_se"]) and np.isnan(one["l_L_se"])
+
+
+def test_the_page_puts_each_uncertainty_beside_its_value():
+    from crosssection.stats.report import _with_errors
+
+    df = pd.DataFrame({"set": ["a", "b"], "N_l": [14.52, 3.0], "N_l_se": [0.477, np.nan],
+                       "alpha_e": ["0.644 (n = 20: indicative only)", 0.5],
+                       "alpha_e_lo": [0.61, 0.4], "alpha_e_hi": [0.68, 0.6]})
+    out = _with_errors(df)
+    assert list(out.columns) == ["set", "N_l", "alpha_e"]
+    assert out["N_l"].tolist() == ["14.5 ± 0.48", 3.0]
+    assert out["alpha_e"].tolist() == ["0.644 [0.61, 0.68] (n = 20: indicative only)",
+                                       "0.5 [0.4, 0.6]"]
+
+
 def test_demo_batch_tables_bulk_periphery_and_truncation(tmp_path):
     demo.write_demo_batch(tmp_path / "b", n_images=4, seed=3,
                           sets={"s1": {"n_stacks": 50, "nbr_mean": 3.0, "length_mu_L": 4e-3}})
