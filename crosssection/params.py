@@ -22,6 +22,7 @@ from crosssection.core.fileio import read_toml
 from crosssection.core.provenance import resolved_path
 
 __all__ = ["ScanScale", "AnalysisParams", "add_analysis_arguments", "check_param", "PARAM_NAMES",
+           "DEFAULT_PX_PER_MM", "scale_left_out",
            "THRESHOLD_METHODS", "CURVATURE_METHODS", "SKELETON_METHODS", "WIDTH_STATISTICS",
            "WIDTH_LAWS", "CHOICE_PARAMS",
            "SWITCHES", "switched_off"]
@@ -127,6 +128,28 @@ class ScanScale:
         return area_px2 / self.px_per_mm ** 2
 
 
+class _DefaultScale(float):
+    """The default ``px_per_mm``, a float that says it was not given: an
+    ``AnalysisParams(px_per_mm=50)`` holds a plain 50.0, one that left it out this object,
+    so that a scan read at a scale nobody gave is flagged (``scale_assumed``) and one read
+    at the same scale given is not. It survives ``dataclasses.replace`` of other fields."""
+
+    __slots__ = ()
+
+    def __reduce__(self):
+        return (_DefaultScale, (float(self),))
+
+
+#: the default scan resolution, px/mm (50 px/mm, 1270 dpi: the paper's scans)
+DEFAULT_PX_PER_MM = _DefaultScale(50.0)
+
+
+def scale_left_out(params) -> bool:
+    """Whether ``params`` (an :class:`AnalysisParams`) holds the default ``px_per_mm``
+    because none was given, rather than a scale given (at the default value or not)."""
+    return isinstance(getattr(params, "px_per_mm", None), _DefaultScale)
+
+
 def _opt(help_text: str, unit: str = "", *, cli: bool = True, choices=None, nargs=None,
          metavar=None):
     return {"help": help_text, "unit": unit, "cli": cli, "choices": choices, "nargs": nargs,
@@ -148,7 +171,8 @@ class AnalysisParams:
     turned into a ``Calibration``).
     """
 
-    px_per_mm: float = field(default=50.0, metadata=_opt("scan resolution", "px/mm"))
+    px_per_mm: float = field(default=DEFAULT_PX_PER_MM,
+                             metadata=_opt("scan resolution", "px/mm"))
     thickness_mm: float = field(default=0.1, metadata=_opt("sheet thickness h", "mm"))
     hole_radius_mm: float | None = field(default=None, metadata=_opt(
         "hole radius R; nothing outside the hole is analysed (default: found in the scan)",
@@ -232,8 +256,11 @@ class AnalysisParams:
 
     # ------------------------------------------------------------------ validation
     def __post_init__(self):
+        left_out = scale_left_out(self)
         for f in fields(self):
             object.__setattr__(self, f.name, check_param(f.name, getattr(self, f.name)))
+        if left_out:  # the default stays marked as not given
+            object.__setattr__(self, "px_per_mm", DEFAULT_PX_PER_MM)
         if self.thickness_px < _MIN_THICKNESS_PX:
             raise ParameterError(
                 f"sheet thickness h = {self.thickness_mm:g} mm is {self.thickness_px:.3g} px at "
@@ -433,6 +460,8 @@ class AnalysisParams:
                 v = self.calibration_record()
             elif isinstance(v, tuple):
                 v = list(v)
+            elif isinstance(v, _DefaultScale):  # the record holds the scale the scan was read at
+                v = float(v)
             out[f.name] = v
         return out
 

@@ -37,7 +37,7 @@ from crosssection._version import __version__
 from crosssection.core.errors import AnalysisError, FoldstatError, ImageError, ParameterError
 from crosssection.core.provenance import input_record, library_versions, sha256_in_background
 from crosssection.linsys import solve_branch_counts
-from crosssection.params import LINEAR_CALIBRATION, AnalysisParams
+from crosssection.params import LINEAR_CALIBRATION, AnalysisParams, scale_left_out
 from crosssection.result import AnalysisResult, write_step_images
 from crosssection.stages import curvature, hole as hole_stage, voids as void_stage
 from crosssection.stages.clean import clean_mask
@@ -635,10 +635,10 @@ def analyze(image, params: AnalysisParams | None = None, *, warn: bool = True,
     scale_given : bool, optional
         Whether the user gave the scan's resolution (the command line's ``--px-per-mm``, a
         set's ``px_per_mm``). By default: ``px_per_mm`` among ``overrides`` or in a dict
-        ``params``, and an :class:`~crosssection.params.AnalysisParams` ``params`` whose
-        ``px_per_mm`` is not the default (at the default it cannot tell a scale chosen from
-        one left out: pass True if the scan is at it). A file that records no resolution read
-        at the default scale is flagged (``scale_assumed``).
+        ``params``, and an :class:`~crosssection.params.AnalysisParams` ``params`` built with
+        a ``px_per_mm`` (any value, the default's included; one built from a mapping or a
+        TOML file that holds it). A file that records no resolution read at the default scale
+        is flagged (``scale_assumed``).
     **overrides
         Fields of :class:`~crosssection.params.AnalysisParams` overriding ``params``, e.g.
         ``px_per_mm=50, thickness_mm=0.1, calibration="cal.csv", hole_radius_mm=20``.
@@ -668,10 +668,8 @@ def analyze(image, params: AnalysisParams | None = None, *, warn: bool = True,
     if not isinstance(warn, (bool, np.bool_)):
         raise ParameterError(f"warn must be True or False, got {warn!r}", path_hint)
     if scale_given is None:
-        default_scale = AnalysisParams.__dataclass_fields__["px_per_mm"].default
         scale_given = (overrides.get("px_per_mm") is not None
-                       or (isinstance(params, AnalysisParams)
-                           and params.px_per_mm != default_scale)
+                       or (isinstance(params, AnalysisParams) and not scale_left_out(params))
                        or (isinstance(params, dict) and params.get("px_per_mm") is not None))
     elif not isinstance(scale_given, (bool, np.bool_)):
         raise ParameterError(f"scale_given must be True, False or None, got {scale_given!r}",

@@ -4,6 +4,7 @@
 the last run alone."""
 from __future__ import annotations
 
+import dataclasses
 import shutil
 import subprocess
 import sys
@@ -568,17 +569,24 @@ def test_a_file_without_a_resolution_read_at_the_default_scale_is_flagged(small_
         warnings.simplefilter("always")
         assumed = analyze(str(small_scan))
         given = analyze(str(small_scan), px_per_mm=50)
-        # a parameters object at the default scale cannot say whether it was chosen: the
-        # README's own style, AnalysisParams(calibration=...), would otherwise go unflagged
+        # a parameters object that leaves the scale out (the README's own style,
+        # AnalysisParams(calibration=...)) is flagged, also once other fields are replaced;
+        # one given the default scale is not
         default_object = analyze(str(small_scan), AnalysisParams())
+        replaced = analyze(str(small_scan),
+                           dataclasses.replace(AnalysisParams(), thickness_mm=0.1))
         as_object = analyze(str(small_scan), AnalysisParams(px_per_mm=49.5))
+        at_default = analyze(str(small_scan), AnalysisParams(px_per_mm=50))
         told = analyze(str(small_scan), AnalysisParams(), scale_given=True)
-    for r in (assumed, default_object):
+    for r in (assumed, default_object, replaced):
         assert "scale_assumed" in r.summary["quality"]["codes"]
     assert any(issubclass(w.category, crosssection.quality.ScaleAssumedWarning)
                and "a 1200-dpi scan reads -5.5 %" in str(w.message) for w in caught)
-    for r in (given, as_object, told):
+    for r in (given, as_object, at_default, told):
         assert "scale_assumed" not in r.summary["quality"]["codes"]
+    # the record gives the same analysis back, the scale it was read at given
+    again = AnalysisParams(**default_object.summary["parameters"])
+    assert again.px_per_mm == 50 and not crosssection.params.scale_left_out(again)
     capfd.readouterr()
     main = crosssection.cli.main
     assert main(["analyze", str(small_scan), "--out", str(tmp_path / "a"), "--no-figure"]) == 0
