@@ -397,6 +397,43 @@ def test_a_pen_stroke_apart_from_the_network_is_flagged():
     assert "isolated_stacks" not in res.summary["quality"]["codes"]
 
 
+def test_a_pen_stroke_joined_to_the_network_is_flagged():
+    """A wavy stroke drawn in a cell from one of its sheets reads as a dead-end stack of one
+    layer carrying most of the scan's energy; a straight one carries none and is not flagged
+    (a rod's own ends are such stacks)."""
+    import cv2
+
+    img, kw = _grid_scan()
+    t = np.linspace(0, 1, 200)
+    # from the sheet at column 150 into the cell, waving with 0.3 mm of amplitude
+    pts = np.stack([152 + 120 * t, 225 + 15 * np.sin(6 * np.pi * t)], axis=1)
+    stroke = img.copy()
+    cv2.polylines(stroke, [np.round(pts).astype(np.int32)], False, (40, 70, 190), 5)
+    res, caught = _analyze(stroke, **kw)
+    assert "end_energy" in res.summary["quality"]["codes"]
+    assert any(issubclass(w.category, quality.CurvatureWarning) and "pen stroke" in
+               str(w.message) for w in caught)
+    straight = img.copy()
+    cv2.line(straight, (152, 225), (272, 225), (40, 70, 190), 5)
+    res, _ = _analyze(straight, **kw)
+    assert "end_energy" not in res.summary["quality"]["codes"]
+
+
+def test_the_end_energy_check_reads_single_sheets_ending_free():
+    import pandas as pd
+
+    stacks = pd.DataFrame({"stack_id": [0, 1, 2], "junction_a": [0, 0, -1],
+                           "junction_b": [1, -1, -1], "kind": ["junction", "free_end",
+                                                               "free_end"],
+                           "n_br": [2, 1, 1], "energy_per_branch": [10.0, 20.0, 1.0]})
+    (flag,) = quality._end_energy_check(stacks)
+    assert flag.value == pytest.approx(20 / 41) and flag.category is quality.EndEnergyWarning
+    # two sheets, or a piece free at both ends (isolated_stacks' case), or a small share
+    assert quality._end_energy_check(stacks.assign(n_br=[2, 2, 1])) == []
+    assert quality._end_energy_check(stacks.assign(junction_a=[0, -1, -1])) == []
+    assert quality._end_energy_check(stacks.assign(energy_per_branch=[100.0, 20.0, 1.0])) == []
+
+
 def test_an_ink_blot_on_a_short_stack_is_flagged():
     """A blot on a single sheet between two crossings (3 mm, under four of its widths once
     blotted) reads many layers more than the count the junctions give it."""
