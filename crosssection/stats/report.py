@@ -1631,6 +1631,10 @@ def _with_errors(df: pd.DataFrame) -> pd.DataFrame:
         lo, hi = df.get(f"{b}_lo"), df.get(f"{b}_hi")
         cells = []
         for i, v in zip(df.index, df[b]):
+            if se is not None and np.isfinite(_num(se[i])) and not isinstance(v, str) \
+                    and np.isfinite(_num(v)):
+                cells.append(_plus_minus(_num(v), _num(se[i])))
+                continue
             if se is not None and np.isfinite(_num(se[i])):
                 extra = f" ± {_num(se[i]):.2g}"
             elif lo is not None and np.isfinite(_num(lo[i])) and np.isfinite(_num(hi[i])):
@@ -1645,6 +1649,18 @@ def _with_errors(df: pd.DataFrame) -> pd.DataFrame:
                 cells.append(f"{v:.3g}{extra}" if np.isfinite(_num(v)) else v)
         df[b] = pd.Series(cells, index=df.index, dtype=object)
     return df.drop(columns=errs)
+
+
+def _plus_minus(v: float, se: float) -> str:
+    """``v ± se`` with the error to two significant figures and the value to the same
+    decimal place (4093 ± 83, 0.0443 ± 0.0013); a value with no spread (every configuration
+    alike, 0 stacks in each) alone."""
+    if se == 0:
+        return f"{v:.3g}"
+    if not (1e-4 <= abs(v) < 1e6 or v == 0) or se >= 1e6:
+        return f"{v:.3g} ± {se:.2g}"
+    d = max(0, 1 - int(np.floor(np.log10(se))))
+    return f"{v:.{d}f} ± {se:.{d}f}"
 
 
 def _num(v) -> float:
@@ -1767,6 +1783,26 @@ def _gamma_n(res: StatsResult, s, reg, q) -> tuple:
     return (float(r.n), float(r.n_independent)) if r is not None else (np.nan, np.nan)
 
 
+#: goodness-of-fit p-value below which a Gamma law's parameters are marked as those of a law
+#: the data reject (the fits table's test)
+GAMMA_MISFIT_P = 0.05
+
+
+def _gamma_misfit_note(res: StatsResult, s, reg, q) -> str:
+    """Why the Gamma law of quantity ``q`` describes the data poorly: its goodness-of-fit
+    test rejects it, or another law is selected; "" when neither (or no fit)."""
+    summ = res.summaries.get((s, reg, q))
+    r = summ.results.get("gamma") if summ is not None else None
+    if r is None:
+        return ""
+    why = []
+    if np.isfinite(r.pvalue) and r.pvalue < GAMMA_MISFIT_P:
+        why.append(f"the Gamma law of {q} fails its goodness-of-fit test, {r.p_text()}")
+    if summ.best and summ.best != "gamma":
+        why.append(f"{FAMILIES[summ.best].title} is the law selected for {q}")
+    return "; ".join(why)
+
+
 def _small_fits_marked(df: pd.DataFrame, res: StatsResult) -> pd.DataFrame:
     """``df`` (the micro or dof table) with every value taken from a Gamma fit on fewer
     values than model selection needs marked "indicative only", as the other tables mark
@@ -1783,14 +1819,21 @@ def _small_fits_marked(df: pd.DataFrame, res: StatsResult) -> pd.DataFrame:
         for _, row in df.iterrows():
             v = row[col]
             reg = row.get("region", "all")
-            notes = []
+            notes, misfits = [], []
             for q, r in sources:
                 n, n_ind = _gamma_n(res, row["set"], r or reg, q)
                 notes.append(small_sample_note(n, F.N_SELECT_MIN,
                                                f"samples model selection needs ({q})", n_ind))
+                misfits.append(_gamma_misfit_note(res, row["set"], r or reg, q))
             notes = [n for n in notes if n]
-            cells.append(f"{v:.3g} ({'; '.join(notes)}: indicative only)"
-                         if notes and isinstance(v, (int, float)) and np.isfinite(v) else v)
+            misfits = [m for m in misfits if m]
+            if not (isinstance(v, (int, float)) and np.isfinite(v)) or not (notes or misfits):
+                cells.append(v)
+                continue
+            # the value first: the page puts its interval right after it
+            cells.append(f"{v:.3g}" + (f" ({'; '.join(notes)}: indicative only)" if notes
+                                       else "")
+                         + (f" ({'; '.join(misfits)})" if misfits else ""))
         df[col] = pd.Series(cells, index=df.index, dtype=object)
     return df
 
@@ -1983,7 +2026,7 @@ def _html(res: StatsResult, figs, meta, ens: Ensemble | None = None,
         "<p>A sum of m independent Gamma variables of shape α_e has shape m α_e, so "
         "α_E/α_e counts the effectively independent energy units of a configuration; the "
         "paper compares it with the number of stacks &lt;N<sub>l</sub>&gt; ([ ] a 95 % "
-        "interval from the two shapes' intervals, on the log scale). The paper's "
+        "interval from resampling the configurations). The paper's "
         "values below ours.</p>",
         _html_table(_with_paper(_with_errors(_small_fits_marked(res.dof, res)), PAPER_DOF)),
         "<h2>Stacking relations (paper Eqs. (12)-(16))</h2>",

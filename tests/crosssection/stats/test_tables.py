@@ -359,6 +359,33 @@ def test_the_tables_carry_the_uncertainty_of_their_means_shapes_and_coefficients
     assert np.isnan(one["N_l_se"]) and np.isnan(one["l_L_se"])
 
 
+def test_the_gamma_shape_of_the_resamples_is_scipys():
+    from scipy import stats
+
+    rng = np.random.default_rng(0)
+    for a in (0.3, 0.64, 5.0, 50.0):
+        x = rng.gamma(a, 2.0, 400)
+        assert T.gamma_shape_mle(x.mean(), np.log(x).mean()) == pytest.approx(
+            stats.gamma.fit(x, floc=0)[0], rel=1e-6)
+
+
+def test_the_shape_of_a_gamma_law_another_law_beats_is_marked_on_the_page():
+    from crosssection.stats.report import _small_fits_marked
+
+    rng = np.random.default_rng(4)
+    ens = _relations_ensemble(rng, n=30)
+    ens.branches["e"] = rng.lognormal(3.0, 1.5, len(ens.branches))
+    res = T.compute_stats(ens, T.StatsOptions(seed=1, n_boot=20, gof=False,
+                                              quantities=("e",)))
+    cell = _small_fits_marked(res.micro, res).set_index("region").loc["all", "alpha_e"]
+    assert "log-normal is the law selected for e" in cell
+    ens.branches["e"] = rng.gamma(0.5, 300.0, len(ens.branches))
+    res = T.compute_stats(ens, T.StatsOptions(seed=1, n_boot=20, gof=False,
+                                              quantities=("e",)))
+    cell = _small_fits_marked(res.micro, res).set_index("region").loc["all", "alpha_e"]
+    assert not isinstance(cell, str)
+
+
 def test_the_page_puts_each_uncertainty_beside_its_value():
     from crosssection.stats.report import _with_errors
 
@@ -367,7 +394,9 @@ def test_the_page_puts_each_uncertainty_beside_its_value():
                        "alpha_e_lo": [0.61, 0.4], "alpha_e_hi": [0.68, 0.6]})
     out = _with_errors(df)
     assert list(out.columns) == ["set", "N_l", "alpha_e"]
-    assert out["N_l"].tolist() == ["14.5 ± 0.48", 3.0]
+    assert out["N_l"].tolist() == ["14.52 ± 0.48", 3.0]
+    assert _with_errors(pd.DataFrame({"E": [4092.94, 0.0, 0.04428], "E_se": [83.4, 0.0, 0.00132]}))[
+        "E"].tolist() == ["4093 ± 83", "0", "0.0443 ± 0.0013"]
     assert out["alpha_e"].tolist() == ["0.644 [0.61, 0.68] (n = 20: indicative only)",
                                        "0.5 [0.4, 0.6]"]
 
