@@ -422,16 +422,21 @@ def test_a_pen_stroke_joined_to_the_network_is_flagged():
 def test_the_end_energy_check_reads_single_sheets_ending_free():
     import pandas as pd
 
-    stacks = pd.DataFrame({"stack_id": [0, 1, 2], "junction_a": [0, 0, -1],
-                           "junction_b": [1, -1, -1], "kind": ["junction", "free_end",
-                                                               "free_end"],
-                           "n_br": [2, 1, 1], "energy_per_branch": [10.0, 20.0, 1.0]})
+    # a dead end of one sheet beside a free piece and eight stacks between junctions
+    stacks = pd.DataFrame({"stack_id": range(10), "junction_a": [0, 0, -1] + [1] * 7,
+                           "junction_b": [1, -1, -1] + [2] * 7,
+                           "kind": ["junction", "free_end", "free_end"] + ["junction"] * 7,
+                           "n_br": [2, 1, 1] + [1] * 7,
+                           "energy_per_branch": [10.0, 20.0, 1.0] + [1.0] * 7})
     (flag,) = quality._end_energy_check(stacks)
-    assert flag.value == pytest.approx(20 / 41) and flag.category is quality.EndEnergyWarning
+    assert flag.value == pytest.approx(20 / 48) and flag.category is quality.EndEnergyWarning
     # two sheets, or a piece free at both ends (isolated_stacks' case), or a small share
-    assert quality._end_energy_check(stacks.assign(n_br=[2, 2, 1])) == []
-    assert quality._end_energy_check(stacks.assign(junction_a=[0, -1, -1])) == []
-    assert quality._end_energy_check(stacks.assign(energy_per_branch=[100.0, 20.0, 1.0])) == []
+    assert quality._end_energy_check(stacks.assign(n_br=[2, 2, 1] + [1] * 7)) == []
+    assert quality._end_energy_check(stacks.assign(junction_a=[0, -1, -1] + [1] * 7)) == []
+    assert quality._end_energy_check(stacks.assign(
+        energy_per_branch=[100.0, 20.0, 1.0] + [1.0] * 7)) == []
+    # a hairpin or a sheet peeling off a band: three stacks, the free end holding half
+    assert quality._end_energy_check(stacks.iloc[:3]) == []
 
 
 def test_an_ink_blot_on_a_short_stack_is_flagged():
