@@ -375,48 +375,46 @@ def test_an_ink_blot_apart_from_the_network_is_flagged():
 def test_a_pen_stroke_apart_from_the_network_is_flagged():
     """A letter written over the hole reads as a free stack of one layer whose turns hold
     much of the scan's energy: flagged, where a straight stroke holding none is not."""
-    import cv2
-
     img, kw = _grid_scan()
     t = np.linspace(0, 2 * np.pi, 200)
     # an "S" about 1.6 x 2.4 mm in the cell whose corner is (150, 150)
     pts = np.stack([225 + 40 * np.sin(t) * np.cos(t / 2), 225 - 60 * np.sin(t / 2) + 30],
                    axis=1)
-    stroke = img.copy()
-    cv2.polylines(stroke, [np.round(pts).astype(np.int32)], False, (40, 70, 190), 5)
-    res, caught = _analyze(stroke, **kw)
+    res, caught, straight = _stroke_and_line(img, kw, pts, (190, 225), (260, 225))
     st = res.stacks
     free = st[(st["junction_a"] < 0) & (st["junction_b"] < 0)]
     assert len(free) == 1 and int(free["n_br"].iloc[0]) == 1
     assert "isolated_stacks" in res.summary["quality"]["codes"]
     assert any(issubclass(w.category, quality.NetworkWarning) and "pen stroke" in
                str(w.message) for w in caught)
-    straight = img.copy()
-    cv2.line(straight, (190, 225), (260, 225), (40, 70, 190), 5)
-    res, _ = _analyze(straight, **kw)
-    assert "isolated_stacks" not in res.summary["quality"]["codes"]
+    assert "isolated_stacks" not in straight.summary["quality"]["codes"]
+
+
+def _stroke_and_line(img, kw, pts, a, b):
+    """The analyses of ``img`` with a pen stroke through ``pts`` (its warnings too), and
+    with a straight one from ``a`` to ``b`` instead."""
+    import cv2
+
+    stroke, straight = img.copy(), img.copy()
+    cv2.polylines(stroke, [np.round(pts).astype(np.int32)], False, (40, 70, 190), 5)
+    cv2.line(straight, a, b, (40, 70, 190), 5)
+    res, caught = _analyze(stroke, **kw)
+    return res, caught, _analyze(straight, **kw)[0]
 
 
 def test_a_pen_stroke_joined_to_the_network_is_flagged():
     """A wavy stroke drawn in a cell from one of its sheets reads as a dead-end stack of one
     layer carrying most of the scan's energy; a straight one carries none and is not flagged
     (a rod's own ends are such stacks)."""
-    import cv2
-
     img, kw = _grid_scan()
     t = np.linspace(0, 1, 200)
     # from the sheet at column 150 into the cell, waving with 0.3 mm of amplitude
     pts = np.stack([152 + 120 * t, 225 + 15 * np.sin(6 * np.pi * t)], axis=1)
-    stroke = img.copy()
-    cv2.polylines(stroke, [np.round(pts).astype(np.int32)], False, (40, 70, 190), 5)
-    res, caught = _analyze(stroke, **kw)
+    res, caught, straight = _stroke_and_line(img, kw, pts, (152, 225), (272, 225))
     assert "end_energy" in res.summary["quality"]["codes"]
     assert any(issubclass(w.category, quality.CurvatureWarning) and "pen stroke" in
                str(w.message) for w in caught)
-    straight = img.copy()
-    cv2.line(straight, (152, 225), (272, 225), (40, 70, 190), 5)
-    res, _ = _analyze(straight, **kw)
-    assert "end_energy" not in res.summary["quality"]["codes"]
+    assert "end_energy" not in straight.summary["quality"]["codes"]
 
 
 def test_the_end_energy_check_reads_single_sheets_ending_free():
