@@ -1659,7 +1659,10 @@ def _plus_minus(v: float, se: float) -> str:
         return f"{v:.3g}"
     if not (1e-4 <= abs(v) < 1e6 or v == 0) or se >= 1e6:
         return f"{v:.3g} ± {se:.2g}"
-    d = max(0, 1 - int(np.floor(np.log10(se))))
+    d = 1 - int(np.floor(np.log10(se)))
+    if d < 0:  # an error of hundreds or more: both to its second digit (16400 ± 7400)
+        q = 10.0 ** -d
+        return f"{round(v / q) * q:.0f} ± {round(se / q) * q:.0f}"
     return f"{v:.{d}f} ± {se:.{d}f}"
 
 

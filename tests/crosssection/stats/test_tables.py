@@ -395,8 +395,10 @@ def test_the_page_puts_each_uncertainty_beside_its_value():
     out = _with_errors(df)
     assert list(out.columns) == ["set", "N_l", "alpha_e"]
     assert out["N_l"].tolist() == ["14.52 ± 0.48", 3.0]
-    errors = pd.DataFrame({"E": [4092.94, 0.0, 0.04428], "E_se": [83.4, 0.0, 0.00132]})
-    assert _with_errors(errors)["E"].tolist() == ["4093 ± 83", "0", "0.0443 ± 0.0013"]
+    errors = pd.DataFrame({"E": [4092.94, 0.0, 0.04428, 16447.3],
+                           "E_se": [83.4, 0.0, 0.00132, 7402.0]})
+    assert _with_errors(errors)["E"].tolist() == ["4093 ± 83", "0", "0.0443 ± 0.0013",
+                                                  "16400 ± 7400"]
     assert out["alpha_e"].tolist() == ["0.644 [0.61, 0.68] (n = 20: indicative only)",
                                        "0.5 [0.4, 0.6]"]
 
