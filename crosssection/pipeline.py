@@ -485,7 +485,7 @@ def frame_flags(pre: Preprocessed, params: AnalysisParams, *, scale_given: bool 
         image_shape=pre.rgb.shape, file_px_per_mm=pre.file_px_per_mm,
         file_pages=pre.file_pages, file_dpi_xy=pre.file_dpi_xy,
         border_ink_rc=_border_pixels(pre.mask_clean), see_through=pre.see_through,
-        scale_assumed=_scale_assumed(pre, scale_given))
+        scale_assumed=_scale_assumed(pre, scale_given), scale_given=scale_given)
     return [f for f in flags if f.code in FRAME_CHECKS]
 
 
@@ -909,7 +909,7 @@ def _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, void
         calibration_one_layer_mm=_one_layer_mm(cal, p),
         void_areas_mm2=voids["area_mm2"].to_numpy() if "area_mm2" in voids else None,
         odd_steps=_odd_steps(pre.graph, stacks["n_br"].to_numpy()),
-        scale_assumed=_scale_assumed(pre, scale_given))
+        scale_assumed=_scale_assumed(pre, scale_given), scale_given=scale_given)
     notes = list(pre.warnings) + [f"linear system: {f}" for f in lin.flags
                                   if not str(f).startswith("disconnected")]
     summary = tb.summary(pre=pre, params=p, linear_system=lin, junctions=junctions,

@@ -544,7 +544,7 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
            file_dpi_xy=None, faint_ends=None,
            calibration_one_layer_mm=None, void_areas_mm2=None,
            dark_marks_fraction=0.0, odd_steps=None,
-           scale_assumed=False) -> list[QualityFlag]:
+           scale_assumed=False, scale_given=True) -> list[QualityFlag]:
     """Run every check of the module table on one analysis.
 
     Parameters
@@ -619,6 +619,8 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
     scale_assumed : bool
         The scan is a file read at the default ``px_per_mm``: none given, none recorded in
         the file (the ``scale_assumed`` check).
+    scale_given : bool
+        Whether ``px_per_mm`` was given (False: the default, named so by ``scale_mismatch``).
     odd_steps : sequence of (float, float), optional
         (row, col) of the layer steps where an odd number of layers ends (a rod end inside a
         band, :func:`crosssection.stages.widths.layer_steps`): counted by ``rod_ends``.
@@ -663,7 +665,8 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
     if file_px_per_mm and abs(params.px_per_mm / file_px_per_mm - 1.0) > SCALE_TOLERANCE:
         flags.append(QualityFlag(
             "scale_mismatch", f"the file records {25.4 * file_px_per_mm:.0f} dpi "
-            f"({file_px_per_mm:.2f} px/mm) but px_per_mm = {params.px_per_mm:g} is used: every "
+            f"({file_px_per_mm:.2f} px/mm) but px_per_mm = {params.px_per_mm:g} is used"
+            f"{'' if scale_given else ' (the default: none was given)'}: every "
             f"length, width and layer count rests on the scale (pass px_per_mm = "
             f"{file_px_per_mm:.2f} if the file is right)",
             value=params.px_per_mm / file_px_per_mm - 1.0, limit=SCALE_TOLERANCE))

@@ -1617,10 +1617,15 @@ def _html_table(df: pd.DataFrame) -> str:
                               border=0, classes="t")
 
 
-def _with_errors(df: pd.DataFrame) -> pd.DataFrame:
+def _with_errors(df: pd.DataFrame, n_configs=None) -> pd.DataFrame:
     """``df`` for the page with each value's uncertainty in its cell: ``X_se`` as
     "v ± se", ``X_lo`` and ``X_hi`` as "v [lo, hi]" (a cell already written out, marked
-    indicative, keeps its mark after the interval); the error columns dropped."""
+    indicative, keeps its mark after the interval); the error columns dropped. A standard
+    error over fewer than :data:`N_RELATION_MIN` configurations (``n_configs``: set name ->
+    count) is marked indicative, as a relation fitted on as few: it is itself uncertain."""
+    few = pd.Series(False, index=df.index)
+    if n_configs is not None and "set" in df.columns:
+        few = df["set"].map(lambda s: n_configs.get(s, np.inf) < N_RELATION_MIN).astype(bool)
     df = df.copy()
     errs = [c for c in df.columns if c.endswith(("_se", "_lo", "_hi"))]
     bases = dict.fromkeys(c.rsplit("_", 1)[0] for c in errs)
@@ -1633,7 +1638,9 @@ def _with_errors(df: pd.DataFrame) -> pd.DataFrame:
         for i, v in zip(df.index, df[b]):
             if se is not None and np.isfinite(_num(se[i])) and not isinstance(v, str) \
                     and np.isfinite(_num(v)):
-                cells.append(_plus_minus(_num(v), _num(se[i])))
+                k = n_configs.get(df.at[i, "set"]) if few[i] else None
+                cells.append(_plus_minus(_num(v), _num(se[i])) + (
+                    f" (n = {k} configurations: indicative only)" if few[i] else ""))
                 continue
             if se is not None and np.isfinite(_num(se[i])):
                 extra = f" ± {_num(se[i]):.2g}"
@@ -1649,6 +1656,14 @@ def _with_errors(df: pd.DataFrame) -> pd.DataFrame:
                 cells.append(f"{v:.3g}{extra}" if np.isfinite(_num(v)) else v)
         df[b] = pd.Series(cells, index=df.index, dtype=object)
     return df.drop(columns=errs)
+
+
+def _n_configs(res: StatsResult) -> dict:
+    """Configurations per set (the macro table's ``n_configs``)."""
+    m = res.macro
+    if m.empty or "n_configs" not in m.columns:
+        return {}
+    return {s: int(n) for s, n in zip(m["set"], m["n_configs"])}
 
 
 def _plus_minus(v: float, se: float) -> str:
@@ -2018,13 +2033,13 @@ def _html(res: StatsResult, figs, meta, ens: Ensemble | None = None,
         "docs/report.md). ± a standard error: over the configurations, for a pooled mean "
         "with each configuration's values taken together (they are not independent draws). "
         "The paper's values below ours.</p>",
-        _html_table(_with_paper(_with_errors(res.macro), PAPER_MACRO)),
+        _html_table(_with_paper(_with_errors(res.macro, _n_configs(res)), PAPER_MACRO)),
         "<h2>Averages per set: curvature and energy</h2><p>Means, and the shape α and scale χ "
         "of the Gamma law fitted to the branch energies e and to the total energies E "
         "(± a standard error as above; [ ] the 95 % bootstrap interval of the fits table, "
         "whatever law is selected there); the paper's values below ours.</p>",
-        _html_table(_with_paper(_with_errors(_small_fits_marked(res.micro, res)),
-                                PAPER_MICRO)),
+        _html_table(_with_paper(_with_errors(_small_fits_marked(res.micro, res),
+                                             _n_configs(res)), PAPER_MICRO)),
         "<h2>Are branches the independent units? α_E/α_e against the number of stacks</h2>"
         "<p>A sum of m independent Gamma variables of shape α_e has shape m α_e, so "
         "α_E/α_e counts the effectively independent energy units of a configuration; the "

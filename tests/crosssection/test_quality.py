@@ -716,9 +716,16 @@ def test_a_scale_other_than_the_files_recorded_resolution_is_flagged(scene, tmp_
             assert flag.value == pytest.approx(50.0 / (1200 / 25.4) - 1, rel=1e-3)
             assert any(issubclass(w.category, quality.CalibrationWarning) and "1200 dpi" in str(w.message)
                        for w in caught)
+    assert "none was given" not in flag.message
     # the same scale is right when given as the file records it
     res, _ = _analyze(str(tmp_path / "scan_1200.png"), **_given(scene, px_per_mm=1200 / 25.4))
     assert "scale_mismatch" not in res.summary["quality"]["codes"]
+    # left out, the default the message compares with is named as such
+    kw = _given(scene)
+    kw.pop("px_per_mm")
+    res, _ = _analyze(str(tmp_path / "scan_1200.png"), **kw)
+    flag = next(f for f in res.quality if f.code == "scale_mismatch")
+    assert "px_per_mm = 50 is used (the default: none was given)" in flag.message
 
 
 @pytest.mark.parametrize("dpi, expected", [

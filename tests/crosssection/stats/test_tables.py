@@ -395,6 +395,11 @@ def test_the_page_puts_each_uncertainty_beside_its_value():
     out = _with_errors(df)
     assert list(out.columns) == ["set", "N_l", "alpha_e"]
     assert out["N_l"].tolist() == ["14.52 ± 0.48", 3.0]
+    # a standard error over fewer configurations than a relation needs is marked
+    few = _with_errors(pd.DataFrame({"set": ["a", "b"], "N_l": [12.0, 12.0],
+                                     "N_l_se": [2.0, 2.0]}), {"a": 2, "b": 30})
+    assert few["N_l"].tolist() == ["12.0 ± 2.0 (n = 2 configurations: indicative only)",
+                                   "12.0 ± 2.0"]
     errors = pd.DataFrame({"E": [4092.94, 0.0, 0.04428, 16447.3],
                            "E_se": [83.4, 0.0, 0.00132, 7402.0]})
     assert _with_errors(errors)["E"].tolist() == ["4093 ± 83", "0", "0.0443 ± 0.0013",
