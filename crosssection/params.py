@@ -80,6 +80,28 @@ TANGENT_H_MAX = 20
 UNRECORDED_CALIBRATION = "object"
 
 
+class _DefaultScale(float):
+    """The default ``px_per_mm``, a float that says it was not given: an
+    ``AnalysisParams(px_per_mm=50)`` holds a plain 50.0, one that left it out this object,
+    so that a scan read at a scale nobody gave is flagged (``scale_assumed``) and one read
+    at the same scale given is not. It survives ``dataclasses.replace`` of other fields."""
+
+    __slots__ = ()
+
+    def __reduce__(self):
+        return (_DefaultScale, (float(self),))
+
+
+#: the default scan resolution, px/mm (50 px/mm, 1270 dpi: the paper's scans)
+DEFAULT_PX_PER_MM = _DefaultScale(50.0)
+
+
+def scale_left_out(params) -> bool:
+    """Whether ``params`` (an :class:`AnalysisParams`) holds the default ``px_per_mm``
+    because none was given, rather than a scale given (at the default value or not)."""
+    return isinstance(getattr(params, "px_per_mm", None), _DefaultScale)
+
+
 @dataclass(frozen=True)
 class ScanScale:
     """Resolution and sheet thickness of a scan; every mm <-> px conversion.
@@ -97,7 +119,7 @@ class ScanScale:
         A value that is not a positive number in the range ``AnalysisParams`` accepts.
     """
 
-    px_per_mm: float = 50.0
+    px_per_mm: float = float(DEFAULT_PX_PER_MM)
     thickness_mm: float = 0.1
 
     def __post_init__(self):
@@ -126,28 +148,6 @@ class ScanScale:
     def area_to_mm2(self, area_px2):
         """Area in px^2 -> mm^2."""
         return area_px2 / self.px_per_mm ** 2
-
-
-class _DefaultScale(float):
-    """The default ``px_per_mm``, a float that says it was not given: an
-    ``AnalysisParams(px_per_mm=50)`` holds a plain 50.0, one that left it out this object,
-    so that a scan read at a scale nobody gave is flagged (``scale_assumed``) and one read
-    at the same scale given is not. It survives ``dataclasses.replace`` of other fields."""
-
-    __slots__ = ()
-
-    def __reduce__(self):
-        return (_DefaultScale, (float(self),))
-
-
-#: the default scan resolution, px/mm (50 px/mm, 1270 dpi: the paper's scans)
-DEFAULT_PX_PER_MM = _DefaultScale(50.0)
-
-
-def scale_left_out(params) -> bool:
-    """Whether ``params`` (an :class:`AnalysisParams`) holds the default ``px_per_mm``
-    because none was given, rather than a scale given (at the default value or not)."""
-    return isinstance(getattr(params, "px_per_mm", None), _DefaultScale)
 
 
 def _opt(help_text: str, unit: str = "", *, cli: bool = True, choices=None, nargs=None,

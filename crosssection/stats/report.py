@@ -1641,19 +1641,13 @@ def _with_errors(df: pd.DataFrame, n_configs=None) -> pd.DataFrame:
                 k = n_configs.get(df.at[i, "set"]) if few[i] else None
                 cells.append(_plus_minus(_num(v), _num(se[i])) + (
                     f" (n = {k} configurations: indicative only)" if few[i] else ""))
-                continue
-            if se is not None and np.isfinite(_num(se[i])):
-                extra = f" ± {_num(se[i]):.2g}"
-            elif lo is not None and np.isfinite(_num(lo[i])) and np.isfinite(_num(hi[i])):
+            elif lo is not None and np.isfinite(_num(lo[i])) and np.isfinite(_num(hi[i])) \
+                    and (isinstance(v, str) or np.isfinite(_num(v))):
                 extra = f" [{_num(lo[i]):.3g}, {_num(hi[i]):.3g}]"
-            else:
-                cells.append(v)
-                continue
-            if isinstance(v, str):
-                head, _, tail = v.partition(" ")
+                head, _, tail = (v if isinstance(v, str) else f"{v:.3g}").partition(" ")
                 cells.append(f"{head}{extra} {tail}".rstrip())
             else:
-                cells.append(f"{v:.3g}{extra}" if np.isfinite(_num(v)) else v)
+                cells.append(v)
         df[b] = pd.Series(cells, index=df.index, dtype=object)
     return df.drop(columns=errs)
 

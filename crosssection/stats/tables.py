@@ -465,28 +465,32 @@ def fits_columns() -> list:
             "indicative"]
 
 
+def _gamma_fit(summ):
+    """The Gamma fit of ``summ`` whose parameters the tables take, or None (no summary, no
+    Gamma fit, or a degenerate one)."""
+    if summ is None or "gamma" not in summ.results or not summ.results["gamma"].selectable:
+        return None
+    return summ.results["gamma"]
+
+
 def _gamma_small(summ) -> bool:
     """Whether the Gamma parameters taken from ``summ`` (see :func:`_gamma_params`) rest on
     fewer than :data:`~crosssection.stats.fits.N_SELECT_MIN` independent values (stacks,
     for the branches of scans)."""
-    if summ is None or "gamma" not in summ.results or not summ.results["gamma"].selectable:
-        return False
-    return summ.results["gamma"].n_independent < F.N_SELECT_MIN
+    r = _gamma_fit(summ)
+    return r is not None and r.n_independent < F.N_SELECT_MIN
 
 
 def _gamma_params(summ):
-    if summ is None or "gamma" not in summ.results or not summ.results["gamma"].selectable:
-        return np.nan, np.nan
-    p = summ.results["gamma"].params
-    return p["alpha"], p["chi"]
+    r = _gamma_fit(summ)
+    return (np.nan, np.nan) if r is None else (r.params["alpha"], r.params["chi"])
 
 
 def _gamma_alpha_ci(summ) -> tuple[float, float]:
     """The bootstrap interval of the Gamma shape of ``summ`` (the fits table's), NaN
     without one."""
-    if summ is None or "gamma" not in summ.results or not summ.results["gamma"].selectable:
-        return np.nan, np.nan
-    lo, hi = summ.results["gamma"].ci.get("alpha", (np.nan, np.nan))
+    r = _gamma_fit(summ)
+    lo, hi = (np.nan, np.nan) if r is None else r.ci.get("alpha", (np.nan, np.nan))
     return float(lo), float(hi)
 
 
