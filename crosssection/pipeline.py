@@ -109,6 +109,8 @@ class Preprocessed:
     #: pen, pencil, a shadow), in pieces, over the ink's
     #: (:func:`~crosssection.stages.threshold.dark_marks`).
     dark_marks_fraction: float = 0.0
+    #: Pixels beside the ink darker than the ink, over the ink's (``marks_on_ink``).
+    marks_on_ink_fraction: float = 0.0
     #: The pixels an alpha channel made transparent or partly, composited over white (None:
     #: every pixel opaque).
     see_through: np.ndarray | None = None
@@ -450,12 +452,13 @@ def _preprocess_read(rgb, path, header: Header, orientation, p: AnalysisParams, 
                         exif_orientation=orientation,
                         edge_feature=dominance if thr.dominance_min is not None else None,
                         ink_missed_fraction=float(missed), see_through=see_through,
-                        file_dpi_xy=header.dpi_xy, dark_marks_fraction=float(marks))
+                        file_dpi_xy=header.dpi_xy, dark_marks_fraction=marks.apart,
+                        marks_on_ink_fraction=marks.on_ink)
 
 
 #: the quality checks decided before the network is read: those ``steps`` reports
 FRAME_CHECKS = ("pages", "see_through", "scale_assumed", "scale_mismatch", "non_square",
-                "low_resolution", "ink_missed", "dark_marks", "hole_fitted",
+                "low_resolution", "ink_missed", "dark_marks", "marks_on_ink", "hole_fitted",
                 "ink_outside_hole", "hole_crossed", "hole_wide", "hole_cut")
 
 
@@ -480,6 +483,7 @@ def frame_flags(pre: Preprocessed, params: AnalysisParams, *, scale_given: bool 
         ink_outside_fraction=pre.ink_outside_fraction,
         ink_missed_fraction=pre.ink_missed_fraction, degrees=np.zeros(0, np.int64),
         stacks=schema.empty_table("stacks"), dark_marks_fraction=pre.dark_marks_fraction,
+        marks_on_ink_fraction=pre.marks_on_ink_fraction,
         rod_length_mm=0.0, rod_measured_mm=0.0, ink_area_in_hole_mm2=0.0,
         calibration_max_width_mm=None, junctions=schema.empty_table("junctions"),
         image_shape=pre.rgb.shape, file_px_per_mm=pre.file_px_per_mm,
@@ -897,6 +901,7 @@ def _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, void
         ink_outside_fraction=pre.ink_outside_fraction,
         ink_missed_fraction=pre.ink_missed_fraction, degrees=degrees, stacks=stacks,
         dark_marks_fraction=pre.dark_marks_fraction,
+        marks_on_ink_fraction=pre.marks_on_ink_fraction,
         rod_length_mm=L, rod_measured_mm=rod_mm, ink_area_in_hole_mm2=ink_area_mm2,
         calibration_max_width_mm=_max_width_mm(cal, p), junctions=junctions,
         image_shape=pre.rgb.shape, file_px_per_mm=pre.file_px_per_mm,

@@ -1111,6 +1111,28 @@ def test_half_the_rod_drawn_in_black_ink_is_named(scene):
     assert "dark_marks" not in clean.summary["quality"]["codes"]
 
 
+def test_a_dark_fibre_lying_on_the_bands_edges_is_named(scene):
+    # a black fibre over the bands' edges on part of the scan: the ink under it is lost and
+    # the bands read narrower; no mix of ink and paper is as dark as it
+    import cv2
+
+    rgb = scene.rgb.copy()
+    rgbi = rgb.astype(int)
+    ink = (rgbi[..., 2] - rgbi[..., :2].max(axis=2) > 40).astype(np.uint8)
+    edge = (ink - cv2.erode(ink, np.ones((5, 5), np.uint8))).astype(bool)  # 2 px wide
+    edge[:, : 2 * rgb.shape[1] // 3] = False
+    rgb[edge] = (40, 38, 38)
+    res, caught = _analyze(rgb, **_given(scene))
+    flag = next(f for f in res.quality if f.code == "marks_on_ink")
+    assert flag.value > quality.MARKS_ON_INK_LIMIT and "narrower" in flag.message
+    assert any(w.category is quality.MarksOnInkWarning for w in caught)
+    # a grey fibre as light as the ink's rim is no mark on it
+    grey = scene.rgb.copy()
+    grey[edge] = (170, 175, 185)
+    light, _ = _analyze(grey, **_given(scene))
+    assert "marks_on_ink" not in light.summary["quality"]["codes"]
+
+
 @pytest.mark.parametrize("radius_px, flagged", [(40, True), (20, False)])
 def test_an_ink_blot_read_as_a_stack_of_folds_is_flagged(tmp_path, radius_px, flagged):
     """A round blot of 1.6 mm hanging from a single sheet read as a dead-end stack of 6
