@@ -47,6 +47,13 @@ likelihood-ratio statistic G = 2 sum_k c_k ln(c_k / (n P_k)) instead of Anderson
 Bootstrap replicates of the parameters are kept in :attr:`FitResult.boot` so that figures can
 draw a confidence band of the fitted density without refitting.
 
+The Gamma shape of independent values (no groups, no cut, not counts) takes its interval from
+the statistic ``T = log(mean x) - mean(log x)`` instead of the bootstrap
+(:func:`gamma_shape_interval`): T's law depends on the shape alone, so the interval holds the
+true shape as often as it says at any sample size, where the percentile bootstrap, resampling
+a handful of configurations' total energies, held it in 56 % of ensembles of 5 and 88 % of 48
+(``benchmarks/stats_coverage.py``).
+
 Groups (clusters): the branches of one stack share its length, curvature and energy, so a
 scan's table of branches repeats each stack's value n_br times. Every entry point but
 :func:`truncation_bias` takes ``groups=``, one label per observation: the point estimates
@@ -787,6 +794,8 @@ def _fit_one(x, family: str, *, truncation, n_boot, seed, gof, n_mc, ci_level,
         draws = (bootstrap_draws(x, family, truncation=c, n_boot=n_boot, seed=s_boot,
                                  discrete=discrete, groups=g) if n_boot else None)
         ci = _percentile_ci(draws, fam.param_names, ci_level) if n_boot else {}
+        if n_boot and fam.name == "gamma" and c is None and g is None and not discrete:
+            ci["alpha"] = gamma_shape_interval(x, ci_level)
         undetermined = _degenerate_resamples(fam, draws, x, c, ci_level, discrete)
         if undetermined:
             return replace(res, ci=ci, boot=draws, rejected=undetermined)
@@ -1015,6 +1024,59 @@ def _degenerate_resamples(fam, draws, x, c, level, discrete=False) -> str:
         return ""
     return (f"{100 * share:.0f} % of the bootstrap resamples fit its degenerate limit (as: "
             f"{bad[0]}): the data do not determine it")
+
+
+def gamma_shape_interval(x, level: float = 0.95) -> tuple[float, float]:
+    """Confidence interval of the shape of a Gamma law (location 0) from independent values.
+
+    ``T = log(mean x) - mean(log x)`` does not depend on the scale, and its law on the shape
+    ``a`` and the sample size ``n`` alone, with exact moments (the sum of the values is
+    independent of their shares, which are Dirichlet):
+    ``E[T] = digamma(n a) - log n - digamma(a)`` and
+    ``Var[T] = trigamma(a) / n - trigamma(n a)``. T is taken as a scaled chi-square with
+    these two moments (the approximation of Bain and Engelhardt), and the interval is the
+    shapes under which the observed T lies within the central ``level`` of its law: T falls
+    as the shape grows. Measured against 4000 samples per case at shapes 0.3-20 and
+    n = 3-250, the approximate law's probabilities at T's empirical 2.5, 50 and 97.5 %
+    points are within 0.009 of them, and the interval holds the shape in 93-97 % of
+    400 samples per case. The maximum-likelihood shape always lies inside.
+
+    Parameters
+    ----------
+    x : array_like
+        Positive values, at least 2 of them not all equal.
+    level : float
+        Coverage, between 0 and 1.
+
+    Returns
+    -------
+    (lo, hi) : tuple of float
+        NaN for a bound beyond the shapes 1e-6 to 1e6 (values all but equal), or when
+        ``x`` has fewer than 2 positive values or no spread.
+    """
+    from scipy import special
+
+    x = np.asarray(x, float)
+    x = x[np.isfinite(x) & (x > 0)]
+    n = x.size
+    t = float(np.log(x.mean()) - np.log(x).mean()) if n >= 2 else 0.0
+    if not t > 0:
+        return float("nan"), float("nan")
+
+    def cdf(log_a, p):
+        a = np.exp(log_a)
+        m = special.digamma(n * a) - np.log(n) - special.digamma(a)
+        v = special.polygamma(1, a) / n - special.polygamma(1, n * a)
+        return stats.chi2.cdf(t * 2 * m / v, 2 * m * m / v) - p
+
+    q = (1 - level) / 2
+    bracket = (np.log(1e-6), np.log(1e6))
+    out = []
+    for p in (q, 1 - q):
+        lo, hi = (cdf(b, p) for b in bracket)
+        out.append(float(np.exp(optimize.brentq(cdf, *bracket, args=(p,), xtol=1e-12)))
+                   if lo < 0 < hi else float("nan"))
+    return out[0], out[1]
 
 
 def _percentile_ci(draws, names, level) -> dict:

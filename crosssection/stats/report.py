@@ -1743,7 +1743,7 @@ def _selected_table(res: StatsResult) -> pd.DataFrame:
             "selected law": FAMILIES[r.family].title + (" (fitted as counts)" if r.discrete
                                                          else "")
             + (" (truncated at the detection limit)" if r.truncated else ""),
-            "parameters [95 % bootstrap interval]": "; ".join(ps),
+            "parameters [95 % interval]": "; ".join(ps),
             "runner-up law, BIC − BIC(selected)": runner,
             "goodness of fit": r.p_text() or "not computed"})
     return pd.DataFrame(rows)
@@ -1970,7 +1970,10 @@ def _methods(meta, opts: StatsOptions, ens=None) -> str:
         "lowest BIC, except that a law with fewer parameters within ΔBIC &lt; "
         f"{F.DELTA_BIC_SIMPLER:g} of the minimum is preferred (the simplest law the data "
         "support); AIC and BIC of every law are in fits.csv. Parameter intervals are 95 % "
-        f"percentile bootstrap intervals from {opts.n_boot} resamples, and the shaded bands "
+        f"percentile bootstrap intervals from {opts.n_boot} resamples, except the Gamma shape "
+        "of values fitted as independent (the total energies E, a simulation's branches): "
+        "the interval of its scale-free statistic log(mean) − mean(log), which holds the "
+        "shape of a Gamma law as often as it says at any number of values; the shaded bands "
         f"in the figures the pointwise 95 % range of the law over those resamples. {gof}</p>")
 
 
@@ -2030,7 +2033,7 @@ def _html(res: StatsResult, figs, meta, ens: Ensemble | None = None,
         _html_table(_with_paper(_with_errors(res.macro, _n_configs(res)), PAPER_MACRO)),
         "<h2>Averages per set: curvature and energy</h2><p>Means, and the shape α and scale χ "
         "of the Gamma law fitted to the branch energies e and to the total energies E "
-        "(± a standard error as above; [ ] the 95 % bootstrap interval of the fits table, "
+        "(± a standard error as above; [ ] the 95 % interval of the fits table, "
         "whatever law is selected there); the paper's values below ours.</p>",
         _html_table(_with_paper(_with_errors(_small_fits_marked(res.micro, res),
                                              _n_configs(res)), PAPER_MICRO)),
@@ -2038,7 +2041,7 @@ def _html(res: StatsResult, figs, meta, ens: Ensemble | None = None,
         "<p>A sum of m independent Gamma variables of shape α_e has shape m α_e, so "
         "α_E/α_e counts the effectively independent energy units of a configuration; the "
         "paper compares it with the number of stacks &lt;N<sub>l</sub>&gt; ([ ] a 95 % "
-        "interval from resampling the configurations). The paper's "
+        "interval from the two shapes' intervals). The paper's "
         "values below ours.</p>",
         _html_table(_with_paper(_with_errors(_small_fits_marked(res.dof, res)), PAPER_DOF)),
         "<h2>Stacking relations (paper Eqs. (12)-(16))</h2>",

@@ -554,3 +554,13 @@ def test_a_detection_limit_above_every_value_is_named(tmp_path):
     for s, n in ens.branches.groupby("set").size().items():  # each set names its own
         assert any(m.startswith(f"set {s}: ") and f"length_L n = 0 ({n} below the detection "
                    "limit or not finite)" in m for m in msgs), msgs
+
+
+def test_the_ratio_interval_combines_the_two_shapes_intervals():
+    # alpha_e known exactly: the ratio's interval is alpha_E's over it
+    assert T.dof_ratio_interval(20.0, (10.0, 40.0), 0.5, (0.5, 0.5)) == pytest.approx((20.0, 80.0))
+    # both uncertain: each side wider than either shape's alone, on a log scale in quadrature
+    lo, hi = T.dof_ratio_interval(20.0, (10.0, 40.0), 0.5, (0.25, 1.0))
+    assert lo == pytest.approx(40.0 * np.exp(-np.hypot(np.log(2), np.log(2))))
+    assert hi == pytest.approx(40.0 * np.exp(np.hypot(np.log(2), np.log(2))))
+    assert np.isnan(T.dof_ratio_interval(20.0, (np.nan, np.nan), 0.5, (0.4, 0.6))).all()
