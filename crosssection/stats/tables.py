@@ -487,8 +487,8 @@ def _gamma_params(summ):
 
 
 def _gamma_alpha_ci(summ) -> tuple[float, float]:
-    """The bootstrap interval of the Gamma shape of ``summ`` (the fits table's), NaN
-    without one."""
+    """The 95 % interval of the Gamma shape of ``summ`` (the fits table's), NaN without
+    one."""
     r = _gamma_fit(summ)
     lo, hi = (np.nan, np.nan) if r is None else r.ci.get("alpha", (np.nan, np.nan))
     return float(lo), float(hi)
