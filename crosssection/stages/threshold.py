@@ -1229,10 +1229,13 @@ def faint_band_ends(graph, dominance, *, paper_level: float, cut: float, mask, h
 #: ink counted as marks; the step of the lattice they are read on (px)
 DARK_MARK_MIN_H2 = 4.0
 DARK_MARK_STEP = 2
-#: ``marks_on_ink``: how much darker in red and green than the ink's level, as a share of the
-#: ink-paper contrast, a pixel beside the ink must be to count as a mark on it (a pixel of
-#: the ink's rim, half ink and half paper, is lighter than the ink)
-ON_INK_MARGIN = 0.1
+#: ``marks_on_ink``: how much greyer than any mix of ink and paper a pixel beside the ink must
+#: be to count as a mark on it: its share of the ink's darkness (in red and green, from the
+#: paper's to the ink's) exceeds its share of the ink's blue dominance by this much. A pixel
+#: of the ink's rim, a mix, has the two shares equal; graphite (105, 105, 110) on the sample
+#: scans 0.73, a black hair 1.1 or more; noise 20 and channels misregistered by a pixel let
+#: a few rim pixels pass, in pieces of at most 0.15 % of the ink's area
+ON_INK_GREYNESS = 0.4
 
 
 @dataclass(frozen=True)
@@ -1281,13 +1284,14 @@ def dark_marks(thr: ThresholdResult, features: ColourFeatures, region, *,
     frame's others). The ink's own rim, whose half-covered pixels are darker than the paper
     and less blue than the ink, is left out of ``apart``: pixels within ``max(3, h)`` px of
     the ink are not counted, nor those as near the frame's edge (a dark plate's rim inside
-    the hole's circle). Within that distance of the ink, ``on_ink`` counts the pixels darker
-    than the ink itself by :data:`ON_INK_MARGIN` of the contrast, which no mix of ink and
-    paper is, in pieces that touch the paper (a band's near-black core, which the cut leaves
-    out and the cleaning fills, does not): a dark fibre lying along a band's edge hides the
-    ink under it, and the band reads narrower (a fibre 0.07 mm wide along 100 degrees of a
-    sample scan's wall band: 1.5 % of the ink's area, 9 of 112 branches lost, rod length
-    -6.3 %, with no other check firing; 0 on the five sample scans). Read on a lattice of
+    the hole's circle). Within that distance of the ink, ``on_ink`` counts the pixels greyer
+    than any mix of ink and paper (:data:`ON_INK_GREYNESS`), in pieces that touch the paper
+    (a band's near-black core, which the cut leaves out and the cleaning fills, does not): a
+    hair or a pencil line lying along a band's edge hides the ink under it, and the band
+    reads narrower or is split (a black fibre 0.07 mm wide along 100 degrees of a sample
+    scan's wall band: 3.0 % of the ink's area, 9 of 112 branches lost, rod length -6.3 %;
+    graphite along a band: 0.5-0.9 %, energy +11 to +20 %, and along an inner stack +217 %;
+    none of them flagged by another check). Read on a lattice of
     :data:`DARK_MARK_STEP` px (a piece of 4 h^2 holds 25 lattice points at h = 5 px), about
     5 ms on a 2000 x 2000 scan.
 
@@ -1303,15 +1307,17 @@ def dark_marks(thr: ThresholdResult, features: ColourFeatures, region, *,
     n_ink = int(np.count_nonzero(mask))
     if not n_ink:
         return DarkMarks()
-    dark = features.darkness[::step, ::step]
+    dom, dark = features.lattice(step)
     ink = mask[::step, ::step]
     frame = np.ones_like(ink) if region is None else np.asarray(region, bool)[::step, ::step]
     if thr.ink_level is not None and thr.paper_level is not None:
-        ink_dark, paper_dark = float(thr.ink_level[1]), float(thr.paper_level[1])
+        (ink_dom, ink_dark), (paper_dom, paper_dark) = (
+            (float(a), float(b)) for a, b in (thr.ink_level, thr.paper_level))
     else:
         if not (frame & ~ink).any():
             return DarkMarks()
-        ink_dark = float(np.median(dark[ink]))
+        ink_dom, ink_dark = float(np.median(dom[ink])), float(np.median(dark[ink]))
+        paper_dom = float(np.median(dom[frame & ~ink]))
         paper_dark = float(np.median(dark[frame & ~ink]))
     if not paper_dark - ink_dark > MIN_CONTRAST_U8 * features.scale:
         return DarkMarks()
@@ -1324,11 +1330,17 @@ def dark_marks(thr: ThresholdResult, features: ColourFeatures, region, *,
     inner = cv2.erode(np.ascontiguousarray(frame, np.uint8), disc,
                       borderType=cv2.BORDER_CONSTANT, borderValue=0) > 0
     min_px = DARK_MARK_MIN_H2 * thickness_px ** 2
-    darker = (dark < ink_dark - ON_INK_MARGIN * (paper_dark - ink_dark)) & ~ink
+    apart = _pieces_share((dark < cut) & inner & ~near, step, min_px, n_ink)
+    if not ink_dom - paper_dom > MIN_CONTRAST_U8 * features.scale:
+        return DarkMarks(apart=apart)
+    # the share of the ink's darkness against that of its blue: equal on a mix of ink and
+    # paper, larger on a grey or black mark (a redder pixel counts no blue, not less)
+    share_dark = (paper_dark - dark) / (paper_dark - ink_dark)
+    share_blue = np.maximum((dom - paper_dom) / (ink_dom - paper_dom), 0.0)
+    grey = (share_dark - share_blue > ON_INK_GREYNESS) & ~ink
     # pieces on the ink's edge, touching the paper: not a dark core the cut left inside a
     # band (the cleaning fills it)
-    paper = cv2.dilate(np.ascontiguousarray(frame & ~ink & ~darker, np.uint8),
+    paper = cv2.dilate(np.ascontiguousarray(frame & ~ink & ~grey, np.uint8),
                        np.ones((3, 3), np.uint8)) > 0
-    return DarkMarks(apart=_pieces_share((dark < cut) & inner & ~near, step, min_px, n_ink),
-                     on_ink=_pieces_share(darker & inner & near, step, min_px, n_ink,
-                                          touching=paper))
+    return DarkMarks(apart=apart, on_ink=_pieces_share(grey & inner & near, step, min_px,
+                                                       n_ink, touching=paper))

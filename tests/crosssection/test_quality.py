@@ -1111,7 +1111,7 @@ def test_half_the_rod_drawn_in_black_ink_is_named(scene):
     assert "dark_marks" not in clean.summary["quality"]["codes"]
 
 
-def test_a_dark_fibre_lying_on_the_bands_edges_is_named(scene):
+def test_a_dark_fibre_or_a_pencil_line_on_the_bands_edges_is_named(scene):
     # a black fibre over the bands' edges on part of the scan: the ink under it is lost and
     # the bands read narrower; no mix of ink and paper is as dark as it
     import cv2
@@ -1126,6 +1126,11 @@ def test_a_dark_fibre_lying_on_the_bands_edges_is_named(scene):
     flag = next(f for f in res.quality if f.code == "marks_on_ink")
     assert flag.value > quality.MARKS_ON_INK_LIMIT and "narrower" in flag.message
     assert any(w.category is quality.MarksOnInkWarning for w in caught)
+    # nor a pencil line, grey: lighter than the ink, but greyer than any mix of ink and paper
+    pencil = scene.rgb.copy()
+    pencil[edge] = (110, 110, 115)
+    drawn, _ = _analyze(pencil, **_given(scene))
+    assert "marks_on_ink" in drawn.summary["quality"]["codes"]
     # a grey fibre as light as the ink's rim is no mark on it
     grey = scene.rgb.copy()
     grey[edge] = (170, 175, 185)
