@@ -1039,7 +1039,11 @@ def gamma_shape_interval(x, level: float = 0.95) -> tuple[float, float]:
     as the shape grows. Measured against 4000 samples per case at shapes 0.3-20 and
     n = 3-250, the approximate law's probabilities at T's empirical 2.5, 50 and 97.5 %
     points are within 0.009 of them, and the interval holds the shape in 93-97 % of
-    400 samples per case. The maximum-likelihood shape always lies inside.
+    400 samples per case (0.927-0.963 at the 95 % level and 0.648-0.706 at 68 % on 1000
+    samples per case at shapes 0.2-500 and n = 2-1000). At the 95 % level the
+    maximum-likelihood shape lay inside on every sample; at 68 % and two values it can lie
+    beyond. It covers a Gamma law's shape: on log-normal or Weibull values the shape of the
+    nearest Gamma law is held in 0.84-0.96 of samples, less as n grows.
 
     Parameters
     ----------
@@ -1051,8 +1055,10 @@ def gamma_shape_interval(x, level: float = 0.95) -> tuple[float, float]:
     Returns
     -------
     (lo, hi) : tuple of float
-        NaN for a bound beyond the shapes 1e-6 to 1e6 (values all but equal), or when
-        ``x`` has fewer than 2 positive values or no spread.
+        A bound beyond the shapes 1e-6 to 1e6 is replaced by the nearer end of that range or
+        by 0 or inf, whichever still holds it (values all but equal leave the shape
+        unbounded above: ``hi`` inf); NaN when ``x`` has fewer than 2 positive values or no
+        spread.
     """
     from scipy import special
 
@@ -1072,10 +1078,11 @@ def gamma_shape_interval(x, level: float = 0.95) -> tuple[float, float]:
     q = (1 - level) / 2
     bracket = (np.log(1e-6), np.log(1e6))
     out = []
-    for p in (q, 1 - q):
+    for p, below, beyond in ((q, 0.0, np.exp(bracket[1])), (1 - q, np.exp(bracket[0]), np.inf)):
         lo, hi = (cdf(b, p) for b in bracket)
+        # a bound beyond the bracket is replaced by one that still holds it (0 or inf open)
         out.append(float(np.exp(optimize.brentq(cdf, *bracket, args=(p,), xtol=1e-12)))
-                   if lo < 0 < hi else float("nan"))
+                   if lo < 0 < hi else float(below if lo >= 0 else beyond))
     return out[0], out[1]
 
 

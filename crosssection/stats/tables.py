@@ -520,14 +520,17 @@ def dof_ratio_interval(alpha_E, alpha_E_ci, alpha_e, alpha_e_ci) -> tuple[float,
     configurations; the ratio's uncertainty is mostly its. A percentile bootstrap over
     configurations, tried first, kept the upward bias of alpha_E's maximum-likelihood
     estimate over a few dozen values: 59 % coverage at 5 configurations, 90 % at 48
-    (``benchmarks/stats_coverage.py``). NaN where either interval is missing.
+    (``benchmarks/stats_coverage.py``). Where E's errors are those of its own branches' energies
+    (E their sum) the two errors go together and the interval is wider than it need be:
+    0.99-1.00 coverage at 2 branches per configuration, 0.93-0.97 at 20. A bound a shape's
+    interval leaves open (0 or inf) stays open; NaN where either interval is missing.
     """
-    with np.errstate(invalid="ignore", divide="ignore"):
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         r = alpha_E / alpha_e
         d_lo = np.hypot(np.log(alpha_E / alpha_E_ci[0]), np.log(alpha_e_ci[1] / alpha_e))
         d_hi = np.hypot(np.log(alpha_E_ci[1] / alpha_E), np.log(alpha_e / alpha_e_ci[0]))
         lo, hi = float(r * np.exp(-d_lo)), float(r * np.exp(d_hi))
-    return (lo, hi) if np.isfinite(lo) and np.isfinite(hi) else (np.nan, np.nan)
+    return (lo, hi) if not (np.isnan(lo) or np.isnan(hi)) and np.isfinite(r) else (np.nan, np.nan)
 
 
 def set_seed(seed: int | None, name: str) -> int | None:

@@ -296,3 +296,6 @@ def test_the_gamma_fit_of_independent_values_takes_the_shape_interval():
     rg = F.fit_family(x, "gamma", n_boot=200, seed=1, groups=g)
     assert rg.ci["alpha"] != pytest.approx(F.gamma_shape_interval(x))
     assert np.isnan(F.gamma_shape_interval([2.0, 2.0, 2.0])).all()
+    # values all but equal: the shape is bounded below only, and says so
+    lo, hi = F.gamma_shape_interval([10.0, 10.0 + 1e-7])
+    assert lo >= 1e5 and hi == np.inf

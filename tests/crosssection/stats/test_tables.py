@@ -564,3 +564,6 @@ def test_the_ratio_interval_combines_the_two_shapes_intervals():
     assert lo == pytest.approx(40.0 * np.exp(-np.hypot(np.log(2), np.log(2))))
     assert hi == pytest.approx(40.0 * np.exp(np.hypot(np.log(2), np.log(2))))
     assert np.isnan(T.dof_ratio_interval(20.0, (np.nan, np.nan), 0.5, (0.4, 0.6))).all()
+    # alpha_E unbounded above: the ratio too, its lower bound kept
+    lo, hi = T.dof_ratio_interval(20.0, (10.0, np.inf), 0.5, (0.25, 1.0))
+    assert lo == pytest.approx(40.0 * np.exp(-np.hypot(np.log(2), np.log(2)))) and hi == np.inf
