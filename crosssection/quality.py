@@ -737,9 +737,10 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
         flags.append(QualityFlag(
             "faint_ink", f"{len(faint_ends)} band end(s) continued by fainter blue ink below "
             f"the threshold's cut (stack {sid}, its end at x {c:.0f}, y {r:.0f} px of the "
-            "scan): ink faded there, or a band thinned below the cut by blur (a single "
-            "sheet under 3 px wide), is lost, and the rod with it (look at the overlay; a "
-            "light-blue smear at a band's end also reads so)", len(faint_ends), 0))
+            "scan): ink faded there, lightened by a glare or a light streak across the "
+            "band, or a band thinned below the cut by blur (a single sheet under 3 px wide), "
+            "is lost, and the rod with it (look at the overlay; a light-blue smear at a "
+            "band's end also reads so)", len(faint_ends), 0))
     flags += _crossed_check(params, hole)
     flags += _wide_check(params, hole)
     if ink_outside_fraction > 0.02:
