@@ -727,10 +727,11 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
     if marks_on_ink_fraction > MARKS_ON_INK_LIMIT:
         flags.append(QualityFlag(
             "marks_on_ink", f"grey or black marks that are not blue lie on the ink's edge, "
-            f"{100 * marks_on_ink_fraction:.1f} % of the ink's area (a hair, a fibre, pencil, "
-            "or ink much darker than the rest, which the cut leaves out): the ink under them "
-            "is not read, and the bands there read narrower, with fewer layers, or split "
-            "(look at the overlay; clean the sample and scan it again)",
+            f"{100 * marks_on_ink_fraction:.1f} % of the ink's area (a hair, a fibre, pencil; "
+            "ink much darker than the rest, which the cut leaves out; a plate inside a hole "
+            "given too wide): the ink under them is not read, and the bands there read "
+            "narrower, with fewer layers, or split (look at the overlay; clean the sample and "
+            "scan it again)",
             marks_on_ink_fraction, MARKS_ON_INK_LIMIT))
     if faint_ends:
         sid, (r, c) = faint_ends[0]

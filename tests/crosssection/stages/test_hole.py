@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from crosssection.core.errors import ParameterError
-from crosssection.quality import DarkMarksWarning, FrameWarning
+from crosssection.quality import DarkMarksWarning, FrameWarning, MarksOnInkWarning
 from crosssection.stages.hole import Hole, check_hole, find_hole, frame_mask, trim_margin
 from crosssection.stages.threshold import threshold_rgb
 from crosssection.truth.backdrop import apply_backdrop
@@ -517,11 +517,14 @@ def test_a_given_hole_too_wide_is_flagged_and_a_plate_edge_replaces_it(scene, pl
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", FrameWarning)
         warnings.simplefilter("ignore", DarkMarksWarning)
+        warnings.simplefilter("ignore", MarksOnInkWarning)
         kept = analyze(img, hole_radius_mm=1.06 * p["hole_radius_mm"], hole_correction=False,
                        **kw)
     assert "hole_wide" in kept.summary["quality"]["codes"]
-    # the grey plate inside the circle kept is dark and not ink: named too
+    # the grey plate inside the circle kept is dark and not ink, and lines the wall band:
+    # named too
     assert ("dark_marks" in kept.summary["quality"]["codes"]) is (plate == "grey")
+    assert ("marks_on_ink" in kept.summary["quality"]["codes"]) is (plate == "grey")
     assert kept.hole.radius_px == pytest.approx(1.06 * R)
 
 
