@@ -704,10 +704,10 @@ def compute_stats(ens: Ensemble, opts: StatsOptions | None = None, *,
                 "alpha_e_lo": ae_ci[0], "alpha_e_hi": ae_ci[1],
                 "alpha_E_lo": aE_ci[0] if whole else np.nan,
                 "alpha_E_hi": aE_ci[1] if whole else np.nan})
-        small_e = _gamma_small(summaries.get((s, "all", "e")))
-        ae, _ = _gamma_params(summaries.get((s, "all", "e")))
-        ratio_ci = dof_ratio_interval(aE, aE_ci, ae,
-                                      _gamma_alpha_ci(summaries.get((s, "all", "e"))))
+        e_all = summaries.get((s, "all", "e"))
+        small_e = _gamma_small(e_all)
+        ae, _ = _gamma_params(e_all)
+        ratio_ci = dof_ratio_interval(aE, aE_ci, ae, _gamma_alpha_ci(e_all))
         dof_rows.append({"set": s, "N_l": _mean(e.configs["N_l"]),
                          "N_br": _mean(e.configs["N_br"]), "alpha_E": aE, "alpha_e": ae,
                          "alpha_E_over_alpha_e": aE / ae if ae else np.nan,
