@@ -35,6 +35,7 @@ from crosssection import quality
 from crosssection import tables as tb
 from crosssection._version import __version__
 from crosssection.core.errors import AnalysisError, FoldstatError, ImageError, ParameterError
+from crosssection.core.parallel import in_background
 from crosssection.core.provenance import input_record, library_versions, sha256_in_background
 from crosssection.linsys import solve_branch_counts
 from crosssection.params import LINEAR_CALIBRATION, AnalysisParams, scale_left_out
@@ -235,7 +236,9 @@ def _threshold_in_frame(rgb, p: AnalysisParams, path, timer, min_piece_px: float
         if taken is not None and fraction > quality.INK_MISSED_LIMIT:
             thr = dataclasses.replace(thr, mask=thr.mask | taken,
                                       local_px=int(np.count_nonzero(taken)))
-        marks = dark_marks(thr, m["features"], inside, thickness_px=p.thickness_px)
+        # read by the quality checks alone: measured beside the cleaning
+        marks = in_background(dark_marks, thr, m["features"], inside,
+                              thickness_px=p.thickness_px)
     return thr, hole, outside, m["features"].dominance, fraction, marks
 
 
@@ -414,6 +417,7 @@ def _preprocess_read(rgb, path, header: Header, orientation, p: AnalysisParams, 
                           sliver_length_px=l_min_px,
                           sliver_width_px=p.sliver_width_h * p.thickness_px)
     _check_clean(mask, speck_px, path)
+    marks = marks()
     with timer("distance"):
         dist = distance_map(mask)
     with timer("skeleton"):
@@ -736,6 +740,14 @@ def _analyze(image, params, overrides, *, warn: bool = True,
         if width_mm is None:
             width_mm = _stack_widths_mm(sg, pre.distance_px, profiles, p)
         layers_est = np.asarray(cal.layers(width_mm), dtype=float)
+    edge = (None if pre.edge_feature is None else
+            (pre.edge_feature, float(pre.threshold.dominance_min)))
+    with timer("curvature"):
+        lines = curvature.stack_centrelines(sg, pre.distance_px, thickness_px=h_px,
+                                            smooth_px=p.smooth_px, method=p.curvature_method,
+                                            edge=edge, walls=False)
+    # the walls' midpoints need no branch count: found beside the packs and the linear system
+    lines = in_background(curvature.between_walls, lines)
     with timer("packs"):
         if packs is None:
             packs = compute_packs(sg, tangent_px=scale.to_px(p.tangent_used_mm))
@@ -744,11 +756,10 @@ def _analyze(image, params, overrides, *, warn: bool = True,
                                   integer_refinement=p.integer_refinement)
         n_br = np.asarray(lin.n_br, dtype=np.int64)
     with timer("curvature"):
-        edge = (None if pre.edge_feature is None else
-                (pre.edge_feature, float(pre.threshold.dominance_min)))
         profiles = curvature.stack_profiles(sg, n_br, pre.distance_px, thickness_px=h_px,
                                             px_per_mm=p.px_per_mm, smooth_px=p.smooth_px,
-                                            method=p.curvature_method, edge=edge)
+                                            method=p.curvature_method, edge=edge,
+                                            centrelines=lines())
     length_mm = scale.to_mm(np.asarray(sg.length_px, dtype=float))
     rod_mm = float(np.sum(n_br * length_mm))
     L = p.rod_length_mm if p.rod_length_mm is not None else rod_mm

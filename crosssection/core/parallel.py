@@ -604,6 +604,40 @@ def compiling_in_turn(lock_path: str | None):
             os.close(taken[0])  # releases the lock
 
 
+def in_background(fn, /, *args, **kwargs):
+    """Start ``fn(*args, **kwargs)`` on a thread; return a callable that waits for it.
+
+    For work that releases the interpreter (OpenCV's calls, compiled kernels declared
+    ``nogil``) run beside other such work of the same analysis: the two share the
+    machine's cores instead of taking turns.
+
+    Returns
+    -------
+    callable
+        Called with no argument: waits for ``fn`` and returns its result, or raises what it
+        raised.
+    """
+    out = {}
+
+    def work():
+        try:
+            out["value"] = fn(*args, **kwargs)
+        except BaseException as exc:  # handed to the caller, which raises it
+            out["error"] = exc
+
+    thread = threading.Thread(target=work, name=f"foldstat-{getattr(fn, '__name__', 'work')}",
+                              daemon=True)
+    thread.start()
+
+    def result():
+        thread.join()
+        if "error" in out:
+            raise out["error"]
+        return out["value"]
+
+    return result
+
+
 def spawn_seeds(seed: int | None, n: int) -> list[int]:
     """``n`` independent integer seeds derived from ``seed`` by ``SeedSequence.spawn``.
 
@@ -615,5 +649,5 @@ def spawn_seeds(seed: int | None, n: int) -> list[int]:
 
 
 __all__ = ["get_executor", "ClusterLostError", "ClusterWarning", "quiet_loggers",
-           "SCHEDULER_TIMEOUT_S", "stop_pool", "compiling_in_turn", "spawn_seeds",
+           "SCHEDULER_TIMEOUT_S", "stop_pool", "compiling_in_turn", "spawn_seeds", "in_background",
            "ThreadPoolExecutor"]

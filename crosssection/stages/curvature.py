@@ -124,6 +124,7 @@ kappa_m = |kappa_pm| (paper, section "Curvature of branches"), in 1/mm, trapezoi
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -1242,18 +1243,42 @@ def _midlines(paths, smoothed, closed, radius_px, dt, edge=None) -> list:
     feat, level = (np.zeros((1, 1), np.int16), 0.0) if edge is None else edge
     if feat.dtype not in (np.int16, np.float32):
         feat = feat.astype(np.float32)  # one compiled kernel per type
-    out = []
-    for p, sm, c, r in zip(paths, smoothed, closed, radius_px):
-        p = np.ascontiguousarray(p, dtype=np.float64)
-        if len(p) < 3 or not np.isfinite(r) or r <= 0:
-            out.append(p)
-            continue
-        # a band of w pixels has walls w px apart and a distance transform of about w / 2 + 0.5
-        # on its skeleton
-        width = 2.0 * float(r) - 0.5
-        tol = max(_MIDLINE_WIDTH_TOL_MIN_PX, _MIDLINE_WIDTH_TOL * width)
-        out.append(_midline_kernel(p, np.ascontiguousarray(sm, dtype=np.float64), dt, width,
-                                   tol, _MIDLINE_MAX_SHIFT_PX, bool(c), feat, float(level)))
+    paths = [np.ascontiguousarray(p, dtype=np.float64).reshape(-1, 2) for p in paths]
+    m = len(paths)
+    offs = np.zeros(m + 1, np.int64)
+    np.cumsum([len(p) for p in paths], out=offs[1:])
+    width = np.zeros(m)
+    tol = np.zeros(m)
+    moved = np.zeros(m, np.bool_)
+    for i, (p, r) in enumerate(zip(paths, radius_px)):
+        if len(p) >= 3 and np.isfinite(r) and r > 0:
+            # a band of w pixels has walls w px apart and a distance transform of about
+            # w / 2 + 0.5 on its skeleton
+            width[i] = 2.0 * float(r) - 0.5
+            tol[i] = max(_MIDLINE_WIDTH_TOL_MIN_PX, _MIDLINE_WIDTH_TOL * width[i])
+            moved[i] = True
+    if not m:
+        return []
+    raw = np.concatenate(paths) if offs[-1] else np.zeros((0, 2))
+    sm = np.ascontiguousarray(np.concatenate([np.asarray(q, np.float64).reshape(-1, 2)
+                                              for q in smoothed]))
+    # every stack in one compiled call: it releases the interpreter (the pipeline runs it on
+    # a thread beside the linear system)
+    out = _midlines_kernel(raw, sm, offs, width, tol, moved, np.asarray(closed, np.bool_),
+                           dt, _MIDLINE_MAX_SHIFT_PX, feat, float(level))
+    return [p if not moved[i] else out[offs[i]:offs[i + 1]] for i, p in enumerate(paths)]
+
+
+@njit(cache=True, nogil=True)
+def _midlines_kernel(raw, sm, offs, width, tol, moved, closed, dt, max_shift, feat,
+                     level):  # pragma: no cover - numba
+    # :func:`_midline_kernel` of every stack ``i`` (rows ``offs[i]:offs[i + 1]``) to move
+    out = raw.copy()
+    for i in range(offs.shape[0] - 1):
+        if moved[i]:
+            a, b = offs[i], offs[i + 1]
+            out[a:b] = _midline_kernel(raw[a:b], sm[a:b], dt, width[i], tol[i], max_shift,
+                                       closed[i], feat, level)
     return out
 
 
@@ -1539,8 +1564,126 @@ def _contact_arcs(paths, at_node, radius, reach, gap_px: float = _CONTACT_GAP_PX
     return dict(zip(keys, arc.tolist()))
 
 
+@dataclass(frozen=True)
+class StackCentrelines:
+    """What :func:`stack_profiles` reads from the scan before the branch counts: every
+    stack's centreline between its walls and the bands' radii and contacts at the junctions
+    (:func:`stack_centrelines`)."""
+
+    n_stacks: int
+    thickness_px: float
+    smooth_px: int
+    method: str
+    #: junction -> [(stack, end)]
+    at_node: dict
+    radius_px: np.ndarray
+    #: per band end at a junction: its skeleton from the junction, and the other bands'
+    #: skeleton points there with the distance below which each touches it
+    contact: dict
+    at_junction: np.ndarray
+    #: the inscribed ink radius at the junction of every stack end (0 at a free end)
+    r_j: list
+    raw: list
+    closed: list
+    skeleton_px: list
+    smoothed: list
+    dt32: np.ndarray
+    edge: object
+    #: whether ``smoothed`` is final: between the walls (:func:`between_walls`), or the
+    #: skeleton's for the paper's method
+    placed: bool
+
+
+def stack_centrelines(graph, distance_px, *, thickness_px: float, smooth_px: int | None = None,
+                      method: str = METHODS[0], edge=None,
+                      walls: bool = True) -> StackCentrelines:
+    """The part of :func:`stack_profiles` that needs no branch count: the stacks'
+    centrelines (module docstring, step 1) and their junctions' geometry.
+
+    Its costliest step, the walls' midpoints (:func:`between_walls`), can be left to a
+    later call.
+
+    Parameters
+    ----------
+    graph, distance_px, thickness_px, smooth_px, method, edge
+        As :func:`stack_profiles`.
+    walls : bool
+        Move the centrelines between the walls here (:func:`between_walls`); False leaves
+        that step to a later call.
+
+    Returns
+    -------
+    StackCentrelines
+        To hand to :func:`stack_profiles` with the same graph and settings.
+    """
+    sm = default_smooth_px(thickness_px) if smooth_px is None else int(smooth_px)
+    if method not in METHODS:
+        raise ParameterError(f"curvature method must be one of {METHODS}, got {method!r}")
+    H, W = distance_px.shape
+    at_node = {}  # junction -> [(stack, end)]
+    for sid in range(graph.n_stacks):
+        for end, node in enumerate(graph.ends[sid]):
+            if graph.node_kind[node] == "junction":
+                at_node.setdefault(node, []).append((sid, end))
+    reach = int(np.ceil(_CONTACT_REACH_H * float(thickness_px)))
+    radius = median_radii_px(graph.paths, distance_px)
+    # per band end at a junction: its skeleton from the junction, and the skeleton points of
+    # the other bands there with the distance below which each touches it
+    contact = _contact_arcs(graph.paths, at_node, radius, reach)
+
+    # the inscribed ink radius at the junction of every stack end (0 at a free end)
+    ends = np.array(graph.ends, np.int64).reshape(-1, 2)
+    at_junction = np.array([[graph.node_kind[node] == "junction" for node in e]
+                            for e in graph.ends], bool).reshape(-1, 2)
+    r_j = np.zeros(ends.shape)
+    if at_junction.any():
+        rc = np.round(np.array([graph.node_rc[node] for node in ends[at_junction].tolist()],
+                               float).reshape(-1, 2)).astype(int)
+        r_j[at_junction] = distance_px[np.clip(rc[:, 0], 0, H - 1), np.clip(rc[:, 1], 0, W - 1)]
+    r_j = r_j.tolist()
+
+    prepared = [_prepared_path(graph.paths[sid], graph.node_kind[graph.ends[sid][0]] == "loop")
+                for sid in range(graph.n_stacks)]
+    raw = [p for p, _ in prepared]
+    closed = [c for _, c in prepared]
+    # the skeleton's length (polyline.length; a path that is not a loop is prepared as it is)
+    r, c, offs = _flat_paths(raw)
+    skeleton_px = _path_lengths(r, c, offs[:-1], offs[1:]).tolist()
+    smoothed = polyline.smooth_paths(raw, window_px=sm, closed=closed)
+    dt32 = np.ascontiguousarray(distance_px, dtype=np.float32)
+    lines = StackCentrelines(graph.n_stacks, float(thickness_px), sm, method, at_node, radius,
+                             contact, at_junction, r_j, raw, closed, skeleton_px, smoothed, dt32,
+                             edge, method == "paper")
+    return between_walls(lines) if walls else lines
+
+
+def between_walls(lines: StackCentrelines) -> StackCentrelines:
+    """The centrelines of :func:`stack_centrelines` moved between their bands' walls
+    (module docstring, step 1), unless they are already (or the method is the paper's, whose
+    centreline is the skeleton's).
+
+    One compiled call that releases the interpreter: the pipeline runs it on a thread while
+    the linear system is solved.
+
+    Parameters
+    ----------
+    lines : StackCentrelines
+
+    Returns
+    -------
+    StackCentrelines
+    """
+    if lines.placed:
+        return lines
+    mid = _midlines(lines.raw, lines.smoothed, lines.closed, lines.radius_px, lines.dt32,
+                    lines.edge)
+    smoothed = polyline.smooth_paths(mid, window_px=lines.smooth_px, closed=lines.closed)
+    return dataclasses.replace(lines, smoothed=smoothed, placed=True)
+
+
 def stack_profiles(graph, n_br, distance_px, *, thickness_px: float, px_per_mm: float,
-                   smooth_px: int | None = None, method: str = METHODS[0], edge=None) -> list:
+                   smooth_px: int | None = None, method: str = METHODS[0], edge=None,
+                   centrelines: StackCentrelines | None = None) -> list:
     """Curvature profile of every stack of a stack graph (paper: parabolic fits over 5 n_br h).
 
     Parameters
@@ -1567,6 +1710,9 @@ def stack_profiles(graph, n_br, distance_px, *, thickness_px: float, px_per_mm: 
         The threshold's feature (the scan's ``blue - max(red, green)``) and its cut: the
         centreline's walls (step 1) are placed where the feature crosses the cut, to a
         fraction of a pixel. None: on the mask's distance transform alone.
+    centrelines : StackCentrelines, optional
+        :func:`stack_centrelines` of the same graph with the same settings, computed
+        beforehand (None: computed here).
 
     Returns
     -------
@@ -1575,29 +1721,20 @@ def stack_profiles(graph, n_br, distance_px, *, thickness_px: float, px_per_mm: 
     """
     if method not in METHODS:
         raise ParameterError(f"curvature method must be one of {METHODS}, got {method!r}")
-    H, W = distance_px.shape
     sm = default_smooth_px(thickness_px) if smooth_px is None else int(smooth_px)
-    at_node = {}  # junction -> [(stack, end)]
-    for sid in range(graph.n_stacks):
-        for end, node in enumerate(graph.ends[sid]):
-            if graph.node_kind[node] == "junction":
-                at_node.setdefault(node, []).append((sid, end))
-    reach = int(np.ceil(_CONTACT_REACH_H * float(thickness_px)))
-    radius = median_radii_px(graph.paths, distance_px)
-    # per band end at a junction: its skeleton from the junction, and the skeleton points of
-    # the other bands there with the distance below which each touches it
-    contact = _contact_arcs(graph.paths, at_node, radius, reach)
-
-    # the inscribed ink radius at the junction of every stack end (0 at a free end)
-    ends = np.array(graph.ends, np.int64).reshape(-1, 2)
-    at_junction = np.array([[graph.node_kind[node] == "junction" for node in e]
-                            for e in graph.ends], bool).reshape(-1, 2)
-    r_j = np.zeros(ends.shape)
-    if at_junction.any():
-        rc = np.round(np.array([graph.node_rc[node] for node in ends[at_junction].tolist()],
-                               float).reshape(-1, 2)).astype(int)
-        r_j[at_junction] = distance_px[np.clip(rc[:, 0], 0, H - 1), np.clip(rc[:, 1], 0, W - 1)]
-    r_j = r_j.tolist()
+    if centrelines is None:
+        centrelines = stack_centrelines(graph, distance_px, thickness_px=thickness_px,
+                                        smooth_px=sm, method=method, edge=edge)
+    elif (centrelines.n_stacks, centrelines.smooth_px, centrelines.method,
+          centrelines.thickness_px, centrelines.edge is None) != (
+            graph.n_stacks, sm, method, float(thickness_px), edge is None):
+        raise ParameterError("centrelines were computed for another graph or other settings "
+                             "than the profiles asked for")
+    cl = between_walls(centrelines)
+    at_node, radius, contact, at_junction, r_j = (cl.at_node, cl.radius_px, cl.contact,
+                                                  cl.at_junction, cl.r_j)
+    raw, closed, skeleton_px, smoothed, dt32 = (cl.raw, cl.closed, cl.skeleton_px,
+                                                cl.smoothed, cl.dt32)
 
     def fork_zone(sid, end, nb):
         # module docstring, step 3
@@ -1605,19 +1742,6 @@ def stack_profiles(graph, n_br, distance_px, *, thickness_px: float, px_per_mm: 
             return 0.0
         return _fork_zone_px(nb * float(thickness_px), r_j[sid][end], contact[(sid, end)], sm)
 
-    prepared = [_prepared_path(graph.paths[sid], graph.node_kind[graph.ends[sid][0]] == "loop")
-                for sid in range(graph.n_stacks)]
-    raw = [p for p, _ in prepared]
-    closed = [c for _, c in prepared]
-    # the skeleton's length (polyline.length; a path that is not a loop is prepared as it is)
-    r, c, offs = _flat_paths(raw)
-    skeleton_px = _path_lengths(r, c, offs[:-1], offs[1:]).tolist()
-    smoothed = polyline.smooth_paths(raw, window_px=sm, closed=closed)
-    dt32 = np.ascontiguousarray(distance_px, dtype=np.float32)
-    if method != "paper":
-        # the paper's centreline is the skeleton's; the others read it between the walls
-        mid = _midlines(raw, smoothed, closed, radius, dt32, edge)
-        smoothed = polyline.smooth_paths(mid, window_px=sm, closed=closed)
     nbs = [max(1, int(x)) for x in n_br]
     all_trims, forks, lumps, walled = [], [], [], {}
     for sid in range(graph.n_stacks):

@@ -1254,7 +1254,7 @@ class DarkMarks:
     on_ink: float = 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _greyer_than_ink(dark, dom, where, paper_dark, d_dark, paper_dom, d_dom,
                      margin):  # pragma: no cover - numba
     """Where ``where``: the pixels whose share of the ink's darkness (red and green, from the

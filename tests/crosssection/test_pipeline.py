@@ -331,6 +331,39 @@ def test_the_walls_follow_the_thresholds_feature():
     assert 0.0 < np.median(moved) < 0.2 and moved.max() < 1.0
 
 
+def test_centrelines_drawn_beforehand_on_a_thread_give_the_same_profiles():
+    """The pipeline draws the stacks' centrelines (between the walls) on a thread while the
+    branch counts are solved: the profiles are those drawn in one call, to the bit, and
+    centrelines of other settings are refused."""
+    from crosssection.core.parallel import in_background
+    from crosssection.pipeline import preprocess
+    from crosssection.stages.curvature import (between_walls, stack_centrelines,
+                                               stack_profiles)
+
+    scene = make_scene(seed=5, n_stacks=25, max_layers=5, noise_sigma=4.0)
+    p = scene.params
+    pre = preprocess(scene.rgb, px_per_mm=p["px_per_mm"], thickness_mm=p["thickness_mm"])
+    n_br = np.random.default_rng(5).integers(1, 5, pre.graph.n_stacks)
+    edge = (pre.edge_feature, pre.threshold.dominance_min)
+    args = dict(thickness_px=p["thickness_mm"] * p["px_per_mm"], edge=edge)
+    for method in ("walls", "missing", "paper"):
+        whole = stack_profiles(pre.graph, n_br, pre.distance_px, px_per_mm=p["px_per_mm"],
+                               method=method, **args)
+        lines = stack_centrelines(pre.graph, pre.distance_px, method=method, walls=False,
+                                  **args)
+        assert lines.placed == (method == "paper")
+        placed = in_background(between_walls, lines)()
+        assert placed.placed
+        parts = stack_profiles(pre.graph, n_br, pre.distance_px, px_per_mm=p["px_per_mm"],
+                               method=method, centrelines=placed, **args)
+        for a, b in zip(whole, parts, strict=True):
+            np.testing.assert_array_equal(a.kappa_per_mm, b.kappa_per_mm)
+            np.testing.assert_array_equal(a.rc_px, b.rc_px)
+    with pytest.raises(ParameterError, match="other settings"):
+        stack_profiles(pre.graph, n_br, pre.distance_px, px_per_mm=p["px_per_mm"],
+                       method="missing", centrelines=placed, **args)
+
+
 def test_uniform_images_raise_analysis_error():
     with pytest.raises(AnalysisError, match="empty mask"):
         analyze(np.full((64, 64, 3), 250, np.uint8))

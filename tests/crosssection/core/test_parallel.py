@@ -14,7 +14,7 @@ import pytest
 from crosssection.core.errors import ParameterError
 
 from crosssection import batch as B
-from crosssection.core.parallel import get_executor, spawn_seeds
+from crosssection.core.parallel import get_executor, in_background, spawn_seeds
 
 from crosssection.testing import index_numbers as numbers
 from crosssection.testing import make_scan_tree as make_tree
@@ -43,6 +43,26 @@ def test_a_worker_prints_no_library_warning(capfd):
     with get_executor(2) as ex:
         assert list(ex.map(_warns, range(2))) == [1, 1]
     assert "Glyph" not in capfd.readouterr().err
+
+
+def test_in_background_returns_the_result_or_raises_the_error():
+    import threading
+
+    names = []
+
+    def work(x, *, y):
+        names.append(threading.current_thread().name)
+        return x + y
+
+    assert in_background(work, 2, y=3)() == 5
+    assert names and names[0] != threading.main_thread().name
+
+    def fails():
+        raise ValueError("bad input")
+
+    wait = in_background(fails)
+    with pytest.raises(ValueError, match="bad input"):
+        wait()
 
 
 def test_spawn_seeds_are_stable_and_independent():
