@@ -115,6 +115,10 @@ class Preprocessed:
     #: The pixels an alpha channel made transparent or partly, composited over white (None:
     #: every pixel opaque).
     see_through: np.ndarray | None = None
+    #: Called without argument: waits for the voids of ``mask_clean``
+    #: (:func:`~crosssection.stages.voids.scan_voids`, scanned on a thread; None: scan
+    #: them when needed).
+    void_scan: object = None
 
 
 def _read(image):
@@ -418,6 +422,8 @@ def _preprocess_read(rgb, path, header: Header, orientation, p: AnalysisParams, 
                           sliver_width_px=p.sliver_width_h * p.thickness_px)
     _check_clean(mask, speck_px, path)
     marks = marks()
+    # the voids need the mask alone: scanned beside the distances and the thinning
+    voids = in_background(void_stage.scan_voids, mask, hole=hole, s_min_px=s_min_px)
     with timer("distance"):
         dist = distance_map(mask)
     with timer("skeleton"):
@@ -436,8 +442,11 @@ def _preprocess_read(rgb, path, header: Header, orientation, p: AnalysisParams, 
     short = short if len(short) < sg.n_stacks else []
     with timer("graph"):
         if short:
+            seeds = [tuple(sg.paths[sid][0]) for sid in short]
+            mask = mask.copy()  # the voids are scanned on the mask as it was
             _drop_pieces(sg, short, skel, mask, dist)
             sg = without_stacks(sg, short)
+            voids = functools.partial(_voids_without, voids, mask, seeds)
         else:
             sg = with_multigraph(sg)
     if sg.n_stacks == 0:
@@ -457,7 +466,7 @@ def _preprocess_read(rgb, path, header: Header, orientation, p: AnalysisParams, 
                         edge_feature=dominance if thr.dominance_min is not None else None,
                         ink_missed_fraction=float(missed), see_through=see_through,
                         file_dpi_xy=header.dpi_xy, dark_marks_fraction=marks.apart,
-                        marks_on_ink_fraction=marks.on_ink)
+                        marks_on_ink_fraction=marks.on_ink, void_scan=voids)
 
 
 #: the quality checks decided before the network is read: those ``steps`` reports
@@ -511,6 +520,11 @@ def _isolated_short_pieces(sg, l_min_px) -> list[int]:
     kind = sg.node_kind
     return [sid for sid, (u, v) in enumerate(sg.ends)
             if kind[u] == "end" and kind[v] == "end" and sg.length_px[sid] < l_min_px]
+
+
+def _voids_without(scanned, mask, seeds):
+    """The voids of ``mask``: those ``scanned`` (waited for) without the pieces dropped."""
+    return void_stage.without_pieces(scanned(), mask, seeds)
 
 
 def _drop_pieces(sg, stacks, skel, mask, dist) -> None:
@@ -775,8 +789,9 @@ def _analyze(image, params, overrides, *, warn: bool = True,
                                     cut=thr.dominance_min, mask=pre.mask_clean, hole=pre.hole,
                                     width_px=width_px, thickness_px=h_px)
     with timer("voids"):
-        voids = void_stage.find_voids(pre.mask_clean, hole=pre.hole, s_min_px=pre.s_min_px,
-                                      px_per_mm=p.px_per_mm,
+        scanned = (pre.void_scan() if pre.void_scan is not None else
+                   void_stage.scan_voids(pre.mask_clean, hole=pre.hole, s_min_px=pre.s_min_px))
+        voids = void_stage.void_table(scanned, px_per_mm=p.px_per_mm,
                                       junction_centers_rc=pre.junctions.centers_rc,
                                       touch_px=_touch_px(sg, width_px, h_px))
     with timer("branches"):

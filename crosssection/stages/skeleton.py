@@ -101,7 +101,7 @@ _ZS1, _ZS2, _SIMPLE, _COUNT = _build_luts()
 
 
 # ----------------------------------------------------------------------------- thinning
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _zhang_suen(f, offs, lst, n, st, flags, zs1, zs2, simple, count):  # pragma: no cover - numba
     """Zhang-Suen thinning of the flat padded uint8 image ``f`` in place.
 

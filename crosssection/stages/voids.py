@@ -37,7 +37,8 @@ from numba import njit
 
 from crosssection.core.schema import VOID_COLUMNS
 
-__all__ = ["find_voids", "contour_perimeter_px", "void_labels"]
+__all__ = ["find_voids", "scan_voids", "without_pieces", "void_table", "VoidScan",
+           "contour_perimeter_px", "void_labels"]
 
 _STEINER_D = 0.5  # px between boundary pixel centres and the region's edge
 
@@ -133,17 +134,25 @@ class _Void:
     region: np.ndarray        # uint8 crop, 1 on the void
     area: int
     first: int                # raster index of the first pixel (ordering)
+    contour: int = -1         # index of its border among the scan's contours
 
 
-def _extract_voids(mask, hole, s_min_px, wall_voids):
-    """The voids as crops, in raster order of their first pixel.
+@dataclass(frozen=True)
+class _Borders:
+    """The borders of the padded ink (``cv2.findContours(RETR_TREE)``) the voids are read
+    from, kept so that the voids can be read again where the mask loses isolated pieces."""
 
-    The voids are the holes of the 8-connected ink (4-connected background components not
-    connected to the image border): hole borders of ``cv2.findContours(RETR_TREE)`` on the
-    padded mask. Each hole's pixels are recovered on its bounding box by filling its border
-    and emptying the borders of the ink islands inside it; the count is checked against
-    Pick's theorem on the borders and, if they disagree, the crop is labelled instead.
-    """
+    contours: tuple
+    hier: np.ndarray          # (n, 4): next, previous, first child, parent
+    depth: np.ndarray         # even: an ink component's outer border; odd: a hole's border
+    circle: tuple | None      # (row, col, R) in padded coordinates, or None
+    s_min_px: float
+    width: int                # of the unpadded mask
+
+
+def _padded_ink(mask, hole, wall_voids):
+    """The ink padded by one pixel of background (uint8) and the hole's circle in padded
+    coordinates, or None when the wall closes the background (``wall_voids``) or no hole."""
     mask = np.asarray(mask, dtype=bool)
     H, W = mask.shape
     ink = np.zeros((H + 2, W + 2), np.uint8)
@@ -155,78 +164,112 @@ def _extract_voids(mask, hole, s_min_px, wall_voids):
             ink[1:-1, 1:-1] |= 1 - _disk_u8((H, W), cr, cc, R)
         else:
             circle = (cr + 1.0, cc + 1.0, R)  # padded coordinates
+    return ink, circle
+
+
+def _borders(mask, hole, s_min_px, wall_voids):
+    """The padded ink and its :class:`_Borders` (None when the ink has no border)."""
+    ink, circle = _padded_ink(mask, hole, wall_voids)
+    W = ink.shape[1] - 2
     contours, hier = cv2.findContours(ink, cv2.RETR_TREE, cv2.CHAIN_APPROX_NONE)
     if hier is None:
-        return []
+        return ink, None
     hier = hier[0]
     depth = np.full(len(contours), -1, np.int64)
-
-    def get_depth(i):
+    for i in range(len(contours)):
         chain = []
-        while depth[i] < 0:
-            p = hier[i, 3]
+        j = i
+        while depth[j] < 0:
+            p = hier[j, 3]
             if p < 0:
-                depth[i] = 0
+                depth[j] = 0
                 break
-            chain.append(i)
-            i = p
-        d = depth[i]
-        for j in reversed(chain):
+            chain.append(j)
+            j = p
+        d = depth[j]
+        for k in reversed(chain):
             d += 1
-            depth[j] = d
-        return depth[chain[0]] if chain else depth[i]
+            depth[k] = d
+    return ink, _Borders(tuple(contours), hier, depth, circle, float(s_min_px), W)
 
-    voids = []
-    for i, c in enumerate(contours):
-        if get_depth(i) % 2 == 0:
-            continue                              # outer border of an ink component
-        x, y, w, h = cv2.boundingRect(c)
-        if (w - 2) * (h - 2) < s_min_px:
-            continue                              # cannot hold s_min pixels
-        islands = []
-        ch = hier[i, 2]
-        while ch >= 0:
-            islands.append(ch)
-            ch = hier[ch, 0]
-        expect = _lattice_count(c, True) - sum(_lattice_count(contours[k], False)
-                                               for k in islands)
-        if expect < s_min_px - 0.5:
-            continue
-        off = np.array([[x, y]], np.int32)
-        reg = np.zeros((h, w), np.uint8)
-        cv2.drawContours(reg, [c.reshape(-1, 2) - off], -1, 1, thickness=-1)
-        for k in islands:
-            cv2.drawContours(reg, [contours[k].reshape(-1, 2) - off], -1, 0, thickness=-1)
-        reg &= 1 - ink[y:y + h, x:x + w]
+
+def _children(hier, i) -> list:
+    out = []
+    ch = hier[i, 2]
+    while ch >= 0:
+        out.append(ch)
+        ch = hier[ch, 0]
+    return out
+
+
+def _void_of(i, b: _Borders, ink, islands=None):
+    """The void whose border is hole contour ``i``, or None (too small, or reaching outside
+    the hole). ``islands``: the outer borders of the ink inside it (default: its children)."""
+    contours, s_min_px = b.contours, b.s_min_px
+    c = contours[i]
+    x, y, w, h = cv2.boundingRect(c)
+    if (w - 2) * (h - 2) < s_min_px:
+        return None                               # cannot hold s_min pixels
+    if islands is None:
+        islands = _children(b.hier, i)
+    expect = _lattice_count(c, True) - sum(_lattice_count(contours[k], False)
+                                           for k in islands)
+    if expect < s_min_px - 0.5:
+        return None
+    off = np.array([[x, y]], np.int32)
+    reg = np.zeros((h, w), np.uint8)
+    cv2.drawContours(reg, [c.reshape(-1, 2) - off], -1, 1, thickness=-1)
+    for k in islands:
+        cv2.drawContours(reg, [contours[k].reshape(-1, 2) - off], -1, 0, thickness=-1)
+    reg &= 1 - ink[y:y + h, x:x + w]
+    area = cv2.countNonZero(reg)
+    if area != int(round(expect)):
+        # fill rule disagreed with the lattice count (degenerate border): label the crop
+        bg = np.ascontiguousarray(1 - ink[y:y + h, x:x + w])
+        n, lab = cv2.connectedComponents(bg, connectivity=4, ltype=cv2.CV_32S)
+        votes = np.bincount(lab[reg > 0], minlength=n)
+        votes[0] = 0
+        reg = (lab == int(np.argmax(votes))).view(np.uint8)
         area = cv2.countNonZero(reg)
-        if area != int(round(expect)):
-            # fill rule disagreed with the lattice count (degenerate border): label the crop
-            bg = np.ascontiguousarray(1 - ink[y:y + h, x:x + w])
-            n, lab = cv2.connectedComponents(bg, connectivity=4, ltype=cv2.CV_32S)
-            votes = np.bincount(lab[reg > 0], minlength=n)
-            votes[0] = 0
-            reg = (lab == int(np.argmax(votes))).view(np.uint8)
-            area = cv2.countNonZero(reg)
-        if area < s_min_px or area == 0:
-            continue
-        if circle is not None:
-            cr, cc, R = circle
-            pts = c.reshape(-1, 2)
-            # each rounded term grows with the distance along its axis, so no border pixel
-            # lies outside when the box's farthest corner does not: the border is tested only
-            # for the voids near the wall
-            far_r = max(abs(y - cr), abs(y + h - 1 - cr))
-            far_c = max(abs(x - cc), abs(x + w - 1 - cc))
-            if far_r * far_r + far_c * far_c > R * R and \
-                    np.any((pts[:, 1] - cr) ** 2 + (pts[:, 0] - cc) ** 2 > R * R):
-                rr, cc_ = np.nonzero(reg)
-                if np.any((rr + y - cr) ** 2 + (cc_ + x - cc) ** 2 > R * R):
-                    continue                      # reaches outside the hole
-        k0 = int(np.argmax(reg.reshape(-1)))
-        r0, c0 = divmod(k0, w)
-        voids.append(_Void((y - 1, x - 1), reg, area, (y - 1 + r0) * W + (x - 1 + c0)))
+    if area < s_min_px or area == 0:
+        return None
+    if b.circle is not None:
+        cr, cc, R = b.circle
+        pts = c.reshape(-1, 2)
+        # each rounded term grows with the distance along its axis, so no border pixel
+        # lies outside when the box's farthest corner does not: the border is tested only
+        # for the voids near the wall
+        far_r = max(abs(y - cr), abs(y + h - 1 - cr))
+        far_c = max(abs(x - cc), abs(x + w - 1 - cc))
+        if far_r * far_r + far_c * far_c > R * R and \
+                np.any((pts[:, 1] - cr) ** 2 + (pts[:, 0] - cc) ** 2 > R * R):
+            rr, cc_ = np.nonzero(reg)
+            if np.any((rr + y - cr) ** 2 + (cc_ + x - cc) ** 2 > R * R):
+                return None                       # reaches outside the hole
+    k0 = int(np.argmax(reg.reshape(-1)))
+    r0, c0 = divmod(k0, w)
+    return _Void((y - 1, x - 1), reg, area, (y - 1 + r0) * b.width + (x - 1 + c0), i)
+
+
+def _extract_voids(mask, hole, s_min_px, wall_voids, *, keep_borders=False):
+    """The voids as crops, in raster order of their first pixel.
+
+    The voids are the holes of the 8-connected ink (4-connected background components not
+    connected to the image border): hole borders of ``cv2.findContours(RETR_TREE)`` on the
+    padded mask. Each hole's pixels are recovered on its bounding box by filling its border
+    and emptying the borders of the ink islands inside it; the count is checked against
+    Pick's theorem on the borders and, if they disagree, the crop is labelled instead.
+    With ``keep_borders``, returns ``(voids, borders)`` (:class:`_Borders`, None without ink).
+    """
+    ink, b = _borders(mask, hole, s_min_px, wall_voids)
+    voids = []
+    if b is not None:
+        for i in np.flatnonzero(b.depth % 2 == 1).tolist():  # hole borders
+            v = _void_of(i, b, ink)
+            if v is not None:
+                voids.append(v)
     voids.sort(key=lambda v: v.first)
-    return voids
+    return (voids, b) if keep_borders else voids
 
 
 def void_labels(mask, *, hole=None, s_min_px=0.0, wall_voids=False) -> np.ndarray:
@@ -288,28 +331,167 @@ def find_voids(mask, *, hole, s_min_px, px_per_mm, junction_centers_rc, touch_px
         shape_ratio, n_edges, centroid_x_px (column), centroid_y_px (row). Voids are
         numbered in raster order of their first pixel.
     """
-    voids = _extract_voids(mask, hole, s_min_px, wall_voids)
+    return void_table(scan_voids(mask, hole=hole, s_min_px=s_min_px, wall_voids=wall_voids,
+                                 smooth=smooth),
+                      px_per_mm=px_per_mm, junction_centers_rc=junction_centers_rc,
+                      touch_px=touch_px)
+
+
+@dataclass(frozen=True)
+class VoidScan:
+    """The voids of a mask, measured, before they are tied to the junctions
+    (:func:`scan_voids`; :func:`void_table` makes their table).
+
+    Attributes
+    ----------
+    area_px, perimeter_px : (N,) float arrays
+        Areas and perimeters (:func:`contour_perimeter_px`), px.
+    centroid_rc : (N, 2) float array
+        Centroids (row, col), px.
+    borders_rc : tuple of (P, 2) int arrays
+        Every void's border pixels (row, col).
+    """
+
+    area_px: np.ndarray
+    perimeter_px: np.ndarray
+    centroid_rc: np.ndarray
+    borders_rc: tuple
+    _voids: tuple = ()
+    _borders: object = None
+    _settings: tuple = ()
+
+
+def _measured(v: _Void, smooth):
+    """Area, perimeter, centroid (row, col) and border pixels (row, col) of a void."""
+    # the crop has a zero margin: the void lies strictly inside its ink border
+    cs, hier = cv2.findContours(v.region, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE)
+    perim = _contours_length(cs, hier, smooth)
+    rows = cv2.reduce(v.region, 1, cv2.REDUCE_SUM, dtype=cv2.CV_32S).ravel()
+    cols = cv2.reduce(v.region, 0, cv2.REDUCE_SUM, dtype=cv2.CV_32S).ravel()
+    a = float(rows.sum())
+    cent = (rows @ np.arange(len(rows)) / a + v.origin_rc[0],
+            cols @ np.arange(len(cols)) / a + v.origin_rc[1])
+    pts = np.concatenate([c.reshape(-1, 2) for c in cs])[:, ::-1]
+    return a, perim, cent, pts + np.asarray(v.origin_rc)
+
+
+def _scan(voids, measures, borders, settings) -> VoidScan:
     n = len(voids)
+    cent = np.empty((n, 2))
+    for j, m in enumerate(measures):
+        cent[j] = m[2]
+    return VoidScan(np.array([m[0] for m in measures], float).reshape(n),
+                    np.array([m[1] for m in measures], float).reshape(n), cent,
+                    tuple(m[3] for m in measures), tuple(zip(voids, measures)), borders,
+                    settings)
+
+
+def scan_voids(mask, *, hole, s_min_px, wall_voids=False, smooth=5) -> VoidScan:
+    """The voids of a mask and their areas, perimeters, centroids and borders: what
+    :func:`find_voids` measures from the mask alone.
+
+    It needs no skeleton: the pipeline scans the voids on a thread while the distances and
+    the skeleton are drawn (OpenCV's calls and those kernels release the interpreter), then
+    removes the isolated pieces the skeleton drops (:func:`without_pieces`).
+
+    Parameters
+    ----------
+    mask, hole, s_min_px, wall_voids, smooth
+        As :func:`find_voids`.
+
+    Returns
+    -------
+    VoidScan
+    """
+    voids, borders = _extract_voids(mask, hole, s_min_px, wall_voids, keep_borders=True)
+    return _scan(voids, [_measured(v, smooth) for v in voids], borders,
+                 (hole, float(s_min_px), bool(wall_voids), int(smooth)))
+
+
+def without_pieces(scan: VoidScan, mask, seeds_rc) -> VoidScan:
+    """:func:`scan_voids` of ``mask``: the scanned mask with the isolated pieces of ink that
+    hold the pixels ``seeds_rc`` removed, read again only where they lay.
+
+    A piece inside a void's border, removed, joins that void (with the piece's own holes);
+    the void is read again from its border and the ink islands left inside it. A piece whose
+    holes hold ink, or that lies in another removed piece's hole, has the whole mask scanned
+    again.
+
+    Parameters
+    ----------
+    scan : VoidScan
+        :func:`scan_voids` of the mask before the pieces were removed.
+    mask : (H, W) bool array
+        The mask after.
+    seeds_rc : sequence of (row, col)
+        One ink pixel of every removed piece (each piece an 8-connected component).
+
+    Returns
+    -------
+    VoidScan
+        The same numbers, to the bit, as :func:`scan_voids` of ``mask``.
+    """
+    b = scan._borders
+    hole, s_min_px, wall_voids, smooth = scan._settings
+    if not len(seeds_rc):
+        return scan
+    again = (lambda: scan_voids(mask, hole=hole, s_min_px=s_min_px, wall_voids=wall_voids,
+                                smooth=smooth))
+    if b is None:  # a scan already read again
+        return again()
+    boxes = np.array([cv2.boundingRect(c) for c in b.contours], np.int64).reshape(-1, 4)
+    outer = b.depth % 2 == 0
+    pieces, joined, read = set(), set(), set()
+    for r, c in seeds_rc:
+        x, y = int(c) + 1, int(r) + 1  # padded coordinates
+        near = np.flatnonzero(outer & (boxes[:, 0] <= x) & (x < boxes[:, 0] + boxes[:, 2])
+                              & (boxes[:, 1] <= y) & (y < boxes[:, 1] + boxes[:, 3]))
+        # the piece's outer border: the deepest one around its pixel
+        held = [i for i in near.tolist()
+                if cv2.pointPolygonTest(b.contours[i], (float(x), float(y)), False) >= 0]
+        if not held:
+            return again()
+        piece = max(held, key=lambda i: b.depth[i])
+        pieces.add(piece)
+        for h in _children(b.hier, piece):  # its holes join what surrounds it
+            if b.hier[h, 2] >= 0:
+                return again()  # ink inside the piece's hole would join the void too
+            joined.add(h)
+        if b.hier[piece, 3] >= 0:
+            read.add(int(b.hier[piece, 3]))
+    if read & joined:
+        return again()  # a piece in another removed piece's hole
+    ink, _ = _padded_ink(mask, hole, wall_voids)
+    kept = [(v, m) for v, m in scan._voids if v.contour not in joined | read]
+    for k in sorted(read):
+        v = _void_of(k, b, ink, [i for i in _children(b.hier, k) if i not in pieces])
+        if v is not None:
+            kept.append((v, _measured(v, smooth)))
+    kept.sort(key=lambda vm: vm[0].first)
+    return _scan([v for v, _ in kept], [m for _, m in kept], None, scan._settings)
+
+
+def void_table(scan: VoidScan, *, px_per_mm, junction_centers_rc, touch_px) -> pd.DataFrame:
+    """The table of :func:`find_voids` from the voids scanned and the junctions.
+
+    Parameters
+    ----------
+    scan : VoidScan
+        :func:`scan_voids` of the mask (or :func:`without_pieces`).
+    px_per_mm, junction_centers_rc, touch_px
+        As :func:`find_voids`.
+
+    Returns
+    -------
+    DataFrame
+        As :func:`find_voids`.
+    """
+    n = len(scan.area_px)
     if n == 0:
         return pd.DataFrame({c: pd.Series(dtype=float) for c in VOID_COLUMNS}).astype(
             {"void_id": np.int64, "n_edges": np.int64})
-    perim = np.empty(n)
-    area = np.empty(n)
-    cent = np.empty((n, 2))
-    borders = []
-    for j, v in enumerate(voids):
-        # the crop has a zero margin: the void lies strictly inside its ink border
-        cs, hier = cv2.findContours(v.region, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE)
-        perim[j] = _contours_length(cs, hier, smooth)
-        rows = cv2.reduce(v.region, 1, cv2.REDUCE_SUM, dtype=cv2.CV_32S).ravel()
-        cols = cv2.reduce(v.region, 0, cv2.REDUCE_SUM, dtype=cv2.CV_32S).ravel()
-        a = float(rows.sum())
-        area[j] = a
-        cent[j] = (rows @ np.arange(len(rows)) / a + v.origin_rc[0],
-                   cols @ np.arange(len(cols)) / a + v.origin_rc[1])
-        pts = np.concatenate([c.reshape(-1, 2) for c in cs])[:, ::-1]
-        borders.append(pts + np.asarray(v.origin_rc))
-    n_edges = _count_junctions(borders, junction_centers_rc, touch_px)
+    area, perim, cent = scan.area_px, scan.perimeter_px, scan.centroid_rc
+    n_edges = _count_junctions(list(scan.borders_rc), junction_centers_rc, touch_px)
     ppm = float(px_per_mm)
     df = pd.DataFrame({
         "void_id": np.arange(n, dtype=np.int64),

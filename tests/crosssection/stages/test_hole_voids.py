@@ -275,3 +275,92 @@ def test_junction_count_equals_a_kd_tree_ball_query():
             want[v[1]] += 1
         np.testing.assert_array_equal(_count_junctions(borders, jc, touch), want)
     assert len(_count_junctions(borders, np.zeros((0, 2)), 5.0)) == len(borders)
+
+
+def _pieces_scene(seed, size=260, ink_in_holes=True):
+    """Ink rings (voids inside), islands in them (some with holes, and with
+    ``ink_in_holes`` some holding ink in their holes), rings crossing rings, and pieces on
+    the open paper."""
+    import cv2
+
+    rng = np.random.default_rng(seed)
+    img = np.zeros((size, size), np.uint8)
+    for _ in range(rng.integers(3, 7)):
+        c = tuple(int(v) for v in rng.integers(30, size - 30, 2))
+        r = int(rng.integers(14, 40))
+        cv2.circle(img, c, r, 1, int(rng.integers(1, 4)))
+        for _ in range(rng.integers(0, 4)):  # pieces inside the ring
+            dc = rng.normal(0, 0.35 * r, 2).astype(int)
+            p = (c[0] + int(dc[0]), c[1] + int(dc[1]))
+            kind = rng.integers(0, 3 if ink_in_holes else 2)
+            if kind == 0:
+                cv2.circle(img, p, int(rng.integers(1, 4)), 1, -1)
+            elif kind == 1:  # a piece with a hole
+                cv2.circle(img, p, int(rng.integers(4, 8)), 1, 1)
+            else:  # a piece whose hole holds ink
+                cv2.circle(img, p, 7, 1, 1)
+                img[p[1], p[0]] = 1
+    for _ in range(rng.integers(0, 6)):  # pieces on the open paper
+        img[tuple(rng.integers(0, size, 2))] = 1
+    return img.astype(bool)
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_voids_read_again_where_pieces_are_removed_equal_a_new_scan(seed):
+    """The pipeline scans the voids before the skeleton drops isolated pieces of ink from the
+    mask, then reads again only the voids that held them (:func:`without_pieces`): every
+    number is the new mask's scan, to the bit, whichever pieces go (in a void, on the open
+    paper, with holes, with ink in their holes, in another piece's hole), with or without
+    the hole's circle."""
+    import cv2
+
+    from crosssection.stages.voids import scan_voids, without_pieces
+
+    mask = _pieces_scene(seed, ink_in_holes=seed % 4 == 0)
+    rng = np.random.default_rng(1000 + seed)
+    n, lab = cv2.connectedComponents(mask.view(np.uint8), connectivity=8)
+    gone = [k for k in range(1, n) if rng.random() < 0.5]
+    seeds = []
+    after = mask.copy()
+    for k in gone:
+        rr, cc = np.nonzero(lab == k)
+        j = int(rng.integers(len(rr)))
+        seeds.append((int(rr[j]), int(cc[j])))
+        after[lab == k] = False
+    hole = Hole(np.array([130.0, 128.0]), 118.0, True) if seed % 2 else None
+    for s_min in (0.0, 30.0):
+        for wall in ((False, True) if hole is not None else (False,)):
+            before = scan_voids(mask, hole=hole, s_min_px=s_min, wall_voids=wall)
+            got = without_pieces(before, after, seeds)
+            want = scan_voids(after, hole=hole, s_min_px=s_min, wall_voids=wall)
+            for name in ("area_px", "perimeter_px", "centroid_rc"):
+                np.testing.assert_array_equal(getattr(got, name), getattr(want, name))
+            assert len(got.borders_rc) == len(want.borders_rc)
+            for a, b in zip(got.borders_rc, want.borders_rc):
+                np.testing.assert_array_equal(a, b)
+
+
+def test_voids_are_read_again_only_where_a_piece_lay(monkeypatch):
+    """Pieces in voids and on the open paper, none with ink in its holes: the voids are
+    read again from their borders, the mask is not scanned again."""
+    import cv2
+
+    from crosssection.stages import voids as V
+
+    changed = 0
+    for seed in range(12):
+        mask = _pieces_scene(seed, ink_in_holes=False)
+        n, lab = cv2.connectedComponents(mask.view(np.uint8), connectivity=8)
+        sizes = np.bincount(lab.ravel())
+        gone = [k for k in range(1, n) if sizes[k] < 80]  # the pieces, not the rings
+        after = mask & ~np.isin(lab, gone)
+        seeds = [tuple(int(v) for v in np.argwhere(lab == k)[0]) for k in gone]
+        before = V.scan_voids(mask, hole=None, s_min_px=0.0)
+        want = V.scan_voids(after, hole=None, s_min_px=0.0)
+        with monkeypatch.context() as m:
+            m.setattr(V, "scan_voids", lambda *a, **k: pytest.fail("scanned again"))
+            got = V.without_pieces(before, after, seeds)
+        np.testing.assert_array_equal(got.area_px, want.area_px)
+        np.testing.assert_array_equal(got.perimeter_px, want.perimeter_px)
+        changed += not np.array_equal(got.area_px, before.area_px)
+    assert changed >= 6
