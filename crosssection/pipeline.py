@@ -35,7 +35,7 @@ from crosssection import quality
 from crosssection import tables as tb
 from crosssection._version import __version__
 from crosssection.core.errors import AnalysisError, FoldstatError, ImageError, ParameterError
-from crosssection.core.parallel import in_background
+from crosssection.core.parallel import in_background, wait_all
 from crosssection.core.provenance import input_record, library_versions, sha256_in_background
 from crosssection.linsys import solve_branch_counts
 from crosssection.params import LINEAR_CALIBRATION, AnalysisParams, scale_left_out
@@ -379,11 +379,14 @@ def preprocess(image, params: AnalysisParams | None = None, *, timer=None,
     path_hint = str(image) if isinstance(image, (str, Path)) else None
     p = _resolve_params(params, overrides, path_hint)
     try:
-        return _preprocess(image, p, timer or StageTimer())
+        pre = _preprocess(image, p, timer or StageTimer())
     except FoldstatError as exc:
         if exc.path is None and path_hint is not None:
             raise type(exc)(exc.cause, path_hint) from None
         raise
+    # nothing of it runs on after it returns: the voids scanned on a thread are waited for
+    scanned = pre.void_scan()
+    return dataclasses.replace(pre, void_scan=lambda: scanned)
 
 
 def _preprocess(image, p: AnalysisParams, timer) -> Preprocessed:
@@ -413,60 +416,72 @@ def _preprocess_read(rgb, path, header: Header, orientation, p: AnalysisParams, 
     # pixels along every band counts (s_min_mm2 = 0 read 0.03-0.26 % on the sample scans)
     thr, hole, outside, dominance, missed, marks = _threshold_in_frame(
         rgb, p, path, timer, min_piece_px=max(speck_px, 10.0 * p.thickness_px ** 2))
-    confidence = None if p.hole_given else hole.confidence
-    with timer("clean"):
-        # a blob too small to hold a branch of length l_min goes whatever its area
-        mask = clean_mask(thr.mask, s_min_px=s_min_px, speck_px=speck_px,
-                          min_extent_px=l_min_px,
-                          sliver_length_px=l_min_px,
-                          sliver_width_px=p.sliver_width_h * p.thickness_px)
-    _check_clean(mask, speck_px, path)
-    marks = marks()
-    # the voids need the mask alone: scanned beside the distances and the thinning
-    voids = in_background(void_stage.scan_voids, mask, hole=hole, s_min_px=s_min_px)
-    with timer("distance"):
-        dist = distance_map(mask)
-    with timer("skeleton"):
-        skel = skeletonize_mask(mask, l_min_px=l_min_px, method=p.skeleton_method,
-                                distance_px=dist)
-    if not skel.any():
-        raise AnalysisError("empty skeleton", path)
-    with timer("graph"):
-        # (the MultiGraph of the graph kept only: isolated pieces dropped make another)
-        junc, sg, merged = stack_graph(skel, dist, merge_px=p.merge_px,
-                                       merge_thick_crossings=p.merge_thick_crossings,
-                                       thickness_px=p.thickness_px, with_graph=False)
-    # unless they are all the ink (then the scan is refused as it stands, empty of stacks
-    # after the cleaning or not)
-    short = _isolated_short_pieces(sg, l_min_px)
-    short = short if len(short) < sg.n_stacks else []
-    with timer("graph"):
+    marked = marks
+    running = []  # the steps on a thread, waited for if this fails
+    try:
+        confidence = None if p.hole_given else hole.confidence
+        with timer("clean"):
+            # a blob too small to hold a branch of length l_min goes whatever its area
+            mask = clean_mask(thr.mask, s_min_px=s_min_px, speck_px=speck_px,
+                              min_extent_px=l_min_px,
+                              sliver_length_px=l_min_px,
+                              sliver_width_px=p.sliver_width_h * p.thickness_px)
+        _check_clean(mask, speck_px, path)
+        marks = marks()
+        # the voids need the mask alone: scanned beside the distances and the thinning
+        voids = in_background(void_stage.scan_voids, mask, hole=hole, s_min_px=s_min_px)
+        running.append(voids)
+        with timer("distance"):
+            dist = distance_map(mask)
+        with timer("skeleton"):
+            skel = skeletonize_mask(mask, l_min_px=l_min_px, method=p.skeleton_method,
+                                    distance_px=dist)
+        if not skel.any():
+            raise AnalysisError("empty skeleton", path)
+        with timer("graph"):
+            # (the MultiGraph of the graph kept only: isolated pieces dropped make another)
+            junc, sg, merged = stack_graph(skel, dist, merge_px=p.merge_px,
+                                           merge_thick_crossings=p.merge_thick_crossings,
+                                           thickness_px=p.thickness_px, with_graph=False)
+        # unless they are all the ink (then the scan is refused as it stands, empty of stacks
+        # after the cleaning or not)
+        short = _isolated_short_pieces(sg, l_min_px)
+        short = short if len(short) < sg.n_stacks else []
+        with timer("graph"):
+            if short:
+                seeds = [tuple(sg.paths[sid][0]) for sid in short]
+                mask = mask.copy()  # the voids are scanned on the mask as it was
+                _drop_pieces(sg, short, skel, mask, dist)
+                sg = without_stacks(sg, short)
+                voids = functools.partial(_voids_without, voids, mask, seeds)
+            else:
+                sg = with_multigraph(sg)
+        if sg.n_stacks == 0:
+            raise AnalysisError("the skeleton has no stack (only isolated points)", path)
+        notes = [] if len(junc) else ["no junction found: every stack is a closed loop or a band "
+                                      "between two ends (on the wall or free)"]
         if short:
-            seeds = [tuple(sg.paths[sid][0]) for sid in short]
-            mask = mask.copy()  # the voids are scanned on the mask as it was
-            _drop_pieces(sg, short, skel, mask, dist)
-            sg = without_stacks(sg, short)
-            voids = functools.partial(_voids_without, voids, mask, seeds)
-        else:
-            sg = with_multigraph(sg)
-    if sg.n_stacks == 0:
-        raise AnalysisError("the skeleton has no stack (only isolated points)", path)
-    notes = [] if len(junc) else ["no junction found: every stack is a closed loop or a band "
-                                  "between two ends (on the wall or free)"]
-    if short:
-        notes.append(f"{len(short)} isolated piece(s) of ink whose skeleton is shorter than "
-                     "l_min dropped (specks: no branch of the detection limit's length)")
-    return Preprocessed(rgb=rgb, threshold=thr, hole=hole, hole_confidence=confidence,
-                        ink_outside_fraction=float(outside), mask_clean=mask, skeleton=skel,
-                        junctions=junc, graph=sg, distance_px=dist, path=path,
-                        s_min_px=s_min_px, speck_px=speck_px, l_min_px=l_min_px,
-                        warnings=notes, merged_links=merged,
-                        file_px_per_mm=header.px_per_mm, file_pages=header.pages,
-                        exif_orientation=orientation,
-                        edge_feature=dominance if thr.dominance_min is not None else None,
-                        ink_missed_fraction=float(missed), see_through=see_through,
-                        file_dpi_xy=header.dpi_xy, dark_marks_fraction=marks.apart,
-                        marks_on_ink_fraction=marks.on_ink, void_scan=voids)
+            notes.append(f"{len(short)} isolated piece(s) of ink whose skeleton is shorter than "
+                         "l_min dropped (specks: no branch of the detection limit's length)")
+        return Preprocessed(rgb=rgb, threshold=thr, hole=hole, hole_confidence=confidence,
+                            ink_outside_fraction=float(outside), mask_clean=mask, skeleton=skel,
+                            junctions=junc, graph=sg, distance_px=dist, path=path,
+                            s_min_px=s_min_px, speck_px=speck_px, l_min_px=l_min_px,
+                            warnings=notes, merged_links=merged,
+                            file_px_per_mm=header.px_per_mm, file_pages=header.pages,
+                            exif_orientation=orientation,
+                            edge_feature=dominance if thr.dominance_min is not None else None,
+                            ink_missed_fraction=float(missed), see_through=see_through,
+                            file_dpi_xy=header.dpi_xy, dark_marks_fraction=marks.apart,
+                            marks_on_ink_fraction=marks.on_ink, void_scan=voids)
+    except BaseException as exc:
+        wait_all(*running)
+        try:
+            marked()
+        except BaseException as first:
+            if first is not exc:  # the marks come first in the scan's order: so does their error
+                raise first from None
+        raise
 
 
 #: the quality checks decided before the network is read: those ``steps`` reports
@@ -717,93 +732,103 @@ def _analyze(image, params, overrides, *, warn: bool = True,
     is_file = isinstance(image, (str, Path))
     hashing = sha256_in_background(image) if is_file and image_sha256 is None else None
     pre = _preprocess(image, p, timer)
-    if is_file:  # named once the scan is read: a file that is not fails alone
-        from crosssection.setconfig import set_not_read
+    running = [pre.void_scan]  # the steps on a thread, waited for if this fails
+    try:
+        if is_file:  # named once the scan is read: a file that is not fails alone
+            from crosssection.setconfig import set_not_read
 
-        note = set_not_read(image, p)
-        if note:  # the same scan would read other numbers in a batch of its set
+            note = set_not_read(image, p)
+            if note:  # the same scan would read other numbers in a batch of its set
+                pre = dataclasses.replace(pre, warnings=[*pre.warnings, note])
+                if warn:
+                    _warnings.warn(note, quality.SetWarning, stacklevel=3)
+        hash_note = None
+        if hashing is not None:
+            image_sha256, hash_note = hashing()
+        inputs = input_record(image, p.calibration, image_sha256=image_sha256,
+                              image_hashed=is_file,
+                              table=cal if p.calibration is not None else None)
+        if hash_note:
+            note = f"SHA-256 not recorded: {hash_note}"
             pre = dataclasses.replace(pre, warnings=[*pre.warnings, note])
             if warn:
-                _warnings.warn(note, quality.SetWarning, stacklevel=3)
-    hash_note = None
-    if hashing is not None:
-        image_sha256, hash_note = hashing()
-    inputs = input_record(image, p.calibration, image_sha256=image_sha256, image_hashed=is_file,
-                          table=cal if p.calibration is not None else None)
-    if hash_note:
-        note = f"SHA-256 not recorded: {hash_note}"
-        pre = dataclasses.replace(pre, warnings=[*pre.warnings, note])
-        if warn:
-            # user -> analyze -> _analyze: the warning points at the user's call
-            _warnings.warn(f"{image}: {note}", quality.InputWarning, stacklevel=3)
-    sg, h_px, scale = pre.graph, p.thickness_px, p.scale
-    law, packs, width_mm = None, None, None
-    with timer("widths"):
-        # layers ending inside a band leave no junction: the band is cut where its width steps
-        profiles = width_profiles_px(sg.paths, pre.distance_px)
-        if p.calibration is None and p.width_law == "fitted":
-            width_mm = _stack_widths_mm(sg, pre.distance_px, profiles, p)
-            law, packs = _fitted_law(sg, width_mm, p)
-            if law.ok:
-                cal = law.calibration()
-        cuts = layer_steps(sg, pre.distance_px, lambda w: cal.layers(scale.to_mm(w)),
-                           thickness_px=h_px, profiles=profiles) if p.layer_steps else {}
-        if cuts:
-            sg, profiles, packs, width_mm = split_stacks(sg, cuts), None, None, None
-            pre = dataclasses.replace(pre, graph=sg)
-        if width_mm is None:
-            width_mm = _stack_widths_mm(sg, pre.distance_px, profiles, p)
-        layers_est = np.asarray(cal.layers(width_mm), dtype=float)
-    edge = (None if pre.edge_feature is None else
-            (pre.edge_feature, float(pre.threshold.dominance_min)))
-    with timer("curvature"):
-        lines = curvature.stack_centrelines(sg, pre.distance_px, thickness_px=h_px,
-                                            smooth_px=p.smooth_px, method=p.curvature_method,
-                                            edge=edge, walls=False)
-    # the walls' midpoints need no branch count: found beside the packs and the linear system
-    lines = in_background(curvature.between_walls, lines)
-    with timer("packs"):
-        if packs is None:
-            packs = compute_packs(sg, tangent_px=scale.to_px(p.tangent_used_mm))
-    with timer("linear_system"):
-        lin = solve_branch_counts(sg, packs, layers_est,
-                                  integer_refinement=p.integer_refinement)
-        n_br = np.asarray(lin.n_br, dtype=np.int64)
-    with timer("curvature"):
-        profiles = curvature.stack_profiles(sg, n_br, pre.distance_px, thickness_px=h_px,
-                                            px_per_mm=p.px_per_mm, smooth_px=p.smooth_px,
-                                            method=p.curvature_method, edge=edge,
-                                            centrelines=lines())
-    length_mm = scale.to_mm(np.asarray(sg.length_px, dtype=float))
-    rod_mm = float(np.sum(n_br * length_mm))
-    L = p.rod_length_mm if p.rod_length_mm is not None else rod_mm
-    with timer("regions"):
-        width_px = scale.to_px(width_mm)
-        tol = hole_stage.wall_tolerance_px(sg, width_px, h_px)
-        regions = hole_stage.classify_regions(sg, pre.junctions.centers_rc, pre.hole, tol_px=tol)
-    faint = []
-    thr = pre.threshold
-    if pre.edge_feature is not None and thr.paper_level is not None:
+                # user -> analyze -> _analyze: the warning points at the user's call
+                _warnings.warn(f"{image}: {note}", quality.InputWarning, stacklevel=3)
+        sg, h_px, scale = pre.graph, p.thickness_px, p.scale
+        law, packs, width_mm = None, None, None
+        with timer("widths"):
+            # layers ending inside a band leave no junction: the band is cut where its width steps
+            profiles = width_profiles_px(sg.paths, pre.distance_px)
+            if p.calibration is None and p.width_law == "fitted":
+                width_mm = _stack_widths_mm(sg, pre.distance_px, profiles, p)
+                law, packs = _fitted_law(sg, width_mm, p)
+                if law.ok:
+                    cal = law.calibration()
+            cuts = layer_steps(sg, pre.distance_px, lambda w: cal.layers(scale.to_mm(w)),
+                               thickness_px=h_px, profiles=profiles) if p.layer_steps else {}
+            if cuts:
+                sg, profiles, packs, width_mm = split_stacks(sg, cuts), None, None, None
+                pre = dataclasses.replace(pre, graph=sg)
+            if width_mm is None:
+                width_mm = _stack_widths_mm(sg, pre.distance_px, profiles, p)
+            layers_est = np.asarray(cal.layers(width_mm), dtype=float)
+        edge = (None if pre.edge_feature is None else
+                (pre.edge_feature, float(pre.threshold.dominance_min)))
+        with timer("curvature"):
+            lines = curvature.stack_centrelines(sg, pre.distance_px, thickness_px=h_px,
+                                                smooth_px=p.smooth_px, method=p.curvature_method,
+                                                edge=edge, walls=False)
+        # the walls' midpoints need no branch count: found beside the packs and the linear system
+        lines = in_background(curvature.between_walls, lines)
+        running.append(lines)
+        with timer("packs"):
+            if packs is None:
+                packs = compute_packs(sg, tangent_px=scale.to_px(p.tangent_used_mm))
+        with timer("linear_system"):
+            lin = solve_branch_counts(sg, packs, layers_est,
+                                      integer_refinement=p.integer_refinement)
+            n_br = np.asarray(lin.n_br, dtype=np.int64)
+        with timer("curvature"):
+            profiles = curvature.stack_profiles(sg, n_br, pre.distance_px, thickness_px=h_px,
+                                                px_per_mm=p.px_per_mm, smooth_px=p.smooth_px,
+                                                method=p.curvature_method, edge=edge,
+                                                centrelines=lines())
+        length_mm = scale.to_mm(np.asarray(sg.length_px, dtype=float))
+        rod_mm = float(np.sum(n_br * length_mm))
+        L = p.rod_length_mm if p.rod_length_mm is not None else rod_mm
         with timer("regions"):
-            faint = faint_band_ends(sg, pre.edge_feature, paper_level=thr.paper_level[0],
-                                    cut=thr.dominance_min, mask=pre.mask_clean, hole=pre.hole,
-                                    width_px=width_px, thickness_px=h_px)
-    with timer("voids"):
-        scanned = (pre.void_scan() if pre.void_scan is not None else
-                   void_stage.scan_voids(pre.mask_clean, hole=pre.hole, s_min_px=pre.s_min_px))
-        voids = void_stage.void_table(scanned, px_per_mm=p.px_per_mm,
-                                      junction_centers_rc=pre.junctions.centers_rc,
-                                      touch_px=_touch_px(sg, width_px, h_px))
-    with timer("branches"):
-        branches, stack_energy = tb.branch_table(profiles, n_br, regions, length_mm,
-                                                 rod_length_mm=L, kappa_c_per_mm=p.kappa_c_per_mm)
-    with timer("tables"):
-        stacks = tb.stack_table(sg, length_mm=length_mm, width_mm=width_mm, layers_est=layers_est,
-                                n_br=n_br, fixed_by_width=lin.fixed_by_width, regions=regions,
-                                profiles=profiles, stack_energy=stack_energy)
-        junctions = tb.junction_table(pre.junctions, sg, packs, n_br, lin)
-    return _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, voids, warn,
-                   rod_mm, L, timer, t_start, inputs, law, faint, scale_given)
+            width_px = scale.to_px(width_mm)
+            tol = hole_stage.wall_tolerance_px(sg, width_px, h_px)
+            regions = hole_stage.classify_regions(sg, pre.junctions.centers_rc, pre.hole,
+                                                  tol_px=tol)
+        faint = []
+        thr = pre.threshold
+        if pre.edge_feature is not None and thr.paper_level is not None:
+            with timer("regions"):
+                faint = faint_band_ends(sg, pre.edge_feature, paper_level=thr.paper_level[0],
+                                        cut=thr.dominance_min, mask=pre.mask_clean, hole=pre.hole,
+                                        width_px=width_px, thickness_px=h_px)
+        with timer("voids"):
+            scanned = (pre.void_scan() if pre.void_scan is not None else
+                       void_stage.scan_voids(pre.mask_clean, hole=pre.hole, s_min_px=pre.s_min_px))
+            voids = void_stage.void_table(scanned, px_per_mm=p.px_per_mm,
+                                          junction_centers_rc=pre.junctions.centers_rc,
+                                          touch_px=_touch_px(sg, width_px, h_px))
+        with timer("branches"):
+            branches, stack_energy = tb.branch_table(profiles, n_br, regions, length_mm,
+                                                     rod_length_mm=L,
+                                                     kappa_c_per_mm=p.kappa_c_per_mm)
+        with timer("tables"):
+            stacks = tb.stack_table(sg, length_mm=length_mm, width_mm=width_mm,
+                                    layers_est=layers_est, n_br=n_br,
+                                    fixed_by_width=lin.fixed_by_width, regions=regions,
+                                    profiles=profiles, stack_energy=stack_energy)
+            junctions = tb.junction_table(pre.junctions, sg, packs, n_br, lin)
+        return _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, voids, warn,
+                       rod_mm, L, timer, t_start, inputs, law, faint, scale_given)
+    except BaseException:
+        wait_all(*running)
+        raise
 
 
 def _bounds_in_16_bits(p: AnalysisParams, image) -> AnalysisParams:

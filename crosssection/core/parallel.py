@@ -6,6 +6,7 @@ Local processes by default; a Dask distributed cluster when a scheduler address 
 """
 from __future__ import annotations
 
+import contextvars
 import logging
 import os
 import threading
@@ -609,7 +610,10 @@ def in_background(fn, /, *args, **kwargs):
 
     For work that releases the interpreter (OpenCV's calls, compiled kernels declared
     ``nogil``) run beside other such work of the same analysis: the two share the
-    machine's cores instead of taking turns.
+    machine's cores instead of taking turns. ``fn`` runs in a copy of the caller's context
+    (numpy's error state with it). The warnings filters are the process's: a caller that
+    sets them waits for ``fn`` (:func:`wait_all`) before it restores them, also when it
+    fails.
 
     Returns
     -------
@@ -618,10 +622,11 @@ def in_background(fn, /, *args, **kwargs):
         raised.
     """
     out = {}
+    context = contextvars.copy_context()
 
     def work():
         try:
-            out["value"] = fn(*args, **kwargs)
+            out["value"] = context.run(fn, *args, **kwargs)
         except BaseException as exc:  # handed to the caller, which raises it
             out["error"] = exc
 
@@ -638,6 +643,18 @@ def in_background(fn, /, *args, **kwargs):
     return result
 
 
+def wait_all(*waiting) -> None:
+    """Wait for every :func:`in_background` step given (None and finished values are
+    skipped), dropping what they return or raise: on a failure's way out, so that none of
+    them runs on, or warns, after its caller has given up."""
+    for w in waiting:
+        if callable(w):
+            try:
+                w()
+            except BaseException:  # the caller's own failure is the one raised
+                pass
+
+
 def spawn_seeds(seed: int | None, n: int) -> list[int]:
     """``n`` independent integer seeds derived from ``seed`` by ``SeedSequence.spawn``.
 
@@ -650,4 +667,5 @@ def spawn_seeds(seed: int | None, n: int) -> list[int]:
 
 __all__ = ["get_executor", "ClusterLostError", "ClusterWarning", "quiet_loggers",
            "SCHEDULER_TIMEOUT_S", "stop_pool", "compiling_in_turn", "spawn_seeds", "in_background",
+           "wait_all",
            "ThreadPoolExecutor"]

@@ -364,6 +364,33 @@ def test_centrelines_drawn_beforehand_on_a_thread_give_the_same_profiles():
                        method="missing", centrelines=placed, **args)
 
 
+def test_a_failed_analysis_leaves_no_step_running_and_raises_the_first_error():
+    """Steps run on a thread (the dark marks, the voids, the walls' midpoints) are waited for
+    when the analysis fails: none runs on or warns after it has raised, and a caller who
+    turns warnings into errors gets the error that comes first in the scan's order (the
+    dark marks' median of an empty selection, before the cleaning finds nothing left)."""
+    import threading
+
+    img = np.full((300, 300, 3), 245, np.uint8)
+    img[151, 151] = img[101, 101] = (40, 60, 170)
+    kw = dict(threshold_method="fixed", hole_radius_mm=2, hole_center_px=[150, 150],
+              hole_correction=False)
+    for _ in range(3):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            with pytest.raises(AnalysisError, match="nothing left after cleaning"):
+                analyze(img, **kw)
+            n_caught = len(caught)
+        steps = [t for t in threading.enumerate() if t.name.startswith("foldstat-")
+                 and t.name != "foldstat-sha256" and t.is_alive()]
+        assert steps == []
+        assert len(caught) == n_caught  # nothing more arrived after the analysis raised
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(RuntimeWarning, match="empty slice"):
+            analyze(img, **kw)
+
+
 def test_uniform_images_raise_analysis_error():
     with pytest.raises(AnalysisError, match="empty mask"):
         analyze(np.full((64, 64, 3), 250, np.uint8))

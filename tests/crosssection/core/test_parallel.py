@@ -14,7 +14,7 @@ import pytest
 from crosssection.core.errors import ParameterError
 
 from crosssection import batch as B
-from crosssection.core.parallel import get_executor, in_background, spawn_seeds
+from crosssection.core.parallel import get_executor, in_background, spawn_seeds, wait_all
 
 from crosssection.testing import index_numbers as numbers
 from crosssection.testing import make_scan_tree as make_tree
@@ -63,6 +63,13 @@ def test_in_background_returns_the_result_or_raises_the_error():
     wait = in_background(fails)
     with pytest.raises(ValueError, match="bad input"):
         wait()
+    wait_all(wait, None, 3)  # its error dropped, the rest skipped
+
+    # the caller's numpy error state goes with the work
+    with np.errstate(divide="raise"):
+        divide = in_background(lambda: np.float64(1.0) / np.float64(0.0))
+    with pytest.raises(FloatingPointError):
+        divide()
 
 
 def test_spawn_seeds_are_stable_and_independent():
