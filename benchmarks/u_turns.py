@@ -25,19 +25,15 @@ PX_PER_MM = 50.0
 H_MM = 0.1
 
 
-def u_turn_scan(r_mm: float, n_layers: int, *, arm_mm: float = 4.0, seed: int = 1):
-    """The RGB scan of one U-turn band and its centre (x, y) px (module docstring)."""
+def _band_scan(pts_mm: np.ndarray, n_layers: int, seed: int):
+    """The RGB scan of a band of ``n_layers`` sheets along the polyline ``pts_mm`` (x, y) mm
+    about the scan's centre, and that centre (x, y) px (module docstring)."""
     import cv2
 
-    arm = np.linspace(-arm_mm, 0.0, 400)
-    turn = np.linspace(np.pi, 0.0, 2000)
-    pts = np.concatenate([np.column_stack([np.full_like(arm, -r_mm), arm]),
-                          np.column_stack([r_mm * np.cos(turn), r_mm * np.sin(turn)]),
-                          np.column_stack([np.full_like(arm, r_mm), arm[::-1]])])
     size, ss = 700, 4
     centre = np.array([size / 2 + 0.3, size / 2 - 0.2])
     big = np.zeros((size * ss, size * ss), np.uint8)
-    q = ((pts * PX_PER_MM + centre) * ss * 16).round().astype(np.int32)
+    q = ((pts_mm * PX_PER_MM + centre) * ss * 16).round().astype(np.int32)
     cv2.polylines(big, [q.reshape(-1, 1, 2)], False, 255,
                   thickness=int(round(n_layers * H_MM * PX_PER_MM * ss)), lineType=cv2.LINE_AA,
                   shift=4)
@@ -46,33 +42,29 @@ def u_turn_scan(r_mm: float, n_layers: int, *, arm_mm: float = 4.0, seed: int = 
     img = paper * (1 - cover[..., None]) + ink * cover[..., None]
     img = cv2.GaussianBlur(img, (0, 0), 1.0) + np.random.default_rng(seed).normal(0, 3, img.shape)
     return np.clip(img, 0, 255).astype(np.uint8), centre
+
+
+def u_turn_scan(r_mm: float, n_layers: int, *, arm_mm: float = 4.0, seed: int = 1):
+    """The RGB scan of one U-turn band and its centre (x, y) px (module docstring)."""
+    arm = np.linspace(-arm_mm, 0.0, 400)
+    turn = np.linspace(np.pi, 0.0, 2000)
+    pts = np.concatenate([np.column_stack([np.full_like(arm, -r_mm), arm]),
+                          np.column_stack([r_mm * np.cos(turn), r_mm * np.sin(turn)]),
+                          np.column_stack([np.full_like(arm, r_mm), arm[::-1]])])
+    return _band_scan(pts, n_layers, seed)
 
 
 def bend_scan(r_mm: float, n_layers: int, turn_rad: float, *, arm_mm: float = 4.0,
               seed: int = 1):
     """The RGB scan of one band bending by ``turn_rad`` on an arc of centreline radius
     ``r_mm`` between straight arms, and its centre (x, y) px (as :func:`u_turn_scan`)."""
-    import cv2
-
     arm = np.column_stack([np.linspace(-arm_mm, 0.0, 400), np.zeros(400)])
     t = np.linspace(0.0, turn_rad, 2000)
     arc = np.column_stack([r_mm * np.sin(t), r_mm * (1.0 - np.cos(t))])
     out = arc[-1] + np.linspace(0.0, arm_mm, 400)[:, None] * np.array(
         [np.cos(turn_rad), np.sin(turn_rad)])
     pts = np.concatenate([arm, arc, out])
-    pts -= pts.mean(axis=0)
-    size, ss = 700, 4
-    centre = np.array([size / 2 + 0.3, size / 2 - 0.2])
-    big = np.zeros((size * ss, size * ss), np.uint8)
-    q = ((pts * PX_PER_MM + centre) * ss * 16).round().astype(np.int32)
-    cv2.polylines(big, [q.reshape(-1, 1, 2)], False, 255,
-                  thickness=int(round(n_layers * H_MM * PX_PER_MM * ss)), lineType=cv2.LINE_AA,
-                  shift=4)
-    cover = cv2.resize(big.astype(np.float32) / 255, (size, size), interpolation=cv2.INTER_AREA)
-    ink, paper = np.array([55.0, 80.0, 175.0]), np.full(3, 242.0)
-    img = paper * (1 - cover[..., None]) + ink * cover[..., None]
-    img = cv2.GaussianBlur(img, (0, 0), 1.0) + np.random.default_rng(seed).normal(0, 3, img.shape)
-    return np.clip(img, 0, 255).astype(np.uint8), centre
+    return _band_scan(pts - pts.mean(axis=0), n_layers, seed)
 
 
 def main(argv=None) -> int:
