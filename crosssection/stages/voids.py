@@ -21,6 +21,9 @@ Implementation (speed: 2000x2000 scan with 83 voids, 162 junctions: 0.30 s -> ~0
   contour used before (skimage ``find_contours``, 23x slower). For comparison skimage's
   ``regionprops.perimeter`` gives +4..5 % on disks and up to +7.6 % on oblique squares.
 - Shape ratio sqrt(s)/p (0.2821 for a disk).
+- Isolated pieces of ink removed after the scan (the graph drops pieces too short to hold a
+  branch): only the voids whose border held one are read again, from that border and the
+  islands left inside it (:func:`without_pieces`; the same numbers as a new scan, to the bit).
 - ``n_edges``: junctions within ``touch_px`` of the void (paper: "the number of junction
   points belonging to each void contour"): the distances from the junction centres to the
   void's border pixels, in a compiled loop that skips the junctions far from the void's
