@@ -756,6 +756,15 @@ def _analyze(image, params, overrides, *, warn: bool = True,
                 _warnings.warn(f"{image}: {note}", quality.InputWarning, stacklevel=3)
         sg, h_px, scale = pre.graph, p.thickness_px, p.scale
         law, packs, width_mm = None, None, None
+        edge = (None if pre.edge_feature is None else
+                (pre.edge_feature, float(pre.threshold.dominance_min)))
+        # the centrelines need no branch count: drawn beside the widths, the packs and the
+        # linear system (again if the widths cut the graph's bands)
+        lines_of = functools.partial(curvature.stack_centrelines, distance_px=pre.distance_px,
+                                     thickness_px=h_px, smooth_px=p.smooth_px,
+                                     method=p.curvature_method, edge=edge)
+        lines = in_background(lines_of, sg)
+        running.append(lines)
         with timer("widths"):
             # layers ending inside a band leave no junction: the band is cut where its width steps
             profiles = width_profiles_px(sg.paths, pre.distance_px)
@@ -769,18 +778,12 @@ def _analyze(image, params, overrides, *, warn: bool = True,
             if cuts:
                 sg, profiles, packs, width_mm = split_stacks(sg, cuts), None, None, None
                 pre = dataclasses.replace(pre, graph=sg)
+                wait_all(lines)
+                lines = in_background(lines_of, sg)
+                running.append(lines)
             if width_mm is None:
                 width_mm = _stack_widths_mm(sg, pre.distance_px, profiles, p)
             layers_est = np.asarray(cal.layers(width_mm), dtype=float)
-        edge = (None if pre.edge_feature is None else
-                (pre.edge_feature, float(pre.threshold.dominance_min)))
-        with timer("curvature"):
-            lines = curvature.stack_centrelines(sg, pre.distance_px, thickness_px=h_px,
-                                                smooth_px=p.smooth_px, method=p.curvature_method,
-                                                edge=edge, walls=False)
-        # the walls' midpoints need no branch count: found beside the packs and the linear system
-        lines = in_background(curvature.between_walls, lines)
-        running.append(lines)
         with timer("packs"):
             if packs is None:
                 packs = compute_packs(sg, tangent_px=scale.to_px(p.tangent_used_mm))

@@ -171,7 +171,7 @@ def _segment_medians(values, seg, n_seg) -> np.ndarray:
     return _run_medians(np.ascontiguousarray(values, dtype=np.float64), offs)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _run_medians(values, offs):  # pragma: no cover - numba
     """Median of every run ``values[offs[k]:offs[k + 1]]`` (NaN when empty): its middle
     element, or the mean of its two middle ones, as ``np.median`` returns them bit for bit.
@@ -273,7 +273,7 @@ def _profiles_kernel(pr, pc, offs, half_windows, dist, step):
     return _walk_widths(pr, pc, nr, nc, d_path, j0, dist, float(step))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _walk_widths(pr, pc, nr, nc, d_path, j0, dist, step):  # pragma: no cover - numba
     """The walks of :func:`_profiles_kernel`: from sample ``j0 + 1`` outwards on each side
     (``+normal``, then ``-normal``) of every pixel until the bilinearly interpolated mask
