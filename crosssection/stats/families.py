@@ -392,6 +392,54 @@ class ParametricFamily(Family):
         return z0 - np.where(np.asarray(self.log_params), -np.log(1.5), np.std(xs))
 
 
+class BoundLaw:
+    """A ``scipy.stats`` law with its parameters bound: the methods of its frozen
+    distribution (``pdf``, ``logpdf``, ``cdf``, ``sf``, ``logsf``, ``ppf``, ``isf``, ``rvs``),
+    each the same call of the law itself with the same arguments, so the same numbers; any
+    other attribute is the frozen distribution's.
+
+    Written because scipy builds every frozen distribution as a new instance of its class,
+    docstrings included: 0.5 ms each, and the bootstraps and goodness-of-fit tests of one
+    ensemble freeze tens of thousands (51 000 for the report of the five sample scans, which
+    took 50 s with frozen distributions and takes 32 s with these, the same tables).
+    """
+
+    __slots__ = ("rv", "args", "kwds")
+
+    def __init__(self, rv, *args, **kwds):
+        self.rv, self.args, self.kwds = rv, args, kwds
+
+    def pdf(self, x):
+        return self.rv.pdf(x, *self.args, **self.kwds)
+
+    def logpdf(self, x):
+        return self.rv.logpdf(x, *self.args, **self.kwds)
+
+    def cdf(self, x):
+        return self.rv.cdf(x, *self.args, **self.kwds)
+
+    def sf(self, x):
+        return self.rv.sf(x, *self.args, **self.kwds)
+
+    def logsf(self, x):
+        return self.rv.logsf(x, *self.args, **self.kwds)
+
+    def ppf(self, q):
+        return self.rv.ppf(q, *self.args, **self.kwds)
+
+    def isf(self, q):
+        return self.rv.isf(q, *self.args, **self.kwds)
+
+    def rvs(self, size=None, random_state=None):
+        return self.rv.rvs(*self.args, size=size, random_state=random_state, **self.kwds)
+
+    def __getattr__(self, name):
+        # anything else of a frozen distribution (mean, std, support, ...): from one
+        if name in BoundLaw.__slots__:
+            raise AttributeError(name)
+        return getattr(self.rv(*self.args, **self.kwds), name)
+
+
 class ScipyFamily(ParametricFamily):
     """A family backed by a ``scipy.stats`` distribution (loc 0 for the positive ones).
 
@@ -407,8 +455,8 @@ class ScipyFamily(ParametricFamily):
     #: underflows at extreme scales unless the data are scaled first
     squares_data = False
 
-    def frozen(self, params: dict):
-        """The ``scipy.stats`` frozen distribution."""
+    def frozen(self, params: dict) -> BoundLaw:
+        """The ``scipy.stats`` law with ``params`` bound (:class:`BoundLaw`)."""
         raise NotImplementedError
 
     def std(self, params: dict) -> float:
@@ -475,7 +523,7 @@ class Exponential(ScipyFamily):
     rv = stats.expon
 
     def frozen(self, params):
-        return stats.expon(scale=params["mu"])
+        return BoundLaw(stats.expon, scale=params["mu"])
 
     def std(self, params):
         return params["mu"]
@@ -516,7 +564,7 @@ class Gamma(ScipyFamily):
     width_name = "alpha"  # coefficient of variation 1/sqrt(alpha)
 
     def frozen(self, params):
-        return stats.gamma(params["alpha"], scale=params["chi"])
+        return BoundLaw(stats.gamma, params["alpha"], scale=params["chi"])
 
     def std(self, params):
         return math.sqrt(params["alpha"]) * params["chi"]
@@ -574,7 +622,7 @@ class LogNormal(ScipyFamily):
     width_name = "sigma"
 
     def frozen(self, params):
-        return stats.lognorm(params["sigma"], scale=np.exp(params["mu"]))
+        return BoundLaw(stats.lognorm, params["sigma"], scale=np.exp(params["mu"]))
 
     def std(self, params):
         s2 = params["sigma"] ** 2
@@ -637,7 +685,7 @@ class Gaussian(ScipyFamily):
     squares_data = True
 
     def frozen(self, params):
-        return stats.norm(params["mu"], params["sigma"])
+        return BoundLaw(stats.norm, params["mu"], params["sigma"])
 
     def std(self, params):
         return params["sigma"]

@@ -149,3 +149,27 @@ def test_p_text_floor_and_exact_values():
     x = np.random.default_rng(2).lognormal(0.0, 1.0, 300)
     r = F.fit_family(x, "exponential", n_boot=0, n_mc=19, seed=0)
     assert r.n_mc == 19 and r.pvalue == pytest.approx(1 / 20) and r.p_text() == "p < 1/20"
+
+
+@pytest.mark.parametrize("name, params", [
+    ("exponential", {"mu": 2.5}), ("gamma", {"alpha": 0.4, "chi": 3.0}),
+    ("lognormal", {"mu": 0.3, "sigma": 1.2}), ("gaussian", {"mu": 5.0, "sigma": 0.7})])
+def test_a_bound_law_gives_its_frozen_distributions_numbers(name, params):
+    """The families' laws with their parameters bound (``BoundLaw``, which scipy's frozen
+    distributions are not, for speed) give every number the frozen distribution gives."""
+    import scipy.stats as st
+
+    from crosssection.stats.families import FAMILIES, BoundLaw
+
+    law = FAMILIES[name].frozen(params)
+    assert isinstance(law, BoundLaw)
+    frozen = law.rv(*law.args, **law.kwds)
+    assert isinstance(frozen, st._distn_infrastructure.rv_continuous_frozen)
+    x = np.array([0.05, 0.5, 1.0, 3.0, 12.0])
+    q = np.array([0.01, 0.3, 0.5, 0.9, 0.999])
+    for method, arg in (("pdf", x), ("logpdf", x), ("cdf", x), ("sf", x), ("logsf", x),
+                        ("ppf", q), ("isf", q)):
+        np.testing.assert_array_equal(getattr(law, method)(arg), getattr(frozen, method)(arg))
+    np.testing.assert_array_equal(law.rvs(size=7, random_state=np.random.default_rng(3)),
+                                  frozen.rvs(size=7, random_state=np.random.default_rng(3)))
+    assert law.mean() == frozen.mean() and law.support() == frozen.support()
