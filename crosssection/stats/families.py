@@ -435,7 +435,7 @@ class BoundLaw:
 
     def __getattr__(self, name):
         # anything else of a frozen distribution (mean, std, support, ...): from one
-        if name in BoundLaw.__slots__:
+        if name in BoundLaw.__slots__ or name.startswith("__"):
             raise AttributeError(name)
         return getattr(self.rv(*self.args, **self.kwds), name)
 
