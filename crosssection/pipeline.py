@@ -414,9 +414,8 @@ def _preprocess_read(rgb, path, header: Header, orientation, p: AnalysisParams, 
     # missed ink counts in pieces of 10 h^2 or more (the cleaning's default speck, l_min h at
     # h = 0.1 mm), however small the cleaning is set: below that the rim of half-covered
     # pixels along every band counts (s_min_mm2 = 0 read 0.03-0.26 % on the sample scans)
-    thr, hole, outside, dominance, missed, marks = _threshold_in_frame(
+    thr, hole, outside, dominance, missed, marks_later = _threshold_in_frame(
         rgb, p, path, timer, min_piece_px=max(speck_px, 10.0 * p.thickness_px ** 2))
-    marked = marks
     running = []  # the steps on a thread, waited for if this fails
     try:
         confidence = None if p.hole_given else hole.confidence
@@ -427,7 +426,7 @@ def _preprocess_read(rgb, path, header: Header, orientation, p: AnalysisParams, 
                               sliver_length_px=l_min_px,
                               sliver_width_px=p.sliver_width_h * p.thickness_px)
         _check_clean(mask, speck_px, path)
-        marks = marks()
+        marks = marks_later()
         # the voids need the mask alone: scanned beside the distances and the thinning
         voids = in_background(void_stage.scan_voids, mask, hole=hole, s_min_px=s_min_px)
         running.append(voids)
@@ -477,7 +476,7 @@ def _preprocess_read(rgb, path, header: Header, orientation, p: AnalysisParams, 
     except BaseException as exc:
         wait_all(*running)
         try:
-            marked()
+            marks_later()
         except BaseException as first:
             if first is not exc:  # the marks come first in the scan's order: so does their error
                 raise first from None

@@ -124,7 +124,6 @@ kappa_m = |kappa_pm| (paper, section "Curvature of branches"), in 1/mm, trapezoi
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -1263,7 +1262,7 @@ def _midlines(paths, smoothed, closed, radius_px, dt, edge=None) -> list:
     sm = np.ascontiguousarray(np.concatenate([np.asarray(q, np.float64).reshape(-1, 2)
                                               for q in smoothed]))
     # every stack in one compiled call: it releases the interpreter (the pipeline runs it on
-    # a thread beside the linear system)
+    # a thread beside the widths and the linear system)
     out = _midlines_kernel(raw, sm, offs, width, tol, moved, np.asarray(closed, np.bool_),
                            dt, _MIDLINE_MAX_SHIFT_PX, feat, float(level))
     return [p if not moved[i] else out[offs[i]:offs[i + 1]] for i, p in enumerate(paths)]
@@ -1574,6 +1573,8 @@ class StackCentrelines:
     thickness_px: float
     smooth_px: int
     method: str
+    #: whether the walls were placed on the threshold's feature (``edge`` given)
+    on_feature: bool
     #: junction -> [(stack, end)]
     at_node: dict
     radius_px: np.ndarray
@@ -1586,30 +1587,23 @@ class StackCentrelines:
     raw: list
     closed: list
     skeleton_px: list
+    #: the smoothed centrelines: between the walls, or the skeleton's for the paper's method
     smoothed: list
     dt32: np.ndarray
-    edge: object
-    #: whether ``smoothed`` is final: between the walls (:func:`between_walls`), or the
-    #: skeleton's for the paper's method
-    placed: bool
 
 
 def stack_centrelines(graph, distance_px, *, thickness_px: float, smooth_px: int | None = None,
-                      method: str = METHODS[0], edge=None,
-                      walls: bool = True) -> StackCentrelines:
+                      method: str = METHODS[0], edge=None) -> StackCentrelines:
     """The part of :func:`stack_profiles` that needs no branch count: the stacks'
     centrelines (module docstring, step 1) and their junctions' geometry.
 
-    Its costliest step, the walls' midpoints (:func:`between_walls`), can be left to a
-    later call.
+    The pipeline draws them on a thread while the widths and the linear system are read: the
+    costliest step, the walls' midpoints, is one compiled call that releases the interpreter.
 
     Parameters
     ----------
     graph, distance_px, thickness_px, smooth_px, method, edge
         As :func:`stack_profiles`.
-    walls : bool
-        Move the centrelines between the walls here (:func:`between_walls`); False leaves
-        that step to a later call.
 
     Returns
     -------
@@ -1651,34 +1645,13 @@ def stack_centrelines(graph, distance_px, *, thickness_px: float, smooth_px: int
     skeleton_px = _path_lengths(r, c, offs[:-1], offs[1:]).tolist()
     smoothed = polyline.smooth_paths(raw, window_px=sm, closed=closed)
     dt32 = np.ascontiguousarray(distance_px, dtype=np.float32)
-    lines = StackCentrelines(graph.n_stacks, float(thickness_px), sm, method, at_node, radius,
-                             contact, at_junction, r_j, raw, closed, skeleton_px, smoothed, dt32,
-                             edge, method == "paper")
-    return between_walls(lines) if walls else lines
-
-
-def between_walls(lines: StackCentrelines) -> StackCentrelines:
-    """The centrelines of :func:`stack_centrelines` moved between their bands' walls
-    (module docstring, step 1), unless they are already (or the method is the paper's, whose
-    centreline is the skeleton's).
-
-    One compiled call that releases the interpreter: the pipeline runs it on a thread while
-    the linear system is solved.
-
-    Parameters
-    ----------
-    lines : StackCentrelines
-
-    Returns
-    -------
-    StackCentrelines
-    """
-    if lines.placed:
-        return lines
-    mid = _midlines(lines.raw, lines.smoothed, lines.closed, lines.radius_px, lines.dt32,
-                    lines.edge)
-    smoothed = polyline.smooth_paths(mid, window_px=lines.smooth_px, closed=lines.closed)
-    return dataclasses.replace(lines, smoothed=smoothed, placed=True)
+    if method != "paper":
+        # the paper's centreline is the skeleton's; the others read it between the walls
+        mid = _midlines(raw, smoothed, closed, radius, dt32, edge)
+        smoothed = polyline.smooth_paths(mid, window_px=sm, closed=closed)
+    return StackCentrelines(graph.n_stacks, float(thickness_px), sm, method, edge is not None,
+                            at_node, radius, contact, at_junction, r_j, raw, closed,
+                            skeleton_px, smoothed, dt32)
 
 
 def stack_profiles(graph, n_br, distance_px, *, thickness_px: float, px_per_mm: float,
@@ -1726,11 +1699,11 @@ def stack_profiles(graph, n_br, distance_px, *, thickness_px: float, px_per_mm: 
         centrelines = stack_centrelines(graph, distance_px, thickness_px=thickness_px,
                                         smooth_px=sm, method=method, edge=edge)
     elif (centrelines.n_stacks, centrelines.smooth_px, centrelines.method,
-          centrelines.thickness_px, centrelines.edge is None) != (
-            graph.n_stacks, sm, method, float(thickness_px), edge is None):
+          centrelines.thickness_px, centrelines.on_feature) != (
+            graph.n_stacks, sm, method, float(thickness_px), edge is not None):
         raise ParameterError("centrelines were computed for another graph or other settings "
                              "than the profiles asked for")
-    cl = between_walls(centrelines)
+    cl = centrelines
     at_node, radius, contact, at_junction, r_j = (cl.at_node, cl.radius_px, cl.contact,
                                                   cl.at_junction, cl.r_j)
     raw, closed, skeleton_px, smoothed, dt32 = (cl.raw, cl.closed, cl.skeleton_px,

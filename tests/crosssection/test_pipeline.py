@@ -337,8 +337,7 @@ def test_centrelines_drawn_beforehand_on_a_thread_give_the_same_profiles():
     centrelines of other settings are refused."""
     from crosssection.core.parallel import in_background
     from crosssection.pipeline import preprocess
-    from crosssection.stages.curvature import (between_walls, stack_centrelines,
-                                               stack_profiles)
+    from crosssection.stages.curvature import stack_centrelines, stack_profiles
 
     scene = make_scene(seed=5, n_stacks=25, max_layers=5, noise_sigma=4.0)
     p = scene.params
@@ -349,19 +348,17 @@ def test_centrelines_drawn_beforehand_on_a_thread_give_the_same_profiles():
     for method in ("walls", "missing", "paper"):
         whole = stack_profiles(pre.graph, n_br, pre.distance_px, px_per_mm=p["px_per_mm"],
                                method=method, **args)
-        lines = stack_centrelines(pre.graph, pre.distance_px, method=method, walls=False,
-                                  **args)
-        assert lines.placed == (method == "paper")
-        placed = in_background(between_walls, lines)()
-        assert placed.placed
+        lines = in_background(stack_centrelines, pre.graph, pre.distance_px, method=method,
+                              **args)()
         parts = stack_profiles(pre.graph, n_br, pre.distance_px, px_per_mm=p["px_per_mm"],
-                               method=method, centrelines=placed, **args)
+                               method=method, centrelines=lines, **args)
         for a, b in zip(whole, parts, strict=True):
             np.testing.assert_array_equal(a.kappa_per_mm, b.kappa_per_mm)
             np.testing.assert_array_equal(a.rc_px, b.rc_px)
-    with pytest.raises(ParameterError, match="other settings"):
-        stack_profiles(pre.graph, n_br, pre.distance_px, px_per_mm=p["px_per_mm"],
-                       method="missing", centrelines=placed, **args)
+    for other in (dict(method="missing", edge=edge), dict(method="paper", edge=None)):
+        with pytest.raises(ParameterError, match="other settings"):
+            stack_profiles(pre.graph, n_br, pre.distance_px, px_per_mm=p["px_per_mm"],
+                           thickness_px=args["thickness_px"], centrelines=lines, **other)
 
 
 def test_a_failed_analysis_leaves_no_step_running_and_raises_the_first_error():
