@@ -14,8 +14,8 @@ wall, so the outer envelope of the ink is a circle with gaps where the rod leave
 3. Robust refinement on the outermost points: the boundary pixels are binned by polar angle
    around the current centre (bins of ~2 px of arc); the outermost pixel of each bin is a wall
    candidate; bins whose outermost pixel lies more than ``gap_px`` inside the current circle are
-   gaps and dropped. A geometric fit (``scipy.optimize.least_squares``, soft-L1 loss) on the
-   remaining points; three iterations.
+   gaps and dropped. A geometric fit (soft-L1 loss, :func:`_soft_l1_circle`) on the remaining
+   points; three iterations.
 4. Pixel centres of the outermost ink lie half a pixel inside the ink's outer edge: 0.5 px is
    added to the fitted radius (the wall is the outer edge of the ink).
 
@@ -241,7 +241,6 @@ def fit_hole(mask, *, center_rc=None, radius_px=None, gap_px=None, path=None) ->
 
 def _fit_points(pts, center_rc, radius_px, gap_px, path) -> Hole:
     """:func:`fit_hole` on the outer border points of the ink (:func:`_boundary_points`)."""
-    from scipy.optimize import least_squares
     from scipy.spatial import ConvexHull, QhullError
 
     if len(pts) < 3:
@@ -273,21 +272,127 @@ def _fit_points(pts, center_rc, radius_px, gap_px, path) -> Hole:
         if center_rc is not None:
             r = float(np.median(rad[keep]))
             continue
-        # the points' rows and columns apart: the residuals in 2/3 of the time of a
-        # difference broadcast over an axis of 2 (the fit calls them some 15 times)
         qr, qc = outer[keep, 0], outer[keep, 1]
         if radius_px is not None:
-            fun = lambda x: np.hypot(qr - x[0], qc - x[1]) - (float(radius_px) - 0.5)  # noqa: E731
-            c = least_squares(fun, c, loss="soft_l1", f_scale=1.0).x
+            c = _soft_l1_circle(qr, qc, np.r_[c, 0.0], float(radius_px) - 0.5)[:2]
         else:
-            fun = lambda x: np.hypot(qr - x[0], qc - x[1]) - x[2]  # noqa: E731
-            sol = least_squares(fun, np.r_[c, r - 0.5], loss="soft_l1", f_scale=1.0).x
+            sol = _soft_l1_circle(qr, qc, np.r_[c, r - 0.5], np.nan)
             c, r = sol[:2], float(sol[2]) + 0.5
     if center_rc is not None:
         r = r + 0.5  # pixel centres -> outer edge of the ink
     if radius_px is not None:
         r = float(radius_px)
     return Hole(np.asarray(c, dtype=np.float64), float(r), True)
+
+
+@njit(cache=True, nogil=True)
+def _soft_l1_circle(qr, qc, x0, radius):  # pragma: no cover - numba
+    """The circle through the points (``qr``, ``qc``) that minimises the soft-L1 loss of
+    their distances to it, ``sum 2 (sqrt(1 + f^2) - 1)`` with ``f = |q - c| - r`` (in px:
+    a scale of 1 px), from ``x0`` = (row, col, radius); with ``radius`` finite the radius is
+    held at it and only the centre is fitted (``x0[2]`` ignored).
+
+    ``scipy.optimize.least_squares(loss="soft_l1", f_scale=1)`` minimises the same loss and
+    lands on the same circle (within 1e-6 px, median 6e-8, over 120 synthetic arcs with up
+    to 30 % of the points pulled inwards, as gaps in the wall band pull them, in the tests):
+    Gauss-Newton steps on the reweighted normal equations (weights
+    ``1 / sqrt(1 + f^2)``, the loss' derivative), halved while the loss would grow, until a
+    step moves the circle by less than 1e-9 px. 0.6 ms for the 2 800 wall points of a
+    2000 x 2000 scan against 3.3 ms for ``least_squares``, which spends it in its trust-region
+    machinery and numerical Jacobian (the hole's search fits five times).
+
+    Parameters
+    ----------
+    qr, qc : (n,) float64 arrays
+        Rows and columns of the points, px.
+    x0 : (3,) float64 array
+        The first circle: centre row, centre column, radius, px.
+    radius : float
+        The radius held fixed, or NaN to fit it.
+
+    Returns
+    -------
+    (3,) float64 array
+        Centre row, centre column and radius, px.
+    """
+    x = x0.copy()
+    fixed = np.isfinite(radius)
+    if fixed:
+        x[2] = radius
+    n = qr.size
+
+    def loss(x):
+        s = 0.0
+        for i in range(n):
+            dr = qr[i] - x[0]
+            dc = qc[i] - x[1]
+            f = np.sqrt(dr * dr + dc * dc) - x[2]
+            s += 2.0 * (np.sqrt(1.0 + f * f) - 1.0)
+        return s
+
+    cost = loss(x)
+    for _ in range(200):
+        a00 = a01 = a02 = a11 = a12 = a22 = 0.0
+        g0 = g1 = g2 = 0.0
+        for i in range(n):
+            dr = qr[i] - x[0]
+            dc = qc[i] - x[1]
+            d = np.sqrt(dr * dr + dc * dc)
+            f = d - x[2]
+            w = 1.0 / np.sqrt(1.0 + f * f)
+            if d > 0.0:
+                ur = dr / d
+                uc = dc / d
+            else:
+                ur = uc = 0.0
+            a00 += w * ur * ur
+            a01 += w * ur * uc
+            a11 += w * uc * uc
+            a02 += w * ur
+            a12 += w * uc
+            a22 += w
+            g0 += w * ur * f
+            g1 += w * uc * f
+            g2 += w * f
+        # the Gauss-Newton step of the weighted problem: A s = g (Cramer's rule)
+        if fixed:
+            det = a00 * a11 - a01 * a01
+            if not det > 1e-12 * (a00 * a11 + 1e-300):
+                break
+            s0 = (g0 * a11 - g1 * a01) / det
+            s1 = (a00 * g1 - a01 * g0) / det
+            s2 = 0.0
+        else:
+            c00 = a11 * a22 - a12 * a12
+            c01 = a02 * a12 - a01 * a22
+            c02 = a01 * a12 - a02 * a11
+            det = a00 * c00 + a01 * c01 + a02 * c02
+            if not det > 1e-12 * (a00 * a11 * a22 + 1e-300):
+                break
+            c11 = a00 * a22 - a02 * a02
+            c12 = a01 * a02 - a00 * a12
+            c22 = a00 * a11 - a01 * a01
+            s0 = (c00 * g0 + c01 * g1 + c02 * g2) / det
+            s1 = (c01 * g0 + c11 * g1 + c12 * g2) / det
+            s2 = (c02 * g0 + c12 * g1 + c22 * g2) / det
+        t = 1.0
+        trial = x.copy()
+        for _ in range(40):
+            trial[0] = x[0] + t * s0
+            trial[1] = x[1] + t * s1
+            trial[2] = x[2] + t * s2
+            new = loss(trial)
+            if new <= cost:
+                break
+            t *= 0.5
+        else:
+            break
+        moved = t * max(abs(s0), abs(s1), abs(s2))
+        x[:] = trial
+        cost = new
+        if moved < 1e-9:
+            break
+    return x
 
 
 def check_hole(shape, center_rc, radius_px, *, path=None) -> None:
@@ -589,19 +694,15 @@ def _plate_levels(features, r0, c0, r_frame):
 
 
 def _circle_fit(points, c0, r0):
-    """Soft-L1 geometric circle fit, then again without points more than 2 px off."""
-    from scipy.optimize import least_squares
-
-    x = np.r_[c0, r0]
+    """Soft-L1 geometric circle fit (:func:`_soft_l1_circle`), then again without points
+    more than 2 px off."""
+    x = np.r_[c0, r0].astype(np.float64)
     keep = np.ones(len(points), bool)
     for _ in range(2):
         q = points[keep]
         if len(q) < 5:
             break
-        # rows and columns apart (see :func:`_fit_points`)
-        fun = lambda x, qr=q[:, 0].copy(), qc=q[:, 1].copy(): (  # noqa: E731
-            np.hypot(qr - x[0], qc - x[1]) - x[2])
-        x = least_squares(fun, x, loss="soft_l1", f_scale=1.0).x
+        x = _soft_l1_circle(q[:, 0].copy(), q[:, 1].copy(), x, np.nan)
         keep = np.abs(np.hypot(*(points - x[:2]).T) - x[2]) <= 2.0
     return x[:2], float(x[2]), keep
 

@@ -602,3 +602,45 @@ def test_border_points_on_one_line_name_a_plate_of_the_inks_colour():
     with pytest.raises(AnalysisError, match="or a plate of the ink's colour around the hole"
                                             ".*give the hole"):
         _fit_points(pts, None, None, 2.0, "scan.png")
+
+
+@pytest.mark.parametrize("fixed", [False, True])
+def test_soft_l1_circle_is_scipys_least_squares(fixed):
+    """The compiled circle fit lands where ``scipy.optimize.least_squares`` with the same
+    soft-L1 loss does: arcs and whole circles, noisy, with points pulled inwards (gaps in
+    the wall band) and a start off by several pixels."""
+    from scipy.optimize import least_squares
+
+    from crosssection.stages.hole import _soft_l1_circle
+
+    rng = np.random.default_rng(11)
+    for _ in range(60):
+        n = int(rng.integers(20, 3000))
+        r_true = float(rng.uniform(30, 2000))
+        c_true = rng.uniform(-500, 2500, 2)
+        span = float(rng.uniform(0.5, 2.0)) * np.pi
+        t = rng.uniform(0.0, span, n)
+        rr = c_true[0] + r_true * np.sin(t) + rng.normal(0, rng.uniform(0.1, 2.0), n)
+        cc = c_true[1] + r_true * np.cos(t) + rng.normal(0, rng.uniform(0.1, 2.0), n)
+        pulled = rng.random(n) < rng.uniform(0.0, 0.3)
+        shrink = 1.0 - rng.uniform(0.0, 0.1, n) * pulled
+        rr, cc = c_true[0] + (rr - c_true[0]) * shrink, c_true[1] + (cc - c_true[1]) * shrink
+        x0 = np.r_[c_true + rng.normal(0, 5, 2), r_true + rng.normal(0, 5)]
+        if fixed:
+            rad = r_true
+            want = least_squares(lambda x: np.hypot(rr - x[0], cc - x[1]) - rad, x0[:2],
+                                 loss="soft_l1", f_scale=1.0).x
+            got = _soft_l1_circle(rr, cc, x0, rad)
+            assert got[2] == rad
+            np.testing.assert_allclose(got[:2], want, atol=1e-5)
+        else:
+            want = least_squares(lambda x: np.hypot(rr - x[0], cc - x[1]) - x[2], x0,
+                                 loss="soft_l1", f_scale=1.0).x
+            got = _soft_l1_circle(rr, cc, x0, np.nan)
+            np.testing.assert_allclose(got, want, atol=1e-5)
+        # and it is a minimum of the loss: no nearby circle has a lower one
+        def loss(x):
+            f = np.hypot(rr - x[0], cc - x[1]) - x[2]
+            return np.sum(2.0 * (np.sqrt(1.0 + f * f) - 1.0))
+        for d in np.eye(3)[: 2 if fixed else 3]:
+            assert loss(got + 1e-3 * d) >= loss(got) and loss(got - 1e-3 * d) >= loss(got)
