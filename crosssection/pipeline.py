@@ -427,14 +427,17 @@ def _preprocess_read(rgb, path, header: Header, orientation, p: AnalysisParams, 
                               sliver_width_px=p.sliver_width_h * p.thickness_px)
         _check_clean(mask, speck_px, path)
         marks = marks_later()
-        # the voids need the mask alone: scanned beside the distances and the thinning
+        # the voids need the mask alone, the distances too, and the thinning needs no
+        # distance (only the spurs' pruning after it): the three side by side
         voids = in_background(void_stage.scan_voids, mask, hole=hole, s_min_px=s_min_px)
         running.append(voids)
         with timer("distance"):
-            dist = distance_map(mask)
+            distances = in_background(distance_map, mask)
+        running.append(distances)
         with timer("skeleton"):
             skel = skeletonize_mask(mask, l_min_px=l_min_px, method=p.skeleton_method,
-                                    distance_px=dist)
+                                    distance_px=distances)
+        dist = distances()
         if not skel.any():
             raise AnalysisError("empty skeleton", path)
         with timer("graph"):

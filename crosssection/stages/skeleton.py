@@ -906,6 +906,9 @@ def _skeleton_padded(mask, *, l_min_px, method="thinning", distance_px=None):
     _to_row_codes(f, idx)
     idx = _remove_redundant(f, w + 2, idx, mark=st)
     n_removed = 0
+    if callable(distance_px):
+        distance_px = distance_px()
+        _check_distance(distance_px, mask.shape)
     if l_min_px > 0:
         extra = None if distance_px is None else _PaddedValues(distance_px)
         idx, n_removed = _prune(f, w + 2, idx, float(l_min_px), mark=st, extra=extra)
@@ -930,12 +933,13 @@ def skeletonize_mask(mask, *, l_min_px: float, method: str = "thinning",
         thinning, or ``skimage.morphology.skeletonize`` (the reference implementation,
         slower). Both are followed by the same removal of redundant pixels and
         the same spur pruning, so the two skeletons differ only by what the thinnings do.
-    distance_px : (H, W) float array, optional
+    distance_px : (H, W) float array or callable, optional
         Distance of every ink pixel to the background. Given, a terminal branch is a spur
         when its length plus the distance at its free end is shorter than ``l_min_px`` plus
         the distance at its junction pixel: its ink reaches less than ``l_min_px`` beyond the
-        band it leaves (step 3 of the module
-        docstring).
+        band it leaves (step 3 of the module docstring). A callable without argument that
+        returns it (a step computing it on another thread) is called once, after the
+        thinning, which does not need it.
 
     Returns
     -------
@@ -951,11 +955,16 @@ def skeletonize_mask(mask, *, l_min_px: float, method: str = "thinning",
         raise ParameterError(f"l_min_px must be a finite number >= 0, got {l_min_px}")
     if method not in ("thinning", "skimage"):
         raise ParameterError(f"skeleton method must be 'thinning' or 'skimage', got {method!r}")
-    if distance_px is not None and np.shape(distance_px) != mask.shape:
-        raise ParameterError(f"distance_px has shape {np.shape(distance_px)}, the mask "
-                             f"{mask.shape}")
+    if distance_px is not None and not callable(distance_px):
+        _check_distance(distance_px, mask.shape)
     img, _ = _skeleton_padded(mask, l_min_px=l_min_px, method=method, distance_px=distance_px)
     return img[1:-1, 1:-1].astype(bool)
+
+
+def _check_distance(distance_px, shape) -> None:
+    if np.shape(distance_px) != shape:
+        raise ParameterError(f"distance_px has shape {np.shape(distance_px)}, the mask "
+                             f"{shape}")
 
 
 def neighbour_count(skel) -> np.ndarray:

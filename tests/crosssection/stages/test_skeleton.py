@@ -520,6 +520,26 @@ def test_distance_map_of_another_shape_is_refused():
     mask = _wide_band_with_branches()
     with pytest.raises(ParameterError, match="distance_px"):
         sk.skeletonize_mask(mask, l_min_px=50.0, distance_px=np.zeros((10, 10)))
+    # also when it comes later, from a callable
+    with pytest.raises(ParameterError, match="distance_px"):
+        sk.skeletonize_mask(mask, l_min_px=50.0, distance_px=lambda: np.zeros((10, 10)))
+
+
+@pytest.mark.parametrize("l_min_px", [0.0, 50.0])
+def test_a_distance_map_given_later_is_the_same_skeleton(l_min_px):
+    """A callable returning the distances (a step on another thread) is called once, after
+    the thinning, and gives the skeleton the array itself gives."""
+    mask = _wide_band_with_branches()
+    dist = cv2.distanceTransform(mask.view(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    calls = []
+
+    def later():
+        calls.append(1)
+        return dist
+
+    got = sk.skeletonize_mask(mask, l_min_px=l_min_px, distance_px=later)
+    assert calls == [1]
+    assert np.array_equal(got, sk.skeletonize_mask(mask, l_min_px=l_min_px, distance_px=dist))
 
 
 def _thin_band_with_fat_stub(reach_px):
