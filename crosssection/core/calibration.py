@@ -42,14 +42,22 @@ def _bisect_pchip(bp, c, yc, a, b):  # pragma: no cover - numba
     2000 x 2000 scan, nine times an analysis: 7.5 ms, against 2.2 ms here.
     """
     out = np.empty(yc.size)
-    last = bp.size - 2
     for j in range(yc.size):
         lo = a[j]
         hi = b[j]
         y = yc[j]
         for _ in range(60):
             m = 0.5 * (lo + hi)
-            i = min(np.searchsorted(bp, m, side="right") - 1, last)
+            # the interval by bisection on the breakpoints (m lies between the first and
+            # the last: it ends on the last interval at the last breakpoint)
+            i = 0
+            k = bp.size - 1
+            while k - i > 1:
+                mid = (i + k) // 2
+                if m >= bp[mid]:
+                    i = mid
+                else:
+                    k = mid
             s = m - bp[i]
             z = s * s
             if ((c[3, i] + c[2, i] * s) + c[1, i] * z) + c[0, i] * (z * s) < y:

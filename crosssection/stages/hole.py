@@ -315,36 +315,21 @@ def _soft_l1_circle(qr, qc, x0, radius):  # pragma: no cover - numba
     (3,) float64 array
         Centre row, centre column and radius, px.
     """
-    x = x0.copy()
-    fixed = np.isfinite(radius)
-    if fixed:
-        x[2] = radius
-    n = qr.size
-
-    def loss(x):
-        s = 0.0
-        for i in range(n):
-            dr = qr[i] - x[0]
-            dc = qc[i] - x[1]
-            f = np.sqrt(dr * dr + dc * dc) - x[2]
-            s += 2.0 * (np.sqrt(1.0 + f * f) - 1.0)
-        return s
-
-    cost = loss(x)
+    fixed = radius == radius  # not NaN
+    x0_, x1_ = x0[0], x0[1]
+    x2_ = radius if fixed else x0[2]
+    cost = _soft_l1_loss(qr, qc, x0_, x1_, x2_)
     for _ in range(200):
         a00 = a01 = a02 = a11 = a12 = a22 = 0.0
         g0 = g1 = g2 = 0.0
-        for i in range(n):
-            dr = qr[i] - x[0]
-            dc = qc[i] - x[1]
+        for i in range(qr.size):
+            dr = qr[i] - x0_
+            dc = qc[i] - x1_
             d = np.sqrt(dr * dr + dc * dc)
-            f = d - x[2]
+            f = d - x2_
             w = 1.0 / np.sqrt(1.0 + f * f)
-            if d > 0.0:
-                ur = dr / d
-                uc = dc / d
-            else:
-                ur = uc = 0.0
+            ur = dr / d if d > 0.0 else 0.0
+            uc = dc / d if d > 0.0 else 0.0
             a00 += w * ur * ur
             a01 += w * ur * uc
             a11 += w * uc * uc
@@ -375,24 +360,39 @@ def _soft_l1_circle(qr, qc, x0, radius):  # pragma: no cover - numba
             s0 = (c00 * g0 + c01 * g1 + c02 * g2) / det
             s1 = (c01 * g0 + c11 * g1 + c12 * g2) / det
             s2 = (c02 * g0 + c12 * g1 + c22 * g2) / det
+        # halved while the loss would grow
         t = 1.0
-        trial = x.copy()
+        new = cost
         for _ in range(40):
-            trial[0] = x[0] + t * s0
-            trial[1] = x[1] + t * s1
-            trial[2] = x[2] + t * s2
-            new = loss(trial)
+            new = _soft_l1_loss(qr, qc, x0_ + t * s0, x1_ + t * s1, x2_ + t * s2)
             if new <= cost:
                 break
             t *= 0.5
-        else:
+        if new > cost:
             break
-        moved = t * max(abs(s0), abs(s1), abs(s2))
-        x[:] = trial
+        x0_ += t * s0
+        x1_ += t * s1
+        x2_ += t * s2
         cost = new
-        if moved < 1e-9:
+        if t * max(abs(s0), abs(s1), abs(s2)) < 1e-9:
             break
-    return x
+    out = np.empty(3)
+    out[0] = x0_
+    out[1] = x1_
+    out[2] = x2_
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _soft_l1_loss(qr, qc, r0, c0, rad):  # pragma: no cover - numba
+    """The soft-L1 loss of :func:`_soft_l1_circle` for the circle (``r0``, ``c0``, ``rad``)."""
+    s = 0.0
+    for i in range(qr.size):
+        dr = qr[i] - r0
+        dc = qc[i] - c0
+        f = np.sqrt(dr * dr + dc * dc) - rad
+        s += 2.0 * (np.sqrt(1.0 + f * f) - 1.0)
+    return s
 
 
 def check_hole(shape, center_rc, radius_px, *, path=None) -> None:
