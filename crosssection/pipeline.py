@@ -435,8 +435,12 @@ def _preprocess_read(rgb, path, header: Header, orientation, p: AnalysisParams, 
             distances = in_background(distance_map, mask)
         running.append(distances)
         with timer("skeleton"):
-            skel = skeletonize_mask(mask, l_min_px=l_min_px, method=p.skeleton_method,
-                                    distance_px=distances)
+            try:
+                skel = skeletonize_mask(mask, l_min_px=l_min_px, method=p.skeleton_method,
+                                        distance_px=distances)
+            except BaseException:
+                distances()  # its error, first in the scan's order, is the one raised
+                raise
         dist = distances()
         if not skel.any():
             raise AnalysisError("empty skeleton", path)
@@ -733,8 +737,12 @@ def _analyze(image, params, overrides, *, warn: bool = True,
     # hashed while it is analysed: the record names the content the results come from
     is_file = isinstance(image, (str, Path))
     hashing = sha256_in_background(image) if is_file and image_sha256 is None else None
-    pre = _preprocess(image, p, timer)
-    running = [pre.void_scan]  # the steps on a thread, waited for if this fails
+    try:
+        pre = _preprocess(image, p, timer)
+    except BaseException:
+        wait_all(hashing)
+        raise
+    running = [pre.void_scan, hashing]  # the steps on a thread, waited for if this fails
     try:
         if is_file:  # named once the scan is read: a file that is not fails alone
             from crosssection.setconfig import set_not_read

@@ -288,9 +288,8 @@ class Calibration:
             k = np.clip(np.searchsorted(tw, yc, side="right") - 1, 0, len(tw) - 2)
             a, b = tn[k].copy(), tn[k + 1].copy()
             a = np.where(np.isfinite(a), a, tn[0])
-            inside = _bisect_pchip(interp.x, np.ascontiguousarray(interp.c),
-                                   np.atleast_1d(yc), np.atleast_1d(a), np.atleast_1d(b))
-            inside = inside.reshape(yc.shape)
+            inside = _bisect_pchip(interp.x, np.ascontiguousarray(interp.c), yc.ravel(),
+                                   a.ravel(), b.ravel()).reshape(yc.shape)
         out = np.where(y < tw[0], tn[0] + (y - tw[0]) / lo_slope,
                        np.where(y > tw[-1], tn[-1] + (y - tw[-1]) / hi_slope, inside))
         out = np.where(np.isfinite(y), out, np.nan)

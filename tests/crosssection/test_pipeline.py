@@ -17,7 +17,7 @@ from crosssection import analyze
 from crosssection.core import schema
 from crosssection.cli import main
 from crosssection.core.calibration import Calibration
-from crosssection.core.errors import AnalysisError, ParameterError
+from crosssection.core.errors import AnalysisError, ImageError, ParameterError
 from crosssection.quality import NetworkWarning
 from crosssection.truth.network import make_scene
 
@@ -386,6 +386,37 @@ def test_a_failed_analysis_leaves_no_step_running_and_raises_the_first_error():
         warnings.simplefilter("error")
         with pytest.raises(RuntimeWarning, match="empty slice"):
             analyze(img, **kw)
+
+
+def test_the_distances_error_comes_before_the_thinnings(monkeypatch, tmp_path):
+    """The distances run beside the thinning: when both fail, the distances' error, first in
+    the scan's order, is raised, and neither step runs on; a scan file that cannot be read
+    leaves no hashing thread behind."""
+    import threading
+
+    import crosssection.pipeline as pipeline
+
+    scene = make_scene(seed=3, n_stacks=12)
+
+    def thin(*args, **kwargs):
+        raise RuntimeError("the thinning failed")
+
+    def distances(*args, **kwargs):
+        raise ValueError("the distances failed")
+
+    monkeypatch.setattr(pipeline, "skeletonize_mask", thin)
+    monkeypatch.setattr(pipeline, "distance_map", distances)
+    with pytest.raises(ValueError, match="the distances failed"):
+        analyze(scene.rgb, px_per_mm=scene.params["px_per_mm"])
+    monkeypatch.undo()
+    monkeypatch.setattr(pipeline, "skeletonize_mask", thin)
+    with pytest.raises(RuntimeError, match="the thinning failed"):
+        analyze(scene.rgb, px_per_mm=scene.params["px_per_mm"])
+    for _ in range(5):
+        with pytest.raises(ImageError):
+            analyze(tmp_path / "missing.png")
+        assert [t for t in threading.enumerate() if t.name.startswith("foldstat-")
+                and t.is_alive()] == []
 
 
 def test_uniform_images_raise_analysis_error():

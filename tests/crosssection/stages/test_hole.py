@@ -644,3 +644,49 @@ def test_soft_l1_circle_is_scipys_least_squares(fixed):
             return np.sum(2.0 * (np.sqrt(1.0 + f * f) - 1.0))
         for d in np.eye(3)[: 2 if fixed else 3]:
             assert loss(got + 1e-3 * d) >= loss(got) and loss(got - 1e-3 * d) >= loss(got)
+
+
+def test_soft_l1_circle_where_the_data_do_not_fix_the_circle():
+    """Points that leave the circle ill-determined (a short arc of a large circle, points
+    on a line, one point repeated, a start far off, a fixed radius far from the data):
+    the fit ends no worse than ``least_squares`` from the same start, never on its start
+    unchanged when that start is not a minimum."""
+    from scipy.optimize import least_squares
+
+    from crosssection.stages.hole import _soft_l1_circle
+
+    def loss(x, rr, cc, rad):
+        f = np.hypot(rr - x[0], cc - x[1]) - rad
+        return np.sum(2.0 * (np.sqrt(1.0 + f * f) - 1.0))
+
+    a = np.linspace(-1e-3, 1e-3, 50)
+    cases = [
+        (1e4 * np.cos(a), 1e4 * np.sin(a), np.array([100.0, 3.0, 9800.0]), np.nan),
+        (np.array([448.63091285067577, -34.85314427708451, -470.143254581899]),
+         np.array([142.11733948813458, 469.46426051796914, 24.60884523717465]),
+         np.array([-184.09301012565803, 100.07642703846467, 0.0]), 383.1636874786909),
+        (np.linspace(0, 100, 40), np.full(40, 7.0), np.array([50.0, 500.0, 480.0]), np.nan),
+        (np.full(10, 3.0), np.full(10, 4.0), np.array([0.0, 0.0, 1.0]), np.nan),
+    ]
+    rng = np.random.default_rng(2)
+    for _ in range(20):
+        r = 10.0 ** rng.uniform(3, 6)
+        t = rng.uniform(0, rng.uniform(1e-3, 0.1), 30)
+        cases.append((r * np.sin(t) + rng.normal(0, 0.5, 30), r * np.cos(t),
+                      np.array([rng.normal(0, r), rng.normal(0, r), r * rng.uniform(0.5, 2)]),
+                      np.nan))
+    for rr, cc, x0, radius in cases:
+        got = _soft_l1_circle(rr, cc, x0, radius)
+        fixed = np.isfinite(radius)
+        if fixed:
+            ref = least_squares(lambda x: np.hypot(rr - x[0], cc - x[1]) - radius, x0[:2],
+                                loss="soft_l1", f_scale=1.0).x
+            ref, rad_got = np.r_[ref, radius], radius
+        else:
+            ref = least_squares(lambda x: np.hypot(rr - x[0], cc - x[1]) - x[2], x0,
+                                loss="soft_l1", f_scale=1.0).x
+            rad_got = got[2]
+        assert np.all(np.isfinite(got))
+        want = loss(ref, rr, cc, ref[2])
+        assert loss(got, rr, cc, rad_got) <= want * (1 + 1e-9) + 1e-12
+

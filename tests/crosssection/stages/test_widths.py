@@ -174,6 +174,13 @@ def test_layers_bisects_the_interpolant_as_its_own_calls_do():
         assert np.array_equal(got[inside], (0.5 * (a + b))[inside])
         assert np.isnan(got[np.isnan(y)]).all()
         assert cal.layers(float(y[0])) == got[0]
+        # any shape, in any memory order, as numpy's own elementwise calls
+        grid = y[:300].reshape(20, 15)
+        assert np.array_equal(cal.layers(grid), got[:300].reshape(20, 15), equal_nan=True)
+        assert np.array_equal(cal.layers(np.asfortranarray(grid)), cal.layers(grid),
+                              equal_nan=True)
+        assert cal.layers(np.zeros((0, 2))).shape == (0, 2)
+        assert cal.layers(grid.tolist()).shape == (20, 15)
 
 
 def test_sparse_table_is_monotone_and_inverse():
