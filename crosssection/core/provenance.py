@@ -84,13 +84,23 @@ def sha256_in_background(path):
     callable
         Called once the analysis has read the file: waits for the hash and returns
         ``(sha256, problem)``, the hex digest and None, or None and why there is none (the
-        file changed or could not be read).
+        file changed or could not be read, or is no regular file: a named pipe or a device
+        is not opened, since opening one waits for a writer, and what it holds is not there
+        to be read again).
     """
+    import stat
     import threading
 
     path = os.path.expanduser(os.fspath(path))
     before = _identity(path)
     out = {}
+    try:
+        regular = stat.S_ISREG(os.stat(path).st_mode)
+    except OSError as exc:
+        problem = f"the file could not be read again to hash it ({exc.strerror or exc})"
+        return lambda: (None, problem)
+    if not regular:
+        return lambda: (None, "it is not a regular file")
 
     def work():
         try:
