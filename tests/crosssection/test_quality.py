@@ -1168,3 +1168,34 @@ def test_an_ink_blot_read_as_a_stack_of_folds_is_flagged(tmp_path, radius_px, fl
     if flagged:
         (flag,) = [f for f in res.quality if f.code == "stubby_stacks"]
         assert flag.value == 1 and "ink blot" in flag.message
+
+
+def test_junction_blot_ratios_are_the_group_by_of_the_stack_table():
+    """Each junction's ratio reads its widest stack as a group-by of both ends' widths
+    would (NaN widths left out, NaN where no stack of it has one or where it has no stack),
+    bit for bit, on random tables with ends at no junction (-1) and at junctions missing
+    from the junction table."""
+    from crosssection.quality import junction_blot_ratios
+
+    def by_groups(radius_px, junctions, stacks, px_per_mm):
+        ends = pd.concat([stacks[["junction_a", "width_mm"]].set_axis(["j", "w"], axis=1),
+                          stacks[["junction_b", "width_mm"]].set_axis(["j", "w"], axis=1)])
+        widest_px = ends[ends["j"] >= 0].groupby("j")["w"].max() * px_per_mm
+        half = widest_px.reindex(junctions["junction_id"].to_numpy()).to_numpy() / 2.0
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.asarray(radius_px, float) / half
+
+    rng = np.random.default_rng(8)
+    for it in range(500):
+        m, k = int(rng.integers(1, 60)), int(rng.integers(1, 40))
+        w = rng.uniform(0.0, 2.0, m)
+        w[rng.random(m) < 0.2] = np.nan
+        if it % 7 == 0:
+            w[:] = np.nan
+        stacks = pd.DataFrame({"junction_a": rng.integers(-1, k + 3, m),
+                               "junction_b": rng.integers(-1, k + 3, m), "width_mm": w})
+        junctions = pd.DataFrame({"junction_id": rng.permutation(k + 2)[:k]})
+        radius = rng.uniform(0.0, 30.0, k)
+        px_per_mm = float(rng.uniform(10, 100))
+        assert np.array_equal(junction_blot_ratios(radius, junctions, stacks, px_per_mm),
+                              by_groups(radius, junctions, stacks, px_per_mm), equal_nan=True)
