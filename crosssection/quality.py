@@ -868,14 +868,15 @@ def junction_blot_ratios(radius_px, junctions, stacks, px_per_mm) -> np.ndarray:
     j = np.concatenate([stacks["junction_a"].to_numpy(), stacks["junction_b"].to_numpy()])
     w = np.tile(stacks["width_mm"].to_numpy(dtype=float), 2)
     at = j >= 0
+    if not at.any():
+        return np.full(len(radius_px), np.nan)
     ids, slot = np.unique(j[at], return_inverse=True)
     widest = np.full(len(ids), -np.inf)
     np.fmax.at(widest, slot, w[at])
     widest[widest == -np.inf] = np.nan  # a junction whose stacks have no width
     want = junctions["junction_id"].to_numpy()
-    k = np.minimum(np.searchsorted(ids, want), max(len(ids) - 1, 0))
-    found = (ids[k] == want) if len(ids) else np.zeros(len(want), bool)
-    half = np.where(found, widest[k] * px_per_mm if len(ids) else np.nan, np.nan) / 2.0
+    k = np.minimum(np.searchsorted(ids, want), len(ids) - 1)
+    half = np.where(ids[k] == want, widest[k] * px_per_mm, np.nan) / 2.0
     with np.errstate(invalid="ignore", divide="ignore"):
         return radius_px / half
 

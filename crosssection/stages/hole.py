@@ -394,7 +394,9 @@ def _soft_l1_steps(qr, qc, x0, radius):  # pragma: no cover - numba
             # halved while the loss would not fall; within 1e-4 px of the minimum the loss
             # changes by less than its rounding, and the whole steps, whose normal matrix
             # is steeper than the loss (weights w against the loss' w^3), are taken as
-            # they are
+            # they are (the loss read again only if a larger step follows)
+            if cost != cost:
+                cost = _soft_l1_loss(qr, qc, x0_, x1_, x2_)
             new = cost
             for _ in range(40):
                 new = _soft_l1_loss(qr, qc, x0_ + t * s0, x1_ + t * s1, x2_ + t * s2)
@@ -404,11 +406,11 @@ def _soft_l1_steps(qr, qc, x0, radius):  # pragma: no cover - numba
             if not new < cost:
                 break
             cost = new
+        else:
+            cost = np.nan
         x0_ += t * s0
         x1_ += t * s1
         x2_ += t * s2
-        if t == 1.0 and step <= 1e-4:
-            cost = _soft_l1_loss(qr, qc, x0_, x1_, x2_)
     out = np.empty(3)
     out[0] = x0_
     out[1] = x1_
