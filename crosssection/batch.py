@@ -55,9 +55,10 @@ Design choices
   ``OUT_DIR/.batch.lock``, released by the system when the process dies, so that a batch
   killed does not block its re-run), and a second batch is refused in one line.
 - The parameters hash covers the effective analysis parameters (:func:`effective_params`:
-  every default filled in, derived ones such as ``s_min`` computed), the SHA-256 of the
-  image and of the calibration file, and the package version: changing any of them redoes
-  the image, which replaces its earlier results; a re-run with the same options is silent.
+  every default filled in, derived ones such as ``s_min`` computed; a scale left to its
+  default counts apart from the same scale given, which the ``scale_assumed`` check tells
+  apart), the SHA-256 of the image and of the calibration file, and the package version:
+  changing any of them redoes the image, which replaces its earlier results; a re-run with the same options is silent.
   ``summary.json`` records the image's and the calibration's SHA-256, their paths as given
   and resolved, and the calibration's widths (``inputs``, the record ``analyze`` writes,
   with the scan's path as the batch was given it; the same in ``batch.inputs``), so that an
@@ -317,6 +318,10 @@ def params_hash(params: dict, image_sha: str, *, seed=None) -> str:
     """
     payload = {"params": effective_params(params), "image": image_sha, "version": __version__,
                "seed": seed}
+    if params.get("px_per_mm") is None:
+        # read at the default scale and flagged so: giving that scale later redoes the image,
+        # whose summary would otherwise keep the flag (the hash of a given scale is unchanged)
+        payload["scale_assumed"] = True
     blob = json.dumps(payload, sort_keys=True, default=str).encode()
     return hashlib.sha256(blob).hexdigest()[:16]
 
@@ -905,6 +910,9 @@ def changed_inputs(task: ImageTask) -> list[str]:
         before, after = info.get("params") or {}, task.params
     changed = [k for k in dict.fromkeys([*after, *before])
                if before.get(k) != after.get(k)]
+    given_before = (info.get("params") or {}).get("px_per_mm") is not None
+    if "px_per_mm" not in changed and given_before != (task.params.get("px_per_mm") is not None):
+        changed.append("px_per_mm given" if not given_before else "px_per_mm left to its default")
     if info.get("version") != __version__:
         changed.append("package version")
     return changed or ["image or calibration file content"]

@@ -28,7 +28,7 @@ from pathlib import Path
 
 from crosssection import quality
 from crosssection.core import schema
-from crosssection.core.errors import OutputError, output_error
+from crosssection.core.errors import OutputError, one_line_path, output_error
 from crosssection.core.fileio import check_out, temporary_files
 from crosssection.core.records import is_record, output_of, read_record
 from crosssection.params import AnalysisParams, add_analysis_arguments
@@ -427,9 +427,9 @@ def run(args) -> int:
     written = result.write(out, figure=not args.no_figure, steps=args.steps)
     removed = remove_stale(out, "analyze", written.values()) if earlier else []
     s = result.summary
-    print(f"{args.image}: {s['n_junctions']} junctions, {s['n_stacks']} stacks, "
-          f"{s['n_branches']} branches, {s['n_voids']} voids, {rod_length_text(s)}"
-          f" -> {args.out}{_removed_note(removed)}")
+    print(f"{one_line_path(args.image)}: {s['n_junctions']} junctions, {s['n_stacks']} "
+          f"stacks, {s['n_branches']} branches, {s['n_voids']} voids, {rod_length_text(s)}"
+          f" -> {one_line_path(args.out)}{_removed_note(removed)}")
     return 0
 
 
@@ -457,6 +457,7 @@ def run_steps(args) -> int:
 
     from crosssection.core.provenance import resolved_path
     from crosssection.pipeline import preprocess, write_step_images
+    from crosssection.result import _remove_if_empty
     from crosssection.tables import recorded_parameters
 
     _check_image_given(args.image)
@@ -471,6 +472,7 @@ def run_steps(args) -> int:
     _warn_frame(pre, params, args.image, scale_given=args.px_per_mm is not None)
     out = Path(args.out).expanduser()
     earlier = earlier_run(out)
+    created = not out.exists()
     try:
         with renamed_together():  # never one run's images beside another's
             made_from = {"image": None if pre.path is None else resolved_path(pre.path),
@@ -484,11 +486,14 @@ def run_steps(args) -> int:
             # written last, as summary.json is: its presence marks the images complete
             record = write_json(out / STEPS_RECORD, steps_record(pre, params, paths.values()))
     except OutputError:
+        _remove_if_empty(out, created)
         raise
     except OSError as exc:
+        _remove_if_empty(out, created)
         raise output_error(exc, out) from None
     removed = remove_stale(out, "steps", [*paths.values(), record]) if earlier else []
-    print(f"{args.image}: {len(paths)} step images -> {args.out}{_removed_note(removed)}")
+    print(f"{one_line_path(args.image)}: {len(paths)} step images -> "
+          f"{one_line_path(args.out)}{_removed_note(removed)}")
     return 0
 
 

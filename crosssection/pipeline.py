@@ -497,8 +497,9 @@ FRAME_CHECKS = ("pages", "see_through", "scale_assumed", "scale_mismatch", "non_
 
 
 def _scale_assumed(pre: Preprocessed, scale_given: bool) -> bool:
-    """A file read at the default scale: no resolution given, none recorded in the file."""
-    return not scale_given and pre.path is not None and pre.file_px_per_mm is None
+    """A scan read at the default scale: no resolution given, none recorded in the file (an
+    array records none)."""
+    return not scale_given and pre.file_px_per_mm is None
 
 
 def frame_flags(pre: Preprocessed, params: AnalysisParams, *, scale_given: bool = True) -> list:

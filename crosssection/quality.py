@@ -18,8 +18,9 @@ see_through              pixels inside the hole that an alpha channel made    > 
                          the hole's pixels
 no_calibration           no width calibration given: layers from the width    always flagged
                          law read from the scan (or width = n h)
-scale_assumed            a file that records no resolution, read without a    always flagged
-                         px_per_mm given (at the default)
+scale_assumed            a scan that records no resolution (an array, or a    always flagged
+                         file without one), read without a px_per_mm given
+                         (at the default)
 scale_mismatch           px_per_mm used / the resolution the file records     off by > 2 %
                          (a scanner's: 100 dpi or more)
 non_square               the file's recorded resolution along x / along y (a   off by > 1 %
@@ -632,8 +633,8 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
         Pixels beside the ink darker than the ink, in pieces, over the ink's (the same
         function's ``on_ink``): the ``marks_on_ink`` check.
     scale_assumed : bool
-        The scan is a file read at the default ``px_per_mm``: none given, none recorded in
-        the file (the ``scale_assumed`` check).
+        The scan is read at the default ``px_per_mm``: none given, none recorded in the
+        file (an array records none; the ``scale_assumed`` check).
     scale_given : bool
         Whether ``px_per_mm`` was given (False: the default, named so by ``scale_mismatch``).
     odd_steps : sequence of (float, float), optional
@@ -670,7 +671,7 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
     if scale_assumed:
         # a file recording two resolutions records no one scale (``non_square`` says which)
         recorded = ("the file records no single one (its axes differ)" if file_dpi_xy
-                    else "none recorded in the file")
+                    else "the scan records none that a scanner writes (100 to 50 800 dpi)")
         flags.append(QualityFlag(
             "scale_assumed", f"no resolution given and {recorded}: read at "
             f"the default {params.px_per_mm:g} px/mm ({25.4 * params.px_per_mm:.0f} dpi); "

@@ -63,7 +63,9 @@ Protocol
 
 Outputs (same layout as quench, :func:`simulate.ensemble.run_ensemble`): ``DIR/configs.csv``
 (:data:`CONFIG_COLUMNS`: epsilon = 1/(2 pi R) of the wall, wall_radius, thickness,
-contact_distance, rg and epsilon_rg = 1/(2 pi Rg), energy_total = energy_bending (a hard wall
+contact_distance, rg (about the wall's centre, as the quench's Rg is taken about its
+potential's, paper Eq. (11); a rod pressed to one side of the wall reads 1-2 % more than
+about its own centroid) and epsilon_rg = 1/(2 pi Rg), energy_total = energy_bending (a hard wall
 stores no confinement energy), N_l = n_stacks, N_br = n_branches, junctions, voids, the final
 checks, wall_s, then counters ``n_*``), ``DIR/branches.csv``, ``stacks.csv``, ``voids.csv``
 (:func:`simulate.contacts.analyze_rod` with ``lam = 0`` and contact distance 3 h, see
@@ -1181,7 +1183,10 @@ def add_subparser(sub):
                         "circumference holds the rod; experiments: 8-19); with the default "
                         "thickness (h = 0.005 R) the rod's segments must be more than 2 h "
                         "long: epsilon > 0.005 N / pi, 3.2 at N = 2000 (fewer --segments "
-                        "below)")
+                        "below), and the rod fills 2 h/R epsilon of the disk, at most "
+                        f"{100 * MAX_AREA_FRACTION:.0f} %%: epsilon below "
+                        f"{MAX_AREA_FRACTION / (2 * H_OVER_R):.0f} (a thinner --thickness "
+                        "above; at most 100)")
     p.add_argument("--segments", type=int, default=CompactParams.n_segments,
                    help="number of segments N of the rod of length L (default "
                         f"{CompactParams.n_segments})")

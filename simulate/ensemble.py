@@ -911,8 +911,8 @@ def _add_common(p, command):
                         "must fit inside (default: none)")
     p.add_argument("--contact-distance", type=float, default=None,
                    help="contact cut-off of the analysis, in units of L, from "
-                        f"{MIN_CONTACT_DISTANCE:g} to {CONTACT_DISTANCE_MAX:g} (default half a "
-                        "segment, 1/(2N))")
+                        f"{MIN_CONTACT_DISTANCE:g} to {CONTACT_DISTANCE_MAX:g} or half a "
+                        "segment if larger (default half a segment, 1/(2N))")
     p.add_argument("--workers", type=int, default=1, help="local worker processes (default 1)")
     p.add_argument("--scheduler", default=None,
                    help="Dask scheduler address, e.g. tcp://host:8786 (default: local workers)")
@@ -932,9 +932,12 @@ def _add_common(p, command):
     p.set_defaults(func=run, command=command)
 
 
-#: the largest contact distance a quench or anneal takes, in units of L (the paper's rods
-#: have a radius of gyration of 0.05: 0.99 made the rod one stack of one branch, silently)
-CONTACT_DISTANCE_MAX = 0.1
+#: the largest contact distance a quench or anneal takes, in units of L, unless half a
+#: segment (the default) is larger: twice the mean gap between neighbouring passes of a rod
+#: folded at the paper's radius of gyration, 0.05 (disk area over rod length, about 0.015);
+#: beyond, passes count in contact across the gaps between them (0.1 made one rod of 300
+#: segments a single stack of one branch, 0.05 a stack of 3, silently; 0.99 did at any N)
+CONTACT_DISTANCE_MAX = 0.03
 
 
 def _finite(name, value, *, low=None, low_open=False, allow_none=False):
@@ -1016,6 +1019,13 @@ def params_from_args(args) -> dict:
                              f"paper's at {N_SEGMENTS} segments): above, nearly every start "
                              "shape crosses itself and none is drawn; lower --noise or raise "
                              f"--segments, got {args.noise:g}")
+    if noise == 0.0 and args.method == "lbfgs":
+        # the straight start is a stationary point of the energy (a saddle): a gradient
+        # method stays on it and returns the straight rod, where Powell's line searches fold it
+        raise ParameterError("--noise 0 with --method lbfgs: the straight start rod is a "
+                             "stationary point of the energy, which a gradient method does "
+                             "not leave (every configuration would be the straight rod); give "
+                             "--noise > 0 or --method powell")
     params = dict(command=args.command, n_configs=args.n_configs, n_segments=args.segments,
                   lam=lam, noise=noise, seed=args.seed,
                   method=args.method,
@@ -1041,13 +1051,14 @@ def params_from_args(args) -> dict:
                              f"{MIN_CONTACT_DISTANCE:g}: use at most "
                              f"{math.floor(0.5 / MIN_CONTACT_DISTANCE + 1e-9)} segments or give "
                              "--contact-distance")
-    if cd is not None and not MIN_CONTACT_DISTANCE <= cd <= CONTACT_DISTANCE_MAX:
+    most = max(CONTACT_DISTANCE_MAX, default_contact_distance(args.segments))
+    if cd is not None and not MIN_CONTACT_DISTANCE <= cd <= most:
         # below, the analysis' own range (simulate.contacts.analyze_rod), on which every
-        # analysis would fail; above, every pass of a folded rod touches every other
+        # analysis would fail; above, passes of a folded rod touch across their gaps
         raise ParameterError(f"--contact-distance must be from {MIN_CONTACT_DISTANCE:g} up to "
-                             f"{CONTACT_DISTANCE_MAX:g} (twice a folded rod's radius of "
-                             "gyration, about 0.05: beyond, its whole rod is one stack), got "
-                             f"{cd:g}")
+                             f"{most:g} (twice the mean gap between the passes of a rod "
+                             "folded to a radius of gyration of 0.05, or half a segment if "
+                             f"larger: beyond, passes touch across their gaps), got {cd:g}")
     wall, half = params["wall_radius"], 0.5 / args.segments
     if wall is not None and wall <= half:
         # a segment is a straight chord 1/N long: a disk no wider holds it only as its

@@ -300,6 +300,9 @@ MIN_SHEET_PX = 1.0
 MAX_BLUR_PX = 50.0
 #: Largest scan noise (grey levels of 8 bits): the contrast between the ink and the paper.
 MAX_NOISE_SIGMA = 255.0
+#: Most smears, specks or pinholes of one scene: a hundred times the defaults' largest count
+#: (each is drawn in turn; 1e8 smears ran for minutes before any was refused).
+MAX_MARKS = 1000
 #: Largest |coordinate| of a rod, in units of the rod length L: a rod's nodes lie within L of
 #: one another and the simulations centre it on the origin or its wall, so |x| is of order 1;
 #: a thousand times that still leaves the squared distances of the analysis and of the
@@ -1758,6 +1761,9 @@ def _defects(clean: bool, given: dict, has_hole: bool) -> dict:
         v = d[k]
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
             raise ParameterError(f"{k} must be a whole number >= 0, got {v!r}")
+        if v > MAX_MARKS:
+            raise ParameterError(f"{k} must be at most {MAX_MARKS} (a hundred times the "
+                                 f"scan defaults' largest count), got {v!r}")
     q = d["jpeg_quality"]
     if q is not None and (isinstance(q, bool) or not isinstance(q, (int, np.integer))
                           or not 0 <= q <= 100):
@@ -2203,6 +2209,15 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
     tables[LAYER_PIECES] = _layer_piece_table(tables["stacks"], pieces, px_per_mm)
     for message in truth_warnings:
         warnings.warn(message, TruthWarning, stacklevel=2)
+    if rod_length_mm is None and rod_thickness is None and not frame.gap_ok:
+        # the scale chosen here was capped by max_size_px (the ResolutionWarning above says
+        # so): passes the truth keeps apart may be drawn merged, and validate must not count
+        # the scene as a truth
+        truth_warnings.append(
+            f"rod length capped at {frame.rod_length_mm:.1f} mm by max_size_px = "
+            f"{max_size_px}: passes farther apart than the contact distance are not "
+            "guaranteed a visible gap, and the drawn bands may merge stacks the truth keeps "
+            "apart (a thinner sheet, a lower px_per_mm or a larger max_size_px keeps them)")
     summary = _summary(analysis, frame, tables, ink_mask, px_per_mm=px_per_mm)
     summary["truth_warnings"] = truth_warnings
     # a rod coarser than the truth is validated from: warned above as a range, and recorded
@@ -2853,10 +2868,11 @@ def _render_directory_locked(sim_dir, out_dir, *, configs=None, limit=None, prog
                     short_seen.add(short)
                     warnings.warn(f"{out_dir}: {short}", ScanRangeWarning, stacklevel=3)
                 for w in caught:
-                    # the scan and rod ranges are the run's (warned once); a truth check is
-                    # the scene's own
-                    if issubclass(w.category, TruthWarning):
-                        warnings.warn(f"{folder}: {w.message}", TruthWarning, stacklevel=3)
+                    # the scan and rod ranges are the run's (warned once); a truth check or
+                    # the scale of the drawing is the scene's own
+                    if issubclass(w.category, QualityWarning) \
+                            and not issubclass(w.category, ScanRangeWarning):
+                        warnings.warn(f"{folder}: {w.message}", w.category, stacklevel=3)
                 if not recorded:
                     # before the first scene: a folder never holds scenes without their record
                     write_json(out_dir / RENDER_RECORD, record)
@@ -2973,13 +2989,13 @@ def add_subparser(sub) -> None:
                         f"{VALIDATED_JPEG_QUALITY}: a warning)")
     p.add_argument("--smears", type=int, default=None,
                    help=f"number of light-blue smears, rejected by the threshold (default "
-                        f"{d['smears']}, 0 with --clean)")
+                        f"{d['smears']}, 0 with --clean; at most {MAX_MARKS})")
     p.add_argument("--specks", type=int, default=None,
                    help=f"number of small ink specks in the paper, removed by cleaning "
-                        f"(default {d['specks']}, 0 with --clean)")
+                        f"(default {d['specks']}, 0 with --clean; at most {MAX_MARKS})")
     p.add_argument("--pinholes", type=int, default=None,
                    help=f"number of paper-coloured pinholes in wide bands (default "
-                        f"{d['pinholes']}, 0 with --clean)")
+                        f"{d['pinholes']}, 0 with --clean; at most {MAX_MARKS})")
     p.add_argument("--plate", default=None, type=_plate_arg,
                    help=f"plate around the hole: {', '.join(PLATE_NAMES)}, an RGB triple R,G,B "
                         "(0-255) or none (default "

@@ -64,15 +64,25 @@ _NUMERIC_TRUTH = {
 _SUMMARY_TOTALS = ["rod_length_mm", "n_branches", "total_energy"]
 
 
+#: The largest junction matching radius (px) scoring takes: the default is 3 h (15 px at
+#: 50 px/mm); a radius of a large scene's half width matches any junction to any other.
+MAX_MATCH_PX = 1000.0
+
+
 def _check_match_px(value, name: str) -> None:
-    """Raise ParameterError unless ``value`` is None or a finite number > 0."""
+    """Raise ParameterError unless ``value`` is None or a finite number in (0,
+    :data:`MAX_MATCH_PX`]."""
     if value is None:
         return
     ok = (not isinstance(value, bool) and isinstance(value, (int, float, np.number))
           and math.isfinite(value) and value > 0)
+    shown = f"{value:g}" if isinstance(value, (float, np.floating)) else repr(value)
     if not ok:
-        shown = f"{value:g}" if isinstance(value, (float, np.floating)) else repr(value)
         raise ParameterError(f"must be a finite number > 0, got {shown}", name)
+    if value > MAX_MATCH_PX:
+        raise ParameterError(f"must be at most {MAX_MATCH_PX:g} px (the default is 3 sheet "
+                             "thicknesses: a radius of half a scene matches any junction to "
+                             f"any other), got {shown}", name)
 
 
 def read_truth(truth_dir) -> tuple[dict, dict]:

@@ -24,6 +24,21 @@ def printable(path) -> str:
         return text.encode("utf-8", "backslashreplace").decode("utf-8")
 
 
+def one_line_path(path) -> str:
+    """``path`` printable (:func:`printable`) and on one line: a line break in a file name
+    becomes a space, so that a message naming the file stays one line.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+
+    Returns
+    -------
+    str
+    """
+    return " ".join(printable(path).splitlines())
+
+
 class FoldstatError(Exception):
     """Base class of every expected failure of the toolkit.
 
@@ -44,7 +59,7 @@ class FoldstatError(Exception):
         """The message shown to the user: ``"<file>: <cause>"``."""
         msg = " ".join(printable(self.cause).split())
         # a file name holding a line break stays on the one line, as in warnings
-        return f"{' '.join(printable(self.path).splitlines())}: {msg}" if self.path else msg
+        return f"{one_line_path(self.path)}: {msg}" if self.path else msg
 
 
 class ImageError(FoldstatError):

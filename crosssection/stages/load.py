@@ -69,6 +69,7 @@ import numpy as np
 from numba import njit
 
 from crosssection.core.errors import ImageError
+from crosssection.params import _MAX_PX_PER_MM
 
 MIN_SIDE_PX = 16
 _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -183,8 +184,15 @@ def rgb_and_opacity(arr, *, path=None) -> tuple[np.ndarray, np.ndarray | None]:
     Raises
     ------
     ImageError
-        Grayscale, wrong shape, bad dtype or values, too small.
+        Grayscale, wrong shape, bad dtype or values, too small, or a masked array.
     """
+    if np.ma.isMaskedArray(arr) and np.ma.getmask(arr) is not np.ma.nomask \
+            and np.ma.getmask(arr).any():
+        # its mask would be dropped unseen; what the masked pixels are (paper, or outside
+        # the hole) is the caller's to say
+        raise ImageError("masked array: the mask is not used; fill the masked pixels with "
+                         "the paper's colour (numpy.ma.filled(a, 255) for 8-bit, 1.0 for "
+                         "float) or give the hole", path)
     a = np.asarray(arr)
     if a.ndim == 2 or (a.ndim == 3 and a.shape[2] == 1):
         raise ImageError("grayscale image: an RGB scan of blue ink is needed to threshold "
@@ -752,6 +760,9 @@ def _read_pillow(path: Path) -> np.ndarray:
 #: Recorded resolutions below this (dpi) are not a scanner's: 72 and 96 dpi are what image
 #: software writes by default, whatever the scan.
 MIN_SCANNER_DPI = 100.0
+#: Recorded resolutions above this (dpi: the largest scale an analysis takes) are no scan's
+#: either.
+MAX_SCANNER_DPI = 25.4 * _MAX_PX_PER_MM
 
 
 class Header(NamedTuple):
@@ -772,7 +783,8 @@ def recorded_header(path) -> Header:
 
     The resolution: scanners write it into the file (PNG ``pHYs``, TIFF ``XResolution``, JPEG
     JFIF density; 1200 dpi = 47.24 px/mm); image software writes 72 or 96 dpi whatever the
-    image, so a value below :data:`MIN_SCANNER_DPI`, a missing or unreadable one give None. A
+    image, so a value below :data:`MIN_SCANNER_DPI` or above :data:`MAX_SCANNER_DPI`, a
+    missing or unreadable one give None. A
     different resolution along the rows (x) and the columns (y) (more than 1 %) gives None
     and the two as ``dpi_xy``: such pixels are not square, and every length read from them
     is off along one axis. The images (TIFF pages, animation frames): the loader decodes the
@@ -801,7 +813,8 @@ def recorded_header(path) -> Header:
         x, y = (float(v) for v in dpi)
     except (TypeError, ValueError):
         return Header(None, pages)
-    if not (math.isfinite(x) and math.isfinite(y)) or min(x, y) < MIN_SCANNER_DPI:
+    if not (math.isfinite(x) and math.isfinite(y)) or min(x, y) < MIN_SCANNER_DPI \
+            or max(x, y) > MAX_SCANNER_DPI:
         return Header(None, pages)
     if abs(x - y) > 0.01 * max(x, y):
         return Header(None, pages, (x, y))

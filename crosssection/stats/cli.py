@@ -143,9 +143,11 @@ def check_options(args) -> None:
             seen.setdefault(name, d)
     check_out(args.out)
     n_boot, n_mc = resamples(args)
-    for flag, v in (("--seed", args.seed), ("--n-boot", n_boot), ("--n-mc", n_mc)):
+    # a p-value needs a resample: --n-mc takes 1 or more (0 is refused below, saying why)
+    for flag, v, least in (("--seed", args.seed, 0), ("--n-boot", n_boot, 0),
+                           ("--n-mc", n_mc, 1)):
         if v < 0:
-            raise ParameterError(f"must be an integer >= 0, got {v}", flag)
+            raise ParameterError(f"must be an integer >= {least}, got {v}", flag)
     for flag, v in (("--n-boot", n_boot), ("--n-mc", n_mc)):
         if v > MAX_RESAMPLES:
             raise ParameterError(f"must be at most {MAX_RESAMPLES}, got {v}", flag)

@@ -590,10 +590,11 @@ def load_simulation(folder, *, set_name=None) -> Ensemble:
     # the simulator writes configs.csv's counts and the tables from the same analysis: a
     # difference is a table truncated or edited (or tables of two runs mixed)
     table_note = "; ".join(filter(None, (
-        _check_config_counts(folder / table, df, cfg, key, what)
-        for table, df, key, what in (("branches.csv", br, "n_branches", "branches"),
-                                     ("stacks.csv", st, "n_stacks", "stacks"),
-                                     ("voids.csv", vo, "n_voids", "voids")))))
+        *(_check_config_counts(folder / table, df, cfg, key, what)
+          for table, df, key, what in (("branches.csv", br, "n_branches", "branches"),
+                                       ("stacks.csv", st, "n_stacks", "stacks"),
+                                       ("voids.csv", vo, "n_voids", "voids"))),
+        _check_lengths(folder / "branches.csv", br["length"]))))
     configs = pd.DataFrame({
         "set": name, "config_id": cfg["config_id"].astype(str), "N_l": cfg["n_stacks"],
         "N_br": cfg["n_branches"], "n_voids": cfg["n_voids"], "epsilon": cfg["epsilon"],
@@ -765,10 +766,11 @@ def load_image_output(folder, *, set_name: str, config_id: str | None = None,
     # a table cut short (or edited) is used as it is: its rows are the scan's counts too,
     # so that N_br of the whole system is that of bulk and periphery (and the fits' values)
     table_note = "; ".join(filter(None, (
-        _check_count(folder / table, len(df), summary.get(key), what)
-        for table, df, key, what in (("stacks.csv", st, "n_stacks", "stacks"),
-                                     ("branches.csv", br, "n_branches", "branches"),
-                                     ("voids.csv", vo, "n_voids", "voids")))))
+        *(_check_count(folder / table, len(df), summary.get(key), what)
+          for table, df, key, what in (("stacks.csv", st, "n_stacks", "stacks"),
+                                       ("branches.csv", br, "n_branches", "branches"),
+                                       ("voids.csv", vo, "n_voids", "voids"))),
+        _check_lengths(folder / "branches.csv", br["length_mm"] / L, f", L = {L:.4g} mm"))))
     n_br_map = dict(zip(st["stack_id"], st["n_br"]))
     rec_l, rec_s = _recorded_limits(summary)
     # a summary that does not record its limits (written by other tools) gets the
@@ -889,6 +891,29 @@ def _check_count(path: Path, rows: int, counted, what: str) -> str:
         return ""
     text = (f"{path}: holds {rows} {what} where summary.json counts {counted:g} "
             f"(truncated or edited?); the {rows} rows are used")
+    warnings.warn(text, QualityWarning, stacklevel=4)
+    return text
+
+
+def _check_lengths(path: Path, length_L, of_rod: str = "") -> str:
+    """Warn when branches are longer than the rod they are parts of (``l / L > 1``): a table
+    edited, or read with another rod's length; such values dominate the means and fits
+    they enter, which use them as read.
+
+    Returns
+    -------
+    str
+        The warning's text (the report records it), "" when every branch fits in its rod.
+    """
+    v = np.asarray(length_L, float)
+    with np.errstate(invalid="ignore"):
+        over = v > 1.0 + 1e-9
+    if not over.any():
+        return ""
+    n = int(over.sum())
+    text = (f"{path}: {n} branch{'es' if n > 1 else ''} longer than the rod (l / L up to "
+            f"{np.nanmax(v[over]):.3g}{of_rod}): the table or the rod length is wrong; "
+            f"{'they are' if n > 1 else 'it is'} used as read")
     warnings.warn(text, QualityWarning, stacklevel=4)
     return text
 
@@ -1131,6 +1156,20 @@ def _check_failures(folder: Path) -> str:
     return text
 
 
+def _enclosing_batch(folder: Path) -> Path | None:
+    """The batch output a folder of per-image folders lies in (a set's folder, ``OUT/<set>``,
+    or one level of a nested set's), when the folder holds no ``index.csv`` or
+    ``batch.json`` of its own: its nearest parent that does, None without one."""
+    if (folder / "index.csv").is_file() or (folder / "batch.json").is_file():
+        return None
+    # the path as given names the batch's files in the warnings, where it can
+    plain = ".." not in folder.parts and folder.parts
+    for parent in folder.parents if plain else folder.resolve().parents:
+        if (parent / "index.csv").is_file() or (parent / "batch.json").is_file():
+            return parent
+    return None
+
+
 def load_batch(folder, *, l_min_mm=RECORDED, s_min_mm2=RECORDED) -> Ensemble:
     """Read every per-image folder of a batch output.
 
@@ -1145,6 +1184,11 @@ def load_batch(folder, *, l_min_mm=RECORDED, s_min_mm2=RECORDED) -> Ensemble:
     says, scans the analysis flagged (one :class:`FlaggedScanWarning` per scan, or per set
     when many) and a detection limit given below the analysis' own (one
     :class:`DetectionLimitWarning` per set).
+
+    A folder inside a batch output (a set's folder, ``OUT/<set>``) is read through that
+    batch's ``index.csv`` and ``batch.json``, keeping the images below the folder: scans the
+    batch failed, still had pending or no longer has (an earlier run's folders) stay out, and
+    an unfinished batch is said, as for the whole batch.
 
     Parameters
     ----------
@@ -1169,7 +1213,14 @@ def load_batch(folder, *, l_min_mm=RECORDED, s_min_mm2=RECORDED) -> Ensemble:
     _limit(l_min_mm, "l_min_mm")
     _limit(s_min_mm2, "s_min_mm2")
     parts, notes = [], []
-    found = _batch_image_folders(folder, notes)
+    given, root = folder, _enclosing_batch(folder)
+    if root is None:
+        found = _batch_image_folders(folder, notes)
+    else:
+        inside = folder.resolve()
+        found = [(s, c, img) for s, c, img in _batch_image_folders(root, notes)
+                 if img.resolve().is_relative_to(inside)]
+        folder = root
     for set_name, cid, img in found:
         try:
             parts.append(load_image_output(img, set_name=set_name, config_id=cid,
@@ -1185,7 +1236,9 @@ def load_batch(folder, *, l_min_mm=RECORDED, s_min_mm2=RECORDED) -> Ensemble:
     if not parts:
         why = ("its index.csv lists no scan as done (ok or skipped)"
                if (folder / "index.csv").is_file() else "no */summary.json")
-        raise ConfigError(f"batch output holds no finished image ({why})", folder)
+        if root is not None:
+            why = f"the batch's index.csv at {root} lists none below it as done"
+        raise ConfigError(f"batch output holds no finished image ({why})", given)
     note = _check_finished(folder, len(found))
     failed = _check_failures(folder)
     ens = Ensemble.concat(parts)

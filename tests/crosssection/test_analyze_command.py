@@ -11,6 +11,7 @@ import sys
 import warnings
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -578,11 +579,17 @@ def test_a_file_without_a_resolution_read_at_the_default_scale_is_flagged(small_
         as_object = analyze(str(small_scan), AnalysisParams(px_per_mm=49.5))
         at_default = analyze(str(small_scan), AnalysisParams(px_per_mm=50))
         told = analyze(str(small_scan), AnalysisParams(), scale_given=True)
-    for r in (assumed, default_object, replaced):
+        # an array records no resolution: read at the default, it is flagged as a file is
+        from PIL import Image
+
+        pixels = np.asarray(Image.open(small_scan).convert("RGB"))
+        from_array = analyze(pixels)
+        array_given = analyze(pixels, px_per_mm=50)
+    for r in (assumed, default_object, replaced, from_array):
         assert "scale_assumed" in r.summary["quality"]["codes"]
     assert any(issubclass(w.category, crosssection.quality.ScaleAssumedWarning)
                and "a 1200-dpi scan reads -5.5 %" in str(w.message) for w in caught)
-    for r in (given, as_object, at_default, told):
+    for r in (given, as_object, at_default, told, array_given):
         assert "scale_assumed" not in r.summary["quality"]["codes"]
     # the record gives the same analysis back, the scale it was read at given
     again = AnalysisParams(**default_object.summary["parameters"])
@@ -590,7 +597,42 @@ def test_a_file_without_a_resolution_read_at_the_default_scale_is_flagged(small_
     capfd.readouterr()
     main = crosssection.cli.main
     assert main(["analyze", str(small_scan), "--out", str(tmp_path / "a"), "--no-figure"]) == 0
-    assert "no resolution given and none recorded" in capfd.readouterr().err
+    assert "no resolution given and the scan records none that a scanner writes" in \
+        capfd.readouterr().err
     assert main(["analyze", str(small_scan), "--out", str(tmp_path / "b"), "--no-figure",
                  "--px-per-mm", "50"]) == 0
     assert "no resolution given" not in capfd.readouterr().err
+
+
+def test_a_line_break_in_a_file_name_keeps_each_message_on_one_line(small_scan, tmp_path,
+                                                                   capfd):
+    scan = tmp_path / "a\nb.png"
+    shutil.copy(small_scan, scan)
+    capfd.readouterr()
+    main = crosssection.cli.main
+    assert main(["analyze", str(scan), "--out", str(tmp_path / "o\nut"), "--no-figure",
+                 "--px-per-mm", "50"]) == 0
+    out = capfd.readouterr().out
+    assert out.count("\n") == 1 and out.startswith(f"{tmp_path}/a b.png: ")
+    assert out.rstrip().endswith(f"-> {tmp_path}/o ut")
+    assert main(["steps", str(scan), "--out", str(tmp_path / "s"), "--no-figure",
+                 "--px-per-mm", "50"]) == 0
+    assert capfd.readouterr().out.count("\n") == 1
+
+
+def test_steps_that_cannot_write_leave_no_empty_folder(small_scan, tmp_path, capfd,
+                                                       monkeypatch):
+    import errno
+
+    import crosssection.core.fileio as fileio
+
+    def full(*args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device", str(tmp_path / "s" / "x"))
+
+    monkeypatch.setattr(fileio, "write_json", full)
+    capfd.readouterr()
+    assert crosssection.cli.main(["steps", str(small_scan), "--out", str(tmp_path / "s"),
+                                  "--no-figure", "--px-per-mm", "50"]) == 2
+    err = capfd.readouterr().err.splitlines()
+    assert err[-1].endswith("cannot write (No space left on device)")
+    assert not (tmp_path / "s").exists()

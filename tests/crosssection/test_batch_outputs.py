@@ -253,6 +253,34 @@ def test_what_a_redone_image_changed_is_named(tmp_path):
     assert B.changed_inputs(task) == ["image or calibration file content"]
 
 
+def test_a_scale_given_after_the_default_redoes_the_image_and_clears_its_flag(tmp_path,
+                                                                                capsys):
+    """The default scale and the same scale given analyse alike, but only the first is
+    flagged ``scale_assumed``: a re-run that gives it redoes the image rather than keep the
+    flag, and says why."""
+    inp = _scans(tmp_path / "in")  # PNGs that record no resolution
+    out = tmp_path / "out"
+
+    def run(*scale):
+        capsys.readouterr()
+        status = main(["batch", str(inp), "--out", str(out), "--workers", "1", "--no-figure",
+                       "--quiet", "--thickness-mm", "0.1", *scale])
+        return status, capsys.readouterr().err.splitlines()
+
+    assert run()[0] == 0
+    summary = out / "default" / "s0" / "summary.json"
+    assert "scale_assumed" in json.loads(summary.read_text())["quality"]["codes"]
+    status, err = run("--px-per-mm", "50")
+    assert status == 0
+    assert [line for line in err if "analysed again" in line] == [
+        f"warning: {inp / 's0.png'}: analysed again: its parameters differ from the recorded "
+        "ones (px_per_mm given); its earlier results are replaced if it succeeds"]
+    assert "scale_assumed" not in json.loads(summary.read_text())["quality"]["codes"]
+    assert "scale_assumed" not in str(pd.read_csv(out / "index.csv")["quality"][0])
+    status, err = run("--px-per-mm", "50")
+    assert status == 0 and (pd.read_csv(out / "index.csv")["status"] == "skipped").all()
+
+
 # the sample scans carry no calibration, so their analysis flags them
 @pytest.mark.filterwarnings("ignore::crosssection.stats.data.FlaggedScanWarning")
 def test_a_rerun_redoes_a_scan_whose_table_is_corrupt(tmp_path, capsys):
@@ -465,8 +493,12 @@ def test_the_parameters_hash_follows_the_effective_parameters(tmp_path):
     plain = B.plan_batch(inp, tmp_path / "out", cli_params={"thickness_mm": 0.1})[0][0]
     # (10 h)^2 and 3 h are the defaults of s_min and the tangent length: one analysis
     spelled = B.plan_batch(inp, tmp_path / "out", cli_params={
-        "thickness_mm": 0.1, "s_min_mm2": 1.0, "tangent_mm": 0.3, "px_per_mm": 50.0})[0][0]
+        "thickness_mm": 0.1, "s_min_mm2": 1.0, "tangent_mm": 0.3})[0][0]
     assert spelled.params_hash == plain.params_hash
+    # the default scale given analyses alike but is not flagged scale_assumed: another hash
+    scaled = [B.plan_batch(inp, tmp_path / "out", cli_params={
+        "thickness_mm": 0.1, "px_per_mm": v})[0][0].params_hash for v in (50, 50.0)]
+    assert scaled[0] == scaled[1] != plain.params_hash
     other = B.plan_batch(inp, tmp_path / "out", cli_params={"thickness_mm": 0.1,
                                                             "s_min_mm2": 2.0})[0][0]
     assert other.params_hash != plain.params_hash

@@ -167,7 +167,7 @@ def test_ring_only_image_is_not_an_error():
     cv2.circle(mask, (150, 150), 100, 1, 6)
     img[mask > 0] = (40, 70, 190)
     with pytest.warns(NetworkWarning, match="no junction found"):
-        res = analyze(img, calibration=DRAWN_CALIBRATION)
+        res = analyze(img, calibration=DRAWN_CALIBRATION, px_per_mm=50)
     assert res.summary["n_junctions"] == 0
     assert res.summary["n_stacks"] == 1
     assert res.stacks["junction_a"].iloc[0] == -1
@@ -197,7 +197,7 @@ def test_thick_x_crossing_becomes_degree_4():
     img[mask > 0] = (40, 70, 190)
     # the drawing has no hole: the one given holds the whole cross
     res = analyze(img, l_min_mm=0.5, calibration=DRAWN_CALIBRATION, hole_radius_mm=3.9,
-                  hole_center_px=(200, 200))
+                  hole_center_px=(200, 200), px_per_mm=50)
     assert res.summary["n_junctions"] == 1
     assert res.junctions["n_stacks"].iloc[0] == 4
     assert abs(res.junctions["x_px"].iloc[0] - 200) < 6
@@ -467,7 +467,8 @@ def test_a_colourless_scan_says_so():
 def test_result_write_roundtrip(tmp_path):
     scene = make_scene(seed=44, n_stacks=20, max_layers=3)
     given = dict(hole_radius_mm=scene.params["hole_radius_mm"],
-                 hole_center_px=scene.params["hole_center_px"], calibration=scene.calibration)
+                 hole_center_px=scene.params["hole_center_px"], calibration=scene.calibration,
+                 px_per_mm=scene.params["px_per_mm"])
     # rod lengths the hole cannot hold, far beyond the rod measured (both flagged); what is
     # checked is the scaling by L
     with pytest.warns(NetworkWarning) as caught:

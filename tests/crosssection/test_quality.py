@@ -731,6 +731,7 @@ def test_a_scale_other_than_the_files_recorded_resolution_is_flagged(scene, tmp_
 @pytest.mark.parametrize("dpi, expected", [
     ((1200, 1200), 1200 / 25.4), ((600, 600), 600 / 25.4),
     ((72, 72), None), ((96, 96), None),     # image software's defaults, not a scanner's
+    ((60000, 60000), None),                 # beyond any scale an analysis takes
     ((600, 300), None), (None, None),       # anisotropic or not recorded
 ])
 def test_the_recorded_resolution_of_png_tiff_and_jpeg(tmp_path, dpi, expected):

@@ -203,6 +203,11 @@ def test_a_size_cap_the_scene_cannot_keep_is_a_resolution_warning():
     with pytest.warns(ResolutionWarning, match="rod length capped"):
         capped = render_configuration(XY, an, max_size_px=side, **FAST)
     assert max(capped.rgb.shape[:2]) < side
+    # passes beyond the contact distance may then touch: its truth is flagged, so that
+    # validate leaves it out of the means, and the uncapped scene's is not
+    assert not capped.params["gap_guaranteed"]
+    assert any("rod length capped" in m for m in capped.summary["truth_warnings"])
+    assert not any("rod length capped" in m for m in free.summary["truth_warnings"])
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         # the short rod's own range warning is not the size cap's

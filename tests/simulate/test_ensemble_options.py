@@ -35,6 +35,10 @@ def test_one_stage_anneal_is_a_quench_at_the_target_lambda():
     (["anneal", "--contact-distance", "1"], "--contact-distance"),
     # the whole rod one stack (0.99 was taken silently)
     (["quench", "--contact-distance", "0.99"], "--contact-distance"),
+    # passes touching across their gaps: one rod of 300 segments read as one stack at 0.1
+    (["quench", "--contact-distance", "0.1"], "--contact-distance"),
+    # the straight start is a stationary point, which a gradient method never leaves
+    (["quench", "--noise", "0", "--method", "lbfgs"], "--noise 0 with --method lbfgs"),
     (["compact", "--epsilon", "1.5", "--thickness", "1e-6"], "--thickness"),
 ])
 def test_absurd_simulation_options_are_one_line(tmp_path, argv, named):
@@ -44,6 +48,17 @@ def test_absurd_simulation_options_are_one_line(tmp_path, argv, named):
                         "--segments", "40", "--out", str(out)], capture_output=True, text=True)
     assert r.returncode == 2, r.stderr
     assert r.stderr.count("\n") == 1 and named in r.stderr and "Traceback" not in r.stderr
+
+
+def test_the_default_contact_distance_of_a_coarse_rod_is_taken(tmp_path):
+    """Half a segment of 3 segments is beyond the largest contact distance one may give: the
+    default itself was refused, in words naming an option that was not given."""
+    out = tmp_path / "out"
+    r = subprocess.run([sys.executable, "-m", "simulate", "quench", "--segments", "3",
+                        "--noise", "2", "--n-configs", "1", "--no-progress", "--out", str(out)],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert "Traceback" not in r.stderr and (out / "configs.csv").is_file()
 
 
 def test_too_many_segments_for_the_default_contact_distance_names_segments(tmp_path):

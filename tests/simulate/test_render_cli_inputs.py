@@ -72,6 +72,27 @@ def test_negative_seed_exits_2_naming_the_option(sim, tmp_path, capsys):
         render_configuration(xy, seed=-1)
 
 
+@pytest.mark.parametrize("option", ["--smears", "--specks", "--pinholes"])
+def test_marks_beyond_a_scan_are_refused_before_drawing(sim, tmp_path, capsys, option):
+    """A hundred million smears were drawn one by one for minutes before anything said no."""
+    status, err = _render(capsys, sim, "--out", tmp_path / "s", option, "100000000",
+                          "--limit", "1")
+    assert status == 2
+    assert _one_error(err).startswith(f"error: {option}: must be at most 1000")
+    assert not (tmp_path / "s").exists()
+
+
+def test_a_size_cap_reaches_the_command_line_and_flags_the_scene(sim, tmp_path, capsys):
+    """``render`` kept the truth checks of each scene and dropped the size cap's warning."""
+    status, err = _render(capsys, sim, "--out", tmp_path / "s", "--limit", "1", "--clean",
+                          "--thickness-mm", "1")
+    assert status == 0
+    assert "rod length capped" in err and err.startswith("warning: ")
+    summary = json.loads((tmp_path / "s" / "config_00000" / "truth" / "summary.json")
+                         .read_text())
+    assert any("rod length capped" in m for m in summary["truth_warnings"])
+
+
 @pytest.mark.parametrize("content", ["garbage", "truncated", "npy"])
 @pytest.mark.parametrize("limit", [[], ["--limit", "1"]])
 def test_unreadable_rods_exit_2_with_or_without_limit(sim, tmp_path, capsys, content, limit):

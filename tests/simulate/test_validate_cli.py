@@ -53,6 +53,18 @@ def test_match_px_must_be_finite_and_positive(scenes, tmp_path, capsys, value):
         validate_scenes(folder, tmp_path / "rep", match_px=float(value))
 
 
+def test_a_match_radius_of_a_whole_scene_is_refused(scenes, tmp_path, capsys):
+    """1e9 px matched every junction to every other, and the scores meant nothing."""
+    folder, _ = scenes
+    assert run(folder, tmp_path / "rep", "--match-px", "1e9") == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert err.startswith("error: --match-px: must be at most 1000 px")
+    assert not (tmp_path / "rep").exists()
+    with pytest.raises(ParameterError, match="match_px"):
+        validate_scenes(folder, tmp_path / "rep", match_px=1001.0)
+
+
 def damage_image(scene):
     (scene / "image.png").write_bytes(b"not a png")
     return "image.png"

@@ -495,3 +495,21 @@ def test_two_channels_and_full_transparency_are_named_as_such():
         as_rgb(np.zeros((64, 64, 2), np.uint8))
     with pytest.raises(ImageError, match="fully transparent"):
         as_rgb(np.zeros((64, 64, 4), np.uint8))
+
+
+def test_a_masked_array_is_refused_unless_nothing_is_masked():
+    """numpy drops a masked array's mask unseen: the pixels under it would be analysed as
+    they are, so the caller is asked what they are."""
+    from crosssection.stages.load import rgb_and_opacity
+
+    rgb = np.full((40, 50, 3), 255, np.uint8)
+    rgb[10:30, 20:24] = (30, 40, 160)
+    mask = np.zeros(rgb.shape, bool)
+    mask[:, :25] = True
+    with pytest.raises(ImageError, match="masked array: the mask is not used"):
+        rgb_and_opacity(np.ma.masked_array(rgb, mask=mask), path="scan")
+    # nothing masked: the data, as given
+    got, see_through = rgb_and_opacity(np.ma.masked_array(rgb))
+    assert np.array_equal(got, rgb) and see_through is None
+    got, _ = rgb_and_opacity(np.ma.masked_array(rgb, mask=np.zeros(rgb.shape, bool)))
+    assert np.array_equal(got, rgb)

@@ -105,7 +105,7 @@ def test_malformed_summary_is_one_error_line(batch, tmp_path, capfd, content, ca
 @pytest.mark.parametrize("option, value, cause", [
     ("--seed", "-1", "must be an integer >= 0, got -1"),
     ("--n-boot", "-1", "must be an integer >= 0, got -1"),
-    ("--n-mc", "-5", "must be an integer >= 0, got -5"),
+    ("--n-mc", "-5", "must be an integer >= 1, got -5"),
     ("--n-boot", "100001", "must be at most 100000, got 100001"),
     ("--n-mc", "1000000000", "must be at most 100000, got 1000000000"),
     ("--l-min-mm", "-1", "must be a finite number >= 0 (0 = no limit), got -1"),

@@ -270,3 +270,59 @@ def test_nested_sets_are_read_by_their_recorded_names_with_or_without_the_index(
     (out / "batch.json").write_text(json.dumps({**meta, "stale_outputs": ["eps8/old"]}))
     ens = load_batch(out)
     assert sorted(zip(ens.configs["set"], ens.configs["config_id"])) == want
+
+
+def test_a_set_folder_inside_a_batch_is_read_through_the_batch_record(analysed, tmp_path,
+                                                                      capfd):
+    """``stats OUT/<set>`` keeps to what the batch's index.csv records as done: a folder of
+    an earlier run that the index no longer lists, and a scan the index records as failed,
+    stay out, and an unfinished batch is said, as for ``stats OUT``."""
+    import shutil
+
+    from crosssection.stats.data import load_any
+
+    set_dir = analysed / "s1"
+    shutil.copytree(set_dir / "img000", set_dir / "img_old")  # an earlier run's leftover
+    index = pd.read_csv(analysed / "index.csv")
+    index.loc[index["output"] == "s1/img002", "status"] = "failed"
+    index.to_csv(analysed / "index.csv", index=False)
+    (analysed / "batch.json").write_text(json.dumps({"n_images": 3, "complete": False}))
+    with pytest.warns(Warning) as caught:
+        ens = load_any(set_dir)
+    assert sorted(ens.configs["config_id"]) == ["img000", "img001"]
+    assert set(ens.configs["set"]) == {"s1"}
+    assert any("did not finish" in str(w.message) for w in caught)
+    # the same through the command line
+    status, err = _stats(capfd, set_dir, "--out", tmp_path / "rep", *FAST)
+    assert status == 0 and any("did not finish" in ln for ln in err)
+    per_config = pd.read_csv(tmp_path / "rep" / "per_config.csv")
+    assert len(per_config) == 2
+    # a set folder whose batch records none of its scans as done is refused in one line
+    index["status"] = "failed"
+    index.to_csv(analysed / "index.csv", index=False)
+    status, err = _stats(capfd, set_dir, "--out", tmp_path / "rep2", *FAST)
+    assert status == 2 and len(err) == 1 and "lists none below it as done" in err[0]
+
+
+def test_a_branch_longer_than_its_rod_is_said(analysed, tmp_path):
+    """A branch of five rod lengths (an edited table) moved the mean l/L by half, in silence."""
+    from crosssection.stats.data import load_any
+
+    scan = analysed / "s1" / "img001"
+    L = json.loads((scan / "summary.json").read_text())["rod_length_mm"]
+    br = pd.read_csv(scan / "branches.csv")
+    br.loc[0, "length_mm"] = 5 * L
+    br.to_csv(scan / "branches.csv", index=False)
+    with pytest.warns(Warning) as caught:
+        ens = load_any(analysed)
+    said = [str(w.message) for w in caught if "longer than the rod" in str(w.message)]
+    assert len(said) == 1 and said[0].startswith(f"{scan / 'branches.csv'}: 1 branch longer")
+    assert "l / L up to 5" in said[0]
+    note = ens.configs.set_index("config_id").loc["img001", "table_note"]
+    assert "longer than the rod" in note
+    # a simulation's lengths are in units of its rod: one beyond 1 is said the same way
+    from crosssection.stats.data import _check_lengths
+
+    with pytest.warns(Warning, match="2 branches longer than the rod"):
+        assert _check_lengths(tmp_path / "branches.csv", [0.2, 1.5, np.nan, 3.0])
+    assert _check_lengths(tmp_path / "branches.csv", [0.2, 1.0, np.nan]) == ""
