@@ -289,9 +289,9 @@ def _restore_lengths(x, rxs, rys, ds, dxs, dys, lo, di, up, rhs):
     return False
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _compress(x, r_start, r_end, h_ratio, margin, rate, k, dt_max, max_iter, ftol, k_min,
-              patience=HOLD_PATIENCE):
+              patience=HOLD_PATIENCE, stop=None):
     """Shrink the wall from ``r_start`` to ``r_end`` while relaxing the rod, then relax it
     at ``r_end``. ``x`` (N+1, 2) is updated in place.
 
@@ -357,6 +357,9 @@ def _compress(x, r_start, r_end, h_ratio, margin, rate, k, dt_max, max_iter, fto
     a compression at equilibrium stays below 0.3 of the range, short of the 0.5 at which
     they stiffen again. A hold converging within ``patience`` iterations is unchanged.
 
+    ``stop``, a one-element array or None, ends the loop before the next iteration once it
+    holds a non-zero value (set from another thread: :func:`_compress_interruptibly`).
+
     Returns
     -------
     (wall radius, iterations, list builds, FIRE restarts, largest node force, largest
@@ -396,6 +399,8 @@ def _compress(x, r_start, r_end, h_ratio, margin, rate, k, dt_max, max_iter, fto
     # the iteration at which the wall reached r_end (-1: not yet)
     it_hold = 0 if r_start <= r_end else -1
     while it < max_iter:
+        if stop is not None and stop[0]:
+            break  # the caller was interrupted (:func:`_compress_interruptibly`)
         it += 1
         h = h_ratio * big_r
         if big_r > r_end and ovl < 0.5 * margin * h:
@@ -697,6 +702,44 @@ class CompactResult:
     wall_s: float = 0.0
 
 
+def _compress_interruptibly(*args):
+    """:func:`_compress` on a thread, the caller waiting in a way a signal interrupts.
+
+    A level runs for up to a minute in compiled code, where Python's signal handlers do not
+    run: Ctrl-C and SIGTERM waited for the level's end (50 s measured at epsilon 50). Here
+    the main thread waits on the thread, which a signal interrupts; the kernel is then told
+    to stop (it checks a flag before each iteration), joined, and the interruption goes on.
+    The results are :func:`_compress`'s to the bit.
+
+    Returns
+    -------
+    tuple
+        :func:`_compress`'s.
+    """
+    import threading
+
+    stop = np.zeros(1, np.int8)
+    out = {}
+
+    def work():
+        try:
+            out["value"] = _compress(*args, HOLD_PATIENCE, stop)
+        except BaseException as exc:  # handed to the caller, which raises it
+            out["error"] = exc
+
+    thread = threading.Thread(target=work, name="foldstat-compress", daemon=True)
+    thread.start()
+    try:
+        thread.join()
+    except BaseException:
+        stop[0] = 1
+        thread.join()
+        raise
+    if "error" in out:
+        raise out["error"]
+    return out["value"]
+
+
 def levels(n_segments: int, wall_radius: float) -> list[int]:
     """Segment counts of the successive levels, coarsest first.
 
@@ -857,8 +900,9 @@ def compact_rod(params: CompactParams, rng) -> CompactResult:
         nonlocal k_phys
         k0 = _stiffness(n, r_to)
         k = max(k0, k_phys / float(n) ** 3)
-        out = _compress(xy, r_from, r_to, ratio, MARGIN, params.rate, k,
-                        DT_MAX / n ** 1.5 / math.sqrt(k / STIFFNESS), max_iter, ftol, k0)
+        out = _compress_interruptibly(xy, r_from, r_to, ratio, MARGIN, params.rate, k,
+                                      DT_MAX / n ** 1.5 / math.sqrt(k / STIFFNESS), max_iter,
+                                      ftol, k0)
         for key, i in (("iterations", 1), ("builds", 2), ("restarts", 3), ("stiffenings", 6),
                        ("halved_steps", 8), ("softenings", 9)):
             stats[key] += int(out[i])

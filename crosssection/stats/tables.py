@@ -371,7 +371,8 @@ def _clean(x, positive=True):
 
 def _warn_left_out(ens: Ensemble, quantity: str, values, positive: bool) -> None:
     """One warning giving how many values of ``quantity`` the fits leave out and why (not
-    finite; <= 0 where the laws fitted live on x > 0); none when every value is used."""
+    finite, which the means leave out too; <= 0 where the laws fitted live on x > 0, which
+    the means keep); none when every value is used."""
     v = np.asarray(values, float)
     n_nan = int(np.sum(~np.isfinite(v)))
     n_low = int(np.sum(np.isfinite(v) & (v <= 0))) if positive else 0
@@ -381,7 +382,8 @@ def _warn_left_out(ens: Ensemble, quantity: str, values, positive: bool) -> None
     # a simulated rod): say so, as the fits then lean to the longer branches
     why = (": branches too short to hold a curvature, shorter than one segment of a simulated "
            "rod, so the fits lean to the longer ones" if quantity.startswith("kappa") else "")
-    parts = ([f"{n_nan} not finite (NaN or inf{why})"] if n_nan else []) + (
+    parts = ([f"{n_nan} not finite (NaN or inf{why}; left out of the means as well)"]
+             if n_nan else []) + (
         [f"{n_low} <= 0 (the laws fitted live on x > 0)"] if n_low else [])
     where = f"set {', '.join(map(str, ens.sets))}: " if len(ens.sets) else ""
     warnings.warn(f"{where}{quantity}: {n_nan + n_low} of {v.size} values left out of the "

@@ -218,6 +218,48 @@ def test_segment_lengths_exact_after_every_step_of_a_rod_pressed_along_the_wall(
     assert max(out[8] for out in outs) > 0  # halved steps: the case is the one they are for
 
 
+def test_a_level_stops_when_its_caller_is_interrupted():
+    """A level runs in compiled code for up to a minute, where signal handlers wait: Ctrl-C
+    took 50 s to stop a compaction at epsilon 50. The kernel runs on a thread; a signal
+    interrupts its caller's wait, the kernel stops at its next iteration, and the
+    interruption goes on. Uninterrupted, the results are the kernel's own."""
+    import signal
+    import threading
+
+    n = 200
+    x, big_r = _zigzag_arc_on_wall(n, 76.0, 0.1)
+    k = compact._stiffness(n, big_r)
+    args = (big_r, big_r, compact.H_OVER_R, compact.MARGIN, 6.25e-5, k,
+            compact.DT_MAX / n ** 1.5 / np.sqrt(k / compact.STIFFNESS))
+    # a set flag stops the kernel before its first iteration, the rod untouched
+    y = x.copy()
+    out = compact._compress(y, *args, 50, 0.0, k, compact.HOLD_PATIENCE, np.ones(1, np.int8))
+    assert out[1] == 0 and np.array_equal(y, x)
+    # the same results on the thread as called directly
+    a, b = x.copy(), x.copy()
+    assert compact._compress_interruptibly(a, *args, 60, 0.0, k) == \
+        compact._compress(b, *args, 60, 0.0, k)
+    assert np.array_equal(a, b)
+
+    class Interrupted(Exception):
+        pass
+
+    def interrupt(signum, frame):
+        raise Interrupted
+
+    old = signal.signal(signal.SIGALRM, interrupt)
+    try:
+        signal.setitimer(signal.ITIMER_REAL, 0.3)
+        with pytest.raises(Interrupted):
+            # far more iterations than 0.3 s hold: only the interruption ends it
+            compact._compress_interruptibly(x.copy(), *args, 10**9, 0.0, k)
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, old)
+    assert not any(t.name == "foldstat-compress" and t.is_alive()
+                   for t in threading.enumerate())
+
+
 def test_a_ring_lining_the_wall_end_to_end_does_not_stall_the_wall():
     """At epsilon 2, N = 300 the second level ends at epsilon 1: the relaxed rod lines the wall
     as a ring whose ends butt against each other, a compression the wall's position imposes

@@ -275,6 +275,8 @@ def test_curvatures_left_out_say_why():
     _, caught = _recorded(lambda: compute_stats(ens, opts))
     (w,) = [w for w in _of(caught, QualityWarning) if "left out" in str(w.message)]
     assert "3 not finite (NaN or inf: branches too short to hold a curvature" in str(w.message)
+    # the means leave them out too (they keep the values <= 0): the warning says so
+    assert "left out of the means as well" in str(w.message)
 
 
 def test_plot_pdf_bad_arguments_are_parameter_errors():
