@@ -633,6 +633,13 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
                 power = _linear_ticks(ax.xaxis)
             # long names on two lines: side-by-side panels' labels must not run together
             ax.set_xlabel(_wrap_label(_scaled_label(label, power), 36))
+            if power and not count:
+                # the ticks read the quantity in units of 10^power, the density is still per
+                # unit of the quantity: said, so that its area is not read as 10^-power
+                i = label.find("$")
+                j = label.find("$", i + 1) if i >= 0 else -1
+                per = label[i:j + 1] if j > i else "of the quantity"
+                ax.set_ylabel(_wrap_label(f"probability density, per unit {per}", 36))
         # one legend per row, outside the log panel: never over the data
         handles, labels = row[1].get_legend_handles_labels()
         # per set: its data, then its law, then the band and the detection limit

@@ -116,6 +116,10 @@ def test_a_large_scale_is_named_in_the_axis_label_not_beside_the_axis():
     assert 10 ** power <= top < 10 ** (power + 1)
     ticks = [float(t.get_text()) for t in lin.get_xticklabels() if t.get_text()]
     assert ticks and max(ticks) < 10  # 0.5, 1, ... in units of 10^power: not 50000
+    # the density is per unit e, not per unit of the ticks: the label says so (its area
+    # read off the ticks is 10^-power), and the log panel, in e itself, needs no such words
+    assert "per unit $e$" in lin.get_ylabel()
+    assert fig.axes[1].get_ylabel() == "probability density"
 
 
 @pytest.mark.parametrize("flag, bar", [([], False), (["--progress"], True)])
