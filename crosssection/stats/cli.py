@@ -18,7 +18,7 @@ import sys
 import warnings
 from pathlib import Path
 
-from crosssection.core.errors import ParameterError
+from crosssection.core.errors import ParameterError, one_line_path
 from crosssection.core.fileio import check_out
 from crosssection.stats.data import RECORDED
 from crosssection.stats.fits import N_BOOT, N_BOOT_MIN, N_MC
@@ -181,7 +181,7 @@ def run(args) -> int:
         from crosssection.cli import INTERRUPTED, TERMINATED, Terminated
 
         how = "terminated" if isinstance(exc, Terminated) else "interrupted"
-        print(f"error: {args.out}: {how}; the report folder was left as it was "
+        print(f"error: {one_line_path(args.out)}: {how}; the report folder was left as it was "
               "(re-run the command to write it)", file=sys.stderr)
         return TERMINATED if isinstance(exc, Terminated) else INTERRUPTED
     for w in caught:  # hand them on to the command line, which prints ours as lines
@@ -223,6 +223,6 @@ def _run(args) -> int:
                          figures=not args.no_figures, progress=args.progress,
                          limits_given=given)
     print(f"stats: {len(ens.sets)} set(s), {len(ens.configs)} configurations, "
-          f"{len(ens.branches)} branches -> {Path(args.out) / 'report.html'} "
+          f"{len(ens.branches)} branches -> {one_line_path(Path(args.out) / 'report.html')} "
           f"({len(paths)} files)")
     return 0
