@@ -23,7 +23,7 @@ import numpy as np
 from numba import njit
 
 from simulate.checks import check_real
-from simulate.geometry import _trapezoid_weights, checked_rod, positions
+from simulate.geometry import _trapezoid_weights, checked_angles, checked_rod, positions
 from simulate.intersect import _grid_fill, _grid_setup
 
 #: The paper's confinement Lambda (section "Numerical simulations"), the simulator's default.
@@ -194,7 +194,7 @@ def energy_and_gradient(theta, start, lam: float) -> tuple[float, np.ndarray]:
     Bending ``N sum_i (2 - 2cos(theta_i - theta_{i-1}))``; changing ``theta_k`` moves the nodes
     ``j > k`` by ``ds t_k^perp`` so ``dE_conf/dtheta_k = 2 Lambda ds t_k^perp . sum_{j>k} w_j R_j``.
     """
-    theta = np.asarray(theta, dtype=np.float64)
+    theta = checked_angles(theta)
     n = theta.size
     ds = 1.0 / n
     xy = positions(theta, start)

@@ -40,9 +40,43 @@ def positions(theta, start=(0.0, 0.0)) -> np.ndarray:
     -------
     (N+1, 2) float64 array
         ``xy[i+1] = xy[i] + (cos theta_i, sin theta_i) / N``.
+
+    Raises
+    ------
+    ParameterError
+        ``theta`` is not a 1-d array of N >= 1 angles.
     """
-    theta = np.ascontiguousarray(theta, dtype=np.float64)
+    theta = checked_angles(theta)
     return _positions(theta, float(start[0]), float(start[1]))
+
+
+def checked_angles(theta) -> np.ndarray:
+    """``theta`` as a contiguous float64 array of N >= 1 tangent angles.
+
+    Values are not checked: the minimisers evaluate the energy on every step, and a step
+    gone non-finite is theirs to stop on (a NaN energy), not an error.
+
+    Parameters
+    ----------
+    theta : array-like
+
+    Returns
+    -------
+    (N,) float64 array
+        ``theta`` itself when it is one already.
+
+    Raises
+    ------
+    ParameterError
+        Naming its shape (an empty ``theta`` divided by zero).
+    """
+    arr = np.ascontiguousarray(theta, dtype=np.float64)
+    if arr.ndim == 1 and arr.size:
+        return arr
+    from crosssection.core.errors import ParameterError
+
+    raise ParameterError(f"theta must be a 1-d array of N >= 1 tangent angles, got shape "
+                         f"{arr.shape}")
 
 
 def angles(xy) -> tuple[np.ndarray, np.ndarray]:
@@ -149,7 +183,7 @@ def radius_of_gyration(xy) -> float:
 
 
 __all__ = ["positions", "angles", "trapezoid_weights", "center_of_mass", "radius_of_gyration",
-           "checked_rod", "is_point"]
+           "checked_rod", "checked_angles", "is_point"]
 
 
 def checked_rod(xy, *, min_segments: int = 1) -> np.ndarray:

@@ -299,3 +299,17 @@ def test_functions_that_spawn_seeds_take_a_seed_sequence():
     assert np.array_equal(a.xy, b.xy)
     kw = dict(n_segments=40, noises=(100, 500), n_samples=50)
     assert largest_noise(seed=np.random.SeedSequence(2), **kw) == largest_noise(seed=2, **kw)
+
+
+@pytest.mark.parametrize("theta", [np.zeros(0), np.zeros((2, 3)), []])
+def test_angles_that_make_no_rod_are_a_parameter_error(theta):
+    """An empty theta divided by zero in positions and energy_and_gradient."""
+    from simulate.energy import energy_and_gradient
+    from simulate.geometry import positions
+
+    with pytest.raises(ParameterError, match="theta must be a 1-d array of N >= 1"):
+        positions(theta)
+    with pytest.raises(ParameterError, match="theta must be a 1-d array of N >= 1"):
+        energy_and_gradient(theta, (0.0, 0.0), 1.0)
+    # one segment is a rod: from the start, 1/N along its angle
+    assert np.allclose(positions([0.5]), [[0.0, 0.0], [np.cos(0.5), np.sin(0.5)]])
