@@ -861,11 +861,13 @@ def _marks_of_another_colour(rgb, reg, scale) -> tuple[str, str]:
     hue = 360.0 * colorsys.rgb_to_hsv(*(ink / 255.0))[0]
     name = next(n for h, n in _HUES if hue < h)
     if name == "blue":
-        if light:
-            return "", ""
         # ink nearly black: blue above red and green by less than the contrast the classes
         # need, which the faint-ink advice (darker than the paper by too little) misnames
         apart = (ink[2] - ink[:2].max()) - (paper[2] - paper[:2].max())
+        if light or apart >= MIN_CONTRAST_U8:
+            # blue ink the threshold tells apart well: the cause lies elsewhere (too little
+            # of it, say), for the caller's own words
+            return "", ""
         return (f"the scan's dark marks are blue-black {colours}: blue above red and green "
                 f"sets them apart from the paper by {apart:.0f} only, less than the "
                 f"{MIN_CONTRAST_U8:g} the automatic threshold needs" + recipe), options

@@ -281,6 +281,17 @@ def test_marks_of_another_colour_are_named(ink_rgb, colour):
     assert iou > 0.9
 
 
+def test_blue_marks_set_well_apart_are_not_called_blue_black():
+    """A few px of clear blue ink in a noisy strip: the note said the marks were blue-black,
+    "apart from the paper by 123 only, less than the 30" the threshold needs."""
+    rng = np.random.default_rng(0)
+    img = np.full((32, 824, 3), 250.0)
+    img[10:12, 100:105] = (40, 70, 190)
+    img = np.clip(img + rng.normal(0, 15, img.shape), 0, 255).astype(np.uint8)
+    res = threshold_rgb(img)
+    assert "blue-black" not in res.note
+
+
 @pytest.mark.parametrize("plate", ["grey", "brown", (250, 250, 250)])
 def test_black_marks_framed_by_a_plate_get_a_cut_that_leaves_the_plate_out(plate):
     """Black marks on paper inside a grey plate: the darker of two classes holds the plate
