@@ -935,8 +935,8 @@ def _add_common(p, command):
 #: the largest contact distance a quench or anneal takes, in units of L, unless half a
 #: segment (the default) is larger: twice the mean gap between neighbouring passes of a rod
 #: folded at the paper's radius of gyration, 0.05 (disk area over rod length, about 0.015);
-#: beyond, passes count in contact across the gaps between them (0.1 made one rod of 300
-#: segments a single stack of one branch, 0.05 a stack of 3, silently; 0.99 did at any N)
+#: beyond, passes count in contact across the gaps between them (at 0.1 a rod of 300
+#: segments reads as a single stack of one branch, at 0.05 as a stack of 3; at 0.99 any rod)
 CONTACT_DISTANCE_MAX = 0.03
 
 

@@ -301,7 +301,7 @@ MAX_BLUR_PX = 50.0
 #: Largest scan noise (grey levels of 8 bits): the contrast between the ink and the paper.
 MAX_NOISE_SIGMA = 255.0
 #: Most smears, specks or pinholes of one scene: a hundred times the defaults' largest count
-#: (each is drawn in turn; 1e8 smears ran for minutes before any was refused).
+#: (each is drawn in turn: 1e8 smears take minutes).
 MAX_MARKS = 1000
 #: Largest |coordinate| of a rod, in units of the rod length L: a rod's nodes lie within L of
 #: one another and the simulations centre it on the origin or its wall, so |x| is of order 1;

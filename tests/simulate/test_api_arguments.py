@@ -303,7 +303,7 @@ def test_functions_that_spawn_seeds_take_a_seed_sequence():
 
 @pytest.mark.parametrize("theta", [np.zeros(0), np.zeros((2, 3)), []])
 def test_angles_that_make_no_rod_are_a_parameter_error(theta):
-    """An empty theta divided by zero in positions and energy_and_gradient."""
+    """An empty theta would divide by zero in positions and energy_and_gradient."""
     from simulate.energy import energy_and_gradient
     from simulate.geometry import positions
 

@@ -219,8 +219,8 @@ def test_segment_lengths_exact_after_every_step_of_a_rod_pressed_along_the_wall(
 
 
 def test_a_level_stops_when_its_caller_is_interrupted():
-    """A level runs in compiled code for up to a minute, where signal handlers wait: Ctrl-C
-    took 50 s to stop a compaction at epsilon 50. The kernel runs on a thread; a signal
+    """A level runs in compiled code for up to a minute, where signal handlers wait (50 s at
+    epsilon 50). The kernel runs on a thread; a signal
     interrupts its caller's wait, the kernel stops at its next iteration, and the
     interruption goes on. Uninterrupted, the results are the kernel's own."""
     import signal

@@ -52,7 +52,7 @@ def test_absurd_simulation_options_are_one_line(tmp_path, argv, named):
 
 def test_the_default_contact_distance_of_a_coarse_rod_is_taken(tmp_path):
     """Half a segment of 3 segments is beyond the largest contact distance one may give: the
-    default itself was refused, in words naming an option that was not given."""
+    default is taken all the same, and no option that was not given is named."""
     out = tmp_path / "out"
     r = subprocess.run([sys.executable, "-m", "simulate", "quench", "--segments", "3",
                         "--noise", "2", "--n-configs", "1", "--no-progress", "--out", str(out)],

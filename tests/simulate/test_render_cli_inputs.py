@@ -74,7 +74,7 @@ def test_negative_seed_exits_2_naming_the_option(sim, tmp_path, capsys):
 
 @pytest.mark.parametrize("option", ["--smears", "--specks", "--pinholes"])
 def test_marks_beyond_a_scan_are_refused_before_drawing(sim, tmp_path, capsys, option):
-    """A hundred million smears were drawn one by one for minutes before anything said no."""
+    """A hundred million smears would be drawn one by one for minutes: refused at once."""
     status, err = _render(capsys, sim, "--out", tmp_path / "s", option, "100000000",
                           "--limit", "1")
     assert status == 2
@@ -83,7 +83,8 @@ def test_marks_beyond_a_scan_are_refused_before_drawing(sim, tmp_path, capsys, o
 
 
 def test_a_size_cap_reaches_the_command_line_and_flags_the_scene(sim, tmp_path, capsys):
-    """``render`` kept the truth checks of each scene and dropped the size cap's warning."""
+    """``render`` passes on the size cap's warning with the truth checks of each scene, and
+    the capped scene's truth is flagged."""
     status, err = _render(capsys, sim, "--out", tmp_path / "s", "--limit", "1", "--clean",
                           "--thickness-mm", "1")
     assert status == 0

@@ -54,7 +54,7 @@ def test_match_px_must_be_finite_and_positive(scenes, tmp_path, capsys, value):
 
 
 def test_a_match_radius_of_a_whole_scene_is_refused(scenes, tmp_path, capsys):
-    """1e9 px matched every junction to every other, and the scores meant nothing."""
+    """1e9 px would match every junction to every other, and the scores mean nothing."""
     folder, _ = scenes
     assert run(folder, tmp_path / "rep", "--match-px", "1e9") == 2
     err = capsys.readouterr().err

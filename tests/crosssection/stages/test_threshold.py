@@ -282,8 +282,8 @@ def test_marks_of_another_colour_are_named(ink_rgb, colour):
 
 
 def test_blue_marks_set_well_apart_are_not_called_blue_black():
-    """A few px of clear blue ink in a noisy strip: the note said the marks were blue-black,
-    "apart from the paper by 123 only, less than the 30" the threshold needs."""
+    """A few px of clear blue ink in a noisy strip are not blue-black: blue above red and
+    green sets them 123 levels apart from the paper, more than the 30 the threshold needs."""
     rng = np.random.default_rng(0)
     img = np.full((32, 824, 3), 250.0)
     img[10:12, 100:105] = (40, 70, 190)

@@ -305,7 +305,7 @@ def test_a_set_folder_inside_a_batch_is_read_through_the_batch_record(analysed, 
 
 
 def test_a_branch_longer_than_its_rod_is_said(analysed, tmp_path):
-    """A branch of five rod lengths (an edited table) moved the mean l/L by half, in silence."""
+    """A branch of five rod lengths (an edited table) moves the mean l/L by half: said."""
     from crosssection.stats.data import load_any
 
     scan = analysed / "s1" / "img001"
