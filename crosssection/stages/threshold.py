@@ -591,6 +591,16 @@ def threshold_rgb(rgb, *, method: str = "auto", region=None, blue_min=None,
     levels = _auto_levels(d, m, reg, scale, features)
     if levels is None:
         note, options = _marks_of_another_colour(rgb, reg, scale)
+        blue = (b >= int(np.ceil(BLUE_MIN_U8 * scale))) & (m <= int(np.floor(RG_MAX_U8 * scale)))
+        n_blue = int(np.count_nonzero(blue if reg is None else blue & reg))
+        if not note and 0 < n_blue < FEW_INK_PX:
+            # ink there is, but too little of it for a class of its own: the contrast
+            # advice below would be wrong
+            note = (f"only {n_blue} px are blue ink by the paper's rule (blue >= "
+                    f"{BLUE_MIN_U8:g}, red and green <= {RG_MAX_U8:g}), too few for a class of "
+                    "their own (a blank scan, or the wrong file?); to read them all the same: "
+                    "--threshold-method fixed (in Python threshold_method='fixed')")
+            options = "--threshold-method fixed"
         note = note or (
             f"no ink darker in red and green than the paper by {MIN_CONTRAST_U8:g} (uint8 "
             "units); for faint ink set the cut with --threshold-method fixed --blue-min B "
@@ -609,6 +619,9 @@ def threshold_rgb(rgb, *, method: str = "auto", region=None, blue_min=None,
                            reg_frac, n_outside=n_out[0])
 
 
+#: Fewer pixels than this passing the paper's rule, where the automatic threshold finds no ink
+#: class, are too little ink, not too faint (the class statistics need 10-20 px of it).
+FEW_INK_PX = 50
 #: Share of the ink inside the region above which the pixels passing the cut outside it are
 #: told from noise (:func:`_structured_px`): below it no quality check can fire on them.
 OUTSIDE_NOISE_CHECK = 0.01

@@ -290,6 +290,11 @@ def test_blue_marks_set_well_apart_are_not_called_blue_black():
     img = np.clip(img + rng.normal(0, 15, img.shape), 0, 255).astype(np.uint8)
     res = threshold_rgb(img)
     assert "blue-black" not in res.note
+    # the cause is how little ink there is, not its contrast, and the fixed rule reads it
+    assert "only 10 px are blue ink by the paper's rule" in res.note
+    assert "darker in red and green than the paper" not in res.note
+    assert res.options == "--threshold-method fixed"
+    assert threshold_rgb(img, method="fixed").mask.sum() == 10
 
 
 @pytest.mark.parametrize("plate", ["grey", "brown", (250, 250, 250)])
