@@ -58,7 +58,8 @@ Design choices
   every default filled in, derived ones such as ``s_min`` computed; a scale left to its
   default counts apart from the same scale given, which the ``scale_assumed`` check tells
   apart), the SHA-256 of the image and of the calibration file, and the package version:
-  changing any of them redoes the image, which replaces its earlier results; a re-run with the same options is silent.
+  changing any of them redoes the image, which replaces its earlier results; a re-run with
+  the same options is silent.
   ``summary.json`` records the image's and the calibration's SHA-256, their paths as given
   and resolved, and the calibration's widths (``inputs``, the record ``analyze`` writes,
   with the scan's path as the batch was given it; the same in ``batch.inputs``), so that an

@@ -716,28 +716,16 @@ def _compress_interruptibly(*args):
     tuple
         :func:`_compress`'s.
     """
-    import threading
+    from crosssection.core.parallel import in_background, wait_all
 
     stop = np.zeros(1, np.int8)
-    out = {}
-
-    def work():
-        try:
-            out["value"] = _compress(*args, HOLD_PATIENCE, stop)
-        except BaseException as exc:  # handed to the caller, which raises it
-            out["error"] = exc
-
-    thread = threading.Thread(target=work, name="foldstat-compress", daemon=True)
-    thread.start()
+    waiting = in_background(_compress, *args, HOLD_PATIENCE, stop)
     try:
-        thread.join()
+        return waiting()
     except BaseException:
         stop[0] = 1
-        thread.join()
+        wait_all(waiting)
         raise
-    if "error" in out:
-        raise out["error"]
-    return out["value"]
 
 
 def levels(n_segments: int, wall_radius: float) -> list[int]:

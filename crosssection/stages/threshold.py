@@ -591,7 +591,7 @@ def threshold_rgb(rgb, *, method: str = "auto", region=None, blue_min=None,
     levels = _auto_levels(d, m, reg, scale, features)
     if levels is None:
         note, options = _marks_of_another_colour(rgb, reg, scale)
-        blue = (b >= int(np.ceil(BLUE_MIN_U8 * scale))) & (m <= int(np.floor(RG_MAX_U8 * scale)))
+        blue = _at_least(b, BLUE_MIN_U8 * scale) & _at_most(m, RG_MAX_U8 * scale)
         n_blue = int(np.count_nonzero(blue if reg is None else blue & reg))
         if not note and 0 < n_blue < FEW_INK_PX:
             # ink there is, but too little of it for a class of its own: the contrast

@@ -1163,7 +1163,7 @@ def _enclosing_batch(folder: Path) -> Path | None:
     if (folder / "index.csv").is_file() or (folder / "batch.json").is_file():
         return None
     # the path as given names the batch's files in the warnings, where it can
-    plain = ".." not in folder.parts and folder.parts
+    plain = bool(folder.parts) and ".." not in folder.parts
     for parent in folder.parents if plain else folder.resolve().parents:
         if (parent / "index.csv").is_file() or (parent / "batch.json").is_file():
             return parent

@@ -256,7 +256,7 @@ def test_a_level_stops_when_its_caller_is_interrupted():
     finally:
         signal.setitimer(signal.ITIMER_REAL, 0)
         signal.signal(signal.SIGALRM, old)
-    assert not any(t.name == "foldstat-compress" and t.is_alive()
+    assert not any(t.name == "foldstat-_compress" and t.is_alive()
                    for t in threading.enumerate())
 
 
