@@ -171,3 +171,28 @@ def test_a_texture_of_pixels_is_labelled_not_traced():
     for c in range(10, n - 10, 12):
         bands[10:-10, c:c + 5] = True
     assert not cl._pixel_texture(bands)
+
+
+@pytest.mark.parametrize("fraction", [0.6, 0.75, 0.9])
+def test_dense_random_ink_is_a_texture(fraction):
+    # ink covering most of a disk at random: its pinholes are the borders (10^5 on 1500 px,
+    # seconds of border following), fewer than one transition per ink pixel
+    rng = np.random.default_rng(int(fraction * 100))
+    n = 400
+    yy, xx = np.indices((n, n))
+    m = (np.hypot(yy - n / 2, xx - n / 2) < 0.45 * n) & (rng.random((n, n)) < fraction)
+    rows = m[::8]
+    assert np.count_nonzero(rows[:, 1:] != rows[:, :-1]) < np.count_nonzero(rows)
+    assert cl._pixel_texture(m)
+    got = clean_mask(m, s_min_px=2500.0, speck_px=40.0, sliver_length_px=50.0,
+                     sliver_width_px=7.5)
+    assert np.array_equal(got, _by_labelling(m, 2500.0, 40.0, 0.0))
+
+
+def test_bands_with_narrow_gaps_are_traced():
+    # paper gaps of 3 px between 5-px bands (slivers between stacks) are no pinholes
+    n = 600
+    bands = np.zeros((n, n), bool)
+    for c in range(10, n - 10, 8):
+        bands[10:-10, c:c + 5] = True
+    assert not cl._pixel_texture(bands)
