@@ -376,7 +376,7 @@ def analyze_rod(xy, *, lam: float, contact_distance: float | None = None,
 
     whole = _whole_rod(xy, lam)
     smp = _sample_contacts(xy, delta, min_run)
-    runs = _contact_runs(smp, delta)
+    runs = _split_hairpins(_contact_runs(smp, delta), smp, delta)
     cls = _union_runs(runs, smp)
     runs, cls = _split_fold_caps(runs, cls, smp, delta)
     runs, cls = _cut_loops(runs, cls, smp)
@@ -481,6 +481,53 @@ def _contact_runs(smp, delta):
     return runs
 
 
+def _split_hairpins(runs, smp, delta):
+    """Cut a run at every fold it holds: a sample in contact with a sample of its own run
+    less than a fold cap (``4 delta + pi delta``, as in :func:`_split_fold_caps`) further
+    along the rod.
+
+    A fold whose cap is shorter than ``min_run`` has its cap merged into the passes beside it
+    by :func:`_smooth_short_runs`, so that one run goes round the fold, and the partner
+    check of :func:`_contact_runs` is skipped where the multiplicity was smoothed. A branch
+    ends at a fold apex (module docstring): without the cut, an accordion of 4 layers 0.99
+    delta apart read 5 branches, two of them slivers of 0.005 L. The cut is the middle of
+    the two samples in contact, the apex; one within ``same_pass`` of the run's end is the
+    run's end already. Only where the rod turns back: a pass that stands off its band over a
+    bump shorter than ``min_run`` touches itself across the bump and goes on the way it
+    came. A spiral's passes touch a whole turn further along: a loop, cut by
+    :func:`_cut_loops`.
+    """
+    span = int(np.floor((4.0 + np.pi) * delta / smp.h))
+    same_pass, mult, clusters = smp.same_pass, smp.mult, smp.clusters
+    pts, last = smp.pts, len(smp.pts) - 1
+    m = max(span // 2, 1)
+
+    def turns_back(c):
+        # the rod's direction over half a cap before and after the apex: opposed at a fold;
+        # a pass bulging off its band for a moment goes on the way it came
+        u = pts[max(c - m, 0)] - pts[max(c - 2 * m, 0)]
+        v = pts[min(c + 2 * m, last)] - pts[min(c + m, last)]
+        return u @ v < 0
+
+    out = []
+    for a, b in runs:
+        if mult[a] < 2:
+            out.append([a, b])
+            continue
+        apices = sorted((k + q) // 2 for k in range(a, b) for q in clusters[k]
+                        if k + same_pass < q < min(b, k + span + 1))
+        cuts = []
+        for group in np.split(np.asarray(apices, np.int64),
+                              np.flatnonzero(np.diff(apices) > same_pass) + 1):
+            if len(group):
+                c = int(np.median(group))
+                if a + same_pass < c < b - same_pass and turns_back(c):
+                    cuts.append(c)
+        edges = [a] + cuts + [b]
+        out.extend([u, v] for u, v in zip(edges[:-1], edges[1:]))
+    return out
+
+
 def _union_runs(runs, smp):
     """Stack label of every run: runs joined by a contact of unsmoothed multiplicity."""
     mult, mult_raw = smp.mult, smp.mult_raw
@@ -495,13 +542,17 @@ def _split_fold_caps(runs, cls, smp, delta):
     """A short run between two runs of one stack is a fold cap: split it between them."""
     mult = smp.mult
     cap_max = 4.0 * delta + np.pi * delta
+
+    def middle(r):  # a run's multiplicity: its ends may hold half a cap split before
+        return mult[(r[0] + r[1]) // 2]
+
     changed = True
     while changed:
         changed = False
         for i in range(1, len(runs) - 1):
             a, b = runs[i]
             if (b - a) * smp.h < cap_max and cls[i - 1] == cls[i + 1] and cls[i] != cls[i - 1] \
-                    and min(mult[runs[i - 1][0]], mult[runs[i + 1][0]]) > mult[a]:
+                    and min(middle(runs[i - 1]), middle(runs[i + 1])) > middle(runs[i]):
                 mid = (a + b) // 2
                 runs[i - 1][1] = mid
                 runs[i + 1][0] = mid

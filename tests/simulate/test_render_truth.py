@@ -117,15 +117,18 @@ def _trimmed_short(monkeypatch):
 
 
 def test_bands_a_junction_holds_together_that_do_not_touch_are_flagged(monkeypatch):
-    """A quenched rod of 60 segments: with its unjoined band ends trimmed, the tip of its
-    four-layer stack stops 30 px short of the arm that continues it (two networks for the
-    analysis)."""
+    """A quenched rod of 300 segments, drawn in one piece of ink; with its unjoined band ends
+    trimmed, the bands of two of its junctions stop short of each other (three networks for
+    the analysis)."""
+    xy = np.load(DATA / "quench_rod_5.npy")
+    sc, said = _render(xy, lam=3e4, seed=2)
+    assert cv2.connectedComponents(sc.ink_mask.astype(np.uint8), connectivity=8)[0] - 1 == 1
+    assert not any("drawn rod is cut" in m for m in said)
     _trimmed_short(monkeypatch)
-    xy = np.load(DATA / "quench_rod_cut_join.npy")
     sc, said = _render(xy, lam=3e4, seed=2)
     n, _ = cv2.connectedComponents(sc.ink_mask.astype(np.uint8), connectivity=8)
-    assert n - 1 == 2
-    assert any("do not touch: the drawn rod is cut" in m for m in said)
+    assert n - 1 == 3
+    assert any("junctions 1, 6 do not touch: the drawn rod is cut" in m for m in said)
     assert said == sc.summary["truth_warnings"]
 
 
@@ -228,7 +231,7 @@ def _sim(tmp_path, xy, params):
 
 def test_cli_names_the_scene_of_a_truth_warning(tmp_path, capsys, monkeypatch):
     _trimmed_short(monkeypatch)  # a drawing cut at a junction
-    sim = _sim(tmp_path, np.load(DATA / "quench_rod_cut_join.npy"),
+    sim = _sim(tmp_path, np.load(DATA / "quench_rod_5.npy"),
                {"command": "quench", "lam": 3e4})
     out = tmp_path / "s"
     assert main(["render", str(sim), "--out", str(out), "--clean", "--seed", "2"]) == 0
