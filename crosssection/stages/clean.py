@@ -40,8 +40,10 @@ import numpy as np
 from crosssection.core.errors import ParameterError
 
 
-def _small_components(binary_u8: np.ndarray, connectivity: int, max_area: float) -> np.ndarray:
-    """Bool mask of the nonzero pixels of components with area < max_area.
+def _small_components(binary_u8: np.ndarray, connectivity: int, max_area: float,
+                      count: bool = False):
+    """Bool mask of the nonzero pixels of components with area < max_area (and the number of
+    components, with ``count``).
 
     Labels are 16-bit while there are fewer than 65 536 components (OpenCV raises past
     that, and 32-bit labels take over): their areas are then one ``cv2.calcHist`` with a bin
@@ -61,7 +63,8 @@ def _small_components(binary_u8: np.ndarray, connectivity: int, max_area: float)
         n, lab = cv2.connectedComponents(binary_u8, connectivity=connectivity,
                                          ltype=cv2.CV_32S)
     if n <= 1:
-        return np.zeros(binary_u8.shape, bool)
+        return (np.zeros(binary_u8.shape, bool), n - 1) if count else \
+            np.zeros(binary_u8.shape, bool)
     if lab.dtype == np.uint16:
         # bins of width 1 from 0: bin k counts label k exactly
         area = cv2.calcHist([lab], [0], None, [n], [0, n]).ravel()
@@ -69,9 +72,8 @@ def _small_components(binary_u8: np.ndarray, connectivity: int, max_area: float)
         area = np.bincount(lab.ravel(), minlength=n)
     small = area < max_area
     small[0] = False  # label 0 is the complement
-    if not small.any():
-        return np.zeros(binary_u8.shape, bool)
-    return np.take(small, lab)
+    out = np.take(small, lab) if small.any() else np.zeros(binary_u8.shape, bool)
+    return (out, n - 1) if count else out
 
 
 def _drop_components(binary_u8: np.ndarray, min_area: float, min_extent_px: float) -> np.ndarray:
@@ -187,20 +189,44 @@ def clean_mask(mask, *, s_min_px: float, speck_px: float | None = None,
     out = m.copy()
     if s_min_px > 0:
         bg = (~m).view(np.uint8)
-        small = _small_components(bg, 4, s_min_px)
+        small, n_holes = _small_components(bg, 4, s_min_px, count=True)
         if sliver is not None:
-            small &= ~_slivers(small, sliver)
+            small &= ~_slivers(small, sliver, wide_only=n_holes > MANY_HOLES)
         out |= small
     if speck_px > 0 or min_extent_px > 0:
         out = _drop_components(out.view(np.uint8), speck_px, min_extent_px)
     return out
 
 
-def _slivers(holes: np.ndarray, sliver: tuple[float, float]) -> np.ndarray:
-    """Bool mask of the 4-connected components of ``holes`` that are slivers."""
+#: Above this many holes, :func:`_slivers` keeps to those wide enough to be slivers before
+#: it measures their boxes.
+MANY_HOLES = 65_535
+
+
+def _slivers(holes: np.ndarray, sliver: tuple[float, float], wide_only: bool = False) -> np.ndarray:
+    """Bool mask of the 4-connected components of ``holes`` that are slivers.
+
+    ``wide_only``: first keep the components holding a pixel as far from the ink as a sliver's
+    least width asks. The distance within the whole mask is at least the distance within the
+    component's own box (:func:`is_sliver`), so no sliver is lost; the boxes of a texture's
+    millions of one-pixel holes are not gathered (a 4000 x 4000 checkerboard: 1.3 GB).
+    """
     import cv2
 
-    n, lab, stats, _ = cv2.connectedComponentsWithStats(holes.view(np.uint8), connectivity=4)
+    holes_u8 = holes.view(np.uint8)
+    if wide_only:
+        dist = cv2.distanceTransform(holes_u8, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+        wide = dist >= (sliver[1] + 1.0) / 2.0  # is_sliver's width 2 max(dist) - 1
+        del dist
+        if not wide.any():
+            return np.zeros(holes.shape, bool)
+        n, lab = cv2.connectedComponents(holes_u8, connectivity=4, ltype=cv2.CV_32S)
+        keep = np.zeros(n, bool)
+        keep[lab[wide]] = True
+        keep[0] = False
+        holes_u8 = np.take(keep, lab).view(np.uint8)
+        del lab
+    n, lab, stats, _ = cv2.connectedComponentsWithStats(holes_u8, connectivity=4)
     out = np.zeros(holes.shape, bool)
     # the box test of _may_be_sliver on every component at once (a texture's 190 000 pinholes
     # took 0.4 s one by one)
@@ -233,6 +259,20 @@ TEXTURE_TRANSITIONS = 1.0
 #: the pixel scale (the pinholes of ink covering 60-90 % of the hole): the voids between
 #: stacks are ``s_min`` = (10 h)^2 and more, the slivers between stacks 1.5 h wide and more.
 TEXTURE_PAPER_RUN_PX = 2.5
+#: Mean area, in px, of the ink pieces and paper pieces in small tiles of the ink below
+#: which the ink is a texture (a checkerboard of 3 x 1 px bricks: 3 px; the bands of the
+#: dense benchmark scan cut by the tiles: hundreds of px).
+TEXTURE_PIECE_PX = 20.0
+#: Side of the tiles, in px, and how many are read.
+TEXTURE_TILE_PX = 48
+TEXTURE_TILES = 12
+
+
+def _sampled_rows(h: int) -> np.ndarray:
+    """Every eighth row, its phase cycling through the eight, so that no pattern of period
+    eight rows (a checkerboard with every eighth row inked) hides in the rows read."""
+    r = np.arange(0, h, 8)
+    return np.minimum(r + (np.arange(r.size) * 3) % 8, h - 1)
 
 
 def _pixel_texture(m: np.ndarray) -> bool:
@@ -241,16 +281,17 @@ def _pixel_texture(m: np.ndarray) -> bool:
     ``cv2.findContours(RETR_TREE)`` grows faster than the square of the number of borders:
     on a 2000 x 2000 checkerboard of ink and paper inside a disk it took 196 s (the
     labelling, 0.05 s), on 5 % salt-and-pepper noise 1.8 s, on 60-80 % random ink inside a
-    disk of 1500 px 4.9-7.7 s. The transitions along every eighth row (0.2 ms on a
-    2000 x 2000 scan) tell such ink from bands: enough of them to exceed
-    :data:`MAX_BORDERS` borders, and either more than :data:`TEXTURE_TRANSITIONS` per ink
-    pixel (specks) or runs of paper between ink shorter than :data:`TEXTURE_PAPER_RUN_PX`
-    on average (pinholes). The labelling gives the same result: a band scan taken for a
-    texture only costs time.
+    disk of 1500 px 4.9-7.7 s, on a 2000 x 2000 checkerboard of 3 x 1 px bricks 35 s. The
+    transitions along every eighth row (:func:`_sampled_rows`; 0.2 ms on a 2000 x 2000 scan)
+    tell such ink from bands: enough of them to exceed :data:`MAX_BORDERS` borders, and
+    either more than :data:`TEXTURE_TRANSITIONS` per ink pixel (specks), runs of paper
+    between ink shorter than :data:`TEXTURE_PAPER_RUN_PX` on average (pinholes), or, in
+    :data:`TEXTURE_TILES` tiles about ink pixels of those rows, pieces of ink and paper
+    smaller than :data:`TEXTURE_PIECE_PX` on average (a texture of small pieces of both).
+    The labelling gives the same result: a band scan taken for a texture only costs time.
     """
-    rows = m[::8]
-    edges = rows[:, 1:] != rows[:, :-1]
-    transitions = np.count_nonzero(edges)
+    rows = m[_sampled_rows(m.shape[0])]
+    transitions = np.count_nonzero(rows[:, 1:] != rows[:, :-1])
     if 8 * transitions <= 2 * MAX_BORDERS:
         return False
     if transitions > TEXTURE_TRANSITIONS * max(np.count_nonzero(rows), 1):
@@ -262,7 +303,29 @@ def _pixel_texture(m: np.ndarray) -> bool:
     last = rows.shape[1] - 1 - rows[:, ::-1].argmax(axis=1)
     paper_px = int(np.sum(last - first + 1)) - np.count_nonzero(rows)
     paper_runs = (transitions - 2 * rows.shape[0]) // 2  # two edges per row are its ends
-    return paper_runs > 0 and paper_px < TEXTURE_PAPER_RUN_PX * paper_runs
+    if paper_runs > 0 and paper_px < TEXTURE_PAPER_RUN_PX * paper_runs:
+        return True
+    return _small_pieces(m, _sampled_rows(m.shape[0])[inked], rows)
+
+
+def _small_pieces(m: np.ndarray, row_index: np.ndarray, rows: np.ndarray) -> bool:
+    """Whether tiles about ink pixels of the sampled ``rows`` (each an inked row, at
+    ``row_index`` in ``m``) hold pieces of ink (8-connected) and of paper (4-connected) of less
+    than :data:`TEXTURE_PIECE_PX` on average: about the middle ink pixel of
+    :data:`TEXTURE_TILES` rows spread over the inked ones."""
+    import cv2
+
+    half = TEXTURE_TILE_PX // 2
+    pieces = area = 0
+    for i in np.unique(np.linspace(0, len(rows) - 1, TEXTURE_TILES).astype(np.int64)).tolist():
+        xs = np.flatnonzero(rows[i])  # the row's middle ink pixel
+        r, c = int(row_index[i]), int(xs[xs.size // 2])
+        tile = np.ascontiguousarray(m[max(r - half, 0):r + half, max(c - half, 0):c + half])
+        u8 = tile.view(np.uint8)
+        pieces += cv2.connectedComponents(u8, connectivity=8)[0] - 1
+        pieces += cv2.connectedComponents(1 - u8, connectivity=4)[0] - 1
+        area += tile.size
+    return pieces > 0 and area < TEXTURE_PIECE_PX * pieces
 
 
 def _borders_settle(m: np.ndarray, s_min_px: float) -> bool:

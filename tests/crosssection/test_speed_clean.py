@@ -196,3 +196,66 @@ def test_bands_with_narrow_gaps_are_traced():
     for c in range(10, n - 10, 8):
         bands[10:-10, c:c + 5] = True
     assert not cl._pixel_texture(bands)
+
+
+def _disk(n):
+    yy, xx = np.indices((n, n))
+    return yy, xx, np.hypot(yy - n / 2, xx - n / 2) < 0.45 * n
+
+
+@pytest.mark.parametrize("pattern", ["rows_every_8", "bricks_3x1", "blocks_2x2"])
+def test_textures_that_the_row_counts_miss_are_labelled(pattern):
+    # a checkerboard with every eighth row inked (rows read at one phase would see solid ink),
+    # and checkerboards of 3 x 1 and 2 x 2 blocks (one transition per ink pixel, paper runs of
+    # 2-3 px): 10^5-10^6 borders, tens of seconds of border following at 1000-2000 px
+    n = 400
+    yy, xx, disk = _disk(n)
+    if pattern == "rows_every_8":
+        m = (yy + xx) % 2 == 0
+        m[::8] = True
+    elif pattern == "bricks_3x1":
+        m = (yy + xx // 3) % 2 == 0
+    else:
+        m = (yy // 2 + xx // 2) % 2 == 0
+    m &= disk
+    assert cl._pixel_texture(m)
+    got = clean_mask(m, s_min_px=2500.0, speck_px=40.0)
+    assert np.array_equal(got, _by_labelling(m, 2500.0, 40.0, 0.0))
+
+
+def test_band_scans_are_no_texture():
+    # bands 5-9 px wide at all angles, gaps of 6-30 px: the tiles read pieces of hundreds of px
+    rng = np.random.default_rng(3)
+    n = 800
+    m = np.zeros((n, n), np.uint8)
+    for _ in range(400):
+        p = rng.integers(0, n, 2)
+        a = rng.uniform(0, np.pi)
+        q = (p + 60 * np.array([np.cos(a), np.sin(a)])).astype(int)
+        cv2.line(m, tuple(int(v) for v in p), tuple(int(v) for v in q), 1,
+                 int(rng.integers(5, 10)))
+    m = m.view(bool)
+    rows = m[cl._sampled_rows(n)]
+    assert 8 * np.count_nonzero(rows[:, 1:] != rows[:, :-1]) > 2 * cl.MAX_BORDERS
+    assert not cl._pixel_texture(m)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_slivers_among_many_holes_are_the_same_found_from_the_wide_ones(seed):
+    """Keeping to the holes wide enough to be slivers first (a texture's millions of holes)
+    finds the same slivers: bands with paper gaps of 1-12 px between them, and pinholes."""
+    rng = np.random.default_rng(seed)
+    n = 300
+    m = np.ones((n, n), np.uint8)
+    for _ in range(12):
+        r, c = (int(v) for v in rng.integers(10, n - 60, 2))
+        cv2.rectangle(m, (c, r), (c + int(rng.integers(20, 60)), r + int(rng.integers(1, 13))),
+                      0, -1)
+        cv2.ellipse(m, (c, r), (int(rng.integers(3, 40)), int(rng.integers(1, 7))),
+                    float(rng.uniform(0, 180)), 0, 360, 0, -1)
+    m[rng.random((n, n)) < 0.05] = 0
+    holes = cl._small_components(1 - m, 4, 2500.0)
+    for sliver in [(20.0, 3.0), (50.0, 7.5), (30.0, 5.0)]:
+        want = cl._slivers(holes, sliver)
+        assert np.array_equal(cl._slivers(holes, sliver, wide_only=True), want)
+    assert want.any()
