@@ -5,8 +5,8 @@ with ``crosssection.core.fileio.save_figure``. ``AnalysisResult.plot`` draws the
 
 Stacks are drawn as one ``LineCollection`` (thousands of stacks render in about a second),
 with a line width proportional to ``n_br`` (one sheet thickness per branch on the image's
-scale, at least 0.6 pt per branch), bulk green and periphery red, labelled with ``n_br`` at their
-mid point when they are long enough to carry a label.
+scale, at least 0.6 pt per branch), bulk bluish green and periphery vermillion, labelled with
+``n_br`` at their mid point when they are long enough to carry a label.
 """
 from __future__ import annotations
 
@@ -19,8 +19,10 @@ from crosssection.core.errors import printable
 __all__ = ["overlay_figure", "draw_overlay", "overlay_window", "steps_figure", "threshold_title",
            "step_titles", "curvature_figure", "widths_figure", "dim_image"]
 
-BULK_COLOR = "#1a9641"
-PERIPHERY_COLOR = "#d7191c"
+# bluish green and vermillion (Okabe and Ito's palette): told apart with every common colour
+# vision deficiency, where green and red are not, and neither is the ink's blue
+BULK_COLOR = "#009e73"
+PERIPHERY_COLOR = "#d55e00"
 OTHER_COLOR = "#2b83ba"
 
 
@@ -193,7 +195,7 @@ def overlay_figure(rgb, result=None, *, junctions_df=None, stacks_df=None, paths
         max_labels=max_labels)
     st = stacks_df if stacks_df is not None else _get(result, "stacks")
     regions = set(st["region"]) if st is not None and "region" in st else {"bulk", "periphery"}
-    # only what the figure shows: a scan without a periphery stack has no red in it
+    # only what the figure shows: a scan without a periphery stack shows no periphery colour
     handles = [Line2D([], [], color=c, lw=3, label=r)
                for r, c in (("bulk", BULK_COLOR), ("periphery", PERIPHERY_COLOR))
                if r in regions]

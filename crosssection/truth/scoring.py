@@ -208,7 +208,8 @@ def score(result, truth, *, match_px: float | None = None, px_per_mm: float | No
     px_per_mm = _recorded(px_per_mm, "px_per_mm", rs, ts, 50.0)
     thickness_mm = _recorded(thickness_mm, "thickness_mm", rs, ts, 0.1)
     if match_px is None:
-        match_px = 3.0 * thickness_mm * px_per_mm
+        # rounded to 12 digits: 3 h of 0.1 mm at 50 px/mm is 15, not 15.000000000000002
+        match_px = float(f"{3.0 * thickness_mm * px_per_mm:.12g}")
     out = {"match_px": float(match_px)}
 
     def total(summary, tables, key, col, weight=None):

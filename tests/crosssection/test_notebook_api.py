@@ -32,7 +32,8 @@ def test_html_summary_and_small_thumbnail(result):
     assert img.format == "PNG" and max(img.size) == 320
     rgb = np.asarray(img.convert("RGB")).astype(int)
     r, g = rgb[..., 0], rgb[..., 1]
-    # the network is drawn: green bulk and red periphery pixels, not only the dimmed scan
+    # the network is drawn: bluish-green bulk and vermillion periphery pixels, not only the
+    # dimmed scan
     assert (g > r + 60).sum() > 100 and (r > g + 60).sum() > 20
 
 

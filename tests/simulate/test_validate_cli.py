@@ -285,6 +285,7 @@ def test_summary_records_the_default_match_px_used(scenes, tmp_path):
     used = pd.read_csv(tmp_path / "rep" / "scores.csv")["match_px"].tolist()
     assert summary["options"]["match_px"] == used[0] == pytest.approx(
         3 * params["thickness_mm"] * params["px_per_mm"])
+    assert used[0] == float(f"{used[0]:.12g}")  # 15, not 15.000000000000002
 
 
 def test_unusable_out_is_one_error_line(scenes, tmp_path, capsys):

@@ -38,6 +38,8 @@ def test_stats_report_on_batch_and_simulation(tmp_path, seed):
     assert meta["version"] and meta["options"]["seed"] == seed
     assert meta["sets"]["s1"]["fits"]["all"]["length_L"]["selected"]
     html = (out / "report.html").read_text()
+    # the page says what Eq. (12) tests and what a negative r2 means
+    assert "the branches tile the rod" in html and "worse than their mean" in html
     figs = sorted((out / "figures").glob("*.png"))
     assert len(figs) >= 10
     for f in figs:  # the page links every figure

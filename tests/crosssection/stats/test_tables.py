@@ -521,7 +521,15 @@ def test_two_configurations_give_no_correlation_in_the_table_or_the_figure():
     three = _relations_ensemble(np.random.default_rng(5), n=T.CORRELATION_MIN_PAIRS)
     fig3 = _scatter_fig(T.compute_stats(three, T.StatsOptions(n_boot=0, gof=False)),
                         "N_br", "E", "N_br", "E", "E against N_br")
-    assert any("Pearson" in label for label in fig3.axes[0].get_legend_handles_labels()[1])
+    labels3 = fig3.axes[0].get_legend_handles_labels()[1]
+    # the number of pairs is in the legend, as the coefficient rests on it
+    assert any("Pearson r = " in label and f"(n = {T.CORRELATION_MIN_PAIRS}, indicative only)"
+               in label for label in labels3)
+    many = _relations_ensemble(np.random.default_rng(5), n=T.N_RELATION_MIN)
+    fig5 = _scatter_fig(T.compute_stats(many, T.StatsOptions(n_boot=0, gof=False)),
+                        "N_br", "E", "N_br", "E", "E against N_br")
+    assert any(f"(n = {T.N_RELATION_MIN})" in label
+               for label in fig5.axes[0].get_legend_handles_labels()[1])
 
 
 def test_a_simulation_resumed_under_other_versions_reports_every_version(tmp_path):
