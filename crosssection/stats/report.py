@@ -2065,7 +2065,13 @@ def _html(res: StatsResult, figs, meta, ens: Ensemble | None = None,
         _html_table(_selected_table(res)) if res.summaries else "<p>none</p>",
     ]
     if len(rej):
-        parts += ["<h2>Degenerate fits (never selected)</h2>", _html_table(rej[rej_cols])]
+        parts += ["<h2>Degenerate fits (never selected)</h2><p>A fit whose parameters run to "
+                  "a limit of its family (a Bose-Einstein law with βx ≪ 1 everywhere, that is "
+                  "a 1/x law; a Gaussian whose mean lies far below the data) or whose law is a "
+                  "spike the data cannot resolve describes no law of the data, whatever its "
+                  "BIC: a limit fits as well as the family's best member and its parameters "
+                  "are not determined. Its reason is in the last column; it is never selected "
+                  "and carries no interval nor p-value.</p>", _html_table(rej[rej_cols])]
     if not res.truncation.empty:
         parts += ["<h2>Detection limits: naive against truncation-aware fits</h2>",
                   _html_table(res.truncation)]

@@ -40,6 +40,9 @@ def test_stats_report_on_batch_and_simulation(tmp_path, seed):
     html = (out / "report.html").read_text()
     # the page says what Eq. (12) tests and what a negative r2 means
     assert "the branches tile the rod" in html and "worse than their mean" in html
+    # some of this ensemble's fits are degenerate: the page says why they are set aside
+    assert "<h2>Degenerate fits (never selected)</h2><p>" in html
+    assert "describes no law of the data, whatever its BIC" in html
     figs = sorted((out / "figures").glob("*.png"))
     assert len(figs) >= 10
     for f in figs:  # the page links every figure
