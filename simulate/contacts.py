@@ -14,7 +14,8 @@ Definitions (paper sections "Simulations vs experiments", "Tiling", "Curvature o
   a scan, where bands closer than the resolution merge). The *multiplicity* of a sample is the
   number of distinct passes in its chained cluster, itself included.
 - Runs of constant multiplicity (runs shorter than ``min_run`` = 3 delta are merged into a
-  neighbour; a run also ends where a partner pass jumps) are unioned through their contacts
+  neighbour; a run also ends where a partner pass jumps, and at the apex where it folds back
+  onto itself, a cap so merged) are unioned through their contacts
   into *stacks*; a short single run between two runs of the same stack is a fold cap and is
   split between them (the stack ends there, like a free end: junction -1).
 - A stack whose runs wrap around (a spiral) is cut where its passes cross the normal at its

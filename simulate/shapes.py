@@ -1,4 +1,5 @@
-"""Hand-built rods of known contact structure (hairpin, spiral, double loop), in units of L.
+"""Hand-built rods of known contact structure (hairpin, accordion, spiral, double loop), in
+units of L.
 
 Used to check the contact analysis and the renderer against shapes whose stacks, junctions and
 voids are known by construction.
@@ -7,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["resample", "lines", "hairpin", "spiral", "double_loop", "transform"]
+__all__ = ["resample", "lines", "hairpin", "accordion", "spiral", "double_loop", "transform"]
 
 
 def resample(curve, n=300):
@@ -33,6 +34,24 @@ def hairpin(g, arm=0.3):
     cap = np.c_[arm + g / 2 * np.cos(th), g / 2 * np.sin(th)]
     return np.concatenate([lines((-0.1, 0.06), (0, g / 2), (arm, g / 2)), cap,
                            lines((arm, -g / 2), (0, -g / 2), (-0.1, -0.06))])
+
+
+def accordion(layers, g, length=1.0):
+    """Rod folded flat ``layers`` times: straight layers ``g`` apart joined by half-circle caps
+    of diameter ``g``, the rod's ends free at both sides (one stack of ``layers`` branches, no
+    junction)."""
+    cap = np.pi * g / 2
+    arm = (length - (layers - 1) * cap) / layers
+    th = np.linspace(-np.pi / 2, np.pi / 2, 400)
+    parts = []
+    for i in range(layers):
+        y = i * g
+        ends = ((0.0, y), (arm, y)) if i % 2 == 0 else ((arm, y), (0.0, y))
+        parts.append(lines(*ends))
+        if i < layers - 1:  # the cap turns round the end the layer ran to
+            x0, sign = ends[1][0], (1 if i % 2 == 0 else -1)
+            parts.append(np.c_[x0 + sign * g / 2 * np.cos(th), y + g / 2 + g / 2 * np.sin(th)])
+    return np.concatenate(parts)
 
 
 def spiral(turns, g):

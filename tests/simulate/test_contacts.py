@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from simulate.contacts import analyze_rod
-from simulate.shapes import double_loop, hairpin, lines, resample, spiral, transform
+from simulate.shapes import accordion, double_loop, hairpin, lines, resample, spiral, transform
 
 LAM = 7e5
 DELTA = 0.5 / 300
@@ -61,6 +61,23 @@ def test_hairpin(seed):
     assert sorted([s2.junction_a, s2.junction_b]) == [-1, 0]
     assert a.multiplicity.max() == 2
     check_totals(a, xy)
+
+
+@pytest.mark.parametrize("layers", [3, 4, 5, 6, 8, 11])
+def test_accordion_is_one_stack_of_its_layers(layers):
+    """A rod folded flat into ``layers`` layers, at any gap within the contact distance: one
+    stack of one branch per layer, each about 1/layers long. Caps shorter than ``min_run``
+    are merged into the layers beside them: a run then went round a fold (4 layers 0.9-0.97
+    delta apart read 5 branches, two of them slivers of 0.005 L; 8 layers read 9 or 10)."""
+    rng = np.random.default_rng(layers)
+    for frac in (0.3, 0.7, 0.85, 0.9, 0.97):
+        xy = transform(resample(accordion(layers, frac * DELTA)), rng)
+        a = analyze_rod(xy, lam=LAM)
+        assert a.stacks["n_br"].tolist() == [layers], frac
+        assert a.n_junctions == 0
+        lengths = a.branches["length"].to_numpy()
+        assert np.all(np.abs(lengths * layers - 1) < 0.1), (frac, lengths)
+        check_totals(a, xy)
 
 
 def test_hairpin_apart_has_no_contact():
