@@ -259,6 +259,9 @@ TEXTURE_TRANSITIONS = 1.0
 #: the pixel scale (the pinholes of ink covering 60-90 % of the hole): the voids between
 #: stacks are ``s_min`` = (10 h)^2 and more, the slivers between stacks 1.5 h wide and more.
 TEXTURE_PAPER_RUN_PX = 2.5
+#: Runs of paper this many times :data:`TEXTURE_PAPER_RUN_PX` long on average are voids: the
+#: tiles are not read (the dense benchmark scan's runs: 128 px).
+TEXTURE_WIDE_PAPER = 3.0
 #: Mean area, in px, of the ink pieces and paper pieces in small tiles of the ink below
 #: which the ink is a texture (a checkerboard of 3 x 1 px bricks: 3 px; the bands of the
 #: dense benchmark scan cut by the tiles: hundreds of px).
@@ -285,7 +288,8 @@ def _pixel_texture(m: np.ndarray) -> bool:
     transitions along every eighth row (:func:`_sampled_rows`; 0.2 ms on a 2000 x 2000 scan)
     tell such ink from bands: enough of them to exceed :data:`MAX_BORDERS` borders, and
     either more than :data:`TEXTURE_TRANSITIONS` per ink pixel (specks), runs of paper
-    between ink shorter than :data:`TEXTURE_PAPER_RUN_PX` on average (pinholes), or, in
+    between ink shorter than :data:`TEXTURE_PAPER_RUN_PX` on average (pinholes), or, where
+    those runs are shorter than :data:`TEXTURE_WIDE_PAPER` times that, in
     :data:`TEXTURE_TILES` tiles about ink pixels of those rows, pieces of ink and paper
     smaller than :data:`TEXTURE_PIECE_PX` on average (a texture of small pieces of both).
     The labelling gives the same result: a band scan taken for a texture only costs time.
@@ -305,6 +309,8 @@ def _pixel_texture(m: np.ndarray) -> bool:
     paper_runs = (transitions - 2 * rows.shape[0]) // 2  # two edges per row are its ends
     if paper_runs > 0 and paper_px < TEXTURE_PAPER_RUN_PX * paper_runs:
         return True
+    if paper_runs <= 0 or paper_px >= TEXTURE_WIDE_PAPER * TEXTURE_PAPER_RUN_PX * paper_runs:
+        return False  # paper in wide runs between the ink: voids, not a texture's gaps
     return _small_pieces(m, _sampled_rows(m.shape[0])[inked], rows)
 
 

@@ -549,7 +549,8 @@ def _skeleton_front(hc, w, to8, offs, j, path, depth, queue, seen):  # pragma: n
 
 
 class _FrontSearch:
-    """Scratch space of :func:`_skeleton_front` on one image, allocated at the first search.
+    """Scratch space of :func:`_skeleton_front` on one image of at most ``n_pixels`` skeleton
+    pixels, allocated at the first search (one per pruning, whose rounds only remove pixels).
 
     The search was a breadth-first loop in Python: on ink that the cleaning fills into one
     blob (60 % random ink inside a given hole of 1000 x 1000 px) its depth, twice the distance
@@ -557,13 +558,13 @@ class _FrontSearch:
     26 s of a 29 s analysis. Compiled, the same searches take well under a second.
     """
 
-    def __init__(self, hc, w, offs):
-        self.hc, self.w, self.offs = hc, w, offs
+    def __init__(self, hc, w, offs, n_pixels):
+        self.hc, self.w, self.offs, self.n_pixels = hc, w, offs, n_pixels
         self.queue = self.seen = None
 
     def front(self, j, path, depth):
         if self.queue is None:
-            self.queue = np.empty(int(np.count_nonzero(self.hc & 2)) + 1, np.int64)
+            self.queue = np.empty(self.n_pixels + 1, np.int64)
             self.seen = np.zeros(self.hc.shape[0], np.uint8)
         lo, hi = _skeleton_front(self.hc, self.w, _TO8, self.offs, j,
                                  np.asarray(path, np.int64), depth, self.queue, self.seen)
@@ -593,7 +594,7 @@ def _past_its_band(search, j, path, reach, l_min, extra) -> bool:
     return reach >= l_min and reach >= l_min + _band_half_width(search, j, path, extra)
 
 
-def _walk_all(hc, w, ends, l_min, buf_len, offs, extra=None, l_walk=None):
+def _walk_all(hc, w, ends, l_min, buf_len, offs, extra=None, l_walk=None, search=None):
     """Walks from the free ends ``ends`` on a fixed image (row codes ``hc``, row length ``w``),
     all at once.
 
@@ -684,7 +685,7 @@ def _walk_all(hc, w, ends, l_min, buf_len, offs, extra=None, l_walk=None):
     walkers, pixels = np.concatenate(walkers), np.concatenate(pixels)
     if extra is not None:
         # spurs only by the band's width at their junction: that width read past the fork
-        search = _FrontSearch(hc, w, offs)
+        search = search or _FrontSearch(hc, w, offs, int(np.count_nonzero(hc & 2)))
         for i in np.flatnonzero(spur & (length + lead >= l_min)).tolist():
             if _past_its_band(search, int(stop[i]), pixels[walkers == i],
                               length[i] + lead[i], l_min, extra):
@@ -736,7 +737,7 @@ def _prune(hc, w, idx, l_min, mark=None, extra=None):
     offs_l = offs.tolist()
     box = [0] + offs_l  # a pixel and its neighbours: what a walk reads around a pixel
     n_removed = 0
-    search = _FrontSearch(hc, w, offs)
+    search = _FrontSearch(hc, w, offs, idx.shape[0])  # pruning only removes pixels
 
     def code_of(p):  # on the current image
         return _TO8_L[int(hc[p - w]) + 8 * int(hc[p]) + 64 * int(hc[p + w])]
@@ -746,7 +747,7 @@ def _prune(hc, w, idx, l_min, mark=None, extra=None):
         if ends.shape[0] == 0:
             break
         spur, lens, walker, pixel, stop = _walk_all(hc, w, ends, l_min, buf_len, offs, extra,
-                                                    l_walk)
+                                                    l_walk, search)
         sid = np.flatnonzero(spur)
         if sid.shape[0] == 0:
             break

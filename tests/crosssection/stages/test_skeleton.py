@@ -544,7 +544,7 @@ def test_band_front_search_matches_a_set_search(seed):
     assert idx.size > 50
     hc = f.copy()
     sk._to_row_codes(hc, idx)
-    search = sk._FrontSearch(hc, w, sk._offsets(w))
+    search = sk._FrontSearch(hc, w, sk._offsets(w), idx.size)
     for j in rng.choice(idx, 8, replace=False).tolist():
         # a piece of skeleton next to j stands for the spur
         path = sorted(_ref_front(f, w, j, [], 1))[:1]
