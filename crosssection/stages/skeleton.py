@@ -555,7 +555,7 @@ class _FrontSearch:
     The search was a breadth-first loop in Python: on ink that the cleaning fills into one
     blob (60 % random ink inside a given hole of 1000 x 1000 px) its depth, twice the distance
     to the background, spans the blob, and 453 searches over its 26 000-pixel skeleton took
-    26 s of a 29 s analysis. Compiled, the same searches take well under a second.
+    20 s of a 21 s analysis. Compiled, the same searches take 0.1 s.
     """
 
     def __init__(self, hc, w, offs, n_pixels):
