@@ -259,3 +259,23 @@ def test_slivers_among_many_holes_are_the_same_found_from_the_wide_ones(seed):
         want = cl._slivers(holes, sliver)
         assert np.array_equal(cl._slivers(holes, sliver, wide_only=True), want)
     assert want.any()
+
+
+@pytest.mark.parametrize("share", [0.2, 0.4])
+def test_a_texture_beside_solid_ink_on_every_row_is_labelled(share):
+    """Each row a 1-px checkerboard over its first ``share`` of the disk, then solid ink, then
+    paper, and a wall band of 8 px (mean paper runs of 2.7 px: the tiles are read): tiles
+    about each row's middle ink pixel all sat on the solid ink, and border following took 30 s
+    at 2000 px."""
+    n = 1000
+    yy, xx = np.indices((n, n))
+    c, r = (n - 1) / 2, n / 2 - 20
+    rr = np.hypot(xx - c, yy - c)
+    half = np.sqrt(np.maximum(r * r - (yy - c) ** 2, 0))
+    u = (xx - c + half) / np.maximum(2 * half, 1)
+    m = np.where(u < share, (xx + yy) % 2 == 0, u < share + 0.26)
+    m[np.abs(yy - c) > 0.85 * r] = True
+    m = (m & (rr <= r)) | ((rr <= r) & (rr > r - 8))
+    assert cl._pixel_texture(m)
+    got = clean_mask(m, s_min_px=2500.0, speck_px=40.0)
+    assert np.array_equal(got, _by_labelling(m, 2500.0, 40.0, 0.0))
