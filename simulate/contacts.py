@@ -377,11 +377,11 @@ def analyze_rod(xy, *, lam: float, contact_distance: float | None = None,
 
     whole = _whole_rod(xy, lam)
     smp = _sample_contacts(xy, delta, min_run)
-    runs = _split_hairpins(_contact_runs(smp, delta), smp, delta)
+    runs, apices = _split_hairpins(_contact_runs(smp, delta), smp, delta)
     cls = _union_runs(runs, smp)
-    runs, cls = _split_fold_caps(runs, cls, smp, delta)
+    runs, cls, caps = _split_fold_caps(runs, cls, smp, delta)
     runs, cls = _cut_loops(runs, cls, smp)
-    topo = _merge_two_ended_junctions(runs, cls, smp)
+    topo = _merge_two_ended_junctions(runs, cls, smp, apices | caps)
     junctions, junction_of_end = _junction_table(topo)
     j_xy = junctions[["x", "y"]].to_numpy(float) if len(junctions) else np.zeros((0, 2))
     branches = _branch_table(xy, lam, topo, smp, whole.r2)
@@ -483,9 +483,9 @@ def _contact_runs(smp, delta):
 
 
 def _split_hairpins(runs, smp, delta):
-    """Cut a run at every fold it holds: a sample in contact with a sample of its own run
-    less than a fold cap (``4 delta + pi delta``, as in :func:`_split_fold_caps`) further
-    along the rod.
+    """Cut a run at every fold it holds (returns the runs and the samples cut at): a sample in
+    contact with a sample of its own run less than a fold cap (``4 delta + pi delta``, as in
+    :func:`_split_fold_caps`) further along the rod.
 
     A fold whose cap is shorter than ``min_run`` has its cap merged into the passes beside it
     by :func:`_smooth_short_runs`, so that one run goes round the fold, and the partner
@@ -510,7 +510,7 @@ def _split_hairpins(runs, smp, delta):
         v = pts[min(c + 2 * m, last)] - pts[min(c + m, last)]
         return u @ v < 0
 
-    out = []
+    out, cut_at = [], set()
     for a, b in runs:
         if mult[a] < 2:
             out.append([a, b])
@@ -526,7 +526,8 @@ def _split_hairpins(runs, smp, delta):
                     cuts.append(c)
         edges = [a] + cuts + [b]
         out.extend([u, v] for u, v in zip(edges[:-1], edges[1:]))
-    return out
+        cut_at.update(cuts)
+    return out, cut_at
 
 
 def _union_runs(runs, smp):
@@ -540,8 +541,11 @@ def _union_runs(runs, smp):
 
 
 def _split_fold_caps(runs, cls, smp, delta):
-    """A short run between two runs of one stack is a fold cap: split it between them."""
+    """A short run between two runs of one stack is a fold cap: split it between them.
+
+    Returns the runs, their stack labels and the samples where a cap was split (apices)."""
     mult = smp.mult
+    apices = set()
     cap_max = 4.0 * delta + np.pi * delta
 
     def middle(r):  # a run's multiplicity: its ends may hold half a cap split before
@@ -557,11 +561,12 @@ def _split_fold_caps(runs, cls, smp, delta):
                 mid = (a + b) // 2
                 runs[i - 1][1] = mid
                 runs[i + 1][0] = mid
+                apices.add(mid)
                 del runs[i]
                 del cls[i]
                 changed = True
                 break
-    return runs, cls
+    return runs, cls, apices
 
 
 def _cut_loops(runs, cls, smp):
@@ -609,14 +614,17 @@ class _Topology(NamedTuple):
     node_pts: dict
 
 
-def _merge_two_ended_junctions(runs, cls, smp) -> _Topology:
+def _merge_two_ended_junctions(runs, cls, smp, apices=frozenset()) -> _Topology:
     """Number the stacks and merge every pair of stacks meeting alone at a junction.
 
     A junction with exactly two stack ends (a free rod end or a fold inside a band, or a third
     pass brushing a band) changes the set of passes but not the band: a scan shows one band
     whose width changes, the skeleton no junction. Convention (truth and pipeline agree): the
     two stacks are one; the passes running through are one branch each, so n_br = number of
-    distinct rod pieces in the band (the larger count).
+    distinct rod pieces in the band (the larger count). A pass that folds back there (two
+    runs meeting at a sample of ``apices``, the fold apices) is two pieces, as a fold is
+    everywhere else: a hairpin lying in a band that a third pass leaves beyond the fold
+    counts both its legs.
     """
     rside = None  # [side of start, side of end] per run; 2 = inside its stack (merged away)
     for _ in range(len(runs) + 1):
@@ -640,7 +648,8 @@ def _merge_two_ended_junctions(runs, cls, smp) -> _Topology:
         cls = [c_a if c == c_b else c for c in cls]
         new_runs, new_cls, new_side = [list(runs[0])], [cls[0]], [list(rside[0])]
         for i in range(1, len(runs)):
-            if new_side[-1][1] == 2 and rside[i][0] == 2 and new_cls[-1] == cls[i]:
+            if new_side[-1][1] == 2 and rside[i][0] == 2 and new_cls[-1] == cls[i] \
+                    and runs[i][0] not in apices:
                 new_runs[-1][1] = runs[i][1]  # one pass through the merged band: one branch
                 new_side[-1][1] = rside[i][1]
             else:

@@ -80,6 +80,40 @@ def test_accordion_is_one_stack_of_its_layers(layers):
         check_totals(a, xy)
 
 
+def _hairpin_on_a_pass(g, arm=0.25, tail=0.2):
+    """A pass along y = 0 from a free end at x = arm + tail to x = 0, an excursion to the left
+    back to (0, g), a hairpin lying on the pass (legs at y = g and 2 g, its fold at x = arm),
+    then a free tail: the pass goes on alone beyond the fold."""
+    th = np.linspace(-np.pi / 2, np.pi / 2, 200)
+    t = np.linspace(0, 1, 800)
+    loop = np.c_[-0.15 * np.sin(np.pi * t), g * t - 0.1 * np.sin(np.pi * t)]
+    cap = np.c_[arm + g / 2 * np.cos(th), 1.5 * g + g / 2 * np.sin(th)]
+    return np.concatenate([lines((arm + tail, 0.0), (0.0, 0.0)), loop,
+                           lines((0.0, g), (arm, g)), cap,
+                           lines((arm, 2 * g), (0.0, 2 * g), (-0.1, 0.08))])
+
+
+@pytest.mark.parametrize("frac", [0.3, 0.5, 0.7])
+def test_a_hairpin_on_a_pass_that_goes_on_counts_both_its_legs(frac):
+    """The band of three layers and the single pass beyond its fold are one stack (a junction
+    of two stack ends is merged away); the pass running through it is one branch, and the
+    hairpin, folded there, two: n_br = 3 (the legs were joined into one branch round the
+    fold)."""
+    rng = np.random.default_rng(int(frac * 10))
+    curve = _hairpin_on_a_pass(frac * DELTA)
+    xy = transform(resample(curve), rng)
+    a = analyze_rod(xy, lam=LAM)
+    br = a.branches
+    through = br.loc[br["length"].idxmax()]  # the pass, from its free end
+    band = br[br["stack_id"] == through["stack_id"]]
+    assert len(band) == 3
+    # the legs: 0.25 of the curve's length each, the fold half-way round the cap
+    leg = 0.25 / np.hypot(*np.diff(curve, axis=0).T).sum()
+    legs = np.sort(band["length"].to_numpy())[:2]
+    assert np.all(np.abs(legs - leg) < 0.01), (legs, leg)
+    check_totals(a, xy)
+
+
 def test_hairpin_apart_has_no_contact():
     xy = resample(hairpin(3 * DELTA))
     a = analyze_rod(xy, lam=LAM)
