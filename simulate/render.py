@@ -809,7 +809,8 @@ def _rod_length_mm(xy, delta, cal, n_max, *, rod_length_mm, px_per_mm, gap_px, m
         return rod_length_mm, True
     if rod_length_mm > cap:
         warnings.warn(f"rod length capped at {cap:.1f} mm to keep the image under "
-                      f"{max_size_px} px: passes just beyond delta may touch",
+                      f"{max_size_px} px: passes just beyond the contact distance (the "
+                      "ensemble's, in units of L) may touch in the image",
                       ResolutionWarning, stacklevel=4)
         return cap, False
     return rod_length_mm, True
@@ -2972,7 +2973,7 @@ def add_subparser(sub) -> None:
     p.add_argument("--rod-length-mm", type=float, default=None,
                    help="rod length L in mm (default: thickness-mm over the rod's thickness "
                         "for a compaction, else the smallest keeping a visible gap between "
-                        "passes beyond delta)")
+                        "passes farther apart than the contact distance)")
     p.add_argument("--clean", action="store_true",
                    help="no scan defect, no plate: the clean drawing (each option below "
                         "still sets its defect)")

@@ -89,6 +89,7 @@ def test_a_size_cap_reaches_the_command_line_and_flags_the_scene(sim, tmp_path, 
                           "--thickness-mm", "1")
     assert status == 0
     assert "rod length capped" in err and err.startswith("warning: ")
+    assert "beyond the contact distance" in err and "delta" not in err  # no symbol unexplained
     summary = json.loads((tmp_path / "s" / "config_00000" / "truth" / "summary.json")
                          .read_text())
     assert any("rod length capped" in m for m in summary["truth_warnings"])
