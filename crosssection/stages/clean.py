@@ -62,17 +62,17 @@ def _small_components(binary_u8: np.ndarray, connectivity: int, max_area: float,
     if lab is None:
         n, lab = cv2.connectedComponents(binary_u8, connectivity=connectivity,
                                          ltype=cv2.CV_32S)
-    if n <= 1:
-        return (np.zeros(binary_u8.shape, bool), n - 1) if count else \
-            np.zeros(binary_u8.shape, bool)
-    if lab.dtype == np.uint16:
-        # bins of width 1 from 0: bin k counts label k exactly
-        area = cv2.calcHist([lab], [0], None, [n], [0, n]).ravel()
-    else:
-        area = np.bincount(lab.ravel(), minlength=n)
-    small = area < max_area
-    small[0] = False  # label 0 is the complement
-    out = np.take(small, lab) if small.any() else np.zeros(binary_u8.shape, bool)
+    out = np.zeros(binary_u8.shape, bool)
+    if n > 1:
+        if lab.dtype == np.uint16:
+            # bins of width 1 from 0: bin k counts label k exactly
+            area = cv2.calcHist([lab], [0], None, [n], [0, n]).ravel()
+        else:
+            area = np.bincount(lab.ravel(), minlength=n)
+        small = area < max_area
+        small[0] = False  # label 0 is the complement
+        if small.any():
+            out = np.take(small, lab)
     return (out, n - 1) if count else out
 
 
@@ -294,7 +294,8 @@ def _pixel_texture(m: np.ndarray) -> bool:
     smaller than :data:`TEXTURE_PIECE_PX` on average (a texture of small pieces of both).
     The labelling gives the same result: a band scan taken for a texture only costs time.
     """
-    rows = m[_sampled_rows(m.shape[0])]
+    row_index = _sampled_rows(m.shape[0])
+    rows = m[row_index]
     transitions = np.count_nonzero(rows[:, 1:] != rows[:, :-1])
     if 8 * transitions <= 2 * MAX_BORDERS:
         return False
@@ -311,7 +312,7 @@ def _pixel_texture(m: np.ndarray) -> bool:
         return True
     if paper_runs <= 0 or paper_px >= TEXTURE_WIDE_PAPER * TEXTURE_PAPER_RUN_PX * paper_runs:
         return False  # paper in wide runs between the ink: voids, not a texture's gaps
-    return _small_pieces(m, _sampled_rows(m.shape[0])[inked], rows)
+    return _small_pieces(m, row_index[inked], rows)
 
 
 def _small_pieces(m: np.ndarray, row_index: np.ndarray, rows: np.ndarray) -> bool:
