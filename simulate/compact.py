@@ -103,6 +103,7 @@ from crosssection.core.errors import AnalysisError, ParameterError
 from crosssection.quality import QualityWarning
 
 from simulate.contacts import MIN_CONTACT_DISTANCE
+from simulate.geometry import sharp_nodes
 from simulate.noise import N_SEGMENTS, NOISE
 
 
@@ -813,10 +814,7 @@ def flat_folds(xy) -> int:
     -------
     int
     """
-    t = np.diff(np.asarray(xy, dtype=np.float64), axis=0)
-    a = np.arctan2(t[:, 1], t[:, 0])
-    turn = np.abs((np.diff(a) + np.pi) % (2.0 * np.pi) - np.pi)
-    return int(np.count_nonzero(turn > math.radians(FLAT_FOLD_DEG)))
+    return sharp_nodes(xy, FLAT_FOLD_DEG)
 
 
 def min_segment_distance(xy, cutoff: float) -> float:

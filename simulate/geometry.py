@@ -105,6 +105,29 @@ def angles(xy) -> tuple[np.ndarray, np.ndarray]:
     return theta, xy[0].copy()
 
 
+def sharp_nodes(xy, turn_deg: float) -> int:
+    """Nodes of a polyline whose tangent turns by more than ``turn_deg`` degrees.
+
+    Parameters
+    ----------
+    xy : (N+1, 2) array
+        Node positions, finite, N >= 1.
+    turn_deg : float
+        Turn angle in degrees, in [0, 180).
+
+    Returns
+    -------
+    int
+
+    Raises
+    ------
+    ParameterError
+        ``xy`` is not such an array (see :func:`checked_rod`).
+    """
+    theta, _ = angles(xy)
+    return int(np.count_nonzero(np.abs(np.diff(theta)) > math.radians(turn_deg)))
+
+
 def trapezoid_weights(n_segments: int) -> np.ndarray:
     """Trapezoid weights of the N+1 nodes for integrals ``int f ds`` over the rod.
 

@@ -205,6 +205,31 @@ def test_a_default_quench_is_not_too_coarse_for_its_stacks():
     assert coarse_rod_doubt({"branches": long}, 300) is None
 
 
+def test_a_fold_within_one_node_is_counted_and_warned_of(tmp_path, capsys):
+    """A node turning back by nearly 180 degrees is counted in configs.csv and named."""
+    from simulate.ensemble import HAIRPIN_NODE_DEG, hairpin_doubt
+    from simulate.geometry import positions, sharp_nodes
+
+    theta = np.zeros(20)
+    theta[10:] = np.pi - 1e-3  # back along itself at node 10
+    hairpin = positions(theta)
+    assert sharp_nodes(hairpin, HAIRPIN_NODE_DEG) == 1
+    bend = positions(np.linspace(0.0, 2.0, 20))  # a smooth arc of 2 rad
+    assert sharp_nodes(bend, HAIRPIN_NODE_DEG) == 0
+    assert hairpin_doubt(pd.DataFrame({"n_hairpin_nodes": [0, 0]})) is None
+    assert hairpin_doubt(pd.DataFrame({"config_id": [0]})) is None  # an older folder
+    doubt = hairpin_doubt(pd.DataFrame({"n_hairpin_nodes": [0, 2, 1]}))
+    assert doubt.startswith("2 of 3 configurations") and "3 node(s)" in doubt
+
+    out = tmp_path / "q"
+    assert simulate_main(["quench", *POWELL, "--out", str(out)]) == 0
+    c = pd.read_csv(out / "configs.csv")
+    with np.load(out / "rods.npz") as z:
+        assert c.n_hairpin_nodes[0] == sharp_nodes(z["config_00000"], HAIRPIN_NODE_DEG)
+    said = "fold back at a single node" in capsys.readouterr().err
+    assert said == bool(c.n_hairpin_nodes[0])
+
+
 def _computed_by(out, run):
     """Make the folder's ensemble look computed by ``run`` ({"version", "libraries"}): its
     record and every part file (``run`` None: parts without ``computed_by``)."""
