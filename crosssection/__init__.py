@@ -31,8 +31,10 @@ _LAZY = {
     "OutputError": "crosssection.core.errors",
 }
 
-#: submodules the README names as ``crosssection.<name>.<function>``, imported on first use
-_SUBMODULES = ("samples", "stats", "tables", "testing", "truth")
+#: submodules reachable as ``crosssection.<name>`` after ``import crosssection`` alone (the
+#: README's ``crosssection.quality.NoCalibrationWarning``), imported on first use
+_SUBMODULES = ("batch", "core", "figures", "linsys", "params", "pipeline", "quality", "result",
+               "samples", "setconfig", "stages", "stats", "tables", "testing", "truth")
 
 __all__ = ["__version__", *_LAZY]
 
@@ -48,4 +50,4 @@ def __getattr__(name):
 
 
 def __dir__():
-    return sorted(__all__)
+    return sorted([*__all__, *_SUBMODULES])

@@ -22,7 +22,7 @@ from crosssection.core.fileio import read_toml
 from crosssection.core.provenance import resolved_path
 
 __all__ = ["ScanScale", "AnalysisParams", "add_analysis_arguments", "check_param", "PARAM_NAMES",
-           "DEFAULT_PX_PER_MM", "scale_left_out",
+           "DEFAULT_PX_PER_MM", "DEFAULT_THICKNESS_MM", "scale_left_out",
            "THRESHOLD_METHODS", "CURVATURE_METHODS", "SKELETON_METHODS", "WIDTH_STATISTICS",
            "WIDTH_LAWS", "CHOICE_PARAMS",
            "SWITCHES", "switched_off"]
@@ -94,6 +94,8 @@ class _DefaultScale(float):
 
 #: the default scan resolution, px/mm (50 px/mm, 1270 dpi: the paper's scans)
 DEFAULT_PX_PER_MM = _DefaultScale(50.0)
+#: The paper's polyester sheet: h = 0.1 mm ("Experimental set-up")
+DEFAULT_THICKNESS_MM = 0.1
 
 
 def scale_left_out(params) -> bool:
@@ -120,7 +122,7 @@ class ScanScale:
     """
 
     px_per_mm: float = float(DEFAULT_PX_PER_MM)
-    thickness_mm: float = 0.1
+    thickness_mm: float = DEFAULT_THICKNESS_MM
 
     def __post_init__(self):
         # the same checks as AnalysisParams': a string or a negative scale would convert
@@ -173,7 +175,8 @@ class AnalysisParams:
 
     px_per_mm: float = field(default=DEFAULT_PX_PER_MM,
                              metadata=_opt("scan resolution", "px/mm"))
-    thickness_mm: float = field(default=0.1, metadata=_opt("sheet thickness h", "mm"))
+    thickness_mm: float = field(default=DEFAULT_THICKNESS_MM,
+                                metadata=_opt("sheet thickness h", "mm"))
     hole_radius_mm: float | None = field(default=None, metadata=_opt(
         "hole radius R; nothing outside the hole is analysed (default: found in the scan)",
         "mm"))
@@ -187,7 +190,7 @@ class AnalysisParams:
         "without a calibration: fitted (width = a + b n, a read at the junctions, b from "
         "the widths' lattice of whole layers, bent by a term in n^2 or sqrt(n) where wide "
         "stacks ask for it; w = n h where the scan shows none) or linear "
-        "(width = n h); ignored when a calibration is given", choices=WIDTH_LAWS))
+        "(width = n h); a calibration given overrides it", choices=WIDTH_LAWS))
     rod_length_mm: float | None = field(default=None, metadata=_opt(
         "known rod length L for the dimensionless energies and epsilon (default: measured "
         "sum n_br l)", "mm"))
@@ -446,6 +449,13 @@ class AnalysisParams:
     def from_cli_args(cls, args, *, path=None) -> "AnalysisParams":
         """Parameters from ``argparse`` options added by :func:`add_analysis_arguments`."""
         values = {name: getattr(args, name, None) for name in PARAM_NAMES}
+        if values.get("calibration") and values.get("width_law") is not None:
+            # both on one command line: the law stands in for a calibration and would be
+            # ignored (a set's calibration overrides a batch's --width-law, which serves the
+            # sets without one)
+            raise ParameterError(f"--width-law {values['width_law']} is not used with "
+                                 "--calibration (the calibration gives the widths of n "
+                                 "layers): leave one of them out")
         if values.get("calibration"):
             values["calibration"] = str(Path(values["calibration"]).resolve())
         values.update(switched_off(args))

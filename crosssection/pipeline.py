@@ -661,11 +661,11 @@ def analyze(image, params: AnalysisParams | None = None, *, warn: bool = True,
     Parameters
     ----------
     image : str, Path or ndarray
-        Image file (PNG, TIFF 8/16-bit, JPEG) or an RGB array: (H, W, 3), or (H, W, 4)
-        with alpha (composited over white); uint8, uint16, float in [0, 1], or another
-        integer type with values within 0..65535 (within 0..255: read as 8-bit); any
-        strides (:func:`~crosssection.stages.load.rgb_and_opacity`). The array is not
-        modified.
+        Image file (PNG, TIFF, JPEG, BMP or WebP: ``crosssection.core.schema.IMAGE_FORMATS``)
+        or an RGB array: (H, W, 3), or (H, W, 4) with alpha (composited over white); uint8,
+        uint16, float in [0, 1], or another integer type with values within 0..65535 (within
+        0..255: read as 8-bit); any strides (:func:`~crosssection.stages.load.rgb_and_opacity`).
+        The array is not modified.
     params : AnalysisParams or dict, optional
         Parameters (default: :class:`~crosssection.params.AnalysisParams` defaults).
     warn : bool

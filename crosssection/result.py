@@ -30,7 +30,7 @@ def rod_length_text(summary: dict) -> str:
     return f"L = {mm(measured)} mm measured, {mm(used)} mm given"
 
 
-@dataclass(repr=False, eq=False)
+@dataclass(repr=False, eq=False, frozen=True)
 class AnalysisResult:
     """Everything ``analyze`` computed for one scan.
 
@@ -244,7 +244,7 @@ class AnalysisResult:
 
         return network_graph(self.junctions, self.stacks, self.branches)
 
-    def write(self, out_dir, figure: bool = True, *, steps: bool = False) -> dict:
+    def write(self, out_dir, *, figure: bool = True, steps: bool = False) -> dict:
         """Write ``summary.json``, the four CSV tables and (optionally) ``overlay.png``.
 
         Parameters
@@ -258,7 +258,8 @@ class AnalysisResult:
             earlier write stay when this one does not write them (``foldstat analyze`` removes them,
             :func:`crosssection.commands.remove_stale`).
         figure : bool
-            Also write ``overlay.png`` (paper Figs. 1c and 9a).
+            Also write ``overlay.png`` (paper Figs. 1c and 9a), and ``steps.png`` with
+            ``steps``.
         steps : bool
             Also write the step images of paper Fig. 2 (see :meth:`write_steps`).
 
@@ -310,8 +311,8 @@ class AnalysisResult:
                         description=json.dumps(made_from, default=str, sort_keys=True))
                     summary["output_timings_s"] = {**summary.get("output_timings_s", {}),
                                                    "overlay_figure": time.perf_counter() - t0}
-                if steps:
-                    paths.update(self.write_steps(out))
+                if steps:  # steps.png is a figure too, as under ``foldstat steps --no-figure``
+                    paths.update(self.write_steps(out, figure=figure))
                 paths.update(schema.write_tables(out, summary, self.tables))
         except OutputError:
             _remove_if_empty(out, created)

@@ -22,8 +22,14 @@ from pathlib import Path
 
 import pandas as pd
 
-from crosssection.core.errors import ConfigError
+from crosssection.core.errors import ConfigError, why_unreadable
 from crosssection.core.fileio import read_json_object, write_csv, write_json
+
+#: The file suffixes of the scans ``batch`` finds in a folder (any case); ``analyze`` reads the
+#: same formats (:mod:`crosssection.stages.load`, which tells them by content)
+IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp", ".webp")
+#: The formats in words, for help texts
+IMAGE_FORMATS = "PNG, TIFF, JPEG, BMP or WebP; 8 or 16 bits per channel, or float TIFF"
 
 JUNCTION_COLUMNS = ["junction_id", "x_px", "y_px", "n_stacks"]
 STACK_COLUMNS = ["stack_id", "junction_a", "junction_b", "length_mm", "width_mm", "n_br",
@@ -132,7 +138,7 @@ def read_table(path, name: str) -> pd.DataFrame:
         raise ConfigError(f"cannot read ({exc.strerror or type(exc).__name__})",
                           path) from None
     except ValueError as exc:  # parser and decoding errors
-        raise ConfigError(f"malformed CSV ({type(exc).__name__})", path) from None
+        raise ConfigError(f"malformed CSV ({why_unreadable(exc)})", path) from None
     missing = [c for c in required if c not in df.columns]
     if len(missing) == len(required):
         # no column of the schema: most likely another file under this name

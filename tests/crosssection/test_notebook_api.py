@@ -114,10 +114,17 @@ def test_the_submodules_the_readme_names_load_on_first_use():
     import sys
 
     # a fresh interpreter: earlier tests have imported the submodules already
-    code = ("import crosssection; "
+    code = ("import warnings, crosssection, simulate; "
+            # the README's filter, before anything else is imported
+            "warnings.simplefilter('ignore', crosssection.quality.NoCalibrationWarning); "
             "print(crosssection.samples.copy_samples.__name__, "
-            "crosssection.tables.network_graph.__name__)")
+            "crosssection.tables.network_graph.__name__, "
+            "crosssection.params.AnalysisParams.__name__, "
+            "crosssection.setconfig.__name__, simulate.load_ensemble.__name__, "
+            "simulate.CompactParams.__name__, simulate.render.__name__)")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                        timeout=120)
     assert r.returncode == 0, r.stderr
-    assert r.stdout.split() == ["copy_samples", "network_graph"]
+    assert r.stdout.split() == ["copy_samples", "network_graph", "AnalysisParams",
+                                "crosssection.setconfig", "load_ensemble", "CompactParams",
+                                "simulate.render"]

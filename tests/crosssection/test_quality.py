@@ -1081,6 +1081,7 @@ def test_a_sheet_thickness_given_twice_too_large_names_the_thickness(scene):
 
 
 def test_the_docs_list_every_check_with_its_category():
+    import importlib
     import importlib.util
     from pathlib import Path
 
@@ -1095,6 +1096,24 @@ def test_the_docs_list_every_check_with_its_category():
     make = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(make)
     assert page == make.page()
+    # every other category of QualityWarning, wherever it is defined, has its row
+    import pkgutil
+
+    import crosssection
+    import simulate
+
+    defined = set()
+    for pkg in (crosssection, simulate):
+        for m in pkgutil.walk_packages(pkg.__path__, f"{pkg.__name__}."):
+            if not m.name.endswith("__main__"):
+                defined |= {c for c in vars(importlib.import_module(m.name)).values()
+                            if isinstance(c, type) and issubclass(c, quality.QualityWarning)
+                            and c.__module__ == m.name}
+    checks = set(quality.CHECK_WARNINGS.values())
+    groups = {c.__mro__[1] for c in checks}
+    other = defined - checks - groups - {quality.QualityWarning}
+    assert other == set(make.other_warnings())
+    assert all(f"| {c.__name__} | `{c.__module__}` |" in page for c in other)
 
 
 def test_half_the_rod_drawn_in_black_ink_is_named(scene):
