@@ -133,7 +133,7 @@ from crosssection.quality import QualityWarning
 from crosssection.setconfig import (DEFAULT_PARAMS, DEFAULT_SET_NAME, SET_FILE, SetConfig,
                                     check_params, failed_set, load_set_config)
 
-IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp", ".webp")
+IMAGE_SUFFIXES = schema.IMAGE_SUFFIXES
 #: ``rod_length_used_mm`` and ``hole_radius_mm`` beside ``epsilon``: epsilon = L / (2 pi R)
 #: with the L used (a given ``--rod-length-mm``, else the measured ``rod_length_mm``)
 SUMMARY_NUMBERS = ["n_junctions", "n_stacks", "n_branches", "n_voids", "mean_branches_per_stack",
@@ -455,6 +455,13 @@ def plan_batch(input_dir, out_dir, *, cli_params: dict | None = None, seed: int 
         raise ConfigError("not a folder (batch reads a folder of scans; analyze reads one "
                           "scan)" if root.exists() else "input folder does not exist", root)
     root = root.resolve()
+    from crosssection.core.records import output_of
+
+    made_by = output_of(root)
+    if made_by is not None and made_by[1] != "foldstat render":  # a render's scenes are scans
+        # its images are figures of scans (a steps run's, an overlay), not scans
+        raise ConfigError(f"holds the output of {made_by[1]} ({made_by[0]}), not scans: "
+                          "batch reads a folder of scans", given_root)
     out = Path(out_dir).resolve()
     defaults = dict(DEFAULT_PARAMS)
     given = check_params(cli_params or {}, Path.cwd() / "command line",
@@ -1123,7 +1130,7 @@ def _executor_slots(ex, workers: int) -> int:
     return max(1, 2 * workers)
 
 
-def check_out_dir(input_dir, out_dir) -> None:
+def check_out_dir(input_dir, out_dir, *, force: bool = False) -> None:
     """Refuse an output folder that a batch of ``input_dir`` must not write into.
 
     ``out_dir`` may be missing (it is created), empty, or hold an earlier batch of the same
@@ -1134,6 +1141,9 @@ def check_out_dir(input_dir, out_dir) -> None:
     Parameters
     ----------
     input_dir, out_dir : str or Path
+    force : bool
+        The batch redoes every scan: a ``batch.json`` that cannot be read is taken for this
+        input folder's, and rewritten.
 
     Raises
     ------
@@ -1142,14 +1152,21 @@ def check_out_dir(input_dir, out_dir) -> None:
         new batch would mix with its own and leave out of its index), or files that are no
         batch's (a folder of scans, a report, a simulation).
     ConfigError
-        Its ``batch.json`` cannot be read.
+        Its ``batch.json`` cannot be read (without ``force``).
     """
     out = Path(out_dir)
     if not out.is_dir():
         return  # created (a file in the way is named when it is)
     record = out / "batch.json"
     if record.is_file():
-        recorded = read_json_object(record).get("input_dir")
+        try:
+            data = read_json_object(record)
+        except ConfigError as exc:
+            if force:  # every scan is redone: nothing of the lost record is needed
+                return
+            raise ConfigError(f"{exc.cause}: the batch's record is damaged; re-run with "
+                              "--force to redo every scan and write it anew", record) from None
+        recorded = data.get("input_dir")
         if recorded is not None and Path(recorded) != Path(input_dir).resolve():
             raise ParameterError(f"holds the batch of another input folder ({recorded}): "
                                  "give another --out", out)
@@ -1229,7 +1246,7 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
     t_start = time.time()
     out = Path(out_dir)
     tasks, sets = plan_batch(input_dir, out, cli_params=cli_params, seed=seed, figure=figure)
-    check_out_dir(input_dir, out)
+    check_out_dir(input_dir, out, force=force)
 
     # the executor before any write: a scheduler that cannot be reached is refused with
     # nothing left behind (an empty batch would read as a finished one)
@@ -1362,6 +1379,10 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
     finally:
         pool.close()  # the first pool, when no image was left to analyse
         bar.close()
+        if stopped and scheduler is None:
+            # the local workers, terminated mid-scan, left their staging folders: removed now
+            # rather than by the re-run (a cluster's tasks in flight may still be writing)
+            clear_leftovers(out, tasks)
         try:
             index = _write_tables(out, rows, tasks, pending=todo)
             counts = index["status"].value_counts().to_dict()

@@ -262,7 +262,13 @@ def _run_parsed(parser: argparse.ArgumentParser, argv=None) -> int:
             raise
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            status = int(args.func(args) or 0)
+            try:
+                status = int(args.func(args) or 0)
+            except (KeyboardInterrupt, Terminated):
+                # a stopped run shows the doubts of the work it finished, which its re-run
+                # skips; an error (exit 2) is one line alone
+                _print_warnings(caught)
+                raise
         _print_warnings(caught)
         return status
     except FoldstatError as exc:

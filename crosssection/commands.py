@@ -12,8 +12,8 @@ parameters, the package version and the input file they were made with.
 
 A run leaves DIR describing itself alone: when DIR holds the record of an earlier run
 (``summary.json`` or ``steps.json``), the files of the command that this run does not write
-(``overlay.png`` under ``--no-figure``, the step images without ``--steps``, ``steps.png``
-under ``steps --no-figure``) are removed from DIR once the new outputs are written; the step
+(``overlay.png`` and ``steps.png`` under ``--no-figure``, the step images without
+``--steps``) are removed from DIR once the new outputs are written; the step
 images of a ``steps`` run of the same scan, which its ``steps.json`` describes, stay beside
 an ``analyze`` without ``--steps``. Only those names are: nothing else in DIR is touched, a
 folder with no such record keeps its files (they are the user's), and a run that fails
@@ -122,8 +122,8 @@ def run_files(command: str, *, figure: bool = True, steps: bool = False) -> tupl
     if command == "steps":
         optional = (STEPS_FIGURE,) if figure else ()
     else:
-        optional = ((OVERLAY,) if figure else ()) + ((*STEP_IMAGES, STEPS_FIGURE) if steps
-                                                     else ())
+        optional = (((OVERLAY,) if figure else ()) + (STEP_IMAGES if steps else ())
+                    + ((STEPS_FIGURE,) if steps and figure else ()))
     return (*_ALWAYS_WRITTEN[command], *optional)
 
 
@@ -382,7 +382,7 @@ def add_subparser(subparsers) -> None:
         description="Analyse one scan of a cut cross-section (paper, 'Image analysis "
                     "procedure') and write summary.json, junctions.csv, stacks.csv, "
                     "branches.csv, voids.csv and overlay.png.")
-    pa.add_argument("image", help="scan (PNG, TIFF 8/16-bit, JPEG)")
+    pa.add_argument("image", help=f"scan ({schema.IMAGE_FORMATS})")
     pa.add_argument("--out", required=True,
                     help="output folder (created; the outputs of an earlier analyze there "
                          "that this run does not write are removed)")
@@ -396,7 +396,7 @@ def add_subparser(subparsers) -> None:
         description="Save the raw scan, the thresholded and cleaned masks and the skeleton "
                     "with its junctions as PNG images (paper Fig. 2), and steps.json: the "
                     "parameters, version and input file they were made with.")
-    ps.add_argument("image", help="scan (PNG, TIFF 8/16-bit, JPEG)")
+    ps.add_argument("image", help=f"scan ({schema.IMAGE_FORMATS})")
     ps.add_argument("--out", required=True,
                     help="output folder (created; a steps.png of an earlier run there is "
                          "removed under --no-figure)")
@@ -492,7 +492,9 @@ def run_steps(args) -> int:
         _remove_if_empty(out, created)
         raise output_error(exc, out) from None
     removed = remove_stale(out, "steps", [*paths.values(), record]) if earlier else []
-    print(f"{one_line_path(args.image)}: {len(paths)} step images -> "
+    n_steps = sum(1 for name in paths.values() if Path(name).name != STEPS_FIGURE)
+    shown = f"{n_steps} step images" + (f" and {STEPS_FIGURE}" if n_steps < len(paths) else "")
+    print(f"{one_line_path(args.image)}: {shown} -> "
           f"{one_line_path(args.out)}{_removed_note(removed)}")
     return 0
 

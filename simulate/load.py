@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from crosssection.core.errors import ConfigError, ParameterError
+from crosssection.core.errors import ConfigError, ParameterError, why_unreadable
 from simulate.energy import LAMBDA
 from simulate.geometry import checked_rod, is_point
 
@@ -130,7 +130,7 @@ class SimulationEnsemble:
                 return np.asarray(rods[key], float)
         except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
             # the file was read when the ensemble was loaded: it changed since
-            raise ConfigError(f"unreadable rods file ({type(exc).__name__})", path) from None
+            raise ConfigError(f"unreadable rods file ({why_unreadable(exc)})", path) from None
 
     def plot(self, config=0, *, ax=None, stacks: bool = True):
         """Draw one configuration (:func:`plot_configuration`).
@@ -214,13 +214,13 @@ def load_ensemble(folder) -> SimulationEnsemble:
         except pd.errors.EmptyDataError:
             tables[name] = pd.DataFrame()
         except (pd.errors.ParserError, UnicodeDecodeError) as exc:
-            raise ConfigError(f"unreadable CSV ({type(exc).__name__})", path) from None
+            raise ConfigError(f"unreadable CSV ({why_unreadable(exc)})", path) from None
     params = {}
     if (folder / "params.json").is_file():
         try:
             params = json.loads((folder / "params.json").read_text())
         except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
-            raise ConfigError(f"unreadable params.json ({type(exc).__name__})",
+            raise ConfigError(f"unreadable params.json ({why_unreadable(exc)})",
                               folder / "params.json") from None
     keys = []
     if (folder / "rods.npz").is_file():
@@ -228,7 +228,7 @@ def load_ensemble(folder) -> SimulationEnsemble:
             with np.load(folder / "rods.npz", allow_pickle=False) as rods:
                 keys = sorted(rods.files)
         except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
-            raise ConfigError(f"unreadable rods file ({type(exc).__name__})",
+            raise ConfigError(f"unreadable rods file ({why_unreadable(exc)})",
                               folder / "rods.npz") from None
     return SimulationEnsemble(folder, **tables, params=params, keys=keys)
 

@@ -24,6 +24,36 @@ def printable(path) -> str:
         return text.encode("utf-8", "backslashreplace").decode("utf-8")
 
 
+def why_unreadable(exc: BaseException) -> str:
+    """What an exception raised while reading a file says of that file, in words and on one
+    line: a user reads "not a text file", not ``UnicodeDecodeError``.
+
+    Parameters
+    ----------
+    exc : BaseException
+
+    Returns
+    -------
+    str
+    """
+    import json
+
+    if isinstance(exc, UnicodeDecodeError):
+        return "not a text file"
+    if isinstance(exc, json.JSONDecodeError):
+        return f"malformed JSON: {exc.msg} at line {exc.lineno}"
+    if isinstance(exc, IsADirectoryError):
+        return "a folder, not a file"
+    if isinstance(exc, OSError):
+        return exc.strerror or type(exc).__name__
+    if type(exc).__name__ == "EmptyDataError":  # pandas: no header, no row
+        return "empty file"
+    if isinstance(exc, EOFError) or type(exc).__name__ == "BadZipFile":
+        return "cut short or not of its format"
+    words = " ".join(str(exc).split())
+    return words[:200] if words else type(exc).__name__
+
+
 def one_line_path(path) -> str:
     """``path`` printable (:func:`printable`) and on one line: a line break in a file name
     becomes a space, so that a message naming the file stays one line.

@@ -75,7 +75,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from crosssection.core.errors import ConfigError, ParameterError
+from crosssection.core.errors import ConfigError, ParameterError, why_unreadable
 from crosssection.params import AnalysisParams
 from crosssection.quality import QualityWarning
 
@@ -338,7 +338,7 @@ def _read_csv(path: Path, required, *, numeric=(), nonempty: bool = False) -> pd
     except FileNotFoundError:
         raise ConfigError(MISSING_TABLE, path) from None
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"unreadable CSV ({type(exc).__name__})", path) from None
+        raise ConfigError(f"unreadable CSV ({why_unreadable(exc)})", path) from None
     except OSError as exc:
         raise ConfigError(f"unreadable CSV ({exc.strerror or type(exc).__name__})",
                           path) from None
@@ -414,7 +414,7 @@ def _read_summary(path: Path) -> dict:
     try:
         summary = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"unreadable summary.json ({type(exc).__name__})", path) from None
+        raise ConfigError(f"unreadable summary.json ({why_unreadable(exc)})", path) from None
     if not isinstance(summary, dict):
         raise ConfigError(f"holds a JSON {_json_kind(summary)}, not an object", path)
     for key in SUMMARY_NUMBERS:
@@ -471,6 +471,12 @@ def _not_an_output(folder: Path) -> ConfigError:
     # imported here: only this error needs the batch's idea of a scan
     from crosssection.batch import find_images
 
+    from crosssection.core.records import output_of
+
+    made_by = output_of(folder)
+    if made_by is not None and made_by[1] == "foldstat steps":
+        return ConfigError("holds the step images of foldstat steps (steps.json), not an "
+                           "analysis: run foldstat analyze or batch on the scan", folder)
     scans = find_images(folder)
     if scans:
         return ConfigError(f"holds {len(scans)} scan(s) ({scans[0].name}, ...), not analysis "
@@ -960,7 +966,7 @@ def _read_index(index: Path, folder: Path):
     try:
         text = index.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
-        warnings.warn(f"{index}: unreadable ({type(exc).__name__}); {fallback}", QualityWarning,
+        warnings.warn(f"{index}: unreadable ({why_unreadable(exc)}); {fallback}", QualityWarning,
                       stacklevel=3)
         return None
     reader = csv.reader(io.StringIO(text, newline=""))
@@ -1092,7 +1098,7 @@ def _check_finished(folder: Path, n_found: int) -> str:
     try:
         meta = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError) as exc:  # JSON and Unicode decoding errors are ValueErrors
-        note = (f"unreadable ({type(exc).__name__}), so whether the batch finished is "
+        note = (f"unreadable ({why_unreadable(exc)}), so whether the batch finished is "
                 f"unknown; its {n_found} finished image(s) are used")
         warnings.warn(f"{path}: {note}", IncompleteBatchWarning, stacklevel=3)
         return note
@@ -1492,7 +1498,7 @@ def load_report(folder) -> Report:
     except FileNotFoundError:
         raise ConfigError("not a stats report folder (no stats.json)", folder) from None
     except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"unreadable stats.json ({type(exc).__name__})", meta_path) from None
+        raise ConfigError(f"unreadable stats.json ({why_unreadable(exc)})", meta_path) from None
     tables = {}
     for name in REPORT_TABLES:
         path = folder / f"{name}.csv"
@@ -1503,5 +1509,5 @@ def load_report(folder) -> Report:
         except FileNotFoundError:
             raise ConfigError(MISSING_TABLE, path) from None
         except (pd.errors.ParserError, UnicodeDecodeError) as exc:
-            raise ConfigError(f"unreadable CSV ({type(exc).__name__})", path) from None
+            raise ConfigError(f"unreadable CSV ({why_unreadable(exc)})", path) from None
     return Report(**tables, meta=meta, folder=folder)

@@ -32,7 +32,7 @@ from scipy.optimize import linear_sum_assignment
 from scipy.spatial.distance import cdist
 
 from crosssection.core import schema
-from crosssection.core.errors import ParameterError
+from crosssection.core.errors import ConfigError, ParameterError
 from crosssection.truth.scene import LAYER_PIECES, read_scene, read_scene_params
 
 TABLE_NAMES = ("junctions", "stacks", "branches", "voids")
@@ -357,6 +357,19 @@ def _beside_or_above(scene_dir: Path, name: str) -> Path:
     return up if not here.exists() and up.exists() else here
 
 
+def _set_calibration(scene_dir: Path) -> str | None:
+    """The calibration file a scene's own ``set.toml`` names, or None (no such file or key,
+    or a file that is no TOML: the analysis then goes on as without it)."""
+    import tomllib
+
+    try:
+        with open(scene_dir / "set.toml", "rb") as fh:
+            name = tomllib.load(fh).get("calibration")
+    except (OSError, tomllib.TOMLDecodeError):
+        return None
+    return name if isinstance(name, str) else None
+
+
 def analyze_scene_folder(scene_dir, *, image_name: str | None = None, use_hole: bool = True,
                          use_calibration: bool = True, **kwargs):
     """Run ``crosssection.analyze`` on a scene folder with the parameters of its ``params.json``.
@@ -378,6 +391,12 @@ def analyze_scene_folder(scene_dir, *, image_name: str | None = None, use_hole: 
     -------
     (result, (summary, tables))
         The ``AnalysisResult`` and the pair :func:`score` takes.
+
+    Raises
+    ------
+    ConfigError
+        The calibration file the scene's ``set.toml`` names is missing (with
+        ``use_calibration``).
     """
     from crosssection import AnalysisParams, analyze
 
@@ -393,6 +412,10 @@ def analyze_scene_folder(scene_dir, *, image_name: str | None = None, use_hole: 
     cal = _beside_or_above(scene_dir, "calibration.csv")
     if use_calibration and cal.exists():
         want["calibration"] = str(cal)
+    elif use_calibration and _set_calibration(scene_dir) is not None:
+        # the scene was drawn with that law: read without it, its counts are another's
+        raise ConfigError(f"{_set_calibration(scene_dir)}, the calibration its set.toml "
+                          "names, is missing", scene_dir)
     want.update(kwargs)
     result = analyze(str(image), AnalysisParams.from_mapping(want, path=image),
                      scale_given="px_per_mm" in params)

@@ -482,6 +482,8 @@ def test_analyze_keeps_the_step_images_of_a_steps_run_of_the_same_scan(small_sca
     assert crosssection.cli.main(["analyze", str(small_scan), "--out", str(out),
                                   "--no-figure", "--steps"]) == 0
     assert not (out / "steps.json").exists()
+    # without figures: the step images, not their figure (as ``steps --no-figure``)
+    assert all((out / n).is_file() for n in STEP_IMAGES) and not (out / "steps.png").exists()
 
 
 def test_analyze_refuses_a_scene_a_batch_folder_and_a_users_tables(tmp_path, capsys):

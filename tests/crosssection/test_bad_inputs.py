@@ -235,6 +235,22 @@ def test_blue_min_with_otsu_is_refused_not_ignored(tmp_path, capsys):
     AnalysisParams(px_per_mm=50, thickness_mm=0.1, threshold_method="otsu", rg_max=120)
 
 
+def test_a_width_law_with_a_calibration_is_refused_not_ignored(tmp_path, capsys):
+    """The law stands in for a calibration: asked for beside one it changed nothing."""
+    from crosssection.params import AnalysisParams
+
+    scan, cal = tmp_path / "scan.png", tmp_path / "cal.csv"
+    Image.fromarray(_good_rgb(3)).save(scan)
+    cal.write_text("n_layers,width_mm\n1,0.1\n2,0.2\n")
+    assert main(["analyze", str(scan), "--out", str(tmp_path / "out"), "--px-per-mm", "50",
+                 "--calibration", str(cal), "--width-law", "linear"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--width-law linear is not used with --calibration" in err[0]
+    assert not (tmp_path / "out").exists()
+    # in Python (and a set's calibration under a batch's --width-law) the calibration wins
+    AnalysisParams(px_per_mm=50, calibration=str(cal), width_law="linear")
+
+
 @pytest.mark.parametrize("method, options, named", [
     ("otsu", ["--rg-max", "10"], "(rg_max = 10)"),
     ("fixed", ["--blue-min", "255"], "(blue_min = 255, rg_max = 130)")])

@@ -743,3 +743,34 @@ def test_a_lock_file_that_is_a_link_is_refused_and_its_target_left_alone(tmp_pat
     status, err = _batch(capsys, inp, out)
     assert status == 2 and len(err) == 1 and "symbolic link" in err[0]
     assert precious.read_text() == "a user's data\n"
+
+
+def test_a_damaged_batch_record_says_how_to_recover_and_force_rebuilds_it(tmp_path, capsys):
+    """A batch.json cut to nothing stopped every re-run, --force included, with no way out
+    but deleting the whole output."""
+    inp, out = _scans(tmp_path / "in"), tmp_path / "out"
+    assert _batch(capsys, inp, out)[0] == 0
+    (out / "batch.json").write_text("")
+    status, err = _batch(capsys, inp, out)
+    assert status == 2 and len(err) == 1
+    assert err[0].startswith(f"error: {out / 'batch.json'}: malformed JSON")
+    assert "--force" in err[0]
+    status, err = _batch(capsys, inp, out, "--force")
+    assert status == 0 and _notices(err) == []
+    assert json.loads((out / "batch.json").read_text())["complete"] is True
+    assert set(pd.read_csv(out / "index.csv")["status"]) == {"ok"}
+
+
+def test_a_steps_folder_is_no_folder_of_scans(tmp_path, capsys):
+    """batch read the step images of a steps run as scans (three failed, one 'done'), and
+    stats told to run batch on them."""
+    scan = _scans(tmp_path / "in") / "s0.png"
+    steps = tmp_path / "steps"
+    assert main(["steps", str(scan), "--out", str(steps), *SCALE]) == 0
+    status, err = _batch(capsys, steps, tmp_path / "b")
+    assert status == 2 and err == [f"error: {steps}: holds the output of foldstat steps "
+                                   "(steps.json), not scans: batch reads a folder of scans"]
+    assert not (tmp_path / "b").exists()
+    assert main(["stats", str(steps), "--out", str(tmp_path / "r")]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and "step images of foldstat steps" in err[0]

@@ -26,6 +26,9 @@ from pathlib import Path
 
 
 def slow(task):
+    from crosssection.core.fileio import staging_folder
+
+    (staging_folder(task.out_dir) / "table.csv").write_text("half")  # as an analysis writes
     Path(os.environ["MARKS"], str(os.getpid())).touch()  # this worker is at work
     time.sleep(60)
 
@@ -61,6 +64,8 @@ def test_a_signalled_batch_stops_its_workers_and_exits_at_once(tmp_path, signall
     workers = {int(p.name) for p in marks.iterdir()}
     assert workers <= set(r.children)
     assert r.left == []
+    # nothing half-written stays behind: the stopped workers' staging folders are gone
+    assert not [p for p in out.rglob("*") if ".partial-" in p.name]
     # the batch's records are written as on Ctrl-C (nothing was done: every image pending)
     assert set(pd.read_csv(out / "index.csv")["status"]) == {"pending"}
     assert json.loads((out / "batch.json").read_text())["complete"] is False

@@ -85,8 +85,14 @@ def damage_calibration(scene):
     return "calibration.csv"
 
 
+def lose_calibration(scene):
+    # read without the law it was drawn with, the scene was scored on another's counts
+    (scene / "calibration.csv").unlink()
+    return "calibration.csv, the calibration its set.toml names, is missing"
+
+
 @pytest.mark.parametrize("damage", [damage_image, damage_summary, damage_params,
-                                    damage_calibration])
+                                    damage_calibration, lose_calibration])
 def test_failed_scene_is_a_warning_and_exit_3(scenes, tmp_path, capsys, damage):
     folder, scene = scenes
     name = damage(scene)

@@ -82,7 +82,7 @@ def test_text_in_a_simulation_table_is_one_error_line(tmp_path, capfd):
     (None, 'n_branches is "many", not a number'),
     (None, "rod_length_mm is true, not a number"),
     (None, "quality is not an object with a list of codes"),
-    (b"\xff\xfe\x00binary", "unreadable summary.json (UnicodeDecodeError)"),
+    (b"\xff\xfe\x00binary", "unreadable summary.json (not a text file)"),
 ])
 def test_malformed_summary_is_one_error_line(batch, tmp_path, capfd, content, cause):
     path = batch / "s1" / "img000" / "summary.json"
@@ -425,7 +425,7 @@ def test_unreadable_index_falls_back_to_the_folders_with_a_warning(batch, tmp_pa
     index.write_bytes(b"\xff\xfe\x00\x01garbage")
     status, out, err = _stats(capfd, batch, "--out", tmp_path / "rep", *FAST)
     assert status == 0 and "3 configurations" in out[0]
-    assert err == [f"warning: {index}: unreadable (UnicodeDecodeError); every */summary.json "
+    assert err == [f"warning: {index}: unreadable (not a text file); every */summary.json "
                    f"below {batch} is read instead"]
 
 

@@ -114,7 +114,7 @@ def test_score_folder(tmp_path):
     ("stacks.csv", "", "empty file (no header line)"),
     ("stacks.csv", "x\n1\n", "not a stacks table (expected the header stack_id,"),
     ("junctions.csv", "junction_id,x_px\n0,1.0\n", "lacks column(s) y_px, n_stacks"),
-    ("voids.csv", b"void_id,area_mm2\n\xff\xfe,1\n", "malformed CSV (UnicodeDecodeError)"),
+    ("voids.csv", b"void_id,area_mm2\n\xff\xfe,1\n", "malformed CSV (not a text file)"),
     ("summary.json", None, "file not found"),
     ("summary.json", "{bad", "malformed JSON"),
     ("summary.json", "[1, 2]", "must hold a JSON object"),
