@@ -616,8 +616,7 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
             elif ymax_lin > 0:
                 # a Gamma law with alpha < 1 diverges at 0: scale the axis to the data
                 ax.set_ylim(0, 1.15 * ymax_lin)
-            ax.set_ylabel("fraction of stacks $P(n_{br})$" if count
-                          else "probability density")
+            ylabel = "fraction of stacks $P(n_{br})$" if count else "probability density"
             scale = ("linear scale" if not logscale else
                      "log scales" if ax.get_xscale() == "log" else
                      "log density scale")
@@ -639,7 +638,13 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
                 i = label.find("$")
                 j = label.find("$", i + 1) if i >= 0 else -1
                 per = label[i:j + 1] if j > i else "of the quantity"
-                ax.set_ylabel(_wrap_label(f"probability density, per unit {per}", 36))
+                ylabel = f"probability density, per unit {per}"
+            if not logscale:
+                # densities of 1e-4 per unit E read as 0.00012: in units of a power of ten too
+                ypower = _linear_ticks(ax.yaxis)
+                if ypower:
+                    ylabel += f", in units of $10^{{{ypower}}}$"
+            ax.set_ylabel(_wrap_label(ylabel, 36))
         # one legend per row, outside the log panel: never over the data
         handles, labels = row[1].get_legend_handles_labels()
         # per set: its data, then its law, then the band and the detection limit
@@ -865,10 +870,12 @@ def network_figure(res: StatsResult, colors=None):
            "x": "Eq. (12), left: the C fitted to the set, with each configuration's own "
                 "ε and √s̄/l̄ (on its point where the relation holds)",
            "--": "Eq. (14) left, (15) right: the set's mean <n_br>"}
+    # one set: its colour; several: grey, each set's lines in its own colour
+    shade = colors[groups[0][0]] if len(groups) == 1 else "0.3"
     for ls in ("-", "x", "--"):
         if ls in styles:
-            handles.append(Line2D([], [], ls="none", marker="x", ms=5, color="0.3")
-                           if ls == "x" else Line2D([], [], ls=ls, color="0.3", lw=1.5))
+            handles.append(Line2D([], [], ls="none", marker="x", ms=5, color=shade)
+                           if ls == "x" else Line2D([], [], ls=ls, color=shade, lw=1.5))
             labels.append(key[ls])
     axes[1].legend(handles, [_wrap_label(t, 60) for t in labels], fontsize=8,
                    frameon=False, loc="upper left", bbox_to_anchor=(1.01, 1.0))
