@@ -527,6 +527,18 @@ def test_layer_conservation_violated_is_flagged():
     assert any(issubclass(w.category, quality.LinearSystemWarning) for w in caught)
 
 
+def test_merged_junctions_are_flagged(scene):
+    # the grid's crossings: 9 of its 21 junctions join four stacks (paper: about 1 %)
+    img, kw = _grid_scan()
+    res, caught = _analyze(img, **kw)
+    flag = next(f for f in res.quality if f.code == "merged_junctions")
+    assert flag.value == pytest.approx(9 / 21) and flag.value > quality.MERGED_SHARE
+    assert any(w.category is quality.MergedJunctionsWarning for w in caught)
+    typical, _ = _analyze(scene.rgb, **_given(scene))
+    assert "merged_junctions" not in typical.summary["quality"]["codes"]
+    assert (typical.junctions["n_stacks"] >= 4).mean() <= quality.MERGED_SHARE
+
+
 def test_junction_degree_is_flagged():
     # a star of 8 thick rays meeting at one point: a junction of degree 8
     import cv2
