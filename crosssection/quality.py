@@ -857,12 +857,13 @@ JUNCTION_BLOT_RATIO = 2.0
 #: merged, among at least :data:`MERGED_MIN_JUNCTIONS`. Measured with the default analysis
 #: (``degree >= 4``): the sample scans 0-3 %; the network generator's typical, thick dense,
 #: 25 px/mm and tangential scenes (seeds 100-103) 0-4 %, its truth the same; an independent
-#: generator's typical, thick and thick dense scans 3-14 %; renders of rods compacted to
-#: epsilon 19 8-14 % (their contact analysis 8-29 %); scans of nested bands whose single layers
-#: peel off 8-12-layer wall bands within a band's width of one another, written apart from
-#: this package, 41-50 %: there the junctions found were 17-23 for 32-34 forks, the short
-#: stacks between merged forks read 5-9 layers for 12, and the energy -41 to -58 %, with no
-#: other flag on half of them.
+#: generator's typical, thick, thick dense, 25 px/mm and peel scans (seeds 1-3) 0-14 %; quench
+#: renders 0 %; renders of rods compacted to epsilon 19 8-14 % (their contact analysis
+#: 8-29 %) (``python benchmarks/junction_degrees.py --scenes WORK/eps19/scan``); scans of
+#: nested bands whose single layers peel off 8-12-layer wall bands within a band's width of
+#: one another, written apart from this package, 41-50 %: there the junctions found were
+#: 17-23 for 32-34 forks, the short stacks between merged forks read 5-9 layers for 12, and
+#: the energy -41 to -58 %, with no other flag on half of them.
 MERGED_SHARE = 0.25
 MERGED_MIN_JUNCTIONS = 8
 #: ``junction_blot``: paper filled by the cleaning inside the junction's ink disc, in h^2,
