@@ -9,6 +9,7 @@ The public names are loaded on first use (PEP 562), so that ``import crosssectio
 simulator, which imports the shared core) does not pay for the whole pipeline's imports.
 """
 import importlib
+import pkgutil
 
 from crosssection._version import __version__
 from crosssection.core.numbacache import use_writable_cache
@@ -33,8 +34,8 @@ _LAZY = {
 
 #: submodules reachable as ``crosssection.<name>`` after ``import crosssection`` alone (the
 #: README's ``crosssection.quality.NoCalibrationWarning``), imported on first use
-_SUBMODULES = ("batch", "core", "figures", "linsys", "params", "pipeline", "quality", "result",
-               "samples", "setconfig", "stages", "stats", "tables", "testing", "truth")
+_SUBMODULES = tuple(sorted(m.name for m in pkgutil.iter_modules(__path__)
+                           if not m.name.startswith("_")))
 
 __all__ = ["__version__", *_LAZY]
 

@@ -458,8 +458,9 @@ def plan_batch(input_dir, out_dir, *, cli_params: dict | None = None, seed: int 
     from crosssection.core.records import output_of
 
     made_by = output_of(root)
-    if made_by is not None and made_by[1] != "foldstat render":  # a render's scenes are scans
-        # its images are figures of scans (a steps run's, an overlay), not scans
+    # the records of outputs whose images are figures of scans (a steps run's, an overlay):
+    # a render's scenes are scans, and a configs.csv may be a user's own table
+    if made_by is not None and made_by[1] not in ("foldstat render", "a simulation"):
         raise ConfigError(f"holds the output of {made_by[1]} ({made_by[0]}), not scans: "
                           "batch reads a folder of scans", given_root)
     out = Path(out_dir).resolve()
@@ -1142,8 +1143,8 @@ def check_out_dir(input_dir, out_dir, *, force: bool = False) -> None:
     ----------
     input_dir, out_dir : str or Path
     force : bool
-        The batch redoes every scan: a ``batch.json`` that cannot be read is taken for this
-        input folder's, and rewritten.
+        The batch redoes every scan: a ``batch.json`` that cannot be read, beside the batch's
+        ``index.csv``, is taken for this input folder's, and rewritten.
 
     Raises
     ------
@@ -1162,7 +1163,9 @@ def check_out_dir(input_dir, out_dir, *, force: bool = False) -> None:
         try:
             data = read_json_object(record)
         except ConfigError as exc:
-            if force:  # every scan is redone: nothing of the lost record is needed
+            if force and (out / "index.csv").is_file():
+                # a batch's folder (its index beside the record): every scan is redone,
+                # nothing of the lost record is needed
                 return
             raise ConfigError(f"{exc.cause}: the batch's record is damaged; re-run with "
                               "--force to redo every scan and write it anew", record) from None

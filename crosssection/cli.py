@@ -265,9 +265,11 @@ def _run_parsed(parser: argparse.ArgumentParser, argv=None) -> int:
             try:
                 status = int(args.func(args) or 0)
             except (KeyboardInterrupt, Terminated):
-                # a stopped run shows the doubts of the work it finished, which its re-run
-                # skips; an error (exit 2) is one line alone
-                _print_warnings(caught)
+                # a stopped batch, render or ensemble shows the doubts of the work it
+                # finished, which its re-run skips (a one-shot command kept nothing); an
+                # error (exit 2) is one line alone
+                if getattr(args, "command", None) not in _ONE_SHOT:
+                    _print_warnings(caught)
                 raise
         _print_warnings(caught)
         return status

@@ -453,9 +453,9 @@ class AnalysisParams:
             # both on one command line: the law stands in for a calibration and would be
             # ignored (a set's calibration overrides a batch's --width-law, which serves the
             # sets without one)
-            raise ParameterError(f"--width-law {values['width_law']} is not used with "
-                                 "--calibration (the calibration gives the widths of n "
-                                 "layers): leave one of them out")
+            raise ParameterError(f"{values['width_law']} is not used with --calibration (the "
+                                 "calibration gives the widths of n layers): leave one of "
+                                 "them out", "--width-law")
         if values.get("calibration"):
             values["calibration"] = str(Path(values["calibration"]).resolve())
         values.update(switched_off(args))

@@ -805,8 +805,9 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
             flags.append(QualityFlag(
                 "merged_junctions", f"{n4} of {len(degrees)} junctions join 4 stacks or more "
                 f"({100 * n4 / len(degrees):.0f} %, paper: about 1 %): forks closer than a "
-                "band's width are read as one, and the short stacks between them are lost "
-                "(counts, lengths and energies near them are doubtful); check the overlay",
+                "band's width are read as one, the short stacks between them lost (counts, "
+                "lengths and energies near them are doubtful), or the network is unlike the "
+                "paper's; check the overlay",
                 n4 / len(degrees), MERGED_SHARE))
     if network_shares is not None:
         flags += _network_check(network_shares)

@@ -316,8 +316,10 @@ def recorded_parameters(params) -> dict:
     smooth = (params.smooth_px if params.smooth_px is not None
               else default_smooth_px(params.thickness_px))
     return {**params.to_dict(), "s_min_mm2": params.s_min_used_mm2,
-            # 12 digits: 3 h computed reads 0.30000000000000004 mm
-            "tangent_mm": float(f"{params.tangent_used_mm:.12g}"), "smooth_px": int(smooth)}
+            # 3 h computed to 12 digits (0.3, not 0.30000000000000004 mm); a given one as given
+            "tangent_mm": (params.tangent_mm if params.tangent_mm is not None
+                           else float(f"{params.tangent_used_mm:.12g}")),
+            "smooth_px": int(smooth)}
 
 
 def summary(*, pre, params, linear_system, junctions, stacks, branches, voids, rod_measured_mm,

@@ -11,6 +11,7 @@ Lengths are in units of the rod length L. See ``python -m simulate --help``.
 The public names are loaded on first use (PEP 562), as in :mod:`crosssection`.
 """
 import importlib
+import pkgutil
 
 from crosssection._version import __version__
 
@@ -28,8 +29,8 @@ _LAZY = {
 }
 
 #: submodules reachable as ``simulate.<name>`` after ``import simulate`` alone
-_SUBMODULES = ("atlas", "checks", "compact", "contacts", "energy", "ensemble", "geometry",
-               "load", "render", "shapes", "validate")
+_SUBMODULES = tuple(sorted(m.name for m in pkgutil.iter_modules(__path__)
+                           if not m.name.startswith("_")))
 
 __all__ = ["__version__", *_LAZY]
 

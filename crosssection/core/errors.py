@@ -41,6 +41,8 @@ def why_unreadable(exc: BaseException) -> str:
     if isinstance(exc, UnicodeDecodeError):
         return "not a text file"
     if isinstance(exc, json.JSONDecodeError):
+        if not exc.doc.strip():
+            return "empty file"
         return f"malformed JSON: {exc.msg} at line {exc.lineno}"
     if isinstance(exc, IsADirectoryError):
         return "a folder, not a file"
@@ -51,6 +53,8 @@ def why_unreadable(exc: BaseException) -> str:
     if isinstance(exc, EOFError) or type(exc).__name__ == "BadZipFile":
         return "cut short or not of its format"
     words = " ".join(str(exc).split())
+    if "pickle" in words:  # numpy's advice to unpickle a file it cannot read: not for users
+        return "not a NumPy archive of arrays"
     return words[:200] if words else type(exc).__name__
 
 

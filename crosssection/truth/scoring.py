@@ -358,8 +358,9 @@ def _beside_or_above(scene_dir: Path, name: str) -> Path:
 
 
 def _set_calibration(scene_dir: Path) -> str | None:
-    """The calibration file a scene's own ``set.toml`` names, or None (no such file or key,
-    or a file that is no TOML: the analysis then goes on as without it)."""
+    """The calibration file a scene's own ``set.toml`` names (relative to the scene folder),
+    or None (no such file or key, an empty name, or a file that is no TOML: the analysis then
+    looks for ``calibration.csv`` as without it)."""
     import tomllib
 
     try:
@@ -367,7 +368,7 @@ def _set_calibration(scene_dir: Path) -> str | None:
             name = tomllib.load(fh).get("calibration")
     except (OSError, tomllib.TOMLDecodeError):
         return None
-    return name if isinstance(name, str) else None
+    return name.strip() if isinstance(name, str) and name.strip() else None
 
 
 def analyze_scene_folder(scene_dir, *, image_name: str | None = None, use_hole: bool = True,
@@ -409,13 +410,14 @@ def analyze_scene_folder(scene_dir, *, image_name: str | None = None, use_hole: 
         want["hole_radius_mm"] = params["hole_radius_mm"]
         if params.get("hole_center_px"):
             want["hole_center_px"] = tuple(params["hole_center_px"])
-    cal = _beside_or_above(scene_dir, "calibration.csv")
-    if use_calibration and cal.exists():
+    named = _set_calibration(scene_dir)
+    cal = scene_dir / named if named else _beside_or_above(scene_dir, "calibration.csv")
+    if use_calibration and cal.is_file():
         want["calibration"] = str(cal)
-    elif use_calibration and _set_calibration(scene_dir) is not None:
+    elif use_calibration and named:
         # the scene was drawn with that law: read without it, its counts are another's
-        raise ConfigError(f"{_set_calibration(scene_dir)}, the calibration its set.toml "
-                          "names, is missing", scene_dir)
+        raise ConfigError(f"{named}, the calibration its set.toml names, is missing",
+                          scene_dir)
     want.update(kwargs)
     result = analyze(str(image), AnalysisParams.from_mapping(want, path=image),
                      scale_given="px_per_mm" in params)

@@ -759,6 +759,14 @@ def test_a_damaged_batch_record_says_how_to_recover_and_force_rebuilds_it(tmp_pa
     assert status == 0 and _notices(err) == []
     assert json.loads((out / "batch.json").read_text())["complete"] is True
     assert set(pd.read_csv(out / "index.csv")["status"]) == {"ok"}
+    # a damaged record with no index beside it is no batch's: --force does not take it
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "batch.json").write_text("{")
+    (other / "mine.txt").write_text("a user's file")
+    status, err = _batch(capsys, inp, other, "--force")
+    assert status == 2 and len(err) == 1 and "malformed JSON" in err[0]
+    assert sorted(p.name for p in other.iterdir()) == ["batch.json", "mine.txt"]
 
 
 def test_a_steps_folder_is_no_folder_of_scans(tmp_path, capsys):
@@ -774,3 +782,7 @@ def test_a_steps_folder_is_no_folder_of_scans(tmp_path, capsys):
     assert main(["stats", str(steps), "--out", str(tmp_path / "r")]) == 2
     err = capsys.readouterr().err.splitlines()
     assert len(err) == 1 and "step images of foldstat steps" in err[0]
+    # a table of the user's named like a simulation's does not stop a batch of scans
+    (tmp_path / "in" / "configs.csv").write_text("id,notes\n1,cut at 30 cm\n")
+    status, err = _batch(capsys, tmp_path / "in", tmp_path / "b2")
+    assert status == 0 and _notices(err) == []

@@ -128,3 +128,13 @@ def test_the_submodules_the_readme_names_load_on_first_use():
     assert r.stdout.split() == ["copy_samples", "network_graph", "AnalysisParams",
                                 "crosssection.setconfig", "load_ensemble", "CompactParams",
                                 "simulate.render"]
+    # every public submodule, not a hand-picked list
+    code = ("import pkgutil, crosssection, simulate\n"
+            "for pkg in (crosssection, simulate):\n"
+            "    for m in pkgutil.iter_modules(pkg.__path__):\n"
+            "        if not m.name.startswith('_'):\n"
+            "            getattr(pkg, m.name)\n"
+            "print('ok')")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 0 and r.stdout.strip() == "ok", r.stderr

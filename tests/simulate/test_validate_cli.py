@@ -91,6 +91,16 @@ def lose_calibration(scene):
     return "calibration.csv, the calibration its set.toml names, is missing"
 
 
+def test_a_calibration_of_another_name_that_its_set_names_is_read(scenes, tmp_path):
+    folder, scene = scenes
+    (scene / "calibration.csv").rename(scene / "law.csv")
+    toml = (scene / "set.toml").read_text()
+    (scene / "set.toml").write_text(toml.replace('calibration = "calibration.csv"',
+                                                 'calibration = "law.csv"'))
+    assert 'calibration = "law.csv"' in (scene / "set.toml").read_text()
+    assert run(folder, tmp_path / "rep") == 0
+
+
 @pytest.mark.parametrize("damage", [damage_image, damage_summary, damage_params,
                                     damage_calibration, lose_calibration])
 def test_failed_scene_is_a_warning_and_exit_3(scenes, tmp_path, capsys, damage):
