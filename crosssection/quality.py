@@ -56,7 +56,8 @@ hole_wide                fraction of a given hole's circle that the ink       < 
                                                                               it
 hole_cut                 area of the hole outside the scan / the hole's area; > 0.5 %, or
                          ink on the border where the hole overhangs it by h   >= max(h, 2) px
-no_junction              junctions found                                      none
+no_junction              junctions found (a band wound into a spiral, its     none
+                         layer count stepping at the rod's ends, has none)
 junction_degree          largest junction degree (paper: degree 4 ~ 1 %)      > 6
 merged_junctions         share of the junctions where 4 stacks or more meet   > 25 %, of 8
                          (paper: ~ 1 %; forks closer than a band's width      junctions or more
@@ -788,7 +789,12 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
                                      "scan (cropped through the hole?) and misses what lies "
                                      "beyond: scan the whole hole", ink_on_border_px,
                                      max(h_px, 2.0)))
-    if not len(degrees):
+    # one band whose layer count steps where the rod's ends lie, with no fork: a spiral, the
+    # paper's ground state ("condensed phase"), read whole, not a failed network (a closed
+    # band of even count stays flagged: rings, or a spiral whose ends lie at one angle)
+    wound = (len(stacks) > 0 and "kind" in stacks.columns
+             and bool((stacks["kind"] == "step").all()))
+    if not len(degrees) and not wound:
         flags.append(QualityFlag("no_junction", "no junction found: every stack is a closed "
                                  "loop or a free segment, while a folded sheet's cross-section "
                                  "is a network (check the scan, the threshold and the scale)",

@@ -527,6 +527,39 @@ def test_layer_conservation_violated_is_flagged():
     assert any(issubclass(w.category, quality.LinearSystemWarning) for w in caught)
 
 
+def _spiral(turns: float):
+    """A rod wound along the wall in contact with itself (an Archimedean spiral of pitch h,
+    5 px), drawn 4x finer and averaged down; its length in mm."""
+    import cv2
+
+    h, R, c, size, big = 5.0, 240.0, 260.0, 520, 4
+    img = np.full((size * big, size * big, 3), 245, np.uint8)
+    th = np.linspace(0.0, turns * 2 * np.pi, 8000)
+    r = R - h / 2 - h * th / (2 * np.pi)
+    pts = np.stack([c + r * np.cos(th), c + r * np.sin(th)], 1) * big
+    cv2.polylines(img, [np.round(pts).astype(np.int32)], False, (40, 70, 190),
+                  int(h * big) + 2)
+    img = cv2.resize(img, (size, size), interpolation=cv2.INTER_AREA)
+    length_mm = float(np.sum(np.hypot(*np.diff(pts / big, axis=0).T))) / 50
+    return img, length_mm, dict(px_per_mm=50, thickness_mm=0.1, hole_radius_mm=R / 50,
+                                hole_center_px=(c, c))
+
+
+def test_a_spiral_ground_state_is_no_failed_network():
+    # the paper's ground state: one wound band, its count stepping at the rod's ends, no
+    # fork; read whole, it is not flagged
+    img, length_mm, kw = _spiral(3.5)
+    res, _ = _analyze(img, **kw)
+    assert set(res.stacks["kind"]) == {"step"} and len(res.junctions) == 0
+    assert sorted(res.stacks["n_br"]) == [3, 4]
+    assert res.summary["rod_length_mm"] == pytest.approx(length_mm, rel=0.01)
+    assert "no_junction" not in res.summary["quality"]["codes"]
+    # wound a whole number of turns, the band is closed: rings or a spiral, still flagged
+    img, length_mm, kw = _spiral(3.0)
+    res, _ = _analyze(img, **kw)
+    assert "no_junction" in res.summary["quality"]["codes"]
+
+
 def test_merged_junctions_are_flagged(scene):
     # the grid's crossings: 9 of its 21 junctions join four stacks (paper: about 1 %)
     img, kw = _grid_scan()
