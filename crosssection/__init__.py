@@ -8,8 +8,9 @@ stacks, branches and voids, then ensemble statistics.
 The public names are loaded on first use (PEP 562), so that ``import crosssection`` (and the
 simulator, which imports the shared core) does not pay for the whole pipeline's imports.
 """
-import importlib
 import pkgutil
+
+import lazy_loader
 
 from crosssection._version import __version__
 from crosssection.core.numbacache import use_writable_cache
@@ -18,18 +19,14 @@ from crosssection.core.numbacache import use_writable_cache
 # folder otherwise, and every compiled kernel fails (crosssection.core.numbacache)
 use_writable_cache()
 
+#: the public names, each imported from its module on first use
 _LAZY = {
-    "analyze": "crosssection.pipeline",
-    "AnalysisResult": "crosssection.result",
-    "AnalysisParams": "crosssection.params",
-    "ScanScale": "crosssection.params",
-    "QualityWarning": "crosssection.quality",
-    "FoldstatError": "crosssection.core.errors",
-    "ImageError": "crosssection.core.errors",
-    "ParameterError": "crosssection.core.errors",
-    "AnalysisError": "crosssection.core.errors",
-    "ConfigError": "crosssection.core.errors",
-    "OutputError": "crosssection.core.errors",
+    "pipeline": ["analyze"],
+    "result": ["AnalysisResult"],
+    "params": ["AnalysisParams", "ScanScale"],
+    "quality": ["QualityWarning"],
+    "core.errors": ["FoldstatError", "ImageError", "ParameterError", "AnalysisError",
+                    "ConfigError", "OutputError"],
 }
 
 #: submodules reachable as ``crosssection.<name>`` after ``import crosssection`` alone (the
@@ -37,18 +34,6 @@ _LAZY = {
 _SUBMODULES = tuple(sorted(m.name for m in pkgutil.iter_modules(__path__)
                            if not m.name.startswith("_")))
 
-__all__ = ["__version__", *_LAZY]
-
-
-def __getattr__(name):
-    if name in _LAZY:
-        value = getattr(importlib.import_module(_LAZY[name]), name)
-        globals()[name] = value
-        return value
-    if name in _SUBMODULES:
-        return importlib.import_module(f"crosssection.{name}")
-    raise AttributeError(f"module 'crosssection' has no attribute {name!r}")
-
-
-def __dir__():
-    return sorted([*__all__, *_SUBMODULES])
+# scikit-image's lazy loading (SPEC 1); ``import *`` takes the public names, not every module
+__getattr__, __dir__, _ = lazy_loader.attach(__name__, _SUBMODULES, _LAZY)
+__all__ = ["__version__", *(name for names in _LAZY.values() for name in names)]

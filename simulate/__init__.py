@@ -10,40 +10,23 @@ Lengths are in units of the rod length L. See ``python -m simulate --help``.
 
 The public names are loaded on first use (PEP 562), as in :mod:`crosssection`.
 """
-import importlib
 import pkgutil
+
+import lazy_loader
 
 from crosssection._version import __version__
 
 _LAZY = {
-    "load_ensemble": "simulate.load",
-    "SimulationEnsemble": "simulate.load",
-    "plot_configuration": "simulate.load",
-    "analyze_rod": "simulate.contacts",
-    "CompactParams": "simulate.compact",
-    "CompactResult": "simulate.compact",
-    "compact_rod": "simulate.compact",
-    "render_configuration": "simulate.render",
-    "render_directory": "simulate.render",
-    "validate_scenes": "simulate.validate",
+    "load": ["load_ensemble", "SimulationEnsemble", "plot_configuration"],
+    "contacts": ["analyze_rod"],
+    "compact": ["CompactParams", "CompactResult", "compact_rod"],
+    "render": ["render_configuration", "render_directory"],
+    "validate": ["validate_scenes"],
 }
 
 #: submodules reachable as ``simulate.<name>`` after ``import simulate`` alone
 _SUBMODULES = tuple(sorted(m.name for m in pkgutil.iter_modules(__path__)
                            if not m.name.startswith("_")))
 
-__all__ = ["__version__", *_LAZY]
-
-
-def __getattr__(name):
-    if name in _LAZY:
-        value = getattr(importlib.import_module(_LAZY[name]), name)
-        globals()[name] = value
-        return value
-    if name in _SUBMODULES:
-        return importlib.import_module(f"simulate.{name}")
-    raise AttributeError(f"module 'simulate' has no attribute {name!r}")
-
-
-def __dir__():
-    return sorted([*__all__, *_SUBMODULES])
+__getattr__, __dir__, _ = lazy_loader.attach(__name__, _SUBMODULES, _LAZY)
+__all__ = ["__version__", *(name for names in _LAZY.values() for name in names)]
