@@ -2807,6 +2807,12 @@ def _render_directory_locked(sim_dir, out_dir, *, configs=None, limit=None, prog
             warnings.warn(f"{sim_dir}: rods.npz holds {len(rods.files)} of the {asked} "
                           "configurations params.json asks for (a run stopped before the end: "
                           "re-run it to finish it)", TruthWarning, stacklevel=3)
+        n_failed = _failed_count(sim_dir)
+        if configs is None and n_failed:
+            # the scenes are the ensemble's finished configurations: said, as stats says it
+            warnings.warn(f"{sim_dir}: {n_failed} configuration(s) of the simulation failed "
+                          f"and are not rendered (see {sim_dir / 'failures.csv'})",
+                          TruthWarning, stacklevel=3)
         if limit is not None:
             keys = keys[:limit]
         # an ensemble that recorded None for its default delta analyses with that default

@@ -473,6 +473,10 @@ def _not_an_output(folder: Path) -> ConfigError:
 
     from crosssection.core.records import output_of
 
+    if (folder / "parts").is_dir() and (folder / "params.json").is_file():
+        return ConfigError("an unfinished simulation (its params.json and parts/, no "
+                           "configs.csv yet): re-run the command that made it to finish it",
+                           folder)
     made_by = output_of(folder)
     if made_by is not None and made_by[1] == "foldstat steps":
         return ConfigError("holds the step images of foldstat steps (steps.json), not an "

@@ -495,6 +495,19 @@ def test_an_ensemble_whose_every_configuration_failed_is_refused(sim, tmp_path, 
         render_directory(failed, tmp_path / "s", px_per_mm=25, clean=True)
 
 
+def test_the_failed_configurations_of_an_ensemble_are_named(sim, tmp_path, capsys):
+    """A render of the finished configurations said nothing of the failed ones."""
+    some = tmp_path / "some"
+    shutil.copytree(sim, some)
+    (some / "failures.csv").write_text("config_id,seed,error\n2,1,AnalysisError: x\n")
+    status, err = _render(capsys, some, "--out", tmp_path / "s", "--limit", "1", *FAST)
+    assert status == 0
+    assert (f"warning: {some}: 1 configuration(s) of the simulation failed and are not "
+            f"rendered (see {some / 'failures.csv'})") in err.splitlines()
+    status, err = _render(capsys, sim, "--out", tmp_path / "t", "--limit", "1", *FAST)
+    assert status == 0 and "failed" not in err
+
+
 @pytest.mark.parametrize("content, cause", [
     (b"junk\n", "not a NumPy .npz archive"),
     (b"", "empty file, not a NumPy .npz archive"),

@@ -802,3 +802,14 @@ def test_a_second_stats_run_writing_the_same_report_is_refused(batch, tmp_path, 
     status, _, err = _stats(capfd, batch, "--out", out, *FAST)
     assert status == 0 and (out / "macro.csv").is_file()
     assert not (tmp_path / ".rep.lock").exists()
+
+
+def test_an_unfinished_simulation_is_named_as_such(tmp_path, capfd):
+    """A quench stopped before its tables: its folder holds params.json and parts/ only."""
+    sim = tmp_path / "sim"
+    (sim / "parts").mkdir(parents=True)
+    (sim / "params.json").write_text('{"command": "quench"}')
+    status, _, err = _stats(capfd, sim, "--out", tmp_path / "rep", *FAST)
+    assert status == 2 and len(err) == 1
+    assert err[0] == (f"error: {sim}: an unfinished simulation (its params.json and parts/, "
+                      "no configs.csv yet): re-run the command that made it to finish it")
