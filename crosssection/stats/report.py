@@ -257,16 +257,16 @@ def _scaled_label(label: str, power: int) -> str:
     return f"{label[:i + 1]}10^{{{-power}}}\\,{label[i + 1:]}"
 
 
-def _linear_ticks(axis) -> int:
-    """At most 5 labels; for an axis reaching below 1e-2 or beyond 1e4, labels in units of a
-    power of ten, returned (0: none) for the axis label to name. Plain labels such as 0.00015
-    on a 4-inch axis run into each other, and matplotlib's own "x10^k" beside the axis lies
-    under the end of a two-line axis label."""
+def _linear_ticks(axis, small: float = 1e-2) -> int:
+    """At most 5 labels; for an axis reaching below ``small`` or beyond 1e4, labels in units
+    of a power of ten, returned (0: none) for the axis label to name. Plain labels such as
+    0.00015 on a 4-inch axis run into each other, and matplotlib's own "x10^k" beside the axis
+    lies under the end of a two-line axis label."""
     from matplotlib.ticker import FuncFormatter, MaxNLocator
 
     axis.set_major_locator(MaxNLocator(nbins=5))
     top = max(abs(v) for v in axis.get_view_interval())
-    power = int(np.floor(np.log10(top))) if top > 0 and (top >= 1e4 or top < 1e-2) else 0
+    power = int(np.floor(np.log10(top))) if top > 0 and (top >= 1e4 or top < small) else 0
     scale = 10.0 ** power
     axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v / scale:.6g}"))
     return power
@@ -639,9 +639,10 @@ def pdf_figure(res: StatsResult, ens: Ensemble, quantity: str, sets=None, colors
                 j = label.find("$", i + 1) if i >= 0 else -1
                 per = label[i:j + 1] if j > i else "of the quantity"
                 ylabel = f"probability density, per unit {per}"
-            if not logscale:
-                # densities of 1e-4 per unit E read as 0.00012: in units of a power of ten too
-                ypower = _linear_ticks(ax.yaxis)
+            if not logscale and not count:
+                # densities of 1e-4 per unit E read as 0.00012: in units of a power of ten,
+                # below 1 too, so that the rows of one figure read alike
+                ypower = _linear_ticks(ax.yaxis, small=1.0)
                 if ypower:
                     ylabel += f", in units of $10^{{{ypower}}}$"
             ax.set_ylabel(_wrap_label(ylabel, 36))
