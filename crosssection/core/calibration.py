@@ -15,7 +15,7 @@ import numpy as np
 import pandas as pd
 from numba import njit
 
-from crosssection.core.errors import ConfigError
+from crosssection.core.errors import ConfigError, why_unreadable
 from crosssection.core.fileio import write_csv
 
 __all__ = ["Calibration"]
@@ -178,20 +178,9 @@ class Calibration:
             table = pd.read_csv(path, comment="#", skipinitialspace=True)
         except FileNotFoundError:
             raise ConfigError("calibration file not found", path) from None
-        except IsADirectoryError:
-            raise ConfigError("a folder, not a calibration CSV file", path) from None
-        except pd.errors.EmptyDataError:
-            raise ConfigError("empty file: a calibration CSV holds a header n_layers,width_mm "
-                              "and one row per layer count", path) from None
-        except UnicodeDecodeError:
-            raise ConfigError("not a text file: a calibration CSV holds a header "
+        except Exception as exc:  # noqa: BLE001 - parser errors, empty or binary files, folders
+            raise ConfigError(f"{why_unreadable(exc)}: a calibration CSV holds a header "
                               "n_layers,width_mm and one row per layer count", path) from None
-        except OSError as exc:
-            raise ConfigError(f"cannot read calibration CSV ({exc.strerror or exc})",
-                              path) from None
-        except Exception as exc:  # noqa: BLE001 - the parser's errors: one line, its message
-            why = " ".join(str(exc).split()) or type(exc).__name__
-            raise ConfigError(f"cannot read calibration CSV ({why})", path) from None
         return cls.from_frame(table, source=path)
 
     @classmethod

@@ -337,11 +337,9 @@ def _read_csv(path: Path, required, *, numeric=(), nonempty: bool = False) -> pd
         df = pd.read_csv(path)
     except FileNotFoundError:
         raise ConfigError(MISSING_TABLE, path) from None
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError,
+            OSError) as exc:
         raise ConfigError(f"unreadable CSV ({why_unreadable(exc)})", path) from None
-    except OSError as exc:
-        raise ConfigError(f"unreadable CSV ({exc.strerror or type(exc).__name__})",
-                          path) from None
     if len(df) and _cut_last_line(path, len(df.columns)):
         # a last line short of fields and of its newline was cut while written (a full disk,
         # a copy stopped): no row
@@ -468,9 +466,8 @@ def _validation_report(folder: Path) -> ConfigError | None:
 def _not_an_output(folder: Path) -> ConfigError:
     """The error for a folder holding no foldstat output, saying what it holds instead
     when that is scans or generated scenes (a common mix-up: the input of ``batch``)."""
-    # imported here: only this error needs the batch's idea of a scan
+    # imported here: only this error needs the batch's idea of a scan and of an output
     from crosssection.batch import find_images
-
     from crosssection.core.records import output_of
 
     if (folder / "parts").is_dir() and (folder / "params.json").is_file():
