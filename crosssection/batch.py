@@ -127,8 +127,7 @@ from crosssection.core.fileio import (BROWSER_FILES, PARTIAL_TAG, check_out, cle
                                       temporary_files, write_csv, write_json)
 from crosssection.core.parallel import (ClusterLostError, capped_workers, compiling_in_turn,
                                         get_executor)
-from crosssection.params import (PARAM_NAMES, AnalysisParams, add_analysis_arguments,
-                                 check_param, switched_off)
+from crosssection.params import AnalysisParams, add_analysis_arguments, switched_off
 from crosssection.quality import QualityWarning
 from crosssection.setconfig import (DEFAULT_PARAMS, DEFAULT_SET_NAME, SET_FILE, SetConfig,
                                     check_params, failed_set, load_set_config)
@@ -1282,7 +1281,9 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
             if why:
                 redone.append((t.given or t.image, why))
         meta = _start(out, input_dir, tasks, sets, redone, stale, {
-            "workers": workers, "scheduler": scheduler, "seed": seed, "figure": figure,
+            # the local processes used (None: one per CPU); a cluster's are its own
+            "workers": (workers if workers is not None or scheduler
+                        else os.cpu_count() or 1), "scheduler": scheduler, "seed": seed, "figure": figure,
             "force": force, "cli_params": cli_params or {}})
         # before any analysis: an earlier run's rows of the scans redone now must not
         # outlive their folders if this run is killed
@@ -1302,6 +1303,7 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
     fn = task_fn or process_image
     queue, suspects = deque(todo), deque()
     interrupted, stopped = False, False
+    stop_exc = None
     try:
         while queue or suspects:
             if ex is None:  # the previous pool broke
@@ -1371,13 +1373,14 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
                         _write_tables(out, rows, tasks, pending=todo)
                         last_write, failed_now = time.monotonic(), False
             ex = None
-    except (KeyboardInterrupt, ClusterLostError):
+    except (KeyboardInterrupt, ClusterLostError) as exc:
         # an interrupt landing once every image is done stops nothing: the batch is complete
         if len(rows) < len(tasks):
             interrupted = stopped = True
+            stop_exc = exc
             raise
-    except BaseException:
-        stopped = True
+    except BaseException as exc:
+        stopped, stop_exc = True, exc
         raise
     finally:
         pool.close()  # the first pool, when no image was left to analyse
@@ -1395,6 +1398,9 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
                                 for k in ("ok", "skipped", "failed", "pending")},
                         complete=len(rows) == len(tasks), interrupted=interrupted)
             _write_record(out / "batch.json", write_json, meta)
+            if stop_exc is not None:
+                # the rows done before the stop, for the caller to report (``run``)
+                stop_exc.batch_index = index
         except OutputError:
             # a batch that stops for another reason (an interrupt, the same full disk) is
             # told by that reason: these records are written where they can be
@@ -1507,13 +1513,6 @@ def run(args) -> int:
         raise ParameterError(f"must be >= 1, got {args.workers}", "--workers")
     if args.seed is not None and args.seed < 0:
         raise ParameterError(f"must be >= 0, got {args.seed}", "--seed")
-    for name in PARAM_NAMES:
-        value = getattr(args, name, None)
-        if value is not None and name != "calibration":
-            try:
-                check_param(name, value)
-            except ParameterError as exc:
-                raise ParameterError(exc.cause, "--" + name.replace("_", "-")) from None
     cli_params = {k: v for k, v in AnalysisParams.from_cli_args(args).to_dict().items()
                   if getattr(args, k, None) is not None}
     cli_params.update(switched_off(args))
@@ -1522,14 +1521,33 @@ def run(args) -> int:
         print(f"warning: {lowered}", file=sys.stderr)
     from crosssection.cli import interrupt_received
 
-    index = run_batch(args.input_dir, args.out, workers=workers, scheduler=args.scheduler,
-                      seed=args.seed, figure=not args.no_figure, cli_params=cli_params,
-                      force=args.force,
-                      progress=False if args.quiet else args.progress,
-                      on_wait=lambda message: print(f"warning: {message}", file=sys.stderr),
-                      signalled=interrupt_received)
+    try:
+        index = run_batch(args.input_dir, args.out, workers=workers,
+                          scheduler=args.scheduler, seed=args.seed, figure=not args.no_figure,
+                          cli_params=cli_params, force=args.force,
+                          progress=False if args.quiet else args.progress,
+                          on_wait=lambda message: print(f"warning: {message}",
+                                                        file=sys.stderr),
+                          signalled=interrupt_received)
+    except KeyboardInterrupt as exc:
+        # a stopped batch names the failures and doubts of the scans it finished, before
+        # the error line, as a finished one does (the re-run skips those scans)
+        done = getattr(exc, "batch_index", None)
+        if done is not None:
+            _report_rows(done, args)
+        raise
+    _report_rows(index, args)
     n = index["status"].value_counts()
     n_failed = int(n.get("failed", 0))
+    print(f"batch: {len(index)} images: {int(n.get('ok', 0))} done, "
+          f"{int(n.get('skipped', 0))} skipped, {n_failed} failed"
+          + (f" (see {Path(args.out) / 'failures.csv'})" if n_failed else ""))
+    return EXIT_SOME_FAILED if n_failed else 0
+
+
+def _report_rows(index, args) -> None:
+    """A ``warning:`` line for every image of ``index`` that failed or whose results are
+    doubtful."""
     for _, row in index[index["status"] == "failed"].iterrows():
         shown = Path(args.input_dir) / row["image"]
         reason = str(row["reason"])
@@ -1541,10 +1559,6 @@ def run(args) -> int:
         _warning_line(f"{Path(args.input_dir) / row['image']}: doubtful results "
                       f"({row['quality'].replace(';', ', ')}; see "
                       f"{Path(args.out) / row['output'] / 'summary.json'})")
-    print(f"batch: {len(index)} images: {int(n.get('ok', 0))} done, "
-          f"{int(n.get('skipped', 0))} skipped, {n_failed} failed"
-          + (f" (see {Path(args.out) / 'failures.csv'})" if n_failed else ""))
-    return EXIT_SOME_FAILED if n_failed else 0
 
 
 __all__ = ["run_batch", "BatchWarning", "plan_batch", "process_image", "completed_row",

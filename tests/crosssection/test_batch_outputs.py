@@ -556,6 +556,26 @@ def test_an_interrupt_after_the_last_image_finishes_the_batch(tmp_path, monkeypa
     assert meta["complete"] is complete and meta["interrupted"] is not complete
 
 
+def test_the_record_names_the_workers_used(tmp_path, monkeypatch):
+    # batch.json said "workers": null for a batch run with one worker per CPU
+    from crosssection.core import parallel
+
+    inp = tmp_path / "in"
+    _set(inp / "x", "", "s0.png")
+    asked = []
+
+    def inline(workers, scheduler=None, **kw):
+        asked.append(workers)
+        return parallel.get_executor(1, None, **kw)
+
+    monkeypatch.setattr(B, "get_executor", inline)
+    for workers, out in ((None, tmp_path / "a"), (1, tmp_path / "b")):
+        B.run_batch(inp, out, workers=workers, progress=False, task_fn=_quick)
+        meta = json.loads((out / "batch.json").read_text())
+        assert meta["workers"] == (os.cpu_count() or 1 if workers is None else workers)
+    assert asked[0] is None  # the record says what None meant; the executor is asked the same
+
+
 def test_a_rerun_killed_before_its_first_result_leaves_no_row_of_the_earlier_run(tmp_path):
     # the earlier run's rows of the scans being redone must not outlive their folders: a
     # run killed (SIGKILL, out of memory) before its first result lists them as pending

@@ -225,3 +225,41 @@ def test_an_interrupted_forced_batch_says_what_a_re_run_does():
     for command in ("analyze", "steps"):
         assert _resume_hint(argparse.Namespace(command=command)) == (
             "no file was written; re-run the same command")
+
+
+@pytest.mark.parametrize("sig, status, word", [(signal.SIGINT, 130, "interrupted"),
+                                               (signal.SIGTERM, 143, "terminated")])
+def test_a_stopped_batch_names_the_failures_and_doubts_of_the_scans_it_finished(
+        tmp_path, monkeypatch, capsys, sig, status, word):
+    """The lines a finished batch prints for its failed and flagged scans were lost when it
+    was stopped: the re-run skips those scans, so they are printed before the error line."""
+    from PIL import Image
+
+    from crosssection import batch
+    from crosssection.cli import main
+
+    inp, out = tmp_path / "in", tmp_path / "out"
+    inp.mkdir()
+    for i in range(4):
+        Image.fromarray(np.zeros((8, 8, 3), np.uint8)).save(inp / f"a{i}.png")
+
+    def task(t):
+        if t.rel == "a0.png":
+            return batch._row(t, "failed", reason="not an image")
+        if t.rel == "a1.png":
+            return batch._row(t, "ok", summary={"quality": {"codes": ["no_calibration"]}})
+        signal.raise_signal(sig)
+        return batch._row(t, "ok")
+
+    monkeypatch.setattr(batch, "process_image", task)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        assert main(["batch", str(inp), "--out", str(out), "--workers", "1",
+                     "--quiet"]) == status
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 3
+    assert lines[0] == f"warning: {inp / 'a0.png'}: not analysed: not an image"
+    assert lines[1].startswith(f"warning: {inp / 'a1.png'}: doubtful results (no_calibration;")
+    assert lines[2] == f"error: {word} (re-run the same command to resume)"
