@@ -913,7 +913,10 @@ def _scatter_fig(res, x, y, xlabel, ylabel, title, *, through_origin=False, pape
         if k.sum() >= 2 and through_origin:
             a = np.sum(xv[k] * yv[k]) / np.sum(xv[k] ** 2)
             xs = np.linspace(0, xv[k].max() * 1.1, 10)
-            ax.plot(xs, a * xs, "-", color=c, label=f"{name[s]}: fit through 0, slope {a:.3g}")
+            few = (f" (n = {int(k.sum())}, indicative only)" if k.sum() < N_RELATION_MIN
+                   else "")
+            ax.plot(xs, a * xs, "-", color=c,
+                    label=f"{name[s]}: fit through 0, slope {a:.3g}{few}")
     if paper_slope is not None:
         xs = np.array([0, np.nanmax(np.asarray(pc[x], float)) * 1.1])
         ax.plot(xs, paper_slope * xs, ":", color="grey", label=f"paper: slope {paper_slope}")

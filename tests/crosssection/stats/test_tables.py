@@ -575,3 +575,22 @@ def test_the_ratio_interval_combines_the_two_shapes_intervals():
     # alpha_E unbounded above: the ratio too, its lower bound kept
     lo, hi = T.dof_ratio_interval(20.0, (10.0, np.inf), 0.5, (0.25, 1.0))
     assert lo == pytest.approx(40.0 * np.exp(-np.hypot(np.log(2), np.log(2)))) and hi == np.inf
+
+
+@pytest.mark.filterwarnings("ignore::crosssection.quality.QualityWarning")  # a built ensemble
+def test_a_fit_through_zero_on_few_configurations_is_marked_in_the_legend():
+    # the figure's slope rested on two configurations and said nothing of it
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from crosssection.stats.report import _scatter_fig
+
+    def legend(n):
+        res = T.compute_stats(_relations_ensemble(np.random.default_rng(5), n=n),
+                              T.StatsOptions(n_boot=0, gof=False))
+        fig = _scatter_fig(res, "l_bar", "sqrt_s_bar", "l", "sqrt(s)", "s against l",
+                           through_origin=True)
+        return [t for t in fig.axes[0].get_legend_handles_labels()[1] if "fit through 0" in t]
+
+    assert [t.endswith("(n = 2, indicative only)") for t in legend(2)] == [True]
+    assert [t.endswith("indicative only)") for t in legend(T.N_RELATION_MIN)] == [False]
