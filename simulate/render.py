@@ -791,6 +791,14 @@ def _rod_length_mm(xy, delta, cal, n_max, *, rod_length_mm, px_per_mm, gap_px, m
     extent = float(np.max(xy.max(axis=0) - xy.min(axis=0)))
     need_mm = 0.5 * (float(cal.width(1)) + float(cal.width(n_max))) + gap_px / px_per_mm
     if rod_length_mm is not None:
+        widest = float(cal.width(n_max))
+        if extent * rod_length_mm < 2.0 * widest:
+            # the rod's whole drawing narrower than two of its bands: one blot, no network
+            least = 2.0 * widest / max(extent, 1e-9)
+            raise ParameterError(f"{rod_length_mm:.4g} mm draws the whole rod within "
+                                 f"{extent * rod_length_mm:.3g} mm, less than two of its "
+                                 f"widest bands ({widest:.3g} mm wide): give at least "
+                                 f"{least:.4g} mm", "rod_length_mm")
         return rod_length_mm, delta * rod_length_mm >= need_mm
     rod_length_mm = need_mm / delta
     cap = ((max_size_px - 2) / px_per_mm - 2 * margin_mm) / max(extent, 1e-9)

@@ -73,6 +73,18 @@ def test_noise_beyond_the_inks_contrast_is_refused(sim, tmp_path, capsys, not_dr
     assert not (tmp_path / "s").exists()
 
 
+def test_a_rod_too_short_to_draw_is_refused(sim, tmp_path, capsys, not_drawn):
+    """A 10-um rod of 0.1-mm sheets was drawn as one blot with warnings only."""
+    line = _error(capsys, sim, "--out", tmp_path / "s", "--rod-length-mm", "0.01", *FAST)
+    assert line.startswith("error: --rod-length-mm: 0.01 mm draws the whole rod within ")
+    assert "less than two of its widest bands" in line and "give at least " in line
+    assert not (tmp_path / "s").exists()
+    least = float(line.rsplit("give at least ", 1)[1].split()[0])
+    xy = np.load(sim / "rods.npz")["config_00000"]
+    with pytest.raises(ParameterError, match="less than two of its widest bands"):
+        render_configuration(xy, rod_length_mm=0.99 * least, px_per_mm=25.0, clean=True)
+
+
 def test_a_blur_at_the_bound_is_drawn(sim, tmp_path, capsys):
     capsys.readouterr()
     assert main(["render", str(sim), "--out", str(tmp_path / "s"), "--blur",
