@@ -23,6 +23,8 @@ versions may not accept them); a scene that raises is recorded and the others go
 =====================  ====================================================================
 energy_rel_error       sum of the output branch energies / truth energy_total - 1
 rod_length_rel_error   sum of n_br * length_mm over the output stacks / truth L_mm - 1
+modelled_stack_share   the largest share of the energy carried by one stack none of whose
+                       energy is measured (the ``modelled_stack`` check's value)
 version                ``crosssection.__version__`` of the package scored
 =====================  ====================================================================
 
@@ -143,10 +145,23 @@ def score_scene(folder, name: str, analyze, **methods) -> dict:
         stacks = res.stacks
         return {"energy_rel_error": res.branches["energy"].sum() / truth["energy_total"] - 1,
                 "rod_length_rel_error":
-                    (stacks["n_br"] * stacks["length_mm"]).sum() / truth["L_mm"] - 1}
+                    (stacks["n_br"] * stacks["length_mm"]).sum() / truth["L_mm"] - 1,
+                "modelled_stack_share": _modelled_stack_share(stacks)}
     except Exception as exc:  # noqa: BLE001 - a failing scene is a row of the table
         message = (str(exc).splitlines() or [""])[0].replace(f"{folder}{os.sep}", "")
         return {"error": f"{type(exc).__name__}: {message}"}  # no folder path in the outputs
+
+
+def _modelled_stack_share(stacks) -> float:
+    """The largest share of the scan's energy carried by one stack none of whose energy is
+    measured (``energy_rel_uncertainty`` >= 0.99; the ``modelled_stack`` check), NaN for a
+    version without the column."""
+    if "energy_rel_uncertainty" not in stacks:
+        return float("nan")
+    e = (stacks["energy_per_branch"] * stacks["n_br"]).to_numpy(float)
+    total = float(np.nansum(e))
+    wholly = stacks["energy_rel_uncertainty"].to_numpy(float) >= 0.99
+    return float(e[wholly].max() / total) if wholly.any() and total > 0 else 0.0
 
 
 def score_folder(folder, conditions=None, analyze=None, version=None, **methods):
@@ -158,14 +173,15 @@ def score_folder(folder, conditions=None, analyze=None, version=None, **methods)
     rows = []
     for condition, name in list_scenes(folder, conditions):
         row = {"condition": condition, "scene": name, "version": version or "unknown",
-               "energy_rel_error": np.nan, "rod_length_rel_error": np.nan, "error": None,
+               "energy_rel_error": np.nan, "rod_length_rel_error": np.nan,
+               "modelled_stack_share": np.nan, "error": None,
                **score_scene(folder, name, analyze, **methods)}
         print(f"{name:<20} " + (f"failed: {row['error']}" if row["error"] else
                                 f"energy {row['energy_rel_error']:+.3f}  "
                                 f"rod {row['rod_length_rel_error']:+.3f}"), flush=True)
         rows.append(row)
     return pd.DataFrame(rows, columns=["condition", "scene", "version", "energy_rel_error",
-                                       "rod_length_rel_error", "error"])
+                                       "rod_length_rel_error", "modelled_stack_share", "error"])
 
 
 def summarize(df: pd.DataFrame) -> pd.DataFrame:
@@ -177,6 +193,7 @@ def summarize(df: pd.DataFrame) -> pd.DataFrame:
                      "energy_signed_med": ok["energy_rel_error"].median(),
                      "energy_abs_med": ok["energy_rel_error"].abs().median(),
                      "rod_med": ok["rod_length_rel_error"].median(),
+                     "modelled_stack_max": ok["modelled_stack_share"].max(),
                      "scenes": len(g), "failures": len(g) - len(ok)})
     return pd.DataFrame(rows)
 

@@ -437,6 +437,50 @@ def test_the_end_energy_check_reads_single_sheets_ending_free():
     assert quality._end_energy_check(stacks.iloc[:3]) == []
 
 
+def _two_arms_off_a_band(band_px):
+    """A straight band across the scan and two straight sheets leaving it 60 px apart: every
+    stack straight, the link between the two forks shorter than its fork zones."""
+    import cv2
+
+    img = np.full((400, 400, 3), 245, np.uint8)
+    ink = (40, 60, 170)
+    cv2.line(img, (20, 150), (380, 150), ink, band_px)
+    t = np.deg2rad(50)
+    for x0, sgn in ((170, -1), (230, 1)):
+        cv2.line(img, (x0, 150), (int(x0 + sgn * 200 * np.cos(t)), int(150 + 200 * np.sin(t))),
+                 ink, 6)
+    return img
+
+
+def test_a_total_resting_on_one_modelled_link_is_flagged():
+    """A 4-layer link between two forks, fitted whole and continued from the hooks of its
+    skeleton into both forks, carries 93 % of a scan whose sheets are all straight; the same
+    scene with a 3-layer band reads no bend there and is not flagged."""
+    res, caught = _analyze(_two_arms_off_a_band(21), px_per_mm=50.0)
+    assert "modelled_stack" in res.summary["quality"]["codes"]
+    (w,) = [w for w in caught if w.category is quality.ModelledStackWarning]
+    assert issubclass(w.category, quality.CurvatureWarning) and "none of it read" in str(
+        w.message)
+    thin, _ = _analyze(_two_arms_off_a_band(16), px_per_mm=50.0)
+    assert "modelled_stack" not in thin.summary["quality"]["codes"]
+
+
+def test_the_modelled_stack_check_reads_the_share_of_stacks_wholly_modelled():
+    import pandas as pd
+
+    stacks = pd.DataFrame({"stack_id": range(4), "n_br": [2, 1, 1, 1],
+                           "energy_per_branch": [10.0, 5.0, 3.0, 2.0],
+                           "energy_rel_uncertainty": [1.0, 0.2, 1.0, 0.3]})
+    (flag,) = quality._modelled_stack_check(stacks)
+    assert flag.value == pytest.approx(20 / 30) and flag.limit == quality.MODELLED_STACK_SHARE
+    # measured in part, or a small share, or no uncertainty column (the paper's window)
+    assert quality._modelled_stack_check(stacks.assign(
+        energy_rel_uncertainty=[0.9, 0.2, 1.0, 0.3])) == []
+    assert quality._modelled_stack_check(stacks.assign(
+        energy_per_branch=[1.0, 5.0, 3.0, 2.0])) == []
+    assert quality._modelled_stack_check(stacks.drop(columns="energy_rel_uncertainty")) == []
+
+
 def test_an_ink_blot_on_a_short_stack_is_flagged():
     """A blot on a single sheet between two crossings (3 mm, under four of its widths once
     blotted) reads many layers more than the count the junctions give it."""
