@@ -127,7 +127,8 @@ from crosssection.core.fileio import (BROWSER_FILES, PARTIAL_TAG, check_out, cle
                                       temporary_files, write_csv, write_json)
 from crosssection.core.parallel import (ClusterLostError, capped_workers, compiling_in_turn,
                                         get_executor)
-from crosssection.params import AnalysisParams, add_analysis_arguments, switched_off
+from crosssection.params import (PARAM_NAMES, AnalysisParams, add_analysis_arguments,
+                                 check_param, switched_off)
 from crosssection.quality import QualityWarning
 from crosssection.setconfig import (DEFAULT_PARAMS, DEFAULT_SET_NAME, SET_FILE, SetConfig,
                                     check_params, failed_set, load_set_config)
@@ -1513,6 +1514,14 @@ def run(args) -> int:
         raise ParameterError(f"must be >= 1, got {args.workers}", "--workers")
     if args.seed is not None and args.seed < 0:
         raise ParameterError(f"must be >= 0, got {args.seed}", "--seed")
+    for name in PARAM_NAMES:
+        value = getattr(args, name, None)
+        if value is not None and name != "calibration":
+            try:
+                check_param(name, value)
+            except ParameterError as exc:
+                # many scans: the option is named (analyze names its one scan)
+                raise ParameterError(exc.cause, "--" + name.replace("_", "-")) from None
     cli_params = {k: v for k, v in AnalysisParams.from_cli_args(args).to_dict().items()
                   if getattr(args, k, None) is not None}
     cli_params.update(switched_off(args))

@@ -449,13 +449,6 @@ class AnalysisParams:
     def from_cli_args(cls, args, *, path=None) -> "AnalysisParams":
         """Parameters from ``argparse`` options added by :func:`add_analysis_arguments`."""
         values = {name: getattr(args, name, None) for name in PARAM_NAMES}
-        for name, value in values.items():
-            if value is not None and name != "calibration":
-                try:
-                    check_param(name, value)
-                except ParameterError as exc:
-                    # a value given on the command line: the option is named, not the scan
-                    raise ParameterError(exc.cause, "--" + name.replace("_", "-")) from None
         if values.get("calibration") and values.get("width_law") is not None:
             # both on one command line: the law stands in for a calibration and would be
             # ignored (a set's calibration overrides a batch's --width-law, which serves the

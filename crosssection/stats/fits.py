@@ -52,7 +52,10 @@ the statistic ``T = log(mean x) - mean(log x)`` instead of the bootstrap
 (:func:`gamma_shape_interval`): T's law depends on the shape alone, so the interval holds the
 true shape as often as it says at any sample size, where the percentile bootstrap, resampling
 a handful of configurations' total energies, held it in 56 % of ensembles of 5 and 88 % of 48
-(``benchmarks/stats_coverage.py``).
+(``benchmarks/stats_coverage.py``). For the same reason the log-normal and Gaussian
+parameters of independent values take Student's and the chi-square intervals
+(:func:`normal_intervals`; the bootstrap held the log-normal sigma in 82 % of samples of 40 at
+95 %) and the exponential mean the chi-square one (:func:`exponential_mean_interval`).
 
 Groups (clusters): the branches of one stack share its length, curvature and energy, so a
 scan's table of branches repeats each stack's value n_br times. Every entry point but
@@ -794,8 +797,15 @@ def _fit_one(x, family: str, *, truncation, n_boot, seed, gof, n_mc, ci_level,
         draws = (bootstrap_draws(x, family, truncation=c, n_boot=n_boot, seed=s_boot,
                                  discrete=discrete, groups=g) if n_boot else None)
         ci = _percentile_ci(draws, fam.param_names, ci_level) if n_boot else {}
-        if n_boot and fam.name == "gamma" and c is None and g is None and not discrete:
-            ci["alpha"] = gamma_shape_interval(x, ci_level)
+        if n_boot and c is None and g is None and not discrete:
+            # independent values: the intervals whose law is exact, where a family has them
+            if fam.name == "gamma":
+                ci["alpha"] = gamma_shape_interval(x, ci_level)
+            elif fam.name in ("lognormal", "gaussian"):
+                ci.update(normal_intervals(np.log(x) if fam.name == "lognormal" else x,
+                                           ci_level))
+            elif fam.name == "exponential":
+                ci["mu"] = exponential_mean_interval(x, ci_level)
         undetermined = _degenerate_resamples(fam, draws, x, c, ci_level, discrete)
         if undetermined:
             return replace(res, ci=ci, boot=draws, rejected=undetermined)
@@ -1084,6 +1094,82 @@ def gamma_shape_interval(x, level: float = 0.95) -> tuple[float, float]:
         out.append(float(np.exp(optimize.brentq(cdf, *bracket, args=(p,), xtol=1e-12)))
                    if lo < 0 < hi else float(below if lo >= 0 else beyond))
     return out[0], out[1]
+
+
+def normal_intervals(y, level: float = 0.95) -> dict:
+    """Exact confidence intervals of the mean and the standard deviation of a normal law from
+    independent values: ``(mean - mu) sqrt(n) / s`` is Student's t with n - 1 degrees of
+    freedom and ``n sigma_hat^2 / sigma^2`` (``sigma_hat`` the maximum-likelihood deviation)
+    chi-square with n - 1, whatever mu and sigma. The percentile bootstrap of the same
+    parameters held the log-normal sigma in 82 % of 100 samples of 40 values at the 95 %
+    level (the resamples' spread is too narrow by about ``sqrt((n - 1) / n)`` and skewed); these
+    hold it as often as they say at any n (``test_normal_intervals_hold_as_often_as_they_say``).
+
+    Parameters
+    ----------
+    y : array_like
+        Finite values (the logarithms of a log-normal law's), at least 2 not all equal.
+    level : float
+        Coverage, between 0 and 1.
+
+    Returns
+    -------
+    dict
+        ``{"mu": (lo, hi), "sigma": (lo, hi)}``; NaN bounds with fewer than 2 finite values or
+        no spread.
+    """
+    from scipy import stats as st
+
+    y = np.asarray(y, float)
+    y = y[np.isfinite(y)]
+    n = y.size
+    nan = (float("nan"), float("nan"))
+    if n < 2:
+        return {"mu": nan, "sigma": nan}
+    # in units of the largest value, so that values near the ends of floating point (1e+-300)
+    # neither overflow nor underflow in their squares
+    big = float(np.abs(y).max())
+    if not big > 0:
+        return {"mu": nan, "sigma": nan}
+    u = y / big
+    m = float(u.mean())
+    ss = float(((u - m) ** 2).sum())  # n sigma_hat^2, in units of big^2
+    if not ss > 0:
+        return {"mu": nan, "sigma": nan}
+    tail = (1.0 - level) / 2.0
+    half = float(st.t.isf(tail, n - 1)) * np.sqrt(ss / (n - 1) / n)
+    return {"mu": (big * (m - half), big * (m + half)),
+            "sigma": (big * float(np.sqrt(ss / st.chi2.isf(tail, n - 1))),
+                      big * float(np.sqrt(ss / st.chi2.ppf(tail, n - 1))))}
+
+
+def exponential_mean_interval(x, level: float = 0.95) -> tuple[float, float]:
+    """Exact confidence interval of an exponential law's mean from independent values:
+    ``2 sum(x) / mu`` is chi-square with 2 n degrees of freedom.
+
+    Parameters
+    ----------
+    x : array_like
+        Values >= 0, one at least positive.
+    level : float
+        Coverage, between 0 and 1.
+
+    Returns
+    -------
+    (lo, hi) : tuple of float
+        NaN without a positive value.
+    """
+    from scipy import stats as st
+
+    x = np.asarray(x, float)
+    x = x[np.isfinite(x)]
+    big = float(x.max()) if x.size else 0.0
+    if not big > 0:
+        return float("nan"), float("nan")
+    total = 2.0 * float((x / big).sum())  # in units of the largest value (no overflow)
+    tail = (1.0 - level) / 2.0
+    return (big * (total / float(st.chi2.isf(tail, 2 * x.size))),
+            big * (total / float(st.chi2.ppf(tail, 2 * x.size))))
 
 
 def _percentile_ci(draws, names, level) -> dict:
