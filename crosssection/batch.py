@@ -1281,10 +1281,10 @@ def run_batch(input_dir, out_dir, *, workers: int | None = 1, scheduler: str | N
             why = None if force else redo_reason(t)
             if why:
                 redone.append((t.given or t.image, why))
+        # the local processes used (None: one per CPU); a cluster's are its own
+        used = workers if workers is not None or scheduler else os.cpu_count() or 1
         meta = _start(out, input_dir, tasks, sets, redone, stale, {
-            # the local processes used (None: one per CPU); a cluster's are its own
-            "workers": (workers if workers is not None or scheduler
-                        else os.cpu_count() or 1), "scheduler": scheduler, "seed": seed, "figure": figure,
+            "workers": used, "scheduler": scheduler, "seed": seed, "figure": figure,
             "force": force, "cli_params": cli_params or {}})
         # before any analysis: an earlier run's rows of the scans redone now must not
         # outlive their folders if this run is killed

@@ -1372,11 +1372,12 @@ def _end_energy_check(stacks) -> list[QualityFlag]:
 #: is wholly modelled (``energy_rel_uncertainty`` of at least :data:`MODELLED_STACK_UNCERTAINTY`)
 #: is flagged. On 137 scans of four generators (the network generator's 40 and the
 #: independent generator's 36, seeds 100-107 and 1-6: ``python benchmarks/estimator_transfer.py
-#: score DIR``, column ``modelled_stack_share``; 61 of two generators outside the repository;
-#: energies -49 to +64 %) such a stack carries at most 26 %; on two scans of a wall band under a bluish shadow that the threshold takes in part, a
-#: 3-layer link of 1.3 mm between two forks, its skeleton hooked into both, carries 53 and
-#: 61 % (917 times its branches' true energy each) of totals +93 and +96 % high. Renders of
-#: rods compacted to epsilon 19: at most 32 %.
+#: score DIR``, column ``modelled_stack_share``; 61 of two generators outside the
+#: repository; energies -49 to +64 %) such a stack carries at most 26 %. On two scans of a
+#: wall band under a bluish shadow that the threshold takes in part, a 3-layer link of 1.3 mm
+#: between two forks, its skeleton hooked into both, carries 53 and 61 % (215 times its
+#: branches' true energy) of totals +93 and +96 % high. Renders of rods compacted to
+#: epsilon 19: at most 32 %.
 MODELLED_STACK_SHARE = 0.4
 #: ... a stack's ``energy_rel_uncertainty`` from which none of its energy is measured (the
 #: column is capped at 1)
