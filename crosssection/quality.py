@@ -1348,6 +1348,17 @@ END_ENERGY_SHARE = 0.3
 END_ENERGY_MIN_STACKS = 10
 
 
+def _heaviest(stacks, share, which):
+    """``(index, where)`` of the stack of ``which`` (a boolean Series) carrying the largest
+    ``share`` of the energy, ``where`` as :func:`_stack_position` says it; None when
+    ``which`` holds none."""
+    if not which.any():
+        return None
+    i = share[which].idxmax()
+    return i, (_stack_position(stacks, int(stacks.loc[i, "stack_id"])) if "stack_id" in stacks
+               else "a stack")
+
+
 def _end_energy_check(stacks) -> list[QualityFlag]:
     need = {"junction_a", "junction_b", "kind", "n_br"}
     if not need <= set(stacks.columns) or len(stacks) < END_ENERGY_MIN_STACKS:
@@ -1355,12 +1366,10 @@ def _end_energy_check(stacks) -> list[QualityFlag]:
     dead = (stacks["kind"] == "free_end") & ((stacks["junction_a"] >= 0)
                                              != (stacks["junction_b"] >= 0))
     share = _energy_shares(stacks)
-    heavy = dead & (stacks["n_br"] == 1) & (share >= END_ENERGY_SHARE)
-    if not heavy.any():
+    heaviest = _heaviest(stacks, share, dead & (stacks["n_br"] == 1) & (share >= END_ENERGY_SHARE))
+    if heaviest is None:
         return []
-    i = share[heavy].idxmax()
-    where = (_stack_position(stacks, int(stacks.loc[i, "stack_id"])) if "stack_id" in stacks
-             else "a stack")
+    i, where = heaviest
     return [QualityFlag("end_energy", f"a single sheet ending free ({where}) carries "
                         f"{100 * float(share[i]):.0f} % of the total bending energy: a pen "
                         "stroke or a mark joined to the network reads so (a rod's own end "
@@ -1388,13 +1397,12 @@ def _modelled_stack_check(stacks) -> list[QualityFlag]:
     if not {"energy_rel_uncertainty"} <= set(stacks.columns) or len(stacks) < 2:
         return []
     share = _energy_shares(stacks)
-    heavy = (stacks["energy_rel_uncertainty"] >= MODELLED_STACK_UNCERTAINTY) & (
-        share >= MODELLED_STACK_SHARE)
-    if not heavy.any():
+    heaviest = _heaviest(stacks, share, (stacks["energy_rel_uncertainty"]
+                                         >= MODELLED_STACK_UNCERTAINTY)
+                         & (share >= MODELLED_STACK_SHARE))
+    if heaviest is None:
         return []
-    i = share[heavy].idxmax()
-    where = (_stack_position(stacks, int(stacks.loc[i, "stack_id"])) if "stack_id" in stacks
-             else "a stack")
+    i, where = heaviest
     return [QualityFlag("modelled_stack", f"one stack ({where}) carries "
                         f"{100 * float(share[i]):.0f} % of the total bending energy, none of "
                         "it read on its own centreline (a short link between forks, whose "

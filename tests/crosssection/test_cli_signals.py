@@ -144,6 +144,19 @@ def test_an_interrupt_while_python_m_imports_is_one_line(package):
     assert proc.stderr.strip().splitlines() == ["error: interrupted before the command started"]
 
 
+def _batch_with_python_sigint(inp, out) -> int:
+    """``batch INP --out OUT --workers 1 --quiet`` under Python's own SIGINT handler, as a
+    terminal's job has it (a suite started in the background of a non-interactive shell
+    inherits SIG_IGN, which the command keeps); its exit status."""
+    from crosssection.cli import main
+
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        return main(["batch", str(inp), "--out", str(out), "--workers", "1", "--quiet"])
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
 @pytest.mark.parametrize("swallowed", [False, True])
 @pytest.mark.parametrize("sig, status, word", [(signal.SIGINT, 130, "interrupted"),
                                                (signal.SIGTERM, 143, "terminated")])
@@ -156,7 +169,6 @@ def test_an_interrupt_the_analysis_catches_still_stops_the_batch(tmp_path, monke
     from PIL import Image
 
     from crosssection import batch
-    from crosssection.cli import main
 
     inp, out = tmp_path / "in", tmp_path / "out"
     inp.mkdir()
@@ -176,14 +188,7 @@ def test_an_interrupt_the_analysis_catches_still_stops_the_batch(tmp_path, monke
         return batch._row(task, "ok")
 
     monkeypatch.setattr(batch, "process_image", caught)
-    # Python's own SIGINT handler, as a terminal's job has it (a suite started in the
-    # background of a non-interactive shell inherits SIG_IGN, which the command keeps)
-    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
-    try:
-        assert main(["batch", str(inp), "--out", str(out), "--workers", "1",
-                     "--quiet"]) == status
-    finally:
-        signal.signal(signal.SIGINT, previous)
+    assert _batch_with_python_sigint(inp, out) == status
     assert capsys.readouterr().err == f"error: {word} (re-run the same command to resume)\n"
     assert ran == ["a0.png"]  # no scan started after the interrupt
     assert pd.read_csv(out / "failures.csv").empty
@@ -236,7 +241,6 @@ def test_a_stopped_batch_names_the_failures_and_doubts_of_the_scans_it_finished(
     from PIL import Image
 
     from crosssection import batch
-    from crosssection.cli import main
 
     inp, out = tmp_path / "in", tmp_path / "out"
     inp.mkdir()
@@ -252,12 +256,7 @@ def test_a_stopped_batch_names_the_failures_and_doubts_of_the_scans_it_finished(
         return batch._row(t, "ok")
 
     monkeypatch.setattr(batch, "process_image", task)
-    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
-    try:
-        assert main(["batch", str(inp), "--out", str(out), "--workers", "1",
-                     "--quiet"]) == status
-    finally:
-        signal.signal(signal.SIGINT, previous)
+    assert _batch_with_python_sigint(inp, out) == status
     lines = capsys.readouterr().err.splitlines()
     assert len(lines) == 3
     assert lines[0] == f"warning: {inp / 'a0.png'}: not analysed: not an image"
