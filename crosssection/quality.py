@@ -1125,7 +1125,8 @@ def _layer_multiple_check(stacks) -> list[QualityFlag]:
                         f"single sheets): a scale or a calibration off by a factor {d}, which "
                         f"reads each layer {d} times, is the likely cause; check px_per_mm (a "
                         f"scan made at {d} times the resolution assumed, the file not recording "
-                        "it) and the calibration", d, 2)]
+                        "it) and the calibration (a sheet doubled or closed on itself has "
+                        "no single sheet either)", d, 2)]
 
 
 def _count_width_check(stacks) -> list[QualityFlag]:
