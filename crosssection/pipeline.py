@@ -41,7 +41,7 @@ from crosssection.linsys import solve_branch_counts
 from crosssection.params import LINEAR_CALIBRATION, AnalysisParams, scale_left_out
 from crosssection.result import AnalysisResult, write_step_images
 from crosssection.stages import curvature, hole as hole_stage, voids as void_stage
-from crosssection.stages.clean import clean_mask
+from crosssection.stages.clean import clean_mask, filled_in_discs
 from crosssection.stages.graph import split_stacks, stack_graph, with_multigraph, without_stacks
 from crosssection.stages.load import (Header, exif_orientation, load_image_oriented,
                                       recorded_header, rgb_and_opacity)
@@ -885,18 +885,6 @@ def _inscribed_radius_px(distance_px, junctions) -> np.ndarray:
     return out
 
 
-def _filled_near_px(pre, junctions, i: int, radius_px: float) -> int:
-    """Paper pixels the cleaning filled within ``radius_px`` of junction ``i`` (a void below
-    ``s_min`` closed there makes the same wide ink as a blot)."""
-    rows, cols = pre.mask_clean.shape
-    x, y = float(junctions["x_px"].iloc[i]), float(junctions["y_px"].iloc[i])
-    r, c, k = int(round(y)), int(round(x)), int(np.ceil(radius_px)) + 1
-    box = np.s_[max(r - k, 0):min(r + k + 1, rows), max(c - k, 0):min(c + k + 1, cols)]
-    rr, cc = np.ogrid[box]
-    disc = (rr - y) ** 2 + (cc - x) ** 2 <= radius_px ** 2
-    return int(np.count_nonzero(pre.mask_clean[box] & ~pre.threshold.mask[box] & disc))
-
-
 def _touch_px(sg, width_px, h_px) -> float:
     """How close a void's border must pass to a junction to count it (half the widest stack
     at the junction, 90th percentile over junctions, plus h)."""
@@ -961,6 +949,7 @@ def _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, void
 
     degrees = junctions["n_stacks"].to_numpy()
     ink_area_mm2 = p.scale.area_to_mm2(float(np.count_nonzero(pre.mask_clean)))
+    radius_px = _inscribed_radius_px(pre.distance_px, junctions)
     flags = quality.assess(
         params=p, hole=pre.hole, hole_confidence=pre.hole_confidence,
         ink_outside_fraction=pre.ink_outside_fraction,
@@ -973,8 +962,11 @@ def _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, void
         file_pages=pre.file_pages, file_dpi_xy=pre.file_dpi_xy,
         network_shares=_network_shares(lin, stacks),
         border_ink_rc=_border_pixels(pre.mask_clean), width_law=law,
-        junction_radius_px=_inscribed_radius_px(pre.distance_px, junctions),
-        filled_near_junction=functools.partial(_filled_near_px, pre, junctions),
+        junction_radius_px=radius_px,
+        junction_filled_px=filled_in_discs(
+            pre.mask_clean, pre.threshold.mask,
+            np.column_stack([junctions["y_px"].to_numpy(float),
+                             junctions["x_px"].to_numpy(float)]), radius_px),
         see_through=pre.see_through, faint_ends=faint,
         calibration_one_layer_mm=_one_layer_mm(cal, p),
         void_areas_mm2=voids["area_mm2"].to_numpy() if "area_mm2" in voids else None,

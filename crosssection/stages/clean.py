@@ -36,6 +36,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
 from crosssection.core.errors import ParameterError
 
@@ -426,3 +427,53 @@ def _clean_by_borders(m: np.ndarray, s_min_px: float, speck_px: float,
             if short or area < speck_px:
                 pad[y:y + bh, x:x + bw] = box
     return pad[1:-1, 1:-1].view(bool).copy()
+
+
+def filled_in_discs(clean, thresholded, centers_rc, radii_px) -> np.ndarray:
+    """Paper pixels the cleaning filled (``clean`` and not ``thresholded``) within each disc.
+
+    Parameters
+    ----------
+    clean, thresholded : (H, W) bool arrays
+        The cleaned ink mask and the threshold's mask it was made from.
+    centers_rc : (K, 2) array
+        Disc centres (row, col), px (a junction's mean position).
+    radii_px : (K,) array
+        Disc radii, px.
+
+    Returns
+    -------
+    (K,) int array
+        A void below ``s_min`` filled at a junction (the paper's rule) leaves tens of ``h^2``
+        there, a pinhole a few pixels. All discs in one pass over their boxes: a numpy window
+        per junction took about 30 us each, 5 ms on a dense scan of 170 junctions.
+    """
+    c = np.ascontiguousarray(clean, dtype=bool)
+    t = np.ascontiguousarray(thresholded, dtype=bool)
+    rc = np.asarray(centers_rc, dtype=np.float64).reshape(-1, 2)
+    rad = np.asarray(radii_px, dtype=np.float64).reshape(-1)
+    if c.shape != t.shape or c.ndim != 2 or len(rc) != len(rad):
+        raise ParameterError(f"masks of shapes {c.shape} and {t.shape} with {len(rc)} centres "
+                             f"and {len(rad)} radii")
+    return _filled_in_discs(c, t, np.ascontiguousarray(rc[:, 0]),
+                            np.ascontiguousarray(rc[:, 1]), rad)
+
+
+@njit(cache=True)
+def _filled_in_discs(c, t, ys, xs, rad):  # pragma: no cover - numba
+    rows, cols = c.shape
+    out = np.zeros(len(ys), np.int64)
+    for i in range(len(ys)):
+        y, x, r = ys[i], xs[i], rad[i]
+        if not (r >= 0.0 and np.isfinite(y) and np.isfinite(x)):
+            continue
+        k = int(np.ceil(r)) + 1
+        r0, c0 = int(round(y)), int(round(x))
+        n = 0
+        for rr in range(max(r0 - k, 0), min(r0 + k + 1, rows)):
+            dy2 = (rr - y) * (rr - y)
+            for cc in range(max(c0 - k, 0), min(c0 + k + 1, cols)):
+                if c[rr, cc] and not t[rr, cc] and dy2 + (cc - x) * (cc - x) <= r * r:
+                    n += 1
+        out[i] = n
+    return out

@@ -481,6 +481,49 @@ def test_the_modelled_stack_check_reads_the_share_of_stacks_wholly_modelled():
     assert quality._modelled_stack_check(stacks.drop(columns="energy_rel_uncertainty")) == []
 
 
+def _triangle_of_bands(side_px):
+    """Three 12-px bands round a triangle of ``side_px``, each corner continued outward: the
+    void inside lies below s_min = 1 mm^2 for sides up to 80 px at 50 px/mm."""
+    import cv2
+
+    img = np.full((400, 400, 3), 245, np.uint8)
+    c = np.array([200.0, 200.0])
+    ang = np.deg2rad([90, 210, 330])
+    v = [c + side_px / np.sqrt(3) * np.array([np.cos(a), -np.sin(a)]) for a in ang]
+    for i in range(3):
+        for end in (v[(i + 1) % 3], c + 170 * np.array([np.cos(ang[i]), -np.sin(ang[i])])):
+            cv2.line(img, tuple(np.round(v[i]).astype(int)), tuple(np.round(end).astype(int)),
+                     (40, 60, 170), 12)
+    return img
+
+
+def test_a_void_below_s_min_filled_at_a_junction_is_flagged():
+    """The cleaning fills the small void between three bands (the paper's rule) and its three
+    forks merge into one junction; with s_min lowered the void and its forks are read."""
+    img = _triangle_of_bands(70)
+    res, caught = _analyze(img, px_per_mm=50.0)
+    assert res.summary["n_junctions"] == 1 and "filled_voids" in res.summary["quality"]["codes"]
+    (w,) = [w for w in caught if w.category is quality.FilledVoidsWarning]
+    assert issubclass(w.category, quality.NetworkWarning) and "lower s_min_mm2" in str(w.message)
+    kept, _ = _analyze(img, px_per_mm=50.0, s_min_mm2=0.02)
+    assert kept.summary["n_junctions"] == 3 and kept.summary["n_voids"] == 1
+    assert "filled_voids" not in kept.summary["quality"]["codes"]
+
+
+def test_filled_in_discs_counts_the_filled_paper_of_each_disc():
+    from crosssection.stages.clean import filled_in_discs
+
+    rng = np.random.default_rng(2)
+    thr = rng.random((60, 70)) < 0.5
+    clean = thr | (rng.random((60, 70)) < 0.3)
+    centers = np.array([[10.0, 12.5], [30.4, 35.0], [0.0, 69.0], [59.0, 0.2]])
+    radii = np.array([3.0, 7.5, 4.0, 0.0])
+    rr, cc = np.mgrid[:60, :70]
+    want = [int(np.count_nonzero(clean & ~thr & ((rr - y) ** 2 + (cc - x) ** 2 <= r ** 2)))
+            for (y, x), r in zip(centers, radii)]
+    assert filled_in_discs(clean, thr, centers, radii).tolist() == want
+
+
 def test_an_ink_blot_on_a_short_stack_is_flagged():
     """A blot on a single sheet between two crossings (3 mm, under four of its widths once
     blotted) reads many layers more than the count the junctions give it."""
