@@ -125,6 +125,12 @@ class DuplicateScanWarning(QualityWarning):
     one cut analysed twice under two names weighs twice in the statistics."""
 
 
+class HairpinNodesWarning(QualityWarning):
+    """Configurations of a simulation ensemble fold back at a single node (``n_hairpin_nodes``
+    of its configs.csv): the discrete rod caps such a fold's bending at ``4 / ds``, and the
+    branches holding it, whose energies are that cap, enter the statistics."""
+
+
 class MixedParametersWarning(QualityWarning):
     """The configurations of one set were made with different analysis (or simulation)
     parameters, beyond those each scan has its own of (its hole, its rod length, its
@@ -585,6 +591,18 @@ def load_simulation(folder, *, set_name=None) -> Ensemble:
                      "command to finish it)")
         warnings.warn(notes[-1], IncompleteBatchWarning, stacklevel=2)
     cfg = cfg[~stopped]
+    if "n_hairpin_nodes" in cfg.columns:
+        folds = pd.to_numeric(cfg["n_hairpin_nodes"], errors="coerce").fillna(0)
+        k = int((folds > 0).sum())
+        if k:
+            # a fold within one node: the quench warned of it; the statistics say it again,
+            # since those branches hold the ensemble's largest energies (a fifth of a
+            # 6-configuration quench's bending in two branches)
+            notes.append(f"{folder / 'configs.csv'}: {k} of {len(cfg)} configurations fold "
+                         "back at a single node (n_hairpin_nodes): the discrete rod caps such "
+                         "a fold's bending at 4 / ds, and the branches holding it, whose "
+                         "energies are that cap, are in the statistics")
+            warnings.warn(notes[-1], HairpinNodesWarning, stacklevel=2)
     note = "; ".join(notes)
     br = _read_csv(folder / "branches.csv", ["config_id", "length", "kappa_plus", "kappa_pm",
                                              "energy"],

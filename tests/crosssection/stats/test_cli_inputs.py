@@ -813,3 +813,24 @@ def test_an_unfinished_simulation_is_named_as_such(tmp_path, capfd):
     assert status == 2 and len(err) == 1
     assert err[0] == (f"error: {sim}: an unfinished simulation (its params.json and parts/, "
                       "no configs.csv yet): re-run the command that made it to finish it")
+
+
+def test_configurations_folding_back_at_one_node_are_named_by_the_statistics(tmp_path, capfd):
+    """The quench warns of folds within one node, whose branches carry the discrete rod's
+    4 / ds cap; stats fitted those branches without a word."""
+    sim = demo.write_demo_simulation(tmp_path / "sim", n_configs=4, seed=1)
+    cfg = pd.read_csv(sim / "configs.csv")
+    cfg["n_hairpin_nodes"] = [0, 1, 0, 2]
+    cfg.to_csv(sim / "configs.csv", index=False)
+    with pytest.warns(QualityWarning, match="2 of 4 configurations fold back at a single node"):
+        load_any(sim)
+    status, _, err = _stats(capfd, sim, "--out", tmp_path / "rep", *FAST)
+    assert status == 0
+    assert [line for line in err if "fold back at a single node" in line] == [
+        f"warning: {sim / 'configs.csv'}: 2 of 4 configurations fold back at a single node "
+        "(n_hairpin_nodes): the discrete rod caps such a fold's bending at 4 / ds, and the "
+        "branches holding it, whose energies are that cap, are in the statistics"]
+    cfg["n_hairpin_nodes"] = 0
+    cfg.to_csv(sim / "configs.csv", index=False)
+    status, _, err = _stats(capfd, sim, "--out", tmp_path / "rep2", *FAST)
+    assert status == 0 and err == []
