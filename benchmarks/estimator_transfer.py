@@ -154,14 +154,16 @@ def score_scene(folder, name: str, analyze, **methods) -> dict:
 
 def _modelled_stack_share(stacks) -> float:
     """The largest share of the scan's energy carried by one stack none of whose energy is
-    measured (``energy_rel_uncertainty`` >= 0.99; the ``modelled_stack`` check), NaN for a
-    version without the column."""
+    measured (the ``modelled_stack`` check's measure), NaN for a version of the package
+    without that check or the column."""
+    try:
+        from crosssection.quality import MODELLED_STACK_UNCERTAINTY, _energy_shares
+    except ImportError:
+        return float("nan")
     if "energy_rel_uncertainty" not in stacks:
         return float("nan")
-    e = (stacks["energy_per_branch"] * stacks["n_br"]).to_numpy(float)
-    total = float(np.nansum(e))
-    wholly = stacks["energy_rel_uncertainty"].to_numpy(float) >= 0.99
-    return float(e[wholly].max() / total) if wholly.any() and total > 0 else 0.0
+    wholly = stacks["energy_rel_uncertainty"] >= MODELLED_STACK_UNCERTAINTY
+    return float(_energy_shares(stacks)[wholly].max()) if wholly.any() else 0.0
 
 
 def score_folder(folder, conditions=None, analyze=None, version=None, **methods):

@@ -568,8 +568,7 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
            junctions, image_shape=None, file_px_per_mm=None,
            file_pages=1, network_shares=None, border_ink_rc=None,
            ink_missed_fraction=0.0, width_law=None,
-           junction_radius_px=None, filled_near_junction=None, junction_filled_px=None,
-           see_through=None,
+           junction_radius_px=None, junction_filled_px=None, see_through=None,
            file_dpi_xy=None, faint_ends=None,
            calibration_one_layer_mm=None, void_areas_mm2=None,
            dark_marks_fraction=0.0, marks_on_ink_fraction=0.0, odd_steps=None,
@@ -626,13 +625,10 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
     junction_radius_px : (K,) array, optional
         Radius of the ink disc inscribed at each junction of ``junctions`` (in its order):
         the ``junction_blot`` check (not made without it).
-    filled_near_junction : callable, optional
-        ``filled_near_junction(i, radius_px)``: paper the cleaning filled within that radius
-        of junction ``i`` (px), asked of the junction a ``junction_blot`` flag names only.
     junction_filled_px : (K,) array, optional
         Paper pixels the cleaning filled within the ink disc inscribed at each junction
-        (:func:`crosssection.stages.clean.filled_in_discs`; used in place of
-        ``filled_near_junction``): the ``filled_voids`` check (not made without it).
+        (:func:`crosssection.stages.clean.filled_in_discs`): the ``filled_voids`` check (not
+        made without it), and the cause a ``junction_blot`` flag names.
     see_through : (H, W) bool array, optional
         The pixels an alpha channel made transparent or partly: the ``see_through`` check.
     file_dpi_xy : (float, float), optional
@@ -837,13 +833,11 @@ def assess(*, params, hole, hole_confidence, ink_outside_fraction, degrees, stac
     if h_px >= LATTICE_MIN_H_PX:
         flags += _lattice_check(stacks, h_px)
     flags += _linear_system_checks(junctions)
-    if junction_filled_px is not None:
-        filled = np.asarray(junction_filled_px, float)
-        filled_near_junction = lambda i, radius_px: filled[i]  # noqa: E731
+    filled = None if junction_filled_px is None else np.asarray(junction_filled_px, float)
+    if filled is not None:
         flags += _filled_voids_check(filled, junctions, params)
     if junction_radius_px is not None:
-        flags += _blot_check(junction_radius_px, junctions, stacks, params,
-                             filled_near=filled_near_junction)
+        flags += _blot_check(junction_radius_px, junctions, stacks, params, filled_px=filled)
     return flags
 
 
@@ -960,7 +954,7 @@ def junction_blot_ratios(radius_px, junctions, stacks, px_per_mm) -> np.ndarray:
         return radius_px / half
 
 
-def _blot_check(radius_px, junctions, stacks, params, filled_near=None) -> list[QualityFlag]:
+def _blot_check(radius_px, junctions, stacks, params, filled_px=None) -> list[QualityFlag]:
     radius_px = np.asarray(radius_px, float)
     ratio = junction_blot_ratios(radius_px, junctions, stacks, params.px_per_mm)
     bad = np.flatnonzero(np.isfinite(ratio) & (ratio > JUNCTION_BLOT_RATIO))
@@ -971,7 +965,7 @@ def _blot_check(radius_px, junctions, stacks, params, filled_near=None) -> list[
     cause = "an ink blot over a junction hides how its layers pass"
     # paper the cleaning filled there, beyond pinholes: a void below s_min, closed by the
     # paper's rule, whose junctions merge into one ink disc
-    filled = 0.0 if filled_near is None else float(filled_near(int(i), float(radius_px[i])))
+    filled = 0.0 if filled_px is None else float(filled_px[i])
     if filled >= FILLED_VOID_H2 * params.thickness_px ** 2:
         cause = (f"a void of {params.scale.area_to_mm2(filled):.2f} mm^2 or more there, below "
                  f"s_min = {params.s_min_used_mm2:.3g} mm^2, was filled (the paper's rule) and its "
