@@ -25,7 +25,7 @@ from functools import lru_cache
 import numpy as np
 
 __all__ = ["length", "mid_point", "smooth", "smooth_paths", "smoothed_lengths", "is_closed",
-           "concat_paths"]
+           "concat_paths", "walk_ends", "grouped_axes"]
 
 
 def concat_paths(paths, dtype=np.int64) -> tuple[np.ndarray, np.ndarray]:
@@ -55,6 +55,77 @@ def ranges(lo, hi):
     pos = np.zeros(len(n), np.int64)
     np.cumsum(n[:-1], out=pos[1:])
     return np.arange(int(n.sum())) + np.repeat(lo - pos, n), pos, n
+
+
+def walk_ends(offs, sids, rev):
+    """The points of many paths of one flat array, each walked from one of its ends.
+
+    Parameters
+    ----------
+    offs : ndarray (P + 1,) int
+        Offsets of the flat array (:func:`concat_paths`).
+    sids : ndarray (Q,) int
+        The path of every walk.
+    rev : ndarray (Q,) bool
+        Walk from the path's last point instead of its first.
+
+    Returns
+    -------
+    walk, pos, idx : ndarray (M,) int
+        For every point of every walk, one walk after the other: its walk, its position along
+        the walk, and its index in the flat array.
+    lens : ndarray (Q,) int
+        Length of every walk.
+    """
+    a = offs[sids]
+    lens = offs[sids + 1] - a
+    walk = np.repeat(np.arange(len(sids)), lens)
+    pos = np.arange(len(walk)) - np.repeat(np.cumsum(lens) - lens, lens)
+    idx = a[walk] + np.where(rev[walk], lens[walk] - 1 - pos, pos)
+    return walk, pos, idx, lens
+
+
+def grouped_axes(groups, rows, cols, pos, n_groups: int):
+    """Principal axis of many groups of points at once (closed-form 2 x 2 PCA).
+
+    Per-group sums are ``np.bincount`` sums, which add in the points' order as a loop would.
+
+    Parameters
+    ----------
+    groups : ndarray (M,) int
+        Group of every point, in ``[0, n_groups)``.
+    rows, cols : ndarray (M,) float
+        The points.
+    pos : ndarray (M,) int
+        Position of every point along its group's walk.
+    n_groups : int
+
+    Returns
+    -------
+    count : ndarray (G,) int
+    mean_r, mean_c : ndarray (G,) float
+        Mean point (0 for an empty group).
+    angle : ndarray (G,) float
+        Direction of the principal axis, ``(cos, sin)`` of it in (row, col); its sign is
+        arbitrary.
+    first, last : ndarray (G,) int
+        Least and largest position in the group (int64 max and -1 for an empty group).
+    """
+    count = np.bincount(groups, minlength=n_groups)
+    cn = np.maximum(count, 1)
+    mean_r = np.bincount(groups, weights=rows, minlength=n_groups) / cn
+    mean_c = np.bincount(groups, weights=cols, minlength=n_groups) / cn
+    dr = rows - mean_r[groups]
+    dc = cols - mean_c[groups]
+    vrr = np.bincount(groups, weights=dr * dr, minlength=n_groups)
+    vcc = np.bincount(groups, weights=dc * dc, minlength=n_groups)
+    vrc = np.bincount(groups, weights=dr * dc, minlength=n_groups)
+    first = np.full(n_groups, np.iinfo(np.int64).max)
+    last = np.full(n_groups, -1)
+    np.minimum.at(first, groups, pos)
+    np.maximum.at(last, groups, pos)
+    angle = 0.5 * np.arctan2(2.0 * vrc, vrr - vcc)
+    return count, mean_r, mean_c, angle, first, last
 
 
 def _as_points(path_rc) -> np.ndarray:

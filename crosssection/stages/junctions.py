@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from crosssection.core.errors import ParameterError
+from crosssection.core.polyline import grouped_axes, walk_ends
 from crosssection.core.unionfind import group_labels
 from crosssection.stages.skeleton import nonzero_rc
 
@@ -337,17 +338,6 @@ def merge_junctions(junctions: Junctions, groups, extra_pixels=(), *,
     return _from_pixels(rr, cc, ids, len(start), new_lab)
 
 
-def _walk_points(offs, sids, rev):
-    """Points of the stack ends, each walked from its junction outwards: (end of every
-    point, its position along the walk, its index in the flat path arrays)."""
-    a = offs[sids]
-    lens = offs[sids + 1] - a
-    end = np.repeat(np.arange(len(sids)), lens)
-    pos = np.arange(len(end)) - np.repeat(np.cumsum(lens) - lens, lens)
-    ii = a[end] + np.where(rev[end], lens[end] - 1 - pos, pos)
-    return end, pos, ii, lens
-
-
 def _end_lines(pr, pc, offs, sids, rev, c0r, c0c, skip, fit):
     """Centreline line of every stack end: mean point and unit direction (PCA) of the path
     pixels between ``skip`` and ``skip + fit`` from the junction's skeleton centre, walked
@@ -362,7 +352,7 @@ def _end_lines(pr, pc, offs, sids, rev, c0r, c0c, skip, fit):
     mean = np.zeros((q, 2))
     direc = np.zeros((q, 2))
     cnt = np.zeros(q, np.int64)
-    end, pos, ii, lens = _walk_points(offs, sids, rev)
+    end, pos, ii, lens = walk_ends(offs, sids, rev)
     if len(end) == 0:
         return mean, direc, cnt, lens
     d = np.hypot(pr[ii] - c0r[end], pc[ii] - c0c[end])
@@ -370,24 +360,10 @@ def _end_lines(pr, pc, offs, sids, rev, c0r, c0c, skip, fit):
     out = d > skip[end] + fit[end]
     np.minimum.at(stop, end[out], pos[out])
     sel = (pos < stop[end]) & (d >= skip[end])
-    e, ii_s, pos_s = end[sel], ii[sel], pos[sel]
-    m = np.bincount(e, minlength=q)
+    m, mr, mc, ang, first, last = grouped_axes(end[sel], pr[ii[sel]], pc[ii[sel]], pos[sel], q)
     ok = m >= 3
-    mm = np.maximum(m, 1)
-    mr = np.bincount(e, weights=pr[ii_s], minlength=q) / mm
-    mc = np.bincount(e, weights=pc[ii_s], minlength=q) / mm
-    dr = pr[ii_s] - mr[e]
-    dc = pc[ii_s] - mc[e]
-    vrr = np.bincount(e, weights=dr * dr, minlength=q)
-    vcc = np.bincount(e, weights=dc * dc, minlength=q)
-    vrc = np.bincount(e, weights=dr * dc, minlength=q)
-    first = np.full(q, np.iinfo(np.int64).max)
-    last = np.full(q, -1)
-    np.minimum.at(first, e, pos_s)
-    np.maximum.at(last, e, pos_s)
-    ang = 0.5 * np.arctan2(2.0 * vrc[ok], vrr[ok] - vcc[ok])
-    tr = np.cos(ang)
-    tc = np.sin(ang)
+    tr = np.cos(ang[ok])
+    tc = np.sin(ang[ok])
     a = offs[sids[ok]]
     n = lens[ok]
     r_ = rev[ok]

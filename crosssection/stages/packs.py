@@ -27,6 +27,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from crosssection.core.polyline import grouped_axes, walk_ends
+
 EdgeEnd = tuple[int, int]  # (stack_id, end): end 0 = path start, 1 = path end
 
 __all__ = ["EdgeEnd", "Pack", "StackGraphLike", "compute_packs", "junction_edge_ends",
@@ -164,12 +166,9 @@ def _tangents_kernel(pr, pc, offs, sids, ends, p0r, p0c, skips, tangent_px):
     """
     q = sids.shape[0]
     out = np.full((q, 2), np.nan)
-    a = offs[sids]
-    lens = offs[sids + 1] - a
     rev = ends == 1
-    e = np.repeat(np.arange(q), lens)
-    pos = np.arange(len(e)) - np.repeat(np.cumsum(lens) - lens, lens)
-    ii = a[e] + np.where(rev[e], lens[e] - 1 - pos, pos)
+    e, pos, ii, lens = walk_ends(offs, sids, rev)
+    a = offs[sids]
     d = np.hypot(pr[ii] - p0r[e], pc[ii] - p0c[e])
     # the walk stops after the first point farther than skip + tangent_px
     stop = lens.copy()
@@ -181,27 +180,13 @@ def _tangents_kernel(pr, pc, offs, sids, ends, p0r, p0c, skips, tangent_px):
     stop = np.where(use_all, np.minimum(np.maximum(2, np.minimum(lens, int(np.ceil(tangent_px)))),
                                         lens), stop)
     sel = (pos < stop[e]) & (use_all[e] | near)
-    es, iis, ps = e[sel], ii[sel], pos[sel]
-    cnt = np.bincount(es, minlength=q)
+    cnt, mr, mc, ang, first, last = grouped_axes(e[sel], pr[ii[sel]], pc[ii[sel]], pos[sel], q)
     fit = cnt >= 2
-    cn = np.maximum(cnt, 1)
-    mr = np.bincount(es, weights=pr[iis], minlength=q) / cn
-    mc = np.bincount(es, weights=pc[iis], minlength=q) / cn
-    dr = pr[iis] - mr[es]
-    dc = pc[iis] - mc[es]
-    vrr = np.bincount(es, weights=dr * dr, minlength=q)
-    vcc = np.bincount(es, weights=dc * dc, minlength=q)
-    vrc = np.bincount(es, weights=dr * dc, minlength=q)
-    first = np.full(q, np.iinfo(np.int64).max)
-    last = np.full(q, -1)
-    np.minimum.at(first, es, ps)
-    np.maximum.at(last, es, ps)
     done = np.zeros(q, np.bool_)
     k = np.flatnonzero(fit)
     if len(k):
-        ang = 0.5 * np.arctan2(2.0 * vrc[k], vrr[k] - vcc[k])
-        tr = np.cos(ang)
-        tc = np.sin(ang)
+        tr = np.cos(ang[k])
+        tc = np.sin(ang[k])
         i0 = a[k] + np.where(rev[k], lens[k] - 1 - first[k], first[k])
         i1 = a[k] + np.where(rev[k], lens[k] - 1 - last[k], last[k])
         orr = pr[i1] - pr[i0]

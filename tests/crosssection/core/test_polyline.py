@@ -122,3 +122,30 @@ def test_a_window_longer_than_the_paths_costs_only_the_windows_they_use():
     lengths = pl.smoothed_lengths(np.concatenate(paths), np.cumsum([0, 40, 120, 299]),
                                   np.zeros(3, bool), window_px=5001)
     assert np.allclose(lengths, [pl.length(b) for b in big])
+
+
+def test_walked_ends_and_grouped_axes_match_a_loop_over_the_paths():
+    rng = np.random.default_rng(3)
+    paths = [np.cumsum(rng.normal(size=(n, 2)), axis=0) for n in (5, 1, 12, 7)]
+    flat, offs = pl.concat_paths(paths, dtype=float)
+    sids = np.array([0, 2, 2, 3, 1])
+    rev = np.array([False, False, True, True, False])
+    walk, pos, idx, lens = pl.walk_ends(offs, sids, rev)
+    for w, (s, r) in enumerate(zip(sids, rev)):
+        expected = paths[s][::-1] if r else paths[s]
+        np.testing.assert_array_equal(flat[idx[walk == w]], expected)
+        np.testing.assert_array_equal(pos[walk == w], np.arange(len(expected)))
+        assert lens[w] == len(expected)
+    # groups: the first four points of every walk, one empty group at the end
+    keep = pos < 4
+    count, mr, mc, ang, first, last = pl.grouped_axes(
+        walk[keep], flat[idx[keep], 0], flat[idx[keep], 1], pos[keep], len(sids) + 1)
+    for w in range(len(sids)):
+        pts = flat[idx[(walk == w) & keep]]
+        assert count[w] == len(pts)
+        np.testing.assert_allclose([mr[w], mc[w]], pts.mean(axis=0))
+        assert (first[w], last[w]) == (0, len(pts) - 1)
+        if len(pts) >= 2:
+            axis = np.linalg.svd(pts - pts.mean(axis=0))[2][0]
+            assert abs(abs(np.dot(axis, [np.cos(ang[w]), np.sin(ang[w])])) - 1) < 1e-9
+    assert count[-1] == 0 and last[-1] == -1 and mr[-1] == 0
