@@ -2150,19 +2150,30 @@ NOISE_MAX_PX = 1.0
 #: 2.3; 120 stacks), a stack with one 90-degree turn of radius 12 px among them 80 times
 #: (pooled with it, the noise read 12 times its value).
 NOISE_OUTLIER = 4.0
+#: With one other stack of its window, a stack is left out beyond this many times that one's
+#: estimate: two noise-only estimates differ by at most 1.9 / 0.3 = 6.3 times (above), a stack
+#: hooked across a layer step beside a gentle arc read 330 times it (pooled with it, the noise
+#: floor removed 92 % of the arc's energy).
+NOISE_OUTLIER_PAIR = 16.0
 
 
 def _without_outliers(v, w):
     """Per-stack noise estimates ``v`` (weights ``w``) without the stacks whose own estimate
     exceeds :data:`NOISE_OUTLIER` times the pooled estimate of the others (their mean absolute
     estimate where they pool to 0 or below), largest first, while two stacks or more remain
-    besides it.
+    besides it; of two stacks, the larger when it exceeds :data:`NOISE_OUTLIER_PAIR` times
+    the other's.
 
     A stack with real bending at the scale of the lags (a hook, a kink) reads tens of times the
     scan's noise, and pooled with the others it would set the noise removed from every stack.
     """
     order = np.argsort(v)
     v, w = v[order], w[order]
+    if len(v) == 2:
+        ref = abs(float(v[0]))
+        if ref > 0 and v[1] > NOISE_OUTLIER_PAIR * ref:
+            return v[:1], w[:1]
+        return v, w
     while len(v) >= 3:
         rest = float(v[:-1] @ w[:-1]) / float(w[:-1].sum())
         if rest <= 0:

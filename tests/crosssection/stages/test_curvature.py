@@ -943,6 +943,19 @@ def test_noise_outlier_beside_estimates_scattered_about_zero():
     assert len(kept) == 5
 
 
+def test_noise_outlier_of_two_stacks():
+    # a stack hooked across a layer step beside a gentle arc, the two stacks of their window:
+    # pooled, the hook's estimate removed 92 % of the arc's energy
+    from crosssection.stages.curvature import _without_outliers
+
+    kept, w = _without_outliers(np.array([0.166, 0.0005]), np.array([444.0, 284.0]))
+    assert kept.tolist() == [0.0005] and w.tolist() == [284.0]
+    # two noise-only estimates (0.3-1.9 times their pooled value) are both kept
+    for pair in ([0.3, 1.9], [-0.002, 0.01], [0.0, 0.2]):
+        kept, _ = _without_outliers(np.array(pair), np.ones(2))
+        assert len(kept) == 2, pair
+
+
 @pytest.mark.parametrize("h_px", [1.0, 2.0, 2.5, 3.0, 3.5, 3.8, 4.0, 4.5, 5.0, 5.5, 6.0, 7.5, 10.0])
 def test_smoothing_window_is_about_two_thicknesses_never_wider(h_px):
     # an odd window of 2 floor(h) + 1 points: at most 2 h + 1, more than 2 h - 1; rounded to
