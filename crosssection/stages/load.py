@@ -96,8 +96,13 @@ def max_pixels() -> int | None:
 def _check_budget(width: int, height: int, path) -> None:
     limit = max_pixels()
     if limit is not None and int(width) * int(height) > limit:
-        raise ImageError(f"image too large ({width}x{height} = {int(width) * int(height)} px; "
-                         f"at most {limit} px): a decompression bomb or not a scan", path)
+        raise ImageError(_too_large(f"{width}x{height} = {int(width) * int(height)} px; "
+                                    f"at most {limit} px"), path)
+
+
+def _too_large(detail: str) -> str:
+    return (f"image too large ({detail}, Pillow's Image.MAX_IMAGE_PIXELS): crop the scan to "
+            "the cross-section, or raise that limit from Python")
 
 
 def _short(exc: BaseException, n: int = 120) -> str:
@@ -652,6 +657,8 @@ def _tiff_page(tif, path):
     pages = list(tif.pages)
     if not pages:
         raise ImageError("TIFF without any image page", path)
+    # a scanner's thumbnail (NewSubfileType: reduced image) is not another scan
+    pages = [p for p in pages if not getattr(p, "is_reduced", False)] or pages
     kinds = {(tuple(p.shape), str(p.dtype)) for p in pages}
     if len(kinds) > 1:
         shown = ", ".join(f"{'x'.join(map(str, s))} {d}" for s, d in sorted(kinds)[:4])
@@ -735,6 +742,8 @@ def _read_pillow(path: Path) -> np.ndarray:
             im.load()
             orientation = im.getexif().get(_ORIENTATION_TAG, 1)
             mode = im.mode
+            # a 32-bit BMP's fourth byte is often left 0 by its writer: unused, not transparent
+            unused_alpha = im.format == "BMP" and mode == "RGBA"
             if mode == "P":
                 im = im.convert("RGBA" if "transparency" in im.info else "RGB")
             elif mode in ("LA", "La", "PA"):
@@ -742,10 +751,12 @@ def _read_pillow(path: Path) -> np.ndarray:
             elif mode in ("CMYK", "YCbCr", "LAB", "HSV", "RGBX", "RGBa"):
                 im = im.convert("RGB")
             arr = np.asarray(im)
+            if unused_alpha and not arr[..., 3].any():
+                arr = arr[..., :3]
     except UnidentifiedImageError:
         raise ImageError("not an image file (unknown or corrupt format)", path) from None
     except Image.DecompressionBombError as exc:
-        raise ImageError(f"image too large ({_short(exc, 100)})", path) from None
+        raise ImageError(_too_large(_short(exc, 100)), path) from None
     except MemoryError:
         raise ImageError("image too large to decode in memory", path) from None
     except (OSError, SyntaxError, ValueError, EOFError, struct.error) as exc:
@@ -807,6 +818,8 @@ def recorded_header(path) -> Header:
             with Image.open(path) as im:
                 dpi = im.info.get("dpi")
                 pages = max(int(getattr(im, "n_frames", 1)), 1)
+                if im.format == "TIFF" and pages > 1:
+                    pages = max(_full_pages(im), 1)
     except Exception:  # noqa: BLE001 - metadata is advisory: any failure means no value
         return Header(None, 1)
     try:
@@ -817,8 +830,19 @@ def recorded_header(path) -> Header:
             or max(x, y) > MAX_SCANNER_DPI:
         return Header(None, pages)
     if abs(x - y) > 0.01 * max(x, y):
+        if exif_orientation(path) in (5, 6, 7, 8):
+            x, y = y, x  # the pixels are shown turned a quarter: x as displayed
         return Header(None, pages, (x, y))
     return Header(0.5 * (x + y) / 25.4, pages)
+
+
+def _full_pages(im) -> int:
+    """The pages of an open Pillow TIFF that are not a reduced image (a thumbnail)."""
+    n = 0
+    for i in range(im.n_frames):
+        im.seek(i)
+        n += not int(im.tag_v2.get(254, 0)) & 1
+    return n
 
 
 def exif_orientation(path) -> int:

@@ -904,6 +904,19 @@ def test_pixels_that_are_not_square_are_flagged(scene, tmp_path, dpi, aspect):
                    for w in caught)
 
 
+def test_non_square_resolutions_are_named_in_the_displayed_frame(tmp_path):
+    # a JPEG stored a quarter turn from how it is shown (EXIF 6): its x is the stored y
+    from PIL import Image
+
+    from crosssection.stages.load import recorded_header
+
+    ex = Image.Exif()
+    ex[274] = 6
+    path = tmp_path / "turned.jpg"
+    Image.new("RGB", (64, 48), (245, 245, 240)).save(path, dpi=(1200, 600), exif=ex.tobytes())
+    assert recorded_header(path).dpi_xy == pytest.approx((600, 1200), rel=1e-3)
+
+
 def test_a_file_recording_two_resolutions_is_not_said_to_record_none(scene, tmp_path):
     from PIL import Image
 

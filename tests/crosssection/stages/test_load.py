@@ -106,6 +106,33 @@ def test_multipage_tiff_of_one_size_reads_the_first_page(tmp_path):
     np.testing.assert_array_equal(load_image(p), _scan(5))
 
 
+def test_a_scanners_thumbnail_page_is_not_another_scan(tmp_path, capfd):
+    from crosssection.stages.load import recorded_header
+
+    p = tmp_path / "thumb.tif"
+    with tifffile.TiffWriter(p) as w:
+        w.write(_scan(5), photometric="rgb")
+        w.write(_scan(6)[:20, :20], photometric="rgb", subfiletype=1)  # reduced image
+    np.testing.assert_array_equal(load_image(p), _scan(5))
+    assert capfd.readouterr().err == ""
+    assert recorded_header(p).pages == 1
+
+
+def test_a_32_bit_bmp_whose_fourth_byte_is_all_0_reads_opaque(tmp_path):
+    # BITMAPV5HEADER with an alpha mask, alpha left 0 by the writer: "unused", not transparent
+    img = _scan(7)
+    h, w = img.shape[:2]
+    bgra = np.dstack([img[..., ::-1], np.zeros((h, w), np.uint8)])[::-1].tobytes()
+    hdr = struct.pack("<IiiHHIIiiII", 124, w, h, 1, 32, 3, len(bgra), 2835, 2835, 0, 0)
+    hdr += struct.pack("<IIII", 0x00FF0000, 0x0000FF00, 0x000000FF, 0xFF000000)
+    hdr += b"sRGB" + b"\0" * 64
+    off = 14 + len(hdr)
+    p = tmp_path / "scan.bmp"
+    p.write_bytes(b"BM" + struct.pack("<IHHI", off + len(bgra), 0, 0, off) + hdr + bgra)
+    assert Image.open(p).mode == "RGBA"
+    np.testing.assert_array_equal(load_image(p), img)
+
+
 def test_tiff_with_invalid_first_page_offset_one_line_no_log(tmp_path, capfd):
     p = tmp_path / "offset.tif"
     tifffile.imwrite(p, _scan(7))
@@ -133,7 +160,8 @@ def test_decompression_bomb_caught_at_every_depth(tmp_path, capfd, monkeypatch, 
         tifffile.imwrite(p, img if fmt == "tif8" else img16)
     else:
         Image.fromarray(img).save(p)
-    assert "image too large" in _error(p, capfd)
+    cause = _error(p, capfd)
+    assert "image too large" in cause and "crop the scan" in cause
 
 
 def _chunks(data):
