@@ -377,7 +377,7 @@ def preprocess(image, params: AnalysisParams | None = None, *, timer=None,
     ``AnalysisError`` (empty mask, nothing left after cleaning, empty skeleton).
     """
     path_hint = str(image) if isinstance(image, (str, Path)) else None
-    p = _resolve_params(params, overrides, path_hint)
+    p = _bounds_in_16_bits(_resolve_params(params, overrides, path_hint), image)
     try:
         pre = _preprocess(image, p, timer or StageTimer())
     except FoldstatError as exc:

@@ -37,6 +37,11 @@ class AnalysisResult:
     Compared by identity (``==`` is ``is``): two analyses of one scan differ in their
     timings; compare their ``tables`` and ``summary`` to compare their results.
 
+    Frozen one level deep: no attribute can be rebound, but the dict, the tables and the
+    arrays it holds are the analysis' own and can be edited in place, which every later use
+    of this result (``repr``, ``network()``, ``write``) then shows. Edit a copy
+    (``result.stacks.copy()``, ``copy.deepcopy(result.summary)``).
+
     Attributes
     ----------
     summary : dict

@@ -112,6 +112,28 @@ def add_pinholes(img: np.ndarray, rng: np.random.Generator, *, count: int, paths
                    tuple(float(x) for x in PAPER_RGB), -1, cv2.LINE_AA, shift=2)
 
 
+def check_degradations(*, blur_px=0.0, noise_sigma=0.0, jpeg_quality=None, **counts) -> None:
+    """Raise :class:`~crosssection.core.errors.ParameterError` for a degradation outside its
+    range: ``blur_px`` and ``noise_sigma`` finite and >= 0, ``jpeg_quality`` None or a whole
+    number in 1-100, every count in ``counts`` (specks, smears, pinholes) a whole number >= 0.
+    Out of range, a degradation was silently not applied (or clipped by OpenCV) while the
+    scene's options recorded it."""
+    from crosssection.core.errors import ParameterError
+
+    for name, v in (("blur_px", blur_px), ("noise_sigma", noise_sigma)):
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
+                or not math.isfinite(float(v)) or v < 0:
+            raise ParameterError(f"{name} must be a finite number >= 0, got {v!r}")
+    if jpeg_quality is not None and (
+            isinstance(jpeg_quality, bool)
+            or not isinstance(jpeg_quality, (int, np.integer)) or not 1 <= jpeg_quality <= 100):
+        raise ParameterError(f"jpeg_quality must be None or a whole number in 1-100, "
+                             f"got {jpeg_quality!r}")
+    for name, v in counts.items():
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
+            raise ParameterError(f"{name} must be a whole number >= 0, got {v!r}")
+
+
 def finish_scan(img: np.ndarray, rng: np.random.Generator, *, blur_px: float = 0.0,
                 noise_sigma: float = 0.0, jpeg_quality: int | None = None) -> np.ndarray:
     """Blur, add noise, round to uint8 and optionally round-trip through JPEG.
@@ -132,7 +154,13 @@ def finish_scan(img: np.ndarray, rng: np.random.Generator, *, blur_px: float = 0
     Returns
     -------
     (H, W, 3) uint8 array
+
+    Raises
+    ------
+    ParameterError
+        A degradation outside its range (:func:`check_degradations`).
     """
+    check_degradations(blur_px=blur_px, noise_sigma=noise_sigma, jpeg_quality=jpeg_quality)
     if blur_px > 0:
         img = cv2.GaussianBlur(img, (0, 0), float(blur_px))
     if noise_sigma > 0:

@@ -773,6 +773,9 @@ def make_scene(*, seed: int, n_stacks: int = 40, max_layers: int = 6, px_per_mm:
 
     Raises
     ------
+    ParameterError
+        An option outside its range (a degradation, ``fan_deg``, ``width_scatter``, a scene
+        too large to draw).
     SceneGenerationError
         When no valid layout is found.
     """
@@ -782,6 +785,9 @@ def make_scene(*, seed: int, n_stacks: int = 40, max_layers: int = 6, px_per_mm:
         raise ParameterError(f"fan_deg must be in (0, 90], got {fan_deg}")
     if not 0.0 <= width_scatter <= 0.3:
         raise ParameterError(f"width_scatter must be in [0, 0.3], got {width_scatter}")
+    degrade.check_degradations(blur_px=blur_px, noise_sigma=noise_sigma,
+                               jpeg_quality=jpeg_quality, smears=smears, specks=specks,
+                               pinholes=pinholes)
     rng = np.random.default_rng(seed)
     scatter = (width_scatter, np.random.default_rng((seed, 1)))
     cal = calibration or Calibration.nonlinear(thickness_mm, n_max=max(40, max_layers + 5))

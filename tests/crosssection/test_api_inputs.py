@@ -13,6 +13,7 @@ import pytest
 import crosssection as cs
 from crosssection.core.calibration import Calibration
 from crosssection.core.errors import OutputError, ParameterError
+from crosssection.pipeline import preprocess
 from crosssection.quality import NetworkWarning
 from crosssection.testing import generated_scan
 
@@ -52,6 +53,10 @@ def test_a_float_image_takes_its_fixed_bounds_in_its_own_scale(scan):
     # the record re-runs the same analysis
     again = cs.analyze(scan / 255.0, cs.AnalysisParams(**own.summary["parameters"]), warn=False)
     assert again.summary["n_branches"] == own.summary["n_branches"]
+    # preprocess takes the parameters of analyze
+    pre = preprocess(scan / 255.0, **fixed, blue_min=100 / 255, rg_max=130 / 255)
+    ref_mask = preprocess(scan, **fixed, blue_min=100, rg_max=130).mask_clean
+    assert (pre.mask_clean == ref_mask).all() and ref_mask.any()
 
 
 def test_the_result_holds_its_own_copy_of_the_scan(scan, result):

@@ -274,3 +274,13 @@ def test_fan_angle_sets_the_fork_opening():
     assert narrow.summary["n_voids"] == faces
     with pytest.raises(ParameterError):
         make_scene(seed=2, n_stacks=20, max_layers=4, fan_deg=0.0)
+
+
+@pytest.mark.parametrize("option", [dict(noise_sigma=-5), dict(blur_px=float("nan")),
+                                    dict(blur_px=-2), dict(smears=-1), dict(specks=-3),
+                                    dict(pinholes=1.5), dict(jpeg_quality=0),
+                                    dict(jpeg_quality=101), dict(jpeg_quality=90.0)])
+def test_a_degradation_outside_its_range_is_refused(option):
+    # out of range it was drawn as no degradation while the scene's options recorded it
+    with pytest.raises(ParameterError, match=next(iter(option))):
+        make_scene(seed=2, n_stacks=20, max_layers=3, **option)
