@@ -119,6 +119,9 @@ class Preprocessed:
     #: (:func:`~crosssection.stages.voids.scan_voids`, scanned on a thread; None: scan
     #: them when needed).
     void_scan: object = None
+    #: Ink area (px, voids below s_min filled) of every isolated piece dropped for a skeleton
+    #: shorter than l_min (``dropped_pieces``).
+    dropped_piece_px: tuple = ()
 
 
 def _read(image):
@@ -453,11 +456,12 @@ def _preprocess_read(rgb, path, header: Header, orientation, p: AnalysisParams, 
         # after the cleaning or not)
         short = _isolated_short_pieces(sg, l_min_px)
         short = short if len(short) < sg.n_stacks else []
+        dropped = ()
         with timer("graph"):
             if short:
                 seeds = [tuple(sg.paths[sid][0]) for sid in short]
                 mask = mask.copy()  # the voids are scanned on the mask as it was
-                _drop_pieces(sg, short, skel, mask, dist)
+                dropped = _drop_pieces(sg, short, skel, mask, dist)
                 sg = without_stacks(sg, short)
                 voids = functools.partial(_voids_without, voids, mask, seeds)
             else:
@@ -479,7 +483,8 @@ def _preprocess_read(rgb, path, header: Header, orientation, p: AnalysisParams, 
                             edge_feature=dominance if thr.dominance_min is not None else None,
                             ink_missed_fraction=float(missed), see_through=see_through,
                             file_dpi_xy=header.dpi_xy, dark_marks_fraction=marks.apart,
-                            marks_on_ink_fraction=marks.on_ink, void_scan=voids)
+                            marks_on_ink_fraction=marks.on_ink, void_scan=voids,
+                            dropped_piece_px=dropped)
     except BaseException as exc:
         wait_all(*running)
         try:
@@ -549,18 +554,21 @@ def _voids_without(scanned, mask, seeds):
     return void_stage.without_pieces(scanned(), mask, seeds)
 
 
-def _drop_pieces(sg, stacks, skel, mask, dist) -> None:
+def _drop_pieces(sg, stacks, skel, mask, dist) -> tuple:
     """Remove the ink pieces of ``stacks`` from the skeleton, the mask and the distance map,
     in place (the arrays this analysis made): each is its own connected piece of ink, a stack
-    with two free ends being all the skeleton of its piece."""
+    with two free ends being all the skeleton of its piece. Returns each piece's area, px."""
+    areas = []
     for sid in stacks:
         path = sg.paths[sid]
         skel[path[:, 0], path[:, 1]] = False
         r, c = (int(v) for v in path[0])
         # the piece's 8-connected ink, as the skeleton's connectivity; its box bounds the rest
-        _, _, _, (x, y, w, h) = cv2.floodFill(mask.view(np.uint8), None, (c, r), 0, flags=8)
+        area, _, _, (x, y, w, h) = cv2.floodFill(mask.view(np.uint8), None, (c, r), 0, flags=8)
         box = (slice(y, y + h), slice(x, x + w))
         dist[box][~mask[box]] = 0.0
+        areas.append(int(area))
+    return tuple(areas)
 
 
 def _check_fraction(thr, path, rgb=None, given_bounds=None):
@@ -971,6 +979,7 @@ def _result(pre, p, cal, lin, packs, profiles, junctions, stacks, branches, void
         calibration_one_layer_mm=_one_layer_mm(cal, p),
         void_areas_mm2=voids["area_mm2"].to_numpy() if "area_mm2" in voids else None,
         odd_steps=_odd_steps(pre.graph, stacks["n_br"].to_numpy()),
+        dropped_pieces_mm2=[p.scale.area_to_mm2(a) for a in pre.dropped_piece_px],
         scale_assumed=_scale_assumed(pre, scale_given), scale_given=scale_given)
     notes = list(pre.warnings) + [f"linear system: {f}" for f in lin.flags
                                   if not str(f).startswith("disconnected")]

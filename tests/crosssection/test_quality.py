@@ -13,6 +13,7 @@ import pytest
 
 import crosssection
 from crosssection import quality
+from crosssection.core.calibration import Calibration
 from crosssection.core.errors import ParameterError
 from crosssection.truth.backdrop import apply_backdrop
 from crosssection.truth.network import make_scene
@@ -1364,3 +1365,31 @@ def test_junction_blot_ratios_are_the_group_by_of_the_stack_table():
         px_per_mm = float(rng.uniform(10, 100))
         assert np.array_equal(junction_blot_ratios(radius, junctions, stacks, px_per_mm),
                               by_groups(radius, junctions, stacks, px_per_mm), equal_nan=True)
+
+
+@pytest.mark.parametrize("void_mm2, flagged", [(0.9, True), (1.2, False)])
+def test_a_ring_round_a_void_below_s_min_is_not_dropped_unsaid(void_mm2, flagged):
+    """A one-layer ring round a void just below s_min, filled, is a blob whose skeleton is
+    shorter than l_min: dropped as a speck, its rod and bending gone with no word. Round a
+    void above s_min it is a loop, read (and flagged ``loops``)."""
+    size, R, h = 700, 300.0, 5.0
+    c = size / 2
+    rr, cc = np.mgrid[0:size, 0:size].astype(float)
+    rho = np.hypot(rr - c, cc - c)
+    ink = (rho <= R) & (rho >= R - h)  # the wall band
+    ink |= (np.abs(rr - c) <= h / 2) & (rho <= R - h / 2)  # a chord across the hole
+    # the ring: a one-layer circle round a void of void_mm2 (50 px/mm), in a half-disc's middle
+    r_in = np.sqrt(void_mm2 / np.pi) * 50.0
+    d = np.hypot(rr - (c - 120), cc - c)
+    ink |= (d >= r_in) & (d <= r_in + h)
+    rgb = np.full((size, size, 3), 245, np.uint8)
+    rgb[ink] = (40, 60, 170)
+    res, caught = _analyze(rgb, px_per_mm=50.0, thickness_mm=0.1,
+                           calibration=Calibration.linear(0.1), hole_radius_mm=R / 50.0,
+                           hole_center_px=(c, c))
+    codes = res.summary["quality"]["codes"]
+    assert ("dropped_pieces" in codes) is flagged
+    assert any(issubclass(w.category, quality.NetworkWarning) and "dropped" in str(w.message)
+               for w in caught) is flagged
+    if not flagged:
+        assert (res.stacks["kind"] == "loop").sum() == 1
