@@ -25,7 +25,10 @@ fit on size 5 n_br h, after coordinates translation and rotation in the tangent 
    is removed (``circle_correction``: exact to O((kappa w)^2) on arcs). Near an open end the
    window keeps its length and is shifted inwards; the samples it serves hold its fit read at
    its centre (:func:`_fitted_kappa`). The window is capped at half the fitted length
-   (``max_window_frac``): a longer parabola cannot resolve an S-shaped stack.
+   (``max_window_frac``): a longer parabola cannot resolve an S-shaped stack. Where the
+   window turns by more than a radian over its half (a U-turn of one sheet of radius 2 h
+   read +22 %), the sample is fitted again over a window that turns by one radian
+   (:func:`_tight_refits`).
 3. **Fork zones.** Near a junction the bands of the stacks meeting there overlap: the image
    holds no centreline of this stack, and the skeleton hooks into the medial-axis fork point.
    The maximal disc at the fork (radius r_J, the inscribed ink radius at the junction) touches
@@ -855,6 +858,48 @@ def _fit_curvatures(X, Y, S, off, lens, half_w, i0, cnt, correct, shift):
     return k
 
 
+#: Largest turn of the centreline over half a fit window, radians: a sample whose fit reads
+#: a turn ``|kappa| w / 2`` beyond it is fitted again over a window that turns by this much
+#: (:func:`_tight_refits`).
+_WINDOW_MAX_TURN = 1.0
+
+
+def _tight_refits(kin, X, Y, S, start, length, half_w, i0, count, correct, shift):
+    """The fits of the samples where the window turns by more than :data:`_WINDOW_MAX_TURN`
+    over half its length, fitted again over a window that turns by that much.
+
+    The parabola in the tangent frame follows a bend only while the window turns by less
+    than about a radian on each side: beyond it the arms of a tight turn come back across the
+    frame and the fit overshoots. U-turns of one to three sheets
+    (``python benchmarks/u_turns.py --raw``) read +22 to +118 % where the half window turned
+    by 1.25-2 rad (1 sheet of radius 2 h, 2 sheets of 2.5-4 h, 3 sheets of 4-5 h), and within
+    -7 to +1 % where it turned by 1 rad or less. A path's refit takes one window, the least
+    its offending samples ask (at least 2 px); it replaces their fits only, twice at most.
+    """
+    if not len(count):
+        return kin
+    kin = kin.copy()
+    hw = np.repeat(half_w, count)
+    path = np.repeat(np.arange(len(count)), count)
+    for _ in range(2):
+        over = np.abs(kin) * hw > _WINDOW_MAX_TURN * (1.0 + 1e-9)
+        if not over.any():
+            break
+        need = np.full(len(count), np.inf)
+        np.minimum.at(need, path[over], _WINDOW_MAX_TURN / np.abs(kin[over]))
+        redo = np.flatnonzero(np.isfinite(need))
+        new_hw = np.maximum(need[redo], 2.0)
+        k2 = _fit_curvatures(X, Y, S, start[redo], length[redo], new_hw, i0[redo],
+                             count[redo], correct[redo], shift[redo])
+        first = np.zeros(len(count) + 1, np.int64)
+        np.cumsum(count, out=first[1:])
+        idx, _, _ = polyline.ranges(first[redo], first[redo + 1])
+        swap = over[idx] & (new_hw[np.repeat(np.arange(len(redo)), count[redo])] < hw[idx])
+        kin[idx[swap]] = k2[swap]
+        hw[idx[swap]] = np.repeat(new_hw, count[redo])[swap]
+    return kin
+
+
 def _flat_paths(paths):
     """Paths (n, 2) in flat arrays: ``(rows, cols, offs)``, path ``i`` at
     ``offs[i]:offs[i + 1]``."""
@@ -922,9 +967,11 @@ def _paper_profiles(smoothed, closed, n_br, trims, unfitted, *, thickness_px, px
     X, Y, S, start, length, i0, count = _fit_arrays(r, c, s_px, offs, total, mode, t0, t1)
     fitted = mode != 0
     shift = ends == "shift"
-    kin = _fit_curvatures(X, Y, S, start, length, half_w[fitted], i0, count,
-                          np.full(len(count), bool(circle_correction)),
-                          (mode[fitted] == 2) & shift)
+    correct = np.full(len(count), bool(circle_correction))
+    shifted = (mode[fitted] == 2) & shift
+    kin = _fit_curvatures(X, Y, S, start, length, half_w[fitted], i0, count, correct, shifted)
+    kin = _tight_refits(kin, X, Y, S, start, length, half_w[fitted], i0, count, correct,
+                        shifted)
     s, kappa, out = _fitted_kappa(s_px, total, offs, mode, t0, t1, half_w, shift, kin)
     rc = [np.vstack([p, p[:1]]) if loop else p for p, loop in zip(pts, (mode == 1).tolist())]
     profs = _profiles(s, kappa, out, px_per_mm, cl, rc,

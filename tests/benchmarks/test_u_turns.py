@@ -31,3 +31,14 @@ def test_the_bend_scan_draws_its_arms_and_its_turn(load_script):
     # the arms run along x and, after the turn, along y: the ink spans about 5 mm each way
     assert 4.5 < np.ptp(cols) / script.PX_PER_MM < 5.6
     assert 4.5 < np.ptp(rows) / script.PX_PER_MM < 5.6
+
+
+@pytest.mark.parametrize("r_mm, layers", [(0.15, 1), (0.2, 1), (0.3, 2), (0.4, 3)])
+def test_a_turn_tighter_than_the_window_reads_close_to_its_truth(load_script, capsys, r_mm,
+                                                                 layers):
+    # the window turning by 1.25-2 rad over its half: a parabola over the whole U-turn read
+    # +71 / +22 / +74 / +92 %; refitted where it turns by 1 rad, -8 / -9 / -9 / -10 %
+    script = load_script("u_turns")
+    assert script.main(["--radii", str(r_mm), "--layers", str(layers), "--raw"]) == 0
+    err = float(re.search(r"\(([-+][\d.]+) %\)", capsys.readouterr().out).group(1))
+    assert -15.0 < err < 10.0, err
