@@ -28,7 +28,7 @@ fit on size 5 n_br h, after coordinates translation and rotation in the tangent 
    (``max_window_frac``): a longer parabola cannot resolve an S-shaped stack. Where the
    window turns by more than a radian over its half (a U-turn of one sheet of radius 2 h
    read +22 %), the sample is fitted again over a window that turns by one radian
-   (:func:`_tight_refits`).
+   (:func:`_tight_refits`; not with the paper's method, ``method="paper"``).
 3. **Fork zones.** Near a junction the bands of the stacks meeting there overlap: the image
    holds no centreline of this stack, and the skeleton hooks into the medial-axis fork point.
    The maximal disc at the fork (radius r_J, the inscribed ink radius at the junction) touches
@@ -915,7 +915,7 @@ def _path_lengths(r, c, lo, hi):
 
 def _paper_profiles(smoothed, closed, n_br, trims, unfitted, *, thickness_px, px_per_mm,
                     window_px=None, circle_correction=True, ends="shift",
-                    max_window_frac=0.5) -> list:
+                    max_window_frac=0.5, tight_refits=True) -> list:
     """Profiles by the paper's parabolic window (module docstring) of many stacks, their
     window fits in one call of :func:`_fit_curvatures`.
 
@@ -946,6 +946,9 @@ def _paper_profiles(smoothed, closed, n_br, trims, unfitted, *, thickness_px, px
     thickness_px, px_per_mm : float
     window_px, circle_correction, ends, max_window_frac
         As in :func:`stack_curvature`, for all stacks.
+    tight_refits : bool
+        Fit again where the window turns by more than a radian (:func:`_tight_refits`; not
+        the paper's method).
 
     Returns
     -------
@@ -970,8 +973,9 @@ def _paper_profiles(smoothed, closed, n_br, trims, unfitted, *, thickness_px, px
     correct = np.full(len(count), bool(circle_correction))
     shifted = (mode[fitted] == 2) & shift
     kin = _fit_curvatures(X, Y, S, start, length, half_w[fitted], i0, count, correct, shifted)
-    kin = _tight_refits(kin, X, Y, S, start, length, half_w[fitted], i0, count, correct,
-                        shifted)
+    if tight_refits:
+        kin = _tight_refits(kin, X, Y, S, start, length, half_w[fitted], i0, count, correct,
+                            shifted)
     s, kappa, out = _fitted_kappa(s_px, total, offs, mode, t0, t1, half_w, shift, kin)
     rc = [np.vstack([p, p[:1]]) if loop else p for p, loop in zip(pts, (mode == 1).tolist())]
     profs = _profiles(s, kappa, out, px_per_mm, cl, rc,
@@ -1051,7 +1055,8 @@ def stack_curvature(path_rc, *, n_br, thickness_px, px_per_mm, closed=None, smoo
     prof = _paper_profiles(
         [polyline.smooth(p, window_px=int(smooth_px), closed=closed)], [closed], [n_br], [trims],
         [False], thickness_px=thickness_px, px_per_mm=px_per_mm, window_px=window_px,
-        circle_correction=circle_correction, ends=ends, max_window_frac=max_window_frac)[0]
+        circle_correction=circle_correction, ends=ends, max_window_frac=max_window_frac,
+        tight_refits=method != "paper")[0]
     if method == "paper":
         return prof
     # only junction ends are fork zones; a free end keeps the nearest fitted curvature
@@ -1855,7 +1860,8 @@ def stack_profiles(graph, n_br, distance_px, *, thickness_px: float, px_per_mm: 
     every = _paper_profiles(
         list(smoothed) + list(wsmooth), closed + [False] * len(wsids),
         nbs + [nbs[sid] for sid in wsids], all_trims + [walled[sid][1] for sid in wsids],
-        lumps + [False] * len(wsids), thickness_px=thickness_px, px_per_mm=px_per_mm)
+        lumps + [False] * len(wsids), thickness_px=thickness_px, px_per_mm=px_per_mm,
+        tight_refits=method != "paper")
     profiles = every[:graph.n_stacks]
     if method == "paper":
         return profiles
