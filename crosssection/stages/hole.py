@@ -1232,6 +1232,10 @@ def find_hole(rgb, ink_mask, *, min_confidence: float = 0.5, path=None) -> Hole:
         ink = _within_upsampled(ink, lab == largest)
         big = np.flatnonzero(area >= PIECE_FRACTION * area[largest])
         big = big[big > 0] if len(big) > 2 else ()
+    elif n == 2:
+        # one piece on the half-resolution lattice: a speck off it (one pixel at an odd row
+        # or column) is still in the full-resolution ink, and grew a plateless hole by half
+        ink = _within_upsampled(ink, lab == 1)
     border = _boundary_points(ink)
     env = _fit_points(border, None, None, None, path)
     env_conf = _envelope_confidence(border, env)

@@ -690,3 +690,18 @@ def test_soft_l1_circle_where_the_data_do_not_fix_the_circle():
         want = loss(ref, rr, cc, ref[2])
         assert loss(got, rr, cc, rad_got) <= want * (1 + 1e-9) + 1e-12
 
+
+
+@pytest.mark.parametrize("rc", [(6, 6), (7, 7), (6, 7), (7, 6)])
+def test_one_ink_pixel_on_the_paper_does_not_grow_a_plateless_hole(rc):
+    # a pixel off the half-resolution lattice the specks are told on (an odd row or column)
+    # grew the hole from the rod's envelope (7.96 mm) to a circle through it (12.35 mm)
+    scene = make_scene(seed=18, n_stacks=30, max_layers=4)
+    a = scene.rgb.astype(int)
+    ink = (a[..., 2] - np.maximum(a[..., 0], a[..., 1])) > 60
+    clean = find_hole(scene.rgb, ink)
+    marked = ink.copy()
+    marked[rc] = True
+    hole = find_hole(scene.rgb, marked)
+    assert hole.radius_px == pytest.approx(clean.radius_px, abs=0.5)
+    np.testing.assert_allclose(hole.center_rc, clean.center_rc, atol=0.5)
