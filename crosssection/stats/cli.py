@@ -44,8 +44,9 @@ def add_subparser(subparsers) -> argparse.ArgumentParser:
                         "previous report)")
     p.add_argument("--name", action="append", default=None,
                    help="set name for each DIR in order (repeat, once per DIR, each name "
-                        "different; default: the folder names, a repeated one as NAME#k); "
-                        "the sets A, B of a batch DIR become NAME/A, NAME/B")
+                        "different, of ASCII letters, digits and . _ + -; default: the folder "
+                        "names, a repeated one as NAME#k); the sets A, B of a batch DIR become "
+                        "NAME/A, NAME/B")
     p.add_argument("--seed", type=int, default=0,
                    help="seed of bootstrap and GOF (default 0). Each set draws from its own "
                         "stream, derived from this seed and the set's name (stats.json "
