@@ -1763,7 +1763,10 @@ def _selected_table(res: StatsResult) -> pd.DataFrame:
             + (" (truncated at the detection limit)" if r.truncated else ""),
             "parameters [95 % interval]": "; ".join(ps),
             "runner-up law, BIC − BIC(selected)": runner,
-            "goodness of fit": r.p_text() or "not computed"})
+            "goodness of fit": (r.p_text() or "not computed") + (
+                "; the data reject it: no law fitted here describes them (the table's other "
+                "laws were worse or set aside)"
+                if np.isfinite(r.pvalue) and r.pvalue < GAMMA_MISFIT_P else "")})
     return pd.DataFrame(rows)
 
 
@@ -1813,8 +1816,8 @@ def _gamma_n(res: StatsResult, s, reg, q) -> tuple:
     return (float(r.n), float(r.n_independent)) if r is not None else (np.nan, np.nan)
 
 
-#: goodness-of-fit p-value below which a Gamma law's parameters are marked as those of a law
-#: the data reject (the fits table's test)
+#: goodness-of-fit p-value below which a law is marked as one the data reject (a Gamma law's
+#: parameters in the tables, the selected law of every quantity; the fits table's test)
 GAMMA_MISFIT_P = 0.05
 
 

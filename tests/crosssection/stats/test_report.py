@@ -259,3 +259,26 @@ def test_the_methods_paragraph_names_the_curvature_method_the_scans_used(tmp_pat
     assert _curvature_methods(None) == [] and _curvature_text([]) == ""
     only = _curvature_text(["paper"])
     assert "<code>paper</code>" in only and "walls" not in only
+
+
+def test_a_selected_law_the_data_reject_is_said_so():
+    # counts of 1 and 2 about half each: the laws with a width fit as spikes (set aside), and
+    # the exponential left, selected, fails its test: the table said "selected" alone
+    import warnings
+    from types import SimpleNamespace
+
+    from crosssection.stats.fits import fit_all
+    from crosssection.stats.report import _selected_table
+
+    x = np.array([1] * 29 + [2] * 25, float)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        s = fit_all(x, n_boot=0, gof=True, n_mc=200, discrete=True, seed=0)
+    assert s.best and s.results[s.best].pvalue < 0.05
+    row = _selected_table(SimpleNamespace(summaries={("A", "all", "n_br"): s})).iloc[0]
+    assert "the data reject it" in row["goodness of fit"]
+    # a law that fits is not marked
+    y = np.random.default_rng(1).gamma(2.0, 1.0, 200)
+    s = fit_all(y, families=("gamma", "exponential"), n_boot=0, gof=True, n_mc=200, seed=0)
+    row = _selected_table(SimpleNamespace(summaries={("A", "all", "e"): s})).iloc[0]
+    assert "reject" not in row["goodness of fit"]
