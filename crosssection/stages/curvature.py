@@ -881,6 +881,8 @@ def _tight_refits(kin, X, Y, S, start, length, half_w, i0, count, correct, shift
     kin = kin.copy()
     hw = np.repeat(half_w, count)
     path = np.repeat(np.arange(len(count)), count)
+    first = np.zeros(len(count) + 1, np.int64)
+    np.cumsum(count, out=first[1:])
     for _ in range(2):
         over = np.abs(kin) * hw > _WINDOW_MAX_TURN * (1.0 + 1e-9)
         if not over.any():
@@ -891,8 +893,6 @@ def _tight_refits(kin, X, Y, S, start, length, half_w, i0, count, correct, shift
         new_hw = np.maximum(need[redo], 2.0)
         k2 = _fit_curvatures(X, Y, S, start[redo], length[redo], new_hw, i0[redo],
                              count[redo], correct[redo], shift[redo])
-        first = np.zeros(len(count) + 1, np.int64)
-        np.cumsum(count, out=first[1:])
         idx, _, _ = polyline.ranges(first[redo], first[redo + 1])
         swap = over[idx] & (new_hw[np.repeat(np.arange(len(redo)), count[redo])] < hw[idx])
         kin[idx[swap]] = k2[swap]
