@@ -82,7 +82,8 @@ thickness_calibration    the calibration's width of one layer / the sheet     ou
 layer_lattice            median |layers from width - final n_br|, weighted    > 0.12 layer, or
                          by stack length (h >= 3 px)                          0.75 px / h if more
 linear_system            junctions whose final counts violate conservation,   > 10 % of junctions,
-                         or junctions repartitioned by the widths             or > 25 % of them
+                         or junctions repartitioned by the widths             or > 25 % of 8
+                                                                              or more
 layer_multiple           the greatest common divisor of every stack's n_br    >= 2, on 6 stacks
                          (no single sheet anywhere: each layer read d times   or more
                          by a scale or calibration off by a factor d)
@@ -1055,7 +1056,9 @@ def _linear_system_checks(junctions) -> list[QualityFlag]:
                             "others: layers pass there between every pair of its stacks, or a "
                             "rod end or a fold lies in it; junctions.csv marks them)",
                             _frac(bad, n_j), 0.10)]
-    if _frac(moved, n_j) > 0.25:
+    # a share of a few junctions is no rate: on drawn scans of 4 junctions with an exact
+    # calibration, 2 at wall feet were repartitioned (the widths right, the packs ambiguous)
+    if n_j >= MERGED_MIN_JUNCTIONS and _frac(moved, n_j) > 0.25:
         return [QualityFlag("linear_system", f"{moved} of {n_j} junctions were repartitioned "
                             "by the widths against the skeleton's packs (check the calibration; "
                             "junctions.csv marks them)",

@@ -743,6 +743,17 @@ def test_linear_system_flag_counts_violations_and_repartitions_apart(violated, r
         assert flags[0].code == "linear_system" and flags[0].value > flags[0].limit
 
 
+def test_a_few_junctions_repartitioned_are_no_rate():
+    # 2 of 4 junctions repartitioned at wall feet, the calibration exact: no flag; 2 of 7
+    # violating conservation still is one
+    import pandas as pd
+
+    j = pd.DataFrame({"conservation_ok": [True] * 4, "repartitioned": [True, True, False, False]})
+    assert not quality._linear_system_checks(j)
+    j = pd.DataFrame({"conservation_ok": [False] * 2 + [True] * 5, "repartitioned": [False] * 7})
+    assert quality._linear_system_checks(j)
+
+
 @pytest.mark.parametrize("depth", [0.0, 0.05, 0.2, 1.0])
 def test_hole_outside_fraction_is_the_circular_segment(depth):
     # a disc of radius r whose left edge lies depth * r beyond the image's left border
