@@ -140,11 +140,14 @@ def _ring(p: np.ndarray) -> np.ndarray:
 
 
 def is_closed(path_rc) -> bool:
-    """Whether a pixel path is a closed loop: first and last pixels equal or 8-neighbours,
-    with more than 3 points."""
+    """Whether a pixel path is a closed loop: first and last pixels equal or 8-neighbours
+    (for float points: at most 1 px apart along each axis), with more than 3 points."""
     p = np.asarray(path_rc)
     if len(p) < 4:
         return False
+    if p.dtype.kind == "f":
+        # truncated to pixels, ends 2.8 px apart could read as neighbours
+        return bool(np.abs(p[0] - p[-1]).max() <= 1.0)
     d = np.abs(p[0].astype(np.int64) - p[-1].astype(np.int64))
     return bool(d.max() <= 1)
 

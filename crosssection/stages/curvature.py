@@ -25,10 +25,11 @@ fit on size 5 n_br h, after coordinates translation and rotation in the tangent 
    is removed (``circle_correction``: exact to O((kappa w)^2) on arcs). Near an open end the
    window keeps its length and is shifted inwards; the samples it serves hold its fit read at
    its centre (:func:`_fitted_kappa`). The window is capped at half the fitted length
-   (``max_window_frac``): a longer parabola cannot resolve an S-shaped stack. Where the
-   window turns by more than a radian over its half (a U-turn of one sheet of radius 2 h
-   read +22 %), the sample is fitted again over a window that turns by one radian
-   (:func:`_tight_refits`; not with the paper's method, ``method="paper"``).
+   (``max_window_frac``), a closed loop's at half the loop: a longer parabola cannot
+   resolve an S-shaped stack. Where the window turns by more than two radians (a U-turn of
+   one sheet of radius 2 h read +22 %, one of three sheets at 2 h lost a third), the sample
+   is fitted again over a window scaled to turn by two (:func:`_tight_refits`; not with the
+   paper's method, ``method="paper"``).
 3. **Fork zones.** Near a junction the bands of the stacks meeting there overlap: the image
    holds no centreline of this stack, and the skeleton hooks into the medial-axis fork point.
    The maximal disc at the fork (radius r_J, the inscribed ink radius at the junction) touches
@@ -472,10 +473,11 @@ def _fit_ranges(r, c, offs, closed, nb, trims, unfitted, thickness_px, window_px
     fits = n >= 3
     # no centreline of its own (stack_profiles): missing data, filled from its neighbours
     t1[fits & unfitted & ~closed] = 0
-    # a closed loop is unrolled once on each side; a window never exceeds the loop
+    # a closed loop is unrolled once on each side; a window never exceeds half the loop (a
+    # parabola fitted round a whole circle reads no curvature)
     loop = fits & closed
     mode[loop] = 1
-    half_w[loop] = _pymin(half_w[loop], 0.5 * total[loop])
+    half_w[loop] = _pymin(half_w[loop], 0.25 * total[loop])
     op = np.flatnonzero(fits & ~closed & ~unfitted)
     if len(op) == 0:
         return s_px, total, mode, t0, t1, half_w
@@ -858,45 +860,63 @@ def _fit_curvatures(X, Y, S, off, lens, half_w, i0, cnt, correct, shift):
     return k
 
 
-#: Largest turn of the centreline over half a fit window, radians: a sample whose fit reads
-#: a turn ``|kappa| w / 2`` beyond it is fitted again over a window that turns by this much
+#: Largest turn of the centreline over half a fit window, radians: a sample whose window
+#: turns by more than twice this in all is fitted again over a shorter one
 #: (:func:`_tight_refits`).
 _WINDOW_MAX_TURN = 1.0
+#: Refits of one path at most (:func:`_tight_refits`).
+_REFITS = 4
 
 
 def _tight_refits(kin, X, Y, S, start, length, half_w, i0, count, correct, shift):
-    """The fits of the samples where the window turns by more than :data:`_WINDOW_MAX_TURN`
-    over half its length, fitted again over a window that turns by that much.
+    """The fits of the samples whose window turns by more than twice
+    :data:`_WINDOW_MAX_TURN`, fitted again over shorter windows.
 
     The parabola in the tangent frame follows a bend only while the window turns by less
     than about a radian on each side: beyond it the arms of a tight turn come back across the
-    frame and the fit overshoots. U-turns of one to three sheets
+    frame, and the fit overshoots (a window centred on the turn) or spreads the turn over
+    the window (one beside it). U-turns of one to three sheets
     (``python benchmarks/u_turns.py --raw``) read +22 to +118 % where the half window turned
     by 1.25-2 rad (1 sheet of radius 2 h, 2 sheets of 2.5-4 h, 3 sheets of 4-5 h), and within
-    -7 to +1 % where it turned by 1 rad or less. A path's refit takes one window, the least
-    its offending samples ask (at least 2 px); it replaces their fits only, twice at most.
+    -7 to +1 % where it turned by 1 rad or less. The turn of a window is the integral of
+    ``|kappa|`` over it from the current fits (a turn spread by a long window is still the
+    turn); a path is fitted again over one window, the least its offending samples ask (that
+    window scaled to turn by twice :data:`_WINDOW_MAX_TURN`, at least 2 px), which replaces
+    their fits, up to :data:`_REFITS` times.
     """
     if not len(count):
         return kin
     kin = kin.copy()
-    hw = np.repeat(half_w, count)
-    path = np.repeat(np.arange(len(count)), count)
     first = np.zeros(len(count) + 1, np.int64)
     np.cumsum(count, out=first[1:])
-    for _ in range(2):
-        over = np.abs(kin) * hw > _WINDOW_MAX_TURN * (1.0 + 1e-9)
-        if not over.any():
-            break
-        need = np.full(len(count), np.inf)
-        np.minimum.at(need, path[over], _WINDOW_MAX_TURN / np.abs(kin[over]))
-        redo = np.flatnonzero(np.isfinite(need))
-        new_hw = np.maximum(need[redo], 2.0)
-        k2 = _fit_curvatures(X, Y, S, start[redo], length[redo], new_hw, i0[redo],
-                             count[redo], correct[redo], shift[redo])
-        idx, _, _ = polyline.ranges(first[redo], first[redo + 1])
-        swap = over[idx] & (new_hw[np.repeat(np.arange(len(redo)), count[redo])] < hw[idx])
-        kin[idx[swap]] = k2[swap]
-        hw[idx[swap]] = np.repeat(new_hw, count[redo])[swap]
+    k_abs = np.abs(kin)
+    # a window turning by less than this holds no turn it could miss
+    peak = np.maximum.reduceat(k_abs * np.repeat(half_w, count), first[:-1]) \
+        if len(kin) else np.zeros(0)
+    limit = 2.0 * _WINDOW_MAX_TURN
+    for f in np.flatnonzero(peak > 0.25 * limit).tolist():
+        a, b = first[f], first[f + 1]
+        n = b - a
+        loop = length[f] == 3 * n  # unrolled once on each side (_fit_arrays)
+        s_all = S[start[f]:start[f] + length[f]]
+        s_want = s_all[i0[f]:i0[f] + n]
+        hw = np.full(n, float(half_w[f]))
+        for _ in range(_REFITS):
+            k = np.abs(kin[a:b])
+            ks, ss = (np.tile(k, 3), s_all) if loop else (k, s_want)
+            turn = np.concatenate([[0.0], np.cumsum(0.5 * (ks[1:] + ks[:-1]) * np.diff(ss))])
+            t = np.interp(s_want + hw, ss, turn) - np.interp(s_want - hw, ss, turn)
+            over = t > limit * (1.0 + 1e-9)
+            if not over.any():
+                break
+            w = max(float(np.min(hw[over] * limit / t[over])), 2.0)
+            swap = over & (w < hw)
+            if not swap.any():
+                break
+            k2 = _fit_curvatures(X, Y, S, start[f:f + 1], length[f:f + 1], np.array([w]),
+                                 i0[f:f + 1], count[f:f + 1], correct[f:f + 1], shift[f:f + 1])
+            kin[a:b][swap] = k2[swap]
+            hw[swap] = w
     return kin
 
 
@@ -1042,8 +1062,33 @@ def stack_curvature(path_rc, *, n_br, thickness_px, px_per_mm, closed=None, smoo
     Returns
     -------
     CurvatureProfile
+
+    Raises
+    ------
+    ParameterError
+        A scale, thickness, count, window or noise that is not a finite positive number (the
+        noise and the window may be None, the noise 0), ``ends`` or ``method`` not one of
+        theirs, ``trim_px`` neither one number nor two, a point of the path not finite.
     """
+    for name, v, least in (("thickness_px", thickness_px, 0.0), ("px_per_mm", px_per_mm, 0.0),
+                           ("n_br", n_br, 1.0 - 1e-9), ("window_px", window_px, 2.0),
+                           ("noise_var_per_mm2", noise_var_per_mm2, None)):
+        if v is None and name in ("window_px", "noise_var_per_mm2"):
+            continue
+        ok = (isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
+              and math.isfinite(float(v))
+              and (float(v) >= 0.0 if least is None else float(v) > least))
+        if not ok:
+            bound = ">= 0" if least is None else ("at least 1" if name == "n_br" else
+                                                  f"> {least:g}")
+            raise ParameterError(f"{name} must be a finite number {bound}, got {v!r}")
+    if ends not in ("shift", "truncate"):
+        raise ParameterError(f"ends must be 'shift' or 'truncate', got {ends!r}")
+    if np.ndim(trim_px) and np.size(trim_px) != 2:
+        raise ParameterError(f"trim_px must be one number or two, got {trim_px!r}")
     p, closed = _prepared_path(path_rc, closed)
+    if not np.isfinite(p).all():
+        raise ParameterError("path_rc holds a point that is not finite")
     if len(p) == 0:
         z = np.zeros(0)
         return CurvatureProfile(z, z, 0.0, np.nan, np.nan, np.nan, closed, np.zeros((0, 2)))
@@ -2397,6 +2442,6 @@ def _measured_noise(profiles, n_br, nbs, window, sm, px_per_mm, min_pairs, *, lo
             fitted = prof.s_mm[prof.fit_stop - 1] - prof.s_mm[prof.fit_start]
             weights.append((fitted - lag) * float(px_per_mm))
         v, w = _without_outliers(np.asarray(per_stack, float), np.asarray(weights, float))
-        if w.sum() >= min_pairs:
+        if w.sum() > 0 and w.sum() >= min_pairs:
             measured[nb] = max(float(v @ w) / float(w.sum()), 0.0)
     return measured

@@ -37,7 +37,7 @@ def test_the_bend_scan_draws_its_arms_and_its_turn(load_script):
 def test_a_turn_tighter_than_the_window_reads_close_to_its_truth(load_script, capsys, r_mm,
                                                                  layers):
     # the window turning by 1.25-2 rad over its half: a parabola over the whole U-turn read
-    # +71 / +22 / +74 / +92 %; refitted where it turns by 1 rad, -8 / -9 / -9 / -10 %
+    # +71 / +22 / +74 / +92 %; refitted where it turns by 2 rad in all, -3 / -2 / -5 / -5 %
     script = load_script("u_turns")
     assert script.main(["--radii", str(r_mm), "--layers", str(layers), "--raw"]) == 0
     err = float(re.search(r"\(([-+][\d.]+) %\)", capsys.readouterr().out).group(1))

@@ -9,9 +9,10 @@ import pytest
 from skimage.draw import line
 from skimage.morphology import skeletonize
 
+from crosssection.core.errors import ParameterError
 from crosssection.core.polyline import is_closed
 from crosssection.core.polyline import smooth as _smooth
-from crosssection.stages.curvature import default_smooth_px, stack_curvature
+from crosssection.stages.curvature import default_smooth_px, noise_variance, stack_curvature
 
 H = 5.0  # sheet thickness in px (0.1 mm at 50 px/mm)
 
@@ -1003,3 +1004,59 @@ def test_a_circle_tighter_than_the_window_is_fitted_on_a_shorter_one(r_px):
                             method="paper")
     assert abs(ours.kappa_m * r_px / 50.0 - 1) < 0.12, ours.kappa_m
     assert paper.kappa_m * r_px / 50.0 > 1.4, paper.kappa_m
+
+
+@pytest.mark.parametrize("r_px", [10.0, 12.0, 15.0])
+def test_a_loop_no_longer_than_the_window_reads_its_curvature(r_px):
+    # a ring of three sheets whose circumference is about the window (5 n_br h = 75 px): a
+    # window capped at the whole loop read no curvature (a parabola round a whole circle)
+    t = np.arange(0.0, 2 * np.pi * r_px) / r_px
+    p = np.column_stack([100 + r_px * np.sin(t), 100 + r_px * np.cos(t)])
+    prof = stack_curvature(p, n_br=3, thickness_px=H, px_per_mm=50.0, closed=True,
+                           smooth_px=1)
+    assert abs(prof.kappa_m * r_px / 50.0 - 1) < 0.08, prof.kappa_m
+
+
+@pytest.mark.parametrize("n_br, r_px", [(3, 10.0), (2, 7.5)])
+def test_a_u_turn_the_window_spans_whole_keeps_its_energy(n_br, r_px):
+    # legs of 80 px and a half circle: the windows beside the turn, spanning both legs, read it
+    # spread out (0.67 of its int kappa^2 ds at n_br = 3, r = 2 h) until refitted by the turn
+    # their window holds
+    leg = np.arange(0.0, 80.0)
+    t = np.arange(0.0, np.pi * r_px) / r_px
+    xy = np.concatenate([np.column_stack([80.0 - leg, np.zeros_like(leg)]),
+                         np.column_stack([-r_px * np.sin(t), r_px - r_px * np.cos(t)]),
+                         np.column_stack([leg, np.full_like(leg, 2 * r_px)])])
+    p = np.column_stack([500 - xy[:, 1], 500 + xy[:, 0]])
+    prof = stack_curvature(p, n_br=n_br, thickness_px=H, px_per_mm=1.0)
+    energy = np.trapezoid(prof.kappa_per_mm ** 2, prof.s_mm) * r_px / np.pi
+    assert 0.85 < energy < 1.15, energy
+
+
+@pytest.mark.parametrize("kw", [dict(thickness_px=0.0), dict(px_per_mm=0.0), dict(n_br=0),
+                                dict(window_px=1.0), dict(noise_var_per_mm2=-1.0),
+                                dict(ends="Shift"), dict(trim_px=(1.0, 2.0, 3.0)),
+                                dict(px_per_mm=float("nan"))])
+def test_stack_curvature_refuses_what_it_cannot_read(kw):
+    p = np.column_stack([np.zeros(60), np.arange(60.0)])
+    args = dict(n_br=1, thickness_px=H, px_per_mm=50.0) | kw
+    with pytest.raises(ParameterError):
+        stack_curvature(p, **args)
+    with pytest.raises(ParameterError, match="not finite"):
+        stack_curvature(np.vstack([p, [[np.nan, 3.0]]]), n_br=1, thickness_px=H,
+                        px_per_mm=50.0)
+
+
+def test_noise_variance_without_pairs_asked_and_none_found():
+    short = stack_curvature(np.column_stack([np.zeros(30), np.arange(30.0)]), n_br=1,
+                            thickness_px=5.0, px_per_mm=50.0)
+    assert noise_variance([short], [1], thickness_px=5.0, px_per_mm=50.0,
+                          min_pairs=0) == {1: 0.0}
+
+
+def test_an_open_float_path_with_ends_apart_is_not_closed():
+    t = np.linspace(0.0, 1.9 * np.pi, 120)
+    p = np.column_stack([40 * np.sin(t), 40 * np.cos(t)])  # ends 12 px apart
+    assert not is_closed(p)
+    assert not is_closed(np.array([[0.0, 0.0], [0.0, 5.0], [3.0, 5.0], [2.8, 0.0]]))
+    assert is_closed(np.array([[0.0, 0.0], [0.0, 5.0], [3.0, 5.0], [0.6, 0.7]]))
