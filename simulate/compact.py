@@ -1026,7 +1026,7 @@ def run_config(config_id: int, seed: int, params: dict, out: str) -> int:
         ``config_id``.
     """
     from simulate.contacts import analyze_rod
-    from simulate.ensemble import analysis_records, write_part
+    from simulate.ensemble import RUN_DIGEST, analysis_records, write_part
     from simulate.geometry import radius_of_gyration
 
     p = CompactParams(**{k: params[k] for k in _PARAM_FIELDS})
@@ -1061,7 +1061,8 @@ def run_config(config_id: int, seed: int, params: dict, out: str) -> int:
     except Exception as exc:  # noqa: BLE001 - recorded per configuration, the ensemble goes on
         row["analysis_error"] = f"{type(exc).__name__}: {exc}"
     row.update({f"n_{k}": v for k, v in res.stats.items()})
-    write_part(out, config_id, row, res.xy, res.xy0, branches, voids, stacks)
+    write_part(out, config_id, row, res.xy, res.xy0, branches, voids, stacks,
+               digest=params.get(RUN_DIGEST))
     return config_id
 
 

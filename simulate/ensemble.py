@@ -293,6 +293,21 @@ def resolve_defaults(params: dict) -> dict:
     return out
 
 
+#: The key of the parameters handed to a task that holds the run's digest of its physics
+#: parameters (:func:`params_digest`), which the task's part file records.
+RUN_DIGEST = "run_digest"
+
+
+def params_digest(params: dict, keys) -> str:
+    """A digest of the physics parameters ``keys`` of ``params``: a part file computed under
+    others (a stopped run's configuration still finishing on a Dask worker, after its folder
+    was emptied for a run of other parameters) is not this run's."""
+    import hashlib
+
+    text = json.dumps({k: params.get(k) for k in keys}, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
 def part_path(out, config_id: int) -> Path:
     """Path of the part file of one configuration."""
     return Path(out) / "parts" / f"config_{config_id:05d}.npz"
@@ -407,7 +422,8 @@ def run_config(config_id: int, seed: int, params: dict, out: str) -> int:
                    analysis_error=f"{type(exc).__name__}: {exc}")
     row.update({f"n_{k}": v for k, v in res.stats.items()})
     row["n_hairpin_nodes"] = sharp_nodes(res.xy, HAIRPIN_NODE_DEG)
-    write_part(out, config_id, row, res.xy, xy0, branches, voids, stacks)
+    write_part(out, config_id, row, res.xy, xy0, branches, voids, stacks,
+               digest=params.get(RUN_DIGEST))
     return config_id
 
 
@@ -427,7 +443,8 @@ def analysis_records(an):
             an.stacks.reindex(columns=scols).to_dict("records"))
 
 
-def write_part(out, config_id: int, row: dict, xy, xy0, branches=(), voids=(), stacks=()):
+def write_part(out, config_id: int, row: dict, xy, xy0, branches=(), voids=(), stacks=(),
+               digest: str | None = None):
     """Write the part file of one configuration atomically (read back by :func:`assemble`).
 
     Parameters
@@ -441,11 +458,15 @@ def write_part(out, config_id: int, row: dict, xy, xy0, branches=(), voids=(), s
         Final and initial node positions.
     branches, voids, stacks : lists of dict
         See :func:`analysis_records`.
+    digest : str, optional
+        The run's :data:`RUN_DIGEST` (the digest of its physics parameters): a resume keeps
+        only the parts of its own parameters.
     """
     # the process that computed the rod records its versions (a Dask worker's may differ
     # from the client's): params.json lists those of the rods kept (:func:`params_record`)
     meta = json.dumps({"row": row, "branches": list(branches), "voids": list(voids),
-                       "stacks": list(stacks), "computed_by": computing_versions()},
+                       "stacks": list(stacks), "computed_by": computing_versions(),
+                       "digest": digest},
                       default=lambda o: o.item() if hasattr(o, "item") else str(o))
     write_npz(part_path(out, config_id), xy=xy, xy0=xy0, meta=np.array(meta))
 
@@ -489,16 +510,18 @@ def _parts_versions(metas, recorded: dict) -> list[dict]:
     return runs
 
 
-def _kept_part(path, config_id: int, seed: int) -> dict | None:
-    """The record of a part file that is a complete result of this configuration (same id
-    and seed), else None: a truncated, garbled or foreign one is redone, so a resume never
-    fails on it."""
+def _kept_part(path, config_id: int, seed: int, digest: str | None = None) -> dict | None:
+    """The record of a part file that is a complete result of this configuration (same id,
+    seed and, when given, parameters' ``digest``), else None: a truncated, garbled or foreign
+    one is redone, so a resume never fails on it."""
     if not path.exists():
         return None
     try:
         meta, xy = _read_part(path)
         row = meta["row"]
         ok = (int(row["config_id"]) == config_id and int(row["seed"]) == int(seed)
+              # (a part written before parts recorded a digest is taken on its id and seed)
+              and (digest is None or meta.get("digest") in (None, digest))
               and xy.ndim == 2 and xy.shape[1] == 2 and bool(np.isfinite(xy).all()))
     except Exception:  # noqa: BLE001 - any unreadable part is simply redone
         return None
@@ -777,8 +800,10 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
         warnings.warn(f"{out}: {coarse}", CoarseSegmentsWarning, stacklevel=2)
     n = int(params["n_configs"])
     seeds = spawn_seeds(params["seed"], n)
+    digest = params_digest(params, _physics_keys(params) if physics_keys is None
+                           else physics_keys)
     kept = {i: meta for i in range(n)
-            if (meta := _kept_part(part_path(out, i), i, seeds[i])) is not None}
+            if (meta := _kept_part(part_path(out, i), i, seeds[i], digest)) is not None}
     todo = [i for i in range(n) if i not in kept]
     # the record's versions are those of the runs that computed the configurations kept
     record, mixed = params_record(params, raw if kept else None,
@@ -804,11 +829,12 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
                        disable=None if progress is None else not progress)
         try:
             if todo:
+                given = dict(params, **{RUN_DIGEST: digest})
                 if workers == 1 and not scheduler:
                     # inline executor runs at submit: submit one by one so the bar moves
-                    done = ((i, ex.submit(task, i, seeds[i], params, where)) for i in todo)
+                    done = ((i, ex.submit(task, i, seeds[i], given, where)) for i in todo)
                 else:
-                    ids = {ex.submit(task, i, seeds[i], params, where): i for i in todo}
+                    ids = {ex.submit(task, i, seeds[i], given, where): i for i in todo}
                     done = ((ids[f], f) for f in as_completed(ids))
                 for i, fut in done:
                     try:
@@ -831,7 +857,14 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
                          for i, (s, e) in sorted(failed.items())],
                         columns=["config_id", "seed", "error"])
     write_csv(out / "failures.csv", fail)
-    if todo:  # the configurations this run computed join the record's versions
+    if todo:
+        # a stopped run's configuration still finishing on a Dask worker may have written
+        # its part over this run's since: computed again here
+        given = dict(params, **{RUN_DIGEST: digest})
+        for i in range(n):
+            if i not in failed and _kept_part(part_path(out, i), i, seeds[i], digest) is None:
+                task(i, seeds[i], given, where)
+        # the configurations this run computed join the record's versions
         metas = [kept[i] if i in kept else _read_part(part_path(out, i))[0]
                  for i in range(n) if i not in failed]
         final, _ = params_record(params, record, _parts_versions(metas, record), False)
@@ -1355,5 +1388,6 @@ __all__ = ["run_ensemble", "report_failures", "run_config", "assemble", "minimiz
            "params_record",
            "METHOD_OPTIONS",
            "analysis_records", "write_part", "resolve_defaults", "PARAMETRIZATION",
+           "params_digest", "RUN_DIGEST",
            "summary_head",
            "CONFIG_COLUMNS", "BRANCH_COLUMNS", "VOID_COLUMNS"]

@@ -189,3 +189,39 @@ def test_nematic_cutoff_checked(tmp_path, extra):
     from crosssection.core.errors import ParameterError
     with pytest.raises(ParameterError, match="nematic-cutoff"):
         _run(["quench", *ARGS, "--seed", "11", *extra, "--out", str(tmp_path / "x")])
+
+
+def test_a_part_of_other_parameters_is_not_kept(first, tmp_path):
+    # a stopped Dask run's configuration finishing on a worker after its folder was emptied
+    # for a run of other parameters wrote its part there, and that run took it as its own
+    import shutil
+
+    other = tmp_path / "lam"
+    assert _run(["quench", *ARGS[:5], "3e4", *ARGS[6:], "--seed", "11",
+                 "--out", str(other)]) == 0
+    out = tmp_path / "o"
+    (out / "parts").mkdir(parents=True)
+    shutil.copy(other / "parts" / "config_00001.npz", out / "parts")
+    assert _run(["quench", *ARGS, "--seed", "11", "--out", str(out)]) == 0
+    pd.testing.assert_frame_equal(_configs(first), _configs(out))
+
+
+def test_a_part_written_over_during_the_run_is_computed_again(first, tmp_path, monkeypatch):
+    import shutil
+
+    other = tmp_path / "lam"
+    assert _run(["quench", *ARGS[:5], "3e4", *ARGS[6:], "--seed", "11",
+                 "--out", str(other)]) == 0
+    out = tmp_path / "w"
+    task = ensemble.run_config
+
+    def late_orphan(config_id, seed, params, where):
+        done = task(config_id, seed, params, where)
+        if config_id == 2 and not getattr(late_orphan, "done", False):
+            late_orphan.done = True  # the orphan lands once, after this run wrote its part
+            shutil.copy(other / "parts" / "config_00002.npz", out / "parts")
+        return done
+
+    monkeypatch.setattr(ensemble, "run_config", late_orphan)
+    assert _run(["quench", *ARGS, "--seed", "11", "--out", str(out)]) == 0
+    pd.testing.assert_frame_equal(_configs(first), _configs(out))
