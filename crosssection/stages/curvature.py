@@ -1532,7 +1532,7 @@ def _fork_zone_px(width_px, r_j, touching_px, smooth_px, merged_px=0.0):
     return max(2.0 * max(width_px, r_j), touching_px, merged_px + r_j) + 0.5 * (smooth_px - 1)
 
 
-def _merged_arcs(paths, at_node, radius, distance_px, thickness_px) -> dict:
+def _merged_arcs(prefixes, radius, distance_px, thickness_px) -> dict:
     """Arc length from a junction along which a stack's skeleton runs in ink wider than its
     own band (module docstring, step 3).
 
@@ -1544,10 +1544,8 @@ def _merged_arcs(paths, at_node, radius, distance_px, thickness_px) -> dict:
 
     Parameters
     ----------
-    paths : list of (P, 2) int arrays
-        Skeleton paths (row, col), from their first node to their last.
-    at_node : dict
-        Junction -> [(stack, end)].
+    prefixes : tuple
+        :func:`_junction_prefixes` of the skeleton paths (pixels, the contact's reach).
     radius : (M,) array
         Every stack's median inscribed radius, px.
     distance_px : 2-D array
@@ -1558,22 +1556,29 @@ def _merged_arcs(paths, at_node, radius, distance_px, thickness_px) -> dict:
     -------
     dict
         (stack, end) -> arc length, px, from the junction to the first skeleton pixel whose
-        inscribed radius is the band's own.
+        inscribed radius is the band's own (the prefix's length when none is).
     """
-    keys = [key for ks in at_node.values() for key in ks]
+    keys, flat, offs = prefixes
     if not keys:
         return {}
-    flat, offs = polyline.concat_paths(paths)
-    sids = np.array([sid for sid, _ in keys], np.int64)
-    walk, pos, idx, lens = polyline.walk_ends(offs, sids, np.array([e for _, e in keys], bool))
-    own = np.asarray(radius, float)[sids] + max(1.0, _MERGED_TOL_H * float(thickness_px))
-    first = lens.copy()
-    free = distance_px[flat[idx, 0], flat[idx, 1]] <= own[walk]
-    np.minimum.at(first, walk[free], pos[free])
-    # arc to that pixel: the steps of the walk up to it (a walk's points are consecutive)
-    d = np.diff(flat[idx].astype(np.float64), axis=0)
-    step = np.r_[0.0, np.hypot(d[:, 0], d[:, 1])] * (pos > 0)
-    arc = np.bincount(walk, weights=step * (pos <= first[walk]), minlength=len(keys))
+    lens = np.diff(offs)
+    walk = np.repeat(np.arange(len(keys)), lens)
+    own = np.asarray(radius, float)[[sid for sid, _ in keys]] \
+        + max(1.0, _MERGED_TOL_H * float(thickness_px))
+    rc = flat.astype(np.intp)  # skeleton pixels: whole numbers
+    free = distance_px[rc[:, 0], rc[:, 1]] <= own[walk]
+    # each prefix's first free pixel (the prefixes lie one after the other, in walk order)
+    first = offs[1:].copy()
+    w_free, at = np.unique(walk[free], return_index=True)
+    first[w_free] = np.flatnonzero(free)[at]
+    # arc to that pixel: the steps of the prefix up to it
+    d = np.diff(flat, axis=0)
+    step = np.r_[0.0, np.hypot(d[:, 0], d[:, 1])]
+    step[offs[:-1][lens > 0]] = 0.0
+    cum = np.cumsum(step)
+    last = np.minimum(first, offs[1:] - 1)
+    arc = np.where(lens > 0, cum[np.maximum(last, 0)] - cum[np.minimum(offs[:-1],
+                                                                        len(cum) - 1)], 0.0)
     return {key: float(a) for key, a in zip(keys, arc)}
 
 
@@ -1672,19 +1677,28 @@ def _first_far_kernel(pr, pc, offs, rad, group_lo, group_hi, gap_px):  # pragma:
     return out
 
 
-def _contact_arcs(paths, at_node, radius, reach, gap_px: float = _CONTACT_GAP_PX) -> dict:
+def _junction_prefixes(paths, at_node, reach):
+    """Every stack end at a junction and its path's first ``reach`` pixels from there, in one
+    flat array: ``(keys, flat, offs)``, key ``i``'s prefix ``flat[offs[i]:offs[i + 1]]``
+    (float, row and col), the keys junction after junction as ``at_node`` lists them."""
+    keys = [key for ks in at_node.values() for key in ks]
+    flat, offs = polyline.concat_paths([_prefix(paths[sid], end, reach) for sid, end in keys],
+                                       np.float64)
+    return keys, flat, offs
+
+
+def _contact_arcs(prefixes, at_node, radius, gap_px: float = _CONTACT_GAP_PX) -> dict:
     """:func:`contact_arc_px` of every stack end at a junction against the other ends there.
 
     Parameters
     ----------
-    paths : list of (P, 2) arrays
-        Stack paths.
+    prefixes : tuple
+        :func:`_junction_prefixes` of the stack paths (the prefix length, pixels, compared
+        from each junction).
     at_node : dict
         Junction -> list of (stack, end) meeting there.
     radius : (M,) float array
         Half width of every stack (median inscribed radius).
-    reach : int
-        Prefix length, pixels, compared from each junction.
     gap_px : float
         As in :func:`contact_arc_px`.
 
@@ -1693,18 +1707,14 @@ def _contact_arcs(paths, at_node, radius, reach, gap_px: float = _CONTACT_GAP_PX
     dict
         (stack, end) -> arc length, px.
     """
-    keys = [key for ks in at_node.values() for key in ks]
+    keys, flat, offs = prefixes
     if not keys:
         return {}
-    pre = [_prefix(paths[sid], end, reach) for sid, end in keys]
     sizes = np.array([len(ks) for ks in at_node.values()], np.int64)
     ends = np.cumsum(sizes)
     group_lo = np.repeat(ends - sizes, sizes)
     group_hi = np.repeat(ends, sizes)
-    lens = np.fromiter((len(p) for p in pre), np.int64, count=len(pre))
-    offs = np.zeros(len(pre) + 1, np.int64)
-    np.cumsum(lens, out=offs[1:])
-    flat = np.concatenate(pre) if offs[-1] else np.zeros((0, 2))
+    lens = np.diff(offs)
     rad = np.asarray(radius, np.float64)[np.array([sid for sid, _ in keys], np.int64)]
     first_far = _first_far_kernel(np.ascontiguousarray(flat[:, 0]),
                                   np.ascontiguousarray(flat[:, 1]), offs, rad, group_lo,
@@ -1780,8 +1790,9 @@ def stack_centrelines(graph, distance_px, *, thickness_px: float, smooth_px: int
     radius = median_radii_px(graph.paths, distance_px)
     # per band end at a junction: its skeleton from the junction, and the skeleton points of
     # the other bands there with the distance below which each touches it
-    contact = _contact_arcs(graph.paths, at_node, radius, reach)
-    merged = _merged_arcs(graph.paths, at_node, radius, distance_px, thickness_px)
+    prefixes = _junction_prefixes(graph.paths, at_node, reach)
+    contact = _contact_arcs(prefixes, at_node, radius)
+    merged = _merged_arcs(prefixes, radius, distance_px, thickness_px)
 
     # the inscribed ink radius at the junction of every stack end (0 at a free end)
     ends = np.array(graph.ends, np.int64).reshape(-1, 2)
