@@ -116,8 +116,8 @@ def check_degradations(*, blur_px=0.0, noise_sigma=0.0, jpeg_quality=None, **cou
     """Raise :class:`~crosssection.core.errors.ParameterError` for a degradation outside its
     range: ``blur_px`` and ``noise_sigma`` finite and >= 0, ``jpeg_quality`` None or a whole
     number in 1-100, every count in ``counts`` (specks, smears, pinholes) a whole number >= 0.
-    Out of range, a degradation was silently not applied (or clipped by OpenCV) while the
-    scene's options recorded it."""
+    Out of range, a degradation would not be applied (or OpenCV would clip it) while the
+    scene's options record it."""
     from crosssection.core.errors import ParameterError
 
     for name, v in (("blur_px", blur_px), ("noise_sigma", noise_sigma)):
