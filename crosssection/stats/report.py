@@ -1764,8 +1764,7 @@ def _selected_table(res: StatsResult) -> pd.DataFrame:
             "parameters [95 % interval]": "; ".join(ps),
             "runner-up law, BIC − BIC(selected)": runner,
             "goodness of fit": (r.p_text() or "not computed") + (
-                "; the data reject it: no law fitted here describes them (the table's other "
-                "laws were worse or set aside)"
+                f"; the data reject it at the {GAMMA_MISFIT_P:.0%} level"
                 if np.isfinite(r.pvalue) and r.pvalue < GAMMA_MISFIT_P else "")})
     return pd.DataFrame(rows)
 
