@@ -231,6 +231,22 @@ def test_relations_recover_constants(seed, slope, nbr):
     assert c == pytest.approx(T.EQ12_CONST) and r2 == pytest.approx(1.0)
 
 
+def test_a_configuration_without_a_branch_is_no_point_of_the_relations():
+    # at (0, 0) it took R^2 of eq14_slope from 0.00 to 0.97 (a hand-made empty scan; a rod
+    # that touches itself nowhere holds no stack either)
+    ens = _relations_ensemble(np.random.default_rng(5), n=12)
+    pc = T.per_config_table(ens)
+    pc["N_br"] = pc["N_br"] + np.random.default_rng(6).normal(0, 20, len(pc))  # scatter
+    ref = T.relations_table(ens, pc, {}).set_index("relation")
+    zero = pc.iloc[:1].copy()
+    zero[["config_id", "N_l", "N_br"]] = ["empty", 0, 0]
+    with pytest.warns(QualityWarning, match="1 of 13 configurations hold no branch"):
+        rel = T.relations_table(ens, pd.concat([pc, zero], ignore_index=True),
+                                {}).set_index("relation")
+    assert rel.loc["eq14_slope", "r2"] == pytest.approx(ref.loc["eq14_slope", "r2"])
+    assert rel.loc["eq14_slope", "n"] == ref.loc["eq14_slope", "n"]
+
+
 def test_relations_hold_no_row_equal_by_construction():
     # a configuration's E is the sum of its branches' energies (the simulator's contact
     # analysis here; a scan's summary sums its branches.csv), so <E> = <N_br><e> exactly and
