@@ -811,6 +811,7 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
     if mixed:
         warnings.warn(f"{out}: {mixed}", MixedVersionsWarning, stacklevel=2)
     task = run_config if task is None else task
+    given = dict(params, **{RUN_DIGEST: digest})  # the task's part records the digest
     failed = {}
     # nothing is written before the executor exists: a refused --scheduler or --workers
     # leaves no folder behind
@@ -829,7 +830,6 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
                        disable=None if progress is None else not progress)
         try:
             if todo:
-                given = dict(params, **{RUN_DIGEST: digest})
                 if workers == 1 and not scheduler:
                     # inline executor runs at submit: submit one by one so the bar moves
                     done = ((i, ex.submit(task, i, seeds[i], given, where)) for i in todo)
@@ -858,15 +858,16 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
                         columns=["config_id", "seed", "error"])
     write_csv(out / "failures.csv", fail)
     if todo:
-        # a stopped run's configuration still finishing on a Dask worker may have written
-        # its part over this run's since: computed again here
-        given = dict(params, **{RUN_DIGEST: digest})
-        for i in range(n):
-            if i not in failed and _kept_part(part_path(out, i), i, seeds[i], digest) is None:
+        metas = []
+        for i in (i for i in range(n) if i not in failed):
+            meta = _kept_part(part_path(out, i), i, seeds[i], digest)
+            if meta is None:
+                # a stopped run's configuration still finishing on a Dask worker wrote its
+                # part over this run's: computed again here
                 task(i, seeds[i], given, where)
+                meta = _read_part(part_path(out, i))[0]
+            metas.append(meta)
         # the configurations this run computed join the record's versions
-        metas = [kept[i] if i in kept else _read_part(part_path(out, i))[0]
-                 for i in range(n) if i not in failed]
         final, _ = params_record(params, record, _parts_versions(metas, record), False)
         if final != record:
             write_json(pfile, final)

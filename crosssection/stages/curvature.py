@@ -141,6 +141,7 @@ from scipy.spatial.distance import cdist
 from crosssection.core import polyline
 from crosssection.core.errors import ParameterError
 from crosssection.params import CURVATURE_METHODS as METHODS
+from crosssection.params import _number
 from crosssection.stages.junctions import median_radii_px
 
 __all__ = ["CurvatureProfile", "stack_curvature", "stack_profiles", "default_smooth_px",
@@ -891,8 +892,8 @@ def _tight_refits(kin, X, Y, S, start, length, half_w, i0, count, correct, shift
     np.cumsum(count, out=first[1:])
     k_abs = np.abs(kin)
     # a window turning by less than this holds no turn it could miss
-    peak = np.maximum.reduceat(k_abs * np.repeat(half_w, count), first[:-1]) \
-        if len(kin) else np.zeros(0)
+    # (every fitted path has a wanted sample: count >= 1)
+    peak = np.maximum.reduceat(k_abs * np.repeat(half_w, count), first[:-1])
     limit = 2.0 * _WINDOW_MAX_TURN
     for f in np.flatnonzero(peak > 0.25 * limit).tolist():
         a, b = first[f], first[f + 1]
@@ -1070,18 +1071,13 @@ def stack_curvature(path_rc, *, n_br, thickness_px, px_per_mm, closed=None, smoo
         noise and the window may be None, the noise 0), ``ends`` or ``method`` not one of
         theirs, ``trim_px`` neither one number nor two, a point of the path not finite.
     """
-    for name, v, least in (("thickness_px", thickness_px, 0.0), ("px_per_mm", px_per_mm, 0.0),
-                           ("n_br", n_br, 1.0 - 1e-9), ("window_px", window_px, 2.0),
-                           ("noise_var_per_mm2", noise_var_per_mm2, None)):
-        if v is None and name in ("window_px", "noise_var_per_mm2"):
-            continue
-        ok = (isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
-              and math.isfinite(float(v))
-              and (float(v) >= 0.0 if least is None else float(v) > least))
-        if not ok:
-            bound = ">= 0" if least is None else ("at least 1" if name == "n_br" else
-                                                  f"> {least:g}")
-            raise ParameterError(f"{name} must be a finite number {bound}, got {v!r}")
+    _number("thickness_px", thickness_px)
+    _number("px_per_mm", px_per_mm)
+    _number("n_br", n_br, minimum=1.0, allow_equal=True)
+    if window_px is not None:
+        _number("window_px", window_px, minimum=2.0)
+    if noise_var_per_mm2 is not None:
+        _number("noise_var_per_mm2", noise_var_per_mm2, allow_equal=True)
     if ends not in ("shift", "truncate"):
         raise ParameterError(f"ends must be 'shift' or 'truncate', got {ends!r}")
     if np.ndim(trim_px) and np.size(trim_px) != 2:
@@ -1558,27 +1554,20 @@ def _merged_arcs(prefixes, radius, distance_px, thickness_px) -> dict:
         (stack, end) -> arc length, px, from the junction to the first skeleton pixel whose
         inscribed radius is the band's own (the prefix's length when none is).
     """
-    keys, flat, offs = prefixes
+    keys, r, c, offs = prefixes
     if not keys:
         return {}
     lens = np.diff(offs)
     walk = np.repeat(np.arange(len(keys)), lens)
     own = np.asarray(radius, float)[[sid for sid, _ in keys]] \
         + max(1.0, _MERGED_TOL_H * float(thickness_px))
-    rc = flat.astype(np.intp)  # skeleton pixels: whole numbers
-    free = distance_px[rc[:, 0], rc[:, 1]] <= own[walk]
+    # (skeleton pixels: whole numbers)
+    free = distance_px[r.astype(np.intp), c.astype(np.intp)] <= own[walk]
     # each prefix's first free pixel (the prefixes lie one after the other, in walk order)
-    first = offs[1:].copy()
+    first = lens.copy()
     w_free, at = np.unique(walk[free], return_index=True)
-    first[w_free] = np.flatnonzero(free)[at]
-    # arc to that pixel: the steps of the prefix up to it
-    d = np.diff(flat, axis=0)
-    step = np.r_[0.0, np.hypot(d[:, 0], d[:, 1])]
-    step[offs[:-1][lens > 0]] = 0.0
-    cum = np.cumsum(step)
-    last = np.minimum(first, offs[1:] - 1)
-    arc = np.where(lens > 0, cum[np.maximum(last, 0)] - cum[np.minimum(offs[:-1],
-                                                                        len(cum) - 1)], 0.0)
+    first[w_free] = np.flatnonzero(free)[at] - offs[:-1][w_free]
+    arc = _path_lengths(r, c, offs[:-1], offs[:-1] + np.minimum(first, lens - 1) + 1)
     return {key: float(a) for key, a in zip(keys, arc)}
 
 
@@ -1678,13 +1667,12 @@ def _first_far_kernel(pr, pc, offs, rad, group_lo, group_hi, gap_px):  # pragma:
 
 
 def _junction_prefixes(paths, at_node, reach):
-    """Every stack end at a junction and its path's first ``reach`` pixels from there, in one
-    flat array: ``(keys, flat, offs)``, key ``i``'s prefix ``flat[offs[i]:offs[i + 1]]``
-    (float, row and col), the keys junction after junction as ``at_node`` lists them."""
+    """Every stack end at a junction and its path's first ``reach`` pixels from there, in flat
+    arrays: ``(keys, rows, cols, offs)``, key ``i``'s prefix at ``offs[i]:offs[i + 1]``
+    (float), the keys junction after junction as ``at_node`` lists them."""
     keys = [key for ks in at_node.values() for key in ks]
-    flat, offs = polyline.concat_paths([_prefix(paths[sid], end, reach) for sid, end in keys],
-                                       np.float64)
-    return keys, flat, offs
+    r, c, offs = _flat_paths([_prefix(paths[sid], end, reach) for sid, end in keys])
+    return keys, r, c, offs
 
 
 def _contact_arcs(prefixes, at_node, radius, gap_px: float = _CONTACT_GAP_PX) -> dict:
@@ -1707,7 +1695,7 @@ def _contact_arcs(prefixes, at_node, radius, gap_px: float = _CONTACT_GAP_PX) ->
     dict
         (stack, end) -> arc length, px.
     """
-    keys, flat, offs = prefixes
+    keys, r, c, offs = prefixes
     if not keys:
         return {}
     sizes = np.array([len(ks) for ks in at_node.values()], np.int64)
@@ -1716,14 +1704,11 @@ def _contact_arcs(prefixes, at_node, radius, gap_px: float = _CONTACT_GAP_PX) ->
     group_hi = np.repeat(ends, sizes)
     lens = np.diff(offs)
     rad = np.asarray(radius, np.float64)[np.array([sid for sid, _ in keys], np.int64)]
-    first_far = _first_far_kernel(np.ascontiguousarray(flat[:, 0]),
-                                  np.ascontiguousarray(flat[:, 1]), offs, rad, group_lo,
-                                  group_hi, float(gap_px))
+    first_far = _first_far_kernel(r, c, offs, rad, group_lo, group_hi, float(gap_px))
     # an end whose junction has no other end with a prefix has nothing to touch
     filled = (lens > 0).astype(np.int64)
     has_other = np.repeat(np.add.reduceat(filled, ends - sizes), sizes) - filled > 0
-    arc = _path_lengths(np.ascontiguousarray(flat[:, 0]), np.ascontiguousarray(flat[:, 1]),
-                        offs[:-1], offs[:-1] + np.minimum(first_far, lens - 1) + 1)
+    arc = _path_lengths(r, c, offs[:-1], offs[:-1] + np.minimum(first_far, lens - 1) + 1)
     arc[(lens < 2) | (first_far < 1) | ~has_other] = 0.0
     return dict(zip(keys, arc.tolist()))
 

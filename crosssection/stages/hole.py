@@ -1225,17 +1225,17 @@ def find_hole(rgb, ink_mask, *, min_confidence: float = 0.5, path=None) -> Hole:
     small = np.ascontiguousarray(ink[::2, ::2]).view(np.uint8)
     n, lab = cv2.connectedComponents(small, connectivity=8)
     big = ()  # the labels of the rod's pieces, when it is in more than one
+    largest = 1
     if n > 2:
         area = np.bincount(lab[small.view(bool)], minlength=n)
         area[0] = small.size - np.count_nonzero(small)
         largest = 1 + int(np.argmax(area[1:]))
-        ink = _within_upsampled(ink, lab == largest)
         big = np.flatnonzero(area >= PIECE_FRACTION * area[largest])
         big = big[big > 0] if len(big) > 2 else ()
-    elif n == 2:
-        # one piece on the half-resolution lattice: a speck off it (one pixel at an odd row
-        # or column) is still in the full-resolution ink, and grew a plateless hole by half
-        ink = _within_upsampled(ink, lab == 1)
+    if n > 1:
+        # the largest piece at full resolution; with it alone on the lattice too: a speck
+        # off the lattice (one pixel at an odd row or column) grew a plateless hole by half
+        ink = _within_upsampled(ink, lab == largest)
     border = _boundary_points(ink)
     env = _fit_points(border, None, None, None, path)
     env_conf = _envelope_confidence(border, env)
