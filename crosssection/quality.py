@@ -149,7 +149,10 @@ generator's typical, thick dense, tangential and render scenes; an independent g
 typical, thick and tangential scans; compacted renders at epsilon 14-30), none flagged; 0.14-0.61
 on them analysed with ``px_per_mm`` off by a factor 0.6, 0.7, 0.8, 1.25, 1.4 or 1.6, flagged
 on 59 of the 62 where the assumed h stays >= 3 px (missed: three sample scans at 0.6, h = 3
-px, 0.14-0.24 against a limit of 0.25). Blur moves the ink's edges and thin sheets scatter:
+px, 0.14-0.24 against a limit of 0.25). Where the true h is 3 px the limit misses a scale
+1.25 times too large too: network scans drawn at 30 px/mm and read at 37.5 px/mm (4 seeds,
+calibration given, no resolution in the file) sit 0.12-0.18 layer off, as blurred scans
+with the right scale do there, and the rod reads 16-20 % short unflagged. Blur moves the ink's edges and thin sheets scatter:
 network scenes of 40 stacks (4 seeds per cell) read at most 0.18/0.10/0.07/0.09 at h =
 3/4/5/6 px and blur up to 1.5 px, none flagged; at 2 px 2/1/0/0 of 4 are flagged, at 3 px
 3/4/3/1 (counts exact on every scene up to 2 px). Hence a limit of 0.75 px of width below

@@ -34,6 +34,9 @@ __all__ = ["WidthWeights", "estimate_noise_scale", "estimate_growth", "width_wei
 NOISE_LAYERS = 0.3
 #: Growth of the width error per layer beyond the first (module docstring).
 NOISE_GROWTH = 0.05
+#: Largest layer estimate the linear system takes in, beyond it missing: a band of a million
+#: layers is a million pixels wide at h >= 1 px, wider than any scan the loader opens.
+LAYERS_EST_MAX = 1e6
 
 
 @dataclass(frozen=True)

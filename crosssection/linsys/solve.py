@@ -39,7 +39,8 @@ from crosssection.linsys.equations import (conservation_equations, paper_system,
                                            reliability_score, rod_end_junctions,
                                            select_width_stacks, sparse_rows)
 from crosssection.linsys.milp import milp_solve
-from crosssection.linsys.noise import NOISE_LAYERS, WidthWeights, width_weights
+from crosssection.linsys.noise import (LAYERS_EST_MAX, NOISE_LAYERS, WidthWeights,
+                                       width_weights)
 from crosssection.linsys.rank import system_diagnostics, width_fixed_stacks
 from crosssection.linsys.search import integer_refine, objective
 
@@ -411,6 +412,9 @@ def solve_branch_counts(graph, packs: dict, layers_est, *, reliability=None,
     e_raw = np.asarray(layers_est, dtype=float).reshape(-1)
     if len(e_raw) != M:
         raise ValueError(f"layers_est has {len(e_raw)} values for {M} stacks")
+    # an estimate no scan can hold is missing, as a NaN is (cast to integers, 1e19 layers
+    # wrapped round to a negative count; 1e12 sent the MILP out of memory)
+    e_raw = np.where(np.abs(e_raw) <= LAYERS_EST_MAX, e_raw, np.nan)
     opts = _Options(noise_layers=noise_layers, width_fraction=width_fraction, window=window,
                     soft_penalty=soft_penalty, robust_penalty=robust_penalty, start=start,
                     milp_max_stacks=milp_max_stacks, time_limit_s=time_limit_s,

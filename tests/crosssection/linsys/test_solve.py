@@ -231,3 +231,18 @@ def test_milp_needs_integer_refinement(tiny_graph):
     fg = tiny_graph([(0, 1)], {0: "end", 1: "end"})
     with pytest.raises(ValueError, match="integer_refinement"):
         solve_branch_counts(fg, {}, np.ones(1), method="milp", integer_refinement=False)
+
+
+@pytest.mark.parametrize("big", [1e12, 1e19, 1e300, -1e19])
+def test_absurd_estimates_are_missing_not_counts(big, tiny_graph):
+    """An estimate beyond any scan's band (1e19 layers, cast to integers, wrapped round to a
+    negative count; 1e12 sent the MILP out of memory) is missing data, as a NaN is: alone it
+    reads one layer, at a junction the others' conservation fills it."""
+    fg = tiny_graph([(0, 1)], {0: "end", 1: "end"})
+    res = solve_branch_counts(fg, {}, np.array([big]))
+    assert res.n_br.tolist() == [1]
+    fg, packs = _y_junction()
+    res = solve_branch_counts(fg, packs, np.array([big, 2.0, 3.0]))
+    nan = solve_branch_counts(fg, packs, np.array([np.nan, 2.0, 3.0]))
+    assert res.n_br.tolist() == nan.n_br.tolist() == [5, 2, 3]
+    assert res.conservation_residual == 0
