@@ -374,7 +374,7 @@ def step_titles(thresholds: dict | None = None) -> list:
 
 
 def steps_figure(rgb, mask_threshold, mask_clean, skeleton, junction_centers_rc, *,
-                 titles=None, axes=None):
+                 titles=None, axes=None, px_per_mm=None):
     """The four steps of paper Fig. 2: raw scan, thresholded, cleaned, skeleton + junctions.
 
     Parameters
@@ -385,6 +385,9 @@ def steps_figure(rgb, mask_threshold, mask_clean, skeleton, junction_centers_rc,
     titles : list of 4 str, optional
     axes : sequence of 4 matplotlib axes, optional
         Draw into these instead of a new figure.
+    px_per_mm : float, optional
+        The scan's resolution: a scale bar in mm on the raw scan's panel (the four panels
+        share one scale).
 
     Returns
     -------
@@ -429,6 +432,8 @@ def steps_figure(rgb, mask_threshold, mask_clean, skeleton, junction_centers_rc,
     for ax, t in zip(axes, titles):
         ax.set_title(t, fontsize=10)
         ax.set_axis_off()
+    if px_per_mm:
+        _scale_bar(axes[0], float(px_per_mm), W, img)
     if own:
         fig.subplots_adjust(left=0.01, right=0.99, bottom=0.01, top=0.92, wspace=0.03)
     return fig

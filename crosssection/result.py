@@ -208,7 +208,8 @@ class AnalysisResult:
         if kind == "steps":
             return F.steps_figure(self.rgb, self.mask_threshold, self.mask_clean, self.skeleton,
                                   self.graph_junction_centers(), axes=ax,
-                                  titles=self._step_titles())
+                                  titles=self._step_titles(),
+                                  px_per_mm=getattr(self.params, "px_per_mm", None))
         if kind == "curvature":
             return F.curvature_figure(self.profiles, self.stacks, ax=ax)
         if kind == "widths":
@@ -340,6 +341,7 @@ class AnalysisResult:
         return write_step_images(out_dir, self.rgb, self.mask_threshold, self.mask_clean,
                                  self.skeleton, self.graph_junction_centers(), figure=figure,
                                  titles=self._step_titles(),
+                                 px_per_mm=getattr(self.params, "px_per_mm", None),
                                  description=json.dumps(made_from, default=str,
                                                         sort_keys=True))
 
@@ -366,10 +368,11 @@ def _remove_if_empty(folder: Path, created: bool) -> None:
 
 
 def write_step_images(out_dir, rgb, mask_threshold, mask_clean, skeleton, junction_centers_rc,
-                      *, figure: bool = True, titles=None, description: str | None = None
-                      ) -> dict:
+                      *, figure: bool = True, titles=None, description: str | None = None,
+                      px_per_mm: float | None = None) -> dict:
     """Write the four step images of paper Fig. 2 (see ``AnalysisResult.write_steps``);
-    ``titles``: the four panel titles of ``steps.png`` (``figures.steps_figure``). Each PNG's
+    ``titles``: the four panel titles of ``steps.png`` (``figures.steps_figure``), whose raw
+    panel has a scale bar when ``px_per_mm`` is given. Each PNG's
     text records the package version (``Software``) and ``description`` (what the images
     were made from) when given, as the figures do."""
     import cv2
@@ -412,6 +415,6 @@ def write_step_images(out_dir, rgb, mask_threshold, mask_clean, skeleton, juncti
         from crosssection.core.fileio import save_figure
 
         fig = steps_figure(raw, mask_threshold, mask_clean, skeleton, junction_centers_rc,
-                           titles=titles)
+                           titles=titles, px_per_mm=px_per_mm)
         paths["steps"] = save_figure(fig, out / "steps.png", description=description)
     return paths

@@ -105,7 +105,7 @@ def add_subparser(sub) -> argparse.ArgumentParser:
     """Register ``samples``: ``foldstat samples DIR [--force]``."""
     p = sub.add_parser("samples", help="copy the bundled sample scans (with their truth) "
                                        "into a folder",
-                       description=__doc__.split("\n\n")[0])
+                       description=__doc__.split("\n\n")[0].replace("``", ""))
     p.add_argument("dest", metavar="DIR", help="destination folder (created)")
     p.add_argument("--force", action="store_true",
                    help="overwrite files already there (default: refuse)")

@@ -771,6 +771,7 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
         The run adds configurations to an ensemble computed under other package or library
         versions than its own (:func:`params_record`).
     """
+    given = out  # named in messages as the caller gave it
     out = Path(out)
     # the workers write the parts: a Dask worker runs in its own working folder, where a
     # relative path names another place than the client's
@@ -797,7 +798,7 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
                               + ", ".join(diff) + "); use another --out", path=out)
     coarse = coarse_segments_doubt(params)
     if coarse:
-        warnings.warn(f"{out}: {coarse}", CoarseSegmentsWarning, stacklevel=2)
+        warnings.warn(f"{given}: {coarse}", CoarseSegmentsWarning, stacklevel=2)
     n = int(params["n_configs"])
     seeds = spawn_seeds(params["seed"], n)
     digest = params_digest(params, _physics_keys(params) if physics_keys is None
@@ -809,7 +810,7 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
     record, mixed = params_record(params, raw if kept else None,
                                   _parts_versions(kept.values(), raw or {}), bool(todo))
     if mixed:
-        warnings.warn(f"{out}: {mixed}", MixedVersionsWarning, stacklevel=2)
+        warnings.warn(f"{given}: {mixed}", MixedVersionsWarning, stacklevel=2)
     task = run_config if task is None else task
     given = dict(params, **{RUN_DIGEST: digest})  # the task's part records the digest
     failed = {}

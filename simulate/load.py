@@ -301,18 +301,22 @@ def plot_configuration(xy, *, ax=None, stacks: bool = True, lam: float = LAMBDA,
         an = analyze_rod(xy, lam=lam, contact_distance=contact_distance)
         n_br = an.stacks["n_br"].to_numpy(int) if len(an.stacks) else np.zeros(0, int)
         if len(n_br):
-            cmap = colormaps["viridis"]
-            top = max(int(n_br.max()), 2)
-            lc = LineCollection([np.asarray(line, float) for line in an.stack_lines],
-                                colors=[cmap((n - 1) / (top - 1)) for n in n_br],
-                                linewidths=1.0 + 1.2 * n_br, alpha=0.75, zorder=2)
-            ax.add_collection(lc)
             from matplotlib.cm import ScalarMappable
-            from matplotlib.colors import Normalize
+            from matplotlib.colors import BoundaryNorm
 
-            # the colours read as counts: the same map and range as the lines'
-            bar = ax.figure.colorbar(ScalarMappable(Normalize(1, top), cmap), ax=ax,
-                                     shrink=0.8, ticks=range(1, top + 1))
+            top = max(int(n_br.max()), 2)
+            # one colour per count, as the lines are drawn: a count is not a continuum
+            cmap = colormaps["viridis"].resampled(top)
+            norm = BoundaryNorm(np.arange(0.5, top + 1.0), top)
+            lc = LineCollection([np.asarray(line, float) for line in an.stack_lines],
+                                colors=cmap(norm(n_br)), linewidths=1.0 + 1.2 * n_br,
+                                alpha=0.75, zorder=2)
+            ax.add_collection(lc)
+            # beside the axes and as tall as they are (the equal aspect leaves them shorter
+            # than the figure, where a bar of the figure's height stood apart)
+            cax = ax.inset_axes([1.04, 0.0, 0.045, 1.0])
+            bar = ax.figure.colorbar(ScalarMappable(norm, cmap), cax=cax,
+                                     ticks=range(1, top + 1))
             bar.set_label("branches per stack $n_{br}$")
         # two lines: one would be wider than the axes of the default figure
         text += (f": {an.n_stacks} stacks, {an.n_branches} branches, "

@@ -263,6 +263,8 @@ def check_writable(path) -> None:
         from crosssection.core.errors import OutputError
 
         why = exc.strerror or type(exc).__name__
+        if exc.errno == errno.ENOENT:  # an existing folder that takes no files (/proc)
+            why = "it takes no new files"
         raise OutputError(f"cannot be created: {probe} cannot be written ({why})",
                           folder) from None
 

@@ -177,8 +177,11 @@ class WidthLawFit:
 
     def formula(self) -> str:
         """The law as an equation, in mm: ``w = a + b n (+ c n^2 or + r sqrt(n)) mm``."""
-        bend = (f" {self.quadratic_mm:+.2e} n^2" if self.quadratic_mm else
-                f" {self.root_mm:+.4f} sqrt(n)" if self.root_mm else "")
+        def term(x, fmt):  # a sign spaced as an operator: "+ 0.0495", "- 1.00e-03"
+            return f" {'-' if x < 0 else '+'} {abs(x):{fmt}}"
+
+        bend = (term(self.quadratic_mm, ".2e") + " n^2" if self.quadratic_mm else
+                term(self.root_mm, ".4f") + " sqrt(n)" if self.root_mm else "")
         return f"w = {self.offset_mm:.4f} + {self.step_mm:.4f} n{bend} mm"
 
     def describe(self) -> str:

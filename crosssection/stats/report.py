@@ -374,7 +374,7 @@ def _count_mean(r: F.FitResult, top: int = 10_000) -> float:
 
 def _fit_text(r: F.FitResult) -> str:
     p = r.p_text()
-    return r.label() + (f", {p}" if p else "")
+    return r.label() + (f", GOF {p}" if p else "")
 
 
 def _curve(r: F.FitResult, params, xs, cut, count: bool):
@@ -969,14 +969,17 @@ def e_vs_nbr_figure(ens: Ensemble, colors=None):
             # every integer in the range: a stack size without branches is a gap (NaN),
             # where the line breaks instead of joining its neighbours across it
             st = st.reindex(np.arange(int(st.index.min()), int(st.index.max()) + 1))
+            ms = 4 if reg is None else 2
             ax.errorbar(st.index, st["mean"], yerr=st["sem"].fillna(0), fmt="o" + ls, color=c,
-                        ms=4 if reg is None else 2, lw=1, capsize=2,
-                        alpha=1 if reg is None else 0.6,
+                        ms=ms, lw=1, capsize=2, alpha=1 if reg is None else 0.6,
                         label=f"{name[s]}: {REGION_WORDS[reg or 'all']}")
+            one = (st["size"] == 1).to_numpy()  # one value: a mean without an error
+            ax.plot(st.index[one], st["mean"].to_numpy()[one], "o", ms=ms, mfc="white",
+                    mec=c, ls="none", alpha=1 if reg is None else 0.6)
     ax.set(xlabel="number of branches in the stack $n_{br}$",
            ylabel=r"mean branch energy $\langle e\rangle$ (dimensionless)",
            title="mean branch energy against $n_{br}$\n" r"(mean $\pm$ standard error over "
-                 "a scan's stacks, a simulation's branches)")
+                 "a scan's stacks, a simulation's branches; hollow: a single value)")
     ax.xaxis.get_major_locator().set_params(integer=True)
     ax.legend(fontsize=7, frameon=False, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     return fig

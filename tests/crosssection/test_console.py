@@ -224,3 +224,13 @@ def test_help_or_version_that_cannot_be_written_is_an_error(main, argv, monkeypa
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert err == "error: output: No space left on device\n"
+
+
+def test_no_help_text_shows_docstring_markup():
+    # a terminal shows ``literal`` as typed: the descriptions and helps drop the backquotes
+    commands, _ = console.registered_subcommands()
+    for name in commands:
+        sub = _subparsers(console.build_parser([name])).choices[name]
+        assert "``" not in (sub.description or ""), name
+        for action in sub._actions:
+            assert "``" not in (action.help or ""), f"{name} {action.dest}"

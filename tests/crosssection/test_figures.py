@@ -91,6 +91,26 @@ def test_steps_figure(tmp_path):
     assert Image.open(out).size[0] > Image.open(out).size[1]
 
 
+def test_the_steps_of_a_result_have_a_scale_bar_at_its_scale(tmp_path):
+    # the four panels share one scale: one bar, on the raw scan, in mm at the scan's px_per_mm
+    from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
+
+    from crosssection import analyze
+    from crosssection.truth.network import make_scene
+
+    sc = make_scene(seed=3, n_stacks=12, max_layers=3)
+    for ppm in (50.0, 25.0):
+        res = analyze(sc.rgb, px_per_mm=ppm, thickness_mm=0.1 * 50.0 / ppm,
+                      calibration=sc.calibration if ppm == 50.0 else None, warn=False)
+        fig = res.plot("steps")
+        bars = [[a for a in ax.artists if isinstance(a, AnchoredSizeBar)] for ax in fig.axes]
+        assert [len(b) for b in bars] == [1, 0, 0, 0]
+        mm = float(bars[0][0].txt_label.get_text().split()[0])
+        assert 0.08 <= mm * ppm / sc.rgb.shape[1] <= 0.2
+    paths = res.write_steps(tmp_path / "steps")
+    assert paths["steps"].is_file()
+
+
 @pytest.mark.parametrize("method", ["auto", "fixed"])
 def test_steps_figure_names_the_threshold_used(method):
     # the threshold panel's title is the rule and cuts of this analysis, not a fixed text

@@ -225,3 +225,14 @@ def test_a_part_written_over_during_the_run_is_computed_again(first, tmp_path, m
     monkeypatch.setattr(ensemble, "run_config", late_orphan)
     assert _run(["quench", *ARGS, "--seed", "11", "--out", str(out)]) == 0
     pd.testing.assert_frame_equal(_configs(first), _configs(out))
+
+
+def test_every_warning_names_the_folder_as_given(tmp_path, capsys):
+    # one run's lines name one folder: "out/" throughout, not "out" in some and "out/" in others
+    from crosssection.console import main
+
+    out = f"{tmp_path / 'q'}/"
+    assert main(["quench", *ARGS, "--seed", "11", "--out", out]) == 0
+    lines = capsys.readouterr().err.splitlines()
+    assert any("segments" in ln for ln in lines)  # N = 60: the coarse-segments warning
+    assert lines and all(ln.startswith(f"warning: {out}: ") for ln in lines), lines

@@ -47,9 +47,21 @@ def test_plot_configuration_draws_rod_and_stacks(sim):
     n_stacks = int(ens.configs["n_stacks"].iloc[0])
     assert len(ax.collections[0].get_segments()) == n_stacks
     assert f"{n_stacks} stacks" in ax.get_title()
-    # the colours read as counts: a colour bar of whole n_br from 1
-    bar = fig.axes[1]
+    # the colours read as counts: a colour bar of whole n_br from 1, one colour each, as
+    # tall as the axes beside it
+    (bar,) = ax.child_axes
     assert "n_{br}" in bar.get_ylabel() and bar.get_yticks()[0] == 1
+    top = int(ens.stacks.loc[ens.stacks["config_id"] == ens.stacks["config_id"].iloc[0],
+                             "n_br"].max())
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.collections import QuadMesh
+
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    fig.draw(renderer)
+    (solids,) = [c for c in bar.collections if isinstance(c, QuadMesh)]
+    assert len(np.unique(solids.get_facecolors(), axis=0)) == max(top, 2)
+    a, b = ax.get_window_extent(renderer), bar.get_window_extent(renderer)
+    assert abs(a.height - b.height) < 1 and b.x0 > a.x1
     bare = Figure().add_subplot()
     assert plot_configuration(ens.rod(0), ax=bare, stacks=False, wall_radius=0.2) is bare.figure
     assert not bare.collections and len(bare.patches) == 1
@@ -79,7 +91,8 @@ def test_plot_keeps_title_labels_and_colour_bar_inside_the_figure(sim):
         fig = ens.plot(config)
         renderer = FigureCanvasAgg(fig).get_renderer()
         fig.draw(renderer)
-        ax, bar = fig.axes
+        (ax,) = fig.axes
+        (bar,) = ax.child_axes
         texts = {"title": ax.title, "x label": ax.xaxis.label, "y label": ax.yaxis.label,
                  "colour bar label": bar.yaxis.label}
         assert "stacks" in ax.get_title() and bar.get_ylabel()

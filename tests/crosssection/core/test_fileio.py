@@ -224,3 +224,20 @@ def test_a_loop_of_symbolic_links_as_the_output_is_named_so(tmp_path):
     (tmp_path / "real").mkdir()
     (tmp_path / "link").symlink_to(tmp_path / "real")
     check_out(tmp_path / "link")  # a link to a folder is that folder
+
+
+def test_a_folder_that_takes_no_files_is_not_said_to_be_missing(tmp_path, monkeypatch):
+    # /proc exists but refuses new files with ENOENT: "No such file or directory" about a
+    # folder that exists contradicts itself
+    import tempfile
+
+    def refuse(*args, **kwargs):
+        raise FileNotFoundError(errno.ENOENT, "No such file or directory")
+
+    monkeypatch.setattr(tempfile, "NamedTemporaryFile", refuse)
+    from crosssection.core.errors import OutputError
+
+    with pytest.raises(OutputError) as info:
+        fileio.check_writable(tmp_path / "out")
+    assert "takes no new files" in str(info.value)
+    assert "No such file" not in str(info.value)

@@ -230,3 +230,14 @@ def test_a_scale_given_wrong_is_named_in_the_flag():
     flag = next(f for f in res.quality if f.code == "no_calibration")
     assert res.summary["width_law"]["ok"]
     assert "less than a sheet" in flag.message and "px_per_mm" in flag.message
+
+
+def test_the_law_is_written_with_spaced_signs():
+    from crosssection.stages.widthlaw import WidthLawFit
+
+    fit = WidthLawFit(ok=True, offset_mm=-0.0038, step_mm=0.0976, contrast=0.9, n_stacks=30,
+                      n_junctions=10, root_mm=0.0495)
+    assert fit.formula() == "w = -0.0038 + 0.0976 n + 0.0495 sqrt(n) mm"
+    fit = WidthLawFit(ok=True, offset_mm=0.01, step_mm=0.1, contrast=0.9, n_stacks=30,
+                      n_junctions=10, quadratic_mm=-0.001)
+    assert fit.formula() == "w = 0.0100 + 0.1000 n - 1.00e-03 n^2 mm"

@@ -464,3 +464,37 @@ def test_the_branch_energy_error_bars_count_a_stack_once():
     # without stack ids (a simulation) every branch is its own value
     sim = _means_by_count(br.drop(columns="stack_id"))
     assert sim.loc[3, "size"] == 6 and sim.loc[2, "sem"] == 0.0
+
+
+def test_a_single_value_is_drawn_hollow_and_the_title_says_so():
+    # n_br = 3 holds two stacks (a mean with an error), n_br = 2 one stack (no error bar):
+    # that point is hollow, so that a reader does not take it for a mean of several
+    import matplotlib.pyplot as plt
+
+    br = pd.DataFrame({"set": "s", "config_id": "c", "stack_id": [0, 0, 0, 1, 1, 1, 2, 2],
+                       "n_br": [3, 3, 3, 3, 3, 3, 2, 2], "e": [1, 1, 1, 3, 3, 3, 5, 5.0],
+                       "region": "none"})
+    ens = Ensemble(pd.DataFrame({"set": ["s"], "config_id": ["c"]}).reindex(columns=CONFIG_COLS),
+                   br.reindex(columns=BRANCH_COLS),
+                   pd.DataFrame(columns=STACK_COLS), pd.DataFrame(columns=VOID_COLS))
+    fig = e_vs_nbr_figure(ens)
+    ax = fig.axes[0]
+    hollow = [ln for ln in ax.lines if ln.get_markerfacecolor() in ("white", (1, 1, 1, 1))
+              and len(ln.get_xdata())]
+    assert len(hollow) == 1
+    assert list(hollow[0].get_xdata()) == [2] and list(hollow[0].get_ydata()) == [5.0]
+    assert "hollow: a single value" in ax.get_title()
+    plt.close(fig)
+
+
+def test_the_legends_name_the_goodness_of_fit_p_value():
+    from crosssection.stats.report import _fit_text
+
+    class R:
+        def label(self):
+            return "Gamma alpha=0.3 chi=700"
+
+        def p_text(self):
+            return "p = 0.01"
+
+    assert _fit_text(R()) == "Gamma alpha=0.3 chi=700, GOF p = 0.01"
