@@ -548,12 +548,13 @@ def _reject_unknown(values: dict) -> None:
         raise ParameterError(f"unknown parameter {bad[0]!r}; known: {', '.join(PARAM_NAMES)}")
 
 
-def _number(name, value, *, minimum=0.0, allow_equal=False, integer=False):
+def _number(name, value, *, minimum=0.0, allow_equal=False, integer=False,
+            maximum=math.inf):
     if isinstance(value, bool) or not isinstance(value, (int, float)) and \
             not hasattr(value, "__float__"):
         raise ParameterError(f"{name} must be a number, got {value!r}")
     bound = (f" {'>=' if allow_equal else '>'} {minimum:g}" if math.isfinite(minimum)
-             else "")
+             else "") + (f" and <= {maximum:g}" if math.isfinite(maximum) else "")
     try:
         v = float(value)
     except (TypeError, ValueError):
@@ -562,7 +563,7 @@ def _number(name, value, *, minimum=0.0, allow_equal=False, integer=False):
         # an int (or Fraction) beyond the float range: its repr may run to any length
         raise ParameterError(f"{name} must be a finite number{bound}, got a number beyond "
                              "the floating-point range") from None
-    if not math.isfinite(v) or v < minimum or (v == minimum and not allow_equal):
+    if not math.isfinite(v) or v < minimum or (v == minimum and not allow_equal) or v > maximum:
         raise ParameterError(f"{name} must be a finite number{bound}, got {value!r}")
     if integer:
         if v != int(v):

@@ -129,7 +129,14 @@ def grouped_axes(groups, rows, cols, pos, n_groups: int):
 
 
 def _as_points(path_rc) -> np.ndarray:
-    return np.asarray(path_rc, dtype=np.float64).reshape(-1, 2)
+    p = np.asarray(path_rc, dtype=np.float64)
+    if p.size and (p.ndim != 2 or p.shape[1] != 2):
+        # reshaped, an (N, 3) array read as a path of 1.5 N points
+        from crosssection.core.errors import ParameterError
+
+        raise ParameterError(f"a path must be an (N, 2) array of (row, col) points, got "
+                             f"shape {p.shape}")
+    return p.reshape(-1, 2)
 
 
 def _ring(p: np.ndarray) -> np.ndarray:
@@ -256,6 +263,11 @@ def _smooth_into(x, y, k, closed, proj, ox, oy):
 
 
 def _half_window(window_px, n: int, closed: bool) -> int:
+    if isinstance(window_px, bool) or not np.isfinite(window_px) or window_px < 0:
+        from crosssection.core.errors import ParameterError
+
+        raise ParameterError(f"the smoothing window must be a finite number of points >= 0, "
+                             f"got {window_px!r}")
     k = max(0, int(window_px)) // 2
     return max(0, min(k, (n - 1) // 2))
 

@@ -29,6 +29,7 @@ import pandas as pd
 
 from crosssection.core.errors import ParameterError
 from crosssection.core.schema import BRANCH_COLUMNS
+from crosssection.params import _number
 
 __all__ = ["bending_energy", "energy_density", "stack_energies", "branch_table",
            "rod_length_mm"]
@@ -51,6 +52,8 @@ def energy_density(kappa_per_mm, kappa_c_per_mm=None) -> np.ndarray:
     """
     k = np.abs(np.asarray(kappa_per_mm, dtype=np.float64))
     f = k * k
+    if kappa_c_per_mm is not None and np.isnan(kappa_c_per_mm):
+        raise ParameterError("plastic threshold kappa_c is NaN (None or inf: purely elastic)")
     if kappa_c_per_mm is not None and np.isfinite(kappa_c_per_mm):
         kc = float(kappa_c_per_mm)
         if kc <= 0:
@@ -87,8 +90,11 @@ def bending_energy(kappa_per_mm, s_mm, *, rod_length_mm, kappa_c_per_mm=None,
     s = np.asarray(s_mm, dtype=np.float64)
     if k.shape != s.shape:
         raise ParameterError(f"kappa and s have different shapes {k.shape} != {s.shape}")
+    _number("rod_length_mm", rod_length_mm, allow_equal=True)
     if len(s) < 2:
         return 0.0
+    if np.any(s[1:] < s[:-1]):
+        raise ParameterError("s_mm must be increasing along the branch")
     f = energy_density(k, kappa_c_per_mm)
     v = float(noise_var_per_mm2)
     if not np.isfinite(v) or v < 0:
@@ -112,7 +118,11 @@ def _trapezoid(y, ds):
 
 def rod_length_mm(lengths_mm, n_br) -> float:
     """Rod length ``L = sum n_br * length`` over stacks, mm."""
-    return float(np.sum(np.asarray(n_br, dtype=np.float64) * np.asarray(lengths_mm, float)))
+    n, ln = np.asarray(n_br, dtype=np.float64), np.asarray(lengths_mm, float)
+    if n.shape != ln.shape:
+        raise ParameterError(f"lengths_mm and n_br have different shapes {ln.shape} != "
+                             f"{n.shape}")
+    return float(np.sum(n * ln))
 
 
 def _stack_ids(stacks, m):
@@ -166,7 +176,7 @@ def stack_energies(profiles: Sequence, *, rod_length_mm, kappa_c_per_mm=None) ->
     offs = np.zeros(m + 1, np.int64)
     np.cumsum(n, out=offs[1:])
     k, s = np.concatenate(ks), np.concatenate(ss)
-    L = float(rod_length_mm)
+    L = _number("rod_length_mm", rod_length_mm, allow_equal=True)
     tf = _trapz_ranges(energy_density(k, kappa_c_per_mm), s, offs[:-1], offs[1:])
     e = L * tf
     v = np.array(vs)

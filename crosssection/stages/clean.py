@@ -168,8 +168,8 @@ def clean_mask(mask, *, s_min_px: float, speck_px: float | None = None,
         filled area).
     """
     m = np.asarray(mask)
-    if m.ndim != 2:
-        raise ParameterError(f"mask must be 2-D, got shape {m.shape}")
+    if m.ndim != 2 or m.size == 0:
+        raise ParameterError(f"mask must be a 2-D array with pixels, got shape {m.shape}")
     if not np.isfinite(s_min_px) or s_min_px < 0:
         raise ParameterError(f"s_min_px must be a finite number >= 0, got {s_min_px}")
     speck_px = s_min_px if speck_px is None else speck_px

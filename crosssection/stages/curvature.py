@@ -1010,7 +1010,7 @@ def _paper_profiles(smoothed, closed, n_br, trims, unfitted, *, thickness_px, px
 
 def _prepared_path(path_rc, closed):
     """The points of a stack's path as the fits take them, and whether it is closed."""
-    p = np.asarray(path_rc, dtype=np.float64).reshape(-1, 2)
+    p = polyline._as_points(path_rc)
     if closed is None:
         closed = polyline.is_closed(p)
     closed = bool(closed)
@@ -1082,6 +1082,15 @@ def stack_curvature(path_rc, *, n_br, thickness_px, px_per_mm, closed=None, smoo
         raise ParameterError(f"ends must be 'shift' or 'truncate', got {ends!r}")
     if np.ndim(trim_px) and np.size(trim_px) != 2:
         raise ParameterError(f"trim_px must be one number or two, got {trim_px!r}")
+    for t in (np.ravel(trim_px) if trim_px is not None else ()):
+        if t is not None:
+            _number("trim_px", t, allow_equal=True)
+    if max_window_frac is not None:
+        _number("max_window_frac", max_window_frac, maximum=1.0)
+    if window_px is None and 5.0 * float(n_br) * float(thickness_px) < 2.0:
+        raise ParameterError(f"the window 5 n_br h = {5.0 * float(n_br) * float(thickness_px):g}"
+                             f" px is below 2 px: no parabola fits it (thickness_px "
+                             f"{thickness_px!r})")
     p, closed = _prepared_path(path_rc, closed)
     if not np.isfinite(p).all():
         raise ParameterError("path_rc holds a point that is not finite")
@@ -1090,6 +1099,7 @@ def stack_curvature(path_rc, *, n_br, thickness_px, px_per_mm, closed=None, smoo
         return CurvatureProfile(z, z, 0.0, np.nan, np.nan, np.nan, closed, np.zeros((0, 2)))
     if smooth_px is None:
         smooth_px = default_smooth_px(thickness_px)
+    _number("smooth_px", smooth_px, minimum=1.0, allow_equal=True)
     if method not in ("missing", "paper"):
         raise ParameterError(f"curvature method must be 'missing' or 'paper', got {method!r}")
     trims = tuple(trim_px) if np.ndim(trim_px) else (trim_px, trim_px)

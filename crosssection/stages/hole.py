@@ -232,7 +232,18 @@ def fit_hole(mask, *, center_rc=None, radius_px=None, gap_px=None, path=None) ->
     ------
     AnalysisError
         Fewer than 3 foreground boundary points to fit.
+    ParameterError
+        A given centre that is not two finite numbers, a given radius that is not a finite
+        number > 0.
     """
+    if center_rc is not None:
+        c = np.asarray(center_rc, dtype=np.float64).reshape(-1)
+        if c.shape != (2,) or not np.all(np.isfinite(c)):
+            raise ParameterError(f"the hole's centre must be two finite numbers (row, col), "
+                                 f"got {center_rc!r}", path)
+    if radius_px is not None and not (np.isfinite(radius_px) and radius_px > 0):
+        raise ParameterError(f"the hole's radius must be a finite number > 0 px, got "
+                             f"{radius_px!r}", path)
     if center_rc is not None and radius_px is not None:
         return Hole(np.asarray(center_rc, dtype=np.float64).copy(), float(radius_px), False)
     return _fit_points(_boundary_points(np.asarray(mask, dtype=bool)), center_rc, radius_px,

@@ -18,6 +18,8 @@ X crossings) are merged later, by :func:`merge_junctions`, once the stack graph 
 """
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass
 
 import numpy as np
@@ -91,6 +93,16 @@ def _junction_labels(img, flat, n_nb, merge_px):
     rad = max(1, int(np.ceil(merge_px)))
     m2 = max(merge_px * merge_px, 2.0)  # touching pixels always merge
     pairs = [np.zeros((0, 2), np.int64)]
+    if (2 * rad + 1) ** 2 > 81:
+        # a wide merge: pairs from a k-d tree, not one pass over the junction pixels per
+        # offset of the disc ((2 merge_px + 1)^2 passes: merge_px = 1000 ran for minutes)
+        from scipy.spatial import cKDTree
+
+        ij = cKDTree(np.stack([jr, jc], axis=1)).query_pairs(math.sqrt(m2) + 1e-6,
+                                                             output_type="ndarray")
+        d2 = (jr[ij[:, 0]] - jr[ij[:, 1]]) ** 2 + (jc[ij[:, 0]] - jc[ij[:, 1]]) ** 2
+        pairs.append(ij[d2 <= m2].astype(np.int64))
+        rad = 0  # no offsets left to pass over
     for dr in range(-rad, rad + 1):
         for dc in range(-rad, rad + 1):
             if (dr == 0 and dc == 0) or dr * dr + dc * dc > m2:

@@ -538,8 +538,9 @@ def threshold_rgb(rgb, *, method: str = "auto", region=None, blue_min=None,
         a region of another shape or empty.
     """
     rgb = np.asarray(rgb)
-    if rgb.ndim != 3 or rgb.shape[2] != 3:
-        raise ParameterError(f"threshold needs an (H, W, 3) RGB array, got shape {rgb.shape}")
+    if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.size == 0:
+        raise ParameterError(f"threshold needs an (H, W, 3) RGB array with pixels, got shape "
+                             f"{rgb.shape}")
     if method not in METHODS:
         raise ParameterError(f"threshold method must be one of {METHODS}, got {method!r}")
     scale = _scale(rgb)

@@ -271,3 +271,36 @@ def test_stack_graph_finds_the_junctions_of_find_junctions():
         assert all(np.array_equal(a, b) for a, b in zip(junc.pixels, ref.pixels))
         assert len(junc.pixels) == len(ref.pixels)
         assert np.array_equal(junc.label_image, ref.label_image)
+
+
+@pytest.mark.parametrize("merge_px", [4.5, 7.0, 12.0, 1000.0])
+def test_a_wide_merge_joins_the_junction_pixels_within_it(merge_px):
+    # a merge wider than a few pixels takes its pairs from a k-d tree instead of one pass
+    # over the junction pixels per offset of the disc (a merge of 1000 px ran for minutes):
+    # junction pixels (3 neighbours or more) closer than the merge share a cluster, and
+    # clusters lie farther apart than it
+    from crosssection.stages.skeleton import neighbour_count
+
+    rng = np.random.default_rng(int(merge_px * 10))
+    skel = np.zeros((120, 120), bool)
+    for _ in range(14):  # random straight strokes: crossings make junction pixels
+        r0, c0, r1, c1 = rng.integers(5, 115, 4)
+        n = max(abs(r1 - r0), abs(c1 - c0)) + 1
+        skel[np.linspace(r0, r1, n).round().astype(int),
+             np.linspace(c0, c1, n).round().astype(int)] = True
+    skel = skeletonize_mask(skel, l_min_px=0)
+    junc = find_junctions(skel, merge_px=merge_px)
+    jr, jc = np.nonzero(skel & (neighbour_count(skel) >= 3))
+    assert len(jr) >= 10
+    own = junc.label_image[jr, jc] - 1
+    assert np.all(own >= 0)
+    d2 = (jr[:, None] - jr[None, :]) ** 2 + (jc[:, None] - jc[None, :]) ** 2
+    near = d2 <= max(merge_px ** 2, 2.0)
+    # closer than the merge: one cluster; every cluster joined through such links
+    assert np.all(own[:, None] == own[None, :], where=near)
+    from scipy.sparse.csgraph import connected_components
+
+    n_links, _ = connected_components(near.astype(np.int8), directed=False)
+    assert len(junc) == n_links == len(np.unique(own))
+    if merge_px == 1000.0:
+        assert len(junc) == 1

@@ -139,7 +139,8 @@ def _thinned(mask):
     lst = np.empty(cap, np.int64)
     lst[:len(start)] = start
     sk._zhang_suen(f, sk._offsets(w), lst, len(start), np.zeros(f.shape[0], np.uint8),
-                   np.empty(cap, np.int64), sk._ZS1, sk._ZS2, sk._SIMPLE, sk._COUNT)
+                   np.empty(cap, np.int64), sk._ZS1, sk._ZS2, sk._SIMPLE, sk._COUNT,
+                   sk._thin_lines(img).reshape(-1), sk._CORNER1, sk._CORNER2)
     return f, w
 
 
@@ -604,3 +605,43 @@ def test_a_fat_stub_is_measured_beyond_the_thin_band_it_leaves(reach_px, kept):
     skel = sk.skeletonize_mask(mask, l_min_px=50.0, distance_px=dist)
     assert skel[90:, 190:211].any() == kept
     assert skel[60, 30:170].any() or skel[59, 30:170].any()  # the band stays either way
+
+
+@pytest.mark.parametrize("width", [2.0, 2.4, 2.8, 3.2])
+@pytest.mark.parametrize("angle_deg", [40.0, 45.0, 135.0, 140.0])
+def test_thin_diagonal_bands_with_free_ends_keep_their_length(width, angle_deg):
+    # straight bands 2-3 px wide drawn as polygons (60 px long, both ends free) in every
+    # orientation: a staircase used to be eaten from its free end pixel after pixel (a band
+    # 2.8 px wide at 135 degrees kept 3 pixels)
+    from skimage.draw import polygon
+
+    L, size = 30.0, 80
+    t = np.radians(angle_deg)
+    d, c = np.array([np.sin(t), np.cos(t)]), np.array([size / 2 + 0.5, size / 2])
+    n = np.array([d[1], -d[0]])
+    pts = np.array([c - L * d - width / 2 * n, c + L * d - width / 2 * n,
+                    c + L * d + width / 2 * n, c - L * d + width / 2 * n])
+    band = np.zeros((size, size), bool)
+    rr, cc = polygon(pts[:, 0], pts[:, 1], band.shape)
+    band[rr, cc] = True
+    for b in (band, band.T, band[::-1], band[:, ::-1]):
+        skel = sk.skeletonize_mask(b, l_min_px=0)
+        # a diagonal line of 2 L px holds about 2 L / sqrt(2) pixels
+        assert skel.sum() >= 0.85 * 2 * L / np.sqrt(2), (width, angle_deg, skel.sum())
+
+
+def test_a_staircase_two_pixels_wide_keeps_its_length():
+    a = np.zeros((40, 40), bool)
+    for i in range(5, 35):
+        a[i, i] = a[i, i + 1] = True
+    for band in (a, a.T, a[::-1], a[:, ::-1]):
+        assert sk.thin_mask(band).sum() >= 29
+    # an arm of 2 px at 45 degrees leaving a trunk keeps its pixels and its junction
+    from crosssection.stages.junctions import find_junctions
+
+    trunk = np.zeros((60, 60), bool)
+    trunk[10:14, 5:55] = True
+    for i in range(25):
+        trunk[14 + i, 30 + i] = trunk[14 + i, 31 + i] = True
+    skel = sk.skeletonize_mask(trunk, l_min_px=0)
+    assert skel[14:].sum() >= 22 and len(find_junctions(skel)) == 1
