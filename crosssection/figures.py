@@ -133,6 +133,11 @@ def panel_image(img, max_px: int = PANEL_MAX_PX) -> np.ndarray:
     return cv2.resize(np.ascontiguousarray(a), size, interpolation=cv2.INTER_AREA)
 
 
+def _count(n: int, noun: str) -> str:
+    """``1 stack``, ``2 stacks``, ``1 branch``, ``0 branches``."""
+    return f"{n} {noun}" if n == 1 else f"{n} {noun}{'es' if noun.endswith('ch') else 's'}"
+
+
 def _get(result, name, default=None):
     return getattr(result, name, default) if result is not None else default
 
@@ -199,8 +204,9 @@ def overlay_figure(rgb, result=None, *, junctions_df=None, stacks_df=None, paths
     handles = [Line2D([], [], color=c, lw=3, label=r)
                for r, c in (("bulk", BULK_COLOR), ("periphery", PERIPHERY_COLOR))
                if r in regions]
-    handles.append(Line2D([], [], marker="o", mfc="none", mec="black", ls="none",
-                          label="junction"))
+    if n_j:
+        handles.append(Line2D([], [], marker="o", mfc="none", mec="black", ls="none",
+                              label="junction"))
     if len(_step_points(result)):
         handles.append(Line2D([], [], marker="D", mfc="white", mec="black", ls="none",
                               label="layer step"))
@@ -210,7 +216,8 @@ def overlay_figure(rgb, result=None, *, junctions_df=None, stacks_df=None, paths
     if px_per_mm:
         _scale_bar(ax, float(px_per_mm), view[1], img[max(r0, 0):r1, max(c0, 0):c1])
     text, ncol, _ = _overlay_header(
-        f"{head}   ({n_j} junctions, {m} stacks, {n_br_total} branches)", len(handles),
+        f"{head}   ({_count(n_j, 'junction')}, {_count(m, 'stack')}, "
+        f"{_count(n_br_total, 'branch')})", len(handles),
         fig.get_figwidth())
     height = fig.get_figheight()
     fig.suptitle(text, fontsize=10, x=0.1 / fig.get_figwidth(), y=1 - 0.05 / height,
@@ -422,9 +429,17 @@ def steps_figure(rgb, mask_threshold, mask_clean, skeleton, junction_centers_rc,
     grow = int(max(0, round(max(H, W) / 1000.0)))
     if grow:
         sk = ndi.binary_dilation(sk, iterations=grow)
+    if own:
+        fig.subplots_adjust(left=0.01, right=0.99, bottom=0.01, top=0.92, wspace=0.03)
     for ax, mask in zip(axes[1:], (mask_threshold, mask_clean, sk)):
-        ax.imshow(panel_image(np.asarray(mask, bool)), cmap="gray_r", vmin=0, vmax=1,
-                  interpolation="nearest", extent=extent)
+        shown = panel_image(np.asarray(mask, bool))
+        # a panel a few hundred pixels wide (at the 120 dpi figures are saved at) shows a
+        # larger mask filtered, not by its nearest pixels, which break lines a few pixels
+        # wide into dashes (a 5000 px scan's single sheets)
+        panel_px = ax.get_position().width * fig.get_figwidth() * 120.0
+        ax.imshow(shown, cmap="gray_r", vmin=0, vmax=1, extent=extent,
+                  interpolation="antialiased" if max(shown.shape) > 1.5 * panel_px
+                  else "nearest")
     jc = np.asarray(junction_centers_rc, float).reshape(-1, 2)
     if len(jc):
         axes[3].scatter(jc[:, 1], jc[:, 0], s=14, facecolors="none", edgecolors="red",
@@ -434,8 +449,6 @@ def steps_figure(rgb, mask_threshold, mask_clean, skeleton, junction_centers_rc,
         ax.set_axis_off()
     if px_per_mm:
         _scale_bar(axes[0], float(px_per_mm), W, img)
-    if own:
-        fig.subplots_adjust(left=0.01, right=0.99, bottom=0.01, top=0.92, wspace=0.03)
     return fig
 
 
@@ -474,8 +487,10 @@ def curvature_figure(profiles, stacks_df=None, *, ax=None, max_stacks=8):
     ax.axhline(0, color="0.6", lw=0.6)
     ax.set_xlabel("arc length s [mm]")
     ax.set_ylabel(r"curvature $\kappa$ [1/mm]")
-    ax.set_title(f"curvature along the {min(max_stacks, len(profiles))} longest stacks "
-                 "(dotted: not fitted)", fontsize=10)
+    shown = min(max_stacks, len(profiles))
+    ax.set_title(("curvature along the stack" if shown == 1 else
+                  f"curvature along the {shown} longest stacks") + " (dotted: not fitted)",
+                 fontsize=10)
     if profiles:  # beside the axes: the curves run anywhere inside them
         ax.legend(fontsize=7, frameon=False, loc="upper left", bbox_to_anchor=(1.01, 1.0),
                   borderaxespad=0.0)

@@ -142,7 +142,8 @@ CONTACT_DISTANCE = 3.0
 #: ``s = pi h / 2`` (the half-turn of a fold of diameter h) once ``cos(theta / 2) < 1 / pi``.
 #: The node-segment contacts hold only the next node, at ``ds sin(pi - theta)``; measured:
 #: no node above 42 degrees at epsilon 19 (4 rods, N = 2000), 2-7 nodes at 176 degrees per
-#: rod at epsilon 30 (3 rods), holding 8-18 % of the rod's bending energy.
+#: rod at epsilon 30 (3 rods), holding 8-18 % of the rod's bending energy; a fourth rod at 30
+#: (seed 5) folds flat at 11 nodes (166-176 degrees) holding 35 % of it.
 FLAT_FOLD_DEG = 2.0 * math.degrees(math.acos(1.0 / math.pi))
 #: largest area fraction ``L h / (pi (R - h/2)^2)`` accepted (see :func:`check_params`)
 MAX_AREA_FRACTION = 0.6
@@ -1101,11 +1102,13 @@ def check_params(params: CompactParams) -> None:
              f"the thickness that epsilon {eps:g} implies (h/R = {H_OVER_R:g})")
     if h >= 0.5 / n:
         n_max = math.ceil(0.5 / h) - 1
-        fix = (f"use at most {n_max} segments (--segments) or a thinner rod (--thickness)"
-               if n_max >= 3 else "a rod of 3 segments or more needs a thickness below 1/6 "
-               "of its length: give a thinner rod (--thickness)")
+        if n_max < 3:
+            raise ParameterError(f"{given} {h:.3g} is too thick for any rod of segments: "
+                                 "a rod of 3 segments or more needs a thickness below 1/6 of "
+                                 "its length (units of L); give a thinner rod (--thickness)")
         raise ParameterError(f"{given} {h:.3g} must be below half a segment 1/(2N) = "
-                             f"{0.5 / n:.3g}: {fix}")
+                             f"{0.5 / n:.3g}: use at most {n_max} segments (--segments) or a "
+                             "thinner rod (--thickness)")
     r = params.wall_radius
     frac = h / (math.pi * (r - 0.5 * h) ** 2) if r > 0.5 * h else math.inf
     if frac >= MAX_AREA_FRACTION:

@@ -953,6 +953,7 @@ def e_vs_nbr_figure(ens: Ensemble, colors=None):
     fig, ax = _subplots(figsize=(8.5, 4.8))
     ax = ax[0, 0]
     name = legend_names(ens.sets)
+    single = False
     for s in ens.sets:
         g = br[br["set"] == s]
         if g.empty:
@@ -976,12 +977,20 @@ def e_vs_nbr_figure(ens: Ensemble, colors=None):
             one = (st["size"] == 1).to_numpy()  # one value: a mean without an error
             ax.plot(st.index[one], st["mean"].to_numpy()[one], "o", ms=ms, mfc="white",
                     mec=c, ls="none", alpha=1 if reg is None else 0.6)
+            single = single or bool(one.any())
     ax.set(xlabel="number of branches in the stack $n_{br}$",
            ylabel=r"mean branch energy $\langle e\rangle$ (dimensionless)",
            title="mean branch energy against $n_{br}$\n" r"(mean $\pm$ standard error over "
-                 "a scan's stacks, a simulation's branches; hollow: a single value)")
+                 "a scan's stacks, a simulation's branches)")
     ax.xaxis.get_major_locator().set_params(integer=True)
-    ax.legend(fontsize=7, frameon=False, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    handles, labels = ax.get_legend_handles_labels()
+    if single:
+        from matplotlib.lines import Line2D
+
+        handles.append(Line2D([], [], marker="o", mfc="white", mec="0.3", ls="none", ms=4))
+        labels.append("hollow: a single value, no error bar")
+    ax.legend(handles, labels, fontsize=7, frameon=False, loc="upper left",
+              bbox_to_anchor=(1.01, 1.0))
     return fig
 
 

@@ -291,3 +291,22 @@ def test_a_label_on_the_hole_circle_is_outlined_and_one_inside_is_not():
                          paths=paths, hole=Hole(np.array([200.0, 200.0]), 150.0, False))
     texts = {t.get_text(): t for t in fig.axes[0].texts}
     assert texts["1"].get_path_effects() and not texts["2"].get_path_effects()
+
+
+def test_a_lone_ring_is_counted_in_the_singular_and_shows_no_junction_key():
+    # one closed ring of ink: "1 stack, 1 branch", no junction in the legend, and the
+    # curvature figure's title speaks of the stack
+    import cv2
+
+    from crosssection import analyze
+
+    rgb = np.full((400, 400, 3), 245, np.uint8)
+    cv2.circle(rgb, (200, 200), 150, (190, 50, 40), 6)  # BGR order is not read: blue ink
+    rgb = rgb[..., ::-1].copy()
+    res = analyze(rgb, px_per_mm=50.0, warn=False)
+    fig = res.plot("overlay")
+    title = fig._suptitle.get_text()
+    assert "0 junctions, 1 stack, 1 branch)" in title
+    labels = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert "junction" not in labels
+    assert res.plot("curvature").axes[0].get_title().startswith("curvature along the stack ")

@@ -483,7 +483,7 @@ def test_a_single_value_is_drawn_hollow_and_the_title_says_so():
               and len(ln.get_xdata())]
     assert len(hollow) == 1
     assert list(hollow[0].get_xdata()) == [2] and list(hollow[0].get_ydata()) == [5.0]
-    assert "hollow: a single value" in ax.get_title()
+    assert "hollow: a single value" in [t.get_text() for t in ax.get_legend().get_texts()][-1]
     plt.close(fig)
 
 
