@@ -39,6 +39,7 @@ import numpy as np
 from numba import njit
 
 from crosssection.core.errors import ParameterError
+from crosssection.params import _number
 
 
 def _small_components(binary_u8: np.ndarray, connectivity: int, max_area: float,
@@ -170,13 +171,10 @@ def clean_mask(mask, *, s_min_px: float, speck_px: float | None = None,
     m = np.asarray(mask)
     if m.ndim != 2 or m.size == 0:
         raise ParameterError(f"mask must be a 2-D array with pixels, got shape {m.shape}")
-    if not np.isfinite(s_min_px) or s_min_px < 0:
-        raise ParameterError(f"s_min_px must be a finite number >= 0, got {s_min_px}")
+    _number("s_min_px", s_min_px, allow_equal=True)
     speck_px = s_min_px if speck_px is None else speck_px
-    if not np.isfinite(speck_px) or speck_px < 0:
-        raise ParameterError(f"speck_px must be a finite number >= 0, got {speck_px}")
-    if not np.isfinite(min_extent_px) or min_extent_px < 0:
-        raise ParameterError(f"min_extent_px must be a finite number >= 0, got {min_extent_px}")
+    _number("speck_px", speck_px, allow_equal=True)
+    _number("min_extent_px", min_extent_px, allow_equal=True)
     for name, v in (("sliver_length_px", sliver_length_px), ("sliver_width_px", sliver_width_px)):
         if not np.isfinite(v) or v < 0:
             raise ParameterError(f"{name} must be a finite number >= 0, got {v}")

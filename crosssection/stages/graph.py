@@ -27,6 +27,7 @@ from scipy.sparse.csgraph import depth_first_order
 
 from crosssection.core import polyline
 from crosssection.core.errors import ParameterError
+from crosssection.params import _number
 from crosssection.stages.junctions import (Junctions, fork_points, merge_junctions,
                                            padded_junctions)
 from crosssection.stages.skeleton import nonzero_rc
@@ -618,6 +619,8 @@ def stack_graph(skel, distance_px, *, merge_px: float = 2.0,
     skel = np.asarray(skel, dtype=bool)
     if skel.ndim != 2:
         raise ParameterError(f"skeleton must be a 2-D array, got shape {skel.shape}")
+    if thickness_px is not None:
+        _number("thickness_px", thickness_px)
     padded = _padded(skel)  # the junctions and every tracing below read it
     junc = padded_junctions(padded.img, padded.sp, _NB_COUNT[padded.bits], merge_px=merge_px)
     # (the MultiGraph only of the graph kept: merged crossings trace it again)

@@ -27,6 +27,7 @@ import numpy as np
 from crosssection.core.errors import ParameterError
 from crosssection.core.polyline import grouped_axes, walk_ends
 from crosssection.core.unionfind import group_labels
+from crosssection.params import _number
 from crosssection.stages.skeleton import nonzero_rc
 
 
@@ -211,8 +212,7 @@ def _from_pixels(rr, cc, ids, k, lab) -> Junctions:
 
 def _check_merge_px(merge_px):
     """Raise ``ParameterError`` unless ``merge_px`` is a finite number >= 0."""
-    if not np.isfinite(merge_px) or merge_px < 0:
-        raise ParameterError(f"merge_px must be >= 0, got {merge_px}")
+    _number("merge_px", merge_px, allow_equal=True)
 
 
 def find_junctions(skel, *, merge_px: float = 2.0) -> Junctions:

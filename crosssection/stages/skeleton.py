@@ -62,6 +62,7 @@ from numba import njit
 from scipy import ndimage as ndi
 
 from crosssection.core.errors import ParameterError
+from crosssection.params import _number
 
 # neighbour offsets, clockwise from north: P2..P9 of Zhang & Suen (bit k = offset k)
 _DR = np.array([-1, -1, 0, 1, 1, 1, 0, -1], dtype=np.int64)
@@ -1036,8 +1037,7 @@ def skeletonize_mask(mask, *, l_min_px: float, method: str = "thinning",
     See the module docstring for the algorithm and the measurements behind hand-writing it.
     """
     mask = _check_mask(mask)
-    if not np.isfinite(l_min_px) or l_min_px < 0:
-        raise ParameterError(f"l_min_px must be a finite number >= 0, got {l_min_px}")
+    _number("l_min_px", l_min_px, allow_equal=True)
     if method not in ("thinning", "skimage"):
         raise ParameterError(f"skeleton method must be 'thinning' or 'skimage', got {method!r}")
     if distance_px is not None and not callable(distance_px):

@@ -39,6 +39,7 @@ import pandas as pd
 from numba import njit
 
 from crosssection.core.schema import VOID_COLUMNS
+from crosssection.params import _number
 
 __all__ = ["find_voids", "scan_voids", "without_pieces", "void_table", "VoidScan",
            "contour_perimeter_px", "void_labels"]
@@ -264,6 +265,7 @@ def _extract_voids(mask, hole, s_min_px, wall_voids, *, keep_borders=False):
     Pick's theorem on the borders and, if they disagree, the crop is labelled instead.
     With ``keep_borders``, returns ``(voids, borders)`` (:class:`_Borders`, None without ink).
     """
+    _number("s_min_px", s_min_px, allow_equal=True)
     ink, b = _borders(mask, hole, s_min_px, wall_voids)
     voids = []
     if b is not None:

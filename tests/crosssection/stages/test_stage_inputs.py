@@ -81,3 +81,27 @@ def test_bending_energy_refuses_what_no_branch_has():
     with pytest.raises(ParameterError, match="NaN"):
         energy_density(k, np.nan)
     assert np.array_equal(energy_density(k, np.inf), k * k)
+
+
+@pytest.mark.parametrize("bad", [-1.0, np.nan, np.inf, None, "3"])
+def test_detection_limits_of_the_stages_are_numbers(bad):
+    from crosssection.stages.graph import stack_graph
+    from crosssection.stages.junctions import find_junctions
+    from crosssection.stages.skeleton import skeletonize_mask
+    from crosssection.stages.voids import void_labels
+
+    mask = np.zeros((30, 30), bool)
+    mask[5:25, 5:25] = True
+    mask[10:20, 10:20] = False
+    with pytest.raises(ParameterError, match="s_min_px"):
+        clean_mask(mask, s_min_px=bad)
+    with pytest.raises(ParameterError, match="s_min_px"):
+        void_labels(mask, s_min_px=bad)
+    with pytest.raises(ParameterError, match="l_min_px"):
+        skeletonize_mask(mask, l_min_px=bad)
+    skel = skeletonize_mask(mask, l_min_px=0)
+    with pytest.raises(ParameterError, match="merge_px"):
+        find_junctions(skel, merge_px=bad)
+    if bad is not None:  # thickness_px None: no junction moved to the centrelines
+        with pytest.raises(ParameterError, match="thickness_px"):
+            stack_graph(skel, np.ones(skel.shape), thickness_px=bad)
