@@ -481,7 +481,7 @@ def run_steps(args) -> int:
                                       pre.skeleton, pre.junctions.centers_rc,
                                       figure=not args.no_figure,
                                       titles=step_titles(pre.threshold.as_summary()),
-                                      px_per_mm=params.px_per_mm,
+                                      px_per_mm=params.px_per_mm, hole=pre.hole,
                                       description=json.dumps(made_from, default=str,
                                                              sort_keys=True))
             # written last, as summary.json is: its presence marks the images complete

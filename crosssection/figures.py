@@ -381,7 +381,7 @@ def step_titles(thresholds: dict | None = None) -> list:
 
 
 def steps_figure(rgb, mask_threshold, mask_clean, skeleton, junction_centers_rc, *,
-                 titles=None, axes=None, px_per_mm=None):
+                 titles=None, axes=None, px_per_mm=None, hole=None):
     """The four steps of paper Fig. 2: raw scan, thresholded, cleaned, skeleton + junctions.
 
     Parameters
@@ -395,6 +395,9 @@ def steps_figure(rgb, mask_threshold, mask_clean, skeleton, junction_centers_rc,
     px_per_mm : float, optional
         The scan's resolution: a scale bar in mm on the raw scan's panel (the four panels
         share one scale).
+    hole : Hole, optional
+        The panels show the hole and a margin around it, as the overlay does
+        (:func:`overlay_window`); the whole scan without it.
 
     Returns
     -------
@@ -402,7 +405,10 @@ def steps_figure(rgb, mask_threshold, mask_clean, skeleton, junction_centers_rc,
     """
     from scipy import ndimage as ndi
 
-    img = np.asarray(rgb)
+    r0, r1, c0, c1 = overlay_window(np.shape(rgb), hole)
+    img = np.asarray(rgb)[r0:r1, c0:c1]
+    mask_threshold, mask_clean, skeleton = (np.asarray(m)[r0:r1, c0:c1] for m in
+                                            (mask_threshold, mask_clean, skeleton))
     H, W = img.shape[:2]
     own = axes is None
     if own:
@@ -440,7 +446,7 @@ def steps_figure(rgb, mask_threshold, mask_clean, skeleton, junction_centers_rc,
         ax.imshow(shown, cmap="gray_r", vmin=0, vmax=1, extent=extent,
                   interpolation="antialiased" if max(shown.shape) > 1.5 * panel_px
                   else "nearest")
-    jc = np.asarray(junction_centers_rc, float).reshape(-1, 2)
+    jc = np.asarray(junction_centers_rc, float).reshape(-1, 2) - (r0, c0)
     if len(jc):
         axes[3].scatter(jc[:, 1], jc[:, 0], s=14, facecolors="none", edgecolors="red",
                         linewidths=0.8)

@@ -209,7 +209,8 @@ class AnalysisResult:
             return F.steps_figure(self.rgb, self.mask_threshold, self.mask_clean, self.skeleton,
                                   self.graph_junction_centers(), axes=ax,
                                   titles=self._step_titles(),
-                                  px_per_mm=getattr(self.params, "px_per_mm", None))
+                                  px_per_mm=getattr(self.params, "px_per_mm", None),
+                                  hole=self.hole)
         if kind == "curvature":
             return F.curvature_figure(self.profiles, self.stacks, ax=ax)
         if kind == "widths":
@@ -342,6 +343,7 @@ class AnalysisResult:
                                  self.skeleton, self.graph_junction_centers(), figure=figure,
                                  titles=self._step_titles(),
                                  px_per_mm=getattr(self.params, "px_per_mm", None),
+                                 hole=self.hole,
                                  description=json.dumps(made_from, default=str,
                                                         sort_keys=True))
 
@@ -369,10 +371,11 @@ def _remove_if_empty(folder: Path, created: bool) -> None:
 
 def write_step_images(out_dir, rgb, mask_threshold, mask_clean, skeleton, junction_centers_rc,
                       *, figure: bool = True, titles=None, description: str | None = None,
-                      px_per_mm: float | None = None) -> dict:
+                      px_per_mm: float | None = None, hole=None) -> dict:
     """Write the four step images of paper Fig. 2 (see ``AnalysisResult.write_steps``);
     ``titles``: the four panel titles of ``steps.png`` (``figures.steps_figure``), whose raw
-    panel has a scale bar when ``px_per_mm`` is given. Each PNG's
+    panel has a scale bar when ``px_per_mm`` is given and whose panels show ``hole`` (a
+    margin around it) when it is given; the four step images are the whole scan. Each PNG's
     text records the package version (``Software``) and ``description`` (what the images
     were made from) when given, as the figures do."""
     import cv2
@@ -415,6 +418,6 @@ def write_step_images(out_dir, rgb, mask_threshold, mask_clean, skeleton, juncti
         from crosssection.core.fileio import save_figure
 
         fig = steps_figure(raw, mask_threshold, mask_clean, skeleton, junction_centers_rc,
-                           titles=titles, px_per_mm=px_per_mm)
+                           titles=titles, px_per_mm=px_per_mm, hole=hole)
         paths["steps"] = save_figure(fig, out / "steps.png", description=description)
     return paths

@@ -1069,7 +1069,9 @@ def stack_curvature(path_rc, *, n_br, thickness_px, px_per_mm, closed=None, smoo
     ParameterError
         A scale, thickness, count, window or noise that is not a finite positive number (the
         noise and the window may be None, the noise 0), ``ends`` or ``method`` not one of
-        theirs, ``trim_px`` neither one number nor two, a point of the path not finite.
+        theirs, ``trim_px`` neither one number nor two (each finite, >= 0),
+        ``max_window_frac`` outside (0, 1], ``smooth_px`` below 1, a window ``5 n_br h``
+        below 2 px, a path that is not an (N, 2) array, a point of the path not finite.
     """
     _number("thickness_px", thickness_px)
     _number("px_per_mm", px_per_mm)

@@ -19,7 +19,6 @@ X crossings) are merged later, by :func:`merge_junctions`, once the stack graph 
 from __future__ import annotations
 
 import math
-
 from dataclasses import dataclass
 
 import numpy as np

@@ -141,7 +141,7 @@ def _zhang_suen(f, offs, lst, n, st, flags, zs1, zs2, simple, count, thin, cn1,
     one (a band 2 px wide at 45 degrees with a free end kept 2 of its 60 pixels). On thin
     ink a sub-iteration also deletes the staircase's inner corners (``cn1``, ``cn2``:
     simple points that the crossing number counts twice), before any pixel of two
-    neighbours; elsewhere the thinning is Zhang and Suen's, bit for bit.
+    neighbours; away from thin ink the thinning is Zhang and Suen's as before.
 
     ``lst[:n]`` holds the flat indices of the initial border pixels (foreground with a
     background 8-neighbour): interior pixels have 8 neighbours and cannot be deleted before a

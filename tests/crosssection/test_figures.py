@@ -310,3 +310,30 @@ def test_a_lone_ring_is_counted_in_the_singular_and_shows_no_junction_key():
     labels = [t.get_text() for t in fig.legends[0].get_texts()]
     assert "junction" not in labels
     assert res.plot("curvature").axes[0].get_title().startswith("curvature along the stack ")
+
+
+def test_the_steps_show_the_hole_as_the_overlay_does():
+    # a wide page with the cut in one part: the steps' panels show the hole and its margin,
+    # the overlay's window, not the whole page (the network was a strip in each panel)
+    from crosssection import analyze
+    from crosssection.truth.network import make_scene
+
+    sc = make_scene(seed=3, n_stacks=12, max_layers=3)
+    h, w = sc.rgb.shape[:2]
+    page = np.full((h, 3 * w, 3), 245, np.uint8)
+    page[:, w:2 * w] = sc.rgb
+    p = sc.params
+    cx, cy = p["hole_center_px"]
+    res = analyze(page, px_per_mm=50.0, thickness_mm=0.1, calibration=sc.calibration,
+                  hole_radius_mm=p["hole_radius_mm"], hole_center_px=(cx + w, cy), warn=False)
+    r0, r1, c0, c1 = overlay_window(page.shape, res.hole)
+    assert c1 - c0 < 0.5 * page.shape[1]
+    fig = res.plot("steps")
+    for ax in fig.axes:
+        left, right, bottom, top = ax.images[0].get_extent()
+        assert (right - left, bottom - top) == (c1 - c0, r1 - r0)
+    # the junctions drawn where the skeleton panel shows them
+    (pts,) = fig.axes[3].collections
+    xy = pts.get_offsets()
+    assert len(xy) == len(res.junctions)
+    assert np.all((xy[:, 0] >= 0) & (xy[:, 0] < c1 - c0))
