@@ -102,6 +102,9 @@ MAX_PARAMS = max(len(f.param_names) for f in FAMILIES.values())
 #: counts start at 1: the discretised law lives on [COUNT_MIN - 1/2, inf)
 COUNT_MIN = 1
 #: Default resamples: bootstrap draws of the parameter intervals, and parametric-bootstrap
+#: a count fit's negative log-likelihood where it is not finite (the minimiser needs a
+#: number): a fit that ends there did not converge (:func:`fit_family`)
+_NO_LIKELIHOOD = 1e300
 #: samples of a goodness-of-fit p-value (199: a p-value is then a multiple of 1/200)
 N_BOOT = 200
 N_MC = 199
@@ -296,12 +299,12 @@ def _cluster_index(rng, g) -> np.ndarray:
 def _finite(x, c, g=None, *, stacklevel: int = 3):
     """``(x, c, g, n_left_out)`` without the observations that are not finite or whose cut
     is not (``g``: their group codes, or None), with one QualityWarning giving their number
-    (none when all are finite)."""
+    (none when all are finite), in a canonical order (:func:`_canonical`)."""
     bad_x = ~np.isfinite(x)
     bad = bad_x if c is None else bad_x | ~np.isfinite(c)
     n_bad = int(bad.sum())
     if not n_bad:
-        return x, c, g, 0
+        return (*_canonical(x, c, g), 0)
     parts = []
     if bad_x.any():
         parts.append(f"{int(bad_x.sum())} not finite (NaN or inf)")
@@ -310,7 +313,26 @@ def _finite(x, c, g=None, *, stacklevel: int = 3):
     warnings.warn(f"x: {n_bad} of {x.size} observations left out of the fit: "
                   f"{' and '.join(parts)}", LeftOutWarning, stacklevel=stacklevel)
     keep = ~bad
-    return x[keep], (None if c is None else c[keep]), (None if g is None else g[keep]), n_bad
+    return (*_canonical(x[keep], None if c is None else c[keep],
+                        None if g is None else g[keep]), n_bad)
+
+
+def _canonical(x, c, g):
+    """``(x, c, g)`` sorted by value (then cut, then group), each group renumbered in order
+    of its smallest value: the bootstrap and the goodness-of-fit draws pick observations
+    and groups by position, so the same sample in another row order gave other intervals,
+    p-values and, through the share of degenerate draws, another selected law."""
+    keys = [x] if c is None else [c, x]  # np.lexsort: the last key first
+    if g is None:
+        order = np.lexsort(tuple(keys))
+        return x[order], (None if c is None else c[order]), None
+    order = np.lexsort(tuple([g] + keys))
+    x, c, g = x[order], (None if c is None else c[order]), g[order]
+    # groups numbered in order of first appearance once sorted by value
+    _, first, inv = np.unique(g, return_index=True, return_inverse=True)
+    rank = np.empty(first.size, np.int64)
+    rank[np.argsort(first, kind="stable")] = np.arange(first.size)
+    return x, c, rank[inv]
 
 
 def _count(value, name: str, minimum: int = 0) -> None:
@@ -552,7 +574,7 @@ def _fit_counts(fam, x, theta0=None):
     def nll(z):
         lp = _count_logp(fam, np.where(logp, np.exp(z), z), ks)
         v = -float(np.sum(cnt * lp))
-        return v if np.isfinite(v) else 1e300
+        return v if np.isfinite(v) else _NO_LIKELIHOOD
 
     res = optimize.minimize(nll, z0, method="Nelder-Mead",
                             options={"xatol": 1e-5, "fatol": 1e-7, "maxiter": 1000})
@@ -783,7 +805,9 @@ def _fit_one(x, family: str, *, truncation, n_boot, seed, gof, n_mc, ci_level,
                         discrete=discrete, n_groups=n_groups)
         if not all(np.isfinite(v) for v in params.values()):
             return replace(res, rejected="the fit did not converge (non-finite parameter)")
-        if not np.isfinite(ll):  # a value at the edge of floating point (5e-324) can do it
+        # a value at the edge of floating point (5e-324) can do it; -1e300 is the count
+        # fits' stand-in for a likelihood that is not finite (_fit_counts), never reached
+        if not np.isfinite(ll) or ll <= -_NO_LIKELIHOOD:
             return replace(res, rejected="the fit did not converge (log-likelihood not "
                                          "finite: values at the limits of floating point?)")
         # a law outside the domain (a spike narrower than any sample with a spread) cannot

@@ -313,9 +313,16 @@ def per_config_table(ens: Ensemble) -> pd.DataFrame:
     """
     c = ens.configs.copy()
     key = ["set", "config_id"]
-    lb = ens.branches.groupby(key)["length_L"].mean().rename("l_bar")
-    eb = ens.branches.groupby(key)["e"].mean().rename("e_bar")
-    sb = ens.voids.groupby(key)["area_L2"].mean().rename("s_bar")
+
+    def finite_mean(df, col, name):
+        # of the finite values, as the fits take them (an infinite length made l_bar inf
+        # and the configuration's Eq. (12) abscissa 0, kept in the relation)
+        v = df[col].where(np.isfinite(df[col].astype(float)))
+        return v.groupby([df[k] for k in key]).mean().rename(name)
+
+    lb = finite_mean(ens.branches, "length_L", "l_bar")
+    eb = finite_mean(ens.branches, "e", "e_bar")
+    sb = finite_mean(ens.voids, "area_L2", "s_bar")
     c = c.join(lb, on=key).join(eb, on=key).join(sb, on=key)
     c["n_br_bar"] = c["N_br"] / c["N_l"].where(c["N_l"] > 0)
     c["sqrt_s_bar"] = np.sqrt(c["s_bar"])
@@ -815,7 +822,9 @@ def relations_table(ens: Ensemble, per_cfg: pd.DataFrame, summaries: dict) -> pd
                                          f"set {s}: eq12_eps_sqrtNl")
         a3, r3, n3 = slope_through_origin(pc["N_l"], pc["N_br"], f"set {s}: eq14_slope")
         fl = _mean(pc["n_br_bar"] / nbr_mean - 1) if np.isfinite(nbr_mean) else np.nan
-        eq16 = nbr_mean * np.sqrt(_mean(pc["N_l"])) / _mean(pc["epsilon"])
+        eps_mean = _mean(pc["epsilon"])
+        eq16 = (nbr_mean * np.sqrt(_mean(pc["N_l"])) / eps_mean
+                if np.isfinite(eps_mean) and eps_mean > 0 else np.nan)
         nsum = summaries.get((s, "all", "n_br"))
         mu = nsum.results["exponential"].params["mu"] if nsum else np.nan
         ci = nsum.results["exponential"].ci.get("mu", (np.nan, np.nan)) if nsum else (np.nan,) * 2
