@@ -293,6 +293,10 @@ SCALE_TOLERANCE = 0.01
 MAX_SCENE_PX = 10_000 * 10_000
 #: Thinnest sheet drawn, px (the analysis' own limit, ``crosssection.params``).
 MIN_SHEET_PX = 1.0
+#: thickest sheet a render draws, px: its bands (n h wide, dozens of layers on a wall) must
+#: stay below the widest line OpenCV draws (32767 px), which failed inside OpenCV at 700 mm
+#: sheets at 50 px/mm; a scan's sheet is 2-10 px
+MAX_SHEET_PX = 1000.0
 #: Widest Gaussian blur drawn, sigma in px: ten sheet thicknesses at the defaults (h = 5 px).
 #: A band h wide blurred with sigma keeps about h / (sqrt(2 pi) sigma) of its contrast, 4 %
 #: here, so no scan is blurrier. Far wider blurs cost more than any scene: measured at the
@@ -2117,6 +2121,11 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
                    rod_thickness=rod_thickness, wall_radius=wall_radius,
                    wall_center_xy=wall_center_xy)
     _check_scene_size(frame, px_per_mm)
+    if px_per_mm * thickness_mm > MAX_SHEET_PX:
+        raise ParameterError(f"a sheet would be {px_per_mm * thickness_mm:.3g} px thick (> "
+                             f"{MAX_SHEET_PX:g} px at {px_per_mm:g} px/mm and h = "
+                             f"{thickness_mm:g} mm): lower px_per_mm or thickness_mm",
+                             "thickness_mm")
     given = {"noise_sigma": noise_sigma, "blur_px": blur_px, "jpeg_quality": jpeg_quality,
              "smears": smears, "specks": specks, "pinholes": pinholes, "plate": plate,
              "rim_px": rim_px, "illumination": illumination, "cast": cast}

@@ -208,3 +208,22 @@ def test_a_damaged_scene_is_rendered_again_on_resume(sim, tmp_path):
     (scene / "truth" / "stacks.csv").unlink()
     assert main(["render", str(sim), "--out", str(out), *FAST]) == 0
     assert (scene / "truth" / "stacks.csv").is_file()
+
+
+def test_a_sheet_wider_than_opencv_draws_is_refused_before_drawing():
+    # 700 mm sheets at 50 px/mm failed inside OpenCV's line drawing (widths above 32767 px)
+    import numpy as np
+    import pytest
+
+    from crosssection.core.errors import ParameterError
+    from simulate.render import render_configuration
+
+    import warnings
+
+    from simulate import shapes
+
+    xy = shapes.resample(shapes.hairpin(0.001), 300)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the rod's length capped to keep the image small
+        with pytest.raises(ParameterError, match="px thick"):
+            render_configuration(xy, px_per_mm=50.0, thickness_mm=700.0, clean=True)
