@@ -2107,6 +2107,14 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
     if draw == "passes" and not pass_width * thickness_mm * px_per_mm > PASS_OVERLAP_PX:
         raise ParameterError(f"pass_width must exceed {PASS_OVERLAP_PX} px, got "
                              f"{pass_width * thickness_mm * px_per_mm:g} px")
+    if wall_radius is not None:
+        reach = float(np.max(np.hypot(*(np.asarray(xy, float)
+                                        - np.asarray(wall_center_xy, float)).T)))
+        if reach > wall_radius + max(float(rod_thickness or 0.0), 0.05 * wall_radius):
+            # the hole is the wall: a rod beyond it would be cut by its own frame
+            raise ParameterError(f"the rod reaches {reach:.4g} L from the wall's centre, beyond "
+                                 f"the wall (radius {wall_radius:.4g} L): not a configuration "
+                                 "of that wall", "wall_radius")
     if analysis is None:
         analysis = analyze_rod(xy, lam=lam, contact_distance=contact_distance)
     if draw == "passes":

@@ -227,3 +227,20 @@ def test_a_sheet_wider_than_opencv_draws_is_refused_before_drawing():
         warnings.simplefilter("ignore")  # the rod's length capped to keep the image small
         with pytest.raises(ParameterError, match="px thick"):
             render_configuration(xy, px_per_mm=50.0, thickness_mm=700.0, clean=True)
+
+
+def test_a_rod_beyond_its_wall_is_refused():
+    # the hole is the wall: a rod lying outside it was drawn, and only its truth's rod length
+    # was doubted
+    import warnings
+
+    from simulate import shapes
+
+    xy = shapes.resample(shapes.hairpin(0.001), 300)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with pytest.raises(ParameterError, match="beyond the wall"):
+            render_configuration(xy, wall_radius=1e-3, clean=True)
+        reach = float(np.max(np.hypot(*xy.T)))
+        sc = render_configuration(xy, wall_radius=1.01 * reach, clean=True)
+    assert sc.rgb.ndim == 3
