@@ -42,6 +42,13 @@ side (one sample ``h``), and the passes of a contact cluster are listed in sampl
 joins then cross the paper). A rod whose two principal moments are equal has no frame of its
 own, and a void whose free part is about a pixel wide is found or missed with the rod's
 sub-pixel position: a perturbed rod (not a rigidly moved one) may gain or lose it.
+Measured with the nodes reversed: 15 quenched rods of 300 segments read the same stacks,
+branches and junctions; a quenched rod of 60 segments read 7 stacks and 22 branches
+instead of 8 and 25 in its last fifth, and random walks and zig-zags (which may cross
+themselves) 30 -> 33 stacks at N = 300. A branch's energy takes the nodes from its start
+to the node before its end, so a fold at one node gives its bending to the branch that
+comes after it in node order (reversed: to the other arm; the total is the same), and
+every branch boundary moves by one sample ``h`` between the two numberings.
 """
 from __future__ import annotations
 
