@@ -313,7 +313,7 @@ def plot_configuration(xy, *, ax=None, stacks: bool = True, lam: float = LAMBDA,
                                 alpha=0.75, zorder=2)
             ax.add_collection(lc)
             # beside the axes and as tall as they are (the equal aspect leaves them shorter
-            # than the figure, where a bar of the figure's height stood apart)
+            # than the figure, where a bar of the figure's height would stand apart)
             cax = ax.inset_axes([1.04, 0.0, 0.045, 1.0])
             bar = ax.figure.colorbar(ScalarMappable(norm, cmap), cax=cax,
                                      ticks=range(1, top + 1))

@@ -294,8 +294,8 @@ MAX_SCENE_PX = 10_000 * 10_000
 #: Thinnest sheet drawn, px (the analysis' own limit, ``crosssection.params``).
 MIN_SHEET_PX = 1.0
 #: thickest sheet a render draws, px: its bands (n h wide, dozens of layers on a wall) must
-#: stay below the widest line OpenCV draws (32767 px), which failed inside OpenCV at 700 mm
-#: sheets at 50 px/mm; a scan's sheet is 2-10 px
+#: stay below the widest line OpenCV draws (32767 px: 700 mm sheets at 50 px/mm fail inside
+#: OpenCV); a scan's sheet is 2-10 px
 MAX_SHEET_PX = 1000.0
 #: Widest Gaussian blur drawn, sigma in px: ten sheet thicknesses at the defaults (h = 5 px).
 #: A band h wide blurred with sigma keeps about h / (sqrt(2 pi) sigma) of its contrast, 4 %

@@ -131,7 +131,7 @@ def grouped_axes(groups, rows, cols, pos, n_groups: int):
 def _as_points(path_rc) -> np.ndarray:
     p = np.asarray(path_rc, dtype=np.float64)
     if p.size and (p.ndim != 2 or p.shape[1] != 2):
-        # reshaped, an (N, 3) array read as a path of 1.5 N points
+        # reshaped, an (N, 3) array would read as a path of 1.5 N points
         from crosssection.core.errors import ParameterError
 
         raise ParameterError(f"a path must be an (N, 2) array of (row, col) points, got "

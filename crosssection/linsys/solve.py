@@ -413,7 +413,7 @@ def solve_branch_counts(graph, packs: dict, layers_est, *, reliability=None,
     if len(e_raw) != M:
         raise ValueError(f"layers_est has {len(e_raw)} values for {M} stacks")
     # an estimate no scan can hold is missing, as a NaN is (cast to integers, 1e19 layers
-    # wrapped round to a negative count; 1e12 sent the MILP out of memory)
+    # wrap round to a negative count; 1e12 sends the MILP out of memory)
     e_raw = np.where(np.abs(e_raw) <= LAYERS_EST_MAX, e_raw, np.nan)
     opts = _Options(noise_layers=noise_layers, width_fraction=width_fraction, window=window,
                     soft_penalty=soft_penalty, robust_penalty=robust_penalty, start=start,

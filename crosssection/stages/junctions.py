@@ -95,7 +95,7 @@ def _junction_labels(img, flat, n_nb, merge_px):
     pairs = [np.zeros((0, 2), np.int64)]
     if (2 * rad + 1) ** 2 > 81:
         # a wide merge: pairs from a k-d tree, not one pass over the junction pixels per
-        # offset of the disc ((2 merge_px + 1)^2 passes: merge_px = 1000 ran for minutes)
+        # offset of the disc ((2 merge_px + 1)^2 passes: minutes at merge_px = 1000)
         from scipy.spatial import cKDTree
 
         ij = cKDTree(np.stack([jr, jc], axis=1)).query_pairs(math.sqrt(m2) + 1e-6,

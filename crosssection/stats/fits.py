@@ -320,8 +320,8 @@ def _finite(x, c, g=None, *, stacklevel: int = 3):
 def _canonical(x, c, g):
     """``(x, c, g)`` sorted by value (then cut, then group), each group renumbered in order
     of its smallest value: the bootstrap and the goodness-of-fit draws pick observations
-    and groups by position, so the same sample in another row order gave other intervals,
-    p-values and, through the share of degenerate draws, another selected law."""
+    and groups by position, so the same sample in another row order would give other
+    intervals, p-values and, through the share of degenerate draws, another selected law."""
     keys = [x] if c is None else [c, x]  # np.lexsort: the last key first
     if g is None:
         order = np.lexsort(tuple(keys))

@@ -315,8 +315,8 @@ def per_config_table(ens: Ensemble) -> pd.DataFrame:
     key = ["set", "config_id"]
 
     def finite_mean(df, col, name):
-        # of the finite values, as the fits take them (an infinite length made l_bar inf
-        # and the configuration's Eq. (12) abscissa 0, kept in the relation)
+        # of the finite values, as the fits take them (an infinite length would make l_bar
+        # inf and the configuration's Eq. (12) abscissa 0, kept in the relation)
         v = df[col].where(np.isfinite(df[col].astype(float)))
         return v.groupby([df[k] for k in key]).mean().rename(name)
 

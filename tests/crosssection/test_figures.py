@@ -314,7 +314,7 @@ def test_a_lone_ring_is_counted_in_the_singular_and_shows_no_junction_key():
 
 def test_the_steps_show_the_hole_as_the_overlay_does():
     # a wide page with the cut in one part: the steps' panels show the hole and its margin,
-    # the overlay's window, not the whole page (the network was a strip in each panel)
+    # the overlay's window, not the whole page (where the network is a strip in each panel)
     from crosssection import analyze
     from crosssection.truth.network import make_scene
 

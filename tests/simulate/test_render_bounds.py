@@ -230,8 +230,7 @@ def test_a_sheet_wider_than_opencv_draws_is_refused_before_drawing():
 
 
 def test_a_rod_beyond_its_wall_is_refused():
-    # the hole is the wall: a rod lying outside it was drawn, and only its truth's rod length
-    # was doubted
+    # the hole is the wall: a rod lying outside it is no configuration of that wall
     import warnings
 
     from simulate import shapes

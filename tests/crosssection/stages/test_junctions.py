@@ -276,7 +276,7 @@ def test_stack_graph_finds_the_junctions_of_find_junctions():
 @pytest.mark.parametrize("merge_px", [4.5, 7.0, 12.0, 1000.0])
 def test_a_wide_merge_joins_the_junction_pixels_within_it(merge_px):
     # a merge wider than a few pixels takes its pairs from a k-d tree instead of one pass
-    # over the junction pixels per offset of the disc (a merge of 1000 px ran for minutes):
+    # over the junction pixels per offset of the disc (minutes for a merge of 1000 px):
     # junction pixels (3 neighbours or more) closer than the merge share a cluster, and
     # clusters lie farther apart than it
     from crosssection.stages.skeleton import neighbour_count

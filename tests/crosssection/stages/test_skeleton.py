@@ -611,8 +611,8 @@ def test_a_fat_stub_is_measured_beyond_the_thin_band_it_leaves(reach_px, kept):
 @pytest.mark.parametrize("angle_deg", [40.0, 45.0, 135.0, 140.0])
 def test_thin_diagonal_bands_with_free_ends_keep_their_length(width, angle_deg):
     # straight bands 2-3 px wide drawn as polygons (60 px long, both ends free) in every
-    # orientation: a staircase used to be eaten from its free end pixel after pixel (a band
-    # 2.8 px wide at 135 degrees kept 3 pixels)
+    # orientation: a staircase is not eaten from its free end pixel after pixel (a band
+    # 2.8 px wide at 135 degrees keeps 3 pixels under plain sequential deletion)
     from skimage.draw import polygon
 
     L, size = 30.0, 80
