@@ -977,7 +977,9 @@ def e_vs_nbr_figure(ens: Ensemble, colors=None):
             one = (st["size"] == 1).to_numpy()  # one value: a mean without an error
             ax.plot(st.index[one], st["mean"].to_numpy()[one], "o", ms=ms, mfc="white",
                     mec=c, ls="none", alpha=1 if reg is None else 0.6)
-            single = single or bool(one.any())
+            # said in the legend where the whole system's points are (the sub-systems' small
+            # markers at the same values hide theirs)
+            single = single or (reg is None and bool(one.any()))
     ax.set(xlabel="number of branches in the stack $n_{br}$",
            ylabel=r"mean branch energy $\langle e\rangle$ (dimensionless)",
            title="mean branch energy against $n_{br}$\n" r"(mean $\pm$ standard error over "
