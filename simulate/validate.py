@@ -159,8 +159,9 @@ def score_scene(scene_dir, *, match_px: float | None = None) -> dict:
     -------
     dict
         The scores of :func:`crosssection.truth.scoring.score` plus ``scene``, ``analyze_s``
-        and ``truth_warnings``, the number of messages with which the render flagged the
-        scene's truth (:func:`truth_warnings`).
+        (seconds of the analysis; on a fresh install the first scene's include numba's
+        compilation, several seconds) and ``truth_warnings``, the number of messages with
+        which the render flagged the scene's truth (:func:`truth_warnings`).
 
     Raises
     ------
