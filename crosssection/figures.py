@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from crosssection.core.errors import printable
+from crosssection.core.fileio import SAVE_DPI
 
 __all__ = ["overlay_figure", "draw_overlay", "overlay_window", "steps_figure", "threshold_title",
            "step_titles", "curvature_figure", "widths_figure", "dim_image"]
@@ -439,10 +440,10 @@ def steps_figure(rgb, mask_threshold, mask_clean, skeleton, junction_centers_rc,
         fig.subplots_adjust(left=0.01, right=0.99, bottom=0.01, top=0.92, wspace=0.03)
     for ax, mask in zip(axes[1:], (mask_threshold, mask_clean, sk)):
         shown = panel_image(np.asarray(mask, bool))
-        # a panel a few hundred pixels wide (at the 120 dpi figures are saved at) shows a
+        # a panel a few hundred pixels wide (at the dpi figures are saved at) shows a
         # larger mask filtered, not by its nearest pixels, which break lines a few pixels
         # wide into dashes (a 5000 px scan's single sheets)
-        panel_px = ax.get_position().width * fig.get_figwidth() * 120.0
+        panel_px = ax.get_position().width * fig.get_figwidth() * SAVE_DPI
         ax.imshow(shown, cmap="gray_r", vmin=0, vmax=1, extent=extent,
                   interpolation="antialiased" if max(shown.shape) > 1.5 * panel_px
                   else "nearest")

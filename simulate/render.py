@@ -865,6 +865,14 @@ def _frame(xy, analysis, cal, *, px_per_mm, thickness_mm, rod_length_mm, hole_ra
     elif hole_radius_mm is not None and wall_radius is not None:
         hole_center_l = np.asarray(wall_center_xy, float)
     hole_px = None if hole_radius_mm is None else hole_radius_mm * px_per_mm
+    if wall_radius is not None:
+        reach_l = float(np.hypot(*(xy - np.asarray(wall_center_xy, float)).T).max())
+        if reach_l > wall_radius + max(float(rod_thickness or 0.0), 0.05 * wall_radius):
+            # a rod beyond its wall is no configuration of it (the hole, when it is the wall,
+            # would cut it)
+            raise ParameterError(f"the rod reaches {reach_l:.4g} L from the wall's centre, "
+                                 f"beyond the wall (radius {wall_radius:.4g} L): not a "
+                                 "configuration of that wall", "wall_radius")
     if hole_px is not None and not hole_is_wall:
         # the hole holds the cut: a rod reaching beyond it is no scan of one
         reach_mm = float(np.hypot(*(xy - hole_center_l).T).max()) * rod_length_mm
@@ -2107,14 +2115,6 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
     if draw == "passes" and not pass_width * thickness_mm * px_per_mm > PASS_OVERLAP_PX:
         raise ParameterError(f"pass_width must exceed {PASS_OVERLAP_PX} px, got "
                              f"{pass_width * thickness_mm * px_per_mm:g} px")
-    if wall_radius is not None:
-        reach = float(np.max(np.hypot(*(np.asarray(xy, float)
-                                        - np.asarray(wall_center_xy, float)).T)))
-        if reach > wall_radius + max(float(rod_thickness or 0.0), 0.05 * wall_radius):
-            # the hole is the wall: a rod beyond it would be cut by its own frame
-            raise ParameterError(f"the rod reaches {reach:.4g} L from the wall's centre, beyond "
-                                 f"the wall (radius {wall_radius:.4g} L): not a configuration "
-                                 "of that wall", "wall_radius")
     if analysis is None:
         analysis = analyze_rod(xy, lam=lam, contact_distance=contact_distance)
     if draw == "passes":

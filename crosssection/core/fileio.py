@@ -327,6 +327,10 @@ def write_text(path, text: str) -> Path:
     return Path(path)
 
 
+#: Resolution figures are saved at (:func:`save_figure`), dots per inch.
+SAVE_DPI = 120
+
+
 def save_figure(fig, path, *, description: str | None = None, **kwargs) -> Path:
     """Save a matplotlib figure as PNG atomically and close it.
 
@@ -340,7 +344,7 @@ def save_figure(fig, path, *, description: str | None = None, **kwargs) -> Path:
 
     from crosssection._version import __version__
 
-    kwargs.setdefault("dpi", 120)
+    kwargs.setdefault("dpi", SAVE_DPI)
     kwargs.setdefault("pil_kwargs", {"compress_level": 3})
     metadata = {"Software": f"foldstat {__version__} (matplotlib {matplotlib.__version__})"}
     if description:

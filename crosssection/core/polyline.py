@@ -24,6 +24,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from crosssection.core.errors import ParameterError
+
 __all__ = ["length", "mid_point", "smooth", "smooth_paths", "smoothed_lengths", "is_closed",
            "concat_paths", "walk_ends", "grouped_axes"]
 
@@ -132,8 +134,6 @@ def _as_points(path_rc) -> np.ndarray:
     p = np.asarray(path_rc, dtype=np.float64)
     if p.size and (p.ndim != 2 or p.shape[1] != 2):
         # reshaped, an (N, 3) array would read as a path of 1.5 N points
-        from crosssection.core.errors import ParameterError
-
         raise ParameterError(f"a path must be an (N, 2) array of (row, col) points, got "
                              f"shape {p.shape}")
     return p.reshape(-1, 2)
@@ -264,8 +264,6 @@ def _smooth_into(x, y, k, closed, proj, ox, oy):
 
 def _half_window(window_px, n: int, closed: bool) -> int:
     if isinstance(window_px, bool) or not np.isfinite(window_px) or window_px < 0:
-        from crosssection.core.errors import ParameterError
-
         raise ParameterError(f"the smoothing window must be a finite number of points >= 0, "
                              f"got {window_px!r}")
     k = max(0, int(window_px)) // 2

@@ -102,17 +102,17 @@ def _junction_labels(img, flat, n_nb, merge_px):
                                                              output_type="ndarray")
         d2 = (jr[ij[:, 0]] - jr[ij[:, 1]]) ** 2 + (jc[ij[:, 0]] - jc[ij[:, 1]]) ** 2
         pairs.append(ij[d2 <= m2].astype(np.int64))
-        rad = 0  # no offsets left to pass over
-    for dr in range(-rad, rad + 1):
-        for dc in range(-rad, rad + 1):
-            if (dr == 0 and dc == 0) or dr * dr + dc * dc > m2:
-                continue
-            rr, cc = jr + dr, jc + dc
-            i = np.flatnonzero((rr >= 0) & (rr < h) & (cc >= 0) & (cc < w))
-            q = rr[i] * w + cc[i]
-            k = np.searchsorted(jp, q)
-            hit = jp[np.minimum(k, n - 1)] == q
-            pairs.append(np.stack([i[hit], k[hit]], axis=1))
+    else:
+        for dr in range(-rad, rad + 1):
+            for dc in range(-rad, rad + 1):
+                if (dr == 0 and dc == 0) or dr * dr + dc * dc > m2:
+                    continue
+                rr, cc = jr + dr, jc + dc
+                i = np.flatnonzero((rr >= 0) & (rr < h) & (cc >= 0) & (cc < w))
+                q = rr[i] * w + cc[i]
+                k = np.searchsorted(jp, q)
+                hit = jp[np.minimum(k, n - 1)] == q
+                pairs.append(np.stack([i[hit], k[hit]], axis=1))
     # cluster ids in order of first pixel (raster order)
     cid = group_labels(n, np.concatenate(pairs))
     k = int(cid.max()) + 1

@@ -184,10 +184,8 @@ def _zhang_suen(f, offs, lst, n, st, flags, zs1, zs2, simple, count, thin, cn1,
                     code = 0
                     for k in range(8):
                         code |= f[p + offs[k]] << k
-                    if thin[p] and count[code] == 2 and rnd == 0:
-                        continue
-                    if rnd == 1 and not (thin[p] and count[code] == 2):
-                        continue
+                    if (thin[p] and count[code] == 2) != (rnd == 1):
+                        continue  # not this round's
                     if simple[code] and count[code] >= 2:
                         f[p] = 0
                         changed = True
