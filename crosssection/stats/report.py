@@ -975,8 +975,11 @@ def e_vs_nbr_figure(ens: Ensemble, colors=None):
                         ms=ms, lw=1, capsize=2, alpha=1 if reg is None else 0.6,
                         label=f"{name[s]}: {REGION_WORDS[reg or 'all']}")
             one = (st["size"] == 1).to_numpy()  # one value: a mean without an error
+            # above every series: a sub-system's small filled marker at the same value
+            # would fill the ring
             ax.plot(st.index[one], st["mean"].to_numpy()[one], "o", ms=ms, mfc="white",
-                    mec=c, ls="none", alpha=1 if reg is None else 0.6)
+                    mec=c, ls="none", alpha=1 if reg is None else 0.6,
+                    zorder=4 if reg is None else 3)
             # said in the legend where the whole system's points are (the sub-systems' small
             # markers at the same values hide theirs)
             single = single or (reg is None and bool(one.any()))
