@@ -519,11 +519,12 @@ def steps_record(pre, params: AnalysisParams, written) -> dict:
         ``image`` (path, absolute with links followed, size, dtype), ``inputs`` (the scan
         and the calibration by path and SHA-256, as in summary.json), ``parameters`` (as in
         summary.json, with the ``s_min_mm2``, ``tangent_mm`` and ``smooth_px`` used),
-        ``thresholds``, ``hole``, ``warnings`` and ``outputs`` (the file names).
+        ``thresholds``, ``hole`` (as in summary.json), ``warnings`` and ``outputs`` (the file
+        names).
     """
     from crosssection._version import __version__
     from crosssection.core.provenance import input_record, library_versions, resolved_path
-    from crosssection.tables import recorded_parameters
+    from crosssection.tables import hole_record, recorded_parameters
 
     h, w = pre.rgb.shape[:2]
     return {
@@ -536,9 +537,7 @@ def steps_record(pre, params: AnalysisParams, written) -> dict:
                                params.calibration),
         "parameters": recorded_parameters(params),
         "thresholds": pre.threshold.as_summary(),
-        "hole": {**pre.hole.as_summary(), "fitted": bool(pre.hole.fitted),
-                 "radius_mm": float(params.scale.to_mm(pre.hole.radius_px)),
-                 "confidence": pre.hole_confidence},
+        "hole": hole_record(pre, params),
         "warnings": list(pre.warnings),
         "outputs": sorted(Path(p).name for p in written),
     }

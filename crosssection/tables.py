@@ -285,6 +285,25 @@ def energy_rel_uncertainty(stacks: pd.DataFrame) -> float | None:
     return float(np.nansum(e * np.minimum(u, 1.0)) / total)
 
 
+def hole_record(pre, params) -> dict:
+    """The ``hole`` block of ``summary.json`` and ``steps.json``: centre, radius (px and mm),
+    whether it was fitted, its confidence and how it was set."""
+    return {**pre.hole.as_summary(), "fitted": bool(pre.hole.fitted),
+            "radius_mm": _hole_radius_mm(pre, params), "confidence": pre.hole_confidence,
+            # a plate's edge, or the ink's envelope (a rod that does not reach the wall reads
+            # a smaller hole and a larger epsilon there)
+            "found_by": _hole_found_by(pre.hole, params)}
+
+
+def _hole_radius_mm(pre, params) -> float:
+    """The hole's radius in mm: a given one as given, not its round trip through px."""
+    radius_mm = float(params.scale.to_mm(pre.hole.radius_px))
+    if params.hole_radius_mm is not None and math.isclose(radius_mm, params.hole_radius_mm,
+                                                          rel_tol=1e-12):
+        return float(params.hole_radius_mm)
+    return radius_mm
+
+
 def _hole_found_by(hole, params) -> str:
     """How the hole of ``summary.json`` was set: given, its radius given and its centre
     fitted to the ink, or found in the scan (a plate's edge or the ink's envelope, the
@@ -358,10 +377,7 @@ def summary(*, pre, params, linear_system, junctions, stacks, branches, voids, r
     n_br = stacks["n_br"].to_numpy()
     deg = junctions["n_stacks"].to_numpy()
     kinds = stacks["kind"].tolist()
-    radius_mm = params.scale.to_mm(pre.hole.radius_px)
-    if params.hole_radius_mm is not None and math.isclose(radius_mm, params.hole_radius_mm,
-                                                          rel_tol=1e-12):
-        radius_mm = float(params.hole_radius_mm)  # as given, not its round trip through px
+    radius_mm = _hole_radius_mm(pre, params)
     total_energy = float(branches["energy"].sum()) if len(branches) else 0.0
     h, w = pre.rgb.shape[:2]
     out = {
@@ -376,11 +392,7 @@ def summary(*, pre, params, linear_system, junctions, stacks, branches, voids, r
         "epsilon": rod_used_mm / (2.0 * np.pi * radius_mm) if radius_mm > 0 else None,
         "total_energy": total_energy,
         "total_energy_rel_uncertainty": energy_rel_uncertainty(stacks),
-        "hole": {**pre.hole.as_summary(), "fitted": bool(pre.hole.fitted),
-                 "radius_mm": float(radius_mm), "confidence": pre.hole_confidence,
-                 # a plate's edge, or the ink's envelope (a rod that does not reach the wall
-                 # reads a smaller hole and a larger epsilon there)
-                 "found_by": _hole_found_by(pre.hole, params)},
+        "hole": hole_record(pre, params),
         "timings_s": {k: round(v, 6) for k, v in timings.items()},
         "total_time_s": round(total_time_s, 6),
         "n_junctions_by_degree": {str(int(d)): int(c) for d, c in

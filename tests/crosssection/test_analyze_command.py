@@ -210,6 +210,11 @@ def test_steps_records_what_it_was_made_with(small_scan, tmp_path):
     assert record["parameters"]["thickness_mm"] == AnalysisParams().thickness_mm
     assert record["outputs"] == sorted([*STEP_IMAGES, STEPS_FIGURE])
     assert _names(out) == sorted([*STEP_IMAGES, STEPS_FIGURE, STEPS_RECORD])  # no temp file
+    # the hole as analyze records it, how it was set included
+    assert main(["analyze", str(small_scan), "--out", str(tmp_path / "an"), "--px-per-mm",
+                 "50", "--no-figure"]) == 0
+    summary = json.loads((tmp_path / "an" / "summary.json").read_text())
+    assert record["hole"] == summary["hole"] and "found_by" in record["hole"]
     # without the figure, the steps.png of the earlier run goes and the record says so
     assert main(["steps", str(small_scan), "--out", str(out), "--no-figure"]) == 0
     assert _names(out) == sorted([*STEP_IMAGES, STEPS_RECORD])
