@@ -201,6 +201,10 @@ def _threshold_in_frame(rgb, p: AnalysisParams, path, timer, min_piece_px: float
                                 path) from None
     with timer("threshold"):
         thr = threshold_rgb(rgb, region=inside, **m)
+    if not p.hole_given:
+        with timer("hole"):
+            hole, inside, thr = _checked_found_hole(rgb, hole, inside, thr,
+                                                    thickness_px=p.thickness_px)
     if p.hole_given:
         # a radius given alone is fitted to the ink: a radius too short cuts the wall band
         # as a whole hole given off does
@@ -296,6 +300,30 @@ def _checked_given_hole(rgb, hole, inside, thr, m, path, *, correct=True):
     found = dataclasses.replace(found, given_crossed=cut, replaced=True,
                                 alternative=(hole.center_rc.copy(), float(hole.radius_px)))
     return found, frame, thr_found
+
+
+def _checked_found_hole(rgb, hole, inside, thr, *, thickness_px):
+    """A plate's edge found beyond the circle the ink is pressed against, across a surface
+    darker than the paper: flagged (``hole_wide``), kept.
+
+    A light rim or a bevel round the hole, paler than the plate, reads as paper: the plate's
+    edge is then found at the rim's outer side (a light ring 20 px wide: a radius 19 px, 2.5 %,
+    too large, at full confidence), while the ink is pressed against a circle 2 h or more
+    inside it (:func:`~crosssection.stages.hole.given_hole_wide`) across a ring darker than
+    the paper (:func:`~crosssection.stages.hole.rim_inside`). That circle is not the wall
+    either where the wall band's thin stretches lie inside its widest ones (an independent
+    generator's scans: 15 px inside the wall), so the hole found is kept and its
+    ``envelope`` set, which the ``hole_wide`` check names. Paper in that ring is a rod lying
+    away from its wall: nothing is flagged, as for a given hole with a plate's edge at its
+    circle. Returns ``(hole, frame, threshold)``.
+    """
+    if not hole.reason.startswith("plate edge"):
+        return hole, inside, thr
+    env = hole_stage.given_hole_wide(thr.mask, hole, thickness_px=thickness_px)
+    if env is None or not hole_stage.rim_inside(rgb, thr.mask, hole, env,
+                                                thickness_px=thickness_px):
+        return hole, inside, thr
+    return dataclasses.replace(hole, envelope=env), inside, thr
 
 
 def _checked_wide_hole(rgb, hole, inside, thr, m, path, *, thickness_px, correct=True):
@@ -822,7 +850,9 @@ def _analyze(image, params, overrides, *, warn: bool = True,
             width_px = scale.to_px(width_mm)
             tol = hole_stage.wall_tolerance_px(sg, width_px, h_px)
             regions = hole_stage.classify_regions(sg, pre.junctions.centers_rc, pre.hole,
-                                                  tol_px=tol)
+                                                  tol_px=tol, mask=pre.mask_clean,
+                                                  gap_max_px=hole_stage.wall_gap_max_px(
+                                                      width_px, h_px))
         faint = []
         thr = pre.threshold
         if pre.edge_feature is not None and thr.paper_level is not None:

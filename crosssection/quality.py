@@ -51,9 +51,11 @@ hole_wide                fraction of a given hole's circle that the ink       < 
                          2 h or more inside, is reached (the rod pressed      on 50 %; < 50 %,
                          against a smaller wall); a plate's edge found at     where the ink lines
                          the envelope replaces the given hole, or the         90 % of it; a
-                         envelope where the ink lines 90 % of it              plate's edge at the
-                                                                              given circle clears
-                                                                              it
+                         envelope where the ink lines 90 % of it; a plate's   plate's edge at the
+                         edge found beyond such an envelope across a surface  given circle clears
+                         darker than the paper (a light rim) is kept          it; paper round the
+                                                                              envelope clears a
+                                                                              plate's edge found
 hole_cut                 area of the hole outside the scan / the hole's area; > 0.5 %, or
                          ink on the border where the hole overhangs it by h   >= max(h, 2) px
 no_junction              junctions found (a band wound into a spiral, its     none
@@ -66,7 +68,7 @@ networks                 separate networks of ink each holding at least 10 %  > 
                          of the rod (``sum n_br l``)
 packing                  L h / (pi R^2): area of the rod over the hole's      > 1 (impossible)
 rod_length               a given L over the one measured (``sum n_br l``)     outside [0.8, 1.25]
-epsilon_ink              L h over the ink area inside the hole                outside [0.4, 2.5]
+epsilon_ink              measured L h over the ink area inside the hole       outside [0.4, 2.5]
 specks                   free stacks (both ends free) shorter than 2 l_min    > 5 % of stacks
 loops                    closed loops of ink touching no other stack          any, beside others
 tiny_voids               voids smaller than h^2 (an ``s_min_mm2`` below it    any
@@ -247,7 +249,8 @@ drawn in two or three pieces (each at least 5 % of the ink) and three of them ar
 they read a median |energy error| of 25 % against 9.9 % for the others.
 
 The ``epsilon_ink`` check uses that a rod of length L and thickness h covers about L h of ink:
-a rod length far from the ink area means the layer counts or the threshold are wrong.
+the rod measured on the scan (``sum n_br l``, never a given L, which ``rod_length`` checks) far
+from the ink area means the layer counts or the threshold are wrong.
 
 The ``rod_length`` check compares a given ``rod_length_mm`` (the L of epsilon and of the
 energies) with the rod measured on the scan, ``sum n_br l``: a factor of 10 or 25.4 is a
@@ -517,14 +520,23 @@ def _crossed_check(params, hole) -> list[QualityFlag]:
 
 
 def _wide_check(params, hole) -> list[QualityFlag]:
-    """The ``hole_wide`` check: a given hole wider than the wall the ink is pressed against."""
+    """The ``hole_wide`` check: a given hole, or a plate's edge found, wider than the wall
+    the ink is pressed against."""
     from crosssection.stages.hole import WIDE_LINED_REACH_MAX, WIDE_REACH_MAX
 
     env = getattr(hole, "envelope", None)
     if env is None:
         return []
     mm = params.scale.to_mm
-    (r0, c0), rad, reach, _env_reach = env
+    (r0, c0), rad, reach, env_reach = env
+    if not params.hole_given:
+        msg = (f"the plate's edge found in the scan (radius {mm(hole.radius_px):.2f} mm) lies "
+               f"{mm(hole.radius_px - rad):.2f} mm beyond the circle the ink is pressed "
+               f"against on {100 * env_reach:.0f} % of it (radius {mm(rad):.2f} mm, centre "
+               f"x = {c0:.0f}, y = {r0:.0f} px), across a surface darker than the paper: a "
+               "light rim or a bevel round the hole may read as paper, and epsilon as low; "
+               "give the hole (hole_radius_mm and hole_center_px)")
+        return [QualityFlag("hole_wide", msg, reach, WIDE_REACH_MAX)]
     given = hole.alternative[1] if hole.replaced else hole.radius_px
     head = (f"the ink reaches the given hole's circle on {100 * reach:.0f} % of it, and is "
             f"pressed against a circle {mm(given - rad):.2f} mm inside it (radius "
@@ -1383,7 +1395,7 @@ TIGHT_BEND_SHARE = 0.1
 
 #: ``energy_modelled``: share of the total bending energy resting on the fork-zone model or
 #: the noise floor (``total_energy_rel_uncertainty``) beyond which it is flagged: less than a
-#: twentieth measured on free centrelines. Measured 0.09-0.35 on simulator renders and
+#: twentieth measured on free centrelines. Measured 0.09-0.71 on simulator renders and
 #: 0.62-0.89 on the network generator's scans (robust sweep, 48 scans; the sample scans
 #: 0.73-0.84), where the total is within 5-30 %, and 0.93 on one of its networks of 7 layers
 #: on average (+14 %); 0.85-0.95 on an independent generator's thick dense scans (-23 % in the

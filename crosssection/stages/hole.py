@@ -73,6 +73,7 @@ import numpy as np
 from numba import njit
 
 from crosssection.core.errors import AnalysisError, ParameterError
+from crosssection.params import _number
 
 #: Without a plate, ink components of at least this fraction of the largest one's area are
 #: pieces of the rod and lie inside the frame; smaller ones (specks) may be cut.
@@ -98,8 +99,8 @@ _REREAD_BELOW = 0.9
 _FAR_RAYS = 180
 
 __all__ = ["Hole", "fit_hole", "find_hole", "frame_mask", "trim_margin", "check_hole",
-           "classify_regions", "wall_tolerance_px", "kasa_fit", "ink_across_circle",
-           "given_hole_wide"]
+           "classify_regions", "wall_tolerance_px", "wall_gaps_px", "wall_gap_max_px",
+           "rim_inside", "kasa_fit", "ink_across_circle", "given_hole_wide"]
 
 
 @dataclass
@@ -839,6 +840,53 @@ def given_hole_wide(mask, hole, *, thickness_px: float):
     return env.center_rc, float(env.radius_px), reach, env_reach
 
 
+#: A ring between the ink's envelope and a plate's edge found is a rim of the plate when its
+#: median brightness is below this fraction of the paper's (:func:`rim_inside`).
+RIM_BRIGHTNESS_MAX = 0.9
+
+
+def rim_inside(rgb, ink_mask, hole, envelope, *, thickness_px: float) -> bool:
+    """Whether the surface between the ink's envelope and a plate's edge found outside it is
+    a rim of the plate rather than paper.
+
+    The ring from 2 h beyond the envelope to 2 px inside the edge, ink left out, is a rim when
+    its median brightness (the sum of the channels) is below :data:`RIM_BRIGHTNESS_MAX` of
+    the paper's: the 80th percentile of the brightness of the surface inside the envelope
+    (voids: paper, and the darker receding surfaces).
+
+    Parameters
+    ----------
+    rgb : (H, W, 3) array
+    ink_mask : (H, W) bool array
+    hole : Hole
+        The plate's edge found.
+    envelope : tuple
+        ``(center_rc, radius_px, ...)`` of the ink's envelope (:func:`given_hole_wide`).
+    thickness_px : float
+
+    Returns
+    -------
+    bool
+        False too where either surface has fewer than 20 pixels.
+    """
+    (er, ec), env_r = envelope[0], float(envelope[1])
+    h, w = ink_mask.shape
+    r_lo, r_hi = hole.center_rc[0] - hole.radius_px, hole.center_rc[0] + hole.radius_px
+    c_lo, c_hi = hole.center_rc[1] - hole.radius_px, hole.center_rc[1] + hole.radius_px
+    r0, r1 = int(max(np.floor(r_lo), 0)), int(min(np.ceil(r_hi) + 1, h))
+    c0, c1 = int(max(np.floor(c_lo), 0)), int(min(np.ceil(c_hi) + 1, w))
+    rr, cc = np.mgrid[r0:r1, c0:c1]
+    d_env = np.hypot(rr - er, cc - ec)
+    d_edge = np.hypot(rr - hole.center_rc[0], cc - hole.center_rc[1])
+    free = ~np.asarray(ink_mask, bool)[r0:r1, c0:c1]
+    lum = np.asarray(rgb, np.float64)[r0:r1, c0:c1].sum(axis=2)
+    ring = lum[free & (d_env > env_r + 2 * thickness_px) & (d_edge < hole.radius_px - 2)]
+    paper = lum[free & (d_env < env_r - 2 * thickness_px)]
+    if ring.size < 20 or paper.size < 20:
+        return False
+    return bool(np.median(ring) < RIM_BRIGHTNESS_MAX * np.percentile(paper, 80))
+
+
 def _wall_points(rgb, ink_mask, c0, r0, n_rays, *, far=False):
     """Wall points on rays from ``c0`` where a plate distinct from the paper surrounds it.
 
@@ -1336,16 +1384,94 @@ def wall_tolerance_px(graph, width_px, thickness_px) -> np.ndarray:
     return tol
 
 
-def classify_regions(graph, junction_centers_rc, hole, *, tol_px) -> list[str]:
+#: Paper between the wall and the outermost ink up to half the widest stack and this many
+#: sheet thicknesses is a gap that the periphery's contact tolerance does not count
+#: (:func:`wall_gap_max_px`).
+WALL_GAP_H = 2.0
+
+
+def wall_gap_max_px(width_px, thickness_px: float) -> float:
+    """The widest gap between the wall and the wall band that :func:`classify_regions` does
+    not count as distance: half the scan's widest stack plus :data:`WALL_GAP_H` h.
+
+    A wall band whose thick stretches are pressed against the wall lies up to half its widest
+    stack inside it along its thin stretches when its inner side, not its outer one, follows
+    a circle; 2 h takes in a hole given or fitted a little wide (1 % of a 15 mm radius is
+    1.5 h at h = 0.1 mm).
+
+    Parameters
+    ----------
+    width_px : array
+        Stack widths (px); non-finite ones are ignored.
+    thickness_px : float
+
+    Returns
+    -------
+    float
+    """
+    w = np.asarray(width_px, dtype=np.float64)
+    w = w[np.isfinite(w)]
+    return 0.5 * (float(w.max()) if w.size else 0.0) + WALL_GAP_H * float(thickness_px)
+
+
+def wall_gaps_px(mask, hole, points_rc, *, reach_px: float) -> np.ndarray:
+    """Paper between the outermost ink and the wall on the ray from the hole's centre through
+    each point.
+
+    The ray is read on ``mask`` (nearest pixel, 0.5 px steps) from the point, or from
+    ``reach_px`` inside the wall when the point lies deeper, out to 2 px beyond the wall.
+
+    Parameters
+    ----------
+    mask : (H, W) bool array
+        The ink.
+    hole : Hole
+    points_rc : (K, 2) array
+        Points inside the hole (row, col).
+    reach_px : float
+        How far inside the wall the outermost ink is looked for.
+
+    Returns
+    -------
+    (K,) float array
+        ``radius - r`` of the outermost ink sample ``r`` on each ray (negative: ink beyond the
+        wall); inf where no ink lies within ``reach_px`` of the wall.
+    """
+    p = np.asarray(points_rc, dtype=np.float64).reshape(-1, 2)
+    reach_px = _number("reach_px", reach_px, allow_equal=True)
+    if len(p) == 0:
+        return np.zeros(0)
+    c = np.asarray(hole.center_rc, dtype=np.float64)
+    r0 = np.hypot(p[:, 0] - c[0], p[:, 1] - c[1])
+    u = (p - c) / np.maximum(r0, 1e-9)[:, None]
+    start = np.maximum(r0, hole.radius_px - reach_px)
+    steps = np.arange(0.0, reach_px + 2.5, 0.5)
+    rad = start[:, None] + steps[None, :]
+    inside = rad <= hole.radius_px + 2.0
+    h, w = mask.shape
+    rr = np.clip(np.rint(c[0] + u[:, :1] * rad), 0, h - 1).astype(np.intp)
+    cc = np.clip(np.rint(c[1] + u[:, 1:] * rad), 0, w - 1).astype(np.intp)
+    ink = np.asarray(mask, bool)[rr, cc] & inside
+    last = np.where(ink.any(axis=1), rad[np.arange(len(p)), ink.shape[1] - 1
+                                         - np.argmax(ink[:, ::-1], axis=1)], -np.inf)
+    return hole.radius_px - last
+
+
+def classify_regions(graph, junction_centers_rc, hole, *, tol_px, mask=None,
+                     gap_max_px: float = 0.0) -> list[str]:
     """``"periphery"`` or ``"bulk"`` per stack (paper, "Two sub-systems").
 
     A stack is periphery when one of its end nodes touches the wall: the distance from the
     node to the circle, ``R - |node - centre|``, is at most the tolerance (nodes outside the
-    circle count as touching). End nodes are junctions or free skeleton ends, at their
-    positions ``graph.node_rc`` (junction nodes: ``junction_centers_rc``). A closed loop
-    without junction has no extremity; it is periphery when its path comes within the
-    tolerance of the wall (the paper is silent; such a loop lying along the wall is the
-    extreme case of a branch pressed against it).
+    circle count as touching). With ``mask``, paper between the circle and the outermost ink
+    on the node's ray (:func:`wall_gaps_px`) is not counted in that distance when it is at
+    most ``gap_max_px`` wide: a wall band lying a little inside the circle (a hole given or
+    found a little wide, a band whose thin stretches lie inside its widest one) still
+    touches it, where a junction facing open paper up to the wall does not. End nodes are
+    junctions or free skeleton ends, at their positions ``graph.node_rc`` (junction nodes:
+    ``junction_centers_rc``). A closed loop without junction has no extremity; it is
+    periphery when its path comes within the tolerance of the wall (the paper is silent;
+    such a loop lying along the wall is the extreme case of a branch pressed against it).
 
     Parameters
     ----------
@@ -1358,6 +1484,11 @@ def classify_regions(graph, junction_centers_rc, hole, *, tol_px) -> list[str]:
     tol_px : float or array (M,)
         Contact tolerance, scalar or per stack. Suggested: :func:`wall_tolerance_px`
         (half the widest stack at the junction + 2 h).
+    mask : (H, W) bool array, optional
+        The ink; without it the distance is to the circle alone.
+    gap_max_px : float
+        The widest gap not counted. Suggested: :func:`wall_gap_max_px` (half the scan's
+        widest stack + 2 h).
 
     Returns
     -------
@@ -1376,8 +1507,17 @@ def classify_regions(graph, junction_centers_rc, hole, *, tol_px) -> list[str]:
         return np.asarray(graph.node_rc[node], dtype=np.float64)
 
     # both ends of every stack at once (the same element-wise distances as per stack)
-    d = np.minimum(hole.distance_to_wall(np.array([pos(u) for u, _ in graph.ends])),
-                   hole.distance_to_wall(np.array([pos(v) for _, v in graph.ends])))
+    ends = np.array([[pos(u), pos(v)] for u, v in graph.ends], dtype=np.float64)
+    d = hole.distance_to_wall(ends.reshape(-1, 2)).reshape(m, 2)
+    if mask is not None and gap_max_px > 0:
+        # the wall's side of each end beyond the tolerance: paper between the outermost ink
+        # on its ray and the circle, when no wider than gap_max_px, is a gap, not a distance
+        tol2 = np.repeat(tol, 2).reshape(m, 2)
+        near = (d > tol2) & (d <= tol2 + gap_max_px)
+        if near.any():
+            gap = wall_gaps_px(mask, hole, ends[near], reach_px=gap_max_px)
+            d[near] -= np.where(gap <= gap_max_px, np.maximum(gap, 0.0), 0.0)
+    d = d.min(axis=1)
     for sid, (u, _v) in enumerate(graph.ends):
         if kinds.get(u) == "loop":
             d[sid] = hole.distance_to_wall(graph.paths[sid]).min() if len(graph.paths[sid]) \

@@ -9,7 +9,8 @@ import pytest
 from skimage.draw import polygon
 
 from crosssection.core.errors import AnalysisError
-from crosssection.stages.hole import Hole, classify_regions, fit_hole, kasa_fit, wall_tolerance_px
+from crosssection.stages.hole import (Hole, classify_regions, fit_hole, kasa_fit,
+                                     wall_gap_max_px, wall_gaps_px, wall_tolerance_px)
 from crosssection.core.schema import VOID_COLUMNS
 from crosssection.stages.voids import contour_perimeter_px, find_voids, void_labels
 
@@ -109,6 +110,75 @@ def test_classify_regions_by_end_junctions():
     tol = wall_tolerance_px(g, np.array([10.0, 4, 4, 6, 5]), H)
     assert tol[0] == pytest.approx(0.5 * 10 + 2 * H)
     assert tol[2] == pytest.approx(0.5 * 6 + 2 * H)   # node 2 meets stacks 1, 2, 3
+
+
+def _inset_ring_scene(gap_px, size=500, R=220.0, ring_w=2 * H, arm_w=1.4 * H):
+    """A wall band lining half the circle ``gap_px`` inside it, four radial arms from a
+    central junction: two end on the band, two (on the other half) in the open."""
+    c = np.array([size / 2, size / 2])
+    rr, cc = np.mgrid[0:size, 0:size]
+    d = np.hypot(rr - c[0], cc - c[1])
+    ang = np.arctan2(rr - c[0], cc - c[1])
+    r_mid = R - gap_px - ring_w / 2
+    mask = (np.abs(d - r_mid) <= ring_w / 2) & (ang < 0)
+    nodes = {0: tuple(c)}
+    edges = []
+    for k, a in enumerate((-2.0, -1.0, 1.0, 2.0)):
+        end_r = r_mid if a < 0 else R - 12 * H
+        u = np.array([np.sin(a), np.cos(a)])
+        t = (rr - c[0]) * u[0] + (cc - c[1]) * u[1]
+        off = np.abs(-(rr - c[0]) * u[1] + (cc - c[1]) * u[0])
+        mask |= (t >= 0) & (t <= end_r) & (off <= arm_w / 2)
+        nodes[k + 1] = tuple(c + end_r * u)
+        edges.append((0, k + 1))
+    kinds = {i: "junction" for i in nodes}
+    g = _make_graph(nodes, kinds, edges)
+    return mask, g, np.array([nodes[i] for i in range(len(nodes))], float), Hole(c, R, False)
+
+
+#: The widest gap not counted in a scan whose widest stack is 8 h wide (6 h).
+GAP_MAX = wall_gap_max_px(np.array([8 * H, 2 * H, np.nan]), H)
+
+
+def test_wall_gap_max_px():
+    assert GAP_MAX == pytest.approx(6 * H)
+    assert wall_gap_max_px(np.array([np.nan]), H) == pytest.approx(2 * H)
+
+
+@pytest.mark.parametrize("gap_h", [0.0, 1.5, 3.0, 5.5])
+def test_periphery_across_a_gap_between_wall_band_and_wall(gap_h):
+    # a wall band lying a few sheet thicknesses inside the circle (a hole given a little wide,
+    # or a band whose thin stretches lie inside its widest one): the arms ending on it touch
+    # the wall, the arms ending in the open do not
+    mask, g, jc, hole = _inset_ring_scene(gap_h * H)
+    tol = wall_tolerance_px(g, np.full(4, 2 * H), H)
+    reg = classify_regions(g, jc, hole, tol_px=tol, mask=mask, gap_max_px=GAP_MAX)
+    assert reg == ["periphery", "periphery", "bulk", "bulk"]
+    # measured to the circle alone, a gap beyond the tolerance's 2 h reads the band as bulk
+    alone = classify_regions(g, jc, hole, tol_px=tol)
+    assert alone[:2] == (["periphery"] * 2 if gap_h <= 1.5 else ["bulk"] * 2)
+
+
+def test_a_gap_wider_than_its_limit_is_distance():
+    mask, g, jc, hole = _inset_ring_scene(1.2 * GAP_MAX)
+    tol = wall_tolerance_px(g, np.full(4, 2 * H), H)
+    reg = classify_regions(g, jc, hole, tol_px=tol, mask=mask, gap_max_px=GAP_MAX)
+    assert reg == ["bulk"] * 4
+
+
+def test_wall_gaps_px_reads_the_outermost_ink_on_each_ray():
+    mask, g, jc, hole = _inset_ring_scene(4 * H)
+    gaps = wall_gaps_px(mask, hole, jc[1:], reach_px=10 * H)
+    # arms 1-2 end on the band, whose outer edge lies 4 h inside the wall (to the half pixel)
+    assert np.allclose(gaps[:2], 4 * H, atol=1.0)
+    # arms 3-4 end 12 h inside the wall with paper beyond: no ink within the reach
+    assert np.all(np.isinf(gaps[2:]))
+    # read from 3 px inside the open arms' ends: their own ink is the outermost, 12 h inside
+    inner = jc[3:] - 3 * (jc[3:] - jc[0]) / np.linalg.norm(jc[3:] - jc[0], axis=1)[:, None]
+    assert np.isinf(wall_gaps_px(mask, hole, inner, reach_px=11 * H)).all()
+    assert wall_gaps_px(mask, hole, inner, reach_px=14 * H) == pytest.approx([12 * H] * 2,
+                                                                            abs=1.0)
+    assert wall_gaps_px(mask, hole, np.zeros((0, 2)), reach_px=H).shape == (0,)
 
 
 def _teardrop(n=2000, scale=60.0, m=2):
