@@ -118,8 +118,11 @@ layer's path.
 ``CurvatureProfile.energy_rel_uncertainty``: the share of ``int kappa^2 ds`` not measured on a
 free centreline (the fork zones extrapolated, or followed along a merged band's wall; all of it
 for a stack fitted whole inside its fork zones) plus the removed noise floor, relative to the
-stack's ``int kappa^2 ds``, at most 1 (a gentle stack whose removed floor exceeds what is left of
-its energy rests on the floor entirely). It ranks the stacks' errors, it does not bound them: a stack whose
+stack's ``int kappa^2 ds`` before the floor is removed (the energy reported is that integral less
+the floor), at most 1 (a gentle stack whose removed floor exceeds what is left of its energy
+rests on the floor entirely; NaN for a path of fewer than 2 samples). Despite its name it is
+a modelled share, not a standard error: it ranks the stacks' errors, it does not bound them
+(an energy read more than twice the truth is never within it): a stack whose
 share is at most 0.5 is read within a factor 1.5 for 79-100 % of the true energy of such
 stacks, one above 0.5 for 0-86 % (four generators; ``benchmarks/stack_energy_errors.py``).
 
@@ -170,8 +173,9 @@ class CurvatureProfile:
     fit_start, fit_stop : int
         Samples ``fit_start:fit_stop`` were fitted; the others lie in fork zones or at ends.
     energy_rel_uncertainty : float
-        Relative uncertainty of the stack's ``int kappa^2 ds`` (module docstring; NaN for the
-        paper method).
+        Share of the stack's ``int kappa^2 ds`` resting on the fork-zone model or the noise
+        floor (module docstring: it ranks errors, it does not bound them; NaN for the paper
+        method and for a path of fewer than 2 samples).
     noise_var_per_mm2 : float
         Variance of the curvature noise of the window fit, 1/mm^2 (module docstring, step 4;
         0 when not measured). The bending energy removes it.
