@@ -330,9 +330,10 @@ def _checked_wide_hole(rgb, hole, inside, thr, m, path, *, thickness_px, correct
     """A given hole wider than the wall the rod is pressed against, replaced by the plate's
     edge found there.
 
-    A radius given too large by more than 2 h leaves the wall band's junctions beyond the
-    periphery's tolerance: every stack reads as bulk, and epsilon is low (a sample scan
-    given 7 % too large: 26 periphery stacks of 57 -> 0, epsilon 5.78 -> 5.39, no word).
+    A radius given too large reads epsilon low, and by more than the periphery's gap
+    (:func:`~crosssection.stages.hole.wall_gap_max_px`) it leaves the wall band's junctions
+    beyond the periphery's tolerance: every stack reads as bulk (a sample scan given 7 % too
+    large and kept: 26 periphery stacks of 57 -> 0, epsilon 5.78 -> 5.39).
     :func:`~crosssection.stages.hole.given_hole_wide` tells such a hole by the ink's
     envelope. A plate's edge found in the scan (:func:`~crosssection.stages.hole.find_hole`)
     at that envelope is the wall: it replaces the given hole (with ``correct`` False the

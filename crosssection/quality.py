@@ -547,9 +547,9 @@ def _wide_check(params, hole) -> list[QualityFlag]:
                f"{mm(hole.radius_px):.2f} mm; given {mm(given):.2f} mm): check the hole given, "
                "and px_per_mm (a scale off by a few % moves a hole given in mm as much)")
     else:
-        msg = (f"{head}: a hole given too large reads the stacks along the wall as bulk and "
-               "epsilon low; check hole_radius_mm and hole_center_px (and px_per_mm), or "
-               "leave them out to find the hole")
+        msg = (f"{head}: a hole given too large reads epsilon low, and the stacks along the "
+               "wall as bulk where the wall band lies far inside it; check hole_radius_mm "
+               "and hole_center_px (and px_per_mm), or leave them out to find the hole")
     # the limit of the rule that fired: reached nowhere, or short of half where lined
     limit = WIDE_REACH_MAX if reach < WIDE_REACH_MAX else WIDE_LINED_REACH_MAX
     return [QualityFlag("hole_wide", msg, reach, limit)]

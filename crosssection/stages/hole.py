@@ -779,8 +779,8 @@ WIDE_LINED_REACH_MAX = 0.5
 
 
 def wide_tolerance_px(thickness_px: float) -> float:
-    """How far inside a given circle the ink may stop before the hole is too wide: 2 h (the
-    periphery's tolerance beyond half a band, :func:`wall_tolerance_px`), at least 3.5 px
+    """How far inside a given circle the ink may stop before the hole is too wide: 2 h (a
+    radius given 1 % long on a 15 mm hole at h = 0.1 mm is 1.5 h), at least 3.5 px
     (:func:`_envelope_confidence`'s reach)."""
     return max(2.0 * float(thickness_px), 3.5)
 
@@ -791,8 +791,9 @@ def given_hole_wide(mask, hole, *, thickness_px: float):
     The wall band lines the wall, so the ink reaches a right hole's circle on most of it;
     the stacks pressed against the wall end their junctions half a band inside it, within
     the periphery's tolerance (:func:`wall_tolerance_px`: half a band + 2 h). A radius given
-    more than 2 h too large leaves every such junction beyond that tolerance: every stack
-    reads as bulk, and epsilon (``L / 2 pi R``) is low by the radius' excess. Such a hole is
+    too large reads epsilon (``L / 2 pi R``) low by the radius' excess, and by more than the
+    periphery's gap (:func:`wall_gap_max_px`) it leaves every such junction beyond that
+    tolerance: every stack reads as bulk. Such a hole is
     told by the ink reaching within 2 h of its circle on less than :data:`WIDE_REACH_MAX` of
     it, where the ink's own envelope (:func:`fit_hole`, centred within a fifth of the radius)
     lies more than 2 h inside it and is reached on :data:`WIDE_ENVELOPE_MIN` of it (a rod
