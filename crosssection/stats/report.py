@@ -27,6 +27,7 @@ import pandas as pd
 
 from crosssection._version import __version__
 from crosssection.core.errors import OutputError, ParameterError
+from crosssection.core.provenance import library_versions
 from crosssection.core.fileio import (BROWSER_FILES, clear_stale_folders, exclusive_lock,
                                       foreign_entry,
                                       save_figure, staging_folder, swap_in_folder, write_csv,
@@ -73,6 +74,9 @@ WORDS = {
 }
 REGION_WORDS = {"all": "whole system", "bulk": "bulk (no wall contact)",
                 "periphery": "periphery (touching the wall)"}
+
+#: The libraries a report's numbers rest on, recorded in stats.json.
+STATS_LIBRARIES = ("numpy", "scipy", "pandas", "matplotlib")
 
 
 #: A BIC difference below which the selection between two laws is not decided by the data
@@ -1239,6 +1243,8 @@ def _write_files(res: StatsResult, ens: Ensemble, out: Path, *, opts: StatsOptio
 
     stats_json = {
         "package": "foldstat", "version": __version__,
+        # the fits' bootstrap and likelihoods rest on these: a new release can move last bits
+        "libraries": library_versions(STATS_LIBRARIES),
         "inputs": [_resolved(i) for i in inputs],
         "sets_of_inputs": {_resolved(d): v for d, v in input_sets(ens).items()},
         "detection_limits": detection_limits(ens),

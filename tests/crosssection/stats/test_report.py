@@ -36,6 +36,8 @@ def test_stats_report_on_batch_and_simulation(tmp_path, seed):
     assert {"bulk", "periphery"} <= set(macro.loc[macro["set"] == "s1", "region"])
     meta = json.loads((out / "stats.json").read_text())
     assert meta["version"] and meta["options"]["seed"] == seed
+    assert set(meta["libraries"]) == {"numpy", "scipy", "pandas", "matplotlib"}
+    assert meta["libraries"]["numpy"] == np.__version__
     assert meta["sets"]["s1"]["fits"]["all"]["length_L"]["selected"]
     html = (out / "report.html").read_text()
     # the page says what Eq. (12) tests and what a negative r2 means
