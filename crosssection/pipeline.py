@@ -201,21 +201,19 @@ def _threshold_in_frame(rgb, p: AnalysisParams, path, timer, min_piece_px: float
                                 path) from None
     with timer("threshold"):
         thr = threshold_rgb(rgb, region=inside, **m)
-    if not p.hole_given:
-        with timer("hole"):
-            hole, inside, thr = _checked_found_hole(rgb, hole, inside, thr,
-                                                    thickness_px=p.thickness_px)
-    if p.hole_given:
-        # a radius given alone is fitted to the ink: a radius too short cuts the wall band
-        # as a whole hole given off does
-        with timer("hole"):
+    with timer("hole"):
+        if p.hole_given:
+            # a radius given alone is fitted to the ink: a radius too short cuts the wall
+            # band as a whole hole given off does
             hole, inside, thr = _checked_given_hole(rgb, hole, inside, thr, m, path,
                                                     correct=p.hole_correction)
-    if p.hole_given and not hole.replaced:
-        with timer("hole"):
-            hole, inside, thr = _checked_wide_hole(rgb, hole, inside, thr, m, path,
-                                                   thickness_px=p.thickness_px,
-                                                   correct=p.hole_correction)
+            if not hole.replaced:
+                hole, inside, thr = _checked_wide_hole(rgb, hole, inside, thr, m, path,
+                                                       thickness_px=p.thickness_px,
+                                                       correct=p.hole_correction)
+        else:
+            hole, inside, thr = _checked_found_hole(rgb, hole, inside, thr,
+                                                    thickness_px=p.thickness_px)
     with timer("threshold"):
         n_px = 0
         if p.thickness_px < BRIDGE_MAX_H_PX:

@@ -876,11 +876,12 @@ def rim_inside(rgb, ink_mask, hole, envelope, *, thickness_px: float) -> bool:
     c_lo, c_hi = hole.center_rc[1] - hole.radius_px, hole.center_rc[1] + hole.radius_px
     r0, r1 = int(max(np.floor(r_lo), 0)), int(min(np.ceil(r_hi) + 1, h))
     c0, c1 = int(max(np.floor(c_lo), 0)), int(min(np.ceil(c_hi) + 1, w))
-    rr, cc = np.mgrid[r0:r1, c0:c1]
+    rr, cc = np.ogrid[r0:r1, c0:c1]
     d_env = np.hypot(rr - er, cc - ec)
     d_edge = np.hypot(rr - hole.center_rc[0], cc - hole.center_rc[1])
     free = ~np.asarray(ink_mask, bool)[r0:r1, c0:c1]
-    lum = np.asarray(rgb, np.float64)[r0:r1, c0:c1].sum(axis=2)
+    # the hole's box only, summed in integers (no float copy of the whole scan)
+    lum = np.asarray(rgb)[r0:r1, c0:c1].sum(axis=2, dtype=np.int64)
     ring = lum[free & (d_env > env_r + 2 * thickness_px) & (d_edge < hole.radius_px - 2)]
     paper = lum[free & (d_env < env_r - 2 * thickness_px)]
     if ring.size < 20 or paper.size < 20:
