@@ -202,14 +202,20 @@ def find_images(input_dir, *, exclude=()) -> list[Path]:
     return _walk_scans(input_dir, exclude=exclude)[0]
 
 
-def _walk_scans(input_dir, *, exclude=()) -> tuple[list[Path], list[Path]]:
+def _walk_scans(input_dir, *, exclude=(), unreadable=None) -> tuple[list[Path], list[Path]]:
     """:func:`find_images`, and the symbolic links to folders met on the way.
 
     Linked folders are not followed: one may lead back into its own tree (a loop), to scans
     the batch already holds (each analysed twice, under two names) or out of the input
     folder, which the batch's output would then no longer describe. The batch names them in
     a warning; a linked folder's scans are analysed as a batch of their own, or linked one
-    by one.
+    by one. A folder that cannot be listed (no read or search permission) is passed over,
+    its scans unseen; the batch names it in a warning too.
+
+    Parameters
+    ----------
+    unreadable : list, optional
+        Receives ``(folder, cause)`` for each folder that could not be listed.
 
     Returns
     -------
@@ -221,20 +227,29 @@ def _walk_scans(input_dir, *, exclude=()) -> tuple[list[Path], list[Path]]:
     root = Path(input_dir).resolve()
     excluded = [Path(e).resolve() for e in exclude]
     found, linked = [], []
-    for dirpath, dirnames, filenames in os.walk(root):
+    missed = [] if unreadable is None else unreadable
+
+    def cannot_list(exc: OSError) -> None:
+        missed.append((Path(exc.filename), exc.strerror or type(exc).__name__))
+
+    for dirpath, dirnames, filenames in os.walk(root, onerror=cannot_list):
         here = Path(dirpath)
         keep = []
         for d in sorted(dirnames):
-            if d.startswith(".") or (here / d).resolve() in excluded:
-                continue
-            if (here / d).is_symlink():
-                linked.append(here / d)
-            elif not is_output_folder(here / d):
-                keep.append(d)
+            try:
+                if d.startswith(".") or (here / d).resolve() in excluded:
+                    continue
+                if (here / d).is_symlink():
+                    linked.append(here / d)
+                elif not is_output_folder(here / d):
+                    keep.append(d)
+            except OSError as exc:
+                missed.append((here / d, exc.strerror or type(exc).__name__))
         dirnames[:] = keep
         for fn in filenames:
             if not fn.startswith(".") and fn.lower().endswith(IMAGE_SUFFIXES):
                 found.append(here / fn)
+    missed.sort()
     return sorted(found, key=lambda p: p.relative_to(root).as_posix()), sorted(linked)
 
 
@@ -468,9 +483,16 @@ def plan_batch(input_dir, out_dir, *, cli_params: dict | None = None, seed: int 
     given = check_params(cli_params or {}, Path.cwd() / "command line",
                          origin="--calibration")
     defaults.update(given)
-    images, linked_folders = _walk_scans(root, exclude=[out])
+    unreadable = []
+    images, linked_folders = _walk_scans(root, exclude=[out], unreadable=unreadable)
+    for folder, cause in unreadable:
+        if folder == root:
+            raise ConfigError(f"cannot list the folder ({cause})", given_root)
     if not images:
-        raise ConfigError(f"no image ({', '.join(IMAGE_SUFFIXES)}) found", root)
+        more = (f" ({len(unreadable)} folder(s) could not be listed: "
+                f"{printable(given_root / unreadable[0][0].relative_to(root))}, "
+                f"{unreadable[0][1]})" if unreadable else "")
+        raise ConfigError(f"no image ({', '.join(IMAGE_SUFFIXES)}) found{more}", root)
 
     # sets: the nearest folder (at or above the image, within root) holding set.toml
     sets: dict[str, SetConfig] = {}
@@ -482,7 +504,16 @@ def plan_batch(input_dir, out_dir, *, cli_params: dict | None = None, seed: int 
             if key in sets:
                 return sets[key]
             toml = cand / SET_FILE
-            if toml.is_file():
+            try:
+                is_set = toml.is_file()
+            except OSError as exc:
+                # a folder that can be listed but not searched: neither its set file nor its
+                # scans can be read, and its scans fail with this cause
+                sets[key] = failed_set(toml, ConfigError(
+                    f"cannot read ({exc.strerror or type(exc).__name__})", toml).one_line(),
+                    root=root)
+                return sets[key]
+            if is_set:
                 try:
                     sets[key] = load_set_config(toml, defaults=defaults, given=given,
                                                 root=root)
@@ -525,9 +556,15 @@ def plan_batch(input_dir, out_dir, *, cli_params: dict | None = None, seed: int 
             # the analysis draws no random numbers: the seed is recorded, not hashed
             t.params_hash = params_hash(t.params, t.image_sha)
     default_set.warnings.extend(_unused_calibrations(tasks))
+    def shown(folder: Path) -> str:
+        return printable(given_root / folder.relative_to(root))
+
     default_set.warnings.extend(
-        f"{d}: a symbolic link to a folder, not searched: run a batch on the folder it "
-        f"links to, or link its scans one by one" for d in linked_folders)
+        f"{shown(d)}: a symbolic link to a folder, not searched: run a batch on the folder "
+        f"it links to, or link its scans one by one" for d in linked_folders)
+    default_set.warnings.extend(
+        f"{shown(d)}: cannot list the folder ({cause}): its scans are not in the batch; "
+        "give read and search permission and re-run" for d, cause in unreadable)
     # the batch's own warnings (not any set's) ride with the default set, listed even when
     # no scan lies outside a set
     if default_set.warnings or any(t.set_name == DEFAULT_SET_NAME and t.error is None

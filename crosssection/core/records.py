@@ -30,6 +30,9 @@ RECORDS = (
 )
 #: the table a simulation (quench, anneal, compact) writes at the top of its output folder
 SIMULATION_TABLE = "configs.csv"
+#: the keys of the ``params.json`` beside a simulation's table: a ``configs.csv`` alone may be
+#: a user's own table beside their scans (``batch`` would skip them)
+SIMULATION_KEYS = ("command", "n_configs", "seed", "version")
 #: the largest file read as a record: foldstat's are kilobytes; a file of megabytes of that
 #: name is someone else's, and would be read whole for every folder a batch searches
 RECORD_MAX_BYTES = 4 << 20
@@ -83,12 +86,23 @@ def output_of(folder) -> tuple[str, str] | None:
     -------
     (str, str) or None
         The record's file name and the command (``"foldstat batch"``, ...; ``"a
-        simulation"`` for a folder with ``configs.csv``), or None for any other folder.
+        simulation"`` for a folder with ``configs.csv`` and a simulation's ``params.json``),
+        or None for any other folder.
     """
     folder = Path(folder).expanduser()
     for name, command, keys in RECORDS:
         if is_record(folder / name, keys):
             return name, command
-    if (folder / SIMULATION_TABLE).is_file():
+    if _is_file(folder / SIMULATION_TABLE) and is_record(folder / "params.json",
+                                                         SIMULATION_KEYS):
         return SIMULATION_TABLE, "a simulation"
     return None
+
+
+def _is_file(path: Path) -> bool:
+    """Whether ``path`` is a file; False too where it cannot be looked at (a folder without
+    read or search permission), which then holds no record this reader could use."""
+    try:
+        return path.is_file()
+    except OSError:
+        return False

@@ -806,3 +806,70 @@ def test_a_steps_folder_is_no_folder_of_scans(tmp_path, capsys):
     (tmp_path / "in" / "configs.csv").write_text("id,notes\n1,cut at 30 cm\n")
     status, err = _batch(capsys, tmp_path / "in", tmp_path / "b2")
     assert status == 0 and _notices(err) == []
+
+
+def test_a_folder_that_cannot_be_listed_is_named_and_the_batch_goes_on(tmp_path, capsys,
+                                                                       monkeypatch):
+    """A subfolder without read or search permission stopped the whole batch with an error
+    naming a file inside it (looking for a simulation's table there raised). It is passed
+    over and named in one warning; the other scans are analysed."""
+    import errno
+    from pathlib import PosixPath
+
+    inp = _scans(tmp_path / "in")
+    _scans(inp / "locked", seed=5)
+    _scans(inp / "half", seed=6)  # listed, not searched (read permission, no execute)
+    locked, half = (inp / "locked").resolve(), (inp / "half").resolve()
+
+    def denied(path):
+        return OSError(errno.EACCES, os.strerror(errno.EACCES), str(path))
+
+    # the permissions as a user without them meets them (the tests may run as root)
+    scandir, is_file = os.scandir, PosixPath.is_file
+
+    def guarded_scandir(path="."):
+        if Path(path).resolve() == locked:
+            raise denied(path)
+        return scandir(path)
+
+    def guarded_is_file(self):
+        if self.resolve().parent in (locked, half):
+            raise denied(self)
+        return is_file(self)
+
+    monkeypatch.setattr(os, "scandir", guarded_scandir)
+    monkeypatch.setattr(PosixPath, "is_file", guarded_is_file)
+    status, err = _batch(capsys, inp, tmp_path / "out")
+    assert status == B.EXIT_SOME_FAILED, err
+    named = [line for line in err if "locked" in line]
+    assert named == [f"warning: {inp / 'locked'}: cannot list the folder (Permission denied): "
+                     "its scans are not in the batch; give read and search permission and "
+                     "re-run"]
+    index = pd.read_csv(tmp_path / "out" / "index.csv")
+    assert dict(zip(index["image"], index["status"])) == {"half/s0.png": "failed",
+                                                         "s0.png": "ok"}
+    reason = pd.read_csv(tmp_path / "out" / "failures.csv")["reason"].iloc[0]
+    assert reason == f"{half / 'set.toml'}: cannot read (Permission denied)"
+    # the input folder itself cannot be listed: one line naming it, exit status 2
+    locked = inp.resolve()
+    status, err = _batch(capsys, inp, tmp_path / "out2")
+    assert status == 2 and err == [f"error: {inp}: cannot list the folder (Permission denied)"]
+
+
+def test_a_users_table_named_like_a_simulations_does_not_hide_a_subfolders_scans(tmp_path,
+                                                                                capsys):
+    """A folder is a simulation's output only with its configs.csv and params.json: a
+    user's configs.csv beside scans left them out of the batch, unnamed."""
+    inp = _scans(tmp_path / "in")
+    _scans(inp / "cut", seed=5)
+    (inp / "cut" / "configs.csv").write_text("config,value\n1,2\n")
+    (inp / "cut" / "params.json").write_text('{"scanner": "A4", "dpi": 1270}\n')
+    sim = inp / "sim"
+    _scans(sim, seed=7)  # a simulation's folder holds no scan; one put there is not searched
+    (sim / "configs.csv").write_text("config_id\n0\n")
+    (sim / "params.json").write_text(json.dumps({"command": "quench", "n_configs": 1,
+                                                 "seed": 0, "version": "0"}))
+    status, err = _batch(capsys, inp, tmp_path / "out")
+    assert status == 0, err
+    index = pd.read_csv(tmp_path / "out" / "index.csv")
+    assert sorted(index["image"]) == ["cut/s0.png", "s0.png"]
