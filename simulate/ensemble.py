@@ -59,7 +59,7 @@ import pandas as pd
 
 from crosssection._version import __version__
 from crosssection.core.errors import ConfigError, ParameterError, output_error
-from crosssection.core.fileio import (BROWSER_FILES, check_out, foreign_entry,
+from crosssection.core.fileio import (BROWSER_FILES, check_out, folder_lock, foreign_entry,
                                       renamed_together, write_csv, write_json, write_npz)
 from crosssection.core.parallel import (ClusterLostError, capped_workers, get_executor,
                                         spawn_seeds)
@@ -780,6 +780,19 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
         params = checked_params(params)
     params = resolve_defaults(params)
     params = {k: params.get(k) for k in sorted(params)}
+    # two runs into one folder would each take it for theirs: one whose params.json the
+    # other had not yet written computed beside it, and the tables mixed the two ensembles
+    with folder_lock(out, "simulation", where=given,
+                     busy=f"another {params['command']} is writing into it"):
+        return _run_ensemble_locked(params, out, given, where, workers=workers,
+                                    scheduler=scheduler, progress=progress, task=task,
+                                    columns=columns, physics_keys=physics_keys,
+                                    on_wait=on_wait)
+
+
+def _run_ensemble_locked(params, out, given, where, *, workers, scheduler, progress, task,
+                         columns, physics_keys, on_wait) -> dict:
+    """:func:`run_ensemble` holding the output folder's lock, its parameters resolved."""
     check_out_folder(out, params["command"])
     pfile = out / "params.json"
     raw = None

@@ -167,7 +167,6 @@ up; signed curvatures therefore compare in absolute value.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import math
 import shutil
@@ -182,7 +181,7 @@ import pandas as pd
 
 from crosssection.core import polyline, schema
 from crosssection.core.calibration import Calibration
-from crosssection.core.errors import ConfigError, OutputError, ParameterError
+from crosssection.core.errors import ConfigError, ParameterError
 from crosssection.core.unionfind import group_labels
 from crosssection.quality import QualityWarning
 from crosssection.truth import degrade, ink
@@ -2744,24 +2743,14 @@ def _render_directory(sim_dir, out_dir, *, configs=None, limit=None, progress=Fa
     One render at a time writes into ``out_dir``: two with other options each took the
     folder for theirs (render.json of one, scenes of the other). The lock is
     :func:`~crosssection.core.fileio.exclusive_lock` on ``.<name>.render.lock`` beside it."""
-    from crosssection.core.fileio import exclusive_lock
+    from crosssection.core.fileio import folder_lock
 
     if not str(out_dir).strip():
         # Path("") is the current folder
         raise ParameterError("empty path: give the output folder", name("out_dir"))
-    out = Path(out_dir).expanduser().resolve()
-    lock = contextlib.ExitStack()
     # nothing is created before the folder is checked (a folder inside the simulation is
-    # refused): a render into a new parent runs unlocked, and so does one into a folder that
-    # cannot be written, which the render names in its own words
-    if out.parent.is_dir():
-        try:
-            lock.enter_context(exclusive_lock(out.parent / f".{out.name}.render.lock",
-                                              where=out_dir, busy="another render is "
-                                              "writing into it"))
-        except OutputError:
-            pass
-    with lock:
+    # refused): a render into a new parent runs unlocked
+    with folder_lock(out_dir, "render", where=out_dir, busy="another render is writing into it"):
         return _render_directory_locked(sim_dir, out_dir, configs=configs, limit=limit,
                                         progress=progress, kwargs=kwargs, name=name)
 

@@ -679,3 +679,53 @@ def exclusive_lock(path, *, where, busy: str, unlocked=None):
         except OSError:
             pass
         os.close(fd)
+
+
+@contextmanager
+def folder_lock(out, kind: str, *, where, busy: str):
+    """Hold :func:`exclusive_lock` on ``.<name>.<kind>.lock`` beside the output folder
+    ``out`` while one command writes it, so that a second run into it is refused before it
+    reads what the first is writing.
+
+    The lock lies beside the folder, not in it: it is taken before the folder is checked or
+    made, and a folder holding only a command's own files stays so. A folder whose parent
+    does not exist yet, or cannot be written, is written unlocked (the command names such a
+    folder's faults in its own words).
+
+    Parameters
+    ----------
+    out : str or Path
+        The output folder.
+    kind : str
+        The command's kind, in the lock's name (``"render"``, ``"simulation"``).
+    where : str or Path
+        What a refusal names (the output as given).
+    busy : str
+        The refusal's cause.
+
+    Yields
+    ------
+    str or None
+        The run's token (None when unlocked).
+
+    Raises
+    ------
+    ParameterError
+        Another run holds the lock (named by its process id).
+    """
+    from crosssection.core.errors import OutputError
+
+    out = Path(out).expanduser().resolve()
+    if not out.parent.is_dir():
+        yield None
+        return
+    try:
+        lock = exclusive_lock(out.parent / f".{out.name}.{kind}.lock", where=where, busy=busy)
+        token = lock.__enter__()
+    except OutputError:
+        yield None
+        return
+    try:
+        yield token
+    finally:
+        lock.__exit__(None, None, None)

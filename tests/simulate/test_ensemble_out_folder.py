@@ -110,3 +110,23 @@ def test_its_own_folder_is_resumed_with_browser_files_and_leftover_temporaries(t
     # a different ensemble, of this command or another, is refused (its parameters differ)
     assert simulate_main([*QUENCH[:1], "--seed", "1", *QUENCH[1:], "--out", str(out)]) == 2
     assert simulate_main([*COMPACT, "--out", str(out)]) == 2
+
+
+@pytest.mark.parametrize("argv", [QUENCH, COMPACT], ids=["quench", "compact"])
+def test_a_second_run_into_the_same_folder_is_refused(tmp_path, capsys, argv):
+    """Two runs started together into one folder each took it for theirs when the second
+    read it before the first had written its params.json: the tables mixed both ensembles.
+    The second is refused in one line while the first holds the folder's lock."""
+    from crosssection.core.fileio import folder_lock
+
+    out = tmp_path / "q"
+    with folder_lock(out, "simulation", where=out, busy="held") as token:
+        assert token is not None
+        status = simulate_main([*argv, "--out", str(out)])
+    err = capsys.readouterr().err.splitlines()
+    assert status == 2 and len(err) == 1, err
+    assert err[0].startswith(f"error: {out}: another {argv[0]} is writing into it (pid ")
+    assert not out.exists()
+    # released: the same run goes on, and leaves no lock file behind
+    assert simulate_main([*argv, "--out", str(out)]) == 0
+    assert (out / "configs.csv").is_file() and not list(tmp_path.glob(".q.*.lock"))
