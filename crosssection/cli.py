@@ -40,11 +40,32 @@ class OneLineParser(argparse.ArgumentParser):
     """An ``ArgumentParser`` whose usage errors are one ``error:`` line and exit status 2
     (argparse's default prints the usage block as well)."""
 
+    parse_known_args = _Parser.parse_known_args
+
     def error(self, message):
-        print(f"error: {self.prog}: {' '.join(message.split())}", file=sys.stderr)
+        print(f"error: {self.prog}: {' '.join(message.split())}{_dash_hint(self)}",
+              file=sys.stderr)
         raise SystemExit(2)
 
     _print_message = _Parser._print_message
+
+
+def _dash_hint(parser) -> str:
+    """A hint where the words parsed hold a scan's file name starting with '-', which
+    argparse reads as an option, or options after ``--``, which it reads as file names;
+    else ''."""
+    from crosssection.core.schema import IMAGE_SUFFIXES
+
+    words = getattr(parser, "_words", [])
+    after = words[words.index("--") + 1:] if "--" in words else []
+    if any(w.startswith("-") for w in after):
+        return " (every word after '--' is read as a file name: give the options before it)"
+    named = [w for w in words if w.startswith("-") and not w.startswith("--")
+             and w.lower().endswith(IMAGE_SUFFIXES)]
+    if not named:
+        return ""
+    return (f" ({named[0]} is read as an option: name a file starting with '-' as "
+            f"./{named[0]})")
 
 
 def make_parser(prog: str, description: str, subcommands: dict,

@@ -214,6 +214,12 @@ class _Parser(argparse.ArgumentParser):
     """``crosssection.cli.OneLineParser``'s one-line usage errors, imported only when an
     error is reported (that module imports numpy)."""
 
+    def parse_known_args(self, args=None, namespace=None):
+        # the words parsed, for the hint on a file named like an option
+        # (crosssection.cli._dash_hint)
+        self._words = list(sys.argv[1:] if args is None else args)
+        return argparse.ArgumentParser.parse_known_args(self, args, namespace)
+
     def error(self, message):
         from crosssection.cli import OneLineParser
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 import warnings
 from pathlib import Path
@@ -174,6 +175,7 @@ def run(args) -> int:
     end): one ``error:`` line saying so and exit status 130. Warnings about the inputs are
     then dropped with the run, as they are with an error.
     """
+    had_report = os.path.lexists(args.out)
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -182,8 +184,10 @@ def run(args) -> int:
         from crosssection.cli import INTERRUPTED, TERMINATED, Terminated
 
         how = "terminated" if isinstance(exc, Terminated) else "interrupted"
-        print(f"error: {one_line_path(args.out)}: {how}; the report folder was left as it was "
-              "(re-run the command to write it)", file=sys.stderr)
+        left = ("the report folder was left as it was" if had_report
+                else "no report was written")
+        print(f"error: {one_line_path(args.out)}: {how}; {left} (re-run the command to write "
+              "it)", file=sys.stderr)
         return TERMINATED if isinstance(exc, Terminated) else INTERRUPTED
     for w in caught:  # hand them on to the command line, which prints ours as lines
         message = w.message

@@ -82,3 +82,33 @@ def test_an_ascii_terminal_gets_escapes_not_a_failure(tmp_path):
                        capture_output=True, text=True, env=env, encoding="ascii")
     assert r.returncode == 0, r.stderr
     assert r.stdout.startswith(f"{tmp_path}/scan \\xfc.png: ")
+
+
+@pytest.mark.parametrize("entry", ["crosssection", "foldstat"])
+def test_a_name_starting_with_a_dash_gets_a_hint_in_its_one_line(entry, tmp_path, capsys):
+    """argparse reads '-scan.png' as an option and then misses the scan, and reads options
+    after '--' as file names: its one line says which, and how to name the file."""
+    from crosssection.console import main as foldstat
+
+    main = crosssection.cli.main if entry == "crosssection" else foldstat
+
+    def run(argv):
+        try:
+            return main(argv)
+        except SystemExit as exc:  # argparse's usage errors
+            return exc.code
+    out = str(tmp_path / "out")
+    hints = {("analyze", "-scan.png", "--out", out):
+             "the following arguments are required: image (-scan.png is read as an option: "
+             "name a file starting with '-' as ./-scan.png)",
+             ("analyze", "--", "-scan.png", "--out", out):
+             "the following arguments are required: --out (every word after '--' is read as "
+             "a file name: give the options before it)"}
+    for argv, said in hints.items():
+        assert run(list(argv)) == 2
+        err = capsys.readouterr().err.splitlines()
+        assert len(err) == 1 and err[0].startswith("error: ") and err[0].endswith(said), err
+    # no hint where none applies
+    assert run(["analyze", "--out", out]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.endswith("the following arguments are required: image")

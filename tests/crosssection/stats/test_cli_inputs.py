@@ -485,7 +485,10 @@ def test_an_interrupted_report_leaves_the_old_one_whole(tmp_path, capfd, monkeyp
 def test_an_interrupted_first_report_leaves_nothing(tmp_path, capfd, monkeypatch):
     sim = demo.write_demo_simulation(tmp_path / "sim", n_configs=6, seed=1)
     monkeypatch.setattr(report, "write_text", _interrupted)
-    assert _stats(capfd, sim, "--out", tmp_path / "rep", *FAST)[0] == 130
+    status, _, err = _stats(capfd, sim, "--out", tmp_path / "rep", *FAST)
+    assert status == 130
+    assert err == [f"error: {tmp_path / 'rep'}: interrupted; no report was written (re-run the "
+                   "command to write it)"]
     assert not (tmp_path / "rep").exists() and _hidden_beside(tmp_path / "rep") == []
 
 
