@@ -556,6 +556,7 @@ def plan_batch(input_dir, out_dir, *, cli_params: dict | None = None, seed: int 
             # the analysis draws no random numbers: the seed is recorded, not hashed
             t.params_hash = params_hash(t.params, t.image_sha)
     default_set.warnings.extend(_unused_calibrations(tasks))
+
     def shown(folder: Path) -> str:
         return printable(given_root / folder.relative_to(root))
 

@@ -713,19 +713,17 @@ def folder_lock(out, kind: str, *, where, busy: str):
     ParameterError
         Another run holds the lock (named by its process id).
     """
+    from contextlib import ExitStack
+
     from crosssection.core.errors import OutputError
 
     out = Path(out).expanduser().resolve()
-    if not out.parent.is_dir():
-        yield None
-        return
-    try:
-        lock = exclusive_lock(out.parent / f".{out.name}.{kind}.lock", where=where, busy=busy)
-        token = lock.__enter__()
-    except OutputError:
-        yield None
-        return
-    try:
+    with ExitStack() as held:
+        token = None
+        if out.parent.is_dir():
+            try:
+                token = held.enter_context(exclusive_lock(
+                    out.parent / f".{out.name}.{kind}.lock", where=where, busy=busy))
+            except OutputError:
+                pass
         yield token
-    finally:
-        lock.__exit__(None, None, None)
