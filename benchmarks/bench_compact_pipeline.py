@@ -71,8 +71,8 @@ import pandas as pd
 from crosssection.core.fileio import write_csv
 from crosssection.core import schema
 from crosssection.truth.scene import LAYER_PIECES, read_scene, write_scene
-from crosssection.truth.scoring import (analyze_scene_folder, match_points, medial_fork_points,
-                                         score)
+from crosssection.truth.scoring import (analyze_scene_folder, match_points, match_stacks,
+                                         medial_fork_points, score)
 from simulate.cli import main as simulate_main
 from simulate.contacts import analyze_rod
 from simulate import render as _render
@@ -353,9 +353,7 @@ def _breakdown(pair, truth, h_px: float) -> dict:
     missed junctions, and the energy by kind of stack."""
     (_, out_t), (_, tru_t) = pair, truth
     so, st = out_t["stacks"], tru_t["stacks"]
-    lim = np.maximum(3 * h_px, 0.25 * st["length_mm"].to_numpy(float) * PX_PER_MM)
-    r, c = match_points(so[["mid_x_px", "mid_y_px"]].to_numpy(float),
-                        st[["mid_x_px", "mid_y_px"]].to_numpy(float), lim)
+    r, c = match_stacks(so, st, match_px=3 * h_px, px_per_mm=PX_PER_MM)
     nbr_t = st["n_br"].to_numpy(int)
     length = st["length_mm"].to_numpy(float)
     # a stack shorter than twice its band's width is a lump in a junction zone, not a band

@@ -80,7 +80,7 @@ def split_scene(condition: str, seed: int, near_px: float = 3.0) -> dict:
     """The ratios of the module docstring for one scene."""
     import crosssection
     from crosssection.stages.curvature import default_smooth_px, noise_variance
-    from crosssection.truth.scoring import match_points
+    from crosssection.truth.scoring import match_stacks
 
     options = robust_sweep.scene_options(condition, seed)
     scene = robust_sweep.make_network_scene(seed, options)
@@ -93,9 +93,7 @@ def split_scene(condition: str, seed: int, near_px: float = 3.0) -> dict:
         warnings.simplefilter("ignore")
         res = crosssection.analyze(scene.rgb, **kw)
     so, st = res.stacks, scene.tables["stacks"].reset_index(drop=True)
-    lim = np.maximum(3 * h, 0.25 * st["length_mm"].to_numpy(float) * px)
-    r, c = match_points(so[["mid_x_px", "mid_y_px"]].to_numpy(float),
-                        st[["mid_x_px", "mid_y_px"]].to_numpy(float), lim)
+    r, c = match_stacks(so, st, match_px=3 * h, px_per_mm=px)
     n_out = so["n_br"].to_numpy(int)
     # the derivative's noise floor, measured as the curvature's is
     dprofs = []

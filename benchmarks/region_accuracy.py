@@ -67,13 +67,10 @@ def scene(condition: str, seed: int, independent_dir: Path):
 
 def region_scores(res, truth: pd.DataFrame, px_per_mm: float, thickness_mm: float) -> dict:
     """Share of the matched branch length in the right region; periphery shares."""
-    from crosssection.truth.scoring import match_points
+    from crosssection.truth.scoring import match_stacks
 
     so = res.stacks
-    lim = np.maximum(3 * thickness_mm * px_per_mm,
-                     0.25 * truth["length_mm"].to_numpy(float) * px_per_mm)
-    r, c = match_points(so[["mid_x_px", "mid_y_px"]].to_numpy(float),
-                        truth[["mid_x_px", "mid_y_px"]].to_numpy(float), lim)
+    r, c = match_stacks(so, truth, match_px=3 * thickness_mm * px_per_mm, px_per_mm=px_per_mm)
     w = (truth["n_br"] * truth["length_mm"]).to_numpy(float)[c]
     right = so["region"].to_numpy()[r] == truth["region"].to_numpy()[c]
     out_w = (so["n_br"] * so["length_mm"]).to_numpy(float)

@@ -90,16 +90,13 @@ def render_scene(seed: int, px_per_mm: float, condition: str, rods: dict):
 def stack_energy_abslog(result, scene, px_per_mm: float) -> float:
     """Median over the matched stacks of ``|log(measured / true energy)|`` (midpoints within
     ``max(3 h, a quarter of the truth stack's length)``); NaN when none matches."""
-    from crosssection.truth.scoring import match_points
+    from crosssection.truth.scoring import match_stacks
 
     truth = scene.tables["stacks"]
     energy = truth["stack_id"].map(
         scene.tables["branches"].groupby("stack_id")["energy"].sum()).fillna(0.0)
     out = result.stacks
-    limit = np.maximum(3 * THICKNESS_MM * px_per_mm,
-                       0.25 * truth["length_mm"].to_numpy(float) * px_per_mm)
-    r, c = match_points(out[["mid_x_px", "mid_y_px"]].to_numpy(float),
-                        truth[["mid_x_px", "mid_y_px"]].to_numpy(float), limit)
+    r, c = match_stacks(out, truth, match_px=3 * THICKNESS_MM * px_per_mm, px_per_mm=px_per_mm)
     measured = (out["energy_per_branch"] * out["n_br"]).to_numpy(float)[r]
     true = energy.to_numpy(float)[c]
     ok = (true > 0) & np.isfinite(measured)

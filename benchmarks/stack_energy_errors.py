@@ -41,13 +41,11 @@ GENERATORS = ["typical", "thick_dense", "renders", "independent"]
 
 def _matched_rows(res, truth_stacks: pd.DataFrame, px_per_mm: float, thickness_mm: float):
     """One dict per matched stack: truth n_br, length, energies, reported share."""
-    from crosssection.truth.scoring import match_points
+    from crosssection.truth.scoring import match_stacks
 
     so = res.stacks
-    lim = np.maximum(3 * thickness_mm * px_per_mm,
-                     0.25 * truth_stacks["length_mm"].to_numpy(float) * px_per_mm)
-    r, c = match_points(so[["mid_x_px", "mid_y_px"]].to_numpy(float),
-                        truth_stacks[["mid_x_px", "mid_y_px"]].to_numpy(float), lim)
+    r, c = match_stacks(so, truth_stacks, match_px=3 * thickness_mm * px_per_mm,
+                        px_per_mm=px_per_mm)
     rows = []
     for i, j in zip(r, c):
         o, t = so.iloc[i], truth_stacks.iloc[j]

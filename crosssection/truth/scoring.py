@@ -161,6 +161,30 @@ def match_points(out_xy: np.ndarray, truth_xy: np.ndarray, max_dist) -> tuple[np
     return r[ok], c[ok]
 
 
+def match_stacks(out_stacks, truth_stacks, *, match_px: float,
+                 px_per_mm: float) -> tuple[np.ndarray, np.ndarray]:
+    """Match output stacks to truth stacks by their mid points (:func:`match_points`), each
+    truth stack within ``max(match_px, a quarter of its length)``: the mid point of one
+    physical stack moves along it with where its ends are placed.
+
+    Parameters
+    ----------
+    out_stacks, truth_stacks : pandas.DataFrame
+        Stack tables with ``mid_x_px`` and ``mid_y_px``; the truth's with ``length_mm``.
+    match_px : float
+        The least accepted distance, px (3 h in the benchmarks).
+    px_per_mm : float
+
+    Returns
+    -------
+    (out_idx, truth_idx) : tuple of int arrays
+        Row positions of the matched pairs.
+    """
+    lim = np.maximum(match_px, 0.25 * truth_stacks["length_mm"].to_numpy(float) * px_per_mm)
+    return match_points(out_stacks[["mid_x_px", "mid_y_px"]].to_numpy(float),
+                        truth_stacks[["mid_x_px", "mid_y_px"]].to_numpy(float), lim)
+
+
 def _recorded(given, name, result_summary, truth_summary, default) -> float:
     """A scale the caller gave, else the one the analysis (or the truth) recorded: a scan of
     25 px/mm scored at 50 would match junctions within 6 h."""
@@ -254,9 +278,7 @@ def score(result, truth, *, match_px: float | None = None, px_per_mm: float | No
     # stacks and n_br
     so, st = rt["stacks"], (drawn if drawn is not None else tt["stacks"])
     if len(st):
-        lim = np.maximum(match_px, 0.25 * st["length_mm"].to_numpy(float) * px_per_mm)
-        r, c = match_points(so[["mid_x_px", "mid_y_px"]].to_numpy(float),
-                            st[["mid_x_px", "mid_y_px"]].to_numpy(float), lim)
+        r, c = match_stacks(so, st, match_px=match_px, px_per_mm=px_per_mm)
         ok = np.zeros(len(st), bool)
         nbr_out = np.full(len(st), -1)
         nbr_out[c] = so["n_br"].to_numpy(int)[r]
@@ -424,4 +446,5 @@ def analyze_scene_folder(scene_dir, *, image_name: str | None = None, use_hole: 
     return result, _as_pair(result)
 
 
-__all__ = ["score", "score_folder", "match_points", "meets_targets", "analyze_scene_folder"]
+__all__ = ["score", "score_folder", "match_points", "match_stacks", "meets_targets",
+           "analyze_scene_folder"]

@@ -3,10 +3,12 @@ import copy
 import shutil
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from crosssection.core.errors import ConfigError
-from crosssection.truth.scoring import match_points, meets_targets, score, score_folder
+from crosssection.truth.scoring import (match_points, match_stacks, meets_targets, score,
+                                        score_folder)
 from crosssection.truth.network import make_scene
 from crosssection.truth.scene import write_scene
 
@@ -100,6 +102,18 @@ def test_match_points_respects_radius():
     assert len(r) == 30 and np.array_equal(r, c)
     r, c = match_points(o + 100, t, 15.0)
     assert len(r) <= 2
+
+
+def test_match_stacks_accepts_a_quarter_of_a_long_stacks_length():
+    """A long stack's mid point moves with where its ends are placed: it is matched within
+    a quarter of its length, a short one within ``match_px``."""
+    truth = pd.DataFrame({"mid_x_px": [100.0, 400.0], "mid_y_px": [100.0, 100.0],
+                          "length_mm": [10.0, 0.5]})
+    out = truth.assign(mid_x_px=truth["mid_x_px"] + 60.0)  # 60 px off each
+    r, c = match_stacks(out, truth, match_px=15.0, px_per_mm=50.0)
+    assert r.tolist() == [0] and c.tolist() == [0]  # 10 mm: within 125 px; 0.5 mm: 15 px
+    r, c = match_stacks(out, truth, match_px=70.0, px_per_mm=50.0)
+    assert r.tolist() == [0, 1] and c.tolist() == [0, 1]
 
 
 def test_score_folder(tmp_path):
