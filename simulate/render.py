@@ -51,7 +51,12 @@ bending (the pipeline measures 2-6 times more energy on polylines at epsilon = 1
 shorter than two segments are parabolas through their ends and middle (``smooth="long"``
 leaves them polylines, ``"none"`` draws every polyline). The truth ``energy`` of a branch is
 the rod's: its discrete ``sum dtheta^2 / ds``, the ``int kappa^2 ds`` of a curve turning by
-dtheta over each segment, which the smooth curve reproduces along an arc (the tests).
+dtheta over each segment, which the smooth curve reproduces along an arc (the tests). A
+node that folds the rod back within one segment (turning by more than
+:data:`simulate.ensemble.HAIRPIN_NODE_DEG`) is the exception: the discrete energy prices it at
+up to ``4 / ds`` and no drawing shows it (the band ends where the fold lies). The scene's
+summary records that share of its energy (``hairpin_energy_share``, :func:`hairpin_nodes`;
+one quenched rod of 300 segments holds 44 % of its energy at one node).
 
 Joining bands to junctions. A stack's line is the mean of its passes with the junction points
 first and last, and a junction point, the mean of the run ends meeting there, lies at a band's
@@ -1899,6 +1904,43 @@ def _truth_tables(analysis, frame, lines_px, cal, voids, *, px_per_mm, thickness
     return {"junctions": junctions, "stacks": stacks, "branches": branches, "voids": voids}
 
 
+def hairpin_nodes(xy) -> tuple[int, float]:
+    """The rod's nodes that fold it back within one node, and their share of its bending
+    energy.
+
+    A node turning by more than :data:`simulate.ensemble.HAIRPIN_NODE_DEG` is a fold tighter
+    than one segment, which the discrete energy prices at up to ``4 / ds`` (a quenched rod of
+    300 segments: 1200 of a bending energy of about 2700 at one node, seed 2). No drawing
+    shows such a fold: the smooth curve through the nodes turns by a fraction of it, and the
+    band ends where the fold lies. The truth's energy counts it all the same, so a scene's
+    energy error holds it (docs/validation/README.md, "Resolution: one scene from 20 to 100
+    px/mm").
+
+    Parameters
+    ----------
+    xy : (N+1, 2) array
+        The rod's nodes.
+
+    Returns
+    -------
+    n : int
+        Nodes turning by more than the limit.
+    share : float
+        Their share of the rod's bending energy (0 when there are none).
+    """
+    from simulate.energy import node_curvature
+    from simulate.ensemble import HAIRPIN_NODE_DEG
+    from simulate.geometry import angles
+
+    theta, _ = angles(xy)
+    sharp = np.abs(np.diff(theta)) > math.radians(HAIRPIN_NODE_DEG)
+    if not sharp.any():
+        return 0, 0.0
+    bending = node_curvature(xy)[1:-1] ** 2  # the interior nodes, as the turns
+    total = float(bending.sum())
+    return int(sharp.sum()), float(bending[sharp].sum()) / total if total > 0 else 0.0
+
+
 def _summary(analysis, frame, tables, ink_mask, *, px_per_mm):
     """summary.json of the truth: counts, rod length, compaction, energy, hole."""
     stacks = tables["stacks"]
@@ -2245,6 +2287,8 @@ def render_configuration(xy, analysis: RodAnalysis | None = None, *, lam: float 
             "apart (a thinner sheet, a lower px_per_mm or a larger max_size_px keeps them)")
     summary = _summary(analysis, frame, tables, ink_mask, px_per_mm=px_per_mm)
     summary["truth_warnings"] = truth_warnings
+    # a fold within one node: its energy is the discretisation's, and no drawing shows it
+    summary["hairpin_energy_share"] = hairpin_nodes(xy)[1]
     # a rod coarser than the truth is validated from: warned above as a range, and recorded
     # with the scene so that validate names it (its truth is not known to be wrong)
     summary["truth_range"] = short

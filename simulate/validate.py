@@ -160,8 +160,11 @@ def score_scene(scene_dir, *, match_px: float | None = None) -> dict:
     dict
         The scores of :func:`crosssection.truth.scoring.score` plus ``scene``, ``analyze_s``
         (seconds of the analysis; on a fresh install the first scene's include numba's
-        compilation, several seconds) and ``truth_warnings``, the number of messages with
-        which the render flagged the scene's truth (:func:`truth_warnings`).
+        compilation, several seconds), ``truth_warnings``, the number of messages with
+        which the render flagged the scene's truth (:func:`truth_warnings`), and
+        ``hairpin_energy_share``, the share of the truth's energy at nodes that fold the rod
+        back within one segment (:func:`simulate.render.hairpin_nodes`), which no drawing
+        shows.
 
     Raises
     ------
@@ -186,6 +189,9 @@ def score_scene(scene_dir, *, match_px: float | None = None) -> dict:
                      thickness_mm=params["thickness_mm"]))
     out["analyze_s"] = dt
     out["truth_warnings"] = len(truth_warnings(truth[0]))
+    # the truth's energy held by folds within one node, which no drawing shows (NaN for a
+    # scene rendered before it was recorded)
+    out["hairpin_energy_share"] = float(truth[0].get("hairpin_energy_share", math.nan))
     return out
 
 

@@ -109,6 +109,20 @@ def test_a_render_without_a_defect_of_its_truth_says_nothing():
     xy = resample(hairpin(0.25 * 0.5 / n, arm=0.3), n)
     sc, said = _render(xy, draw="passes", rod_length_mm=60.0)
     assert said == [] and sc.summary["truth_warnings"] == []
+    # its fold lies within one node: the truth's energy there is recorded as such
+    assert sc.summary["hairpin_energy_share"] == pytest.approx(render.hairpin_nodes(xy)[1])
+
+
+def test_a_fold_within_one_node_holds_its_share_of_the_truths_energy():
+    """A fold tighter than one segment turns the rod by nearly pi at one node, which the
+    discrete energy prices at up to 4 / ds and no drawing shows (a quenched rod: 44 % of its
+    energy at one node); a fold resolved over many nodes has none."""
+    n = 300
+    count, share = render.hairpin_nodes(resample(hairpin(0.25 * 0.5 / n, arm=0.3), n))
+    assert count == 1 and 0.8 < share <= 1.0
+    assert render.hairpin_nodes(resample(hairpin(0.02, arm=0.3), n)) == (0, 0.0)
+    t = np.linspace(0.0, np.pi, n + 1)
+    assert render.hairpin_nodes(np.c_[np.cos(t), np.sin(t)] / np.pi) == (0, 0.0)
 
 
 def _trimmed_short(monkeypatch):
