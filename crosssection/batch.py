@@ -470,6 +470,11 @@ def plan_batch(input_dir, out_dir, *, cli_params: dict | None = None, seed: int 
         raise ConfigError("not a folder (batch reads a folder of scans; analyze reads one "
                           "scan)" if root.exists() else "input folder does not exist", root)
     root = root.resolve()
+    try:
+        (root / SET_FILE).exists()
+    except OSError as exc:  # listed, perhaps, but not searched: nothing in it can be read
+        raise ConfigError(f"cannot search the folder ({exc.strerror or type(exc).__name__})",
+                          given_root) from None
     from crosssection.core.records import output_of
 
     made_by = output_of(root)
@@ -510,8 +515,9 @@ def plan_batch(input_dir, out_dir, *, cli_params: dict | None = None, seed: int 
                 # a folder that can be listed but not searched: neither its set file nor its
                 # scans can be read, and its scans fail with this cause
                 sets[key] = failed_set(toml, ConfigError(
-                    f"cannot read ({exc.strerror or type(exc).__name__})", toml).one_line(),
-                    root=root)
+                    f"cannot search the folder ({exc.strerror or type(exc).__name__}): its "
+                    "files cannot be read; give it search permission and re-run",
+                    cand).one_line(), root=root)
                 return sets[key]
             if is_set:
                 try:

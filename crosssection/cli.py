@@ -43,24 +43,28 @@ class OneLineParser(argparse.ArgumentParser):
     parse_known_args = _Parser.parse_known_args
 
     def error(self, message):
-        print(f"error: {self.prog}: {' '.join(message.split())}{_dash_hint(self)}",
+        print(f"error: {self.prog}: {' '.join(message.split())}{_dash_hint(self, message)}",
               file=sys.stderr)
         raise SystemExit(2)
 
     _print_message = _Parser._print_message
 
 
-def _dash_hint(parser) -> str:
-    """A hint where the words parsed hold a scan's file name starting with '-', which
-    argparse reads as an option, or options after ``--``, which it reads as file names;
-    else ''."""
+def _dash_hint(parser, message: str) -> str:
+    """A hint, for an argument missing or not recognised, where the words parsed hold an
+    option of ``parser`` after ``--`` (argparse reads it as a file name) or a scan's file name
+    starting with '-' before it (argparse reads it as an option); else ''."""
     from crosssection.core.schema import IMAGE_SUFFIXES
 
+    if not message.startswith(("the following arguments are required",
+                               "unrecognized arguments")):
+        return ""
     words = getattr(parser, "_words", [])
-    after = words[words.index("--") + 1:] if "--" in words else []
-    if any(w.startswith("-") for w in after):
+    cut = words.index("--") if "--" in words else len(words)
+    options = parser._option_string_actions
+    if any(w.split("=", 1)[0] in options for w in words[cut + 1:]):
         return " (every word after '--' is read as a file name: give the options before it)"
-    named = [w for w in words if w.startswith("-") and not w.startswith("--")
+    named = [w for w in words[:cut] if w.startswith("-") and not w.startswith("--")
              and w.lower().endswith(IMAGE_SUFFIXES)]
     if not named:
         return ""

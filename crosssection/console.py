@@ -217,7 +217,8 @@ class _Parser(argparse.ArgumentParser):
     def parse_known_args(self, args=None, namespace=None):
         # the words parsed, for the hint on a file named like an option
         # (crosssection.cli._dash_hint)
-        self._words = list(sys.argv[1:] if args is None else args)
+        args = list(sys.argv[1:] if args is None else args)
+        self._words = args
         return argparse.ArgumentParser.parse_known_args(self, args, namespace)
 
     def error(self, message):

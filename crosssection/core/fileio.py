@@ -454,11 +454,18 @@ def own_file(name: str, own) -> bool:
                            any(name.startswith(f".{k}.") for k in own))
 
 
+#: :func:`folder_lock`'s lock file inside the folder it locks, by the command's kind
+INSIDE_LOCK = ".{}.lock"
+#: the kinds of :func:`folder_lock` (their locks inside a folder belong to no one's output)
+LOCK_KINDS = ("render", "simulation")
+
+
 def foreign_entry(folder, files=(), folder_rule=None) -> str | None:
     """The first entry of ``folder``, in name order, that the command writing it does not
     write, or None: what every command that refuses an ``--out`` holding other files checks.
 
-    Browser files (:data:`BROWSER_FILES`) are nobody's. A file is the command's when
+    Browser files (:data:`BROWSER_FILES`) and locks of a running command
+    (:func:`folder_lock`) are nobody's. A file is the command's when
     :func:`own_file` of ``files`` says so. A subfolder (not a link) is judged by
     ``folder_rule``; without one every subfolder is foreign.
 
@@ -476,8 +483,9 @@ def foreign_entry(folder, files=(), folder_rule=None) -> str | None:
     -------
     str or None
     """
+    locks = {INSIDE_LOCK.format(kind) for kind in LOCK_KINDS}
     for p in sorted(Path(folder).iterdir()):
-        if p.name in BROWSER_FILES:
+        if p.name in BROWSER_FILES or p.name in locks:
             continue
         if p.is_dir() and not p.is_symlink():
             inner = p.name if folder_rule is None else folder_rule(p)
@@ -688,9 +696,10 @@ def folder_lock(out, kind: str, *, where, busy: str):
     reads what the first is writing.
 
     The lock lies beside the folder, not in it: it is taken before the folder is checked or
-    made, and a folder holding only a command's own files stays so. A folder whose parent
-    does not exist yet, or cannot be written, is written unlocked (the command names such a
-    folder's faults in its own words).
+    made, and a folder holding only a command's own files stays so. Where the parent takes
+    no file (read-only), it lies in the folder (:data:`INSIDE_LOCK`, no one's entry for
+    :func:`foreign_entry`). A folder that neither holds (a new folder under a read-only or
+    missing parent, which the command names in its own words) is written unlocked.
 
     Parameters
     ----------
@@ -720,10 +729,14 @@ def folder_lock(out, kind: str, *, where, busy: str):
     out = Path(out).expanduser().resolve()
     with ExitStack() as held:
         token = None
-        if out.parent.is_dir():
+        # inside the folder where its parent takes no file (read-only): both runs into one
+        # folder meet the same parent, so they take the same place
+        for place in (out.parent / f".{out.name}.{kind}.lock", out / INSIDE_LOCK.format(kind)):
+            if not place.parent.is_dir():
+                continue
             try:
-                token = held.enter_context(exclusive_lock(
-                    out.parent / f".{out.name}.{kind}.lock", where=where, busy=busy))
+                token = held.enter_context(exclusive_lock(place, where=where, busy=busy))
+                break
             except OutputError:
-                pass
+                continue
         yield token

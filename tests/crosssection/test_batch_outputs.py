@@ -819,26 +819,29 @@ def test_a_folder_that_cannot_be_listed_is_named_and_the_batch_goes_on(tmp_path,
     inp = _scans(tmp_path / "in")
     _scans(inp / "locked", seed=5)
     _scans(inp / "half", seed=6)  # listed, not searched (read permission, no execute)
-    locked, half = (inp / "locked").resolve(), (inp / "half").resolve()
+    # the folders that cannot be listed, and those whose entries cannot be looked at
+    denied_list, denied_search = {(inp / "locked").resolve()}, {(inp / "locked").resolve(),
+                                                               (inp / "half").resolve()}
+    half = (inp / "half").resolve()
 
     def denied(path):
         return OSError(errno.EACCES, os.strerror(errno.EACCES), str(path))
 
     # the permissions as a user without them meets them (the tests may run as root)
-    scandir, is_file = os.scandir, PosixPath.is_file
+    scandir, stat = os.scandir, PosixPath.stat
 
     def guarded_scandir(path="."):
-        if Path(path).resolve() == locked:
+        if Path(path).resolve() in denied_list:
             raise denied(path)
         return scandir(path)
 
-    def guarded_is_file(self):
-        if self.resolve().parent in (locked, half):
+    def guarded_stat(self, **kw):  # a folder's entries are looked at only with its search right
+        if Path(os.path.realpath(self.parent)) in denied_search:
             raise denied(self)
-        return is_file(self)
+        return stat(self, **kw)
 
     monkeypatch.setattr(os, "scandir", guarded_scandir)
-    monkeypatch.setattr(PosixPath, "is_file", guarded_is_file)
+    monkeypatch.setattr(PosixPath, "stat", guarded_stat)
     status, err = _batch(capsys, inp, tmp_path / "out")
     assert status == B.EXIT_SOME_FAILED, err
     named = [line for line in err if "locked" in line]
@@ -849,11 +852,15 @@ def test_a_folder_that_cannot_be_listed_is_named_and_the_batch_goes_on(tmp_path,
     assert dict(zip(index["image"], index["status"])) == {"half/s0.png": "failed",
                                                          "s0.png": "ok"}
     reason = pd.read_csv(tmp_path / "out" / "failures.csv")["reason"].iloc[0]
-    assert reason == f"{half / 'set.toml'}: cannot read (Permission denied)"
-    # the input folder itself cannot be listed: one line naming it, exit status 2
-    locked = inp.resolve()
+    assert reason == (f"{half}: cannot search the folder (Permission denied): its files cannot "
+                      "be read; give it search permission and re-run")
+    # the input folder itself cannot be listed, or searched: one line naming it, exit 2
+    denied_list, denied_search = {inp.resolve()}, set()
     status, err = _batch(capsys, inp, tmp_path / "out2")
     assert status == 2 and err == [f"error: {inp}: cannot list the folder (Permission denied)"]
+    denied_list, denied_search = set(), {inp.resolve()}
+    status, err = _batch(capsys, inp, tmp_path / "out3")
+    assert status == 2 and err == [f"error: {inp}: cannot search the folder (Permission denied)"]
 
 
 def test_a_users_table_named_like_a_simulations_does_not_hide_a_subfolders_scans(tmp_path,

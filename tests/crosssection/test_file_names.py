@@ -108,7 +108,19 @@ def test_a_name_starting_with_a_dash_gets_a_hint_in_its_one_line(entry, tmp_path
         assert run(list(argv)) == 2
         err = capsys.readouterr().err.splitlines()
         assert len(err) == 1 and err[0].startswith("error: ") and err[0].endswith(said), err
-    # no hint where none applies
-    assert run(["analyze", "--out", out]) == 2
-    err = capsys.readouterr().err.strip()
-    assert err.endswith("the following arguments are required: image")
+    # no hint where none applies: '--' used as it should be, another kind of error
+    for argv, said in {("analyze", "--out", out): "required: image",
+                       ("analyze", "--", "-scan.png"): "required: --out",
+                       ("analyze", "--out", out, "--", "-a.png", "b.png"):
+                       "unrecognized arguments: b.png",
+                       ("analyze", "s.png", "--out", out, "--width-law", "x", "-q.png"):
+                       "(choose from 'fitted', 'linear')"}.items():
+        assert run(list(argv)) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.endswith(said), err
+    # the words are read once: an iterator of them is parsed as a list is
+    from crosssection.cli import OneLineParser
+
+    parser = OneLineParser(prog="x")
+    parser.add_argument("a")
+    assert parser.parse_args(iter(["v"])).a == "v"

@@ -241,3 +241,30 @@ def test_a_folder_that_takes_no_files_is_not_said_to_be_missing(tmp_path, monkey
         fileio.check_writable(tmp_path / "out")
     assert "takes no new files" in str(info.value)
     assert "No such file" not in str(info.value)
+
+
+def test_a_folder_under_a_read_only_parent_is_locked_inside(tmp_path, monkeypatch):
+    """Two runs into an existing folder whose parent takes no file both ran unlocked: the
+    lock is then taken inside the folder, where it is no one's entry."""
+    from crosssection.core.errors import OutputError, ParameterError
+
+    out = tmp_path / "ro" / "out"
+    out.mkdir(parents=True)
+    lock = fileio.exclusive_lock
+
+    def read_only_parent(path, **kw):  # the permissions as an unprivileged user meets them
+        if Path(path).parent == out.parent:
+            raise OutputError("cannot be created (Permission denied)", path)
+        return lock(path, **kw)
+
+    monkeypatch.setattr(fileio, "exclusive_lock", read_only_parent)
+    with fileio.folder_lock(out, "simulation", where=out, busy="busy") as token:
+        assert token is not None and (out / ".simulation.lock").is_file()
+        assert fileio.foreign_entry(out, ("configs.csv",)) is None
+        with pytest.raises(ParameterError, match="busy"):
+            with fileio.folder_lock(out, "simulation", where=out, busy="busy"):
+                pass
+    assert list(out.iterdir()) == []
+    # a new folder there cannot be made: it runs unlocked (its command names the fault)
+    with fileio.folder_lock(out.parent / "new", "simulation", where=out, busy="b") as token:
+        assert token is None
