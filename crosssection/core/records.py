@@ -32,7 +32,7 @@ RECORDS = (
 SIMULATION_TABLE = "configs.csv"
 #: the keys of the ``params.json`` beside a simulation's table: a ``configs.csv`` alone may be
 #: a user's own table beside their scans (``batch`` would skip them)
-SIMULATION_KEYS = ("command", "n_configs", "seed", "version")
+SIMULATION_KEYS = ("command", "n_configs", "seed")
 #: the largest file read as a record: foldstat's are kilobytes; a file of megabytes of that
 #: name is someone else's, and would be read whole for every folder a batch searches
 RECORD_MAX_BYTES = 4 << 20
