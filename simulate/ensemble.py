@@ -782,7 +782,11 @@ def run_ensemble(params: dict, out, *, workers: int = 1, scheduler: str | None =
     params = {k: params.get(k) for k in sorted(params)}
     # two runs into one folder would each take it for theirs: one whose params.json the
     # other had not yet written computed beside it, and the tables mixed the two ensembles
-    with folder_lock(out, "simulation", where=given,
+    def unlocked():
+        warnings.warn(f"{given}: its file system takes no lock: a second run into it would "
+                      "not be refused (run one at a time there)", QualityWarning, stacklevel=4)
+
+    with folder_lock(out, "simulation", where=given, unlocked=unlocked,
                      busy=f"another {params['command']} is writing into it"):
         return _run_ensemble_locked(params, out, given, where, workers=workers,
                                     scheduler=scheduler, progress=progress, task=task,

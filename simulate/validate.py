@@ -164,7 +164,8 @@ def score_scene(scene_dir, *, match_px: float | None = None) -> dict:
         which the render flagged the scene's truth (:func:`truth_warnings`), and
         ``hairpin_energy_share``, the share of the truth's energy at nodes that fold the rod
         back within one segment (:func:`simulate.render.hairpin_nodes`), which no drawing
-        shows.
+        shows, with ``total_energy_rel_error_without_hairpins``, the total's error against
+        the truth's energy without them.
 
     Raises
     ------
@@ -190,8 +191,12 @@ def score_scene(scene_dir, *, match_px: float | None = None) -> dict:
     out["analyze_s"] = dt
     out["truth_warnings"] = len(truth_warnings(truth[0]))
     # the truth's energy held by folds within one node, which no drawing shows (NaN for a
-    # scene rendered before it was recorded)
-    out["hairpin_energy_share"] = float(truth[0].get("hairpin_energy_share", math.nan))
+    # scene rendered before it was recorded), and the total's error without it
+    share = float(truth[0].get("hairpin_energy_share", math.nan))
+    out["hairpin_energy_share"] = share
+    error = float(out.get("total_energy_rel_error", math.nan))
+    out["total_energy_rel_error_without_hairpins"] = ((1.0 + error) / (1.0 - share) - 1.0
+                                                      if share < 1.0 else math.nan)
     return out
 
 

@@ -690,7 +690,7 @@ def exclusive_lock(path, *, where, busy: str, unlocked=None):
 
 
 @contextmanager
-def folder_lock(out, kind: str, *, where, busy: str):
+def folder_lock(out, kind: str, *, where, busy: str, unlocked=None):
     """Hold :func:`exclusive_lock` on ``.<name>.<kind>.lock`` beside the output folder
     ``out`` while one command writes it, so that a second run into it is refused before it
     reads what the first is writing.
@@ -711,6 +711,8 @@ def folder_lock(out, kind: str, *, where, busy: str):
         What a refusal names (the output as given).
     busy : str
         The refusal's cause.
+    unlocked : callable, optional
+        Called once when the file system takes no lock (:func:`exclusive_lock`).
 
     Yields
     ------
@@ -735,7 +737,8 @@ def folder_lock(out, kind: str, *, where, busy: str):
             if not place.parent.is_dir():
                 continue
             try:
-                token = held.enter_context(exclusive_lock(place, where=where, busy=busy))
+                token = held.enter_context(exclusive_lock(place, where=where, busy=busy,
+                                                          unlocked=unlocked))
                 break
             except OutputError:
                 continue

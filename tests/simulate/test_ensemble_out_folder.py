@@ -130,3 +130,20 @@ def test_a_second_run_into_the_same_folder_is_refused(tmp_path, capsys, argv):
     # released: the same run goes on, and leaves no lock file behind
     assert simulate_main([*argv, "--out", str(out)]) == 0
     assert (out / "configs.csv").is_file() and not list(tmp_path.glob(".q.*.lock"))
+
+
+def test_a_file_system_without_locks_is_said_once(tmp_path, capsys, monkeypatch):
+    """On a file system that takes no lock (some network disks) a second run would not be
+    refused: the run says so in one warning line and goes on."""
+    import fcntl
+
+    def no_locks(fd, operation):
+        raise OSError(38, "Function not implemented")
+
+    monkeypatch.setattr(fcntl, "flock", no_locks)
+    out = tmp_path / "q"
+    assert simulate_main([*QUENCH, "--out", str(out)]) == 0
+    err = [line for line in capsys.readouterr().err.splitlines() if "lock" in line]
+    assert err == [f"warning: {out}: its file system takes no lock: a second run into it "
+                   "would not be refused (run one at a time there)"]
+    assert (out / "configs.csv").is_file()

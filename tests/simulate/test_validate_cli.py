@@ -424,3 +424,28 @@ def test_every_truth_flagged_says_where_the_means_are(scenes, tmp_path, capsys):
     out = capsys.readouterr().out
     assert ("1 scenes scored (every one with a truth flagged by its render: summary.json's "
             "mean is empty, mean_all holds their means)") in out
+
+
+def test_the_energy_of_folds_within_one_node_is_listed_beside_the_error(scenes, tmp_path):
+    """A fold within one rod node holds up to 4 / ds of the truth's energy, which no drawing
+    shows: scores.csv lists its share and the total's error without it; a scene rendered
+    before the share was recorded reads NaN there."""
+    import math
+
+    folder, scene = scenes
+    summary_path = scene / "truth" / "summary.json"
+    summary = json.loads(summary_path.read_text())
+    assert summary["hairpin_energy_share"] >= 0.0  # every render records it
+    summary["hairpin_energy_share"] = 0.5
+    summary_path.write_text(json.dumps(summary))
+    assert run(folder, tmp_path / "rep") == 0
+    row = pd.read_csv(tmp_path / "rep" / "scores.csv").iloc[0]
+    assert row["hairpin_energy_share"] == 0.5
+    assert row["total_energy_rel_error_without_hairpins"] == pytest.approx(
+        (1.0 + row["total_energy_rel_error"]) / 0.5 - 1.0)
+    del summary["hairpin_energy_share"]
+    summary_path.write_text(json.dumps(summary))
+    assert run(folder, tmp_path / "rep2") == 0
+    row = pd.read_csv(tmp_path / "rep2" / "scores.csv").iloc[0]
+    assert math.isnan(row["hairpin_energy_share"])
+    assert math.isnan(row["total_energy_rel_error_without_hairpins"])
