@@ -222,7 +222,11 @@ def score(result, truth, *, match_px: float | None = None, px_per_mm: float | No
         ``n_br_exact_branch_length_fraction``, ``n_br_within1_length_fraction``,
         ``n_br_mean_abs_error``, ``n_voids_rel_error``,
         ``void_match_fraction``, ``void_area_median_rel_error``, ``void_area_mean_rel_error``,
-        ``void_total_area_rel_error``, ``total_energy_rel_error``, plus the raw counts.
+        ``void_total_area_rel_error``, ``stack_length_median_rel_error`` (matched stacks),
+        ``total_energy_rel_error``, and what they rest on: ``match_px`` (the junction
+        matching radius used), ``rod_length_mm`` and ``rod_length_mm_truth``,
+        ``total_energy`` and ``total_energy_truth``, ``junction_matched``, ``junction_out``
+        and ``junction_truth`` (counts) and ``junction_median_offset_px`` (matched pairs).
         Relative errors are signed ((out - truth) / truth). The branch and stack counts and
         the stack and n_br scores take the truth's ``layer_pieces`` table for its stacks when
         it has one (a render's bands as drawn, :data:`crosssection.truth.scene.LAYER_PIECES`).
