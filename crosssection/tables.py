@@ -230,9 +230,11 @@ def junction_table(junctions, graph, packs, n_br, linear_system) -> pd.DataFrame
         "y_px": junctions.centers_rc[:, 0] if k else np.zeros(0),
         "n_stacks": deg,
         # typed: a scan without junctions has the dtypes of one with them
-        "pack_a": pd.Series([" ".join(f"{s}.{e}" for s, e in a) for a, _ in sides],
+        # "stack:end", not "stack.end", which a CSV reader takes for a decimal number where a
+        # pack holds one stack end (the column's type would change from scan to scan)
+        "pack_a": pd.Series([" ".join(f"{s}:{e}" for s, e in a) for a, _ in sides],
                             dtype=str),
-        "pack_b": pd.Series([" ".join(f"{s}.{e}" for s, e in b) for _, b in sides],
+        "pack_b": pd.Series([" ".join(f"{s}:{e}" for s, e in b) for _, b in sides],
                             dtype=str),
         "ambiguous": np.array([bool(getattr(packs.get(j), "ambiguous", False))
                                for j in range(k)], dtype=bool),

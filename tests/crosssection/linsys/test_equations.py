@@ -137,12 +137,12 @@ def test_junction_table_reports_the_partition_the_system_used():
     fg, packs = _symmetric_y()
     res = solve_branch_counts(fg, packs, np.array([1.1, 0.9, 2.3]))
     row = _junction_rows(fg, packs, res).iloc[0]
-    assert (row["pack_a"], row["pack_b"]) == ("2.0", "0.0 1.0")
+    assert (row["pack_a"], row["pack_b"]) == ("2:0", "0:0 1:0")
     assert row["equation"] == "widths" and row["conservation_residual"] == 0
     assert row["conservation_ok"] and not row["repartitioned"]
     res = solve_branch_counts(fg, packs, np.array([1.0, 1.0, 1.0]))
     row = _junction_rows(fg, packs, res).iloc[0]
-    assert row["equation"] == "dropped" and row["pack_a"] == "0.0"
+    assert row["equation"] == "dropped" and row["pack_a"] == "0:0"
     assert row["conservation_residual"] == -1 and not row["conservation_ok"]
 
 
@@ -151,7 +151,7 @@ def test_junction_table_marks_repartitioned_junctions_conserved():
     res = solve_branch_counts(fg, fg.packs, est)
     table = _junction_rows(fg, fg.packs, res).set_index("junction_id")
     assert table.loc[node, "equation"] == "repartitioned" and table.loc[node, "repartitioned"]
-    assert table.loc[node, "pack_a"] == " ".join(f"{s}.{e}" for s, e in right[0])
+    assert table.loc[node, "pack_a"] == " ".join(f"{s}:{e}" for s, e in right[0])
     assert table["conservation_ok"].loc[list(fg.packs)].all()
     assert set(table["equation"].loc[list(fg.packs)]) <= {"packs", "repartitioned", "none"}
 
