@@ -26,7 +26,6 @@ condition and resolution.
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 import time
 import warnings
@@ -113,6 +112,7 @@ def run_one(generator: str, seed: int, px_per_mm: float, condition: str, rods: d
     """One scene at one resolution: its scores, warnings and time."""
     import crosssection
     from crosssection.truth.scoring import score
+    from simulate.validate import error_without_hairpins
 
     scene = (network_scene(seed, px_per_mm, condition) if generator == "network"
              else render_scene(seed, px_per_mm, condition, rods))
@@ -142,8 +142,8 @@ def run_one(generator: str, seed: int, px_per_mm: float, condition: str, rods: d
     # a render's truth holds the energy of folds within one rod node, which no drawing shows
     share = float(scene.summary.get("hairpin_energy_share") or 0.0)
     row["truth_hairpin_share"] = share
-    row["total_energy_rel_error_without_hairpins"] = (
-        (1.0 + s["total_energy_rel_error"]) / (1.0 - share) - 1.0 if share < 1.0 else math.nan)
+    row["total_energy_rel_error_without_hairpins"] = error_without_hairpins(
+        s["total_energy_rel_error"], share)
     row["void_count_error"] = len(result.voids) - len(scene.tables["voids"])
     row["stack_energy_abslog"] = stack_energy_abslog(result, scene, px_per_mm)
     row["quality"] = ";".join(result.summary["quality"]["codes"])

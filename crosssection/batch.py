@@ -202,8 +202,9 @@ def find_images(input_dir, *, exclude=()) -> list[Path]:
     return _walk_scans(input_dir, exclude=exclude)[0]
 
 
-def _walk_scans(input_dir, *, exclude=(), unreadable=None) -> tuple[list[Path], list[Path]]:
-    """:func:`find_images`, and the symbolic links to folders met on the way.
+def _walk_scans(input_dir, *, exclude=()) -> tuple[list[Path], list[Path], list]:
+    """:func:`find_images`, the symbolic links to folders met on the way, and the folders
+    that could not be listed.
 
     Linked folders are not followed: one may lead back into its own tree (a loop), to scans
     the batch already holds (each analysed twice, under two names) or out of the input
@@ -212,22 +213,18 @@ def _walk_scans(input_dir, *, exclude=(), unreadable=None) -> tuple[list[Path], 
     by one. A folder that cannot be listed (no read or search permission) is passed over,
     its scans unseen; the batch names it in a warning too.
 
-    Parameters
-    ----------
-    unreadable : list, optional
-        Receives ``(folder, cause)`` for each folder that could not be listed.
-
     Returns
     -------
     images : list of Path
         Sorted by their path relative to ``input_dir``.
     linked_folders : list of Path
         Sorted.
+    unreadable : list of (Path, str)
+        Each folder that could not be listed and the cause, sorted.
     """
     root = Path(input_dir).resolve()
     excluded = [Path(e).resolve() for e in exclude]
-    found, linked = [], []
-    missed = [] if unreadable is None else unreadable
+    found, linked, missed = [], [], []
 
     def cannot_list(exc: OSError) -> None:
         missed.append((Path(exc.filename), exc.strerror or type(exc).__name__))
@@ -249,8 +246,8 @@ def _walk_scans(input_dir, *, exclude=(), unreadable=None) -> tuple[list[Path], 
         for fn in filenames:
             if not fn.startswith(".") and fn.lower().endswith(IMAGE_SUFFIXES):
                 found.append(here / fn)
-    missed.sort()
-    return sorted(found, key=lambda p: p.relative_to(root).as_posix()), sorted(linked)
+    return (sorted(found, key=lambda p: p.relative_to(root).as_posix()), sorted(linked),
+            sorted(missed))
 
 
 def _broken_link(image: Path) -> str | None:
@@ -488,8 +485,7 @@ def plan_batch(input_dir, out_dir, *, cli_params: dict | None = None, seed: int 
     given = check_params(cli_params or {}, Path.cwd() / "command line",
                          origin="--calibration")
     defaults.update(given)
-    unreadable = []
-    images, linked_folders = _walk_scans(root, exclude=[out], unreadable=unreadable)
+    images, linked_folders, unreadable = _walk_scans(root, exclude=[out])
     for folder, cause in unreadable:
         if folder == root:
             raise ConfigError(f"cannot list the folder ({cause})", given_root)

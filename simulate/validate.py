@@ -41,7 +41,7 @@ from crosssection.truth.scene import LAYER_PIECES, read_scene_params, read_truth
 from crosssection.truth.scoring import analyze_scene_folder, score
 
 __all__ = ["validate_scenes", "score_scene", "read_truth", "truth_warnings", "is_report_folder",
-           "add_subparser", "REPORT_FILES"]
+           "error_without_hairpins", "add_subparser", "REPORT_FILES"]
 
 # the headline scores, first in scores.csv (crosssection.truth.scoring names)
 KEY_COLUMNS = ["scene", "rod_length_rel_error", "n_branches_rel_error", "junction_precision",
@@ -194,10 +194,28 @@ def score_scene(scene_dir, *, match_px: float | None = None) -> dict:
     # scene rendered before it was recorded), and the total's error without it
     share = float(truth[0].get("hairpin_energy_share", math.nan))
     out["hairpin_energy_share"] = share
-    error = float(out.get("total_energy_rel_error", math.nan))
-    out["total_energy_rel_error_without_hairpins"] = ((1.0 + error) / (1.0 - share) - 1.0
-                                                      if share < 1.0 else math.nan)
+    out["total_energy_rel_error_without_hairpins"] = error_without_hairpins(
+        float(out.get("total_energy_rel_error", math.nan)), share)
     return out
+
+
+def error_without_hairpins(error: float, share: float) -> float:
+    """A total energy's relative error against the truth's energy less the share held by
+    folds within one rod node (``hairpin_energy_share``), which no drawing shows.
+
+    Parameters
+    ----------
+    error : float
+        ``measured / truth - 1``.
+    share : float
+        The truth's share at such folds, in [0, 1).
+
+    Returns
+    -------
+    float
+        ``measured / (truth (1 - share)) - 1``; NaN where ``share`` is NaN or 1.
+    """
+    return (1.0 + error) / (1.0 - share) - 1.0 if share < 1.0 else math.nan
 
 
 #: The files of a report folder (:func:`validate_scenes`).

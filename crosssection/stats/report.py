@@ -27,11 +27,11 @@ import pandas as pd
 
 from crosssection._version import __version__
 from crosssection.core.errors import OutputError, ParameterError
-from crosssection.core.provenance import library_versions
 from crosssection.core.fileio import (BROWSER_FILES, clear_stale_folders, exclusive_lock,
                                       foreign_entry,
                                       save_figure, staging_folder, swap_in_folder, write_csv,
                                       write_json, write_text)
+from crosssection.core.provenance import library_versions
 from crosssection.stats import fits as F
 from crosssection.stats.families import FAMILIES
 from crosssection.stats.data import REPORT_TABLES, Ensemble, branch_groups
